@@ -1,0 +1,21 @@
+//! Optics: lenses, their files, dispersion, light paths, exact tracing and paraxial matrices.
+//!
+//! # How it works
+//! [`lens`] holds the prescription and its one sign convention; [`formats`] reads and writes it (JSON,
+//! Zemax .zmx, pbrt .dat); [`glass`] gives each medium's index per wavelength; [`path`] lists the surface
+//! interactions of the image and of every ghost; [`trace`] follows real rays along a path exactly, and
+//! [`paraxial`] multiplies the 2x2 matrices of the same path. [`library`] embeds the shipped lenses.
+
+pub mod formats;
+pub mod glass;
+pub mod lens;
+pub mod library;
+pub mod paraxial;
+pub mod path;
+pub mod trace;
+
+pub use glass::D_LINE_NM;
+pub use lens::{Coating, CoatingLayer, Lens, LensError, Medium, Surface};
+pub use paraxial::{EntrancePupil, FirstOrder, Mat2, ParaxialError, PathMatrices};
+pub use path::{Interaction, LightPath, PathKind, Step};
+pub use trace::{pupil_ray, Ray, TraceOptions, TraceResult, TraceStatus, Tracer};

@@ -1,0 +1,308 @@
+//! Exact sequential ray tracing in 3D, in f64, through spherical and flat interfaces.
+//!
+//! # How it works
+//! A [`Tracer`] is made once per (lens, light path, wavelength): it resolves each [`Step`] of the
+//! [`LightPath`] into the vertex position, curvature, clear aperture and the two refractive indices, so that
+//! tracing a ray is a tight loop. For each step the ray is intersected with the surface's sphere (or plane)
+//! by Welford's form, which is exact for flat surfaces and stable for huge radii:
+//! with p the ray point relative to the vertex and d its unit direction,
+//! `s = (c |p|^2 - 2 p_z) / (s_dir sqrt(disc) - b)`, `b = c d.p - d_z`, `disc = b^2 - c (c |p|^2 - 2 p_z)`,
+//! where `s_dir` is the travel direction (+1 / -1) that picks the root on the vertex side. Then it refracts by
+//! the vector form of Snell's law, `n2 d' = n1 d + (n2 cos t - n1 cos i) N`, or reflects,
+//! `d' = d - 2 (d.N) N`, and finally meets the sensor plane.
+//!
+//! Every way a ray can fail is an outcome, never a NaN ([`TraceStatus`]):
+//! - **missed surface k**: the line does not meet the sphere (negative discriminant) or runs parallel to a
+//!   plane (the sensor counts as surface N, the number of surfaces);
+//! - **backward**: the ray leaves the last surface travelling away from the sensor;
+//! - **total internal reflection at k**: `n2^2 - n1^2 sin^2 i < 0`;
+//! - **vignetted at k**: the ray passes outside surface k's clear semi-aperture. Clear apertures are always
+//!   *reported* (`clipped_at`, in path order) but only *applied* when [`TraceOptions::apply_apertures`] is set,
+//!   the convention of the reference figures.
+//!
+//! Ray set-up ([`pupil_ray`]), the convention of `tests/data/reference`: light from the field angle theta in
+//! the y-z plane has direction (0, sin theta, cos theta) and passes through the point (px r_ep, py r_ep, z_ep)
+//! of the paraxial entrance pupil (no real-ray aiming); the sensor is the paraxial back focal plane at the
+//! d-line, whatever the wavelength traced (a sensor does not move with colour).
+
+use glam::DVec3;
+use serde::Serialize;
+
+use super::lens::Lens;
+use super::paraxial::EntrancePupil;
+use super::path::{Interaction, LightPath, Step};
+
+/// A ray: a point and a unit direction, in lens coordinates (mm).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ray {
+    pub origin_mm: DVec3,
+    pub direction: DVec3,
+}
+
+/// The ray of the reference convention: field angle `theta` (radians) in the y-z plane, through the point
+/// (`px`, `py`) of the entrance pupil in units of its radius.
+pub fn pupil_ray(pupil: &EntrancePupil, theta: f64, px: f64, py: f64) -> Ray {
+    let r = pupil.radius_mm;
+    Ray {
+        origin_mm: DVec3::new(px * r, py * r, pupil.z_mm),
+        direction: DVec3::new(0.0, theta.sin(), theta.cos()),
+    }
+}
+
+/// What happened to a ray.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(tag = "status", rename_all = "snake_case")]
+pub enum TraceStatus {
+    /// Reached the sensor.
+    Landed,
+    /// Stopped by surface `surface`'s clear aperture (only when apertures are applied).
+    Vignetted { surface: usize },
+    /// Totally internally reflected at `surface`.
+    Tir { surface: usize },
+    /// Did not meet `surface` (the sensor is surface N).
+    Missed { surface: usize },
+    /// Left the last surface travelling away from the sensor (a ghost turned back for good).
+    Backward,
+}
+
+impl TraceStatus {
+    /// The word used by the command line and the reference figures: ok, vignetted, tir, missed.
+    pub fn word(&self) -> &'static str {
+        match self {
+            Self::Landed => "ok",
+            Self::Vignetted { .. } => "vignetted",
+            Self::Tir { .. } => "tir",
+            Self::Missed { .. } => "missed",
+            Self::Backward => "backward",
+        }
+    }
+
+    /// The surface where the ray stopped, if it did.
+    pub fn surface(&self) -> Option<usize> {
+        match *self {
+            Self::Landed | Self::Backward => None,
+            Self::Vignetted { surface } | Self::Tir { surface } | Self::Missed { surface } => Some(surface),
+        }
+    }
+}
+
+/// Options of one trace.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TraceOptions {
+    /// Stop the ray at the first clear aperture it passes outside.
+    pub apply_apertures: bool,
+    /// Keep every intersection point (for drawing ray diagrams).
+    pub record_points: bool,
+}
+
+/// The outcome of one trace.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TraceResult {
+    pub status: TraceStatus,
+    /// Where the ray met the sensor plane (only when it landed).
+    pub sensor_point_mm: Option<DVec3>,
+    /// Direction when it met the sensor (only when it landed).
+    pub sensor_direction: Option<DVec3>,
+    /// Surfaces, in path order, whose clear aperture the ray passed outside (reported, applied only on request).
+    pub clipped_at: Vec<usize>,
+    /// The start point and every intersection, when asked for.
+    pub points_mm: Vec<DVec3>,
+}
+
+/// One step of a path with everything the inner loop needs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct ResolvedStep {
+    surface: usize,
+    vertex_z_mm: f64,
+    curvature_per_mm: f64,
+    semi_aperture_mm: f64,
+    n_in: f64,
+    n_out: f64,
+    reflect: bool,
+    arriving_direction: f64,
+}
+
+/// Traces rays along one light path of one lens at one wavelength.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Tracer {
+    steps: Vec<ResolvedStep>,
+    sensor_z_mm: f64,
+    sensor_index: usize,
+}
+
+impl Tracer {
+    /// Prepares `path` at `wavelength_nm`, ending on the plane `sensor_z_mm`.
+    pub fn new(lens: &Lens, path: &LightPath, wavelength_nm: f64, sensor_z_mm: f64) -> Self {
+        let n = lens.media_indices_at(wavelength_nm);
+        let z = lens.vertex_z_mm();
+        let steps = path
+            .steps
+            .iter()
+            .map(|s: &Step| {
+                let surf = &lens.surfaces[s.surface];
+                ResolvedStep {
+                    surface: s.surface,
+                    vertex_z_mm: z[s.surface],
+                    curvature_per_mm: surf.curvature_per_mm(),
+                    semi_aperture_mm: surf.semi_aperture_mm,
+                    n_in: n[s.medium_in],
+                    n_out: n[s.medium_out],
+                    reflect: s.interaction == Interaction::Reflect,
+                    arriving_direction: s.arriving_direction,
+                }
+            })
+            .collect();
+        Self { steps, sensor_z_mm, sensor_index: lens.surfaces.len() }
+    }
+
+    /// Traces one ray to the sensor.
+    pub fn trace(&self, ray: &Ray, options: TraceOptions) -> TraceResult {
+        let mut p = ray.origin_mm;
+        let mut d = ray.direction.normalize_or_zero();
+        let mut clipped_at = Vec::new();
+        let mut points_mm = Vec::new();
+        if options.record_points {
+            points_mm.push(p);
+        }
+        let stopped = |status, clipped_at, points_mm| TraceResult {
+            status,
+            sensor_point_mm: None,
+            sensor_direction: None,
+            clipped_at,
+            points_mm,
+        };
+        if d == DVec3::ZERO || !p.is_finite() {
+            return stopped(TraceStatus::Missed { surface: 0 }, clipped_at, points_mm);
+        }
+        for step in &self.steps {
+            let missed = TraceStatus::Missed { surface: step.surface };
+            let local = p - DVec3::new(0.0, 0.0, step.vertex_z_mm);
+            // The ray is a line and each surface a whole sphere: an intersection may lie behind the current
+            // point (the entrance pupil is often inside the lens, and a ray far outside the clear apertures
+            // can meet the next sphere before the last one). This is the convention of the reference
+            // figures; inside the clear apertures surfaces never cross (validation refuses that), so rays
+            // traced with apertures applied always move forward along the path.
+            let Some(s) = intersect(local, d, step.curvature_per_mm, step.arriving_direction) else {
+                return stopped(missed, clipped_at, points_mm);
+            };
+            p += s * d;
+            if options.record_points {
+                points_mm.push(p);
+            }
+            if p.x.hypot(p.y) > step.semi_aperture_mm {
+                clipped_at.push(step.surface);
+                if options.apply_apertures {
+                    return stopped(TraceStatus::Vignetted { surface: step.surface }, clipped_at, points_mm);
+                }
+            }
+            let normal = surface_normal(p - DVec3::new(0.0, 0.0, step.vertex_z_mm), step.curvature_per_mm);
+            d = if step.reflect {
+                reflect(d, normal)
+            } else if step.n_in == step.n_out {
+                d
+            } else {
+                match refract(d, normal, step.n_in, step.n_out) {
+                    Some(d) => d,
+                    None => return stopped(TraceStatus::Tir { surface: step.surface }, clipped_at, points_mm),
+                }
+            };
+            if !d.is_finite() || !p.is_finite() {
+                return stopped(missed, clipped_at, points_mm);
+            }
+        }
+        // The sensor plane, facing the light travelling to +z.
+        if d.z <= 0.0 {
+            return stopped(TraceStatus::Backward, clipped_at, points_mm);
+        }
+        let to_sensor = (self.sensor_z_mm - p.z) / d.z;
+        if !to_sensor.is_finite() {
+            return stopped(TraceStatus::Missed { surface: self.sensor_index }, clipped_at, points_mm);
+        }
+        let landing = p + to_sensor * d;
+        if !landing.is_finite() {
+            return stopped(TraceStatus::Missed { surface: self.sensor_index }, clipped_at, points_mm);
+        }
+        if options.record_points {
+            points_mm.push(landing);
+        }
+        TraceResult {
+            status: TraceStatus::Landed,
+            sensor_point_mm: Some(landing),
+            sensor_direction: Some(d),
+            clipped_at,
+            points_mm,
+        }
+    }
+}
+
+/// Distance along unit direction `d` from `p` (relative to the vertex) to the surface of curvature `c`,
+/// on the root nearer the vertex for travel direction `z_dir`; `None` when the line misses it.
+fn intersect(p: DVec3, d: DVec3, c: f64, z_dir: f64) -> Option<f64> {
+    let cx2 = c * p.length_squared() - 2.0 * p.z;
+    let b = c * d.dot(p) - d.z;
+    let disc = b * b - c * cx2;
+    if disc < 0.0 {
+        return None;
+    }
+    let denominator = z_dir * disc.sqrt() - b;
+    let s = cx2 / denominator;
+    (denominator != 0.0 && s.is_finite()).then_some(s)
+}
+
+/// Unit normal of the surface of curvature `c` at the point `p` (relative to the vertex), pointing to +z
+/// at the vertex.
+fn surface_normal(p: DVec3, c: f64) -> DVec3 {
+    DVec3::new(-c * p.x, -c * p.y, 1.0 - c * p.z).normalize()
+}
+
+/// Vector Snell's law; `None` on total internal reflection.
+fn refract(d: DVec3, normal: DVec3, n_in: f64, n_out: f64) -> Option<DVec3> {
+    let cos_i = d.dot(normal);
+    let sin2_i = (1.0 - cos_i * cos_i).max(0.0);
+    let root = n_out * n_out - n_in * n_in * sin2_i;
+    if root < 0.0 {
+        return None;
+    }
+    let n_cos_t = root.sqrt().copysign(cos_i);
+    Some((n_in * d + (n_cos_t - n_in * cos_i) * normal) / n_out)
+}
+
+fn reflect(d: DVec3, normal: DVec3) -> DVec3 {
+    d - 2.0 * d.dot(normal) * normal
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn flat_surface_intersection_is_exact() {
+        let s = intersect(DVec3::new(0.0, 1.0, -5.0), DVec3::Z, 0.0, 1.0).unwrap();
+        assert_eq!(s, 5.0);
+        assert!(intersect(DVec3::new(0.0, 0.0, -5.0), DVec3::Y, 0.0, 1.0).is_none(), "parallel to a plane");
+    }
+
+    #[test]
+    fn sphere_intersection_picks_the_vertex_side() {
+        // Sphere of radius 10 with vertex at the origin, centre at z = 10; ray along the axis from z = -5.
+        let s = intersect(DVec3::new(0.0, 0.0, -5.0), DVec3::Z, 0.1, 1.0).unwrap();
+        assert!((s - 5.0).abs() < 1e-12);
+        // Travelling back from z = 5 it meets the same vertex.
+        let s = intersect(DVec3::new(0.0, 0.0, 5.0), -DVec3::Z, 0.1, -1.0).unwrap();
+        assert!((s - 5.0).abs() < 1e-12);
+        // A ray at height 11 misses a sphere of radius 10.
+        assert!(intersect(DVec3::new(0.0, 11.0, -5.0), DVec3::Z, 0.1, 1.0).is_none());
+    }
+
+    #[test]
+    fn snell_and_tir() {
+        let d = DVec3::new(0.6, 0.0, 0.8);
+        let out = refract(d, DVec3::Z, 1.0, 1.5).unwrap();
+        assert!((out.length() - 1.0).abs() < 1e-15);
+        assert!((1.5 * out.x - 0.6).abs() < 1e-15, "tangential n sin is conserved");
+        assert!(refract(d, DVec3::Z, 1.5, 1.0).is_some(), "1.5 * 0.6 = 0.9 < 1: no TIR");
+        assert!(refract(DVec3::new(0.8, 0.0, 0.6), DVec3::Z, 1.5, 1.0).is_none(), "1.5 * 0.8 > 1: TIR");
+        let r = reflect(d, DVec3::Z);
+        assert_eq!(r, DVec3::new(0.6, 0.0, -0.8));
+    }
+}

@@ -1,0 +1,1 @@
+fn main(){ let _ = eframe::run_native; }
