@@ -1,1 +1,36 @@
-fn main(){ let _ = eframe::run_native; }
+//! FlareLab: the desktop app with no arguments, the command line with a subcommand.
+//!
+//! Errors on the command line end the program with exit code 2 and one line on stderr; a panic (a bug) is
+//! reported the same way instead of a backtrace.
+
+mod app;
+mod cli;
+
+use std::process::ExitCode;
+
+use clap::Parser;
+
+fn main() -> ExitCode {
+    std::panic::set_hook(Box::new(|info| {
+        let message = info
+            .payload()
+            .downcast_ref::<&str>()
+            .map(|s| (*s).to_owned())
+            .or_else(|| info.payload().downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "unknown".to_owned());
+        let place = info.location().map(|l| format!(" at {}:{}", l.file(), l.line())).unwrap_or_default();
+        eprintln!("flarelab: internal error (a bug; please report it): {}{place}", message.replace('\n', " "));
+    }));
+    let cli = cli::Cli::parse();
+    let result = match cli.command {
+        None => app::run(),
+        Some(command) => cli::run(command),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("flarelab: error: {}", format!("{e:#}").replace('\n', " "));
+            ExitCode::from(2)
+        }
+    }
+}
