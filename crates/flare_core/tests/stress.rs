@@ -1,0 +1,280 @@
+//! Numerical stress: random but valid lenses (3 to 60 surfaces) and light up to 89 degrees never panic and
+//! never give NaN or infinity; the paraxial prediction and the exact trace converge like h^3 as the ray
+//! height and angle go to 0; and the named singular cases (flat surfaces, radii far beyond the aperture,
+//! grazing rays, total internal reflection, afocal lenses) are reported as outcomes.
+
+use flare_core::optics::{
+    pupil_ray, EntrancePupil, FirstOrder, Lens, LightPath, Medium, ParaxialError, PathMatrices, Ray, Surface, TraceOptions,
+    TraceStatus, Tracer, D_LINE_NM,
+};
+use glam::DVec3;
+use proptest::prelude::*;
+
+fn surface(radius_mm: f64, thickness_mm: f64, medium: Medium, semi_aperture_mm: f64) -> Surface {
+    Surface {
+        radius_mm,
+        thickness_mm: Some(thickness_mm),
+        medium,
+        semi_aperture_mm,
+        stop: false,
+        coating: Default::default(),
+        extra: Default::default(),
+    }
+}
+
+fn glass(n_d: f64, v_d: f64) -> Medium {
+    Medium { n_d, v_d: Some(v_d), glass: None }
+}
+
+/// One random interface before assembly: curvature sign and size, aperture, the medium after it, the gap.
+#[derive(Clone, Debug)]
+struct Draft {
+    flat: bool,
+    radius_over_aperture: f64,
+    negative: bool,
+    semi_aperture_mm: f64,
+    to_glass: bool,
+    n_d: f64,
+    v_d: f64,
+    gap_mm: f64,
+}
+
+fn draft() -> impl Strategy<Value = Draft> {
+    (any::<u8>(), 1.1..40.0f64, any::<bool>(), 3.0..15.0f64, any::<u8>(), 1.45..1.95f64, 20.0..80.0f64, 0.1..12.0f64).prop_map(
+        |(f, r, negative, h, g, n_d, v_d, gap_mm)| Draft {
+            flat: f % 7 == 0,
+            radius_over_aperture: r,
+            negative,
+            semi_aperture_mm: h,
+            to_glass: g % 3 != 0,
+            n_d,
+            v_d,
+            gap_mm,
+        },
+    )
+}
+
+/// Assembles drafts into a lens that passes validation by construction: media alternate sensibly, the
+/// last medium is air, the stop is a flat air surface inserted in an air gap, and every gap is widened so
+/// that neighbouring surfaces never cross inside their clear apertures.
+fn assemble(drafts: &[Draft], stop_choice: usize) -> Lens {
+    let mut surfaces = Vec::with_capacity(drafts.len() + 1);
+    let mut in_glass = false;
+    for (k, d) in drafts.iter().enumerate() {
+        let last = k + 1 == drafts.len();
+        let medium = if last || (in_glass && !d.to_glass) || (!in_glass && !d.to_glass && k > 0) {
+            Medium::air()
+        } else {
+            glass(d.n_d, d.v_d)
+        };
+        in_glass = !medium.is_air();
+        let r = if d.flat { 0.0 } else { d.radius_over_aperture * d.semi_aperture_mm * if d.negative { -1.0 } else { 1.0 } };
+        surfaces.push(surface(r, d.gap_mm, medium, d.semi_aperture_mm));
+    }
+    // The stop goes in front of a surface that has air before it.
+    let candidates: Vec<usize> = (0..surfaces.len()).filter(|&k| k == 0 || surfaces[k - 1].medium.is_air()).collect();
+    let at = candidates[stop_choice % candidates.len()];
+    let h = surfaces[at].semi_aperture_mm * 0.7;
+    let mut stop = surface(0.0, 1.0, Medium::air(), h);
+    stop.stop = true;
+    surfaces.insert(at, stop);
+    for k in 0..surfaces.len() - 1 {
+        let h = surfaces[k].semi_aperture_mm.min(surfaces[k + 1].semi_aperture_mm);
+        let overlap = surfaces[k].sag_mm(h).unwrap() - surfaces[k + 1].sag_mm(h).unwrap();
+        let t = surfaces[k].thickness_mm.unwrap() + overlap.max(0.0);
+        surfaces[k].thickness_mm = Some(t);
+    }
+    let lens = Lens { id: "random".into(), name: "random".into(), surfaces, extra: Default::default() };
+    lens.validate().unwrap_or_else(|e| panic!("generator made an invalid lens: {e}\n{lens:?}"));
+    lens
+}
+
+fn lens_strategy(min: usize, max: usize) -> impl Strategy<Value = Lens> {
+    (prop::collection::vec(draft(), min..=max), any::<usize>()).prop_map(|(d, s)| assemble(&d, s))
+}
+
+/// A few ghost paths of the lens, spread over its list (all when there are few).
+fn some_ghosts(lens: &Lens, at_most: usize) -> Vec<LightPath> {
+    let pairs = lens.ghost_pairs();
+    let step = pairs.len().div_ceil(at_most).max(1);
+    pairs.iter().step_by(step).map(|&(i, j)| LightPath::ghost(lens, i, j).unwrap()).collect()
+}
+
+fn check_finite(result: &flare_core::optics::TraceResult, n: usize) {
+    match result.status {
+        TraceStatus::Landed => {
+            assert!(result.sensor_point_mm.unwrap().is_finite(), "{result:?}");
+            assert!(result.sensor_direction.unwrap().is_finite(), "{result:?}");
+        }
+        TraceStatus::Vignetted { surface } | TraceStatus::Tir { surface } => assert!(surface < n),
+        TraceStatus::Missed { surface } => assert!(surface <= n),
+        TraceStatus::Backward => {}
+    }
+    assert!(result.clipped_at.iter().all(|&s| s < n));
+    assert!(result.points_mm.iter().all(|p| p.is_finite()));
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, max_global_rejects: 4096, ..ProptestConfig::default() })]
+
+    /// Random lenses, angles up to 89 degrees, pupil points beyond the rim: no panic, no NaN or infinity.
+    #[test]
+    fn random_lenses_never_give_nan(
+        lens in lens_strategy(2, 59),
+        rays in prop::collection::vec((-89.0..89.0f64, -1.5..1.5f64, -1.5..1.5f64), 6),
+        apply_apertures in any::<bool>(),
+        wavelength_nm in 400.0..700.0f64,
+    ) {
+        let n = lens.surfaces.len();
+        // Afocal and virtual-focus lenses are refused with a reason; trace them on a sensor 100 mm behind.
+        let (pupil, sensor_z) = match FirstOrder::d_line(&lens) {
+            Ok(fo) => (fo.entrance_pupil(), fo.sensor_z_mm()),
+            Err(_) => (EntrancePupil { z_mm: 0.0, radius_mm: 5.0 }, lens.vertex_z_mm()[n - 1] + 100.0),
+        };
+        let mut paths = some_ghosts(&lens, 12);
+        paths.push(LightPath::image(&lens));
+        for path in &paths {
+            let tracer = Tracer::new(&lens, path, wavelength_nm, sensor_z);
+            let matrices = PathMatrices::compute(&lens, path, wavelength_nm, sensor_z);
+            let m = matrices.sensor_from_entrance;
+            prop_assert!([m.a, m.b, m.c, m.d].iter().all(|v| v.is_finite()), "{m:?}");
+            for &(theta_deg, px, py) in &rays {
+                let ray = pupil_ray(&pupil, theta_deg.to_radians(), px, py);
+                let result = tracer.trace(&ray, TraceOptions { apply_apertures, record_points: true });
+                check_finite(&result, n);
+                let y = matrices.landing_height_mm(&pupil, py * pupil.radius_mm, theta_deg.to_radians().tan());
+                prop_assert!(y.is_finite());
+            }
+        }
+    }
+
+    /// As the ray's pupil height and angle shrink together by t, |exact - paraxial| shrinks like t^3
+    /// (third-order aberrations), on the image path and on ghost paths.
+    #[test]
+    fn paraxial_and_exact_converge_like_h_cubed(
+        lens in lens_strategy(2, 12),
+        py0 in prop_oneof![-0.05..-0.01f64, 0.01..0.05f64],
+        theta0_deg in -0.5..0.5f64,
+    ) {
+        let fo = FirstOrder::d_line(&lens);
+        prop_assume!(fo.is_ok(), "afocal or virtual focus");
+        let fo = fo.unwrap();
+        let mut ratios_checked = 0;
+        let pupil = fo.entrance_pupil();
+        let mut paths = some_ghosts(&lens, 6);
+        paths.push(LightPath::image(&lens));
+        for path in &paths {
+            let tracer = Tracer::new(&lens, path, D_LINE_NM, fo.sensor_z_mm());
+            let matrices = PathMatrices::compute(&lens, path, D_LINE_NM, fo.sensor_z_mm());
+            let error = |t: f64| {
+                let (py, theta) = (t * py0, (t * theta0_deg).to_radians());
+                let out = tracer.trace(&pupil_ray(&pupil, theta, 0.0, py), TraceOptions::default());
+                let exact = out.sensor_point_mm?.y;
+                let paraxial = matrices.landing_height_mm(&pupil, py * pupil.radius_mm, theta.tan());
+                Some((exact - paraxial).abs())
+            };
+            let errors: Vec<Option<f64>> = [1.0, 0.5, 0.25].iter().map(|&t| error(t)).collect();
+            let [Some(e1), Some(e2), Some(e4)] = errors[..] else { continue };
+            // Below 1e-10 mm the difference is rounding, not aberration.
+            if e4 < 1e-10 {
+                prop_assert!(e1 < 1e-6, "a tiny ray far from paraxial: {e1}");
+                continue;
+            }
+            let (r1, r2) = (e1 / e2, e2 / e4);
+            prop_assert!((6.0..10.5).contains(&r2), "{:?}: errors {e1:e} {e2:e} {e4:e}, ratios {r1:.2} {r2:.2}", path.kind);
+            ratios_checked += 1;
+        }
+        prop_assert!(ratios_checked >= 1, "the image path at small height and angle always lands");
+    }
+}
+
+fn plate_lens(radius_front_mm: f64) -> Lens {
+    let mut stop = surface(0.0, 5.0, Medium::air(), 5.0);
+    stop.stop = true;
+    Lens {
+        id: "plate".into(),
+        name: "plate".into(),
+        surfaces: vec![stop, surface(radius_front_mm, 10.0, glass(1.5, 60.0), 10.0), surface(0.0, 50.0, Medium::air(), 10.0)],
+        extra: Default::default(),
+    }
+}
+
+#[test]
+fn flat_only_lens_is_afocal_and_traces_exactly() {
+    let lens = plate_lens(0.0);
+    lens.validate().unwrap();
+    assert_eq!(FirstOrder::d_line(&lens), Err(ParaxialError::Afocal), "no focus: refused with the reason");
+    // A tilted ray through a plane-parallel plate keeps its direction and is displaced sideways by the
+    // textbook amount t sin(i - r) / cos r.
+    let tracer = Tracer::new(&lens, &LightPath::image(&lens), D_LINE_NM, 100.0);
+    let i = 20f64.to_radians();
+    let ray = Ray { origin_mm: DVec3::ZERO, direction: DVec3::new(0.0, i.sin(), i.cos()) };
+    let out = tracer.trace(&ray, TraceOptions::default());
+    let d = out.sensor_direction.unwrap();
+    assert!((d - ray.direction).length() < 1e-15);
+    let r = (i.sin() / 1.5).asin();
+    let shift = 10.0 * (i - r).sin() / r.cos();
+    let straight = 100.0 * i.tan();
+    let expected = straight - shift / i.cos();
+    assert!((out.sensor_point_mm.unwrap().y - expected).abs() < 1e-12, "{:?} vs {expected}", out.sensor_point_mm);
+    // Along the axis everything is exactly zero.
+    let axial = tracer.trace(&Ray { origin_mm: DVec3::ZERO, direction: DVec3::Z }, TraceOptions::default());
+    assert_eq!(axial.sensor_point_mm.unwrap(), DVec3::new(0.0, 0.0, 100.0));
+}
+
+#[test]
+fn huge_radius_converges_to_flat() {
+    let flat = plate_lens(0.0);
+    let ray = Ray { origin_mm: DVec3::new(1.0, 2.0, 0.0), direction: DVec3::new(0.1, 0.2, 1.0).normalize() };
+    let land = |lens: &Lens| {
+        Tracer::new(lens, &LightPath::image(lens), D_LINE_NM, 100.0).trace(&ray, TraceOptions::default()).sensor_point_mm.unwrap()
+    };
+    let reference = land(&flat);
+    let mut previous = f64::INFINITY;
+    for r in [1e4, 1e6, 1e8, 1e12, 1e300] {
+        let error = (land(&plate_lens(r)) - reference).length();
+        assert!(error.is_finite() && error <= previous, "R = {r}: error {error}");
+        previous = error;
+    }
+    assert!(previous < 1e-12, "R = 1e300 is flat to rounding: {previous}");
+}
+
+#[test]
+fn grazing_rays_and_tir_are_outcomes_not_nan() {
+    let lens = flare_core::optics::library::builtin_lens("fisheye").unwrap();
+    let fo = FirstOrder::d_line(&lens).unwrap();
+    let n = lens.surfaces.len();
+    let mut seen = std::collections::BTreeSet::new();
+    for path in std::iter::once(LightPath::image(&lens)).chain(some_ghosts(&lens, 55)) {
+        let tracer = Tracer::new(&lens, &path, D_LINE_NM, fo.sensor_z_mm());
+        for theta_deg in [0.0, 45.0, 80.0, 89.0, 89.9, 89.999_999, -89.999_999] {
+            for py in [-1.0, 0.0, 1.0] {
+                let out = tracer.trace(&pupil_ray(&fo.entrance_pupil(), f64::to_radians(theta_deg), 0.0, py), TraceOptions::default());
+                check_finite(&out, n);
+                seen.insert(out.status.word());
+            }
+        }
+    }
+    for word in ["ok", "tir", "missed"] {
+        assert!(seen.contains(word), "the fisheye at grazing angles shows `{word}` ({seen:?})");
+    }
+    // Total internal reflection, made on purpose: a ray parallel to the axis at height h leaves glass of
+    // index 1.5 through a surface of radius 12 at sin i = h / 12; beyond h = 8 that is TIR.
+    let mut stop = surface(0.0, 2.0, Medium::air(), 12.0);
+    stop.stop = true;
+    let lens = Lens {
+        id: "tir".into(),
+        name: "tir".into(),
+        surfaces: vec![stop, surface(0.0, 12.0, glass(1.5, 60.0), 12.0), surface(-12.0, 30.0, Medium::air(), 11.9)],
+        extra: Default::default(),
+    };
+    lens.validate().unwrap();
+    let fo = FirstOrder::d_line(&lens).unwrap();
+    let tracer = Tracer::new(&lens, &LightPath::image(&lens), D_LINE_NM, fo.sensor_z_mm());
+    for (h, expected) in [(7.9, TraceStatus::Landed), (8.1, TraceStatus::Tir { surface: 2 }), (11.0, TraceStatus::Tir { surface: 2 })] {
+        let ray = Ray { origin_mm: DVec3::new(0.0, h, -1.0), direction: DVec3::Z };
+        let out = tracer.trace(&ray, TraceOptions::default());
+        assert_eq!(out.status, expected, "h = {h}");
+        check_finite(&out, 3);
+    }
+}
