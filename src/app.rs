@@ -186,7 +186,7 @@ impl FlareLabApp {
 
 impl eframe::App for FlareLabApp {
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
-        egui::Panel::left("lens_panel").default_size(330.0).resizable(true).show_inside(ui, |ui| self.lens_panel_ui(ui));
-        egui::CentralPanel::default().show_inside(ui, |ui| self.cross_section_ui(ui));
+        egui::Panel::left("lens_panel").default_size(330.0).resizable(true).show(ui, |ui| self.lens_panel_ui(ui));
+        egui::CentralPanel::default().show(ui, |ui| self.cross_section_ui(ui));
     }
 }

@@ -44,7 +44,7 @@ pub enum LensCommand {
         #[arg(long)]
         json: bool,
         /// Wavelength of the first-order data.
-        #[arg(long, default_value_t = D_LINE_NM)]
+        #[arg(long, default_value_t = D_LINE_NM, allow_negative_numbers = true)]
         wavelength_nm: f64,
     },
     /// The built-in lenses.
@@ -85,7 +85,7 @@ pub struct TraceArgs {
     #[arg(long, value_parser = parse_pair_usize)]
     ghost: Option<(usize, usize)>,
     /// Wavelength (default: the d-line).
-    #[arg(long, default_value_t = D_LINE_NM)]
+    #[arg(long, default_value_t = D_LINE_NM, allow_negative_numbers = true)]
     wavelength_nm: f64,
     /// Stop the ray at the first clear aperture it passes outside (default: only report them).
     #[arg(long)]

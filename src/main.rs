@@ -21,7 +21,20 @@ fn main() -> ExitCode {
         let place = info.location().map(|l| format!(" at {}:{}", l.file(), l.line())).unwrap_or_default();
         eprintln!("flarelab: internal error (a bug; please report it): {}{place}", message.replace('\n', " "));
     }));
-    let cli = cli::Cli::parse();
+    let cli = match cli::Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            use clap::error::ErrorKind;
+            if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand) {
+                e.exit();
+            }
+            // One line, as every other error: clap's first line, without its own "error: " prefix.
+            let text = e.render().to_string();
+            let first = text.lines().next().unwrap_or("invalid arguments").trim_start_matches("error: ");
+            eprintln!("flarelab: error: {first} (see `flarelab --help`)");
+            return ExitCode::from(2);
+        }
+    };
     let result = match cli.command {
         None => app::run(),
         Some(command) => cli::run(command),
