@@ -73,13 +73,12 @@ impl FlareLabApp {
                 ui.selectable_value(&mut chosen, id.to_owned(), id);
             }
         });
-        if chosen != self.lens_id {
-            if let Ok(lens) = builtin_lens(&chosen) {
+        if chosen != self.lens_id
+            && let Ok(lens) = builtin_lens(&chosen) {
                 self.lens = lens;
                 self.lens_id = chosen;
                 self.rebuild();
             }
-        }
         ui.label(&self.lens.name);
         ui.separator();
         if ui.add(egui::Slider::new(&mut self.field_deg, -40.0..=40.0).text("field angle (deg)")).changed() {

@@ -118,7 +118,7 @@ fn parse_pair_usize(s: &str) -> Result<(usize, usize), String> {
 pub fn open_lens(name: &str) -> Result<Lens> {
     let path = Path::new(name);
     if path.exists() {
-        return load_lens_file(path).with_context(|| format!("{name}"));
+        return load_lens_file(path).with_context(|| name.to_string());
     }
     let looks_like_path = name.contains(['/', '\\']) || name.contains('.');
     match builtin_lens(name) {
@@ -147,7 +147,7 @@ pub fn run(command: Command) -> Result<()> {
 fn lens_info(file: &str, as_json: bool, wavelength_nm: f64) -> Result<()> {
     check_wavelength(wavelength_nm)?;
     let lens = open_lens(file)?;
-    let fo = FirstOrder::compute(&lens, wavelength_nm).with_context(|| format!("{file}"))?;
+    let fo = FirstOrder::compute(&lens, wavelength_nm).with_context(|| file.to_string())?;
     let ghosts = lens.ghost_pairs();
     let assumed: Vec<usize> =
         (0..lens.surfaces.len()).filter(|&k| lens.surfaces[k].medium.dispersion().is_assumed()).collect();
@@ -190,7 +190,7 @@ fn lens_info(file: &str, as_json: bool, wavelength_nm: f64) -> Result<()> {
     println!("    exit pupil                {:>12.6} mm from the last vertex", fo.exit_pupil_z_mm);
     println!("    total track (to sensor)   {:>12.6} mm", fo.total_track_mm);
     println!();
-    println!("  {:>3} {:>12} {:>10} {:>8} {:>6} {:>8} {:>9}  {}", "#", "radius", "thickness", "nd", "vd", "glass", "semi-ap", "dispersion");
+    println!("  {:>3} {:>12} {:>10} {:>8} {:>6} {:>8} {:>9}  dispersion", "#", "radius", "thickness", "nd", "vd", "glass", "semi-ap");
     for (k, s) in lens.surfaces.iter().enumerate() {
         let radius = if s.is_flat() { "flat".to_owned() } else { format!("{:.4}", s.radius_mm) };
         let thickness = s.thickness_mm.map(|t| format!("{t:.4}")).unwrap_or_else(|| "-".to_owned());

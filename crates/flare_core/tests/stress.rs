@@ -62,7 +62,8 @@ fn assemble(drafts: &[Draft], stop_choice: usize) -> Lens {
     let mut in_glass = false;
     for (k, d) in drafts.iter().enumerate() {
         let last = k + 1 == drafts.len();
-        let medium = if last || (in_glass && !d.to_glass) || (!in_glass && !d.to_glass && k > 0) {
+        // Glass follows air unless the draft says air (the first surface always enters glass).
+        let medium = if last || (!d.to_glass && (in_glass || k > 0)) {
             Medium::air()
         } else {
             glass(d.n_d, d.v_d)

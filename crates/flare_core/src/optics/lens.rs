@@ -289,19 +289,17 @@ impl Lens {
     }
 
     fn validate_extras(&self) -> Result<(), LensError> {
-        if let Some(v) = self.extra.get("units") {
-            if v.as_str() != Some("mm") {
+        if let Some(v) = self.extra.get("units")
+            && v.as_str() != Some("mm") {
                 return Err(LensError::LensField { field: "units", reason: format!("{v} is not supported; use \"mm\"") });
             }
-        }
-        if let Some(v) = self.extra.get("object_index") {
-            if v.as_f64() != Some(1.0) {
+        if let Some(v) = self.extra.get("object_index")
+            && v.as_f64() != Some(1.0) {
                 return Err(LensError::LensField {
                     field: "object_index",
                     reason: format!("{v}: the object space must be air (1.0)"),
                 });
             }
-        }
         if let Some(v) = self.extra.get("wavelength_nm") {
             match v.as_f64() {
                 Some(w) if (w - D_LINE_NM).abs() < 1e-6 => {}

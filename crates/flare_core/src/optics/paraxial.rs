@@ -253,4 +253,57 @@ mod tests {
         assert!((y - (1.0 + 10.0 * u)).abs() < 1e-15);
         assert_eq!(Mat2::reflection(0.0, 1.0), Mat2::IDENTITY, "a flat mirror keeps (y, u) along travel");
     }
+
+    fn close(a: &Mat2, b: &Mat2) -> bool {
+        let (a, b) = (a.as_rows(), b.as_rows());
+        (0..2).all(|r| (0..2).all(|c| (a[r][c] - b[r][c]).abs() <= 1e-12 * (1.0 + b[r][c].abs())))
+    }
+
+    #[test]
+    fn ghost_matrices_split_at_the_stop_and_keep_every_crossing() {
+        let lens = crate::optics::library::default_lens();
+        let fo = FirstOrder::d_line(&lens).unwrap();
+        let stop = lens.stop_index();
+        let mut straddling = 0;
+        for (i, j) in lens.ghost_pairs() {
+            let path = LightPath::ghost(&lens, i, j).unwrap();
+            let m = PathMatrices::compute(&lens, &path, D_LINE_NM, fo.sensor_z_mm());
+            let expected_crossings = if i < stop && stop < j { 3 } else { 1 };
+            assert_eq!(m.stop_from_entrance.len(), expected_crossings, "ghost ({i}, {j})");
+            assert_eq!(path.straddles_stop(&lens), expected_crossings == 3);
+            straddling += usize::from(expected_crossings == 3);
+            // M_f = M_s M_a, with M_a the entrance-to-stop matrix of the last crossing.
+            let product = m.sensor_from_stop.mul(m.stop_from_entrance.last().unwrap());
+            assert!(close(&product, &m.sensor_from_entrance), "ghost ({i}, {j}): {product:?} vs {:?}", m.sensor_from_entrance);
+            // Two reflections and refractions there and back: det = n_object / n_image = 1.
+            assert!((m.sensor_from_entrance.determinant() - 1.0).abs() < 1e-12);
+        }
+        assert_eq!(straddling, 5 * 3, "Heliar: 5 reflecting surfaces before the stop, 3 after");
+    }
+
+    #[test]
+    fn first_order_data_follow_the_wavelength() {
+        let lens = crate::optics::library::builtin_lens("tessar").unwrap();
+        let blue = FirstOrder::compute(&lens, 475.0).unwrap();
+        let green = FirstOrder::compute(&lens, D_LINE_NM).unwrap();
+        let red = FirstOrder::compute(&lens, 650.0).unwrap();
+        // An achromat: the focal length changes little, and the pupil diameter hardly at all.
+        assert!((blue.efl_mm - red.efl_mm).abs() < 0.01 * green.efl_mm, "{} {} {}", blue.efl_mm, green.efl_mm, red.efl_mm);
+        assert_ne!(blue.efl_mm, red.efl_mm, "the indices do depend on the wavelength");
+        // A single positive lens of dispersive glass focuses blue shorter than red.
+        let singlet = Lens {
+            id: "singlet".into(),
+            name: "singlet".into(),
+            surfaces: serde_json::from_str(
+                r#"[{"radius": 0, "thickness": 2, "nd": 1.0, "semi_aperture": 5, "stop": true},
+                    {"radius": 50, "thickness": 5, "nd": 1.5168, "vd": 64.17, "glass": "N-BK7", "semi_aperture": 10},
+                    {"radius": -50, "thickness": 45, "nd": 1.0, "semi_aperture": 10}]"#,
+            )
+            .unwrap(),
+            extra: Default::default(),
+        };
+        singlet.validate().unwrap();
+        let (b, r) = (FirstOrder::compute(&singlet, 475.0).unwrap(), FirstOrder::compute(&singlet, 650.0).unwrap());
+        assert!(b.efl_mm < r.efl_mm - 0.5, "blue {} red {}", b.efl_mm, r.efl_mm);
+    }
 }

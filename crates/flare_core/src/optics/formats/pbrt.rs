@@ -67,11 +67,10 @@ pub fn parse(text: &str, id_hint: &str) -> Result<Lens, FormatError> {
         });
         lines.push(line);
     }
-    if let Some(last) = surfaces.last_mut() {
-        if last.thickness_mm == Some(0.0) {
+    if let Some(last) = surfaces.last_mut()
+        && last.thickness_mm == Some(0.0) {
             last.thickness_mm = None;
         }
-    }
     let lens = Lens {
         id: id_hint.to_owned(),
         name: if name.is_empty() { id_hint.to_owned() } else { name },

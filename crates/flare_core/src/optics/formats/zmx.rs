@@ -143,11 +143,10 @@ fn build(blocks: Vec<Block>, name: String, id_hint: &str) -> Result<Lens, Format
         });
     }
     let object = &blocks[0];
-    if let Some((line, m)) = &object.glass {
-        if !m.is_air() {
+    if let Some((line, m)) = &object.glass
+        && !m.is_air() {
             return Err(unsupported(*line, "an object surface in glass (object space must be air)"));
         }
-    }
     let image = blocks.len() - 1;
     let mut surfaces = Vec::with_capacity(image - 1);
     let mut lines = Vec::with_capacity(image - 1);
