@@ -2,11 +2,11 @@
 //! scale with a fan of exact rays at an adjustable field angle, its first-order data and its surfaces.
 //! The live flare viewport and the editing panels build on this window.
 
-use anyhow::{bail, Result};
+use anyhow::{Result, bail};
 use eframe::egui;
 use flare_core::optics::glass::D_LINE_NM;
-use flare_core::optics::library::{builtin_lens, ids, DEFAULT_LENS_ID};
-use flare_core::optics::{pupil_ray, FirstOrder, Lens, LightPath, TraceOptions, TraceStatus, Tracer};
+use flare_core::optics::library::{DEFAULT_LENS_ID, builtin_lens, ids};
+use flare_core::optics::{FirstOrder, Lens, LightPath, TraceOptions, TraceStatus, Tracer, pupil_ray};
 
 const NO_DISPLAY: &str = "no display to open the app's window on (DISPLAY and WAYLAND_DISPLAY are unset). \
 The command line works without one: `flarelab lens list`, `flarelab lens info LENS`, \
@@ -14,7 +14,10 @@ The command line works without one: `flarelab lens list`, `flarelab lens info LE
 
 /// Opens the app window; without a display, explains how to use the command line instead.
 pub fn run() -> Result<()> {
-    if cfg!(target_os = "linux") && std::env::var_os("DISPLAY").is_none() && std::env::var_os("WAYLAND_DISPLAY").is_none() {
+    if cfg!(target_os = "linux")
+        && std::env::var_os("DISPLAY").is_none()
+        && std::env::var_os("WAYLAND_DISPLAY").is_none()
+    {
         bail!(NO_DISPLAY);
     }
     let options = eframe::NativeOptions {
@@ -39,7 +42,8 @@ struct FlareLabApp {
 impl FlareLabApp {
     fn new() -> Self {
         let lens = builtin_lens(DEFAULT_LENS_ID).unwrap_or_else(|_| flare_core::optics::library::default_lens());
-        let mut app = Self { lens_id: DEFAULT_LENS_ID.to_owned(), first_order: None, lens, field_deg: 10.0, rays: Vec::new() };
+        let mut app =
+            Self { lens_id: DEFAULT_LENS_ID.to_owned(), first_order: None, lens, field_deg: 10.0, rays: Vec::new() };
         app.rebuild();
         app
     }
@@ -74,11 +78,12 @@ impl FlareLabApp {
             }
         });
         if chosen != self.lens_id
-            && let Ok(lens) = builtin_lens(&chosen) {
-                self.lens = lens;
-                self.lens_id = chosen;
-                self.rebuild();
-            }
+            && let Ok(lens) = builtin_lens(&chosen)
+        {
+            self.lens = lens;
+            self.lens_id = chosen;
+            self.rebuild();
+        }
         ui.label(&self.lens.name);
         ui.separator();
         if ui.add(egui::Slider::new(&mut self.field_deg, -40.0..=40.0).text("field angle (deg)")).changed() {
@@ -92,7 +97,10 @@ impl FlareLabApp {
                         ("focal length", format!("{:.3} mm", fo.efl_mm)),
                         ("f-number", format!("f/{:.2}", fo.f_number)),
                         ("back focal distance", format!("{:.3} mm", fo.bfd_mm)),
-                        ("entrance pupil", format!("{:.3} mm at z = {:.3} mm", fo.entrance_pupil_diameter_mm, fo.entrance_pupil_z_mm)),
+                        (
+                            "entrance pupil",
+                            format!("{:.3} mm at z = {:.3} mm", fo.entrance_pupil_diameter_mm, fo.entrance_pupil_z_mm),
+                        ),
                         ("surfaces", format!("{} (stop: {})", self.lens.surfaces.len(), fo.stop_surface)),
                         ("two-reflection ghosts", self.lens.ghost_pairs().len().to_string()),
                     ];
@@ -137,18 +145,21 @@ impl FlareLabApp {
         let h_max = self.lens.surfaces.iter().map(|s| s.semi_aperture_mm).fold(1.0, f64::max) * 1.6;
         let scale = ((rect.width() as f64 - 40.0) / (z_max - z_min)).min((rect.height() as f64 - 40.0) / (2.0 * h_max));
         let to_screen = |zz: f64, y: f64| {
-            egui::pos2(
-                rect.left() + 20.0 + ((zz - z_min) * scale) as f32,
-                rect.center().y - (y * scale) as f32,
-            )
+            egui::pos2(rect.left() + 20.0 + ((zz - z_min) * scale) as f32, rect.center().y - (y * scale) as f32)
         };
-        painter.line_segment([to_screen(z_min, 0.0), to_screen(z_max, 0.0)], egui::Stroke::new(1.0, egui::Color32::from_gray(70)));
+        painter.line_segment(
+            [to_screen(z_min, 0.0), to_screen(z_max, 0.0)],
+            egui::Stroke::new(1.0, egui::Color32::from_gray(70)),
+        );
         let glass = egui::Stroke::new(1.5, egui::Color32::from_rgb(150, 200, 255));
         for (k, s) in self.lens.surfaces.iter().enumerate() {
             if s.stop {
                 let stroke = egui::Stroke::new(3.0, egui::Color32::from_rgb(240, 200, 80));
                 for sign in [-1.0, 1.0] {
-                    painter.line_segment([to_screen(z[k], sign * s.semi_aperture_mm), to_screen(z[k], sign * h_max * 0.8)], stroke);
+                    painter.line_segment(
+                        [to_screen(z[k], sign * s.semi_aperture_mm), to_screen(z[k], sign * h_max * 0.8)],
+                        stroke,
+                    );
                 }
                 continue;
             }

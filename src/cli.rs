@@ -5,12 +5,12 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand, ValueEnum};
 use flare_core::optics::formats::{load_lens_file, pbrt, to_json, write_atomic, zmx};
 use flare_core::optics::glass::D_LINE_NM;
-use flare_core::optics::library::{builtin_lens, ids, DEFAULT_LENS_ID};
-use flare_core::optics::{pupil_ray, FirstOrder, Lens, LightPath, PathKind, TraceOptions, TraceStatus, Tracer};
+use flare_core::optics::library::{DEFAULT_LENS_ID, builtin_lens, ids};
+use flare_core::optics::{FirstOrder, Lens, LightPath, PathKind, TraceOptions, TraceStatus, Tracer, pupil_ray};
 use serde_json::json;
 
 #[derive(Parser, Debug)]
@@ -181,16 +181,27 @@ fn lens_info(file: &str, as_json: bool, wavelength_nm: f64) -> Result<()> {
         return Ok(());
     }
     println!("{} ({})", lens.name, lens.id);
-    println!("  {} surfaces, stop at surface {}, {} two-reflection ghosts", lens.surfaces.len(), fo.stop_surface, ghosts.len());
+    println!(
+        "  {} surfaces, stop at surface {}, {} two-reflection ghosts",
+        lens.surfaces.len(),
+        fo.stop_surface,
+        ghosts.len()
+    );
     println!("  at {wavelength_nm} nm:");
     println!("    focal length (EFL)        {:>12.6} mm", fo.efl_mm);
     println!("    back focal distance       {:>12.6} mm", fo.bfd_mm);
     println!("    f-number                  {:>12.6}", fo.f_number);
-    println!("    entrance pupil            {:>12.6} mm diameter, {:.6} mm behind the first vertex", fo.entrance_pupil_diameter_mm, fo.entrance_pupil_z_mm);
+    println!(
+        "    entrance pupil            {:>12.6} mm diameter, {:.6} mm behind the first vertex",
+        fo.entrance_pupil_diameter_mm, fo.entrance_pupil_z_mm
+    );
     println!("    exit pupil                {:>12.6} mm from the last vertex", fo.exit_pupil_z_mm);
     println!("    total track (to sensor)   {:>12.6} mm", fo.total_track_mm);
     println!();
-    println!("  {:>3} {:>12} {:>10} {:>8} {:>6} {:>8} {:>9}  dispersion", "#", "radius", "thickness", "nd", "vd", "glass", "semi-ap");
+    println!(
+        "  {:>3} {:>12} {:>10} {:>8} {:>6} {:>8} {:>9}  dispersion",
+        "#", "radius", "thickness", "nd", "vd", "glass", "semi-ap"
+    );
     for (k, s) in lens.surfaces.iter().enumerate() {
         let radius = if s.is_flat() { "flat".to_owned() } else { format!("{:.4}", s.radius_mm) };
         let thickness = s.thickness_mm.map(|t| format!("{t:.4}")).unwrap_or_else(|| "-".to_owned());
@@ -228,7 +239,13 @@ fn lens_list(as_json: bool) -> Result<()> {
     } else {
         for (id, lens, fo) in rows {
             let mark = if id == DEFAULT_LENS_ID { " (default)" } else { "" };
-            println!("{id:<28} f = {:>7.2} mm  f/{:<5.2} {:>2} surfaces  {}{mark}", fo.efl_mm, fo.f_number, lens.surfaces.len(), lens.name);
+            println!(
+                "{id:<28} f = {:>7.2} mm  f/{:<5.2} {:>2} surfaces  {}{mark}",
+                fo.efl_mm,
+                fo.f_number,
+                lens.surfaces.len(),
+                lens.name
+            );
         }
     }
     Ok(())
@@ -291,7 +308,9 @@ fn trace(args: &TraceArgs) -> Result<()> {
         }
         TraceStatus::Vignetted { surface } => println!("vignetted: stopped by the clear aperture of surface {surface}"),
         TraceStatus::Tir { surface } => println!("tir: total internal reflection at surface {surface}"),
-        TraceStatus::Missed { surface } if surface == lens.surfaces.len() => println!("missed: the ray never meets the sensor"),
+        TraceStatus::Missed { surface } if surface == lens.surfaces.len() => {
+            println!("missed: the ray never meets the sensor")
+        }
         TraceStatus::Missed { surface } => println!("missed: the ray does not meet surface {surface}"),
         TraceStatus::Backward => println!("backward: the ray leaves the lens travelling away from the sensor"),
     }

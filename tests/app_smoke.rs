@@ -12,7 +12,9 @@ fn app_opens_a_window_under_xvfb_and_keeps_running() {
     let runtime = tempfile::tempdir().unwrap();
     let app = env!("CARGO_BIN_EXE_flarelab");
     // Start the app, wait, and report whether it is still alive; then stop it.
-    let script = format!("'{app}' 2>&1 & P=$!; sleep 5; if kill -0 $P 2>/dev/null; then echo APP-ALIVE; kill $P; fi; wait $P 2>/dev/null; true");
+    let script = format!(
+        "'{app}' 2>&1 & P=$!; sleep 5; if kill -0 $P 2>/dev/null; then echo APP-ALIVE; kill $P; fi; wait $P 2>/dev/null; true"
+    );
     let out = Command::new("xvfb-run")
         .args(["-a", "-s", "-screen 0 1280x800x24", "sh", "-c", &script])
         .env("XDG_RUNTIME_DIR", runtime.path())

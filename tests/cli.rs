@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use flare_core::optics::{pupil_ray, FirstOrder, LightPath, TraceOptions, Tracer, D_LINE_NM};
+use flare_core::optics::{D_LINE_NM, FirstOrder, LightPath, TraceOptions, Tracer, pupil_ray};
 use serde_json::Value;
 
 fn flarelab(args: &[&str]) -> Output {
@@ -72,7 +72,15 @@ fn trace_json_matches_reference_rays_and_ghosts() {
     // which moves a landing by well under 1e-6 mm.
     for ray in r["rays"].as_array().unwrap().iter().filter(|x| !x["x"].is_null()).step_by(5) {
         let pupil = format!("{},{}", ray["px"], ray["py"]);
-        let out = json_of(&flarelab(&["trace", &file, "--field-deg", &ray["theta_deg"].to_string(), "--pupil", &pupil, "--json"]));
+        let out = json_of(&flarelab(&[
+            "trace",
+            &file,
+            "--field-deg",
+            &ray["theta_deg"].to_string(),
+            "--pupil",
+            &pupil,
+            "--json",
+        ]));
         assert_eq!(out["status"], "ok");
         for (ours, theirs) in [("x_mm", "x"), ("y_mm", "y")] {
             let (a, b) = (out[ours].as_f64().unwrap(), ray[theirs].as_f64().unwrap());
@@ -86,14 +94,26 @@ fn trace_json_matches_reference_rays_and_ghosts() {
     for (i, j) in [(0, 9), (2, 4), (6, 10)] {
         let tracer = Tracer::new(&lens, &LightPath::ghost(&lens, i, j).unwrap(), D_LINE_NM, fo.sensor_z_mm());
         for (theta_deg, py) in [(0.0, 0.5), (10.0, -1.0), (-15.0, 0.25), (20.0, 0.0)] {
-            let expected = tracer.trace(&pupil_ray(&fo.entrance_pupil(), f64::to_radians(theta_deg), 0.0, py), TraceOptions::default());
+            let expected = tracer
+                .trace(&pupil_ray(&fo.entrance_pupil(), f64::to_radians(theta_deg), 0.0, py), TraceOptions::default());
             let out = json_of(&flarelab(&[
-                "trace", &file, "--field-deg", &theta_deg.to_string(), "--pupil", &format!("0,{py}"),
-                "--ghost", &format!("{i},{j}"), "--json",
+                "trace",
+                &file,
+                "--field-deg",
+                &theta_deg.to_string(),
+                "--pupil",
+                &format!("0,{py}"),
+                "--ghost",
+                &format!("{i},{j}"),
+                "--json",
             ]));
             assert_eq!(out["status"], expected.status.word(), "ghost {i},{j} at {theta_deg} deg, py {py}");
             assert_eq!(out["surface"].as_u64().map(|s| s as usize), expected.status.surface());
-            assert_eq!(out["y_mm"].as_f64(), expected.sensor_point_mm.map(|p| p.y), "ghost {i},{j} at {theta_deg} deg, py {py}");
+            assert_eq!(
+                out["y_mm"].as_f64(),
+                expected.sensor_point_mm.map(|p| p.y),
+                "ghost {i},{j} at {theta_deg} deg, py {py}"
+            );
         }
     }
 }
@@ -108,8 +128,14 @@ fn the_same_lens_in_three_formats_gives_the_same_answers() {
         assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
         let p = path.to_str().unwrap();
         let info = json_of(&flarelab(&["lens", "info", p, "--json"]));
-        let trace = json_of(&flarelab(&["trace", p, "--field-deg", "12", "--pupil", "0.2,-0.6", "--ghost", "1,6", "--json"]));
-        answers.push((info["efl_mm"].as_f64().unwrap(), info["ghost_count"].clone(), trace["x_mm"].as_f64(), trace["y_mm"].as_f64()));
+        let trace =
+            json_of(&flarelab(&["trace", p, "--field-deg", "12", "--pupil", "0.2,-0.6", "--ghost", "1,6", "--json"]));
+        answers.push((
+            info["efl_mm"].as_f64().unwrap(),
+            info["ghost_count"].clone(),
+            trace["x_mm"].as_f64(),
+            trace["y_mm"].as_f64(),
+        ));
     }
     for a in &answers[1..] {
         assert!((a.0 - answers[0].0).abs() < 1e-12 && a.1 == answers[0].1, "{answers:?}");
@@ -150,7 +176,8 @@ fn errors_exit_2_with_one_line_and_never_panic() {
         assert!(message.contains(word), "{args:?}: `{message}` lacks `{word}`");
     }
     // A failed ray is an answer, not an error.
-    let out = json_of(&flarelab(&["trace", "heliar", "--field-deg", "20", "--pupil", "0,-1", "--apply-apertures", "--json"]));
+    let out =
+        json_of(&flarelab(&["trace", "heliar", "--field-deg", "20", "--pupil", "0,-1", "--apply-apertures", "--json"]));
     assert_eq!(out["status"], "vignetted");
     assert_eq!(out["surface"], 0);
 }
@@ -160,7 +187,10 @@ fn no_display_prints_how_to_use_the_command_line() {
     let out = flarelab(&[]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{stderr}");
-    assert!(stderr.contains("no display") && stderr.contains("flarelab lens info") && stderr.contains("flarelab trace"), "{stderr}");
+    assert!(
+        stderr.contains("no display") && stderr.contains("flarelab lens info") && stderr.contains("flarelab trace"),
+        "{stderr}"
+    );
     assert!(!stderr.contains("panicked"));
     assert!(Path::new(&repo("lenses/README.md")).exists(), "the lens sources ship with the lenses");
 }

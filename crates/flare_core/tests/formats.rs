@@ -5,11 +5,11 @@
 use std::path::Path;
 
 use flare_core::optics::formats::{
-    decode_text, load_lens_file, parse_lens, parse_lens_bytes, pbrt, to_json, write_atomic, zmx, FormatError,
-    LensFormat, MAX_FILE_BYTES,
+    FormatError, LensFormat, MAX_FILE_BYTES, decode_text, load_lens_file, parse_lens, parse_lens_bytes, pbrt, to_json,
+    write_atomic, zmx,
 };
-use flare_core::optics::library::{builtin_lens, ids, BUILTIN_LENSES};
-use flare_core::optics::{pupil_ray, FirstOrder, Lens, LightPath, TraceOptions, TraceStatus, Tracer, D_LINE_NM};
+use flare_core::optics::library::{BUILTIN_LENSES, builtin_lens, ids};
+use flare_core::optics::{D_LINE_NM, FirstOrder, Lens, LightPath, TraceOptions, TraceStatus, Tracer, pupil_ray};
 
 /// First-order data and the landings (or failures, as NaN-free codes) of a grid of rays along the image path
 /// and two ghost paths, at the d-line.
@@ -60,8 +60,7 @@ fn json_round_trip_is_lossless() {
 fn json_keeps_unknown_keys_and_coatings() {
     let mut value: serde_json::Value = serde_json::from_str(BUILTIN_LENSES[0].1).unwrap();
     value["surfaces"][0]["coating"] = serde_json::json!({"type": "quarter_wave", "design_wavelength_nm": 550.0});
-    value["surfaces"][1]["coating"] =
-        serde_json::json!({"type": "multilayer", "layers": [{"index": 1.38, "thickness_nm": 99.6}, {"index": 2.1, "thickness_nm": 65.0}]});
+    value["surfaces"][1]["coating"] = serde_json::json!({"type": "multilayer", "layers": [{"index": 1.38, "thickness_nm": 99.6}, {"index": 2.1, "thickness_nm": 65.0}]});
     value["surfaces"][2]["vendor_note"] = serde_json::json!("kept");
     value["my_tool"] = serde_json::json!({"any": [1, 2, 3]});
     let text = serde_json::to_string(&value).unwrap();
@@ -81,7 +80,11 @@ fn zmx_and_dat_give_the_same_results_as_json() {
         assert_eq!(via_zmx.surfaces.len(), lens.surfaces.len());
         for (a, b) in lens.surfaces.iter().zip(&via_zmx.surfaces) {
             assert!((a.radius_mm - b.radius_mm).abs() <= 1e-15 * a.radius_mm.abs(), "{id}: {a:?} vs {b:?}");
-            assert_eq!((a.thickness_mm.unwrap_or(0.0), &a.medium, a.semi_aperture_mm, a.stop), (b.thickness_mm.unwrap_or(0.0), &b.medium, b.semi_aperture_mm, b.stop), "{id}");
+            assert_eq!(
+                (a.thickness_mm.unwrap_or(0.0), &a.medium, a.semi_aperture_mm, a.stop),
+                (b.thickness_mm.unwrap_or(0.0), &b.medium, b.semi_aperture_mm, b.stop),
+                "{id}"
+            );
         }
         assert_close(&reference, &fingerprint(&via_zmx), 1e-12, &format!("{id} via .zmx"));
 
@@ -186,7 +189,10 @@ fn opticstudio_sample_reads_with_units_and_glasses() {
     assert!((front.thickness_mm.unwrap() - 0.15 * 25.4).abs() < 1e-12);
     assert!((front.semi_aperture_mm - 0.4 * 25.4).abs() < 1e-12, "DIAM is the semi-diameter");
     assert_eq!((front.medium.n_d, front.medium.glass.as_deref()), (1.5168, Some("N-BK7")), "catalogue glass");
-    assert_eq!((lens.surfaces[2].medium.n_d, lens.surfaces[2].medium.v_d, lens.surfaces[2].medium.glass.as_deref()), (1.72, Some(29.3), None));
+    assert_eq!(
+        (lens.surfaces[2].medium.n_d, lens.surfaces[2].medium.v_d, lens.surfaces[2].medium.glass.as_deref()),
+        (1.72, Some(29.3), None)
+    );
     assert!(lens.surfaces[3].medium.is_air());
     assert_eq!(lens.ghost_pairs().len(), 3);
     FirstOrder::d_line(&lens).unwrap();
@@ -214,26 +220,84 @@ fn hostile_json_files_are_refused_with_the_reason() {
         ("blank", b"  \n\t \n".to_vec(), &["empty"]),
         ("truncated", text.as_bytes()[..text.len() / 2].to_vec(), &["JSON line", "EOF"]),
         ("garbage", (0..4000u32).map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8).collect(), &["not text"]),
-        ("wrong type", heliar_json_with(|v| v["surfaces"][3]["radius"] = "thirty".into()), &["surfaces[3].radius", "invalid type"]),
-        ("missing field", heliar_json_with(|v| { v["surfaces"][2].as_object_mut().unwrap().remove("nd"); }), &["surfaces[2]", "nd"]),
+        (
+            "wrong type",
+            heliar_json_with(|v| v["surfaces"][3]["radius"] = "thirty".into()),
+            &["surfaces[3].radius", "invalid type"],
+        ),
+        (
+            "missing field",
+            heliar_json_with(|v| {
+                v["surfaces"][2].as_object_mut().unwrap().remove("nd");
+            }),
+            &["surfaces[2]", "nd"],
+        ),
         ("surfaces not a list", heliar_json_with(|v| v["surfaces"] = 7.into()), &["surfaces", "invalid type"]),
         ("no surfaces", heliar_json_with(|v| v["surfaces"] = serde_json::json!([])), &["no surfaces"]),
-        ("negative thickness", heliar_json_with(|v| v["surfaces"][1]["thickness"] = (-1.0).into()), &["surface 1", "thickness", "negative"]),
+        (
+            "negative thickness",
+            heliar_json_with(|v| v["surfaces"][1]["thickness"] = (-1.0).into()),
+            &["surface 1", "thickness", "negative"],
+        ),
         ("index below one", heliar_json_with(|v| v["surfaces"][0]["nd"] = 0.7.into()), &["surface 0", "nd", "below 1"]),
-        ("radius inside aperture", heliar_json_with(|v| v["surfaces"][0]["radius"] = 10.0.into()), &["surface 0", "radius", "smaller than the semi-aperture"]),
+        (
+            "radius inside aperture",
+            heliar_json_with(|v| v["surfaces"][0]["radius"] = 10.0.into()),
+            &["surface 0", "radius", "smaller than the semi-aperture"],
+        ),
         ("no stop", heliar_json_with(|v| v["surfaces"][5]["stop"] = false.into()), &["no aperture stop"]),
-        ("two stops", heliar_json_with(|v| { v["surfaces"][6]["stop"] = true.into(); }), &["2 aperture stops", "[5, 6]"]),
-        ("curved stop", heliar_json_with(|v| v["surfaces"][5]["radius"] = 100.0.into()), &["surface 5", "radius", "flat"]),
-        ("absurd thickness", heliar_json_with(|v| v["surfaces"][2]["thickness"] = 1e12.into()), &["surface 2", "thickness", "absurd"]),
+        (
+            "two stops",
+            heliar_json_with(|v| {
+                v["surfaces"][6]["stop"] = true.into();
+            }),
+            &["2 aperture stops", "[5, 6]"],
+        ),
+        (
+            "curved stop",
+            heliar_json_with(|v| v["surfaces"][5]["radius"] = 100.0.into()),
+            &["surface 5", "radius", "flat"],
+        ),
+        (
+            "absurd thickness",
+            heliar_json_with(|v| v["surfaces"][2]["thickness"] = 1e12.into()),
+            &["surface 2", "thickness", "absurd"],
+        ),
         ("absurd index", heliar_json_with(|v| v["surfaces"][0]["nd"] = 12.0.into()), &["surface 0", "nd", "absurd"]),
-        ("negative aperture", heliar_json_with(|v| v["surfaces"][4]["semi_aperture"] = (-3.0).into()), &["surface 4", "semi_aperture", "positive"]),
+        (
+            "negative aperture",
+            heliar_json_with(|v| v["surfaces"][4]["semi_aperture"] = (-3.0).into()),
+            &["surface 4", "semi_aperture", "positive"],
+        ),
         ("bad abbe", heliar_json_with(|v| v["surfaces"][0]["vd"] = (-5.0).into()), &["surface 0", "vd"]),
-        ("crossing surfaces", heliar_json_with(|v| v["surfaces"][0]["thickness"] = 1.0.into()), &["surface 0", "cross each other"]),
-        ("image space in glass", heliar_json_with(|v| v["surfaces"][8]["nd"] = 1.5.into()), &["surface 8", "image space"]),
+        (
+            "crossing surfaces",
+            heliar_json_with(|v| v["surfaces"][0]["thickness"] = 1.0.into()),
+            &["surface 0", "cross each other"],
+        ),
+        (
+            "image space in glass",
+            heliar_json_with(|v| v["surfaces"][8]["nd"] = 1.5.into()),
+            &["surface 8", "image space"],
+        ),
         ("units", heliar_json_with(|v| v["units"] = "inch".into()), &["units"]),
         ("object index", heliar_json_with(|v| v["object_index"] = 1.33.into()), &["object_index"]),
-        ("bad coating", heliar_json_with(|v| v["surfaces"][0]["coating"] = serde_json::json!({"type": "quarter_wave", "design_wavelength_nm": -5.0})), &["surface 0", "coating.design_wavelength_nm"]),
-        ("trailing junk", { let mut b = text.as_bytes().to_vec(); b.extend(b"}}"); b }, &["trailing"]),
+        (
+            "bad coating",
+            heliar_json_with(|v| {
+                v["surfaces"][0]["coating"] = serde_json::json!({"type": "quarter_wave", "design_wavelength_nm": -5.0})
+            }),
+            &["surface 0", "coating.design_wavelength_nm"],
+        ),
+        (
+            "trailing junk",
+            {
+                let mut b = text.as_bytes().to_vec();
+                b.extend(b"}}");
+                b
+            },
+            &["trailing"],
+        ),
     ];
     for (what, bytes, expect) in cases {
         let message = refusal("lens.json", &bytes);
@@ -248,10 +312,18 @@ fn hostile_json_files_are_refused_with_the_reason() {
 fn hostile_zmx_and_dat_files_name_the_line() {
     let sample = OPTICSTUDIO_SAMPLE;
     let cases: Vec<(&str, String, &[&str])> = vec![
-        ("aspheric type", sample.replace("SURF 3\n  TYPE STANDARD", "SURF 3\n  TYPE EVENASPH"), &["line 33", "TYPE EVENASPH", "not supported"]),
+        (
+            "aspheric type",
+            sample.replace("SURF 3\n  TYPE STANDARD", "SURF 3\n  TYPE EVENASPH"),
+            &["line 33", "TYPE EVENASPH", "not supported"],
+        ),
         ("conic", sample.replace("CONI 0", "CONI -1.2"), &["line 30", "conic", "not supported"]),
         ("mirror", sample.replace("GLAS N-BK7 0 0", "GLAS MIRROR 0 0"), &["line 28", "MIRROR"]),
-        ("unknown glass", sample.replace("GLAS N-BK7 0 0", "GLAS UNOBTAINIUM 0 0"), &["line 28", "UNOBTAINIUM", "catalogue"]),
+        (
+            "unknown glass",
+            sample.replace("GLAS N-BK7 0 0", "GLAS UNOBTAINIUM 0 0"),
+            &["line 28", "UNOBTAINIUM", "catalogue"],
+        ),
         ("not a number", sample.replace("CURV -0.2", "CURV -0.2x"), &["line 34", "CURV", "not a number"]),
         ("nan", sample.replace("DISZ 0.05", "DISZ nan"), &["line 35", "not finite"]),
         ("non-sequential", sample.replace("MODE SEQ", "MODE NSC"), &["line 2", "NSC"]),
@@ -271,7 +343,11 @@ fn hostile_zmx_and_dat_files_name_the_line() {
     let dat_cases: Vec<(&str, String, &[&str])> = vec![
         ("three columns", dat.replacen("84.83\t0.12\t1\t25.2", "84.83\t0.12\t1", 1), &["line 4", "expected 4 numbers"]),
         ("letters", dat.replacen("84.83", "84.8e", 1), &["line 4", "radius", "84.8e"]),
-        ("stop in glass", dat.replacen("12.75\t5.705\t1\t18", "12.75\t5.705\t1.5\t18", 1), &["line 8", "surface 5", "same medium"]),
+        (
+            "stop in glass",
+            dat.replacen("12.75\t5.705\t1\t18", "12.75\t5.705\t1.5\t18", 1),
+            &["line 8", "surface 5", "same medium"],
+        ),
         ("two stops", dat.replacen("-20.385\t0.19\t1\t20", "0\t0.19\t0\t20", 1), &["2 aperture stops"]),
     ];
     for (what, text, expect) in dat_cases {

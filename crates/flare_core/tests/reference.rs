@@ -13,7 +13,7 @@ use std::path::PathBuf;
 
 use flare_core::optics::library::{builtin_lens, ids};
 use flare_core::optics::{
-    pupil_ray, EntrancePupil, FirstOrder, LightPath, PathMatrices, TraceOptions, TraceStatus, Tracer, D_LINE_NM,
+    D_LINE_NM, EntrancePupil, FirstOrder, LightPath, PathMatrices, TraceOptions, TraceStatus, Tracer, pupil_ray,
 };
 use serde_json::Value;
 
@@ -96,7 +96,12 @@ fn image_rays_land_where_the_reference_says_to_1e_9_mm() {
             }
             assert_eq!(out.status, TraceStatus::Landed, "{id} ray {r}");
             let p = out.sensor_point_mm.unwrap();
-            assert!((p.x - f(&r["x"])).abs() < 1e-9 && (p.y - f(&r["y"])).abs() < 1e-9, "{id} ray {r}: ours ({}, {})", p.x, p.y);
+            assert!(
+                (p.x - f(&r["x"])).abs() < 1e-9 && (p.y - f(&r["y"])).abs() < 1e-9,
+                "{id} ray {r}: ours ({}, {})",
+                p.x,
+                p.y
+            );
             assert_eq!(out.clipped_at, surfaces(r.get("vignetted_at_surfaces")), "{id} ray {r}: clear apertures");
         }
     }

@@ -4,22 +4,14 @@
 //! grazing rays, total internal reflection, afocal lenses) are reported as outcomes.
 
 use flare_core::optics::{
-    pupil_ray, EntrancePupil, FirstOrder, Lens, LightPath, Medium, ParaxialError, PathMatrices, Ray, Surface, TraceOptions,
-    TraceStatus, Tracer, D_LINE_NM,
+    D_LINE_NM, EntrancePupil, FirstOrder, Lens, LightPath, Medium, ParaxialError, PathMatrices, Ray, Surface,
+    TraceOptions, TraceStatus, Tracer, pupil_ray,
 };
 use glam::DVec3;
 use proptest::prelude::*;
 
 fn surface(radius_mm: f64, thickness_mm: f64, medium: Medium, semi_aperture_mm: f64) -> Surface {
-    Surface {
-        radius_mm,
-        thickness_mm: Some(thickness_mm),
-        medium,
-        semi_aperture_mm,
-        stop: false,
-        coating: Default::default(),
-        extra: Default::default(),
-    }
+    Surface::new(radius_mm, Some(thickness_mm), medium, semi_aperture_mm)
 }
 
 fn glass(n_d: f64, v_d: f64) -> Medium {
@@ -40,8 +32,8 @@ struct Draft {
 }
 
 fn draft() -> impl Strategy<Value = Draft> {
-    (any::<u8>(), 1.1..40.0f64, any::<bool>(), 3.0..15.0f64, any::<u8>(), 1.45..1.95f64, 20.0..80.0f64, 0.1..12.0f64).prop_map(
-        |(f, r, negative, h, g, n_d, v_d, gap_mm)| Draft {
+    (any::<u8>(), 1.1..40.0f64, any::<bool>(), 3.0..15.0f64, any::<u8>(), 1.45..1.95f64, 20.0..80.0f64, 0.1..12.0f64)
+        .prop_map(|(f, r, negative, h, g, n_d, v_d, gap_mm)| Draft {
             flat: f % 7 == 0,
             radius_over_aperture: r,
             negative,
@@ -50,8 +42,7 @@ fn draft() -> impl Strategy<Value = Draft> {
             n_d,
             v_d,
             gap_mm,
-        },
-    )
+        })
 }
 
 /// Assembles drafts into a lens that passes validation by construction: media alternate sensibly, the
@@ -63,13 +54,13 @@ fn assemble(drafts: &[Draft], stop_choice: usize) -> Lens {
     for (k, d) in drafts.iter().enumerate() {
         let last = k + 1 == drafts.len();
         // Glass follows air unless the draft says air (the first surface always enters glass).
-        let medium = if last || (!d.to_glass && (in_glass || k > 0)) {
-            Medium::air()
-        } else {
-            glass(d.n_d, d.v_d)
-        };
+        let medium = if last || (!d.to_glass && (in_glass || k > 0)) { Medium::air() } else { glass(d.n_d, d.v_d) };
         in_glass = !medium.is_air();
-        let r = if d.flat { 0.0 } else { d.radius_over_aperture * d.semi_aperture_mm * if d.negative { -1.0 } else { 1.0 } };
+        let r = if d.flat {
+            0.0
+        } else {
+            d.radius_over_aperture * d.semi_aperture_mm * if d.negative { -1.0 } else { 1.0 }
+        };
         surfaces.push(surface(r, d.gap_mm, medium, d.semi_aperture_mm));
     }
     // The stop goes in front of a surface that has air before it.
@@ -195,7 +186,11 @@ fn plate_lens(radius_front_mm: f64) -> Lens {
     Lens {
         id: "plate".into(),
         name: "plate".into(),
-        surfaces: vec![stop, surface(radius_front_mm, 10.0, glass(1.5, 60.0), 10.0), surface(0.0, 50.0, Medium::air(), 10.0)],
+        surfaces: vec![
+            stop,
+            surface(radius_front_mm, 10.0, glass(1.5, 60.0), 10.0),
+            surface(0.0, 50.0, Medium::air(), 10.0),
+        ],
         extra: Default::default(),
     }
 }
@@ -228,7 +223,10 @@ fn huge_radius_converges_to_flat() {
     let flat = plate_lens(0.0);
     let ray = Ray { origin_mm: DVec3::new(1.0, 2.0, 0.0), direction: DVec3::new(0.1, 0.2, 1.0).normalize() };
     let land = |lens: &Lens| {
-        Tracer::new(lens, &LightPath::image(lens), D_LINE_NM, 100.0).trace(&ray, TraceOptions::default()).sensor_point_mm.unwrap()
+        Tracer::new(lens, &LightPath::image(lens), D_LINE_NM, 100.0)
+            .trace(&ray, TraceOptions::default())
+            .sensor_point_mm
+            .unwrap()
     };
     let reference = land(&flat);
     let mut previous = f64::INFINITY;
@@ -250,7 +248,10 @@ fn grazing_rays_and_tir_are_outcomes_not_nan() {
         let tracer = Tracer::new(&lens, &path, D_LINE_NM, fo.sensor_z_mm());
         for theta_deg in [0.0, 45.0, 80.0, 89.0, 89.9, 89.999_999, -89.999_999] {
             for py in [-1.0, 0.0, 1.0] {
-                let out = tracer.trace(&pupil_ray(&fo.entrance_pupil(), f64::to_radians(theta_deg), 0.0, py), TraceOptions::default());
+                let out = tracer.trace(
+                    &pupil_ray(&fo.entrance_pupil(), f64::to_radians(theta_deg), 0.0, py),
+                    TraceOptions::default(),
+                );
                 check_finite(&out, n);
                 seen.insert(out.status.word());
             }
@@ -272,7 +273,9 @@ fn grazing_rays_and_tir_are_outcomes_not_nan() {
     lens.validate().unwrap();
     let fo = FirstOrder::d_line(&lens).unwrap();
     let tracer = Tracer::new(&lens, &LightPath::image(&lens), D_LINE_NM, fo.sensor_z_mm());
-    for (h, expected) in [(7.9, TraceStatus::Landed), (8.1, TraceStatus::Tir { surface: 2 }), (11.0, TraceStatus::Tir { surface: 2 })] {
+    for (h, expected) in
+        [(7.9, TraceStatus::Landed), (8.1, TraceStatus::Tir { surface: 2 }), (11.0, TraceStatus::Tir { surface: 2 })]
+    {
         let ray = Ray { origin_mm: DVec3::new(0.0, h, -1.0), direction: DVec3::Z };
         let out = tracer.trace(&ray, TraceOptions::default());
         assert_eq!(out.status, expected, "h = {h}");

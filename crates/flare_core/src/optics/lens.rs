@@ -23,7 +23,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::glass::{Dispersion, D_LINE_NM};
+use super::glass::{D_LINE_NM, Dispersion};
 
 /// Largest number of surfaces a lens may have (a 60-surface zoom is large; 1000 is absurd).
 pub const MAX_SURFACES: usize = 1000;
@@ -144,6 +144,19 @@ fn radius_or_flat<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Erro
 }
 
 impl Surface {
+    /// An uncoated surface that is not the stop.
+    pub fn new(radius_mm: f64, thickness_mm: Option<f64>, medium: Medium, semi_aperture_mm: f64) -> Self {
+        Self {
+            radius_mm,
+            thickness_mm,
+            medium,
+            semi_aperture_mm,
+            stop: false,
+            coating: Coating::Uncoated,
+            extra: Default::default(),
+        }
+    }
+
     /// Curvature 1/R in 1/mm; 0 for a flat surface.
     pub fn curvature_per_mm(&self) -> f64 {
         if self.radius_mm == 0.0 { 0.0 } else { 1.0 / self.radius_mm }
@@ -290,16 +303,18 @@ impl Lens {
 
     fn validate_extras(&self) -> Result<(), LensError> {
         if let Some(v) = self.extra.get("units")
-            && v.as_str() != Some("mm") {
-                return Err(LensError::LensField { field: "units", reason: format!("{v} is not supported; use \"mm\"") });
-            }
+            && v.as_str() != Some("mm")
+        {
+            return Err(LensError::LensField { field: "units", reason: format!("{v} is not supported; use \"mm\"") });
+        }
         if let Some(v) = self.extra.get("object_index")
-            && v.as_f64() != Some(1.0) {
-                return Err(LensError::LensField {
-                    field: "object_index",
-                    reason: format!("{v}: the object space must be air (1.0)"),
-                });
-            }
+            && v.as_f64() != Some(1.0)
+        {
+            return Err(LensError::LensField {
+                field: "object_index",
+                reason: format!("{v}: the object space must be air (1.0)"),
+            });
+        }
         if let Some(v) = self.extra.get("wavelength_nm") {
             match v.as_f64() {
                 Some(w) if (w - D_LINE_NM).abs() < 1e-6 => {}
@@ -395,7 +410,11 @@ fn validate_coating(k: usize, c: &Coating) -> Result<(), LensError> {
         Coating::QuarterWave { design_wavelength_nm, layer_index } => {
             let w = finite(k, "coating.design_wavelength_nm", *design_wavelength_nm)?;
             if !(100.0..=3000.0).contains(&w) {
-                return Err(LensError::field(k, "coating.design_wavelength_nm", format!("{w} nm is not an optical wavelength")));
+                return Err(LensError::field(
+                    k,
+                    "coating.design_wavelength_nm",
+                    format!("{w} nm is not an optical wavelength"),
+                ));
             }
             if let Some(n) = layer_index {
                 let n = finite(k, "coating.layer_index", *n)?;
@@ -413,10 +432,18 @@ fn validate_coating(k: usize, c: &Coating) -> Result<(), LensError> {
                 let n = finite(k, "coating.layers.index", l.index)?;
                 let t = finite(k, "coating.layers.thickness_nm", l.thickness_nm)?;
                 if !(1.0..=MAX_INDEX).contains(&n) {
-                    return Err(LensError::field(k, "coating.layers.index", format!("{n} is outside [1, {MAX_INDEX}]")));
+                    return Err(LensError::field(
+                        k,
+                        "coating.layers.index",
+                        format!("{n} is outside [1, {MAX_INDEX}]"),
+                    ));
                 }
                 if !(0.0..=1.0e5).contains(&t) {
-                    return Err(LensError::field(k, "coating.layers.thickness_nm", format!("{t} nm is outside [0, 100000]")));
+                    return Err(LensError::field(
+                        k,
+                        "coating.layers.thickness_nm",
+                        format!("{t} nm is outside [0, 100000]"),
+                    ));
                 }
             }
             Ok(())

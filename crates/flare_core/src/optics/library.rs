@@ -6,7 +6,7 @@
 //! built-in lens goes through exactly the validation a user's file does (a test parses all of them).
 //! Look-up is by id, or by any unambiguous part of it (`heliar`, `dgauss`).
 
-use super::formats::{json, FormatError};
+use super::formats::{FormatError, json};
 use super::lens::Lens;
 
 /// (id, JSON text) of every built-in lens, the default first.

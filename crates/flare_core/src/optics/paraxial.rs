@@ -274,7 +274,11 @@ mod tests {
             straddling += usize::from(expected_crossings == 3);
             // M_f = M_s M_a, with M_a the entrance-to-stop matrix of the last crossing.
             let product = m.sensor_from_stop.mul(m.stop_from_entrance.last().unwrap());
-            assert!(close(&product, &m.sensor_from_entrance), "ghost ({i}, {j}): {product:?} vs {:?}", m.sensor_from_entrance);
+            assert!(
+                close(&product, &m.sensor_from_entrance),
+                "ghost ({i}, {j}): {product:?} vs {:?}",
+                m.sensor_from_entrance
+            );
             // Two reflections and refractions there and back: det = n_object / n_image = 1.
             assert!((m.sensor_from_entrance.determinant() - 1.0).abs() < 1e-12);
         }
@@ -288,7 +292,13 @@ mod tests {
         let green = FirstOrder::compute(&lens, D_LINE_NM).unwrap();
         let red = FirstOrder::compute(&lens, 650.0).unwrap();
         // An achromat: the focal length changes little, and the pupil diameter hardly at all.
-        assert!((blue.efl_mm - red.efl_mm).abs() < 0.01 * green.efl_mm, "{} {} {}", blue.efl_mm, green.efl_mm, red.efl_mm);
+        assert!(
+            (blue.efl_mm - red.efl_mm).abs() < 0.01 * green.efl_mm,
+            "{} {} {}",
+            blue.efl_mm,
+            green.efl_mm,
+            red.efl_mm
+        );
         assert_ne!(blue.efl_mm, red.efl_mm, "the indices do depend on the wavelength");
         // A single positive lens of dispersive glass focuses blue shorter than red.
         let singlet = Lens {

@@ -130,5 +130,11 @@ fn refract(k: usize, direction: f64) -> Step {
 
 fn reflect(k: usize, direction: f64) -> Step {
     let medium = if direction > 0.0 { k } else { k + 1 };
-    Step { surface: k, interaction: Interaction::Reflect, arriving_direction: direction, medium_in: medium, medium_out: medium }
+    Step {
+        surface: k,
+        interaction: Interaction::Reflect,
+        arriving_direction: direction,
+        medium_in: medium,
+        medium_out: medium,
+    }
 }

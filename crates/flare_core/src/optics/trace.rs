@@ -43,10 +43,7 @@ pub struct Ray {
 /// (`px`, `py`) of the entrance pupil in units of its radius.
 pub fn pupil_ray(pupil: &EntrancePupil, theta: f64, px: f64, py: f64) -> Ray {
     let r = pupil.radius_mm;
-    Ray {
-        origin_mm: DVec3::new(px * r, py * r, pupil.z_mm),
-        direction: DVec3::new(0.0, theta.sin(), theta.cos()),
-    }
+    Ray { origin_mm: DVec3::new(px * r, py * r, pupil.z_mm), direction: DVec3::new(0.0, theta.sin(), theta.cos()) }
 }
 
 /// What happened to a ray.

@@ -16,7 +16,7 @@ pub mod zmx;
 use std::io::{Read, Write};
 use std::path::Path;
 
-use super::lens::{Lens, LensError};
+use super::lens::{Lens, LensError, Surface};
 
 /// Lens files are a few kilobytes; anything beyond this is refused before it is read.
 pub const MAX_FILE_BYTES: u64 = 16 * 1024 * 1024;
@@ -138,7 +138,8 @@ pub fn decode_text(bytes: &[u8]) -> Result<String, FormatError> {
         String::from_utf16(&units).map_err(|_| FormatError::NotText { offset: 0 })
     };
     let text = if let Some(body) = bytes.strip_prefix(&[0xEF, 0xBB, 0xBF]) {
-        String::from_utf8(body.to_vec()).map_err(|e| FormatError::NotText { offset: e.utf8_error().valid_up_to() + 3 })?
+        String::from_utf8(body.to_vec())
+            .map_err(|e| FormatError::NotText { offset: e.utf8_error().valid_up_to() + 3 })?
     } else if let Some(body) = bytes.strip_prefix(&[0xFF, 0xFE]) {
         utf16(body, true)?
     } else if let Some(body) = bytes.strip_prefix(&[0xFE, 0xFF]) {
@@ -153,7 +154,8 @@ pub fn decode_text(bytes: &[u8]) -> Result<String, FormatError> {
             Err(_) => bytes.iter().map(|&b| b as char).collect(),
         }
     };
-    if let Some(offset) = text.char_indices().find(|(_, c)| c.is_control() && !matches!(c, '\n' | '\r' | '\t')).map(|(i, _)| i)
+    if let Some(offset) =
+        text.char_indices().find(|(_, c)| c.is_control() && !matches!(c, '\n' | '\r' | '\t')).map(|(i, _)| i)
     {
         return Err(FormatError::NotText { offset });
     }
@@ -215,6 +217,24 @@ pub fn write_atomic(path: &Path, contents: &[u8]) -> std::io::Result<()> {
     tmp.as_file().sync_all()?;
     tmp.persist(path).map_err(|e| e.error)?;
     Ok(())
+}
+
+/// Names, validates and returns a lens read from a text format; `surface_lines[k]` is the file line of
+/// surface k, so that a validation error names it.
+pub(crate) fn finish_text_lens(
+    surfaces: Vec<Surface>,
+    name: String,
+    id_hint: &str,
+    surface_lines: &[usize],
+) -> Result<Lens, FormatError> {
+    let lens = Lens {
+        id: id_hint.to_owned(),
+        name: if name.is_empty() { id_hint.to_owned() } else { name },
+        surfaces,
+        extra: Default::default(),
+    };
+    lens.validate().map_err(|e| FormatError::invalid(e, surface_lines))?;
+    Ok(lens)
 }
 
 /// Formats a number so that it reads back to the same f64 (shortest round-trip form).

@@ -9,7 +9,7 @@
 //! [`crate::optics::glass`]; at the d-line it is identical to its JSON twin. The first comment line, if
 //! any, names the lens.
 
-use super::{exact, FormatError};
+use super::{FormatError, exact, finish_text_lens};
 use crate::optics::lens::{Lens, Medium, Surface};
 
 const FORMAT: &str = "pbrt .dat";
@@ -51,39 +51,22 @@ pub fn parse(text: &str, id_hint: &str) -> Result<Lens, FormatError> {
         }
         let [radius_mm, thickness_mm, index, aperture_mm] = v;
         let stop = index == 0.0;
-        let medium = if stop || index == 1.0 {
-            Medium::air()
-        } else {
-            Medium { n_d: index, v_d: None, glass: None }
-        };
-        surfaces.push(Surface {
-            radius_mm,
-            thickness_mm: Some(thickness_mm),
-            medium,
-            semi_aperture_mm: 0.5 * aperture_mm,
-            stop,
-            coating: Default::default(),
-            extra: Default::default(),
-        });
+        let medium = if stop || index == 1.0 { Medium::air() } else { Medium { n_d: index, v_d: None, glass: None } };
+        surfaces.push(Surface { stop, ..Surface::new(radius_mm, Some(thickness_mm), medium, 0.5 * aperture_mm) });
         lines.push(line);
     }
     if let Some(last) = surfaces.last_mut()
-        && last.thickness_mm == Some(0.0) {
-            last.thickness_mm = None;
-        }
-    let lens = Lens {
-        id: id_hint.to_owned(),
-        name: if name.is_empty() { id_hint.to_owned() } else { name },
-        surfaces,
-        extra: Default::default(),
-    };
-    lens.validate().map_err(|e| FormatError::invalid(e, &lines))?;
-    Ok(lens)
+        && last.thickness_mm == Some(0.0)
+    {
+        last.thickness_mm = None;
+    }
+    finish_text_lens(surfaces, name, id_hint, &lines)
 }
 
 /// The lens as a pbrt `.dat` table (aperture as diameter, index 0 on the stop, air as 1).
 pub fn write(lens: &Lens) -> String {
-    let mut out = format!("# {}\n# radius\tthickness\tindex\taperture (diameter)\n", lens.name.replace(['\n', '\r'], " "));
+    let mut out =
+        format!("# {}\n# radius\tthickness\tindex\taperture (diameter)\n", lens.name.replace(['\n', '\r'], " "));
     for s in &lens.surfaces {
         let index = if s.stop { 0.0 } else { s.medium.n_d };
         out.push_str(&format!(

@@ -10,7 +10,7 @@
 //! non-circular apertures, non-sequential mode) is refused by name with its line; purely cosmetic keywords
 //! (comments, colours, solves' flags) are skipped.
 
-use super::{exact, FormatError};
+use super::{FormatError, exact, finish_text_lens};
 use crate::optics::glass::find_glass;
 use crate::optics::lens::{Lens, Medium, Surface};
 
@@ -94,7 +94,9 @@ pub fn parse(text: &str, id_hint: &str) -> Result<Lens, FormatError> {
                     t => b.thickness = Some(number(line, "DISZ", t)? * scale_to_mm),
                 }
             }
-            "DIAM" => blocks.last_mut().unwrap().semi_diameter = Some(number(line, "DIAM", tokens.next())? * scale_to_mm),
+            "DIAM" => {
+                blocks.last_mut().unwrap().semi_diameter = Some(number(line, "DIAM", tokens.next())? * scale_to_mm)
+            }
             "STOP" => blocks.last_mut().unwrap().stop = true,
             "GLAS" => {
                 let medium = glass_line(line, &raw.split_whitespace().collect::<Vec<_>>())?;
@@ -144,9 +146,10 @@ fn build(blocks: Vec<Block>, name: String, id_hint: &str) -> Result<Lens, Format
     }
     let object = &blocks[0];
     if let Some((line, m)) = &object.glass
-        && !m.is_air() {
-            return Err(unsupported(*line, "an object surface in glass (object space must be air)"));
-        }
+        && !m.is_air()
+    {
+        return Err(unsupported(*line, "an object surface in glass (object space must be air)"));
+    }
     let image = blocks.len() - 1;
     let mut surfaces = Vec::with_capacity(image - 1);
     let mut lines = Vec::with_capacity(image - 1);
@@ -154,29 +157,16 @@ fn build(blocks: Vec<Block>, name: String, id_hint: &str) -> Result<Lens, Format
         if b.thickness_infinite {
             return Err(line_error(b.line, format!("surface {k} has DISZ INFINITY (only the object may)")));
         }
-        let semi_aperture_mm = b.semi_diameter.ok_or_else(|| {
-            line_error(b.line, format!("surface {k} has no DIAM (clear semi-diameter)"))
-        })?;
+        let semi_aperture_mm = b
+            .semi_diameter
+            .ok_or_else(|| line_error(b.line, format!("surface {k} has no DIAM (clear semi-diameter)")))?;
         let medium = b.glass.as_ref().map(|(_, m)| m.clone()).unwrap_or_else(Medium::air);
-        surfaces.push(Surface {
-            radius_mm: if b.curvature == 0.0 { 0.0 } else { 1.0 / b.curvature },
-            thickness_mm: Some(b.thickness.unwrap_or(0.0)),
-            medium,
-            semi_aperture_mm,
-            stop: b.stop,
-            coating: Default::default(),
-            extra: Default::default(),
-        });
+        let radius_mm = if b.curvature == 0.0 { 0.0 } else { 1.0 / b.curvature };
+        let surface = Surface::new(radius_mm, Some(b.thickness.unwrap_or(0.0)), medium, semi_aperture_mm);
+        surfaces.push(Surface { stop: b.stop, ..surface });
         lines.push(b.line);
     }
-    let lens = Lens {
-        id: id_hint.to_owned(),
-        name: if name.is_empty() { id_hint.to_owned() } else { name },
-        surfaces,
-        extra: Default::default(),
-    };
-    lens.validate().map_err(|e| FormatError::invalid(e, &lines))?;
-    Ok(lens)
+    finish_text_lens(surfaces, name, id_hint, &lines)
 }
 
 /// The lens as a sequential `.zmx` text (UTF-8, millimetres, STANDARD surfaces), which [`parse`] reads back
