@@ -6,4 +6,9 @@
 //! internal reflection, a ray missing a surface, a flat surface, an afocal lens) is an explicit outcome or
 //! error, never a NaN.
 
+pub mod aperture;
+pub mod coating;
+pub mod ghost;
 pub mod optics;
+pub mod spectrum;
+pub mod starburst;

@@ -94,20 +94,37 @@ impl PathMatrices {
     pub fn compute(lens: &Lens, path: &LightPath, wavelength_nm: f64, sensor_z_mm: f64) -> Self {
         let n = lens.media_indices_at(wavelength_nm);
         let z = lens.vertex_z_mm();
+        Self::walk(lens, &z, &n, path, sensor_z_mm, |_, _| {})
+    }
+
+    /// The same product from precomputed vertex positions `z` and medium indices `n` (see
+    /// [`Lens::media_indices_at`]), calling `visit(step_index, arriving)` with the entrance-to-arrival matrix
+    /// at each step, before its interaction: what the ghost module needs for angles of incidence.
+    pub fn walk(
+        lens: &Lens,
+        z: &[f64],
+        n: &[f64],
+        path: &LightPath,
+        sensor_z_mm: f64,
+        mut visit: impl FnMut(usize, &Mat2),
+    ) -> Self {
         let stop = lens.stop_index();
         let mut total = Mat2::IDENTITY;
         let mut since_stop = Mat2::IDENTITY;
         let mut stop_from_entrance = Vec::with_capacity(1);
         let mut z_now = 0.0;
-        for step in &path.steps {
+        for (index, step) in path.steps.iter().enumerate() {
             let k = step.surface;
+            let travel = Mat2::translation((z[k] - z_now).abs());
+            total = travel.mul(&total);
+            since_stop = travel.mul(&since_stop);
+            visit(index, &total);
             let c = lens.surfaces[k].curvature_per_mm();
             let s = step.arriving_direction;
             let m = match step.interaction {
                 Interaction::Refract => Mat2::refraction(c, n[step.medium_in], n[step.medium_out], s),
                 Interaction::Reflect => Mat2::reflection(c, s),
-            }
-            .mul(&Mat2::translation((z[k] - z_now).abs()));
+            };
             z_now = z[k];
             total = m.mul(&total);
             since_stop = m.mul(&since_stop);

@@ -1,0 +1,220 @@
+//! The aperture: the shape of the stop's opening, rasterised into the mask every ghost sprite is textured with.
+//!
+//! # How it works
+//! An [`Aperture`] is a circle, N blades (3 to 16) with a rotation and a roundness (0 = straight blades,
+//! 1 = a circle; between, the blades bow outwards as curved blades do), or any grayscale image. Its size is
+//! set by the f-number: the lens's own (widest) f-number opens the stop fully, a larger one shrinks the stop
+//! radius in proportion (`scale = nominal / chosen`, never above 1).
+//! [`Aperture::rasterise`] draws it into an n x n mask covering [-1, 1]^2, where radius 1 is the stop's
+//! semi-aperture at this f-number. Edges are anti-aliased analytically: each texel takes the coverage
+//! `clamp(0.5 + d / texel, 0, 1)` of its signed distance d to the edge along the radius. A polygon of unit
+//! circumradius has the edge distance `r(phi) = cos(pi / N) / cos(((phi - rotation) mod 2 pi / N) - pi / N)`;
+//! roundness mixes it towards the circle, `r = r_poly + roundness (1 - r_poly)`.
+
+use std::f64::consts::PI;
+
+/// Default mask resolution (texels across).
+pub const DEFAULT_MASK_SIZE: usize = 256;
+
+/// The shape of the stop.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ApertureShape {
+    Circle,
+    Blades { count: u32, rotation_deg: f64, roundness: f64 },
+    /// A user image: row-major luminance in [0, 1], `size` x `size`, covering [-1, 1]^2.
+    Image { size: usize, luminance: Vec<f32> },
+}
+
+/// The aperture: shape and f-number.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Aperture {
+    pub shape: ApertureShape,
+    /// The f-number the user chose; `None` keeps the lens wide open.
+    pub f_number: Option<f64>,
+}
+
+impl Default for Aperture {
+    fn default() -> Self {
+        Self { shape: ApertureShape::Blades { count: 6, rotation_deg: 0.0, roundness: 0.0 }, f_number: None }
+    }
+}
+
+/// Why an aperture is refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ApertureError {
+    #[error("{0} blades: between 3 and 16, please")]
+    BladeCount(u32),
+    #[error("roundness {0} is outside [0, 1]")]
+    Roundness(f64),
+    #[error("f-number {0} must be finite and positive")]
+    FNumber(f64),
+    #[error("rotation {0} is not finite")]
+    Rotation(f64),
+    #[error("aperture image: {0}")]
+    Image(String),
+}
+
+/// A rasterised mask: `size` x `size` texels over [-1, 1]^2, row 0 at y = +1.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ApertureMask {
+    pub size: usize,
+    pub texels: Vec<u8>,
+}
+
+impl ApertureMask {
+    /// Bilinear sample at (u, v) in [-1, 1]^2 (0 outside), the way a GPU samples the texture.
+    pub fn sample(&self, u: f32, v: f32) -> f32 {
+        if !(-1.0..=1.0).contains(&u) || !(-1.0..=1.0).contains(&v) {
+            return 0.0;
+        }
+        let n = self.size as f32;
+        // Texel centres at (i + 0.5) / n in texture coordinates; v = +1 is row 0.
+        let x = (u * 0.5 + 0.5) * n - 0.5;
+        let y = (0.5 - v * 0.5) * n - 0.5;
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let texel = |i: f32, j: f32| {
+            let i = (i.max(0.0) as usize).min(self.size - 1);
+            let j = (j.max(0.0) as usize).min(self.size - 1);
+            self.texels[j * self.size + i] as f32 / 255.0
+        };
+        let top = texel(x0, y0) * (1.0 - fx) + texel(x0 + 1.0, y0) * fx;
+        let bottom = texel(x0, y0 + 1.0) * (1.0 - fx) + texel(x0 + 1.0, y0 + 1.0) * fx;
+        top * (1.0 - fy) + bottom * fy
+    }
+
+    /// Fraction of the [-1, 1]^2 square that is open (a unit circle is pi / 4).
+    pub fn open_fraction(&self) -> f64 {
+        self.texels.iter().map(|&t| t as f64 / 255.0).sum::<f64>() / self.texels.len() as f64
+    }
+}
+
+impl Aperture {
+    pub fn validate(&self) -> Result<(), ApertureError> {
+        if let Some(f) = self.f_number
+            && !(f.is_finite() && f > 0.0)
+        {
+            return Err(ApertureError::FNumber(f));
+        }
+        match &self.shape {
+            ApertureShape::Circle => Ok(()),
+            ApertureShape::Blades { count, rotation_deg, roundness } => {
+                if !(3..=16).contains(count) {
+                    return Err(ApertureError::BladeCount(*count));
+                }
+                if !rotation_deg.is_finite() {
+                    return Err(ApertureError::Rotation(*rotation_deg));
+                }
+                if !(0.0..=1.0).contains(roundness) {
+                    return Err(ApertureError::Roundness(*roundness));
+                }
+                Ok(())
+            }
+            ApertureShape::Image { size, luminance } => {
+                if *size < 2 || luminance.len() != size * size {
+                    return Err(ApertureError::Image(format!("{} values for a {size} x {size} image", luminance.len())));
+                }
+                if luminance.iter().any(|v| !v.is_finite()) {
+                    return Err(ApertureError::Image("non-finite values".into()));
+                }
+                Ok(())
+            }
+        }
+    }
+
+    /// Stop radius relative to wide open, for a lens whose widest f-number is `nominal_f_number`.
+    pub fn stop_scale(&self, nominal_f_number: f64) -> f64 {
+        match self.f_number {
+            Some(f) if f.is_finite() && f > 0.0 => (nominal_f_number / f).clamp(1e-3, 1.0),
+            _ => 1.0,
+        }
+    }
+
+    /// Loads a grayscale aperture image (any format the `image` crate reads), resampled to `size`.
+    pub fn image_shape_from_file(path: &std::path::Path, size: usize) -> Result<ApertureShape, ApertureError> {
+        let img = image::open(path).map_err(|e| ApertureError::Image(format!("{}: {e}", path.display())))?;
+        let gray = img.resize_exact(size as u32, size as u32, image::imageops::FilterType::Triangle).to_luma32f();
+        let luminance = gray.into_raw().into_iter().map(|v| v.clamp(0.0, 1.0)).collect();
+        Ok(ApertureShape::Image { size, luminance })
+    }
+
+    /// The edge radius in direction `phi` (radians), in units of the circumradius.
+    pub fn edge_radius(&self, phi: f64) -> f64 {
+        match &self.shape {
+            ApertureShape::Blades { count, rotation_deg, roundness } => {
+                let n = *count as f64;
+                let sector = 2.0 * PI / n;
+                let local = (phi - rotation_deg.to_radians()).rem_euclid(sector) - sector / 2.0;
+                let polygon = (PI / n).cos() / local.cos();
+                polygon + roundness * (1.0 - polygon)
+            }
+            _ => 1.0,
+        }
+    }
+
+    /// Rasterises the shape into a `size` x `size` mask.
+    pub fn rasterise(&self, size: usize) -> ApertureMask {
+        let size = size.max(2);
+        let texel = 2.0 / size as f64;
+        let mut texels = vec![0u8; size * size];
+        for j in 0..size {
+            for i in 0..size {
+                let u = -1.0 + texel * (i as f64 + 0.5);
+                let v = 1.0 - texel * (j as f64 + 0.5);
+                let coverage = match &self.shape {
+                    ApertureShape::Image { size: n, luminance } => {
+                        let x = ((i as f64 + 0.5) / size as f64 * *n as f64) as usize;
+                        let y = ((j as f64 + 0.5) / size as f64 * *n as f64) as usize;
+                        luminance[y.min(n - 1) * n + x.min(n - 1)] as f64
+                    }
+                    _ => {
+                        let r = u.hypot(v);
+                        let edge = self.edge_radius(v.atan2(u)).min(0.999);
+                        (0.5 + (edge - r) / texel).clamp(0.0, 1.0)
+                    }
+                };
+                texels[j * size + i] = (coverage * 255.0).round() as u8;
+            }
+        }
+        ApertureMask { size, texels }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn circle_and_polygons_have_the_right_area() {
+        let circle = Aperture { shape: ApertureShape::Circle, f_number: None }.rasterise(512);
+        assert!((circle.open_fraction() - PI / 4.0 * 0.999f64.powi(2)).abs() < 2e-3, "{}", circle.open_fraction());
+        for n in [3u32, 5, 6, 8, 16] {
+            let a = Aperture { shape: ApertureShape::Blades { count: n, rotation_deg: 10.0, roundness: 0.0 }, f_number: None };
+            let area = a.rasterise(512).open_fraction() * 4.0;
+            let exact = 0.5 * n as f64 * (2.0 * PI / n as f64).sin() * 0.999f64.powi(2);
+            assert!((area - exact).abs() < 0.01 * exact, "{n} blades: {area} vs {exact}");
+        }
+        let round = Aperture { shape: ApertureShape::Blades { count: 6, rotation_deg: 0.0, roundness: 1.0 }, f_number: None };
+        assert!((round.rasterise(256).open_fraction() - circle.open_fraction()).abs() < 3e-3);
+    }
+
+    #[test]
+    fn sampling_matches_the_shape_and_is_zero_outside() {
+        let mask = Aperture::default().rasterise(256);
+        assert!((mask.sample(0.0, 0.0) - 1.0).abs() < 1e-6);
+        assert_eq!(mask.sample(0.0, 0.99), 0.0, "a hexagon with a vertex on +x has a flat top at 0.866");
+        assert!(mask.sample(0.95, 0.0) > 0.99, "vertex direction is open to the circumradius");
+        assert_eq!(mask.sample(1.2, 0.0), 0.0);
+    }
+
+    #[test]
+    fn bad_settings_are_refused_and_f_number_scales_the_stop() {
+        let bad = Aperture { shape: ApertureShape::Blades { count: 2, rotation_deg: 0.0, roundness: 0.0 }, f_number: None };
+        assert_eq!(bad.validate(), Err(ApertureError::BladeCount(2)));
+        let bad = Aperture { shape: ApertureShape::Circle, f_number: Some(-2.0) };
+        assert!(bad.validate().is_err());
+        let a = Aperture { shape: ApertureShape::Circle, f_number: Some(8.0) };
+        assert!((a.stop_scale(4.0) - 0.5).abs() < 1e-15);
+        assert_eq!(Aperture { shape: ApertureShape::Circle, f_number: Some(2.0) }.stop_scale(4.0), 1.0, "cannot open past wide open");
+    }
+}
