@@ -10,7 +10,14 @@ use clap::{Parser, Subcommand, ValueEnum};
 use flare_core::optics::formats::{load_lens_file, pbrt, to_json, write_atomic, zmx};
 use flare_core::optics::glass::D_LINE_NM;
 use flare_core::optics::library::{DEFAULT_LENS_ID, builtin_lens, ids};
-use flare_core::optics::{FirstOrder, Lens, LightPath, PathKind, TraceOptions, TraceStatus, Tracer, pupil_ray};
+use flare_core::aperture::{Aperture, ApertureShape, DEFAULT_MASK_SIZE};
+use flare_core::flare::{FlareConfig, PreparedFlare};
+use flare_core::ghost::{FrameSettings, GhostSettings, GhostSystem};
+use flare_core::optics::{
+    Coating, CoatingLayer, FirstOrder, Lens, LightPath, PathKind, TraceOptions, TraceStatus, Tracer, pupil_ray,
+};
+use flare_core::render::{DisplaySettings, Tonemap, cpu, gpu, output};
+use flare_core::spectrum::Spectrum;
 use serde_json::json;
 
 #[derive(Parser, Debug)]
@@ -32,6 +39,84 @@ pub enum Command {
     Lens(LensCommand),
     /// Trace one ray exactly through the lens (or along a ghost path) to the sensor.
     Trace(TraceArgs),
+    /// Every two-reflection ghost for a light direction: sprite, brightness, colour, and whether it is culled.
+    Ghosts(GhostsArgs),
+    /// Render a flare to an image (PNG: tonemapped 8-bit sRGB; EXR: linear float).
+    Render(RenderArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct GhostsArgs {
+    /// Lens file or built-in lens name.
+    file: String,
+    /// Field angle of the light in the y-z plane, degrees (incoming slope tan T, as in `trace`).
+    #[arg(long, allow_negative_numbers = true)]
+    field_deg: f64,
+    /// One wavelength (the sprite is then exactly the stop's image); default: RGB at 650 / 510 / 475 nm.
+    #[arg(long, allow_negative_numbers = true)]
+    wavelength_nm: Option<f64>,
+    /// Coating on every surface instead of the lens's own: none, quarter-wave[:NM], multilayer:N/T,N/T...
+    #[arg(long)]
+    coating: Option<String>,
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct RenderArgs {
+    /// Lens file or built-in lens name.
+    lens: String,
+    /// Where the light appears in the frame, as horizontal and vertical field angles in degrees.
+    #[arg(long, default_value = "6,4", allow_hyphen_values = true, value_parser = parse_pair_f64)]
+    light_deg: (f64, f64),
+    /// Image size, e.g. 1280x720.
+    #[arg(long, default_value = "1280x720", value_parser = parse_size)]
+    size: (u32, u32),
+    /// Rendering method.
+    #[arg(long, default_value = "paraxial")]
+    method: String,
+    /// Aperture: circle, blades:N[:ROTATION_DEG[:ROUNDNESS]], or image:PATH (grayscale).
+    #[arg(long, default_value = "blades:6")]
+    aperture: String,
+    /// f-number (default: wide open).
+    #[arg(long)]
+    f_number: Option<f64>,
+    /// Coating on every surface instead of the lens's own: none, quarter-wave[:NM], multilayer:N/T,N/T...
+    #[arg(long)]
+    coating: Option<String>,
+    /// Wavelengths: 3 is RGB (650/510/475 nm), 2..32 are CIE-weighted, 1 is the d-line alone.
+    #[arg(long, default_value_t = 3)]
+    spectrum: usize,
+    /// Linear exposure before tonemapping (ghost irradiances are ~1e-6 to 1e-2 of the light's).
+    #[arg(long, default_value_t = 100.0)]
+    exposure: f32,
+    /// Tonemapping operator: none, reinhard, aces.
+    #[arg(long, default_value = "aces")]
+    tonemap: String,
+    /// Leave out the starburst at the light.
+    #[arg(long)]
+    no_starburst: bool,
+    /// Background plate (PNG is taken as sRGB, EXR as linear).
+    #[arg(long)]
+    background: Option<PathBuf>,
+    /// Cull sprites dimmer than this relative irradiance.
+    #[arg(long, default_value_t = 1e-7)]
+    threshold: f64,
+    /// gpu (wgpu; a software adapter such as lavapipe counts) or cpu (the renderer's CPU twin).
+    #[arg(long, default_value = "gpu")]
+    device: String,
+    /// Output image, .png or .exr.
+    #[arg(short, long)]
+    output: PathBuf,
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("`{s}` is not WIDTHxHEIGHT"))?;
+    let (w, h): (u32, u32) = (w.trim().parse().map_err(|_| format!("`{s}` is not WIDTHxHEIGHT"))?, h.trim().parse().map_err(|_| format!("`{s}` is not WIDTHxHEIGHT"))?);
+    if !(1..=8192).contains(&w) || !(1..=8192).contains(&h) {
+        return Err(format!("`{s}`: each side must be 1 to 8192 pixels"));
+    }
+    Ok((w, h))
 }
 
 #[derive(Subcommand, Debug)]
@@ -141,6 +226,8 @@ pub fn run(command: Command) -> Result<()> {
         Command::Lens(LensCommand::List { json }) => lens_list(json),
         Command::Lens(LensCommand::Convert { file, to, output }) => lens_convert(&file, to, &output),
         Command::Trace(args) => trace(&args),
+        Command::Ghosts(args) => ghosts(&args),
+        Command::Render(args) => render(&args),
     }
 }
 
@@ -317,5 +404,209 @@ fn trace(args: &TraceArgs) -> Result<()> {
     if !out.clipped_at.is_empty() {
         println!("  passes outside the clear aperture of surfaces {:?} (in path order)", out.clipped_at);
     }
+    Ok(())
+}
+
+/// Parses a coating: none, quarter-wave[:NM], multilayer:INDEX/THICKNESS_NM,...
+pub fn parse_coating(spec: &str) -> Result<Coating> {
+    let (kind, rest) = spec.split_once(':').unwrap_or((spec, ""));
+    let coating = match kind {
+        "none" | "uncoated" => Coating::Uncoated,
+        "quarter-wave" | "qw" => Coating::QuarterWave {
+            design_wavelength_nm: if rest.is_empty() { 550.0 } else { rest.parse().with_context(|| format!("--coating {spec}: `{rest}` is not a wavelength"))? },
+            layer_index: None,
+        },
+        "multilayer" => {
+            let mut layers = Vec::new();
+            for layer in rest.split(',').filter(|l| !l.is_empty()) {
+                let (n, t) = layer.split_once('/').with_context(|| format!("--coating {spec}: layer `{layer}` is not INDEX/THICKNESS_NM"))?;
+                let (index, thickness_nm) = (n.parse::<f64>(), t.parse::<f64>());
+                let (Ok(index), Ok(thickness_nm)) = (index, thickness_nm) else { bail!("--coating {spec}: layer `{layer}` is not two numbers") };
+                layers.push(CoatingLayer { index, thickness_nm });
+            }
+            if layers.is_empty() {
+                bail!("--coating {spec}: a multilayer needs at least one INDEX/THICKNESS_NM layer");
+            }
+            Coating::Multilayer { layers }
+        }
+        other => bail!("--coating {other}: use none, quarter-wave[:NM] or multilayer:N/T,..."),
+    };
+    // Validate through a lens surface so that the rules are the lens file's rules.
+    let mut probe = flare_core::optics::library::default_lens();
+    probe.surfaces[0].coating = coating.clone();
+    probe.validate().map_err(|e| anyhow::anyhow!("--coating {spec}: {e}"))?;
+    Ok(coating)
+}
+
+/// Parses an aperture: circle, blades:N[:ROTATION_DEG[:ROUNDNESS]], image:PATH.
+pub fn parse_aperture(spec: &str, f_number: Option<f64>) -> Result<Aperture> {
+    let mut parts = spec.split(':');
+    let shape = match parts.next().unwrap_or("") {
+        "circle" => ApertureShape::Circle,
+        "blades" => {
+            let count = parts.next().unwrap_or("6").parse().with_context(|| format!("--aperture {spec}: blade count"))?;
+            let rotation_deg = parts.next().map(str::parse).transpose().with_context(|| format!("--aperture {spec}: rotation"))?.unwrap_or(0.0);
+            let roundness = parts.next().map(str::parse).transpose().with_context(|| format!("--aperture {spec}: roundness"))?.unwrap_or(0.0);
+            ApertureShape::Blades { count, rotation_deg, roundness }
+        }
+        "image" => {
+            let path = spec.split_once(':').map(|(_, p)| p).unwrap_or("");
+            Aperture::image_shape_from_file(Path::new(path), DEFAULT_MASK_SIZE)?
+        }
+        other => bail!("--aperture {other}: use circle, blades:N[:ROTATION_DEG[:ROUNDNESS]] or image:PATH"),
+    };
+    let aperture = Aperture { shape, f_number };
+    aperture.validate().map_err(|e| anyhow::anyhow!("--aperture {spec}: {e}"))?;
+    Ok(aperture)
+}
+
+fn ghosts(args: &GhostsArgs) -> Result<()> {
+    if !(args.field_deg.is_finite() && args.field_deg.abs() < 90.0) {
+        bail!("--field-deg {}: must be finite and strictly between -90 and 90", args.field_deg);
+    }
+    let spectrum = match args.wavelength_nm {
+        Some(w) => Spectrum::single(w).map_err(|e| anyhow::anyhow!("--wavelength-nm: {e}"))?,
+        None => Spectrum::rgb(),
+    };
+    let lens = open_lens(&args.file)?;
+    let coating_override = args.coating.as_deref().map(parse_coating).transpose()?;
+    let settings = GhostSettings { spectrum: spectrum.clone(), stop_scale: 1.0, coating_override };
+    let system = GhostSystem::build(&lens, &settings).with_context(|| args.file.clone())?;
+    let u = [0.0, args.field_deg.to_radians().tan()];
+    let frame_settings = FrameSettings::default();
+    let frame = system.frame(u, &frame_settings);
+    let reported = spectrum.len() / 2; // the single wavelength, or G of RGB
+    let mut rows = Vec::with_capacity(system.ghosts.len());
+    for (g, ghost) in system.ghosts.iter().enumerate() {
+        let sprites: Vec<_> = frame.sprites.iter().filter(|s| s.ghost == g).collect();
+        let mut rgb = [0.0; 3];
+        for s in &sprites {
+            for c in 0..3 {
+                rgb[c] += s.rgb[c];
+            }
+        }
+        let intensity = sprites.iter().map(|s| s.irradiance).sum::<f64>() / sprites.len().max(1) as f64;
+        let culled = if sprites.iter().all(|s| s.culled.is_some()) { sprites.first().and_then(|s| s.culled).map(|c| c.word()) } else { None };
+        let sprite = system.stop_image_sprite(g, reported, u);
+        let per_wavelength: Vec<_> = (0..spectrum.len())
+            .map(|w| {
+                let s = system.stop_image_sprite(g, w, u);
+                json!({"wavelength_nm": spectrum.wavelengths_nm[w], "center_mm": s.map(|s| s.0.map(|v| v + 0.0)), "radius_mm": s.map(|s| s.1)})
+            })
+            .collect();
+        rows.push(json!({
+            "i": ghost.i, "j": ghost.j,
+            "center_mm": sprite.map(|s| s.0.map(|v| v + 0.0)), "radius_mm": sprite.map(|s| s.1),
+            "intensity": intensity, "rgb": rgb,
+            "straddles_stop": ghost.straddles_stop,
+            "stop_crossings": if ghost.straddles_stop { 3 } else { 1 },
+            "culled": culled,
+            "per_wavelength": per_wavelength,
+        }));
+    }
+    let st = frame.stats;
+    if args.json {
+        let out = json!({
+            "lens": lens.id, "field_deg": args.field_deg, "wavelengths_nm": spectrum.wavelengths_nm,
+            "reported_wavelength_nm": spectrum.wavelengths_nm[reported],
+            "sensor_mm": [frame_settings.sensor.width_mm, frame_settings.sensor.height_mm],
+            "ghosts": rows,
+            "sprites": {"total": st.sprites, "drawn": st.drawn, "below_threshold": st.below_threshold,
+                        "off_sensor": st.off_sensor, "empty_entrance_region": st.empty_entrance_region},
+        });
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    println!("{} at {} deg: {} ghosts, {} sprites drawn, culled {} dim / {} off sensor / {} empty entrance", lens.id, args.field_deg,
+        system.ghosts.len(), st.drawn, st.below_threshold, st.off_sensor, st.empty_entrance_region);
+    println!("  {:>3} {:>3}  {:>10} {:>9}  {:>10}  {:<8} {}", "i", "j", "centre y", "radius", "intensity", "stop", "culled");
+    let mut order: Vec<usize> = (0..rows.len()).collect();
+    order.sort_by(|&a, &b| rows[b]["intensity"].as_f64().partial_cmp(&rows[a]["intensity"].as_f64()).unwrap_or(std::cmp::Ordering::Equal));
+    for k in order {
+        let r = &rows[k];
+        let centre = r["center_mm"][1].as_f64().map(|v| format!("{v:.3}")).unwrap_or_else(|| "-".into());
+        let radius = r["radius_mm"].as_f64().map(|v| format!("{v:.3}")).unwrap_or_else(|| "-".into());
+        println!("  {:>3} {:>3}  {centre:>10} {radius:>9}  {:>10.3e}  {:<8} {}", r["i"], r["j"], r["intensity"].as_f64().unwrap_or(0.0),
+            if r["straddles_stop"] == true { "3 times" } else { "once" }, r["culled"].as_str().unwrap_or(""));
+    }
+    Ok(())
+}
+
+fn render(args: &RenderArgs) -> Result<()> {
+    if args.method != "paraxial" {
+        bail!("--method {}: available methods: paraxial", args.method);
+    }
+    let (x, y) = args.light_deg;
+    if !(x.abs() < 89.0 && y.abs() < 89.0) {
+        bail!("--light-deg {x},{y}: each angle must be within +-89 degrees");
+    }
+    let kind = output::ImageKind::from_path(&args.output)?;
+    let tonemap = match args.tonemap.as_str() {
+        "none" => Tonemap::None,
+        "reinhard" => Tonemap::Reinhard,
+        "aces" => Tonemap::Aces,
+        other => bail!("--tonemap {other}: use none, reinhard or aces"),
+    };
+    if !(args.exposure.is_finite() && args.exposure >= 0.0) {
+        bail!("--exposure {}: must be finite and not negative", args.exposure);
+    }
+    let lens = open_lens(&args.lens)?;
+    let config = FlareConfig {
+        aperture: parse_aperture(&args.aperture, args.f_number)?,
+        spectrum: Spectrum::with_count(args.spectrum).map_err(|e| anyhow::anyhow!("--spectrum: {e}"))?,
+        coating_override: args.coating.as_deref().map(parse_coating).transpose()?,
+        intensity_threshold: args.threshold,
+        display: DisplaySettings { exposure: args.exposure, tonemap, starburst: !args.no_starburst, ..DisplaySettings::default() },
+    };
+    let background = args.background.as_deref().map(output::read_plate).transpose()?;
+    let flare = PreparedFlare::new(&lens, &config).with_context(|| args.lens.clone())?;
+    let (width, height) = args.size;
+    let (scene, frame) = flare.scene([x, y], width, height);
+    let starburst_texture = cpu::StarburstTexture::from_starburst(&flare.starburst);
+    let (display, hdr) = match args.device.as_str() {
+        "cpu" => {
+            let hdr = cpu::render_hdr(&scene, &flare.mask, config.display.starburst.then_some(&starburst_texture));
+            (cpu::tonemap_pass(&scene, &hdr, background.as_ref()), hdr)
+        }
+        "gpu" => {
+            let ctx = gpu::GpuContext::headless(false).map_err(|e| anyhow::anyhow!("{e} (or use --device cpu)"))?;
+            let mut renderer = gpu::FlareRenderer::new(&ctx.device, &ctx.queue, wgpu::TextureFormat::Rgba8Unorm);
+            renderer.set_aperture(&ctx.device, &ctx.queue, &flare.mask);
+            renderer.set_starburst(&ctx.device, &ctx.queue, &flare.starburst);
+            renderer.set_background(&ctx.device, &ctx.queue, background.as_ref());
+            let display = gpu::render_display(&ctx, &mut renderer, &scene)?;
+            let hdr = gpu::read_hdr(&ctx, &renderer)?;
+            eprintln!("rendered on {} ({:?})", ctx.adapter.name, ctx.adapter.backend);
+            (display, hdr)
+        }
+        other => bail!("--device {other}: use gpu or cpu"),
+    };
+    match kind {
+        output::ImageKind::Png => output::write_png(&args.output, &display)?,
+        output::ImageKind::Exr => {
+            // Linear float: background plus flare, times the exposure (what the PNG shows before tonemapping).
+            let mut linear = hdr;
+            for (k, p) in linear.pixels.iter_mut().enumerate() {
+                if let Some(bg) = &background {
+                    let (x, y) = ((k as u32 % width) as f32, (k as u32 / width) as f32);
+                    let bx = (((x + 0.5) * bg.width as f32 / width as f32) as usize).min(bg.width as usize - 1);
+                    let by = (((y + 0.5) * bg.height as f32 / height as f32) as usize).min(bg.height as usize - 1);
+                    let b = bg.pixels[by * bg.width as usize + bx];
+                    for c in 0..3 {
+                        p[c] += b[c];
+                    }
+                }
+                for c in p.iter_mut().take(3) {
+                    *c *= args.exposure;
+                }
+            }
+            output::write_exr(&args.output, &linear)?
+        }
+    }
+    let st = frame.stats;
+    eprintln!(
+        "wrote {} ({width}x{height}): {} ghosts x {} wavelengths, {} sprites drawn, culled {} dim / {} off sensor / {} empty entrance",
+        args.output.display(), flare.system.ghosts.len(), config.spectrum.len(), st.drawn, st.below_threshold, st.off_sensor, st.empty_entrance_region
+    );
     Ok(())
 }

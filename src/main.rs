@@ -18,6 +18,10 @@ fn main() -> ExitCode {
             .map(|s| (*s).to_owned())
             .or_else(|| info.payload().downcast_ref::<String>().cloned())
             .unwrap_or_else(|| "unknown".to_owned());
+        // `flarelab ... | head` closes the pipe early: that is the reader's choice, not a bug.
+        if message.starts_with("failed printing to stdout") {
+            std::process::exit(0);
+        }
         let place = info.location().map(|l| format!(" at {}:{}", l.file(), l.line())).unwrap_or_default();
         eprintln!("flarelab: internal error (a bug; please report it): {}{place}", message.replace('\n', " "));
     }));

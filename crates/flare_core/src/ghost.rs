@@ -23,7 +23,7 @@
 //!   size: bounded, with the same total energy, never infinite. When `A_k -> 0` (the stop's image at
 //!   infinity) the front disc bounds the region and nothing divides by zero.
 //! - **Reflectance**: each reflection's angle of incidence is paraxial, `i = u + s c y` for the ray through the
-//!   region's centre, linear in the light's slope; the reflectance of each (surface, side, wavelength) is
+//!   region's centre E, linear in E and the light's slope; the reflectance of each (surface, side, wavelength) is
 //!   tabulated at rebuild over sin(i) in [0, 1] ([`REFLECTANCE_SAMPLES`] samples, linear interpolation) from
 //!   [`crate::coating`], so a frame costs a few multiplications per sprite.
 //! - **Skipping**: sprites whose peak colour is below the threshold, that fall entirely off the sensor or
@@ -98,16 +98,39 @@ impl ReflectanceTable {
     }
 }
 
+/// Paraxial angle of incidence at one reflection, linear in the entry point x0 and the light slope u.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Incidence {
+    per_entry: f64,
+    per_slope: f64,
+}
+
+impl Incidence {
+    /// The coefficients from the entrance-to-arrival matrix `m` at a surface of curvature `c`, arriving in
+    /// direction `s`: the angle to the normal is `u + s c y`.
+    fn new(m: &Mat2, c: f64, s: f64) -> Self {
+        let angle = |(y, u): (f64, f64)| u + s * c * y;
+        Self { per_entry: angle(m.apply(1.0, 0.0)), per_slope: angle(m.apply(0.0, 1.0)) }
+    }
+
+    /// sin of the angle of incidence for the ray entering at `x0` with slope `u` (the paraxial angle is
+    /// taken as a tangent, so the sine stays below 1 however steep the ray).
+    fn sin_at(&self, x0: [f64; 2], u: [f64; 2]) -> f64 {
+        let t = (self.per_entry * x0[0] + self.per_slope * u[0]).hypot(self.per_entry * x0[1] + self.per_slope * u[1]);
+        t / (1.0 + t * t).sqrt()
+    }
+}
+
 /// One ghost at one wavelength: everything a frame needs, from the lens alone.
 #[derive(Clone, Debug, PartialEq)]
 pub struct GhostOptics {
     pub wavelength_nm: f64,
     /// The path's matrices (entrance -> sensor, entrance -> each stop crossing, last crossing -> sensor).
     pub matrices: PathMatrices,
-    /// Angle-of-incidence gains: i = gain * (light slope) at the two reflections (second surface j, then i),
-    /// for the ray through the centre of the first stop crossing's entrance disc.
-    incidence_gain_j: f64,
-    incidence_gain_i: f64,
+    /// Paraxial angle of incidence at the two reflections (second surface j, then i) as a linear function of
+    /// the entry point and the light slope: `angle = per_entry * x0 + per_slope * u`.
+    incidence_j: Incidence,
+    incidence_i: Incidence,
     reflectance_j: ReflectanceTable,
     reflectance_i: ReflectanceTable,
 }
@@ -259,18 +282,11 @@ impl GhostSystem {
                         at_i = *m;
                     }
                 });
-                // The ray through the centre of the first crossing's disc enters at x0 = -(B_a / A_a) u
-                // (x0 = 0 when A_a = 0, where the front disc bounds the region).
-                let a = matrices.stop_from_entrance[0];
-                let x0_per_u = if a.a != 0.0 { -a.b / a.a } else { 0.0 };
-                let gain = |m: &Mat2, k: usize, s: f64| {
-                    let (y, u) = m.apply(x0_per_u, 1.0);
-                    u + s * lens.surfaces[k].curvature_per_mm() * y
-                };
+                let (s_j, s_i) = (path.steps[step_j].arriving_direction, path.steps[step_i].arriving_direction);
                 per_wavelength.push(GhostOptics {
                     wavelength_nm,
-                    incidence_gain_j: gain(&at_j, j, path.steps[step_j].arriving_direction),
-                    incidence_gain_i: gain(&at_i, i, path.steps[step_i].arriving_direction),
+                    incidence_j: Incidence::new(&at_j, lens.surfaces[j].curvature_per_mm(), s_j),
+                    incidence_i: Incidence::new(&at_i, lens.surfaces[i].curvature_per_mm(), s_i),
                     reflectance_j: table(j, path.steps[step_j].arriving_direction > 0.0, w),
                     reflectance_i: table(i, path.steps[step_i].arriving_direction > 0.0, w),
                     matrices,
@@ -381,8 +397,9 @@ impl GhostSystem {
                 } else {
                     size
                 };
-                let r_j = optics.reflectance_j.at((optics.incidence_gain_j * u_len).abs());
-                let r_i = optics.reflectance_i.at((optics.incidence_gain_i * u_len).abs());
+                // Reflectances at the angles of the ray through the centre of the entrance region.
+                let r_j = optics.reflectance_j.at(optics.incidence_j.sin_at(e, u));
+                let r_i = optics.reflectance_i.at(optics.incidence_i.sin_at(e, u));
                 let irradiance = cos_theta * r_i * r_j * (rho / half_size).powi(2);
                 let weight = self.settings.spectrum.weights_rgb[w];
                 let rgb = weight.map(|c| (c * irradiance).max(0.0));

@@ -2,13 +2,19 @@
 //!
 //! # How it works
 //! [`optics`] is the foundation: a lens prescription, its files, exact f64 ray tracing and the paraxial
-//! ray-transfer matrices of every ghost path. All numerics are f64 on the CPU; every singular case (total
-//! internal reflection, a ray missing a surface, a flat surface, an afocal lens) is an explicit outcome or
-//! error, never a NaN.
+//! ray-transfer matrices of every ghost path. [`ghost`] turns those matrices into one sprite per ghost and
+//! wavelength (with [`coating`] reflectances, [`spectrum`] colours and the [`aperture`] shape); [`starburst`]
+//! diffracts the aperture; [`render`] draws it all with wgpu (WGSL in `shaders/`) or its CPU twin; [`flare`]
+//! ties a lens and its settings into something that renders any light position. All numerics are f64 on the
+//! CPU; every singular case (total internal reflection, a ray missing a surface, a flat surface, an afocal
+//! lens, a ghost focused to a point) is an explicit outcome or a bounded value, never a NaN, and only
+//! finite values reach GPU buffers.
 
 pub mod aperture;
 pub mod coating;
+pub mod flare;
 pub mod ghost;
 pub mod optics;
+pub mod render;
 pub mod spectrum;
 pub mod starburst;

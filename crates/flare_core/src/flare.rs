@@ -1,0 +1,90 @@
+//! One flare from end to end: a lens and its settings prepared once, then a scene per light position.
+//!
+//! # How it works
+//! [`FlareConfig`] is everything a user sets besides the lens: aperture (shape, f-number), spectrum, coating
+//! override, culling threshold and display. [`PreparedFlare::new`] does the work that depends on those and
+//! on the lens (ghost matrices and reflectance tables, the aperture mask, the starburst's FFT); it is redone
+//! only when one of them changes. [`PreparedFlare::scene`] is the per-frame part: ghost sprites for the
+//! light's position and the GPU-ready [`FlareScene`]. The command line, the benchmarks and the app all go
+//! through here, so they draw the same flare.
+
+use crate::aperture::{Aperture, ApertureError, ApertureMask, DEFAULT_MASK_SIZE};
+use crate::ghost::{FrameSettings, GhostError, GhostFrame, GhostSettings, GhostSystem, Sensor};
+use crate::optics::{Coating, Lens};
+use crate::render::{light_slopes_for_frame_position, DisplaySettings, FlareScene};
+use crate::spectrum::Spectrum;
+use crate::starburst::Starburst;
+
+/// Everything but the lens.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FlareConfig {
+    pub aperture: Aperture,
+    pub spectrum: Spectrum,
+    pub coating_override: Option<Coating>,
+    pub intensity_threshold: f64,
+    pub display: DisplaySettings,
+}
+
+impl Default for FlareConfig {
+    fn default() -> Self {
+        Self {
+            aperture: Aperture::default(),
+            spectrum: Spectrum::rgb(),
+            coating_override: None,
+            intensity_threshold: FrameSettings::default().intensity_threshold,
+            display: DisplaySettings::default(),
+        }
+    }
+}
+
+/// Why a flare cannot be prepared.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FlareError {
+    #[error(transparent)]
+    Ghosts(#[from] GhostError),
+    #[error(transparent)]
+    Aperture(#[from] ApertureError),
+}
+
+/// A lens with its settings, ready to render any light position.
+#[derive(Clone, Debug)]
+pub struct PreparedFlare {
+    pub config: FlareConfig,
+    pub system: GhostSystem,
+    pub mask: ApertureMask,
+    pub starburst: Starburst,
+}
+
+impl PreparedFlare {
+    pub fn new(lens: &Lens, config: &FlareConfig) -> Result<Self, FlareError> {
+        config.aperture.validate()?;
+        let nominal = crate::optics::FirstOrder::d_line(lens).map_err(GhostError::from)?.f_number;
+        let settings = GhostSettings {
+            spectrum: config.spectrum.clone(),
+            stop_scale: config.aperture.stop_scale(nominal),
+            coating_override: config.coating_override.clone(),
+        };
+        let system = GhostSystem::build(lens, &settings)?;
+        let mask = config.aperture.rasterise(DEFAULT_MASK_SIZE);
+        let starburst = Starburst::compute(&mask, &config.spectrum);
+        Ok(Self { config: config.clone(), system, mask, starburst })
+    }
+
+    /// Frame settings for an image of `width` x `height` pixels.
+    pub fn frame_settings(&self, width: u32, height: u32) -> FrameSettings {
+        let sensor = Sensor::full_frame_for(width, height);
+        // A focused ghost is drawn at least a pixel across.
+        let min_half_size_mm = 0.75 * sensor.width_mm / width.max(1) as f64;
+        FrameSettings { sensor, intensity_threshold: self.config.intensity_threshold, min_half_size_mm }
+    }
+
+    /// Ghost sprites and the drawable scene for a light seen at the frame position `light_deg` (X right,
+    /// Y up, degrees).
+    pub fn scene(&self, light_deg: [f64; 2], width: u32, height: u32) -> (FlareScene, GhostFrame) {
+        let u = light_slopes_for_frame_position(light_deg[0], light_deg[1]);
+        let frame_settings = self.frame_settings(width, height);
+        let frame = self.system.frame(u, &frame_settings);
+        let scene = FlareScene::build(&self.system, &frame, u, &frame_settings, &self.config.display, width, height);
+        (scene, frame)
+    }
+}

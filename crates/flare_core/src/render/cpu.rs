@@ -1,0 +1,170 @@
+//! The CPU twin of the GPU renderer: the same passes, the same names, the same steps as `shaders/*.wgsl`.
+//!
+//! # How it works
+//! [`ghost_pass`] is `ghosts.wgsl`: for each instance it visits the pixels whose centres fall inside the
+//! quad, recovers the quad coordinate q, multiplies the aperture mask (bilinear, 0 outside [-1, 1]^2) at every
+//! enabled stop crossing and the anti-aliased front disc, and adds the colour. [`starburst_pass`] is
+//! `starburst.wgsl` and [`tonemap_pass`] is `tonemap.wgsl`. The GPU accumulates in half floats and the CPU in
+//! f32; the comparison test bounds the mean difference. The twin also renders on machines with no GPU
+//! adapter at all (`flarelab render --device cpu`).
+
+use super::{DisplayImage, FlareScene, HdrImage};
+use crate::aperture::ApertureMask;
+use crate::starburst::Starburst;
+
+/// Starburst texture as the GPU holds it: RGBA rounded to half floats.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StarburstTexture {
+    pub size: usize,
+    pub texels: Vec<[f32; 4]>,
+}
+
+impl StarburstTexture {
+    pub fn from_starburst(s: &Starburst) -> Self {
+        let texels = s.rgba.iter().map(|t| t.map(|v| half::f16::from_f32(v).to_f32())).collect();
+        Self { size: s.size, texels }
+    }
+
+    /// Bilinear sample at texture coordinates (s, t) in [0, 1]^2, clamped to the edge.
+    fn sample(&self, s: f32, t: f32) -> [f32; 4] {
+        let n = self.size as f32;
+        let (x, y) = (s * n - 0.5, t * n - 0.5);
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let at = |i: f32, j: f32| {
+            let i = (i.max(0.0) as usize).min(self.size - 1);
+            let j = (j.max(0.0) as usize).min(self.size - 1);
+            self.texels[j * self.size + i]
+        };
+        let mut out = [0.0; 4];
+        for (c, o) in out.iter_mut().enumerate() {
+            let top = at(x0, y0)[c] * (1.0 - fx) + at(x0 + 1.0, y0)[c] * fx;
+            let bottom = at(x0, y0 + 1.0)[c] * (1.0 - fx) + at(x0 + 1.0, y0 + 1.0)[c] * fx;
+            *o = top * (1.0 - fy) + bottom * fy;
+        }
+        out
+    }
+}
+
+fn stop_mask(mask: &ApertureMask, map: [f32; 4], q: [f32; 2]) -> f32 {
+    if map[3] == 0.0 {
+        return 1.0;
+    }
+    mask.sample(map[0] * q[0] + map[1], map[0] * q[1] + map[2])
+}
+
+fn front_mask(map: [f32; 4], q: [f32; 2]) -> f32 {
+    let r = (map[0] * q[0] + map[1]).hypot(map[0] * q[1] + map[2]);
+    (0.5 + (1.0 - r) / map[3]).clamp(0.0, 1.0)
+}
+
+/// `ghosts.wgsl`: every instance into a cleared HDR image.
+pub fn ghost_pass(scene: &FlareScene, mask: &ApertureMask) -> HdrImage {
+    let (w, h) = (scene.width as usize, scene.height as usize);
+    let mut pixels = vec![[0.0f32; 4]; w * h];
+    for inst in &scene.instances {
+        let [cx, cy, hx, hy] = inst.centre_half;
+        let (x_lo, x_hi) = ((cx - hx.abs()).floor().max(0.0) as usize, ((cx + hx.abs()).ceil().max(0.0) as usize).min(w));
+        let (y_lo, y_hi) = ((cy - hy.abs()).floor().max(0.0) as usize, ((cy + hy.abs()).ceil().max(0.0) as usize).min(h));
+        for y in y_lo..y_hi {
+            for x in x_lo..x_hi {
+                let q = [(x as f32 + 0.5 - cx) / hx, (y as f32 + 0.5 - cy) / hy];
+                if q[0].abs() > 1.0 || q[1].abs() > 1.0 {
+                    continue;
+                }
+                let m = stop_mask(mask, inst.stops[0], q)
+                    * stop_mask(mask, inst.stops[1], q)
+                    * stop_mask(mask, inst.stops[2], q)
+                    * front_mask(inst.front, q);
+                let p = &mut pixels[y * w + x];
+                for c in 0..3 {
+                    p[c] += inst.colour[c] * m;
+                }
+            }
+        }
+    }
+    HdrImage { width: scene.width, height: scene.height, pixels }
+}
+
+/// `starburst.wgsl`: the starburst quad added onto `hdr`.
+pub fn starburst_pass(scene: &FlareScene, texture: &StarburstTexture, hdr: &mut HdrImage) {
+    let [cx, cy, half, intensity] = scene.globals.starburst;
+    if half <= 0.0 || intensity == 0.0 {
+        return;
+    }
+    let (w, h) = (hdr.width as usize, hdr.height as usize);
+    let (x_lo, x_hi) = ((cx - half).floor().max(0.0) as usize, ((cx + half).ceil().max(0.0) as usize).min(w));
+    let (y_lo, y_hi) = ((cy - half).floor().max(0.0) as usize, ((cy + half).ceil().max(0.0) as usize).min(h));
+    for y in y_lo..y_hi {
+        for x in x_lo..x_hi {
+            let q = [(x as f32 + 0.5 - cx) / half, (y as f32 + 0.5 - cy) / half];
+            if q[0].abs() > 1.0 || q[1].abs() > 1.0 {
+                continue;
+            }
+            let t = texture.sample(q[0] * 0.5 + 0.5, q[1] * 0.5 + 0.5);
+            let p = &mut hdr.pixels[y * w + x];
+            for c in 0..3 {
+                p[c] += t[c] * intensity;
+            }
+        }
+    }
+}
+
+fn aces(x: f32) -> f32 {
+    ((x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14)).clamp(0.0, 1.0)
+}
+
+fn encode_srgb(c: f32) -> f32 {
+    if c <= 0.0031308 { c * 12.92 } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 }
+}
+
+/// `tonemap.wgsl` for one linear HDR value: exposure, operator, clamp, sRGB encode.
+pub fn tonemap_pixel(c: [f32; 3], globals: &super::Globals) -> [f32; 3] {
+    let [exposure, operator, encode, _] = globals.tonemap;
+    c.map(|v| {
+        let mut v = (v * exposure).max(0.0);
+        if operator > 1.5 {
+            v = aces(v);
+        } else if operator > 0.5 {
+            v /= 1.0 + v;
+        }
+        v = v.clamp(0.0, 1.0);
+        if encode > 0.5 { encode_srgb(v) } else { v }
+    })
+}
+
+/// `tonemap.wgsl`: HDR (+ optional background plate, nearest sample) to 8-bit display pixels.
+pub fn tonemap_pass(scene: &FlareScene, hdr: &HdrImage, background: Option<&HdrImage>) -> DisplayImage {
+    let (w, h) = (hdr.width as usize, hdr.height as usize);
+    let mut pixels = Vec::with_capacity(w * h);
+    for y in 0..h {
+        for x in 0..w {
+            let p = hdr.pixels[y * w + x];
+            let mut c = [p[0], p[1], p[2]];
+            if let Some(bg) = background {
+                let bx = (((x as f32 + 0.5) * bg.width as f32 / w as f32) as usize).min(bg.width as usize - 1);
+                let by = (((y as f32 + 0.5) * bg.height as f32 / h as f32) as usize).min(bg.height as usize - 1);
+                let b = bg.pixels[by * bg.width as usize + bx];
+                for k in 0..3 {
+                    c[k] += b[k];
+                }
+            }
+            let t = tonemap_pixel(c, &scene.globals);
+            pixels.push([to_u8(t[0]), to_u8(t[1]), to_u8(t[2]), 255]);
+        }
+    }
+    DisplayImage { width: hdr.width, height: hdr.height, pixels }
+}
+
+fn to_u8(v: f32) -> u8 {
+    (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
+}
+
+/// The whole frame on the CPU: ghosts, starburst, then (for display) tonemapping.
+pub fn render_hdr(scene: &FlareScene, mask: &ApertureMask, starburst: Option<&StarburstTexture>) -> HdrImage {
+    let mut hdr = ghost_pass(scene, mask);
+    if let Some(texture) = starburst {
+        starburst_pass(scene, texture, &mut hdr);
+    }
+    hdr
+}

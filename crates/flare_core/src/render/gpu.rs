@@ -1,0 +1,433 @@
+//! The wgpu renderer: draws a [`FlareScene`] into a texture view it is given.
+//!
+//! # How it works
+//! [`FlareRenderer`] owns its pipelines, the aperture mask (R8Unorm), the starburst (Rgba16Float), an
+//! optional background plate (Rgba16Float) and an HDR accumulation target (Rgba16Float, resized on demand).
+//! [`FlareRenderer::render`] records three passes into the caller's encoder:
+//! 1. `ghosts.wgsl`: clear the HDR target, draw one instanced quad per ghost sprite, additive blending;
+//! 2. `starburst.wgsl`: the diffraction texture at the light's image, additive;
+//! 3. `tonemap.wgsl`: background + HDR, exposure, tonemap and (for non-sRGB targets) sRGB encoding into the
+//!    caller's view.
+//!
+//! It never owns a window: the app hands it egui's device and a view, tests and the command line hand it a
+//! headless device ([`GpuContext::headless`]) and read the result back ([`read_display`], [`read_hdr`]).
+//! Rows copied to buffers are padded to 256 bytes as wgpu requires.
+
+use super::shaders::{GHOSTS_WGSL, STARBURST_WGSL, TONEMAP_WGSL};
+use super::{DisplayImage, FlareScene, GhostInstance, Globals, HdrImage};
+use crate::aperture::ApertureMask;
+use crate::starburst::Starburst;
+
+/// The HDR accumulation format.
+pub const HDR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+
+/// Why the GPU path is not available or failed.
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    #[error("no GPU adapter found (no Vulkan, Metal, DX12 or GL driver); install one (lavapipe: Debian's mesa-vulkan-drivers) or render on the CPU")]
+    NoAdapter,
+    #[error("the GPU adapter {adapter} refused a device: {message}")]
+    Device { adapter: String, message: String },
+    #[error("reading the image back from the GPU failed: {0}")]
+    Readback(String),
+}
+
+/// A device and queue made without any window.
+pub struct GpuContext {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub adapter: wgpu::AdapterInfo,
+}
+
+impl GpuContext {
+    /// Picks an adapter with no surface. `prefer_software` ranks CPU adapters (lavapipe, llvmpipe) first,
+    /// which keeps test images identical from machine to machine; otherwise real GPUs come first.
+    pub fn headless(prefer_software: bool) -> Result<Self, GpuError> {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+        let rank = |info: &wgpu::AdapterInfo| {
+            let software = info.device_type == wgpu::DeviceType::Cpu;
+            let kind = match info.device_type {
+                wgpu::DeviceType::DiscreteGpu => 0,
+                wgpu::DeviceType::IntegratedGpu => 1,
+                wgpu::DeviceType::VirtualGpu => 2,
+                wgpu::DeviceType::Cpu => 3,
+                wgpu::DeviceType::Other => 4,
+            };
+            let vulkan_first = usize::from(info.backend != wgpu::Backend::Vulkan);
+            if prefer_software { (usize::from(!software), vulkan_first, kind) } else { (kind, vulkan_first, 0) }
+        };
+        let adapter = adapters.into_iter().min_by_key(|a| rank(&a.get_info())).ok_or(GpuError::NoAdapter)?;
+        let info = adapter.get_info();
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("flarelab"),
+            required_features: wgpu::Features::empty(),
+            required_limits: wgpu::Limits::downlevel_defaults().using_resolution(adapter.limits()),
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError::Device { adapter: info.name.clone(), message: e.to_string() })?;
+        Ok(Self { device, queue, adapter: info })
+    }
+}
+
+fn texture_2d(
+    device: &wgpu::Device,
+    label: &str,
+    width: u32,
+    height: u32,
+    format: wgpu::TextureFormat,
+    usage: wgpu::TextureUsages,
+) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage,
+        view_formats: &[],
+    })
+}
+
+fn upload(queue: &wgpu::Queue, texture: &wgpu::Texture, bytes: &[u8], bytes_per_pixel: u32) {
+    let size = texture.size();
+    queue.write_texture(
+        wgpu::TexelCopyTextureInfo { texture, mip_level: 0, origin: wgpu::Origin3d::ZERO, aspect: wgpu::TextureAspect::All },
+        bytes,
+        wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(size.width * bytes_per_pixel), rows_per_image: Some(size.height) },
+        size,
+    );
+}
+
+fn half_floats(rgba: &[[f32; 4]]) -> Vec<u8> {
+    let halves: Vec<half::f16> =
+        rgba.iter().flat_map(|t| t.map(|v| half::f16::from_f32(if v.is_finite() { v } else { 0.0 }))).collect();
+    bytemuck::cast_slice(&halves).to_vec()
+}
+
+/// The GPU flare renderer.
+pub struct FlareRenderer {
+    ghost_pipeline: wgpu::RenderPipeline,
+    starburst_pipeline: wgpu::RenderPipeline,
+    tonemap_pipeline: wgpu::RenderPipeline,
+    ghost_layout: wgpu::BindGroupLayout,
+    tonemap_layout: wgpu::BindGroupLayout,
+    globals: wgpu::Buffer,
+    sampler: wgpu::Sampler,
+    aperture: wgpu::Texture,
+    starburst: wgpu::Texture,
+    background: wgpu::Texture,
+    has_background: bool,
+    hdr: Option<(wgpu::Texture, u32, u32)>,
+    instances: wgpu::Buffer,
+    instance_capacity: usize,
+    target_format: wgpu::TextureFormat,
+}
+
+impl FlareRenderer {
+    /// Pipelines for drawing into views of `target_format`.
+    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, target_format: wgpu::TextureFormat) -> Self {
+        let uniform = wgpu::BindGroupLayoutEntry {
+            binding: 0,
+            visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+            ty: wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None },
+            count: None,
+        };
+        let texture = |binding, filterable| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::FRAGMENT,
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable },
+                view_dimension: wgpu::TextureViewDimension::D2,
+                multisampled: false,
+            },
+            count: None,
+        };
+        let sampler_entry = wgpu::BindGroupLayoutEntry {
+            binding: 2,
+            visibility: wgpu::ShaderStages::FRAGMENT,
+            ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+            count: None,
+        };
+        let ghost_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("ghosts"),
+            entries: &[uniform, texture(1, true), sampler_entry],
+        });
+        let tonemap_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("tonemap"),
+            entries: &[uniform, texture(1, false), texture(2, false)],
+        });
+        let layout = |bgl: &wgpu::BindGroupLayout| {
+            device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: None,
+                bind_group_layouts: &[Some(bgl)],
+                immediate_size: 0,
+            })
+        };
+        let ghost_pl = layout(&ghost_layout);
+        let tonemap_pl = layout(&tonemap_layout);
+        let additive = wgpu::BlendState {
+            color: wgpu::BlendComponent { src_factor: wgpu::BlendFactor::One, dst_factor: wgpu::BlendFactor::One, operation: wgpu::BlendOperation::Add },
+            alpha: wgpu::BlendComponent { src_factor: wgpu::BlendFactor::One, dst_factor: wgpu::BlendFactor::One, operation: wgpu::BlendOperation::Add },
+        };
+        let module = |label, source: &str| {
+            device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(label), source: wgpu::ShaderSource::Wgsl(source.into()) })
+        };
+        let ghosts = module("ghosts.wgsl", GHOSTS_WGSL);
+        let starburst_module = module("starburst.wgsl", STARBURST_WGSL);
+        let tonemap = module("tonemap.wgsl", TONEMAP_WGSL);
+        let instance_attributes = wgpu::vertex_attr_array![0 => Float32x4, 1 => Float32x4, 2 => Float32x4, 3 => Float32x4, 4 => Float32x4, 5 => Float32x4];
+        let instance_buffer_layout = wgpu::VertexBufferLayout {
+            array_stride: std::mem::size_of::<GhostInstance>() as u64,
+            step_mode: wgpu::VertexStepMode::Instance,
+            attributes: &instance_attributes,
+        };
+        let pipeline = |label, layout: &wgpu::PipelineLayout, module: &wgpu::ShaderModule, buffers: &[Option<wgpu::VertexBufferLayout>], format, blend| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(label),
+                layout: Some(layout),
+                vertex: wgpu::VertexState { module, entry_point: Some("vs_main"), compilation_options: Default::default(), buffers },
+                primitive: wgpu::PrimitiveState::default(),
+                depth_stencil: None,
+                multisample: wgpu::MultisampleState::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module,
+                    entry_point: Some("fs_main"),
+                    compilation_options: Default::default(),
+                    targets: &[Some(wgpu::ColorTargetState { format, blend, write_mask: wgpu::ColorWrites::ALL })],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        let ghost_pipeline = pipeline("ghosts", &ghost_pl, &ghosts, &[Some(instance_buffer_layout)], HDR_FORMAT, Some(additive));
+        let starburst_pipeline = pipeline("starburst", &ghost_pl, &starburst_module, &[], HDR_FORMAT, Some(additive));
+        let tonemap_pipeline = pipeline("tonemap", &tonemap_pl, &tonemap, &[], target_format, None);
+        let globals = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("globals"),
+            size: std::mem::size_of::<Globals>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("linear clamp"),
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            ..Default::default()
+        });
+        let sampled = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
+        let aperture = texture_2d(device, "aperture", 1, 1, wgpu::TextureFormat::R8Unorm, sampled);
+        upload(queue, &aperture, &[255], 1);
+        let starburst = texture_2d(device, "starburst", 1, 1, HDR_FORMAT, sampled);
+        upload(queue, &starburst, &half_floats(&[[0.0; 4]]), 8);
+        let background = texture_2d(device, "background", 1, 1, HDR_FORMAT, sampled);
+        upload(queue, &background, &half_floats(&[[0.0; 4]]), 8);
+        let instance_capacity = 256;
+        let instances = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("ghost instances"),
+            size: (instance_capacity * std::mem::size_of::<GhostInstance>()) as u64,
+            usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        Self {
+            ghost_pipeline,
+            starburst_pipeline,
+            tonemap_pipeline,
+            ghost_layout,
+            tonemap_layout,
+            globals,
+            sampler,
+            aperture,
+            starburst,
+            background,
+            has_background: false,
+            hdr: None,
+            instances,
+            instance_capacity,
+            target_format,
+        }
+    }
+
+    /// The format of the views this renderer draws into.
+    pub fn target_format(&self) -> wgpu::TextureFormat {
+        self.target_format
+    }
+
+    /// Replaces the aperture mask (when the aperture settings change).
+    pub fn set_aperture(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, mask: &ApertureMask) {
+        let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
+        self.aperture = texture_2d(device, "aperture", mask.size as u32, mask.size as u32, wgpu::TextureFormat::R8Unorm, usage);
+        upload(queue, &self.aperture, &mask.texels, 1);
+    }
+
+    /// Replaces the starburst texture.
+    pub fn set_starburst(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, starburst: &Starburst) {
+        let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
+        self.starburst = texture_2d(device, "starburst", starburst.size as u32, starburst.size as u32, HDR_FORMAT, usage);
+        upload(queue, &self.starburst, &half_floats(&starburst.rgba), 8);
+    }
+
+    /// Sets or clears the background plate (linear).
+    pub fn set_background(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, plate: Option<&HdrImage>) {
+        self.has_background = plate.is_some();
+        let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
+        let (w, h, pixels) = match plate {
+            Some(p) => (p.width, p.height, half_floats(&p.pixels)),
+            None => (1, 1, half_floats(&[[0.0; 4]])),
+        };
+        self.background = texture_2d(device, "background", w, h, HDR_FORMAT, usage);
+        upload(queue, &self.background, &pixels, 8);
+    }
+
+    /// The HDR accumulation texture of the last render (for EXR output).
+    pub fn hdr_texture(&self) -> Option<&wgpu::Texture> {
+        self.hdr.as_ref().map(|(t, _, _)| t)
+    }
+
+    /// Records the frame into `encoder`, drawing into `target` (of the renderer's target format, the
+    /// scene's size).
+    pub fn render(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, encoder: &mut wgpu::CommandEncoder, target: &wgpu::TextureView, scene: &FlareScene) {
+        let (w, h) = (scene.width.max(1), scene.height.max(1));
+        if !matches!(&self.hdr, Some((_, hw, hh)) if *hw == w && *hh == h) {
+            let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_SRC;
+            self.hdr = Some((texture_2d(device, "hdr", w, h, HDR_FORMAT, usage), w, h));
+        }
+        let mut globals = scene.globals;
+        globals.tonemap[2] = if self.target_format.is_srgb() { 0.0 } else { 1.0 };
+        globals.tonemap[3] = if self.has_background { 1.0 } else { 0.0 };
+        queue.write_buffer(&self.globals, 0, bytemuck::bytes_of(&globals));
+        if scene.instances.len() > self.instance_capacity {
+            self.instance_capacity = scene.instances.len().next_power_of_two();
+            self.instances = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("ghost instances"),
+                size: (self.instance_capacity * std::mem::size_of::<GhostInstance>()) as u64,
+                usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+        }
+        if !scene.instances.is_empty() {
+            queue.write_buffer(&self.instances, 0, bytemuck::cast_slice(&scene.instances));
+        }
+        let Some((hdr, _, _)) = &self.hdr else { return };
+        let hdr_view = hdr.create_view(&wgpu::TextureViewDescriptor::default());
+        let aperture_view = self.aperture.create_view(&wgpu::TextureViewDescriptor::default());
+        let starburst_view = self.starburst.create_view(&wgpu::TextureViewDescriptor::default());
+        let background_view = self.background.create_view(&wgpu::TextureViewDescriptor::default());
+        let bind = |layout: &wgpu::BindGroupLayout, view: &wgpu::TextureView, third: wgpu::BindingResource| {
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: None,
+                layout,
+                entries: &[
+                    wgpu::BindGroupEntry { binding: 0, resource: self.globals.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(view) },
+                    wgpu::BindGroupEntry { binding: 2, resource: third },
+                ],
+            })
+        };
+        let ghost_group = bind(&self.ghost_layout, &aperture_view, wgpu::BindingResource::Sampler(&self.sampler));
+        let starburst_group = bind(&self.ghost_layout, &starburst_view, wgpu::BindingResource::Sampler(&self.sampler));
+        let tonemap_group = bind(&self.tonemap_layout, &hdr_view, wgpu::BindingResource::TextureView(&background_view));
+        {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("flare hdr"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &hdr_view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT), store: wgpu::StoreOp::Store },
+                })],
+                ..Default::default()
+            });
+            if !scene.instances.is_empty() {
+                pass.set_pipeline(&self.ghost_pipeline);
+                pass.set_bind_group(0, &ghost_group, &[]);
+                pass.set_vertex_buffer(0, self.instances.slice(..));
+                pass.draw(0..6, 0..scene.instances.len() as u32);
+            }
+            if globals.starburst[2] > 0.0 && globals.starburst[3] != 0.0 {
+                pass.set_pipeline(&self.starburst_pipeline);
+                pass.set_bind_group(0, &starburst_group, &[]);
+                pass.draw(0..6, 0..1);
+            }
+        }
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("flare tonemap"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: target,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::BLACK), store: wgpu::StoreOp::Store },
+            })],
+            ..Default::default()
+        });
+        pass.set_pipeline(&self.tonemap_pipeline);
+        pass.set_bind_group(0, &tonemap_group, &[]);
+        pass.draw(0..3, 0..1);
+    }
+}
+
+/// Copies `texture` (of `bytes_per_pixel`) into CPU memory, unpadding the 256-byte rows.
+fn read_texture(ctx: &GpuContext, texture: &wgpu::Texture, bytes_per_pixel: u32) -> Result<Vec<u8>, GpuError> {
+    let size = texture.size();
+    let row = size.width * bytes_per_pixel;
+    let padded = row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+    let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("readback"),
+        size: (padded * size.height) as u64,
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+        mapped_at_creation: false,
+    });
+    let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
+    encoder.copy_texture_to_buffer(
+        wgpu::TexelCopyTextureInfo { texture, mip_level: 0, origin: wgpu::Origin3d::ZERO, aspect: wgpu::TextureAspect::All },
+        wgpu::TexelCopyBufferInfo {
+            buffer: &buffer,
+            layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(padded), rows_per_image: Some(size.height) },
+        },
+        size,
+    );
+    ctx.queue.submit(Some(encoder.finish()));
+    let (sender, receiver) = std::sync::mpsc::channel();
+    buffer.slice(..).map_async(wgpu::MapMode::Read, move |r| {
+        let _ = sender.send(r);
+    });
+    ctx.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
+    receiver.recv().map_err(|e| GpuError::Readback(e.to_string()))?.map_err(|e| GpuError::Readback(e.to_string()))?;
+    let view = buffer.slice(..).get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?;
+    let mut out = Vec::with_capacity((row * size.height) as usize);
+    for y in 0..size.height as usize {
+        let start = y * padded as usize;
+        out.extend_from_slice(&view[start..start + row as usize]);
+    }
+    Ok(out)
+}
+
+/// Renders `scene` headless into an Rgba8Unorm texture and reads the display image back.
+pub fn render_display(ctx: &GpuContext, renderer: &mut FlareRenderer, scene: &FlareScene) -> Result<DisplayImage, GpuError> {
+    let target = texture_2d(
+        &ctx.device,
+        "display",
+        scene.width,
+        scene.height,
+        renderer.target_format(),
+        wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+    );
+    let view = target.create_view(&wgpu::TextureViewDescriptor::default());
+    let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("flare") });
+    renderer.render(&ctx.device, &ctx.queue, &mut encoder, &view, scene);
+    ctx.queue.submit(Some(encoder.finish()));
+    let bytes = read_texture(ctx, &target, 4)?;
+    let pixels = bytes.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect();
+    Ok(DisplayImage { width: scene.width, height: scene.height, pixels })
+}
+
+/// Reads the HDR accumulation of the last render (linear, before exposure).
+pub fn read_hdr(ctx: &GpuContext, renderer: &FlareRenderer) -> Result<HdrImage, GpuError> {
+    let texture = renderer.hdr_texture().ok_or_else(|| GpuError::Readback("nothing rendered yet".into()))?;
+    let size = texture.size();
+    let bytes = read_texture(ctx, texture, 8)?;
+    let halves: &[half::f16] = bytemuck::cast_slice(&bytes);
+    let pixels = halves.chunks_exact(4).map(|c| [c[0].to_f32(), c[1].to_f32(), c[2].to_f32(), c[3].to_f32()]).collect();
+    Ok(HdrImage { width: size.width, height: size.height, pixels })
+}

@@ -1,0 +1,191 @@
+//! Rendering a flare: the scene description shared by the wgpu renderer and its CPU twin.
+//!
+//! # How it works
+//! [`FlareScene::build`] turns one frame of ghost sprites ([`crate::ghost`]) into what both renderers draw:
+//! one [`GhostInstance`] per drawn sprite (pixel centre and signed half-size, colour, the affine maps into
+//! the aperture mask at every stop crossing and into the front-lens disc), the starburst's placement, and
+//! the display settings in [`Globals`]. The GPU path ([`gpu`]) and the CPU twin ([`cpu`]) read exactly these
+//! structs, so a test can compare their images pixel by pixel.
+//!
+//! Frame convention: the sensor image is rotated by 180 degrees for display (as a camera does), so the
+//! displayed point of sensor coordinate (x, y) mm is (-x, -y); pixels run right and down from the top-left
+//! corner, `k = width_px / sensor_width_mm`. A light seen at the frame position given by the field angles
+//! (X right, Y up) has rays of slope `(-tan X, -tan Y)` ([`light_slopes_for_frame_position`]).
+//!
+//! Every float that reaches a GPU buffer passes [`GhostInstance::is_finite`]; a sprite that is not finite is
+//! dropped and counted, never uploaded.
+
+pub mod cpu;
+pub mod gpu;
+pub mod output;
+pub mod shaders;
+
+use bytemuck::{Pod, Zeroable};
+
+use crate::ghost::{FrameSettings, GhostFrame, GhostSystem, Sensor};
+
+/// Tonemapping operator.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Tonemap {
+    /// Clamp only.
+    None,
+    /// `c / (1 + c)` per channel.
+    Reinhard,
+    /// Narkowicz's fit of the ACES filmic curve.
+    Aces,
+}
+
+impl Tonemap {
+    fn code(self) -> f32 {
+        match self {
+            Self::None => 0.0,
+            Self::Reinhard => 1.0,
+            Self::Aces => 2.0,
+        }
+    }
+}
+
+/// How the frame is shown.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DisplaySettings {
+    /// Linear multiplier before tonemapping.
+    pub exposure: f32,
+    pub tonemap: Tonemap,
+    /// Draw the starburst at the light's image.
+    pub starburst: bool,
+    /// Starburst half-size as a fraction of the frame height.
+    pub starburst_size: f32,
+    /// Starburst peak brightness (relative irradiance).
+    pub starburst_intensity: f32,
+}
+
+impl Default for DisplaySettings {
+    fn default() -> Self {
+        Self { exposure: 100.0, tonemap: Tonemap::Aces, starburst: true, starburst_size: 0.35, starburst_intensity: 0.3 }
+    }
+}
+
+/// Uniforms shared by every shader. Must be kept in sync with `struct Globals` in `shaders/*.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct Globals {
+    /// width, height, 1 / width, 1 / height (pixels).
+    pub viewport: [f32; 4],
+    /// centre x, centre y, half-size (pixels), intensity.
+    pub starburst: [f32; 4],
+    /// exposure, operator (0 none, 1 Reinhard, 2 ACES), encode sRGB (0/1), background (0/1).
+    pub tonemap: [f32; 4],
+}
+const _: () = assert!(std::mem::size_of::<Globals>() == 48);
+
+/// One ghost sprite for the GPU. Must be kept in sync with `struct GhostInstance` in `shaders/ghosts.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct GhostInstance {
+    /// centre x, y (pixels); half-size x, y (pixels, signed: quad coordinate q -> pixel).
+    pub centre_half: [f32; 4],
+    /// Linear RGB irradiance; alpha unused.
+    pub colour: [f32; 4],
+    /// Aperture maps of up to three stop crossings: scale, offset x, offset y, enabled (0/1).
+    pub stops: [[f32; 4]; 3],
+    /// Front-lens disc map: scale, offset x, offset y, anti-alias width (in its units per pixel).
+    pub front: [f32; 4],
+}
+const _: () = assert!(std::mem::size_of::<GhostInstance>() == 96);
+
+impl GhostInstance {
+    /// True when every field is finite (the only instances ever uploaded).
+    pub fn is_finite(&self) -> bool {
+        bytemuck::cast_slice::<_, f32>(std::slice::from_ref(self)).iter().all(|v| v.is_finite())
+    }
+}
+
+/// Everything one frame draws.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FlareScene {
+    pub width: u32,
+    pub height: u32,
+    pub globals: Globals,
+    pub instances: Vec<GhostInstance>,
+    /// Sprites dropped because a value was not finite (expected: always 0).
+    pub dropped_non_finite: usize,
+}
+
+/// The light slopes of a light seen at the frame position given by field angles (degrees, X right, Y up).
+pub fn light_slopes_for_frame_position(x_deg: f64, y_deg: f64) -> [f64; 2] {
+    [-x_deg.to_radians().tan(), -y_deg.to_radians().tan()]
+}
+
+/// Pixel position of the sensor point `p_mm` (display rotated by 180 degrees).
+pub fn sensor_to_pixel(p_mm: [f64; 2], sensor: &Sensor, width: u32, height: u32) -> [f64; 2] {
+    let k = width as f64 / sensor.width_mm;
+    [0.5 * width as f64 - p_mm[0] * k, 0.5 * height as f64 + p_mm[1] * k]
+}
+
+impl FlareScene {
+    /// The instances and uniforms for light slopes `u`, with the frame already computed by the caller
+    /// (so the app can reuse it for its ghost list).
+    pub fn build(
+        system: &GhostSystem,
+        frame: &GhostFrame,
+        u: [f64; 2],
+        frame_settings: &FrameSettings,
+        display: &DisplaySettings,
+        width: u32,
+        height: u32,
+    ) -> Self {
+        let sensor = &frame_settings.sensor;
+        let k = width as f64 / sensor.width_mm;
+        let mut instances = Vec::with_capacity(frame.stats.drawn);
+        let mut dropped_non_finite = 0;
+        for sprite in frame.sprites.iter().filter(|s| s.culled.is_none()) {
+            let c = sensor_to_pixel(sprite.centre_mm, sensor, width, height);
+            let half_px = sprite.half_size_mm * k;
+            let mut stops = [[0.0f32; 4]; 3];
+            for (slot, map) in stops.iter_mut().zip(&sprite.stop_maps) {
+                *slot = [map.scale as f32, map.offset[0] as f32, map.offset[1] as f32, 1.0];
+            }
+            // The front disc's coordinate changes by |scale| / |half_px| per pixel: the anti-alias width.
+            let aa = (sprite.front_map.scale.abs() / half_px.abs()).max(1e-6);
+            let instance = GhostInstance {
+                centre_half: [c[0] as f32, c[1] as f32, -half_px as f32, half_px as f32],
+                colour: [sprite.rgb[0] as f32, sprite.rgb[1] as f32, sprite.rgb[2] as f32, 0.0],
+                stops,
+                front: [sprite.front_map.scale as f32, sprite.front_map.offset[0] as f32, sprite.front_map.offset[1] as f32, aa as f32],
+            };
+            if instance.is_finite() {
+                instances.push(instance);
+            } else {
+                dropped_non_finite += 1;
+            }
+        }
+        let light = sensor_to_pixel(system.light_image_mm(u), sensor, width, height);
+        let starburst = if display.starburst {
+            [light[0] as f32, light[1] as f32, display.starburst_size * height as f32, display.starburst_intensity]
+        } else {
+            [0.0, 0.0, 0.0, 0.0]
+        };
+        let globals = Globals {
+            viewport: [width as f32, height as f32, 1.0 / width as f32, 1.0 / height as f32],
+            starburst: starburst.map(|v| if v.is_finite() { v } else { 0.0 }),
+            tonemap: [display.exposure, display.tonemap.code(), 1.0, 0.0],
+        };
+        Self { width, height, globals, instances, dropped_non_finite }
+    }
+}
+
+/// A linear HDR image: `width` x `height` RGBA f32, row-major from the top.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HdrImage {
+    pub width: u32,
+    pub height: u32,
+    pub pixels: Vec<[f32; 4]>,
+}
+
+/// A display image: 8-bit sRGB RGBA.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DisplayImage {
+    pub width: u32,
+    pub height: u32,
+    pub pixels: Vec<[u8; 4]>,
+}

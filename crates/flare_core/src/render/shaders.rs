@@ -1,0 +1,12 @@
+//! The WGSL shaders, embedded at compile time from `shaders/` (never read from the working folder).
+
+/// Instanced ghost sprites.
+pub const GHOSTS_WGSL: &str = include_str!("../../../../shaders/ghosts.wgsl");
+/// The starburst quad.
+pub const STARBURST_WGSL: &str = include_str!("../../../../shaders/starburst.wgsl");
+/// Background, exposure, tonemap, sRGB.
+pub const TONEMAP_WGSL: &str = include_str!("../../../../shaders/tonemap.wgsl");
+
+/// Every shader with its file name (for validation and error messages).
+pub const ALL: &[(&str, &str)] =
+    &[("ghosts.wgsl", GHOSTS_WGSL), ("starburst.wgsl", STARBURST_WGSL), ("tonemap.wgsl", TONEMAP_WGSL)];

@@ -1,0 +1,81 @@
+// Ghost sprites: one instanced quad per (ghost, wavelength), additively blended into the HDR target.
+// CPU twin: crates/flare_core/src/render/cpu.rs, `ghost_pass` (same names, same steps).
+// Must be kept in sync with `GhostInstance` and `Globals` in crates/flare_core/src/render/mod.rs.
+
+struct Globals {
+    viewport: vec4<f32>,   // width, height, 1/width, 1/height (pixels)
+    starburst: vec4<f32>,  // centre x, centre y, half-size (pixels), intensity
+    tonemap: vec4<f32>,    // exposure, operator (0 none, 1 Reinhard, 2 ACES), encode sRGB (0/1), background (0/1)
+};
+
+struct GhostInstance {
+    @location(0) centre_half: vec4<f32>, // centre x, y (pixels); half-size x, y (pixels, signed: q -> pixel)
+    @location(1) colour: vec4<f32>,      // linear RGB irradiance
+    @location(2) stop0: vec4<f32>,       // aperture map of stop crossing 0: scale, offset x, offset y, enabled
+    @location(3) stop1: vec4<f32>,
+    @location(4) stop2: vec4<f32>,
+    @location(5) front: vec4<f32>,       // front-lens disc map: scale, offset x, offset y, anti-alias width
+};
+
+struct VertexOut {
+    @builtin(position) position: vec4<f32>,
+    @location(0) q: vec2<f32>,
+    @location(1) colour: vec4<f32>,
+    @location(2) stop0: vec4<f32>,
+    @location(3) stop1: vec4<f32>,
+    @location(4) stop2: vec4<f32>,
+    @location(5) front: vec4<f32>,
+};
+
+@group(0) @binding(0) var<uniform> globals: Globals;
+@group(0) @binding(1) var aperture_texture: texture_2d<f32>;
+@group(0) @binding(2) var aperture_sampler: sampler;
+
+@vertex
+fn vs_main(@builtin(vertex_index) vertex: u32, instance: GhostInstance) -> VertexOut {
+    // Two triangles over q in [-1, 1]^2.
+    var corners = array<vec2<f32>, 6>(
+        vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, -1.0), vec2<f32>(1.0, 1.0),
+        vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
+    );
+    let q = corners[vertex];
+    let pixel = instance.centre_half.xy + instance.centre_half.zw * q;
+    let ndc = vec2<f32>(pixel.x * globals.viewport.z * 2.0 - 1.0, 1.0 - pixel.y * globals.viewport.w * 2.0);
+    var out: VertexOut;
+    out.position = vec4<f32>(ndc, 0.0, 1.0);
+    out.q = q;
+    out.colour = instance.colour;
+    out.stop0 = instance.stop0;
+    out.stop1 = instance.stop1;
+    out.stop2 = instance.stop2;
+    out.front = instance.front;
+    return out;
+}
+
+// The aperture mask at uv in [-1, 1]^2 (v up), 0 outside.
+fn aperture_at(uv: vec2<f32>) -> f32 {
+    if (abs(uv.x) > 1.0 || abs(uv.y) > 1.0) {
+        return 0.0;
+    }
+    let tex = vec2<f32>(uv.x * 0.5 + 0.5, 0.5 - uv.y * 0.5);
+    return textureSampleLevel(aperture_texture, aperture_sampler, tex, 0.0).r;
+}
+
+fn stop_mask(map: vec4<f32>, q: vec2<f32>) -> f32 {
+    if (map.w == 0.0) {
+        return 1.0;
+    }
+    return aperture_at(map.x * q + map.yz);
+}
+
+// Anti-aliased unit disc: coverage of the front lens's clear aperture.
+fn front_mask(map: vec4<f32>, q: vec2<f32>) -> f32 {
+    let r = length(map.x * q + map.yz);
+    return clamp(0.5 + (1.0 - r) / map.w, 0.0, 1.0);
+}
+
+@fragment
+fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
+    let mask = stop_mask(in.stop0, in.q) * stop_mask(in.stop1, in.q) * stop_mask(in.stop2, in.q) * front_mask(in.front, in.q);
+    return vec4<f32>(in.colour.rgb * mask, 0.0);
+}
