@@ -76,6 +76,11 @@ fn front_mask(map: vec4<f32>, q: vec2<f32>) -> f32 {
 
 @fragment
 fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
-    let mask = stop_mask(in.stop0, in.q) * stop_mask(in.stop1, in.q) * stop_mask(in.stop2, in.q) * front_mask(in.front, in.q);
+    // The front disc first: outside it nothing passes, and the aperture lookups are skipped.
+    let front = front_mask(in.front, in.q);
+    if (front <= 0.0) {
+        return vec4<f32>(0.0);
+    }
+    let mask = front * stop_mask(in.stop0, in.q) * stop_mask(in.stop1, in.q) * stop_mask(in.stop2, in.q);
     return vec4<f32>(in.colour.rgb * mask, 0.0);
 }

@@ -99,9 +99,9 @@ pub struct RenderArgs {
     /// Background plate (PNG is taken as sRGB, EXR as linear).
     #[arg(long)]
     background: Option<PathBuf>,
-    /// Cull sprites dimmer than this relative irradiance.
-    #[arg(long, default_value_t = 1e-7)]
-    threshold: f64,
+    /// Cull sprites dimmer than this relative irradiance (default: a quarter of an 8-bit step at the exposure).
+    #[arg(long)]
+    threshold: Option<f64>,
     /// gpu (wgpu; a software adapter such as lavapipe counts) or cpu (the renderer's CPU twin).
     #[arg(long, default_value = "gpu")]
     device: String,

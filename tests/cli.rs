@@ -194,3 +194,86 @@ fn no_display_prints_how_to_use_the_command_line() {
     assert!(!stderr.contains("panicked"));
     assert!(Path::new(&repo("lenses/README.md")).exists(), "the lens sources ship with the lenses");
 }
+
+#[test]
+fn ghosts_json_lists_every_ghost_with_its_sprite() {
+    let out = json_of(&flarelab(&["ghosts", "heliar", "--field-deg", "10", "--wavelength-nm", "587.5618", "--json"]));
+    let ghosts = out["ghosts"].as_array().unwrap();
+    assert_eq!(ghosts.len(), 28);
+    let lens = flare_core::optics::library::builtin_lens("heliar").unwrap();
+    let settings = flare_core::ghost::GhostSettings {
+        spectrum: flare_core::spectrum::Spectrum::single(D_LINE_NM).unwrap(),
+        ..Default::default()
+    };
+    let system = flare_core::ghost::GhostSystem::build(&lens, &settings).unwrap();
+    let u = [0.0, 10f64.to_radians().tan()];
+    for (g, row) in ghosts.iter().enumerate() {
+        for key in ["i", "j", "center_mm", "radius_mm", "intensity", "rgb", "straddles_stop", "culled"] {
+            assert!(row.get(key).is_some(), "ghost {g} lacks {key}: {row}");
+        }
+        let (centre, radius) = system.stop_image_sprite(g, 0, u).unwrap();
+        assert_eq!(row["center_mm"][1].as_f64().unwrap(), centre[1]);
+        assert_eq!(row["radius_mm"].as_f64().unwrap(), radius);
+        assert!(row["culled"].is_null() || row["culled"].is_string());
+        assert_eq!(row["straddles_stop"].as_bool().unwrap(), row["i"].as_u64().unwrap() < 5 && row["j"].as_u64().unwrap() > 5);
+    }
+    let sprites = &out["sprites"];
+    let sum = ["drawn", "below_threshold", "off_sensor", "empty_entrance_region"].iter().map(|k| sprites[k].as_u64().unwrap()).sum::<u64>();
+    assert_eq!(sum, sprites["total"].as_u64().unwrap());
+}
+
+#[test]
+fn render_writes_png_and_exr_and_refuses_bad_options() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("flare.png");
+    let exr = dir.path().join("flare.exr");
+    for (out, extra) in [(&png, vec!["--coating", "quarter-wave:520"]), (&exr, vec!["--aperture", "blades:7:10:0.3", "--f-number", "5.6"])] {
+        let mut args = vec!["render", "dgauss", "--light-deg", "6,-3", "--size", "160x90", "--device", "cpu", "-o", out.to_str().unwrap()];
+        args.extend(extra);
+        let result = flarelab(&args);
+        assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    }
+    let image = image::open(&png).unwrap().to_rgba8();
+    assert_eq!((image.width(), image.height()), (160, 90));
+    let lit = image.pixels().filter(|p| p[0] > 40 || p[1] > 40 || p[2] > 40).count();
+    assert!(lit > 50, "a flare is visible: {lit} lit pixels");
+    let hdr = image::open(&exr).unwrap().to_rgba32f();
+    assert!(hdr.pixels().all(|p| p.0.iter().all(|v| v.is_finite() && *v >= 0.0)));
+    assert!(hdr.pixels().any(|p| p[0] > 1.0), "EXR keeps HDR values above 1");
+    let out = |name: &str| dir.path().join(name).to_str().unwrap().to_owned();
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        (vec!["--size".into(), "0x10".into(), "-o".into(), out("a.png")], "--size"),
+        (vec!["--aperture".into(), "blades:40".into(), "-o".into(), out("a.png")], "blades"),
+        (vec!["--coating".into(), "sparkly".into(), "-o".into(), out("a.png")], "--coating"),
+        (vec!["--spectrum".into(), "64".into(), "-o".into(), out("a.png")], "--spectrum"),
+        (vec!["-o".into(), out("a.jpg")], ".png or .exr"),
+        (vec!["--method".into(), "magic".into(), "-o".into(), out("a.png")], "--method"),
+        (vec!["--light-deg".into(), "95,0".into(), "-o".into(), out("a.png")], "--light-deg"),
+        (vec!["--background".into(), out("nope.png"), "-o".into(), out("a.png")], "nope.png"),
+    ];
+    for (extra, word) in cases {
+        let mut args: Vec<&str> = vec!["render", "heliar", "--device", "cpu"];
+        args.extend(extra.iter().map(String::as_str));
+        let message = refusal(&args);
+        assert!(message.contains(word), "{args:?}: `{message}` lacks `{word}`");
+    }
+    assert!(!dir.path().join("a.png").exists(), "nothing is written on an error");
+}
+
+#[test]
+fn render_on_the_gpu_matches_the_cpu_twin() {
+    let dir = tempfile::tempdir().unwrap();
+    let (gpu_png, cpu_png) = (dir.path().join("gpu.png"), dir.path().join("cpu.png"));
+    let run = |device: &str, out: &Path| flarelab(&["render", "tessar", "--light-deg", "5,2", "--size", "192x108", "--device", device, "-o", out.to_str().unwrap()]);
+    let gpu = run("gpu", &gpu_png);
+    if !gpu.status.success() {
+        let stderr = String::from_utf8_lossy(&gpu.stderr);
+        assert!(stderr.contains("no GPU adapter"), "{stderr}");
+        println!("SKIPPED: {stderr}");
+        return;
+    }
+    assert!(run("cpu", &cpu_png).status.success());
+    let (a, b) = (image::open(&gpu_png).unwrap().to_rgba8(), image::open(&cpu_png).unwrap().to_rgba8());
+    let mean = a.as_raw().iter().zip(b.as_raw()).map(|(x, y)| x.abs_diff(*y) as f64).sum::<f64>() / a.as_raw().len() as f64;
+    assert!(mean < 1.0, "GPU and CPU images differ by {mean}/255 on average");
+}

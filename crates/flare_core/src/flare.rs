@@ -21,8 +21,18 @@ pub struct FlareConfig {
     pub aperture: Aperture,
     pub spectrum: Spectrum,
     pub coating_override: Option<Coating>,
-    pub intensity_threshold: f64,
+    /// Sprites dimmer than this relative irradiance are culled; `None` picks the level that would show as a
+    /// quarter of one 8-bit step at the display exposure (invisible on its own): "skip what the scene
+    /// does not need".
+    pub intensity_threshold: Option<f64>,
     pub display: DisplaySettings,
+}
+
+impl FlareConfig {
+    /// The culling threshold in use (see [`Self::intensity_threshold`]).
+    pub fn threshold(&self) -> f64 {
+        self.intensity_threshold.unwrap_or_else(|| 0.25 / 255.0 / f64::from(self.display.exposure.max(1e-6)))
+    }
 }
 
 impl Default for FlareConfig {
@@ -31,7 +41,7 @@ impl Default for FlareConfig {
             aperture: Aperture::default(),
             spectrum: Spectrum::rgb(),
             coating_override: None,
-            intensity_threshold: FrameSettings::default().intensity_threshold,
+            intensity_threshold: None,
             display: DisplaySettings::default(),
         }
     }
@@ -75,7 +85,7 @@ impl PreparedFlare {
         let sensor = Sensor::full_frame_for(width, height);
         // A focused ghost is drawn at least a pixel across.
         let min_half_size_mm = 0.75 * sensor.width_mm / width.max(1) as f64;
-        FrameSettings { sensor, intensity_threshold: self.config.intensity_threshold, min_half_size_mm }
+        FrameSettings { sensor, intensity_threshold: self.config.threshold(), min_half_size_mm }
     }
 
     /// Ghost sprites and the drawable scene for a light seen at the frame position `light_deg` (X right,

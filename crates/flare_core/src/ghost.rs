@@ -32,7 +32,7 @@
 //! What changes per frame is only `u`: [`GhostSystem::frame`] is all the per-frame CPU work.
 
 use crate::coating::reflection;
-use crate::optics::{Coating, FirstOrder, Lens, LightPath, Mat2, ParaxialError, PathMatrices, D_LINE_NM};
+use crate::optics::{Coating, FirstOrder, Lens, Mat2, ParaxialError, PathMatrices, D_LINE_NM};
 use crate::spectrum::Spectrum;
 
 /// Samples of each reflectance table over sin(i) in [0, 1].
@@ -98,6 +98,65 @@ impl ReflectanceTable {
     }
 }
 
+impl FrameCoefficients {
+    /// Everything linear in the light slope u, from the ghost's matrices (see the module documentation).
+    fn new(ghost: usize, wavelength: usize, optics: &GhostOptics, r_a: f64, r_front: f64) -> Self {
+        let m = &optics.matrices;
+        let f = m.sensor_from_entrance;
+        // Entrance discs as (centre per slope, radius): the front lens, then each stop crossing with A != 0.
+        // A crossing with A = 0 does not depend on the entry point: every ray misses it once |B u| > r_a.
+        let mut discs = vec![(0.0, r_front)];
+        let mut empty_from_slope = f64::INFINITY;
+        for a in &m.stop_from_entrance {
+            if a.a.abs() > 1e-12 {
+                discs.push((-a.b / a.a, r_a / a.a.abs()));
+            } else if a.b != 0.0 {
+                empty_from_slope = empty_from_slope.min(r_a / a.b.abs());
+            }
+        }
+        // Two discs of centres c_p u and c_q u stop overlapping when |c_p - c_q| |u| >= r_p + r_q.
+        for p in 0..discs.len() {
+            for q in p + 1..discs.len() {
+                let dc = (discs[p].0 - discs[q].0).abs();
+                if dc > 0.0 {
+                    empty_from_slope = empty_from_slope.min((discs[p].1 + discs[q].1) / dc);
+                }
+            }
+        }
+        let (e_per_slope, rho) = discs.iter().copied().fold(discs[0], |best, d| if d.1 < best.1 { d } else { best });
+        let mut stop_scale = [0.0; 3];
+        let mut stop_offset_per_slope = [0.0; 3];
+        for (k, a) in m.stop_from_entrance.iter().take(3).enumerate() {
+            stop_scale[k] = a.a * rho / r_a;
+            stop_offset_per_slope[k] = (a.a * e_per_slope + a.b) / r_a;
+        }
+        let incidence = |inc: &Incidence| (inc.per_entry * e_per_slope + inc.per_slope).abs();
+        Self {
+            ghost: ghost as u32,
+            wavelength: wavelength as u32,
+            centre_per_slope: f.a * e_per_slope + f.b,
+            half_size_mm: f.a * rho,
+            rho_squared: rho * rho,
+            empty_from_slope,
+            incidence_j: incidence(&optics.incidence_j),
+            incidence_i: incidence(&optics.incidence_i),
+            reflectance_j: optics.reflectance_j as u32,
+            reflectance_i: optics.reflectance_i as u32,
+            stop_scale,
+            stop_offset_per_slope,
+            stop_count: m.stop_from_entrance.len().min(3) as u8,
+            front_scale: rho / r_front,
+            front_offset_per_slope: e_per_slope / r_front,
+        }
+    }
+}
+
+/// The inverse of a ray-transfer matrix (its determinant is a ratio of indices, never 0).
+fn inverse(m: &Mat2) -> Mat2 {
+    let det = m.determinant();
+    Mat2 { a: m.d / det, b: -m.b / det, c: -m.c / det, d: m.a / det }
+}
+
 /// Paraxial angle of incidence at one reflection, linear in the entry point x0 and the light slope u.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Incidence {
@@ -113,12 +172,6 @@ impl Incidence {
         Self { per_entry: angle(m.apply(1.0, 0.0)), per_slope: angle(m.apply(0.0, 1.0)) }
     }
 
-    /// sin of the angle of incidence for the ray entering at `x0` with slope `u` (the paraxial angle is
-    /// taken as a tangent, so the sine stays below 1 however steep the ray).
-    fn sin_at(&self, x0: [f64; 2], u: [f64; 2]) -> f64 {
-        let t = (self.per_entry * x0[0] + self.per_slope * u[0]).hypot(self.per_entry * x0[1] + self.per_slope * u[1]);
-        t / (1.0 + t * t).sqrt()
-    }
 }
 
 /// One ghost at one wavelength: everything a frame needs, from the lens alone.
@@ -131,8 +184,36 @@ pub struct GhostOptics {
     /// the entry point and the light slope: `angle = per_entry * x0 + per_slope * u`.
     incidence_j: Incidence,
     incidence_i: Incidence,
-    reflectance_j: ReflectanceTable,
-    reflectance_i: ReflectanceTable,
+    /// Indices into [`GhostSystem`]'s reflectance tables.
+    reflectance_j: usize,
+    reflectance_i: usize,
+}
+
+/// What a frame needs of one ghost at one wavelength, precomputed so that the frame is a handful of
+/// multiplications: with E = (entrance-region centre) = `region_centre_per_slope * u`, everything is linear in u.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct FrameCoefficients {
+    ghost: u32,
+    wavelength: u32,
+    /// Sprite centre = this * u (sensor mm per unit slope).
+    centre_per_slope: f64,
+    /// Signed half-size A_f rho (mm), before the focused-ghost minimum.
+    half_size_mm: f64,
+    /// rho^2: the entrance region's bounding radius squared (mm^2), for the energy.
+    rho_squared: f64,
+    /// The entrance region is empty once |u| reaches this (infinity when never).
+    empty_from_slope: f64,
+    /// Paraxial incidence angle per unit |u| at the two reflections.
+    incidence_j: f64,
+    incidence_i: f64,
+    reflectance_j: u32,
+    reflectance_i: u32,
+    /// Aperture maps: scale, and offset per unit slope, per crossing.
+    stop_scale: [f64; 3],
+    stop_offset_per_slope: [f64; 3],
+    stop_count: u8,
+    front_scale: f64,
+    front_offset_per_slope: f64,
 }
 
 /// One two-reflection ghost.
@@ -184,11 +265,23 @@ pub struct Sprite {
     pub irradiance: f64,
     /// irradiance x the wavelength's weight, clamped at 0.
     pub rgb: [f64; 3],
-    /// Aperture-mask maps, one per stop crossing (1 or 3).
-    pub stop_maps: Vec<MaskMap>,
+    pub culled: Option<CullReason>,
+}
+
+/// The masks of one sprite: the aperture at each stop crossing (the first `stop_count`) and the front disc.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SpriteMasks {
+    pub stop_maps: [MaskMap; 3],
+    pub stop_count: usize,
     /// The front lens's clear-aperture disc (a circle of radius 1 in its coordinates).
     pub front_map: MaskMap,
-    pub culled: Option<CullReason>,
+}
+
+impl SpriteMasks {
+    /// The aperture maps of the stop crossings this sprite has.
+    pub fn stops(&self) -> &[MaskMap] {
+        &self.stop_maps[..self.stop_count]
+    }
 }
 
 /// Counts of what a frame drew and skipped.
@@ -230,10 +323,20 @@ pub struct GhostSystem {
     pub ghosts: Vec<GhostModel>,
     /// Image path per wavelength: landing of the ray through the stop centre per unit light slope.
     image_centre_per_slope: Vec<f64>,
+    /// Reflectance tables per (surface, arriving side, wavelength), shared by the ghosts.
+    tables: Vec<ReflectanceTable>,
+    /// Per (ghost, wavelength), ghost-major: the frame's coefficients.
+    coefficients: Vec<FrameCoefficients>,
 }
 
 impl GhostSystem {
     /// Builds every ghost of `lens` (which must be valid) for `settings`.
+    ///
+    /// Rather than multiplying each ghost's whole path, the products are shared: per wavelength, the
+    /// forward products from the entrance to every surface, the products from every surface to the sensor
+    /// and to the stop, and for each second reflection j one backward sweep that passes every first
+    /// reflection i < j. Each ghost then costs a few 2x2 products (a test checks the result against
+    /// [`PathMatrices::walk`] of the full path).
     pub fn build(lens: &Lens, settings: &GhostSettings) -> Result<Self, GhostError> {
         if !(settings.stop_scale > 0.0 && settings.stop_scale <= 1.0) {
             return Err(GhostError::StopScale(settings.stop_scale));
@@ -245,72 +348,129 @@ impl GhostSystem {
         let stop_radius_mm = lens.surfaces[stop].semi_aperture_mm * settings.stop_scale;
         let n_surfaces = lens.surfaces.len();
         let spectrum = &settings.spectrum;
+        let n_w = spectrum.len();
+        let pairs = lens.ghost_pairs();
+        let curvature: Vec<f64> = lens.surfaces.iter().map(|s| s.curvature_per_mm()).collect();
+
+        // Reflectance tables per (surface, side, wavelength): index (k * 2 + backward) * n_w + w.
+        let mut tables = Vec::with_capacity(n_surfaces * 2 * n_w);
         let indices: Vec<Vec<f64>> = spectrum.wavelengths_nm.iter().map(|&w| lens.media_indices_at(w)).collect();
-
-        // Reflectance tables per (surface, arriving direction, wavelength), made once and shared by ghosts.
-        let mut tables: Vec<Option<[ReflectanceTable; 2]>> = vec![None; n_surfaces * spectrum.len()];
-        let mut table = |k: usize, forward: bool, w: usize| -> ReflectanceTable {
-            let slot = k * spectrum.len() + w;
-            let pair = tables[slot].get_or_insert_with(|| {
-                let coating = settings.coating_override.as_ref().unwrap_or(&lens.surfaces[k].coating);
-                let (before, after) = (indices[w][k], indices[w][k + 1]);
-                let make = |n_in: f64, n_out: f64| {
-                    ReflectanceTable(std::array::from_fn(|s| {
-                        let sin_i = s as f64 / (REFLECTANCE_SAMPLES - 1) as f64;
-                        reflection(coating, n_in, n_out, spectrum.wavelengths_nm[w], sin_i).reflectance
-                    }))
-                };
-                [make(before, after), make(after, before)]
-            });
-            pair[usize::from(!forward)].clone()
+        let reflecting: Vec<bool> = {
+            let r = lens.reflecting_surfaces();
+            (0..n_surfaces).map(|k| r.contains(&k)).collect()
         };
-
-        let mut ghosts = Vec::new();
-        for (i, j) in lens.ghost_pairs() {
-            let path = LightPath::ghost(lens, i, j).expect("ghost pairs are reflecting surfaces");
-            let straddles_stop = path.straddles_stop(lens);
-            let reflect_j = path.steps.iter().position(|s| s.surface == j && s.interaction == crate::optics::Interaction::Reflect);
-            let reflect_i = path.steps.iter().rposition(|s| s.surface == i && s.interaction == crate::optics::Interaction::Reflect);
-            let (Some(step_j), Some(step_i)) = (reflect_j, reflect_i) else { continue };
-            let mut per_wavelength = Vec::with_capacity(spectrum.len());
-            for (w, &wavelength_nm) in spectrum.wavelengths_nm.iter().enumerate() {
-                let (mut at_j, mut at_i) = (Mat2::IDENTITY, Mat2::IDENTITY);
-                let matrices = PathMatrices::walk(lens, &z, &indices[w], &path, sensor_z, |k, m| {
-                    if k == step_j {
-                        at_j = *m;
-                    } else if k == step_i {
-                        at_i = *m;
-                    }
-                });
-                let (s_j, s_i) = (path.steps[step_j].arriving_direction, path.steps[step_i].arriving_direction);
-                per_wavelength.push(GhostOptics {
-                    wavelength_nm,
-                    incidence_j: Incidence::new(&at_j, lens.surfaces[j].curvature_per_mm(), s_j),
-                    incidence_i: Incidence::new(&at_i, lens.surfaces[i].curvature_per_mm(), s_i),
-                    reflectance_j: table(j, path.steps[step_j].arriving_direction > 0.0, w),
-                    reflectance_i: table(i, path.steps[step_i].arriving_direction > 0.0, w),
-                    matrices,
-                });
+        for k in 0..n_surfaces {
+            let coating = settings.coating_override.as_ref().unwrap_or(&lens.surfaces[k].coating);
+            for backward in [false, true] {
+                for w in 0..n_w {
+                    let (before, after) = (indices[w][k], indices[w][k + 1]);
+                    let (n_in, n_out) = if backward { (after, before) } else { (before, after) };
+                    tables.push(ReflectanceTable(std::array::from_fn(|sample| {
+                        if !reflecting[k] {
+                            return 0.0;
+                        }
+                        let sin_i = sample as f64 / (REFLECTANCE_SAMPLES - 1) as f64;
+                        reflection(coating, n_in, n_out, spectrum.wavelengths_nm[w], sin_i).reflectance
+                    })));
+                }
             }
-            ghosts.push(GhostModel { i, j, straddles_stop, per_wavelength });
         }
-        let image = LightPath::image(lens);
-        let image_centre_per_slope = indices
+        let table_index = |k: usize, backward: bool, w: usize| (k * 2 + usize::from(backward)) * n_w + w;
+
+        let mut ghosts: Vec<GhostModel> = pairs
             .iter()
-            .map(|n| {
-                let m = PathMatrices::walk(lens, &z, n, &image, sensor_z, |_, _| {});
-                let (f, a) = (m.sensor_from_entrance, m.stop_from_entrance[0]);
-                f.b - f.a * a.b / a.a
-            })
+            .map(|&(i, j)| GhostModel { i, j, straddles_stop: i < stop && stop < j, per_wavelength: Vec::with_capacity(n_w) })
             .collect();
+        let ghost_index = |i: usize, j: usize| pairs.binary_search(&(i, j)).ok();
+        let mut image_centre_per_slope = Vec::with_capacity(n_w);
+        for (w, &wavelength_nm) in spectrum.wavelengths_nm.iter().enumerate() {
+            let n = &indices[w];
+            let gap = |a: usize, b: usize| Mat2::translation((z[a] - z[b]).abs());
+            let forward_refraction = |k: usize| Mat2::refraction(curvature[k], n[k], n[k + 1], 1.0);
+            let backward_refraction = |k: usize| Mat2::refraction(curvature[k], n[k + 1], n[k], -1.0);
+            // arrive[k]: entrance -> arriving at surface k travelling forward.
+            let mut arrive = Vec::with_capacity(n_surfaces);
+            let mut m = Mat2::IDENTITY;
+            for k in 0..n_surfaces {
+                if k > 0 {
+                    m = gap(k, k - 1).mul(&forward_refraction(k - 1).mul(&m));
+                }
+                arrive.push(m);
+            }
+            // to_sensor[k]: leaving surface k forward (after its interaction) -> sensor.
+            // to_stop[k]: leaving surface k forward -> arriving at the stop (k < stop).
+            let last = n_surfaces - 1;
+            let mut to_sensor = vec![Mat2::IDENTITY; n_surfaces];
+            to_sensor[last] = Mat2::translation((sensor_z - z[last]).abs());
+            for k in (0..last).rev() {
+                to_sensor[k] = to_sensor[k + 1].mul(&forward_refraction(k + 1)).mul(&gap(k + 1, k));
+            }
+            let mut to_stop = vec![Mat2::IDENTITY; n_surfaces];
+            for k in (0..stop).rev() {
+                to_stop[k] = if k + 1 == stop { gap(stop, k) } else { to_stop[k + 1].mul(&forward_refraction(k + 1)).mul(&gap(k + 1, k)) };
+            }
+            let image_f = to_sensor[last].mul(&forward_refraction(last)).mul(&arrive[last]);
+            let image_a = arrive[stop];
+            image_centre_per_slope.push(image_f.b - image_f.a * image_a.b / image_a.a);
+
+            for j in 0..n_surfaces {
+                if !reflecting[j] {
+                    continue;
+                }
+                let at_j = arrive[j];
+                // Reflect at j, then sweep back towards the entrance.
+                let mut back = Mat2::reflection(curvature[j], 1.0).mul(&at_j);
+                let mut backward_stop_crossing = None;
+                for k in (0..j).rev() {
+                    let at_k = gap(k + 1, k).mul(&back);
+                    if k == stop {
+                        backward_stop_crossing = Some(at_k);
+                    }
+                    if reflecting[k] && let Some(g) = ghost_index(k, j) {
+                        let after_i = Mat2::reflection(curvature[k], -1.0).mul(&at_k);
+                        let sensor_from_entrance = to_sensor[k].mul(&after_i);
+                        let mut stop_from_entrance = Vec::with_capacity(3);
+                        if stop < j {
+                            stop_from_entrance.push(arrive[stop]);
+                        }
+                        if let Some(crossing) = backward_stop_crossing {
+                            stop_from_entrance.push(crossing);
+                        }
+                        if k < stop {
+                            stop_from_entrance.push(to_stop[k].mul(&after_i));
+                        }
+                        let last_crossing = *stop_from_entrance.last().expect("every path crosses the stop");
+                        let sensor_from_stop = sensor_from_entrance.mul(&inverse(&last_crossing));
+                        ghosts[g].per_wavelength.push(GhostOptics {
+                            wavelength_nm,
+                            matrices: PathMatrices { sensor_from_entrance, stop_from_entrance, sensor_from_stop },
+                            incidence_j: Incidence::new(&at_j, curvature[j], 1.0),
+                            incidence_i: Incidence::new(&at_k, curvature[k], -1.0),
+                            reflectance_j: table_index(j, false, w),
+                            reflectance_i: table_index(k, true, w),
+                        });
+                    }
+                    back = backward_refraction(k).mul(&at_k);
+                }
+            }
+        }
+        let front_radius_mm = lens.surfaces[0].semi_aperture_mm;
+        let mut coefficients = Vec::with_capacity(ghosts.len() * n_w);
+        for (g, ghost) in ghosts.iter().enumerate() {
+            for (w, optics) in ghost.per_wavelength.iter().enumerate() {
+                coefficients.push(FrameCoefficients::new(g, w, optics, stop_radius_mm, front_radius_mm));
+            }
+        }
         Ok(Self {
             lens: lens.clone(),
             first_order,
             settings: settings.clone(),
             stop_radius_mm,
-            front_radius_mm: lens.surfaces[0].semi_aperture_mm,
+            front_radius_mm,
             ghosts,
             image_centre_per_slope,
+            tables,
+            coefficients,
         })
     }
 
@@ -334,13 +494,16 @@ impl GhostSystem {
         Some(([k * u[0], k * u[1]], (f.a / a.a).abs() * self.stop_radius_mm))
     }
 
-    /// The flare quad of a sprite by four rays: the corners `E + rho (+-1, +-1)` of its entrance region's
+    /// The flare quad of the `k`-th sprite by four rays: the corners `E + rho (+-1, +-1)` of its entrance region's
     /// bounding square traced through M_f to the sensor, in the corner order (-,-), (+,-), (+,+), (-,+).
     /// Equal to `C + S (+-1, +-1)` unless the sprite was enlarged because it is focused.
-    pub fn flare_quad_mm(&self, sprite: &Sprite, u: [f64; 2]) -> [[f64; 2]; 4] {
-        let f = self.ghosts[sprite.ghost].per_wavelength[sprite.wavelength].matrices.sensor_from_entrance;
-        let rho = sprite.front_map.scale * self.front_radius_mm;
-        let e = sprite.front_map.offset.map(|o| o * self.front_radius_mm);
+    pub fn flare_quad_mm(&self, k: usize, u: [f64; 2]) -> [[f64; 2]; 4] {
+        let sprite_ghost = self.coefficients[k].ghost as usize;
+        let sprite_wavelength = self.coefficients[k].wavelength as usize;
+        let f = self.ghosts[sprite_ghost].per_wavelength[sprite_wavelength].matrices.sensor_from_entrance;
+        let front = self.sprite_masks(k, u).front_map;
+        let rho = front.scale * self.front_radius_mm;
+        let e = front.offset.map(|o| o * self.front_radius_mm);
         [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]].map(|q| {
             let x0 = [e[0] + rho * q[0], e[1] + rho * q[1]];
             [f.a * x0[0] + f.b * u[0], f.a * x0[1] + f.b * u[1]]
@@ -358,89 +521,68 @@ impl GhostSystem {
     pub fn frame_into(&self, u: [f64; 2], settings: &FrameSettings, frame: &mut GhostFrame) {
         frame.sprites.clear();
         frame.stats = FrameStats::default();
-        let u_len = u[0].hypot(u[1]);
+        let u_len = (u[0] * u[0] + u[1] * u[1]).sqrt();
         let cos_theta = 1.0 / (1.0 + u_len * u_len).sqrt();
         let (half_w, half_h) = (0.5 * settings.sensor.width_mm, 0.5 * settings.sensor.height_mm);
-        let r_a = self.stop_radius_mm;
-        let r_front = self.front_radius_mm;
-        for (g, ghost) in self.ghosts.iter().enumerate() {
-            for (w, optics) in ghost.per_wavelength.iter().enumerate() {
-                let m = &optics.matrices;
-                let f = m.sensor_from_entrance;
-                // Entrance discs: the front aperture, then one per stop crossing.
-                let mut discs: [([f64; 2], f64); 4] = [([0.0, 0.0], r_front); 4];
-                let mut count = 1;
-                let mut empty = false;
-                for a in &m.stop_from_entrance {
-                    if a.a.abs() > 1e-12 {
-                        discs[count] = ([-a.b / a.a * u[0], -a.b / a.a * u[1]], r_a / a.a.abs());
-                        count += 1;
-                    } else if a.b.abs() * u_len > r_a {
-                        // The stop crossing does not depend on the entry point: all rays miss it.
-                        empty = true;
-                    }
-                }
-                let discs = &discs[..count];
-                for p in 0..count {
-                    for q in p + 1..count {
-                        let d = (discs[p].0[0] - discs[q].0[0]).hypot(discs[p].0[1] - discs[q].0[1]);
-                        if d >= discs[p].1 + discs[q].1 {
-                            empty = true;
-                        }
-                    }
-                }
-                let (e, rho) = discs.iter().copied().fold(discs[0], |best, d| if d.1 < best.1 { d } else { best });
-                let centre = [f.a * e[0] + f.b * u[0], f.a * e[1] + f.b * u[1]];
-                let size = f.a * rho;
-                let half_size = if size.abs() < settings.min_half_size_mm {
-                    settings.min_half_size_mm.copysign(if size == 0.0 { 1.0 } else { size })
-                } else {
-                    size
-                };
-                // Reflectances at the angles of the ray through the centre of the entrance region.
-                let r_j = optics.reflectance_j.at(optics.incidence_j.sin_at(e, u));
-                let r_i = optics.reflectance_i.at(optics.incidence_i.sin_at(e, u));
-                let irradiance = cos_theta * r_i * r_j * (rho / half_size).powi(2);
-                let weight = self.settings.spectrum.weights_rgb[w];
-                let rgb = weight.map(|c| (c * irradiance).max(0.0));
-                let extent = half_size.abs() * std::f64::consts::SQRT_2;
-                let culled = if empty {
-                    Some(CullReason::EmptyEntranceRegion)
-                } else if centre[0].abs() - extent > half_w || centre[1].abs() - extent > half_h {
-                    Some(CullReason::OffSensor)
-                } else if rgb.iter().cloned().fold(0.0, f64::max) < settings.intensity_threshold {
-                    Some(CullReason::BelowThreshold)
-                } else {
-                    None
-                };
-                let stats = &mut frame.stats;
-                stats.sprites += 1;
-                match culled {
-                    None => stats.drawn += 1,
-                    Some(CullReason::BelowThreshold) => stats.below_threshold += 1,
-                    Some(CullReason::OffSensor) => stats.off_sensor += 1,
-                    Some(CullReason::EmptyEntranceRegion) => stats.empty_entrance_region += 1,
-                }
-                let stop_maps = m
-                    .stop_from_entrance
-                    .iter()
-                    .map(|a| MaskMap {
-                        scale: a.a * rho / r_a,
-                        offset: [(a.a * e[0] + a.b * u[0]) / r_a, (a.a * e[1] + a.b * u[1]) / r_a],
-                    })
-                    .collect();
-                frame.sprites.push(Sprite {
-                    ghost: g,
-                    wavelength: w,
-                    centre_mm: centre,
-                    half_size_mm: half_size,
-                    irradiance,
-                    rgb,
-                    stop_maps,
-                    front_map: MaskMap { scale: rho / r_front, offset: [e[0] / r_front, e[1] / r_front] },
-                    culled,
-                });
+        let sin_of = |angle_per_slope: f64| {
+            let t = angle_per_slope * u_len;
+            t / (1.0 + t * t).sqrt()
+        };
+        for co in &self.coefficients {
+            let centre = [co.centre_per_slope * u[0], co.centre_per_slope * u[1]];
+            let half_size = if co.half_size_mm.abs() < settings.min_half_size_mm {
+                settings.min_half_size_mm.copysign(if co.half_size_mm == 0.0 { 1.0 } else { co.half_size_mm })
+            } else {
+                co.half_size_mm
+            };
+            let r_j = self.tables[co.reflectance_j as usize].at(sin_of(co.incidence_j));
+            let r_i = self.tables[co.reflectance_i as usize].at(sin_of(co.incidence_i));
+            let irradiance = cos_theta * r_i * r_j * co.rho_squared / (half_size * half_size);
+            let weight = self.settings.spectrum.weights_rgb[co.wavelength as usize];
+            let rgb = [(weight[0] * irradiance).max(0.0), (weight[1] * irradiance).max(0.0), (weight[2] * irradiance).max(0.0)];
+            let extent = half_size.abs() * std::f64::consts::SQRT_2;
+            let culled = if u_len >= co.empty_from_slope {
+                Some(CullReason::EmptyEntranceRegion)
+            } else if centre[0].abs() - extent > half_w || centre[1].abs() - extent > half_h {
+                Some(CullReason::OffSensor)
+            } else if rgb[0].max(rgb[1]).max(rgb[2]) < settings.intensity_threshold {
+                Some(CullReason::BelowThreshold)
+            } else {
+                None
+            };
+            let stats = &mut frame.stats;
+            stats.sprites += 1;
+            match culled {
+                None => stats.drawn += 1,
+                Some(CullReason::BelowThreshold) => stats.below_threshold += 1,
+                Some(CullReason::OffSensor) => stats.off_sensor += 1,
+                Some(CullReason::EmptyEntranceRegion) => stats.empty_entrance_region += 1,
             }
+            frame.sprites.push(Sprite {
+                ghost: co.ghost as usize,
+                wavelength: co.wavelength as usize,
+                centre_mm: centre,
+                half_size_mm: half_size,
+                irradiance,
+                rgb,
+                culled,
+            });
+        }
+    }
+
+    /// The masks of the `k`-th sprite of a frame (sprites come ghost by ghost, wavelength by wavelength) for
+    /// light slope `u`: computed only for the sprites that are drawn.
+    pub fn sprite_masks(&self, k: usize, u: [f64; 2]) -> SpriteMasks {
+        let co = &self.coefficients[k];
+        let map = |scale: f64, per_slope: f64| MaskMap { scale, offset: [per_slope * u[0], per_slope * u[1]] };
+        SpriteMasks {
+            stop_maps: [
+                map(co.stop_scale[0], co.stop_offset_per_slope[0]),
+                map(co.stop_scale[1], co.stop_offset_per_slope[1]),
+                map(co.stop_scale[2], co.stop_offset_per_slope[2]),
+            ],
+            stop_count: co.stop_count as usize,
+            front_map: map(co.front_scale, co.front_offset_per_slope),
         }
     }
 
@@ -454,7 +596,38 @@ impl GhostSystem {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::optics::library::builtin_lens;
+    use crate::optics::LightPath;
+    use crate::optics::library::{builtin_lens, ids, synthetic_lens};
+
+    #[test]
+    fn shared_products_equal_each_ghost_path_multiplied_out() {
+        let mut lenses: Vec<Lens> = ids().into_iter().map(|id| builtin_lens(id).unwrap()).collect();
+        lenses.push(synthetic_lens(26));
+        let close = |a: &Mat2, b: &Mat2| {
+            let (a, b) = (a.as_rows(), b.as_rows());
+            (0..2).all(|r| (0..2).all(|c| (a[r][c] - b[r][c]).abs() <= 1e-11 * (1.0 + b[r][c].abs())))
+        };
+        for lens in &lenses {
+            let s = GhostSystem::build(lens, &GhostSettings::default()).unwrap();
+            let z = lens.vertex_z_mm();
+            for ghost in &s.ghosts {
+                let path = LightPath::ghost(lens, ghost.i, ghost.j).unwrap();
+                assert_eq!(ghost.straddles_stop, path.straddles_stop(lens));
+                for optics in &ghost.per_wavelength {
+                    let n = lens.media_indices_at(optics.wavelength_nm);
+                    let walked = PathMatrices::walk(lens, &z, &n, &path, s.first_order.sensor_z_mm(), |_, _| {});
+                    let ours = &optics.matrices;
+                    let what = format!("{} ghost ({}, {}) at {} nm", lens.id, ghost.i, ghost.j, optics.wavelength_nm);
+                    assert!(close(&ours.sensor_from_entrance, &walked.sensor_from_entrance), "{what}");
+                    assert_eq!(ours.stop_from_entrance.len(), walked.stop_from_entrance.len(), "{what}");
+                    for (a, b) in ours.stop_from_entrance.iter().zip(&walked.stop_from_entrance) {
+                        assert!(close(a, b), "{what}: {a:?} vs {b:?}");
+                    }
+                    assert!(close(&ours.sensor_from_stop, &walked.sensor_from_stop), "{what}");
+                }
+            }
+        }
+    }
 
     fn system(id: &str) -> GhostSystem {
         GhostSystem::build(&builtin_lens(id).unwrap(), &GhostSettings::default()).unwrap()
@@ -469,9 +642,9 @@ mod tests {
         assert_eq!(frame.sprites.len(), 28 * 3);
         let st = frame.stats;
         assert_eq!(st.drawn + st.below_threshold + st.off_sensor + st.empty_entrance_region, st.sprites);
-        for sprite in &frame.sprites {
+        for (k, sprite) in frame.sprites.iter().enumerate() {
             let ghost = &s.ghosts[sprite.ghost];
-            assert_eq!(sprite.stop_maps.len(), if ghost.straddles_stop { 3 } else { 1 });
+            assert_eq!(s.sprite_masks(k, [0.0, 0.1]).stops().len(), if ghost.straddles_stop { 3 } else { 1 });
             assert!(sprite.irradiance.is_finite() && sprite.irradiance >= 0.0);
             assert!(sprite.half_size_mm.is_finite() && sprite.half_size_mm != 0.0);
         }
@@ -484,8 +657,8 @@ mod tests {
         let settings = FrameSettings::default();
         let frame = s.frame(u, &settings);
         let mut checked = 0;
-        for sprite in frame.sprites.iter().filter(|s| s.half_size_mm.abs() > settings.min_half_size_mm) {
-            let quad = s.flare_quad_mm(sprite, u);
+        for (k, sprite) in frame.sprites.iter().enumerate().filter(|(_, s)| s.half_size_mm.abs() > settings.min_half_size_mm) {
+            let quad = s.flare_quad_mm(k, u);
             for (k, q) in [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]].iter().enumerate() {
                 let expected = [sprite.centre_mm[0] + sprite.half_size_mm * q[0], sprite.centre_mm[1] + sprite.half_size_mm * q[1]];
                 assert!((quad[k][0] - expected[0]).abs() < 1e-9 && (quad[k][1] - expected[1]).abs() < 1e-9);
@@ -503,9 +676,9 @@ mod tests {
         let s = system("tessar");
         let settings = FrameSettings::default();
         for u in [[0.0, 0.0], [0.3, 0.0], [0.0, -0.6], [2.0, 2.0]] {
-            for sprite in s.frame(u, &settings).sprites {
+            for (k, sprite) in s.frame(u, &settings).sprites.into_iter().enumerate() {
                 assert!(sprite.half_size_mm.abs() >= settings.min_half_size_mm);
-                let rho = sprite.front_map.scale * s.front_radius_mm;
+                let rho = s.sprite_masks(k, u).front_map.scale * s.front_radius_mm;
                 let energy = sprite.irradiance * sprite.half_size_mm.powi(2);
                 assert!(energy <= rho * rho * 1.0001, "energy never exceeds what enters: {energy} vs {}", rho * rho);
                 assert!(sprite.rgb.iter().all(|c| c.is_finite() && *c >= 0.0));

@@ -66,6 +66,52 @@ pub fn default_lens() -> Lens {
     builtin_lens(DEFAULT_LENS_ID).unwrap_or_else(|e| panic!("the default lens ships with the binary: {e}"))
 }
 
+/// A synthetic lens of `surface_count` surfaces (at least 3): equiconvex singlets of N-BK7 and F2 sharing
+/// a total power of 1 / 50 mm, 10 mm semi-apertures, the stop (semi-aperture 8 mm) in the middle air gap.
+/// Not a real design: it exists for benchmarks and stress tests that need many surfaces (a 60-surface lens has
+/// 1770 ghosts). An even count leaves one surface for the stop, so the last singlet is a plano-convex lens.
+pub fn synthetic_lens(surface_count: usize) -> Lens {
+    use super::lens::{Medium, Surface};
+    let count = surface_count.max(3);
+    let glass_surfaces = count - 1;
+    let elements = glass_surfaces.div_ceil(2);
+    let power_per_element = 1.0 / 50.0 / elements as f64;
+    // Keep the whole stack about 60 mm long so that the focus stays behind it.
+    let (thickness, gap) = ((36.0 / elements as f64).min(4.0), (24.0 / elements as f64).min(3.0));
+    let mut surfaces = Vec::with_capacity(count);
+    for e in 0..elements {
+        let (n_d, v_d, name) = if e % 2 == 0 { (1.5168, 64.17, "N-BK7") } else { (1.62004, 36.37, "F2") };
+        let glass = Medium { n_d, v_d: Some(v_d), glass: Some(name.to_owned()) };
+        let last_single = surfaces.len() + 2 > glass_surfaces;
+        if last_single {
+            // One surface left: a plano-convex element's curved face (into air, so the image space is air).
+            let r = (n_d - 1.0) / power_per_element;
+            surfaces.push(Surface::new(-r, Some(gap), Medium::air(), 10.0));
+            if let Some(prev) = surfaces.len().checked_sub(2) {
+                surfaces[prev].medium = glass;
+                surfaces[prev].radius_mm = 0.0;
+            }
+            break;
+        }
+        let r = 2.0 * (n_d - 1.0) / power_per_element;
+        surfaces.push(Surface::new(r, Some(thickness), glass, 10.0));
+        surfaces.push(Surface::new(-r, Some(gap), Medium::air(), 10.0));
+    }
+    let mut stop = Surface::new(0.0, Some(gap), Medium::air(), 8.0);
+    stop.stop = true;
+    let middle = (surfaces.len() / 2) & !1;
+    surfaces.insert(middle, stop);
+    if let Some(last) = surfaces.last_mut() {
+        last.thickness_mm = Some(40.0);
+    }
+    Lens {
+        id: format!("synthetic_{count}"),
+        name: format!("Synthetic {count}-surface lens (benchmarks and stress tests only)"),
+        surfaces,
+        extra: Default::default(),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -77,6 +123,18 @@ mod tests {
             assert_eq!(lens.id, id);
         }
         assert_eq!(default_lens().id, DEFAULT_LENS_ID);
+    }
+
+    #[test]
+    fn synthetic_lenses_are_valid_and_focus() {
+        for n in [3, 4, 11, 26, 29, 60] {
+            let lens = synthetic_lens(n);
+            assert_eq!(lens.surfaces.len(), n, "{n}");
+            lens.validate().unwrap_or_else(|e| panic!("{n}: {e}"));
+            let fo = crate::optics::FirstOrder::d_line(&lens).unwrap_or_else(|e| panic!("{n}: {e}"));
+            assert!(fo.bfd_mm > 0.0 && fo.efl_mm > 20.0 && fo.efl_mm < 80.0, "{n}: {fo:?}");
+            assert_eq!(lens.ghost_pairs().len(), (n - 1) * (n - 2) / 2, "{n}");
+        }
     }
 
     #[test]

@@ -72,10 +72,15 @@ pub fn ghost_pass(scene: &FlareScene, mask: &ApertureMask) -> HdrImage {
                 if q[0].abs() > 1.0 || q[1].abs() > 1.0 {
                     continue;
                 }
-                let m = stop_mask(mask, inst.stops[0], q)
+                // The front disc first: outside it nothing passes, and the aperture lookups are skipped.
+                let front = front_mask(inst.front, q);
+                if front <= 0.0 {
+                    continue;
+                }
+                let m = front
+                    * stop_mask(mask, inst.stops[0], q)
                     * stop_mask(mask, inst.stops[1], q)
-                    * stop_mask(mask, inst.stops[2], q)
-                    * front_mask(inst.front, q);
+                    * stop_mask(mask, inst.stops[2], q);
                 let p = &mut pixels[y * w + x];
                 for c in 0..3 {
                     p[c] += inst.colour[c] * m;

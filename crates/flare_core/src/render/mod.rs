@@ -138,20 +138,22 @@ impl FlareScene {
         let k = width as f64 / sensor.width_mm;
         let mut instances = Vec::with_capacity(frame.stats.drawn);
         let mut dropped_non_finite = 0;
-        for sprite in frame.sprites.iter().filter(|s| s.culled.is_none()) {
+        for (index, sprite) in frame.sprites.iter().enumerate().filter(|(_, s)| s.culled.is_none()) {
+            let masks = system.sprite_masks(index, u);
             let c = sensor_to_pixel(sprite.centre_mm, sensor, width, height);
             let half_px = sprite.half_size_mm * k;
             let mut stops = [[0.0f32; 4]; 3];
-            for (slot, map) in stops.iter_mut().zip(&sprite.stop_maps) {
+            for (slot, map) in stops.iter_mut().zip(masks.stops()) {
                 *slot = [map.scale as f32, map.offset[0] as f32, map.offset[1] as f32, 1.0];
             }
             // The front disc's coordinate changes by |scale| / |half_px| per pixel: the anti-alias width.
-            let aa = (sprite.front_map.scale.abs() / half_px.abs()).max(1e-6);
+            let front = masks.front_map;
+            let aa = (front.scale.abs() / half_px.abs()).max(1e-6);
             let instance = GhostInstance {
                 centre_half: [c[0] as f32, c[1] as f32, -half_px as f32, half_px as f32],
                 colour: [sprite.rgb[0] as f32, sprite.rgb[1] as f32, sprite.rgb[2] as f32, 0.0],
                 stops,
-                front: [sprite.front_map.scale as f32, sprite.front_map.offset[0] as f32, sprite.front_map.offset[1] as f32, aa as f32],
+                front: [front.scale as f32, front.offset[0] as f32, front.offset[1] as f32, aa as f32],
             };
             if instance.is_finite() {
                 instances.push(instance);

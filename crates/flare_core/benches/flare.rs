@@ -1,0 +1,95 @@
+//! Speed of the paraxial flare (criterion): the per-frame CPU cost of every ghost with matrices cached, the
+//! full rebuild after a lens edit, and a whole 1280x720 GPU frame (lavapipe where there is no GPU).
+//! Targets (issue 3): frame under 20 us and rebuild under 1 ms for a lens of 25+ surfaces.
+//! Run: `cargo bench -p flare_core --bench flare`.
+
+use std::hint::black_box;
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use flare_core::flare::{FlareConfig, PreparedFlare};
+use flare_core::ghost::{FrameSettings, GhostFrame, GhostSettings, GhostSystem};
+use flare_core::optics::library::{builtin_lens, synthetic_lens};
+use flare_core::optics::Lens;
+use flare_core::render::gpu::{FlareRenderer, GpuContext};
+
+fn lenses() -> Vec<(String, Lens)> {
+    vec![
+        ("heliar_9".to_owned(), builtin_lens("heliar").unwrap()),
+        ("synthetic_26".to_owned(), synthetic_lens(26)),
+        ("synthetic_60".to_owned(), synthetic_lens(60)),
+    ]
+}
+
+fn ghost_frame(c: &mut Criterion) {
+    let mut group = c.benchmark_group("ghost_frame_rgb");
+    for (name, lens) in lenses() {
+        let system = GhostSystem::build(&lens, &GhostSettings::default()).unwrap();
+        let settings = FrameSettings::default();
+        let mut frame = GhostFrame::default();
+        let mut k = 0u32;
+        group.bench_function(&name, |b| {
+            b.iter(|| {
+                // The light moves every frame, as when it is dragged.
+                k = k.wrapping_add(1);
+                let t = (k % 100) as f64 * 0.002;
+                system.frame_into(black_box([0.05 + t, -0.03 + t]), &settings, &mut frame);
+                black_box(frame.stats.drawn)
+            })
+        });
+    }
+    group.finish();
+}
+
+fn ghost_rebuild(c: &mut Criterion) {
+    let mut group = c.benchmark_group("ghost_rebuild_rgb");
+    for (name, lens) in lenses().into_iter().take(2) {
+        group.bench_function(&name, |b| b.iter(|| GhostSystem::build(black_box(&lens), &GhostSettings::default()).unwrap()));
+    }
+    group.finish();
+}
+
+fn gpu_frame(c: &mut Criterion) {
+    let ctx = match GpuContext::headless(false) {
+        Ok(ctx) => ctx,
+        Err(e) => {
+            println!("gpu_frame skipped: {e}");
+            return;
+        }
+    };
+    println!("gpu_frame on {} ({:?})", ctx.adapter.name, ctx.adapter.device_type);
+    let mut group = c.benchmark_group("gpu_frame_1280x720");
+    group.sample_size(20);
+    for (name, lens) in lenses().into_iter().take(2) {
+        let flare = PreparedFlare::new(&lens, &FlareConfig::default()).unwrap();
+        let mut renderer = FlareRenderer::new(&ctx.device, &ctx.queue, wgpu::TextureFormat::Rgba8Unorm);
+        renderer.set_aperture(&ctx.device, &ctx.queue, &flare.mask);
+        renderer.set_starburst(&ctx.device, &ctx.queue, &flare.starburst);
+        let target = ctx.device.create_texture(&wgpu::TextureDescriptor {
+            label: None,
+            size: wgpu::Extent3d { width: 1280, height: 720, depth_or_array_layers: 1 },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Rgba8Unorm,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+            view_formats: &[],
+        });
+        let view = target.create_view(&wgpu::TextureViewDescriptor::default());
+        let mut k = 0u32;
+        group.bench_function(&name, |b| {
+            b.iter(|| {
+                k = k.wrapping_add(1);
+                let t = (k % 50) as f64 * 0.1;
+                let (scene, _) = flare.scene([4.0 + t, 3.0 - t], 1280, 720);
+                let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
+                renderer.render(&ctx.device, &ctx.queue, &mut encoder, &view, &scene);
+                ctx.queue.submit(Some(encoder.finish()));
+                ctx.device.poll(wgpu::PollType::wait_indefinitely()).unwrap();
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, ghost_frame, ghost_rebuild, gpu_frame);
+criterion_main!(benches);
