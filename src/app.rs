@@ -1,9 +1,16 @@
-//! The desktop app (eframe + egui): opens on the built-in default lens and shows its cross-section to
-//! scale with a fan of exact rays at an adjustable field angle, its first-order data and its surfaces.
-//! The live flare viewport and the editing panels build on this window.
+//! The desktop app (eframe + egui): opens on the built-in default lens with its flare, rendered by
+//! `flare_core`'s wgpu renderer into a texture that egui shows; click or drag in the image (or use the arrow
+//! keys) to move the light. Below it, the lens cross-section to scale with a fan of exact rays; on the left
+//! the lens choice, first-order data, aperture, coating and exposure. The flare is re-rendered only when
+//! something changed, and the status bar reports the last frame's time and the culling counts.
 
 use anyhow::{Result, bail};
-use eframe::egui;
+use eframe::{egui, egui_wgpu, wgpu};
+use flare_core::aperture::ApertureShape;
+use flare_core::flare::{FlareConfig, PreparedFlare};
+use flare_core::ghost::FrameStats;
+use flare_core::optics::Coating;
+use flare_core::render::gpu::FlareRenderer;
 use flare_core::optics::glass::D_LINE_NM;
 use flare_core::optics::library::{DEFAULT_LENS_ID, builtin_lens, ids};
 use flare_core::optics::{FirstOrder, Lens, LightPath, TraceOptions, TraceStatus, Tracer, pupil_ray};
@@ -24,11 +31,44 @@ pub fn run() -> Result<()> {
         viewport: egui::ViewportBuilder::default().with_inner_size([1280.0, 800.0]).with_title("FlareLab"),
         ..Default::default()
     };
-    let result = eframe::run_native("FlareLab", options, Box::new(|_cc| Ok(Box::new(FlareLabApp::new()))));
+    let result = eframe::run_native("FlareLab", options, Box::new(|cc| Ok(Box::new(FlareLabApp::new(cc.wgpu_render_state.clone())))));
     if let Err(e) = result {
         bail!("could not open the app's window ({e}). The command line works without one: see `flarelab --help`");
     }
     Ok(())
+}
+
+/// Internal resolution of the flare view (shown scaled to the panel).
+const VIEW_SIZE: (u32, u32) = (960, 540);
+/// The view's texture format: sRGB, so that egui samples linear values.
+const VIEW_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
+
+/// The flare view's GPU side: the renderer and the texture egui shows.
+struct FlareView {
+    render_state: egui_wgpu::RenderState,
+    renderer: FlareRenderer,
+    target: wgpu::Texture,
+    texture_id: egui::TextureId,
+}
+
+impl FlareView {
+    fn new(render_state: egui_wgpu::RenderState) -> Self {
+        let device = &render_state.device;
+        let renderer = FlareRenderer::new(device, &render_state.queue, VIEW_FORMAT);
+        let target = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("flare view"),
+            size: wgpu::Extent3d { width: VIEW_SIZE.0, height: VIEW_SIZE.1, depth_or_array_layers: 1 },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: VIEW_FORMAT,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+            view_formats: &[],
+        });
+        let view = target.create_view(&wgpu::TextureViewDescriptor::default());
+        let texture_id = render_state.renderer.write().register_native_texture(device, &view, wgpu::FilterMode::Linear);
+        Self { render_state, renderer, target, texture_id }
+    }
 }
 
 struct FlareLabApp {
@@ -37,15 +77,163 @@ struct FlareLabApp {
     first_order: Option<FirstOrder>,
     field_deg: f64,
     rays: Vec<(Vec<[f64; 2]>, TraceStatus)>,
+    /// Where the light appears in the frame (degrees, X right, Y up).
+    light_deg: [f64; 2],
+    config: FlareConfig,
+    blades: u32,
+    quarter_wave: bool,
+    flare: Option<PreparedFlare>,
+    view: Option<FlareView>,
+    /// The flare must be rendered again (light, lens or settings changed).
+    dirty: bool,
+    /// The settings changed: prepare the flare again.
+    stale: bool,
+    last_frame_ms: f64,
+    last_stats: FrameStats,
+    message: Option<String>,
 }
 
 impl FlareLabApp {
-    fn new() -> Self {
+    fn new(render_state: Option<egui_wgpu::RenderState>) -> Self {
         let lens = builtin_lens(DEFAULT_LENS_ID).unwrap_or_else(|_| flare_core::optics::library::default_lens());
-        let mut app =
-            Self { lens_id: DEFAULT_LENS_ID.to_owned(), first_order: None, lens, field_deg: 10.0, rays: Vec::new() };
+        let mut app = Self {
+            lens_id: DEFAULT_LENS_ID.to_owned(),
+            first_order: None,
+            lens,
+            field_deg: 10.0,
+            rays: Vec::new(),
+            light_deg: [6.0, 4.0],
+            // Coated ghosts are ~100x dimmer than bare ones: open the exposure to match the coating default.
+            config: FlareConfig {
+                display: flare_core::render::DisplaySettings { exposure: 1500.0, ..Default::default() },
+                ..FlareConfig::default()
+            },
+            blades: 6,
+            quarter_wave: true,
+            flare: None,
+            view: render_state.map(FlareView::new),
+            dirty: true,
+            stale: true,
+            last_frame_ms: 0.0,
+            last_stats: FrameStats::default(),
+            message: None,
+        };
         app.rebuild();
         app
+    }
+
+    /// Prepares the flare for the current lens and settings (on edits, not per frame).
+    fn prepare_flare(&mut self) {
+        self.config.aperture.shape = ApertureShape::Blades { count: self.blades, rotation_deg: 0.0, roundness: 0.0 };
+        self.config.coating_override =
+            self.quarter_wave.then_some(Coating::QuarterWave { design_wavelength_nm: 550.0, layer_index: None });
+        match PreparedFlare::new(&self.lens, &self.config) {
+            Ok(flare) => {
+                if let Some(view) = &mut self.view {
+                    let (device, queue) = (&view.render_state.device, &view.render_state.queue);
+                    view.renderer.set_aperture(device, queue, &flare.mask);
+                    view.renderer.set_starburst(device, queue, &flare.starburst);
+                }
+                self.flare = Some(flare);
+                self.message = None;
+            }
+            // Keep the last valid flare and say why the new settings were refused.
+            Err(e) => self.message = Some(e.to_string()),
+        }
+        self.stale = false;
+        self.dirty = true;
+    }
+
+    /// Renders the flare into the view's texture when something changed.
+    fn render_flare(&mut self) {
+        if self.stale {
+            self.prepare_flare();
+        }
+        let (Some(view), Some(flare)) = (&mut self.view, &self.flare) else { return };
+        if !self.dirty {
+            return;
+        }
+        let started = std::time::Instant::now();
+        let (scene, frame) = flare.scene(self.light_deg, VIEW_SIZE.0, VIEW_SIZE.1);
+        let (device, queue) = (&view.render_state.device, &view.render_state.queue);
+        let target = view.target.create_view(&wgpu::TextureViewDescriptor::default());
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("flare view") });
+        view.renderer.render(device, queue, &mut encoder, &target, &scene);
+        queue.submit(Some(encoder.finish()));
+        // Wait, so that the status bar reports the whole frame (CPU and GPU).
+        let _ = device.poll(wgpu::PollType::wait_indefinitely());
+        self.last_frame_ms = started.elapsed().as_secs_f64() * 1e3;
+        self.last_stats = frame.stats;
+        self.dirty = false;
+    }
+
+    /// Puts the light where the pointer is in the flare view.
+    fn light_from_pointer(&mut self, pointer: egui::Pos2, rect: egui::Rect) {
+        let Some(flare) = &self.flare else { return };
+        let k_px_per_mm = rect.width() as f64 / flare.frame_settings(VIEW_SIZE.0, VIEW_SIZE.1).sensor.width_mm;
+        let x_mm = (pointer.x - rect.center().x) as f64 / k_px_per_mm;
+        let y_mm = (rect.center().y - pointer.y) as f64 / k_px_per_mm;
+        // The light images at (sensor mm per unit slope) x tan(angle); the display is the sensor turned round.
+        let per_slope = flare.system.light_image_mm([1.0, 0.0])[0];
+        if per_slope.abs() > 1e-9 {
+            self.light_deg = [(x_mm / per_slope).atan().to_degrees(), (y_mm / per_slope).atan().to_degrees()];
+            self.dirty = true;
+        }
+    }
+
+    fn flare_view_ui(&mut self, ui: &mut egui::Ui) {
+        let Some(view) = &self.view else {
+            ui.label("No wgpu device: the flare view needs the wgpu renderer (the command line renders on the CPU).");
+            return;
+        };
+        let width = ui.available_width();
+        let height = (width * VIEW_SIZE.1 as f32 / VIEW_SIZE.0 as f32).min(ui.available_height() * 0.62);
+        let size = egui::vec2(height * VIEW_SIZE.0 as f32 / VIEW_SIZE.1 as f32, height);
+        let image = egui::Image::from_texture((view.texture_id, size)).sense(egui::Sense::click_and_drag());
+        let response = ui.add(image);
+        if (response.dragged() || response.clicked())
+            && let Some(pointer) = response.interact_pointer_pos()
+        {
+            self.light_from_pointer(pointer, response.rect);
+        }
+        let step = 0.5;
+        ui.input(|i| {
+            for (key, dx, dy) in [
+                (egui::Key::ArrowLeft, -step, 0.0),
+                (egui::Key::ArrowRight, step, 0.0),
+                (egui::Key::ArrowUp, 0.0, step),
+                (egui::Key::ArrowDown, 0.0, -step),
+            ] {
+                if i.key_pressed(key) {
+                    self.light_deg[0] = (self.light_deg[0] + dx).clamp(-85.0, 85.0);
+                    self.light_deg[1] = (self.light_deg[1] + dy).clamp(-85.0, 85.0);
+                    self.dirty = true;
+                }
+            }
+        });
+    }
+
+    fn flare_settings_ui(&mut self, ui: &mut egui::Ui) {
+        ui.heading("Flare");
+        let mut changed = false;
+        changed |= ui.add(egui::Slider::new(&mut self.blades, 3..=16).text("aperture blades")).changed();
+        let nominal = self.first_order.as_ref().map_or(1.0, |fo| fo.f_number);
+        let mut f_number = self.config.aperture.f_number.unwrap_or(nominal);
+        if ui.add(egui::Slider::new(&mut f_number, nominal..=22.0).text("f-number")).changed() {
+            self.config.aperture.f_number = Some(f_number);
+            changed = true;
+        }
+        changed |= ui.checkbox(&mut self.quarter_wave, "quarter-wave AR coating (550 nm) on every surface").changed();
+        changed |= ui
+            .add(egui::Slider::new(&mut self.config.display.exposure, 1.0..=10000.0).logarithmic(true).text("exposure"))
+            .changed();
+        changed |= ui.checkbox(&mut self.config.display.starburst, "starburst").changed();
+        if changed {
+            self.stale = true;
+        }
+        if let Some(message) = &self.message {
+            ui.colored_label(egui::Color32::LIGHT_RED, message);
+        }
     }
 
     /// Recomputes first-order data and the ray fan after the lens or the field angle changed.
@@ -82,7 +270,9 @@ impl FlareLabApp {
         {
             self.lens = lens;
             self.lens_id = chosen;
+            self.config.aperture.f_number = None;
             self.rebuild();
+            self.stale = true;
         }
         ui.label(&self.lens.name);
         ui.separator();
@@ -196,7 +386,33 @@ impl FlareLabApp {
 
 impl eframe::App for FlareLabApp {
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
-        egui::Panel::left("lens_panel").default_size(330.0).resizable(true).show(ui, |ui| self.lens_panel_ui(ui));
-        egui::CentralPanel::default().show(ui, |ui| self.cross_section_ui(ui));
+        self.render_flare();
+        let status = format!(
+            "light ({:.1}, {:.1}) deg | last flare frame {:.1} ms at {}x{} | sprites drawn {}, culled {} dim / {} off sensor / {} empty entrance",
+            self.light_deg[0],
+            self.light_deg[1],
+            self.last_frame_ms,
+            VIEW_SIZE.0,
+            VIEW_SIZE.1,
+            self.last_stats.drawn,
+            self.last_stats.below_threshold,
+            self.last_stats.off_sensor,
+            self.last_stats.empty_entrance_region
+        );
+        egui::Panel::bottom("status").show(ui, |ui| {
+            ui.label(status);
+        });
+        egui::Panel::left("lens_panel").default_size(330.0).resizable(true).show(ui, |ui| {
+            self.flare_settings_ui(ui);
+            ui.separator();
+            self.lens_panel_ui(ui);
+        });
+        egui::CentralPanel::default().show(ui, |ui| {
+            self.flare_view_ui(ui);
+            self.cross_section_ui(ui);
+        });
+        if self.dirty || self.stale {
+            ui.ctx().request_repaint();
+        }
     }
 }

@@ -24,7 +24,7 @@
 //!   infinity) the front disc bounds the region and nothing divides by zero.
 //! - **Reflectance**: each reflection's angle of incidence is paraxial, `i = u + s c y` for the ray through the
 //!   region's centre E, linear in E and the light's slope; the reflectance of each (surface, side, wavelength) is
-//!   tabulated at rebuild over sin(i) in [0, 1] ([`REFLECTANCE_SAMPLES`] samples, linear interpolation) from
+//!   tabulated at rebuild over sin^2(i) in [0, 1] ([`REFLECTANCE_SAMPLES`] samples, linear interpolation) from
 //!   [`crate::coating`], so a frame costs a few multiplications per sprite.
 //! - **Skipping**: sprites whose peak colour is below the threshold, that fall entirely off the sensor or
 //!   whose entrance region is empty are culled, with the reason counted in [`FrameStats`].
@@ -85,13 +85,13 @@ impl Default for FrameSettings {
     }
 }
 
-/// A reflectance table over sin(i).
+/// A reflectance table over sin^2(i), uniform in sin^2 (denser towards grazing, where R changes fastest).
 #[derive(Clone, Debug, PartialEq)]
 struct ReflectanceTable([f64; REFLECTANCE_SAMPLES]);
 
 impl ReflectanceTable {
-    fn at(&self, sin_i: f64) -> f64 {
-        let x = sin_i.clamp(0.0, 1.0) * (REFLECTANCE_SAMPLES - 1) as f64;
+    fn at(&self, sin2_i: f64) -> f64 {
+        let x = sin2_i.clamp(0.0, 1.0) * (REFLECTANCE_SAMPLES - 1) as f64;
         let k = (x as usize).min(REFLECTANCE_SAMPLES - 2);
         let f = x - k as f64;
         self.0[k] * (1.0 - f) + self.0[k + 1] * f
@@ -130,16 +130,18 @@ impl FrameCoefficients {
             stop_scale[k] = a.a * rho / r_a;
             stop_offset_per_slope[k] = (a.a * e_per_slope + a.b) / r_a;
         }
-        let incidence = |inc: &Incidence| (inc.per_entry * e_per_slope + inc.per_slope).abs();
+        let incidence2 = |inc: &Incidence| (inc.per_entry * e_per_slope + inc.per_slope).powi(2);
+        let half_size_mm = f.a * rho;
         Self {
             ghost: ghost as u32,
             wavelength: wavelength as u32,
             centre_per_slope: f.a * e_per_slope + f.b,
-            half_size_mm: f.a * rho,
+            half_size_mm,
             rho_squared: rho * rho,
             empty_from_slope,
-            incidence_j: incidence(&optics.incidence_j),
-            incidence_i: incidence(&optics.incidence_i),
+            incidence2_j: incidence2(&optics.incidence_j),
+            incidence2_i: incidence2(&optics.incidence_i),
+            area_ratio: if half_size_mm != 0.0 { (rho / half_size_mm).powi(2) } else { 0.0 },
             reflectance_j: optics.reflectance_j as u32,
             reflectance_i: optics.reflectance_i as u32,
             stop_scale,
@@ -203,9 +205,11 @@ struct FrameCoefficients {
     rho_squared: f64,
     /// The entrance region is empty once |u| reaches this (infinity when never).
     empty_from_slope: f64,
-    /// Paraxial incidence angle per unit |u| at the two reflections.
-    incidence_j: f64,
-    incidence_i: f64,
+    /// Squared paraxial incidence angle (as a tangent) per unit |u|^2 at the two reflections.
+    incidence2_j: f64,
+    incidence2_i: f64,
+    /// rho^2 / S^2: the irradiance factor when the sprite is not enlarged.
+    area_ratio: f64,
     reflectance_j: u32,
     reflectance_i: u32,
     /// Aperture maps: scale, and offset per unit slope, per crossing.
@@ -369,8 +373,8 @@ impl GhostSystem {
                         if !reflecting[k] {
                             return 0.0;
                         }
-                        let sin_i = sample as f64 / (REFLECTANCE_SAMPLES - 1) as f64;
-                        reflection(coating, n_in, n_out, spectrum.wavelengths_nm[w], sin_i).reflectance
+                        let sin2_i = sample as f64 / (REFLECTANCE_SAMPLES - 1) as f64;
+                        reflection(coating, n_in, n_out, spectrum.wavelengths_nm[w], sin2_i.sqrt()).reflectance
                     })));
                 }
             }
@@ -521,23 +525,26 @@ impl GhostSystem {
     pub fn frame_into(&self, u: [f64; 2], settings: &FrameSettings, frame: &mut GhostFrame) {
         frame.sprites.clear();
         frame.stats = FrameStats::default();
-        let u_len = (u[0] * u[0] + u[1] * u[1]).sqrt();
-        let cos_theta = 1.0 / (1.0 + u_len * u_len).sqrt();
+        let u2 = u[0] * u[0] + u[1] * u[1];
+        let u_len = u2.sqrt();
+        let cos_theta = 1.0 / (1.0 + u2).sqrt();
         let (half_w, half_h) = (0.5 * settings.sensor.width_mm, 0.5 * settings.sensor.height_mm);
-        let sin_of = |angle_per_slope: f64| {
-            let t = angle_per_slope * u_len;
-            t / (1.0 + t * t).sqrt()
+        // The paraxial angle is taken as a tangent t, so sin^2 = t^2 / (1 + t^2) stays below 1.
+        let sin2_of = |angle2_per_slope2: f64| {
+            let t2 = angle2_per_slope2 * u2;
+            t2 / (1.0 + t2)
         };
         for co in &self.coefficients {
             let centre = [co.centre_per_slope * u[0], co.centre_per_slope * u[1]];
-            let half_size = if co.half_size_mm.abs() < settings.min_half_size_mm {
-                settings.min_half_size_mm.copysign(if co.half_size_mm == 0.0 { 1.0 } else { co.half_size_mm })
+            let (half_size, area_ratio) = if co.half_size_mm.abs() < settings.min_half_size_mm {
+                let clamped = settings.min_half_size_mm.copysign(if co.half_size_mm == 0.0 { 1.0 } else { co.half_size_mm });
+                (clamped, co.rho_squared / (clamped * clamped))
             } else {
-                co.half_size_mm
+                (co.half_size_mm, co.area_ratio)
             };
-            let r_j = self.tables[co.reflectance_j as usize].at(sin_of(co.incidence_j));
-            let r_i = self.tables[co.reflectance_i as usize].at(sin_of(co.incidence_i));
-            let irradiance = cos_theta * r_i * r_j * co.rho_squared / (half_size * half_size);
+            let r_j = self.tables[co.reflectance_j as usize].at(sin2_of(co.incidence2_j));
+            let r_i = self.tables[co.reflectance_i as usize].at(sin2_of(co.incidence2_i));
+            let irradiance = cos_theta * r_i * r_j * area_ratio;
             let weight = self.settings.spectrum.weights_rgb[co.wavelength as usize];
             let rgb = [(weight[0] * irradiance).max(0.0), (weight[1] * irradiance).max(0.0), (weight[2] * irradiance).max(0.0)];
             let extent = half_size.abs() * std::f64::consts::SQRT_2;
