@@ -534,6 +534,8 @@ impl GhostSystem {
             let t2 = angle2_per_slope2 * u2;
             t2 / (1.0 + t2)
         };
+        let mut stats = FrameStats { sprites: self.coefficients.len(), ..FrameStats::default() };
+        let weights = &self.settings.spectrum.weights_rgb;
         for co in &self.coefficients {
             let centre = [co.centre_per_slope * u[0], co.centre_per_slope * u[1]];
             let (half_size, area_ratio) = if co.half_size_mm.abs() < settings.min_half_size_mm {
@@ -542,29 +544,31 @@ impl GhostSystem {
             } else {
                 (co.half_size_mm, co.area_ratio)
             };
-            let r_j = self.tables[co.reflectance_j as usize].at(sin2_of(co.incidence2_j));
-            let r_i = self.tables[co.reflectance_i as usize].at(sin2_of(co.incidence2_i));
-            let irradiance = cos_theta * r_i * r_j * area_ratio;
-            let weight = self.settings.spectrum.weights_rgb[co.wavelength as usize];
+            let empty = u_len >= co.empty_from_slope;
+            // An empty entrance region passes no light: no reflectance to look up.
+            let irradiance = if empty {
+                0.0
+            } else {
+                let r_j = self.tables[co.reflectance_j as usize].at(sin2_of(co.incidence2_j));
+                let r_i = self.tables[co.reflectance_i as usize].at(sin2_of(co.incidence2_i));
+                cos_theta * r_i * r_j * area_ratio
+            };
+            let weight = weights[co.wavelength as usize];
             let rgb = [(weight[0] * irradiance).max(0.0), (weight[1] * irradiance).max(0.0), (weight[2] * irradiance).max(0.0)];
             let extent = half_size.abs() * std::f64::consts::SQRT_2;
-            let culled = if u_len >= co.empty_from_slope {
+            let culled = if empty {
+                stats.empty_entrance_region += 1;
                 Some(CullReason::EmptyEntranceRegion)
             } else if centre[0].abs() - extent > half_w || centre[1].abs() - extent > half_h {
+                stats.off_sensor += 1;
                 Some(CullReason::OffSensor)
             } else if rgb[0].max(rgb[1]).max(rgb[2]) < settings.intensity_threshold {
+                stats.below_threshold += 1;
                 Some(CullReason::BelowThreshold)
             } else {
+                stats.drawn += 1;
                 None
             };
-            let stats = &mut frame.stats;
-            stats.sprites += 1;
-            match culled {
-                None => stats.drawn += 1,
-                Some(CullReason::BelowThreshold) => stats.below_threshold += 1,
-                Some(CullReason::OffSensor) => stats.off_sensor += 1,
-                Some(CullReason::EmptyEntranceRegion) => stats.empty_entrance_region += 1,
-            }
             frame.sprites.push(Sprite {
                 ghost: co.ghost as usize,
                 wavelength: co.wavelength as usize,
@@ -575,6 +579,7 @@ impl GhostSystem {
                 culled,
             });
         }
+        frame.stats = stats;
     }
 
     /// The masks of the `k`-th sprite of a frame (sprites come ghost by ghost, wavelength by wavelength) for
