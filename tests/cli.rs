@@ -277,3 +277,26 @@ fn render_on_the_gpu_matches_the_cpu_twin() {
     let mean = a.as_raw().iter().zip(b.as_raw()).map(|(x, y)| x.abs_diff(*y) as f64).sum::<f64>() / a.as_raw().len() as f64;
     assert!(mean < 1.0, "GPU and CPU images differ by {mean}/255 on average");
 }
+
+#[test]
+fn render_takes_an_aperture_image_and_a_background_plate() {
+    let dir = tempfile::tempdir().unwrap();
+    // A grayscale aperture: a bright square on black.
+    let aperture = dir.path().join("square.png");
+    image::GrayImage::from_fn(64, 64, |x, y| image::Luma([if (16..48).contains(&x) && (16..48).contains(&y) { 255 } else { 0 }]))
+        .save(&aperture)
+        .unwrap();
+    // A mid-grey plate (sRGB 128).
+    let plate = dir.path().join("plate.png");
+    image::RgbImage::from_pixel(32, 18, image::Rgb([128, 128, 128])).save(&plate).unwrap();
+    let out = dir.path().join("flare.png");
+    let result = flarelab(&[
+        "render", "heliar", "--light-deg", "3,2", "--size", "128x72", "--device", "cpu", "--tonemap", "none", "--exposure", "1",
+        "--aperture", &format!("image:{}", aperture.display()), "--background", plate.to_str().unwrap(), "-o", out.to_str().unwrap(),
+    ]);
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    let image = image::open(&out).unwrap().to_rgb8();
+    // With exposure 1 and no tonemap the plate comes back as itself wherever the flare adds next to nothing.
+    let corner = image.get_pixel(2, 70);
+    assert!(corner.0.iter().all(|&c| (126..=140).contains(&c)), "plate pixel {corner:?}");
+}
