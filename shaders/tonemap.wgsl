@@ -1,4 +1,4 @@
-// HDR to display: background plate + flare, exposure, tonemap (none / Reinhard / ACES filmic), sRGB encode.
+// HDR to display: flare accumulation (upsampled) + background plate, exposure, tonemap (none / Reinhard / ACES filmic), sRGB encode.
 // CPU twin: crates/flare_core/src/render/cpu.rs, `tonemap_pass` and `tonemap_pixel`.
 // Must be kept in sync with `Globals` in crates/flare_core/src/render/mod.rs.
 
@@ -11,6 +11,7 @@ struct Globals {
 @group(0) @binding(0) var<uniform> globals: Globals;
 @group(0) @binding(1) var hdr_texture: texture_2d<f32>;
 @group(0) @binding(2) var background_texture: texture_2d<f32>;
+@group(0) @binding(3) var hdr_sampler: sampler;
 
 @vertex
 fn vs_main(@builtin(vertex_index) vertex: u32) -> @builtin(position) vec4<f32> {
@@ -33,8 +34,8 @@ fn encode_srgb(c: vec3<f32>) -> vec3<f32> {
 
 @fragment
 fn fs_main(@builtin(position) position: vec4<f32>) -> @location(0) vec4<f32> {
-    let pixel = vec2<i32>(position.xy);
-    var c = textureLoad(hdr_texture, pixel, 0).rgb;
+    // The accumulation may be smaller than the image: sample it bilinearly (exact texels when it is not).
+    var c = textureSampleLevel(hdr_texture, hdr_sampler, position.xy * globals.viewport.zw, 0.0).rgb;
     if (globals.tonemap.w > 0.5) {
         let size = vec2<f32>(textureDimensions(background_texture));
         let at = vec2<i32>(position.xy * size * globals.viewport.zw);

@@ -96,6 +96,9 @@ struct FlareLabApp {
 impl FlareLabApp {
     fn new(render_state: Option<egui_wgpu::RenderState>) -> Self {
         let lens = builtin_lens(DEFAULT_LENS_ID).unwrap_or_else(|_| flare_core::optics::library::default_lens());
+        // On a software adapter (lavapipe, llvmpipe) frame-filling ghosts cost the most: accumulate them at
+        // half resolution there.
+        let software = render_state.as_ref().is_some_and(|r| r.adapter.get_info().device_type == wgpu::DeviceType::Cpu);
         let mut app = Self {
             lens_id: DEFAULT_LENS_ID.to_owned(),
             first_order: None,
@@ -105,7 +108,11 @@ impl FlareLabApp {
             light_deg: [6.0, 4.0],
             // Coated ghosts are ~100x dimmer than bare ones: open the exposure to match the coating default.
             config: FlareConfig {
-                display: flare_core::render::DisplaySettings { exposure: 1500.0, ..Default::default() },
+                display: flare_core::render::DisplaySettings {
+                    exposure: 1500.0,
+                    accumulation_divisor: if software { 2 } else { 1 },
+                    ..Default::default()
+                },
                 ..FlareConfig::default()
             },
             blades: 6,

@@ -58,9 +58,13 @@ fn gpu_frame(c: &mut Criterion) {
     };
     println!("gpu_frame on {} ({:?})", ctx.adapter.name, ctx.adapter.device_type);
     let mut group = c.benchmark_group("gpu_frame_1280x720");
-    group.sample_size(20);
-    for (name, lens) in lenses().into_iter().take(2) {
-        let flare = PreparedFlare::new(&lens, &FlareConfig::default()).unwrap();
+    group.sample_size(10);
+    let cases = [("heliar_9", 1), ("heliar_9_half_res", 2), ("synthetic_26", 1), ("synthetic_26_half_res", 2)];
+    for (name, divisor) in cases {
+        let lens = if name.starts_with("heliar") { builtin_lens("heliar").unwrap() } else { synthetic_lens(26) };
+        let mut config = FlareConfig::default();
+        config.display.accumulation_divisor = divisor;
+        let flare = PreparedFlare::new(&lens, &config).unwrap();
         let mut renderer = FlareRenderer::new(&ctx.device, &ctx.queue, wgpu::TextureFormat::Rgba8Unorm);
         renderer.set_aperture(&ctx.device, &ctx.queue, &flare.mask);
         renderer.set_starburst(&ctx.device, &ctx.queue, &flare.starburst);
@@ -76,7 +80,7 @@ fn gpu_frame(c: &mut Criterion) {
         });
         let view = target.create_view(&wgpu::TextureViewDescriptor::default());
         let mut k = 0u32;
-        group.bench_function(&name, |b| {
+        group.bench_function(name, |b| {
             b.iter(|| {
                 k = k.wrapping_add(1);
                 let t = (k % 50) as f64 * 0.1;

@@ -58,17 +58,29 @@ fn front_mask(map: [f32; 4], q: [f32; 2]) -> f32 {
     (0.5 + (1.0 - r) / map[3]).clamp(0.0, 1.0)
 }
 
-/// `ghosts.wgsl`: every instance into a cleared HDR image.
+/// Image-pixel coordinates per accumulation pixel, horizontally and vertically.
+fn accumulation_scale(scene: &FlareScene) -> (f32, f32) {
+    (scene.width as f32 / scene.hdr_width as f32, scene.height as f32 / scene.hdr_height as f32)
+}
+
+/// The accumulation pixels a quad of centre `c` and half-size `half` (image pixels) covers.
+fn covered(c: f32, half: f32, scale: f32, size: usize) -> std::ops::Range<usize> {
+    let lo = ((c - half.abs()) / scale).floor().max(0.0) as usize;
+    let hi = (((c + half.abs()) / scale).ceil().max(0.0) as usize).min(size);
+    lo..hi
+}
+
+/// `ghosts.wgsl`: every instance into a cleared HDR accumulation image (`hdr_width` x `hdr_height`).
 pub fn ghost_pass(scene: &FlareScene, mask: &ApertureMask) -> HdrImage {
-    let (w, h) = (scene.width as usize, scene.height as usize);
+    let (w, h) = (scene.hdr_width as usize, scene.hdr_height as usize);
+    let (sx, sy) = accumulation_scale(scene);
     let mut pixels = vec![[0.0f32; 4]; w * h];
     for inst in &scene.instances {
         let [cx, cy, hx, hy] = inst.centre_half;
-        let (x_lo, x_hi) = ((cx - hx.abs()).floor().max(0.0) as usize, ((cx + hx.abs()).ceil().max(0.0) as usize).min(w));
-        let (y_lo, y_hi) = ((cy - hy.abs()).floor().max(0.0) as usize, ((cy + hy.abs()).ceil().max(0.0) as usize).min(h));
-        for y in y_lo..y_hi {
-            for x in x_lo..x_hi {
-                let q = [(x as f32 + 0.5 - cx) / hx, (y as f32 + 0.5 - cy) / hy];
+        for y in covered(cy, hy, sy, h) {
+            for x in covered(cx, hx, sx, w) {
+                // The accumulation pixel's centre, in image pixels.
+                let q = [((x as f32 + 0.5) * sx - cx) / hx, ((y as f32 + 0.5) * sy - cy) / hy];
                 if q[0].abs() > 1.0 || q[1].abs() > 1.0 {
                     continue;
                 }
@@ -88,7 +100,7 @@ pub fn ghost_pass(scene: &FlareScene, mask: &ApertureMask) -> HdrImage {
             }
         }
     }
-    HdrImage { width: scene.width, height: scene.height, pixels }
+    HdrImage { width: scene.hdr_width, height: scene.hdr_height, pixels }
 }
 
 /// `starburst.wgsl`: the starburst quad added onto `hdr`.
@@ -98,11 +110,10 @@ pub fn starburst_pass(scene: &FlareScene, texture: &StarburstTexture, hdr: &mut 
         return;
     }
     let (w, h) = (hdr.width as usize, hdr.height as usize);
-    let (x_lo, x_hi) = ((cx - half).floor().max(0.0) as usize, ((cx + half).ceil().max(0.0) as usize).min(w));
-    let (y_lo, y_hi) = ((cy - half).floor().max(0.0) as usize, ((cy + half).ceil().max(0.0) as usize).min(h));
-    for y in y_lo..y_hi {
-        for x in x_lo..x_hi {
-            let q = [(x as f32 + 0.5 - cx) / half, (y as f32 + 0.5 - cy) / half];
+    let (sx, sy) = accumulation_scale(scene);
+    for y in covered(cy, half, sy, h) {
+        for x in covered(cx, half, sx, w) {
+            let q = [((x as f32 + 0.5) * sx - cx) / half, ((y as f32 + 0.5) * sy - cy) / half];
             if q[0].abs() > 1.0 || q[1].abs() > 1.0 {
                 continue;
             }
@@ -138,13 +149,14 @@ pub fn tonemap_pixel(c: [f32; 3], globals: &super::Globals) -> [f32; 3] {
     })
 }
 
-/// `tonemap.wgsl`: HDR (+ optional background plate, nearest sample) to 8-bit display pixels.
+/// `tonemap.wgsl`: HDR accumulation (bilinear, upsampled to the image size) + optional background plate
+/// (nearest sample) to 8-bit display pixels.
 pub fn tonemap_pass(scene: &FlareScene, hdr: &HdrImage, background: Option<&HdrImage>) -> DisplayImage {
-    let (w, h) = (hdr.width as usize, hdr.height as usize);
+    let (w, h) = (scene.width as usize, scene.height as usize);
     let mut pixels = Vec::with_capacity(w * h);
     for y in 0..h {
         for x in 0..w {
-            let p = hdr.pixels[y * w + x];
+            let p = hdr.sample_bilinear((x as f32 + 0.5) / w as f32, (y as f32 + 0.5) / h as f32);
             let mut c = [p[0], p[1], p[2]];
             if let Some(bg) = background {
                 let bx = (((x as f32 + 0.5) * bg.width as f32 / w as f32) as usize).min(bg.width as usize - 1);
@@ -158,7 +170,7 @@ pub fn tonemap_pass(scene: &FlareScene, hdr: &HdrImage, background: Option<&HdrI
             pixels.push([to_u8(t[0]), to_u8(t[1]), to_u8(t[2]), 255]);
         }
     }
-    DisplayImage { width: hdr.width, height: hdr.height, pixels }
+    DisplayImage { width: scene.width, height: scene.height, pixels }
 }
 
 fn to_u8(v: f32) -> u8 {

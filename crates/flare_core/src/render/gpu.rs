@@ -156,7 +156,12 @@ impl FlareRenderer {
         });
         let tonemap_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("tonemap"),
-            entries: &[uniform, texture(1, false), texture(2, false)],
+            entries: &[
+                uniform,
+                texture(1, true),
+                texture(2, false),
+                wgpu::BindGroupLayoutEntry { binding: 3, ..sampler_entry },
+            ],
         });
         let layout = |bgl: &wgpu::BindGroupLayout| {
             device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -288,7 +293,7 @@ impl FlareRenderer {
     /// Records the frame into `encoder`, drawing into `target` (of the renderer's target format, the
     /// scene's size).
     pub fn render(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, encoder: &mut wgpu::CommandEncoder, target: &wgpu::TextureView, scene: &FlareScene) {
-        let (w, h) = (scene.width.max(1), scene.height.max(1));
+        let (w, h) = (scene.hdr_width.max(1), scene.hdr_height.max(1));
         if !matches!(&self.hdr, Some((_, hw, hh)) if *hw == w && *hh == h) {
             let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_SRC;
             self.hdr = Some((texture_2d(device, "hdr", w, h, HDR_FORMAT, usage), w, h));
@@ -314,20 +319,21 @@ impl FlareRenderer {
         let aperture_view = self.aperture.create_view(&wgpu::TextureViewDescriptor::default());
         let starburst_view = self.starburst.create_view(&wgpu::TextureViewDescriptor::default());
         let background_view = self.background.create_view(&wgpu::TextureViewDescriptor::default());
-        let bind = |layout: &wgpu::BindGroupLayout, view: &wgpu::TextureView, third: wgpu::BindingResource| {
-            device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: None,
-                layout,
-                entries: &[
-                    wgpu::BindGroupEntry { binding: 0, resource: self.globals.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(view) },
-                    wgpu::BindGroupEntry { binding: 2, resource: third },
-                ],
-            })
+        let bind = |layout: &wgpu::BindGroupLayout, view: &wgpu::TextureView, third: wgpu::BindingResource, sampler: bool| {
+            let mut entries = vec![
+                wgpu::BindGroupEntry { binding: 0, resource: self.globals.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(view) },
+                wgpu::BindGroupEntry { binding: 2, resource: third },
+            ];
+            if sampler {
+                entries.push(wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(&self.sampler) });
+            }
+            device.create_bind_group(&wgpu::BindGroupDescriptor { label: None, layout, entries: &entries })
         };
-        let ghost_group = bind(&self.ghost_layout, &aperture_view, wgpu::BindingResource::Sampler(&self.sampler));
-        let starburst_group = bind(&self.ghost_layout, &starburst_view, wgpu::BindingResource::Sampler(&self.sampler));
-        let tonemap_group = bind(&self.tonemap_layout, &hdr_view, wgpu::BindingResource::TextureView(&background_view));
+        let ghost_group = bind(&self.ghost_layout, &aperture_view, wgpu::BindingResource::Sampler(&self.sampler), false);
+        let starburst_group = bind(&self.ghost_layout, &starburst_view, wgpu::BindingResource::Sampler(&self.sampler), false);
+        let tonemap_group =
+            bind(&self.tonemap_layout, &hdr_view, wgpu::BindingResource::TextureView(&background_view), true);
         {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("flare hdr"),
