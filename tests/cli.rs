@@ -300,3 +300,20 @@ fn render_takes_an_aperture_image_and_a_background_plate() {
     let corner = image.get_pixel(2, 70);
     assert!(corner.0.iter().all(|&c| (126..=140).contains(&c)), "plate pixel {corner:?}");
 }
+
+#[test]
+fn render_without_any_adapter_says_so_clearly() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x.png");
+    // Ask wgpu for a backend this platform does not have: no adapter at all.
+    let backend = if cfg!(target_os = "macos") { "dx12" } else { "metal" };
+    let result = Command::new(env!("CARGO_BIN_EXE_flarelab"))
+        .args(["render", "heliar", "--size", "64x36", "-o", out.to_str().unwrap()])
+        .env("WGPU_BACKEND", backend)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert_eq!(result.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("no GPU adapter") && stderr.contains("--device cpu"), "{stderr}");
+    assert!(!out.exists());
+}
