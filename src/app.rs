@@ -10,10 +10,10 @@ use flare_core::aperture::ApertureShape;
 use flare_core::flare::{FlareConfig, PreparedFlare};
 use flare_core::ghost::FrameStats;
 use flare_core::optics::Coating;
-use flare_core::render::gpu::FlareRenderer;
 use flare_core::optics::glass::D_LINE_NM;
 use flare_core::optics::library::{DEFAULT_LENS_ID, builtin_lens, ids};
 use flare_core::optics::{FirstOrder, Lens, LightPath, TraceOptions, TraceStatus, Tracer, pupil_ray};
+use flare_core::render::gpu::FlareRenderer;
 
 const NO_DISPLAY: &str = "no display to open the app's window on (DISPLAY and WAYLAND_DISPLAY are unset). \
 The command line works without one: `flarelab lens list`, `flarelab lens info LENS`, \
@@ -31,7 +31,11 @@ pub fn run() -> Result<()> {
         viewport: egui::ViewportBuilder::default().with_inner_size([1280.0, 800.0]).with_title("FlareLab"),
         ..Default::default()
     };
-    let result = eframe::run_native("FlareLab", options, Box::new(|cc| Ok(Box::new(FlareLabApp::new(cc.wgpu_render_state.clone())))));
+    let result = eframe::run_native(
+        "FlareLab",
+        options,
+        Box::new(|cc| Ok(Box::new(FlareLabApp::new(cc.wgpu_render_state.clone())))),
+    );
     if let Err(e) = result {
         bail!("could not open the app's window ({e}). The command line works without one: see `flarelab --help`");
     }

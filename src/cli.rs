@@ -7,12 +7,12 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand, ValueEnum};
-use flare_core::optics::formats::{load_lens_file, pbrt, to_json, write_atomic, zmx};
-use flare_core::optics::glass::D_LINE_NM;
-use flare_core::optics::library::{DEFAULT_LENS_ID, builtin_lens, ids};
 use flare_core::aperture::{Aperture, ApertureShape, DEFAULT_MASK_SIZE};
 use flare_core::flare::{FlareConfig, PreparedFlare};
 use flare_core::ghost::{FrameSettings, GhostSettings, GhostSystem};
+use flare_core::optics::formats::{load_lens_file, pbrt, to_json, write_atomic, zmx};
+use flare_core::optics::glass::D_LINE_NM;
+use flare_core::optics::library::{DEFAULT_LENS_ID, builtin_lens, ids};
 use flare_core::optics::{
     Coating, CoatingLayer, FirstOrder, Lens, LightPath, PathKind, TraceOptions, TraceStatus, Tracer, pupil_ray,
 };
@@ -115,7 +115,10 @@ pub struct RenderArgs {
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
     let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("`{s}` is not WIDTHxHEIGHT"))?;
-    let (w, h): (u32, u32) = (w.trim().parse().map_err(|_| format!("`{s}` is not WIDTHxHEIGHT"))?, h.trim().parse().map_err(|_| format!("`{s}` is not WIDTHxHEIGHT"))?);
+    let (w, h): (u32, u32) = (
+        w.trim().parse().map_err(|_| format!("`{s}` is not WIDTHxHEIGHT"))?,
+        h.trim().parse().map_err(|_| format!("`{s}` is not WIDTHxHEIGHT"))?,
+    );
     if !(1..=8192).contains(&w) || !(1..=8192).contains(&h) {
         return Err(format!("`{s}`: each side must be 1 to 8192 pixels"));
     }
@@ -416,15 +419,23 @@ pub fn parse_coating(spec: &str) -> Result<Coating> {
     let coating = match kind {
         "none" | "uncoated" => Coating::Uncoated,
         "quarter-wave" | "qw" => Coating::QuarterWave {
-            design_wavelength_nm: if rest.is_empty() { 550.0 } else { rest.parse().with_context(|| format!("--coating {spec}: `{rest}` is not a wavelength"))? },
+            design_wavelength_nm: if rest.is_empty() {
+                550.0
+            } else {
+                rest.parse().with_context(|| format!("--coating {spec}: `{rest}` is not a wavelength"))?
+            },
             layer_index: None,
         },
         "multilayer" => {
             let mut layers = Vec::new();
             for layer in rest.split(',').filter(|l| !l.is_empty()) {
-                let (n, t) = layer.split_once('/').with_context(|| format!("--coating {spec}: layer `{layer}` is not INDEX/THICKNESS_NM"))?;
+                let (n, t) = layer
+                    .split_once('/')
+                    .with_context(|| format!("--coating {spec}: layer `{layer}` is not INDEX/THICKNESS_NM"))?;
                 let (index, thickness_nm) = (n.parse::<f64>(), t.parse::<f64>());
-                let (Ok(index), Ok(thickness_nm)) = (index, thickness_nm) else { bail!("--coating {spec}: layer `{layer}` is not two numbers") };
+                let (Ok(index), Ok(thickness_nm)) = (index, thickness_nm) else {
+                    bail!("--coating {spec}: layer `{layer}` is not two numbers")
+                };
                 layers.push(CoatingLayer { index, thickness_nm });
             }
             if layers.is_empty() {
@@ -447,9 +458,20 @@ pub fn parse_aperture(spec: &str, f_number: Option<f64>) -> Result<Aperture> {
     let shape = match parts.next().unwrap_or("") {
         "circle" => ApertureShape::Circle,
         "blades" => {
-            let count = parts.next().unwrap_or("6").parse().with_context(|| format!("--aperture {spec}: blade count"))?;
-            let rotation_deg = parts.next().map(str::parse).transpose().with_context(|| format!("--aperture {spec}: rotation"))?.unwrap_or(0.0);
-            let roundness = parts.next().map(str::parse).transpose().with_context(|| format!("--aperture {spec}: roundness"))?.unwrap_or(0.0);
+            let count =
+                parts.next().unwrap_or("6").parse().with_context(|| format!("--aperture {spec}: blade count"))?;
+            let rotation_deg = parts
+                .next()
+                .map(str::parse)
+                .transpose()
+                .with_context(|| format!("--aperture {spec}: rotation"))?
+                .unwrap_or(0.0);
+            let roundness = parts
+                .next()
+                .map(str::parse)
+                .transpose()
+                .with_context(|| format!("--aperture {spec}: roundness"))?
+                .unwrap_or(0.0);
             ApertureShape::Blades { count, rotation_deg, roundness }
         }
         "image" => {
@@ -489,7 +511,11 @@ fn ghosts(args: &GhostsArgs) -> Result<()> {
             }
         }
         let intensity = sprites.iter().map(|s| s.irradiance).sum::<f64>() / sprites.len().max(1) as f64;
-        let culled = if sprites.iter().all(|s| s.culled.is_some()) { sprites.first().and_then(|s| s.culled).map(|c| c.word()) } else { None };
+        let culled = if sprites.iter().all(|s| s.culled.is_some()) {
+            sprites.first().and_then(|s| s.culled).map(|c| c.word())
+        } else {
+            None
+        };
         let sprite = system.stop_image_sprite(g, reported, u);
         let per_wavelength: Vec<_> = (0..spectrum.len())
             .map(|w| {
@@ -520,17 +546,36 @@ fn ghosts(args: &GhostsArgs) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&out)?);
         return Ok(());
     }
-    println!("{} at {} deg: {} ghosts, {} sprites drawn, culled {} dim / {} off sensor / {} empty entrance", lens.id, args.field_deg,
-        system.ghosts.len(), st.drawn, st.below_threshold, st.off_sensor, st.empty_entrance_region);
-    println!("  {:>3} {:>3}  {:>10} {:>9}  {:>10}  {:<8} {}", "i", "j", "centre y", "radius", "intensity", "stop", "culled");
+    println!(
+        "{} at {} deg: {} ghosts, {} sprites drawn, culled {} dim / {} off sensor / {} empty entrance",
+        lens.id,
+        args.field_deg,
+        system.ghosts.len(),
+        st.drawn,
+        st.below_threshold,
+        st.off_sensor,
+        st.empty_entrance_region
+    );
+    println!(
+        "  {:>3} {:>3}  {:>10} {:>9}  {:>10}  {:<8} {}",
+        "i", "j", "centre y", "radius", "intensity", "stop", "culled"
+    );
     let mut order: Vec<usize> = (0..rows.len()).collect();
-    order.sort_by(|&a, &b| rows[b]["intensity"].as_f64().partial_cmp(&rows[a]["intensity"].as_f64()).unwrap_or(std::cmp::Ordering::Equal));
+    order.sort_by(|&a, &b| {
+        rows[b]["intensity"].as_f64().partial_cmp(&rows[a]["intensity"].as_f64()).unwrap_or(std::cmp::Ordering::Equal)
+    });
     for k in order {
         let r = &rows[k];
         let centre = r["center_mm"][1].as_f64().map(|v| format!("{v:.3}")).unwrap_or_else(|| "-".into());
         let radius = r["radius_mm"].as_f64().map(|v| format!("{v:.3}")).unwrap_or_else(|| "-".into());
-        println!("  {:>3} {:>3}  {centre:>10} {radius:>9}  {:>10.3e}  {:<8} {}", r["i"], r["j"], r["intensity"].as_f64().unwrap_or(0.0),
-            if r["straddles_stop"] == true { "3 times" } else { "once" }, r["culled"].as_str().unwrap_or(""));
+        println!(
+            "  {:>3} {:>3}  {centre:>10} {radius:>9}  {:>10.3e}  {:<8} {}",
+            r["i"],
+            r["j"],
+            r["intensity"].as_f64().unwrap_or(0.0),
+            if r["straddles_stop"] == true { "3 times" } else { "once" },
+            r["culled"].as_str().unwrap_or("")
+        );
     }
     Ok(())
 }
@@ -599,7 +644,12 @@ fn render(args: &RenderArgs) -> Result<()> {
             // Linear float: background plus flare, times the exposure (what the PNG shows before tonemapping),
             // at the image size whatever the accumulation's.
             let pixels = (0..width * height)
-                .map(|k| hdr.sample_bilinear(((k % width) as f32 + 0.5) / width as f32, ((k / width) as f32 + 0.5) / height as f32))
+                .map(|k| {
+                    hdr.sample_bilinear(
+                        ((k % width) as f32 + 0.5) / width as f32,
+                        ((k / width) as f32 + 0.5) / height as f32,
+                    )
+                })
                 .collect();
             let mut linear = flare_core::render::HdrImage { width, height, pixels };
             for (k, p) in linear.pixels.iter_mut().enumerate() {
@@ -622,7 +672,13 @@ fn render(args: &RenderArgs) -> Result<()> {
     let st = frame.stats;
     eprintln!(
         "wrote {} ({width}x{height}): {} ghosts x {} wavelengths, {} sprites drawn, culled {} dim / {} off sensor / {} empty entrance",
-        args.output.display(), flare.system.ghosts.len(), config.spectrum.len(), st.drawn, st.below_threshold, st.off_sensor, st.empty_entrance_region
+        args.output.display(),
+        flare.system.ghosts.len(),
+        config.spectrum.len(),
+        st.drawn,
+        st.below_threshold,
+        st.off_sensor,
+        st.empty_entrance_region
     );
     Ok(())
 }

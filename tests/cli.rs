@@ -215,10 +215,16 @@ fn ghosts_json_lists_every_ghost_with_its_sprite() {
         assert_eq!(row["center_mm"][1].as_f64().unwrap(), centre[1]);
         assert_eq!(row["radius_mm"].as_f64().unwrap(), radius);
         assert!(row["culled"].is_null() || row["culled"].is_string());
-        assert_eq!(row["straddles_stop"].as_bool().unwrap(), row["i"].as_u64().unwrap() < 5 && row["j"].as_u64().unwrap() > 5);
+        assert_eq!(
+            row["straddles_stop"].as_bool().unwrap(),
+            row["i"].as_u64().unwrap() < 5 && row["j"].as_u64().unwrap() > 5
+        );
     }
     let sprites = &out["sprites"];
-    let sum = ["drawn", "below_threshold", "off_sensor", "empty_entrance_region"].iter().map(|k| sprites[k].as_u64().unwrap()).sum::<u64>();
+    let sum = ["drawn", "below_threshold", "off_sensor", "empty_entrance_region"]
+        .iter()
+        .map(|k| sprites[k].as_u64().unwrap())
+        .sum::<u64>();
     assert_eq!(sum, sprites["total"].as_u64().unwrap());
 }
 
@@ -227,8 +233,22 @@ fn render_writes_png_and_exr_and_refuses_bad_options() {
     let dir = tempfile::tempdir().unwrap();
     let png = dir.path().join("flare.png");
     let exr = dir.path().join("flare.exr");
-    for (out, extra) in [(&png, vec!["--coating", "quarter-wave:520"]), (&exr, vec!["--aperture", "blades:7:10:0.3", "--f-number", "5.6"])] {
-        let mut args = vec!["render", "dgauss", "--light-deg", "6,-3", "--size", "160x90", "--device", "cpu", "-o", out.to_str().unwrap()];
+    for (out, extra) in [
+        (&png, vec!["--coating", "quarter-wave:520"]),
+        (&exr, vec!["--aperture", "blades:7:10:0.3", "--f-number", "5.6"]),
+    ] {
+        let mut args = vec![
+            "render",
+            "dgauss",
+            "--light-deg",
+            "6,-3",
+            "--size",
+            "160x90",
+            "--device",
+            "cpu",
+            "-o",
+            out.to_str().unwrap(),
+        ];
         args.extend(extra);
         let result = flarelab(&args);
         assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
@@ -264,7 +284,20 @@ fn render_writes_png_and_exr_and_refuses_bad_options() {
 fn render_on_the_gpu_matches_the_cpu_twin() {
     let dir = tempfile::tempdir().unwrap();
     let (gpu_png, cpu_png) = (dir.path().join("gpu.png"), dir.path().join("cpu.png"));
-    let run = |device: &str, out: &Path| flarelab(&["render", "tessar", "--light-deg", "5,2", "--size", "192x108", "--device", device, "-o", out.to_str().unwrap()]);
+    let run = |device: &str, out: &Path| {
+        flarelab(&[
+            "render",
+            "tessar",
+            "--light-deg",
+            "5,2",
+            "--size",
+            "192x108",
+            "--device",
+            device,
+            "-o",
+            out.to_str().unwrap(),
+        ])
+    };
     let gpu = run("gpu", &gpu_png);
     if !gpu.status.success() {
         let stderr = String::from_utf8_lossy(&gpu.stderr);
@@ -274,7 +307,8 @@ fn render_on_the_gpu_matches_the_cpu_twin() {
     }
     assert!(run("cpu", &cpu_png).status.success());
     let (a, b) = (image::open(&gpu_png).unwrap().to_rgba8(), image::open(&cpu_png).unwrap().to_rgba8());
-    let mean = a.as_raw().iter().zip(b.as_raw()).map(|(x, y)| x.abs_diff(*y) as f64).sum::<f64>() / a.as_raw().len() as f64;
+    let mean =
+        a.as_raw().iter().zip(b.as_raw()).map(|(x, y)| x.abs_diff(*y) as f64).sum::<f64>() / a.as_raw().len() as f64;
     assert!(mean < 1.0, "GPU and CPU images differ by {mean}/255 on average");
 }
 
@@ -283,16 +317,34 @@ fn render_takes_an_aperture_image_and_a_background_plate() {
     let dir = tempfile::tempdir().unwrap();
     // A grayscale aperture: a bright square on black.
     let aperture = dir.path().join("square.png");
-    image::GrayImage::from_fn(64, 64, |x, y| image::Luma([if (16..48).contains(&x) && (16..48).contains(&y) { 255 } else { 0 }]))
-        .save(&aperture)
-        .unwrap();
+    image::GrayImage::from_fn(64, 64, |x, y| {
+        image::Luma([if (16..48).contains(&x) && (16..48).contains(&y) { 255 } else { 0 }])
+    })
+    .save(&aperture)
+    .unwrap();
     // A mid-grey plate (sRGB 128).
     let plate = dir.path().join("plate.png");
     image::RgbImage::from_pixel(32, 18, image::Rgb([128, 128, 128])).save(&plate).unwrap();
     let out = dir.path().join("flare.png");
     let result = flarelab(&[
-        "render", "heliar", "--light-deg", "3,2", "--size", "128x72", "--device", "cpu", "--tonemap", "none", "--exposure", "1",
-        "--aperture", &format!("image:{}", aperture.display()), "--background", plate.to_str().unwrap(), "-o", out.to_str().unwrap(),
+        "render",
+        "heliar",
+        "--light-deg",
+        "3,2",
+        "--size",
+        "128x72",
+        "--device",
+        "cpu",
+        "--tonemap",
+        "none",
+        "--exposure",
+        "1",
+        "--aperture",
+        &format!("image:{}", aperture.display()),
+        "--background",
+        plate.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
     ]);
     assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
     let image = image::open(&out).unwrap().to_rgb8();

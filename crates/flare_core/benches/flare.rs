@@ -5,11 +5,11 @@
 
 use std::hint::black_box;
 
-use criterion::{criterion_group, criterion_main, Criterion};
+use criterion::{Criterion, criterion_group, criterion_main};
 use flare_core::flare::{FlareConfig, PreparedFlare};
 use flare_core::ghost::{FrameSettings, GhostFrame, GhostSettings, GhostSystem};
-use flare_core::optics::library::{builtin_lens, synthetic_lens};
 use flare_core::optics::Lens;
+use flare_core::optics::library::{builtin_lens, synthetic_lens};
 use flare_core::render::gpu::{FlareRenderer, GpuContext};
 
 fn lenses() -> Vec<(String, Lens)> {
@@ -43,7 +43,9 @@ fn ghost_frame(c: &mut Criterion) {
 fn ghost_rebuild(c: &mut Criterion) {
     let mut group = c.benchmark_group("ghost_rebuild_rgb");
     for (name, lens) in lenses().into_iter().take(2) {
-        group.bench_function(&name, |b| b.iter(|| GhostSystem::build(black_box(&lens), &GhostSettings::default()).unwrap()));
+        group.bench_function(&name, |b| {
+            b.iter(|| GhostSystem::build(black_box(&lens), &GhostSettings::default()).unwrap())
+        });
     }
     group.finish();
 }

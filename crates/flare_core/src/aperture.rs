@@ -20,9 +20,16 @@ pub const DEFAULT_MASK_SIZE: usize = 256;
 #[derive(Clone, Debug, PartialEq)]
 pub enum ApertureShape {
     Circle,
-    Blades { count: u32, rotation_deg: f64, roundness: f64 },
+    Blades {
+        count: u32,
+        rotation_deg: f64,
+        roundness: f64,
+    },
     /// A user image: row-major luminance in [0, 1], `size` x `size`, covering [-1, 1]^2.
-    Image { size: usize, luminance: Vec<f32> },
+    Image {
+        size: usize,
+        luminance: Vec<f32>,
+    },
 }
 
 /// The aperture: shape and f-number.
@@ -112,7 +119,10 @@ impl Aperture {
             }
             ApertureShape::Image { size, luminance } => {
                 if *size < 2 || luminance.len() != size * size {
-                    return Err(ApertureError::Image(format!("{} values for a {size} x {size} image", luminance.len())));
+                    return Err(ApertureError::Image(format!(
+                        "{} values for a {size} x {size} image",
+                        luminance.len()
+                    )));
                 }
                 if luminance.iter().any(|v| !v.is_finite()) {
                     return Err(ApertureError::Image("non-finite values".into()));
@@ -189,12 +199,16 @@ mod tests {
         let circle = Aperture { shape: ApertureShape::Circle, f_number: None }.rasterise(512);
         assert!((circle.open_fraction() - PI / 4.0 * 0.999f64.powi(2)).abs() < 2e-3, "{}", circle.open_fraction());
         for n in [3u32, 5, 6, 8, 16] {
-            let a = Aperture { shape: ApertureShape::Blades { count: n, rotation_deg: 10.0, roundness: 0.0 }, f_number: None };
+            let a = Aperture {
+                shape: ApertureShape::Blades { count: n, rotation_deg: 10.0, roundness: 0.0 },
+                f_number: None,
+            };
             let area = a.rasterise(512).open_fraction() * 4.0;
             let exact = 0.5 * n as f64 * (2.0 * PI / n as f64).sin() * 0.999f64.powi(2);
             assert!((area - exact).abs() < 0.01 * exact, "{n} blades: {area} vs {exact}");
         }
-        let round = Aperture { shape: ApertureShape::Blades { count: 6, rotation_deg: 0.0, roundness: 1.0 }, f_number: None };
+        let round =
+            Aperture { shape: ApertureShape::Blades { count: 6, rotation_deg: 0.0, roundness: 1.0 }, f_number: None };
         assert!((round.rasterise(256).open_fraction() - circle.open_fraction()).abs() < 3e-3);
     }
 
@@ -209,12 +223,17 @@ mod tests {
 
     #[test]
     fn bad_settings_are_refused_and_f_number_scales_the_stop() {
-        let bad = Aperture { shape: ApertureShape::Blades { count: 2, rotation_deg: 0.0, roundness: 0.0 }, f_number: None };
+        let bad =
+            Aperture { shape: ApertureShape::Blades { count: 2, rotation_deg: 0.0, roundness: 0.0 }, f_number: None };
         assert_eq!(bad.validate(), Err(ApertureError::BladeCount(2)));
         let bad = Aperture { shape: ApertureShape::Circle, f_number: Some(-2.0) };
         assert!(bad.validate().is_err());
         let a = Aperture { shape: ApertureShape::Circle, f_number: Some(8.0) };
         assert!((a.stop_scale(4.0) - 0.5).abs() < 1e-15);
-        assert_eq!(Aperture { shape: ApertureShape::Circle, f_number: Some(2.0) }.stop_scale(4.0), 1.0, "cannot open past wide open");
+        assert_eq!(
+            Aperture { shape: ApertureShape::Circle, f_number: Some(2.0) }.stop_scale(4.0),
+            1.0,
+            "cannot open past wide open"
+        );
     }
 }

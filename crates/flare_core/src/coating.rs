@@ -48,7 +48,13 @@ pub fn coating_layers(coating: &Coating, n_a: f64, n_b: f64) -> Vec<CoatingLayer
 
 /// Reflectance of the interface from medium `n_incident` into `n_exit` with `coating`, for light of
 /// `wavelength_nm` arriving at `sin_incidence` (sine of the angle to the normal, 0..=1).
-pub fn reflection(coating: &Coating, n_incident: f64, n_exit: f64, wavelength_nm: f64, sin_incidence: f64) -> Reflection {
+pub fn reflection(
+    coating: &Coating,
+    n_incident: f64,
+    n_exit: f64,
+    wavelength_nm: f64,
+    sin_incidence: f64,
+) -> Reflection {
     let mut layers = coating_layers(coating, n_incident, n_exit);
     // Layers are listed from the surface into the lower-index side; light from that side meets the
     // outermost first.
@@ -59,7 +65,13 @@ pub fn reflection(coating: &Coating, n_incident: f64, n_exit: f64, wavelength_nm
 }
 
 /// Characteristic-matrix reflectance of `layers` (in the order the light meets them) between two media.
-pub fn stack_reflection(layers: &[CoatingLayer], n0: f64, n_s: f64, wavelength_nm: f64, sin_incidence: f64) -> Reflection {
+pub fn stack_reflection(
+    layers: &[CoatingLayer],
+    n0: f64,
+    n_s: f64,
+    wavelength_nm: f64,
+    sin_incidence: f64,
+) -> Reflection {
     let sin0 = sin_incidence.clamp(0.0, 1.0);
     // n sin t is conserved through the stack (Snell).
     let invariant = n0 * sin0;
@@ -83,9 +95,13 @@ pub fn stack_reflection(layers: &[CoatingLayer], n0: f64, n_s: f64, wavelength_n
         let eta0 = admittance(n0);
         let eta_s = admittance(n_s);
         // M = product of the layer matrices; [B, C] = M [1, eta_s].
-        let mut m = [[Complex64::new(1.0, 0.0), Complex64::new(0.0, 0.0)], [Complex64::new(0.0, 0.0), Complex64::new(1.0, 0.0)]];
+        let mut m = [
+            [Complex64::new(1.0, 0.0), Complex64::new(0.0, 0.0)],
+            [Complex64::new(0.0, 0.0), Complex64::new(1.0, 0.0)],
+        ];
         for layer in layers {
-            let delta = 2.0 * std::f64::consts::PI * layer.index * layer.thickness_nm * cos_in(layer.index) / wavelength_nm;
+            let delta =
+                2.0 * std::f64::consts::PI * layer.index * layer.thickness_nm * cos_in(layer.index) / wavelength_nm;
             let eta = admittance(layer.index);
             let (c, s) = (delta.cos(), delta.sin());
             let i = Complex64::new(0.0, 1.0);
@@ -147,7 +163,10 @@ mod tests {
                 for w in [400.0, 475.0, 550.0, 650.0, 700.0] {
                     for sin_i in [0.0, 0.3, 0.6, 0.65] {
                         let r = reflection(coating, n0, n1, w, sin_i);
-                        assert!((r.reflectance + r.transmittance - 1.0).abs() < 1e-12, "{coating:?} {n0}->{n1} {w} {sin_i}: {r:?}");
+                        assert!(
+                            (r.reflectance + r.transmittance - 1.0).abs() < 1e-12,
+                            "{coating:?} {n0}->{n1} {w} {sin_i}: {r:?}"
+                        );
                     }
                 }
             }

@@ -11,7 +11,7 @@
 use crate::aperture::{Aperture, ApertureError, ApertureMask, DEFAULT_MASK_SIZE};
 use crate::ghost::{FrameSettings, GhostError, GhostFrame, GhostSettings, GhostSystem, Sensor};
 use crate::optics::{Coating, Lens};
-use crate::render::{light_slopes_for_frame_position, DisplaySettings, FlareScene};
+use crate::render::{DisplaySettings, FlareScene, light_slopes_for_frame_position};
 use crate::spectrum::Spectrum;
 use crate::starburst::Starburst;
 

@@ -32,7 +32,7 @@
 //! What changes per frame is only `u`: [`GhostSystem::frame`] is all the per-frame CPU work.
 
 use crate::coating::reflection;
-use crate::optics::{Coating, FirstOrder, Lens, Mat2, ParaxialError, PathMatrices, D_LINE_NM};
+use crate::optics::{Coating, D_LINE_NM, FirstOrder, Lens, Mat2, ParaxialError, PathMatrices};
 use crate::spectrum::Spectrum;
 
 /// Samples of each reflectance table over sin(i) in [0, 1].
@@ -173,7 +173,6 @@ impl Incidence {
         let angle = |(y, u): (f64, f64)| u + s * c * y;
         Self { per_entry: angle(m.apply(1.0, 0.0)), per_slope: angle(m.apply(0.0, 1.0)) }
     }
-
 }
 
 /// One ghost at one wavelength: everything a frame needs, from the lens alone.
@@ -383,7 +382,12 @@ impl GhostSystem {
 
         let mut ghosts: Vec<GhostModel> = pairs
             .iter()
-            .map(|&(i, j)| GhostModel { i, j, straddles_stop: i < stop && stop < j, per_wavelength: Vec::with_capacity(n_w) })
+            .map(|&(i, j)| GhostModel {
+                i,
+                j,
+                straddles_stop: i < stop && stop < j,
+                per_wavelength: Vec::with_capacity(n_w),
+            })
             .collect();
         let ghost_index = |i: usize, j: usize| pairs.binary_search(&(i, j)).ok();
         let mut image_centre_per_slope = Vec::with_capacity(n_w);
@@ -411,7 +415,11 @@ impl GhostSystem {
             }
             let mut to_stop = vec![Mat2::IDENTITY; n_surfaces];
             for k in (0..stop).rev() {
-                to_stop[k] = if k + 1 == stop { gap(stop, k) } else { to_stop[k + 1].mul(&forward_refraction(k + 1)).mul(&gap(k + 1, k)) };
+                to_stop[k] = if k + 1 == stop {
+                    gap(stop, k)
+                } else {
+                    to_stop[k + 1].mul(&forward_refraction(k + 1)).mul(&gap(k + 1, k))
+                };
             }
             let image_f = to_sensor[last].mul(&forward_refraction(last)).mul(&arrive[last]);
             let image_a = arrive[stop];
@@ -430,7 +438,9 @@ impl GhostSystem {
                     if k == stop {
                         backward_stop_crossing = Some(at_k);
                     }
-                    if reflecting[k] && let Some(g) = ghost_index(k, j) {
+                    if reflecting[k]
+                        && let Some(g) = ghost_index(k, j)
+                    {
                         let after_i = Mat2::reflection(curvature[k], -1.0).mul(&at_k);
                         let sensor_from_entrance = to_sensor[k].mul(&after_i);
                         let mut stop_from_entrance = Vec::with_capacity(3);
@@ -516,7 +526,10 @@ impl GhostSystem {
 
     /// All sprites for the light slope vector `u` (tan of the field angles): the per-frame work.
     pub fn frame(&self, u: [f64; 2], settings: &FrameSettings) -> GhostFrame {
-        let mut frame = GhostFrame { sprites: Vec::with_capacity(self.ghosts.len() * self.settings.spectrum.len()), ..Default::default() };
+        let mut frame = GhostFrame {
+            sprites: Vec::with_capacity(self.ghosts.len() * self.settings.spectrum.len()),
+            ..Default::default()
+        };
         self.frame_into(u, settings, &mut frame);
         frame
     }
@@ -539,7 +552,8 @@ impl GhostSystem {
         for co in &self.coefficients {
             let centre = [co.centre_per_slope * u[0], co.centre_per_slope * u[1]];
             let (half_size, area_ratio) = if co.half_size_mm.abs() < settings.min_half_size_mm {
-                let clamped = settings.min_half_size_mm.copysign(if co.half_size_mm == 0.0 { 1.0 } else { co.half_size_mm });
+                let clamped =
+                    settings.min_half_size_mm.copysign(if co.half_size_mm == 0.0 { 1.0 } else { co.half_size_mm });
                 (clamped, co.rho_squared / (clamped * clamped))
             } else {
                 (co.half_size_mm, co.area_ratio)
@@ -554,7 +568,11 @@ impl GhostSystem {
                 cos_theta * r_i * r_j * area_ratio
             };
             let weight = weights[co.wavelength as usize];
-            let rgb = [(weight[0] * irradiance).max(0.0), (weight[1] * irradiance).max(0.0), (weight[2] * irradiance).max(0.0)];
+            let rgb = [
+                (weight[0] * irradiance).max(0.0),
+                (weight[1] * irradiance).max(0.0),
+                (weight[2] * irradiance).max(0.0),
+            ];
             let extent = half_size.abs() * std::f64::consts::SQRT_2;
             let culled = if empty {
                 stats.empty_entrance_region += 1;
@@ -669,10 +687,15 @@ mod tests {
         let settings = FrameSettings::default();
         let frame = s.frame(u, &settings);
         let mut checked = 0;
-        for (k, sprite) in frame.sprites.iter().enumerate().filter(|(_, s)| s.half_size_mm.abs() > settings.min_half_size_mm) {
+        for (k, sprite) in
+            frame.sprites.iter().enumerate().filter(|(_, s)| s.half_size_mm.abs() > settings.min_half_size_mm)
+        {
             let quad = s.flare_quad_mm(k, u);
             for (k, q) in [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]].iter().enumerate() {
-                let expected = [sprite.centre_mm[0] + sprite.half_size_mm * q[0], sprite.centre_mm[1] + sprite.half_size_mm * q[1]];
+                let expected = [
+                    sprite.centre_mm[0] + sprite.half_size_mm * q[0],
+                    sprite.centre_mm[1] + sprite.half_size_mm * q[1],
+                ];
                 assert!((quad[k][0] - expected[0]).abs() < 1e-9 && (quad[k][1] - expected[1]).abs() < 1e-9);
             }
             // Centre and rim: two rays give the same circle.
@@ -701,13 +724,17 @@ mod tests {
     #[test]
     fn culling_reports_reasons() {
         let s = system("wide");
-        let tiny_sensor = FrameSettings { sensor: Sensor { width_mm: 0.5, height_mm: 0.5 }, ..FrameSettings::default() };
+        let tiny_sensor =
+            FrameSettings { sensor: Sensor { width_mm: 0.5, height_mm: 0.5 }, ..FrameSettings::default() };
         let frame = s.frame([0.0, 0.4], &tiny_sensor);
         assert!(frame.stats.off_sensor > 0, "{:?}", frame.stats);
         let strict = FrameSettings { intensity_threshold: 1.0, ..FrameSettings::default() };
         let frame = s.frame([0.0, 0.0], &strict);
         assert_eq!(frame.stats.drawn, 0);
-        assert_eq!(frame.stats.below_threshold + frame.stats.empty_entrance_region + frame.stats.off_sensor, frame.stats.sprites);
+        assert_eq!(
+            frame.stats.below_threshold + frame.stats.empty_entrance_region + frame.stats.off_sensor,
+            frame.stats.sprites
+        );
         // At a steep angle some ghosts' entrance discs no longer meet the front lens.
         let frame = s.frame([0.0, 1.2], &FrameSettings::default());
         assert!(frame.stats.empty_entrance_region > 0, "{:?}", frame.stats);

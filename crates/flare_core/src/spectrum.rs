@@ -94,7 +94,8 @@ fn lobe(x: f64, mu: f64, sigma_low: f64, sigma_high: f64) -> f64 {
 /// CIE 1931 2-degree colour-matching functions (x-bar, y-bar, z-bar), Wyman-Sloan-Shirley 2013 fit.
 pub fn cie_1931_xyz(wavelength_nm: f64) -> [f64; 3] {
     let w = wavelength_nm;
-    let x = 1.056 * lobe(w, 599.8, 37.9, 31.0) + 0.362 * lobe(w, 442.0, 16.0, 26.7) - 0.065 * lobe(w, 501.1, 20.4, 26.2);
+    let x =
+        1.056 * lobe(w, 599.8, 37.9, 31.0) + 0.362 * lobe(w, 442.0, 16.0, 26.7) - 0.065 * lobe(w, 501.1, 20.4, 26.2);
     let y = 0.821 * lobe(w, 568.8, 46.9, 40.5) + 0.286 * lobe(w, 530.9, 16.3, 31.1);
     let z = 1.217 * lobe(w, 437.0, 11.8, 36.0) + 0.681 * lobe(w, 459.0, 26.0, 13.8);
     [x, y, z]
@@ -102,11 +103,7 @@ pub fn cie_1931_xyz(wavelength_nm: f64) -> [f64; 3] {
 
 /// XYZ to linear sRGB (IEC 61966-2-1, D65).
 pub fn xyz_to_linear_srgb([x, y, z]: [f64; 3]) -> [f64; 3] {
-    [
-        3.2406 * x - 1.5372 * y - 0.4986 * z,
-        -0.9689 * x + 1.8758 * y + 0.0415 * z,
-        0.0557 * x - 0.2040 * y + 1.0570 * z,
-    ]
+    [3.2406 * x - 1.5372 * y - 0.4986 * z, -0.9689 * x + 1.8758 * y + 0.0415 * z, 0.0557 * x - 0.2040 * y + 1.0570 * z]
 }
 
 #[cfg(test)]

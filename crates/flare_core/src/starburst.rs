@@ -78,7 +78,8 @@ impl Starburst {
             let (x0, y0) = (gx.floor() as usize, gy.floor() as usize);
             let (fx, fy) = (gx - x0 as f32, gy - y0 as f32);
             let p = |i: usize, j: usize| power[j * n + i];
-            (p(x0, y0) * (1.0 - fx) + p(x0 + 1, y0) * fx) * (1.0 - fy) + (p(x0, y0 + 1) * (1.0 - fx) + p(x0 + 1, y0 + 1) * fx) * fy
+            (p(x0, y0) * (1.0 - fx) + p(x0 + 1, y0) * fx) * (1.0 - fy)
+                + (p(x0, y0 + 1) * (1.0 - fx) + p(x0 + 1, y0 + 1) * fx) * fy
         };
         let size = STARBURST_SIZE;
         let mut rgba = vec![[0.0f32; 4]; size * size];
@@ -120,8 +121,9 @@ mod tests {
 
     #[test]
     fn a_hexagon_makes_six_spikes_and_the_centre_is_brightest() {
-        let mask = Aperture { shape: ApertureShape::Blades { count: 6, rotation_deg: 0.0, roundness: 0.0 }, f_number: None }
-            .rasterise(128);
+        let mask =
+            Aperture { shape: ApertureShape::Blades { count: 6, rotation_deg: 0.0, roundness: 0.0 }, f_number: None }
+                .rasterise(128);
         let s = Starburst::compute(&mask, &Spectrum::single(550.0).unwrap());
         let n = s.size;
         let at = |x: f32, y: f32| s.rgba[((n as f32 / 2.0 + y) as usize) * n + (n as f32 / 2.0 + x) as usize][1];
@@ -133,7 +135,13 @@ mod tests {
         // Spikes run perpendicular to the hexagon's edges: edges face 30, 90, 150 degrees for a vertex on +x,
         // so there is more light at radius 40 along 90 degrees than along 60 degrees (between spikes).
         let r = 40.0f32;
-        let along = |deg: f32| (0..5).map(|d| at(r * (deg + d as f32 - 2.0).to_radians().cos(), -r * (deg + d as f32 - 2.0).to_radians().sin())).sum::<f32>();
+        let along = |deg: f32| {
+            (0..5)
+                .map(|d| {
+                    at(r * (deg + d as f32 - 2.0).to_radians().cos(), -r * (deg + d as f32 - 2.0).to_radians().sin())
+                })
+                .sum::<f32>()
+        };
         assert!(along(90.0) > 3.0 * along(60.0), "spike {} vs gap {}", along(90.0), along(60.0));
     }
 
@@ -144,7 +152,12 @@ mod tests {
         let red = Starburst::compute(&mask, &Spectrum::single(650.0).unwrap());
         let energy_outside = |s: &Starburst| {
             let c = s.size as f32 / 2.0;
-            s.rgba.iter().enumerate().filter(|(k, _)| ((k % s.size) as f32 - c).hypot((k / s.size) as f32 - c) > 6.0).map(|(_, t)| t[0]).sum::<f32>()
+            s.rgba
+                .iter()
+                .enumerate()
+                .filter(|(k, _)| ((k % s.size) as f32 - c).hypot((k / s.size) as f32 - c) > 6.0)
+                .map(|(_, t)| t[0])
+                .sum::<f32>()
         };
         assert!(energy_outside(&red) > 1.3 * energy_outside(&blue));
     }

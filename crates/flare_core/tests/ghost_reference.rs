@@ -25,12 +25,14 @@ fn sprites_agree_with_the_reference_paraxial_fans_to_1e_9() {
     let mut worst = 0.0_f64;
     for id in ids() {
         let lens = builtin_lens(id).unwrap();
-        let settings = GhostSettings { spectrum: Spectrum::single(flare_core::optics::D_LINE_NM).unwrap(), ..Default::default() };
+        let settings =
+            GhostSettings { spectrum: Spectrum::single(flare_core::optics::D_LINE_NM).unwrap(), ..Default::default() };
         let system = GhostSystem::build(&lens, &settings).unwrap();
         let r = reference(id);
         let fo = &r["first_order"];
         let (z_ep, r_ep) = (fo["enp_dist"].as_f64().unwrap(), 0.5 * fo["enp_diameter"].as_f64().unwrap());
-        let fan: Vec<f64> = r["ghosts"]["pupil_fan_py"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+        let fan: Vec<f64> =
+            r["ghosts"]["pupil_fan_py"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
         assert_eq!(fan, [-1.0, -0.5, 0.0, 0.5, 1.0]);
         for entry in r["ghosts"]["table"].as_array().unwrap() {
             let (i, j) = (entry["i"].as_u64().unwrap() as usize, entry["j"].as_u64().unwrap() as usize);
@@ -39,7 +41,8 @@ fn sprites_agree_with_the_reference_paraxial_fans_to_1e_9() {
             for by in entry["by_theta"].as_array().unwrap() {
                 let theta = by["theta_deg"].as_f64().unwrap().to_radians();
                 let u = theta.tan();
-                let y: Vec<f64> = by["paraxial_y_fan"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+                let y: Vec<f64> =
+                    by["paraxial_y_fan"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
                 let (alpha, beta) = (y[2], (y[4] - y[0]) / 2.0);
                 // The fan really is linear (it is paraxial).
                 for (k, py) in fan.iter().enumerate() {
@@ -53,7 +56,11 @@ fn sprites_agree_with_the_reference_paraxial_fans_to_1e_9() {
                 let what = format!("{id} ghost ({i}, {j}) at {} deg", by["theta_deg"]);
                 assert_eq!(centre[0], 0.0, "{what}: meridional light keeps x = 0");
                 let (dc, dr) = ((centre[1] - expected_centre).abs(), (radius - expected_radius).abs());
-                assert!(dc < 1e-9 && dr < 1e-9, "{what}: centre {} vs {expected_centre}, radius {radius} vs {expected_radius}", centre[1]);
+                assert!(
+                    dc < 1e-9 && dr < 1e-9,
+                    "{what}: centre {} vs {expected_centre}, radius {radius} vs {expected_radius}",
+                    centre[1]
+                );
                 worst = worst.max(dc).max(dr);
                 checked += 1;
             }

@@ -6,15 +6,16 @@ use flare_core::aperture::Aperture;
 use flare_core::ghost::{FrameSettings, GhostSettings, GhostSystem, Sensor};
 use flare_core::optics::library::builtin_lens;
 use flare_core::render::cpu::{self, StarburstTexture};
-use flare_core::render::gpu::{read_hdr, render_display, FlareRenderer, GpuContext};
-use flare_core::render::{light_slopes_for_frame_position, output, shaders, DisplaySettings, FlareScene};
+use flare_core::render::gpu::{FlareRenderer, GpuContext, read_hdr, render_display};
+use flare_core::render::{DisplaySettings, FlareScene, light_slopes_for_frame_position, output, shaders};
 use flare_core::spectrum::Spectrum;
 use flare_core::starburst::Starburst;
 
 #[test]
 fn every_shader_parses_and_validates_with_naga() {
     for (name, source) in shaders::ALL {
-        let module = naga::front::wgsl::parse_str(source).unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(source)));
+        let module =
+            naga::front::wgsl::parse_str(source).unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(source)));
         naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all())
             .validate(&module)
             .unwrap_or_else(|e| panic!("{name}: {e:?}"));
@@ -64,7 +65,9 @@ fn gpu() -> Option<GpuContext> {
 
 #[test]
 fn scene_instances_are_finite_and_within_budget() {
-    for (lens, light) in [("heliar", (0.0, 0.0)), ("wide", (20.0, -10.0)), ("fisheye", (60.0, 30.0)), ("telephoto", (3.0, 1.0))] {
+    for (lens, light) in
+        [("heliar", (0.0, 0.0)), ("wide", (20.0, -10.0)), ("fisheye", (60.0, 30.0)), ("telephoto", (3.0, 1.0))]
+    {
         let f = fixture(lens, light, 320, 200);
         assert_eq!(f.scene.dropped_non_finite, 0);
         assert!(f.scene.instances.iter().all(|i| i.is_finite()));
@@ -109,7 +112,9 @@ fn gpu_matches_its_cpu_twin() {
             }
         }
         let mean = sum / (3 * n) as f64;
-        println!("{lens} (accumulation 1/{divisor}): HDR relative mean difference {relative:.2e}; display mean {mean:.3}/255, worst {worst}/255");
+        println!(
+            "{lens} (accumulation 1/{divisor}): HDR relative mean difference {relative:.2e}; display mean {mean:.3}/255, worst {worst}/255"
+        );
         assert!(level > 0.0, "the image is not black");
         assert!(relative < 0.01, "{lens}: HDR differs by {relative}");
         assert!(mean < 0.5, "{lens}: display differs by {mean}/255 on average");

@@ -24,7 +24,9 @@ pub const HDR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 /// Why the GPU path is not available or failed.
 #[derive(Debug, thiserror::Error)]
 pub enum GpuError {
-    #[error("no GPU adapter found (no Vulkan, Metal, DX12 or GL driver); install one (lavapipe: Debian's mesa-vulkan-drivers) or render on the CPU")]
+    #[error(
+        "no GPU adapter found (no Vulkan, Metal, DX12 or GL driver); install one (lavapipe: Debian's mesa-vulkan-drivers) or render on the CPU"
+    )]
     NoAdapter,
     #[error("the GPU adapter {adapter} refused a device: {message}")]
     Device { adapter: String, message: String },
@@ -93,9 +95,18 @@ fn texture_2d(
 fn upload(queue: &wgpu::Queue, texture: &wgpu::Texture, bytes: &[u8], bytes_per_pixel: u32) {
     let size = texture.size();
     queue.write_texture(
-        wgpu::TexelCopyTextureInfo { texture, mip_level: 0, origin: wgpu::Origin3d::ZERO, aspect: wgpu::TextureAspect::All },
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::All,
+        },
         bytes,
-        wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(size.width * bytes_per_pixel), rows_per_image: Some(size.height) },
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(size.width * bytes_per_pixel),
+            rows_per_image: Some(size.height),
+        },
         size,
     );
 }
@@ -131,7 +142,11 @@ impl FlareRenderer {
         let uniform = wgpu::BindGroupLayoutEntry {
             binding: 0,
             visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
-            ty: wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None },
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
             count: None,
         };
         let texture = |binding, filterable| wgpu::BindGroupLayoutEntry {
@@ -173,11 +188,22 @@ impl FlareRenderer {
         let ghost_pl = layout(&ghost_layout);
         let tonemap_pl = layout(&tonemap_layout);
         let additive = wgpu::BlendState {
-            color: wgpu::BlendComponent { src_factor: wgpu::BlendFactor::One, dst_factor: wgpu::BlendFactor::One, operation: wgpu::BlendOperation::Add },
-            alpha: wgpu::BlendComponent { src_factor: wgpu::BlendFactor::One, dst_factor: wgpu::BlendFactor::One, operation: wgpu::BlendOperation::Add },
+            color: wgpu::BlendComponent {
+                src_factor: wgpu::BlendFactor::One,
+                dst_factor: wgpu::BlendFactor::One,
+                operation: wgpu::BlendOperation::Add,
+            },
+            alpha: wgpu::BlendComponent {
+                src_factor: wgpu::BlendFactor::One,
+                dst_factor: wgpu::BlendFactor::One,
+                operation: wgpu::BlendOperation::Add,
+            },
         };
         let module = |label, source: &str| {
-            device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(label), source: wgpu::ShaderSource::Wgsl(source.into()) })
+            device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(label),
+                source: wgpu::ShaderSource::Wgsl(source.into()),
+            })
         };
         let ghosts = module("ghosts.wgsl", GHOSTS_WGSL);
         let starburst_module = module("starburst.wgsl", STARBURST_WGSL);
@@ -188,11 +214,21 @@ impl FlareRenderer {
             step_mode: wgpu::VertexStepMode::Instance,
             attributes: &instance_attributes,
         };
-        let pipeline = |label, layout: &wgpu::PipelineLayout, module: &wgpu::ShaderModule, buffers: &[Option<wgpu::VertexBufferLayout>], format, blend| {
+        let pipeline = |label,
+                        layout: &wgpu::PipelineLayout,
+                        module: &wgpu::ShaderModule,
+                        buffers: &[Option<wgpu::VertexBufferLayout>],
+                        format,
+                        blend| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
                 layout: Some(layout),
-                vertex: wgpu::VertexState { module, entry_point: Some("vs_main"), compilation_options: Default::default(), buffers },
+                vertex: wgpu::VertexState {
+                    module,
+                    entry_point: Some("vs_main"),
+                    compilation_options: Default::default(),
+                    buffers,
+                },
                 primitive: wgpu::PrimitiveState::default(),
                 depth_stencil: None,
                 multisample: wgpu::MultisampleState::default(),
@@ -206,7 +242,8 @@ impl FlareRenderer {
                 cache: None,
             })
         };
-        let ghost_pipeline = pipeline("ghosts", &ghost_pl, &ghosts, &[Some(instance_buffer_layout)], HDR_FORMAT, Some(additive));
+        let ghost_pipeline =
+            pipeline("ghosts", &ghost_pl, &ghosts, &[Some(instance_buffer_layout)], HDR_FORMAT, Some(additive));
         let starburst_pipeline = pipeline("starburst", &ghost_pl, &starburst_module, &[], HDR_FORMAT, Some(additive));
         let tonemap_pipeline = pipeline("tonemap", &tonemap_pl, &tonemap, &[], target_format, None);
         let globals = device.create_buffer(&wgpu::BufferDescriptor {
@@ -262,14 +299,16 @@ impl FlareRenderer {
     /// Replaces the aperture mask (when the aperture settings change).
     pub fn set_aperture(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, mask: &ApertureMask) {
         let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
-        self.aperture = texture_2d(device, "aperture", mask.size as u32, mask.size as u32, wgpu::TextureFormat::R8Unorm, usage);
+        self.aperture =
+            texture_2d(device, "aperture", mask.size as u32, mask.size as u32, wgpu::TextureFormat::R8Unorm, usage);
         upload(queue, &self.aperture, &mask.texels, 1);
     }
 
     /// Replaces the starburst texture.
     pub fn set_starburst(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, starburst: &Starburst) {
         let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
-        self.starburst = texture_2d(device, "starburst", starburst.size as u32, starburst.size as u32, HDR_FORMAT, usage);
+        self.starburst =
+            texture_2d(device, "starburst", starburst.size as u32, starburst.size as u32, HDR_FORMAT, usage);
         upload(queue, &self.starburst, &half_floats(&starburst.rgba), 8);
     }
 
@@ -292,10 +331,19 @@ impl FlareRenderer {
 
     /// Records the frame into `encoder`, drawing into `target` (of the renderer's target format, the
     /// scene's size).
-    pub fn render(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, encoder: &mut wgpu::CommandEncoder, target: &wgpu::TextureView, scene: &FlareScene) {
+    pub fn render(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        target: &wgpu::TextureView,
+        scene: &FlareScene,
+    ) {
         let (w, h) = (scene.hdr_width.max(1), scene.hdr_height.max(1));
         if !matches!(&self.hdr, Some((_, hw, hh)) if *hw == w && *hh == h) {
-            let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_SRC;
+            let usage = wgpu::TextureUsages::RENDER_ATTACHMENT
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_SRC;
             self.hdr = Some((texture_2d(device, "hdr", w, h, HDR_FORMAT, usage), w, h));
         }
         let mut globals = scene.globals;
@@ -319,19 +367,25 @@ impl FlareRenderer {
         let aperture_view = self.aperture.create_view(&wgpu::TextureViewDescriptor::default());
         let starburst_view = self.starburst.create_view(&wgpu::TextureViewDescriptor::default());
         let background_view = self.background.create_view(&wgpu::TextureViewDescriptor::default());
-        let bind = |layout: &wgpu::BindGroupLayout, view: &wgpu::TextureView, third: wgpu::BindingResource, sampler: bool| {
+        let bind = |layout: &wgpu::BindGroupLayout,
+                    view: &wgpu::TextureView,
+                    third: wgpu::BindingResource,
+                    sampler: bool| {
             let mut entries = vec![
                 wgpu::BindGroupEntry { binding: 0, resource: self.globals.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(view) },
                 wgpu::BindGroupEntry { binding: 2, resource: third },
             ];
             if sampler {
-                entries.push(wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(&self.sampler) });
+                entries
+                    .push(wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(&self.sampler) });
             }
             device.create_bind_group(&wgpu::BindGroupDescriptor { label: None, layout, entries: &entries })
         };
-        let ghost_group = bind(&self.ghost_layout, &aperture_view, wgpu::BindingResource::Sampler(&self.sampler), false);
-        let starburst_group = bind(&self.ghost_layout, &starburst_view, wgpu::BindingResource::Sampler(&self.sampler), false);
+        let ghost_group =
+            bind(&self.ghost_layout, &aperture_view, wgpu::BindingResource::Sampler(&self.sampler), false);
+        let starburst_group =
+            bind(&self.ghost_layout, &starburst_view, wgpu::BindingResource::Sampler(&self.sampler), false);
         let tonemap_group =
             bind(&self.tonemap_layout, &hdr_view, wgpu::BindingResource::TextureView(&background_view), true);
         {
@@ -341,7 +395,10 @@ impl FlareRenderer {
                     view: &hdr_view,
                     depth_slice: None,
                     resolve_target: None,
-                    ops: wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT), store: wgpu::StoreOp::Store },
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                        store: wgpu::StoreOp::Store,
+                    },
                 })],
                 ..Default::default()
             });
@@ -386,10 +443,19 @@ fn read_texture(ctx: &GpuContext, texture: &wgpu::Texture, bytes_per_pixel: u32)
     });
     let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
     encoder.copy_texture_to_buffer(
-        wgpu::TexelCopyTextureInfo { texture, mip_level: 0, origin: wgpu::Origin3d::ZERO, aspect: wgpu::TextureAspect::All },
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::All,
+        },
         wgpu::TexelCopyBufferInfo {
             buffer: &buffer,
-            layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(padded), rows_per_image: Some(size.height) },
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(padded),
+                rows_per_image: Some(size.height),
+            },
         },
         size,
     );
@@ -410,7 +476,11 @@ fn read_texture(ctx: &GpuContext, texture: &wgpu::Texture, bytes_per_pixel: u32)
 }
 
 /// Renders `scene` headless into an Rgba8Unorm texture and reads the display image back.
-pub fn render_display(ctx: &GpuContext, renderer: &mut FlareRenderer, scene: &FlareScene) -> Result<DisplayImage, GpuError> {
+pub fn render_display(
+    ctx: &GpuContext,
+    renderer: &mut FlareRenderer,
+    scene: &FlareScene,
+) -> Result<DisplayImage, GpuError> {
     let target = texture_2d(
         &ctx.device,
         "display",

@@ -44,7 +44,8 @@ fn encode(path: &Path, e: impl std::fmt::Display) -> ImageError {
 /// Writes an 8-bit sRGB PNG.
 pub fn write_png(path: &Path, image: &DisplayImage) -> Result<(), ImageError> {
     let raw: Vec<u8> = image.pixels.iter().flatten().copied().collect();
-    let buffer = image::RgbaImage::from_raw(image.width, image.height, raw).ok_or_else(|| encode(path, "size mismatch"))?;
+    let buffer =
+        image::RgbaImage::from_raw(image.width, image.height, raw).ok_or_else(|| encode(path, "size mismatch"))?;
     let mut bytes = Vec::new();
     buffer.write_to(&mut Cursor::new(&mut bytes), image::ImageFormat::Png).map_err(|e| encode(path, e))?;
     write_atomic(path, &bytes).map_err(|source| ImageError::Io { path: path.display().to_string(), source })
@@ -52,8 +53,14 @@ pub fn write_png(path: &Path, image: &DisplayImage) -> Result<(), ImageError> {
 
 /// Writes a linear float OpenEXR (RGBA, every value finite).
 pub fn write_exr(path: &Path, image: &HdrImage) -> Result<(), ImageError> {
-    let raw: Vec<f32> = image.pixels.iter().flat_map(|p| [p[0], p[1], p[2], 1.0]).map(|v| if v.is_finite() { v } else { 0.0 }).collect();
-    let buffer = image::Rgba32FImage::from_raw(image.width, image.height, raw).ok_or_else(|| encode(path, "size mismatch"))?;
+    let raw: Vec<f32> = image
+        .pixels
+        .iter()
+        .flat_map(|p| [p[0], p[1], p[2], 1.0])
+        .map(|v| if v.is_finite() { v } else { 0.0 })
+        .collect();
+    let buffer =
+        image::Rgba32FImage::from_raw(image.width, image.height, raw).ok_or_else(|| encode(path, "size mismatch"))?;
     let mut bytes = Vec::new();
     image::DynamicImage::ImageRgba32F(buffer)
         .write_to(&mut Cursor::new(&mut bytes), image::ImageFormat::OpenExr)
@@ -73,7 +80,13 @@ pub fn read_plate(path: &Path) -> Result<HdrImage, ImageError> {
     let rgba = img.to_rgba32f();
     let linear = |v: f32| {
         let v = if v.is_finite() { v.max(0.0) } else { 0.0 };
-        if is_float { v } else if v <= 0.04045 { v / 12.92 } else { ((v + 0.055) / 1.055).powf(2.4) }
+        if is_float {
+            v
+        } else if v <= 0.04045 {
+            v / 12.92
+        } else {
+            ((v + 0.055) / 1.055).powf(2.4)
+        }
     };
     let pixels = rgba.pixels().map(|p| [linear(p[0]), linear(p[1]), linear(p[2]), 1.0]).collect();
     Ok(HdrImage { width, height, pixels })
