@@ -460,18 +460,12 @@ pub fn parse_aperture(spec: &str, f_number: Option<f64>) -> Result<Aperture> {
         "blades" => {
             let count =
                 parts.next().unwrap_or("6").parse().with_context(|| format!("--aperture {spec}: blade count"))?;
-            let rotation_deg = parts
-                .next()
-                .map(str::parse)
-                .transpose()
-                .with_context(|| format!("--aperture {spec}: rotation"))?
-                .unwrap_or(0.0);
-            let roundness = parts
-                .next()
-                .map(str::parse)
-                .transpose()
-                .with_context(|| format!("--aperture {spec}: roundness"))?
-                .unwrap_or(0.0);
+            let mut optional = |what: &str| -> Result<f64> {
+                let value = parts.next().map(str::parse::<f64>).transpose();
+                Ok(value.with_context(|| format!("--aperture {spec}: {what}"))?.unwrap_or(0.0))
+            };
+            let rotation_deg = optional("rotation")?;
+            let roundness = optional("roundness")?;
             ApertureShape::Blades { count, rotation_deg, roundness }
         }
         "image" => {
