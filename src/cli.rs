@@ -637,25 +637,8 @@ fn render(args: &RenderArgs) -> Result<()> {
         output::ImageKind::Exr => {
             // Linear float: background plus flare, times the exposure (what the PNG shows before tonemapping),
             // at the image size whatever the accumulation's.
-            let pixels = (0..width * height)
-                .map(|k| {
-                    hdr.sample_bilinear(
-                        ((k % width) as f32 + 0.5) / width as f32,
-                        ((k / width) as f32 + 0.5) / height as f32,
-                    )
-                })
-                .collect();
-            let mut linear = flare_core::render::HdrImage { width, height, pixels };
-            for (k, p) in linear.pixels.iter_mut().enumerate() {
-                if let Some(bg) = &background {
-                    let (x, y) = ((k as u32 % width) as f32, (k as u32 / width) as f32);
-                    let bx = (((x + 0.5) * bg.width as f32 / width as f32) as usize).min(bg.width as usize - 1);
-                    let by = (((y + 0.5) * bg.height as f32 / height as f32) as usize).min(bg.height as usize - 1);
-                    let b = bg.pixels[by * bg.width as usize + bx];
-                    for c in 0..3 {
-                        p[c] += b[c];
-                    }
-                }
+            let mut linear = cpu::composite(&scene, &hdr, background.as_ref());
+            for p in &mut linear.pixels {
                 for c in p.iter_mut().take(3) {
                     *c *= args.exposure;
                 }

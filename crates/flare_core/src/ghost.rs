@@ -32,10 +32,10 @@
 //! What changes per frame is only `u`: [`GhostSystem::frame`] is all the per-frame CPU work.
 
 use crate::coating::reflection;
-use crate::optics::{Coating, D_LINE_NM, FirstOrder, Lens, Mat2, ParaxialError, PathMatrices};
+use crate::optics::{Coating, FirstOrder, Lens, Mat2, ParaxialError, PathMatrices};
 use crate::spectrum::Spectrum;
 
-/// Samples of each reflectance table over sin(i) in [0, 1].
+/// Samples of each reflectance table over sin^2(i) in [0, 1].
 pub const REFLECTANCE_SAMPLES: usize = 33;
 
 /// The physical sensor the flare is drawn on, centred on the axis.
@@ -153,12 +153,6 @@ impl FrameCoefficients {
     }
 }
 
-/// The inverse of a ray-transfer matrix (its determinant is a ratio of indices, never 0).
-fn inverse(m: &Mat2) -> Mat2 {
-    let det = m.determinant();
-    Mat2 { a: m.d / det, b: -m.b / det, c: -m.c / det, d: m.a / det }
-}
-
 /// Paraxial angle of incidence at one reflection, linear in the entry point x0 and the light slope u.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Incidence {
@@ -191,7 +185,7 @@ pub struct GhostOptics {
 }
 
 /// What a frame needs of one ghost at one wavelength, precomputed so that the frame is a handful of
-/// multiplications: with E = (entrance-region centre) = `region_centre_per_slope * u`, everything is linear in u.
+/// multiplications: the entrance region's centre E is (a constant) x u, so everything is linear in u.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct FrameCoefficients {
     ghost: u32,
@@ -454,7 +448,7 @@ impl GhostSystem {
                             stop_from_entrance.push(to_stop[k].mul(&after_i));
                         }
                         let last_crossing = *stop_from_entrance.last().expect("every path crosses the stop");
-                        let sensor_from_stop = sensor_from_entrance.mul(&inverse(&last_crossing));
+                        let sensor_from_stop = sensor_from_entrance.mul(&last_crossing.inverse());
                         ghosts[g].per_wavelength.push(GhostOptics {
                             wavelength_nm,
                             matrices: PathMatrices { sensor_from_entrance, stop_from_entrance, sensor_from_stop },
@@ -614,12 +608,6 @@ impl GhostSystem {
             stop_count: co.stop_count as usize,
             front_map: map(co.front_scale, co.front_offset_per_slope),
         }
-    }
-
-    /// The d-line index of the spectrum, or the middle one.
-    pub fn reference_wavelength(&self) -> usize {
-        let w = &self.settings.spectrum.wavelengths_nm;
-        w.iter().position(|&x| x == D_LINE_NM).unwrap_or(w.len() / 2)
     }
 }
 

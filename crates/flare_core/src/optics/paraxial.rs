@@ -68,6 +68,12 @@ impl Mat2 {
         (self.a * y + self.b * u, self.c * y + self.d * u)
     }
 
+    /// The inverse; a ray-transfer matrix's determinant is a ratio of indices, never 0.
+    pub fn inverse(&self) -> Self {
+        let det = self.determinant();
+        Self { a: self.d / det, b: -self.b / det, c: -self.c / det, d: self.a / det }
+    }
+
     pub fn determinant(&self) -> f64 {
         self.a * self.d - self.b * self.c
     }

@@ -15,34 +15,13 @@ use crate::starburst::Starburst;
 /// Starburst texture as the GPU holds it: RGBA rounded to half floats.
 #[derive(Clone, Debug, PartialEq)]
 pub struct StarburstTexture {
-    pub size: usize,
-    pub texels: Vec<[f32; 4]>,
+    pub image: HdrImage,
 }
 
 impl StarburstTexture {
     pub fn from_starburst(s: &Starburst) -> Self {
-        let texels = s.rgba.iter().map(|t| t.map(|v| half::f16::from_f32(v).to_f32())).collect();
-        Self { size: s.size, texels }
-    }
-
-    /// Bilinear sample at texture coordinates (s, t) in [0, 1]^2, clamped to the edge.
-    fn sample(&self, s: f32, t: f32) -> [f32; 4] {
-        let n = self.size as f32;
-        let (x, y) = (s * n - 0.5, t * n - 0.5);
-        let (x0, y0) = (x.floor(), y.floor());
-        let (fx, fy) = (x - x0, y - y0);
-        let at = |i: f32, j: f32| {
-            let i = (i.max(0.0) as usize).min(self.size - 1);
-            let j = (j.max(0.0) as usize).min(self.size - 1);
-            self.texels[j * self.size + i]
-        };
-        let mut out = [0.0; 4];
-        for (c, o) in out.iter_mut().enumerate() {
-            let top = at(x0, y0)[c] * (1.0 - fx) + at(x0 + 1.0, y0)[c] * fx;
-            let bottom = at(x0, y0 + 1.0)[c] * (1.0 - fx) + at(x0 + 1.0, y0 + 1.0)[c] * fx;
-            *o = top * (1.0 - fy) + bottom * fy;
-        }
-        out
+        let pixels = s.rgba.iter().map(|t| t.map(|v| half::f16::from_f32(v).to_f32())).collect();
+        Self { image: HdrImage { width: s.size as u32, height: s.size as u32, pixels } }
     }
 }
 
@@ -117,7 +96,7 @@ pub fn starburst_pass(scene: &FlareScene, texture: &StarburstTexture, hdr: &mut 
             if q[0].abs() > 1.0 || q[1].abs() > 1.0 {
                 continue;
             }
-            let t = texture.sample(q[0] * 0.5 + 0.5, q[1] * 0.5 + 0.5);
+            let t = texture.image.sample_bilinear(q[0] * 0.5 + 0.5, q[1] * 0.5 + 0.5);
             let p = &mut hdr.pixels[y * w + x];
             for c in 0..3 {
                 p[c] += t[c] * intensity;
@@ -149,27 +128,39 @@ pub fn tonemap_pixel(c: [f32; 3], globals: &super::Globals) -> [f32; 3] {
     })
 }
 
-/// `tonemap.wgsl`: HDR accumulation (bilinear, upsampled to the image size) + optional background plate
-/// (nearest sample) to 8-bit display pixels.
-pub fn tonemap_pass(scene: &FlareScene, hdr: &HdrImage, background: Option<&HdrImage>) -> DisplayImage {
+/// The first step of `tonemap.wgsl`: the HDR accumulation (bilinear, upsampled to the image size) plus the
+/// optional background plate (nearest sample), linear and before the exposure. The EXR output is this times
+/// the exposure.
+pub fn composite(scene: &FlareScene, hdr: &HdrImage, background: Option<&HdrImage>) -> HdrImage {
     let (w, h) = (scene.width as usize, scene.height as usize);
     let mut pixels = Vec::with_capacity(w * h);
     for y in 0..h {
         for x in 0..w {
-            let p = hdr.sample_bilinear((x as f32 + 0.5) / w as f32, (y as f32 + 0.5) / h as f32);
-            let mut c = [p[0], p[1], p[2]];
+            let (s, t) = ((x as f32 + 0.5) / w as f32, (y as f32 + 0.5) / h as f32);
+            let mut p = hdr.sample_bilinear(s, t);
             if let Some(bg) = background {
-                let bx = (((x as f32 + 0.5) * bg.width as f32 / w as f32) as usize).min(bg.width as usize - 1);
-                let by = (((y as f32 + 0.5) * bg.height as f32 / h as f32) as usize).min(bg.height as usize - 1);
-                let b = bg.pixels[by * bg.width as usize + bx];
+                let b = bg.sample_nearest(s, t);
                 for k in 0..3 {
-                    c[k] += b[k];
+                    p[k] += b[k];
                 }
             }
-            let t = tonemap_pixel(c, &scene.globals);
-            pixels.push([to_u8(t[0]), to_u8(t[1]), to_u8(t[2]), 255]);
+            pixels.push(p);
         }
     }
+    HdrImage { width: scene.width, height: scene.height, pixels }
+}
+
+/// `tonemap.wgsl`: [`composite`], then exposure, tonemap and sRGB into 8-bit display pixels.
+pub fn tonemap_pass(scene: &FlareScene, hdr: &HdrImage, background: Option<&HdrImage>) -> DisplayImage {
+    let linear = composite(scene, hdr, background);
+    let pixels = linear
+        .pixels
+        .iter()
+        .map(|p| {
+            let t = tonemap_pixel([p[0], p[1], p[2]], &scene.globals);
+            [to_u8(t[0]), to_u8(t[1]), to_u8(t[2]), 255]
+        })
+        .collect();
     DisplayImage { width: scene.width, height: scene.height, pixels }
 }
 

@@ -201,6 +201,13 @@ pub struct HdrImage {
 }
 
 impl HdrImage {
+    /// Nearest sample at texture coordinates (s, t) in [0, 1]^2: what `textureLoad` at the scaled pixel reads.
+    pub fn sample_nearest(&self, s: f32, t: f32) -> [f32; 4] {
+        let x = ((s * self.width as f32) as usize).min(self.width as usize - 1);
+        let y = ((t * self.height as f32) as usize).min(self.height as usize - 1);
+        self.pixels[y * self.width as usize + x]
+    }
+
     /// Bilinear sample at texture coordinates (s, t) in [0, 1]^2, clamped to the edge: what a GPU's linear
     /// sampler returns.
     pub fn sample_bilinear(&self, s: f32, t: f32) -> [f32; 4] {
