@@ -16,6 +16,7 @@ use flare_core::optics::library::{DEFAULT_LENS_ID, builtin_lens, ids};
 use flare_core::optics::{
     Coating, CoatingLayer, FirstOrder, Lens, LightPath, PathKind, TraceOptions, TraceStatus, Tracer, pupil_ray,
 };
+use flare_core::raytrace;
 use flare_core::render::{DisplaySettings, Tonemap, cpu, gpu, output};
 use flare_core::spectrum::Spectrum;
 use serde_json::json;
@@ -43,6 +44,8 @@ pub enum Command {
     Ghosts(GhostsArgs),
     /// Render a flare to an image (PNG: tonemapped 8-bit sRGB; EXR: linear float).
     Render(RenderArgs),
+    /// Run time against error of every method (paraxial, ray grids) versus the ray-traced reference.
+    Bench(crate::bench::BenchArgs),
 }
 
 #[derive(clap::Args, Debug)]
@@ -72,9 +75,13 @@ pub struct RenderArgs {
     /// Image size, e.g. 1280x720.
     #[arg(long, default_value = "1280x720", value_parser = parse_size)]
     size: (u32, u32),
-    /// Rendering method.
+    /// Rendering method: paraxial (sprites, live), raygrid (Hullin 2011: a coarse grid of exactly traced rays per
+    /// ghost, needs --grid) or reference (the ray-traced ground truth; --grid defaults to the converged size).
     #[arg(long, default_value = "paraxial")]
     method: String,
+    /// Grid cells across each ghost's entrance region, for raygrid and reference.
+    #[arg(long)]
+    grid: Option<usize>,
     /// Aperture: circle, blades:N[:ROTATION_DEG[:ROUNDNESS]], or image:PATH (grayscale).
     #[arg(long, default_value = "blades:6")]
     aperture: String,
@@ -113,7 +120,7 @@ pub struct RenderArgs {
     output: PathBuf,
 }
 
-fn parse_size(s: &str) -> Result<(u32, u32), String> {
+pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
     let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("`{s}` is not WIDTHxHEIGHT"))?;
     let (w, h): (u32, u32) = (
         w.trim().parse().map_err(|_| format!("`{s}` is not WIDTHxHEIGHT"))?,
@@ -234,6 +241,7 @@ pub fn run(command: Command) -> Result<()> {
         Command::Trace(args) => trace(&args),
         Command::Ghosts(args) => ghosts(&args),
         Command::Render(args) => render(&args),
+        Command::Bench(args) => crate::bench::run(&args),
     }
 }
 
@@ -575,8 +583,18 @@ fn ghosts(args: &GhostsArgs) -> Result<()> {
 }
 
 fn render(args: &RenderArgs) -> Result<()> {
-    if args.method != "paraxial" {
-        bail!("--method {}: available methods: paraxial", args.method);
+    let grid = match (args.method.as_str(), args.grid) {
+        ("paraxial", None) => None,
+        ("paraxial", Some(_)) => bail!("--grid applies to --method raygrid or reference"),
+        ("raygrid", None) => bail!("--method raygrid needs --grid N (Hullin 2011 used 16 to 128)"),
+        ("raygrid", Some(n)) => Some(raytrace::Grid::Fixed(n)),
+        ("reference", n) => Some(raytrace::Grid::Adaptive(n.unwrap_or(raytrace::REFERENCE_GRID))),
+        (other, _) => bail!("--method {other}: available methods: paraxial, raygrid, reference"),
+    };
+    if let Some(n) = grid.map(raytrace::Grid::cells)
+        && !raytrace::GRID_RANGE.contains(&n)
+    {
+        bail!("--grid {n}: use {} to {}", raytrace::GRID_RANGE.start(), raytrace::GRID_RANGE.end());
     }
     let (x, y) = args.light_deg;
     if !(x.abs() < 89.0 && y.abs() < 89.0) {
@@ -614,12 +632,33 @@ fn render(args: &RenderArgs) -> Result<()> {
     let (width, height) = args.size;
     let (scene, frame) = flare.scene([x, y], width, height);
     let starburst_texture = cpu::StarburstTexture::from_starburst(&flare.starburst);
-    let (display, hdr) = match args.device.as_str() {
-        "cpu" => {
+    let (display, hdr) = match (grid, args.device.as_str()) {
+        (Some(n), _) => {
+            // Ray-traced ghosts, then the same starburst and tonemap passes as the CPU twin.
+            let started = std::time::Instant::now();
+            let traced = raytrace::RayGridRenderer::new(&flare).render([x, y], width, height, n)?;
+            let st = traced.stats;
+            eprintln!(
+                "ray-traced {} ghost x wavelength jobs, {n:?} grid: {} rays, {} triangles, {} jobs with no light, {:.2} s",
+                st.jobs,
+                st.rays,
+                st.triangles,
+                st.empty_jobs,
+                started.elapsed().as_secs_f64()
+            );
+            // The tonemap pass reads the accumulation at full size.
+            let scene = flare_core::render::FlareScene { hdr_width: width, hdr_height: height, ..scene.clone() };
+            let mut hdr = traced.hdr;
+            if config.display.starburst {
+                cpu::starburst_pass(&scene, &starburst_texture, &mut hdr);
+            }
+            (cpu::tonemap_pass(&scene, &hdr, background.as_ref()), hdr)
+        }
+        (None, "cpu") => {
             let hdr = cpu::render_hdr(&scene, &flare.mask, config.display.starburst.then_some(&starburst_texture));
             (cpu::tonemap_pass(&scene, &hdr, background.as_ref()), hdr)
         }
-        "gpu" => {
+        (None, "gpu") => {
             let ctx = gpu::GpuContext::headless(false).map_err(|e| anyhow::anyhow!("{e} (or use --device cpu)"))?;
             let mut renderer = gpu::FlareRenderer::new(&ctx.device, &ctx.queue, wgpu::TextureFormat::Rgba8Unorm);
             renderer.set_aperture(&ctx.device, &ctx.queue, &flare.mask);
@@ -630,7 +669,7 @@ fn render(args: &RenderArgs) -> Result<()> {
             eprintln!("rendered on {} ({:?})", ctx.adapter.name, ctx.adapter.backend);
             (display, hdr)
         }
-        other => bail!("--device {other}: use gpu or cpu"),
+        (None, other) => bail!("--device {other}: use gpu or cpu"),
     };
     match kind {
         output::ImageKind::Png => output::write_png(&args.output, &display)?,

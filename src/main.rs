@@ -4,7 +4,9 @@
 //! reported the same way instead of a backtrace.
 
 mod app;
+mod bench;
 mod cli;
+mod plot;
 
 use std::process::ExitCode;
 

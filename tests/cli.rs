@@ -369,3 +369,128 @@ fn render_without_any_adapter_says_so_clearly() {
     assert!(stderr.contains("no GPU adapter") && stderr.contains("--device cpu"), "{stderr}");
     assert!(!out.exists());
 }
+
+#[test]
+fn render_with_the_ray_traced_methods() {
+    let dir = tempfile::tempdir().unwrap();
+    for (method, grid) in [("raygrid", Some("16")), ("reference", Some("32")), ("reference", None)] {
+        let out = dir.path().join(format!("{method}-{}.png", grid.unwrap_or("default")));
+        let mut args = vec!["render", "tessar", "--light-deg", "5,3", "--size", "96x64", "--method", method];
+        args.extend(grid.iter().flat_map(|g| ["--grid", g]));
+        args.extend(["--exposure", "3000", "-o", out.to_str().unwrap()]);
+        let result = flarelab(&args);
+        let stderr = String::from_utf8_lossy(&result.stderr);
+        assert!(result.status.success(), "{args:?}: {stderr}");
+        assert!(stderr.contains("ray-traced"), "{stderr}");
+        let image = image::open(&out).unwrap().to_rgba8();
+        assert_eq!((image.width(), image.height()), (96, 64));
+        let lit = image.pixels().filter(|p| p[0] > 40 || p[1] > 40 || p[2] > 40).count();
+        assert!(lit > 50, "{method}: a flare is visible: {lit} lit pixels");
+    }
+    let out = dir.path().join("bad.png");
+    let out = out.to_str().unwrap();
+    for (args, word) in [
+        (vec!["render", "tessar", "--method", "raygrid", "-o", out], "--grid"),
+        (vec!["render", "tessar", "--grid", "32", "-o", out], "--grid"),
+        (vec!["render", "tessar", "--method", "reference", "--grid", "1", "-o", out], "--grid 1"),
+        (vec!["render", "tessar", "--method", "raygrid", "--grid", "99999", "-o", out], "--grid 99999"),
+    ] {
+        let message = refusal(&args);
+        assert!(message.contains(word), "{args:?}: `{message}` lacks `{word}`");
+    }
+}
+
+#[test]
+fn bench_writes_csv_markdown_and_plot_and_updates_the_readme() {
+    let dir = tempfile::tempdir().unwrap();
+    let readme = dir.path().join("README.md");
+    std::fs::write(&readme, "# Title\n\nBefore.\n\n<!-- bench:start -->\nold table\n<!-- bench:end -->\n\nAfter.\n")
+        .unwrap();
+    let out = dir.path().join("bench");
+    let result = flarelab(&[
+        "bench",
+        "--lens",
+        "tessar",
+        "--field-deg",
+        "0,8",
+        "--size",
+        "96x64",
+        "--grids",
+        "8,16",
+        "--reference-grid",
+        "64",
+        "--repeats",
+        "2",
+        "--update-readme",
+        readme.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    let csv = std::fs::read_to_string(out.join("bench.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    for column in ["lens", "field_deg", "method", "ms_median", "psnr_db", "ssim"] {
+        assert!(header.contains(&column), "{header:?} lacks {column}");
+    }
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    let column = |name: &str| header.iter().position(|c| *c == name).unwrap();
+    let methods: Vec<&str> = rows.iter().map(|r| r[column("method")]).collect();
+    assert_eq!(methods.iter().filter(|m| **m == "paraxial").count(), 2, "{methods:?}");
+    for m in ["reference", "raygrid-8", "raygrid-16"] {
+        assert_eq!(methods.iter().filter(|x| **x == m).count(), 2, "{m}: {methods:?}");
+    }
+    for r in &rows {
+        let number = |name: &str| r[column(name)].parse::<f64>().unwrap();
+        assert!(number("ms_median") > 0.0, "{r:?}");
+        let (psnr, ssim) = (number("psnr_db"), number("ssim"));
+        assert!(psnr.is_finite() && psnr > 5.0 && (-1.0..=1.0).contains(&ssim), "{r:?}");
+        if r[column("method")] == "reference" {
+            assert_eq!(psnr, 100.0, "the reference against itself");
+        }
+    }
+    // A finer ray grid is closer to the reference than a coarser one.
+    let psnr_of = |method: &str, field: &str| {
+        rows.iter().find(|r| r[column("method")] == method && r[column("field_deg")] == field).unwrap()
+            [column("psnr_db")]
+        .parse::<f64>()
+        .unwrap()
+    };
+    assert!(psnr_of("raygrid-16", "8") > psnr_of("raygrid-8", "8"));
+    let md = std::fs::read_to_string(out.join("bench.md")).unwrap();
+    assert!(md.contains("| brendel_tessar_usp2854889 | 8 | paraxial |"), "{md}");
+    assert!(md.contains("Convergence of the reference"), "{md}");
+    let plot = image::open(out.join("bench.png")).unwrap().to_rgb8();
+    assert!(plot.width() > 500 && plot.height() > 300);
+    let coloured = plot.pixels().filter(|p| p[0].abs_diff(p[1]) > 60 || p[1].abs_diff(p[2]) > 60).count();
+    assert!(coloured > 50, "the plot has coloured points: {coloured}");
+    let updated = std::fs::read_to_string(&readme).unwrap();
+    assert!(updated.starts_with("# Title\n\nBefore.\n\n<!-- bench:start -->\n"), "{updated}");
+    assert!(updated.contains("| brendel_tessar_usp2854889 | 8 | raygrid-16 |") && !updated.contains("old table"));
+    assert!(updated.ends_with("<!-- bench:end -->\n\nAfter.\n"), "{updated}");
+    // A README without the markers is refused and left as it was.
+    std::fs::write(&readme, "no markers\n").unwrap();
+    let message = refusal(&[
+        "bench",
+        "--lens",
+        "tessar",
+        "--field-deg",
+        "0",
+        "--size",
+        "32x24",
+        "--grids",
+        "4",
+        "--reference-grid",
+        "8",
+        "--repeats",
+        "1",
+        "--update-readme",
+        readme.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(message.contains("bench:start"), "{message}");
+    assert_eq!(std::fs::read_to_string(&readme).unwrap(), "no markers\n");
+    let message = refusal(&["bench", "--lens", "tessar", "--field-deg", "95", "--out", out.to_str().unwrap()]);
+    assert!(message.contains("--field-deg"), "{message}");
+}

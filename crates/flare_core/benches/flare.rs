@@ -70,16 +70,14 @@ fn gpu_frame(c: &mut Criterion) {
         let mut renderer = FlareRenderer::new(&ctx.device, &ctx.queue, wgpu::TextureFormat::Rgba8Unorm);
         renderer.set_aperture(&ctx.device, &ctx.queue, &flare.mask);
         renderer.set_starburst(&ctx.device, &ctx.queue, &flare.starburst);
-        let target = ctx.device.create_texture(&wgpu::TextureDescriptor {
-            label: None,
-            size: wgpu::Extent3d { width: 1280, height: 720, depth_or_array_layers: 1 },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::Rgba8Unorm,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
-            view_formats: &[],
-        });
+        let target = flare_core::render::gpu::texture_2d(
+            &ctx.device,
+            "bench target",
+            1280,
+            720,
+            wgpu::TextureFormat::Rgba8Unorm,
+            wgpu::TextureUsages::RENDER_ATTACHMENT,
+        );
         let view = target.create_view(&wgpu::TextureViewDescriptor::default());
         let mut k = 0u32;
         group.bench_function(name, |b| {

@@ -70,6 +70,7 @@ pub struct ApertureMask {
 
 impl ApertureMask {
     /// Bilinear sample at (u, v) in [-1, 1]^2 (0 outside), the way a GPU samples the texture.
+    #[inline]
     pub fn sample(&self, u: f32, v: f32) -> f32 {
         if !(-1.0..=1.0).contains(&u) || !(-1.0..=1.0).contains(&v) {
             return 0.0;
@@ -78,16 +79,33 @@ impl ApertureMask {
         // Texel centres at (i + 0.5) / n in texture coordinates; v = +1 is row 0.
         let x = (u * 0.5 + 0.5) * n - 0.5;
         let y = (0.5 - v * 0.5) * n - 0.5;
-        let (x0, y0) = (x.floor(), y.floor());
-        let (fx, fy) = (x - x0, y - y0);
-        let texel = |i: f32, j: f32| {
-            let i = (i.max(0.0) as usize).min(self.size - 1);
-            let j = (j.max(0.0) as usize).min(self.size - 1);
-            self.texels[j * self.size + i] as f32 / 255.0
+        // x, y >= -0.5, so truncating x + 1 floors x (without a call to libm's floorf on baseline x86-64).
+        let (x0, y0) = ((x + 1.0) as i32 - 1, (y + 1.0) as i32 - 1);
+        let (fx, fy) = (x - x0 as f32, y - y0 as f32);
+        let last = self.size as i32 - 1;
+        let texel = |i: i32, j: i32| {
+            let (i, j) = (i.clamp(0, last) as usize, j.clamp(0, last) as usize);
+            f32::from(self.texels[j * self.size + i])
         };
-        let top = texel(x0, y0) * (1.0 - fx) + texel(x0 + 1.0, y0) * fx;
-        let bottom = texel(x0, y0 + 1.0) * (1.0 - fx) + texel(x0 + 1.0, y0 + 1.0) * fx;
-        top * (1.0 - fy) + bottom * fy
+        let top = texel(x0, y0) * (1.0 - fx) + texel(x0 + 1, y0) * fx;
+        let bottom = texel(x0, y0 + 1) * (1.0 - fx) + texel(x0 + 1, y0 + 1) * fx;
+        (top * (1.0 - fy) + bottom * fy) / 255.0
+    }
+
+    /// The radius within which [`Self::sample`] is fully open (every texel it can read is 255): the nearest
+    /// centre of a texel below 255, less the reach of a bilinear sample (the texel diagonal). 0 when none.
+    pub fn open_radius(&self) -> f32 {
+        let n = self.size as f32;
+        let mut nearest = f32::INFINITY;
+        for (k, &t) in self.texels.iter().enumerate() {
+            if t < 255 {
+                let (i, j) = ((k % self.size) as f32, (k / self.size) as f32);
+                let (u, v) = ((i + 0.5) / n * 2.0 - 1.0, 1.0 - (j + 0.5) / n * 2.0);
+                nearest = nearest.min(u.hypot(v));
+            }
+        }
+        // Beyond [-1, 1]^2 the mask is 0: the open disc never reaches past radius 1.
+        (nearest.min(1.0) - 2.0 * std::f32::consts::SQRT_2 / n).max(0.0)
     }
 
     /// Fraction of the [-1, 1]^2 square that is open (a unit circle is pi / 4).

@@ -64,6 +64,42 @@ pub fn reflection(
     stack_reflection(&layers, n_incident, n_exit, wavelength_nm, sin_incidence)
 }
 
+/// Reflectance of one interface side at one wavelength, tabulated over sin^2(i) in [0, 1] with `samples`
+/// samples (uniform in sin^2, so denser towards grazing incidence, where R changes fastest) and read by
+/// linear interpolation. The paraxial ghosts use a coarse table, the ray-traced renderers a dense one.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReflectanceTable {
+    samples: Vec<f64>,
+}
+
+impl ReflectanceTable {
+    /// Tabulates [`reflection`] of `coating` from `n_incident` into `n_exit` at `wavelength_nm`.
+    pub fn new(coating: &Coating, n_incident: f64, n_exit: f64, wavelength_nm: f64, samples: usize) -> Self {
+        let samples = samples.max(2);
+        let samples = (0..samples)
+            .map(|k| {
+                let sin2_i = k as f64 / (samples - 1) as f64;
+                reflection(coating, n_incident, n_exit, wavelength_nm, sin2_i.sqrt()).reflectance
+            })
+            .collect();
+        Self { samples }
+    }
+
+    /// A surface that reflects nothing (the stop, or the same medium on both sides).
+    pub fn zero() -> Self {
+        Self { samples: vec![0.0, 0.0] }
+    }
+
+    /// Reflectance at `sin2_i` (clamped to [0, 1]).
+    pub fn at(&self, sin2_i: f64) -> f64 {
+        let n = self.samples.len();
+        let x = sin2_i.clamp(0.0, 1.0) * (n - 1) as f64;
+        let k = (x as usize).min(n - 2);
+        let f = x - k as f64;
+        self.samples[k] * (1.0 - f) + self.samples[k + 1] * f
+    }
+}
+
 /// Characteristic-matrix reflectance of `layers` (in the order the light meets them) between two media.
 pub fn stack_reflection(
     layers: &[CoatingLayer],

@@ -18,7 +18,9 @@
 //!   crossing's aperture coordinate is the affine `uv_k = (A_k rho / r_a) q + (A_k E + B_k u) / r_a`: the
 //!   renderer multiplies the aperture mask at every crossing and the front-disc mask.
 //! - **Brightness**: energy is conserved, so the irradiance relative to the incoming light is
-//!   `cos(theta) R_i R_j (entrance area / sensor area) = cos(theta) R_i R_j / A_f^2`. A ghost focused onto the
+//!   `cos(theta) R_i R_j T (entrance area / sensor area) = cos(theta) R_i R_j T / A_f^2`, where T is the
+//!   product of the transmittances `1 - R` of every refraction along the path, taken at normal incidence
+//!   (a constant per ghost and wavelength: a ghost that crosses 40 uncoated surfaces keeps only ~13%). A ghost focused onto the
 //!   sensor (A_f -> 0) gets the half-size `max(|S|, r_min)` and the irradiance `R_i R_j (rho / S)^2` with that
 //!   size: bounded, with the same total energy, never infinite. When `A_k -> 0` (the stop's image at
 //!   infinity) the front disc bounds the region and nothing divides by zero.
@@ -31,7 +33,7 @@
 //!
 //! What changes per frame is only `u`: [`GhostSystem::frame`] is all the per-frame CPU work.
 
-use crate::coating::reflection;
+use crate::coating::ReflectanceTable;
 use crate::optics::{Coating, FirstOrder, Lens, Mat2, ParaxialError, PathMatrices};
 use crate::spectrum::Spectrum;
 
@@ -85,19 +87,6 @@ impl Default for FrameSettings {
     }
 }
 
-/// A reflectance table over sin^2(i), uniform in sin^2 (denser towards grazing, where R changes fastest).
-#[derive(Clone, Debug, PartialEq)]
-struct ReflectanceTable([f64; REFLECTANCE_SAMPLES]);
-
-impl ReflectanceTable {
-    fn at(&self, sin2_i: f64) -> f64 {
-        let x = sin2_i.clamp(0.0, 1.0) * (REFLECTANCE_SAMPLES - 1) as f64;
-        let k = (x as usize).min(REFLECTANCE_SAMPLES - 2);
-        let f = x - k as f64;
-        self.0[k] * (1.0 - f) + self.0[k + 1] * f
-    }
-}
-
 impl FrameCoefficients {
     /// Everything linear in the light slope u, from the ghost's matrices (see the module documentation).
     fn new(ghost: usize, wavelength: usize, optics: &GhostOptics, r_a: f64, r_front: f64) -> Self {
@@ -142,6 +131,7 @@ impl FrameCoefficients {
             incidence2_j: incidence2(&optics.incidence_j),
             incidence2_i: incidence2(&optics.incidence_i),
             area_ratio: if half_size_mm != 0.0 { (rho / half_size_mm).powi(2) } else { 0.0 },
+            transmission: optics.transmission,
             reflectance_j: optics.reflectance_j as u32,
             reflectance_i: optics.reflectance_i as u32,
             stop_scale,
@@ -179,6 +169,8 @@ pub struct GhostOptics {
     /// the entry point and the light slope: `angle = per_entry * x0 + per_slope * u`.
     incidence_j: Incidence,
     incidence_i: Incidence,
+    /// Product of the transmittances (1 - R at normal incidence) of every refraction along the path.
+    pub transmission: f64,
     /// Indices into [`GhostSystem`]'s reflectance tables.
     reflectance_j: usize,
     reflectance_i: usize,
@@ -203,6 +195,8 @@ struct FrameCoefficients {
     incidence2_i: f64,
     /// rho^2 / S^2: the irradiance factor when the sprite is not enlarged.
     area_ratio: f64,
+    /// The path's transmission (see [`GhostOptics::transmission`]).
+    transmission: f64,
     reflectance_j: u32,
     reflectance_i: u32,
     /// Aperture maps: scale, and offset per unit slope, per crossing.
@@ -258,7 +252,7 @@ pub struct Sprite {
     pub centre_mm: [f64; 2],
     /// Signed half-size: negative when the ghost is an inverted image of the aperture.
     pub half_size_mm: f64,
-    /// Irradiance relative to the incoming light (cos theta R_i R_j / A_f^2, bounded).
+    /// Irradiance relative to the incoming light (cos theta R_i R_j T / A_f^2, bounded).
     pub irradiance: f64,
     /// irradiance x the wavelength's weight, clamped at 0.
     pub rgb: [f64; 3],
@@ -362,13 +356,11 @@ impl GhostSystem {
                 for w in 0..n_w {
                     let (before, after) = (indices[w][k], indices[w][k + 1]);
                     let (n_in, n_out) = if backward { (after, before) } else { (before, after) };
-                    tables.push(ReflectanceTable(std::array::from_fn(|sample| {
-                        if !reflecting[k] {
-                            return 0.0;
-                        }
-                        let sin2_i = sample as f64 / (REFLECTANCE_SAMPLES - 1) as f64;
-                        reflection(coating, n_in, n_out, spectrum.wavelengths_nm[w], sin2_i.sqrt()).reflectance
-                    })));
+                    tables.push(if reflecting[k] {
+                        ReflectanceTable::new(coating, n_in, n_out, spectrum.wavelengths_nm[w], REFLECTANCE_SAMPLES)
+                    } else {
+                        ReflectanceTable::zero()
+                    });
                 }
             }
         }
@@ -387,6 +379,7 @@ impl GhostSystem {
         let mut image_centre_per_slope = Vec::with_capacity(n_w);
         for (w, &wavelength_nm) in spectrum.wavelengths_nm.iter().enumerate() {
             let n = &indices[w];
+            let transmittance = |k: usize, backward: bool| 1.0 - tables[table_index(k, backward, w)].at(0.0);
             let gap = |a: usize, b: usize| Mat2::translation((z[a] - z[b]).abs());
             let forward_refraction = |k: usize| Mat2::refraction(curvature[k], n[k], n[k + 1], 1.0);
             let backward_refraction = |k: usize| Mat2::refraction(curvature[k], n[k + 1], n[k], -1.0);
@@ -449,8 +442,13 @@ impl GhostSystem {
                         }
                         let last_crossing = *stop_from_entrance.last().expect("every path crosses the stop");
                         let sensor_from_stop = sensor_from_entrance.mul(&last_crossing.inverse());
+                        // Refractions: forward 0..j, back j-1..=i+1, forward i+1..N.
+                        let transmission = (0..j).map(|m| transmittance(m, false)).product::<f64>()
+                            * (k + 1..j).map(|m| transmittance(m, true)).product::<f64>()
+                            * (k + 1..n_surfaces).map(|m| transmittance(m, false)).product::<f64>();
                         ghosts[g].per_wavelength.push(GhostOptics {
                             wavelength_nm,
+                            transmission,
                             matrices: PathMatrices { sensor_from_entrance, stop_from_entrance, sensor_from_stop },
                             incidence_j: Incidence::new(&at_j, curvature[j], 1.0),
                             incidence_i: Incidence::new(&at_k, curvature[k], -1.0),
@@ -559,7 +557,7 @@ impl GhostSystem {
             } else {
                 let r_j = self.tables[co.reflectance_j as usize].at(sin2_of(co.incidence2_j));
                 let r_i = self.tables[co.reflectance_i as usize].at(sin2_of(co.incidence2_i));
-                cos_theta * r_i * r_j * area_ratio
+                cos_theta * r_i * r_j * co.transmission * area_ratio
             };
             let weight = weights[co.wavelength as usize];
             let rgb = [

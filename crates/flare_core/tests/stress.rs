@@ -4,86 +4,14 @@
 //! grazing rays, total internal reflection, afocal lenses) are reported as outcomes.
 
 use flare_core::optics::{
-    D_LINE_NM, EntrancePupil, FirstOrder, Lens, LightPath, Medium, ParaxialError, PathMatrices, Ray, Surface,
-    TraceOptions, TraceStatus, Tracer, pupil_ray,
+    D_LINE_NM, EntrancePupil, FirstOrder, Lens, LightPath, Medium, ParaxialError, PathMatrices, Ray, TraceOptions,
+    TraceStatus, Tracer, pupil_ray,
 };
 use glam::DVec3;
+
+mod common;
+use common::{glass, lens_strategy, surface};
 use proptest::prelude::*;
-
-fn surface(radius_mm: f64, thickness_mm: f64, medium: Medium, semi_aperture_mm: f64) -> Surface {
-    Surface::new(radius_mm, Some(thickness_mm), medium, semi_aperture_mm)
-}
-
-fn glass(n_d: f64, v_d: f64) -> Medium {
-    Medium { n_d, v_d: Some(v_d), glass: None }
-}
-
-/// One random interface before assembly: curvature sign and size, aperture, the medium after it, the gap.
-#[derive(Clone, Debug)]
-struct Draft {
-    flat: bool,
-    radius_over_aperture: f64,
-    negative: bool,
-    semi_aperture_mm: f64,
-    to_glass: bool,
-    n_d: f64,
-    v_d: f64,
-    gap_mm: f64,
-}
-
-fn draft() -> impl Strategy<Value = Draft> {
-    (any::<u8>(), 1.1..40.0f64, any::<bool>(), 3.0..15.0f64, any::<u8>(), 1.45..1.95f64, 20.0..80.0f64, 0.1..12.0f64)
-        .prop_map(|(f, r, negative, h, g, n_d, v_d, gap_mm)| Draft {
-            flat: f % 7 == 0,
-            radius_over_aperture: r,
-            negative,
-            semi_aperture_mm: h,
-            to_glass: g % 3 != 0,
-            n_d,
-            v_d,
-            gap_mm,
-        })
-}
-
-/// Assembles drafts into a lens that passes validation by construction: media alternate sensibly, the
-/// last medium is air, the stop is a flat air surface inserted in an air gap, and every gap is widened so
-/// that neighbouring surfaces never cross inside their clear apertures.
-fn assemble(drafts: &[Draft], stop_choice: usize) -> Lens {
-    let mut surfaces = Vec::with_capacity(drafts.len() + 1);
-    let mut in_glass = false;
-    for (k, d) in drafts.iter().enumerate() {
-        let last = k + 1 == drafts.len();
-        // Glass follows air unless the draft says air (the first surface always enters glass).
-        let medium = if last || (!d.to_glass && (in_glass || k > 0)) { Medium::air() } else { glass(d.n_d, d.v_d) };
-        in_glass = !medium.is_air();
-        let r = if d.flat {
-            0.0
-        } else {
-            d.radius_over_aperture * d.semi_aperture_mm * if d.negative { -1.0 } else { 1.0 }
-        };
-        surfaces.push(surface(r, d.gap_mm, medium, d.semi_aperture_mm));
-    }
-    // The stop goes in front of a surface that has air before it.
-    let candidates: Vec<usize> = (0..surfaces.len()).filter(|&k| k == 0 || surfaces[k - 1].medium.is_air()).collect();
-    let at = candidates[stop_choice % candidates.len()];
-    let h = surfaces[at].semi_aperture_mm * 0.7;
-    let mut stop = surface(0.0, 1.0, Medium::air(), h);
-    stop.stop = true;
-    surfaces.insert(at, stop);
-    for k in 0..surfaces.len() - 1 {
-        let h = surfaces[k].semi_aperture_mm.min(surfaces[k + 1].semi_aperture_mm);
-        let overlap = surfaces[k].sag_mm(h).unwrap() - surfaces[k + 1].sag_mm(h).unwrap();
-        let t = surfaces[k].thickness_mm.unwrap() + overlap.max(0.0);
-        surfaces[k].thickness_mm = Some(t);
-    }
-    let lens = Lens { id: "random".into(), name: "random".into(), surfaces, extra: Default::default() };
-    lens.validate().unwrap_or_else(|e| panic!("generator made an invalid lens: {e}\n{lens:?}"));
-    lens
-}
-
-fn lens_strategy(min: usize, max: usize) -> impl Strategy<Value = Lens> {
-    (prop::collection::vec(draft(), min..=max), any::<usize>()).prop_map(|(d, s)| assemble(&d, s))
-}
 
 /// A few ghost paths of the lens, spread over its list (all when there are few).
 fn some_ghosts(lens: &Lens, at_most: usize) -> Vec<LightPath> {

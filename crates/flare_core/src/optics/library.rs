@@ -1,4 +1,4 @@
-//! The built-in lens library: the six prescriptions of `lenses/`, embedded in the binary so that the app
+//! The built-in lens library: the seven prescriptions of `lenses/`, embedded in the binary so that the app
 //! and the command line work from any folder.
 //!
 //! # How it works
@@ -17,6 +17,7 @@ pub const BUILTIN_LENSES: &[(&str, &str)] = &[
     ("pbrt_telephoto_250mm", include_str!("../../../../lenses/pbrt_telephoto_250mm.json")),
     ("pbrt_fisheye_10mm", include_str!("../../../../lenses/pbrt_fisheye_10mm.json")),
     ("brendel_tessar_usp2854889", include_str!("../../../../lenses/brendel_tessar_usp2854889.json")),
+    ("nikon_zoom_28_75mm", include_str!("../../../../lenses/nikon_zoom_28_75mm.json")),
 ];
 
 /// The lens the app opens with: the Heliar of the paraxial-flare patent's Table 1.
@@ -68,8 +69,9 @@ pub fn default_lens() -> Lens {
 
 /// A synthetic lens of `surface_count` surfaces (at least 3): equiconvex singlets of N-BK7 and F2 sharing
 /// a total power of 1 / 50 mm, 10 mm semi-apertures, the stop (semi-aperture 8 mm) in the middle air gap.
-/// Not a real design: it exists for benchmarks and stress tests that need many surfaces (a 60-surface lens has
-/// 1770 ghosts). An even count leaves one surface for the stop, so the last singlet is a plano-convex lens.
+/// Not a real design: it exists for benchmarks and stress tests that need many surfaces. One surface is the
+/// stop, which reflects nothing: 61 surfaces have 60 reflecting ones and 1770 ghosts, 60 surfaces 1711. An even
+/// count leaves an odd number of glass surfaces, so the last singlet is a plano-convex lens.
 pub fn synthetic_lens(surface_count: usize) -> Lens {
     use super::lens::{Medium, Surface};
     let count = surface_count.max(3);

@@ -18,4 +18,4 @@ pub use glass::D_LINE_NM;
 pub use lens::{Coating, CoatingLayer, Lens, LensError, Medium, Surface};
 pub use paraxial::{EntrancePupil, FirstOrder, Mat2, ParaxialError, PathMatrices};
 pub use path::{Interaction, LightPath, PathKind, Step};
-pub use trace::{Ray, TraceOptions, TraceResult, TraceStatus, Tracer, pupil_ray};
+pub use trace::{Landing, Ray, StepHit, TraceOptions, TraceResult, TraceStatus, Tracer, pupil_ray};

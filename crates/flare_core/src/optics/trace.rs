@@ -113,8 +113,8 @@ struct ResolvedStep {
     vertex_z_mm: f64,
     curvature_per_mm: f64,
     semi_aperture_mm: f64,
-    n_in: f64,
-    n_out: f64,
+    /// n_in / n_out (1 between equal media).
+    eta: f64,
     reflect: bool,
     arriving_direction: f64,
 }
@@ -142,8 +142,7 @@ impl Tracer {
                     vertex_z_mm: z[s.surface],
                     curvature_per_mm: surf.curvature_per_mm(),
                     semi_aperture_mm: surf.semi_aperture_mm,
-                    n_in: n[s.medium_in],
-                    n_out: n[s.medium_out],
+                    eta: n[s.medium_in] / n[s.medium_out],
                     reflect: s.interaction == Interaction::Reflect,
                     arriving_direction: s.arriving_direction,
                 }
@@ -154,24 +153,48 @@ impl Tracer {
 
     /// Traces one ray to the sensor.
     pub fn trace(&self, ray: &Ray, options: TraceOptions) -> TraceResult {
-        let mut p = ray.origin_mm;
-        let mut d = ray.direction.normalize_or_zero();
         let mut clipped_at = Vec::new();
         let mut points_mm = Vec::new();
         if options.record_points {
-            points_mm.push(p);
+            points_mm.push(ray.origin_mm);
         }
-        let stopped = |status, clipped_at, points_mm| TraceResult {
-            status,
-            sensor_point_mm: None,
-            sensor_direction: None,
-            clipped_at,
-            points_mm,
-        };
+        let outcome = self.trace_visit(ray, |hit| {
+            if options.record_points {
+                points_mm.push(hit.point_mm);
+            }
+            let outside = hit.point_mm.x.hypot(hit.point_mm.y) > hit.semi_aperture_mm;
+            if outside {
+                clipped_at.push(hit.surface);
+            }
+            !(outside && options.apply_apertures)
+        });
+        match outcome {
+            Ok(landing) => {
+                if options.record_points {
+                    points_mm.push(landing.point_mm);
+                }
+                TraceResult {
+                    status: TraceStatus::Landed,
+                    sensor_point_mm: Some(landing.point_mm),
+                    sensor_direction: Some(landing.direction),
+                    clipped_at,
+                    points_mm,
+                }
+            }
+            Err(status) => TraceResult { status, sensor_point_mm: None, sensor_direction: None, clipped_at, points_mm },
+        }
+    }
+
+    /// The tracing loop itself, allocation-free: `visit` sees every intersection (before the interaction) and
+    /// returns `false` to stop the ray there as vignetted. The ray-grid renderers read incidence angles and
+    /// stop crossings through it; [`Self::trace`] is built on it.
+    pub fn trace_visit(&self, ray: &Ray, mut visit: impl FnMut(&StepHit) -> bool) -> Result<Landing, TraceStatus> {
+        let mut p = ray.origin_mm;
+        let mut d = ray.direction.normalize_or_zero();
         if d == DVec3::ZERO || !p.is_finite() {
-            return stopped(TraceStatus::Missed { surface: 0 }, clipped_at, points_mm);
+            return Err(TraceStatus::Missed { surface: 0 });
         }
-        for step in &self.steps {
+        for (index, step) in self.steps.iter().enumerate() {
             let missed = TraceStatus::Missed { surface: step.surface };
             let local = p - DVec3::new(0.0, 0.0, step.vertex_z_mm);
             // The ray is a line and each surface a whole sphere: an intersection may lie behind the current
@@ -180,56 +203,72 @@ impl Tracer {
             // figures; inside the clear apertures surfaces never cross (validation refuses that), so rays
             // traced with apertures applied always move forward along the path.
             let Some(s) = intersect(local, d, step.curvature_per_mm, step.arriving_direction) else {
-                return stopped(missed, clipped_at, points_mm);
+                return Err(missed);
             };
             p += s * d;
-            if options.record_points {
-                points_mm.push(p);
-            }
-            if p.x.hypot(p.y) > step.semi_aperture_mm {
-                clipped_at.push(step.surface);
-                if options.apply_apertures {
-                    return stopped(TraceStatus::Vignetted { surface: step.surface }, clipped_at, points_mm);
-                }
-            }
             let normal = surface_normal(p - DVec3::new(0.0, 0.0, step.vertex_z_mm), step.curvature_per_mm);
+            let cos_i = d.dot(normal);
+            let hit = StepHit {
+                index,
+                surface: step.surface,
+                point_mm: p,
+                cos_incidence: cos_i.abs().min(1.0),
+                reflect: step.reflect,
+                semi_aperture_mm: step.semi_aperture_mm,
+            };
+            if !visit(&hit) {
+                return Err(TraceStatus::Vignetted { surface: step.surface });
+            }
             d = if step.reflect {
                 reflect(d, normal)
-            } else if step.n_in == step.n_out {
+            } else if step.eta == 1.0 {
                 d
             } else {
-                match refract(d, normal, step.n_in, step.n_out) {
+                match refract(d, normal, step.eta) {
                     Some(d) => d,
-                    None => return stopped(TraceStatus::Tir { surface: step.surface }, clipped_at, points_mm),
+                    None => return Err(TraceStatus::Tir { surface: step.surface }),
                 }
             };
             if !d.is_finite() || !p.is_finite() {
-                return stopped(missed, clipped_at, points_mm);
+                return Err(missed);
             }
         }
         // The sensor plane, facing the light travelling to +z.
         if d.z <= 0.0 {
-            return stopped(TraceStatus::Backward, clipped_at, points_mm);
+            return Err(TraceStatus::Backward);
         }
         let to_sensor = (self.sensor_z_mm - p.z) / d.z;
-        if !to_sensor.is_finite() {
-            return stopped(TraceStatus::Missed { surface: self.sensor_index }, clipped_at, points_mm);
-        }
         let landing = p + to_sensor * d;
-        if !landing.is_finite() {
-            return stopped(TraceStatus::Missed { surface: self.sensor_index }, clipped_at, points_mm);
+        if !to_sensor.is_finite() || !landing.is_finite() {
+            return Err(TraceStatus::Missed { surface: self.sensor_index });
         }
-        if options.record_points {
-            points_mm.push(landing);
-        }
-        TraceResult {
-            status: TraceStatus::Landed,
-            sensor_point_mm: Some(landing),
-            sensor_direction: Some(d),
-            clipped_at,
-            points_mm,
-        }
+        Ok(Landing { point_mm: landing, direction: d })
     }
+
+    /// Number of steps of the path.
+    pub fn steps(&self) -> usize {
+        self.steps.len()
+    }
+}
+
+/// One intersection seen by [`Tracer::trace_visit`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepHit {
+    /// Position of the step along the path.
+    pub index: usize,
+    pub surface: usize,
+    pub point_mm: DVec3,
+    /// |cos| of the angle between the arriving ray and the surface normal.
+    pub cos_incidence: f64,
+    pub reflect: bool,
+    pub semi_aperture_mm: f64,
+}
+
+/// Where and how a ray met the sensor.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Landing {
+    pub point_mm: DVec3,
+    pub direction: DVec3,
 }
 
 /// Distance along unit direction `d` from `p` (relative to the vertex) to the surface of curvature `c`,
@@ -247,21 +286,23 @@ fn intersect(p: DVec3, d: DVec3, c: f64, z_dir: f64) -> Option<f64> {
 }
 
 /// Unit normal of the surface of curvature `c` at the point `p` (relative to the vertex), pointing to +z
-/// at the vertex.
+/// at the vertex. On the sphere `c |p|^2 = 2 p_z`, so `|(-c x, -c y, 1 - c z)|^2 = 1 + c (c |p|^2 - 2 z) = 1`:
+/// the vector is already unit (to rounding) and needs no square root.
 fn surface_normal(p: DVec3, c: f64) -> DVec3 {
-    DVec3::new(-c * p.x, -c * p.y, 1.0 - c * p.z).normalize()
+    DVec3::new(-c * p.x, -c * p.y, 1.0 - c * p.z)
 }
 
-/// Vector Snell's law; `None` on total internal reflection.
-fn refract(d: DVec3, normal: DVec3, n_in: f64, n_out: f64) -> Option<DVec3> {
+/// Vector Snell's law with `eta = n_in / n_out`: `d' = eta d + (sign(cos i) cos t - eta cos i) N`; `None` on
+/// total internal reflection.
+fn refract(d: DVec3, normal: DVec3, eta: f64) -> Option<DVec3> {
     let cos_i = d.dot(normal);
     let sin2_i = (1.0 - cos_i * cos_i).max(0.0);
-    let root = n_out * n_out - n_in * n_in * sin2_i;
+    let root = 1.0 - eta * eta * sin2_i;
     if root < 0.0 {
         return None;
     }
-    let n_cos_t = root.sqrt().copysign(cos_i);
-    Some((n_in * d + (n_cos_t - n_in * cos_i) * normal) / n_out)
+    let cos_t = root.sqrt().copysign(cos_i);
+    Some(eta * d + (cos_t - eta * cos_i) * normal)
 }
 
 fn reflect(d: DVec3, normal: DVec3) -> DVec3 {
@@ -294,11 +335,11 @@ mod tests {
     #[test]
     fn snell_and_tir() {
         let d = DVec3::new(0.6, 0.0, 0.8);
-        let out = refract(d, DVec3::Z, 1.0, 1.5).unwrap();
+        let out = refract(d, DVec3::Z, 1.0 / 1.5).unwrap();
         assert!((out.length() - 1.0).abs() < 1e-15);
         assert!((1.5 * out.x - 0.6).abs() < 1e-15, "tangential n sin is conserved");
-        assert!(refract(d, DVec3::Z, 1.5, 1.0).is_some(), "1.5 * 0.6 = 0.9 < 1: no TIR");
-        assert!(refract(DVec3::new(0.8, 0.0, 0.6), DVec3::Z, 1.5, 1.0).is_none(), "1.5 * 0.8 > 1: TIR");
+        assert!(refract(d, DVec3::Z, 1.5).is_some(), "1.5 * 0.6 = 0.9 < 1: no TIR");
+        assert!(refract(DVec3::new(0.8, 0.0, 0.6), DVec3::Z, 1.5).is_none(), "1.5 * 0.8 > 1: TIR");
         let r = reflect(d, DVec3::Z);
         assert_eq!(r, DVec3::new(0.6, 0.0, -0.8));
     }

@@ -72,7 +72,8 @@ impl GpuContext {
     }
 }
 
-fn texture_2d(
+/// A plain 2D texture (one mip level, one sample).
+pub fn texture_2d(
     device: &wgpu::Device,
     label: &str,
     width: u32,

@@ -121,6 +121,8 @@ pub struct FlareScene {
     pub hdr_height: u32,
     pub globals: Globals,
     pub instances: Vec<GhostInstance>,
+    /// The ghost each instance belongs to (not uploaded; for per-ghost measurements).
+    pub instance_ghosts: Vec<u32>,
     /// Sprites dropped because a value was not finite (expected: always 0).
     pub dropped_non_finite: usize,
 }
@@ -153,6 +155,7 @@ impl FlareScene {
         let divisor = display.accumulation_divisor.clamp(1, 4);
         let (hdr_width, hdr_height) = (width.div_ceil(divisor), height.div_ceil(divisor));
         let mut instances = Vec::with_capacity(frame.stats.drawn);
+        let mut instance_ghosts = Vec::with_capacity(frame.stats.drawn);
         let mut dropped_non_finite = 0;
         for (index, sprite) in frame.sprites.iter().enumerate().filter(|(_, s)| s.culled.is_none()) {
             let masks = system.sprite_masks(index, u);
@@ -173,6 +176,7 @@ impl FlareScene {
             };
             if instance.is_finite() {
                 instances.push(instance);
+                instance_ghosts.push(sprite.ghost as u32);
             } else {
                 dropped_non_finite += 1;
             }
@@ -188,7 +192,7 @@ impl FlareScene {
             starburst: starburst.map(|v| if v.is_finite() { v } else { 0.0 }),
             tonemap: [display.exposure, display.tonemap.code(), 1.0, 0.0],
         };
-        Self { width, height, hdr_width, hdr_height, globals, instances, dropped_non_finite }
+        Self { width, height, hdr_width, hdr_height, globals, instances, instance_ghosts, dropped_non_finite }
     }
 }
 

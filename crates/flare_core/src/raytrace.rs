@@ -1,0 +1,776 @@
+//! Ray-traced ghosts: the ground-truth reference renderer and Hullin et al. 2011's ray grids.
+//!
+//! # How it works
+//! Nothing here is paraxial. Per ghost and wavelength (one job; jobs run in parallel with rayon, each into a
+//! per-thread f64 image that is summed at the end) a regular grid of (N+1) x (N+1) rays leaves the entrance
+//! plane (z = 0, the first vertex) in the light's direction and is traced exactly, in f64, along the ghost's
+//! path ([`crate::optics::Tracer::trace_visit`]). Each ray records:
+//! - where it lands on the sensor (the same plane and pixel mapping as the paraxial renderer);
+//! - its **weight**: the reflectance R at both reflections times the transmittance 1 - R at every refraction,
+//!   each at the ray's own angle of incidence and wavelength, with the surface's coating (dense tables of
+//!   [`DENSE_TABLE_SAMPLES`] samples over sin^2 i from [`crate::coating`]);
+//! - its coordinates at every stop crossing (1 or 3), in units of the stop radius at the chosen f-number;
+//! - its largest relative height `h / semi-aperture` over every other surface it meets (Hullin's "relative
+//!   radius").
+//!
+//! A ray that misses a surface, is totally internally reflected, or turns back for good is invalid; every
+//! triangle touching it is dropped (its light really is lost). Each grid cell is split into two triangles and
+//! **splatted with energy conserved**: a triangle carries `cos(theta) x (entrance area) x (mean weight)` of
+//! the light (the irradiance on the entrance plane of a unit light is cos theta), spread over its footprint on
+//! the sensor, so irradiance = that energy / sensor area: where rays bunch into a caustic, the image
+//! brightens exactly as much as the footprint shrinks. Inside a triangle the stop coordinates, relative radius
+//! and weight are interpolated barycentrically at each pixel centre; the aperture mask is looked up at every
+//! stop crossing and multiplied (the stop's blade shape, anti-aliased), and a pixel whose interpolated relative
+//! radius exceeds 1 is vignetted. Triangles smaller than [`SMALL_TRIANGLE_PX2`] pixels are splatted
+//! bilinearly instead (their energy at the centroids of their midpoint subdivision, or at their centroid
+//! below one pixel): a smooth filter, so the grid's pattern does not alias into the image as the grid
+//! refines, and a ghost focused to a point keeps its energy and stays finite.
+//!
+//! Where the grid lies: a pre-pass of a coarse grid over the whole front lens (a square of half-side the front
+//! clear aperture plus the obliquity of its sag) finds the cells where some ray passes everything and lands in
+//! the frame; the dense grid covers their bounding box grown by one coarse cell (light that lands off the frame
+//! is not traced twice). When no coarse ray passes at all, it covers 1.25 x the paraxial entrance region instead
+//! (only a hint of where to look, never a result), so a ghost smaller than a coarse cell is not missed.
+//!
+//! The two methods are this one algorithm at two densities ([`Grid`]):
+//! - **reference** (adaptive, up to [`REFERENCE_GRID`] cells across, about two per pixel of the ghost's extent
+//!   in the frame): the ground truth, converged (a test and `flarelab bench` show the image change falling as
+//!   the grid doubles);
+//! - **raygrid-N** (N = 16..128): Hullin et al. 2011's interactive method: a coarse grid of traced rays
+//!   rasterised as triangles with the aperture looked up per pixel.
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use crate::aperture::ApertureMask;
+use crate::coating::ReflectanceTable;
+use crate::flare::PreparedFlare;
+use crate::ghost::{GhostSystem, Sensor};
+use crate::metrics::GhostMoments;
+use crate::optics::{Interaction, LightPath, Ray, Tracer};
+use crate::render::{HdrImage, light_slopes_for_frame_position, sensor_to_pixel};
+
+/// Most grid cells across a ghost's entrance region in the reference renderer (see the convergence table in the
+/// README).
+pub const REFERENCE_GRID: usize = 256;
+/// Fewest grid cells across a ghost's entrance region in the reference renderer.
+pub const REFERENCE_MIN_GRID: usize = 64;
+
+/// How many rays a render traces per ghost and wavelength.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Grid {
+    /// N x N cells over every ghost's entrance region: Hullin 2011's ray grids.
+    Fixed(usize),
+    /// Up to N x N cells: about two cells per pixel of the ghost's extent in the frame (measured by the
+    /// pre-pass), at least [`REFERENCE_MIN_GRID`], rounded up to a power of two: the reference, whose triangles
+    /// are then at most about half a pixel on the sensor wherever they are not compressed into a caustic.
+    Adaptive(usize),
+}
+
+impl Grid {
+    /// The largest number of cells across.
+    pub fn cells(self) -> usize {
+        match self {
+            Self::Fixed(n) | Self::Adaptive(n) => n,
+        }
+    }
+
+    /// Cells across for a ghost extending `extent_px` pixels in the frame.
+    fn for_extent(self, extent_px: f64) -> usize {
+        match self {
+            Self::Fixed(n) => n,
+            Self::Adaptive(n) => {
+                let wanted = (2.0 * extent_px).ceil().clamp(1.0, n as f64) as usize;
+                wanted.next_power_of_two().clamp(REFERENCE_MIN_GRID.min(n), n)
+            }
+        }
+    }
+}
+/// Samples of the ray-traced renderers' reflectance tables over sin^2(i).
+pub const DENSE_TABLE_SAMPLES: usize = 1025;
+/// Triangles at least this many pixels big are shaded at the pixel centres they cover; smaller ones are
+/// splatted bilinearly (four splats from 1 px^2 up, one below).
+pub const SMALL_TRIANGLE_PX2: f64 = 4.0;
+/// The smallest and largest grid a ray-grid render accepts.
+pub const GRID_RANGE: std::ops::RangeInclusive<usize> = 2..=4096;
+
+/// One ghost at one wavelength, ready to trace.
+#[derive(Clone, Debug)]
+struct Job {
+    ghost: usize,
+    wavelength: usize,
+    tracer: Tracer,
+    /// Per step of the path: the reflectance table of the surface side the light meets, if it reflects at all.
+    step_tables: Vec<Option<usize>>,
+    /// Per step: 1 / semi-aperture^2 (0 at the stop, whose aperture is the mask).
+    inverse_semi_aperture2: Vec<f64>,
+}
+
+/// Everything a ray-traced render of one lens and configuration needs; made once, used for any light.
+#[derive(Clone, Debug)]
+pub struct RayGridRenderer {
+    system: GhostSystem,
+    mask: ApertureMask,
+    jobs: Vec<Job>,
+    tables: Vec<ReflectanceTable>,
+    stop: usize,
+    /// Half-side of the square the pre-pass covers, before the light's obliquity: the front clear aperture.
+    front_radius_mm: f64,
+    /// |sag| of the front surface at its clear aperture.
+    front_sag_mm: f64,
+}
+
+/// Counts of one render.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RayGridStats {
+    pub jobs: usize,
+    pub rays: u64,
+    pub triangles: u64,
+    /// Jobs (ghost x wavelength) where no ray passed everything.
+    pub empty_jobs: usize,
+}
+
+/// A ray-traced ghost image and what it is made of.
+#[derive(Clone, Debug)]
+pub struct RayGridImage {
+    /// Linear irradiance relative to the light, ghosts only, `width` x `height`.
+    pub hdr: HdrImage,
+    /// Per ghost: luminance-weighted energy and its first moments, over the pixels in the frame.
+    pub moments: Vec<GhostMoments>,
+    pub stats: RayGridStats,
+}
+
+/// Why a ray-grid render is refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RayGridError {
+    #[error("grid {0}: use {min} to {max} cells across", min = GRID_RANGE.start(), max = GRID_RANGE.end())]
+    Grid(usize),
+    #[error("image size {0}x{1}: both sides must be at least 1 pixel")]
+    Size(u32, u32),
+    #[error("light angle {0:?} deg: each angle must be finite and within +-89 degrees")]
+    Angle([f64; 2]),
+}
+
+/// One traced grid vertex.
+#[derive(Clone, Copy, Debug, Default)]
+struct Vertex {
+    valid: bool,
+    /// Landing point in image pixels.
+    pixel: [f64; 2],
+    /// Coordinates at each stop crossing, in stop radii.
+    stops: [[f64; 2]; 3],
+    /// Largest h / semi-aperture over the other surfaces.
+    ratio: f64,
+    weight: f64,
+}
+
+impl Vertex {
+    /// Passes every aperture (the stop's unit square holds any mask).
+    fn passes(&self, stop_count: usize) -> bool {
+        self.valid
+            && self.ratio <= 1.0
+            && self.stops[..stop_count].iter().all(|s| s[0].abs() <= 1.0 && s[1].abs() <= 1.0)
+    }
+}
+
+/// Per-thread accumulation: energy per pixel (relative irradiance x mm^2) and per-ghost moments.
+struct Accumulator {
+    width: usize,
+    height: usize,
+    energy: Vec<[f64; 3]>,
+    moments: Vec<GhostMoments>,
+    stats: RayGridStats,
+}
+
+impl Accumulator {
+    fn new(width: usize, height: usize, ghosts: usize) -> Self {
+        Self {
+            width,
+            height,
+            energy: vec![[0.0; 3]; width * height],
+            moments: vec![GhostMoments::default(); ghosts],
+            stats: RayGridStats::default(),
+        }
+    }
+
+    fn merge(mut self, other: Self) -> Self {
+        for (a, b) in self.energy.iter_mut().zip(&other.energy) {
+            for c in 0..3 {
+                a[c] += b[c];
+            }
+        }
+        for (a, b) in self.moments.iter_mut().zip(&other.moments) {
+            a.add(b);
+        }
+        self.stats.jobs += other.stats.jobs;
+        self.stats.rays += other.stats.rays;
+        self.stats.triangles += other.stats.triangles;
+        self.stats.empty_jobs += other.stats.empty_jobs;
+        self
+    }
+
+    /// Adds `energy` (scalar, before the spectral weight) at pixel (x, y) when it lies in the frame.
+    fn add(&mut self, x: i64, y: i64, energy: f64, job: &JobFrame) {
+        if x < 0 || y < 0 || x >= self.width as i64 || y >= self.height as i64 || !(energy > 0.0) {
+            return;
+        }
+        let p = &mut self.energy[y as usize * self.width + x as usize];
+        for c in 0..3 {
+            p[c] += energy * job.rgb[c];
+        }
+        let luma = energy * job.luma;
+        self.moments[job.ghost].add_sample(luma, [x as f64 + 0.5, y as f64 + 0.5]);
+    }
+}
+
+/// What a job's triangles need besides their vertices.
+struct JobFrame<'a> {
+    ghost: usize,
+    rgb: [f64; 3],
+    luma: f64,
+    stop_count: usize,
+    mask: &'a ApertureMask,
+    /// cos(theta) x the entrance area of one triangle (mm^2).
+    triangle_flux: f64,
+}
+
+impl RayGridRenderer {
+    /// Prepares every ghost of `flare` (its lens, spectrum, f-number, coatings and aperture).
+    pub fn new(flare: &PreparedFlare) -> Self {
+        let system = flare.system.clone();
+        let lens = &system.lens;
+        let spectrum = &system.settings.spectrum;
+        let n_surfaces = lens.surfaces.len();
+        let reflecting = lens.reflecting_surfaces();
+        let sensor_z_mm = system.first_order.sensor_z_mm();
+        // Tables per (surface, arriving backward?, wavelength), as in the paraxial system but dense.
+        let mut tables = Vec::new();
+        let mut table_of = vec![None; n_surfaces * 2 * spectrum.len()];
+        for (w, &wavelength_nm) in spectrum.wavelengths_nm.iter().enumerate() {
+            let n = lens.media_indices_at(wavelength_nm);
+            for &k in &reflecting {
+                let coating = system.settings.coating_override.as_ref().unwrap_or(&lens.surfaces[k].coating);
+                for backward in [false, true] {
+                    let (n_in, n_out) = if backward { (n[k + 1], n[k]) } else { (n[k], n[k + 1]) };
+                    table_of[(k * 2 + usize::from(backward)) * spectrum.len() + w] = Some(tables.len());
+                    tables.push(ReflectanceTable::new(coating, n_in, n_out, wavelength_nm, DENSE_TABLE_SAMPLES));
+                }
+            }
+        }
+        let mut jobs = Vec::with_capacity(system.ghosts.len() * spectrum.len());
+        for (g, ghost) in system.ghosts.iter().enumerate() {
+            let path = LightPath::ghost(lens, ghost.i, ghost.j).expect("the ghost system lists valid ghosts");
+            for (w, &wavelength_nm) in spectrum.wavelengths_nm.iter().enumerate() {
+                let step_tables = path
+                    .steps
+                    .iter()
+                    .map(|s| {
+                        let backward = s.arriving_direction < 0.0;
+                        let table = table_of[(s.surface * 2 + usize::from(backward)) * spectrum.len() + w];
+                        // A refraction between equal media (the stop) neither reflects nor loses light.
+                        if s.interaction == Interaction::Refract && s.medium_in == s.medium_out { None } else { table }
+                    })
+                    .collect();
+                let inverse_semi_aperture2 = path
+                    .steps
+                    .iter()
+                    .map(|s| {
+                        if lens.surfaces[s.surface].stop {
+                            0.0
+                        } else {
+                            lens.surfaces[s.surface].semi_aperture_mm.powi(-2)
+                        }
+                    })
+                    .collect();
+                jobs.push(Job {
+                    ghost: g,
+                    wavelength: w,
+                    tracer: Tracer::new(lens, &path, wavelength_nm, sensor_z_mm),
+                    step_tables,
+                    inverse_semi_aperture2,
+                });
+            }
+        }
+        let front = &lens.surfaces[0];
+        let front_radius_mm = front.semi_aperture_mm;
+        let front_sag_mm = front.sag_mm(front_radius_mm).unwrap_or(front_radius_mm).abs();
+        Self { stop: lens.stop_index(), mask: flare.mask.clone(), system, jobs, tables, front_radius_mm, front_sag_mm }
+    }
+
+    /// Number of ghosts (the length of [`RayGridImage::moments`]).
+    pub fn ghost_count(&self) -> usize {
+        self.system.ghosts.len()
+    }
+
+    /// Renders the ghosts for a light seen at the frame position `light_deg` (X right, Y up, degrees) into a
+    /// `width` x `height` image with `grid` cells across each ghost's entrance region.
+    pub fn render(
+        &self,
+        light_deg: [f64; 2],
+        width: u32,
+        height: u32,
+        grid: Grid,
+    ) -> Result<RayGridImage, RayGridError> {
+        self.render_selected(light_deg, width, height, grid, |_| true)
+    }
+
+    /// [`Self::render`] of the ghosts for which `selected(ghost index)` is true only.
+    pub fn render_selected(
+        &self,
+        light_deg: [f64; 2],
+        width: u32,
+        height: u32,
+        grid: Grid,
+        selected: impl Fn(usize) -> bool + Sync,
+    ) -> Result<RayGridImage, RayGridError> {
+        if !GRID_RANGE.contains(&grid.cells()) {
+            return Err(RayGridError::Grid(grid.cells()));
+        }
+        if width == 0 || height == 0 {
+            return Err(RayGridError::Size(width, height));
+        }
+        if !light_deg.iter().all(|a| a.is_finite() && a.abs() <= 89.0) {
+            return Err(RayGridError::Angle(light_deg));
+        }
+        let u = light_slopes_for_frame_position(light_deg[0], light_deg[1]);
+        let sensor = Sensor::full_frame_for(width, height);
+        let (w, h) = (width as usize, height as usize);
+        let ghosts = self.ghost_count();
+        let acc = self
+            .jobs
+            .par_iter()
+            .filter(|job| selected(job.ghost))
+            .fold(
+                || Accumulator::new(w, h, ghosts),
+                |mut acc, job| {
+                    self.render_job(job, u, &sensor, width, height, grid, &mut acc);
+                    acc
+                },
+            )
+            .reduce(|| Accumulator::new(w, h, ghosts), Accumulator::merge);
+        // Energy per pixel / pixel area = irradiance; moments likewise in irradiance x pixel^2, as the
+        // paraxial renderer's.
+        let pixel_area_mm2 = (sensor.width_mm / width as f64).powi(2);
+        let mut moments = acc.moments;
+        for m in &mut moments {
+            *m = GhostMoments {
+                energy: m.energy / pixel_area_mm2,
+                sum_x: m.sum_x / pixel_area_mm2,
+                sum_y: m.sum_y / pixel_area_mm2,
+            };
+        }
+        let pixels = acc
+            .energy
+            .iter()
+            .map(|e| {
+                let v = e.map(|c| (c / pixel_area_mm2) as f32);
+                let v = v.map(|c| if c.is_finite() && c > 0.0 { c } else { 0.0 });
+                [v[0], v[1], v[2], 1.0]
+            })
+            .collect();
+        Ok(RayGridImage { hdr: HdrImage { width, height, pixels }, moments, stats: acc.stats })
+    }
+
+    /// Traces one ray of `job` from the entrance point `x0` (mm) in direction `d`.
+    fn trace_vertex(&self, job: &Job, x0: [f64; 2], d: DVec3, sensor: &Sensor, size: (u32, u32)) -> Vertex {
+        let ray = Ray { origin_mm: DVec3::new(x0[0], x0[1], 0.0), direction: d };
+        let stop_radius = self.system.stop_radius_mm;
+        let mut v = Vertex { weight: 1.0, ..Vertex::default() };
+        let mut crossings = 0;
+        let mut ratio2 = 0.0f64;
+        let landing = job.tracer.trace_visit(&ray, |hit| {
+            let sin2 = 1.0 - hit.cos_incidence * hit.cos_incidence;
+            if let Some(t) = job.step_tables[hit.index] {
+                let r = self.tables[t].at(sin2);
+                v.weight *= if hit.reflect { r } else { 1.0 - r };
+            }
+            let p = hit.point_mm;
+            if hit.surface == self.stop {
+                if crossings < 3 {
+                    v.stops[crossings] = [p.x / stop_radius, p.y / stop_radius];
+                    crossings += 1;
+                }
+            } else {
+                ratio2 = ratio2.max((p.x * p.x + p.y * p.y) * job.inverse_semi_aperture2[hit.index]);
+            }
+            true
+        });
+        v.ratio = ratio2.sqrt();
+        if let Ok(landing) = landing {
+            let pixel = sensor_to_pixel([landing.point_mm.x, landing.point_mm.y], sensor, size.0, size.1);
+            v.valid = pixel.iter().all(|c| c.is_finite()) && v.weight.is_finite() && v.ratio.is_finite();
+            v.pixel = pixel;
+        }
+        v
+    }
+
+    /// Where to lay the dense grid: `[x_min, y_min, x_max, y_max]` on the entrance plane, and the extent in
+    /// pixels (the larger side of the bounding box, clipped to the frame) of where the passing pre-pass rays land;
+    /// `None` when no ray passes (the pre-pass found none and the paraxial region is empty too).
+    #[allow(clippy::too_many_arguments)]
+    fn grid_bounds(
+        &self,
+        job: &Job,
+        u: [f64; 2],
+        d: DVec3,
+        coarse: usize,
+        sensor: &Sensor,
+        size: (u32, u32),
+        stats: &mut RayGridStats,
+    ) -> Option<([f64; 4], f64)> {
+        let half = self.front_radius_mm * 1.01 + u[0].hypot(u[1]) * self.front_sag_mm;
+        let stop_count =
+            self.system.ghosts[job.ghost].per_wavelength[job.wavelength].matrices.stop_from_entrance.len().min(3);
+        let step = 2.0 * half / coarse as f64;
+        let n = coarse + 1;
+        let mut vertices = Vec::with_capacity(n * n);
+        for iy in 0..n {
+            for ix in 0..n {
+                let x0 = [-half + ix as f64 * step, -half + iy as f64 * step];
+                vertices.push((x0, self.trace_vertex(job, x0, d, sensor, size)));
+            }
+        }
+        stats.rays += (n * n) as u64;
+        let empty = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+        let grow = |b: [f64; 4], p: [f64; 2]| [b[0].min(p[0]), b[1].min(p[1]), b[2].max(p[0]), b[3].max(p[1])];
+        let (w, h) = (f64::from(size.0), f64::from(size.1));
+        // The cells where light passes and lands in the frame (a cell's landings bound where its rays land).
+        let (mut found, mut landed, mut any_passes) = (empty, empty, false);
+        for iy in 0..coarse {
+            for ix in 0..coarse {
+                let corners =
+                    [iy * n + ix, iy * n + ix + 1, (iy + 1) * n + ix, (iy + 1) * n + ix + 1].map(|k| &vertices[k]);
+                if !corners.iter().any(|(_, v)| v.passes(stop_count)) {
+                    continue;
+                }
+                any_passes = true;
+                let footprint = corners.iter().filter(|(_, v)| v.valid).fold(empty, |b, (_, v)| grow(b, v.pixel));
+                if footprint[0] > w + 1.0 || footprint[1] > h + 1.0 || footprint[2] < -1.0 || footprint[3] < -1.0 {
+                    continue;
+                }
+                for (x0, v) in corners {
+                    found = grow(found, *x0);
+                    if v.passes(stop_count) {
+                        landed = grow(landed, v.pixel);
+                    }
+                }
+            }
+        }
+        let extent_px = if landed[0].is_finite() {
+            (landed[2].min(w) - landed[0].max(0.0)).max(landed[3].min(h) - landed[1].max(0.0)).max(0.0)
+        } else {
+            0.0
+        };
+        let mut bounds = if found[0].is_finite() {
+            [found[0] - step, found[1] - step, found[2] + step, found[3] + step]
+        } else {
+            empty
+        };
+        if !any_passes {
+            // No coarse ray passed: look where the paraxial entrance region is, in case the ghost is smaller
+            // than a coarse cell (a hint of where to look, never a result).
+            let sprite = job.ghost * self.system.settings.spectrum.len() + job.wavelength;
+            let front = self.system.sprite_masks(sprite, u).front_map;
+            let rho = front.scale.abs() * self.system.front_radius_mm;
+            let e = front.offset.map(|o| o * self.system.front_radius_mm);
+            if rho > 0.0 && rho.is_finite() && e.iter().all(|c| c.is_finite()) {
+                let r = 1.25 * rho;
+                bounds = [e[0] - r, e[1] - r, e[0] + r, e[1] + r];
+            }
+        }
+        let bounds = [bounds[0].max(-half), bounds[1].max(-half), bounds[2].min(half), bounds[3].min(half)];
+        (bounds[0] < bounds[2] && bounds[1] < bounds[3]).then_some((bounds, extent_px))
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn render_job(
+        &self,
+        job: &Job,
+        u: [f64; 2],
+        sensor: &Sensor,
+        width: u32,
+        height: u32,
+        grid: Grid,
+        acc: &mut Accumulator,
+    ) {
+        acc.stats.jobs += 1;
+        let d = DVec3::new(u[0], u[1], 1.0).normalize();
+        let size = (width, height);
+        let coarse = (grid.cells() / 2).clamp(16, 64);
+        let Some((b, extent_px)) = self.grid_bounds(job, u, d, coarse, sensor, size, &mut acc.stats) else {
+            acc.stats.empty_jobs += 1;
+            return;
+        };
+        let grid = grid.for_extent(extent_px);
+        let weights = self.system.settings.spectrum.weights_rgb[job.wavelength];
+        let frame = JobFrame {
+            ghost: job.ghost,
+            rgb: weights,
+            luma: crate::metrics::luminance(weights),
+            stop_count: self.system.ghosts[job.ghost].per_wavelength[job.wavelength]
+                .matrices
+                .stop_from_entrance
+                .len()
+                .min(3),
+            mask: &self.mask,
+            triangle_flux: d.z * 0.5 * (b[2] - b[0]) * (b[3] - b[1]) / (grid * grid) as f64,
+        };
+        let (dx, dy) = ((b[2] - b[0]) / grid as f64, (b[3] - b[1]) / grid as f64);
+        let mut previous: Vec<Vertex> = Vec::with_capacity(grid + 1);
+        let mut current: Vec<Vertex> = Vec::with_capacity(grid + 1);
+        let mut any = false;
+        for iy in 0..=grid {
+            current.clear();
+            for ix in 0..=grid {
+                let x0 = [b[0] + ix as f64 * dx, b[1] + iy as f64 * dy];
+                current.push(self.trace_vertex(job, x0, d, sensor, size));
+            }
+            acc.stats.rays += (grid + 1) as u64;
+            if iy > 0 {
+                for ix in 0..grid {
+                    let (v00, v10, v01, v11) = (&previous[ix], &previous[ix + 1], &current[ix], &current[ix + 1]);
+                    for tri in [[v00, v10, v11], [v00, v11, v01]] {
+                        if splat_triangle(tri, &frame, acc) {
+                            acc.stats.triangles += 1;
+                            any = true;
+                        }
+                    }
+                }
+            }
+            std::mem::swap(&mut previous, &mut current);
+        }
+        if !any {
+            acc.stats.empty_jobs += 1;
+        }
+    }
+}
+
+/// A quantity linear over a triangle: `a0 + ax x + ay y` at the pixel position (x, y).
+#[derive(Clone, Copy, Debug)]
+struct Plane {
+    a0: f64,
+    ax: f64,
+    ay: f64,
+}
+
+impl Plane {
+    fn at(&self, p: [f64; 2]) -> f64 {
+        self.a0 + self.ax * p[0] + self.ay * p[1]
+    }
+}
+
+/// Barycentric interpolation over one triangle in pixel space: the three barycentric coordinates as planes.
+struct Interpolator {
+    bary: [Plane; 3],
+}
+
+impl Interpolator {
+    /// `None` for a triangle of zero area.
+    fn new(v: [[f64; 2]; 3]) -> Option<Self> {
+        let area2 = (v[1][0] - v[0][0]) * (v[2][1] - v[0][1]) - (v[1][1] - v[0][1]) * (v[2][0] - v[0][0]);
+        if area2 == 0.0 || !area2.is_finite() {
+            return None;
+        }
+        // l_i is the edge function of the opposite edge (q, r) over twice the area.
+        let plane = |q: [f64; 2], r: [f64; 2]| Plane {
+            a0: (q[0] * r[1] - q[1] * r[0]) / area2,
+            ax: (q[1] - r[1]) / area2,
+            ay: (r[0] - q[0]) / area2,
+        };
+        Some(Self { bary: [plane(v[1], v[2]), plane(v[2], v[0]), plane(v[0], v[1])] })
+    }
+
+    /// The plane of a quantity with values `f` at the three vertices.
+    fn attribute(&self, f: [f64; 3]) -> Plane {
+        let [l0, l1, l2] = self.bary;
+        Plane {
+            a0: l0.a0 * f[0] + l1.a0 * f[1] + l2.a0 * f[2],
+            ax: l0.ax * f[0] + l1.ax * f[1] + l2.ax * f[2],
+            ay: l0.ay * f[0] + l1.ay * f[1] + l2.ay * f[2],
+        }
+    }
+
+    /// The pixel columns of row `y` whose centres lie inside the triangle (all barycentrics >= 0).
+    fn span(&self, y: i64, x_range: (i64, i64)) -> std::ops::RangeInclusive<i64> {
+        let yc = y as f64 + 0.5;
+        let (mut lo, mut hi) = (x_range.0 as f64 + 0.5, x_range.1 as f64 + 0.5);
+        for l in &self.bary {
+            let c = l.a0 + l.ay * yc;
+            if l.ax > 0.0 {
+                lo = lo.max(-c / l.ax);
+            } else if l.ax < 0.0 {
+                hi = hi.min(-c / l.ax);
+            } else if c < 0.0 {
+                return 1..=0;
+            }
+        }
+        if !(lo <= hi) {
+            return 1..=0;
+        }
+        ((lo - 0.5).ceil() as i64)..=((hi - 0.5).floor() as i64)
+    }
+}
+
+/// The attributes of one triangle as planes: the light passing at a pixel is `shade`.
+struct TriangleShader<'a> {
+    ratio: Plane,
+    weight: Plane,
+    stops: [[Plane; 2]; 3],
+    frame: &'a JobFrame<'a>,
+}
+
+impl<'a> TriangleShader<'a> {
+    fn new(tri: [&Vertex; 3], interp: &Interpolator, frame: &'a JobFrame<'a>) -> Self {
+        let attr = |f: &dyn Fn(&Vertex) -> f64| interp.attribute([f(tri[0]), f(tri[1]), f(tri[2])]);
+        Self {
+            ratio: attr(&|v| v.ratio),
+            weight: attr(&|v| v.weight),
+            stops: std::array::from_fn(|k| [attr(&|v| v.stops[k][0]), attr(&|v| v.stops[k][1])]),
+            frame,
+        }
+    }
+
+    /// The attributes averaged over the vertices, constant: for a triangle collapsed to a line or a point.
+    fn mean(tri: [&Vertex; 3], frame: &'a JobFrame<'a>) -> Self {
+        let mean = |f: &dyn Fn(&Vertex) -> f64| {
+            let value = (f(tri[0]) + f(tri[1]) + f(tri[2])) / 3.0;
+            Plane { a0: value, ax: 0.0, ay: 0.0 }
+        };
+        Self {
+            ratio: mean(&|v| v.ratio),
+            weight: mean(&|v| v.weight),
+            stops: std::array::from_fn(|k| [mean(&|v| v.stops[k][0]), mean(&|v| v.stops[k][1])]),
+            frame,
+        }
+    }
+
+    /// Weight x aperture masks at the pixel position `p`; 0 where vignetted.
+    fn shade(&self, p: [f64; 2]) -> f64 {
+        if self.ratio.at(p) > 1.0 {
+            return 0.0;
+        }
+        let mut m = self.weight.at(p).max(0.0);
+        for [su, sv] in &self.stops[..self.frame.stop_count] {
+            if m == 0.0 {
+                break;
+            }
+            m *= f64::from(self.frame.mask.sample(su.at(p) as f32, sv.at(p) as f32));
+        }
+        m
+    }
+}
+
+/// Splats one triangle with its energy conserved; `false` when it carries no light.
+fn splat_triangle(tri: [&Vertex; 3], frame: &JobFrame, acc: &mut Accumulator) -> bool {
+    if !tri.iter().all(|v| v.valid) || tri.iter().all(|v| v.ratio > 1.0) {
+        return false;
+    }
+    // Entirely outside the mask's square on one side at some crossing: nothing passes.
+    for k in 0..frame.stop_count {
+        for axis in 0..2 {
+            if tri.iter().all(|v| v.stops[k][axis] > 1.0) || tri.iter().all(|v| v.stops[k][axis] < -1.0) {
+                return false;
+            }
+        }
+    }
+    let pixels = [tri[0].pixel, tri[1].pixel, tri[2].pixel];
+    let x_lo = pixels.iter().map(|p| p[0]).fold(f64::INFINITY, f64::min);
+    let x_hi = pixels.iter().map(|p| p[0]).fold(f64::NEG_INFINITY, f64::max);
+    let y_lo = pixels.iter().map(|p| p[1]).fold(f64::INFINITY, f64::min);
+    let y_hi = pixels.iter().map(|p| p[1]).fold(f64::NEG_INFINITY, f64::max);
+    let (w, h) = (acc.width as f64, acc.height as f64);
+    if x_lo > w + 1.0 || y_lo > h + 1.0 || x_hi < -1.0 || y_hi < -1.0 {
+        return true; // Its light is real but lands off the frame.
+    }
+    let at = |l: [f64; 3]| [0, 1].map(|c| l[0] * pixels[0][c] + l[1] * pixels[1][c] + l[2] * pixels[2][c]);
+    let Some(interp) = Interpolator::new(pixels) else {
+        // Collapsed to a line or a point (a ghost focused there): all of its energy at the centroid.
+        splat_point(&TriangleShader::mean(tri, frame), at([1.0 / 3.0; 3]), frame.triangle_flux, frame, acc);
+        return true;
+    };
+    let shader = TriangleShader::new(tri, &interp, frame);
+    let b = &interp.bary;
+    let area_px = 0.5 / (b[0].ax * b[1].ay - b[0].ay * b[1].ax).abs();
+    if area_px >= SMALL_TRIANGLE_PX2 {
+        // Irradiance x pixel area (1 px^2): the triangle's flux over its footprint, at every pixel centre inside
+        // the frame.
+        let scale = frame.triangle_flux / area_px;
+        let x_range = ((x_lo - 0.5).ceil().max(0.0) as i64, (x_hi - 0.5).floor().min(w - 1.0) as i64);
+        let y_range = ((y_lo - 0.5).ceil().max(0.0) as i64, (y_hi - 0.5).floor().min(h - 1.0) as i64);
+        for y in y_range.0..=y_range.1 {
+            for x in interp.span(y, x_range) {
+                acc.add(x, y, scale * shader.shade([x as f64 + 0.5, y as f64 + 0.5]), frame);
+            }
+        }
+    } else if area_px >= 1.0 {
+        // A pixel or a few: four bilinear splats at the centroids of its midpoint subdivision (a smooth
+        // filter, so the pattern of the grid does not alias into the image).
+        let (big, small) = (2.0 / 3.0, 1.0 / 6.0);
+        for l in [[big, small, small], [small, big, small], [small, small, big], [1.0 / 3.0; 3]] {
+            splat_point(&shader, at(l), 0.25 * frame.triangle_flux, frame, acc);
+        }
+    } else {
+        splat_point(&shader, at([1.0 / 3.0; 3]), frame.triangle_flux, frame, acc);
+    }
+    true
+}
+
+/// `flux` x the shading at the pixel position `at`, split bilinearly over the four nearest pixel centres.
+fn splat_point(shader: &TriangleShader, at: [f64; 2], flux: f64, frame: &JobFrame, acc: &mut Accumulator) {
+    let energy = flux * shader.shade(at);
+    let (px, py) = (at[0] - 0.5, at[1] - 0.5);
+    let (fx, fy) = (px - px.floor(), py - py.floor());
+    let (ix, iy) = (px.floor() as i64, py.floor() as i64);
+    acc.add(ix, iy, energy * (1.0 - fx) * (1.0 - fy), frame);
+    acc.add(ix + 1, iy, energy * fx * (1.0 - fy), frame);
+    acc.add(ix, iy + 1, energy * (1.0 - fx) * fy, frame);
+    acc.add(ix + 1, iy + 1, energy * fx * fy, frame);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::flare::FlareConfig;
+    use crate::optics::library::builtin_lens;
+
+    fn renderer(id: &str) -> RayGridRenderer {
+        RayGridRenderer::new(&PreparedFlare::new(&builtin_lens(id).unwrap(), &FlareConfig::default()).unwrap())
+    }
+
+    #[test]
+    fn refuses_bad_requests() {
+        let r = renderer("tessar");
+        assert_eq!(r.render([0.0, 0.0], 32, 32, Grid::Fixed(1)).unwrap_err(), RayGridError::Grid(1));
+        assert_eq!(r.render([0.0, 0.0], 0, 32, Grid::Adaptive(16)).unwrap_err(), RayGridError::Size(0, 32));
+        assert!(matches!(r.render([f64::NAN, 0.0], 32, 32, Grid::Fixed(16)), Err(RayGridError::Angle(_))));
+    }
+
+    #[test]
+    fn images_are_finite_and_non_negative_at_0_and_89_degrees() {
+        let r = renderer("dgauss");
+        for light in [[0.0, 0.0], [0.0, 89.0], [89.0, -89.0], [3.0, 12.0]] {
+            let image = r.render(light, 48, 32, Grid::Fixed(16)).unwrap();
+            assert!(image.hdr.pixels.iter().flatten().all(|v| v.is_finite() && *v >= 0.0), "{light:?}");
+            assert!(image.moments.iter().all(|m| m.energy.is_finite() && m.energy >= 0.0));
+            assert_eq!(image.stats.jobs, r.ghost_count() * 3);
+        }
+    }
+
+    #[test]
+    fn a_point_focused_triangle_keeps_its_energy() {
+        let mask = crate::aperture::Aperture::default().rasterise(64);
+        let frame =
+            JobFrame { ghost: 0, rgb: [1.0, 1.0, 1.0], luma: 1.0, stop_count: 1, mask: &mask, triangle_flux: 2.0 };
+        let v = Vertex { valid: true, pixel: [10.3, 7.6], stops: [[0.0; 2]; 3], ratio: 0.5, weight: 0.25 };
+        let mut acc = Accumulator::new(20, 20, 1);
+        assert!(splat_triangle([&v, &v, &v], &frame, &mut acc));
+        let total: f64 = acc.energy.iter().map(|p| p[0]).sum();
+        assert!((total - 0.5).abs() < 1e-12, "{total}");
+        // A large triangle: irradiance = flux / area, over the pixel centres inside.
+        let tri = [[2.0, 2.0], [18.0, 2.0], [2.0, 18.0]].map(|pixel| Vertex { pixel, ..v });
+        let mut acc = Accumulator::new(20, 20, 1);
+        splat_triangle([&tri[0], &tri[1], &tri[2]], &frame, &mut acc);
+        let total: f64 = acc.energy.iter().map(|p| p[0]).sum();
+        assert!((total / 0.5 - 1.0).abs() < 0.1, "sampled energy {total} vs 0.5");
+    }
+}

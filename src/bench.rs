@@ -1,0 +1,453 @@
+//! `flarelab bench`: every method renders the same frames; run time against error, on one chart.
+//!
+//! For each lens and light angle the reference renderer ([`flare_core::raytrace`] at its converged grid)
+//! renders the ghosts once; then each method renders the same frame (same size, spectrum, aperture, coatings)
+//! several times: the median wall-clock time is reported, and its image is compared with the reference by
+//! [`flare_core::metrics`] (ghosts only, exposure fixed from the reference, PSNR / SSIM on the tonemapped
+//! display values, relative L1 of linear energy, median per-ghost centroid error). What is timed is the
+//! per-frame work of each method, after its per-lens preparation (the paraxial matrices, the ray-grid tracers),
+//! as the app does it: paraxial = sprites for the light + the CPU twin's ghost pass (rayon over bands of rows);
+//! paraxial-half = the same accumulated at half resolution and upsampled (the app's choice on software
+//! adapters); paraxial-gpu = sprites + the wgpu renderer's draw, waited for (when an adapter exists, lavapipe
+//! included); raygrid-N / reference = tracing and splatting every ghost (rayon over ghosts).
+//!
+//! Writes `bench.csv`, `bench.md` (the tables that `--update-readme` puts into the README between the
+//! `<!-- bench:start -->` and `<!-- bench:end -->` markers) and `bench.png` (error against run time).
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use flare_core::flare::{FlareConfig, PreparedFlare};
+use flare_core::metrics::{self, Comparison};
+use flare_core::optics::formats::write_atomic;
+use flare_core::raytrace::{Grid, REFERENCE_GRID, RayGridImage, RayGridRenderer};
+use flare_core::render::{FlareScene, HdrImage, cpu, gpu};
+
+use crate::cli::open_lens;
+
+/// Azimuth of the light in the frame (degrees from the horizontal): off the axes, so that nothing is
+/// symmetric by accident.
+pub const LIGHT_AZIMUTH_DEG: f64 = 30.0;
+const README_START: &str = "<!-- bench:start -->";
+const README_END: &str = "<!-- bench:end -->";
+
+#[derive(clap::Args, Debug)]
+pub struct BenchArgs {
+    /// Two lenses (the Double Gauss and the 28-surface Nikon zoom), three angles, coarse grids: under 10 minutes
+    /// on 2 cores.
+    #[arg(long)]
+    pub quick: bool,
+    /// Lens files or built-in names (repeatable; default: every built-in lens, or the quick pair).
+    #[arg(long)]
+    pub lens: Vec<String>,
+    /// Light angles from the axis, degrees, comma-separated (default 0,10,20 quick, 0,5,10,15,20,25 full).
+    #[arg(long)]
+    pub field_deg: Option<String>,
+    /// Image size (default 480x320, the 3:2 of a full-frame sensor).
+    #[arg(long, default_value = "480x320")]
+    pub size: String,
+    /// Ray-grid sizes to benchmark (default 16,32,64 quick, 16,32,64,128 full).
+    #[arg(long)]
+    pub grids: Option<String>,
+    /// Grid of the reference renderer.
+    #[arg(long, default_value_t = REFERENCE_GRID)]
+    pub reference_grid: usize,
+    /// Timed runs per method (the median is reported; a method whose first run takes over 2 s runs once).
+    #[arg(long)]
+    pub repeats: Option<usize>,
+    /// Also replace the README's benchmark section with the new tables.
+    #[arg(long)]
+    pub update_readme: Option<PathBuf>,
+    /// Output folder.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// One method at one lens and angle.
+#[derive(Clone, Debug)]
+pub struct Row {
+    pub lens: String,
+    pub surfaces: usize,
+    pub ghosts: usize,
+    pub field_deg: f64,
+    pub method: String,
+    pub ms_median: f64,
+    pub runs: usize,
+    pub errors: Comparison,
+}
+
+/// Image change as the reference grid doubles.
+#[derive(Clone, Debug)]
+struct Convergence {
+    lens: String,
+    field_deg: f64,
+    grid: usize,
+    /// Against the image at half this grid.
+    vs_half: Comparison,
+    ms: f64,
+}
+
+fn parse_list<T: std::str::FromStr>(text: &str, what: &str) -> Result<Vec<T>> {
+    text.split(',')
+        .map(|s| s.trim().parse::<T>().map_err(|_| anyhow::anyhow!("{what}: `{s}` is not a number")))
+        .collect()
+}
+
+/// A run slower than this is not repeated (its noise is small against its length).
+const REPEAT_BELOW_MS: f64 = 2000.0;
+
+/// Median wall-clock milliseconds of up to `runs` calls of `f` (one when the first takes longer than
+/// [`REPEAT_BELOW_MS`]), how many ran, and the last result.
+fn timed<T>(runs: usize, mut f: impl FnMut() -> Result<T>) -> Result<(f64, usize, T)> {
+    let mut times = Vec::with_capacity(runs);
+    let mut last = None;
+    for _ in 0..runs.max(1) {
+        let started = Instant::now();
+        let value = f()?;
+        times.push(started.elapsed().as_secs_f64() * 1e3);
+        last = Some(value);
+        if times[0] > REPEAT_BELOW_MS {
+            break;
+        }
+    }
+    Ok((metrics::median(&times), times.len(), last.expect("at least one run")))
+}
+
+/// Frame position (X, Y field angles in degrees) of a light `theta_deg` from the axis at [`LIGHT_AZIMUTH_DEG`].
+pub fn light_position_deg(theta_deg: f64) -> [f64; 2] {
+    let t = theta_deg.to_radians().tan();
+    let phi = LIGHT_AZIMUTH_DEG.to_radians();
+    [(t * phi.cos()).atan().to_degrees(), (t * phi.sin()).atan().to_degrees()]
+}
+
+pub fn run(args: &BenchArgs) -> Result<()> {
+    let (width, height) = crate::cli::parse_size(&args.size).map_err(|e| anyhow::anyhow!("--size: {e}"))?;
+    let lenses: Vec<String> = if !args.lens.is_empty() {
+        args.lens.clone()
+    } else if args.quick {
+        vec!["pbrt_dgauss_50mm".into(), "nikon_zoom_28_75mm".into()]
+    } else {
+        flare_core::optics::library::ids().into_iter().map(str::to_owned).collect()
+    };
+    let fields: Vec<f64> = parse_list(
+        args.field_deg.as_deref().unwrap_or(if args.quick { "0,10,20" } else { "0,5,10,15,20,25" }),
+        "--field-deg",
+    )?;
+    if let Some(bad) = fields.iter().find(|f| !(f.is_finite() && (0.0..=89.0).contains(*f))) {
+        bail!("--field-deg {bad}: angles from 0 to 89 degrees");
+    }
+    let grids: Vec<usize> =
+        parse_list(args.grids.as_deref().unwrap_or(if args.quick { "16,32,64" } else { "16,32,64,128" }), "--grids")?;
+    let reference_grid = args.reference_grid;
+    for &g in grids.iter().chain([&reference_grid]) {
+        if !flare_core::raytrace::GRID_RANGE.contains(&g) {
+            bail!("grid {g}: use 2 to 4096 cells across");
+        }
+    }
+    if let Some(readme) = &args.update_readme {
+        // Refuse before an hour of benchmarking, not after.
+        readme_section(
+            &std::fs::read_to_string(readme).with_context(|| format!("reading {}", readme.display()))?,
+            readme,
+        )?;
+    }
+    let repeats = args.repeats.unwrap_or(if args.quick { 3 } else { 5 }).max(1);
+    let reference_runs = repeats.min(3);
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let mut gpu = match GpuBench::new(width, height) {
+        Ok(gpu) => Some(gpu),
+        Err(e) => {
+            eprintln!("no paraxial-gpu rows: {e}");
+            None
+        }
+    };
+    let started = Instant::now();
+    let mut rows = Vec::new();
+    let mut convergence = Vec::new();
+    for name in &lenses {
+        let lens = open_lens(name)?;
+        let mut flare = PreparedFlare::new(&lens, &FlareConfig::default()).with_context(|| name.clone())?;
+        let tracer = RayGridRenderer::new(&flare);
+        if let Some(gpu) = gpu.as_mut() {
+            gpu.set_flare(&flare);
+        }
+        let (surfaces, ghosts) = (lens.surfaces.len(), flare.system.ghosts.len());
+        for (k, &theta) in fields.iter().enumerate() {
+            let light = light_position_deg(theta);
+            let render = |grid: Grid| -> Result<RayGridImage> { Ok(tracer.render(light, width, height, grid)?) };
+            let (ms, reference_runs, reference) = timed(reference_runs, || render(Grid::Adaptive(reference_grid)))?;
+            eprintln!(
+                "[{:6.1} s] {} at {theta} deg: reference ({reference_grid}) {:.0} ms, {} rays",
+                started.elapsed().as_secs_f64(),
+                lens.id,
+                ms,
+                reference.stats.rays
+            );
+            let row = |method: String, ms_median: f64, runs: usize, errors: Comparison| Row {
+                lens: lens.id.clone(),
+                surfaces,
+                ghosts,
+                field_deg: theta,
+                method,
+                ms_median,
+                runs,
+                errors,
+            };
+            let against = |image: &HdrImage, moments: &[metrics::GhostMoments]| {
+                metrics::compare(image, moments, &reference.hdr, &reference.moments)
+            };
+            rows.push(row("reference".into(), ms, reference_runs, against(&reference.hdr, &reference.moments)));
+            if k == 0 {
+                // Convergence: the reference grid halved twice, each image against the finer one.
+                let mut finer = reference.clone();
+                let mut grid = reference_grid;
+                for _ in 0..2 {
+                    if grid / 2 < 4 {
+                        break;
+                    }
+                    let (ms_half, _, half) = timed(1, || render(Grid::Adaptive(grid / 2)))?;
+                    let vs_half = metrics::compare(&half.hdr, &half.moments, &finer.hdr, &finer.moments);
+                    convergence.push(Convergence {
+                        lens: lens.id.clone(),
+                        field_deg: theta,
+                        grid,
+                        vs_half,
+                        ms: ms_half,
+                    });
+                    finer = half;
+                    grid /= 2;
+                }
+            }
+            // Paraxial: the exposure (and with it the culling threshold) from the reference.
+            flare.config.display.exposure = metrics::exposure_for(&reference.hdr);
+            flare.config.display.starburst = false;
+            let (ms, runs, (image, scene)) = timed(repeats, || {
+                let (scene, _) = flare.scene(light, width, height);
+                Ok((cpu::ghost_pass(&scene, &flare.mask), scene))
+            })?;
+            let moments = cpu::ghost_moments(&scene, &flare.mask, ghosts);
+            rows.push(row("paraxial".into(), ms, runs, against(&image, &moments)));
+            // The same at half accumulation resolution (the app's choice on software adapters), upsampled.
+            let mut half = flare.clone();
+            half.config.display.accumulation_divisor = 2;
+            let (ms, runs, (image, scene)) = timed(repeats, || {
+                let (scene, _) = half.scene(light, width, height);
+                Ok((cpu::ghost_pass(&scene, &half.mask), scene))
+            })?;
+            let moments = cpu::ghost_moments(&scene, &half.mask, ghosts);
+            let upsampled = cpu::composite(&scene, &image, None);
+            rows.push(row("paraxial-half".into(), ms, runs, against(&upsampled, &moments)));
+            // On the GPU, as the app draws it: sprites, upload, draw, wait (no read-back in the timing).
+            if let Some(gpu) = gpu.as_mut() {
+                let (ms, runs, scene) = timed(repeats, || gpu.frame(&flare, light, width, height))?;
+                let image = gpu.read_hdr()?;
+                let moments = cpu::ghost_moments(&scene, &flare.mask, ghosts);
+                rows.push(row("paraxial-gpu".into(), ms, runs, against(&image, &moments)));
+            }
+            for &grid in &grids {
+                let (ms, runs, image) = timed(repeats, || render(Grid::Fixed(grid)))?;
+                rows.push(row(format!("raygrid-{grid}"), ms, runs, against(&image.hdr, &image.moments)));
+            }
+            eprintln!("[{:6.1} s] {} at {theta} deg: done", started.elapsed().as_secs_f64(), lens.id);
+        }
+    }
+    let elapsed_s = started.elapsed().as_secs_f64();
+    let device = gpu.as_ref().map_or_else(|| "no GPU adapter".to_owned(), |g| format!("GPU: {}", g.ctx.adapter.name));
+    let settings = format!(
+        "{width}x{height}, {device}, RGB (650/510/475 nm), 6-blade aperture wide open, each lens's own coatings, light at {LIGHT_AZIMUTH_DEG} deg azimuth; reference grid {reference_grid}; {} threads; median of {repeats} timed runs per method (1 for runs over {:.0} s); whole run {elapsed_s:.0} s",
+        rayon::current_num_threads(),
+        REPEAT_BELOW_MS / 1e3
+    );
+    write_atomic(&args.out.join("bench.csv"), csv(&rows).as_bytes())?;
+    let markdown = markdown(&rows, &convergence, &settings);
+    write_atomic(&args.out.join("bench.md"), markdown.as_bytes())?;
+    crate::plot::error_against_time(&rows, &args.out.join("bench.png"))?;
+    if let Some(readme) = &args.update_readme {
+        update_readme(readme, &markdown)?;
+    }
+    eprintln!("wrote {}/bench.csv, bench.md and bench.png in {elapsed_s:.0} s", args.out.display());
+    print!("{markdown}");
+    Ok(())
+}
+
+/// The wgpu renderer, headless, for the paraxial-gpu rows.
+struct GpuBench {
+    ctx: gpu::GpuContext,
+    renderer: gpu::FlareRenderer,
+    view: wgpu::TextureView,
+}
+
+impl GpuBench {
+    fn new(width: u32, height: u32) -> Result<Self> {
+        let ctx = gpu::GpuContext::headless(false)?;
+        let renderer = gpu::FlareRenderer::new(&ctx.device, &ctx.queue, wgpu::TextureFormat::Rgba8Unorm);
+        let target = gpu::texture_2d(
+            &ctx.device,
+            "bench target",
+            width,
+            height,
+            wgpu::TextureFormat::Rgba8Unorm,
+            wgpu::TextureUsages::RENDER_ATTACHMENT,
+        );
+        let view = target.create_view(&wgpu::TextureViewDescriptor::default());
+        Ok(Self { ctx, renderer, view })
+    }
+
+    fn set_flare(&mut self, flare: &PreparedFlare) {
+        self.renderer.set_aperture(&self.ctx.device, &self.ctx.queue, &flare.mask);
+        self.renderer.set_starburst(&self.ctx.device, &self.ctx.queue, &flare.starburst);
+    }
+
+    /// One frame, waited for.
+    fn frame(&mut self, flare: &PreparedFlare, light: [f64; 2], width: u32, height: u32) -> Result<FlareScene> {
+        let (scene, _) = flare.scene(light, width, height);
+        let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
+        self.renderer.render(&self.ctx.device, &self.ctx.queue, &mut encoder, &self.view, &scene);
+        self.ctx.queue.submit(Some(encoder.finish()));
+        self.ctx.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| anyhow::anyhow!("GPU: {e}"))?;
+        Ok(scene)
+    }
+
+    fn read_hdr(&self) -> Result<HdrImage> {
+        Ok(gpu::read_hdr(&self.ctx, &self.renderer)?)
+    }
+}
+
+fn csv(rows: &[Row]) -> String {
+    let mut out = String::from(
+        "lens,field_deg,method,ms_median,psnr_db,ssim,rel_l1,centroid_px,centroid_ghosts,runs,surfaces,ghosts\n",
+    );
+    for r in rows {
+        let e = &r.errors;
+        let _ = writeln!(
+            out,
+            "{},{},{},{:.3},{:.2},{:.4},{:.4},{:.2},{},{},{},{}",
+            r.lens,
+            r.field_deg,
+            r.method,
+            r.ms_median,
+            e.psnr_db,
+            e.ssim,
+            e.relative_l1,
+            e.centroid_px,
+            e.centroid_ghosts,
+            r.runs,
+            r.surfaces,
+            r.ghosts
+        );
+    }
+    out
+}
+
+fn markdown(rows: &[Row], convergence: &[Convergence], settings: &str) -> String {
+    let mut md = String::new();
+    let _ = writeln!(md, "Settings: {settings}.\n");
+    let _ =
+        writeln!(md, "| lens | field (deg) | method | ms (median) | PSNR (dB) | SSIM | rel. L1 | centroid err. (px) |");
+    let _ = writeln!(md, "|---|---:|---|---:|---:|---:|---:|---:|");
+    for r in rows.iter().filter(|r| r.method != "reference") {
+        let e = &r.errors;
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {:.1} | {:.1} | {:.3} | {:.3} | {:.1} |",
+            r.lens, r.field_deg, r.method, r.ms_median, e.psnr_db, e.ssim, e.relative_l1, e.centroid_px
+        );
+    }
+    let _ = writeln!(
+        md,
+        "\nSpeed of the paraxial method against the reference, per lens (median over the angles of the ratio of the medians; - where not run):\n"
+    );
+    let variants = ["paraxial", "paraxial-half", "paraxial-gpu"];
+    let _ = writeln!(
+        md,
+        "| lens | surfaces | ghosts | reference ms | {} | paraxial PSNR by angle (dB) |",
+        variants.map(|v| format!("{v} ms | speed-up")).join(" | ")
+    );
+    let _ = writeln!(md, "|---|---:|---:|---:|{}---|", "---:|---:|".repeat(variants.len()));
+    let mut lenses: Vec<&str> = rows.iter().map(|r| r.lens.as_str()).collect();
+    lenses.dedup();
+    let med = |v: Vec<f64>| metrics::median(&v);
+    for lens in lenses {
+        let of = |method: &str| -> Vec<&Row> { rows.iter().filter(|r| r.lens == lens && r.method == method).collect() };
+        let reference = of("reference");
+        let cells: Vec<String> = variants
+            .iter()
+            .map(|v| {
+                let rows = of(v);
+                if rows.is_empty() {
+                    return "- | -".to_owned();
+                }
+                let ratios = reference.iter().zip(&rows).map(|(a, b)| a.ms_median / b.ms_median.max(1e-6)).collect();
+                format!("{:.1} | {:.0}x", med(rows.iter().map(|r| r.ms_median).collect()), med(ratios))
+            })
+            .collect();
+        let by_angle: Vec<String> =
+            of("paraxial").iter().map(|r| format!("{}: {:.1}", r.field_deg, r.errors.psnr_db)).collect();
+        let _ = writeln!(
+            md,
+            "| {lens} | {} | {} | {:.0} | {} | {} |",
+            reference[0].surfaces,
+            reference[0].ghosts,
+            med(reference.iter().map(|r| r.ms_median).collect()),
+            cells.join(" | "),
+            by_angle.join(", ")
+        );
+    }
+    if !convergence.is_empty() {
+        let _ = writeln!(
+            md,
+            "\nConvergence of the reference: the image at grid N against the image at N/2 (first angle):\n"
+        );
+        let _ =
+            writeln!(md, "| lens | field (deg) | N | PSNR vs N/2 (dB) | SSIM vs N/2 | rel. L1 vs N/2 | ms at N/2 |");
+        let _ = writeln!(md, "|---|---:|---:|---:|---:|---:|---:|");
+        for c in convergence {
+            let e = &c.vs_half;
+            let _ = writeln!(
+                md,
+                "| {} | {} | {} | {:.1} | {:.4} | {:.4} | {:.0} |",
+                c.lens, c.field_deg, c.grid, e.psnr_db, e.ssim, e.relative_l1, c.ms
+            );
+        }
+    }
+    md
+}
+
+/// Where the README's benchmark section starts and ends.
+fn readme_section(text: &str, path: &Path) -> Result<(usize, usize)> {
+    let (Some(a), Some(b)) = (text.find(README_START), text.find(README_END)) else {
+        bail!("{}: no `{README_START}` ... `{README_END}` section to replace", path.display());
+    };
+    if b < a {
+        bail!("{}: `{README_END}` comes before `{README_START}`", path.display());
+    }
+    Ok((a, b))
+}
+
+/// Replaces the text between the README's benchmark markers (written atomically).
+fn update_readme(path: &Path, markdown: &str) -> Result<()> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let (a, b) = readme_section(&text, path)?;
+    let updated = format!("{}{README_START}\n{markdown}{}", &text[..a], &text[b..]);
+    write_atomic(path, updated.as_bytes())?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn light_position_has_the_requested_angle_and_azimuth() {
+        for theta in [0.0, 10.0, 45.0, 80.0] {
+            let [x, y] = light_position_deg(theta);
+            let (tx, ty) = (x.to_radians().tan(), y.to_radians().tan());
+            assert!((tx.hypot(ty).atan().to_degrees() - theta).abs() < 1e-9);
+            if theta > 0.0 {
+                assert!((ty.atan2(tx).to_degrees() - LIGHT_AZIMUTH_DEG).abs() < 1e-9);
+            }
+        }
+    }
+}
