@@ -508,8 +508,8 @@ fn ghosts(args: &GhostsArgs) -> Result<()> {
         let sprites: Vec<_> = frame.sprites.iter().filter(|s| s.ghost == g).collect();
         let mut rgb = [0.0; 3];
         for s in &sprites {
-            for c in 0..3 {
-                rgb[c] += s.rgb[c];
+            for (sum, c) in rgb.iter_mut().zip(s.rgb) {
+                *sum += c;
             }
         }
         let intensity = sprites.iter().map(|s| s.irradiance).sum::<f64>() / sprites.len().max(1) as f64;
@@ -558,10 +558,7 @@ fn ghosts(args: &GhostsArgs) -> Result<()> {
         st.off_sensor,
         st.empty_entrance_region
     );
-    println!(
-        "  {:>3} {:>3}  {:>10} {:>9}  {:>10}  {:<8} {}",
-        "i", "j", "centre y", "radius", "intensity", "stop", "culled"
-    );
+    println!("  {:>3} {:>3}  {:>10} {:>9}  {:>10}  {:<8} culled", "i", "j", "centre y", "radius", "intensity", "stop");
     let mut order: Vec<usize> = (0..rows.len()).collect();
     order.sort_by(|&a, &b| {
         rows[b]["intensity"].as_f64().partial_cmp(&rows[a]["intensity"].as_f64()).unwrap_or(std::cmp::Ordering::Equal)

@@ -353,11 +353,11 @@ impl GhostSystem {
         for k in 0..n_surfaces {
             let coating = settings.coating_override.as_ref().unwrap_or(&lens.surfaces[k].coating);
             for backward in [false, true] {
-                for w in 0..n_w {
-                    let (before, after) = (indices[w][k], indices[w][k + 1]);
+                for (n, &wavelength_nm) in indices.iter().zip(&spectrum.wavelengths_nm) {
+                    let (before, after) = (n[k], n[k + 1]);
                     let (n_in, n_out) = if backward { (after, before) } else { (before, after) };
                     tables.push(if reflecting[k] {
-                        ReflectanceTable::new(coating, n_in, n_out, spectrum.wavelengths_nm[w], REFLECTANCE_SAMPLES)
+                        ReflectanceTable::new(coating, n_in, n_out, wavelength_nm, REFLECTANCE_SAMPLES)
                     } else {
                         ReflectanceTable::zero()
                     });

@@ -211,12 +211,12 @@ impl Accumulator {
 
     /// Adds `energy` (scalar, before the spectral weight) at pixel (x, y) when it lies in the frame.
     fn add(&mut self, x: i64, y: i64, energy: f64, job: &JobFrame) {
-        if x < 0 || y < 0 || x >= self.width as i64 || y >= self.height as i64 || !(energy > 0.0) {
+        if x < 0 || y < 0 || x >= self.width as i64 || y >= self.height as i64 || energy.is_nan() || energy <= 0.0 {
             return;
         }
         let p = &mut self.energy[y as usize * self.width + x as usize];
-        for c in 0..3 {
-            p[c] += energy * job.rgb[c];
+        for (value, weight) in p.iter_mut().zip(job.rgb) {
+            *value += energy * weight;
         }
         let luma = energy * job.luma;
         self.moments[job.ghost].add_sample(luma, [x as f64 + 0.5, y as f64 + 0.5]);
@@ -591,7 +591,7 @@ impl Interpolator {
     }
 
     /// The pixel columns of row `y` whose centres lie inside the triangle (all barycentrics >= 0).
-    fn span(&self, y: i64, x_range: (i64, i64)) -> std::ops::RangeInclusive<i64> {
+    fn span(&self, y: i64, x_range: (i64, i64)) -> std::ops::Range<i64> {
         let yc = y as f64 + 0.5;
         let (mut lo, mut hi) = (x_range.0 as f64 + 0.5, x_range.1 as f64 + 0.5);
         for l in &self.bary {
@@ -601,13 +601,13 @@ impl Interpolator {
             } else if l.ax < 0.0 {
                 hi = hi.min(-c / l.ax);
             } else if c < 0.0 {
-                return 1..=0;
+                return 0..0;
             }
         }
-        if !(lo <= hi) {
-            return 1..=0;
+        if lo.is_nan() || hi.is_nan() || lo > hi {
+            return 0..0;
         }
-        ((lo - 0.5).ceil() as i64)..=((hi - 0.5).floor() as i64)
+        ((lo - 0.5).ceil() as i64)..((hi - 0.5).floor() as i64 + 1)
     }
 }
 

@@ -382,6 +382,19 @@ fn atomic_write_replaces_whole_files_only() {
     assert_eq!(leftovers.len(), 1, "no temporary file is left behind");
     // Writing into a folder that does not exist fails and leaves nothing.
     assert!(write_atomic(&dir.path().join("no/such/dir/x.json"), b"{}").is_err());
+    // The replaced file keeps its permissions; a new one is readable by others as usual (not the temporary
+    // file's private 0600).
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = |p: &std::path::Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+        std::fs::set_permissions(&target, std::fs::Permissions::from_mode(0o640)).unwrap();
+        write_atomic(&target, b"again").unwrap();
+        assert_eq!(mode(&target), 0o640);
+        let fresh = dir.path().join("new.png");
+        write_atomic(&fresh, b"new").unwrap();
+        assert_eq!(mode(&fresh), 0o644);
+    }
 }
 
 #[test]

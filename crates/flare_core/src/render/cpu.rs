@@ -161,8 +161,8 @@ pub fn ghost_pass(scene: &FlareScene, mask: &ApertureMask) -> HdrImage {
         for inst in &scene.instances {
             shade_instance(inst, mask, open_radius, scale, (w, h), rows.clone(), |x, y, m| {
                 let p = &mut chunk[(y - y0) * w + x];
-                for c in 0..3 {
-                    p[c] += inst.colour[c] * m;
+                for (value, colour) in p.iter_mut().zip(inst.colour).take(3) {
+                    *value += colour * m;
                 }
             });
         }
