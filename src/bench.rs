@@ -23,7 +23,7 @@ use flare_core::flare::{FlareConfig, PreparedFlare};
 use flare_core::metrics::{self, Comparison};
 use flare_core::optics::formats::write_atomic;
 use flare_core::raytrace::{Grid, REFERENCE_GRID, RayGridImage, RayGridRenderer};
-use flare_core::render::{FlareScene, HdrImage, cpu, gpu};
+use flare_core::render::{DisplayImage, FlareScene, HdrImage, cpu, gpu, output};
 
 use crate::cli::open_lens;
 
@@ -45,7 +45,7 @@ pub struct BenchArgs {
     /// Light angles from the axis, degrees, comma-separated (default 0,10,20 quick, 0,5,10,15,20,25 full).
     #[arg(long)]
     pub field_deg: Option<String>,
-    /// Image size (default 480x320, the 3:2 of a full-frame sensor).
+    /// Image size (the default is the 3:2 of a full-frame sensor).
     #[arg(long, default_value = "480x320")]
     pub size: String,
     /// Ray-grid sizes to benchmark (default 16,32,64 quick, 16,32,64,128 full).
@@ -60,6 +60,9 @@ pub struct BenchArgs {
     /// Also replace the README's benchmark section with the new tables.
     #[arg(long)]
     pub update_readme: Option<PathBuf>,
+    /// Also write every method's image (ghosts only, at the reference's exposure, ACES, sRGB) to OUT/images.
+    #[arg(long)]
+    pub images: bool,
     /// Output folder.
     #[arg(long)]
     pub out: PathBuf,
@@ -156,6 +159,10 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let repeats = args.repeats.unwrap_or(if args.quick { 3 } else { 5 }).max(1);
     let reference_runs = repeats.min(3);
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let images = args.images.then(|| args.out.join("images"));
+    if let Some(dir) = &images {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
     let mut gpu = match GpuBench::new(width, height) {
         Ok(gpu) => Some(gpu),
         Err(e) => {
@@ -195,10 +202,21 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                 runs,
                 errors,
             };
-            let against = |image: &HdrImage, moments: &[metrics::GhostMoments]| {
-                metrics::compare(image, moments, &reference.hdr, &reference.moments)
+            // Each method's image against the reference, and written out with --images.
+            let exposure = metrics::exposure_for(&reference.hdr);
+            let against = |method: &str, image: &HdrImage, moments: &[metrics::GhostMoments]| -> Result<Comparison> {
+                if let Some(dir) = &images {
+                    let name = format!("{}_{theta}deg_{method}.png", lens.id);
+                    write_display(&dir.join(name), image, exposure)?;
+                }
+                Ok(metrics::compare(image, moments, &reference.hdr, &reference.moments))
             };
-            rows.push(row("reference".into(), ms, reference_runs, against(&reference.hdr, &reference.moments)));
+            rows.push(row(
+                "reference".into(),
+                ms,
+                reference_runs,
+                against("reference", &reference.hdr, &reference.moments)?,
+            ));
             if k == 0 {
                 // Convergence: the reference grid halved twice, each image against the finer one.
                 let mut finer = reference.clone();
@@ -221,14 +239,14 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                 }
             }
             // Paraxial: the exposure (and with it the culling threshold) from the reference.
-            flare.config.display.exposure = metrics::exposure_for(&reference.hdr);
+            flare.config.display.exposure = exposure;
             flare.config.display.starburst = false;
             let (ms, runs, (image, scene)) = timed(repeats, || {
                 let (scene, _) = flare.scene(light, width, height);
                 Ok((cpu::ghost_pass(&scene, &flare.mask), scene))
             })?;
             let moments = cpu::ghost_moments(&scene, &flare.mask, ghosts);
-            rows.push(row("paraxial".into(), ms, runs, against(&image, &moments)));
+            rows.push(row("paraxial".into(), ms, runs, against("paraxial", &image, &moments)?));
             // The same at half accumulation resolution (the app's choice on software adapters), upsampled.
             let mut half = flare.clone();
             half.config.display.accumulation_divisor = 2;
@@ -238,17 +256,19 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             })?;
             let moments = cpu::ghost_moments(&scene, &half.mask, ghosts);
             let upsampled = cpu::composite(&scene, &image, None);
-            rows.push(row("paraxial-half".into(), ms, runs, against(&upsampled, &moments)));
+            rows.push(row("paraxial-half".into(), ms, runs, against("paraxial-half", &upsampled, &moments)?));
             // On the GPU, as the app draws it: sprites, upload, draw, wait (no read-back in the timing).
             if let Some(gpu) = gpu.as_mut() {
                 let (ms, runs, scene) = timed(repeats, || gpu.frame(&flare, light, width, height))?;
                 let image = gpu.read_hdr()?;
                 let moments = cpu::ghost_moments(&scene, &flare.mask, ghosts);
-                rows.push(row("paraxial-gpu".into(), ms, runs, against(&image, &moments)));
+                rows.push(row("paraxial-gpu".into(), ms, runs, against("paraxial-gpu", &image, &moments)?));
             }
             for &grid in &grids {
                 let (ms, runs, image) = timed(repeats, || render(Grid::Fixed(grid)))?;
-                rows.push(row(format!("raygrid-{grid}"), ms, runs, against(&image.hdr, &image.moments)));
+                let method = format!("raygrid-{grid}");
+                let errors = against(&method, &image.hdr, &image.moments)?;
+                rows.push(row(method, ms, runs, errors));
             }
             eprintln!("[{:6.1} s] {} at {theta} deg: done", started.elapsed().as_secs_f64(), lens.id);
         }
@@ -413,6 +433,17 @@ fn markdown(rows: &[Row], convergence: &[Convergence], settings: &str) -> String
         }
     }
     md
+}
+
+/// `image` as the metrics see it (exposure, ACES, sRGB), as an 8-bit PNG.
+fn write_display(path: &Path, image: &HdrImage, exposure: f32) -> Result<()> {
+    let to_u8 = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+    let pixels = metrics::display_values(image, exposure)
+        .into_iter()
+        .map(|p| [to_u8(p[0]), to_u8(p[1]), to_u8(p[2]), 255])
+        .collect();
+    output::write_png(path, &DisplayImage { width: image.width, height: image.height, pixels })?;
+    Ok(())
 }
 
 /// Where the README's benchmark section starts and ends.

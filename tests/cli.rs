@@ -423,10 +423,16 @@ fn bench_writes_csv_markdown_and_plot_and_updates_the_readme() {
         "2",
         "--update-readme",
         readme.to_str().unwrap(),
+        "--images",
         "--out",
         out.to_str().unwrap(),
     ]);
     assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    for method in ["reference", "paraxial", "raygrid-16"] {
+        let path = out.join(format!("images/brendel_tessar_usp2854889_8deg_{method}.png"));
+        let image = image::open(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display())).to_rgb8();
+        assert_eq!((image.width(), image.height()), (96, 64));
+    }
     let csv = std::fs::read_to_string(out.join("bench.csv")).unwrap();
     let mut lines = csv.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
