@@ -21,7 +21,7 @@
 
 use rustfft::num_complex::Complex64;
 
-use crate::optics::{Coating, CoatingLayer};
+use crate::optics::{Coating, CoatingLayer, Lens};
 
 /// Unpolarised reflectance and transmittance of one interface.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -97,6 +97,50 @@ impl ReflectanceTable {
         let k = (x as usize).min(n - 2);
         let f = x - k as f64;
         self.samples[k] * (1.0 - f) + self.samples[k + 1] * f
+    }
+}
+
+/// The reflectance tables of every interface of a lens, per side the light arrives from and per wavelength:
+/// what the paraxial ghosts (coarse tables) and the ray-traced renderers (dense tables) both read. A surface
+/// that reflects nothing (the stop, or the same medium on both sides) has a zero table, so its transmittance
+/// `1 - R` is exactly 1.
+#[derive(Clone, Debug, PartialEq)]
+pub struct InterfaceTables {
+    tables: Vec<ReflectanceTable>,
+    wavelengths: usize,
+}
+
+impl InterfaceTables {
+    /// Tables of `samples` samples for every surface of `lens` at `wavelengths_nm`, each surface wearing
+    /// `coating_override` when given, else its own coating.
+    pub fn new(lens: &Lens, coating_override: Option<&Coating>, wavelengths_nm: &[f64], samples: usize) -> Self {
+        let reflecting = lens.reflecting_surfaces();
+        let indices: Vec<Vec<f64>> = wavelengths_nm.iter().map(|&w| lens.media_indices_at(w)).collect();
+        let mut tables = Vec::with_capacity(lens.surfaces.len() * 2 * wavelengths_nm.len());
+        for (k, surface) in lens.surfaces.iter().enumerate() {
+            let coating = coating_override.unwrap_or(&surface.coating);
+            for backward in [false, true] {
+                for (n, &wavelength_nm) in indices.iter().zip(wavelengths_nm) {
+                    let (n_in, n_out) = if backward { (n[k + 1], n[k]) } else { (n[k], n[k + 1]) };
+                    tables.push(if reflecting.contains(&k) {
+                        ReflectanceTable::new(coating, n_in, n_out, wavelength_nm, samples)
+                    } else {
+                        ReflectanceTable::zero()
+                    });
+                }
+            }
+        }
+        Self { tables, wavelengths: wavelengths_nm.len() }
+    }
+
+    /// Where the table of `surface`, met travelling backward (towards -z) or not, at wavelength number
+    /// `wavelength` is: for [`Self::table`].
+    pub fn index(&self, surface: usize, backward: bool, wavelength: usize) -> usize {
+        (surface * 2 + usize::from(backward)) * self.wavelengths + wavelength
+    }
+
+    pub fn table(&self, index: usize) -> &ReflectanceTable {
+        &self.tables[index]
     }
 }
 

@@ -33,7 +33,7 @@
 //!
 //! What changes per frame is only `u`: [`GhostSystem::frame`] is all the per-frame CPU work.
 
-use crate::coating::ReflectanceTable;
+use crate::coating::InterfaceTables;
 use crate::optics::{Coating, FirstOrder, Lens, Mat2, ParaxialError, PathMatrices};
 use crate::spectrum::Spectrum;
 
@@ -315,7 +315,7 @@ pub struct GhostSystem {
     /// Image path per wavelength: landing of the ray through the stop centre per unit light slope.
     image_centre_per_slope: Vec<f64>,
     /// Reflectance tables per (surface, arriving side, wavelength), shared by the ghosts.
-    tables: Vec<ReflectanceTable>,
+    tables: InterfaceTables,
     /// Per (ghost, wavelength), ghost-major: the frame's coefficients.
     coefficients: Vec<FrameCoefficients>,
 }
@@ -343,28 +343,17 @@ impl GhostSystem {
         let pairs = lens.ghost_pairs();
         let curvature: Vec<f64> = lens.surfaces.iter().map(|s| s.curvature_per_mm()).collect();
 
-        // Reflectance tables per (surface, side, wavelength): index (k * 2 + backward) * n_w + w.
-        let mut tables = Vec::with_capacity(n_surfaces * 2 * n_w);
+        let tables = InterfaceTables::new(
+            lens,
+            settings.coating_override.as_ref(),
+            &spectrum.wavelengths_nm,
+            REFLECTANCE_SAMPLES,
+        );
         let indices: Vec<Vec<f64>> = spectrum.wavelengths_nm.iter().map(|&w| lens.media_indices_at(w)).collect();
         let reflecting: Vec<bool> = {
             let r = lens.reflecting_surfaces();
             (0..n_surfaces).map(|k| r.contains(&k)).collect()
         };
-        for k in 0..n_surfaces {
-            let coating = settings.coating_override.as_ref().unwrap_or(&lens.surfaces[k].coating);
-            for backward in [false, true] {
-                for (n, &wavelength_nm) in indices.iter().zip(&spectrum.wavelengths_nm) {
-                    let (before, after) = (n[k], n[k + 1]);
-                    let (n_in, n_out) = if backward { (after, before) } else { (before, after) };
-                    tables.push(if reflecting[k] {
-                        ReflectanceTable::new(coating, n_in, n_out, wavelength_nm, REFLECTANCE_SAMPLES)
-                    } else {
-                        ReflectanceTable::zero()
-                    });
-                }
-            }
-        }
-        let table_index = |k: usize, backward: bool, w: usize| (k * 2 + usize::from(backward)) * n_w + w;
 
         let mut ghosts: Vec<GhostModel> = pairs
             .iter()
@@ -379,7 +368,7 @@ impl GhostSystem {
         let mut image_centre_per_slope = Vec::with_capacity(n_w);
         for (w, &wavelength_nm) in spectrum.wavelengths_nm.iter().enumerate() {
             let n = &indices[w];
-            let transmittance = |k: usize, backward: bool| 1.0 - tables[table_index(k, backward, w)].at(0.0);
+            let transmittance = |k: usize, backward: bool| 1.0 - tables.table(tables.index(k, backward, w)).at(0.0);
             let gap = |a: usize, b: usize| Mat2::translation((z[a] - z[b]).abs());
             let forward_refraction = |k: usize| Mat2::refraction(curvature[k], n[k], n[k + 1], 1.0);
             let backward_refraction = |k: usize| Mat2::refraction(curvature[k], n[k + 1], n[k], -1.0);
@@ -452,8 +441,8 @@ impl GhostSystem {
                             matrices: PathMatrices { sensor_from_entrance, stop_from_entrance, sensor_from_stop },
                             incidence_j: Incidence::new(&at_j, curvature[j], 1.0),
                             incidence_i: Incidence::new(&at_k, curvature[k], -1.0),
-                            reflectance_j: table_index(j, false, w),
-                            reflectance_i: table_index(k, true, w),
+                            reflectance_j: tables.index(j, false, w),
+                            reflectance_i: tables.index(k, true, w),
                         });
                     }
                     back = backward_refraction(k).mul(&at_k);
@@ -555,8 +544,8 @@ impl GhostSystem {
             let irradiance = if empty {
                 0.0
             } else {
-                let r_j = self.tables[co.reflectance_j as usize].at(sin2_of(co.incidence2_j));
-                let r_i = self.tables[co.reflectance_i as usize].at(sin2_of(co.incidence2_i));
+                let r_j = self.tables.table(co.reflectance_j as usize).at(sin2_of(co.incidence2_j));
+                let r_i = self.tables.table(co.reflectance_i as usize).at(sin2_of(co.incidence2_i));
                 cos_theta * r_i * r_j * co.transmission * area_ratio
             };
             let weight = weights[co.wavelength as usize];

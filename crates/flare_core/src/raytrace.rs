@@ -43,11 +43,11 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::aperture::ApertureMask;
-use crate::coating::ReflectanceTable;
+use crate::coating::InterfaceTables;
 use crate::flare::PreparedFlare;
 use crate::ghost::{GhostSystem, Sensor};
 use crate::metrics::GhostMoments;
-use crate::optics::{Interaction, LightPath, Ray, Tracer};
+use crate::optics::{LightPath, Ray, Tracer};
 use crate::render::{HdrImage, light_slopes_for_frame_position, sensor_to_pixel};
 
 /// Most grid cells across a ghost's entrance region in the reference renderer (see the convergence table in the
@@ -100,8 +100,9 @@ struct Job {
     ghost: usize,
     wavelength: usize,
     tracer: Tracer,
-    /// Per step of the path: the reflectance table of the surface side the light meets, if it reflects at all.
-    step_tables: Vec<Option<usize>>,
+    /// Per step of the path: the reflectance table of the surface side the light meets (a zero table where it
+    /// reflects nothing, so that 1 - R = 1).
+    step_tables: Vec<usize>,
     /// Per step: 1 / semi-aperture^2 (0 at the stop, whose aperture is the mask).
     inverse_semi_aperture2: Vec<f64>,
 }
@@ -112,7 +113,7 @@ pub struct RayGridRenderer {
     system: GhostSystem,
     mask: ApertureMask,
     jobs: Vec<Job>,
-    tables: Vec<ReflectanceTable>,
+    tables: InterfaceTables,
     stop: usize,
     /// Half-side of the square the pre-pass covers, before the light's obliquity: the front clear aperture.
     front_radius_mm: f64,
@@ -240,37 +241,19 @@ impl RayGridRenderer {
         let system = flare.system.clone();
         let lens = &system.lens;
         let spectrum = &system.settings.spectrum;
-        let n_surfaces = lens.surfaces.len();
-        let reflecting = lens.reflecting_surfaces();
         let sensor_z_mm = system.first_order.sensor_z_mm();
-        // Tables per (surface, arriving backward?, wavelength), as in the paraxial system but dense.
-        let mut tables = Vec::new();
-        let mut table_of = vec![None; n_surfaces * 2 * spectrum.len()];
-        for (w, &wavelength_nm) in spectrum.wavelengths_nm.iter().enumerate() {
-            let n = lens.media_indices_at(wavelength_nm);
-            for &k in &reflecting {
-                let coating = system.settings.coating_override.as_ref().unwrap_or(&lens.surfaces[k].coating);
-                for backward in [false, true] {
-                    let (n_in, n_out) = if backward { (n[k + 1], n[k]) } else { (n[k], n[k + 1]) };
-                    table_of[(k * 2 + usize::from(backward)) * spectrum.len() + w] = Some(tables.len());
-                    tables.push(ReflectanceTable::new(coating, n_in, n_out, wavelength_nm, DENSE_TABLE_SAMPLES));
-                }
-            }
-        }
+        let tables = InterfaceTables::new(
+            lens,
+            system.settings.coating_override.as_ref(),
+            &spectrum.wavelengths_nm,
+            DENSE_TABLE_SAMPLES,
+        );
         let mut jobs = Vec::with_capacity(system.ghosts.len() * spectrum.len());
         for (g, ghost) in system.ghosts.iter().enumerate() {
             let path = LightPath::ghost(lens, ghost.i, ghost.j).expect("the ghost system lists valid ghosts");
             for (w, &wavelength_nm) in spectrum.wavelengths_nm.iter().enumerate() {
-                let step_tables = path
-                    .steps
-                    .iter()
-                    .map(|s| {
-                        let backward = s.arriving_direction < 0.0;
-                        let table = table_of[(s.surface * 2 + usize::from(backward)) * spectrum.len() + w];
-                        // A refraction between equal media (the stop) neither reflects nor loses light.
-                        if s.interaction == Interaction::Refract && s.medium_in == s.medium_out { None } else { table }
-                    })
-                    .collect();
+                let step_tables =
+                    path.steps.iter().map(|s| tables.index(s.surface, s.arriving_direction < 0.0, w)).collect();
                 let inverse_semi_aperture2 = path
                     .steps
                     .iter()
@@ -380,10 +363,8 @@ impl RayGridRenderer {
         let mut ratio2 = 0.0f64;
         let landing = job.tracer.trace_visit(&ray, |hit| {
             let sin2 = 1.0 - hit.cos_incidence * hit.cos_incidence;
-            if let Some(t) = job.step_tables[hit.index] {
-                let r = self.tables[t].at(sin2);
-                v.weight *= if hit.reflect { r } else { 1.0 - r };
-            }
+            let r = self.tables.table(job.step_tables[hit.index]).at(sin2);
+            v.weight *= if hit.reflect { r } else { 1.0 - r };
             let p = hit.point_mm;
             if hit.surface == self.stop {
                 if crossings < 3 {

@@ -244,11 +244,6 @@ impl Tracer {
         }
         Ok(Landing { point_mm: landing, direction: d })
     }
-
-    /// Number of steps of the path.
-    pub fn steps(&self) -> usize {
-        self.steps.len()
-    }
 }
 
 /// One intersection seen by [`Tracer::trace_visit`].
