@@ -203,13 +203,14 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                 errors,
             };
             // Each method's image against the reference, and written out with --images.
-            let exposure = metrics::exposure_for(&reference.hdr);
+            let truth = metrics::Reference::new(&reference.hdr, &reference.moments);
+            let exposure = truth.exposure;
             let against = |method: &str, image: &HdrImage, moments: &[metrics::GhostMoments]| -> Result<Comparison> {
                 if let Some(dir) = &images {
                     let name = format!("{}_{theta}deg_{method}.png", lens.id);
                     write_display(&dir.join(name), image, exposure)?;
                 }
-                Ok(metrics::compare(image, moments, &reference.hdr, &reference.moments))
+                Ok(truth.compare(image, moments))
             };
             rows.push(row(
                 "reference".into(),

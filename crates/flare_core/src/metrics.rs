@@ -221,25 +221,45 @@ pub struct Comparison {
     pub centroid_ghosts: usize,
 }
 
-/// Compares `test` with `reference` at the reference's exposure.
+/// A reference image prepared once for many comparisons: its exposure and display values.
+pub struct Reference<'a> {
+    pub image: &'a HdrImage,
+    pub moments: &'a [GhostMoments],
+    pub exposure: f32,
+    display: Vec<[f32; 3]>,
+}
+
+impl<'a> Reference<'a> {
+    pub fn new(image: &'a HdrImage, moments: &'a [GhostMoments]) -> Self {
+        let exposure = exposure_for(image);
+        Self { image, moments, exposure, display: display_values(image, exposure) }
+    }
+
+    /// Every metric of `test` (with its per-ghost moments) against this reference, at its exposure.
+    pub fn compare(&self, test: &HdrImage, test_moments: &[GhostMoments]) -> Comparison {
+        let reference = self.image;
+        assert_eq!((test.width, test.height), (reference.width, reference.height), "compare images of one size");
+        let a = display_values(test, self.exposure);
+        let diagonal = f64::from(test.width).hypot(f64::from(test.height));
+        let centroids = centroid_errors(test_moments, self.moments, diagonal);
+        Comparison {
+            psnr_db: psnr(&a, &self.display),
+            ssim: ssim(&a, &self.display, test.width as usize, test.height as usize),
+            relative_l1: relative_l1(test, reference),
+            centroid_px: median(&centroids),
+            centroid_ghosts: centroids.len(),
+        }
+    }
+}
+
+/// Compares `test` with `reference` at the reference's exposure (see [`Reference`] for many comparisons).
 pub fn compare(
     test: &HdrImage,
     test_moments: &[GhostMoments],
     reference: &HdrImage,
     reference_moments: &[GhostMoments],
 ) -> Comparison {
-    assert_eq!((test.width, test.height), (reference.width, reference.height), "compare images of one size");
-    let exposure = exposure_for(reference);
-    let (a, b) = (display_values(test, exposure), display_values(reference, exposure));
-    let diagonal = f64::from(test.width).hypot(f64::from(test.height));
-    let centroids = centroid_errors(test_moments, reference_moments, diagonal);
-    Comparison {
-        psnr_db: psnr(&a, &b),
-        ssim: ssim(&a, &b, test.width as usize, test.height as usize),
-        relative_l1: relative_l1(test, reference),
-        centroid_px: median(&centroids),
-        centroid_ghosts: centroids.len(),
-    }
+    Reference::new(reference, reference_moments).compare(test, test_moments)
 }
 
 #[cfg(test)]
