@@ -173,6 +173,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let started = Instant::now();
     let mut rows = Vec::new();
     let mut convergence = Vec::new();
+    let mut bakes = Vec::new();
     for name in &lenses {
         let lens = open_lens(name)?;
         let mut flare = PreparedFlare::new(&lens, &FlareConfig::default()).with_context(|| name.clone())?;
@@ -180,6 +181,36 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         if let Some(gpu) = gpu.as_mut() {
             gpu.set_flare(&flare);
         }
+        // The blended method's LUT: classified and baked at the default settings, timed and measured once.
+        let (lut, _, bake_s) = crate::lut_cli::bake_lut(
+            &flare,
+            &tracer,
+            &crate::lut_cli::LutChoice { threshold: 0.15, ..Default::default() },
+            &flare_core::lut::bake::BakeSettings::default(),
+            None,
+            true,
+        )?;
+        let lut_bytes = flare_core::lut::format::encode(&lut).len();
+        bakes.push(Bake {
+            lens: lens.id.clone(),
+            surfaces: lens.surfaces.len(),
+            ghosts: flare.system.ghosts.len(),
+            lut_ghosts: lut.ghosts.len(),
+            entries: lut.entry_count(),
+            seconds: bake_s,
+            megabytes: lut_bytes as f64 / 1e6,
+            theta_max_deg: lut.theta_max_deg,
+        });
+        eprintln!(
+            "[{:6.1} s] {}: baked {} LUT ghosts ({} entries) in {bake_s:.1} s, {:.1} MB",
+            started.elapsed().as_secs_f64(),
+            lens.id,
+            lut.ghosts.len(),
+            lut.entry_count(),
+            lut_bytes as f64 / 1e6
+        );
+        let live = flare_core::lut::blend::LiveLut::new(lut);
+        let blend = flare_core::lut::blend::BlendSettings::default();
         let (surfaces, ghosts) = (lens.surfaces.len(), flare.system.ghosts.len());
         for (k, &theta) in fields.iter().enumerate() {
             let light = light_position_deg(theta);
@@ -258,6 +289,14 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             let moments = cpu::ghost_moments(&scene, &half.mask, ghosts);
             let upsampled = cpu::composite(&scene, &image, None);
             rows.push(row("paraxial-half".into(), ms, runs, against("paraxial-half", &upsampled, &moments)?));
+            // Blended: the paraxial flare with the LUT ghosts (CPU twin), as the paraxial row is timed.
+            let (ms, runs, (image, scene, lut_scene)) = timed(repeats, || {
+                let (scene, lut_scene) = live.scenes(&flare, light, width, height, &blend, true);
+                Ok((live.render_cpu(&flare, &scene, &lut_scene), scene, lut_scene))
+            })?;
+            let mut moments = cpu::ghost_moments(&scene, &flare.mask, ghosts);
+            lut_moments(&scene, &lut_scene, &live.lut, &mut moments);
+            rows.push(row("blended".into(), ms, runs, against("blended", &image, &moments)?));
             // On the GPU, as the app draws it: sprites, upload, draw, wait (no read-back in the timing).
             if let Some(gpu) = gpu.as_mut() {
                 let (ms, runs, scene) = timed(repeats, || gpu.frame(&flare, light, width, height))?;
@@ -282,7 +321,8 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         REPEAT_BELOW_MS / 1e3
     );
     write_atomic(&args.out.join("bench.csv"), csv(&rows).as_bytes())?;
-    let markdown = markdown(&rows, &convergence, &settings);
+    let mut markdown = markdown(&rows, &convergence, &settings);
+    markdown.push_str(&bake_table(&bakes, &rows));
     write_atomic(&args.out.join("bench.md"), markdown.as_bytes())?;
     crate::plot::error_against_time(&rows, &args.out.join("bench.png"))?;
     if let Some(readme) = &args.update_readme {
@@ -334,6 +374,94 @@ impl GpuBench {
     fn read_hdr(&self) -> Result<HdrImage> {
         Ok(gpu::read_hdr(&self.ctx, &self.renderer)?)
     }
+}
+
+/// One lens's LUT bake.
+struct Bake {
+    lens: String,
+    surfaces: usize,
+    ghosts: usize,
+    lut_ghosts: usize,
+    entries: usize,
+    seconds: f64,
+    megabytes: f64,
+    theta_max_deg: f64,
+}
+
+/// Per-ghost moments of the LUT images: each instance's energy and centroid, added to its ghost's.
+fn lut_moments(
+    scene: &FlareScene,
+    lut_scene: &flare_core::lut::blend::LutScene,
+    lut: &flare_core::lut::GhostLut,
+    moments: &mut [metrics::GhostMoments],
+) {
+    for (g, ghost) in lut.ghosts.iter().enumerate() {
+        let only: Vec<usize> = (0..lut_scene.sources.len()).filter(|&k| lut_scene.sources[k].0 as usize == g).collect();
+        if only.is_empty() {
+            continue;
+        }
+        let part = flare_core::lut::blend::LutScene {
+            instances: only.iter().map(|&k| lut_scene.instances[k]).collect(),
+            sources: only.iter().map(|&k| lut_scene.sources[k]).collect(),
+            ..Default::default()
+        };
+        let mut image = HdrImage {
+            width: scene.hdr_width,
+            height: scene.hdr_height,
+            pixels: vec![[0.0; 4]; (scene.hdr_width * scene.hdr_height) as usize],
+        };
+        flare_core::lut::blend::lut_pass(scene, &part, lut, &mut image);
+        let m = &mut moments[ghost.ghost as usize];
+        for (k, p) in image.pixels.iter().enumerate() {
+            let luma = metrics::luminance([p[0], p[1], p[2]].map(f64::from));
+            if luma > 0.0 {
+                let (x, y) = ((k % image.width as usize) as f64 + 0.5, (k / image.width as usize) as f64 + 0.5);
+                m.add_sample(luma, [x, y]);
+            }
+        }
+    }
+}
+
+/// The bake table and the blended method's summary against paraxial.
+fn bake_table(bakes: &[Bake], rows: &[Row]) -> String {
+    let mut md = String::new();
+    let _ = writeln!(
+        md,
+        "\nBlended LUT ghosts (default settings: classify, bake, then per frame paraxial + LUT on the CPU twin); medians over the angles inside the LUT range:\n"
+    );
+    let _ = writeln!(
+        md,
+        "| lens | surfaces | ghosts | LUT ghosts | entries | bake (s) | .flut (MB) | theta max | blended PSNR | blended SSIM | paraxial PSNR | gain (dB) | blended / paraxial time |"
+    );
+    let _ = writeln!(md, "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    for b in bakes {
+        let of = |method: &str| -> Vec<&Row> {
+            rows.iter().filter(|r| r.lens == b.lens && r.method == method && r.field_deg <= b.theta_max_deg).collect()
+        };
+        let (blended, paraxial) = (of("blended"), of("paraxial"));
+        let med = |v: Vec<f64>| metrics::median(&v);
+        let gains: Vec<f64> = blended.iter().zip(&paraxial).map(|(a, p)| a.errors.psnr_db - p.errors.psnr_db).collect();
+        let ratios: Vec<f64> =
+            blended.iter().zip(&paraxial).map(|(a, p)| a.ms_median / p.ms_median.max(1e-6)).collect();
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {} | {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.3} | {:.1} | {:.1} | {:.2}x |",
+            b.lens,
+            b.surfaces,
+            b.ghosts,
+            b.lut_ghosts,
+            b.entries,
+            b.seconds,
+            b.megabytes,
+            b.theta_max_deg,
+            med(blended.iter().map(|r| r.errors.psnr_db).collect()),
+            med(blended.iter().map(|r| r.errors.ssim).collect()),
+            med(paraxial.iter().map(|r| r.errors.psnr_db).collect()),
+            med(gains),
+            med(ratios)
+        );
+    }
+    md
 }
 
 fn csv(rows: &[Row]) -> String {

@@ -46,6 +46,12 @@ pub enum Command {
     Render(RenderArgs),
     /// Run time against error of every method (paraxial, ray grids) versus the ray-traced reference.
     Bench(crate::bench::BenchArgs),
+    /// Measure every ghost's paraxial error against ray tracing over light angles: which are non-linear.
+    Classify(crate::lut_cli::ClassifyArgs),
+    /// Bake the non-linear ghosts into a LUT file (.flut) by exact ray tracing.
+    Bake(crate::lut_cli::BakeArgs),
+    /// Import a folder of photographs of a flare swept over theta as a photo LUT (.flut).
+    PhotoLut(crate::lut_cli::PhotoArgs),
 }
 
 #[derive(clap::Args, Debug)]
@@ -75,10 +81,17 @@ pub struct RenderArgs {
     /// Image size, e.g. 1280x720.
     #[arg(long, default_value = "1280x720", value_parser = parse_size)]
     size: (u32, u32),
-    /// Rendering method: paraxial (sprites, live), raygrid (Hullin 2011: a coarse grid of exactly traced rays per
-    /// ghost, needs --grid) or reference (the ray-traced ground truth; --grid defaults to the converged size).
+    /// Rendering method: paraxial (sprites, live), blended (paraxial + LUT ghosts; --lut, or baked in memory),
+    /// photo (a photo LUT played back alone, --lut), raygrid (Hullin 2011: a coarse grid of exactly traced rays
+    /// per ghost, needs --grid) or reference (the ray-traced ground truth; --grid defaults to the converged size).
     #[arg(long, default_value = "paraxial")]
     method: String,
+    /// LUT file (.flut) for --method blended or photo.
+    #[arg(long)]
+    lut: Option<PathBuf>,
+    /// How LUT ghosts blend with the paraxial flare: additive, alpha, linear:FROM:TO or smooth:FROM:TO (degrees).
+    #[arg(long, default_value = "additive")]
+    blend: String,
     /// Grid cells across each ghost's entrance region, for raygrid and reference.
     #[arg(long)]
     grid: Option<usize>,
@@ -242,6 +255,9 @@ pub fn run(command: Command) -> Result<()> {
         Command::Ghosts(args) => ghosts(&args),
         Command::Render(args) => render(&args),
         Command::Bench(args) => crate::bench::run(&args),
+        Command::Classify(args) => crate::lut_cli::classify_command(&args),
+        Command::Bake(args) => crate::lut_cli::bake_command(&args),
+        Command::PhotoLut(args) => crate::lut_cli::photo_command(&args),
     }
 }
 
@@ -581,17 +597,28 @@ fn ghosts(args: &GhostsArgs) -> Result<()> {
 
 fn render(args: &RenderArgs) -> Result<()> {
     let grid = match (args.method.as_str(), args.grid) {
-        ("paraxial", None) => None,
+        ("paraxial" | "blended" | "photo", None) => None,
+        ("blended" | "photo", Some(_)) => bail!("--grid applies to --method raygrid or reference"),
         ("paraxial", Some(_)) => bail!("--grid applies to --method raygrid or reference"),
         ("raygrid", None) => bail!("--method raygrid needs --grid N (Hullin 2011 used 16 to 128)"),
         ("raygrid", Some(n)) => Some(raytrace::Grid::Fixed(n)),
         ("reference", n) => Some(raytrace::Grid::Adaptive(n.unwrap_or(raytrace::REFERENCE_GRID))),
-        (other, _) => bail!("--method {other}: available methods: paraxial, raygrid, reference"),
+        (other, _) => bail!("--method {other}: available methods: paraxial, blended, photo, raygrid, reference"),
     };
     if let Some(n) = grid.map(raytrace::Grid::cells)
         && !raytrace::GRID_RANGE.contains(&n)
     {
         bail!("--grid {n}: use {} to {}", raytrace::GRID_RANGE.start(), raytrace::GRID_RANGE.end());
+    }
+    let blend = flare_core::lut::blend::BlendSettings {
+        mode: flare_core::lut::blend::BlendMode::parse(&args.blend).map_err(|e| anyhow::anyhow!("--blend {e}"))?,
+        ..Default::default()
+    };
+    if args.lut.is_some() && !["blended", "photo"].contains(&args.method.as_str()) {
+        bail!("--lut applies to --method blended or photo");
+    }
+    if args.method == "photo" && args.lut.is_none() {
+        bail!("--method photo needs --lut F.flut (made by `flarelab photo-lut`)");
     }
     let (x, y) = args.light_deg;
     if !(x.abs() < 89.0 && y.abs() < 89.0) {
@@ -629,6 +656,20 @@ fn render(args: &RenderArgs) -> Result<()> {
     let (width, height) = args.size;
     let (scene, frame) = flare.scene([x, y], width, height);
     let starburst_texture = cpu::StarburstTexture::from_starburst(&flare.starburst);
+    if matches!(args.method.as_str(), "blended" | "photo") {
+        return crate::lut_cli::render_with_lut(
+            &flare,
+            &lens,
+            args.lut.as_deref(),
+            args.method == "photo",
+            &blend,
+            [x, y],
+            (width, height),
+            &args.device,
+            background.as_ref(),
+            &args.output,
+        );
+    }
     let (display, hdr) = match (grid, args.device.as_str()) {
         (Some(n), _) => {
             // Ray-traced ghosts, then the same starburst and tonemap passes as the CPU twin.

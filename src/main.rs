@@ -6,6 +6,7 @@
 mod app;
 mod bench;
 mod cli;
+mod lut_cli;
 mod plot;
 
 use std::process::ExitCode;

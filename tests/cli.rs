@@ -463,9 +463,12 @@ fn bench_writes_csv_markdown_and_plot_and_updates_the_readme() {
         .unwrap()
     };
     assert!(psnr_of("raygrid-16", "8") > psnr_of("raygrid-8", "8"));
+    // The blended method (paraxial + baked LUT ghosts) is closer to the reference than paraxial alone.
+    assert!(psnr_of("blended", "8") > psnr_of("paraxial", "8") + 3.0, "{csv}");
     let md = std::fs::read_to_string(out.join("bench.md")).unwrap();
     assert!(md.contains("| brendel_tessar_usp2854889 | 8 | paraxial |"), "{md}");
     assert!(md.contains("Convergence of the reference"), "{md}");
+    assert!(md.contains("Blended LUT ghosts") && md.contains("| brendel_tessar_usp2854889 | 8 | blended |"), "{md}");
     let plot = image::open(out.join("bench.png")).unwrap().to_rgb8();
     assert!(plot.width() > 500 && plot.height() > 300);
     let coloured = plot.pixels().filter(|p| p[0].abs_diff(p[1]) > 60 || p[1].abs_diff(p[2]) > 60).count();
@@ -499,4 +502,105 @@ fn bench_writes_csv_markdown_and_plot_and_updates_the_readme() {
     assert_eq!(std::fs::read_to_string(&readme).unwrap(), "no markers\n");
     let message = refusal(&["bench", "--lens", "tessar", "--field-deg", "95", "--out", out.to_str().unwrap()]);
     assert!(message.contains("--field-deg"), "{message}");
+}
+
+#[test]
+fn classify_bake_and_render_blended_and_photo_luts() {
+    let dir = tempfile::tempdir().unwrap();
+    let lut = dir.path().join("tessar.flut");
+    let lut_s = lut.display().to_string();
+    // Classify: a verdict per ghost, forced choices reported as such.
+    let out = flarelab(&["classify", "tessar", "--json", "--force-nonlinear", "0-1"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let classes = json_of(&out);
+    let ghosts = classes["ghosts"].as_array().unwrap();
+    assert!(ghosts.iter().any(|g| g["forced"] == true && g["nonlinear"] == true));
+    // Bake (small settings so the test is quick), then render with it on the CPU twin.
+    let out = flarelab(&[
+        "bake",
+        "tessar",
+        "--out",
+        &lut_s,
+        "--theta-max",
+        "12",
+        "--res",
+        "32",
+        "--grid",
+        "32",
+        "--tolerance",
+        "0.5",
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("baked") && text.contains("MB"), "{text}");
+    let png = dir.path().join("blended.png");
+    let out = flarelab(&[
+        "render",
+        "tessar",
+        "--method",
+        "blended",
+        "--lut",
+        &lut_s,
+        "--device",
+        "cpu",
+        "--size",
+        "96x64",
+        "--light-deg",
+        "5,3",
+        "--blend",
+        "smooth:2:8",
+        "-o",
+        &png.display().to_string(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("LUT images"));
+    assert!(image::open(&png).is_ok());
+    // The LUT is refused for another lens, a damaged file is refused, both with exit 2 and one line.
+    let e = refusal(&[
+        "render",
+        "pbrt_dgauss_50mm",
+        "--method",
+        "blended",
+        "--lut",
+        &lut_s,
+        "-o",
+        &png.display().to_string(),
+    ]);
+    assert!(e.contains("another lens"), "{e}");
+    let mut bytes = std::fs::read(&lut).unwrap();
+    let n = bytes.len();
+    bytes.truncate(n / 2);
+    let broken = dir.path().join("broken.flut");
+    std::fs::write(&broken, &bytes).unwrap();
+    let e =
+        refusal(&["render", "tessar", "--method", "blended", "--lut", &broken.display().to_string(), "-o", "x.png"]);
+    assert!(e.contains("truncated"), "{e}");
+    let e = refusal(&["render", "tessar", "--method", "photo", "--lut", &lut_s, "-o", "x.png"]);
+    assert!(e.contains("photo LUT"), "{e}");
+    // A photo LUT from a folder of images named by angle, played back alone.
+    let photos = dir.path().join("photos");
+    std::fs::create_dir(&photos).unwrap();
+    for theta in [0, 8] {
+        image::RgbImage::from_pixel(48, 32, image::Rgb([40, 30, 20]))
+            .save(photos.join(format!("f_{theta}deg.png")))
+            .unwrap();
+    }
+    let photo_lut = dir.path().join("photo.flut").display().to_string();
+    let out = flarelab(&["photo-lut", &photos.display().to_string(), "--out", &photo_lut]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = flarelab(&[
+        "render",
+        "tessar",
+        "--method",
+        "photo",
+        "--lut",
+        &photo_lut,
+        "--device",
+        "cpu",
+        "--size",
+        "48x32",
+        "-o",
+        &png.display().to_string(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 }

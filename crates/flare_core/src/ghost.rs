@@ -301,6 +301,15 @@ pub enum GhostError {
     StopScale(f64),
 }
 
+/// One ghost's paraxial sprites reduced to a frame: centre and half-size on the sensor (mm) and energy
+/// (luminance of relative irradiance x mm^2). See [`GhostSystem::paraxial_frame`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ParaxialFrame {
+    pub centre_mm: [f64; 2],
+    pub half_mm: f64,
+    pub energy: f64,
+}
+
 /// Every ghost of a lens with its matrices and reflectance tables: rebuilt on lens or settings edits.
 #[derive(Clone, Debug, PartialEq)]
 pub struct GhostSystem {
@@ -523,11 +532,6 @@ impl GhostSystem {
         let u_len = u2.sqrt();
         let cos_theta = 1.0 / (1.0 + u2).sqrt();
         let (half_w, half_h) = (0.5 * settings.sensor.width_mm, 0.5 * settings.sensor.height_mm);
-        // The paraxial angle is taken as a tangent t, so sin^2 = t^2 / (1 + t^2) stays below 1.
-        let sin2_of = |angle2_per_slope2: f64| {
-            let t2 = angle2_per_slope2 * u2;
-            t2 / (1.0 + t2)
-        };
         let mut stats = FrameStats { sprites: self.coefficients.len(), ..FrameStats::default() };
         let weights = &self.settings.spectrum.weights_rgb;
         for co in &self.coefficients {
@@ -540,14 +544,7 @@ impl GhostSystem {
                 (co.half_size_mm, co.area_ratio)
             };
             let empty = u_len >= co.empty_from_slope;
-            // An empty entrance region passes no light: no reflectance to look up.
-            let irradiance = if empty {
-                0.0
-            } else {
-                let r_j = self.tables.table(co.reflectance_j as usize).at(sin2_of(co.incidence2_j));
-                let r_i = self.tables.table(co.reflectance_i as usize).at(sin2_of(co.incidence2_i));
-                cos_theta * r_i * r_j * co.transmission * area_ratio
-            };
+            let irradiance = if empty { 0.0 } else { self.irradiance(co, u2, cos_theta) * area_ratio };
             let weight = weights[co.wavelength as usize];
             let rgb = [
                 (weight[0] * irradiance).max(0.0),
@@ -579,6 +576,52 @@ impl GhostSystem {
             });
         }
         frame.stats = stats;
+    }
+
+    /// A sprite's irradiance before its area ratio: cos(theta) x R_i x R_j x T at the paraxial angles of
+    /// incidence for `u2` = |u|^2.
+    fn irradiance(&self, co: &FrameCoefficients, u2: f64, cos_theta: f64) -> f64 {
+        // The paraxial angle is taken as a tangent t, so sin^2 = t^2 / (1 + t^2) stays below 1.
+        let sin2_of = |angle2_per_slope2: f64| {
+            let t2 = angle2_per_slope2 * u2;
+            t2 / (1.0 + t2)
+        };
+        let r_j = self.tables.table(co.reflectance_j as usize).at(sin2_of(co.incidence2_j));
+        let r_i = self.tables.table(co.reflectance_i as usize).at(sin2_of(co.incidence2_i));
+        cos_theta * r_i * r_j * co.transmission
+    }
+
+    /// Ghost `g`'s paraxial sprites summed over the spectrum for light slope `u`, with no culling: the frame a
+    /// LUT ghost is fitted to ([`crate::lut`]). The centre and half-size are averaged over the wavelengths with
+    /// their luminance weights (the half-size at least `min_half_mm`); the energy is the luminance of
+    /// irradiance x sprite area, before any vignetting by the front lens or the stop (0 when the entrance region
+    /// is empty).
+    pub fn paraxial_frame(&self, g: usize, u: [f64; 2], min_half_mm: f64) -> ParaxialFrame {
+        let u2 = u[0] * u[0] + u[1] * u[1];
+        let cos_theta = 1.0 / (1.0 + u2).sqrt();
+        let nw = self.settings.spectrum.len();
+        let (mut weight_sum, mut centre, mut half, mut energy) = (0.0, [0.0; 2], 0.0, 0.0);
+        for (w, co) in self.coefficients[g * nw..(g + 1) * nw].iter().enumerate() {
+            let luma = crate::metrics::luminance(self.settings.spectrum.weights_rgb[w]);
+            weight_sum += luma;
+            centre = [centre[0] + luma * co.centre_per_slope * u[0], centre[1] + luma * co.centre_per_slope * u[1]];
+            half += luma * co.half_size_mm.abs();
+            if u2.sqrt() < co.empty_from_slope {
+                // irradiance x (2 half)^2 = irradiance per unit area ratio x 4 rho^2.
+                energy += luma * self.irradiance(co, u2, cos_theta) * 4.0 * co.rho_squared;
+            }
+        }
+        let weight_sum = weight_sum.max(1e-300);
+        let frame = ParaxialFrame {
+            centre_mm: centre.map(|c| c / weight_sum),
+            half_mm: (half / weight_sum).max(min_half_mm),
+            energy,
+        };
+        if frame.centre_mm.iter().all(|c| c.is_finite()) && frame.half_mm.is_finite() && frame.energy.is_finite() {
+            frame
+        } else {
+            ParaxialFrame { centre_mm: [0.0; 2], half_mm: min_half_mm, energy: 0.0 }
+        }
     }
 
     /// The masks of the `k`-th sprite of a frame (sprites come ghost by ghost, wavelength by wavelength) for

@@ -16,6 +16,7 @@ pub mod aperture;
 pub mod coating;
 pub mod flare;
 pub mod ghost;
+pub mod lut;
 pub mod metrics;
 pub mod optics;
 pub mod raytrace;

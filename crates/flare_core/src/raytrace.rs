@@ -48,7 +48,7 @@ use crate::flare::PreparedFlare;
 use crate::ghost::{GhostSystem, Sensor};
 use crate::metrics::GhostMoments;
 use crate::optics::{LightPath, Ray, Tracer};
-use crate::render::{HdrImage, light_slopes_for_frame_position, sensor_to_pixel};
+use crate::render::{HdrImage, light_slopes_for_frame_position};
 
 /// Most grid cells across a ghost's entrance region in the reference renderer (see the convergence table in the
 /// README).
@@ -93,6 +93,48 @@ pub const DENSE_TABLE_SAMPLES: usize = 1025;
 pub const SMALL_TRIANGLE_PX2: f64 = 4.0;
 /// The smallest and largest grid a ray-grid render accepts.
 pub const GRID_RANGE: std::ops::RangeInclusive<usize> = 2..=4096;
+
+/// The part of the sensor plane an image covers: a rectangle of centre `centre_mm` and width `width_mm`, drawn
+/// `width` x `height` square pixels in the display orientation (the sensor rotated by 180 degrees, as
+/// [`crate::render::sensor_to_pixel`] does for the whole frame). The whole frame is the window centred on the
+/// axis with the sensor's width ([`Window::frame`]); a LUT bake uses a window around one ghost.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Window {
+    pub centre_mm: [f64; 2],
+    pub width_mm: f64,
+    pub width: u32,
+    pub height: u32,
+}
+
+impl Window {
+    /// The whole frame of a `width` x `height` image ([`Sensor::full_frame_for`]).
+    pub fn frame(width: u32, height: u32) -> Self {
+        Self { centre_mm: [0.0, 0.0], width_mm: Sensor::full_frame_for(width, height).width_mm, width, height }
+    }
+
+    /// Pixels per millimetre.
+    pub fn px_per_mm(&self) -> f64 {
+        f64::from(self.width) / self.width_mm
+    }
+
+    /// The pixel position of the sensor point `p_mm`.
+    pub fn to_pixel(&self, p_mm: [f64; 2]) -> [f64; 2] {
+        let k = self.px_per_mm();
+        [
+            0.5 * f64::from(self.width) - (p_mm[0] - self.centre_mm[0]) * k,
+            0.5 * f64::from(self.height) + (p_mm[1] - self.centre_mm[1]) * k,
+        ]
+    }
+
+    /// The sensor point at the pixel position `p` (the inverse of [`Self::to_pixel`]).
+    pub fn to_mm(&self, p: [f64; 2]) -> [f64; 2] {
+        let k = self.px_per_mm();
+        [
+            self.centre_mm[0] - (p[0] - 0.5 * f64::from(self.width)) / k,
+            self.centre_mm[1] + (p[1] - 0.5 * f64::from(self.height)) / k,
+        ]
+    }
+}
 
 /// One ghost at one wavelength, ready to trace.
 #[derive(Clone, Debug)]
@@ -148,6 +190,8 @@ pub enum RayGridError {
     Grid(usize),
     #[error("image size {0}x{1}: both sides must be at least 1 pixel")]
     Size(u32, u32),
+    #[error("window width {0} mm: must be finite and positive, with a finite centre")]
+    Window(f64),
     #[error("light angle {0:?} deg: each angle must be finite and within +-89 degrees")]
     Angle([f64; 2]),
 }
@@ -306,17 +350,31 @@ impl RayGridRenderer {
         grid: Grid,
         selected: impl Fn(usize) -> bool + Sync,
     ) -> Result<RayGridImage, RayGridError> {
+        self.render_window(light_deg, &Window::frame(width, height), grid, selected)
+    }
+
+    /// [`Self::render_selected`] into any window of the sensor plane.
+    pub fn render_window(
+        &self,
+        light_deg: [f64; 2],
+        window: &Window,
+        grid: Grid,
+        selected: impl Fn(usize) -> bool + Sync,
+    ) -> Result<RayGridImage, RayGridError> {
+        let (width, height) = (window.width, window.height);
         if !GRID_RANGE.contains(&grid.cells()) {
             return Err(RayGridError::Grid(grid.cells()));
         }
         if width == 0 || height == 0 {
             return Err(RayGridError::Size(width, height));
         }
+        if !(window.width_mm.is_finite() && window.width_mm > 0.0 && window.centre_mm.iter().all(|c| c.is_finite())) {
+            return Err(RayGridError::Window(window.width_mm));
+        }
         if !light_deg.iter().all(|a| a.is_finite() && a.abs() <= 89.0) {
             return Err(RayGridError::Angle(light_deg));
         }
         let u = light_slopes_for_frame_position(light_deg[0], light_deg[1]);
-        let sensor = Sensor::full_frame_for(width, height);
         let (w, h) = (width as usize, height as usize);
         let ghosts = self.ghost_count();
         let acc = self
@@ -326,14 +384,14 @@ impl RayGridRenderer {
             .fold(
                 || Accumulator::new(w, h, ghosts),
                 |mut acc, job| {
-                    self.render_job(job, u, &sensor, width, height, grid, &mut acc);
+                    self.render_job(job, u, window, grid, &mut acc);
                     acc
                 },
             )
             .reduce(|| Accumulator::new(w, h, ghosts), Accumulator::merge);
         // Energy per pixel / pixel area = irradiance; moments likewise in irradiance x pixel^2, as the
         // paraxial renderer's.
-        let pixel_area_mm2 = (sensor.width_mm / width as f64).powi(2);
+        let pixel_area_mm2 = window.px_per_mm().powi(-2);
         let mut moments = acc.moments;
         for m in &mut moments {
             *m = GhostMoments {
@@ -354,8 +412,50 @@ impl RayGridRenderer {
         Ok(RayGridImage { hdr: HdrImage { width, height, pixels }, moments, stats: acc.stats })
     }
 
+    /// Where ghost `ghost` lands on the sensor plane for a light at the frame position `light_deg`:
+    /// `[x_min, y_min, x_max, y_max]` in sensor mm over every wavelength, from a `cells` x `cells` grid over the
+    /// region where the pre-pass found light (each passing ray and its traced neighbours, so the partly lit
+    /// cells at the rim are inside). `None` when no ray of the ghost passes.
+    pub fn footprint_mm(&self, ghost: usize, light_deg: [f64; 2], cells: usize) -> Option<[f64; 4]> {
+        let u = light_slopes_for_frame_position(light_deg[0], light_deg[1]);
+        let d = DVec3::new(u[0], u[1], 1.0).normalize();
+        // 1 px per mm over a metre: nothing the lens can image is off this window.
+        let window = Window { centre_mm: [0.0, 0.0], width_mm: 1000.0, width: 1000, height: 1000 };
+        let n = cells.clamp(4, 512);
+        let mut bounds = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+        let mut stats = RayGridStats::default();
+        for job in self.jobs.iter().filter(|j| j.ghost == ghost) {
+            let Some((b, _)) = self.grid_bounds(job, u, d, 32, &window, &mut stats) else { continue };
+            let stop_count =
+                self.system.ghosts[job.ghost].per_wavelength[job.wavelength].matrices.stop_from_entrance.len().min(3);
+            let (dx, dy) = ((b[2] - b[0]) / n as f64, (b[3] - b[1]) / n as f64);
+            let vertices: Vec<Vertex> = (0..=n)
+                .flat_map(|iy| (0..=n).map(move |ix| (ix, iy)))
+                .map(|(ix, iy)| self.trace_vertex(job, [b[0] + ix as f64 * dx, b[1] + iy as f64 * dy], d, &window))
+                .collect();
+            for iy in 0..=n {
+                for ix in 0..=n {
+                    if !vertices[iy * (n + 1) + ix].passes(stop_count) {
+                        continue;
+                    }
+                    for (jx, jy) in (iy.saturating_sub(1)..=(iy + 1).min(n))
+                        .flat_map(|jy| (ix.saturating_sub(1)..=(ix + 1).min(n)).map(move |jx| (jx, jy)))
+                    {
+                        let v = &vertices[jy * (n + 1) + jx];
+                        if v.valid {
+                            let p = window.to_mm(v.pixel);
+                            bounds =
+                                [bounds[0].min(p[0]), bounds[1].min(p[1]), bounds[2].max(p[0]), bounds[3].max(p[1])];
+                        }
+                    }
+                }
+            }
+        }
+        (bounds[0] <= bounds[2] && bounds[1] <= bounds[3]).then_some(bounds)
+    }
+
     /// Traces one ray of `job` from the entrance point `x0` (mm) in direction `d`.
-    fn trace_vertex(&self, job: &Job, x0: [f64; 2], d: DVec3, sensor: &Sensor, size: (u32, u32)) -> Vertex {
+    fn trace_vertex(&self, job: &Job, x0: [f64; 2], d: DVec3, window: &Window) -> Vertex {
         let ray = Ray { origin_mm: DVec3::new(x0[0], x0[1], 0.0), direction: d };
         let stop_radius = self.system.stop_radius_mm;
         let mut v = Vertex { weight: 1.0, ..Vertex::default() };
@@ -378,7 +478,7 @@ impl RayGridRenderer {
         });
         v.ratio = ratio2.sqrt();
         if let Ok(landing) = landing {
-            let pixel = sensor_to_pixel([landing.point_mm.x, landing.point_mm.y], sensor, size.0, size.1);
+            let pixel = window.to_pixel([landing.point_mm.x, landing.point_mm.y]);
             v.valid = pixel.iter().all(|c| c.is_finite()) && v.weight.is_finite() && v.ratio.is_finite();
             v.pixel = pixel;
         }
@@ -395,8 +495,7 @@ impl RayGridRenderer {
         u: [f64; 2],
         d: DVec3,
         coarse: usize,
-        sensor: &Sensor,
-        size: (u32, u32),
+        window: &Window,
         stats: &mut RayGridStats,
     ) -> Option<([f64; 4], f64)> {
         let half = self.front_radius_mm * 1.01 + u[0].hypot(u[1]) * self.front_sag_mm;
@@ -408,13 +507,13 @@ impl RayGridRenderer {
         for iy in 0..n {
             for ix in 0..n {
                 let x0 = [-half + ix as f64 * step, -half + iy as f64 * step];
-                vertices.push((x0, self.trace_vertex(job, x0, d, sensor, size)));
+                vertices.push((x0, self.trace_vertex(job, x0, d, window)));
             }
         }
         stats.rays += (n * n) as u64;
         let empty = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
         let grow = |b: [f64; 4], p: [f64; 2]| [b[0].min(p[0]), b[1].min(p[1]), b[2].max(p[0]), b[3].max(p[1])];
-        let (w, h) = (f64::from(size.0), f64::from(size.1));
+        let (w, h) = (f64::from(window.width), f64::from(window.height));
         // The cells where light passes and lands in the frame (a cell's landings bound where its rays land).
         let (mut found, mut landed, mut any_passes) = (empty, empty, false);
         for iy in 0..coarse {
@@ -464,21 +563,11 @@ impl RayGridRenderer {
     }
 
     #[allow(clippy::too_many_arguments)]
-    fn render_job(
-        &self,
-        job: &Job,
-        u: [f64; 2],
-        sensor: &Sensor,
-        width: u32,
-        height: u32,
-        grid: Grid,
-        acc: &mut Accumulator,
-    ) {
+    fn render_job(&self, job: &Job, u: [f64; 2], window: &Window, grid: Grid, acc: &mut Accumulator) {
         acc.stats.jobs += 1;
         let d = DVec3::new(u[0], u[1], 1.0).normalize();
-        let size = (width, height);
         let coarse = (grid.cells() / 2).clamp(16, 64);
-        let Some((b, extent_px)) = self.grid_bounds(job, u, d, coarse, sensor, size, &mut acc.stats) else {
+        let Some((b, extent_px)) = self.grid_bounds(job, u, d, coarse, window, &mut acc.stats) else {
             acc.stats.empty_jobs += 1;
             return;
         };
@@ -504,7 +593,7 @@ impl RayGridRenderer {
             current.clear();
             for ix in 0..=grid {
                 let x0 = [b[0] + ix as f64 * dx, b[1] + iy as f64 * dy];
-                current.push(self.trace_vertex(job, x0, d, sensor, size));
+                current.push(self.trace_vertex(job, x0, d, window));
             }
             acc.stats.rays += (grid + 1) as u64;
             if iy > 0 {

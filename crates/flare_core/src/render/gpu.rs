@@ -5,17 +5,20 @@
 //! optional background plate (Rgba16Float) and an HDR accumulation target (Rgba16Float, resized on demand).
 //! [`FlareRenderer::render`] records three passes into the caller's encoder:
 //! 1. `ghosts.wgsl`: clear the HDR target, draw one instanced quad per ghost sprite, additive blending;
-//! 2. `starburst.wgsl`: the diffraction texture at the light's image, additive;
-//! 3. `tonemap.wgsl`: background + HDR, exposure, tonemap and (for non-sRGB targets) sRGB encoding into the
+//! 2. `lut_ghosts.wgsl` (when a LUT is set and the frame has LUT instances): LUT images from the atlas (a 2D
+//!    array of [`ATLAS_PAGE`]-texel Rgba16Float pages), added or composited over through alpha;
+//! 3. `starburst.wgsl`: the diffraction texture at the light's image, additive;
+//! 4. `tonemap.wgsl`: background + HDR, exposure, tonemap and (for non-sRGB targets) sRGB encoding into the
 //!    caller's view.
 //!
 //! It never owns a window: the app hands it egui's device and a view, tests and the command line hand it a
 //! headless device ([`GpuContext::headless`]) and read the result back ([`read_display`], [`read_hdr`]).
 //! Rows copied to buffers are padded to 256 bytes as wgpu requires.
 
-use super::shaders::{GHOSTS_WGSL, STARBURST_WGSL, TONEMAP_WGSL};
+use super::shaders::{GHOSTS_WGSL, LUT_GHOSTS_WGSL, STARBURST_WGSL, TONEMAP_WGSL};
 use super::{DisplayImage, FlareScene, GhostInstance, Globals, HdrImage};
 use crate::aperture::ApertureMask;
+use crate::lut::blend::{ATLAS_PAGE, LiveLut, LutInstance, LutScene};
 use crate::starburst::Starburst;
 
 /// The HDR accumulation format.
@@ -118,6 +121,20 @@ fn half_floats(rgba: &[[f32; 4]]) -> Vec<u8> {
     bytemuck::cast_slice(&halves).to_vec()
 }
 
+/// An Rgba16Float 2D array texture of `layers` square pages of `side` texels.
+fn atlas_texture(device: &wgpu::Device, side: u32, layers: u32) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("lut atlas"),
+        size: wgpu::Extent3d { width: side, height: side, depth_or_array_layers: layers.max(1) },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: HDR_FORMAT,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    })
+}
+
 /// The GPU flare renderer.
 pub struct FlareRenderer {
     ghost_pipeline: wgpu::RenderPipeline,
@@ -135,6 +152,13 @@ pub struct FlareRenderer {
     instances: wgpu::Buffer,
     instance_capacity: usize,
     target_format: wgpu::TextureFormat,
+    lut_add_pipeline: wgpu::RenderPipeline,
+    lut_over_pipeline: wgpu::RenderPipeline,
+    lut_layout: wgpu::BindGroupLayout,
+    /// The LUT atlas (a 1 x 1 x 1 black array when no LUT is set).
+    lut_atlas: wgpu::Texture,
+    lut_instances: wgpu::Buffer,
+    lut_capacity: usize,
 }
 
 impl FlareRenderer {
@@ -247,6 +271,51 @@ impl FlareRenderer {
             pipeline("ghosts", &ghost_pl, &ghosts, &[Some(instance_buffer_layout)], HDR_FORMAT, Some(additive));
         let starburst_pipeline = pipeline("starburst", &ghost_pl, &starburst_module, &[], HDR_FORMAT, Some(additive));
         let tonemap_pipeline = pipeline("tonemap", &tonemap_pl, &tonemap, &[], target_format, None);
+        let lut_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("lut ghosts"),
+            entries: &[
+                uniform,
+                wgpu::BindGroupLayoutEntry {
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                        view_dimension: wgpu::TextureViewDimension::D2Array,
+                        multisampled: false,
+                    },
+                    ..texture(1, true)
+                },
+                sampler_entry,
+            ],
+        });
+        let lut_pl = layout(&lut_layout);
+        let lut_module = module("lut_ghosts.wgsl", LUT_GHOSTS_WGSL);
+        let lut_attributes = wgpu::vertex_attr_array![0 => Float32x4, 1 => Float32x4, 2 => Float32x4, 3 => Float32x4];
+        let lut_buffer_layout = wgpu::VertexBufferLayout {
+            array_stride: std::mem::size_of::<LutInstance>() as u64,
+            step_mode: wgpu::VertexStepMode::Instance,
+            attributes: &lut_attributes,
+        };
+        let over = wgpu::BlendState {
+            color: wgpu::BlendComponent {
+                src_factor: wgpu::BlendFactor::One,
+                dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
+                operation: wgpu::BlendOperation::Add,
+            },
+            alpha: wgpu::BlendComponent {
+                src_factor: wgpu::BlendFactor::One,
+                dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
+                operation: wgpu::BlendOperation::Add,
+            },
+        };
+        let lut_add_pipeline = pipeline(
+            "lut ghosts",
+            &lut_pl,
+            &lut_module,
+            &[Some(lut_buffer_layout.clone())],
+            HDR_FORMAT,
+            Some(additive),
+        );
+        let lut_over_pipeline =
+            pipeline("lut ghosts over", &lut_pl, &lut_module, &[Some(lut_buffer_layout)], HDR_FORMAT, Some(over));
         let globals = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("globals"),
             size: std::mem::size_of::<Globals>() as u64,
@@ -273,7 +342,22 @@ impl FlareRenderer {
             usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
+        let lut_atlas = atlas_texture(device, 1, 1);
+        upload(queue, &lut_atlas, &half_floats(&[[0.0; 4]]), 8);
+        let lut_capacity = 64;
+        let lut_instances = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("lut instances"),
+            size: (lut_capacity * std::mem::size_of::<LutInstance>()) as u64,
+            usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
         Self {
+            lut_add_pipeline,
+            lut_over_pipeline,
+            lut_layout,
+            lut_atlas,
+            lut_instances,
+            lut_capacity,
             ghost_pipeline,
             starburst_pipeline,
             tonemap_pipeline,
@@ -340,6 +424,35 @@ impl FlareRenderer {
         target: &wgpu::TextureView,
         scene: &FlareScene,
     ) {
+        self.render_with_lut(device, queue, encoder, target, scene, None);
+    }
+
+    /// Uploads a LUT's atlas (`None` removes it).
+    pub fn set_lut(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, lut: Option<&LiveLut>) {
+        match lut.filter(|l| l.layout.pages > 0) {
+            Some(live) => {
+                self.lut_atlas = atlas_texture(device, ATLAS_PAGE, live.layout.pages);
+                let texels = live.layout.pages_f16(&live.lut);
+                upload(queue, &self.lut_atlas, bytemuck::cast_slice(&texels), 8);
+            }
+            None => {
+                self.lut_atlas = atlas_texture(device, 1, 1);
+                upload(queue, &self.lut_atlas, &half_floats(&[[0.0; 4]]), 8);
+            }
+        }
+    }
+
+    /// [`Self::render`] with the LUT instances of `lut` drawn after the paraxial ghosts (the atlas from
+    /// [`Self::set_lut`]).
+    pub fn render_with_lut(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        target: &wgpu::TextureView,
+        scene: &FlareScene,
+        lut: Option<&LutScene>,
+    ) {
         let (w, h) = (scene.hdr_width.max(1), scene.hdr_height.max(1));
         if !matches!(&self.hdr, Some((_, hw, hh)) if *hw == w && *hh == h) {
             let usage = wgpu::TextureUsages::RENDER_ATTACHMENT
@@ -362,6 +475,19 @@ impl FlareRenderer {
         }
         if !scene.instances.is_empty() {
             queue.write_buffer(&self.instances, 0, bytemuck::cast_slice(&scene.instances));
+        }
+        let lut = lut.filter(|l| !l.instances.is_empty());
+        if let Some(lut) = lut {
+            if lut.instances.len() > self.lut_capacity {
+                self.lut_capacity = lut.instances.len().next_power_of_two();
+                self.lut_instances = device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("lut instances"),
+                    size: (self.lut_capacity * std::mem::size_of::<LutInstance>()) as u64,
+                    usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                });
+            }
+            queue.write_buffer(&self.lut_instances, 0, bytemuck::cast_slice(&lut.instances));
         }
         let Some((hdr, _, _)) = &self.hdr else { return };
         let hdr_view = hdr.create_view(&wgpu::TextureViewDescriptor::default());
@@ -408,6 +534,25 @@ impl FlareRenderer {
                 pass.set_bind_group(0, &ghost_group, &[]);
                 pass.set_vertex_buffer(0, self.instances.slice(..));
                 pass.draw(0..6, 0..scene.instances.len() as u32);
+            }
+            if let Some(lut) = lut {
+                let atlas_view = self.lut_atlas.create_view(&wgpu::TextureViewDescriptor {
+                    dimension: Some(wgpu::TextureViewDimension::D2Array),
+                    ..Default::default()
+                });
+                let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("lut ghosts"),
+                    layout: &self.lut_layout,
+                    entries: &[
+                        wgpu::BindGroupEntry { binding: 0, resource: self.globals.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&atlas_view) },
+                        wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::Sampler(&self.sampler) },
+                    ],
+                });
+                pass.set_pipeline(if lut.alpha_over { &self.lut_over_pipeline } else { &self.lut_add_pipeline });
+                pass.set_bind_group(0, &group, &[]);
+                pass.set_vertex_buffer(0, self.lut_instances.slice(..));
+                pass.draw(0..6, 0..lut.instances.len() as u32);
             }
             if globals.starburst[2] > 0.0 && globals.starburst[3] != 0.0 {
                 pass.set_pipeline(&self.starburst_pipeline);
@@ -482,6 +627,16 @@ pub fn render_display(
     renderer: &mut FlareRenderer,
     scene: &FlareScene,
 ) -> Result<DisplayImage, GpuError> {
+    render_display_with_lut(ctx, renderer, scene, None)
+}
+
+/// [`render_display`] with LUT instances ([`FlareRenderer::render_with_lut`]).
+pub fn render_display_with_lut(
+    ctx: &GpuContext,
+    renderer: &mut FlareRenderer,
+    scene: &FlareScene,
+    lut: Option<&LutScene>,
+) -> Result<DisplayImage, GpuError> {
     let target = texture_2d(
         &ctx.device,
         "display",
@@ -492,7 +647,7 @@ pub fn render_display(
     );
     let view = target.create_view(&wgpu::TextureViewDescriptor::default());
     let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("flare") });
-    renderer.render(&ctx.device, &ctx.queue, &mut encoder, &view, scene);
+    renderer.render_with_lut(&ctx.device, &ctx.queue, &mut encoder, &view, scene, lut);
     ctx.queue.submit(Some(encoder.finish()));
     let bytes = read_texture(ctx, &target, 4)?;
     let pixels = bytes.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect();

@@ -7,6 +7,13 @@ pub const STARBURST_WGSL: &str = include_str!("../../../../shaders/starburst.wgs
 /// Background, exposure, tonemap, sRGB.
 pub const TONEMAP_WGSL: &str = include_str!("../../../../shaders/tonemap.wgsl");
 
+/// LUT ghosts from the atlas.
+pub const LUT_GHOSTS_WGSL: &str = include_str!("../../../../shaders/lut_ghosts.wgsl");
+
 /// Every shader with its file name (for validation and error messages).
-pub const ALL: &[(&str, &str)] =
-    &[("ghosts.wgsl", GHOSTS_WGSL), ("starburst.wgsl", STARBURST_WGSL), ("tonemap.wgsl", TONEMAP_WGSL)];
+pub const ALL: &[(&str, &str)] = &[
+    ("ghosts.wgsl", GHOSTS_WGSL),
+    ("starburst.wgsl", STARBURST_WGSL),
+    ("tonemap.wgsl", TONEMAP_WGSL),
+    ("lut_ghosts.wgsl", LUT_GHOSTS_WGSL),
+];

@@ -1,0 +1,338 @@
+//! The LUT generator: each non-linear ghost ray-traced at the thetas and azimuths the run time interpolates.
+//!
+//! # How it works
+//! Per ghost (ghosts in parallel with rayon; inside a ghost, its wavelengths in parallel too), and per azimuth
+//! of the symmetry wedge ([`super::Symmetry::phi_samples`]):
+//! 1. **An entry** at (theta, phi): the light at `theta` from the axis with the azimuth `axis + phi`; where the
+//!    ghost lands is found by [`RayGridRenderer::footprint_mm`], the window around it gets at most
+//!    [`BakeSettings::res`] texels across (never finer than [`super::MIN_TEXEL_MM`]), and the ghost alone is
+//!    rendered into it by the reference renderer ([`Grid::Adaptive`], up to [`BakeSettings::grid`] cells).
+//!    Alpha is the coverage: luminance over 5% of the entry's peak, clamped to 1.
+//! 2. **Thetas where the pattern changes**: the angles start at `initial_steps` even steps from 0 to the
+//!    useful field (the light angle whose image reaches the corner of the 36 x 24 mm sensor). Every interval
+//!    is then split at its middle, and the middle entry kept, while the run time's prediction of it (the two
+//!    neighbours interpolated in their paraxial frames, exactly as [`super::blend`] draws them) is off by more
+//!    than [`BakeSettings::tolerance`] (relative L1 of luminance, worst azimuth), down to
+//!    [`BakeSettings::min_step_deg`].
+//!
+//! Progress is reported per entry through a callback, and the bake stops at the next entry when the cancel
+//! flag is set. Given the previous LUT, a ghost whose key (the lens fingerprint, the ghost and the bake
+//! settings) is unchanged is kept, not re-baked: re-classifying, forcing a ghost or changing the theta range
+//! re-bakes only what changed. Any edit of the lens, its coatings, spectrum or stop changes every ghost's
+//! key, because every ghost path crosses every surface (as a refraction at least).
+
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+use half::f16;
+use rayon::prelude::*;
+
+use super::{FNV_OFFSET, GhostLut, LutEntry, LutGhost, LutKind, MIN_TEXEL_MM, Symmetry, fnv1a, light_position_deg};
+use crate::flare::PreparedFlare;
+use crate::metrics::luminance;
+use crate::raytrace::{Grid, RayGridRenderer, Window};
+use crate::render::light_slopes_for_frame_position;
+
+/// How a LUT is baked.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BakeSettings {
+    /// Largest theta (default: the lens's useful field, [`useful_field_deg`]).
+    pub theta_max_deg: Option<f64>,
+    /// Most texels across an entry.
+    pub res: u32,
+    /// Most ray-grid cells across a ghost's entrance region (the reference renderer's adaptive grid).
+    pub grid: usize,
+    /// Azimuth steps over the symmetry wedge (0: one azimuth, rotation only).
+    pub phi_steps: u32,
+    /// Even theta steps before refinement.
+    pub initial_steps: u32,
+    /// Refine an interval while the interpolated middle is off by more than this (relative L1).
+    pub tolerance: f64,
+    /// Finest theta step.
+    pub min_step_deg: f64,
+}
+
+impl Default for BakeSettings {
+    fn default() -> Self {
+        Self {
+            theta_max_deg: None,
+            res: 128,
+            grid: 128,
+            phi_steps: 2,
+            initial_steps: 4,
+            tolerance: 0.12,
+            min_step_deg: 0.75,
+        }
+    }
+}
+
+/// Why a bake stopped.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum BakeError {
+    #[error("the bake was cancelled")]
+    Cancelled,
+    #[error("bake setting `{field}`: {reason}")]
+    Setting { field: &'static str, reason: String },
+    #[error("ghost {0} does not exist (the lens has {1} ghosts)")]
+    NoGhost(usize, usize),
+}
+
+/// Progress of a bake.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BakeProgress {
+    /// Entries rendered so far (all ghosts).
+    pub entries: usize,
+    /// Ghosts finished (kept ones included) out of `ghosts_total`.
+    pub ghosts_done: usize,
+    pub ghosts_total: usize,
+    /// Ghosts kept from the previous LUT.
+    pub ghosts_kept: usize,
+}
+
+/// The light angle whose image reaches the corner of the 36 x 24 mm sensor (the lens's useful field), from
+/// its focal length; at most 60 degrees.
+pub fn useful_field_deg(flare: &PreparedFlare) -> f64 {
+    let f = flare.system.first_order.efl_mm.abs();
+    if f > 0.0 && f.is_finite() { (super::SENSOR_HALF_DIAGONAL_MM / f).atan().to_degrees().min(60.0) } else { 20.0 }
+}
+
+impl BakeSettings {
+    fn validate(&self) -> Result<(), BakeError> {
+        let bad = |field, reason: &str| Err(BakeError::Setting { field, reason: reason.into() });
+        if let Some(t) = self.theta_max_deg
+            && !(t.is_finite() && t > 0.0 && t <= 85.0)
+        {
+            return bad("theta_max_deg", "must be above 0 and at most 85 degrees");
+        }
+        if !(8..=1024).contains(&self.res) {
+            return bad("res", "use 8 to 1024 texels");
+        }
+        if !(4..=crate::raytrace::REFERENCE_GRID * 2).contains(&self.grid) {
+            return bad("grid", "use 4 to 512 cells");
+        }
+        if self.phi_steps > 16 || !(1..=64).contains(&self.initial_steps) {
+            return bad("phi_steps/initial_steps", "at most 16 azimuth steps, 1 to 64 initial theta steps");
+        }
+        if !(self.tolerance.is_finite()
+            && self.tolerance > 0.0
+            && self.min_step_deg.is_finite()
+            && self.min_step_deg > 0.0)
+        {
+            return bad("tolerance/min_step_deg", "must be positive");
+        }
+        Ok(())
+    }
+}
+
+/// Renders one entry: ghost `g` with the light at `theta_deg` and the azimuth `axis + phi_deg`.
+pub fn render_entry(
+    flare: &PreparedFlare,
+    renderer: &RayGridRenderer,
+    g: usize,
+    theta_deg: f64,
+    phi_deg: f64,
+    symmetry: &Symmetry,
+    settings: &BakeSettings,
+) -> LutEntry {
+    let light = light_position_deg(theta_deg, symmetry.axis_deg + phi_deg);
+    let u = light_slopes_for_frame_position(light[0], light[1]);
+    let paraxial = flare.system.paraxial_frame(g, u, MIN_TEXEL_MM);
+    let empty = LutEntry::empty(theta_deg, phi_deg, paraxial);
+    let Some(b) = renderer.footprint_mm(g, light, 48) else { return empty };
+    let (w_mm, h_mm) = ((b[2] - b[0]).max(0.0), (b[3] - b[1]).max(0.0));
+    let texel_mm = (w_mm.max(h_mm) / f64::from(settings.res - 2)).max(MIN_TEXEL_MM);
+    // Two texels of margin each side: the bilinear splats of the rim's triangles land there.
+    let (width, height) = ((w_mm / texel_mm).ceil() as u32 + 4, (h_mm / texel_mm).ceil() as u32 + 4);
+    let window = Window {
+        centre_mm: [0.5 * (b[0] + b[2]), 0.5 * (b[1] + b[3])],
+        width_mm: texel_mm * f64::from(width),
+        width,
+        height,
+    };
+    let Ok(image) = renderer.render_window(light, &window, Grid::Adaptive(settings.grid), |k| k == g) else {
+        return empty;
+    };
+    let peak = image.hdr.pixels.iter().map(|p| luminance([p[0], p[1], p[2]].map(f64::from))).fold(0.0, f64::max);
+    if peak <= 0.0 {
+        return empty;
+    }
+    let texels = image
+        .hdr
+        .pixels
+        .iter()
+        .map(|p| {
+            let alpha = (luminance([p[0], p[1], p[2]].map(f64::from)) / (0.05 * peak)).min(1.0) as f32;
+            [p[0], p[1], p[2], alpha].map(|v| f16::from_f32(if v.is_finite() { v.max(0.0) } else { 0.0 }))
+        })
+        .collect();
+    LutEntry { theta_deg, phi_deg, paraxial, centre_mm: window.centre_mm, texel_mm, width, height, texels }
+}
+
+/// The run time's prediction of `target` from `a` and `b` (weights 1 - t, t), in `target`'s texels, and its
+/// relative L1 error (luminance) against `target`.
+pub fn interpolation_error(a: &LutEntry, b: &LutEntry, t: f64, target: &LutEntry) -> f64 {
+    let actual: f64 = target.texels.iter().map(|p| luminance([p[0], p[1], p[2]].map(f16::to_f64))).sum();
+    let baked = (1.0 - t) * a.paraxial.energy + t * b.paraxial.energy;
+    let ratio = if baked > 0.0 && target.paraxial.energy > 0.0 {
+        (target.paraxial.energy / baked).clamp(0.25, 4.0)
+    } else {
+        1.0
+    };
+    let window = target.window();
+    let sample = |e: &LutEntry, p_mm: [f64; 2]| -> f64 {
+        if e.is_empty() {
+            return 0.0;
+        }
+        // The same normalised position in e's paraxial frame.
+        let n = [
+            (p_mm[0] - target.paraxial.centre_mm[0]) / target.paraxial.half_mm,
+            (p_mm[1] - target.paraxial.centre_mm[1]) / target.paraxial.half_mm,
+        ];
+        let q =
+            [e.paraxial.centre_mm[0] + e.paraxial.half_mm * n[0], e.paraxial.centre_mm[1] + e.paraxial.half_mm * n[1]];
+        // Irradiance scales with 1 / area when the frame is scaled.
+        let area = (e.paraxial.half_mm / target.paraxial.half_mm).powi(2);
+        let px = e.window().to_pixel(q);
+        let v = e.sample((px[0] / f64::from(e.width)) as f32, (px[1] / f64::from(e.height)) as f32);
+        luminance([v[0], v[1], v[2]].map(f64::from)) * area
+    };
+    let mut error = 0.0;
+    let mut predicted_sum = 0.0;
+    for y in 0..target.height.max(if target.is_empty() { 0 } else { 1 }) {
+        for x in 0..target.width {
+            let p_mm = window.to_mm([f64::from(x) + 0.5, f64::from(y) + 0.5]);
+            let predicted = ratio * ((1.0 - t) * sample(a, p_mm) + t * sample(b, p_mm));
+            let p = target.texels[(y * target.width + x) as usize];
+            error += (predicted - luminance([p[0], p[1], p[2]].map(f16::to_f64))).abs();
+            predicted_sum += predicted;
+        }
+    }
+    if target.is_empty() {
+        // All of the neighbours' light would be drawn where there is none.
+        let predicted = (1.0 - t) * a.energy() + t * b.energy();
+        return if predicted > 0.0 { 1.0 } else { 0.0 };
+    }
+    if actual > 0.0 {
+        error / actual
+    } else if predicted_sum > 0.0 {
+        1.0
+    } else {
+        0.0
+    }
+}
+
+/// The key of ghost `g` for these settings (see the module documentation).
+fn ghost_key(fingerprint: u64, g: usize, surfaces: (usize, usize), theta_max: f64, settings: &BakeSettings) -> u64 {
+    let text = format!("{g}|{surfaces:?}|{theta_max}|{settings:?}");
+    fnv1a(text.as_bytes(), fingerprint ^ FNV_OFFSET)
+}
+
+/// Bakes `ghosts` of `flare` (lens indices). `previous` lends the ghosts whose key is unchanged; `progress`
+/// is called after every entry and kept ghost; `cancel` stops the bake.
+pub fn bake(
+    flare: &PreparedFlare,
+    renderer: &RayGridRenderer,
+    ghosts: &[usize],
+    settings: &BakeSettings,
+    previous: Option<&GhostLut>,
+    progress: &(dyn Fn(BakeProgress) + Sync),
+    cancel: &AtomicBool,
+) -> Result<GhostLut, BakeError> {
+    settings.validate()?;
+    let total = flare.system.ghosts.len();
+    if let Some(&bad) = ghosts.iter().find(|&&g| g >= total) {
+        return Err(BakeError::NoGhost(bad, total));
+    }
+    let lens = &flare.system.lens;
+    let fingerprint = super::fingerprint(lens, &flare.config);
+    let symmetry = Symmetry::of_aperture(&flare.config.aperture);
+    let theta_max = settings.theta_max_deg.unwrap_or_else(|| useful_field_deg(flare));
+    let phis = symmetry.phi_samples(settings.phi_steps);
+    let entries_done = AtomicUsize::new(0);
+    let ghosts_done = AtomicUsize::new(0);
+    let kept = AtomicUsize::new(0);
+    let report = || {
+        progress(BakeProgress {
+            entries: entries_done.load(Ordering::Relaxed),
+            ghosts_done: ghosts_done.load(Ordering::Relaxed),
+            ghosts_total: ghosts.len(),
+            ghosts_kept: kept.load(Ordering::Relaxed),
+        })
+    };
+    let baked: Result<Vec<LutGhost>, BakeError> = ghosts
+        .par_iter()
+        .map(|&g| {
+            let model = &flare.system.ghosts[g];
+            let key = ghost_key(fingerprint, g, (model.i, model.j), theta_max, settings);
+            if let Some(old) = previous.filter(|p| p.lens_fingerprint == fingerprint).and_then(|p| p.ghost(g))
+                && old.key == key
+            {
+                kept.fetch_add(1, Ordering::Relaxed);
+                ghosts_done.fetch_add(1, Ordering::Relaxed);
+                report();
+                return Ok(old.clone());
+            }
+            let render = |theta: f64| -> Result<Vec<LutEntry>, BakeError> {
+                phis.iter()
+                    .map(|&phi| {
+                        if cancel.load(Ordering::Relaxed) {
+                            return Err(BakeError::Cancelled);
+                        }
+                        let entry = render_entry(flare, renderer, g, theta, phi, &symmetry, settings);
+                        entries_done.fetch_add(1, Ordering::Relaxed);
+                        report();
+                        Ok(entry)
+                    })
+                    .collect()
+            };
+            let steps = settings.initial_steps;
+            let mut columns: Vec<(f64, Vec<LutEntry>)> = (0..=steps)
+                .map(|k| {
+                    let theta = theta_max * f64::from(k) / f64::from(steps);
+                    render(theta).map(|e| (theta, e))
+                })
+                .collect::<Result<_, _>>()?;
+            // Refine: split each interval while its middle is mispredicted (depth-first, left to right).
+            let mut k = 0;
+            while k + 1 < columns.len() {
+                let (a, b) = (columns[k].0, columns[k + 1].0);
+                if b - a < 2.0 * settings.min_step_deg {
+                    k += 1;
+                    continue;
+                }
+                let middle = 0.5 * (a + b);
+                let entries = render(middle)?;
+                let worst = entries
+                    .iter()
+                    .enumerate()
+                    .map(|(p, e)| interpolation_error(&columns[k].1[p], &columns[k + 1].1[p], 0.5, e))
+                    .fold(0.0, f64::max);
+                if worst > settings.tolerance {
+                    columns.insert(k + 1, (middle, entries));
+                } else {
+                    k += 1;
+                }
+            }
+            ghosts_done.fetch_add(1, Ordering::Relaxed);
+            report();
+            Ok(LutGhost {
+                ghost: g as u32,
+                surfaces: [model.i as u32, model.j as u32],
+                key,
+                thetas_deg: columns.iter().map(|c| c.0).collect(),
+                phis_deg: phis.clone(),
+                entries: columns.into_iter().flat_map(|c| c.1).collect(),
+            })
+        })
+        .collect();
+    let f_number = flare.config.aperture.f_number.unwrap_or(flare.system.first_order.f_number);
+    Ok(GhostLut {
+        kind: LutKind::RayTraced,
+        lens_id: lens.id.clone(),
+        lens_fingerprint: fingerprint,
+        wavelengths_nm: flare.config.spectrum.wavelengths_nm.clone(),
+        f_number,
+        symmetry,
+        theta_max_deg: theta_max,
+        ghosts: baked?,
+    })
+}

@@ -1,0 +1,469 @@
+//! Blending LUT ghosts into the live flare: the run-time half of the patent, on the GPU (`lut_ghosts.wgsl`)
+//! and its CPU twin ([`lut_pass`]).
+//!
+//! # How it works
+//! For a light of slopes u, [`LutScene::build`] takes the light's (theta, alpha), reduces alpha to the
+//! symmetry wedge ([`super::Symmetry::reduce`]) and, per LUT ghost, picks the two baked thetas around theta
+//! and the two baked azimuths around the reduced one (linear weights; outside the baked range the nearest
+//! entry alone). Each picked entry becomes one [`LutInstance`]: a quad whose corners map the entry's image
+//! from its baked paraxial frame into the live one: a texel at sensor point p sits at the normalised position
+//! `n = (p - c_baked) / s_baked`, which is rotated (and mirrored) by the symmetry's transform and the remaining
+//! azimuth difference, then placed at `c_live + s_live n` (c, s: the ghost's paraxial centre and half-size).
+//! Its brightness is scaled by the live paraxial energy over the baked one interpolated the same way (1 when
+//! nothing but the light moved), so a changed coating or f-number dims the LUT ghost as it dims the sprite.
+//! A photo LUT is one image of the whole frame per theta: rotated about the axis, never fitted.
+//!
+//! The [`BlendMode`] sets how much of each non-linear ghost comes from its LUT image (w) and how much from its
+//! paraxial sprite (1 - w), globally or per ghost: **additive** (w = 1: the LUT image replaces the sprite and
+//! adds onto the linear flare), **linear** or **smooth** (w ramps with theta between two angles, linearly
+//! or by smoothstep: paraxial near the axis where it is right, the LUT further out), or **alpha** (the LUT
+//! layer is composited over the linear flare with its coverage: `out = lut + (1 - alpha) linear`).
+//!
+//! Instances reference their entry in an atlas ([`AtlasLayout`]): pages of [`ATLAS_PAGE`] texels with a
+//! zero border of one texel around every entry, so the GPU's bilinear sampler returns what
+//! [`super::LutEntry::sample`] does (0 outside the image).
+
+use bytemuck::{Pod, Zeroable};
+use rayon::prelude::*;
+
+use super::{GhostLut, LutKind, Mat2, light_direction_deg, mat_apply, mat_mul, rotation};
+use crate::ghost::{GhostSystem, ParaxialFrame};
+use crate::raytrace::Window;
+use crate::render::{FlareScene, HdrImage};
+
+/// Side of an atlas page (texels): within every adapter's limits (WebGL2's 2048 included).
+pub const ATLAS_PAGE: u32 = 2048;
+
+/// How a non-linear ghost's LUT image and its paraxial sprite are mixed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum BlendMode {
+    /// The LUT image replaces the sprite (w = 1) and adds onto the linear flare.
+    Additive,
+    /// w rises linearly from 0 at `from_deg` to 1 at `to_deg`.
+    Linear { from_deg: f64, to_deg: f64 },
+    /// w rises by smoothstep from 0 at `from_deg` to 1 at `to_deg` (a non-linear weight curve).
+    Smooth { from_deg: f64, to_deg: f64 },
+    /// The LUT layer over the linear flare through its alpha (coverage) channel.
+    Alpha,
+}
+
+impl BlendMode {
+    /// The LUT image's weight w at light angle `theta_deg` (the sprite gets 1 - w).
+    pub fn weight(self, theta_deg: f64) -> f64 {
+        let ramp = |from: f64, to: f64| {
+            if to <= from {
+                if theta_deg >= to { 1.0 } else { 0.0 }
+            } else {
+                ((theta_deg - from) / (to - from)).clamp(0.0, 1.0)
+            }
+        };
+        match self {
+            Self::Additive | Self::Alpha => 1.0,
+            Self::Linear { from_deg, to_deg } => ramp(from_deg, to_deg),
+            Self::Smooth { from_deg, to_deg } => {
+                let x = ramp(from_deg, to_deg);
+                x * x * (3.0 - 2.0 * x)
+            }
+        }
+    }
+
+    /// `additive`, `alpha`, `linear:FROM:TO` or `smooth:FROM:TO` (degrees).
+    pub fn parse(text: &str) -> Result<Self, String> {
+        let parts: Vec<&str> = text.trim().split(':').collect();
+        let angles = || -> Result<(f64, f64), String> {
+            let bad = || format!("`{text}`: write {}:FROM_DEG:TO_DEG with 0 <= FROM <= TO <= 89", parts[0]);
+            if parts.len() != 3 {
+                return Err(bad());
+            }
+            let from: f64 = parts[1].parse().map_err(|_| bad())?;
+            let to: f64 = parts[2].parse().map_err(|_| bad())?;
+            if !(0.0..=89.0).contains(&from) || !(from..=89.0).contains(&to) {
+                return Err(bad());
+            }
+            Ok((from, to))
+        };
+        match parts[0] {
+            "additive" if parts.len() == 1 => Ok(Self::Additive),
+            "alpha" if parts.len() == 1 => Ok(Self::Alpha),
+            "linear" => angles().map(|(from_deg, to_deg)| Self::Linear { from_deg, to_deg }),
+            "smooth" => angles().map(|(from_deg, to_deg)| Self::Smooth { from_deg, to_deg }),
+            _ => Err(format!("`{text}`: the blend modes are additive, alpha, linear:FROM:TO and smooth:FROM:TO")),
+        }
+    }
+}
+
+/// The blend, globally and per ghost.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BlendSettings {
+    pub mode: BlendMode,
+    /// Per lens ghost index: a mode of its own (alpha applies to the whole LUT layer, so only globally).
+    pub per_ghost: Vec<(u32, BlendMode)>,
+    /// Multiplies every LUT image (1: physically matched).
+    pub gain: f64,
+}
+
+impl Default for BlendSettings {
+    fn default() -> Self {
+        Self { mode: BlendMode::Additive, per_ghost: Vec::new(), gain: 1.0 }
+    }
+}
+
+impl BlendSettings {
+    fn mode_of(&self, ghost: u32) -> BlendMode {
+        self.per_ghost.iter().find(|(g, _)| *g == ghost).map_or(self.mode, |(_, m)| *m)
+    }
+}
+
+/// Where every entry lies in the atlas: per LUT ghost and entry, `(page, x, y)` of its top-left texel (inside
+/// its one-texel zero border).
+#[derive(Clone, Debug, PartialEq)]
+pub struct AtlasLayout {
+    pub pages: u32,
+    /// `slots[lut_ghost][entry]`; `None` for an empty entry.
+    pub slots: Vec<Vec<Option<(u32, u32, u32)>>>,
+}
+
+impl AtlasLayout {
+    /// Shelf packing, tallest entries first, into as many [`ATLAS_PAGE`] pages as needed.
+    pub fn new(lut: &GhostLut) -> Self {
+        let mut order: Vec<(usize, usize, u32, u32)> = lut
+            .ghosts
+            .iter()
+            .enumerate()
+            .flat_map(|(g, ghost)| {
+                ghost
+                    .entries
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, e)| !e.is_empty())
+                    .map(move |(k, e)| (g, k, e.width, e.height))
+            })
+            .collect();
+        order.sort_by_key(|&(g, k, _, h)| (std::cmp::Reverse(h), g, k));
+        let mut slots: Vec<Vec<Option<(u32, u32, u32)>>> =
+            lut.ghosts.iter().map(|g| vec![None; g.entries.len()]).collect();
+        let (mut page, mut x, mut y, mut shelf) = (0u32, 0u32, 0u32, 0u32);
+        let mut used = false;
+        for (g, k, w, h) in order {
+            let (w, h) = ((w + 2).min(ATLAS_PAGE), (h + 2).min(ATLAS_PAGE));
+            if x + w > ATLAS_PAGE {
+                (x, y) = (0, y + shelf);
+                shelf = 0;
+            }
+            if y + h > ATLAS_PAGE {
+                (page, x, y, shelf) = (page + 1, 0, 0, 0);
+            }
+            slots[g][k] = Some((page, x + 1, y + 1));
+            used = true;
+            x += w;
+            shelf = shelf.max(h);
+        }
+        Self { pages: if used { page + 1 } else { 0 }, slots }
+    }
+
+    /// The atlas pages as RGBA half-float texels (page-major, rows from the top), zero between entries.
+    pub fn pages_f16(&self, lut: &GhostLut) -> Vec<[half::f16; 4]> {
+        let side = ATLAS_PAGE as usize;
+        let mut texels = vec![[half::f16::ZERO; 4]; side * side * self.pages as usize];
+        for (g, ghost) in lut.ghosts.iter().enumerate() {
+            for (k, e) in ghost.entries.iter().enumerate() {
+                let Some((page, x0, y0)) = self.slots[g][k] else { continue };
+                let (w, h) = ((e.width as usize).min(side - 2), (e.height as usize).min(side - 2));
+                for y in 0..h {
+                    let start = page as usize * side * side + (y0 as usize + y) * side + x0 as usize;
+                    texels[start..start + w].copy_from_slice(&e.texels[y * e.width as usize..y * e.width as usize + w]);
+                }
+            }
+        }
+        texels
+    }
+}
+
+/// One LUT image drawn as a quad. Must be kept in sync with `struct LutInstance` in `shaders/lut_ghosts.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct LutInstance {
+    /// Quad centre x, y (image pixels); pixels per unit of the quad coordinate q.x (x, y).
+    pub centre_axis_x: [f32; 4],
+    /// Pixels per unit of q.y (x, y); atlas page; unused.
+    pub axis_y_page: [f32; 4],
+    /// The entry's texels in the atlas page: u0, v0, u1, v1 (texture coordinates).
+    pub rect: [f32; 4],
+    /// RGB gain and alpha gain.
+    pub colour: [f32; 4],
+}
+const _: () = assert!(std::mem::size_of::<LutInstance>() == 64);
+
+impl LutInstance {
+    pub fn is_finite(&self) -> bool {
+        bytemuck::cast_slice::<_, f32>(std::slice::from_ref(self)).iter().all(|v| v.is_finite())
+    }
+
+    /// q for the image pixel position `p`, `None` when the quad is degenerate.
+    fn inverse(&self) -> Option<impl Fn([f32; 2]) -> [f32; 2]> {
+        let [cx, cy, ax, ay] = self.centre_axis_x;
+        let [bx, by, _, _] = self.axis_y_page;
+        let det = ax * by - bx * ay;
+        (det != 0.0 && det.is_finite()).then_some(move |p: [f32; 2]| {
+            let (dx, dy) = (p[0] - cx, p[1] - cy);
+            [(by * dx - bx * dy) / det, (ax * dy - ay * dx) / det]
+        })
+    }
+
+    /// Bounding box of the quad, image pixels: x_min, y_min, x_max, y_max.
+    fn bounds(&self) -> [f32; 4] {
+        let [cx, cy, ax, ay] = self.centre_axis_x;
+        let [bx, by, _, _] = self.axis_y_page;
+        let (rx, ry) = (ax.abs() + bx.abs(), ay.abs() + by.abs());
+        [cx - rx, cy - ry, cx + rx, cy + ry]
+    }
+}
+
+/// What one frame draws of a LUT.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LutScene {
+    pub instances: Vec<LutInstance>,
+    /// Per instance: (LUT ghost, entry) it draws.
+    pub sources: Vec<(u32, u32)>,
+    /// Composite over the linear flare through alpha (else add).
+    pub alpha_over: bool,
+    /// Per lens ghost with a LUT image: the weight its paraxial sprites keep (1 - w).
+    pub paraxial_weights: Vec<(u32, f32)>,
+    /// Instances dropped because a value was not finite (expected: always 0).
+    pub dropped_non_finite: usize,
+}
+
+/// Linear weights of the samples around `x` in the increasing list `xs`: one or two `(index, weight)`.
+fn bracket(xs: &[f64], x: f64) -> Vec<(usize, f64)> {
+    match xs.iter().position(|&v| v > x) {
+        _ if xs.len() == 1 => vec![(0, 1.0)],
+        Some(0) => vec![(0, 1.0)],
+        None => vec![(xs.len() - 1, 1.0)],
+        Some(k) => {
+            let t = (x - xs[k - 1]) / (xs[k] - xs[k - 1]);
+            vec![(k - 1, 1.0 - t), (k, t)]
+        }
+    }
+}
+
+impl LutScene {
+    /// The instances of every LUT ghost for light slopes `u` in a `width` x `height` frame. `system` is the live
+    /// lens's (for a photo LUT it is not used).
+    pub fn build(
+        lut: &GhostLut,
+        layout: &AtlasLayout,
+        system: &GhostSystem,
+        u: [f64; 2],
+        width: u32,
+        height: u32,
+        blend: &BlendSettings,
+    ) -> Self {
+        let out = Window::frame(width, height);
+        let (theta, alpha) = light_direction_deg(u);
+        let (beta, base) = lut.symmetry.reduce(alpha);
+        let min_half_mm = super::MIN_TEXEL_MM;
+        let mut scene = Self { alpha_over: blend.mode == BlendMode::Alpha, ..Self::default() };
+        for (lg, ghost) in lut.ghosts.iter().enumerate() {
+            let photo = lut.kind == LutKind::Photo || ghost.ghost == super::PHOTO_GHOST;
+            let mode = if photo { blend.mode } else { blend.mode_of(ghost.ghost) };
+            let w = mode.weight(theta);
+            if !photo {
+                scene.paraxial_weights.push((ghost.ghost, (1.0 - w) as f32));
+            }
+            if w <= 0.0 || ghost.entries.is_empty() {
+                continue;
+            }
+            let live = if photo {
+                ParaxialFrame { centre_mm: [0.0; 2], half_mm: 1.0, energy: 0.0 }
+            } else {
+                system.paraxial_frame(ghost.ghost as usize, u, min_half_mm)
+            };
+            let picks: Vec<(usize, f64)> = bracket(&ghost.thetas_deg, theta)
+                .into_iter()
+                .flat_map(|(t, wt)| {
+                    bracket(&ghost.phis_deg, beta)
+                        .into_iter()
+                        .map(move |(p, wp)| (t * ghost.phis_deg.len() + p, wt * wp))
+                })
+                .filter(|&(_, weight)| weight > 0.0)
+                .collect();
+            let baked_energy: f64 = picks.iter().map(|&(k, weight)| weight * ghost.entries[k].paraxial.energy).sum();
+            let ratio = if !photo && live.energy > 0.0 && baked_energy > 0.0 {
+                (live.energy / baked_energy).clamp(0.25, 4.0)
+            } else {
+                1.0
+            };
+            for (k, weight) in picks {
+                let entry = &ghost.entries[k];
+                let Some((page, x0, y0)) = layout.slots[lg][k] else { continue };
+                let transform = mat_mul(base, rotation(beta - entry.phi_deg));
+                let instance = place(
+                    entry,
+                    &entry.paraxial,
+                    &live,
+                    transform,
+                    &out,
+                    page,
+                    [x0, y0],
+                    (weight * ratio * w * blend.gain) as f32,
+                );
+                if instance.is_finite() {
+                    scene.instances.push(instance);
+                    scene.sources.push((lg as u32, k as u32));
+                } else {
+                    scene.dropped_non_finite += 1;
+                }
+            }
+        }
+        scene
+    }
+
+    /// Scales the paraxial sprites of LUT ghosts by their weights (dropping those at 0).
+    pub fn apply_paraxial_weights(&self, scene: &mut FlareScene) {
+        if self.paraxial_weights.is_empty() {
+            return;
+        }
+        let weight_of = |g: u32| self.paraxial_weights.iter().find(|(h, _)| *h == g).map_or(1.0, |(_, w)| *w);
+        let mut kept = 0;
+        for k in 0..scene.instances.len() {
+            let weight = weight_of(scene.instance_ghosts[k]);
+            if weight <= 0.0 {
+                continue;
+            }
+            let mut instance = scene.instances[k];
+            for c in &mut instance.colour[..3] {
+                *c *= weight;
+            }
+            scene.instances[kept] = instance;
+            scene.instance_ghosts[kept] = scene.instance_ghosts[k];
+            kept += 1;
+        }
+        scene.instances.truncate(kept);
+        scene.instance_ghosts.truncate(kept);
+    }
+}
+
+/// The instance drawing `entry` (baked in the paraxial frame `baked`) in the live frame `live`, turned by
+/// `transform`, into the frame `out`, with the gain `gain`.
+#[allow(clippy::too_many_arguments)]
+fn place(
+    entry: &super::LutEntry,
+    baked: &ParaxialFrame,
+    live: &ParaxialFrame,
+    transform: Mat2,
+    out: &Window,
+    page: u32,
+    origin: [u32; 2],
+    gain: f32,
+) -> LutInstance {
+    let window = entry.window();
+    let (w, h) = (f64::from(entry.width), f64::from(entry.height));
+    let scale = live.half_mm / baked.half_mm;
+    let to_pixel = |q: [f64; 2]| {
+        let p = window.to_mm([(q[0] + 1.0) * 0.5 * w, (q[1] + 1.0) * 0.5 * h]);
+        let n = mat_apply(transform, [p[0] - baked.centre_mm[0], p[1] - baked.centre_mm[1]]);
+        out.to_pixel([live.centre_mm[0] + scale * n[0], live.centre_mm[1] + scale * n[1]])
+    };
+    let (c, x1, y1) = (to_pixel([0.0, 0.0]), to_pixel([1.0, 0.0]), to_pixel([0.0, 1.0]));
+    let page_side = f64::from(ATLAS_PAGE);
+    let (u0, v0) = (f64::from(origin[0]) / page_side, f64::from(origin[1]) / page_side);
+    LutInstance {
+        centre_axis_x: [c[0] as f32, c[1] as f32, (x1[0] - c[0]) as f32, (x1[1] - c[1]) as f32],
+        axis_y_page: [(y1[0] - c[0]) as f32, (y1[1] - c[1]) as f32, page as f32, 0.0],
+        rect: [u0 as f32, v0 as f32, (u0 + w / page_side) as f32, (v0 + h / page_side) as f32],
+        // Irradiance falls as the area grows: energy is kept when the frame is scaled.
+        colour: [gain / (scale * scale) as f32, gain / (scale * scale) as f32, gain / (scale * scale) as f32, gain],
+    }
+}
+
+/// Rows per parallel band of the CPU pass.
+const BAND_ROWS: usize = 16;
+
+/// `lut_ghosts.wgsl`: every LUT instance onto the HDR accumulation `hdr` of `scene` (added, or composited over
+/// it through alpha), sampling each instance's entry exactly as the GPU samples the atlas.
+pub fn lut_pass(scene: &FlareScene, lut_scene: &LutScene, lut: &GhostLut, hdr: &mut HdrImage) {
+    let (w, h) = (hdr.width as usize, hdr.height as usize);
+    let (sx, sy) = (scene.width as f32 / scene.hdr_width as f32, scene.height as f32 / scene.hdr_height as f32);
+    let prepared: Vec<_> = lut_scene
+        .instances
+        .iter()
+        .zip(&lut_scene.sources)
+        .filter_map(|(inst, &(g, k))| {
+            let inverse = inst.inverse()?;
+            Some((inst, inverse, &lut.ghosts[g as usize].entries[k as usize]))
+        })
+        .collect();
+    hdr.pixels.par_chunks_mut(w * BAND_ROWS).enumerate().for_each(|(band, chunk)| {
+        let y0 = band * BAND_ROWS;
+        let rows = y0..(y0 + BAND_ROWS).min(h);
+        for (inst, inverse, entry) in &prepared {
+            let [x_lo, y_lo, x_hi, y_hi] = inst.bounds();
+            let ys = ((y_lo / sy - 0.5).floor().max(rows.start as f32) as usize)
+                ..((y_hi / sy + 0.5).ceil().max(0.0) as usize).min(rows.end);
+            let xs = ((x_lo / sx - 0.5).floor().max(0.0) as usize)..((x_hi / sx + 0.5).ceil().max(0.0) as usize).min(w);
+            for y in ys {
+                for x in xs.clone() {
+                    let q = inverse([(x as f32 + 0.5) * sx, (y as f32 + 0.5) * sy]);
+                    if q[0].abs() > 1.0 || q[1].abs() > 1.0 {
+                        continue;
+                    }
+                    let t = entry.sample(q[0] * 0.5 + 0.5, q[1] * 0.5 + 0.5);
+                    let p = &mut chunk[(y - y0) * w + x];
+                    let keep = if lut_scene.alpha_over { 1.0 - (t[3] * inst.colour[3]).clamp(0.0, 1.0) } else { 1.0 };
+                    for c in 0..3 {
+                        p[c] = t[c] * inst.colour[c] + p[c] * keep;
+                    }
+                }
+            }
+        }
+    });
+}
+
+/// A LUT ready to draw: the LUT and where its entries lie in the atlas.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LiveLut {
+    pub lut: GhostLut,
+    pub layout: AtlasLayout,
+}
+
+impl LiveLut {
+    pub fn new(lut: GhostLut) -> Self {
+        let layout = AtlasLayout::new(&lut);
+        Self { lut, layout }
+    }
+
+    /// The paraxial scene (LUT ghosts' sprites weighted) and the LUT instances for a light at the frame
+    /// position `light_deg`. With `paraxial` false (a photo played back alone) the scene has no sprites.
+    pub fn scenes(
+        &self,
+        flare: &crate::flare::PreparedFlare,
+        light_deg: [f64; 2],
+        width: u32,
+        height: u32,
+        blend: &BlendSettings,
+        paraxial: bool,
+    ) -> (FlareScene, LutScene) {
+        let (mut scene, _) = flare.scene(light_deg, width, height);
+        let u = crate::render::light_slopes_for_frame_position(light_deg[0], light_deg[1]);
+        let lut_scene = LutScene::build(&self.lut, &self.layout, &flare.system, u, width, height, blend);
+        if paraxial {
+            lut_scene.apply_paraxial_weights(&mut scene);
+        } else {
+            scene.instances.clear();
+            scene.instance_ghosts.clear();
+        }
+        (scene, lut_scene)
+    }
+
+    /// The blended ghosts on the CPU (no starburst): the paraxial pass, then the LUT pass.
+    pub fn render_cpu(
+        &self,
+        flare: &crate::flare::PreparedFlare,
+        scene: &FlareScene,
+        lut_scene: &LutScene,
+    ) -> HdrImage {
+        let mut hdr = crate::render::cpu::ghost_pass(scene, &flare.mask);
+        lut_pass(scene, lut_scene, &self.lut, &mut hdr);
+        hdr
+    }
+}

@@ -1,0 +1,433 @@
+//! The `.flut` file: one LUT (ray-traced or photo), versioned, checked on load, streamed.
+//!
+//! # How it works
+//! Layout (all integers little-endian):
+//!
+//! | bytes | content |
+//! |---|---|
+//! | 8 | magic `FLUT\r\n\x1a\n` (catches text-mode transfers, like PNG's) |
+//! | 4 | format version ([`VERSION`]) |
+//! | 8 | header length H |
+//! | 8 | FNV-1a 64 of the header bytes |
+//! | H | header: UTF-8 JSON, [`Header`]: kind, lens id and fingerprint, wavelengths, f-number, symmetry, theta range, per ghost its surfaces, key, thetas, azimuths and per entry its light, paraxial frame, window, size, and where its data lies |
+//! | ... | per entry, in header order: its texels compressed with deflate (zlib, `flate2`) |
+//!
+//! An entry's uncompressed data is `width x height` RGBA half floats, byte-shuffled for compression: the
+//! low bytes of channel R of every texel, then its high bytes, then G, B, A (8 planes of w x h bytes).
+//! Each entry carries the FNV-1a 64 of its uncompressed bytes.
+//!
+//! Loading ([`read_lut`]) streams the file: it checks the magic, the version, that the header fits the file
+//! and its checksum, then every field of the header (finite, in range, sizes that match, data inside the
+//! file, totals under [`MAX_TEXELS`]) before allocating anything for the texels, then inflates each entry
+//! into a buffer of exactly its declared size (never more) and checks its checksum and that every value is
+//! finite and non-negative. Every failure is a [`LutError`] that names what is wrong; none panics. Writing
+//! ([`write_lut`]) goes to a temporary file renamed over the target, so a user's file is never half-written.
+
+use std::io::{Read, Write};
+use std::path::Path;
+
+use flate2::Compression;
+use flate2::read::ZlibDecoder;
+use flate2::write::ZlibEncoder;
+use half::f16;
+use serde::{Deserialize, Serialize};
+
+use super::{FNV_OFFSET, GhostLut, LutEntry, LutGhost, LutKind, Symmetry, fnv1a};
+use crate::ghost::ParaxialFrame;
+
+/// The file's magic bytes.
+pub const MAGIC: [u8; 8] = *b"FLUT\r\n\x1a\n";
+/// The format version this build reads and writes.
+pub const VERSION: u32 = 1;
+/// Most header bytes accepted.
+pub const MAX_HEADER_BYTES: u64 = 64 << 20;
+/// Most texels accepted over all entries (2 GiB of half floats).
+pub const MAX_TEXELS: u64 = 1 << 28;
+/// Most texels across an entry.
+pub const MAX_SIDE: u32 = 8192;
+
+/// Why a LUT file is refused.
+#[derive(Debug, thiserror::Error)]
+pub enum LutError {
+    #[error("{0}")]
+    Io(#[from] std::io::Error),
+    #[error("not a FlareLab LUT (.flut) file: wrong magic bytes")]
+    Magic,
+    #[error("LUT format version {found}; this FlareLab reads version {VERSION}")]
+    Version { found: u32 },
+    #[error("the file is truncated: {0}")]
+    Truncated(String),
+    #[error("the header is corrupt: {0}")]
+    Header(String),
+    #[error("ghost {ghost}, entry {entry}: {reason}")]
+    Entry { ghost: usize, entry: usize, reason: String },
+    #[error(
+        "this LUT was baked for another lens or settings (`{lut_lens}`, fingerprint {lut:016x}; the live lens `{lens}` has {live:016x}): bake it again"
+    )]
+    OtherLens { lut_lens: String, lut: u64, lens: String, live: u64 },
+}
+
+/// The JSON header.
+#[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Header {
+    /// "ray-traced" or "photo".
+    pub kind: String,
+    pub lens_id: String,
+    /// 16 hex digits.
+    pub lens_fingerprint: String,
+    pub wavelengths_nm: Vec<f64>,
+    pub f_number: f64,
+    pub symmetry_order: u32,
+    pub symmetry_axis_deg: f64,
+    pub theta_max_deg: f64,
+    pub ghosts: Vec<GhostHeader>,
+}
+
+#[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct GhostHeader {
+    pub ghost: u32,
+    pub surfaces: [u32; 2],
+    pub key: String,
+    pub thetas_deg: Vec<f64>,
+    pub phis_deg: Vec<f64>,
+    pub entries: Vec<EntryHeader>,
+}
+
+#[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct EntryHeader {
+    pub theta_deg: f64,
+    pub phi_deg: f64,
+    pub paraxial_centre_mm: [f64; 2],
+    pub paraxial_half_mm: f64,
+    pub paraxial_energy: f64,
+    pub centre_mm: [f64; 2],
+    pub texel_mm: f64,
+    pub width: u32,
+    pub height: u32,
+    /// Compressed bytes that follow for this entry.
+    pub compressed_bytes: u64,
+    /// FNV-1a 64 of the uncompressed bytes, 16 hex digits.
+    pub checksum: String,
+}
+
+fn hex(v: u64) -> String {
+    format!("{v:016x}")
+}
+
+fn unhex(text: &str, what: &str) -> Result<u64, LutError> {
+    u64::from_str_radix(text, 16).map_err(|_| LutError::Header(format!("{what} `{text}` is not 16 hex digits")))
+}
+
+/// The byte-shuffled planes of an entry's texels.
+fn shuffle(texels: &[[f16; 4]]) -> Vec<u8> {
+    let n = texels.len();
+    let mut out = vec![0u8; n * 8];
+    for (k, t) in texels.iter().enumerate() {
+        for (c, v) in t.iter().enumerate() {
+            let [lo, hi] = v.to_bits().to_le_bytes();
+            out[(2 * c) * n + k] = lo;
+            out[(2 * c + 1) * n + k] = hi;
+        }
+    }
+    out
+}
+
+fn unshuffle(bytes: &[u8]) -> Vec<[f16; 4]> {
+    let n = bytes.len() / 8;
+    (0..n)
+        .map(|k| {
+            std::array::from_fn(|c| {
+                f16::from_bits(u16::from_le_bytes([bytes[2 * c * n + k], bytes[(2 * c + 1) * n + k]]))
+            })
+        })
+        .collect()
+}
+
+/// The file's bytes.
+pub fn encode(lut: &GhostLut) -> Vec<u8> {
+    let mut blobs = Vec::new();
+    let ghosts = lut
+        .ghosts
+        .iter()
+        .map(|g| GhostHeader {
+            ghost: g.ghost,
+            surfaces: g.surfaces,
+            key: hex(g.key),
+            thetas_deg: g.thetas_deg.clone(),
+            phis_deg: g.phis_deg.clone(),
+            entries: g
+                .entries
+                .iter()
+                .map(|e| {
+                    let raw = shuffle(&e.texels);
+                    let mut encoder = ZlibEncoder::new(Vec::new(), Compression::default());
+                    encoder.write_all(&raw).expect("writing to memory");
+                    let compressed = encoder.finish().expect("writing to memory");
+                    let header = EntryHeader {
+                        theta_deg: e.theta_deg,
+                        phi_deg: e.phi_deg,
+                        paraxial_centre_mm: e.paraxial.centre_mm,
+                        paraxial_half_mm: e.paraxial.half_mm,
+                        paraxial_energy: e.paraxial.energy,
+                        centre_mm: e.centre_mm,
+                        texel_mm: e.texel_mm,
+                        width: e.width,
+                        height: e.height,
+                        compressed_bytes: compressed.len() as u64,
+                        checksum: hex(fnv1a(&raw, FNV_OFFSET)),
+                    };
+                    blobs.push(compressed);
+                    header
+                })
+                .collect(),
+        })
+        .collect();
+    let header = Header {
+        kind: match lut.kind {
+            LutKind::RayTraced => "ray-traced".into(),
+            LutKind::Photo => "photo".into(),
+        },
+        lens_id: lut.lens_id.clone(),
+        lens_fingerprint: hex(lut.lens_fingerprint),
+        wavelengths_nm: lut.wavelengths_nm.clone(),
+        f_number: lut.f_number,
+        symmetry_order: lut.symmetry.order,
+        symmetry_axis_deg: lut.symmetry.axis_deg,
+        theta_max_deg: lut.theta_max_deg,
+        ghosts,
+    };
+    let json = serde_json::to_vec(&header).expect("the header serialises");
+    let mut out = Vec::with_capacity(28 + json.len() + blobs.iter().map(Vec::len).sum::<usize>());
+    out.extend_from_slice(&MAGIC);
+    out.extend_from_slice(&VERSION.to_le_bytes());
+    out.extend_from_slice(&(json.len() as u64).to_le_bytes());
+    out.extend_from_slice(&fnv1a(&json, FNV_OFFSET).to_le_bytes());
+    out.extend_from_slice(&json);
+    for blob in blobs {
+        out.extend_from_slice(&blob);
+    }
+    out
+}
+
+/// Writes `lut` to `path` atomically (temporary file, then rename).
+pub fn write_lut(path: &Path, lut: &GhostLut) -> std::io::Result<u64> {
+    let bytes = encode(lut);
+    crate::optics::formats::write_atomic(path, &bytes)?;
+    Ok(bytes.len() as u64)
+}
+
+/// Reads and checks a LUT file.
+pub fn read_lut(path: &Path) -> Result<GhostLut, LutError> {
+    let file = std::fs::File::open(path)?;
+    let length = file.metadata()?.len();
+    decode(std::io::BufReader::new(file), length)
+}
+
+fn read_exact_or(reader: &mut impl Read, buf: &mut [u8], what: &str) -> Result<(), LutError> {
+    reader.read_exact(buf).map_err(|e| match e.kind() {
+        std::io::ErrorKind::UnexpectedEof => LutError::Truncated(format!("it ends inside the {what}")),
+        _ => LutError::Io(e),
+    })
+}
+
+/// Decodes a LUT from a stream of `length` bytes.
+pub fn decode(mut reader: impl Read, length: u64) -> Result<GhostLut, LutError> {
+    let mut magic = [0u8; 8];
+    read_exact_or(&mut reader, &mut magic, "magic bytes").map_err(|e| match e {
+        LutError::Truncated(_) => LutError::Magic,
+        other => other,
+    })?;
+    if magic != MAGIC {
+        return Err(LutError::Magic);
+    }
+    let mut word = [0u8; 4];
+    read_exact_or(&mut reader, &mut word, "version")?;
+    let version = u32::from_le_bytes(word);
+    if version != VERSION {
+        return Err(LutError::Version { found: version });
+    }
+    let mut long = [0u8; 8];
+    read_exact_or(&mut reader, &mut long, "header length")?;
+    let header_len = u64::from_le_bytes(long);
+    read_exact_or(&mut reader, &mut long, "header checksum")?;
+    let header_sum = u64::from_le_bytes(long);
+    let fixed = 28u64;
+    if header_len > MAX_HEADER_BYTES || fixed + header_len > length {
+        return Err(LutError::Truncated(format!(
+            "the header says it has {header_len} bytes, the file has {} after the fixed part",
+            length.saturating_sub(fixed)
+        )));
+    }
+    let mut json = vec![0u8; header_len as usize];
+    read_exact_or(&mut reader, &mut json, "header")?;
+    if fnv1a(&json, FNV_OFFSET) != header_sum {
+        return Err(LutError::Header("its checksum does not match (the file is damaged)".into()));
+    }
+    let header: Header = serde_json::from_slice(&json).map_err(|e| LutError::Header(e.to_string()))?;
+    let data_len = length - fixed - header_len;
+    check_header(&header, data_len)?;
+    let kind = match header.kind.as_str() {
+        "ray-traced" => LutKind::RayTraced,
+        "photo" => LutKind::Photo,
+        other => return Err(LutError::Header(format!("kind `{other}`: expected `ray-traced` or `photo`"))),
+    };
+    let mut ghosts = Vec::with_capacity(header.ghosts.len());
+    for (gi, g) in header.ghosts.iter().enumerate() {
+        let mut entries = Vec::with_capacity(g.entries.len());
+        for (ei, e) in g.entries.iter().enumerate() {
+            let bad = |reason: String| LutError::Entry { ghost: gi, entry: ei, reason };
+            let raw_len = u64::from(e.width) * u64::from(e.height) * 8;
+            let mut raw = Vec::with_capacity(raw_len as usize);
+            let mut limited = (&mut reader).take(e.compressed_bytes);
+            ZlibDecoder::new(&mut limited).take(raw_len + 1).read_to_end(&mut raw).map_err(|err| match err.kind() {
+                std::io::ErrorKind::UnexpectedEof => {
+                    LutError::Truncated(format!("ghost {gi}, entry {ei}: its data ends early"))
+                }
+                _ => bad(format!("its compressed data is corrupt ({err})")),
+            })?;
+            if raw.len() as u64 != raw_len {
+                return Err(bad(format!(
+                    "{} bytes of texels where {}x{} needs {raw_len}",
+                    raw.len(),
+                    e.width,
+                    e.height
+                )));
+            }
+            // Skip what the decoder did not need, so the next entry starts where the header says.
+            std::io::copy(&mut limited, &mut std::io::sink())?;
+            if unhex(&e.checksum, "checksum")? != fnv1a(&raw, FNV_OFFSET) {
+                return Err(bad("its checksum does not match (the data is damaged)".into()));
+            }
+            let texels = unshuffle(&raw);
+            if let Some(k) = texels.iter().position(|t| t.iter().any(|v| !v.is_finite() || v.to_f32() < 0.0)) {
+                return Err(bad(format!("texel {k} is not finite or negative")));
+            }
+            entries.push(LutEntry {
+                theta_deg: e.theta_deg,
+                phi_deg: e.phi_deg,
+                paraxial: ParaxialFrame {
+                    centre_mm: e.paraxial_centre_mm,
+                    half_mm: e.paraxial_half_mm,
+                    energy: e.paraxial_energy,
+                },
+                centre_mm: e.centre_mm,
+                texel_mm: e.texel_mm,
+                width: e.width,
+                height: e.height,
+                texels,
+            });
+        }
+        ghosts.push(LutGhost {
+            ghost: g.ghost,
+            surfaces: g.surfaces,
+            key: unhex(&g.key, "ghost key")?,
+            thetas_deg: g.thetas_deg.clone(),
+            phis_deg: g.phis_deg.clone(),
+            entries,
+        });
+    }
+    let mut rest = [0u8; 1];
+    if reader.read(&mut rest)? != 0 {
+        return Err(LutError::Header("there are bytes after the last entry".into()));
+    }
+    Ok(GhostLut {
+        kind,
+        lens_id: header.lens_id,
+        lens_fingerprint: unhex(&header.lens_fingerprint, "lens fingerprint")?,
+        wavelengths_nm: header.wavelengths_nm,
+        f_number: header.f_number,
+        symmetry: Symmetry { order: header.symmetry_order, axis_deg: header.symmetry_axis_deg },
+        theta_max_deg: header.theta_max_deg,
+        ghosts,
+    })
+}
+
+/// Every header field in range, before anything is allocated for the texels.
+fn check_header(h: &Header, data_len: u64) -> Result<(), LutError> {
+    let bad = |what: String| Err(LutError::Header(what));
+    let finite_in = |v: f64, lo: f64, hi: f64| v.is_finite() && (lo..=hi).contains(&v);
+    if h.wavelengths_nm.is_empty() || !h.wavelengths_nm.iter().all(|w| finite_in(*w, 200.0, 2000.0)) {
+        return bad(format!("wavelengths {:?}: 1 or more, each 200 to 2000 nm", h.wavelengths_nm));
+    }
+    if !finite_in(h.f_number, 0.0, 1000.0) || !finite_in(h.symmetry_axis_deg, -360.0, 360.0) || h.symmetry_order > 64 {
+        return bad("f-number, symmetry order or axis out of range".into());
+    }
+    if !finite_in(h.theta_max_deg, 0.0, 89.0) {
+        return bad(format!("theta_max_deg {}: 0 to 89", h.theta_max_deg));
+    }
+    let wedge = Symmetry { order: h.symmetry_order, axis_deg: 0.0 }.wedge_deg();
+    let (mut texels, mut bytes) = (0u64, 0u64);
+    for (gi, g) in h.ghosts.iter().enumerate() {
+        let increasing = |xs: &[f64], hi: f64| {
+            !xs.is_empty() && xs.iter().all(|x| finite_in(*x, 0.0, hi)) && xs.windows(2).all(|w| w[0] < w[1])
+        };
+        if !increasing(&g.thetas_deg, 89.0) {
+            return bad(format!("ghost {gi}: thetas {:?} must increase within 0 to 89 degrees", g.thetas_deg));
+        }
+        if !increasing(&g.phis_deg, wedge) {
+            return bad(format!("ghost {gi}: azimuths {:?} must increase within the wedge 0 to {wedge}", g.phis_deg));
+        }
+        if g.entries.len() != g.thetas_deg.len() * g.phis_deg.len() {
+            return bad(format!(
+                "ghost {gi}: {} entries for {} thetas x {} azimuths",
+                g.entries.len(),
+                g.thetas_deg.len(),
+                g.phis_deg.len()
+            ));
+        }
+        for (ei, e) in g.entries.iter().enumerate() {
+            let entry_bad = |reason: &str| Err(LutError::Entry { ghost: gi, entry: ei, reason: reason.into() });
+            let (t, p) = (ei / g.phis_deg.len(), ei % g.phis_deg.len());
+            if e.theta_deg != g.thetas_deg[t] || e.phi_deg != g.phis_deg[p] {
+                return entry_bad("its light direction does not match the ghost's thetas and azimuths");
+            }
+            if e.width > MAX_SIDE || e.height > MAX_SIDE || (e.width == 0) != (e.height == 0) {
+                return entry_bad("its size is out of range (0 x 0 for no light, else 1 to 8192 texels a side)");
+            }
+            let geometry = [e.paraxial_centre_mm[0], e.paraxial_centre_mm[1], e.centre_mm[0], e.centre_mm[1]];
+            if !geometry.iter().all(|v| finite_in(*v, -1e4, 1e4))
+                || !finite_in(e.paraxial_half_mm, 1e-9, 1e4)
+                || !finite_in(e.texel_mm, 1e-9, 1e4)
+                || !finite_in(e.paraxial_energy, 0.0, 1e12)
+            {
+                return entry_bad("a position, size or energy is not finite or out of range");
+            }
+            texels += u64::from(e.width) * u64::from(e.height);
+            bytes = bytes.saturating_add(e.compressed_bytes);
+        }
+    }
+    if texels > MAX_TEXELS {
+        return bad(format!("{texels} texels in all: at most {MAX_TEXELS}"));
+    }
+    if bytes != data_len {
+        if bytes > data_len {
+            return Err(LutError::Truncated(format!(
+                "the entries need {bytes} bytes of data, the file has {data_len}"
+            )));
+        }
+        return bad(format!("the entries need {bytes} bytes of data but the file has {data_len}"));
+    }
+    Ok(())
+}
+
+impl GhostLut {
+    /// Refuses a ray-traced LUT baked for another lens or other settings than `lens` with `config`.
+    pub fn check_for(&self, lens: &crate::optics::Lens, config: &crate::flare::FlareConfig) -> Result<(), LutError> {
+        if self.kind == LutKind::Photo {
+            return Ok(());
+        }
+        let live = super::fingerprint(lens, config);
+        if live != self.lens_fingerprint {
+            return Err(LutError::OtherLens {
+                lut_lens: self.lens_id.clone(),
+                lut: self.lens_fingerprint,
+                lens: lens.id.clone(),
+                live,
+            });
+        }
+        Ok(())
+    }
+}

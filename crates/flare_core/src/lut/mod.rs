@@ -1,0 +1,300 @@
+//! LUT ghosts (KR 10-1658883): the non-linear ghosts, ray-traced ahead of time per light angle, then rotated,
+//! fitted to the live paraxial sprite and blended with the linear flare at run time.
+//!
+//! # How it works
+//! The light direction is (theta, alpha): theta its tilt from the axis, alpha the azimuth of its slope vector
+//! `u = tan(theta) (cos alpha, sin alpha)` in the lens frame (x right, y up on the sensor, the frame of the stop
+//! coordinates and of the aperture mask). A rotationally symmetric lens with an N-bladed stop is symmetric
+//! under the dihedral group D_N, so every azimuth reduces ([`Symmetry::reduce`]) to the wedge
+//! `[0, 180 / N]` degrees from the blades' symmetry axis: the image at alpha is a rotation (and for half of
+//! the azimuths a mirror) of the image at the reduced azimuth. A circular stop needs one azimuth; a user's
+//! image stop has no known symmetry and is treated like a circle (rotation only, the patent's approximation).
+//!
+//! - [`classify`]: per ghost, how far the paraxial sprite is from the ray-traced footprint over theta;
+//!   ghosts above a threshold (and visible) are non-linear, and the user can force any ghost either way.
+//! - [`bake`]: each non-linear ghost ray-traced ([`crate::raytrace`], exact, energy conserving) at thetas
+//!   from 0 to the lens's useful field, refined where the pattern changes fastest, and at the wedge's azimuths.
+//!   Each [`LutEntry`] stores its image (RGBA half floats, A = coverage) in a window of the sensor around
+//!   the ghost, with the ghost's paraxial frame (centre, half-size, energy) at that light.
+//! - [`format`]: the `.flut` file (versioned header, per-entry metadata, deflate-compressed half floats).
+//! - [`photo`]: a photographed flare swept over theta as a 1D LUT.
+//! - [`blend`]: at run time, per LUT ghost, the (up to) two thetas and two azimuth samples around the light,
+//!   each mapped from its baked paraxial frame into the live one (the same normalised position, rotated by
+//!   the symmetry's transform), weighted, and added to (or composited over) the paraxial flare; the GPU
+//!   shader `lut_ghosts.wgsl` and its CPU twin [`blend::lut_pass`] draw them.
+//!
+//! Entry images are in the display orientation of [`crate::raytrace::Window`]: texel (0, 0) is the top-left,
+//! x grows to the left on the sensor and y downwards (the sensor rotated by 180 degrees, as the frame is).
+
+pub mod bake;
+pub mod blend;
+pub mod classify;
+pub mod format;
+pub mod photo;
+
+use half::f16;
+
+use crate::aperture::{Aperture, ApertureShape};
+use crate::flare::FlareConfig;
+use crate::ghost::ParaxialFrame;
+use crate::optics::Lens;
+use crate::raytrace::Window;
+
+/// Half-diagonal of the 36 x 24 mm sensor: the light angle whose image reaches a corner sets the useful field.
+pub const SENSOR_HALF_DIAGONAL_MM: f64 = 21.633_307_652_783_937;
+/// Finest LUT texel (mm on the sensor): 1/4 of a pixel at 960 pixels across 36 mm.
+pub const MIN_TEXEL_MM: f64 = 0.01;
+/// The ghost index a photo LUT's single entry list carries.
+pub const PHOTO_GHOST: u32 = u32::MAX;
+
+/// Where a LUT's images come from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LutKind {
+    /// Ray-traced per non-linear ghost ([`bake`]).
+    RayTraced,
+    /// Photographs of a real flare swept over theta, all ghosts together ([`photo`]).
+    Photo,
+}
+
+/// The azimuthal symmetry of the lens with its stop: dihedral of `order` about the axis at `axis_deg`
+/// (a mirror line through a blade vertex), or full rotational symmetry when `order` is 0.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Symmetry {
+    pub order: u32,
+    pub axis_deg: f64,
+}
+
+/// A 2x2 matrix acting on sensor coordinates (mm), rows first.
+pub type Mat2 = [[f64; 2]; 2];
+
+/// The rotation by `deg` degrees (counter-clockwise, x right, y up).
+pub fn rotation(deg: f64) -> Mat2 {
+    let (s, c) = deg.to_radians().sin_cos();
+    [[c, -s], [s, c]]
+}
+
+/// `a b`.
+pub fn mat_mul(a: Mat2, b: Mat2) -> Mat2 {
+    [
+        [a[0][0] * b[0][0] + a[0][1] * b[1][0], a[0][0] * b[0][1] + a[0][1] * b[1][1]],
+        [a[1][0] * b[0][0] + a[1][1] * b[1][0], a[1][0] * b[0][1] + a[1][1] * b[1][1]],
+    ]
+}
+
+/// `m v`.
+pub fn mat_apply(m: Mat2, v: [f64; 2]) -> [f64; 2] {
+    [m[0][0] * v[0] + m[0][1] * v[1], m[1][0] * v[0] + m[1][1] * v[1]]
+}
+
+impl Symmetry {
+    /// The symmetry of a lens with this stop: N-fold dihedral for N straight or bowed blades, full for a circle
+    /// (or fully rounded blades), and full, as an approximation, for an image stop.
+    pub fn of_aperture(aperture: &Aperture) -> Self {
+        match aperture.shape {
+            ApertureShape::Blades { count, rotation_deg, roundness } if roundness < 1.0 => {
+                Self { order: count, axis_deg: rotation_deg }
+            }
+            _ => Self { order: 0, axis_deg: 0.0 },
+        }
+    }
+
+    /// The azimuths a LUT needs: `[0, 180 / order]` degrees from the axis.
+    pub fn wedge_deg(&self) -> f64 {
+        if self.order == 0 { 0.0 } else { 180.0 / f64::from(self.order) }
+    }
+
+    /// `steps + 1` azimuths evenly over the wedge (one for full symmetry), degrees from the axis.
+    pub fn phi_samples(&self, steps: u32) -> Vec<f64> {
+        let wedge = self.wedge_deg();
+        if wedge == 0.0 || steps == 0 {
+            return vec![0.0];
+        }
+        (0..=steps).map(|k| wedge * f64::from(k) / f64::from(steps)).collect()
+    }
+
+    /// Reduces a light azimuth `alpha_deg` to `(beta, base)`: beta in the wedge `[0, 180 / order]` and the
+    /// transform of the sensor plane with `image(alpha) = base (image(axis + beta))` (a rotation by a multiple of
+    /// 360 / order, after a mirror about the axis line when the azimuth is on the wedge's mirror side). For full
+    /// symmetry beta is 0 and base the rotation from the axis to alpha.
+    pub fn reduce(&self, alpha_deg: f64) -> (f64, Mat2) {
+        let relative = alpha_deg - self.axis_deg;
+        if self.order == 0 {
+            return (0.0, rotation(relative));
+        }
+        let sector = 360.0 / f64::from(self.order);
+        let k = (relative / sector).round();
+        let beta = relative - k * sector;
+        let turn = rotation(k * sector);
+        if beta >= 0.0 {
+            (beta, turn)
+        } else {
+            // Mirror about the line at the axis angle: [[cos 2a, sin 2a], [sin 2a, -cos 2a]].
+            let (s, c) = (2.0 * self.axis_deg).to_radians().sin_cos();
+            (-beta, mat_mul(turn, [[c, s], [s, -c]]))
+        }
+    }
+}
+
+/// The frame position (X right, Y up, degrees; what [`crate::flare::PreparedFlare::scene`] takes) of a light
+/// `theta_deg` from the axis whose slope vector has the azimuth `alpha_deg` in the lens frame.
+pub fn light_position_deg(theta_deg: f64, alpha_deg: f64) -> [f64; 2] {
+    let t = theta_deg.to_radians().tan();
+    let (s, c) = alpha_deg.to_radians().sin_cos();
+    [(-t * c).atan().to_degrees(), (-t * s).atan().to_degrees()]
+}
+
+/// `(theta, alpha)` in degrees of light slopes `u` (alpha 0 on the axis).
+pub fn light_direction_deg(u: [f64; 2]) -> (f64, f64) {
+    let t = u[0].hypot(u[1]);
+    let alpha = if t > 0.0 { u[1].atan2(u[0]).to_degrees() } else { 0.0 };
+    (t.atan().to_degrees(), alpha)
+}
+
+/// One ghost's (or a photo's) image at one light direction.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LutEntry {
+    pub theta_deg: f64,
+    /// Azimuth from the symmetry axis (inside the wedge), degrees.
+    pub phi_deg: f64,
+    /// The ghost's paraxial frame at this light (a photo's: centre 0, half-size 1, energy 0).
+    pub paraxial: ParaxialFrame,
+    /// Centre of the image on the sensor.
+    pub centre_mm: [f64; 2],
+    /// Size of a texel on the sensor.
+    pub texel_mm: f64,
+    pub width: u32,
+    pub height: u32,
+    /// Linear relative irradiance RGB and coverage A, row-major from the top, display orientation.
+    pub texels: Vec<[f16; 4]>,
+}
+
+impl LutEntry {
+    /// An entry with no light (the ghost passes nothing at this light).
+    pub fn empty(theta_deg: f64, phi_deg: f64, paraxial: ParaxialFrame) -> Self {
+        Self { theta_deg, phi_deg, paraxial, centre_mm: [0.0; 2], texel_mm: 1.0, width: 0, height: 0, texels: vec![] }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.width == 0 || self.height == 0
+    }
+
+    /// The sensor window the image covers.
+    pub fn window(&self) -> Window {
+        Window {
+            centre_mm: self.centre_mm,
+            width_mm: self.texel_mm * f64::from(self.width),
+            width: self.width,
+            height: self.height,
+        }
+    }
+
+    /// Bilinear sample at texture coordinates (s, t) in [0, 1]^2 (0 outside the image, as the zero border
+    /// around each entry in the GPU atlas gives).
+    pub fn sample(&self, s: f32, t: f32) -> [f32; 4] {
+        let (w, h) = (self.width as i64, self.height as i64);
+        let (x, y) = (s * w as f32 - 0.5, t * h as f32 - 0.5);
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let at = |i: i64, j: i64| -> [f32; 4] {
+            if i < 0 || j < 0 || i >= w || j >= h {
+                [0.0; 4]
+            } else {
+                self.texels[(j * w + i) as usize].map(f16::to_f32)
+            }
+        };
+        let (a, b, c, d) = (at(x0, y0), at(x0 + 1, y0), at(x0, y0 + 1), at(x0 + 1, y0 + 1));
+        std::array::from_fn(|k| (a[k] * (1.0 - fx) + b[k] * fx) * (1.0 - fy) + (c[k] * (1.0 - fx) + d[k] * fx) * fy)
+    }
+
+    /// Luminance-weighted energy of the image (relative irradiance x mm^2).
+    pub fn energy(&self) -> f64 {
+        let area = self.texel_mm * self.texel_mm;
+        self.texels
+            .iter()
+            .map(|t| crate::metrics::luminance([t[0].to_f64(), t[1].to_f64(), t[2].to_f64()]) * area)
+            .sum()
+    }
+}
+
+/// One LUT ghost: its images over thetas x azimuths.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LutGhost {
+    /// Index in the lens's ghost list ([`PHOTO_GHOST`] for a photo LUT).
+    pub ghost: u32,
+    /// The two reflecting surfaces (i, j).
+    pub surfaces: [u32; 2],
+    /// Hash of everything the images depend on (lens, spectrum, stop, bake settings, the ghost): a re-bake keeps
+    /// a ghost whose key is unchanged.
+    pub key: u64,
+    /// Increasing, degrees.
+    pub thetas_deg: Vec<f64>,
+    /// Increasing, degrees from the symmetry axis, inside the wedge.
+    pub phis_deg: Vec<f64>,
+    /// `thetas x phis`, theta-major.
+    pub entries: Vec<LutEntry>,
+}
+
+impl LutGhost {
+    pub fn entry(&self, theta: usize, phi: usize) -> &LutEntry {
+        &self.entries[theta * self.phis_deg.len() + phi]
+    }
+}
+
+/// A whole LUT: its ghosts (or photo) and what it was made for.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GhostLut {
+    pub kind: LutKind,
+    pub lens_id: String,
+    /// [`fingerprint`] of the lens and settings it was baked for (0 for a photo LUT: any lens).
+    pub lens_fingerprint: u64,
+    pub wavelengths_nm: Vec<f64>,
+    /// The f-number it was baked at (0 for a photo).
+    pub f_number: f64,
+    pub symmetry: Symmetry,
+    /// The largest theta baked, degrees.
+    pub theta_max_deg: f64,
+    pub ghosts: Vec<LutGhost>,
+}
+
+impl GhostLut {
+    pub fn entry_count(&self) -> usize {
+        self.ghosts.iter().map(|g| g.entries.len()).sum()
+    }
+
+    /// Texels over every entry.
+    pub fn texel_count(&self) -> usize {
+        self.ghosts.iter().flat_map(|g| &g.entries).map(|e| e.texels.len()).sum()
+    }
+
+    /// The LUT ghost of lens ghost `g`, if any.
+    pub fn ghost(&self, g: usize) -> Option<&LutGhost> {
+        self.ghosts.iter().find(|l| l.ghost as usize == g)
+    }
+}
+
+/// 64-bit FNV-1a: a stable hash (unlike `std`'s, it never changes between Rust releases), for fingerprints.
+pub(crate) fn fnv1a(bytes: &[u8], mut hash: u64) -> u64 {
+    for &b in bytes {
+        hash ^= u64::from(b);
+        hash = hash.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    hash
+}
+
+pub(crate) const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+
+/// A stable fingerprint of everything a ray-traced LUT depends on: the lens (every surface, glass, coating,
+/// aperture and the sensor distance), the spectrum, the stop's shape and f-number and any coating override.
+/// A LUT whose fingerprint differs from the live lens's is refused on load.
+pub fn fingerprint(lens: &Lens, config: &FlareConfig) -> u64 {
+    let text = format!(
+        "{:?}|{:?}|{:?}|{:?}|{:?}",
+        lens.surfaces,
+        config.spectrum.wavelengths_nm,
+        config.aperture,
+        config.coating_override,
+        config.spectrum.weights_rgb
+    );
+    fnv1a(text.as_bytes(), FNV_OFFSET)
+}

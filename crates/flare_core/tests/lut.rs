@@ -1,0 +1,388 @@
+//! LUT ghosts: symmetry, bake, file format (round trip, refusals, fuzz), blending and its GPU twin, photo LUTs.
+
+use std::sync::atomic::AtomicBool;
+
+use flare_core::flare::{FlareConfig, PreparedFlare};
+use flare_core::lut::bake::{BakeSettings, bake};
+use flare_core::lut::blend::{BlendMode, BlendSettings, LiveLut, LutScene, lut_pass};
+use flare_core::lut::format::{LutError, decode, encode};
+use flare_core::lut::{GhostLut, Symmetry, light_position_deg, mat_apply, photo};
+use flare_core::metrics;
+use flare_core::optics::library::builtin_lens;
+use flare_core::raytrace::{Grid, RayGridRenderer};
+use flare_core::render::{HdrImage, light_slopes_for_frame_position};
+use proptest::prelude::*;
+
+fn flare(id: &str) -> PreparedFlare {
+    PreparedFlare::new(&builtin_lens(id).unwrap(), &FlareConfig::default()).unwrap()
+}
+
+fn small_settings() -> BakeSettings {
+    BakeSettings { res: 48, grid: 48, initial_steps: 2, tolerance: 0.5, min_step_deg: 4.0, ..BakeSettings::default() }
+}
+
+/// A small LUT of the Tessar's two brightest-error ghosts.
+fn small_lut(flare: &PreparedFlare) -> GhostLut {
+    let renderer = RayGridRenderer::new(flare);
+    let settings = BakeSettings { theta_max_deg: Some(16.0), ..small_settings() };
+    bake(flare, &renderer, &[3, 7], &settings, None, &|_| {}, &AtomicBool::new(false)).unwrap()
+}
+
+#[test]
+fn symmetry_reduces_every_azimuth_into_the_wedge_with_an_orthogonal_transform() {
+    let s = Symmetry { order: 6, axis_deg: 10.0 };
+    for k in 0..72 {
+        let alpha = -180.0 + 5.0 * k as f64;
+        let (beta, base) = s.reduce(alpha);
+        assert!((0.0..=30.0 + 1e-9).contains(&beta), "{alpha}: beta {beta}");
+        // base maps the reduced direction to the live one.
+        let reduced = (s.axis_deg + beta).to_radians();
+        let v = mat_apply(base, [reduced.cos(), reduced.sin()]);
+        let live = alpha.to_radians();
+        assert!((v[0] - live.cos()).abs() < 1e-9 && (v[1] - live.sin()).abs() < 1e-9, "{alpha}: {v:?}");
+    }
+    // A circle: one azimuth, the rotation to alpha.
+    let (beta, _) = Symmetry { order: 0, axis_deg: 0.0 }.reduce(73.0);
+    assert_eq!(beta, 0.0);
+}
+
+/// The LUT image of one ghost drawn for a light between baked thetas and at an azimuth that is not baked
+/// (so the rotation, the mirror and both interpolations are exercised) against that ghost ray-traced there.
+#[test]
+fn a_blended_lut_ghost_matches_the_ray_traced_ghost_between_samples() {
+    let flare = flare("tessar");
+    let lut = small_lut(&flare);
+    let live = LiveLut::new(lut);
+    let renderer = RayGridRenderer::new(&flare);
+    let (w, h) = (240, 160);
+    for (theta, alpha) in [(7.0, 200.0), (11.0, -47.0), (4.0, 95.0)] {
+        let light = light_position_deg(theta, alpha);
+        let g = live.lut.ghosts[0].ghost as usize;
+        let mut single = live.clone();
+        single.lut.ghosts.truncate(1);
+        single.layout.slots.truncate(1);
+        let (scene, lut_scene) = single.scenes(&flare, light, w, h, &BlendSettings::default(), false);
+        let mut image = HdrImage { width: w, height: h, pixels: vec![[0.0; 4]; (w * h) as usize] };
+        lut_pass(&scene, &lut_scene, &single.lut, &mut image);
+        let truth = renderer.render_selected(light, w, h, Grid::Adaptive(128), |k| k == g).unwrap();
+        let e_lut: f64 = image.pixels.iter().map(|p| f64::from(p[1])).sum();
+        let e_ref: f64 = truth.hdr.pixels.iter().map(|p| f64::from(p[1])).sum();
+        assert!(e_ref > 0.0, "the ghost has light at {theta} deg");
+        assert!((e_lut / e_ref - 1.0).abs() < 0.15, "energy {e_lut} vs {e_ref} at ({theta}, {alpha})");
+        let l1 = metrics::relative_l1(&image, &truth.hdr);
+        assert!(l1 < 0.35, "relative L1 {l1} at ({theta}, {alpha})");
+        // The same ghost placed by the paraxial frame of the wrong azimuth would be far off: the test can fail.
+        let wrong = light_position_deg(theta, alpha + 90.0);
+        let (scene2, lut_scene2) = single.scenes(&flare, wrong, w, h, &BlendSettings::default(), false);
+        let mut image2 = HdrImage { width: w, height: h, pixels: vec![[0.0; 4]; (w * h) as usize] };
+        lut_pass(&scene2, &lut_scene2, &single.lut, &mut image2);
+        let l1_wrong = metrics::relative_l1(&image2, &truth.hdr);
+        eprintln!(
+            "({theta}, {alpha}): relative L1 {l1:.3}, energy ratio {:.3}; placed for the wrong azimuth {l1_wrong:.3}",
+            e_lut / e_ref
+        );
+        assert!(l1_wrong > l1, "{l1_wrong} vs {l1}");
+    }
+}
+
+#[test]
+fn the_lut_file_round_trips_and_a_rebake_keeps_unchanged_ghosts() {
+    let flare = flare("tessar");
+    let lut = small_lut(&flare);
+    assert_eq!(lut.ghosts.len(), 2);
+    assert!(lut.texel_count() > 0);
+    let bytes = encode(&lut);
+    let back = decode(bytes.as_slice(), bytes.len() as u64).unwrap();
+    assert_eq!(back, lut);
+    // Written atomically to a file and read back.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t.flut");
+    flare_core::lut::format::write_lut(&path, &lut).unwrap();
+    assert_eq!(flare_core::lut::format::read_lut(&path).unwrap(), lut);
+    // A re-bake with one more ghost renders only that one.
+    let renderer = RayGridRenderer::new(&flare);
+    let settings = BakeSettings { theta_max_deg: Some(16.0), ..small_settings() };
+    let kept = std::sync::Mutex::new(0);
+    let again = bake(
+        &flare,
+        &renderer,
+        &[3, 7, 9],
+        &settings,
+        Some(&lut),
+        &|p| *kept.lock().unwrap() = p.ghosts_kept,
+        &AtomicBool::new(false),
+    )
+    .unwrap();
+    assert_eq!(*kept.lock().unwrap(), 2);
+    assert_eq!(again.ghosts[0], lut.ghosts[0]);
+    // A cancelled bake stops with an error.
+    let cancelled = bake(&flare, &renderer, &[9], &settings, None, &|_| {}, &AtomicBool::new(true));
+    assert_eq!(cancelled.unwrap_err(), flare_core::lut::bake::BakeError::Cancelled);
+}
+
+#[test]
+fn the_loader_refuses_bad_files_with_clear_errors() {
+    let flare = flare("tessar");
+    let lut = small_lut(&flare);
+    let bytes = encode(&lut);
+    let load = |b: &[u8]| decode(b, b.len() as u64);
+    let mut wrong_magic = bytes.clone();
+    wrong_magic[0] = b'X';
+    assert!(matches!(load(&wrong_magic), Err(LutError::Magic)));
+    assert!(matches!(load(b"hello"), Err(LutError::Magic)));
+    let mut version = bytes.clone();
+    version[8] = 9;
+    assert!(matches!(load(&version), Err(LutError::Version { found: 9 })));
+    for cut in [12, 20, 40, bytes.len() / 2, bytes.len() - 1] {
+        let e = load(&bytes[..cut]).unwrap_err();
+        assert!(matches!(e, LutError::Truncated(_) | LutError::Header(_)), "cut at {cut}: {e}");
+    }
+    let mut damaged = bytes.clone();
+    let n = damaged.len();
+    damaged[n - 10] ^= 0x55;
+    let e = load(&damaged).unwrap_err();
+    assert!(matches!(e, LutError::Entry { .. } | LutError::Truncated(_)), "{e}");
+    // A header claiming a huge entry is refused before any allocation.
+    let header_len = u64::from_le_bytes(bytes[12..20].try_into().unwrap()) as usize;
+    let json = String::from_utf8(bytes[28..28 + header_len].to_vec()).unwrap();
+    let huge = json.replacen("\"width\":", "\"width\":8000,\"x\":", 1);
+    let mut forged = bytes[..12].to_vec();
+    forged.extend_from_slice(&(huge.len() as u64).to_le_bytes());
+    forged.extend_from_slice(&flare_core_fnv(huge.as_bytes()).to_le_bytes());
+    forged.extend_from_slice(huge.as_bytes());
+    forged.extend_from_slice(&bytes[28 + header_len..]);
+    assert!(matches!(load(&forged), Err(LutError::Header(_))));
+    // A LUT for another lens is refused with both names.
+    let other = builtin_lens("pbrt_dgauss_50mm").unwrap();
+    let e = lut.check_for(&other, &FlareConfig::default()).unwrap_err().to_string();
+    assert!(e.contains("another lens") && e.contains("bake it again"), "{e}");
+    lut.check_for(&builtin_lens("tessar").unwrap(), &FlareConfig::default()).unwrap();
+}
+
+/// FNV-1a 64, as the format uses, to forge headers with a valid checksum.
+fn flare_core_fnv(bytes: &[u8]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for &b in bytes {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}
+
+fn fuzz_source() -> Vec<u8> {
+    static BYTES: std::sync::OnceLock<Vec<u8>> = std::sync::OnceLock::new();
+    BYTES
+        .get_or_init(|| {
+            let flare = flare("tessar");
+            let renderer = RayGridRenderer::new(&flare);
+            let settings = BakeSettings {
+                theta_max_deg: Some(8.0),
+                res: 16,
+                grid: 16,
+                initial_steps: 1,
+                phi_steps: 1,
+                ..small_settings()
+            };
+            encode(&bake(&flare, &renderer, &[3], &settings, None, &|_| {}, &AtomicBool::new(false)).unwrap())
+        })
+        .clone()
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 256, ..ProptestConfig::default() })]
+    /// Any truncation or corruption of a valid file is an error or (where it hits nothing checked) a valid LUT,
+    /// never a panic or a huge allocation.
+    #[test]
+    fn the_loader_never_panics_on_damaged_files(
+        cut in 0usize..4096,
+        flips in proptest::collection::vec((0usize..4096, any::<u8>()), 0..6),
+    ) {
+        let mut bytes = fuzz_source();
+        for (at, value) in flips {
+            let n = bytes.len();
+            bytes[at % n] ^= value;
+        }
+        let keep = bytes.len() - cut % bytes.len();
+        bytes.truncate(keep);
+        if let Ok(lut) = decode(bytes.as_slice(), bytes.len() as u64) {
+            prop_assert!(lut.ghosts.iter().flat_map(|g| &g.entries).all(|e| e.texels.iter().flatten().all(|v| v.is_finite())));
+        }
+    }
+}
+
+#[test]
+fn blend_modes_weigh_the_lut_against_the_sprite() {
+    assert_eq!(BlendMode::Additive.weight(3.0), 1.0);
+    let linear = BlendMode::parse("linear:5:15").unwrap();
+    assert_eq!(linear.weight(0.0), 0.0);
+    assert!((linear.weight(10.0) - 0.5).abs() < 1e-12);
+    assert_eq!(linear.weight(20.0), 1.0);
+    let smooth = BlendMode::parse("smooth:5:15").unwrap();
+    assert!((smooth.weight(7.5) - 0.15625).abs() < 1e-12);
+    assert!(BlendMode::parse("linear:15:5").is_err());
+    assert!(BlendMode::parse("bogus").is_err());
+    // Linear blend at its midpoint: half the sprite of each LUT ghost stays.
+    let flare = flare("tessar");
+    let live = LiveLut::new(small_lut(&flare));
+    let light = light_position_deg(10.0, 30.0);
+    let blend = BlendSettings { mode: linear, ..BlendSettings::default() };
+    let (full, _) = flare.scene(light, 120, 80);
+    let (scene, lut_scene) = live.scenes(&flare, light, 120, 80, &blend, true);
+    for (g, w) in &lut_scene.paraxial_weights {
+        assert!((w - 0.5).abs() < 1e-6, "ghost {g}: {w}");
+    }
+    let sum = |s: &flare_core::render::FlareScene, g: u32| -> f32 {
+        s.instances.iter().zip(&s.instance_ghosts).filter(|(_, h)| **h == g).map(|(i, _)| i.colour[1]).sum()
+    };
+    let g = live.lut.ghosts[0].ghost;
+    assert!((sum(&scene, g) - 0.5 * sum(&full, g)).abs() <= 1e-6 * sum(&full, g).max(1e-30));
+    // Alpha: the LUT layer over the linear flare, out = lut + (1 - alpha) linear, on the CPU twin.
+    let over = BlendSettings { mode: BlendMode::Alpha, ..BlendSettings::default() };
+    let (scene, lut_scene) = live.scenes(&flare, light, 120, 80, &over, true);
+    assert!(lut_scene.alpha_over);
+    let base = flare_core::render::cpu::ghost_pass(&scene, &flare.mask);
+    let mut composed = base.clone();
+    lut_pass(&scene, &lut_scene, &live.lut, &mut composed);
+    let mut added = base.clone();
+    let additive = LutScene { alpha_over: false, ..lut_scene.clone() };
+    lut_pass(&scene, &additive, &live.lut, &mut added);
+    let (mut darker, mut lit) = (0, 0);
+    for ((c, a), b) in composed.pixels.iter().zip(&added.pixels).zip(&base.pixels) {
+        assert!(c[1] <= a[1] + 1e-9);
+        if b[1] > 0.0 && a[1] > b[1] {
+            lit += 1;
+            if c[1] < a[1] {
+                darker += 1;
+            }
+        }
+    }
+    assert!(lit > 0 && darker > 0, "where both layers have light, alpha hides some of the linear flare");
+}
+
+#[test]
+fn every_lut_instance_and_image_is_finite() {
+    let flare = flare("tessar");
+    let live = LiveLut::new(small_lut(&flare));
+    for (theta, alpha) in [(0.0, 0.0), (16.0, 180.0), (40.0, 33.0), (89.0, -90.0)] {
+        let light = light_position_deg(theta, alpha);
+        let u = light_slopes_for_frame_position(light[0], light[1]);
+        let lut_scene = LutScene::build(&live.lut, &live.layout, &flare.system, u, 96, 64, &BlendSettings::default());
+        assert_eq!(lut_scene.dropped_non_finite, 0);
+        assert!(lut_scene.instances.iter().all(|i| i.is_finite()));
+        let (scene, lut_scene) = live.scenes(&flare, light, 96, 64, &BlendSettings::default(), true);
+        let image = live.render_cpu(&flare, &scene, &lut_scene);
+        assert!(image.pixels.iter().flatten().all(|v| v.is_finite() && *v >= 0.0), "{theta} {alpha}");
+    }
+}
+
+#[test]
+fn the_gpu_draws_lut_ghosts_as_its_cpu_twin_does() {
+    let ctx = match flare_core::render::gpu::GpuContext::headless(true) {
+        Ok(ctx) => ctx,
+        Err(e) => {
+            eprintln!("skipped: {e}");
+            return;
+        }
+    };
+    let flare = flare("tessar");
+    let live = LiveLut::new(small_lut(&flare));
+    let light = light_position_deg(9.0, 140.0);
+    for mode in [BlendMode::Additive, BlendMode::Alpha] {
+        let blend = BlendSettings { mode, ..BlendSettings::default() };
+        let (mut scene, lut_scene) = live.scenes(&flare, light, 160, 120, &blend, true);
+        scene.globals.starburst = [0.0; 4];
+        assert!(!lut_scene.instances.is_empty());
+        let cpu = live.render_cpu(&flare, &scene, &lut_scene);
+        let mut renderer =
+            flare_core::render::gpu::FlareRenderer::new(&ctx.device, &ctx.queue, wgpu::TextureFormat::Rgba8Unorm);
+        renderer.set_aperture(&ctx.device, &ctx.queue, &flare.mask);
+        renderer.set_lut(&ctx.device, &ctx.queue, Some(&live));
+        flare_core::render::gpu::render_display_with_lut(&ctx, &mut renderer, &scene, Some(&lut_scene)).unwrap();
+        let gpu = flare_core::render::gpu::read_hdr(&ctx, &renderer).unwrap();
+        let mean = |img: &HdrImage| img.pixels.iter().map(|p| f64::from(p[0] + p[1] + p[2])).sum::<f64>();
+        let diff: f64 = cpu
+            .pixels
+            .iter()
+            .zip(&gpu.pixels)
+            .map(|(a, b)| (0..3).map(|c| f64::from((a[c] - b[c]).abs())).sum::<f64>())
+            .sum();
+        assert!(mean(&cpu) > 0.0);
+        assert!(
+            diff / mean(&cpu) < 0.02,
+            "{mode:?}: GPU differs from the CPU twin by {} of the energy",
+            diff / mean(&cpu)
+        );
+    }
+}
+
+#[test]
+fn a_photo_lut_plays_back_its_images_turned_with_the_light() {
+    let dir = tempfile::tempdir().unwrap();
+    // A "photo": a bright square to the right of centre, brighter as theta grows; 0 deg and 10 deg.
+    for (theta, level) in [(0u32, 100u8), (10, 200)] {
+        let mut img = image::RgbImage::new(60, 40);
+        for y in 18..22 {
+            for x in 40..46 {
+                img.put_pixel(x, y, image::Rgb([level, level, level]));
+            }
+        }
+        img.save(dir.path().join(format!("flare_{theta}deg.png"))).unwrap();
+    }
+    let lut = photo::import_folder(dir.path()).unwrap();
+    assert_eq!(lut.ghosts[0].thetas_deg, vec![0.0, 10.0]);
+    let bytes = encode(&lut);
+    assert_eq!(decode(bytes.as_slice(), bytes.len() as u64).unwrap(), lut);
+    let flare = flare("tessar");
+    let live = LiveLut::new(lut);
+    let render = |theta: f64, azimuth_frame: f64| {
+        let (x, y) = (
+            theta.to_radians().tan() * azimuth_frame.to_radians().cos(),
+            theta.to_radians().tan() * azimuth_frame.to_radians().sin(),
+        );
+        let light = [x.atan().to_degrees(), y.atan().to_degrees()];
+        let (scene, lut_scene) = live.scenes(&flare, light, 60, 40, &BlendSettings::default(), false);
+        assert!(scene.instances.is_empty(), "a photo plays alone");
+        live.render_cpu(&flare, &scene, &lut_scene)
+    };
+    let bright = |img: &HdrImage| {
+        let (mut sx, mut sy, mut e) = (0.0, 0.0, 0.0);
+        for (k, p) in img.pixels.iter().enumerate() {
+            let v = f64::from(p[1]);
+            sx += v * (k % 60) as f64;
+            sy += v * (k / 60) as f64;
+            e += v;
+        }
+        (sx / e, sy / e, e)
+    };
+    // At the sweep's own azimuth the photo comes back as taken.
+    let (x, y, e10) = bright(&render(10.0, 0.0));
+    assert!((x - 42.5).abs() < 0.6 && (y - 19.5).abs() < 0.6, "{x} {y}");
+    // Halfway between the images, half of each: energy between the two.
+    let (_, _, e5) = bright(&render(5.0, 0.0));
+    assert!(e5 < e10 && e5 > 0.3 * e10);
+    // Turned by 180 degrees with the light.
+    let (x, y, _) = bright(&render(10.0, 180.0));
+    assert!((x - 16.5).abs() < 0.6 && (y - 19.5).abs() < 0.6, "{x} {y}");
+    // A folder with no angle in a name is refused with the file named.
+    let bad = tempfile::tempdir().unwrap();
+    image::RgbImage::new(4, 4).save(bad.path().join("flare.png")).unwrap();
+    let e = photo::import_folder(bad.path()).unwrap_err().to_string();
+    assert!(e.contains("flare.png") && e.contains("angle"), "{e}");
+}
+
+#[test]
+fn classification_finds_the_known_non_linear_ghost_and_honours_forced_choices() {
+    let flare = flare("pbrt_dgauss_50mm");
+    let renderer = RayGridRenderer::new(&flare);
+    let settings = flare_core::lut::classify::ClassifySettings::for_flare(&flare, 20.0);
+    let g46 = flare.system.ghosts.iter().position(|g| (g.i, g.j) == (4, 6)).unwrap();
+    let classes = flare_core::lut::classify::classify(&flare, &renderer, &settings, &[(0, true), (g46, false)]);
+    assert_eq!(classes.len(), flare.system.ghosts.len());
+    // Ghost (4, 6): paraxial radius 21.7 mm, real rays within 9.1 mm folding into a caustic.
+    let c = &classes[g46];
+    assert!(c.measured_nonlinear && c.image_error > 0.3 && c.size_ratio > 1.5, "{c:?}");
+    assert!(!c.nonlinear(), "forced linear");
+    assert!(classes[0].nonlinear() && classes[0].forced == Some(true));
+    let linear = classes.iter().filter(|c| !c.measured_nonlinear).count();
+    assert!(linear > 0 && linear < classes.len(), "some ghosts are linear, some not");
+}

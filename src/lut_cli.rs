@@ -1,0 +1,349 @@
+//! `flarelab classify`, `flarelab bake`, `flarelab photo-lut`: the LUT ghosts from the command line.
+
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use flare_core::flare::PreparedFlare;
+use flare_core::lut::bake::{BakeProgress, BakeSettings, bake, useful_field_deg};
+use flare_core::lut::classify::{ClassifySettings, GhostClass, classify};
+use flare_core::lut::{GhostLut, format, photo};
+use flare_core::raytrace::RayGridRenderer;
+
+/// Which ghosts to bake and how.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct LutChoice {
+    /// Largest light angle, degrees (default: the lens's useful field).
+    #[arg(long)]
+    pub theta_max: Option<f64>,
+    /// Image error (0 to 1) above which a visible ghost is non-linear.
+    #[arg(long, default_value_t = 0.15)]
+    pub threshold: f64,
+    /// Ghosts to bake whatever the measure says, as surface pairs: 4-6,2-9.
+    #[arg(long, value_delimiter = ',')]
+    pub force_nonlinear: Vec<String>,
+    /// Ghosts never to bake, as surface pairs.
+    #[arg(long, value_delimiter = ',')]
+    pub force_linear: Vec<String>,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct ClassifyArgs {
+    /// Lens file or built-in lens name.
+    pub file: String,
+    #[command(flatten)]
+    pub choice: LutChoice,
+    /// One JSON document instead of the table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct BakeArgs {
+    /// Lens file or built-in lens name.
+    pub file: String,
+    /// Output LUT (default: the lens's id with .flut).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    #[command(flatten)]
+    pub choice: LutChoice,
+    /// Most texels across an entry.
+    #[arg(long, default_value_t = BakeSettings::default().res)]
+    pub res: u32,
+    /// Most ray-grid cells across a ghost's entrance region.
+    #[arg(long, default_value_t = BakeSettings::default().grid)]
+    pub grid: usize,
+    /// Azimuth steps over the aperture's symmetry wedge (0: rotation only).
+    #[arg(long, default_value_t = BakeSettings::default().phi_steps)]
+    pub phi_steps: u32,
+    /// Refine theta while the interpolated middle entry is off by more than this (relative L1).
+    #[arg(long, default_value_t = BakeSettings::default().tolerance)]
+    pub tolerance: f64,
+    /// A previous LUT of this lens: ghosts whose settings are unchanged are kept, not re-baked.
+    #[arg(long)]
+    pub update: Option<PathBuf>,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct PhotoArgs {
+    /// Folder of PNG/EXR images of a flare swept over theta (angles in flare.json or the file names).
+    pub folder: PathBuf,
+    /// Output LUT.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Lens ghost indices of surface pairs `I-J`.
+fn ghost_indices(flare: &PreparedFlare, pairs: &[String]) -> Result<Vec<usize>> {
+    pairs
+        .iter()
+        .map(|p| {
+            let (i, j) = p
+                .split_once('-')
+                .and_then(|(i, j)| Some((i.trim().parse::<usize>().ok()?, j.trim().parse::<usize>().ok()?)))
+                .ok_or_else(|| anyhow::anyhow!("ghost `{p}`: write the surface pair as I-J, e.g. 4-6"))?;
+            flare
+                .system
+                .ghosts
+                .iter()
+                .position(|g| (g.i, g.j) == (i.min(j), i.max(j)))
+                .ok_or_else(|| anyhow::anyhow!("ghost {p}: the lens has no ghost reflecting at surfaces {i} and {j}"))
+        })
+        .collect()
+}
+
+/// The measure of every ghost with the user's forced choices.
+pub fn classify_ghosts(
+    flare: &PreparedFlare,
+    renderer: &RayGridRenderer,
+    choice: &LutChoice,
+) -> Result<Vec<GhostClass>> {
+    if !(choice.threshold.is_finite() && (0.0..=1.0).contains(&choice.threshold)) {
+        bail!("--threshold {}: 0 to 1", choice.threshold);
+    }
+    let mut forced: Vec<(usize, bool)> =
+        ghost_indices(flare, &choice.force_nonlinear)?.into_iter().map(|g| (g, true)).collect();
+    forced.extend(ghost_indices(flare, &choice.force_linear)?.into_iter().map(|g| (g, false)));
+    let theta_max = choice.theta_max.unwrap_or_else(|| useful_field_deg(flare));
+    let mut settings = ClassifySettings::for_flare(flare, theta_max);
+    settings.threshold = choice.threshold;
+    Ok(classify(flare, renderer, &settings, &forced))
+}
+
+/// Classifies and bakes in memory, printing progress to stderr; the LUT, the classes and the bake seconds.
+pub fn bake_lut(
+    flare: &PreparedFlare,
+    renderer: &RayGridRenderer,
+    choice: &LutChoice,
+    settings: &BakeSettings,
+    previous: Option<&GhostLut>,
+    quiet: bool,
+) -> Result<(GhostLut, Vec<GhostClass>, f64)> {
+    let started = Instant::now();
+    let classes = classify_ghosts(flare, renderer, choice)?;
+    let chosen: Vec<usize> = classes.iter().filter(|c| c.nonlinear()).map(|c| c.ghost).collect();
+    if !quiet {
+        eprintln!(
+            "classified {} ghosts in {:.1} s: {} non-linear to bake",
+            classes.len(),
+            started.elapsed().as_secs_f64(),
+            chosen.len()
+        );
+    }
+    let cancel = AtomicBool::new(false);
+    let progress = |p: BakeProgress| {
+        if !quiet && (p.entries.is_multiple_of(50) || p.ghosts_done == p.ghosts_total) {
+            eprint!(
+                "\rbaking: {} entries, {}/{} ghosts ({} kept), {:.1} s   ",
+                p.entries,
+                p.ghosts_done,
+                p.ghosts_total,
+                p.ghosts_kept,
+                started.elapsed().as_secs_f64()
+            );
+        }
+    };
+    let mut settings = settings.clone();
+    settings.theta_max_deg = choice.theta_max;
+    let lut = bake(flare, renderer, &chosen, &settings, previous, &progress, &cancel)?;
+    if !quiet {
+        eprintln!();
+    }
+    Ok((lut, classes, started.elapsed().as_secs_f64()))
+}
+
+fn print_classes(flare: &PreparedFlare, classes: &[GhostClass]) {
+    println!(
+        "{:>4} {:>3} {:>3}  {:>9} {:>8} {:>6} {:>7} {:>10}  verdict",
+        "#", "i", "j", "centroid", "(rel)", "size", "error", "peak"
+    );
+    let mut order: Vec<&GhostClass> = classes.iter().collect();
+    order.sort_by(|a, b| b.image_error.total_cmp(&a.image_error));
+    for c in order {
+        let verdict = match c.forced {
+            Some(true) => "non-linear (forced)",
+            Some(false) => "linear (forced)",
+            None if c.measured_nonlinear => "non-linear",
+            None => "linear",
+        };
+        println!(
+            "{:>4} {:>3} {:>3}  {:>7.3}mm {:>8.2} {:>6.2} {:>7.3} {:>10.2e}  {verdict}",
+            c.ghost,
+            c.surfaces.0,
+            c.surfaces.1,
+            c.centroid_mm,
+            c.centroid_rel,
+            c.size_ratio,
+            c.image_error,
+            c.peak_irradiance
+        );
+    }
+    let n = classes.iter().filter(|c| c.nonlinear()).count();
+    println!("{n} of {} ghosts non-linear ({} lens)", classes.len(), flare.system.lens.id);
+}
+
+pub fn classify_command(args: &ClassifyArgs) -> Result<()> {
+    let lens = crate::cli::open_lens(&args.file)?;
+    let flare =
+        PreparedFlare::new(&lens, &flare_core::flare::FlareConfig::default()).with_context(|| args.file.clone())?;
+    let renderer = RayGridRenderer::new(&flare);
+    let classes = classify_ghosts(&flare, &renderer, &args.choice)?;
+    if args.json {
+        let rows: Vec<serde_json::Value> = classes
+            .iter()
+            .map(|c| {
+                serde_json::json!({
+                    "ghost": c.ghost, "i": c.surfaces.0, "j": c.surfaces.1,
+                    "centroid_mm": c.centroid_mm, "centroid_rel": c.centroid_rel, "size_ratio": c.size_ratio,
+                    "image_error": c.image_error, "peak_irradiance": c.peak_irradiance,
+                    "measured_nonlinear": c.measured_nonlinear, "forced": c.forced, "nonlinear": c.nonlinear(),
+                })
+            })
+            .collect();
+        println!("{}", serde_json::to_string_pretty(&serde_json::json!({ "lens": lens.id, "ghosts": rows }))?);
+    } else {
+        print_classes(&flare, &classes);
+    }
+    Ok(())
+}
+
+pub fn bake_command(args: &BakeArgs) -> Result<()> {
+    let lens = crate::cli::open_lens(&args.file)?;
+    let config = flare_core::flare::FlareConfig::default();
+    let flare = PreparedFlare::new(&lens, &config).with_context(|| args.file.clone())?;
+    let renderer = RayGridRenderer::new(&flare);
+    let previous = args
+        .update
+        .as_deref()
+        .map(|p| format::read_lut(p).with_context(|| format!("reading {}", p.display())))
+        .transpose()?;
+    let settings = BakeSettings {
+        res: args.res,
+        grid: args.grid,
+        phi_steps: args.phi_steps,
+        tolerance: args.tolerance,
+        ..BakeSettings::default()
+    };
+    let (lut, _, seconds) = bake_lut(&flare, &renderer, &args.choice, &settings, previous.as_ref(), false)?;
+    let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("{}.flut", lens.id)));
+    let bytes = format::write_lut(&out, &lut).with_context(|| format!("writing {}", out.display()))?;
+    for g in &lut.ghosts {
+        println!(
+            "ghost {:>3} ({}-{}): {} thetas {:?} deg x {} azimuths",
+            g.ghost,
+            g.surfaces[0],
+            g.surfaces[1],
+            g.thetas_deg.len(),
+            g.thetas_deg.iter().map(|t| (t * 100.0).round() / 100.0).collect::<Vec<_>>(),
+            g.phis_deg.len()
+        );
+    }
+    println!(
+        "baked {} ghosts, {} entries, {:.1} M texels in {seconds:.1} s; wrote {} ({:.2} MB, theta 0 to {:.1} deg)",
+        lut.ghosts.len(),
+        lut.entry_count(),
+        lut.texel_count() as f64 / 1e6,
+        out.display(),
+        bytes as f64 / 1e6,
+        lut.theta_max_deg
+    );
+    Ok(())
+}
+
+pub fn photo_command(args: &PhotoArgs) -> Result<()> {
+    let lut = photo::import_folder(&args.folder)?;
+    let bytes = format::write_lut(&args.out, &lut).with_context(|| format!("writing {}", args.out.display()))?;
+    println!(
+        "imported {} images (theta {:?} deg) into {} ({:.2} MB)",
+        lut.entry_count(),
+        lut.ghosts[0].thetas_deg,
+        args.out.display(),
+        bytes as f64 / 1e6
+    );
+    Ok(())
+}
+
+/// `flarelab render --method blended|photo`: the paraxial flare with LUT ghosts (or a photo LUT alone).
+#[allow(clippy::too_many_arguments)]
+pub fn render_with_lut(
+    flare: &PreparedFlare,
+    lens: &flare_core::optics::Lens,
+    lut_path: Option<&std::path::Path>,
+    photo_only: bool,
+    blend: &flare_core::lut::blend::BlendSettings,
+    light_deg: [f64; 2],
+    (width, height): (u32, u32),
+    device: &str,
+    background: Option<&flare_core::render::HdrImage>,
+    out: &std::path::Path,
+) -> Result<()> {
+    use flare_core::lut::LutKind;
+    use flare_core::lut::blend::LiveLut;
+    use flare_core::render::{cpu, gpu, output};
+    let lut = match lut_path {
+        Some(path) => {
+            let lut = format::read_lut(path).with_context(|| format!("reading {}", path.display()))?;
+            lut.check_for(lens, &flare.config)?;
+            if photo_only && lut.kind != LutKind::Photo {
+                bail!("{}: --method photo needs a photo LUT (this one is ray-traced)", path.display());
+            }
+            lut
+        }
+        None => {
+            let renderer = RayGridRenderer::new(flare);
+            bake_lut(
+                flare,
+                &renderer,
+                &LutChoice { threshold: 0.15, ..LutChoice::default() },
+                &BakeSettings::default(),
+                None,
+                false,
+            )?
+            .0
+        }
+    };
+    let live = LiveLut::new(lut);
+    let (scene, lut_scene) = live.scenes(flare, light_deg, width, height, blend, !photo_only);
+    let starburst = cpu::StarburstTexture::from_starburst(&flare.starburst);
+    let (display, hdr) = match device {
+        "cpu" => {
+            let mut hdr = live.render_cpu(flare, &scene, &lut_scene);
+            if flare.config.display.starburst {
+                cpu::starburst_pass(&scene, &starburst, &mut hdr);
+            }
+            (cpu::tonemap_pass(&scene, &hdr, background), hdr)
+        }
+        "gpu" => {
+            let ctx = gpu::GpuContext::headless(false).map_err(|e| anyhow::anyhow!("{e} (or use --device cpu)"))?;
+            let mut renderer = gpu::FlareRenderer::new(&ctx.device, &ctx.queue, wgpu::TextureFormat::Rgba8Unorm);
+            renderer.set_aperture(&ctx.device, &ctx.queue, &flare.mask);
+            renderer.set_starburst(&ctx.device, &ctx.queue, &flare.starburst);
+            renderer.set_background(&ctx.device, &ctx.queue, background);
+            renderer.set_lut(&ctx.device, &ctx.queue, Some(&live));
+            let display = gpu::render_display_with_lut(&ctx, &mut renderer, &scene, Some(&lut_scene))?;
+            (display, gpu::read_hdr(&ctx, &renderer)?)
+        }
+        other => bail!("--device {other}: use gpu or cpu"),
+    };
+    match output::ImageKind::from_path(out)? {
+        output::ImageKind::Png => output::write_png(out, &display)?,
+        output::ImageKind::Exr => {
+            let mut linear = cpu::composite(&scene, &hdr, background);
+            for p in &mut linear.pixels {
+                for c in p.iter_mut().take(3) {
+                    *c *= flare.config.display.exposure;
+                }
+            }
+            output::write_exr(out, &linear)?
+        }
+    }
+    eprintln!(
+        "wrote {} ({width}x{height}): {} paraxial sprites, {} LUT images from {} LUT ghosts",
+        out.display(),
+        scene.instances.len(),
+        lut_scene.instances.len(),
+        live.lut.ghosts.len()
+    );
+    Ok(())
+}
