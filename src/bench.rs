@@ -9,7 +9,9 @@
 //! as the app does it: paraxial = sprites for the light + the CPU twin's ghost pass (rayon over bands of rows);
 //! paraxial-half = the same accumulated at half resolution and upsampled (the app's choice on software
 //! adapters); paraxial-gpu = sprites + the wgpu renderer's draw, waited for (when an adapter exists, lavapipe
-//! included); raygrid-N / reference = tracing and splatting every ghost (rayon over ghosts).
+//! included); blended = paraxial with the lens's LUT ghosts (classified and baked once per lens at the default
+//! settings, bake time and file size reported in their own table), sprites + LUT instances + the CPU twin's two
+//! passes; raygrid-N / reference = tracing and splatting every ghost (rayon over ghosts).
 //!
 //! Writes `bench.csv`, `bench.md` (the tables that `--update-readme` puts into the README between the
 //! `<!-- bench:start -->` and `<!-- bench:end -->` markers) and `bench.png` (error against run time).
