@@ -426,8 +426,7 @@ impl RayGridRenderer {
         let mut stats = RayGridStats::default();
         for job in self.jobs.iter().filter(|j| j.ghost == ghost) {
             let Some((b, _)) = self.grid_bounds(job, u, d, 32, &window, &mut stats) else { continue };
-            let stop_count =
-                self.system.ghosts[job.ghost].per_wavelength[job.wavelength].matrices.stop_from_entrance.len().min(3);
+            let stop_count = self.stop_count(job);
             let (dx, dy) = ((b[2] - b[0]) / n as f64, (b[3] - b[1]) / n as f64);
             let vertices: Vec<Vertex> = (0..=n)
                 .flat_map(|iy| (0..=n).map(move |ix| (ix, iy)))
@@ -452,6 +451,11 @@ impl RayGridRenderer {
             }
         }
         (bounds[0] <= bounds[2] && bounds[1] <= bounds[3]).then_some(bounds)
+    }
+
+    /// How many stop crossings of `job` the masks look at (at most 3).
+    fn stop_count(&self, job: &Job) -> usize {
+        self.system.ghosts[job.ghost].per_wavelength[job.wavelength].matrices.stop_from_entrance.len().min(3)
     }
 
     /// Traces one ray of `job` from the entrance point `x0` (mm) in direction `d`.
@@ -499,8 +503,7 @@ impl RayGridRenderer {
         stats: &mut RayGridStats,
     ) -> Option<([f64; 4], f64)> {
         let half = self.front_radius_mm * 1.01 + u[0].hypot(u[1]) * self.front_sag_mm;
-        let stop_count =
-            self.system.ghosts[job.ghost].per_wavelength[job.wavelength].matrices.stop_from_entrance.len().min(3);
+        let stop_count = self.stop_count(job);
         let step = 2.0 * half / coarse as f64;
         let n = coarse + 1;
         let mut vertices = Vec::with_capacity(n * n);
@@ -577,11 +580,7 @@ impl RayGridRenderer {
             ghost: job.ghost,
             rgb: weights,
             luma: crate::metrics::luminance(weights),
-            stop_count: self.system.ghosts[job.ghost].per_wavelength[job.wavelength]
-                .matrices
-                .stop_from_entrance
-                .len()
-                .min(3),
+            stop_count: self.stop_count(job),
             mask: &self.mask,
             triangle_flux: d.z * 0.5 * (b[2] - b[0]) * (b[3] - b[1]) / (grid * grid) as f64,
         };

@@ -170,6 +170,11 @@ pub fn render_entry(
 /// The run time's prediction of `target` from `a` and `b` (weights 1 - t, t), in `target`'s texels, and its
 /// relative L1 error (luminance) against `target`.
 pub fn interpolation_error(a: &LutEntry, b: &LutEntry, t: f64, target: &LutEntry) -> f64 {
+    if target.is_empty() {
+        // All of the neighbours' light would be drawn where there is none.
+        let predicted = (1.0 - t) * a.energy() + t * b.energy();
+        return if predicted > 0.0 { 1.0 } else { 0.0 };
+    }
     let actual: f64 = target.texels.iter().map(|p| luminance([p[0], p[1], p[2]].map(f16::to_f64))).sum();
     let baked = (1.0 - t) * a.paraxial.energy + t * b.paraxial.energy;
     let ratio = if baked > 0.0 && target.paraxial.energy > 0.0 {
@@ -197,7 +202,7 @@ pub fn interpolation_error(a: &LutEntry, b: &LutEntry, t: f64, target: &LutEntry
     };
     let mut error = 0.0;
     let mut predicted_sum = 0.0;
-    for y in 0..target.height.max(if target.is_empty() { 0 } else { 1 }) {
+    for y in 0..target.height {
         for x in 0..target.width {
             let p_mm = window.to_mm([f64::from(x) + 0.5, f64::from(y) + 0.5]);
             let predicted = ratio * ((1.0 - t) * sample(a, p_mm) + t * sample(b, p_mm));
@@ -205,11 +210,6 @@ pub fn interpolation_error(a: &LutEntry, b: &LutEntry, t: f64, target: &LutEntry
             error += (predicted - luminance([p[0], p[1], p[2]].map(f16::to_f64))).abs();
             predicted_sum += predicted;
         }
-    }
-    if target.is_empty() {
-        // All of the neighbours' light would be drawn where there is none.
-        let predicted = (1.0 - t) * a.energy() + t * b.energy();
-        return if predicted > 0.0 { 1.0 } else { 0.0 };
     }
     if actual > 0.0 {
         error / actual

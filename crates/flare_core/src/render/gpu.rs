@@ -135,6 +135,23 @@ fn atlas_texture(device: &wgpu::Device, side: u32, layers: u32) -> wgpu::Texture
     })
 }
 
+/// The atlas when no LUT is set: one black texel.
+fn empty_atlas(device: &wgpu::Device, queue: &wgpu::Queue) -> wgpu::Texture {
+    let atlas = atlas_texture(device, 1, 1);
+    upload(queue, &atlas, &half_floats(&[[0.0; 4]]), 8);
+    atlas
+}
+
+/// A vertex buffer for `capacity` instances of `T`, written by the queue.
+fn vertex_buffer<T>(device: &wgpu::Device, label: &str, capacity: usize) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: (capacity * std::mem::size_of::<T>()) as u64,
+        usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
 /// The GPU flare renderer.
 pub struct FlareRenderer {
     ghost_pipeline: wgpu::RenderPipeline,
@@ -336,21 +353,10 @@ impl FlareRenderer {
         let background = texture_2d(device, "background", 1, 1, HDR_FORMAT, sampled);
         upload(queue, &background, &half_floats(&[[0.0; 4]]), 8);
         let instance_capacity = 256;
-        let instances = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("ghost instances"),
-            size: (instance_capacity * std::mem::size_of::<GhostInstance>()) as u64,
-            usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let lut_atlas = atlas_texture(device, 1, 1);
-        upload(queue, &lut_atlas, &half_floats(&[[0.0; 4]]), 8);
+        let instances = vertex_buffer::<GhostInstance>(device, "ghost instances", instance_capacity);
+        let lut_atlas = empty_atlas(device, queue);
         let lut_capacity = 64;
-        let lut_instances = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("lut instances"),
-            size: (lut_capacity * std::mem::size_of::<LutInstance>()) as u64,
-            usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let lut_instances = vertex_buffer::<LutInstance>(device, "lut instances", lut_capacity);
         Self {
             lut_add_pipeline,
             lut_over_pipeline,
@@ -435,10 +441,7 @@ impl FlareRenderer {
                 let texels = live.layout.pages_f16(&live.lut);
                 upload(queue, &self.lut_atlas, bytemuck::cast_slice(&texels), 8);
             }
-            None => {
-                self.lut_atlas = atlas_texture(device, 1, 1);
-                upload(queue, &self.lut_atlas, &half_floats(&[[0.0; 4]]), 8);
-            }
+            None => self.lut_atlas = empty_atlas(device, queue),
         }
     }
 
@@ -466,12 +469,7 @@ impl FlareRenderer {
         queue.write_buffer(&self.globals, 0, bytemuck::bytes_of(&globals));
         if scene.instances.len() > self.instance_capacity {
             self.instance_capacity = scene.instances.len().next_power_of_two();
-            self.instances = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("ghost instances"),
-                size: (self.instance_capacity * std::mem::size_of::<GhostInstance>()) as u64,
-                usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
+            self.instances = vertex_buffer::<GhostInstance>(device, "ghost instances", self.instance_capacity);
         }
         if !scene.instances.is_empty() {
             queue.write_buffer(&self.instances, 0, bytemuck::cast_slice(&scene.instances));
@@ -480,12 +478,7 @@ impl FlareRenderer {
         if let Some(lut) = lut {
             if lut.instances.len() > self.lut_capacity {
                 self.lut_capacity = lut.instances.len().next_power_of_two();
-                self.lut_instances = device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some("lut instances"),
-                    size: (self.lut_capacity * std::mem::size_of::<LutInstance>()) as u64,
-                    usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
-                    mapped_at_creation: false,
-                });
+                self.lut_instances = vertex_buffer::<LutInstance>(device, "lut instances", self.lut_capacity);
             }
             queue.write_buffer(&self.lut_instances, 0, bytemuck::cast_slice(&lut.instances));
         }
