@@ -68,6 +68,12 @@ pub struct BenchArgs {
     /// Output folder.
     #[arg(long)]
     pub out: PathBuf,
+    /// Which ghosts the blended method bakes.
+    #[command(flatten)]
+    pub lut: crate::lut_cli::LutChoice,
+    /// Most texels across a LUT entry of the blended method.
+    #[arg(long, default_value_t = flare_core::lut::bake::BakeSettings::default().res)]
+    pub lut_res: u32,
 }
 
 /// One method at one lens and angle.
@@ -187,8 +193,8 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         let (lut, _, bake_s) = crate::lut_cli::bake_lut(
             &flare,
             &tracer,
-            &crate::lut_cli::LutChoice { threshold: 0.15, ..Default::default() },
-            &flare_core::lut::bake::BakeSettings::default(),
+            &args.lut,
+            &flare_core::lut::bake::BakeSettings { res: args.lut_res, ..Default::default() },
             None,
             true,
         )?;

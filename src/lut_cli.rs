@@ -12,7 +12,7 @@ use flare_core::lut::{GhostLut, format, photo};
 use flare_core::raytrace::RayGridRenderer;
 
 /// Which ghosts to bake and how.
-#[derive(clap::Args, Debug, Clone, Default)]
+#[derive(clap::Args, Debug, Clone)]
 pub struct LutChoice {
     /// Largest light angle, degrees (default: the lens's useful field).
     #[arg(long)]
@@ -20,6 +20,10 @@ pub struct LutChoice {
     /// Image error (0 to 1) above which a visible ghost is non-linear.
     #[arg(long, default_value_t = 0.15)]
     pub threshold: f64,
+    /// A non-linear ghost whose peak is under this fraction of the brightest ghost's is faint and stays
+    /// paraxial (0 bakes every non-linear ghost).
+    #[arg(long, default_value_t = flare_core::lut::classify::DEFAULT_FAINT_FRACTION)]
+    pub faint: f64,
     /// Ghosts to bake whatever the measure says, as surface pairs: 4-6,2-9.
     #[arg(long, value_delimiter = ',')]
     pub force_nonlinear: Vec<String>,
@@ -74,6 +78,19 @@ pub struct PhotoArgs {
     pub out: PathBuf,
 }
 
+impl Default for LutChoice {
+    /// The command line's defaults.
+    fn default() -> Self {
+        Self {
+            theta_max: None,
+            threshold: 0.15,
+            faint: flare_core::lut::classify::DEFAULT_FAINT_FRACTION,
+            force_nonlinear: Vec::new(),
+            force_linear: Vec::new(),
+        }
+    }
+}
+
 /// Lens ghost indices of surface pairs `I-J`.
 fn ghost_indices(flare: &PreparedFlare, pairs: &[String]) -> Result<Vec<usize>> {
     pairs
@@ -108,6 +125,10 @@ pub fn classify_ghosts(
     let theta_max = choice.theta_max.unwrap_or_else(|| useful_field_deg(flare));
     let mut settings = ClassifySettings::for_flare(flare, theta_max);
     settings.threshold = choice.threshold;
+    if !(choice.faint.is_finite() && (0.0..=1.0).contains(&choice.faint)) {
+        bail!("--faint {}: 0 to 1", choice.faint);
+    }
+    settings.faint_fraction = choice.faint;
     Ok(classify(flare, renderer, &settings, &forced))
 }
 
@@ -165,6 +186,7 @@ fn print_classes(flare: &PreparedFlare, classes: &[GhostClass]) {
             Some(true) => "non-linear (forced)",
             Some(false) => "linear (forced)",
             None if c.measured_nonlinear => "non-linear",
+            None if c.faint => "non-linear but faint: paraxial",
             None => "linear",
         };
         println!(
@@ -180,7 +202,12 @@ fn print_classes(flare: &PreparedFlare, classes: &[GhostClass]) {
         );
     }
     let n = classes.iter().filter(|c| c.nonlinear()).count();
-    println!("{n} of {} ghosts non-linear ({} lens)", classes.len(), flare.system.lens.id);
+    let faint = classes.iter().filter(|c| c.faint && c.forced.is_none()).count();
+    println!(
+        "{n} of {} ghosts non-linear, {faint} more too faint to bake ({} lens)",
+        classes.len(),
+        flare.system.lens.id
+    );
 }
 
 pub fn classify_command(args: &ClassifyArgs) -> Result<()> {
@@ -197,7 +224,7 @@ pub fn classify_command(args: &ClassifyArgs) -> Result<()> {
                     "ghost": c.ghost, "i": c.surfaces.0, "j": c.surfaces.1,
                     "centroid_mm": c.centroid_mm, "centroid_rel": c.centroid_rel, "size_ratio": c.size_ratio,
                     "image_error": c.image_error, "peak_irradiance": c.peak_irradiance,
-                    "measured_nonlinear": c.measured_nonlinear, "forced": c.forced, "nonlinear": c.nonlinear(),
+                    "measured_nonlinear": c.measured_nonlinear, "faint": c.faint, "forced": c.forced, "nonlinear": c.nonlinear(),
                 })
             })
             .collect();
@@ -295,7 +322,7 @@ pub fn render_with_lut(
             bake_lut(
                 flare,
                 &renderer,
-                &LutChoice { threshold: 0.15, ..LutChoice::default() },
+                &LutChoice::default(),
                 &BakeSettings::default(),
                 None,
                 false,

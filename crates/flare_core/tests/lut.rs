@@ -385,4 +385,22 @@ fn classification_finds_the_known_non_linear_ghost_and_honours_forced_choices() 
     assert!(classes[0].nonlinear() && classes[0].forced == Some(true));
     let linear = classes.iter().filter(|c| !c.measured_nonlinear).count();
     assert!(linear > 0 && linear < classes.len(), "some ghosts are linear, some not");
+    assert!(classes.iter().all(|c| !c.faint), "the default bakes every non-linear ghost");
+    // With a faint cutoff, exactly the non-linear ghosts under it stay paraxial, flagged as faint.
+    let cutoff = 2e-3;
+    let faint = flare_core::lut::classify::classify(
+        &flare,
+        &renderer,
+        &flare_core::lut::classify::ClassifySettings { faint_fraction: cutoff, ..settings },
+        &[],
+    );
+    let brightest = classes.iter().map(|c| c.peak_irradiance).fold(0.0, f64::max);
+    let mut flagged = 0;
+    for (a, b) in classes.iter().zip(&faint) {
+        let dim = a.peak_irradiance < cutoff * brightest;
+        assert_eq!(b.faint, a.measured_nonlinear && dim, "{b:?}");
+        assert_eq!(b.measured_nonlinear, a.measured_nonlinear && !dim, "{b:?}");
+        flagged += usize::from(b.faint);
+    }
+    assert!(flagged > 0, "the double Gauss has faint non-linear ghosts at 2e-3");
 }
