@@ -1,23 +1,50 @@
-//! The desktop app (eframe + egui): opens on the built-in default lens with its flare, rendered by
-//! `flare_core`'s wgpu renderer into a texture that egui shows; click or drag in the image (or use the arrow
-//! keys) to move the light. Below it, the lens cross-section to scale with a fan of exact rays; on the left
-//! the lens choice, first-order data, aperture, coating and exposure. The flare is re-rendered only when
-//! something changed, and the status bar reports the last frame's time and the culling counts.
+//! The desktop app (eframe + egui + wgpu): a viewport where the light is dragged across the frame, panels
+//! that edit the document (lens, aperture, coatings, ghosts, blend), a ray diagram, presets, undo and redo.
+//!
+//! # How it works
+//! All the user edits is one [`Document`]; panels change it directly and [`History`] turns every frame's
+//! change (a whole drag at once) into an undo step. Each frame the app derives what the document implies,
+//! rebuilding only what changed: the prepared flare (ghost matrices, aperture mask, starburst) when
+//! [`Document::optics_key`] changes (an impossible lens keeps the last valid flare and marks the bad cell),
+//! then the frame's scene when the light, a gain, the blend, the LUT or the view size changed. A new scene is
+//! handed to the viewport's paint callback ([`crate::viewport`]); otherwise the callback only re-draws the
+//! last texture, and the app never asks for a repaint unless something is under way (a bake, a drag bench),
+//! so an idle window costs nothing. Bakes run on a thread with progress and cancel; files are written to a
+//! temporary file and renamed.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
 
 use anyhow::{Result, bail};
-use eframe::{egui, egui_wgpu, wgpu};
+use eframe::egui_wgpu::RenderState;
+use eframe::{egui, wgpu};
 use flare_core::aperture::ApertureShape;
-use flare_core::flare::{FlareConfig, PreparedFlare};
+use flare_core::flare::PreparedFlare;
 use flare_core::ghost::FrameStats;
-use flare_core::optics::Coating;
-use flare_core::optics::glass::D_LINE_NM;
-use flare_core::optics::library::{DEFAULT_LENS_ID, builtin_lens, ids};
-use flare_core::optics::{FirstOrder, Lens, LightPath, TraceOptions, TraceStatus, Tracer, pupil_ray};
-use flare_core::render::gpu::FlareRenderer;
+use flare_core::lut::blend::{LiveLut, LutScene};
+use flare_core::lut::classify::GhostClass;
+use flare_core::lut::{GhostLut, LutKind};
+use flare_core::optics::FirstOrder;
+use flare_core::optics::formats::load_lens_file;
+use flare_core::render::{FlareScene, sensor_to_pixel};
+
+use crate::document::Document;
+use crate::history::History;
+use crate::panels::aperture::AperturePreview;
+use crate::panels::coatings::CoatingsState;
+use crate::panels::ray_diagram::RayDiagram;
+use crate::panels::{Action, BakeStatus, GhostRow, LensProblem, PanelContext};
+use crate::viewport::{FlareCallback, ViewportResources};
 
 const NO_DISPLAY: &str = "no display to open the app's window on (DISPLAY and WAYLAND_DISPLAY are unset). \
 The command line works without one: `flarelab lens list`, `flarelab lens info LENS`, \
 `flarelab trace LENS --field-deg T --pupil PX,PY [--ghost I,J]`; see `flarelab --help`";
+
+/// The key eframe stores the last session's document under.
+const STORAGE_KEY: &str = "flarelab_document";
+/// Largest viewport render (pixels across); a larger window is upsampled.
+const MAX_VIEW_WIDTH: f32 = 1920.0;
 
 /// Opens the app window; without a display, explains how to use the command line instead.
 pub fn run() -> Result<()> {
@@ -27,14 +54,26 @@ pub fn run() -> Result<()> {
     {
         bail!(NO_DISPLAY);
     }
+    let size = std::env::var("FLARELAB_WINDOW")
+        .ok()
+        .and_then(|s| crate::cli::parse_size(&s).ok())
+        .map_or([1440.0, 900.0], |(w, h)| [w as f32, h as f32]);
     let options = eframe::NativeOptions {
-        viewport: egui::ViewportBuilder::default().with_inner_size([1280.0, 800.0]).with_title("FlareLab"),
+        viewport: egui::ViewportBuilder::default().with_inner_size(size).with_title("FlareLab"),
         ..Default::default()
     };
     let result = eframe::run_native(
         "FlareLab",
         options,
-        Box::new(|cc| Ok(Box::new(FlareLabApp::new(cc.wgpu_render_state.clone())))),
+        Box::new(|cc| {
+            // FLARELAB_FRESH=1 starts from the default document instead of the last session.
+            let stored = if std::env::var_os("FLARELAB_FRESH").is_some() {
+                None
+            } else {
+                cc.storage.and_then(|s| eframe::get_value::<Document>(s, STORAGE_KEY)).filter(|d| d.check().is_ok())
+            };
+            Ok(Box::new(FlareLabApp::new(cc.wgpu_render_state.clone(), stored)))
+        }),
     );
     if let Err(e) = result {
         bail!("could not open the app's window ({e}). The command line works without one: see `flarelab --help`");
@@ -42,388 +81,899 @@ pub fn run() -> Result<()> {
     Ok(())
 }
 
-/// Internal resolution of the flare view (shown scaled to the panel).
-const VIEW_SIZE: (u32, u32) = (960, 540);
-/// The view's texture format: sRGB, so that egui samples linear values.
-const VIEW_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
-
-/// The flare view's GPU side: the renderer and the texture egui shows.
-struct FlareView {
-    render_state: egui_wgpu::RenderState,
-    renderer: FlareRenderer,
-    target: wgpu::Texture,
-    texture_id: egui::TextureId,
+/// Which panel the right side shows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Tab {
+    Lens,
+    Aperture,
+    Coatings,
+    Ghosts,
+    Blend,
 }
 
-impl FlareView {
-    fn new(render_state: egui_wgpu::RenderState) -> Self {
-        let device = &render_state.device;
-        let renderer = FlareRenderer::new(device, &render_state.queue, VIEW_FORMAT);
-        let target = device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("flare view"),
-            size: wgpu::Extent3d { width: VIEW_SIZE.0, height: VIEW_SIZE.1, depth_or_array_layers: 1 },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: VIEW_FORMAT,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
-            view_formats: &[],
-        });
-        let view = target.create_view(&wgpu::TextureViewDescriptor::default());
-        let texture_id = render_state.renderer.write().register_native_texture(device, &view, wgpu::FilterMode::Linear);
-        Self { render_state, renderer, target, texture_id }
-    }
+/// What a bake thread hands back: the LUT and the classification, or why it stopped.
+type BakeOutcome = Result<(GhostLut, Vec<GhostClass>), String>;
+
+/// A bake running on its thread.
+struct BakeJob {
+    cancel: Arc<AtomicBool>,
+    progress: Arc<Mutex<(f32, String)>>,
+    result: Arc<Mutex<Option<BakeOutcome>>>,
 }
 
-struct FlareLabApp {
-    lens_id: String,
-    lens: Lens,
+/// Frame-time measurement of `FLARELAB_DRAG_BENCH=N`: the light swept for N frames, then the app exits.
+struct DragBench {
+    frames: usize,
+    done: usize,
+    last: Option<Instant>,
+    intervals_ms: Vec<f64>,
+    scene_ms: Vec<f64>,
+}
+
+pub struct FlareLabApp {
+    pub doc: Document,
+    pub history: History,
+    pub tab: Tab,
+    pub selected: Option<usize>,
+    gpu: Option<RenderState>,
+    software: bool,
+    // Derived from the document.
+    optics_key: String,
+    flare: Option<Arc<PreparedFlare>>,
     first_order: Option<FirstOrder>,
-    field_deg: f64,
-    rays: Vec<(Vec<[f64; 2]>, TraceStatus)>,
-    /// Where the light appears in the frame (degrees, X right, Y up).
-    light_deg: [f64; 2],
-    config: FlareConfig,
-    blades: u32,
-    quarter_wave: bool,
-    flare: Option<PreparedFlare>,
-    view: Option<FlareView>,
-    /// The flare must be rendered again (light, lens or settings changed).
-    dirty: bool,
-    /// The settings changed: prepare the flare again.
-    stale: bool,
-    last_frame_ms: f64,
-    last_stats: FrameStats,
-    message: Option<String>,
+    pub lens_problem: Option<LensProblem>,
+    pub message: Option<String>,
+    frame_key: String,
+    view_px: (u32, u32),
+    new_frame: Option<Arc<(FlareScene, Option<LutScene>)>>,
+    pub ghosts: Vec<GhostRow>,
+    sprites: Vec<flare_core::ghost::Sprite>,
+    stats: FrameStats,
+    scene_ms: f64,
+    background_key: Option<String>,
+    // LUT.
+    lut: Option<Arc<LiveLut>>,
+    lut_generation: u64,
+    classes: Option<Vec<GhostClass>>,
+    bake: Option<BakeJob>,
+    bake_status: BakeStatus,
+    // Panels' own state.
+    aperture_preview: AperturePreview,
+    coatings: CoatingsState,
+    ray_diagram: RayDiagram,
+    drag_bench: Option<DragBench>,
 }
 
 impl FlareLabApp {
-    fn new(render_state: Option<egui_wgpu::RenderState>) -> Self {
-        let lens = builtin_lens(DEFAULT_LENS_ID).unwrap_or_else(|_| flare_core::optics::library::default_lens());
-        // On a software adapter (lavapipe, llvmpipe) frame-filling ghosts cost the most: accumulate them at
-        // half resolution there.
-        let software = render_state.as_ref().is_some_and(|r| r.adapter.get_info().device_type == wgpu::DeviceType::Cpu);
+    /// The app on `gpu` (none in UI tests: no viewport), from `stored` or the default document.
+    pub fn new(gpu: Option<RenderState>, stored: Option<Document>) -> Self {
+        let software = gpu.as_ref().is_some_and(|r| r.adapter.get_info().device_type == wgpu::DeviceType::Cpu);
+        if let Some(rs) = &gpu {
+            ViewportResources::install(rs);
+        }
+        let doc = stored.unwrap_or_default();
+        let drag_bench = std::env::var("FLARELAB_DRAG_BENCH")
+            .ok()
+            .and_then(|n| n.parse().ok())
+            .map(|frames| DragBench { frames, done: 0, last: None, intervals_ms: Vec::new(), scene_ms: Vec::new() });
         let mut app = Self {
-            lens_id: DEFAULT_LENS_ID.to_owned(),
-            first_order: None,
-            lens,
-            field_deg: 10.0,
-            rays: Vec::new(),
-            light_deg: [6.0, 4.0],
-            // Coated ghosts are ~100x dimmer than bare ones: open the exposure to match the coating default.
-            config: FlareConfig {
-                display: flare_core::render::DisplaySettings {
-                    exposure: 1500.0,
-                    accumulation_divisor: if software { 2 } else { 1 },
-                    ..Default::default()
-                },
-                ..FlareConfig::default()
-            },
-            blades: 6,
-            quarter_wave: true,
+            history: History::new(&doc),
+            doc,
+            tab: Tab::Ghosts,
+            selected: None,
+            gpu,
+            software,
+            optics_key: String::new(),
             flare: None,
-            view: render_state.map(FlareView::new),
-            dirty: true,
-            stale: true,
-            last_frame_ms: 0.0,
-            last_stats: FrameStats::default(),
+            first_order: None,
+            lens_problem: None,
             message: None,
+            frame_key: String::new(),
+            view_px: (960, 540),
+            new_frame: None,
+            ghosts: Vec::new(),
+            sprites: Vec::new(),
+            stats: FrameStats::default(),
+            scene_ms: 0.0,
+            background_key: None,
+            lut: None,
+            lut_generation: 0,
+            classes: None,
+            bake: None,
+            bake_status: BakeStatus::Idle,
+            aperture_preview: AperturePreview::default(),
+            coatings: CoatingsState::default(),
+            ray_diagram: RayDiagram::default(),
+            drag_bench,
         };
-        app.rebuild();
+        app.sync();
         app
     }
 
-    /// Prepares the flare for the current lens and settings (on edits, not per frame).
-    fn prepare_flare(&mut self) {
-        self.config.aperture.shape = ApertureShape::Blades { count: self.blades, rotation_deg: 0.0, roundness: 0.0 };
-        self.config.coating_override =
-            self.quarter_wave.then_some(Coating::QuarterWave { design_wavelength_nm: 550.0, layer_index: None });
-        match PreparedFlare::new(&self.lens, &self.config) {
+    /// The prepared flare in use (the last valid one).
+    pub fn flare(&self) -> Option<&PreparedFlare> {
+        self.flare.as_deref()
+    }
+
+    /// Re-derives what changed in the document (see the module documentation).
+    pub fn sync(&mut self) {
+        self.sync_optics();
+        self.sync_background();
+        self.sync_frame();
+    }
+
+    fn sync_optics(&mut self) {
+        let key = self.doc.optics_key();
+        if key == self.optics_key {
+            return;
+        }
+        self.optics_key = key;
+        if let Err(e) = self.doc.lens.validate() {
+            let (surface, field) = match &e {
+                flare_core::optics::LensError::Field { surface, field, .. } => (Some(*surface), Some(*field)),
+                _ => (None, None),
+            };
+            self.lens_problem = Some(LensProblem { surface, field, reason: e.to_string() });
+            return;
+        }
+        let mut config = self.doc.flare_config(if self.software { 2 } else { 1 });
+        if let Some(path) = &self.doc.aperture.image {
+            match load_aperture_image(path) {
+                Ok(shape) => config.aperture.shape = shape,
+                Err(e) => self.message = Some(format!("aperture image {path}: {e}")),
+            }
+        }
+        match PreparedFlare::new(&self.doc.lens, &config) {
             Ok(flare) => {
-                if let Some(view) = &mut self.view {
-                    let (device, queue) = (&view.render_state.device, &view.render_state.queue);
-                    view.renderer.set_aperture(device, queue, &flare.mask);
-                    view.renderer.set_starburst(device, queue, &flare.starburst);
+                self.first_order = FirstOrder::d_line(&self.doc.lens).ok();
+                if let Some(rs) = &self.gpu {
+                    ViewportResources::with(rs, |res, device, queue| {
+                        res.renderer.set_aperture(device, queue, &flare.mask);
+                        res.renderer.set_starburst(device, queue, &flare.starburst);
+                    });
                 }
-                self.flare = Some(flare);
-                self.message = None;
+                // A ray-traced LUT is for one lens and its settings: refuse it for any other.
+                if let Some(lut) = &self.lut
+                    && lut.lut.kind == LutKind::RayTraced
+                    && lut.lut.check_for(&self.doc.lens, &flare.config).is_err()
+                {
+                    self.set_lut(None);
+                    self.classes = None;
+                    self.bake_status = BakeStatus::Done("the lens changed: bake again for LUT ghosts".into());
+                }
+                self.flare = Some(Arc::new(flare));
+                self.lens_problem = None;
             }
-            // Keep the last valid flare and say why the new settings were refused.
-            Err(e) => self.message = Some(e.to_string()),
+            Err(e) => self.lens_problem = Some(LensProblem { surface: None, field: None, reason: e.to_string() }),
         }
-        self.stale = false;
-        self.dirty = true;
     }
 
-    /// Renders the flare into the view's texture when something changed.
-    fn render_flare(&mut self) {
-        if self.stale {
-            self.prepare_flare();
-        }
-        let (Some(view), Some(flare)) = (&mut self.view, &self.flare) else { return };
-        if !self.dirty {
+    fn sync_background(&mut self) {
+        if self.background_key == self.doc.background {
             return;
         }
-        let started = std::time::Instant::now();
-        let (scene, frame) = flare.scene(self.light_deg, VIEW_SIZE.0, VIEW_SIZE.1);
-        let (device, queue) = (&view.render_state.device, &view.render_state.queue);
-        let target = view.target.create_view(&wgpu::TextureViewDescriptor::default());
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("flare view") });
-        view.renderer.render(device, queue, &mut encoder, &target, &scene);
-        queue.submit(Some(encoder.finish()));
-        // Wait, so that the status bar reports the whole frame (CPU and GPU).
-        let _ = device.poll(wgpu::PollType::wait_indefinitely());
-        self.last_frame_ms = started.elapsed().as_secs_f64() * 1e3;
-        self.last_stats = frame.stats;
-        self.dirty = false;
-    }
-
-    /// Puts the light where the pointer is in the flare view.
-    fn light_from_pointer(&mut self, pointer: egui::Pos2, rect: egui::Rect) {
-        let Some(flare) = &self.flare else { return };
-        let k_px_per_mm = rect.width() as f64 / flare.frame_settings(VIEW_SIZE.0, VIEW_SIZE.1).sensor.width_mm;
-        let x_mm = (pointer.x - rect.center().x) as f64 / k_px_per_mm;
-        let y_mm = (rect.center().y - pointer.y) as f64 / k_px_per_mm;
-        // The light images at (sensor mm per unit slope) x tan(angle); the display is the sensor turned round.
-        let per_slope = flare.system.light_image_mm([1.0, 0.0])[0];
-        if per_slope.abs() > 1e-9 {
-            self.light_deg = [(x_mm / per_slope).atan().to_degrees(), (y_mm / per_slope).atan().to_degrees()];
-            self.dirty = true;
-        }
-    }
-
-    fn flare_view_ui(&mut self, ui: &mut egui::Ui) {
-        let Some(view) = &self.view else {
-            ui.label("No wgpu device: the flare view needs the wgpu renderer (the command line renders on the CPU).");
-            return;
+        self.background_key = self.doc.background.clone();
+        let plate = match &self.doc.background {
+            Some(path) => match flare_core::render::output::read_plate(std::path::Path::new(path)) {
+                Ok(p) => Some(p),
+                Err(e) => {
+                    self.message = Some(e.to_string());
+                    self.doc.background = None;
+                    self.background_key = None;
+                    None
+                }
+            },
+            None => None,
         };
-        let width = ui.available_width();
-        let height = (width * VIEW_SIZE.1 as f32 / VIEW_SIZE.0 as f32).min(ui.available_height() * 0.62);
-        let size = egui::vec2(height * VIEW_SIZE.0 as f32 / VIEW_SIZE.1 as f32, height);
-        let image = egui::Image::from_texture((view.texture_id, size)).sense(egui::Sense::click_and_drag());
-        let response = ui.add(image);
-        if (response.dragged() || response.clicked())
-            && let Some(pointer) = response.interact_pointer_pos()
-        {
-            self.light_from_pointer(pointer, response.rect);
+        if let Some(rs) = &self.gpu {
+            ViewportResources::with(rs, |res, device, queue| {
+                res.renderer.set_background(device, queue, plate.as_ref())
+            });
         }
-        let step = 0.5;
-        ui.input(|i| {
-            for (key, dx, dy) in [
-                (egui::Key::ArrowLeft, -step, 0.0),
-                (egui::Key::ArrowRight, step, 0.0),
-                (egui::Key::ArrowUp, 0.0, step),
-                (egui::Key::ArrowDown, 0.0, -step),
-            ] {
-                if i.key_pressed(key) {
-                    self.light_deg[0] = (self.light_deg[0] + dx).clamp(-85.0, 85.0);
-                    self.light_deg[1] = (self.light_deg[1] + dy).clamp(-85.0, 85.0);
-                    self.dirty = true;
-                }
-            }
-        });
+        self.frame_key.clear();
     }
 
-    fn flare_settings_ui(&mut self, ui: &mut egui::Ui) {
-        ui.heading("Flare");
-        let mut changed = false;
-        changed |= ui.add(egui::Slider::new(&mut self.blades, 3..=16).text("aperture blades")).changed();
-        let nominal = self.first_order.as_ref().map_or(1.0, |fo| fo.f_number);
-        let mut f_number = self.config.aperture.f_number.unwrap_or(nominal);
-        if ui.add(egui::Slider::new(&mut f_number, nominal..=22.0).text("f-number")).changed() {
-            self.config.aperture.f_number = Some(f_number);
-            changed = true;
+    fn set_lut(&mut self, lut: Option<GhostLut>) {
+        let live = lut.map(|l| Arc::new(LiveLut::new(l)));
+        if let Some(rs) = &self.gpu {
+            ViewportResources::with(rs, |res, device, queue| res.renderer.set_lut(device, queue, live.as_deref()));
         }
-        changed |= ui.checkbox(&mut self.quarter_wave, "quarter-wave AR coating (550 nm) on every surface").changed();
-        changed |= ui
-            .add(egui::Slider::new(&mut self.config.display.exposure, 1.0..=10000.0).logarithmic(true).text("exposure"))
-            .changed();
-        changed |= ui.checkbox(&mut self.config.display.starburst, "starburst").changed();
-        if changed {
-            self.stale = true;
+        self.lut = live;
+        self.lut_generation += 1;
+    }
+
+    /// Builds the frame's scene when what it shows changed.
+    fn sync_frame(&mut self) {
+        let Some(flare) = self.flare.clone() else { return };
+        let d = &self.doc;
+        let key = format!(
+            "{}|{:?}|{:?}|{:?}|{:?}|{:?}|{}|{:?}",
+            self.optics_key, d.light_deg, d.ghosts, d.solo, d.blend, self.view_px, self.lut_generation, d.background
+        );
+        if key == self.frame_key {
+            return;
         }
+        self.frame_key = key;
+        let started = Instant::now();
+        let (scene, lut_scene, frame) = self.frame_at(&flare, self.view_px);
+        let models = &flare.system.ghosts;
+        // The ghost list: each ghost's light summed over its wavelengths, and why it is culled.
+        let mut rows: Vec<GhostRow> = models
+            .iter()
+            .enumerate()
+            .map(|(ghost, m)| GhostRow { ghost, i: m.i, j: m.j, rgb: [0.0; 3], culled: Some("no sprite") })
+            .collect();
+        for s in &frame.sprites {
+            let row = &mut rows[s.ghost];
+            for c in 0..3 {
+                row.rgb[c] += s.rgb[c];
+            }
+            row.culled = match (row.culled, s.culled) {
+                (_, None) => None,
+                (None, Some(_)) => None,
+                (Some("no sprite"), Some(r)) => Some(r.word()),
+                (other, Some(_)) => other,
+            };
+        }
+        self.ghosts = rows;
+        self.sprites = frame.sprites;
+        self.stats = frame.stats;
+        self.scene_ms = started.elapsed().as_secs_f64() * 1e3;
+        self.new_frame = Some(Arc::new((scene, lut_scene)));
+    }
+
+    /// The document's scene at `size` (pixels): the paraxial sprites with the user's gains, toggles and
+    /// solo, and the LUT instances when a LUT is in use.
+    fn frame_at(
+        &self,
+        flare: &PreparedFlare,
+        (w, h): (u32, u32),
+    ) -> (FlareScene, Option<LutScene>, flare_core::ghost::GhostFrame) {
+        let d = &self.doc;
+        let (mut scene, frame) = flare.scene(d.light_deg, w, h);
+        let lut_scene = match (&self.lut, &d.blend.lut) {
+            (Some(live), crate::document::LutSource::Simulated { .. } | crate::document::LutSource::Photo { .. }) => {
+                let photo = live.lut.kind == LutKind::Photo;
+                let (s, l) = live.scenes(flare, d.light_deg, w, h, &d.blend_settings(), !photo);
+                scene = s;
+                Some(l)
+            }
+            _ => None,
+        };
+        let models = &flare.system.ghosts;
+        let mut k = 0;
+        while k < scene.instances.len() {
+            let g = &models[scene.instance_ghosts[k] as usize];
+            let gain = d.ghost_gain(g.i, g.j) as f32;
+            if gain <= 0.0 {
+                scene.instances.swap_remove(k);
+                scene.instance_ghosts.swap_remove(k);
+                continue;
+            }
+            for c in &mut scene.instances[k].colour[..3] {
+                *c *= gain;
+            }
+            k += 1;
+        }
+        (scene, lut_scene, frame)
+    }
+
+    /// Undo and redo from the keyboard and the menu.
+    pub fn undo(&mut self) {
+        if self.history.undo(&mut self.doc) {
+            self.sync();
+        }
+    }
+
+    pub fn redo(&mut self) {
+        if self.history.redo(&mut self.doc) {
+            self.sync();
+        }
+    }
+
+    /// The whole window: menus, status bar, panels, viewport, ray diagram; then the frame's bookkeeping.
+    pub fn ui_root(&mut self, ui: &mut egui::Ui) {
+        self.keys(ui.ctx());
+        self.poll_bake(ui.ctx());
+        self.drag_bench_step(ui.ctx());
+        let mut actions = Vec::new();
+        egui::Panel::top("menu").show(ui, |ui| self.menu_ui(ui));
+        egui::Panel::bottom("status").show(ui, |ui| self.status_ui(ui));
+        egui::Panel::right("panels").default_size(470.0).resizable(true).show(ui, |ui| {
+            ui.horizontal(|ui| {
+                for (tab, name) in [
+                    (Tab::Lens, "Lens"),
+                    (Tab::Aperture, "Aperture"),
+                    (Tab::Coatings, "Coatings"),
+                    (Tab::Ghosts, "Ghosts"),
+                    (Tab::Blend, "Blend"),
+                ] {
+                    ui.selectable_value(&mut self.tab, tab, name);
+                }
+            });
+            ui.separator();
+            self.panel_ui(ui, &mut actions);
+        });
+        egui::CentralPanel::default().show(ui, |ui| {
+            let height = ui.available_height();
+            ui.allocate_ui(egui::vec2(ui.available_width(), height * 0.64), |ui| self.viewport_ui(ui, &mut actions));
+            self.display_ui(ui);
+            let ghost =
+                self.selected.and_then(|g| self.flare.as_ref().map(|f| &f.system.ghosts[g])).map(|g| (g.i, g.j));
+            crate::panels::ray_diagram::ray_diagram_ui(
+                ui,
+                &mut self.ray_diagram,
+                &self.doc.lens,
+                self.first_order.as_ref(),
+                self.doc.light_deg,
+                ghost,
+            );
+        });
+        for action in actions {
+            self.act(action);
+        }
+        self.sync();
+        // One undo step per gesture: commit when no button is held.
+        if !ui.ctx().input(|i| i.pointer.any_down()) {
+            self.history.commit(&self.doc);
+        }
+        if self.bake.is_some() {
+            ui.ctx().request_repaint_after(std::time::Duration::from_millis(100));
+        }
+    }
+
+    fn panel_ui(&mut self, ui: &mut egui::Ui, actions: &mut Vec<Action>) {
+        let ctx = PanelContext {
+            flare: self.flare.as_deref(),
+            first_order: self.first_order.as_ref(),
+            lens_problem: self.lens_problem.as_ref(),
+            ghosts: &self.ghosts,
+            classes: self.classes.as_deref(),
+            selected: self.selected,
+            bake: &self.bake_status,
+            lut_summary: None,
+        };
+        let summary = self.lut.as_ref().map(|l| {
+            format!(
+                "LUT: {} ghosts, {} entries, theta 0 to {:.1} deg ({})",
+                l.lut.ghosts.len(),
+                l.lut.entry_count(),
+                l.lut.theta_max_deg,
+                if l.lut.kind == LutKind::Photo { "photo" } else { "ray-traced" }
+            )
+        });
+        let ctx = PanelContext { lut_summary: summary.as_deref(), ..ctx };
+        egui::ScrollArea::vertical().id_salt("panel_scroll").show(ui, |ui| match self.tab {
+            Tab::Lens => crate::panels::lens::lens_ui(ui, &mut self.doc, &ctx, actions),
+            Tab::Aperture => {
+                crate::panels::aperture::aperture_ui(ui, &mut self.doc, &ctx, &mut self.aperture_preview, actions);
+            }
+            Tab::Coatings => crate::panels::coatings::coatings_ui(ui, &mut self.doc, &mut self.coatings),
+            Tab::Ghosts => crate::panels::ghosts::ghosts_ui(ui, &mut self.doc, &ctx, actions),
+            Tab::Blend => crate::panels::blend::blend_ui(ui, &mut self.doc, &ctx, actions),
+        });
         if let Some(message) = &self.message {
-            ui.colored_label(egui::Color32::LIGHT_RED, message);
+            ui.separator();
+            ui.colored_label(egui::Color32::from_rgb(255, 170, 90), message);
         }
     }
 
-    /// Recomputes first-order data and the ray fan after the lens or the field angle changed.
-    fn rebuild(&mut self) {
-        self.first_order = FirstOrder::d_line(&self.lens).ok();
-        self.rays.clear();
-        let Some(fo) = &self.first_order else { return };
-        let tracer = Tracer::new(&self.lens, &LightPath::image(&self.lens), D_LINE_NM, fo.sensor_z_mm());
-        for k in 0..=8 {
-            let py = -1.0 + 0.25 * k as f64;
-            let ray = pupil_ray(&fo.entrance_pupil(), self.field_deg.to_radians(), 0.0, py);
-            let out = tracer.trace(&ray, TraceOptions { apply_apertures: true, record_points: true });
-            let mut points: Vec<[f64; 2]> = out.points_mm.iter().map(|p| [p.z, p.y]).collect();
-            // Start the drawn ray in front of the lens, not at the (often virtual) entrance pupil.
-            if let Some(second) = points.get(1).copied() {
-                let slope = self.field_deg.to_radians().tan();
-                let z0 = -0.15 * fo.total_track_mm;
-                points[0] = [z0, second[1] + (z0 - second[0]) * slope];
-            }
-            self.rays.push((points, out.status));
-        }
-    }
-
-    fn lens_panel_ui(&mut self, ui: &mut egui::Ui) {
-        ui.heading("Lens");
-        let mut chosen = self.lens_id.clone();
-        egui::ComboBox::from_id_salt("lens_choice").selected_text(&chosen).show_ui(ui, |ui| {
-            for id in ids() {
-                ui.selectable_value(&mut chosen, id.to_owned(), id);
-            }
-        });
-        if chosen != self.lens_id
-            && let Ok(lens) = builtin_lens(&chosen)
-        {
-            self.lens = lens;
-            self.lens_id = chosen;
-            self.config.aperture.f_number = None;
-            self.rebuild();
-            self.stale = true;
-        }
-        ui.label(&self.lens.name);
-        ui.separator();
-        if ui.add(egui::Slider::new(&mut self.field_deg, -40.0..=40.0).text("field angle (deg)")).changed() {
-            self.rebuild();
-        }
-        ui.separator();
-        match &self.first_order {
-            Some(fo) => {
-                egui::Grid::new("first_order").num_columns(2).striped(true).show(ui, |ui| {
-                    let rows = [
-                        ("focal length", format!("{:.3} mm", fo.efl_mm)),
-                        ("f-number", format!("f/{:.2}", fo.f_number)),
-                        ("back focal distance", format!("{:.3} mm", fo.bfd_mm)),
-                        (
-                            "entrance pupil",
-                            format!("{:.3} mm at z = {:.3} mm", fo.entrance_pupil_diameter_mm, fo.entrance_pupil_z_mm),
-                        ),
-                        ("surfaces", format!("{} (stop: {})", self.lens.surfaces.len(), fo.stop_surface)),
-                        ("two-reflection ghosts", self.lens.ghost_pairs().len().to_string()),
-                    ];
-                    for (label, value) in rows {
-                        ui.label(label);
-                        ui.label(value);
-                        ui.end_row();
-                    }
-                });
-            }
-            None => {
-                ui.colored_label(egui::Color32::LIGHT_RED, "this lens has no real focus");
-            }
-        }
-        ui.separator();
-        egui::ScrollArea::vertical().show(ui, |ui| {
-            egui::Grid::new("surfaces").num_columns(5).striped(true).show(ui, |ui| {
-                for h in ["#", "radius", "thickness", "nd", "semi-ap"] {
-                    ui.strong(h);
+    fn menu_ui(&mut self, ui: &mut egui::Ui) {
+        egui::MenuBar::new().ui(ui, |ui| {
+            ui.menu_button("File", |ui| {
+                if ui.button("Open preset…").clicked() {
+                    self.open_preset();
                 }
-                ui.end_row();
-                for (k, s) in self.lens.surfaces.iter().enumerate() {
-                    ui.label(if s.stop { format!("{k} stop") } else { k.to_string() });
-                    ui.label(if s.is_flat() { "flat".to_owned() } else { format!("{:.3}", s.radius_mm) });
-                    ui.label(s.thickness_mm.map(|t| format!("{t:.3}")).unwrap_or_else(|| "-".into()));
-                    ui.label(format!("{:.4}", s.medium.n_d));
-                    ui.label(format!("{:.2}", s.semi_aperture_mm));
-                    ui.end_row();
+                if ui.button("Save preset…").clicked() {
+                    self.save_preset();
+                }
+                ui.separator();
+                if ui.button("Background plate…").clicked() {
+                    self.pick_background();
+                }
+                if self.doc.background.is_some() && ui.button("Remove background").clicked() {
+                    self.doc.background = None;
+                }
+                ui.separator();
+                for (label, size) in
+                    [("Export image 1920x1080…", (1920, 1080)), ("Export image 3840x2160…", (3840, 2160))]
+                {
+                    if ui.button(label).clicked() {
+                        self.export_image(size);
+                    }
+                }
+                if ui.button("Export LUT…").clicked() {
+                    self.act(Action::ExportLut);
+                }
+            });
+            ui.menu_button("Edit", |ui| {
+                if ui.add_enabled(self.history.can_undo(), egui::Button::new("Undo  (Ctrl+Z)")).clicked() {
+                    self.undo();
+                }
+                if ui.add_enabled(self.history.can_redo(), egui::Button::new("Redo  (Ctrl+Shift+Z)")).clicked() {
+                    self.redo();
                 }
             });
         });
     }
 
-    fn cross_section_ui(&self, ui: &mut egui::Ui) {
-        let (response, painter) = ui.allocate_painter(ui.available_size(), egui::Sense::hover());
-        let rect = response.rect;
-        painter.rect_filled(rect, 0.0, egui::Color32::from_gray(18));
-        let Some(fo) = &self.first_order else { return };
-        let z = self.lens.vertex_z_mm();
-        let z_min = -0.15 * fo.total_track_mm;
-        let z_max = fo.total_track_mm * 1.03;
-        let h_max = self.lens.surfaces.iter().map(|s| s.semi_aperture_mm).fold(1.0, f64::max) * 1.6;
-        let scale = ((rect.width() as f64 - 40.0) / (z_max - z_min)).min((rect.height() as f64 - 40.0) / (2.0 * h_max));
-        let to_screen = |zz: f64, y: f64| {
-            egui::pos2(rect.left() + 20.0 + ((zz - z_min) * scale) as f32, rect.center().y - (y * scale) as f32)
-        };
-        painter.line_segment(
-            [to_screen(z_min, 0.0), to_screen(z_max, 0.0)],
-            egui::Stroke::new(1.0, egui::Color32::from_gray(70)),
+    fn status_ui(&mut self, ui: &mut egui::Ui) {
+        let dt_ms = ui.ctx().input(|i| i.unstable_dt) * 1e3;
+        ui.label(format!(
+            "light ({:.1}, {:.1}) deg | scene {:.2} ms, frame {:.1} ms at {}x{} | sprites drawn {}, culled {} dim / {} off sensor / {} empty entrance{}",
+            self.doc.light_deg[0],
+            self.doc.light_deg[1],
+            self.scene_ms,
+            dt_ms,
+            self.view_px.0,
+            self.view_px.1,
+            self.stats.drawn,
+            self.stats.below_threshold,
+            self.stats.off_sensor,
+            self.stats.empty_entrance_region,
+            if self.lut.is_some() { " | LUT ghosts on" } else { "" }
+        ));
+    }
+
+    fn display_ui(&mut self, ui: &mut egui::Ui) {
+        ui.horizontal(|ui| {
+            ui.add(egui::Slider::new(&mut self.doc.exposure, 1.0..=100000.0).logarithmic(true).text("exposure"));
+            egui::ComboBox::from_label("tonemap").selected_text(format!("{:?}", self.doc.tonemap)).show_ui(ui, |ui| {
+                use crate::document::TonemapDoc;
+                for t in [TonemapDoc::None, TonemapDoc::Reinhard, TonemapDoc::Aces] {
+                    ui.selectable_value(&mut self.doc.tonemap, t, format!("{t:?}"));
+                }
+            });
+            ui.checkbox(&mut self.doc.starburst, "starburst");
+        });
+    }
+
+    /// The viewport: the flare, the light's drag and arrow keys, a click selects the ghost under it.
+    fn viewport_ui(&mut self, ui: &mut egui::Ui, actions: &mut Vec<Action>) {
+        let avail = ui.available_size();
+        let size = egui::vec2(avail.x, (avail.x * 9.0 / 16.0).min(avail.y));
+        let (rect, response) = ui.allocate_exact_size(size, egui::Sense::click_and_drag());
+        let ppp = ui.ctx().pixels_per_point();
+        let scale = (MAX_VIEW_WIDTH / (rect.width() * ppp)).min(1.0);
+        let mut px = (
+            (rect.width() * ppp * scale).round().max(16.0) as u32,
+            (rect.height() * ppp * scale).round().max(16.0) as u32,
         );
-        let glass = egui::Stroke::new(1.5, egui::Color32::from_rgb(150, 200, 255));
-        for (k, s) in self.lens.surfaces.iter().enumerate() {
-            if s.stop {
-                let stroke = egui::Stroke::new(3.0, egui::Color32::from_rgb(240, 200, 80));
-                for sign in [-1.0, 1.0] {
-                    painter.line_segment(
-                        [to_screen(z[k], sign * s.semi_aperture_mm), to_screen(z[k], sign * h_max * 0.8)],
-                        stroke,
+        // FLARELAB_VIEW_PX=WxH renders the flare at a fixed size, whatever the widget's (the drag bench's
+        // frame times at 1280x720).
+        if let Some(fixed) = std::env::var("FLARELAB_VIEW_PX").ok().and_then(|s| crate::cli::parse_size(&s).ok()) {
+            px = fixed;
+        }
+        if px != self.view_px {
+            self.view_px = px;
+            self.sync_frame();
+        }
+        // Files dropped on the window: a background plate, a preset or a lens.
+        let dropped: Vec<std::path::PathBuf> = ui.ctx().input(|i| {
+            i.raw.dropped_files.iter().map(|f| f.path().to_path_buf()).filter(|p| !p.as_os_str().is_empty()).collect()
+        });
+        for path in dropped {
+            self.open_dropped(&path);
+        }
+        if self.gpu.is_none() {
+            ui.painter().rect_filled(rect, 0.0, egui::Color32::from_gray(10));
+            ui.painter().text(
+                rect.center(),
+                egui::Align2::CENTER_CENTER,
+                "no wgpu device: no viewport",
+                egui::FontId::proportional(16.0),
+                egui::Color32::GRAY,
+            );
+        } else {
+            FlareCallback::paint(ui.painter(), rect, self.new_frame.take());
+        }
+        if response.dragged()
+            && let Some(p) = response.interact_pointer_pos()
+        {
+            self.light_from_pointer(p, rect);
+        }
+        if response.clicked()
+            && let Some(p) = response.interact_pointer_pos()
+        {
+            actions.push(Action::SelectGhost(self.ghost_at(p, rect)));
+        }
+        if response.hovered() || response.has_focus() {
+            let step = 0.25;
+            ui.input(|i| {
+                for (key, dx, dy) in [
+                    (egui::Key::ArrowLeft, -step, 0.0),
+                    (egui::Key::ArrowRight, step, 0.0),
+                    (egui::Key::ArrowUp, 0.0, step),
+                    (egui::Key::ArrowDown, 0.0, -step),
+                ] {
+                    if i.key_pressed(key) {
+                        self.doc.light_deg[0] = (self.doc.light_deg[0] + dx).clamp(-85.0, 85.0);
+                        self.doc.light_deg[1] = (self.doc.light_deg[1] + dy).clamp(-85.0, 85.0);
+                    }
+                }
+            });
+        }
+        self.overlay_ui(ui, rect);
+    }
+
+    /// Sensor mm to a point of the viewport rect.
+    fn to_screen(&self, p_mm: [f64; 2], rect: egui::Rect) -> Option<egui::Pos2> {
+        let flare = self.flare.as_ref()?;
+        let (w, h) = self.view_px;
+        let sensor = flare.frame_settings(w, h).sensor;
+        let p = sensor_to_pixel(p_mm, &sensor, w, h);
+        Some(
+            rect.min
+                + egui::vec2((p[0] / f64::from(w)) as f32 * rect.width(), (p[1] / f64::from(h)) as f32 * rect.height()),
+        )
+    }
+
+    /// The light's marker and the selected ghost's ring.
+    fn overlay_ui(&self, ui: &egui::Ui, rect: egui::Rect) {
+        let painter = ui.painter().with_clip_rect(rect);
+        let Some(flare) = &self.flare else { return };
+        let u = flare_core::render::light_slopes_for_frame_position(self.doc.light_deg[0], self.doc.light_deg[1]);
+        if let Some(p) = self.to_screen(flare.system.light_image_mm(u), rect) {
+            painter.circle_stroke(p, 7.0, egui::Stroke::new(1.5, egui::Color32::from_rgb(255, 230, 120)));
+        }
+        let Some(g) = self.selected else { return };
+        for s in self.sprites.iter().filter(|s| s.ghost == g && s.wavelength == 1) {
+            if let (Some(c), Some(edge)) = (
+                self.to_screen(s.centre_mm, rect),
+                self.to_screen([s.centre_mm[0] + s.half_size_mm.abs(), s.centre_mm[1]], rect),
+            ) {
+                let r = (edge.x - c.x).abs().max(4.0);
+                painter.circle_stroke(c, r, egui::Stroke::new(2.0, egui::Color32::from_rgb(255, 60, 200)));
+                let m = flare.system.ghosts[g].clone();
+                painter.text(
+                    c + egui::vec2(r * 0.7, -r * 0.7),
+                    egui::Align2::LEFT_BOTTOM,
+                    format!("{}-{}", m.i, m.j),
+                    egui::FontId::proportional(14.0),
+                    egui::Color32::from_rgb(255, 60, 200),
+                );
+            }
+        }
+    }
+
+    /// The brightest drawn ghost whose (green) sprite covers `p`, if any.
+    fn ghost_at(&self, p: egui::Pos2, rect: egui::Rect) -> Option<usize> {
+        let mut best: Option<(usize, f64)> = None;
+        for s in self.sprites.iter().filter(|s| s.culled.is_none() && s.wavelength == 1) {
+            let (Some(c), Some(edge)) = (
+                self.to_screen(s.centre_mm, rect),
+                self.to_screen([s.centre_mm[0] + s.half_size_mm.abs(), s.centre_mm[1]], rect),
+            ) else {
+                continue;
+            };
+            let r = (edge.x - c.x).abs().max(4.0);
+            let m = &self.ghosts[s.ghost];
+            let lum = m.intensity() * self.doc.ghost_gain(m.i, m.j);
+            if c.distance(p) <= r && lum > 0.0 && best.is_none_or(|(_, b)| lum > b) {
+                best = Some((s.ghost, lum));
+            }
+        }
+        best.map(|(g, _)| g)
+    }
+
+    /// Puts the light where the pointer is (it may leave the frame: its ghosts keep coming).
+    fn light_from_pointer(&mut self, pointer: egui::Pos2, rect: egui::Rect) {
+        let Some(flare) = &self.flare else { return };
+        let sensor = flare.frame_settings(self.view_px.0, self.view_px.1).sensor;
+        let k_px_per_mm = f64::from(rect.width()) / sensor.width_mm;
+        let x_mm = f64::from(pointer.x - rect.center().x) / k_px_per_mm;
+        let y_mm = f64::from(rect.center().y - pointer.y) / k_px_per_mm;
+        // The light images at (sensor mm per unit slope) x tan(angle); the display is the sensor turned round.
+        let per_slope = flare.system.light_image_mm([1.0, 0.0])[0];
+        if per_slope.abs() > 1e-9 {
+            self.doc.light_deg = [
+                (x_mm / per_slope).atan().to_degrees().clamp(-85.0, 85.0),
+                (y_mm / per_slope).atan().to_degrees().clamp(-85.0, 85.0),
+            ];
+        }
+    }
+
+    fn keys(&mut self, ctx: &egui::Context) {
+        let (undo, redo) = ctx.input_mut(|i| {
+            let redo = i.consume_key(egui::Modifiers::COMMAND | egui::Modifiers::SHIFT, egui::Key::Z)
+                || i.consume_key(egui::Modifiers::COMMAND, egui::Key::Y);
+            let undo = i.consume_key(egui::Modifiers::COMMAND, egui::Key::Z);
+            (undo, redo)
+        });
+        if redo {
+            self.redo();
+        } else if undo {
+            self.undo();
+        }
+    }
+
+    fn act(&mut self, action: Action) {
+        match action {
+            Action::SelectGhost(g) => self.selected = g,
+            Action::OpenLensFile => {
+                if let Some(path) = rfd::FileDialog::new().add_filter("lens", &["json", "zmx", "dat"]).pick_file() {
+                    self.open_lens(&path);
+                }
+            }
+            Action::Bake => self.start_bake(),
+            Action::CancelBake => {
+                if let Some(job) = &self.bake {
+                    job.cancel.store(true, Ordering::Relaxed);
+                }
+            }
+            Action::OpenLut => {
+                if let Some(path) = rfd::FileDialog::new().add_filter("FlareLab LUT", &["flut"]).pick_file() {
+                    self.open_lut(&path);
+                }
+            }
+            Action::ExportLut => {
+                let Some(live) = self.lut.clone() else {
+                    self.message = Some("no LUT to export: bake one (Blend panel) or open one".into());
+                    return;
+                };
+                if let Some(path) =
+                    rfd::FileDialog::new().add_filter("FlareLab LUT", &["flut"]).set_file_name("flare.flut").save_file()
+                {
+                    self.message = Some(match flare_core::lut::format::write_lut(&path, &live.lut) {
+                        Ok(bytes) => format!("wrote {} ({:.1} MB)", path.display(), bytes as f64 / 1e6),
+                        Err(e) => format!("could not write {}: {e}", path.display()),
+                    });
+                }
+            }
+            Action::OpenApertureImage => {
+                if let Some(path) = rfd::FileDialog::new().add_filter("image", &["png", "jpg", "exr"]).pick_file() {
+                    match load_aperture_image(&path.display().to_string()) {
+                        Ok(_) => self.doc.aperture.image = Some(path.display().to_string()),
+                        Err(e) => self.message = Some(format!("{}: {e}", path.display())),
+                    }
+                }
+            }
+        }
+    }
+
+    /// Opens a lens file into the document; a bad file leaves the document as it was.
+    pub fn open_lens(&mut self, path: &std::path::Path) {
+        match load_lens_file(path) {
+            Ok(lens) => {
+                self.doc.lens = lens;
+                self.doc.aperture.f_number = None;
+                self.doc.ghosts.clear();
+                self.doc.solo = None;
+                self.selected = None;
+                self.message = None;
+            }
+            Err(e) => self.message = Some(format!("{}: {e}", path.display())),
+        }
+    }
+
+    /// Opens a `.flut`: a photo LUT for any lens, a ray-traced one only for the lens it was baked for.
+    pub fn open_lut(&mut self, path: &std::path::Path) {
+        let Some(flare) = self.flare.clone() else { return };
+        match flare_core::lut::format::read_lut(path) {
+            Ok(lut) => {
+                if lut.kind == LutKind::RayTraced
+                    && let Err(e) = lut.check_for(&self.doc.lens, &flare.config)
+                {
+                    self.message = Some(format!("{}: {e}", path.display()));
+                    return;
+                }
+                let p = path.display().to_string();
+                self.doc.blend.lut = if lut.kind == LutKind::Photo {
+                    crate::document::LutSource::Photo { path: p }
+                } else {
+                    crate::document::LutSource::Simulated { path: Some(p) }
+                };
+                self.set_lut(Some(lut));
+                self.message = None;
+            }
+            Err(e) => self.message = Some(format!("{}: {e}", path.display())),
+        }
+    }
+
+    fn open_dropped(&mut self, path: &std::path::Path) {
+        let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+        match ext.as_str() {
+            "png" | "exr" | "hdr" | "jpg" | "jpeg" => self.doc.background = Some(path.display().to_string()),
+            "flut" => self.open_lut(path),
+            "zmx" | "dat" => self.open_lens(path),
+            "json" => match Document::open(path) {
+                Ok(doc) => {
+                    self.doc = doc;
+                    self.history.reset(&self.doc);
+                }
+                Err(_) => self.open_lens(path),
+            },
+            _ => self.message = Some(format!("{}: drop a lens, a preset, a LUT or an image", path.display())),
+        }
+    }
+
+    fn open_preset(&mut self) {
+        let Some(path) = rfd::FileDialog::new().add_filter("FlareLab preset", &["json"]).pick_file() else { return };
+        match Document::open(&path) {
+            Ok(doc) => {
+                self.doc = doc;
+                self.history.reset(&self.doc);
+                self.message = Some(format!("opened {}", path.display()));
+            }
+            // The document in the window stays as it was.
+            Err(e) => self.message = Some(format!("{}: {e}", path.display())),
+        }
+    }
+
+    fn save_preset(&mut self) {
+        let Some(path) =
+            rfd::FileDialog::new().add_filter("FlareLab preset", &["json"]).set_file_name("flare.json").save_file()
+        else {
+            return;
+        };
+        self.message = Some(match self.doc.save(&path) {
+            Ok(()) => format!("saved {}", path.display()),
+            Err(e) => format!("could not save {}: {e}", path.display()),
+        });
+    }
+
+    fn pick_background(&mut self) {
+        if let Some(path) = rfd::FileDialog::new().add_filter("image", &["png", "exr", "hdr", "jpg"]).pick_file() {
+            self.doc.background = Some(path.display().to_string());
+        }
+    }
+
+    /// Renders the document's frame at `size` through the CPU twin and writes PNG (8-bit, tonemapped) or EXR
+    /// (linear), chosen by the file name.
+    fn export_image(&mut self, size: (u32, u32)) {
+        let Some(path) =
+            rfd::FileDialog::new().add_filter("image", &["png", "exr"]).set_file_name("flare.png").save_file()
+        else {
+            return;
+        };
+        self.message = Some(match export_frame(self, size, &path) {
+            Ok(()) => format!("wrote {}", path.display()),
+            Err(e) => format!("could not export {}: {e:#}", path.display()),
+        });
+    }
+
+    fn start_bake(&mut self) {
+        let Some(flare) = self.flare.clone() else { return };
+        if self.bake.is_some() {
+            return;
+        }
+        let previous = self.lut.as_ref().filter(|l| l.lut.kind == LutKind::RayTraced).map(|l| l.lut.clone());
+        let job = BakeJob {
+            cancel: Arc::new(AtomicBool::new(false)),
+            progress: Arc::new(Mutex::new((0.0, "classifying the ghosts…".into()))),
+            result: Arc::new(Mutex::new(None)),
+        };
+        let (cancel, progress, result) = (job.cancel.clone(), job.progress.clone(), job.result.clone());
+        std::thread::spawn(move || {
+            let renderer = flare_core::raytrace::RayGridRenderer::new(&flare);
+            let theta_max = flare_core::lut::bake::useful_field_deg(&flare);
+            let settings = flare_core::lut::classify::ClassifySettings::for_flare(&flare, theta_max);
+            let classes = flare_core::lut::classify::classify(&flare, &renderer, &settings, &[]);
+            let chosen: Vec<usize> = classes.iter().filter(|c| c.nonlinear()).map(|c| c.ghost).collect();
+            let report = |p: flare_core::lut::bake::BakeProgress| {
+                if let Ok(mut g) = progress.lock() {
+                    *g = (
+                        p.ghosts_done as f32 / p.ghosts_total.max(1) as f32,
+                        format!("{}/{} ghosts, {} entries", p.ghosts_done, p.ghosts_total, p.entries),
                     );
                 }
-                continue;
-            }
-            let points: Vec<egui::Pos2> = (0..=40)
-                .map(|i| {
-                    let h = s.semi_aperture_mm * (i as f64 / 20.0 - 1.0);
-                    to_screen(z[k] + s.sag_mm(h).unwrap_or(0.0), h)
-                })
-                .collect();
-            painter.add(egui::Shape::line(points, glass));
-        }
-        let sensor = fo.sensor_z_mm();
-        painter.line_segment(
-            [to_screen(sensor, -h_max * 0.9), to_screen(sensor, h_max * 0.9)],
-            egui::Stroke::new(2.0, egui::Color32::from_gray(200)),
-        );
-        for (points, status) in &self.rays {
-            let color = match status {
-                TraceStatus::Landed => egui::Color32::from_rgba_unmultiplied(255, 120, 60, 200),
-                _ => egui::Color32::from_rgba_unmultiplied(160, 160, 160, 120),
             };
-            let pts: Vec<egui::Pos2> = points.iter().map(|p| to_screen(p[0], p[1])).collect();
-            painter.add(egui::Shape::line(pts, egui::Stroke::new(1.0, color)));
-        }
-        painter.text(
-            rect.left_top() + egui::vec2(10.0, 10.0),
-            egui::Align2::LEFT_TOP,
-            format!("{}: exact rays at {:.1} deg, sensor at the paraxial focus", self.lens.id, self.field_deg),
-            egui::FontId::proportional(14.0),
-            egui::Color32::from_gray(220),
-        );
+            let baked = flare_core::lut::bake::bake(
+                &flare,
+                &renderer,
+                &chosen,
+                &flare_core::lut::bake::BakeSettings::default(),
+                previous.as_ref(),
+                &report,
+                &cancel,
+            )
+            .map(|lut| (lut, classes))
+            .map_err(|e| e.to_string());
+            if let Ok(mut r) = result.lock() {
+                *r = Some(baked);
+            }
+        });
+        self.bake = Some(job);
+        self.bake_status = BakeStatus::Running { fraction: 0.0, text: "classifying the ghosts…".into() };
     }
+
+    fn poll_bake(&mut self, _ctx: &egui::Context) {
+        let Some(job) = &self.bake else { return };
+        let finished = job.result.lock().ok().and_then(|mut r| r.take());
+        match finished {
+            None => {
+                if let Ok(p) = job.progress.lock() {
+                    self.bake_status = BakeStatus::Running { fraction: p.0, text: p.1.clone() };
+                }
+            }
+            Some(Ok((lut, classes))) => {
+                self.bake = None;
+                self.bake_status = BakeStatus::Done(format!(
+                    "baked {} non-linear ghosts ({} entries)",
+                    lut.ghosts.len(),
+                    lut.entry_count()
+                ));
+                self.classes = Some(classes);
+                self.doc.blend.lut = crate::document::LutSource::Simulated { path: None };
+                self.set_lut(Some(lut));
+            }
+            Some(Err(e)) => {
+                self.bake = None;
+                self.bake_status = BakeStatus::Failed(format!("bake stopped: {e}"));
+            }
+        }
+    }
+
+    /// `FLARELAB_DRAG_BENCH=N`: sweeps the light along a line through the optical centre, one step a frame,
+    /// for N frames, prints the median frame interval and scene time, and closes the window.
+    fn drag_bench_step(&mut self, ctx: &egui::Context) {
+        let Some(bench) = &mut self.drag_bench else { return };
+        let now = Instant::now();
+        if let Some(last) = bench.last {
+            bench.intervals_ms.push(now.duration_since(last).as_secs_f64() * 1e3);
+            bench.scene_ms.push(self.scene_ms);
+        }
+        bench.last = Some(now);
+        let t = bench.done as f64 / bench.frames.max(1) as f64;
+        self.doc.light_deg = [-20.0 + 40.0 * t, -10.0 + 20.0 * t];
+        bench.done += 1;
+        if bench.done > bench.frames {
+            let median = |v: &mut Vec<f64>| {
+                v.sort_by(f64::total_cmp);
+                v.get(v.len() / 2).copied().unwrap_or(0.0)
+            };
+            let (interval, scene) = (median(&mut bench.intervals_ms), median(&mut bench.scene_ms));
+            println!(
+                "drag bench: {} frames at {}x{}: median frame interval {interval:.1} ms, median scene build {scene:.2} ms",
+                bench.frames, self.view_px.0, self.view_px.1
+            );
+            self.drag_bench = None;
+            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+        } else {
+            ctx.request_repaint();
+        }
+    }
+}
+
+/// A custom aperture from a grey image (white open), as the aperture's image shape.
+fn load_aperture_image(path: &str) -> Result<ApertureShape> {
+    let img = image::open(path)?.to_luma32f();
+    let n = img.width().min(img.height()).min(1024);
+    if n < 8 {
+        bail!("an aperture image needs at least 8 x 8 pixels");
+    }
+    let square = image::imageops::resize(&img, n, n, image::imageops::FilterType::Triangle);
+    let luminance: Vec<f32> =
+        square.pixels().map(|p| if p.0[0].is_finite() { p.0[0].clamp(0.0, 1.0) } else { 0.0 }).collect();
+    Ok(ApertureShape::Image { size: n as usize, luminance })
+}
+
+/// The document's frame at `size` by the CPU twin (the same passes as the GPU), written to `path`.
+fn export_frame(app: &FlareLabApp, size: (u32, u32), path: &std::path::Path) -> Result<()> {
+    use flare_core::render::{cpu, output};
+    let Some(flare) = &app.flare else { bail!("no valid lens") };
+    let (scene, lut_scene, _) = app.frame_at(flare, size);
+    let lut_scene = lut_scene.as_ref();
+    let scene = &scene;
+    let starburst = cpu::StarburstTexture::from_starburst(&flare.starburst);
+    let mut hdr = cpu::render_hdr(scene, &flare.mask, app.doc.starburst.then_some(&starburst));
+    if let (Some(live), Some(l)) = (&app.lut, lut_scene) {
+        flare_core::lut::blend::lut_pass(scene, l, &live.lut, &mut hdr);
+    }
+    let plate = app.doc.background.as_ref().map(|p| output::read_plate(std::path::Path::new(p))).transpose()?;
+    match output::ImageKind::from_path(path)? {
+        output::ImageKind::Png => output::write_png(path, &cpu::tonemap_pass(scene, &hdr, plate.as_ref()))?,
+        output::ImageKind::Exr => output::write_exr(path, &cpu::composite(scene, &hdr, plate.as_ref()))?,
+    }
+    Ok(())
 }
 
 impl eframe::App for FlareLabApp {
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
-        self.render_flare();
-        let status = format!(
-            "light ({:.1}, {:.1}) deg | last flare frame {:.1} ms at {}x{} | sprites drawn {}, culled {} dim / {} off sensor / {} empty entrance",
-            self.light_deg[0],
-            self.light_deg[1],
-            self.last_frame_ms,
-            VIEW_SIZE.0,
-            VIEW_SIZE.1,
-            self.last_stats.drawn,
-            self.last_stats.below_threshold,
-            self.last_stats.off_sensor,
-            self.last_stats.empty_entrance_region
-        );
-        egui::Panel::bottom("status").show(ui, |ui| {
-            ui.label(status);
-        });
-        egui::Panel::left("lens_panel").default_size(330.0).resizable(true).show(ui, |ui| {
-            self.flare_settings_ui(ui);
-            ui.separator();
-            self.lens_panel_ui(ui);
-        });
-        egui::CentralPanel::default().show(ui, |ui| {
-            self.flare_view_ui(ui);
-            self.cross_section_ui(ui);
-        });
-        if self.dirty || self.stale {
-            ui.ctx().request_repaint();
-        }
+        self.ui_root(ui);
+    }
+
+    fn save(&mut self, storage: &mut dyn eframe::Storage) {
+        eframe::set_value(storage, STORAGE_KEY, &self.doc);
     }
 }

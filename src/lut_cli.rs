@@ -319,15 +319,7 @@ pub fn render_with_lut(
         }
         None => {
             let renderer = RayGridRenderer::new(flare);
-            bake_lut(
-                flare,
-                &renderer,
-                &LutChoice::default(),
-                &BakeSettings::default(),
-                None,
-                false,
-            )?
-            .0
+            bake_lut(flare, &renderer, &LutChoice::default(), &BakeSettings::default(), None, false)?.0
         }
     };
     let live = LiveLut::new(lut);

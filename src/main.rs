@@ -3,15 +3,10 @@
 //! Errors on the command line end the program with exit code 2 and one line on stderr; a panic (a bug) is
 //! reported the same way instead of a backtrace.
 
-mod app;
-mod bench;
-mod cli;
-mod lut_cli;
-mod plot;
-
 use std::process::ExitCode;
 
 use clap::Parser;
+use flarelab::{app, cli};
 
 fn main() -> ExitCode {
     std::panic::set_hook(Box::new(|info| {

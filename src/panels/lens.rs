@@ -1,0 +1,131 @@
+//! Lens panel: the built-in library, opening a lens file, first-order data, and the interface table (radius,
+//! thickness, n_d / V_d, semi-aperture, stop) with rows added, removed and reordered. A cell whose value
+//! makes the lens impossible is marked with the reason; the viewport keeps the last valid lens meanwhile.
+
+use eframe::egui;
+use flare_core::optics::library::{builtin_lens, ids};
+use flare_core::optics::{Medium, Surface};
+
+use super::{Action, PanelContext, labelled_check, labelled_value};
+use crate::document::Document;
+
+const BAD: egui::Color32 = egui::Color32::from_rgb(255, 110, 110);
+
+pub fn lens_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, actions: &mut Vec<Action>) {
+    ui.horizontal(|ui| {
+        let mut chosen = doc.lens.id.clone();
+        egui::ComboBox::from_label("lens").selected_text(&chosen).width(190.0).show_ui(ui, |ui| {
+            for id in ids() {
+                ui.selectable_value(&mut chosen, id.to_owned(), id);
+            }
+        });
+        if chosen != doc.lens.id
+            && let Ok(lens) = builtin_lens(&chosen)
+        {
+            doc.lens = lens;
+            doc.aperture.f_number = None;
+            doc.ghosts.clear();
+            doc.solo = None;
+        }
+        if ui.button("Open…").on_hover_text("a lens file: .json, .zmx (Zemax), .dat (pbrt)").clicked() {
+            actions.push(Action::OpenLensFile);
+        }
+    });
+    ui.label(&doc.lens.name);
+    if let Some(problem) = ctx.lens_problem {
+        ui.colored_label(BAD, format!("(!) {} (the view shows the last valid lens)", problem.reason));
+    }
+    if let Some(fo) = ctx.first_order {
+        ui.label(format!(
+            "f = {:.2} mm, f/{:.2}, BFD {:.2} mm, {} surfaces, {} ghosts",
+            fo.efl_mm,
+            fo.f_number,
+            fo.bfd_mm,
+            doc.lens.surfaces.len(),
+            doc.lens.ghost_pairs().len()
+        ));
+    }
+    surface_table_ui(ui, doc, ctx);
+}
+
+fn surface_table_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext) {
+    let problem = ctx.lens_problem;
+    let bad_cell = |k: usize, field: &str| {
+        problem.filter(|p| p.surface == Some(k) && p.field.is_some_and(|f| f == field)).map(|p| p.reason.clone())
+    };
+    let mut edit: Option<RowEdit> = None;
+    egui::ScrollArea::vertical().id_salt("surfaces").max_height(260.0).show(ui, |ui| {
+        egui::Grid::new("surface_table").num_columns(8).striped(true).spacing([4.0, 2.0]).show(ui, |ui| {
+            for h in ["#", "radius", "thickness", "nd", "Vd", "semi-ap", "stop", ""] {
+                ui.strong(h);
+            }
+            ui.end_row();
+            let count = doc.lens.surfaces.len();
+            for (k, s) in doc.lens.surfaces.iter_mut().enumerate() {
+                ui.label(k.to_string());
+                let cell = |ui: &mut egui::Ui, value: &mut f64, field: &'static str, label: &str, speed: f64| {
+                    let bad = bad_cell(k, field);
+                    let mut drag = egui::DragValue::new(value).speed(speed).max_decimals(4);
+                    if bad.is_some() {
+                        drag = drag.prefix("! ");
+                    }
+                    let response = labelled_value(ui.add(drag), &format!("{label} {k}"), *value);
+                    if let Some(reason) = bad {
+                        ui.painter().rect_stroke(
+                            response.rect,
+                            2.0,
+                            egui::Stroke::new(1.5, BAD),
+                            egui::StrokeKind::Outside,
+                        );
+                        response.on_hover_text(reason);
+                    }
+                };
+                cell(ui, &mut s.radius_mm, "radius", "radius", 0.1);
+                let mut t = s.thickness_mm.unwrap_or(0.0);
+                cell(ui, &mut t, "thickness", "thickness", 0.05);
+                if s.thickness_mm.is_some() || t != 0.0 {
+                    s.thickness_mm = Some(t);
+                }
+                cell(ui, &mut s.medium.n_d, "nd", "nd", 0.001);
+                let mut v = s.medium.v_d.unwrap_or(0.0);
+                cell(ui, &mut v, "vd", "Vd", 0.1);
+                s.medium.v_d = (v > 0.0).then_some(v);
+                cell(ui, &mut s.semi_aperture_mm, "semi_aperture", "semi-aperture", 0.05);
+                let stop = s.stop;
+                labelled_check(ui.checkbox(&mut s.stop, ""), &format!("stop {k}"), stop);
+                ui.horizontal(|ui| {
+                    if ui.small_button("up").on_hover_text("move up").clicked() && k > 0 {
+                        edit = Some(RowEdit::Swap(k - 1, k));
+                    }
+                    if ui.small_button("dn").on_hover_text("move down").clicked() && k + 1 < count {
+                        edit = Some(RowEdit::Swap(k, k + 1));
+                    }
+                    if ui.small_button("+").on_hover_text("insert a flat air surface after this one").clicked() {
+                        edit = Some(RowEdit::InsertAfter(k));
+                    }
+                    if ui.small_button("x").on_hover_text("remove this surface").clicked() {
+                        edit = Some(RowEdit::Remove(k));
+                    }
+                });
+                ui.end_row();
+            }
+        });
+    });
+    match edit {
+        Some(RowEdit::Swap(a, b)) => doc.lens.surfaces.swap(a, b),
+        Some(RowEdit::InsertAfter(k)) => {
+            let semi = doc.lens.surfaces[k].semi_aperture_mm;
+            doc.lens.surfaces.insert(k + 1, Surface::new(0.0, Some(1.0), Medium::air(), semi));
+        }
+        Some(RowEdit::Remove(k)) if doc.lens.surfaces.len() > 1 => {
+            doc.lens.surfaces.remove(k);
+        }
+        _ => {}
+    }
+}
+
+enum RowEdit {
+    Swap(usize, usize),
+    InsertAfter(usize),
+    Remove(usize),
+}

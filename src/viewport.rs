@@ -1,0 +1,220 @@
+//! The flare viewport: `flare_core`'s wgpu renderer inside an egui paint callback (the app's one bridge
+//! between egui and the renderer).
+//!
+//! # How it works
+//! [`ViewportResources`] lives in egui-wgpu's callback resources: the [`FlareRenderer`] (its HDR accumulation
+//! and tonemap pass), an offscreen sRGB texture it draws the tonemapped flare into, and a small pipeline
+//! (`shaders/viewport.wgsl`) that draws that texture into egui's render pass. Each frame the app adds a
+//! [`FlareCallback`] for the viewport's rect. When the flare changed (light, lens, gains, exposure...) it
+//! carries the new scene, and `prepare` records the flare passes into egui's encoder before egui's own pass;
+//! otherwise it carries none and `paint` only re-draws the texture (an egui repaint for a tooltip does not
+//! re-render the flare). Uploads that follow edits (aperture mask, starburst, background plate, LUT atlas)
+//! go through [`ViewportResources::with`] from the app. A missing resource is logged once, never a panic.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use eframe::egui_wgpu::{self, CallbackResources, CallbackTrait, RenderState, ScreenDescriptor};
+use eframe::{egui, wgpu};
+use flare_core::lut::blend::LutScene;
+use flare_core::render::gpu::{FlareRenderer, texture_2d};
+use flare_core::render::{FlareScene, shaders::VIEWPORT_WGSL};
+
+/// The offscreen texture's format: sRGB, so that sampling it gives linear values.
+const VIEW_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
+
+static MISSING_LOGGED: AtomicBool = AtomicBool::new(false);
+
+/// The GPU side of the viewport (see the module documentation).
+pub struct ViewportResources {
+    pub renderer: FlareRenderer,
+    target: wgpu::Texture,
+    size: (u32, u32),
+    pipeline: wgpu::RenderPipeline,
+    layout: wgpu::BindGroupLayout,
+    sampler: wgpu::Sampler,
+    params: wgpu::Buffer,
+    bind_group: wgpu::BindGroup,
+}
+
+impl ViewportResources {
+    /// Creates the resources in egui's device and registers them with egui-wgpu.
+    pub fn install(render_state: &RenderState) {
+        let device = &render_state.device;
+        let renderer = FlareRenderer::new(device, &render_state.queue, VIEW_FORMAT);
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("viewport"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 2,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+            ],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("viewport"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("viewport.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(VIEWPORT_WGSL.into()),
+        });
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("viewport"),
+            layout: Some(&pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            primitive: wgpu::PrimitiveState::default(),
+            depth_stencil: None,
+            multisample: wgpu::MultisampleState::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: render_state.target_format,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("viewport"),
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            ..Default::default()
+        });
+        let encode = if render_state.target_format.is_srgb() { 0.0f32 } else { 1.0 };
+        let params = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("viewport params"),
+            size: 16,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        render_state.queue.write_buffer(&params, 0, bytemuck::cast_slice(&[encode, 0.0, 0.0, 0.0]));
+        let (target, bind_group) = Self::target(device, &layout, &sampler, &params, (16, 16));
+        let resources = Self { renderer, target, size: (16, 16), pipeline, layout, sampler, params, bind_group };
+        render_state.renderer.write().callback_resources.insert(resources);
+    }
+
+    fn target(
+        device: &wgpu::Device,
+        layout: &wgpu::BindGroupLayout,
+        sampler: &wgpu::Sampler,
+        params: &wgpu::Buffer,
+        size: (u32, u32),
+    ) -> (wgpu::Texture, wgpu::BindGroup) {
+        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+        let texture = texture_2d(device, "viewport flare", size.0, size.1, VIEW_FORMAT, usage);
+        let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("viewport"),
+            layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: wgpu::BindingResource::TextureView(&view) },
+                wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::Sampler(sampler) },
+                wgpu::BindGroupEntry { binding: 2, resource: params.as_entire_binding() },
+            ],
+        });
+        (texture, bind_group)
+    }
+
+    /// Runs `f` on the installed resources (for uploads after an edit); `None` when they are missing.
+    pub fn with<R>(
+        render_state: &RenderState,
+        f: impl FnOnce(&mut Self, &wgpu::Device, &wgpu::Queue) -> R,
+    ) -> Option<R> {
+        let mut renderer = render_state.renderer.write();
+        let resources = renderer.callback_resources.get_mut::<Self>()?;
+        Some(f(resources, &render_state.device, &render_state.queue))
+    }
+}
+
+/// One frame's viewport: the new scene when the flare must be drawn again, else nothing.
+pub struct FlareCallback {
+    pub frame: Option<Arc<(FlareScene, Option<LutScene>)>>,
+}
+
+impl FlareCallback {
+    /// Adds the viewport to `painter` over `rect`.
+    pub fn paint(painter: &egui::Painter, rect: egui::Rect, frame: Option<Arc<(FlareScene, Option<LutScene>)>>) {
+        painter.add(egui_wgpu::Callback::new_paint_callback(rect, Self { frame }));
+    }
+}
+
+fn missing() {
+    if !MISSING_LOGGED.swap(true, Ordering::Relaxed) {
+        eprintln!("flarelab: the viewport's GPU resources are missing; the flare is not drawn");
+    }
+}
+
+impl CallbackTrait for FlareCallback {
+    fn prepare(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        _screen: &ScreenDescriptor,
+        encoder: &mut wgpu::CommandEncoder,
+        resources: &mut CallbackResources,
+    ) -> Vec<wgpu::CommandBuffer> {
+        let Some(frame) = &self.frame else { return Vec::new() };
+        let Some(res) = resources.get_mut::<ViewportResources>() else {
+            missing();
+            return Vec::new();
+        };
+        let (scene, lut) = frame.as_ref();
+        let size = (scene.width.max(1), scene.height.max(1));
+        if size != res.size {
+            (res.target, res.bind_group) =
+                ViewportResources::target(device, &res.layout, &res.sampler, &res.params, size);
+            res.size = size;
+        }
+        let view = res.target.create_view(&wgpu::TextureViewDescriptor::default());
+        res.renderer.render_with_lut(device, queue, encoder, &view, scene, lut.as_ref());
+        Vec::new()
+    }
+
+    fn paint(
+        &self,
+        _info: egui::PaintCallbackInfo,
+        render_pass: &mut wgpu::RenderPass<'static>,
+        resources: &CallbackResources,
+    ) {
+        let Some(res) = resources.get::<ViewportResources>() else {
+            missing();
+            return;
+        };
+        render_pass.set_pipeline(&res.pipeline);
+        render_pass.set_bind_group(0, &res.bind_group, &[]);
+        render_pass.draw(0..3, 0..1);
+    }
+}

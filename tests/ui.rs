@@ -1,0 +1,138 @@
+//! The app's panels driven by label through egui_kittest (no GPU needed), checked against the document;
+//! and one snapshot of the whole window rendered by wgpu (lavapipe in CI; skipped with the reason printed
+//! where no adapter exists).
+
+use egui_kittest::Harness;
+use egui_kittest::kittest::Queryable;
+use flarelab::app::{FlareLabApp, Tab};
+
+fn harness() -> Harness<'static, FlareLabApp> {
+    Harness::builder()
+        .with_size(egui::vec2(1280.0, 800.0))
+        .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), FlareLabApp::new(None, None))
+}
+
+fn show(h: &mut Harness<'static, FlareLabApp>, tab: Tab) {
+    h.state_mut().tab = tab;
+    h.run();
+}
+
+#[test]
+fn editing_a_radius_marks_an_impossible_value_and_keeps_the_last_valid_lens() {
+    let mut h = harness();
+    show(&mut h, Tab::Lens);
+    let before = h.state().doc.lens.surfaces[1].radius_mm;
+    h.get_by_label("radius 1").set_value_accesskit(before * 1.1);
+    h.run();
+    let r = h.state().doc.lens.surfaces[1].radius_mm;
+    assert!((r - before * 1.1).abs() < 1e-9, "radius {r}, wanted {}", before * 1.1);
+    assert!(h.state().lens_problem.is_none());
+    let flare_before = h.state().flare().unwrap().system.lens.clone();
+    assert_eq!(flare_before.surfaces[1].radius_mm, r, "the flare follows a valid edit");
+    // The stop must be flat: a curved stop is refused, its cell marked, the flare kept.
+    let stop = h.state().doc.lens.stop_index();
+    h.get_by_label(&format!("radius {stop}")).set_value_accesskit(25.0);
+    h.run();
+    let problem = h.state().lens_problem.clone().expect("a curved stop is refused");
+    assert_eq!((problem.surface, problem.field), (Some(stop), Some("radius")), "{problem:?}");
+    assert!(problem.reason.contains("flat"), "{}", problem.reason);
+    assert_eq!(h.state().flare().unwrap().system.lens, flare_before, "the viewport keeps the last valid lens");
+    assert!(h.query_by_label_contains("the view shows the last valid lens").is_some(), "the reason is shown");
+    // Undo (Ctrl+Z) takes the bad value back and the lens is valid again.
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
+    h.run();
+    assert_eq!(h.state().doc.lens.surfaces[stop].radius_mm, 0.0);
+    assert!(h.state().lens_problem.is_none());
+}
+
+#[test]
+fn blades_ghost_toggles_and_undo_redo_change_the_document() {
+    let mut h = harness();
+    show(&mut h, Tab::Aperture);
+    h.get_by_role_and_label(egui::accesskit::Role::Slider, "blades").set_value_accesskit(9.0);
+    h.run();
+    assert_eq!(h.state().doc.aperture.blades, 9);
+    let flare = h.state().flare().unwrap();
+    assert!(
+        matches!(flare.config.aperture.shape, flare_core::aperture::ApertureShape::Blades { count: 9, .. }),
+        "the flare is rebuilt with 9 blades"
+    );
+    // The ghost list: the brightest ghost first; switch it off, then give another a gain.
+    show(&mut h, Tab::Ghosts);
+    let mut rows = h.state().ghosts.clone();
+    rows.sort_by(|a, b| b.intensity().total_cmp(&a.intensity()));
+    let (a, b) = (&rows[0], &rows[1]);
+    assert!(a.culled.is_none(), "the brightest ghost is drawn");
+    h.get_by_label(&format!("ghost {}-{}", a.i, a.j)).click();
+    h.run();
+    assert_eq!(h.state().doc.ghost_gain(a.i, a.j), 0.0, "ghost {}-{} switched off", a.i, a.j);
+    h.get_by_label(&format!("gain {}-{}", b.i, b.j)).set_value_accesskit(2.5);
+    h.run();
+    assert_eq!(h.state().doc.ghost_gain(b.i, b.j), 2.5);
+    // Undo walks back one edit at a time: the gain, the toggle, the blades; redo comes forward again.
+    let undo = |h: &mut Harness<'static, FlareLabApp>| {
+        h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
+        h.run();
+    };
+    undo(&mut h);
+    assert_eq!(h.state().doc.ghost_gain(b.i, b.j), 1.0);
+    assert_eq!(h.state().doc.ghost_gain(a.i, a.j), 0.0);
+    undo(&mut h);
+    assert_eq!(h.state().doc.ghost_gain(a.i, a.j), 1.0);
+    undo(&mut h);
+    assert_eq!(h.state().doc.aperture.blades, 6);
+    h.key_press_modifiers(egui::Modifiers::COMMAND | egui::Modifiers::SHIFT, egui::Key::Z);
+    h.run();
+    assert_eq!(h.state().doc.aperture.blades, 9);
+}
+
+#[test]
+fn dragging_the_light_moves_the_ghosts_along_the_line_through_the_optical_centre() {
+    let mut h = harness();
+    show(&mut h, Tab::Ghosts);
+    let centre_of = |h: &Harness<'static, FlareLabApp>| -> Vec<[f64; 2]> {
+        let flare = h.state().flare().unwrap();
+        let u =
+            flare_core::render::light_slopes_for_frame_position(h.state().doc.light_deg[0], h.state().doc.light_deg[1]);
+        let frame = flare.system.frame(u, &flare.frame_settings(960, 540));
+        frame.sprites.iter().filter(|s| s.culled.is_none() && s.wavelength == 1).map(|s| s.centre_mm).collect()
+    };
+    for light in [[8.0, 3.0], [-5.0, 12.0], [40.0, -2.0]] {
+        h.state_mut().doc.light_deg = light;
+        h.run();
+        let flare = h.state().flare().unwrap();
+        let u = flare_core::render::light_slopes_for_frame_position(light[0], light[1]);
+        let l = flare.system.light_image_mm(u);
+        let centres = centre_of(&h);
+        assert!(!centres.is_empty(), "ghosts drawn at {light:?}");
+        for c in centres {
+            // Collinear with the optical centre and the light's image: cross product ~ 0.
+            let cross = c[0] * l[1] - c[1] * l[0];
+            let scale = (c[0].hypot(c[1]) * l[0].hypot(l[1])).max(1e-9);
+            assert!(cross.abs() / scale < 1e-6, "ghost at {c:?}, light image at {l:?}");
+        }
+    }
+}
+
+#[test]
+fn a_snapshot_of_the_whole_window() {
+    let adapter_ok = pollster::block_on(async {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        instance.request_adapter(&wgpu::RequestAdapterOptions::default()).await.is_ok()
+    });
+    if !adapter_ok {
+        println!("SKIPPED: no wgpu adapter (install mesa-vulkan-drivers for lavapipe) to render the snapshot");
+        return;
+    }
+    let mut h = Harness::builder()
+        .with_size(egui::vec2(1280.0, 800.0))
+        .wgpu()
+        .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), FlareLabApp::new(None, None));
+    h.state_mut().tab = Tab::Lens;
+    h.run();
+    // The status bar reports measured times: not part of the golden image.
+    let status = h.get_by_label_contains("sprites drawn").rect();
+    h.mask(status);
+    // Tolerant of font rasterisation differences between Mesa versions, not of a changed layout.
+    h.snapshot_options("app_lens_panel", &egui_kittest::SnapshotOptions::new().threshold(2.0).max_failed_pixels(2000));
+}
