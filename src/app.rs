@@ -195,6 +195,16 @@ impl FlareLabApp {
         self.flare.as_deref()
     }
 
+    /// The LUT in use, if any.
+    pub fn lut(&self) -> Option<&GhostLut> {
+        self.lut.as_deref().map(|l| &l.lut)
+    }
+
+    /// Where the bake stands (for the Blend panel and the tests).
+    pub fn bake_status(&self) -> &BakeStatus {
+        &self.bake_status
+    }
+
     /// Re-derives what changed in the document (see the module documentation).
     pub fn sync(&mut self) {
         self.sync_optics();

@@ -114,6 +114,53 @@ fn dragging_the_light_moves_the_ghosts_along_the_line_through_the_optical_centre
     }
 }
 
+/// Steps the UI (with real time passing, for the bake thread) until `done` or `limit_s`.
+fn step_until(h: &mut Harness<'static, FlareLabApp>, limit_s: f64, done: impl Fn(&FlareLabApp) -> bool) -> f64 {
+    let started = std::time::Instant::now();
+    while !done(h.state()) {
+        assert!(started.elapsed().as_secs_f64() < limit_s, "not done after {limit_s} s: {:?}", h.state().bake_status());
+        std::thread::sleep(std::time::Duration::from_millis(100));
+        h.step();
+    }
+    started.elapsed().as_secs_f64()
+}
+
+#[test]
+fn the_blend_panel_bakes_on_a_thread_cancels_and_shows_the_classification() {
+    use flarelab::document::LutSource;
+    use flarelab::panels::BakeStatus;
+    let mut h = harness();
+    show(&mut h, Tab::Blend);
+    // Cancel stops a bake and says so; nothing changes in the document.
+    h.get_by_label("Bake").click();
+    h.run_steps(2);
+    assert!(matches!(h.state().bake_status(), BakeStatus::Running { .. }), "{:?}", h.state().bake_status());
+    h.get_by_label("Cancel").click();
+    step_until(&mut h, 300.0, |app| !matches!(app.bake_status(), BakeStatus::Running { .. }));
+    assert!(
+        matches!(h.state().bake_status(), BakeStatus::Failed(t) if t.contains("cancelled")),
+        "{:?}",
+        h.state().bake_status()
+    );
+    assert!(h.state().lut().is_none());
+    // A whole bake: the LUT is used, the ghost list shows which ghosts are non-linear.
+    h.get_by_label("Bake").click();
+    h.run_steps(2);
+    let seconds = step_until(&mut h, 600.0, |app| app.lut().is_some());
+    println!("the Heliar baked from the Blend panel in {seconds:.1} s");
+    assert!(matches!(h.state().doc.blend.lut, LutSource::Simulated { path: None }));
+    let baked = h.state().lut().unwrap().ghosts.len();
+    assert!(baked > 0);
+    show(&mut h, Tab::Ghosts);
+    assert_eq!(h.query_all_by_label("non-linear").count(), baked, "one row per baked ghost says non-linear");
+    // A lens edit invalidates the LUT (it was baked for the old lens).
+    show(&mut h, Tab::Lens);
+    let r = h.state().doc.lens.surfaces[0].radius_mm;
+    h.get_by_label("radius 0").set_value_accesskit(r * 1.05);
+    h.run();
+    assert!(h.state().lut().is_none(), "a LUT for another lens is not drawn");
+}
+
 #[test]
 fn a_snapshot_of_the_whole_window() {
     let adapter_ok = pollster::block_on(async {

@@ -8,6 +8,8 @@ use flare_core::coating::reflection;
 use flare_core::optics::Coating;
 use flare_core::optics::CoatingLayer;
 
+use super::labelled_value;
+
 use crate::document::Document;
 
 /// Which surface the plot and the editor show.
@@ -58,7 +60,8 @@ fn coating_editor_ui(ui: &mut egui::Ui, coating: &mut Coating, id: &str) -> bool
                     *layer_index = None;
                 } else {
                     let mut n = layer_index.unwrap_or(1.38);
-                    ui.add(egui::DragValue::new(&mut n).range(1.0..=3.0).speed(0.005).prefix("n = "));
+                    let r = ui.add(egui::DragValue::new(&mut n).range(1.0..=3.0).speed(0.005).prefix("n = "));
+                    labelled_value(r, "layer index", n);
                     *layer_index = Some(n);
                 }
             });
@@ -68,8 +71,10 @@ fn coating_editor_ui(ui: &mut egui::Ui, coating: &mut Coating, id: &str) -> bool
             for (k, layer) in layers.iter_mut().enumerate() {
                 ui.horizontal(|ui| {
                     ui.label(format!("layer {k}"));
-                    ui.add(egui::DragValue::new(&mut layer.index).range(1.0..=3.0).speed(0.005).prefix("n = "));
-                    ui.add(egui::DragValue::new(&mut layer.thickness_nm).range(0.0..=2000.0).suffix(" nm"));
+                    let r = ui.add(egui::DragValue::new(&mut layer.index).range(1.0..=3.0).speed(0.005).prefix("n = "));
+                    labelled_value(r, &format!("layer {k} index"), layer.index);
+                    let r = ui.add(egui::DragValue::new(&mut layer.thickness_nm).range(0.0..=2000.0).suffix(" nm"));
+                    labelled_value(r, &format!("layer {k} thickness"), layer.thickness_nm);
                     if ui.small_button("x").clicked() {
                         remove = Some(k);
                     }
@@ -101,7 +106,8 @@ pub fn coatings_ui(ui: &mut egui::Ui, doc: &mut Document, state: &mut CoatingsSt
     } else {
         ui.horizontal(|ui| {
             ui.label("surface");
-            ui.add(egui::DragValue::new(&mut state.surface).range(0..=count.saturating_sub(1)));
+            let r = ui.add(egui::DragValue::new(&mut state.surface).range(0..=count.saturating_sub(1)));
+            labelled_value(r, "coated surface", state.surface as f64);
         });
         let s = state.surface;
         if let Some(surface) = doc.lens.surfaces.get_mut(s) {
@@ -126,6 +132,8 @@ pub fn coatings_ui(ui: &mut egui::Ui, doc: &mut Document, state: &mut CoatingsSt
         .x_axis_label("wavelength (nm)")
         .y_axis_label("reflectance (%)")
         .allow_scroll(false)
+        .include_y(0.0)
+        .include_y(5.0)
         .show(ui, |plot| {
             plot.line(Line::new(format!("surface {s} ({})", kind(&coating)), PlotPoints::from(curve(&coating))));
             plot.line(
