@@ -142,6 +142,8 @@ pub struct FlareLabApp {
     coatings: CoatingsState,
     ray_diagram: RayDiagram,
     drag_bench: Option<DragBench>,
+    /// The size File > Export image renders at.
+    export_size: (u32, u32),
 }
 
 impl FlareLabApp {
@@ -185,6 +187,7 @@ impl FlareLabApp {
             coatings: CoatingsState::default(),
             ray_diagram: RayDiagram::default(),
             drag_bench,
+            export_size: (1920, 1080),
         };
         app.sync();
         app
@@ -485,13 +488,17 @@ impl FlareLabApp {
                     self.doc.background = None;
                 }
                 ui.separator();
-                for (label, size) in
-                    [("Export image 1920x1080…", (1920, 1080)), ("Export image 3840x2160…", (3840, 2160))]
-                {
-                    if ui.button(label).clicked() {
-                        self.export_image(size);
+                ui.horizontal(|ui| {
+                    let (w, h) = &mut self.export_size;
+                    let r = ui.add(egui::DragValue::new(w).range(16..=8192).suffix(" px"));
+                    crate::panels::labelled_value(r, "export width", f64::from(*w));
+                    ui.label("x");
+                    let r = ui.add(egui::DragValue::new(h).range(16..=8192).suffix(" px"));
+                    crate::panels::labelled_value(r, "export height", f64::from(*h));
+                    if ui.button("Export image…").on_hover_text("PNG (tonemapped) or EXR (linear)").clicked() {
+                        self.export_image(self.export_size);
                     }
-                }
+                });
                 if ui.button("Export LUT…").clicked() {
                     self.act(Action::ExportLut);
                 }
@@ -836,7 +843,7 @@ impl FlareLabApp {
         else {
             return;
         };
-        self.message = Some(match export_frame(self, size, &path) {
+        self.message = Some(match self.export_image_to(size, &path) {
             Ok(()) => format!("wrote {}", path.display()),
             Err(e) => format!("could not export {}: {e:#}", path.display()),
         });
@@ -958,7 +965,14 @@ fn load_aperture_image(path: &str) -> Result<ApertureShape> {
     Ok(ApertureShape::Image { size: n as usize, luminance })
 }
 
-/// The document's frame at `size` by the CPU twin (the same passes as the GPU), written to `path`.
+impl FlareLabApp {
+    /// The document's frame at `size` by the CPU twin (the same passes as the GPU), written to `path` (PNG
+    /// tonemapped or EXR linear, by its extension; atomically).
+    pub fn export_image_to(&self, size: (u32, u32), path: &std::path::Path) -> Result<()> {
+        export_frame(self, size, path)
+    }
+}
+
 fn export_frame(app: &FlareLabApp, size: (u32, u32), path: &std::path::Path) -> Result<()> {
     use flare_core::render::{cpu, output};
     let Some(flare) = &app.flare else { bail!("no valid lens") };

@@ -87,6 +87,47 @@ fn blades_ghost_toggles_and_undo_redo_change_the_document() {
 }
 
 #[test]
+fn dragging_in_the_viewport_moves_the_light_and_undo_takes_the_whole_drag_back() {
+    let mut h = harness();
+    show(&mut h, Tab::Ghosts);
+    let before = h.state().doc.light_deg;
+    // The viewport is the top left of the window (a placeholder without a GPU, with the same input).
+    let (from, to) = (egui::pos2(300.0, 250.0), egui::pos2(420.0, 200.0));
+    h.drag_at(from);
+    h.run_steps(2);
+    for k in 1..=5 {
+        h.hover_at(from + (to - from) * (k as f32 / 5.0));
+        h.run_steps(1);
+    }
+    h.drop_at(to);
+    h.run();
+    let after = h.state().doc.light_deg;
+    assert_ne!(after, before, "the drag moved the light");
+    // The drop point is right of and above the view's centre: +x and +y in the frame.
+    assert!(after[0] > 0.0 && after[1] > 0.0, "{after:?}");
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
+    h.run();
+    assert_eq!(h.state().doc.light_deg, before, "one undo step for the whole drag");
+}
+
+#[test]
+fn an_image_exports_at_the_chosen_size_as_png_and_exr() {
+    let mut h = harness();
+    h.run();
+    let dir = tempfile::tempdir().unwrap();
+    for name in ["flare.png", "flare.exr"] {
+        let path = dir.path().join(name);
+        h.state().export_image_to((320, 180), &path).unwrap();
+        let img = image::open(&path).unwrap().to_rgb32f();
+        assert_eq!(img.dimensions(), (320, 180), "{name}");
+        assert!(img.pixels().any(|p| p.0.iter().sum::<f32>() > 0.05), "{name} shows the flare");
+        assert!(img.pixels().all(|p| p.0.iter().all(|v| v.is_finite())), "{name}");
+    }
+    let e = h.state().export_image_to((320, 180), &dir.path().join("flare.bmp")).unwrap_err().to_string();
+    assert!(e.contains("bmp") || e.contains("png"), "{e}");
+}
+
+#[test]
 fn dragging_the_light_moves_the_ghosts_along_the_line_through_the_optical_centre() {
     let mut h = harness();
     show(&mut h, Tab::Ghosts);

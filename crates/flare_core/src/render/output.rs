@@ -68,7 +68,8 @@ pub fn write_exr(path: &Path, image: &HdrImage) -> Result<(), ImageError> {
     write_atomic(path, &bytes).map_err(|source| ImageError::Io { path: path.display().to_string(), source })
 }
 
-/// Reads a background plate (PNG is decoded from sRGB to linear; EXR is taken as linear), any size.
+/// Reads a background plate (PNG is decoded from sRGB to linear; EXR and Radiance HDR are taken as linear),
+/// any size.
 pub fn read_plate(path: &Path) -> Result<HdrImage, ImageError> {
     let decode = |message: String| ImageError::Decode { path: path.display().to_string(), message };
     let img = image::open(path).map_err(|e| decode(e.to_string()))?;
