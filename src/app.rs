@@ -35,7 +35,7 @@ use crate::panels::aperture::AperturePreview;
 use crate::panels::coatings::CoatingsState;
 use crate::panels::ray_diagram::RayDiagram;
 use crate::panels::{Action, BakeStatus, GhostRow, LensProblem, PanelContext};
-use crate::viewport::{FlareCallback, ViewportResources};
+use crate::viewport::{FlareCallback, ViewFrame, ViewportResources};
 
 const NO_DISPLAY: &str = "no display to open the app's window on (DISPLAY and WAYLAND_DISPLAY are unset). \
 The command line works without one: `flarelab lens list`, `flarelab lens info LENS`, \
@@ -125,7 +125,10 @@ pub struct FlareLabApp {
     pub message: Option<String>,
     frame_key: String,
     view_px: (u32, u32),
-    new_frame: Option<Arc<(FlareScene, Option<LutScene>)>>,
+    /// The latest scene for the viewport, with its generation (see [`crate::viewport`]).
+    view_frame: Option<ViewFrame>,
+    /// The scene was rebuilt after the viewport was painted this frame.
+    frame_pending: bool,
     pub ghosts: Vec<GhostRow>,
     sprites: Vec<flare_core::ghost::Sprite>,
     stats: FrameStats,
@@ -172,7 +175,8 @@ impl FlareLabApp {
             message: None,
             frame_key: String::new(),
             view_px: (960, 540),
-            new_frame: None,
+            view_frame: None,
+            frame_pending: false,
             ghosts: Vec::new(),
             sprites: Vec::new(),
             stats: FrameStats::default(),
@@ -332,7 +336,9 @@ impl FlareLabApp {
         self.sprites = frame.sprites;
         self.stats = frame.stats;
         self.scene_ms = started.elapsed().as_secs_f64() * 1e3;
-        self.new_frame = Some(Arc::new((scene, lut_scene)));
+        let generation = self.view_frame.as_ref().map_or(1, |f| f.0 + 1);
+        self.view_frame = Some((generation, Arc::new((scene, lut_scene))));
+        self.frame_pending = true;
     }
 
     /// The document's scene at `size` (pixels): the paraxial sprites with the user's gains, toggles and
@@ -386,6 +392,8 @@ impl FlareLabApp {
 
     /// The whole window: menus, status bar, panels, viewport, ray diagram; then the frame's bookkeeping.
     pub fn ui_root(&mut self, ui: &mut egui::Ui) {
+        // Whatever changed the document since the last frame (a test, a restored session) is drawn now.
+        self.sync();
         self.keys(ui.ctx());
         self.poll_bake(ui.ctx());
         self.drag_bench_step(ui.ctx());
@@ -426,6 +434,10 @@ impl FlareLabApp {
             self.act(action);
         }
         self.sync();
+        // An edit in this frame made a new scene after the viewport was painted: paint once more.
+        if self.frame_pending && self.gpu.is_some() {
+            ui.ctx().request_repaint();
+        }
         // One undo step per gesture: commit when no button is held.
         if !ui.ctx().input(|i| i.pointer.any_down()) {
             self.history.commit(&self.doc);
@@ -582,7 +594,8 @@ impl FlareLabApp {
                 egui::Color32::GRAY,
             );
         } else {
-            FlareCallback::paint(ui.painter(), rect, self.new_frame.take());
+            FlareCallback::paint(ui.painter(), rect, self.view_frame.clone());
+            self.frame_pending = false;
         }
         if response.dragged()
             && let Some(p) = response.interact_pointer_pos()

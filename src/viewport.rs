@@ -5,10 +5,12 @@
 //! [`ViewportResources`] lives in egui-wgpu's callback resources: the [`FlareRenderer`] (its HDR accumulation
 //! and tonemap pass), an offscreen sRGB texture it draws the tonemapped flare into, and a small pipeline
 //! (`shaders/viewport.wgsl`) that draws that texture into egui's render pass. Each frame the app adds a
-//! [`FlareCallback`] for the viewport's rect. When the flare changed (light, lens, gains, exposure...) it
-//! carries the new scene, and `prepare` records the flare passes into egui's encoder before egui's own pass;
-//! otherwise it carries none and `paint` only re-draws the texture (an egui repaint for a tooltip does not
-//! re-render the flare). Uploads that follow edits (aperture mask, starburst, background plate, LUT atlas)
+//! [`FlareCallback`] for the viewport's rect with its latest scene and that scene's generation (bumped when
+//! the light, lens, gains, exposure... changed). `prepare` records the flare passes into egui's encoder
+//! before egui's own pass only when the generation differs from the one last drawn; otherwise `paint` only
+//! re-draws the texture (an egui repaint for a tooltip does not re-render the flare). A frame that is never
+//! rendered (skipped by the windowing system, or by a test harness) loses nothing: the next one carries the
+//! same scene. Uploads that follow edits (aperture mask, starburst, background plate, LUT atlas)
 //! go through [`ViewportResources::with`] from the app. A missing resource is logged once, never a panic.
 
 use std::sync::Arc;
@@ -35,6 +37,8 @@ pub struct ViewportResources {
     sampler: wgpu::Sampler,
     params: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
+    /// The scene generation the texture shows (0: none yet).
+    drawn: u64,
 }
 
 impl ViewportResources {
@@ -122,7 +126,8 @@ impl ViewportResources {
         });
         render_state.queue.write_buffer(&params, 0, bytemuck::cast_slice(&[encode, 0.0, 0.0, 0.0]));
         let (target, bind_group) = Self::target(device, &layout, &sampler, &params, (16, 16));
-        let resources = Self { renderer, target, size: (16, 16), pipeline, layout, sampler, params, bind_group };
+        let resources =
+            Self { renderer, target, size: (16, 16), pipeline, layout, sampler, params, bind_group, drawn: 0 };
         render_state.renderer.write().callback_resources.insert(resources);
     }
 
@@ -148,25 +153,30 @@ impl ViewportResources {
         (texture, bind_group)
     }
 
-    /// Runs `f` on the installed resources (for uploads after an edit); `None` when they are missing.
+    /// Runs `f` on the installed resources (for uploads after an edit, which also make the next frame draw
+    /// again); `None` when they are missing.
     pub fn with<R>(
         render_state: &RenderState,
         f: impl FnOnce(&mut Self, &wgpu::Device, &wgpu::Queue) -> R,
     ) -> Option<R> {
         let mut renderer = render_state.renderer.write();
         let resources = renderer.callback_resources.get_mut::<Self>()?;
+        resources.drawn = 0;
         Some(f(resources, &render_state.device, &render_state.queue))
     }
 }
 
-/// One frame's viewport: the new scene when the flare must be drawn again, else nothing.
+/// A scene to draw and its generation.
+pub type ViewFrame = (u64, Arc<(FlareScene, Option<LutScene>)>);
+
+/// One frame's viewport: the latest scene (drawn again only when its generation is new).
 pub struct FlareCallback {
-    pub frame: Option<Arc<(FlareScene, Option<LutScene>)>>,
+    pub frame: Option<ViewFrame>,
 }
 
 impl FlareCallback {
     /// Adds the viewport to `painter` over `rect`.
-    pub fn paint(painter: &egui::Painter, rect: egui::Rect, frame: Option<Arc<(FlareScene, Option<LutScene>)>>) {
+    pub fn paint(painter: &egui::Painter, rect: egui::Rect, frame: Option<ViewFrame>) {
         painter.add(egui_wgpu::Callback::new_paint_callback(rect, Self { frame }));
     }
 }
@@ -186,11 +196,15 @@ impl CallbackTrait for FlareCallback {
         encoder: &mut wgpu::CommandEncoder,
         resources: &mut CallbackResources,
     ) -> Vec<wgpu::CommandBuffer> {
-        let Some(frame) = &self.frame else { return Vec::new() };
+        let Some((generation, frame)) = &self.frame else { return Vec::new() };
         let Some(res) = resources.get_mut::<ViewportResources>() else {
             missing();
             return Vec::new();
         };
+        if res.drawn == *generation {
+            return Vec::new();
+        }
+        res.drawn = *generation;
         let (scene, lut) = frame.as_ref();
         let size = (scene.width.max(1), scene.height.max(1));
         if size != res.size {

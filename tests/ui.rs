@@ -202,25 +202,43 @@ fn the_blend_panel_bakes_on_a_thread_cancels_and_shows_the_classification() {
     assert!(h.state().lut().is_none(), "a LUT for another lens is not drawn");
 }
 
+/// Two snapshots of the whole window rendered by wgpu, the flare viewport included: the app gets the test
+/// renderer's device, so its paint callback draws the flare exactly as in the window.
 #[test]
-fn a_snapshot_of_the_whole_window() {
+fn snapshots_of_the_whole_window_with_the_flare() {
     let adapter_ok = pollster::block_on(async {
         let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
         instance.request_adapter(&wgpu::RequestAdapterOptions::default()).await.is_ok()
     });
     if !adapter_ok {
-        println!("SKIPPED: no wgpu adapter (install mesa-vulkan-drivers for lavapipe) to render the snapshot");
+        println!("SKIPPED: no wgpu adapter (install mesa-vulkan-drivers for lavapipe) to render the snapshots");
         return;
     }
+    let render_state = egui_kittest::wgpu::create_render_state(
+        egui_kittest::wgpu::default_wgpu_setup(),
+        eframe::egui_wgpu::RendererOptions::PREDICTABLE,
+    );
+    let app = FlareLabApp::new(Some(render_state.clone()), None);
     let mut h = Harness::builder()
         .with_size(egui::vec2(1280.0, 800.0))
-        .wgpu()
-        .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), FlareLabApp::new(None, None));
+        .renderer(egui_kittest::wgpu::WgpuTestRenderer::from_render_state(render_state))
+        .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), app);
+    // Tolerant of rasterisation differences between Mesa versions, not of a changed layout or flare.
+    let options = egui_kittest::SnapshotOptions::new().threshold(2.0).max_failed_pixels(3000);
+    let snap = |h: &mut Harness<'static, FlareLabApp>, name: &str| {
+        h.run();
+        // The status bar reports measured times: not part of the golden image.
+        let status = h.get_by_label_contains("sprites drawn").rect();
+        h.mask(status);
+        h.snapshot_options(name, &options);
+    };
     h.state_mut().tab = Tab::Lens;
-    h.run();
-    // The status bar reports measured times: not part of the golden image.
-    let status = h.get_by_label_contains("sprites drawn").rect();
-    h.mask(status);
-    // Tolerant of font rasterisation differences between Mesa versions, not of a changed layout.
-    h.snapshot_options("app_lens_panel", &egui_kittest::SnapshotOptions::new().threshold(2.0).max_failed_pixels(2000));
+    snap(&mut h, "app_lens_panel");
+    // The brightest drawn ghost selected: ringed in the viewport, traced in the ray diagram.
+    let mut rows = h.state().ghosts.clone();
+    rows.sort_by(|a, b| b.intensity().total_cmp(&a.intensity()));
+    h.state_mut().tab = Tab::Ghosts;
+    h.state_mut().selected = rows.iter().find(|r| r.culled.is_none()).map(|r| r.ghost);
+    h.state_mut().doc.light_deg = [10.0, 6.0];
+    snap(&mut h, "app_ghost_selected");
 }

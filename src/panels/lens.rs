@@ -86,7 +86,13 @@ fn surface_table_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext) {
                 if s.thickness_mm.is_some() || t != 0.0 {
                     s.thickness_mm = Some(t);
                 }
-                cell(ui, &mut s.medium.n_d, "nd", "nd", 0.001);
+                let (glass, n_before) = (s.medium.glass.clone(), s.medium.n_d);
+                let hover = glass.unwrap_or_else(|| "no catalogue glass: n_d and V_d as given".into());
+                ui.scope(|ui| cell(ui, &mut s.medium.n_d, "nd", "nd", 0.001)).response.on_hover_text(hover);
+                if s.medium.n_d != n_before && !s.medium.is_air() {
+                    // An edited index is no longer the catalogue glass.
+                    s.medium.glass = None;
+                }
                 let mut v = s.medium.v_d.unwrap_or(0.0);
                 cell(ui, &mut v, "vd", "Vd", 0.1);
                 s.medium.v_d = (v > 0.0).then_some(v);
