@@ -720,6 +720,10 @@ impl FlareLabApp {
     fn act(&mut self, action: Action) {
         match action {
             Action::SelectGhost(g) => self.selected = g,
+            Action::EditCoating(k) => {
+                self.coatings.surface = k;
+                self.tab = Tab::Coatings;
+            }
             Action::OpenLensFile => {
                 if let Some(path) = rfd::FileDialog::new().add_filter("lens", &["json", "zmx", "dat"]).pick_file() {
                     self.open_lens(&path);

@@ -20,7 +20,8 @@ pub struct CoatingsState {
 
 const QUARTER_WAVE: Coating = Coating::QuarterWave { design_wavelength_nm: 550.0, layer_index: None };
 
-fn kind(c: &Coating) -> &'static str {
+/// The coating's kind in words.
+pub fn kind(c: &Coating) -> &'static str {
     match c {
         Coating::Uncoated => "none",
         Coating::QuarterWave { .. } => "quarter-wave",

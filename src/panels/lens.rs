@@ -45,22 +45,23 @@ pub fn lens_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, action
             doc.lens.ghost_pairs().len()
         ));
     }
-    surface_table_ui(ui, doc, ctx);
+    surface_table_ui(ui, doc, ctx, actions);
 }
 
-fn surface_table_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext) {
+fn surface_table_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, actions: &mut Vec<Action>) {
     let problem = ctx.lens_problem;
     let bad_cell = |k: usize, field: &str| {
         problem.filter(|p| p.surface == Some(k) && p.field.is_some_and(|f| f == field)).map(|p| p.reason.clone())
     };
     let mut edit: Option<RowEdit> = None;
     egui::ScrollArea::vertical().id_salt("surfaces").max_height(260.0).show(ui, |ui| {
-        egui::Grid::new("surface_table").num_columns(8).striped(true).spacing([4.0, 2.0]).show(ui, |ui| {
-            for h in ["#", "radius", "thickness", "nd", "Vd", "semi-ap", "stop", ""] {
+        egui::Grid::new("surface_table").num_columns(9).striped(true).spacing([4.0, 2.0]).show(ui, |ui| {
+            for h in ["#", "radius", "thickness", "nd", "Vd", "semi-ap", "stop", "coating", ""] {
                 ui.strong(h);
             }
             ui.end_row();
             let count = doc.lens.surfaces.len();
+            let doc_override = doc.coating_override.clone();
             for (k, s) in doc.lens.surfaces.iter_mut().enumerate() {
                 ui.label(k.to_string());
                 let cell = |ui: &mut egui::Ui, value: &mut f64, field: &'static str, label: &str, speed: f64| {
@@ -99,6 +100,13 @@ fn surface_table_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext) {
                 cell(ui, &mut s.semi_aperture_mm, "semi_aperture", "semi-aperture", 0.05);
                 let stop = s.stop;
                 labelled_check(ui.checkbox(&mut s.stop, ""), &format!("stop {k}"), stop);
+                // The coating in use (the override when one is set), edited in the Coatings panel.
+                let coating = doc_override.as_ref().unwrap_or(&s.coating);
+                let text =
+                    if doc_override.is_some() { "all: " } else { "" }.to_owned() + super::coatings::kind(coating);
+                if ui.small_button(text).on_hover_text("edit in the Coatings panel").clicked() {
+                    actions.push(Action::EditCoating(k));
+                }
                 ui.horizontal(|ui| {
                     if ui.small_button("up").on_hover_text("move up").clicked() && k > 0 {
                         edit = Some(RowEdit::Swap(k - 1, k));

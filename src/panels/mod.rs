@@ -76,6 +76,8 @@ pub enum Action {
     OpenLut,
     ExportLut,
     OpenApertureImage,
+    /// Show surface `k`'s coating in the Coatings panel.
+    EditCoating(usize),
 }
 
 /// Gives a number widget (a table cell) an accessible label with its value: what screen readers and the UI
