@@ -67,11 +67,7 @@ pub fn run() -> Result<()> {
         options,
         Box::new(|cc| {
             // FLARELAB_FRESH=1 starts from the default document instead of the last session.
-            let stored = if std::env::var_os("FLARELAB_FRESH").is_some() {
-                None
-            } else {
-                cc.storage.and_then(|s| eframe::get_value::<Document>(s, STORAGE_KEY)).filter(|d| d.check().is_ok())
-            };
+            let stored = if std::env::var_os("FLARELAB_FRESH").is_some() { None } else { cc.storage.and_then(restore) };
             Ok(Box::new(FlareLabApp::new(cc.wgpu_render_state.clone(), stored)))
         }),
     );
@@ -969,6 +965,19 @@ impl FlareLabApp {
     }
 }
 
+/// The last session's document from eframe's storage, if there is a valid one (a damaged or newer one is
+/// ignored, with the reason on stderr, and the app starts from the default).
+pub fn restore(storage: &dyn eframe::Storage) -> Option<Document> {
+    let text = storage.get_string(STORAGE_KEY)?;
+    match Document::from_json(&text) {
+        Ok(doc) => Some(doc),
+        Err(e) => {
+            eprintln!("flarelab: the last session could not be restored ({e}); starting from the default");
+            None
+        }
+    }
+}
+
 /// A custom aperture from a grey image (white open), as the aperture's image shape.
 fn load_aperture_image(path: &str) -> Result<ApertureShape> {
     let img = image::open(path)?.to_luma32f();
@@ -1014,7 +1023,9 @@ impl eframe::App for FlareLabApp {
         self.ui_root(ui);
     }
 
+    /// The session is stored as the preset's JSON (RON, eframe's own format, cannot carry the lens's free-form
+    /// extra fields), and read back through the preset loader with all its checks ([`restore`]).
     fn save(&mut self, storage: &mut dyn eframe::Storage) {
-        eframe::set_value(storage, STORAGE_KEY, &self.doc);
+        storage.set_string(STORAGE_KEY, self.doc.to_json());
     }
 }

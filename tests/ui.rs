@@ -194,6 +194,27 @@ fn the_blend_panel_bakes_on_a_thread_cancels_and_shows_the_classification() {
     assert!(baked > 0);
     show(&mut h, Tab::Ghosts);
     assert_eq!(h.query_all_by_label("non-linear").count(), baked, "one row per baked ghost says non-linear");
+    // The baked LUT written to a file opens in a fresh app for the same lens; a damaged copy is refused
+    // with the reason and changes nothing.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("heliar.flut");
+    flare_core::lut::format::write_lut(&path, h.state().lut().unwrap()).unwrap();
+    let mut fresh = FlareLabApp::new(None, None);
+    let mut bytes = std::fs::read(&path).unwrap();
+    let n = bytes.len();
+    bytes[n / 2] ^= 0x5a;
+    let damaged = dir.path().join("damaged.flut");
+    std::fs::write(&damaged, &bytes).unwrap();
+    fresh.open_lut(&damaged);
+    assert!(
+        fresh.lut().is_none() && fresh.message.as_deref().is_some_and(|m| m.contains("damaged.flut")),
+        "{:?}",
+        fresh.message
+    );
+    assert_eq!(fresh.doc.blend.lut, LutSource::None);
+    fresh.open_lut(&path);
+    assert_eq!(fresh.lut().map(|l| l.ghosts.len()), Some(baked));
+    assert!(matches!(&fresh.doc.blend.lut, LutSource::Simulated { path: Some(p) } if p.ends_with("heliar.flut")));
     // A lens edit invalidates the LUT (it was baked for the old lens).
     show(&mut h, Tab::Lens);
     let r = h.state().doc.lens.surfaces[0].radius_mm;
@@ -241,4 +262,64 @@ fn snapshots_of_the_whole_window_with_the_flare() {
     h.state_mut().selected = rows.iter().find(|r| r.culled.is_none()).map(|r| r.ghost);
     h.state_mut().doc.light_deg = [10.0, 6.0];
     snap(&mut h, "app_ghost_selected");
+}
+
+#[test]
+fn a_bad_lens_file_is_refused_and_the_document_keeps_its_lens() {
+    let mut app = FlareLabApp::new(None, None);
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.json");
+    std::fs::write(&bad, r#"{"surfaces": [{"radius": "flat?", "thickness": 1, "nd": 1.5, "semi_aperture": 5}]}"#)
+        .unwrap();
+    let lens = app.doc.lens.clone();
+    app.open_lens(&bad);
+    assert_eq!(app.doc.lens, lens);
+    let message = app.message.clone().unwrap_or_default();
+    assert!(message.contains("bad.json") && message.contains("radius"), "{message}");
+    // A good file replaces the lens.
+    let good = dir.path().join("tessar.json");
+    std::fs::write(
+        &good,
+        flare_core::optics::formats::to_json(&flare_core::optics::library::builtin_lens("tessar").unwrap()),
+    )
+    .unwrap();
+    app.open_lens(&good);
+    app.sync();
+    assert_eq!(app.flare().unwrap().system.lens.surfaces.len(), app.doc.lens.surfaces.len());
+    assert_ne!(app.doc.lens, lens);
+}
+
+/// eframe's storage as a map (the app's `save` and the start-up read go through `eframe::{set,get}_value`).
+#[derive(Default)]
+struct MemoryStorage(std::collections::HashMap<String, String>);
+
+impl eframe::Storage for MemoryStorage {
+    fn get_string(&self, key: &str) -> Option<String> {
+        self.0.get(key).cloned()
+    }
+    fn set_string(&mut self, key: &str, value: String) {
+        self.0.insert(key.to_owned(), value);
+    }
+    fn remove_string(&mut self, key: &str) {
+        self.0.remove(key);
+    }
+    fn flush(&mut self) {}
+}
+
+#[test]
+fn the_session_round_trips_through_eframes_storage() {
+    use eframe::App as _;
+    let mut app = FlareLabApp::new(None, None);
+    app.doc.light_deg = [12.5, -3.0];
+    app.doc.aperture.blades = 7;
+    app.doc.ghost_mut(2, 6).gain = 0.25;
+    app.doc.lens.surfaces[0].radius_mm *= 1.01;
+    let mut storage = MemoryStorage::default();
+    app.save(&mut storage);
+    let restored = flarelab::app::restore(&storage).expect("the stored session reads back");
+    assert_eq!(restored, app.doc);
+    // A damaged session is ignored, not a crash.
+    let key = storage.0.keys().next().cloned().unwrap();
+    storage.0.insert(key, "{ damaged".into());
+    assert!(flarelab::app::restore(&storage).is_none());
 }
