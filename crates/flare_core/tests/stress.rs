@@ -69,7 +69,11 @@ proptest! {
     }
 
     /// As the ray's pupil height and angle shrink together by t, |exact - paraxial| shrinks like t^3
-    /// (third-order aberrations), on the image path and on ghost paths.
+    /// (third-order aberrations) or faster, on the image path and on ghost paths. Halving t must divide the
+    /// last error above rounding by at least 6.5 (a wrong paraxial matrix leaves an O(t) error: a ratio of
+    /// 2). There is no upper bound: where a ghost's third-order coefficient nearly cancels, the fifth order
+    /// dominates over the sampled range and the ratio reaches 12 to 60 (saved case `2f9bb245`: ghost (3, 5),
+    /// ratios 62, 11.8).
     #[test]
     fn paraxial_and_exact_converge_like_h_cubed(
         lens in lens_strategy(2, 12),
@@ -96,15 +100,17 @@ proptest! {
             // h^3 is the asymptotic law: halve until the error is small, then the last ratio must be near 8.
             let errors: Option<Vec<f64>> = (0..7).map(|k| error(0.5f64.powi(k))).collect();
             let Some(errors) = errors else { continue };
-            // Below 1e-10 mm the difference is rounding, not aberration.
-            let usable: Vec<f64> = errors.iter().copied().take_while(|&e| e > 1e-10).collect();
+            // Below 1e-9 mm (a picometre) the difference is rounding, not aberration: a ghost path of a dozen
+            // surfaces, with its magnification, rounds the landing height at the 1e-10 mm level (case
+            // `2f9bb245`: 5e-10 mm after three halvings, its ratio down to 4.9).
+            let usable: Vec<f64> = errors.iter().copied().take_while(|&e| e > 1e-9).collect();
             if usable.len() < 2 {
                 prop_assert!(errors[0] < 1e-6, "a tiny ray far from paraxial: {errors:?}");
                 continue;
             }
             let n = usable.len();
             let ratio = usable[n - 2] / usable[n - 1];
-            prop_assert!((6.5..9.5).contains(&ratio), "{:?}: errors {usable:?}, last ratio {ratio:.2}", path.kind);
+            prop_assert!(ratio >= 6.5, "{:?}: errors {usable:?}, last ratio {ratio:.2}", path.kind);
             ratios_checked += 1;
         }
         prop_assert!(ratios_checked >= 1, "the image path at small height and angle always lands");
