@@ -349,9 +349,7 @@ impl FlareLabApp {
         let lut_scene = match (&self.lut, &d.blend.lut) {
             (Some(live), crate::document::LutSource::Simulated { .. } | crate::document::LutSource::Photo { .. }) => {
                 let photo = live.lut.kind == LutKind::Photo;
-                let (s, l) = live.scenes(flare, d.light_deg, w, h, &d.blend_settings(), !photo);
-                scene = s;
-                Some(l)
+                Some(live.blend_into(flare, &mut scene, d.light_deg, &d.blend_settings(), !photo))
             }
             _ => None,
         };

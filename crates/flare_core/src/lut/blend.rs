@@ -444,15 +444,30 @@ impl LiveLut {
         paraxial: bool,
     ) -> (FlareScene, LutScene) {
         let (mut scene, _) = flare.scene(light_deg, width, height);
+        let lut_scene = self.blend_into(flare, &mut scene, light_deg, blend, paraxial);
+        (scene, lut_scene)
+    }
+
+    /// [`Self::scenes`] on a paraxial scene already built for `light_deg` (by [`crate::flare::PreparedFlare::scene`],
+    /// at the scene's size): weights its LUT ghosts' sprites (or drops every sprite when `paraxial` is false)
+    /// and returns the LUT instances.
+    pub fn blend_into(
+        &self,
+        flare: &crate::flare::PreparedFlare,
+        scene: &mut FlareScene,
+        light_deg: [f64; 2],
+        blend: &BlendSettings,
+        paraxial: bool,
+    ) -> LutScene {
         let u = crate::render::light_slopes_for_frame_position(light_deg[0], light_deg[1]);
-        let lut_scene = LutScene::build(&self.lut, &self.layout, &flare.system, u, width, height, blend);
+        let lut_scene = LutScene::build(&self.lut, &self.layout, &flare.system, u, scene.width, scene.height, blend);
         if paraxial {
-            lut_scene.apply_paraxial_weights(&mut scene);
+            lut_scene.apply_paraxial_weights(scene);
         } else {
             scene.instances.clear();
             scene.instance_ghosts.clear();
         }
-        (scene, lut_scene)
+        lut_scene
     }
 
     /// The blended ghosts on the CPU (no starburst): the paraxial pass, then the LUT pass.
