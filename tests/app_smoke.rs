@@ -19,6 +19,14 @@ fn have_xvfb() -> bool {
     true
 }
 
+/// A scratch home for the app and, inside it, the folder Xvfb keeps its screen in.
+fn scratch() -> (tempfile::TempDir, std::path::PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    let fb = dir.path().join("fb");
+    std::fs::create_dir_all(&fb).unwrap();
+    (dir, fb)
+}
+
 /// Runs `script` (sh) under a fresh Xvfb of `screen` with its framebuffer in `fbdir`; stdout + stderr.
 fn under_xvfb(screen: &str, fbdir: &Path, home: &Path, script: &str) -> String {
     let out = Command::new("xvfb-run")
@@ -68,9 +76,7 @@ fn the_app_opens_on_the_default_lens_and_shows_a_flare() {
     if !have_xvfb() {
         return;
     }
-    let dir = tempfile::tempdir().unwrap();
-    let fb = dir.path().join("fb");
-    std::fs::create_dir_all(&fb).unwrap();
+    let (dir, fb) = scratch();
     let shot = dir.path().join("screen.xwd");
     let app = env!("CARGO_BIN_EXE_flarelab");
     // Start the app, give it time to draw (a debug build on lavapipe is slow), copy the screen, stop it.
@@ -110,9 +116,7 @@ fn the_drag_bench_sweeps_the_light_and_reports_frame_times() {
     if !have_xvfb() {
         return;
     }
-    let dir = tempfile::tempdir().unwrap();
-    let fb = dir.path().join("fb");
-    std::fs::create_dir_all(&fb).unwrap();
+    let (dir, fb) = scratch();
     let app = env!("CARGO_BIN_EXE_flarelab");
     let frames = 20;
     let script = format!("FLARELAB_VIEW_PX=1280x720 FLARELAB_DRAG_BENCH={frames} timeout 120 '{app}'");
