@@ -1,7 +1,7 @@
 //! `flarelab classify`, `flarelab bake`, `flarelab photo-lut`: the LUT ghosts from the command line.
 
 use std::path::PathBuf;
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
@@ -64,6 +64,9 @@ pub struct BakeArgs {
     /// Refine theta while the interpolated middle entry is off by more than this (relative L1).
     #[arg(long, default_value_t = BakeSettings::default().tolerance)]
     pub tolerance: f64,
+    /// Finest theta step, degrees (an interval narrower than twice this is not split).
+    #[arg(long, default_value_t = BakeSettings::default().min_step_deg)]
+    pub min_step: f64,
     /// A previous LUT of this lens: ghosts whose settings are unchanged are kept, not re-baked.
     #[arg(long)]
     pub update: Option<PathBuf>,
@@ -153,8 +156,11 @@ pub fn bake_lut(
         );
     }
     let cancel = AtomicBool::new(false);
+    let printed = AtomicUsize::new(0);
     let progress = |p: BakeProgress| {
-        if !quiet && (p.entries.is_multiple_of(50) || p.ghosts_done == p.ghosts_total) {
+        // Entries come a column (every azimuth of one theta) at a time: print as each 50 is passed.
+        let bucket = p.entries / 50;
+        if !quiet && (printed.swap(bucket, Ordering::Relaxed) != bucket || p.ghosts_done == p.ghosts_total) {
             eprint!(
                 "\rbaking: {} entries, {}/{} ghosts ({} kept), {:.1} s   ",
                 p.entries,
@@ -250,6 +256,7 @@ pub fn bake_command(args: &BakeArgs) -> Result<()> {
         grid: args.grid,
         phi_steps: args.phi_steps,
         tolerance: args.tolerance,
+        min_step_deg: args.min_step,
         ..BakeSettings::default()
     };
     let (lut, _, seconds) = bake_lut(&flare, &renderer, &args.choice, &settings, previous.as_ref(), false)?;

@@ -136,6 +136,28 @@ impl Window {
     }
 }
 
+/// A window of the sensor plane seen with the light turned by `turn_deg` about the optical axis
+/// (counter-clockwise, x right, y up) from the light a render is asked for ([`RayGridRenderer::render_turned`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct View {
+    pub window: Window,
+    pub turn_deg: f64,
+}
+
+impl View {
+    /// `v` as this view sees it: its landing point (sensor mm, in `v.pixel` when traced) and stop coordinates
+    /// turned, the landing point then in the window's pixels.
+    fn see(&self, v: &Vertex) -> Vertex {
+        let (s, c) = self.turn_deg.to_radians().sin_cos();
+        let turn = |p: [f64; 2]| if self.turn_deg == 0.0 { p } else { [c * p[0] - s * p[1], s * p[0] + c * p[1]] };
+        let mut seen = *v;
+        seen.stops = v.stops.map(turn);
+        seen.pixel = self.window.to_pixel(turn(v.pixel));
+        seen.valid = v.valid && seen.pixel.iter().all(|c| c.is_finite());
+        seen
+    }
+}
+
 /// One ghost at one wavelength, ready to trace.
 #[derive(Clone, Debug)]
 struct Job {
@@ -254,6 +276,35 @@ impl Accumulator {
         self
     }
 
+    /// The image of `window`: energy per pixel / pixel area = irradiance; moments likewise in irradiance x
+    /// pixel^2, as the paraxial renderer's.
+    fn into_image(self, window: &Window) -> RayGridImage {
+        let pixel_area_mm2 = window.px_per_mm().powi(-2);
+        let moments = self
+            .moments
+            .iter()
+            .map(|m| GhostMoments {
+                energy: m.energy / pixel_area_mm2,
+                sum_x: m.sum_x / pixel_area_mm2,
+                sum_y: m.sum_y / pixel_area_mm2,
+            })
+            .collect();
+        let pixels = self
+            .energy
+            .iter()
+            .map(|e| {
+                let v = e.map(|c| (c / pixel_area_mm2) as f32);
+                let v = v.map(|c| if c.is_finite() && c > 0.0 { c } else { 0.0 });
+                [v[0], v[1], v[2], 1.0]
+            })
+            .collect();
+        RayGridImage {
+            hdr: HdrImage { width: self.width as u32, height: self.height as u32, pixels },
+            moments,
+            stats: self.stats,
+        }
+    }
+
     /// Adds `energy` (scalar, before the spectral weight) at pixel (x, y) when it lies in the frame.
     fn add(&mut self, x: i64, y: i64, energy: f64, job: &JobFrame) {
         if x < 0 || y < 0 || x >= self.width as i64 || y >= self.height as i64 || energy.is_nan() || energy <= 0.0 {
@@ -361,55 +412,57 @@ impl RayGridRenderer {
         grid: Grid,
         selected: impl Fn(usize) -> bool + Sync,
     ) -> Result<RayGridImage, RayGridError> {
-        let (width, height) = (window.width, window.height);
+        let mut images = self.render_turned(light_deg, &[View { window: *window, turn_deg: 0.0 }], grid, selected)?;
+        Ok(images.remove(0))
+    }
+
+    /// Renders several [`View`]s from one set of traced rays: view k is the image for the light turned by
+    /// `turn_deg` about the optical axis, in its own window. A rotationally symmetric lens turns its image
+    /// with the light, all but the stop: so each traced ray is turned (its landing point and its stop
+    /// coordinates, where the mask is looked up) instead of traced again. This is how a LUT bake makes the
+    /// azimuths of one theta for the price of one trace.
+    pub fn render_turned(
+        &self,
+        light_deg: [f64; 2],
+        views: &[View],
+        grid: Grid,
+        selected: impl Fn(usize) -> bool + Sync,
+    ) -> Result<Vec<RayGridImage>, RayGridError> {
         if !GRID_RANGE.contains(&grid.cells()) {
             return Err(RayGridError::Grid(grid.cells()));
         }
-        if width == 0 || height == 0 {
-            return Err(RayGridError::Size(width, height));
-        }
-        if !(window.width_mm.is_finite() && window.width_mm > 0.0 && window.centre_mm.iter().all(|c| c.is_finite())) {
-            return Err(RayGridError::Window(window.width_mm));
+        for view in views {
+            let window = &view.window;
+            if window.width == 0 || window.height == 0 {
+                return Err(RayGridError::Size(window.width, window.height));
+            }
+            if !(window.width_mm.is_finite()
+                && window.width_mm > 0.0
+                && window.centre_mm.iter().all(|c| c.is_finite())
+                && view.turn_deg.is_finite())
+            {
+                return Err(RayGridError::Window(window.width_mm));
+            }
         }
         if !light_deg.iter().all(|a| a.is_finite() && a.abs() <= 89.0) {
             return Err(RayGridError::Angle(light_deg));
         }
         let u = light_slopes_for_frame_position(light_deg[0], light_deg[1]);
-        let (w, h) = (width as usize, height as usize);
         let ghosts = self.ghost_count();
-        let acc = self
+        let fresh = || -> Vec<Accumulator> {
+            views.iter().map(|v| Accumulator::new(v.window.width as usize, v.window.height as usize, ghosts)).collect()
+        };
+        let merge = |a: Vec<Accumulator>, b: Vec<Accumulator>| a.into_iter().zip(b).map(|(a, b)| a.merge(b)).collect();
+        let accs = self
             .jobs
             .par_iter()
             .filter(|job| selected(job.ghost))
-            .fold(
-                || Accumulator::new(w, h, ghosts),
-                |mut acc, job| {
-                    self.render_job(job, u, window, grid, &mut acc);
-                    acc
-                },
-            )
-            .reduce(|| Accumulator::new(w, h, ghosts), Accumulator::merge);
-        // Energy per pixel / pixel area = irradiance; moments likewise in irradiance x pixel^2, as the
-        // paraxial renderer's.
-        let pixel_area_mm2 = window.px_per_mm().powi(-2);
-        let mut moments = acc.moments;
-        for m in &mut moments {
-            *m = GhostMoments {
-                energy: m.energy / pixel_area_mm2,
-                sum_x: m.sum_x / pixel_area_mm2,
-                sum_y: m.sum_y / pixel_area_mm2,
-            };
-        }
-        let pixels = acc
-            .energy
-            .iter()
-            .map(|e| {
-                let v = e.map(|c| (c / pixel_area_mm2) as f32);
-                let v = v.map(|c| if c.is_finite() && c > 0.0 { c } else { 0.0 });
-                [v[0], v[1], v[2], 1.0]
+            .fold(fresh, |mut accs, job| {
+                self.render_job(job, u, views, grid, &mut accs);
+                accs
             })
-            .collect();
-        Ok(RayGridImage { hdr: HdrImage { width, height, pixels }, moments, stats: acc.stats })
+            .reduce(fresh, merge);
+        Ok(views.iter().zip(accs).map(|(view, acc)| acc.into_image(&view.window)).collect())
     }
 
     /// Where ghost `ghost` lands on the sensor plane for a light at the frame position `light_deg`:
@@ -417,40 +470,66 @@ impl RayGridRenderer {
     /// region where the pre-pass found light (each passing ray and its traced neighbours, so the partly lit
     /// cells at the rim are inside). `None` when no ray of the ghost passes.
     pub fn footprint_mm(&self, ghost: usize, light_deg: [f64; 2], cells: usize) -> Option<[f64; 4]> {
+        self.footprints_turned_mm(ghost, light_deg, cells, &[0.0]).remove(0)
+    }
+
+    /// [`Self::footprint_mm`] for the light turned by each of `turns_deg` about the axis (see
+    /// [`Self::render_turned`]), from one set of traced rays.
+    pub fn footprints_turned_mm(
+        &self,
+        ghost: usize,
+        light_deg: [f64; 2],
+        cells: usize,
+        turns_deg: &[f64],
+    ) -> Vec<Option<[f64; 4]>> {
         let u = light_slopes_for_frame_position(light_deg[0], light_deg[1]);
         let d = DVec3::new(u[0], u[1], 1.0).normalize();
         // 1 px per mm over a metre: nothing the lens can image is off this window.
-        let window = Window { centre_mm: [0.0, 0.0], width_mm: 1000.0, width: 1000, height: 1000 };
+        let views: Vec<View> = turns_deg
+            .iter()
+            .map(|&turn_deg| View {
+                window: Window { centre_mm: [0.0, 0.0], width_mm: 1000.0, width: 1000, height: 1000 },
+                turn_deg,
+            })
+            .collect();
         let n = cells.clamp(4, 512);
-        let mut bounds = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+        let empty = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+        let mut bounds = vec![empty; views.len()];
         let mut stats = RayGridStats::default();
         for job in self.jobs.iter().filter(|j| j.ghost == ghost) {
-            let Some((b, _)) = self.grid_bounds(job, u, d, 32, &window, &mut stats) else { continue };
+            let Some((b, _)) = self.grid_bounds(job, u, d, 32, &views, &mut stats) else { continue };
             let stop_count = self.stop_count(job);
             let (dx, dy) = ((b[2] - b[0]) / n as f64, (b[3] - b[1]) / n as f64);
-            let vertices: Vec<Vertex> = (0..=n)
+            let traced: Vec<Vertex> = (0..=n)
                 .flat_map(|iy| (0..=n).map(move |ix| (ix, iy)))
-                .map(|(ix, iy)| self.trace_vertex(job, [b[0] + ix as f64 * dx, b[1] + iy as f64 * dy], d, &window))
+                .map(|(ix, iy)| self.trace(job, [b[0] + ix as f64 * dx, b[1] + iy as f64 * dy], d))
                 .collect();
-            for iy in 0..=n {
-                for ix in 0..=n {
-                    if !vertices[iy * (n + 1) + ix].passes(stop_count) {
-                        continue;
-                    }
-                    for (jx, jy) in (iy.saturating_sub(1)..=(iy + 1).min(n))
-                        .flat_map(|jy| (ix.saturating_sub(1)..=(ix + 1).min(n)).map(move |jx| (jx, jy)))
-                    {
-                        let v = &vertices[jy * (n + 1) + jx];
-                        if v.valid {
-                            let p = window.to_mm(v.pixel);
-                            bounds =
-                                [bounds[0].min(p[0]), bounds[1].min(p[1]), bounds[2].max(p[0]), bounds[3].max(p[1])];
+            for (view, bounds) in views.iter().zip(&mut bounds) {
+                let vertices: Vec<Vertex> = traced.iter().map(|v| view.see(v)).collect();
+                for iy in 0..=n {
+                    for ix in 0..=n {
+                        if !vertices[iy * (n + 1) + ix].passes(stop_count) {
+                            continue;
+                        }
+                        for (jx, jy) in (iy.saturating_sub(1)..=(iy + 1).min(n))
+                            .flat_map(|jy| (ix.saturating_sub(1)..=(ix + 1).min(n)).map(move |jx| (jx, jy)))
+                        {
+                            let v = &vertices[jy * (n + 1) + jx];
+                            if v.valid {
+                                let p = view.window.to_mm(v.pixel);
+                                *bounds = [
+                                    bounds[0].min(p[0]),
+                                    bounds[1].min(p[1]),
+                                    bounds[2].max(p[0]),
+                                    bounds[3].max(p[1]),
+                                ];
+                            }
                         }
                     }
                 }
             }
         }
-        (bounds[0] <= bounds[2] && bounds[1] <= bounds[3]).then_some(bounds)
+        bounds.into_iter().map(|b| (b[0] <= b[2] && b[1] <= b[3]).then_some(b)).collect()
     }
 
     /// How many stop crossings of `job` the masks look at (at most 3).
@@ -458,8 +537,9 @@ impl RayGridRenderer {
         self.system.ghosts[job.ghost].per_wavelength[job.wavelength].matrices.stop_from_entrance.len().min(3)
     }
 
-    /// Traces one ray of `job` from the entrance point `x0` (mm) in direction `d`.
-    fn trace_vertex(&self, job: &Job, x0: [f64; 2], d: DVec3, window: &Window) -> Vertex {
+    /// Traces one ray of `job` from the entrance point `x0` (mm) in direction `d`; its `pixel` is the landing
+    /// point in sensor mm until a [`View`] sees it.
+    fn trace(&self, job: &Job, x0: [f64; 2], d: DVec3) -> Vertex {
         let ray = Ray { origin_mm: DVec3::new(x0[0], x0[1], 0.0), direction: d };
         let stop_radius = self.system.stop_radius_mm;
         let mut v = Vertex { weight: 1.0, ..Vertex::default() };
@@ -482,9 +562,9 @@ impl RayGridRenderer {
         });
         v.ratio = ratio2.sqrt();
         if let Ok(landing) = landing {
-            let pixel = window.to_pixel([landing.point_mm.x, landing.point_mm.y]);
-            v.valid = pixel.iter().all(|c| c.is_finite()) && v.weight.is_finite() && v.ratio.is_finite();
-            v.pixel = pixel;
+            let p = [landing.point_mm.x, landing.point_mm.y];
+            v.valid = p.iter().all(|c| c.is_finite()) && v.weight.is_finite() && v.ratio.is_finite();
+            v.pixel = p;
         }
         v
     }
@@ -499,51 +579,55 @@ impl RayGridRenderer {
         u: [f64; 2],
         d: DVec3,
         coarse: usize,
-        window: &Window,
+        views: &[View],
         stats: &mut RayGridStats,
     ) -> Option<([f64; 4], f64)> {
         let half = self.front_radius_mm * 1.01 + u[0].hypot(u[1]) * self.front_sag_mm;
         let stop_count = self.stop_count(job);
         let step = 2.0 * half / coarse as f64;
         let n = coarse + 1;
-        let mut vertices = Vec::with_capacity(n * n);
+        let mut traced = Vec::with_capacity(n * n);
         for iy in 0..n {
             for ix in 0..n {
                 let x0 = [-half + ix as f64 * step, -half + iy as f64 * step];
-                vertices.push((x0, self.trace_vertex(job, x0, d, window)));
+                traced.push((x0, self.trace(job, x0, d)));
             }
         }
         stats.rays += (n * n) as u64;
         let empty = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
         let grow = |b: [f64; 4], p: [f64; 2]| [b[0].min(p[0]), b[1].min(p[1]), b[2].max(p[0]), b[3].max(p[1])];
-        let (w, h) = (f64::from(window.width), f64::from(window.height));
-        // The cells where light passes and lands in the frame (a cell's landings bound where its rays land).
-        let (mut found, mut landed, mut any_passes) = (empty, empty, false);
-        for iy in 0..coarse {
-            for ix in 0..coarse {
-                let corners =
-                    [iy * n + ix, iy * n + ix + 1, (iy + 1) * n + ix, (iy + 1) * n + ix + 1].map(|k| &vertices[k]);
-                if !corners.iter().any(|(_, v)| v.passes(stop_count)) {
-                    continue;
-                }
-                any_passes = true;
-                let footprint = corners.iter().filter(|(_, v)| v.valid).fold(empty, |b, (_, v)| grow(b, v.pixel));
-                if footprint[0] > w + 1.0 || footprint[1] > h + 1.0 || footprint[2] < -1.0 || footprint[3] < -1.0 {
-                    continue;
-                }
-                for (x0, v) in corners {
-                    found = grow(found, *x0);
-                    if v.passes(stop_count) {
-                        landed = grow(landed, v.pixel);
+        // The cells where light passes and lands in some view's frame (a cell's landings bound where its rays
+        // land); the extent is the largest over the views.
+        let (mut found, mut any_passes, mut extent_px) = (empty, false, 0.0f64);
+        for view in views {
+            let vertices: Vec<([f64; 2], Vertex)> = traced.iter().map(|(x0, v)| (*x0, view.see(v))).collect();
+            let (w, h) = (f64::from(view.window.width), f64::from(view.window.height));
+            let mut landed = empty;
+            for iy in 0..coarse {
+                for ix in 0..coarse {
+                    let corners =
+                        [iy * n + ix, iy * n + ix + 1, (iy + 1) * n + ix, (iy + 1) * n + ix + 1].map(|k| &vertices[k]);
+                    if !corners.iter().any(|(_, v)| v.passes(stop_count)) {
+                        continue;
+                    }
+                    any_passes = true;
+                    let footprint = corners.iter().filter(|(_, v)| v.valid).fold(empty, |b, (_, v)| grow(b, v.pixel));
+                    if footprint[0] > w + 1.0 || footprint[1] > h + 1.0 || footprint[2] < -1.0 || footprint[3] < -1.0 {
+                        continue;
+                    }
+                    for (x0, v) in corners {
+                        found = grow(found, *x0);
+                        if v.passes(stop_count) {
+                            landed = grow(landed, v.pixel);
+                        }
                     }
                 }
             }
+            if landed[0].is_finite() {
+                extent_px = extent_px
+                    .max((landed[2].min(w) - landed[0].max(0.0)).max(landed[3].min(h) - landed[1].max(0.0)).max(0.0));
+            }
         }
-        let extent_px = if landed[0].is_finite() {
-            (landed[2].min(w) - landed[0].max(0.0)).max(landed[3].min(h) - landed[1].max(0.0)).max(0.0)
-        } else {
-            0.0
-        };
         let mut bounds = if found[0].is_finite() {
             [found[0] - step, found[1] - step, found[2] + step, found[3] + step]
         } else {
@@ -565,13 +649,20 @@ impl RayGridRenderer {
         (bounds[0] < bounds[2] && bounds[1] < bounds[3]).then_some((bounds, extent_px))
     }
 
-    #[allow(clippy::too_many_arguments)]
-    fn render_job(&self, job: &Job, u: [f64; 2], window: &Window, grid: Grid, acc: &mut Accumulator) {
-        acc.stats.jobs += 1;
+    /// Traces `job` once and splats it into every view's accumulator (`accs[k]` for `views[k]`).
+    fn render_job(&self, job: &Job, u: [f64; 2], views: &[View], grid: Grid, accs: &mut [Accumulator]) {
+        for acc in accs.iter_mut() {
+            acc.stats.jobs += 1;
+        }
         let d = DVec3::new(u[0], u[1], 1.0).normalize();
         let coarse = (grid.cells() / 2).clamp(16, 64);
-        let Some((b, extent_px)) = self.grid_bounds(job, u, d, coarse, window, &mut acc.stats) else {
-            acc.stats.empty_jobs += 1;
+        let mut stats = RayGridStats::default();
+        let bounds = self.grid_bounds(job, u, d, coarse, views, &mut stats);
+        accs[0].stats.rays += stats.rays;
+        let Some((b, extent_px)) = bounds else {
+            for acc in accs.iter_mut() {
+                acc.stats.empty_jobs += 1;
+            }
             return;
         };
         let grid = grid.for_extent(extent_px);
@@ -585,31 +676,39 @@ impl RayGridRenderer {
             triangle_flux: d.z * 0.5 * (b[2] - b[0]) * (b[3] - b[1]) / (grid * grid) as f64,
         };
         let (dx, dy) = ((b[2] - b[0]) / grid as f64, (b[3] - b[1]) / grid as f64);
-        let mut previous: Vec<Vertex> = Vec::with_capacity(grid + 1);
-        let mut current: Vec<Vertex> = Vec::with_capacity(grid + 1);
-        let mut any = false;
+        let mut traced: Vec<Vertex> = Vec::with_capacity(grid + 1);
+        // Per view: the previous and the current row as it sees them.
+        let mut previous: Vec<Vec<Vertex>> = vec![Vec::with_capacity(grid + 1); views.len()];
+        let mut current: Vec<Vec<Vertex>> = vec![Vec::with_capacity(grid + 1); views.len()];
+        let mut any = vec![false; views.len()];
         for iy in 0..=grid {
-            current.clear();
+            traced.clear();
             for ix in 0..=grid {
-                let x0 = [b[0] + ix as f64 * dx, b[1] + iy as f64 * dy];
-                current.push(self.trace_vertex(job, x0, d, window));
+                traced.push(self.trace(job, [b[0] + ix as f64 * dx, b[1] + iy as f64 * dy], d));
             }
-            acc.stats.rays += (grid + 1) as u64;
-            if iy > 0 {
-                for ix in 0..grid {
-                    let (v00, v10, v01, v11) = (&previous[ix], &previous[ix + 1], &current[ix], &current[ix + 1]);
-                    for tri in [[v00, v10, v11], [v00, v11, v01]] {
-                        if splat_triangle(tri, &frame, acc) {
-                            acc.stats.triangles += 1;
-                            any = true;
+            accs[0].stats.rays += (grid + 1) as u64;
+            for (k, view) in views.iter().enumerate() {
+                current[k].clear();
+                current[k].extend(traced.iter().map(|v| view.see(v)));
+                if iy > 0 {
+                    let (previous, current, acc) = (&previous[k], &current[k], &mut accs[k]);
+                    for ix in 0..grid {
+                        let (v00, v10, v01, v11) = (&previous[ix], &previous[ix + 1], &current[ix], &current[ix + 1]);
+                        for tri in [[v00, v10, v11], [v00, v11, v01]] {
+                            if splat_triangle(tri, &frame, acc) {
+                                acc.stats.triangles += 1;
+                                any[k] = true;
+                            }
                         }
                     }
                 }
             }
             std::mem::swap(&mut previous, &mut current);
         }
-        if !any {
-            acc.stats.empty_jobs += 1;
+        for (acc, any) in accs.iter_mut().zip(any) {
+            if !any {
+                acc.stats.empty_jobs += 1;
+            }
         }
     }
 }

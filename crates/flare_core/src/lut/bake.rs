@@ -3,17 +3,22 @@
 //! # How it works
 //! Per ghost (ghosts in parallel with rayon; inside a ghost, its wavelengths in parallel too), and per azimuth
 //! of the symmetry wedge ([`super::Symmetry::phi_samples`]):
-//! 1. **An entry** at (theta, phi): the light at `theta` from the axis with the azimuth `axis + phi`; where the
-//!    ghost lands is found by [`RayGridRenderer::footprint_mm`], the window around it gets at most
-//!    [`BakeSettings::res`] texels across (never finer than [`super::MIN_TEXEL_MM`]), and the ghost alone is
-//!    rendered into it by the reference renderer ([`Grid::Adaptive`], up to [`BakeSettings::grid`] cells).
-//!    Alpha is the coverage: luminance over 5% of the entry's peak, clamped to 1.
+//! 1. **A column of entries** at theta, one per azimuth phi of the wedge (the light at `theta` from the axis
+//!    with the azimuth `axis + phi`), from one set of traced rays: the lens is rotationally symmetric, so the
+//!    rays traced for the first azimuth, turned about the axis, are the rays of every other; only the stop's
+//!    blades do not turn, and the mask is looked up at the turned stop coordinates
+//!    ([`RayGridRenderer::render_turned`]). Where the ghost lands is found by
+//!    [`RayGridRenderer::footprints_turned_mm`]; the window around it gets at most [`BakeSettings::res`] texels
+//!    across (never finer than [`super::MIN_TEXEL_MM`]), and the ghost alone is rendered into it by the
+//!    reference renderer ([`Grid::Adaptive`], up to [`BakeSettings::grid`] cells). Alpha is the coverage
+//!    ([`super::texels_with_coverage`]).
 //! 2. **Thetas where the pattern changes**: the angles start at `initial_steps` even steps from 0 to the
 //!    useful field (the light angle whose image reaches the corner of the 36 x 24 mm sensor). Every interval
-//!    is then split at its middle, and the middle entry kept, while the run time's prediction of it (the two
-//!    neighbours interpolated in their paraxial frames, exactly as [`super::blend`] draws them) is off by more
-//!    than [`BakeSettings::tolerance`] (relative L1 of luminance, worst azimuth), down to
-//!    [`BakeSettings::min_step_deg`].
+//!    wider than twice [`BakeSettings::min_step_deg`] gets its middle rendered and kept; while the run time's
+//!    prediction of that middle (the two neighbours interpolated in their paraxial frames, exactly as
+//!    [`super::blend`] draws them, plainly and fitted onto one shape by [`super::fit_picks`]) is off by more
+//!    than [`BakeSettings::tolerance`] (relative L1 of luminance, worst azimuth), both halves are split again.
+//!    Otherwise both halves are final, and fitted at run time when the fitted prediction was the better one.
 //!
 //! Progress is reported per entry through a callback, and the bake stops at the next entry when the cancel
 //! flag is set. Given the previous LUT, a ghost whose key (the lens fingerprint, the ghost and the bake
@@ -26,10 +31,13 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use half::f16;
 use rayon::prelude::*;
 
-use super::{FNV_OFFSET, GhostLut, LutEntry, LutGhost, LutKind, MIN_TEXEL_MM, Symmetry, fnv1a, light_position_deg};
+use super::{
+    FNV_OFFSET, Fit, GhostLut, LutEntry, LutGhost, LutKind, MIN_TEXEL_MM, Mat2, Symmetry, fit_picks, fnv1a,
+    light_position_deg, mat_apply, mat_det, texels_with_coverage,
+};
 use crate::flare::PreparedFlare;
 use crate::metrics::luminance;
-use crate::raytrace::{Grid, RayGridRenderer, Window};
+use crate::raytrace::{Grid, RayGridRenderer, View, Window};
 use crate::render::light_slopes_for_frame_position;
 
 /// How a LUT is baked.
@@ -123,6 +131,9 @@ impl BakeSettings {
     }
 }
 
+/// An entry's window reaches this many times the sensor's half-diagonal from the axis, at most.
+pub const VISIBLE_MARGIN: f64 = 1.15;
+
 /// Renders one entry: ghost `g` with the light at `theta_deg` and the azimuth `axis + phi_deg`.
 pub fn render_entry(
     flare: &PreparedFlare,
@@ -133,43 +144,77 @@ pub fn render_entry(
     symmetry: &Symmetry,
     settings: &BakeSettings,
 ) -> LutEntry {
-    let light = light_position_deg(theta_deg, symmetry.axis_deg + phi_deg);
-    let u = light_slopes_for_frame_position(light[0], light[1]);
-    let paraxial = flare.system.paraxial_frame(g, u, MIN_TEXEL_MM);
-    let empty = LutEntry::empty(theta_deg, phi_deg, paraxial);
-    let Some(b) = renderer.footprint_mm(g, light, 48) else { return empty };
-    let (w_mm, h_mm) = ((b[2] - b[0]).max(0.0), (b[3] - b[1]).max(0.0));
-    let texel_mm = (w_mm.max(h_mm) / f64::from(settings.res - 2)).max(MIN_TEXEL_MM);
-    // Two texels of margin each side: the bilinear splats of the rim's triangles land there.
-    let (width, height) = ((w_mm / texel_mm).ceil() as u32 + 4, (h_mm / texel_mm).ceil() as u32 + 4);
-    let window = Window {
-        centre_mm: [0.5 * (b[0] + b[2]), 0.5 * (b[1] + b[3])],
-        width_mm: texel_mm * f64::from(width),
-        width,
-        height,
-    };
-    let Ok(image) = renderer.render_window(light, &window, Grid::Adaptive(settings.grid), |k| k == g) else {
-        return empty;
-    };
-    let peak = image.hdr.pixels.iter().map(|p| luminance([p[0], p[1], p[2]].map(f64::from))).fold(0.0, f64::max);
-    if peak <= 0.0 {
-        return empty;
+    render_column(flare, renderer, g, theta_deg, &[phi_deg], symmetry, settings).remove(0)
+}
+
+/// Renders the entries of ghost `g` at `theta_deg` for every azimuth `axis + phi` of `phis_deg`, from one
+/// set of traced rays ([`RayGridRenderer::render_turned`]: the lens turns the image with the light).
+pub fn render_column(
+    flare: &PreparedFlare,
+    renderer: &RayGridRenderer,
+    g: usize,
+    theta_deg: f64,
+    phis_deg: &[f64],
+    symmetry: &Symmetry,
+    settings: &BakeSettings,
+) -> Vec<LutEntry> {
+    // Traced for the light at the first azimuth; each entry's view turns it on to its own.
+    let base_deg = phis_deg.first().copied().unwrap_or(0.0);
+    let base = light_position_deg(theta_deg, symmetry.axis_deg + base_deg);
+    let turns: Vec<f64> = phis_deg.iter().map(|p| p - base_deg).collect();
+    let footprints = renderer.footprints_turned_mm(g, base, 48, &turns);
+    let mut entries: Vec<LutEntry> = Vec::with_capacity(phis_deg.len());
+    let mut views = Vec::new();
+    for (&phi_deg, footprint) in phis_deg.iter().zip(&footprints) {
+        let light = light_position_deg(theta_deg, symmetry.axis_deg + phi_deg);
+        let u = light_slopes_for_frame_position(light[0], light[1]);
+        let paraxial = flare.system.paraxial_frame(g, u, MIN_TEXEL_MM);
+        let mut entry = LutEntry::empty(theta_deg, phi_deg, paraxial);
+        // Only what can reach the frame: the sensor's corners at any azimuth, with a margin for the frames
+        // that interpolation and fitting move an entry by.
+        let reach = VISIBLE_MARGIN * super::SENSOR_HALF_DIAGONAL_MM;
+        let footprint = footprint
+            .map(|b| [b[0].max(-reach), b[1].max(-reach), b[2].min(reach), b[3].min(reach)])
+            .filter(|b| b[0] < b[2] && b[1] < b[3]);
+        if let Some(b) = footprint {
+            let (w_mm, h_mm) = ((b[2] - b[0]).max(0.0), (b[3] - b[1]).max(0.0));
+            let texel_mm = (w_mm.max(h_mm) / f64::from(settings.res - 2)).max(MIN_TEXEL_MM);
+            // Two texels of margin each side: the bilinear splats of the rim's triangles land there.
+            let (width, height) = ((w_mm / texel_mm).ceil() as u32 + 4, (h_mm / texel_mm).ceil() as u32 + 4);
+            let window = Window {
+                centre_mm: [0.5 * (b[0] + b[2]), 0.5 * (b[1] + b[3])],
+                width_mm: texel_mm * f64::from(width),
+                width,
+                height,
+            };
+            (entry.centre_mm, entry.texel_mm, entry.width, entry.height) = (window.centre_mm, texel_mm, width, height);
+            views.push((entries.len(), View { window, turn_deg: phi_deg - base_deg }));
+        }
+        entries.push(entry);
     }
-    let texels = image
-        .hdr
-        .pixels
-        .iter()
-        .map(|p| {
-            let alpha = (luminance([p[0], p[1], p[2]].map(f64::from)) / (0.05 * peak)).min(1.0) as f32;
-            [p[0], p[1], p[2], alpha].map(|v| f16::from_f32(if v.is_finite() { v.max(0.0) } else { 0.0 }))
-        })
-        .collect();
-    LutEntry { theta_deg, phi_deg, paraxial, centre_mm: window.centre_mm, texel_mm, width, height, texels }
+    if views.is_empty() {
+        return entries;
+    }
+    let only: Vec<View> = views.iter().map(|v| v.1).collect();
+    let Ok(images) = renderer.render_turned(base, &only, Grid::Adaptive(settings.grid), |k| k == g) else {
+        return entries.into_iter().map(|e| LutEntry::empty(e.theta_deg, e.phi_deg, e.paraxial)).collect();
+    };
+    for ((k, _), image) in views.into_iter().zip(images) {
+        let entry = &mut entries[k];
+        let peak = image.hdr.pixels.iter().map(|p| luminance([p[0], p[1], p[2]].map(f64::from))).fold(0.0, f64::max);
+        if peak <= 0.0 {
+            *entry = LutEntry::empty(entry.theta_deg, entry.phi_deg, entry.paraxial);
+            continue;
+        }
+        entry.texels = texels_with_coverage(image.hdr.pixels.iter().map(|p| [p[0], p[1], p[2]]));
+    }
+    entries
 }
 
 /// The run time's prediction of `target` from `a` and `b` (weights 1 - t, t), in `target`'s texels, and its
-/// relative L1 error (luminance) against `target`.
-pub fn interpolation_error(a: &LutEntry, b: &LutEntry, t: f64, target: &LutEntry) -> f64 {
+/// relative L1 error (luminance) against `target`. With `fitted` the two are first fitted onto one shape
+/// ([`super::fit_picks`]), as the run time does for an interval baked as fitted.
+pub fn interpolation_error(a: &LutEntry, b: &LutEntry, t: f64, target: &LutEntry, fitted: bool) -> f64 {
     if target.is_empty() {
         // All of the neighbours' light would be drawn where there is none.
         let predicted = (1.0 - t) * a.energy() + t * b.energy();
@@ -183,19 +228,33 @@ pub fn interpolation_error(a: &LutEntry, b: &LutEntry, t: f64, target: &LutEntry
         1.0
     };
     let window = target.window();
-    let sample = |e: &LutEntry, p_mm: [f64; 2]| -> f64 {
+    let identity = [[1.0, 0.0], [0.0, 1.0]];
+    let fits = if fitted {
+        fit_picks(&[(a.shape(), identity, 1.0 - t), (b.shape(), identity, t)])
+    } else {
+        vec![Fit { linear: identity, offset: [0.0; 2] }; 2]
+    };
+    // Per neighbour: the inverse of its fit (target's normalised position to its own) and its area factor.
+    let inverse = |f: &Fit| {
+        let d = mat_det(f.linear);
+        let inv = [[f.linear[1][1] / d, -f.linear[0][1] / d], [-f.linear[1][0] / d, f.linear[0][0] / d]];
+        (inv, f.offset, d.abs())
+    };
+    let maps = [inverse(&fits[0]), inverse(&fits[1])];
+    let sample = |e: &LutEntry, (inv, offset, det): (Mat2, [f64; 2], f64), p_mm: [f64; 2]| -> f64 {
         if e.is_empty() {
             return 0.0;
         }
-        // The same normalised position in e's paraxial frame.
+        // The target's normalised position, carried back through e's fit into e's paraxial frame.
         let n = [
-            (p_mm[0] - target.paraxial.centre_mm[0]) / target.paraxial.half_mm,
-            (p_mm[1] - target.paraxial.centre_mm[1]) / target.paraxial.half_mm,
+            (p_mm[0] - target.paraxial.centre_mm[0]) / target.paraxial.half_mm - offset[0],
+            (p_mm[1] - target.paraxial.centre_mm[1]) / target.paraxial.half_mm - offset[1],
         ];
+        let n = mat_apply(inv, n);
         let q =
             [e.paraxial.centre_mm[0] + e.paraxial.half_mm * n[0], e.paraxial.centre_mm[1] + e.paraxial.half_mm * n[1]];
-        // Irradiance scales with 1 / area when the frame is scaled.
-        let area = (e.paraxial.half_mm / target.paraxial.half_mm).powi(2);
+        // Irradiance scales with 1 / area when the frame is scaled (and fitted).
+        let area = (e.paraxial.half_mm / target.paraxial.half_mm).powi(2) / det;
         let px = e.window().to_pixel(q);
         let v = e.sample((px[0] / f64::from(e.width)) as f32, (px[1] / f64::from(e.height)) as f32);
         luminance([v[0], v[1], v[2]].map(f64::from)) * area
@@ -205,7 +264,7 @@ pub fn interpolation_error(a: &LutEntry, b: &LutEntry, t: f64, target: &LutEntry
     for y in 0..target.height {
         for x in 0..target.width {
             let p_mm = window.to_mm([f64::from(x) + 0.5, f64::from(y) + 0.5]);
-            let predicted = ratio * ((1.0 - t) * sample(a, p_mm) + t * sample(b, p_mm));
+            let predicted = ratio * ((1.0 - t) * sample(a, maps[0], p_mm) + t * sample(b, maps[1], p_mm));
             let p = target.texels[(y * target.width + x) as usize];
             error += (predicted - luminance([p[0], p[1], p[2]].map(f16::to_f64))).abs();
             predicted_sum += predicted;
@@ -272,26 +331,24 @@ pub fn bake(
                 return Ok(old.clone());
             }
             let render = |theta: f64| -> Result<Vec<LutEntry>, BakeError> {
-                phis.iter()
-                    .map(|&phi| {
-                        if cancel.load(Ordering::Relaxed) {
-                            return Err(BakeError::Cancelled);
-                        }
-                        let entry = render_entry(flare, renderer, g, theta, phi, &symmetry, settings);
-                        entries_done.fetch_add(1, Ordering::Relaxed);
-                        report();
-                        Ok(entry)
-                    })
-                    .collect()
+                if cancel.load(Ordering::Relaxed) {
+                    return Err(BakeError::Cancelled);
+                }
+                let column = render_column(flare, renderer, g, theta, &phis, &symmetry, settings);
+                entries_done.fetch_add(column.len(), Ordering::Relaxed);
+                report();
+                Ok(column)
             };
             let steps = settings.initial_steps;
-            let mut columns: Vec<(f64, Vec<LutEntry>)> = (0..=steps)
+            // (theta, its entries, whether the interval from it to the next is fitted).
+            let mut columns: Vec<(f64, Vec<LutEntry>, bool)> = (0..=steps)
                 .map(|k| {
                     let theta = theta_max * f64::from(k) / f64::from(steps);
-                    render(theta).map(|e| (theta, e))
+                    render(theta).map(|e| (theta, e, false))
                 })
                 .collect::<Result<_, _>>()?;
-            // Refine: split each interval while its middle is mispredicted (depth-first, left to right).
+            // Refine: split each interval while its middle is mispredicted both plainly and fitted
+            // (depth-first, left to right); a kept interval is fitted when that predicted its middle better.
             let mut k = 0;
             while k + 1 < columns.len() {
                 let (a, b) = (columns[k].0, columns[k + 1].0);
@@ -301,15 +358,21 @@ pub fn bake(
                 }
                 let middle = 0.5 * (a + b);
                 let entries = render(middle)?;
-                let worst = entries
-                    .iter()
-                    .enumerate()
-                    .map(|(p, e)| interpolation_error(&columns[k].1[p], &columns[k + 1].1[p], 0.5, e))
-                    .fold(0.0, f64::max);
-                if worst > settings.tolerance {
-                    columns.insert(k + 1, (middle, entries));
-                } else {
-                    k += 1;
+                let worst = |fitted: bool| {
+                    entries
+                        .iter()
+                        .enumerate()
+                        .map(|(p, e)| interpolation_error(&columns[k].1[p], &columns[k + 1].1[p], 0.5, e, fitted))
+                        .fold(0.0, f64::max)
+                };
+                let (plain, fitted) = (worst(false), worst(true));
+                let done = plain.min(fitted) <= settings.tolerance;
+                // The middle is kept either way (it cost a render): a well predicted interval is then two,
+                // fitted or not as the better prediction of the middle says.
+                columns[k].2 = done && fitted < plain;
+                columns.insert(k + 1, (middle, entries, done && fitted < plain));
+                if done {
+                    k += 2;
                 }
             }
             ghosts_done.fetch_add(1, Ordering::Relaxed);
@@ -319,6 +382,7 @@ pub fn bake(
                 surfaces: [model.i as u32, model.j as u32],
                 key,
                 thetas_deg: columns.iter().map(|c| c.0).collect(),
+                fitted: columns[..columns.len() - 1].iter().map(|c| c.2).collect(),
                 phis_deg: phis.clone(),
                 entries: columns.into_iter().flat_map(|c| c.1).collect(),
             })

@@ -26,7 +26,9 @@
 use bytemuck::{Pod, Zeroable};
 use rayon::prelude::*;
 
-use super::{GhostLut, LutKind, Mat2, light_direction_deg, mat_apply, mat_mul, rotation};
+use super::{
+    EntryShape, Fit, GhostLut, LutEntry, LutKind, fit_picks, light_direction_deg, mat_apply, mat_mul, rotation,
+};
 use crate::ghost::{GhostSystem, ParaxialFrame};
 use crate::raytrace::Window;
 use crate::render::{FlareScene, HdrImage};
@@ -250,14 +252,14 @@ impl LutScene {
     /// The instances of every LUT ghost for light slopes `u` in a `width` x `height` frame. `system` is the live
     /// lens's (for a photo LUT it is not used).
     pub fn build(
-        lut: &GhostLut,
-        layout: &AtlasLayout,
+        live_lut: &LiveLut,
         system: &GhostSystem,
         u: [f64; 2],
         width: u32,
         height: u32,
         blend: &BlendSettings,
     ) -> Self {
+        let (lut, layout) = (&live_lut.lut, &live_lut.layout);
         let out = Window::frame(width, height);
         let (theta, alpha) = light_direction_deg(u);
         let (beta, base) = lut.symmetry.reduce(alpha);
@@ -278,7 +280,9 @@ impl LutScene {
             } else {
                 system.paraxial_frame(ghost.ghost as usize, u, min_half_mm)
             };
-            let picks: Vec<(usize, f64)> = bracket(&ghost.thetas_deg, theta)
+            let thetas = bracket(&ghost.thetas_deg, theta);
+            let fitted = thetas.len() == 2 && ghost.fitted.get(thetas[0].0).copied().unwrap_or(false);
+            let picks: Vec<(usize, f64)> = thetas
                 .into_iter()
                 .flat_map(|(t, wt)| {
                     bracket(&ghost.phis_deg, beta)
@@ -293,15 +297,21 @@ impl LutScene {
             } else {
                 1.0
             };
-            for (k, weight) in picks {
+            let turned: Vec<_> = picks
+                .iter()
+                .map(|&(k, weight)| {
+                    let transform = mat_mul(base, rotation(beta - ghost.entries[k].phi_deg));
+                    (if fitted { live_lut.shapes[lg][k] } else { None }, transform, weight)
+                })
+                .collect();
+            for ((k, weight), fit) in picks.into_iter().zip(fit_picks(&turned)) {
                 let entry = &ghost.entries[k];
                 let Some((page, x0, y0)) = layout.slots[lg][k] else { continue };
-                let transform = mat_mul(base, rotation(beta - entry.phi_deg));
                 let instance = place(
                     entry,
                     &entry.paraxial,
                     &live,
-                    transform,
+                    fit,
                     &out,
                     page,
                     [x0, y0],
@@ -343,14 +353,14 @@ impl LutScene {
     }
 }
 
-/// The instance drawing `entry` (baked in the paraxial frame `baked`) in the live frame `live`, turned by
-/// `transform`, into the frame `out`, with the gain `gain`.
+/// The instance drawing `entry` (baked in the paraxial frame `baked`) in the live frame `live`, laid on by
+/// `fit` (normalised coordinates), into the frame `out`, with the gain `gain`.
 #[allow(clippy::too_many_arguments)]
 fn place(
     entry: &super::LutEntry,
     baked: &ParaxialFrame,
     live: &ParaxialFrame,
-    transform: Mat2,
+    fit: Fit,
     out: &Window,
     page: u32,
     origin: [u32; 2],
@@ -361,9 +371,13 @@ fn place(
     let scale = live.half_mm / baked.half_mm;
     let to_pixel = |q: [f64; 2]| {
         let p = window.to_mm([(q[0] + 1.0) * 0.5 * w, (q[1] + 1.0) * 0.5 * h]);
-        let n = mat_apply(transform, [p[0] - baked.centre_mm[0], p[1] - baked.centre_mm[1]]);
-        out.to_pixel([live.centre_mm[0] + scale * n[0], live.centre_mm[1] + scale * n[1]])
+        let n = [(p[0] - baked.centre_mm[0]) / baked.half_mm, (p[1] - baked.centre_mm[1]) / baked.half_mm];
+        let m = mat_apply(fit.linear, n);
+        let n = [fit.offset[0] + m[0], fit.offset[1] + m[1]];
+        out.to_pixel([live.centre_mm[0] + live.half_mm * n[0], live.centre_mm[1] + live.half_mm * n[1]])
     };
+    // Irradiance falls as the area grows: energy is kept when the frame is scaled (and fitted).
+    let area = scale * scale * super::mat_det(fit.linear).abs();
     let (c, x1, y1) = (to_pixel([0.0, 0.0]), to_pixel([1.0, 0.0]), to_pixel([0.0, 1.0]));
     let page_side = f64::from(ATLAS_PAGE);
     let (u0, v0) = (f64::from(origin[0]) / page_side, f64::from(origin[1]) / page_side);
@@ -371,8 +385,7 @@ fn place(
         centre_axis_x: [c[0] as f32, c[1] as f32, (x1[0] - c[0]) as f32, (x1[1] - c[1]) as f32],
         axis_y_page: [(y1[0] - c[0]) as f32, (y1[1] - c[1]) as f32, page as f32, 0.0],
         rect: [u0 as f32, v0 as f32, (u0 + w / page_side) as f32, (v0 + h / page_side) as f32],
-        // Irradiance falls as the area grows: energy is kept when the frame is scaled.
-        colour: [gain / (scale * scale) as f32, gain / (scale * scale) as f32, gain / (scale * scale) as f32, gain],
+        colour: [gain / area as f32, gain / area as f32, gain / area as f32, gain],
     }
 }
 
@@ -424,12 +437,15 @@ pub fn lut_pass(scene: &FlareScene, lut_scene: &LutScene, lut: &GhostLut, hdr: &
 pub struct LiveLut {
     pub lut: GhostLut,
     pub layout: AtlasLayout,
+    /// Per LUT ghost and entry, its shape for [`super::fit_picks`] (measured once, on load).
+    pub shapes: Vec<Vec<Option<EntryShape>>>,
 }
 
 impl LiveLut {
     pub fn new(lut: GhostLut) -> Self {
         let layout = AtlasLayout::new(&lut);
-        Self { lut, layout }
+        let shapes = lut.ghosts.par_iter().map(|g| g.entries.iter().map(LutEntry::shape).collect()).collect();
+        Self { lut, layout, shapes }
     }
 
     /// The paraxial scene (LUT ghosts' sprites weighted) and the LUT instances for a light at the frame
@@ -460,7 +476,7 @@ impl LiveLut {
         paraxial: bool,
     ) -> LutScene {
         let u = crate::render::light_slopes_for_frame_position(light_deg[0], light_deg[1]);
-        let lut_scene = LutScene::build(&self.lut, &self.layout, &flare.system, u, scene.width, scene.height, blend);
+        let lut_scene = LutScene::build(self, &flare.system, u, scene.width, scene.height, blend);
         if paraxial {
             lut_scene.apply_paraxial_weights(scene);
         } else {

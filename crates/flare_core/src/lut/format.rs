@@ -12,9 +12,11 @@
 //! | H | header: UTF-8 JSON, [`Header`]: kind, lens id and fingerprint, wavelengths, f-number, symmetry, theta range, per ghost its surfaces, key, thetas, azimuths and per entry its light, paraxial frame, window, size, and where its data lies |
 //! | ... | per entry, in header order: its texels compressed with deflate (zlib, `flate2`) |
 //!
-//! An entry's uncompressed data is `width x height` RGBA half floats, byte-shuffled for compression: the
-//! low bytes of channel R of every texel, then its high bytes, then G, B, A (8 planes of w x h bytes).
-//! Each entry carries the FNV-1a 64 of its uncompressed bytes.
+//! An entry's uncompressed data is `width x height` RGB half floats (rounded to
+//! [`super::TEXEL_MANTISSA_BITS`] mantissa bits), byte-shuffled for compression: the low bytes of channel R of
+//! every texel, then its high bytes, then G, B (6 planes of w x h bytes). Alpha (coverage) is not stored: it is
+//! computed on load from the RGB ([`super::set_coverage`]). Version 1 files stored RGBA (8 planes) and no
+//! `fitted` flags; they still load. Each entry carries the FNV-1a 64 of its uncompressed bytes.
 //!
 //! Loading ([`read_lut`]) streams the file: it checks the magic, the version, that the header fits the file
 //! and its checksum, then every field of the header (finite, in range, sizes that match, data inside the
@@ -37,8 +39,11 @@ use crate::ghost::ParaxialFrame;
 
 /// The file's magic bytes.
 pub const MAGIC: [u8; 8] = *b"FLUT\r\n\x1a\n";
-/// The format version this build reads and writes.
-pub const VERSION: u32 = 1;
+/// The format version this build writes; it reads this one and the ones before it ([`OLDEST_VERSION`]).
+/// Version 2 added the per-interval `fitted` flags.
+pub const VERSION: u32 = 2;
+/// The oldest format version this build reads.
+pub const OLDEST_VERSION: u32 = 1;
 /// Most header bytes accepted.
 pub const MAX_HEADER_BYTES: u64 = 64 << 20;
 /// Most texels accepted over all entries (2 GiB of half floats).
@@ -53,7 +58,7 @@ pub enum LutError {
     Io(#[from] std::io::Error),
     #[error("not a FlareLab LUT (.flut) file: wrong magic bytes")]
     Magic,
-    #[error("LUT format version {found}; this FlareLab reads version {VERSION}")]
+    #[error("LUT format version {found}; this FlareLab reads versions {OLDEST_VERSION} to {VERSION}")]
     Version { found: u32 },
     #[error("the file is truncated: {0}")]
     Truncated(String),
@@ -91,6 +96,9 @@ pub struct GhostHeader {
     pub surfaces: [u32; 2],
     pub key: String,
     pub thetas_deg: Vec<f64>,
+    /// Per theta interval, whether it is fitted (version 2; absent in version 1: none is).
+    #[serde(default)]
+    pub fitted: Vec<bool>,
     pub phis_deg: Vec<f64>,
     pub entries: Vec<EntryHeader>,
 }
@@ -121,12 +129,12 @@ fn unhex(text: &str, what: &str) -> Result<u64, LutError> {
     u64::from_str_radix(text, 16).map_err(|_| LutError::Header(format!("{what} `{text}` is not 16 hex digits")))
 }
 
-/// The byte-shuffled planes of an entry's texels.
-fn shuffle(texels: &[[f16; 4]]) -> Vec<u8> {
+/// The byte-shuffled planes of the first `channels` channels of an entry's texels.
+fn shuffle(texels: &[[f16; 4]], channels: usize) -> Vec<u8> {
     let n = texels.len();
-    let mut out = vec![0u8; n * 8];
+    let mut out = vec![0u8; n * 2 * channels];
     for (k, t) in texels.iter().enumerate() {
-        for (c, v) in t.iter().enumerate() {
+        for (c, v) in t[..channels].iter().enumerate() {
             let [lo, hi] = v.to_bits().to_le_bytes();
             out[(2 * c) * n + k] = lo;
             out[(2 * c + 1) * n + k] = hi;
@@ -135,19 +143,34 @@ fn shuffle(texels: &[[f16; 4]]) -> Vec<u8> {
     out
 }
 
-fn unshuffle(bytes: &[u8]) -> Vec<[f16; 4]> {
-    let n = bytes.len() / 8;
+/// Texels from `channels` byte-shuffled planes (the others zero).
+fn unshuffle(bytes: &[u8], channels: usize) -> Vec<[f16; 4]> {
+    let n = bytes.len() / (2 * channels);
     (0..n)
         .map(|k| {
             std::array::from_fn(|c| {
-                f16::from_bits(u16::from_le_bytes([bytes[2 * c * n + k], bytes[(2 * c + 1) * n + k]]))
+                if c < channels {
+                    f16::from_bits(u16::from_le_bytes([bytes[2 * c * n + k], bytes[(2 * c + 1) * n + k]]))
+                } else {
+                    f16::ZERO
+                }
             })
         })
         .collect()
 }
 
+/// Channels stored per texel in a file of `version`.
+fn stored_channels(version: u32) -> usize {
+    if version == 1 { 4 } else { 3 }
+}
+
 /// The file's bytes.
 pub fn encode(lut: &GhostLut) -> Vec<u8> {
+    encode_version(lut, VERSION)
+}
+
+/// The file's bytes in format `version` (1 for the tests of old files: RGBA, no `fitted` flags).
+fn encode_version(lut: &GhostLut, version: u32) -> Vec<u8> {
     let mut blobs = Vec::new();
     let ghosts = lut
         .ghosts
@@ -157,12 +180,13 @@ pub fn encode(lut: &GhostLut) -> Vec<u8> {
             surfaces: g.surfaces,
             key: hex(g.key),
             thetas_deg: g.thetas_deg.clone(),
+            fitted: if version == 1 { Vec::new() } else { g.fitted.clone() },
             phis_deg: g.phis_deg.clone(),
             entries: g
                 .entries
                 .iter()
                 .map(|e| {
-                    let raw = shuffle(&e.texels);
+                    let raw = shuffle(&e.texels, stored_channels(version));
                     let mut encoder = ZlibEncoder::new(Vec::new(), Compression::default());
                     encoder.write_all(&raw).expect("writing to memory");
                     let compressed = encoder.finish().expect("writing to memory");
@@ -202,7 +226,7 @@ pub fn encode(lut: &GhostLut) -> Vec<u8> {
     let json = serde_json::to_vec(&header).expect("the header serialises");
     let mut out = Vec::with_capacity(28 + json.len() + blobs.iter().map(Vec::len).sum::<usize>());
     out.extend_from_slice(&MAGIC);
-    out.extend_from_slice(&VERSION.to_le_bytes());
+    out.extend_from_slice(&version.to_le_bytes());
     out.extend_from_slice(&(json.len() as u64).to_le_bytes());
     out.extend_from_slice(&fnv1a(&json, FNV_OFFSET).to_le_bytes());
     out.extend_from_slice(&json);
@@ -246,7 +270,7 @@ pub fn decode(mut reader: impl Read, length: u64) -> Result<GhostLut, LutError> 
     let mut word = [0u8; 4];
     read_exact_or(&mut reader, &mut word, "version")?;
     let version = u32::from_le_bytes(word);
-    if version != VERSION {
+    if !(OLDEST_VERSION..=VERSION).contains(&version) {
         return Err(LutError::Version { found: version });
     }
     let mut long = [0u8; 8];
@@ -279,7 +303,8 @@ pub fn decode(mut reader: impl Read, length: u64) -> Result<GhostLut, LutError> 
         let mut entries = Vec::with_capacity(g.entries.len());
         for (ei, e) in g.entries.iter().enumerate() {
             let bad = |reason: String| LutError::Entry { ghost: gi, entry: ei, reason };
-            let raw_len = u64::from(e.width) * u64::from(e.height) * 8;
+            let channels = stored_channels(version);
+            let raw_len = u64::from(e.width) * u64::from(e.height) * 2 * channels as u64;
             let mut raw = Vec::with_capacity(raw_len as usize);
             let mut limited = (&mut reader).take(e.compressed_bytes);
             ZlibDecoder::new(&mut limited).take(raw_len + 1).read_to_end(&mut raw).map_err(|err| match err.kind() {
@@ -301,9 +326,12 @@ pub fn decode(mut reader: impl Read, length: u64) -> Result<GhostLut, LutError> 
             if unhex(&e.checksum, "checksum")? != fnv1a(&raw, FNV_OFFSET) {
                 return Err(bad("its checksum does not match (the data is damaged)".into()));
             }
-            let texels = unshuffle(&raw);
+            let mut texels = unshuffle(&raw, channels);
             if let Some(k) = texels.iter().position(|t| t.iter().any(|v| !v.is_finite() || v.to_f32() < 0.0)) {
                 return Err(bad(format!("texel {k} is not finite or negative")));
+            }
+            if channels == 3 {
+                super::set_coverage(&mut texels);
             }
             entries.push(LutEntry {
                 theta_deg: e.theta_deg,
@@ -325,6 +353,7 @@ pub fn decode(mut reader: impl Read, length: u64) -> Result<GhostLut, LutError> 
             surfaces: g.surfaces,
             key: unhex(&g.key, "ghost key")?,
             thetas_deg: g.thetas_deg.clone(),
+            fitted: g.fitted.clone(),
             phis_deg: g.phis_deg.clone(),
             entries,
         });
@@ -369,6 +398,13 @@ fn check_header(h: &Header, data_len: u64) -> Result<(), LutError> {
         }
         if !increasing(&g.phis_deg, wedge) {
             return bad(format!("ghost {gi}: azimuths {:?} must increase within the wedge 0 to {wedge}", g.phis_deg));
+        }
+        if !(g.fitted.is_empty() || g.fitted.len() + 1 == g.thetas_deg.len()) {
+            return bad(format!(
+                "ghost {gi}: {} fitted flags for {} thetas (one per interval, or none)",
+                g.fitted.len(),
+                g.thetas_deg.len()
+            ));
         }
         if g.entries.len() != g.thetas_deg.len() * g.phis_deg.len() {
             return bad(format!(
@@ -429,5 +465,80 @@ impl GhostLut {
             });
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A one-ghost LUT of two 3 x 2 entries, stored as the bake stores texels.
+    fn tiny() -> GhostLut {
+        let entry = |theta_deg: f64, scale: f32| LutEntry {
+            theta_deg,
+            phi_deg: 0.0,
+            paraxial: ParaxialFrame { centre_mm: [0.5, -0.25], half_mm: 2.0, energy: 3.0 },
+            centre_mm: [0.4, -0.2],
+            texel_mm: 0.5,
+            width: 3,
+            height: 2,
+            texels: super::super::texels_with_coverage((0..6).map(|k| [k as f32 * scale, 0.5 * scale, 0.01])),
+        };
+        GhostLut {
+            kind: LutKind::RayTraced,
+            lens_id: "tiny".into(),
+            lens_fingerprint: 42,
+            wavelengths_nm: vec![650.0, 510.0, 475.0],
+            f_number: 2.0,
+            symmetry: Symmetry { order: 0, axis_deg: 0.0 },
+            theta_max_deg: 10.0,
+            ghosts: vec![LutGhost {
+                ghost: 3,
+                surfaces: [1, 4],
+                key: 7,
+                thetas_deg: vec![0.0, 10.0],
+                fitted: vec![true],
+                phis_deg: vec![0.0],
+                entries: vec![entry(0.0, 1.0), entry(10.0, 1.7)],
+            }],
+        }
+    }
+
+    #[test]
+    fn version_2_round_trips_and_version_1_files_still_load() {
+        let lut = tiny();
+        let bytes = encode(&lut);
+        assert_eq!(decode(bytes.as_slice(), bytes.len() as u64).unwrap(), lut);
+        // Version 1 stored alpha and no flags: the same texels (alpha as computed), no interval fitted.
+        let old = encode_version(&lut, 1);
+        assert_eq!(u32::from_le_bytes(old[8..12].try_into().unwrap()), 1);
+        assert!(old.len() > bytes.len(), "RGBA takes more room than RGB");
+        let back = decode(old.as_slice(), old.len() as u64).unwrap();
+        let mut expected = lut.clone();
+        expected.ghosts[0].fitted.clear();
+        assert_eq!(back, expected);
+        // A version from the future is refused by name.
+        let mut future = bytes.clone();
+        future[8..12].copy_from_slice(&(VERSION + 1).to_le_bytes());
+        let err = decode(future.as_slice(), future.len() as u64).unwrap_err();
+        assert!(err.to_string().contains("versions 1 to 2"), "{err}");
+        // Flags that do not match the thetas are refused.
+        let mut bad = lut.clone();
+        bad.ghosts[0].fitted = vec![true, false];
+        let bytes = encode(&bad);
+        let err = decode(bytes.as_slice(), bytes.len() as u64).unwrap_err();
+        assert!(err.to_string().contains("fitted flags"), "{err}");
+    }
+
+    #[test]
+    fn stored_texels_keep_seven_mantissa_bits() {
+        for v in [0.0f32, 1e-7, 0.3, 1.0, 1234.5, 65504.0, 1e9, f32::NAN, -2.0] {
+            let t = super::super::texel_value(v);
+            assert!(t.is_finite() && t.to_f32() >= 0.0, "{v} -> {t}");
+            assert_eq!(t.to_bits() & 0b111, 0, "{v}");
+            if v.is_finite() && v > 1e-4 && v < 65000.0 {
+                assert!((t.to_f32() / v - 1.0).abs() <= 1.0 / 256.0 + 1e-3, "{v} -> {t}");
+            }
+        }
     }
 }

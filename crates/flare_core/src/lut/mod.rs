@@ -217,6 +217,193 @@ impl LutEntry {
     }
 }
 
+/// Where an entry's light lies in its own normalised paraxial frame (`n = (p - centre) / half`): the
+/// luminance-weighted mean and covariance of its texels (each texel's own spread, 1/12 of a texel squared,
+/// included, so a single-texel image still has a positive covariance).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EntryShape {
+    pub mean: [f64; 2],
+    pub cov: Mat2,
+}
+
+impl LutEntry {
+    /// The entry's [`EntryShape`]; `None` for an empty or unlit entry.
+    pub fn shape(&self) -> Option<EntryShape> {
+        if self.is_empty() {
+            return None;
+        }
+        let window = self.window();
+        let (c, h) = (self.paraxial.centre_mm, self.paraxial.half_mm);
+        let (mut sum, mut sx, mut sy, mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+        for y in 0..self.height {
+            for x in 0..self.width {
+                let t = self.texels[(y * self.width + x) as usize];
+                let l = crate::metrics::luminance([t[0].to_f64(), t[1].to_f64(), t[2].to_f64()]);
+                if l <= 0.0 {
+                    continue;
+                }
+                let p = window.to_mm([f64::from(x) + 0.5, f64::from(y) + 0.5]);
+                let n = [(p[0] - c[0]) / h, (p[1] - c[1]) / h];
+                sum += l;
+                sx += l * n[0];
+                sy += l * n[1];
+                sxx += l * n[0] * n[0];
+                syy += l * n[1] * n[1];
+                sxy += l * n[0] * n[1];
+            }
+        }
+        if !(sum > 0.0 && sum.is_finite()) {
+            return None;
+        }
+        let mean = [sx / sum, sy / sum];
+        let texel = (self.texel_mm / h).powi(2) / 12.0;
+        let cov = [
+            [sxx / sum - mean[0] * mean[0] + texel, sxy / sum - mean[0] * mean[1]],
+            [sxy / sum - mean[0] * mean[1], syy / sum - mean[1] * mean[1] + texel],
+        ];
+        let shape = EntryShape { mean, cov };
+        (mean.iter().chain(cov.iter().flatten()).all(|v| v.is_finite()) && mat_det(cov) > 0.0).then_some(shape)
+    }
+}
+
+/// How a picked entry is laid onto the live frame, in normalised paraxial coordinates:
+/// `n_live = offset + linear n_entry`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Fit {
+    pub linear: Mat2,
+    pub offset: [f64; 2],
+}
+
+/// The largest stretch (either way) a fit may apply to an entry; beyond it the picks are too unlike each other
+/// to be fitted onto one shape, and they are only turned and cross-faded.
+pub const MAX_FIT_STRETCH: f64 = 2.0;
+
+/// The determinant of `m`.
+pub fn mat_det(m: Mat2) -> f64 {
+    m[0][0] * m[1][1] - m[0][1] * m[1][0]
+}
+
+fn transpose(m: Mat2) -> Mat2 {
+    [[m[0][0], m[1][0]], [m[0][1], m[1][1]]]
+}
+
+fn inverse(m: Mat2) -> Mat2 {
+    let d = mat_det(m);
+    [[m[1][1] / d, -m[0][1] / d], [-m[1][0] / d, m[0][0] / d]]
+}
+
+/// The square root of a symmetric positive definite 2x2 matrix: `(M + sqrt(det M) I) / sqrt(tr M + 2 sqrt(det M))`.
+fn sqrt_spd(m: Mat2) -> Mat2 {
+    let s = mat_det(m).max(0.0).sqrt();
+    let t = (m[0][0] + m[1][1] + 2.0 * s).sqrt();
+    [[(m[0][0] + s) / t, m[0][1] / t], [m[1][0] / t, (m[1][1] + s) / t]]
+}
+
+/// The eigenvalues of a symmetric 2x2 matrix, smaller first.
+fn eigenvalues_sym(m: Mat2) -> [f64; 2] {
+    let half_trace = 0.5 * (m[0][0] + m[1][1]);
+    let r = (half_trace * half_trace - mat_det(m)).max(0.0).sqrt();
+    [half_trace - r, half_trace + r]
+}
+
+/// Fits the entries picked for one light onto a common shape before they are cross-faded, so that two images
+/// of a ghost that moved or stretched between the baked angles (more than its paraxial frame says) add up to
+/// one image in between rather than two faded copies. Each pick is `(shape, transform, weight)`: its shape
+/// in its own frame, the rotation (or mirror) the symmetry turns it by, and its interpolation weight.
+///
+/// The target is the weighted mean of the turned means and of the square roots of the turned covariances
+/// (squared back); each entry is carried onto it by the linear map of optimal transport between Gaussians,
+/// `A = C^-1/2 (C^1/2 C* C^1/2)^1/2 C^-1/2`, a symmetric stretch. A single pick, a pick without a shape (an
+/// empty entry) or a stretch beyond [`MAX_FIT_STRETCH`] gives every pick its plain transform (no fit).
+pub fn fit_picks(picks: &[(Option<EntryShape>, Mat2, f64)]) -> Vec<Fit> {
+    let plain: Vec<Fit> = picks.iter().map(|&(_, t, _)| Fit { linear: t, offset: [0.0; 2] }).collect();
+    let total: f64 = picks.iter().map(|p| p.2).sum();
+    if picks.len() < 2 || total.is_nan() || total <= 0.0 {
+        return plain;
+    }
+    let Some(turned): Option<Vec<(EntryShape, Mat2, f64)>> = picks
+        .iter()
+        .map(|&(shape, t, w)| {
+            shape.map(|s| {
+                let mean = mat_apply(t, s.mean);
+                let cov = mat_mul(mat_mul(t, s.cov), transpose(t));
+                (EntryShape { mean, cov }, t, w / total)
+            })
+        })
+        .collect()
+    else {
+        return plain;
+    };
+    let mut mean = [0.0; 2];
+    let mut root = [[0.0; 2]; 2];
+    for (s, _, w) in &turned {
+        let r = sqrt_spd(s.cov);
+        for i in 0..2 {
+            mean[i] += w * s.mean[i];
+            for j in 0..2 {
+                root[i][j] += w * r[i][j];
+            }
+        }
+    }
+    let target = mat_mul(root, root);
+    let mut fits = Vec::with_capacity(turned.len());
+    for (s, t, _) in &turned {
+        let r = sqrt_spd(s.cov);
+        let r_inv = inverse(r);
+        let a = mat_mul(mat_mul(r_inv, sqrt_spd(mat_mul(mat_mul(r, target), r))), r_inv);
+        let a = [[a[0][0], 0.5 * (a[0][1] + a[1][0])], [0.5 * (a[0][1] + a[1][0]), a[1][1]]];
+        let [lo, hi] = eigenvalues_sym(a);
+        if !(lo >= 1.0 / MAX_FIT_STRETCH && hi <= MAX_FIT_STRETCH) {
+            return plain;
+        }
+        let moved = mat_apply(a, s.mean);
+        fits.push(Fit { linear: mat_mul(a, *t), offset: [mean[0] - moved[0], mean[1] - moved[1]] });
+    }
+    if fits.iter().all(|f| f.offset.iter().chain(f.linear.iter().flatten()).all(|v| v.is_finite())) {
+        fits
+    } else {
+        plain
+    }
+}
+
+/// Mantissa bits a LUT texel keeps of a half float's 10: a relative error of at most 2^-8 (0.4%, under the
+/// display's own quantisation), and the low bits that hold only the ray grid's noise, which deflate cannot
+/// compress, are zero (a third smaller files).
+pub const TEXEL_MANTISSA_BITS: u32 = 7;
+/// Coverage (alpha) is 1 from this fraction of an image's brightest texel (luminance) up, and falls linearly
+/// to 0 below it.
+pub const COVERAGE_FRACTION: f64 = 0.05;
+
+/// `v` as a stored texel value: finite, non-negative (else 0), rounded to [`TEXEL_MANTISSA_BITS`].
+pub fn texel_value(v: f32) -> f16 {
+    let v = if v.is_finite() { v.max(0.0) } else { 0.0 };
+    let drop = 10 - TEXEL_MANTISSA_BITS;
+    let bits = f16::from_f32(v).to_bits();
+    let rounded = (bits + (1 << (drop - 1))) & !((1u16 << drop) - 1);
+    // Rounding up from the largest finite half would give infinity: keep the largest finite stored value.
+    f16::from_bits(if f16::from_bits(rounded).is_finite() { rounded } else { 0x7bff & !((1u16 << drop) - 1) })
+}
+
+/// Linear RGB texels of one image as stored: [`texel_value`]s with their coverage as alpha (luminance over
+/// [`COVERAGE_FRACTION`] of the image's brightest, at most 1; computed from the stored values, so that a
+/// file, which does not store alpha, loads to exactly these texels).
+pub fn texels_with_coverage(rgb: impl Iterator<Item = [f32; 3]>) -> Vec<[f16; 4]> {
+    let mut texels: Vec<[f16; 4]> =
+        rgb.map(|p| [texel_value(p[0]), texel_value(p[1]), texel_value(p[2]), f16::ZERO]).collect();
+    set_coverage(&mut texels);
+    texels
+}
+
+/// Sets every texel's alpha to its coverage (see [`texels_with_coverage`]).
+pub fn set_coverage(texels: &mut [[f16; 4]]) {
+    let luma = |t: &[f16; 4]| crate::metrics::luminance([t[0].to_f64(), t[1].to_f64(), t[2].to_f64()]);
+    let peak = texels.iter().map(luma).fold(0.0, f64::max);
+    for t in texels.iter_mut() {
+        let alpha = if peak > 0.0 { (luma(t) / (COVERAGE_FRACTION * peak)).min(1.0) } else { 0.0 };
+        t[3] = f16::from_f64(alpha);
+    }
+}
+
 /// One LUT ghost: its images over thetas x azimuths.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LutGhost {
@@ -229,6 +416,10 @@ pub struct LutGhost {
     pub key: u64,
     /// Increasing, degrees.
     pub thetas_deg: Vec<f64>,
+    /// Per theta interval (`thetas_deg.len() - 1` of them, or none: all false): whether the run time fits
+    /// the entries on either side onto one shape ([`fit_picks`]) before cross-fading them, because at the bake
+    /// that predicted the interval's middle better than the plain cross-fade.
+    pub fitted: Vec<bool>,
     /// Increasing, degrees from the symmetry axis, inside the wedge.
     pub phis_deg: Vec<f64>,
     /// `thetas x phis`, theta-major.

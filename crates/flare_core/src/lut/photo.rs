@@ -13,12 +13,10 @@
 
 use std::path::{Path, PathBuf};
 
-use half::f16;
 use serde::Deserialize;
 
 use super::{GhostLut, LutEntry, LutGhost, LutKind, PHOTO_GHOST, Symmetry};
 use crate::ghost::ParaxialFrame;
-use crate::metrics::luminance;
 
 /// Largest image side kept (an atlas page less its border).
 pub const MAX_PHOTO_SIDE: u32 = super::blend::ATLAS_PAGE - 2;
@@ -127,16 +125,7 @@ pub fn import_folder(folder: &Path) -> Result<GhostLut, PhotoError> {
     for (theta, path) in &images {
         let rgb = load_linear(path)?;
         let (width, height) = rgb.dimensions();
-        let peak = rgb.pixels().map(|p| luminance(p.0.map(f64::from))).fold(0.0, f64::max);
-        let texels = rgb
-            .pixels()
-            .map(|p| {
-                let alpha =
-                    if peak > 0.0 { (luminance(p.0.map(f64::from)) / (0.05 * peak)).min(1.0) as f32 } else { 0.0 };
-                let [r, g, b] = p.0;
-                [r, g, b, alpha].map(|v| f16::from_f32(if v.is_finite() { v.max(0.0) } else { 0.0 }))
-            })
-            .collect();
+        let texels = super::texels_with_coverage(rgb.pixels().map(|p| p.0));
         entries.push(LutEntry {
             theta_deg: *theta,
             phi_deg: 0.0,
@@ -163,6 +152,8 @@ pub fn import_folder(folder: &Path) -> Result<GhostLut, PhotoError> {
             surfaces: [0, 0],
             key: 0,
             thetas_deg,
+            // Whole frames are never fitted.
+            fitted: Vec::new(),
             phis_deg: vec![0.0],
             entries,
         }],
