@@ -145,17 +145,29 @@ pub struct View {
 }
 
 impl View {
-    /// `v` as this view sees it: its landing point (sensor mm, in `v.pixel` when traced) and stop coordinates
-    /// turned, the landing point then in the window's pixels.
-    fn see(&self, v: &Vertex) -> Vertex {
+    /// What this view makes of a traced vertex: its landing point (sensor mm, in `v.pixel` when traced) and
+    /// stop coordinates turned, the landing point then in the window's pixels. The turn's sine and cosine are
+    /// taken once, here, not per vertex.
+    fn seer(&self) -> impl Fn(&Vertex) -> Vertex + '_ {
         let (s, c) = self.turn_deg.to_radians().sin_cos();
-        let turn = |p: [f64; 2]| if self.turn_deg == 0.0 { p } else { [c * p[0] - s * p[1], s * p[0] + c * p[1]] };
-        let mut seen = *v;
-        seen.stops = v.stops.map(turn);
-        seen.pixel = self.window.to_pixel(turn(v.pixel));
-        seen.valid = v.valid && seen.pixel.iter().all(|c| c.is_finite());
-        seen
+        let turned = self.turn_deg != 0.0;
+        move |v: &Vertex| {
+            let turn = |p: [f64; 2]| if turned { [c * p[0] - s * p[1], s * p[0] + c * p[1]] } else { p };
+            let mut seen = *v;
+            seen.stops = v.stops.map(turn);
+            seen.pixel = self.window.to_pixel(turn(v.pixel));
+            seen.valid = v.valid && seen.pixel.iter().all(|c| c.is_finite());
+            seen
+        }
     }
+}
+
+/// An empty bounding box `[x_min, y_min, x_max, y_max]`, for [`grow`].
+const NO_BOUNDS: [f64; 4] = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+
+/// The bounding box `b` grown to hold `p`.
+fn grow(b: [f64; 4], p: [f64; 2]) -> [f64; 4] {
+    [b[0].min(p[0]), b[1].min(p[1]), b[2].max(p[0]), b[3].max(p[1])]
 }
 
 /// One ghost at one wavelength, ready to trace.
@@ -493,8 +505,7 @@ impl RayGridRenderer {
             })
             .collect();
         let n = cells.clamp(4, 512);
-        let empty = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
-        let mut bounds = vec![empty; views.len()];
+        let mut bounds = vec![NO_BOUNDS; views.len()];
         let mut stats = RayGridStats::default();
         for job in self.jobs.iter().filter(|j| j.ghost == ghost) {
             let Some((b, _)) = self.grid_bounds(job, u, d, 32, &views, &mut stats) else { continue };
@@ -505,7 +516,7 @@ impl RayGridRenderer {
                 .map(|(ix, iy)| self.trace(job, [b[0] + ix as f64 * dx, b[1] + iy as f64 * dy], d))
                 .collect();
             for (view, bounds) in views.iter().zip(&mut bounds) {
-                let vertices: Vec<Vertex> = traced.iter().map(|v| view.see(v)).collect();
+                let vertices: Vec<Vertex> = traced.iter().map(view.seer()).collect();
                 for iy in 0..=n {
                     for ix in 0..=n {
                         if !vertices[iy * (n + 1) + ix].passes(stop_count) {
@@ -516,13 +527,7 @@ impl RayGridRenderer {
                         {
                             let v = &vertices[jy * (n + 1) + jx];
                             if v.valid {
-                                let p = view.window.to_mm(v.pixel);
-                                *bounds = [
-                                    bounds[0].min(p[0]),
-                                    bounds[1].min(p[1]),
-                                    bounds[2].max(p[0]),
-                                    bounds[3].max(p[1]),
-                                ];
+                                *bounds = grow(*bounds, view.window.to_mm(v.pixel));
                             }
                         }
                     }
@@ -594,15 +599,14 @@ impl RayGridRenderer {
             }
         }
         stats.rays += (n * n) as u64;
-        let empty = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
-        let grow = |b: [f64; 4], p: [f64; 2]| [b[0].min(p[0]), b[1].min(p[1]), b[2].max(p[0]), b[3].max(p[1])];
         // The cells where light passes and lands in some view's frame (a cell's landings bound where its rays
         // land); the extent is the largest over the views.
-        let (mut found, mut any_passes, mut extent_px) = (empty, false, 0.0f64);
+        let (mut found, mut any_passes, mut extent_px) = (NO_BOUNDS, false, 0.0f64);
         for view in views {
-            let vertices: Vec<([f64; 2], Vertex)> = traced.iter().map(|(x0, v)| (*x0, view.see(v))).collect();
+            let see = view.seer();
+            let vertices: Vec<([f64; 2], Vertex)> = traced.iter().map(|(x0, v)| (*x0, see(v))).collect();
             let (w, h) = (f64::from(view.window.width), f64::from(view.window.height));
-            let mut landed = empty;
+            let mut landed = NO_BOUNDS;
             for iy in 0..coarse {
                 for ix in 0..coarse {
                     let corners =
@@ -611,7 +615,8 @@ impl RayGridRenderer {
                         continue;
                     }
                     any_passes = true;
-                    let footprint = corners.iter().filter(|(_, v)| v.valid).fold(empty, |b, (_, v)| grow(b, v.pixel));
+                    let footprint =
+                        corners.iter().filter(|(_, v)| v.valid).fold(NO_BOUNDS, |b, (_, v)| grow(b, v.pixel));
                     if footprint[0] > w + 1.0 || footprint[1] > h + 1.0 || footprint[2] < -1.0 || footprint[3] < -1.0 {
                         continue;
                     }
@@ -631,7 +636,7 @@ impl RayGridRenderer {
         let mut bounds = if found[0].is_finite() {
             [found[0] - step, found[1] - step, found[2] + step, found[3] + step]
         } else {
-            empty
+            NO_BOUNDS
         };
         if !any_passes {
             // No coarse ray passed: look where the paraxial entrance region is, in case the ghost is smaller
@@ -681,15 +686,16 @@ impl RayGridRenderer {
         let mut previous: Vec<Vec<Vertex>> = vec![Vec::with_capacity(grid + 1); views.len()];
         let mut current: Vec<Vec<Vertex>> = vec![Vec::with_capacity(grid + 1); views.len()];
         let mut any = vec![false; views.len()];
+        let seers: Vec<_> = views.iter().map(View::seer).collect();
         for iy in 0..=grid {
             traced.clear();
             for ix in 0..=grid {
                 traced.push(self.trace(job, [b[0] + ix as f64 * dx, b[1] + iy as f64 * dy], d));
             }
             accs[0].stats.rays += (grid + 1) as u64;
-            for (k, view) in views.iter().enumerate() {
+            for k in 0..views.len() {
                 current[k].clear();
-                current[k].extend(traced.iter().map(|v| view.see(v)));
+                current[k].extend(traced.iter().map(&seers[k]));
                 if iy > 0 {
                     let (previous, current, acc) = (&previous[k], &current[k], &mut accs[k]);
                     for ix in 0..grid {

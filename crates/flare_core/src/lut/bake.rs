@@ -33,7 +33,7 @@ use rayon::prelude::*;
 
 use super::{
     FNV_OFFSET, Fit, GhostLut, LutEntry, LutGhost, LutKind, MIN_TEXEL_MM, Mat2, Symmetry, fit_picks, fnv1a,
-    light_position_deg, mat_apply, mat_det, texels_with_coverage,
+    light_position_deg, mat_apply, mat_det, mat_inverse, texels_with_coverage,
 };
 use crate::flare::PreparedFlare;
 use crate::metrics::luminance;
@@ -235,11 +235,7 @@ pub fn interpolation_error(a: &LutEntry, b: &LutEntry, t: f64, target: &LutEntry
         vec![Fit { linear: identity, offset: [0.0; 2] }; 2]
     };
     // Per neighbour: the inverse of its fit (target's normalised position to its own) and its area factor.
-    let inverse = |f: &Fit| {
-        let d = mat_det(f.linear);
-        let inv = [[f.linear[1][1] / d, -f.linear[0][1] / d], [-f.linear[1][0] / d, f.linear[0][0] / d]];
-        (inv, f.offset, d.abs())
-    };
+    let inverse = |f: &Fit| (mat_inverse(f.linear), f.offset, mat_det(f.linear).abs());
     let maps = [inverse(&fits[0]), inverse(&fits[1])];
     let sample = |e: &LutEntry, (inv, offset, det): (Mat2, [f64; 2], f64), p_mm: [f64; 2]| -> f64 {
         if e.is_empty() {

@@ -287,7 +287,8 @@ fn transpose(m: Mat2) -> Mat2 {
     [[m[0][0], m[1][0]], [m[0][1], m[1][1]]]
 }
 
-fn inverse(m: Mat2) -> Mat2 {
+/// The inverse of `m` (not finite when `m` is singular).
+pub fn mat_inverse(m: Mat2) -> Mat2 {
     let d = mat_det(m);
     [[m[1][1] / d, -m[0][1] / d], [-m[1][0] / d, m[0][0] / d]]
 }
@@ -349,7 +350,7 @@ pub fn fit_picks(picks: &[(Option<EntryShape>, Mat2, f64)]) -> Vec<Fit> {
     let mut fits = Vec::with_capacity(turned.len());
     for (s, t, _) in &turned {
         let r = sqrt_spd(s.cov);
-        let r_inv = inverse(r);
+        let r_inv = mat_inverse(r);
         let a = mat_mul(mat_mul(r_inv, sqrt_spd(mat_mul(mat_mul(r, target), r))), r_inv);
         let a = [[a[0][0], 0.5 * (a[0][1] + a[1][0])], [0.5 * (a[0][1] + a[1][0]), a[1][1]]];
         let [lo, hi] = eigenvalues_sym(a);
