@@ -182,8 +182,8 @@ pub fn bake_lut(
 
 fn print_classes(flare: &PreparedFlare, classes: &[GhostClass]) {
     println!(
-        "{:>4} {:>3} {:>3}  {:>9} {:>8} {:>6} {:>7} {:>10}  verdict",
-        "#", "i", "j", "centroid", "(rel)", "size", "error", "peak"
+        "{:>4} {:>3} {:>3}  {:>9} {:>8} {:>6} {:>7} {:>7} {:>10} {:>10}  verdict",
+        "#", "i", "j", "centroid", "(rel)", "size", "error", "energy", "misplaced", "peak"
     );
     let mut order: Vec<&GhostClass> = classes.iter().collect();
     order.sort_by(|a, b| b.image_error.total_cmp(&a.image_error));
@@ -196,7 +196,7 @@ fn print_classes(flare: &PreparedFlare, classes: &[GhostClass]) {
             None => "linear",
         };
         println!(
-            "{:>4} {:>3} {:>3}  {:>7.3}mm {:>8.2} {:>6.2} {:>7.3} {:>10.2e}  {verdict}",
+            "{:>4} {:>3} {:>3}  {:>7.3}mm {:>8.2} {:>6.2} {:>7.3} {:>7.2} {:>10.2e} {:>10.2e}  {verdict}",
             c.ghost,
             c.surfaces.0,
             c.surfaces.1,
@@ -204,6 +204,8 @@ fn print_classes(flare: &PreparedFlare, classes: &[GhostClass]) {
             c.centroid_rel,
             c.size_ratio,
             c.image_error,
+            c.energy_ratio,
+            c.misplaced_energy,
             c.peak_irradiance
         );
     }
@@ -229,7 +231,8 @@ pub fn classify_command(args: &ClassifyArgs) -> Result<()> {
                 serde_json::json!({
                     "ghost": c.ghost, "i": c.surfaces.0, "j": c.surfaces.1,
                     "centroid_mm": c.centroid_mm, "centroid_rel": c.centroid_rel, "size_ratio": c.size_ratio,
-                    "image_error": c.image_error, "peak_irradiance": c.peak_irradiance,
+                    "image_error": c.image_error, "energy_ratio": c.energy_ratio,
+                    "misplaced_energy": c.misplaced_energy, "peak_irradiance": c.peak_irradiance,
                     "measured_nonlinear": c.measured_nonlinear, "faint": c.faint, "forced": c.forced, "nonlinear": c.nonlinear(),
                 })
             })

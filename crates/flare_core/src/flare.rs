@@ -21,8 +21,9 @@ pub struct FlareConfig {
     pub aperture: Aperture,
     pub spectrum: Spectrum,
     pub coating_override: Option<Coating>,
-    /// Sprites dimmer than this relative irradiance are culled; `None` picks the level that would show as a
-    /// quarter of one 8-bit step at the display exposure (invisible on its own): "skip what the scene
+    /// The most relative irradiance that culling the faintest sprites may take from any pixel (all the culled
+    /// sprites together, see [`crate::ghost::FrameSettings::intensity_threshold`]); `None` picks the level that
+    /// would show as a quarter of one 8-bit step at the display exposure (invisible): "skip what the scene
     /// does not need".
     pub intensity_threshold: Option<f64>,
     pub display: DisplaySettings,

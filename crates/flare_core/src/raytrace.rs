@@ -30,7 +30,12 @@
 //! clear aperture plus the obliquity of its sag) finds the cells where some ray passes everything and lands in
 //! the frame; the dense grid covers their bounding box grown by one coarse cell (light that lands off the frame
 //! is not traced twice). When no coarse ray passes at all, it covers 1.25 x the paraxial entrance region instead
-//! (only a hint of where to look, never a result), so a ghost smaller than a coarse cell is not missed.
+//! (only a hint of where to look, never a result), so a ghost smaller than a coarse cell is not missed. Inside
+//! that box a dense ray is traced only in the lit cells of the pre-pass grown by one cell ([`LitCells`]): a
+//! ghost's light is often a disc, a crescent or a ring, and the rays far from it carry none. A LUT bake first
+//! **scouts** a ghost ([`RayGridRenderer::scout`]: a 32-cell pre-pass over the front lens, then 48 cells over
+//! where light passed) to size its windows, and that scout grid, much finer than one over the whole front
+//! lens, is then the render's pre-pass ([`RayGridRenderer::render_scouted`]).
 //!
 //! The two methods are this one algorithm at two densities ([`Grid`]):
 //! - **reference** (adaptive, up to [`REFERENCE_GRID`] cells across, about two per pixel of the ghost's extent
@@ -160,6 +165,27 @@ impl View {
             seen
         }
     }
+}
+
+/// What [`RayGridRenderer::scout`] found of one ghost for one light.
+#[derive(Clone, Debug)]
+pub struct Scout {
+    pub ghost: usize,
+    pub light_deg: [f64; 2],
+    /// Per turn: where the ghost lands, `[x_min, y_min, x_max, y_max]` in sensor mm; `None` when nothing does.
+    pub footprints_mm: Vec<Option<[f64; 4]>>,
+    /// Per wavelength: the grid traced over the region of the entrance plane where its light passes; `None`
+    /// where none does.
+    grids: Vec<Option<TracedGrid>>,
+}
+
+/// A grid of `cells` x `cells` cells traced over `region` of the entrance plane: (cells + 1)^2 vertices, row
+/// by row, in sensor mm (not yet seen by a view).
+#[derive(Clone, Debug)]
+struct TracedGrid {
+    region: [f64; 4],
+    cells: usize,
+    vertices: Vec<Vertex>,
 }
 
 /// An empty bounding box `[x_min, y_min, x_max, y_max]`, for [`grow`].
@@ -440,6 +466,31 @@ impl RayGridRenderer {
         grid: Grid,
         selected: impl Fn(usize) -> bool + Sync,
     ) -> Result<Vec<RayGridImage>, RayGridError> {
+        self.render_views(light_deg, views, grid, |job: &Job| selected(job.ghost).then_some(None))
+    }
+
+    /// [`Self::render_turned`] of the ghost a [`Scout`] looked at, for its light: the scout's grid over the
+    /// region where each wavelength's light passes is the pre-pass (finer than one over the whole front lens,
+    /// and not traced again), and a wavelength where none passed is not traced at all.
+    pub fn render_scouted(&self, scout: &Scout, views: &[View], grid: Grid) -> Result<Vec<RayGridImage>, RayGridError> {
+        self.render_views(scout.light_deg, views, grid, |job: &Job| {
+            if job.ghost != scout.ghost {
+                return None;
+            }
+            scout.grids.get(job.wavelength).and_then(Option::as_ref).map(Some)
+        })
+    }
+
+    /// Validates a request and renders it: `plan(job)` is `None` for a job not drawn, `Some(None)` for one
+    /// whose pre-pass is traced over the whole front lens and `Some(Some(grid))` for one whose pre-pass is the
+    /// scouted `grid`.
+    fn render_views<'s>(
+        &self,
+        light_deg: [f64; 2],
+        views: &[View],
+        grid: Grid,
+        plan: impl Fn(&Job) -> Option<Option<&'s TracedGrid>> + Sync,
+    ) -> Result<Vec<RayGridImage>, RayGridError> {
         if !GRID_RANGE.contains(&grid.cells()) {
             return Err(RayGridError::Grid(grid.cells()));
         }
@@ -468,9 +519,9 @@ impl RayGridRenderer {
         let accs = self
             .jobs
             .par_iter()
-            .filter(|job| selected(job.ghost))
-            .fold(fresh, |mut accs, job| {
-                self.render_job(job, u, views, grid, &mut accs);
+            .filter_map(|job| plan(job).map(|scouted| (job, scouted)))
+            .fold(fresh, |mut accs, (job, scouted)| {
+                self.render_job(job, u, views, grid, scouted, &mut accs);
                 accs
             })
             .reduce(fresh, merge);
@@ -494,6 +545,13 @@ impl RayGridRenderer {
         cells: usize,
         turns_deg: &[f64],
     ) -> Vec<Option<[f64; 4]>> {
+        self.scout(ghost, light_deg, cells, turns_deg).footprints_mm
+    }
+
+    /// A quick look at ghost `ghost` for the light at `light_deg`: its footprints as
+    /// [`Self::footprints_turned_mm`] gives them, and per wavelength the region of the entrance plane where its
+    /// light passes, which [`Self::render_scouted`] then covers instead of the whole front lens.
+    pub fn scout(&self, ghost: usize, light_deg: [f64; 2], cells: usize, turns_deg: &[f64]) -> Scout {
         let u = light_slopes_for_frame_position(light_deg[0], light_deg[1]);
         let d = DVec3::new(u[0], u[1], 1.0).normalize();
         // 1 px per mm over a metre: nothing the lens can image is off this window.
@@ -506,17 +564,17 @@ impl RayGridRenderer {
             .collect();
         let n = cells.clamp(4, 512);
         let mut bounds = vec![NO_BOUNDS; views.len()];
-        let mut stats = RayGridStats::default();
+        let mut grids = vec![None; self.system.settings.spectrum.len()];
         for job in self.jobs.iter().filter(|j| j.ghost == ghost) {
-            let Some((b, _)) = self.grid_bounds(job, u, d, 32, &views, &mut stats) else { continue };
+            let front = self.front_region(u);
+            let coarse = self.trace_grid(job, front, SCOUT_PRE_PASS_CELLS, d);
+            let Some(pre) = self.pre_pass(job, u, &coarse, &views) else {
+                continue;
+            };
+            let traced = self.trace_grid(job, pre.bounds, n, d);
             let stop_count = self.stop_count(job);
-            let (dx, dy) = ((b[2] - b[0]) / n as f64, (b[3] - b[1]) / n as f64);
-            let traced: Vec<Vertex> = (0..=n)
-                .flat_map(|iy| (0..=n).map(move |ix| (ix, iy)))
-                .map(|(ix, iy)| self.trace(job, [b[0] + ix as f64 * dx, b[1] + iy as f64 * dy], d))
-                .collect();
             for (view, bounds) in views.iter().zip(&mut bounds) {
-                let vertices: Vec<Vertex> = traced.iter().map(view.seer()).collect();
+                let vertices: Vec<Vertex> = traced.vertices.iter().map(view.seer()).collect();
                 for iy in 0..=n {
                     for ix in 0..=n {
                         if !vertices[iy * (n + 1) + ix].passes(stop_count) {
@@ -533,8 +591,14 @@ impl RayGridRenderer {
                     }
                 }
             }
+            grids[job.wavelength] = Some(traced);
         }
-        bounds.into_iter().map(|b| (b[0] <= b[2] && b[1] <= b[3]).then_some(b)).collect()
+        Scout {
+            ghost,
+            light_deg,
+            footprints_mm: bounds.into_iter().map(|b| (b[0] <= b[2] && b[1] <= b[3]).then_some(b)).collect(),
+            grids,
+        }
     }
 
     /// How many stop crossings of `job` the masks look at (at most 3).
@@ -574,37 +638,46 @@ impl RayGridRenderer {
         v
     }
 
-    /// Where to lay the dense grid: `[x_min, y_min, x_max, y_max]` on the entrance plane, and the extent in
-    /// pixels (the larger side of the bounding box, clipped to the frame) of where the passing pre-pass rays land;
-    /// `None` when no ray passes (the pre-pass found none and the paraxial region is empty too).
-    #[allow(clippy::too_many_arguments)]
-    fn grid_bounds(
-        &self,
-        job: &Job,
-        u: [f64; 2],
-        d: DVec3,
-        coarse: usize,
-        views: &[View],
-        stats: &mut RayGridStats,
-    ) -> Option<([f64; 4], f64)> {
+    /// The square of the entrance plane, `[x_min, y_min, x_max, y_max]`, that a pre-pass over the whole front
+    /// lens covers for the light slope `u`: half-side the front clear aperture plus the obliquity of its sag.
+    fn front_region(&self, u: [f64; 2]) -> [f64; 4] {
         let half = self.front_radius_mm * 1.01 + u[0].hypot(u[1]) * self.front_sag_mm;
+        [-half, -half, half, half]
+    }
+
+    /// Traces `job` on a `cells` x `cells` grid over `region` of the entrance plane, direction `d`.
+    fn trace_grid(&self, job: &Job, region: [f64; 4], cells: usize, d: DVec3) -> TracedGrid {
+        let step = [(region[2] - region[0]) / cells as f64, (region[3] - region[1]) / cells as f64];
+        let vertices = (0..=cells)
+            .flat_map(|iy| (0..=cells).map(move |ix| (ix, iy)))
+            .map(|(ix, iy)| self.trace(job, [region[0] + ix as f64 * step[0], region[1] + iy as f64 * step[1]], d))
+            .collect();
+        TracedGrid { region, cells, vertices }
+    }
+
+    /// Where to lay the dense grid, from the pre-pass `traced`: see [`PrePass`]. `None` when no ray passes
+    /// (the pre-pass found none and the paraxial region is empty too).
+    fn pre_pass(&self, job: &Job, u: [f64; 2], traced: &TracedGrid, views: &[View]) -> Option<PrePass> {
+        let half = self.front_region(u)[2];
+        let (region, coarse) = (traced.region, traced.cells);
         let stop_count = self.stop_count(job);
-        let step = 2.0 * half / coarse as f64;
+        let step = [(region[2] - region[0]) / coarse as f64, (region[3] - region[1]) / coarse as f64];
         let n = coarse + 1;
-        let mut traced = Vec::with_capacity(n * n);
-        for iy in 0..n {
-            for ix in 0..n {
-                let x0 = [-half + ix as f64 * step, -half + iy as f64 * step];
-                traced.push((x0, self.trace(job, x0, d)));
-            }
-        }
-        stats.rays += (n * n) as u64;
         // The cells where light passes and lands in some view's frame (a cell's landings bound where its rays
         // land); the extent is the largest over the views.
         let (mut found, mut any_passes, mut extent_px) = (NO_BOUNDS, false, 0.0f64);
+        let mut lit = vec![false; coarse * coarse];
         for view in views {
             let see = view.seer();
-            let vertices: Vec<([f64; 2], Vertex)> = traced.iter().map(|(x0, v)| (*x0, see(v))).collect();
+            let vertices: Vec<([f64; 2], Vertex)> = traced
+                .vertices
+                .iter()
+                .enumerate()
+                .map(|(k, v)| {
+                    let x0 = [region[0] + (k % n) as f64 * step[0], region[1] + (k / n) as f64 * step[1]];
+                    (x0, see(v))
+                })
+                .collect();
             let (w, h) = (f64::from(view.window.width), f64::from(view.window.height));
             let mut landed = NO_BOUNDS;
             for iy in 0..coarse {
@@ -620,6 +693,7 @@ impl RayGridRenderer {
                     if footprint[0] > w + 1.0 || footprint[1] > h + 1.0 || footprint[2] < -1.0 || footprint[3] < -1.0 {
                         continue;
                     }
+                    lit[iy * coarse + ix] = true;
                     for (x0, v) in corners {
                         found = grow(found, *x0);
                         if v.passes(stop_count) {
@@ -634,13 +708,14 @@ impl RayGridRenderer {
             }
         }
         let mut bounds = if found[0].is_finite() {
-            [found[0] - step, found[1] - step, found[2] + step, found[3] + step]
+            [found[0] - step[0], found[1] - step[1], found[2] + step[0], found[3] + step[1]]
         } else {
             NO_BOUNDS
         };
+        let mut lit = found[0].is_finite().then(|| LitCells::grown(region, step, coarse, &lit));
         if !any_passes {
             // No coarse ray passed: look where the paraxial entrance region is, in case the ghost is smaller
-            // than a coarse cell (a hint of where to look, never a result).
+            // than a coarse cell (a hint of where to look, never a result), and trace all of it.
             let sprite = job.ghost * self.system.settings.spectrum.len() + job.wavelength;
             let front = self.system.sprite_masks(sprite, u).front_map;
             let rho = front.scale.abs() * self.system.front_radius_mm;
@@ -649,22 +724,36 @@ impl RayGridRenderer {
                 let r = 1.25 * rho;
                 bounds = [e[0] - r, e[1] - r, e[0] + r, e[1] + r];
             }
+            lit = None;
         }
         let bounds = [bounds[0].max(-half), bounds[1].max(-half), bounds[2].min(half), bounds[3].min(half)];
-        (bounds[0] < bounds[2] && bounds[1] < bounds[3]).then_some((bounds, extent_px))
+        (bounds[0] < bounds[2] && bounds[1] < bounds[3]).then_some(PrePass { bounds, extent_px, lit })
     }
 
-    /// Traces `job` once and splats it into every view's accumulator (`accs[k]` for `views[k]`).
-    fn render_job(&self, job: &Job, u: [f64; 2], views: &[View], grid: Grid, accs: &mut [Accumulator]) {
+    /// Traces `job` once and splats it into every view's accumulator (`accs[k]` for `views[k]`); the pre-pass
+    /// is `scouted`, or traced over the whole front lens.
+    fn render_job(
+        &self,
+        job: &Job,
+        u: [f64; 2],
+        views: &[View],
+        grid: Grid,
+        scouted: Option<&TracedGrid>,
+        accs: &mut [Accumulator],
+    ) {
         for acc in accs.iter_mut() {
             acc.stats.jobs += 1;
         }
         let d = DVec3::new(u[0], u[1], 1.0).normalize();
-        let coarse = (grid.cells() / 2).clamp(16, 64);
-        let mut stats = RayGridStats::default();
-        let bounds = self.grid_bounds(job, u, d, coarse, views, &mut stats);
-        accs[0].stats.rays += stats.rays;
-        let Some((b, extent_px)) = bounds else {
+        let pre = match scouted {
+            Some(traced) => self.pre_pass(job, u, traced, views),
+            None => {
+                let traced = self.trace_grid(job, self.front_region(u), (grid.cells() / 2).clamp(16, 64), d);
+                accs[0].stats.rays += traced.vertices.len() as u64;
+                self.pre_pass(job, u, &traced, views)
+            }
+        };
+        let Some(PrePass { bounds: b, extent_px, lit }) = pre else {
             for acc in accs.iter_mut() {
                 acc.stats.empty_jobs += 1;
             }
@@ -689,10 +778,18 @@ impl RayGridRenderer {
         let seers: Vec<_> = views.iter().map(View::seer).collect();
         for iy in 0..=grid {
             traced.clear();
+            let mut rays = 0;
             for ix in 0..=grid {
-                traced.push(self.trace(job, [b[0] + ix as f64 * dx, b[1] + iy as f64 * dy], d));
+                let x0 = [b[0] + ix as f64 * dx, b[1] + iy as f64 * dy];
+                // Far from every lit cell of the pre-pass: no triangle of this ray carries light.
+                if lit.as_ref().is_some_and(|lit| !lit.contains(x0)) {
+                    traced.push(Vertex::default());
+                    continue;
+                }
+                traced.push(self.trace(job, x0, d));
+                rays += 1;
             }
-            accs[0].stats.rays += (grid + 1) as u64;
+            accs[0].stats.rays += rays;
             for k in 0..views.len() {
                 current[k].clear();
                 current[k].extend(traced.iter().map(&seers[k]));
@@ -716,6 +813,62 @@ impl RayGridRenderer {
                 acc.stats.empty_jobs += 1;
             }
         }
+    }
+}
+
+/// Cells of the scout's pre-pass over the front lens.
+const SCOUT_PRE_PASS_CELLS: usize = 32;
+
+/// What a pre-pass found for one job.
+struct PrePass {
+    /// Where the dense grid lies on the entrance plane, `[x_min, y_min, x_max, y_max]`: the bounding box of the
+    /// lit cells grown by one cell, within the front lens.
+    bounds: [f64; 4],
+    /// The extent in pixels (the larger side of the bounding box, clipped to the frame) of where the passing
+    /// rays land, largest over the views.
+    extent_px: f64,
+    /// The lit cells, grown by one; `None` when the pre-pass saw no ray pass (the dense grid then traces all
+    /// of its bounds).
+    lit: Option<LitCells>,
+}
+
+/// The cells of a pre-pass where some corner ray passes everything and lands in some view's frame, grown by
+/// one cell each way (so that the dense triangles at the rim, half lit, are traced too). A dense ray outside
+/// them is not traced: inside the bounding box, a ghost's light is often a disc, a crescent or a ring.
+struct LitCells {
+    origin: [f64; 2],
+    step: [f64; 2],
+    cells: usize,
+    lit: Vec<bool>,
+}
+
+impl LitCells {
+    fn grown(region: [f64; 4], step: [f64; 2], cells: usize, lit: &[bool]) -> Self {
+        let mut grown = vec![false; cells * cells];
+        for iy in 0..cells {
+            for ix in 0..cells {
+                if lit[iy * cells + ix] {
+                    for jy in iy.saturating_sub(1)..=(iy + 1).min(cells - 1) {
+                        for jx in ix.saturating_sub(1)..=(ix + 1).min(cells - 1) {
+                            grown[jy * cells + jx] = true;
+                        }
+                    }
+                }
+            }
+        }
+        Self { origin: [region[0], region[1]], step, cells, lit: grown }
+    }
+
+    /// Whether the entrance point `p` lies in a lit cell (a point on a cell boundary belongs to both).
+    fn contains(&self, p: [f64; 2]) -> bool {
+        let cell = |axis: usize| -> (usize, usize) {
+            let f = (p[axis] - self.origin[axis]) / self.step[axis];
+            let lo = (f.floor().max(0.0) as usize).min(self.cells - 1);
+            let hi = ((f.ceil() - 1.0).max(0.0) as usize).min(self.cells - 1);
+            (lo.min(hi), lo.max(hi))
+        };
+        let ((x0, x1), (y0, y1)) = (cell(0), cell(1));
+        (y0..=y1).any(|y| (x0..=x1).any(|x| self.lit[y * self.cells + x]))
     }
 }
 

@@ -80,6 +80,11 @@ pub struct GhostClass {
     pub size_ratio: f64,
     /// Worst image error at a visible angle (0 to 1).
     pub image_error: f64,
+    /// Worst energy ratio of traced to paraxial light at a visible angle (reported as the larger of r and 1 / r).
+    pub energy_ratio: f64,
+    /// Worst luminance the paraxial sprite puts in the wrong place, unnormalised: `0.5 sum |T - P|` over the
+    /// window, in relative irradiance x mm^2 (what the ghost's error weighs in a frame).
+    pub misplaced_energy: f64,
     /// Brightest traced irradiance over the angles.
     pub peak_irradiance: f64,
     /// The measure's verdict.
@@ -167,6 +172,8 @@ pub fn classify(
                 centroid_rel: 0.0,
                 size_ratio: 1.0,
                 image_error: 0.0,
+                energy_ratio: 1.0,
+                misplaced_energy: 0.0,
                 peak_irradiance: 0.0,
                 measured_nonlinear: false,
                 faint: false,
@@ -227,6 +234,23 @@ pub fn classify(
                 }
                 if peak_t.max(peak_p) >= settings.visible_irradiance {
                     class.image_error = class.image_error.max(error);
+                    if ep > 0.0 {
+                        class.energy_ratio = class.energy_ratio.max((et / ep).max(ep / et));
+                    }
+                    let texel_mm2 = window.width_mm.powi(2) / f64::from(window.width * window.width);
+                    let misplaced = 0.5
+                        * t.hdr
+                            .pixels
+                            .iter()
+                            .zip(&p.pixels)
+                            .map(|(a, b)| {
+                                (luminance([a[0], a[1], a[2]].map(f64::from))
+                                    - luminance([b[0], b[1], b[2]].map(f64::from)))
+                                .abs()
+                            })
+                            .sum::<f64>()
+                        * texel_mm2;
+                    class.misplaced_energy = class.misplaced_energy.max(misplaced);
                 }
             }
             class.measured_nonlinear = class.image_error > settings.threshold;
