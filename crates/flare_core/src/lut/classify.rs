@@ -211,21 +211,19 @@ pub fn classify(
                 if et <= 0.0 {
                     continue;
                 }
-                let error = if ep <= 0.0 {
-                    1.0
-                } else {
-                    0.5 * t
-                        .hdr
-                        .pixels
-                        .iter()
-                        .zip(&p.pixels)
-                        .map(|(a, b)| {
-                            let la = luminance([a[0], a[1], a[2]].map(f64::from));
-                            let lb = luminance([b[0], b[1], b[2]].map(f64::from));
-                            (la / et - lb / ep).abs()
-                        })
-                        .sum::<f64>()
-                };
+                // One pass over the two images: the distance of the normalised footprints and the unnormalised
+                // one (luminance put in the wrong place).
+                let (mut distance, mut misplaced) = (0.0, 0.0);
+                for (a, b) in t.hdr.pixels.iter().zip(&p.pixels) {
+                    let la = luminance([a[0], a[1], a[2]].map(f64::from));
+                    let lb = luminance([b[0], b[1], b[2]].map(f64::from));
+                    if ep > 0.0 {
+                        distance += (la / et - lb / ep).abs();
+                    }
+                    misplaced += (la - lb).abs();
+                }
+                let error = if ep <= 0.0 { 1.0 } else { 0.5 * distance };
+                let misplaced = 0.5 * misplaced * (window.width_mm / f64::from(window.width)).powi(2);
                 let offset = (ct[0] - cp[0]).hypot(ct[1] - cp[1]);
                 class.centroid_mm = class.centroid_mm.max(offset);
                 class.centroid_rel = class.centroid_rel.max(offset / para.half_mm);
@@ -237,19 +235,6 @@ pub fn classify(
                     if ep > 0.0 {
                         class.energy_ratio = class.energy_ratio.max((et / ep).max(ep / et));
                     }
-                    let texel_mm2 = window.width_mm.powi(2) / f64::from(window.width * window.width);
-                    let misplaced = 0.5
-                        * t.hdr
-                            .pixels
-                            .iter()
-                            .zip(&p.pixels)
-                            .map(|(a, b)| {
-                                (luminance([a[0], a[1], a[2]].map(f64::from))
-                                    - luminance([b[0], b[1], b[2]].map(f64::from)))
-                                .abs()
-                            })
-                            .sum::<f64>()
-                        * texel_mm2;
                     class.misplaced_energy = class.misplaced_energy.max(misplaced);
                 }
             }
