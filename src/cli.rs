@@ -119,7 +119,8 @@ pub struct RenderArgs {
     /// Background plate (PNG is taken as sRGB, EXR as linear).
     #[arg(long)]
     background: Option<PathBuf>,
-    /// Cull sprites dimmer than this relative irradiance (default: a quarter of an 8-bit step at the exposure).
+    /// Most relative irradiance culling may take from any pixel: the faintest sprites are culled while their peaks sum
+    /// to at most this (default: a quarter of an 8-bit step at the exposure).
     #[arg(long)]
     threshold: Option<f64>,
     /// Accumulate ghosts at 1/N resolution (1, 2 or 4) and upsample: faster on software adapters, a little softer.
