@@ -25,9 +25,9 @@
 //!    finest step keeps that choice).
 //!
 //! Progress is reported per entry through a callback, and the bake stops at the next entry when the cancel
-//! flag is set. Given the previous LUT, a ghost whose key (the lens fingerprint, the ghost and the bake
-//! settings) is unchanged is kept, not re-baked: re-classifying, forcing a ghost or changing the theta range
-//! re-bakes only what changed. Any edit of the lens, its coatings, spectrum or stop changes every ghost's
+//! flag is set. Given the previous LUT, a ghost whose key (the lens fingerprint, the ghost, the bake
+//! settings and the bake's revision) is unchanged is kept, not re-baked: re-classifying, forcing a ghost or
+//! changing the theta range re-bakes only what changed. Any edit of the lens, its coatings, spectrum or stop changes every ghost's
 //! key, because every ghost path crosses every surface (as a refraction at least).
 
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -302,9 +302,14 @@ pub fn interpolation_error(a: &LutEntry, b: &LutEntry, t: f64, target: &LutEntry
     }
 }
 
+/// Revision of how entries are chosen and rendered, part of every ghost's key: a LUT baked by an older
+/// revision is re-baked, not kept, by `--update`. 2: refinement always splits large errors and fits its
+/// narrowest intervals.
+const BAKE_REVISION: u32 = 2;
+
 /// The key of ghost `g` for these settings (see the module documentation).
 fn ghost_key(fingerprint: u64, g: usize, surfaces: (usize, usize), theta_max: f64, settings: &BakeSettings) -> u64 {
-    let text = format!("{g}|{surfaces:?}|{theta_max}|{settings:?}");
+    let text = format!("{BAKE_REVISION}|{g}|{surfaces:?}|{theta_max}|{settings:?}");
     fnv1a(text.as_bytes(), fingerprint ^ FNV_OFFSET)
 }
 
