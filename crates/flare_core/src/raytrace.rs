@@ -565,8 +565,8 @@ impl RayGridRenderer {
         let n = cells.clamp(4, 512);
         let mut bounds = vec![NO_BOUNDS; views.len()];
         let mut grids = vec![None; self.system.settings.spectrum.len()];
+        let front = self.front_region(u);
         for job in self.jobs.iter().filter(|j| j.ghost == ghost) {
-            let front = self.front_region(u);
             let coarse = self.trace_grid(job, front, SCOUT_PRE_PASS_CELLS, d);
             let Some(pre) = self.pre_pass(job, u, &coarse, &views) else {
                 continue;
