@@ -18,13 +18,16 @@
 //! **splatted with energy conserved**: a triangle carries `cos(theta) x (entrance area) x (mean weight)` of
 //! the light (the irradiance on the entrance plane of a unit light is cos theta), spread over its footprint on
 //! the sensor, so irradiance = that energy / sensor area: where rays bunch into a caustic, the image
-//! brightens exactly as much as the footprint shrinks. Inside a triangle the stop coordinates, relative radius
-//! and weight are interpolated barycentrically at each pixel centre; the aperture mask is looked up at every
-//! stop crossing and multiplied (the stop's blade shape, anti-aliased), and a pixel whose interpolated relative
-//! radius exceeds 1 is vignetted. Triangles smaller than [`SMALL_TRIANGLE_PX2`] pixels are splatted
-//! bilinearly instead (their energy at the centroids of their midpoint subdivision, or at their centroid
-//! below one pixel): a smooth filter, so the grid's pattern does not alias into the image as the grid
-//! refines, and a ghost focused to a point keeps its energy and stays finite.
+//! brightens exactly as much as the footprint shrinks. The footprint is **box filtered**, as a sensor pixel
+//! integrates: the triangle is clipped to each pixel it covers (`Polygon`) and the pixel gets the
+//! irradiance times that area. The stop coordinates, relative radius and weight are interpolated
+//! barycentrically at the centroid of each covered part; the aperture mask is looked up at every stop crossing
+//! and multiplied (the stop's blade shape, anti-aliased; skipped when the triangle's corners all lie in the
+//! disc where the mask is fully open), and a part whose interpolated relative radius exceeds 1 is vignetted.
+//! Sampling at pixel centres instead aliases the grid into moire wherever triangles are a pixel or two across
+//! (the folds of a caustic most), differently at every grid; the box filter does not. A triangle inside one
+//! pixel, or collapsed to a line or a point (a ghost focused there), puts all of its light in that pixel: it
+//! keeps its energy and stays finite.
 //!
 //! Where the grid lies: a pre-pass of a coarse grid over the whole front lens (a square of half-side the front
 //! clear aperture plus the obliquity of its sag) finds the cells where some ray passes everything and lands in
@@ -93,9 +96,6 @@ impl Grid {
 }
 /// Samples of the ray-traced renderers' reflectance tables over sin^2(i).
 pub const DENSE_TABLE_SAMPLES: usize = 1025;
-/// Triangles at least this many pixels big are shaded at the pixel centres they cover; smaller ones are
-/// splatted bilinearly (four splats from 1 px^2 up, one below).
-pub const SMALL_TRIANGLE_PX2: f64 = 4.0;
 /// The smallest and largest grid a ray-grid render accepts.
 pub const GRID_RANGE: std::ops::RangeInclusive<usize> = 2..=4096;
 
@@ -214,6 +214,8 @@ struct Job {
 pub struct RayGridRenderer {
     system: GhostSystem,
     mask: ApertureMask,
+    /// The square of the radius (stop radii) within which the mask is fully open ([`ApertureMask::open_radius`]).
+    open_radius2: f64,
     jobs: Vec<Job>,
     tables: InterfaceTables,
     stop: usize,
@@ -364,6 +366,8 @@ struct JobFrame<'a> {
     luma: f64,
     stop_count: usize,
     mask: &'a ApertureMask,
+    /// [`RayGridRenderer::open_radius2`].
+    open_radius2: f64,
     /// cos(theta) x the entrance area of one triangle (mm^2).
     triangle_flux: f64,
 }
@@ -410,7 +414,17 @@ impl RayGridRenderer {
         let front = &lens.surfaces[0];
         let front_radius_mm = front.semi_aperture_mm;
         let front_sag_mm = front.sag_mm(front_radius_mm).unwrap_or(front_radius_mm).abs();
-        Self { stop: lens.stop_index(), mask: flare.mask.clone(), system, jobs, tables, front_radius_mm, front_sag_mm }
+        let open_radius2 = f64::from(flare.mask.open_radius()).powi(2);
+        Self {
+            stop: lens.stop_index(),
+            mask: flare.mask.clone(),
+            open_radius2,
+            system,
+            jobs,
+            tables,
+            front_radius_mm,
+            front_sag_mm,
+        }
     }
 
     /// Number of ghosts (the length of [`RayGridImage::moments`]).
@@ -567,11 +581,12 @@ impl RayGridRenderer {
         let mut grids = vec![None; self.system.settings.spectrum.len()];
         let front = self.front_region(u);
         for job in self.jobs.iter().filter(|j| j.ghost == ghost) {
-            let coarse = self.trace_grid(job, front, SCOUT_PRE_PASS_CELLS, d);
+            let coarse = self.trace_grid(job, front, SCOUT_PRE_PASS_CELLS, d, None);
             let Some(pre) = self.pre_pass(job, u, &coarse, &views) else {
                 continue;
             };
-            let traced = self.trace_grid(job, pre.bounds, n, d);
+            // Only in the lit cells of the coarse pass, as a render's dense grid.
+            let traced = self.trace_grid(job, pre.bounds, n, d, pre.lit.as_ref());
             let stop_count = self.stop_count(job);
             for (view, bounds) in views.iter().zip(&mut bounds) {
                 let vertices: Vec<Vertex> = traced.vertices.iter().map(view.seer()).collect();
@@ -646,11 +661,15 @@ impl RayGridRenderer {
     }
 
     /// Traces `job` on a `cells` x `cells` grid over `region` of the entrance plane, direction `d`.
-    fn trace_grid(&self, job: &Job, region: [f64; 4], cells: usize, d: DVec3) -> TracedGrid {
+    /// A grid traced over `region`; a ray outside `lit` (where given) is not traced and stays invalid.
+    fn trace_grid(&self, job: &Job, region: [f64; 4], cells: usize, d: DVec3, lit: Option<&LitCells>) -> TracedGrid {
         let step = [(region[2] - region[0]) / cells as f64, (region[3] - region[1]) / cells as f64];
         let vertices = (0..=cells)
             .flat_map(|iy| (0..=cells).map(move |ix| (ix, iy)))
-            .map(|(ix, iy)| self.trace(job, [region[0] + ix as f64 * step[0], region[1] + iy as f64 * step[1]], d))
+            .map(|(ix, iy)| {
+                let x0 = [region[0] + ix as f64 * step[0], region[1] + iy as f64 * step[1]];
+                if lit.is_some_and(|lit| !lit.contains(x0)) { Vertex::default() } else { self.trace(job, x0, d) }
+            })
             .collect();
         TracedGrid { region, cells, vertices }
     }
@@ -748,7 +767,8 @@ impl RayGridRenderer {
         let pre = match scouted {
             Some(traced) => self.pre_pass(job, u, traced, views),
             None => {
-                let traced = self.trace_grid(job, self.front_region(u), (grid.cells() / 2).clamp(16, 64), d);
+                let cells = (grid.cells() / 2).clamp(16, 64);
+                let traced = self.trace_grid(job, self.front_region(u), cells, d, None);
                 accs[0].stats.rays += traced.vertices.len() as u64;
                 self.pre_pass(job, u, &traced, views)
             }
@@ -767,6 +787,7 @@ impl RayGridRenderer {
             luma: crate::metrics::luminance(weights),
             stop_count: self.stop_count(job),
             mask: &self.mask,
+            open_radius2: self.open_radius2,
             triangle_flux: d.z * 0.5 * (b[2] - b[0]) * (b[3] - b[1]) / (grid * grid) as f64,
         };
         let (dx, dy) = ((b[2] - b[0]) / grid as f64, (b[3] - b[1]) / grid as f64);
@@ -916,26 +937,6 @@ impl Interpolator {
             ay: l0.ay * f[0] + l1.ay * f[1] + l2.ay * f[2],
         }
     }
-
-    /// The pixel columns of row `y` whose centres lie inside the triangle (all barycentrics >= 0).
-    fn span(&self, y: i64, x_range: (i64, i64)) -> std::ops::Range<i64> {
-        let yc = y as f64 + 0.5;
-        let (mut lo, mut hi) = (x_range.0 as f64 + 0.5, x_range.1 as f64 + 0.5);
-        for l in &self.bary {
-            let c = l.a0 + l.ay * yc;
-            if l.ax > 0.0 {
-                lo = lo.max(-c / l.ax);
-            } else if l.ax < 0.0 {
-                hi = hi.min(-c / l.ax);
-            } else if c < 0.0 {
-                return 0..0;
-            }
-        }
-        if lo.is_nan() || hi.is_nan() || lo > hi {
-            return 0..0;
-        }
-        ((lo - 0.5).ceil() as i64)..((hi - 0.5).floor() as i64 + 1)
-    }
 }
 
 /// The attributes of one triangle as planes: the light passing at a pixel is `shade`.
@@ -943,6 +944,9 @@ struct TriangleShader<'a> {
     ratio: Plane,
     weight: Plane,
     stops: [[Plane; 2]; 3],
+    /// Every stop crossing of the triangle lies in the disc where the mask is fully open (the stop coordinates
+    /// are linear over it, so it does if its corners do): no mask lookup needed.
+    open: bool,
     frame: &'a JobFrame<'a>,
 }
 
@@ -952,7 +956,14 @@ impl<'a> TriangleShader<'a> {
         Self {
             ratio: attr(&|v| v.ratio),
             weight: attr(&|v| v.weight),
-            stops: std::array::from_fn(|k| [attr(&|v| v.stops[k][0]), attr(&|v| v.stops[k][1])]),
+            stops: std::array::from_fn(|k| {
+                if k < frame.stop_count {
+                    [attr(&|v| v.stops[k][0]), attr(&|v| v.stops[k][1])]
+                } else {
+                    [Plane { a0: 0.0, ax: 0.0, ay: 0.0 }; 2]
+                }
+            }),
+            open: Self::open(tri, frame),
             frame,
         }
     }
@@ -967,8 +978,14 @@ impl<'a> TriangleShader<'a> {
             ratio: mean(&|v| v.ratio),
             weight: mean(&|v| v.weight),
             stops: std::array::from_fn(|k| [mean(&|v| v.stops[k][0]), mean(&|v| v.stops[k][1])]),
+            open: Self::open(tri, frame),
             frame,
         }
+    }
+
+    fn open(tri: [&Vertex; 3], frame: &JobFrame) -> bool {
+        let inside = |s: [f64; 2]| s[0] * s[0] + s[1] * s[1] < frame.open_radius2;
+        tri.iter().all(|v| v.stops[..frame.stop_count].iter().all(|&s| inside(s)))
     }
 
     /// Weight x aperture masks at the pixel position `p`; 0 where vignetted.
@@ -977,6 +994,9 @@ impl<'a> TriangleShader<'a> {
             return 0.0;
         }
         let mut m = self.weight.at(p).max(0.0);
+        if self.open {
+            return m;
+        }
         for [su, sv] in &self.stops[..self.frame.stop_count] {
             if m == 0.0 {
                 break;
@@ -1011,47 +1031,153 @@ fn splat_triangle(tri: [&Vertex; 3], frame: &JobFrame, acc: &mut Accumulator) ->
     }
     let at = |l: [f64; 3]| [0, 1].map(|c| l[0] * pixels[0][c] + l[1] * pixels[1][c] + l[2] * pixels[2][c]);
     let Some(interp) = Interpolator::new(pixels) else {
-        // Collapsed to a line or a point (a ghost focused there): all of its energy at the centroid.
-        splat_point(&TriangleShader::mean(tri, frame), at([1.0 / 3.0; 3]), frame.triangle_flux, frame, acc);
+        // Collapsed to a line or a point (a ghost focused there): all of its energy in the pixel of its centroid.
+        let c = at([1.0 / 3.0; 3]);
+        let energy = frame.triangle_flux * TriangleShader::mean(tri, frame).shade(c);
+        acc.add(c[0].floor() as i64, c[1].floor() as i64, energy, frame);
         return true;
     };
     let shader = TriangleShader::new(tri, &interp, frame);
     let b = &interp.bary;
     let area_px = 0.5 / (b[0].ax * b[1].ay - b[0].ay * b[1].ax).abs();
-    if area_px >= SMALL_TRIANGLE_PX2 {
-        // Irradiance x pixel area (1 px^2): the triangle's flux over its footprint, at every pixel centre inside
-        // the frame.
-        let scale = frame.triangle_flux / area_px;
-        let x_range = ((x_lo - 0.5).ceil().max(0.0) as i64, (x_hi - 0.5).floor().min(w - 1.0) as i64);
-        let y_range = ((y_lo - 0.5).ceil().max(0.0) as i64, (y_hi - 0.5).floor().min(h - 1.0) as i64);
-        for y in y_range.0..=y_range.1 {
-            for x in interp.span(y, x_range) {
-                acc.add(x, y, scale * shader.shade([x as f64 + 0.5, y as f64 + 0.5]), frame);
+    let (col, row) = (x_lo.floor(), y_lo.floor());
+    if x_hi < col + 1.0 && y_hi < row + 1.0 {
+        // Inside one pixel: all of it there.
+        acc.add(col as i64, row as i64, frame.triangle_flux * shader.shade(at([1.0 / 3.0; 3])), frame);
+        return true;
+    }
+    // Irradiance (the triangle's flux over its footprint) x the area it covers of each pixel, shaded at the
+    // centroid of that part: the box filter a sensor pixel applies.
+    let irradiance = frame.triangle_flux / area_px;
+    // The part in the frame, cut into rows, each row into pixels (the last row and the last pixel of a row
+    // without a cut).
+    let mut rows = Polygon::triangle(pixels);
+    if x_lo < 0.0 || y_lo < 0.0 || x_hi > w || y_hi > h {
+        rows = rows.clip(0, 0.0, false).clip(0, w, true).clip(1, 0.0, false).clip(1, h, true);
+    }
+    let Some([_, y_first, _, y_last]) = rows.bounds() else { return true };
+    let mut y = y_first.floor();
+    while rows.count >= 3 {
+        let strip = if y + 1.0 >= y_last {
+            std::mem::replace(&mut rows, Polygon::EMPTY)
+        } else {
+            let (strip, rest) = rows.split(1, y + 1.0);
+            rows = rest;
+            strip
+        };
+        if let Some([x_first, _, x_last, _]) = strip.bounds() {
+            let mut columns = strip;
+            let mut x = x_first.floor();
+            while columns.count >= 3 {
+                let piece = if x + 1.0 >= x_last {
+                    std::mem::replace(&mut columns, Polygon::EMPTY)
+                } else {
+                    let (piece, rest) = columns.split(0, x + 1.0);
+                    columns = rest;
+                    piece
+                };
+                if let Some((area, centroid)) = piece.area_centroid() {
+                    acc.add(x as i64, y as i64, irradiance * area * shader.shade(centroid), frame);
+                }
+                x += 1.0;
             }
         }
-    } else if area_px >= 1.0 {
-        // A pixel or a few: four bilinear splats at the centroids of its midpoint subdivision (a smooth
-        // filter, so the pattern of the grid does not alias into the image).
-        let (big, small) = (2.0 / 3.0, 1.0 / 6.0);
-        for l in [[big, small, small], [small, big, small], [small, small, big], [1.0 / 3.0; 3]] {
-            splat_point(&shader, at(l), 0.25 * frame.triangle_flux, frame, acc);
-        }
-    } else {
-        splat_point(&shader, at([1.0 / 3.0; 3]), frame.triangle_flux, frame, acc);
+        y += 1.0;
     }
     true
 }
 
-/// `flux` x the shading at the pixel position `at`, split bilinearly over the four nearest pixel centres.
-fn splat_point(shader: &TriangleShader, at: [f64; 2], flux: f64, frame: &JobFrame, acc: &mut Accumulator) {
-    let energy = flux * shader.shade(at);
-    let (px, py) = (at[0] - 0.5, at[1] - 0.5);
-    let (fx, fy) = (px - px.floor(), py - py.floor());
-    let (ix, iy) = (px.floor() as i64, py.floor() as i64);
-    acc.add(ix, iy, energy * (1.0 - fx) * (1.0 - fy), frame);
-    acc.add(ix + 1, iy, energy * fx * (1.0 - fy), frame);
-    acc.add(ix, iy + 1, energy * (1.0 - fx) * fy, frame);
-    acc.add(ix + 1, iy + 1, energy * fx * fy, frame);
+/// A convex polygon in pixel space: a triangle clipped to an axis-aligned box (the frame, a row of it, a pixel),
+/// so at most seven vertices (each side of the box adds at most one).
+#[derive(Clone, Copy)]
+struct Polygon {
+    vertices: [[f64; 2]; 8],
+    count: usize,
+}
+
+impl Polygon {
+    const EMPTY: Self = Self { vertices: [[0.0; 2]; 8], count: 0 };
+
+    fn triangle(v: [[f64; 2]; 3]) -> Self {
+        let mut vertices = [[0.0; 2]; 8];
+        vertices[..3].copy_from_slice(&v);
+        Self { vertices, count: 3 }
+    }
+
+    /// The part with `p[axis] <= at` (`below`) or `p[axis] >= at`.
+    fn clip(&self, axis: usize, at: f64, below: bool) -> Self {
+        let (lower, upper) = self.split(axis, at);
+        if below { lower } else { upper }
+    }
+
+    /// The parts with `p[axis] <= at` and with `p[axis] >= at` (Sutherland-Hodgman against one line, both sides
+    /// in one pass).
+    fn split(&self, axis: usize, at: f64) -> (Self, Self) {
+        let vertices = &self.vertices[..self.count];
+        let empty = Self::EMPTY;
+        if vertices.iter().all(|p| p[axis] <= at) {
+            return (*self, empty);
+        }
+        if vertices.iter().all(|p| p[axis] >= at) {
+            return (empty, *self);
+        }
+        let (mut lower, mut upper) = (empty, empty);
+        let push = |poly: &mut Self, p: [f64; 2]| {
+            if poly.count < poly.vertices.len() {
+                poly.vertices[poly.count] = p;
+                poly.count += 1;
+            }
+        };
+        let mut a = vertices[vertices.len() - 1];
+        for &b in vertices {
+            if a[axis] <= at {
+                push(&mut lower, a);
+            }
+            if a[axis] >= at {
+                push(&mut upper, a);
+            }
+            if (a[axis] < at && b[axis] > at) || (a[axis] > at && b[axis] < at) {
+                // The edge crosses the line (so its ends differ along `axis`): the crossing belongs to both.
+                let t = (at - a[axis]) / (b[axis] - a[axis]);
+                let mut p = [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])];
+                p[axis] = at;
+                push(&mut lower, p);
+                push(&mut upper, p);
+            }
+            a = b;
+        }
+        (lower, upper)
+    }
+
+    /// `[x_min, y_min, x_max, y_max]`, `None` when the polygon is empty.
+    fn bounds(&self) -> Option<[f64; 4]> {
+        (self.count >= 3).then(|| {
+            self.vertices[..self.count]
+                .iter()
+                .fold([f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY], |b, p| {
+                    [b[0].min(p[0]), b[1].min(p[1]), b[2].max(p[0]), b[3].max(p[1])]
+                })
+        })
+    }
+
+    /// Area (px^2) and centroid; `None` when empty or of no area.
+    fn area_centroid(&self) -> Option<(f64, [f64; 2])> {
+        if self.count < 3 {
+            return None;
+        }
+        let o = self.vertices[0];
+        let (mut area2, mut cx, mut cy) = (0.0, 0.0, 0.0);
+        for i in 1..self.count - 1 {
+            let (a, b) = (self.vertices[i], self.vertices[i + 1]);
+            let (ax, ay, bx, by) = (a[0] - o[0], a[1] - o[1], b[0] - o[0], b[1] - o[1]);
+            let cross = ax * by - ay * bx;
+            area2 += cross;
+            cx += cross * (ax + bx);
+            cy += cross * (ay + by);
+        }
+        (area2 != 0.0 && area2.is_finite())
+            .then(|| (0.5 * area2.abs(), [o[0] + cx / (3.0 * area2), o[1] + cy / (3.0 * area2)]))
+    }
 }
 
 #[cfg(test)]
@@ -1086,18 +1212,80 @@ mod tests {
     #[test]
     fn a_point_focused_triangle_keeps_its_energy() {
         let mask = crate::aperture::Aperture::default().rasterise(64);
-        let frame =
-            JobFrame { ghost: 0, rgb: [1.0, 1.0, 1.0], luma: 1.0, stop_count: 1, mask: &mask, triangle_flux: 2.0 };
+        let frame = JobFrame {
+            ghost: 0,
+            rgb: [1.0, 1.0, 1.0],
+            luma: 1.0,
+            stop_count: 1,
+            mask: &mask,
+            open_radius2: 0.0,
+            triangle_flux: 2.0,
+        };
         let v = Vertex { valid: true, pixel: [10.3, 7.6], stops: [[0.0; 2]; 3], ratio: 0.5, weight: 0.25 };
         let mut acc = Accumulator::new(20, 20, 1);
         assert!(splat_triangle([&v, &v, &v], &frame, &mut acc));
         let total: f64 = acc.energy.iter().map(|p| p[0]).sum();
         assert!((total - 0.5).abs() < 1e-12, "{total}");
-        // A large triangle: irradiance = flux / area, over the pixel centres inside.
+        // A large triangle: irradiance = flux / area, times the area it covers of each pixel.
         let tri = [[2.0, 2.0], [18.0, 2.0], [2.0, 18.0]].map(|pixel| Vertex { pixel, ..v });
         let mut acc = Accumulator::new(20, 20, 1);
         splat_triangle([&tri[0], &tri[1], &tri[2]], &frame, &mut acc);
         let total: f64 = acc.energy.iter().map(|p| p[0]).sum();
-        assert!((total / 0.5 - 1.0).abs() < 0.1, "sampled energy {total} vs 0.5");
+        assert!((total / 0.5 - 1.0).abs() < 1e-9, "box-filtered energy {total} vs 0.5");
+        // Partly off the frame: what lands in it is its share by area (x >= 0: a quarter of this one).
+        let tri = [[-8.0, 2.0], [8.0, 2.0], [-8.0, 18.0]].map(|pixel| Vertex { pixel, ..v });
+        let mut acc = Accumulator::new(20, 20, 1);
+        splat_triangle([&tri[0], &tri[1], &tri[2]], &frame, &mut acc);
+        let total: f64 = acc.energy.iter().map(|p| p[0]).sum();
+        assert!((total / 0.125 - 1.0).abs() < 1e-9, "{total} vs 1/4 of 0.5");
+    }
+
+    /// A mesh of triangles a pixel or so across, of one irradiance, tiles a region: every pixel inside it gets
+    /// exactly that irradiance (no moire from the grid), whatever the mesh's scale, skew and offset.
+    #[test]
+    fn a_uniform_mesh_splats_a_uniform_image() {
+        let mask = crate::aperture::Aperture::default().rasterise(64);
+        let v = Vertex { valid: true, pixel: [0.0; 2], stops: [[0.0; 2]; 3], ratio: 0.5, weight: 1.0 };
+        for (step, skew, offset) in [(1.37, 0.21, [3.3, 2.9]), (0.71, -0.4, [4.05, 3.5]), (2.3, 0.0, [2.5, 2.5])] {
+            // Cells are parallelograms of area step^2, each two triangles of half that.
+            let frame = JobFrame {
+                ghost: 0,
+                rgb: [1.0; 3],
+                luma: 1.0,
+                stop_count: 1,
+                mask: &mask,
+                open_radius2: f64::from(mask.open_radius()).powi(2),
+                triangle_flux: 0.5 * step * step,
+            };
+            let n = (24.0 / step) as usize;
+            let at = |i: usize, j: usize| {
+                let (x, y) = (i as f64 * step, j as f64 * step);
+                Vertex { pixel: [offset[0] + x + skew * y, offset[1] + y], ..v }
+            };
+            let mut acc = Accumulator::new(32, 32, 1);
+            for j in 0..n {
+                for i in 0..n {
+                    let (a, b, c, d) = (at(i, j), at(i + 1, j), at(i, j + 1), at(i + 1, j + 1));
+                    assert!(splat_triangle([&a, &b, &d], &frame, &mut acc));
+                    assert!(splat_triangle([&a, &d, &c], &frame, &mut acc));
+                }
+            }
+            // Pixels well inside the mesh: irradiance 1 (energy per unit area; a pixel is 1 x 1).
+            let inside = (0..32 * 32).filter(|k| {
+                let (x, y) = ((k % 32) as f64, (k / 32) as f64);
+                let (y0, y1) = (offset[1] + 1.0, offset[1] + n as f64 * step - 2.0);
+                let x_at = |y: f64| offset[0] + skew * (y - offset[1]);
+                y > y0
+                    && y + 1.0 < y1
+                    && x > x_at(y).max(x_at(y + 1.0)) + 1.0
+                    && x + 2.0 < x_at(y).min(x_at(y + 1.0)) + n as f64 * step
+            });
+            let mut count = 0;
+            for k in inside {
+                assert!((acc.energy[k][0] - 1.0).abs() < 1e-9, "step {step}: pixel {k} got {}", acc.energy[k][0]);
+                count += 1;
+            }
+            assert!(count > 100, "step {step}: only {count} pixels inside");
+        }
     }
 }

@@ -83,7 +83,7 @@ proptest! {
         let fo = FirstOrder::d_line(&lens);
         prop_assume!(fo.is_ok(), "afocal or virtual focus");
         let fo = fo.unwrap();
-        let mut ratios_checked = 0;
+        let mut landed = 0;
         let pupil = fo.entrance_pupil();
         let mut paths = some_ghosts(&lens, 6);
         paths.push(LightPath::image(&lens));
@@ -100,6 +100,7 @@ proptest! {
             // h^3 is the asymptotic law: halve until the error is small, then the last ratio must be near 8.
             let errors: Option<Vec<f64>> = (0..7).map(|k| error(0.5f64.powi(k))).collect();
             let Some(errors) = errors else { continue };
+            landed += 1;
             // Below 1e-9 mm (a picometre) the difference is rounding, not aberration: a ghost path of a dozen
             // surfaces, with its magnification, rounds the landing height at the 1e-10 mm level (case
             // `2f9bb245`: 5e-10 mm after three halvings, its ratio down to 4.9).
@@ -111,9 +112,10 @@ proptest! {
             let n = usable.len();
             let ratio = usable[n - 2] / usable[n - 1];
             prop_assert!(ratio >= 6.5, "{:?}: errors {usable:?}, last ratio {ratio:.2}", path.kind);
-            ratios_checked += 1;
         }
-        prop_assert!(ratios_checked >= 1, "the image path at small height and angle always lands");
+        // Every path that lands is checked: by its ratio, or (a nearly afocal lens whose difference stays at
+        // rounding level, saved case `da46e37a`) by the tiny-ray bound.
+        prop_assert!(landed >= 1, "the image path at small height and angle always lands");
     }
 }
 

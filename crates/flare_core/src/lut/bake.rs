@@ -52,9 +52,9 @@ pub struct BakeSettings {
     /// Most texels across an entry.
     pub res: u32,
     /// Most ray-grid cells across a ghost's entrance region (the reference renderer's adaptive grid). 64 by
-    /// default: over the scouted region that is about one cell per two texels. Measured against 128: the same
-    /// on the 28-surface Nikon zoom (SSIM 0.9782 / 0.9796 at 13 deg) for 58 s instead of 95 s; 0.002-0.003
-    /// SSIM less on the double Gauss, whose caustics are sharper.
+    /// default: over the scouted region that is about one cell per two texels. 128 took the 28-surface Nikon
+    /// zoom 95 s instead of 58 s for the same image (SSIM 0.9782 / 0.9796 at 13 deg, measured before the box
+    /// filter); 32 costs the double Gauss 0.002-0.004 SSIM at 0 and 13 deg (box filter).
     pub grid: usize,
     /// Azimuth steps over the symmetry wedge (0: one azimuth, rotation only).
     pub phi_steps: u32,
@@ -304,8 +304,9 @@ pub fn interpolation_error(a: &LutEntry, b: &LutEntry, t: f64, target: &LutEntry
 
 /// Revision of how entries are chosen and rendered, part of every ghost's key: a LUT baked by an older
 /// revision is re-baked, not kept, by `--update`. 2: refinement always splits large errors and fits its
-/// narrowest intervals.
-const BAKE_REVISION: u32 = 2;
+/// narrowest intervals. 3: entries rendered with the box filter (each triangle's light shared among the pixels it
+/// covers by area).
+const BAKE_REVISION: u32 = 3;
 
 /// The key of ghost `g` for these settings (see the module documentation).
 fn ghost_key(fingerprint: u64, g: usize, surfaces: (usize, usize), theta_max: f64, settings: &BakeSettings) -> u64 {
