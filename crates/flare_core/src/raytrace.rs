@@ -660,8 +660,8 @@ impl RayGridRenderer {
         [-half, -half, half, half]
     }
 
-    /// Traces `job` on a `cells` x `cells` grid over `region` of the entrance plane, direction `d`.
-    /// A grid traced over `region`; a ray outside `lit` (where given) is not traced and stays invalid.
+    /// Traces `job` on a `cells` x `cells` grid over `region` of the entrance plane, direction `d`; a ray outside
+    /// `lit` (where given) is not traced and stays invalid.
     fn trace_grid(&self, job: &Job, region: [f64; 4], cells: usize, d: DVec3, lit: Option<&LitCells>) -> TracedGrid {
         let step = [(region[2] - region[0]) / cells as f64, (region[3] - region[1]) / cells as f64];
         let vertices = (0..=cells)
@@ -1049,33 +1049,19 @@ fn splat_triangle(tri: [&Vertex; 3], frame: &JobFrame, acc: &mut Accumulator) ->
     // Irradiance (the triangle's flux over its footprint) x the area it covers of each pixel, shaded at the
     // centroid of that part: the box filter a sensor pixel applies.
     let irradiance = frame.triangle_flux / area_px;
-    // The part in the frame, cut into rows, each row into pixels (the last row and the last pixel of a row
-    // without a cut).
+    // The part in the frame, cut into rows, each row into pixels.
     let mut rows = Polygon::triangle(pixels);
     if x_lo < 0.0 || y_lo < 0.0 || x_hi > w || y_hi > h {
         rows = rows.clip(0, 0.0, false).clip(0, w, true).clip(1, 0.0, false).clip(1, h, true);
     }
-    let Some([_, y_first, _, y_last]) = rows.bounds() else { return true };
+    let Some([_, y_first, ..]) = rows.bounds() else { return true };
     let mut y = y_first.floor();
     while rows.count >= 3 {
-        let strip = if y + 1.0 >= y_last {
-            std::mem::replace(&mut rows, Polygon::EMPTY)
-        } else {
-            let (strip, rest) = rows.split(1, y + 1.0);
-            rows = rest;
-            strip
-        };
-        if let Some([x_first, _, x_last, _]) = strip.bounds() {
-            let mut columns = strip;
+        let mut columns = rows.cut_below(1, y + 1.0);
+        if let Some([x_first, ..]) = columns.bounds() {
             let mut x = x_first.floor();
             while columns.count >= 3 {
-                let piece = if x + 1.0 >= x_last {
-                    std::mem::replace(&mut columns, Polygon::EMPTY)
-                } else {
-                    let (piece, rest) = columns.split(0, x + 1.0);
-                    columns = rest;
-                    piece
-                };
+                let piece = columns.cut_below(0, x + 1.0);
                 if let Some((area, centroid)) = piece.area_centroid() {
                     acc.add(x as i64, y as i64, irradiance * area * shader.shade(centroid), frame);
                 }
@@ -1102,6 +1088,13 @@ impl Polygon {
         let mut vertices = [[0.0; 2]; 8];
         vertices[..3].copy_from_slice(&v);
         Self { vertices, count: 3 }
+    }
+
+    /// Cuts off and returns the part with `p[axis] <= at`, keeping the rest.
+    fn cut_below(&mut self, axis: usize, at: f64) -> Self {
+        let (lower, upper) = self.split(axis, at);
+        *self = upper;
+        lower
     }
 
     /// The part with `p[axis] <= at` (`below`) or `p[axis] >= at`.

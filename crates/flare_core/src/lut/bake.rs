@@ -27,8 +27,8 @@
 //! Progress is reported per entry through a callback, and the bake stops at the next entry when the cancel
 //! flag is set. Given the previous LUT, a ghost whose key (the lens fingerprint, the ghost, the bake
 //! settings and the bake's revision) is unchanged is kept, not re-baked: re-classifying, forcing a ghost or
-//! changing the theta range re-bakes only what changed. Any edit of the lens, its coatings, spectrum or stop changes every ghost's
-//! key, because every ghost path crosses every surface (as a refraction at least).
+//! changing the theta range re-bakes only what changed. Any edit of the lens, its coatings, spectrum or stop
+//! changes every ghost's key, because every ghost path crosses every surface (as a refraction at least).
 
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
