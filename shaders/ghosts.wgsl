@@ -1,12 +1,7 @@
 // Ghost sprites: one instanced quad per (ghost, wavelength), additively blended into the HDR target.
 // CPU twin: crates/flare_core/src/render/cpu.rs, `ghost_pass` (same names, same steps).
-// Must be kept in sync with `GhostInstance` and `Globals` in crates/flare_core/src/render/mod.rs.
-
-struct Globals {
-    viewport: vec4<f32>,   // width, height, 1/width, 1/height (pixels)
-    starburst: vec4<f32>,  // centre x, centre y, half-size (pixels), intensity
-    tonemap: vec4<f32>,    // exposure, operator (0 none, 1 Reinhard, 2 ACES), encode sRGB (0/1), background (0/1)
-};
+// Must be kept in sync with `GhostInstance` in crates/flare_core/src/render/mod.rs (the uniforms `Globals`
+// come from common.wgsl).
 
 struct GhostInstance {
     @location(0) centre_half: vec4<f32>, // centre x, y (pixels); half-size x, y (pixels, signed: q -> pixel)

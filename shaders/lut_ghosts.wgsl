@@ -1,14 +1,9 @@
 // LUT ghosts: one instanced quad per LUT entry drawn this frame, sampling the entry's image in the atlas.
 // CPU twin: crates/flare_core/src/lut/blend.rs, `lut_pass` (same names, same steps).
-// Must be kept in sync with `LutInstance` in crates/flare_core/src/lut/blend.rs and `Globals` in render/mod.rs.
+// Must be kept in sync with `LutInstance` in crates/flare_core/src/lut/blend.rs (the uniforms `Globals` come
+// from common.wgsl).
 // Drawn after the paraxial ghosts into the same HDR target: added (blend One, One) or, in the alpha blend mode,
 // composited over them (blend One, OneMinusSrcAlpha).
-
-struct Globals {
-    viewport: vec4<f32>,   // width, height, 1/width, 1/height (pixels)
-    starburst: vec4<f32>,  // centre x, centre y, half-size (pixels), intensity
-    tonemap: vec4<f32>,    // exposure, operator, encode sRGB, background
-};
 
 struct LutInstance {
     @location(0) centre_axis_x: vec4<f32>, // quad centre (pixels); pixels per unit q.x

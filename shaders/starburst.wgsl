@@ -1,12 +1,6 @@
 // The starburst: the aperture's diffraction texture on a quad centred on the light's image, additive.
 // CPU twin: crates/flare_core/src/render/cpu.rs, `starburst_pass`.
-// Must be kept in sync with `Globals` in crates/flare_core/src/render/mod.rs.
-
-struct Globals {
-    viewport: vec4<f32>,
-    starburst: vec4<f32>,  // centre x, centre y, half-size (pixels), intensity
-    tonemap: vec4<f32>,
-};
+// The uniforms `Globals` come from common.wgsl, prepended when the shader is embedded.
 
 struct VertexOut {
     @builtin(position) position: vec4<f32>,

@@ -1,12 +1,7 @@
-// HDR to display: flare accumulation (upsampled) + background plate, exposure, tonemap (none / Reinhard / ACES filmic), sRGB encode.
+// HDR to display: the composite flare * 2^flare_ev (accumulation upsampled) + plate * 2^plate_ev, then the
+// tonemap (none / Reinhard / ACES filmic) and sRGB encoding.
 // CPU twin: crates/flare_core/src/render/cpu.rs, `tonemap_pass` and `tonemap_pixel`.
-// Must be kept in sync with `Globals` in crates/flare_core/src/render/mod.rs.
-
-struct Globals {
-    viewport: vec4<f32>,
-    starburst: vec4<f32>,
-    tonemap: vec4<f32>,    // exposure, operator (0 none, 1 Reinhard, 2 ACES), encode sRGB (0/1), background (0/1)
-};
+// The uniforms `Globals` come from common.wgsl, prepended when the shader is embedded.
 
 @group(0) @binding(0) var<uniform> globals: Globals;
 @group(0) @binding(1) var hdr_texture: texture_2d<f32>;
@@ -35,13 +30,13 @@ fn encode_srgb(c: vec3<f32>) -> vec3<f32> {
 @fragment
 fn fs_main(@builtin(position) position: vec4<f32>) -> @location(0) vec4<f32> {
     // The accumulation may be smaller than the image: sample it bilinearly (exact texels when it is not).
-    var c = textureSampleLevel(hdr_texture, hdr_sampler, position.xy * globals.viewport.zw, 0.0).rgb;
-    if (globals.tonemap.w > 0.5) {
+    var c = textureSampleLevel(hdr_texture, hdr_sampler, position.xy * globals.viewport.zw, 0.0).rgb * globals.tonemap.x;
+    if (globals.plate.y > 0.5) {
         let size = vec2<f32>(textureDimensions(background_texture));
         let at = vec2<i32>(position.xy * size * globals.viewport.zw);
-        c = c + textureLoad(background_texture, at, 0).rgb;
+        c = c + textureLoad(background_texture, at, 0).rgb * globals.plate.x;
     }
-    c = max(c * globals.tonemap.x, vec3<f32>(0.0));
+    c = max(c, vec3<f32>(0.0));
     if (globals.tonemap.y > 1.5) {
         c = aces(c);
     } else if (globals.tonemap.y > 0.5) {

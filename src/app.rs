@@ -2,15 +2,18 @@
 //! that edit the document (lens, aperture, coatings, ghosts, blend), a ray diagram, presets, undo and redo.
 //!
 //! # How it works
-//! All the user edits is one [`Document`]; panels change it directly and [`History`] turns every frame's
-//! change (a whole drag at once) into an undo step. Each frame the app derives what the document implies,
-//! rebuilding only what changed: the prepared flare (ghost matrices, aperture mask, starburst) when
-//! [`Document::optics_key`] changes (an impossible lens keeps the last valid flare and marks the bad cell),
-//! then the frame's scene when the light, a gain, the blend, the LUT or the view size changed. A new scene is
-//! handed to the viewport's paint callback ([`crate::viewport`]); otherwise the callback only re-draws the
-//! last texture, and the app never asks for a repaint unless something is under way (a bake, a drag bench),
-//! so an idle window costs nothing. Bakes run on a thread with progress and cancel; files are written to a
-//! temporary file and renamed.
+//! All the user edits is one [`Document`] (`flare_core::preset`, the same the command line renders); panels
+//! change it directly and [`History`] turns every frame's change (a whole drag at once) into an undo step.
+//! Each frame the app derives what the document implies, rebuilding only what changed: the prepared flare
+//! (ghost matrices, aperture mask, starburst, and their GPU textures) when
+//! [`Document::optics_fingerprint`] changes (an impossible lens keeps the last valid flare and marks the bad
+//! cell), the plate's texture when the plate file changes, then the frame ([`Frame::build`], the one frame
+//! pipeline) when its [`FrameRequest`] (light, gains, blend, exposures, tonemap, view size) or the LUT
+//! changed. Display settings never rebuild the optics or a texture ([`RebuildCounts`] counts what was
+//! rebuilt). A new frame is handed to the viewport's paint callback ([`crate::viewport`]); otherwise the
+//! callback only re-draws the last texture, and the app never asks for a repaint unless something is under
+//! way (a bake, a drag bench), so an idle window costs nothing. Bakes run on a thread with progress and
+//! cancel; images are exported through the same frame pipeline and writer as `flarelab render`.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -19,17 +22,17 @@ use std::time::Instant;
 use anyhow::{Result, bail};
 use eframe::egui_wgpu::RenderState;
 use eframe::{egui, wgpu};
-use flare_core::aperture::ApertureShape;
 use flare_core::flare::PreparedFlare;
-use flare_core::ghost::FrameStats;
-use flare_core::lut::blend::{LiveLut, LutScene};
+use flare_core::frame::{Device, Frame, FrameRequest, LayerChoice, Sources};
+use flare_core::ghost::{FrameStats, Sensor};
+use flare_core::image::HdrImage;
+use flare_core::lut::blend::LiveLut;
 use flare_core::lut::classify::GhostClass;
 use flare_core::lut::{GhostLut, LutKind};
 use flare_core::optics::FirstOrder;
 use flare_core::optics::formats::load_lens_file;
-use flare_core::render::{FlareScene, sensor_to_pixel};
-
-use crate::document::Document;
+use flare_core::preset::{Document, LutSource};
+use flare_core::render::sensor_to_pixel;
 use crate::history::History;
 use crate::panels::aperture::AperturePreview;
 use crate::panels::coatings::CoatingsState;
@@ -56,7 +59,7 @@ pub fn run() -> Result<()> {
     }
     let size = std::env::var("FLARELAB_WINDOW")
         .ok()
-        .and_then(|s| crate::cli::parse_size(&s).ok())
+        .and_then(|s| flare_core::frame::parse_size(&s).ok())
         .map_or([1440.0, 900.0], |(w, h)| [w as f32, h as f32]);
     let options = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default().with_inner_size(size).with_title("FlareLab"),
@@ -97,8 +100,33 @@ struct BakeJob {
     result: Arc<Mutex<Option<BakeOutcome>>>,
 }
 
+/// How often the app rebuilt what the document implies, for the tests and the status bar: display settings
+/// (exposures, tonemap, starburst, plate exposure) must change only `frames`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RebuildCounts {
+    /// Prepared flares built (ghost system, aperture mask, starburst FFT).
+    pub optics: u64,
+    /// GPU texture uploads (aperture, starburst, plate, LUT atlas).
+    pub textures: u64,
+    /// Frames built.
+    pub frames: u64,
+}
+
+/// What the latest frame was built from: a new frame is built only when this changes.
+#[derive(Clone, Debug, PartialEq)]
+struct FrameKey {
+    optics: u64,
+    request: FrameRequest,
+    lut_generation: u64,
+    plate_generation: u64,
+}
+
 /// Frame-time measurement of `FLARELAB_DRAG_BENCH=N`: the light swept for N frames, then the app exits.
 struct DragBench {
+    /// Sweep the exposure instead of the light (`FLARELAB_DRAG_BENCH_WHAT=exposure`).
+    exposure: bool,
+    /// What had been rebuilt when the sweep began.
+    rebuilds_at_start: Option<RebuildCounts>,
     frames: usize,
     done: usize,
     last: Option<Instant>,
@@ -114,12 +142,14 @@ pub struct FlareLabApp {
     gpu: Option<RenderState>,
     software: bool,
     // Derived from the document.
-    optics_key: String,
+    optics_key: Option<u64>,
     flare: Option<Arc<PreparedFlare>>,
+    /// What was rebuilt so far.
+    pub rebuilds: RebuildCounts,
     first_order: Option<FirstOrder>,
     pub lens_problem: Option<LensProblem>,
     pub message: Option<String>,
-    frame_key: String,
+    frame_key: Option<FrameKey>,
     view_px: (u32, u32),
     /// The latest scene for the viewport, with its generation (see [`crate::viewport`]).
     view_frame: Option<ViewFrame>,
@@ -130,6 +160,9 @@ pub struct FlareLabApp {
     stats: FrameStats,
     scene_ms: f64,
     background_key: Option<String>,
+    /// The background plate (linear, as read), for exports.
+    plate: Option<Arc<HdrImage>>,
+    plate_generation: u64,
     // LUT.
     lut: Option<Arc<LiveLut>>,
     lut_generation: u64,
@@ -143,6 +176,8 @@ pub struct FlareLabApp {
     drag_bench: Option<DragBench>,
     /// The size File > Export image renders at.
     export_size: (u32, u32),
+    /// Where the viewport was last laid out (points).
+    view_rect: Option<egui::Rect>,
 }
 
 impl FlareLabApp {
@@ -156,7 +191,15 @@ impl FlareLabApp {
         let drag_bench = std::env::var("FLARELAB_DRAG_BENCH")
             .ok()
             .and_then(|n| n.parse().ok())
-            .map(|frames| DragBench { frames, done: 0, last: None, intervals_ms: Vec::new(), scene_ms: Vec::new() });
+            .map(|frames| DragBench {
+                exposure: std::env::var("FLARELAB_DRAG_BENCH_WHAT").is_ok_and(|w| w == "exposure"),
+                rebuilds_at_start: None,
+                frames,
+                done: 0,
+                last: None,
+                intervals_ms: Vec::new(),
+                scene_ms: Vec::new(),
+            });
         let mut app = Self {
             history: History::new(&doc),
             doc,
@@ -164,12 +207,13 @@ impl FlareLabApp {
             selected: None,
             gpu,
             software,
-            optics_key: String::new(),
+            optics_key: None,
             flare: None,
+            rebuilds: RebuildCounts::default(),
             first_order: None,
             lens_problem: None,
             message: None,
-            frame_key: String::new(),
+            frame_key: None,
             view_px: (960, 540),
             view_frame: None,
             frame_pending: false,
@@ -178,6 +222,8 @@ impl FlareLabApp {
             stats: FrameStats::default(),
             scene_ms: 0.0,
             background_key: None,
+            plate: None,
+            plate_generation: 0,
             lut: None,
             lut_generation: 0,
             classes: None,
@@ -188,6 +234,7 @@ impl FlareLabApp {
             ray_diagram: RayDiagram::default(),
             drag_bench,
             export_size: (1920, 1080),
+            view_rect: None,
         };
         app.sync();
         app
@@ -216,11 +263,11 @@ impl FlareLabApp {
     }
 
     fn sync_optics(&mut self) {
-        let key = self.doc.optics_key();
-        if key == self.optics_key {
+        let key = self.doc.optics_fingerprint();
+        if self.optics_key == Some(key) {
             return;
         }
-        self.optics_key = key;
+        self.optics_key = Some(key);
         if let Err(e) = self.doc.lens.validate() {
             let (surface, field) = match &e {
                 flare_core::optics::LensError::Field { surface, field, .. } => (Some(*surface), Some(*field)),
@@ -229,13 +276,15 @@ impl FlareLabApp {
             self.lens_problem = Some(LensProblem { surface, field, reason: e.to_string() });
             return;
         }
-        let mut config = self.doc.flare_config(if self.software { 2 } else { 1 });
-        if let Some(path) = &self.doc.aperture.image {
-            match load_aperture_image(path) {
-                Ok(shape) => config.aperture.shape = shape,
-                Err(e) => self.message = Some(format!("aperture image {path}: {e}")),
+        let config = match self.doc.flare_config() {
+            Ok(config) => config,
+            Err(e) => {
+                // A bad aperture image or spectrum: the last valid flare stays, and the user is told.
+                self.message = Some(e.to_string());
+                return;
             }
-        }
+        };
+        self.rebuilds.optics += 1;
         match PreparedFlare::new(&self.doc.lens, &config) {
             Ok(flare) => {
                 self.first_order = FirstOrder::d_line(&self.doc.lens).ok();
@@ -244,6 +293,7 @@ impl FlareLabApp {
                         res.renderer.set_aperture(device, queue, &flare.mask);
                         res.renderer.set_starburst(device, queue, &flare.starburst);
                     });
+                    self.rebuilds.textures += 2;
                 }
                 // A ray-traced LUT is for one lens and its settings: refuse it for any other.
                 if let Some(lut) = &self.lut
@@ -267,8 +317,8 @@ impl FlareLabApp {
         }
         self.background_key = self.doc.background.clone();
         let plate = match &self.doc.background {
-            Some(path) => match flare_core::render::output::read_plate(std::path::Path::new(path)) {
-                Ok(p) => Some(p),
+            Some(path) => match flare_core::output::read_plate(std::path::Path::new(path)) {
+                Ok(p) => Some(Arc::new(p)),
                 Err(e) => {
                     self.message = Some(e.to_string());
                     self.doc.background = None;
@@ -280,43 +330,55 @@ impl FlareLabApp {
         };
         if let Some(rs) = &self.gpu {
             ViewportResources::with(rs, |res, device, queue| {
-                res.renderer.set_background(device, queue, plate.as_ref())
+                res.renderer.set_background(device, queue, plate.as_deref())
             });
+            self.rebuilds.textures += 1;
         }
-        self.frame_key.clear();
+        self.plate = plate;
+        self.plate_generation += 1;
     }
 
     fn set_lut(&mut self, lut: Option<GhostLut>) {
         let live = lut.map(|l| Arc::new(LiveLut::new(l)));
         if let Some(rs) = &self.gpu {
             ViewportResources::with(rs, |res, device, queue| res.renderer.set_lut(device, queue, live.as_deref()));
+            self.rebuilds.textures += 1;
         }
         self.lut = live;
         self.lut_generation += 1;
     }
 
-    /// Builds the frame's scene when what it shows changed.
+    /// The accumulation divisor of the viewport: half resolution on software adapters.
+    fn view_divisor(&self) -> u32 {
+        if self.software { 2 } else { 1 }
+    }
+
+    /// Builds the frame when what it shows changed.
     fn sync_frame(&mut self) {
-        let Some(flare) = self.flare.clone() else { return };
-        let d = &self.doc;
-        let key = format!(
-            "{}|{:?}|{:?}|{:?}|{:?}|{:?}|{}|{:?}",
-            self.optics_key, d.light_deg, d.ghosts, d.solo, d.blend, self.view_px, self.lut_generation, d.background
-        );
-        if key == self.frame_key {
+        let (Some(flare), Some(optics)) = (self.flare.clone(), self.optics_key) else { return };
+        let (w, h) = self.view_px;
+        let key = FrameKey {
+            optics,
+            request: self.doc.frame_request(&flare.system, w, h, self.view_divisor()),
+            lut_generation: self.lut_generation,
+            plate_generation: self.plate_generation,
+        };
+        if self.frame_key.as_ref() == Some(&key) {
             return;
         }
-        self.frame_key = key;
         let started = Instant::now();
-        let (scene, lut_scene, frame) = self.frame_at(&flare, self.view_px);
-        let models = &flare.system.ghosts;
+        let frame = Frame::build(&flare, self.lut.as_deref(), &key.request);
+        self.frame_key = Some(key);
+        self.rebuilds.frames += 1;
         // The ghost list: each ghost's light summed over its wavelengths, and why it is culled.
-        let mut rows: Vec<GhostRow> = models
+        let mut rows: Vec<GhostRow> = flare
+            .system
+            .ghosts
             .iter()
             .enumerate()
             .map(|(ghost, m)| GhostRow { ghost, i: m.i, j: m.j, rgb: [0.0; 3], culled: Some("no sprite") })
             .collect();
-        for s in &frame.sprites {
+        for s in &frame.sprites.sprites {
             let row = &mut rows[s.ghost];
             for c in 0..3 {
                 row.rgb[c] += s.rgb[c];
@@ -329,46 +391,12 @@ impl FlareLabApp {
             };
         }
         self.ghosts = rows;
-        self.sprites = frame.sprites;
-        self.stats = frame.stats;
+        self.sprites = frame.sprites.sprites.clone();
+        self.stats = frame.sprites.stats;
         self.scene_ms = started.elapsed().as_secs_f64() * 1e3;
         let generation = self.view_frame.as_ref().map_or(1, |f| f.0 + 1);
-        self.view_frame = Some((generation, Arc::new((scene, lut_scene))));
+        self.view_frame = Some((generation, Arc::new(frame)));
         self.frame_pending = true;
-    }
-
-    /// The document's scene at `size` (pixels): the paraxial sprites with the user's gains, toggles and
-    /// solo, and the LUT instances when a LUT is in use.
-    fn frame_at(
-        &self,
-        flare: &PreparedFlare,
-        (w, h): (u32, u32),
-    ) -> (FlareScene, Option<LutScene>, flare_core::ghost::GhostFrame) {
-        let d = &self.doc;
-        let (mut scene, frame) = flare.scene(d.light_deg, w, h);
-        let lut_scene = match (&self.lut, &d.blend.lut) {
-            (Some(live), crate::document::LutSource::Simulated { .. } | crate::document::LutSource::Photo { .. }) => {
-                let photo = live.lut.kind == LutKind::Photo;
-                Some(live.blend_into(flare, &mut scene, d.light_deg, &d.blend_settings(), !photo))
-            }
-            _ => None,
-        };
-        let models = &flare.system.ghosts;
-        let mut k = 0;
-        while k < scene.instances.len() {
-            let g = &models[scene.instance_ghosts[k] as usize];
-            let gain = d.ghost_gain(g.i, g.j) as f32;
-            if gain <= 0.0 {
-                scene.instances.swap_remove(k);
-                scene.instance_ghosts.swap_remove(k);
-                continue;
-            }
-            for c in &mut scene.instances[k].colour[..3] {
-                *c *= gain;
-            }
-            k += 1;
-        }
-        (scene, lut_scene, frame)
     }
 
     /// Undo and redo from the keyboard and the menu.
@@ -540,11 +568,14 @@ impl FlareLabApp {
 
     fn display_ui(&mut self, ui: &mut egui::Ui) {
         ui.horizontal(|ui| {
-            ui.add(egui::Slider::new(&mut self.doc.exposure, 1.0..=100000.0).logarithmic(true).text("exposure"));
-            egui::ComboBox::from_label("tonemap").selected_text(format!("{:?}", self.doc.tonemap)).show_ui(ui, |ui| {
-                use crate::document::TonemapDoc;
-                for t in [TonemapDoc::None, TonemapDoc::Reinhard, TonemapDoc::Aces] {
-                    ui.selectable_value(&mut self.doc.tonemap, t, format!("{t:?}"));
+            // Exposures in stops: the flare's relative irradiance times 2^EV, the plate as shot at 0 EV.
+            ui.add(egui::Slider::new(&mut self.doc.flare_ev, -4.0..=24.0).step_by(0.1).suffix(" EV").text("flare exposure"));
+            if self.doc.background.is_some() {
+                ui.add(egui::Slider::new(&mut self.doc.plate_ev, -8.0..=8.0).step_by(0.1).suffix(" EV").text("plate exposure"));
+            }
+            egui::ComboBox::from_label("tonemap").selected_text(self.doc.tonemap.name()).show_ui(ui, |ui| {
+                for t in flare_core::color::Tonemap::ALL {
+                    ui.selectable_value(&mut self.doc.tonemap, t, t.name());
                 }
             });
             ui.checkbox(&mut self.doc.starburst, "starburst");
@@ -556,6 +587,7 @@ impl FlareLabApp {
         let avail = ui.available_size();
         let size = egui::vec2(avail.x, (avail.x * 9.0 / 16.0).min(avail.y));
         let (rect, response) = ui.allocate_exact_size(size, egui::Sense::click_and_drag());
+        self.view_rect = Some(rect);
         let ppp = ui.ctx().pixels_per_point();
         let scale = (MAX_VIEW_WIDTH / (rect.width() * ppp)).min(1.0);
         let mut px = (
@@ -564,7 +596,7 @@ impl FlareLabApp {
         );
         // FLARELAB_VIEW_PX=WxH renders the flare at a fixed size, whatever the widget's (the drag bench's
         // frame times at 1280x720).
-        if let Some(fixed) = std::env::var("FLARELAB_VIEW_PX").ok().and_then(|s| crate::cli::parse_size(&s).ok()) {
+        if let Some(fixed) = std::env::var("FLARELAB_VIEW_PX").ok().and_then(|s| flare_core::frame::parse_size(&s).ok()) {
             px = fixed;
         }
         if px != self.view_px {
@@ -620,11 +652,18 @@ impl FlareLabApp {
         self.overlay_ui(ui, rect);
     }
 
+    /// Where the light's image (the starburst's centre) is drawn in the viewport, in points.
+    pub fn light_on_screen(&self) -> Option<egui::Pos2> {
+        let flare = self.flare.as_ref()?;
+        let u = flare_core::render::light_slopes_for_frame_position(self.doc.light_deg[0], self.doc.light_deg[1]);
+        self.to_screen(flare.system.light_image_mm(u), self.view_rect?)
+    }
+
     /// Sensor mm to a point of the viewport rect.
     fn to_screen(&self, p_mm: [f64; 2], rect: egui::Rect) -> Option<egui::Pos2> {
-        let flare = self.flare.as_ref()?;
+        self.flare.as_ref()?;
         let (w, h) = self.view_px;
-        let sensor = flare.frame_settings(w, h).sensor;
+        let sensor = Sensor::full_frame_for(w, h);
         let p = sensor_to_pixel(p_mm, &sensor, w, h);
         Some(
             rect.min
@@ -683,7 +722,7 @@ impl FlareLabApp {
     /// Puts the light where the pointer is (it may leave the frame: its ghosts keep coming).
     fn light_from_pointer(&mut self, pointer: egui::Pos2, rect: egui::Rect) {
         let Some(flare) = &self.flare else { return };
-        let sensor = flare.frame_settings(self.view_px.0, self.view_px.1).sensor;
+        let sensor = Sensor::full_frame_for(self.view_px.0, self.view_px.1);
         let k_px_per_mm = f64::from(rect.width()) / sensor.width_mm;
         let x_mm = f64::from(pointer.x - rect.center().x) / k_px_per_mm;
         let y_mm = f64::from(rect.center().y - pointer.y) / k_px_per_mm;
@@ -750,9 +789,10 @@ impl FlareLabApp {
             }
             Action::OpenApertureImage => {
                 if let Some(path) = rfd::FileDialog::new().add_filter("image", &["png", "jpg", "exr"]).pick_file() {
-                    match load_aperture_image(&path.display().to_string()) {
+                    let size = flare_core::aperture::DEFAULT_MASK_SIZE;
+                    match flare_core::aperture::Aperture::image_shape_from_file(&path, size) {
                         Ok(_) => self.doc.aperture.image = Some(path.display().to_string()),
-                        Err(e) => self.message = Some(format!("{}: {e}", path.display())),
+                        Err(e) => self.message = Some(e.to_string()),
                     }
                 }
             }
@@ -787,9 +827,9 @@ impl FlareLabApp {
                 }
                 let p = path.display().to_string();
                 self.doc.blend.lut = if lut.kind == LutKind::Photo {
-                    crate::document::LutSource::Photo { path: p }
+                    LutSource::Photo { path: p }
                 } else {
-                    crate::document::LutSource::Simulated { path: Some(p) }
+                    LutSource::Simulated { path: Some(p) }
                 };
                 self.set_lut(Some(lut));
                 self.message = None;
@@ -922,7 +962,7 @@ impl FlareLabApp {
                     lut.entry_count()
                 ));
                 self.classes = Some(classes);
-                self.doc.blend.lut = crate::document::LutSource::Simulated { path: None };
+                self.doc.blend.lut = LutSource::Simulated { path: None };
                 self.set_lut(Some(lut));
             }
             Some(Err(e)) => {
@@ -932,18 +972,28 @@ impl FlareLabApp {
         }
     }
 
-    /// `FLARELAB_DRAG_BENCH=N`: sweeps the light along a line through the optical centre, one step a frame,
-    /// for N frames, prints the median frame interval and scene time, and closes the window.
+    /// `FLARELAB_DRAG_BENCH=N`: sweeps the light along a line through the optical centre (or, with
+    /// `FLARELAB_DRAG_BENCH_WHAT=exposure`, the flare's exposure from 6 to 14 EV), one step a frame, for N
+    /// frames, prints the median frame interval and scene time and what was rebuilt, and closes the window.
     fn drag_bench_step(&mut self, ctx: &egui::Context) {
+        let rebuilds = self.rebuilds;
         let Some(bench) = &mut self.drag_bench else { return };
         let now = Instant::now();
         if let Some(last) = bench.last {
             bench.intervals_ms.push(now.duration_since(last).as_secs_f64() * 1e3);
             bench.scene_ms.push(self.scene_ms);
         }
+        // The first frame builds the optics and uploads the textures; rebuilds are counted after it.
+        if bench.done == 1 {
+            bench.rebuilds_at_start = Some(rebuilds);
+        }
         bench.last = Some(now);
         let t = bench.done as f64 / bench.frames.max(1) as f64;
-        self.doc.light_deg = [-20.0 + 40.0 * t, -10.0 + 20.0 * t];
+        if bench.exposure {
+            self.doc.flare_ev = 6.0 + 8.0 * t;
+        } else {
+            self.doc.light_deg = [-20.0 + 40.0 * t, -10.0 + 20.0 * t];
+        }
         bench.done += 1;
         if bench.done > bench.frames {
             let median = |v: &mut Vec<f64>| {
@@ -951,9 +1001,16 @@ impl FlareLabApp {
                 v.get(v.len() / 2).copied().unwrap_or(0.0)
             };
             let (interval, scene) = (median(&mut bench.intervals_ms), median(&mut bench.scene_ms));
+            let start = bench.rebuilds_at_start.unwrap_or(rebuilds);
             println!(
-                "drag bench: {} frames at {}x{}: median frame interval {interval:.1} ms, median scene build {scene:.2} ms",
-                bench.frames, self.view_px.0, self.view_px.1
+                "drag bench: {}: {} frames at {}x{}: median frame interval {interval:.1} ms, median scene build {scene:.2} ms; {} optics rebuilds, {} texture uploads, {} frames built during the sweep",
+                if bench.exposure { "exposure" } else { "light" },
+                bench.frames,
+                self.view_px.0,
+                self.view_px.1,
+                rebuilds.optics - start.optics,
+                rebuilds.textures - start.textures,
+                rebuilds.frames - start.frames,
             );
             self.drag_bench = None;
             ctx.send_viewport_cmd(egui::ViewportCommand::Close);
@@ -976,44 +1033,18 @@ pub fn restore(storage: &dyn eframe::Storage) -> Option<Document> {
     }
 }
 
-/// A custom aperture from a grey image (white open), as the aperture's image shape.
-fn load_aperture_image(path: &str) -> Result<ApertureShape> {
-    let img = image::open(path)?.to_luma32f();
-    let n = img.width().min(img.height()).min(1024);
-    if n < 8 {
-        bail!("an aperture image needs at least 8 x 8 pixels");
-    }
-    let square = image::imageops::resize(&img, n, n, image::imageops::FilterType::Triangle);
-    let luminance: Vec<f32> =
-        square.pixels().map(|p| if p.0[0].is_finite() { p.0[0].clamp(0.0, 1.0) } else { 0.0 }).collect();
-    Ok(ApertureShape::Image { size: n as usize, luminance })
-}
-
 impl FlareLabApp {
-    /// The document's frame at `size` by the CPU twin (the same passes as the GPU), written to `path` (PNG
-    /// tonemapped or EXR linear, by its extension; atomically).
+    /// The document's frame at `size` (pixels), drawn by the CPU twin through the one frame pipeline and
+    /// written by the one writer (PNG tonemapped, EXR linear with layers), exactly as `flarelab render
+    /// --preset` of this document with `--size` and `--device cpu` does.
     pub fn export_image_to(&self, size: (u32, u32), path: &std::path::Path) -> Result<()> {
-        export_frame(self, size, path)
+        let Some(flare) = &self.flare else { bail!("no valid lens") };
+        let request = self.doc.frame_request(&flare.system, size.0, size.1, 1);
+        let frame = Frame::build(flare, self.lut.as_deref(), &request);
+        let sources = Sources { flare, lut: self.lut.as_deref(), plate: self.plate.as_deref() };
+        flare_core::frame::render_to_file(&mut Device::Cpu, &frame, &sources, LayerChoice::default(), path)?;
+        Ok(())
     }
-}
-
-fn export_frame(app: &FlareLabApp, size: (u32, u32), path: &std::path::Path) -> Result<()> {
-    use flare_core::render::{cpu, output};
-    let Some(flare) = &app.flare else { bail!("no valid lens") };
-    let (scene, lut_scene, _) = app.frame_at(flare, size);
-    let lut_scene = lut_scene.as_ref();
-    let scene = &scene;
-    let starburst = cpu::StarburstTexture::from_starburst(&flare.starburst);
-    let mut hdr = cpu::render_hdr(scene, &flare.mask, app.doc.starburst.then_some(&starburst));
-    if let (Some(live), Some(l)) = (&app.lut, lut_scene) {
-        flare_core::lut::blend::lut_pass(scene, l, &live.lut, &mut hdr);
-    }
-    let plate = app.doc.background.as_ref().map(|p| output::read_plate(std::path::Path::new(p))).transpose()?;
-    match output::ImageKind::from_path(path)? {
-        output::ImageKind::Png => output::write_png(path, &cpu::tonemap_pass(scene, &hdr, plate.as_ref()))?,
-        output::ImageKind::Exr => output::write_exr(path, &cpu::composite(scene, &hdr, plate.as_ref()))?,
-    }
-    Ok(())
 }
 
 impl eframe::App for FlareLabApp {

@@ -7,7 +7,7 @@
 //! from the committed one, the committed one goes onto the undo stack. A drag of a slider or of the light is
 //! therefore one step, however many frames it lasted. An edit after an undo clears the redo stack.
 
-use crate::document::Document;
+use flare_core::preset::Document;
 
 /// Most undo steps kept.
 pub const UNDO_LIMIT: usize = 200;
@@ -80,20 +80,20 @@ mod tests {
         let mut doc = Document::default();
         let mut h = History::new(&doc);
         assert!(!h.undo(&mut doc), "nothing to undo at first");
-        doc.exposure = 10.0;
+        doc.flare_ev = 10.0;
         assert!(h.commit(&doc));
         assert!(!h.commit(&doc), "an unchanged document is no step");
-        doc.exposure = 20.0;
+        doc.flare_ev = 20.0;
         doc.light_deg = [1.0, 1.0];
         h.commit(&doc);
         assert!(h.undo(&mut doc));
-        assert_eq!((doc.exposure, doc.light_deg), (10.0, [6.0, 4.0]));
+        assert_eq!((doc.flare_ev, doc.light_deg), (10.0, [6.0, 4.0]));
         assert!(h.undo(&mut doc));
         assert_eq!(doc, Document::default());
         assert!(h.redo(&mut doc));
-        assert_eq!(doc.exposure, 10.0);
+        assert_eq!(doc.flare_ev, 10.0);
         // A new edit drops the redo stack.
-        doc.exposure = 5.0;
+        doc.flare_ev = 5.0;
         h.commit(&doc);
         assert!(!h.redo(&mut doc));
         assert!(h.can_undo());

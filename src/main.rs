@@ -38,7 +38,14 @@ fn main() -> ExitCode {
             // One line, as every other error: clap's first line, without its own "error: " prefix.
             let text = e.render().to_string();
             let first = text.lines().next().unwrap_or("invalid arguments").trim_start_matches("error: ");
-            eprintln!("flarelab: error: {first} (see `flarelab --help`)");
+            // An enumerated flag's values are part of the one line.
+            let values = text
+                .lines()
+                .map(str::trim)
+                .find(|l| l.starts_with("[possible values:"))
+                .map(|l| format!(" {l}"))
+                .unwrap_or_default();
+            eprintln!("flarelab: error: {first}{values} (see `flarelab --help`)");
             return ExitCode::from(2);
         }
     };

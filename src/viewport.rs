@@ -6,7 +6,8 @@
 //! and tonemap pass), an offscreen sRGB texture it draws the tonemapped flare into, and a small pipeline
 //! (`shaders/viewport.wgsl`) that draws that texture into egui's render pass. Each frame the app adds a
 //! [`FlareCallback`] for the viewport's rect with its latest scene and that scene's generation (bumped when
-//! the light, lens, gains, exposure... changed). `prepare` records the flare passes into egui's encoder
+//! the light, lens, gains, exposure... changed: the frame comes from `flare_core::frame`, the pipeline
+//! every command draws through). `prepare` records the flare passes into egui's encoder
 //! before egui's own pass only when the generation differs from the one last drawn; otherwise `paint` only
 //! re-draws the texture (an egui repaint for a tooltip does not re-render the flare). A frame that is never
 //! rendered (skipped by the windowing system, or by a test harness) loses nothing: the next one carries the
@@ -18,9 +19,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use eframe::egui_wgpu::{self, CallbackResources, CallbackTrait, RenderState, ScreenDescriptor};
 use eframe::{egui, wgpu};
-use flare_core::lut::blend::LutScene;
+use flare_core::frame::Frame;
 use flare_core::render::gpu::{FlareRenderer, texture_2d};
-use flare_core::render::{FlareScene, shaders::VIEWPORT_WGSL};
+use flare_core::render::shaders::VIEWPORT_WGSL;
 
 /// The offscreen texture's format: sRGB, so that sampling it gives linear values.
 const VIEW_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
@@ -166,8 +167,8 @@ impl ViewportResources {
     }
 }
 
-/// A scene to draw and its generation.
-pub type ViewFrame = (u64, Arc<(FlareScene, Option<LutScene>)>);
+/// A frame to draw and its generation.
+pub type ViewFrame = (u64, Arc<Frame>);
 
 /// One frame's viewport: the latest scene (drawn again only when its generation is new).
 pub struct FlareCallback {
@@ -205,7 +206,7 @@ impl CallbackTrait for FlareCallback {
             return Vec::new();
         }
         res.drawn = *generation;
-        let (scene, lut) = frame.as_ref();
+        let (scene, lut) = (&frame.scene, &frame.lut);
         let size = (scene.width.max(1), scene.height.max(1));
         if size != res.size {
             (res.target, res.bind_group) =

@@ -13,6 +13,7 @@ use std::process::Command;
 
 fn have_xvfb() -> bool {
     if Command::new("xvfb-run").arg("--help").output().is_err() {
+        assert!(!flare_core::render::gpu::gpu_required(), "FLARELAB_REQUIRE_GPU=1 but xvfb-run is not installed");
         println!("SKIPPED: xvfb-run is not installed (Debian package xvfb); the app needs a display to start");
         return false;
     }
@@ -119,10 +120,19 @@ fn the_drag_bench_sweeps_the_light_and_reports_frame_times() {
     let (dir, fb) = scratch();
     let app = env!("CARGO_BIN_EXE_flarelab");
     let frames = 20;
-    let script = format!("FLARELAB_VIEW_PX=1280x720 FLARELAB_DRAG_BENCH={frames} timeout 120 '{app}'");
-    let text = under_xvfb("1280x720x24", &fb, dir.path(), &script);
-    let line = text.lines().find(|l| l.starts_with("drag bench:")).unwrap_or_else(|| panic!("no bench line:\n{text}"));
-    println!("{line}");
-    assert!(line.contains(&format!("{frames} frames at 1280x720")), "{line}");
-    assert!(!text.contains("panicked"), "{text}");
+    for what in ["light", "exposure"] {
+        let script = format!(
+            "FLARELAB_VIEW_PX=1280x720 FLARELAB_DRAG_BENCH={frames} FLARELAB_DRAG_BENCH_WHAT={what} timeout 120 '{app}'"
+        );
+        let text = under_xvfb("1280x720x24", &fb, dir.path(), &script);
+        let line =
+            text.lines().find(|l| l.starts_with("drag bench:")).unwrap_or_else(|| panic!("no bench line:\n{text}"));
+        println!("{line}");
+        assert!(line.contains(&format!("{what}: {frames} frames at 1280x720")), "{line}");
+        assert!(!text.contains("panicked"), "{text}");
+        if what == "exposure" {
+            // Sweeping the exposure rebuilds no optics and uploads no texture after the first frame.
+            assert!(line.contains("0 optics rebuilds, 0 texture uploads"), "{line}");
+        }
+    }
 }

@@ -302,6 +302,7 @@ fn render_on_the_gpu_matches_the_cpu_twin() {
     if !gpu.status.success() {
         let stderr = String::from_utf8_lossy(&gpu.stderr);
         assert!(stderr.contains("no GPU adapter"), "{stderr}");
+        assert!(!flare_core::render::gpu::gpu_required(), "FLARELAB_REQUIRE_GPU=1 but {stderr}");
         println!("SKIPPED: {stderr}");
         return;
     }
@@ -337,8 +338,8 @@ fn render_takes_an_aperture_image_and_a_background_plate() {
         "cpu",
         "--tonemap",
         "none",
-        "--exposure",
-        "1",
+        "--exposure-ev",
+        "0",
         "--aperture",
         &format!("image:{}", aperture.display()),
         "--background",
@@ -348,7 +349,8 @@ fn render_takes_an_aperture_image_and_a_background_plate() {
     ]);
     assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
     let image = image::open(&out).unwrap().to_rgb8();
-    // With exposure 1 and no tonemap the plate comes back as itself wherever the flare adds next to nothing.
+    // With the flare at 0 EV (x1), the plate at 0 EV and no tonemap the plate comes back as itself wherever the
+    // flare adds next to nothing.
     let corner = image.get_pixel(2, 70);
     assert!(corner.0.iter().all(|&c| (126..=140).contains(&c)), "plate pixel {corner:?}");
 }
@@ -377,7 +379,7 @@ fn render_with_the_ray_traced_methods() {
         let out = dir.path().join(format!("{method}-{}.png", grid.unwrap_or("default")));
         let mut args = vec!["render", "tessar", "--light-deg", "5,3", "--size", "96x64", "--method", method];
         args.extend(grid.iter().flat_map(|g| ["--grid", g]));
-        args.extend(["--exposure", "3000", "-o", out.to_str().unwrap()]);
+        args.extend(["--exposure-ev", "11.55", "--coating", "lens", "-o", out.to_str().unwrap()]);
         let result = flarelab(&args);
         let stderr = String::from_utf8_lossy(&result.stderr);
         assert!(result.status.success(), "{args:?}: {stderr}");
@@ -603,4 +605,118 @@ fn classify_bake_and_render_blended_and_photo_luts() {
         &png.display().to_string(),
     ]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}
+
+#[test]
+fn render_reads_presets_and_flags_override_their_fields() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = |name: &str| dir.path().join(name).display().to_string();
+    // `preset new` writes the default document; rendering it equals rendering with no flags at all.
+    let out = flarelab(&["preset", "new", "-o", &path("default.json")]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let render = |extra: &[&str], name: &str| {
+        let mut args = vec!["render", "--size", "120x68", "--device", "cpu", "-o"];
+        let out_path = path(name);
+        args.push(&out_path);
+        args.extend(extra);
+        let result = flarelab(&args);
+        assert!(result.status.success(), "{args:?}: {}", String::from_utf8_lossy(&result.stderr));
+        std::fs::read(dir.path().join(name)).unwrap()
+    };
+    let plain = render(&[], "plain.png");
+    let preset_file = path("default.json");
+    assert_eq!(render(&["--preset", &preset_file], "preset.png"), plain, "the default document is the default");
+    assert_eq!(render(&["--preset", "default"], "shipped.png"), plain, "so is the shipped `default`");
+    // A flag overrides the preset's field.
+    assert_ne!(render(&["--preset", "default", "--exposure-ev", "8"], "ev8.png"), plain);
+    // Every shipped preset renders.
+    let list = flarelab(&["preset", "list", "--json"]);
+    let shipped = json_of(&list);
+    assert!(shipped.as_array().unwrap().len() >= 4);
+    for p in shipped.as_array().unwrap() {
+        let name = p["name"].as_str().unwrap();
+        assert!(p["lens"].is_string() && p["title"].is_string());
+        let image = render(&["--preset", name], &format!("{name}.png"));
+        assert!(!image.is_empty());
+    }
+}
+
+#[test]
+fn bad_presets_plates_and_layers_are_refused_and_nothing_is_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out.exr");
+    let out_s = out.display().to_string();
+    let e = refusal(&["render", "--preset", "no-such-look", "-o", &out_s]);
+    assert!(e.contains("no-such-look") && e.contains("default") && e.contains("nikon-zoom"), "{e}");
+    let newer = dir.path().join("newer.json");
+    std::fs::write(&newer, r#"{"version": 99, "flare_ev": 3}"#).unwrap();
+    let e = refusal(&["render", "--preset", &newer.display().to_string(), "-o", &out_s]);
+    assert!(e.contains("99") && e.contains("newer"), "{e}");
+    let bad_field = dir.path().join("bad.json");
+    std::fs::write(&bad_field, r#"{"version": 2, "plate_ev": "bright"}"#).unwrap();
+    let e = refusal(&["render", "--preset", &bad_field.display().to_string(), "-o", &out_s]);
+    assert!(e.contains("plate_ev"), "{e}");
+    let plate = dir.path().join("plate.png");
+    std::fs::write(&plate, b"not an image").unwrap();
+    let e = refusal(&["render", "--background", &plate.display().to_string(), "-o", &out_s]);
+    assert!(e.contains("plate.png") && e.contains("plate"), "{e}");
+    let e = refusal(&["render", "--layers", "shadows", "-o", &out_s]);
+    assert!(e.contains("shadows") && e.contains("ghosts"), "{e}");
+    let png = dir.path().join("out.png").display().to_string();
+    let e = refusal(&["render", "--layers", "ghosts", "-o", &png]);
+    assert!(e.contains("EXR"), "{e}");
+    let e = refusal(&["render", "--exposure", "1024", "-o", &png]);
+    assert!(e.contains("--exposure-ev 10.00"), "{e}");
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 3, "only the three inputs: nothing half-written");
+}
+
+#[test]
+fn render_writes_compositing_layers_with_the_plate_apart() {
+    let dir = tempfile::tempdir().unwrap();
+    let plate = dir.path().join("plate.exr");
+    let plate_image = image::Rgb32FImage::from_fn(80, 45, |x, _| image::Rgb([0.05 + 0.01 * x as f32, 0.2, 0.4]));
+    image::DynamicImage::ImageRgb32F(plate_image.clone()).save(&plate).unwrap();
+    let render = |plate_ev: &str, name: &str| {
+        let out = dir.path().join(name);
+        let result = flarelab(&[
+            "render",
+            "--preset",
+            "nikon-zoom",
+            "--size",
+            "80x45",
+            "--device",
+            "cpu",
+            "--background",
+            &plate.display().to_string(),
+            "--plate-ev",
+            plate_ev,
+            "--layers",
+            "ghosts",
+            "-o",
+            &out.display().to_string(),
+        ]);
+        assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+        let image = exr::prelude::read_all_flat_layers_from_file(&out).unwrap();
+        let channels: std::collections::BTreeMap<String, Vec<f32>> = image.layer_data[0]
+            .channel_data
+            .list
+            .iter()
+            .map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect()))
+            .collect();
+        channels
+    };
+    let (a, b) = (render("1", "a.exr"), render("-1", "b.exr"));
+    assert!(a.keys().any(|k| k.starts_with("ghost_") && k.ends_with(".G")), "ghost layers: {:?}", a.keys());
+    for c in ["R", "G", "B"] {
+        let (flare, plate_layer) = (&a[&format!("flare.{c}")], &a[&format!("plate.{c}")]);
+        for k in 0..flare.len() {
+            assert_eq!(a[c][k], flare[k] + plate_layer[k]);
+        }
+        assert_eq!(flare, &b[&format!("flare.{c}")], "the flare layer ignores --plate-ev");
+    }
+    // The plate layer is the plate times 2^plate_ev, pixel for pixel.
+    for (k, p) in plate_image.pixels().enumerate() {
+        assert_eq!(a["plate.R"][k], p[0] * 2.0);
+        assert_eq!(b["plate.B"][k], p[2] * 0.5);
+    }
 }

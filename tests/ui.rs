@@ -12,6 +12,31 @@ fn harness() -> Harness<'static, FlareLabApp> {
         .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), FlareLabApp::new(None, None))
 }
 
+/// The app on a wgpu device (lavapipe in CI), so that its viewport draws and uploads textures as in the window;
+/// `None` with the reason printed when there is no adapter, a failure under `FLARELAB_REQUIRE_GPU=1`.
+fn gpu_harness(stored: Option<flare_core::preset::Document>) -> Option<Harness<'static, FlareLabApp>> {
+    let adapter_ok = pollster::block_on(async {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        instance.request_adapter(&wgpu::RequestAdapterOptions::default()).await.is_ok()
+    });
+    if !adapter_ok {
+        assert!(!flare_core::render::gpu::gpu_required(), "FLARELAB_REQUIRE_GPU=1 but there is no wgpu adapter");
+        println!("SKIPPED: no wgpu adapter (install mesa-vulkan-drivers for lavapipe)");
+        return None;
+    }
+    let render_state = egui_kittest::wgpu::create_render_state(
+        egui_kittest::wgpu::default_wgpu_setup(),
+        eframe::egui_wgpu::RendererOptions::PREDICTABLE,
+    );
+    let app = FlareLabApp::new(Some(render_state.clone()), stored);
+    Some(
+        Harness::builder()
+            .with_size(egui::vec2(1280.0, 800.0))
+            .renderer(egui_kittest::wgpu::WgpuTestRenderer::from_render_state(render_state))
+            .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), app),
+    )
+}
+
 fn show(h: &mut Harness<'static, FlareLabApp>, tab: Tab) {
     h.state_mut().tab = tab;
     h.run();
@@ -105,6 +130,27 @@ fn dragging_in_the_viewport_moves_the_light_and_undo_takes_the_whole_drag_back()
     assert_ne!(after, before, "the drag moved the light");
     // The drop point is right of and above the view's centre: +x and +y in the frame.
     assert!(after[0] > 0.0 && after[1] > 0.0, "{after:?}");
+    // The optics put the light's image (the starburst) under the pointer where it was dropped, and every ghost
+    // moved to where the paraxial matrices send it for the new light: on the line through the optical centre
+    // and the light's image, at the ghost's own fixed ratio of the light's image (its matrix's A element).
+    let light_on_screen = h.state().light_on_screen().expect("the light is on screen");
+    assert!(light_on_screen.distance(to) < 1.0, "light drawn at {light_on_screen:?}, dropped at {to:?}");
+    let flare = h.state().flare().unwrap();
+    let ratios = |light: [f64; 2]| -> Vec<(usize, f64)> {
+        let u = flare_core::render::light_slopes_for_frame_position(light[0], light[1]);
+        let l = flare.system.light_image_mm(u);
+        let frame = flare.system.frame(u, &flare.frame_settings(960, 540, 1000.0));
+        frame
+            .sprites
+            .iter()
+            .filter(|s| s.wavelength == 1)
+            .map(|s| (s.ghost, (s.centre_mm[0] * l[0] + s.centre_mm[1] * l[1]) / (l[0] * l[0] + l[1] * l[1])))
+            .collect()
+    };
+    for ((g, r_before), (h_, r_after)) in ratios(before).into_iter().zip(ratios(after)) {
+        assert_eq!(g, h_);
+        assert!((r_before - r_after).abs() < 1e-9, "ghost {g}: {r_before} vs {r_after} of the light's image");
+    }
     h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
     h.run();
     assert_eq!(h.state().doc.light_deg, before, "one undo step for the whole drag");
@@ -135,7 +181,7 @@ fn dragging_the_light_moves_the_ghosts_along_the_line_through_the_optical_centre
         let flare = h.state().flare().unwrap();
         let u =
             flare_core::render::light_slopes_for_frame_position(h.state().doc.light_deg[0], h.state().doc.light_deg[1]);
-        let frame = flare.system.frame(u, &flare.frame_settings(960, 540));
+        let frame = flare.system.frame(u, &flare.frame_settings(960, 540, 1000.0));
         frame.sprites.iter().filter(|s| s.culled.is_none() && s.wavelength == 1).map(|s| s.centre_mm).collect()
     };
     for light in [[8.0, 3.0], [-5.0, 12.0], [40.0, -2.0]] {
@@ -168,7 +214,7 @@ fn step_until(h: &mut Harness<'static, FlareLabApp>, limit_s: f64, done: impl Fn
 
 #[test]
 fn the_blend_panel_bakes_on_a_thread_cancels_and_shows_the_classification() {
-    use flarelab::document::LutSource;
+    use flare_core::preset::LutSource;
     use flarelab::panels::BakeStatus;
     let mut h = harness();
     show(&mut h, Tab::Blend);
@@ -227,23 +273,7 @@ fn the_blend_panel_bakes_on_a_thread_cancels_and_shows_the_classification() {
 /// renderer's device, so its paint callback draws the flare exactly as in the window.
 #[test]
 fn snapshots_of_the_whole_window_with_the_flare() {
-    let adapter_ok = pollster::block_on(async {
-        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-        instance.request_adapter(&wgpu::RequestAdapterOptions::default()).await.is_ok()
-    });
-    if !adapter_ok {
-        println!("SKIPPED: no wgpu adapter (install mesa-vulkan-drivers for lavapipe) to render the snapshots");
-        return;
-    }
-    let render_state = egui_kittest::wgpu::create_render_state(
-        egui_kittest::wgpu::default_wgpu_setup(),
-        eframe::egui_wgpu::RendererOptions::PREDICTABLE,
-    );
-    let app = FlareLabApp::new(Some(render_state.clone()), None);
-    let mut h = Harness::builder()
-        .with_size(egui::vec2(1280.0, 800.0))
-        .renderer(egui_kittest::wgpu::WgpuTestRenderer::from_render_state(render_state))
-        .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), app);
+    let Some(mut h) = gpu_harness(None) else { return };
     // Tolerant of rasterisation differences between Mesa versions, not of a changed layout or flare.
     let options = egui_kittest::SnapshotOptions::new().threshold(2.0).max_failed_pixels(3000);
     let snap = |h: &mut Harness<'static, FlareLabApp>, name: &str| {
@@ -322,4 +352,102 @@ fn the_session_round_trips_through_eframes_storage() {
     let key = storage.0.keys().next().cloned().unwrap();
     storage.0.insert(key, "{ damaged".into());
     assert!(flarelab::app::restore(&storage).is_none());
+}
+
+#[test]
+fn the_exposure_slider_rebuilds_no_optics_and_no_texture() {
+    // On a GPU the viewport uploads textures: counted. Without one only the optics and frames are.
+    let mut h = gpu_harness(None).unwrap_or_else(harness);
+    show(&mut h, Tab::Ghosts);
+    let before = h.state().rebuilds;
+    assert!(before.optics >= 1 && before.frames >= 1, "{before:?}");
+    let mut frame_ms = Vec::new();
+    for ev in [8.0, 9.5, 11.0, 12.5, 4.0, 10.5] {
+        h.get_by_role_and_label(egui::accesskit::Role::Slider, "flare exposure").set_value_accesskit(ev);
+        let started = std::time::Instant::now();
+        h.run();
+        frame_ms.push(started.elapsed().as_secs_f64() * 1e3);
+        assert_eq!(h.state().doc.flare_ev, ev);
+    }
+    let after = h.state().rebuilds;
+    assert_eq!((after.optics, after.textures), (before.optics, before.textures), "{before:?} -> {after:?}");
+    assert!(after.frames > before.frames, "each exposure is a new frame");
+    frame_ms.sort_by(f64::total_cmp);
+    println!("exposure drag: median {:.1} ms per UI update (harness, all passes)", frame_ms[frame_ms.len() / 2]);
+    // Tonemap, starburst and plate exposure are display settings too.
+    h.state_mut().doc.tonemap = flare_core::color::Tonemap::Reinhard;
+    h.state_mut().doc.starburst = false;
+    h.state_mut().doc.plate_ev = 2.0;
+    h.run();
+    let display = h.state().rebuilds;
+    assert_eq!((display.optics, display.textures), (before.optics, before.textures));
+    // An optics edit does rebuild: the counter can see one.
+    h.state_mut().doc.aperture.f_number = Some(8.0);
+    h.run();
+    assert_eq!(h.state().rebuilds.optics, before.optics + 1);
+}
+
+/// A look with most of the document off its defaults: ghost gains, exposures, tonemap, aperture, a plate.
+fn a_look(dir: &std::path::Path) -> flare_core::preset::Document {
+    let plate = dir.join("plate.png");
+    image::RgbImage::from_fn(64, 36, |x, y| image::Rgb([(x * 3) as u8, (y * 5) as u8, 90])).save(&plate).unwrap();
+    let mut doc = flare_core::preset::Document::for_lens(flare_core::optics::library::builtin_lens("dgauss").unwrap());
+    doc.light_deg = [-7.5, 4.0];
+    doc.flare_ev = 9.0;
+    doc.plate_ev = -0.5;
+    doc.tonemap = flare_core::color::Tonemap::Reinhard;
+    doc.aperture.blades = 7;
+    doc.aperture.roundness = 0.2;
+    doc.aperture.f_number = Some(4.0);
+    doc.ghost_mut(2, 9).gain = 3.0;
+    doc.ghost_mut(1, 4).enabled = false;
+    doc.background = Some(plate.display().to_string());
+    doc
+}
+
+#[test]
+fn the_apps_export_and_render_preset_give_the_same_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let doc = a_look(dir.path());
+    let preset = dir.path().join("look.json");
+    doc.save(&preset).unwrap();
+    let mut h = Harness::builder()
+        .with_size(egui::vec2(1280.0, 800.0))
+        .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), FlareLabApp::new(None, Some(doc)));
+    h.run();
+    let render = |device: &str, name: &str| {
+        let out = dir.path().join(name);
+        let result = std::process::Command::new(env!("CARGO_BIN_EXE_flarelab"))
+            .args(["render", "--preset", preset.to_str().unwrap(), "--size", "240x135", "--device", device, "-o"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        (result, out)
+    };
+    for name in ["app.png", "app.exr"] {
+        h.state().export_image_to((240, 135), &dir.path().join(name)).unwrap();
+    }
+    // The CPU twin: the same bytes.
+    let (result, cli_png) = render("cpu", "cli.png");
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    assert_eq!(std::fs::read(&cli_png).unwrap(), std::fs::read(dir.path().join("app.png")).unwrap());
+    let (result, cli_exr) = render("cpu", "cli.exr");
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    let pixels = |p: &std::path::Path| image::open(p).unwrap().to_rgba32f().into_raw();
+    assert_eq!(pixels(&cli_exr), pixels(&dir.path().join("app.exr")));
+    // The GPU: within the twins' tolerance (see crates/flare_core/tests/render.rs).
+    let (result, gpu_png) = render("gpu", "gpu.png");
+    if !result.status.success() {
+        let stderr = String::from_utf8_lossy(&result.stderr);
+        assert!(stderr.contains("no GPU adapter"), "{stderr}");
+        assert!(!flare_core::render::gpu::gpu_required(), "FLARELAB_REQUIRE_GPU=1 but {stderr}");
+        println!("SKIPPED the GPU half: {stderr}");
+        return;
+    }
+    let (a, b) = (image::open(&gpu_png).unwrap().to_rgba8(), image::open(dir.path().join("app.png")).unwrap().to_rgba8());
+    let diffs: Vec<u8> = a.as_raw().iter().zip(b.as_raw()).map(|(x, y)| x.abs_diff(*y)).collect();
+    let mean = diffs.iter().map(|&d| f64::from(d)).sum::<f64>() / diffs.len() as f64;
+    let worst = diffs.iter().copied().max().unwrap();
+    println!("app export (CPU twin) vs render --device gpu: mean {mean:.3}/255, worst {worst}/255");
+    assert!(mean < 0.5 && worst <= 2, "mean {mean}, worst {worst}");
 }

@@ -4,7 +4,7 @@
 use eframe::egui;
 
 use super::{Action, PanelContext};
-use crate::document::Document;
+use flare_core::preset::Document;
 
 /// Preview textures, rebuilt when the prepared flare changes.
 #[derive(Default)]

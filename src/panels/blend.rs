@@ -5,7 +5,7 @@
 use eframe::egui;
 
 use super::{Action, BakeStatus, PanelContext};
-use crate::document::{Document, LutSource};
+use flare_core::preset::{Document, LutSource};
 
 pub fn blend_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, actions: &mut Vec<Action>) {
     // The mode as its parts: name, and the ramp's angles for the two curves.

@@ -10,7 +10,7 @@ use flare_core::optics::CoatingLayer;
 
 use super::labelled_value;
 
-use crate::document::Document;
+use flare_core::preset::Document;
 
 /// Which surface the plot and the editor show.
 #[derive(Default)]

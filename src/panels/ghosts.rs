@@ -5,7 +5,7 @@
 use eframe::egui;
 
 use super::{Action, PanelContext, labelled_check, labelled_value};
-use crate::document::{Document, ghost_key};
+use flare_core::preset::{Document, ghost_key};
 
 pub fn ghosts_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, actions: &mut Vec<Action>) {
     let mut rows: Vec<_> = ctx.ghosts.iter().collect();

@@ -7,7 +7,7 @@ use flare_core::optics::library::{builtin_lens, ids};
 use flare_core::optics::{Medium, Surface};
 
 use super::{Action, PanelContext, labelled_check, labelled_value};
-use crate::document::Document;
+use flare_core::preset::Document;
 
 const BAD: egui::Color32 = egui::Color32::from_rgb(255, 110, 110);
 

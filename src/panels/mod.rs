@@ -1,4 +1,4 @@
-//! The app's panels, one file each. A panel edits the [`crate::document::Document`] it is given and reads
+//! The app's panels, one file each. A panel edits the [`flare_core::preset::Document`] it is given and reads
 //! derived state from a [`PanelContext`]; what needs the app (file dialogs, the bake thread, selection) it
 //! asks for by pushing an [`Action`].
 

@@ -17,7 +17,7 @@ use std::f64::consts::PI;
 pub const DEFAULT_MASK_SIZE: usize = 256;
 
 /// The shape of the stop.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub enum ApertureShape {
     Circle,
     Blades {
@@ -33,7 +33,7 @@ pub enum ApertureShape {
 }
 
 /// The aperture: shape and f-number.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct Aperture {
     pub shape: ApertureShape,
     /// The f-number the user chose; `None` keeps the lens wide open.

@@ -1,38 +1,41 @@
 //! One flare from end to end: a lens and its settings prepared once, then a scene per light position.
 //!
 //! # How it works
-//! [`FlareConfig`] is everything a user sets besides the lens: aperture (shape, f-number), spectrum, coating
-//! override, culling threshold and display. [`PreparedFlare::new`] does the work that depends on those and
-//! on the lens (ghost matrices and reflectance tables, the aperture mask, the starburst's FFT); it is redone
-//! only when one of them changes. [`PreparedFlare::scene`] is the per-frame part: ghost sprites for the
-//! light's position and the GPU-ready [`FlareScene`]. The command line, the benchmarks and the app all go
-//! through here, so they draw the same flare.
+//! [`FlareConfig`] is everything besides the lens that changes the optics: aperture (shape, f-number),
+//! spectrum, coating override and the culling threshold. [`PreparedFlare::new`] does the work that depends on
+//! those and on the lens (ghost matrices and reflectance tables, the aperture mask, the starburst's FFT); it
+//! is redone only when one of them changes, never for a display setting (exposure, tonemap, plate,
+//! starburst gain, view size). [`PreparedFlare::scene_with`] is the per-frame part: ghost sprites for the
+//! light's position and the GPU-ready [`FlareScene`], with the display settings and per-ghost gains of that
+//! frame. [`crate::frame`] builds every frame of the app, the command line and the benchmarks through it.
 
 use crate::aperture::{Aperture, ApertureError, ApertureMask, DEFAULT_MASK_SIZE};
 use crate::ghost::{FrameSettings, GhostError, GhostFrame, GhostSettings, GhostSystem, Sensor};
 use crate::optics::{Coating, Lens};
-use crate::render::{DisplaySettings, FlareScene, light_slopes_for_frame_position};
+use crate::ghost::light_slopes_for_frame_position;
+use crate::render::cpu::StarburstTexture;
+use crate::render::{DisplaySettings, FlareScene};
 use crate::spectrum::Spectrum;
 use crate::starburst::Starburst;
 
-/// Everything but the lens.
+/// Everything but the lens that changes the optics (display settings are per frame: [`DisplaySettings`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct FlareConfig {
     pub aperture: Aperture,
     pub spectrum: Spectrum,
     pub coating_override: Option<Coating>,
     /// The most relative irradiance that culling the faintest sprites may take from any pixel (all the culled
-    /// sprites together, see [`crate::ghost::FrameSettings::intensity_threshold`]); `None` picks the level that
-    /// would show as a quarter of one 8-bit step at the display exposure (invisible): "skip what the scene
-    /// does not need".
+    /// sprites together, see [`crate::ghost::FrameSettings::intensity_threshold`]); `None` picks, per frame,
+    /// the level that would show as a quarter of one 8-bit step at that frame's flare exposure (invisible):
+    /// "skip what the scene does not need". Culling is per frame, so an exposure change rebuilds nothing.
     pub intensity_threshold: Option<f64>,
-    pub display: DisplaySettings,
 }
 
 impl FlareConfig {
-    /// The culling threshold in use (see [`Self::intensity_threshold`]).
-    pub fn threshold(&self) -> f64 {
-        self.intensity_threshold.unwrap_or_else(|| 0.25 / 255.0 / f64::from(self.display.exposure.max(1e-6)))
+    /// The culling threshold in use for a flare drawn at the linear gain `flare_gain` (see
+    /// [`Self::intensity_threshold`]).
+    pub fn threshold(&self, flare_gain: f32) -> f64 {
+        self.intensity_threshold.unwrap_or_else(|| 0.25 / 255.0 / f64::from(flare_gain.max(1e-12)))
     }
 }
 
@@ -43,7 +46,6 @@ impl Default for FlareConfig {
             spectrum: Spectrum::rgb(),
             coating_override: None,
             intensity_threshold: None,
-            display: DisplaySettings::default(),
         }
     }
 }
@@ -64,6 +66,8 @@ pub struct PreparedFlare {
     pub system: GhostSystem,
     pub mask: ApertureMask,
     pub starburst: Starburst,
+    /// The starburst as the GPU holds it (half floats), for the CPU twin.
+    pub starburst_texture: StarburstTexture,
 }
 
 impl PreparedFlare {
@@ -78,24 +82,38 @@ impl PreparedFlare {
         let system = GhostSystem::build(lens, &settings)?;
         let mask = config.aperture.rasterise(DEFAULT_MASK_SIZE);
         let starburst = Starburst::compute(&mask, &config.spectrum);
-        Ok(Self { config: config.clone(), system, mask, starburst })
+        let starburst_texture = StarburstTexture::from_starburst(&starburst);
+        Ok(Self { config: config.clone(), system, mask, starburst, starburst_texture })
     }
 
-    /// Frame settings for an image of `width` x `height` pixels.
-    pub fn frame_settings(&self, width: u32, height: u32) -> FrameSettings {
+    /// Frame settings for an image of `width` x `height` pixels drawn at the flare gain `flare_gain`.
+    pub fn frame_settings(&self, width: u32, height: u32, flare_gain: f32) -> FrameSettings {
         let sensor = Sensor::full_frame_for(width, height);
         // A focused ghost is drawn at least a pixel across.
         let min_half_size_mm = 0.75 * sensor.width_mm / width.max(1) as f64;
-        FrameSettings { sensor, intensity_threshold: self.config.threshold(), min_half_size_mm }
+        FrameSettings { sensor, intensity_threshold: self.config.threshold(flare_gain), min_half_size_mm }
     }
 
     /// Ghost sprites and the drawable scene for a light seen at the frame position `light_deg` (X right,
-    /// Y up, degrees).
+    /// Y up, degrees), at the default display settings with every ghost at gain 1 (the ghosts alone, as the
+    /// ray-traced methods and the tests compare them; frames for the user come from [`crate::frame`]).
     pub fn scene(&self, light_deg: [f64; 2], width: u32, height: u32) -> (FlareScene, GhostFrame) {
+        self.scene_with(light_deg, width, height, &DisplaySettings::default(), &[])
+    }
+
+    /// [`Self::scene`] with the frame's display settings and per-ghost gains (see [`FlareScene::build`]).
+    pub fn scene_with(
+        &self,
+        light_deg: [f64; 2],
+        width: u32,
+        height: u32,
+        display: &DisplaySettings,
+        gains: &[f32],
+    ) -> (FlareScene, GhostFrame) {
         let u = light_slopes_for_frame_position(light_deg[0], light_deg[1]);
-        let frame_settings = self.frame_settings(width, height);
+        let frame_settings = self.frame_settings(width, height, display.flare_gain());
         let frame = self.system.frame(u, &frame_settings);
-        let scene = FlareScene::build(&self.system, &frame, u, &frame_settings, &self.config.display, width, height);
+        let scene = FlareScene::build(&self.system, &frame, u, &frame_settings, display, width, height, gains);
         (scene, frame)
     }
 }

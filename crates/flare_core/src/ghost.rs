@@ -673,6 +673,17 @@ impl GhostSystem {
     }
 }
 
+/// The light slopes of a light seen at the frame position given by field angles (degrees, X right, Y up).
+pub fn light_slopes_for_frame_position(x_deg: f64, y_deg: f64) -> [f64; 2] {
+    [-x_deg.to_radians().tan(), -y_deg.to_radians().tan()]
+}
+
+/// Pixel position of the sensor point `p_mm` (display rotated by 180 degrees).
+pub fn sensor_to_pixel(p_mm: [f64; 2], sensor: &Sensor, width: u32, height: u32) -> [f64; 2] {
+    let k = width as f64 / sensor.width_mm;
+    [0.5 * width as f64 - p_mm[0] * k, 0.5 * height as f64 + p_mm[1] * k]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -14,11 +14,18 @@
 
 pub mod aperture;
 pub mod coating;
+pub mod color;
+pub mod files;
+pub mod fingerprint;
 pub mod flare;
+pub mod frame;
 pub mod ghost;
+pub mod image;
 pub mod lut;
 pub mod metrics;
 pub mod optics;
+pub mod output;
+pub mod preset;
 pub mod raytrace;
 pub mod render;
 pub mod spectrum;

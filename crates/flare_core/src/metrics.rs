@@ -7,7 +7,7 @@
 //!   luminance maps to 1.0 before tonemapping (the maximum when that percentile is 0; 1 for a black
 //!   reference), and the same exposure is applied to the image under test;
 //! - **display values**: exposure, ACES tonemap and sRGB encoding exactly as the renderer's tonemap pass
-//!   ([`crate::render::cpu::tonemap_pixel`]), kept as floats in [0, 1] (no 8-bit rounding);
+//!   ([`crate::color::display_value`], which the tonemap shader's CPU twin calls), kept as floats in [0, 1] (no 8-bit rounding);
 //! - **PSNR** over the three display channels of every pixel, `10 log10(1 / MSE)`, capped at
 //!   [`PSNR_CAP_DB`] (identical images);
 //! - **SSIM** (Wang et al. 2004) on the display luma `0.2126 R' + 0.7152 G' + 0.0722 B'`, an 11 x 11 Gaussian
@@ -20,47 +20,16 @@
 //!   least [`CENTROID_MIN_FRACTION`] of the brightest ghost's in-frame energy in the reference; the median is
 //!   reported.
 
-use crate::render::cpu::tonemap_pixel;
-use crate::render::{Globals, HdrImage};
+pub use crate::color::luminance;
+use crate::color::{Tonemap, display_value};
+pub use crate::image::GhostMoments;
+use crate::image::HdrImage;
 
 /// PSNR of identical images.
 pub const PSNR_CAP_DB: f64 = 100.0;
 /// Ghosts dimmer than this fraction of the brightest (in-frame energy, reference) are left out of the
 /// centroid error.
 pub const CENTROID_MIN_FRACTION: f64 = 0.01;
-
-/// Rec. 709 luminance of a linear RGB colour.
-pub fn luminance(rgb: [f64; 3]) -> f64 {
-    0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2]
-}
-
-/// Luminance-weighted energy of one ghost in the frame and its first moments (pixel coordinates).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct GhostMoments {
-    pub energy: f64,
-    pub sum_x: f64,
-    pub sum_y: f64,
-}
-
-impl GhostMoments {
-    pub fn add(&mut self, other: &Self) {
-        self.energy += other.energy;
-        self.sum_x += other.sum_x;
-        self.sum_y += other.sum_y;
-    }
-
-    /// Adds `energy` at the pixel position `p`.
-    pub fn add_sample(&mut self, energy: f64, p: [f64; 2]) {
-        self.energy += energy;
-        self.sum_x += energy * p[0];
-        self.sum_y += energy * p[1];
-    }
-
-    /// The centroid, when there is any energy.
-    pub fn centroid(&self) -> Option<[f64; 2]> {
-        (self.energy > 0.0).then(|| [self.sum_x / self.energy, self.sum_y / self.energy])
-    }
-}
 
 /// The exposure that maps the reference's 99.9th-percentile pixel luminance to 1.0 (see the module docs).
 pub fn exposure_for(reference: &HdrImage) -> f32 {
@@ -81,8 +50,7 @@ pub fn exposure_for(reference: &HdrImage) -> f32 {
 
 /// Display values (sRGB-encoded, [0, 1]) of `image` at `exposure` through ACES, as the tonemap pass makes them.
 pub fn display_values(image: &HdrImage, exposure: f32) -> Vec<[f32; 3]> {
-    let globals = Globals { viewport: [0.0; 4], starburst: [0.0; 4], tonemap: [exposure, 2.0, 1.0, 0.0] };
-    image.pixels.iter().map(|p| tonemap_pixel([p[0], p[1], p[2]], &globals)).collect()
+    image.pixels.iter().map(|p| [p[0], p[1], p[2]].map(|v| display_value(v * exposure, Tonemap::Aces, true))).collect()
 }
 
 /// PSNR in dB between two display images of the same size (capped at [`PSNR_CAP_DB`]).

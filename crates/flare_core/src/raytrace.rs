@@ -54,9 +54,10 @@ use crate::aperture::ApertureMask;
 use crate::coating::InterfaceTables;
 use crate::flare::PreparedFlare;
 use crate::ghost::{GhostSystem, Sensor};
-use crate::metrics::GhostMoments;
+use crate::image::GhostMoments;
 use crate::optics::{LightPath, Ray, Tracer};
-use crate::render::{HdrImage, light_slopes_for_frame_position};
+use crate::ghost::light_slopes_for_frame_position;
+use crate::image::HdrImage;
 
 /// Most grid cells across a ghost's entrance region in the reference renderer (see the convergence table in the
 /// README).
@@ -101,7 +102,7 @@ pub const GRID_RANGE: std::ops::RangeInclusive<usize> = 2..=4096;
 
 /// The part of the sensor plane an image covers: a rectangle of centre `centre_mm` and width `width_mm`, drawn
 /// `width` x `height` square pixels in the display orientation (the sensor rotated by 180 degrees, as
-/// [`crate::render::sensor_to_pixel`] does for the whole frame). The whole frame is the window centred on the
+/// [`crate::ghost::sensor_to_pixel`] does for the whole frame). The whole frame is the window centred on the
 /// axis with the sensor's width ([`Window::frame`]); a LUT bake uses a window around one ghost.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Window {

@@ -10,7 +10,8 @@ use flare_core::lut::{GhostLut, Symmetry, light_position_deg, mat_apply, photo};
 use flare_core::metrics;
 use flare_core::optics::library::builtin_lens;
 use flare_core::raytrace::{Grid, RayGridRenderer};
-use flare_core::render::{HdrImage, light_slopes_for_frame_position};
+use flare_core::frame::{Frame, FrameRequest, LutUse};
+use flare_core::render::{DisplaySettings, FlareScene, HdrImage, light_slopes_for_frame_position};
 use proptest::prelude::*;
 
 fn flare(id: &str) -> PreparedFlare {
@@ -22,6 +23,36 @@ fn small_settings() -> BakeSettings {
 }
 
 /// A small LUT of the Tessar's two brightest-error ghosts.
+/// The frame of `live` at `light` through the frame pipeline (no starburst): LUT ghosts blended with the
+/// paraxial sprites, or alone (`paraxial` false).
+fn scenes(
+    live: &LiveLut,
+    flare: &PreparedFlare,
+    light: [f64; 2],
+    width: u32,
+    height: u32,
+    blend: &BlendSettings,
+    paraxial: bool,
+) -> Frame {
+    let request = FrameRequest {
+        light_deg: light,
+        width,
+        height,
+        display: DisplaySettings { starburst: false, ..DisplaySettings::default() },
+        blend: blend.clone(),
+        lut_use: if paraxial { LutUse::Blend } else { LutUse::Alone },
+        ..FrameRequest::default()
+    };
+    Frame::build(flare, Some(live), &request)
+}
+
+/// The CPU twin's accumulation of a scene and its LUT instances (ghost pass, then LUT pass).
+fn render_cpu(flare: &PreparedFlare, live: &LiveLut, scene: &FlareScene, lut_scene: &LutScene) -> HdrImage {
+    let mut hdr = flare_core::render::cpu::ghost_pass(scene, &flare.mask);
+    lut_pass((scene.width, scene.height), lut_scene, &live.lut, &mut hdr);
+    hdr
+}
+
 fn small_lut(flare: &PreparedFlare) -> GhostLut {
     let renderer = RayGridRenderer::new(flare);
     let settings = BakeSettings { theta_max_deg: Some(16.0), ..small_settings() };
@@ -61,9 +92,10 @@ fn a_blended_lut_ghost_matches_the_ray_traced_ghost_between_samples() {
         let mut one = live.lut.clone();
         one.ghosts.truncate(1);
         let single = LiveLut::new(one);
-        let (scene, lut_scene) = single.scenes(&flare, light, w, h, &BlendSettings::default(), false);
+        let frame = scenes(&single, &flare, light, w, h, &BlendSettings::default(), false);
+        let (scene, lut_scene) = (frame.scene.clone(), frame.lut.clone().unwrap_or_default());
         let mut image = HdrImage { width: w, height: h, pixels: vec![[0.0; 4]; (w * h) as usize] };
-        lut_pass(&scene, &lut_scene, &single.lut, &mut image);
+        lut_pass((scene.width, scene.height), &lut_scene, &single.lut, &mut image);
         let truth = renderer.render_selected(light, w, h, Grid::Adaptive(128), |k| k == g).unwrap();
         let e_lut: f64 = image.pixels.iter().map(|p| f64::from(p[1])).sum();
         let e_ref: f64 = truth.hdr.pixels.iter().map(|p| f64::from(p[1])).sum();
@@ -73,9 +105,10 @@ fn a_blended_lut_ghost_matches_the_ray_traced_ghost_between_samples() {
         assert!(l1 < 0.35, "relative L1 {l1} at ({theta}, {alpha})");
         // The same ghost placed by the paraxial frame of the wrong azimuth would be far off: the test can fail.
         let wrong = light_position_deg(theta, alpha + 90.0);
-        let (scene2, lut_scene2) = single.scenes(&flare, wrong, w, h, &BlendSettings::default(), false);
+        let frame = scenes(&single, &flare, wrong, w, h, &BlendSettings::default(), false);
+        let (scene2, lut_scene2) = (frame.scene.clone(), frame.lut.clone().unwrap_or_default());
         let mut image2 = HdrImage { width: w, height: h, pixels: vec![[0.0; 4]; (w * h) as usize] };
-        lut_pass(&scene2, &lut_scene2, &single.lut, &mut image2);
+        lut_pass((scene2.width, scene2.height), &lut_scene2, &single.lut, &mut image2);
         let l1_wrong = metrics::relative_l1(&image2, &truth.hdr);
         eprintln!(
             "({theta}, {alpha}): relative L1 {l1:.3}, energy ratio {:.3}; placed for the wrong azimuth {l1_wrong:.3}",
@@ -227,7 +260,8 @@ fn blend_modes_weigh_the_lut_against_the_sprite() {
     let light = light_position_deg(10.0, 30.0);
     let blend = BlendSettings { mode: linear, ..BlendSettings::default() };
     let (full, _) = flare.scene(light, 120, 80);
-    let (scene, lut_scene) = live.scenes(&flare, light, 120, 80, &blend, true);
+    let frame = scenes(&live, &flare, light, 120, 80, &blend, true);
+        let (scene, lut_scene) = (frame.scene.clone(), frame.lut.clone().unwrap_or_default());
     for (g, w) in &lut_scene.paraxial_weights {
         assert!((w - 0.5).abs() < 1e-6, "ghost {g}: {w}");
     }
@@ -238,14 +272,15 @@ fn blend_modes_weigh_the_lut_against_the_sprite() {
     assert!((sum(&scene, g) - 0.5 * sum(&full, g)).abs() <= 1e-6 * sum(&full, g).max(1e-30));
     // Alpha: the LUT layer over the linear flare, out = lut + (1 - alpha) linear, on the CPU twin.
     let over = BlendSettings { mode: BlendMode::Alpha, ..BlendSettings::default() };
-    let (scene, lut_scene) = live.scenes(&flare, light, 120, 80, &over, true);
+    let frame = scenes(&live, &flare, light, 120, 80, &over, true);
+        let (scene, lut_scene) = (frame.scene.clone(), frame.lut.clone().unwrap_or_default());
     assert!(lut_scene.alpha_over);
     let base = flare_core::render::cpu::ghost_pass(&scene, &flare.mask);
     let mut composed = base.clone();
-    lut_pass(&scene, &lut_scene, &live.lut, &mut composed);
+    lut_pass((scene.width, scene.height), &lut_scene, &live.lut, &mut composed);
     let mut added = base.clone();
     let additive = LutScene { alpha_over: false, ..lut_scene.clone() };
-    lut_pass(&scene, &additive, &live.lut, &mut added);
+    lut_pass((scene.width, scene.height), &additive, &live.lut, &mut added);
     let (mut darker, mut lit) = (0, 0);
     for ((c, a), b) in composed.pixels.iter().zip(&added.pixels).zip(&base.pixels) {
         assert!(c[1] <= a[1] + 1e-9);
@@ -266,33 +301,29 @@ fn every_lut_instance_and_image_is_finite() {
     for (theta, alpha) in [(0.0, 0.0), (16.0, 180.0), (40.0, 33.0), (89.0, -90.0)] {
         let light = light_position_deg(theta, alpha);
         let u = light_slopes_for_frame_position(light[0], light[1]);
-        let lut_scene = LutScene::build(&live, &flare.system, u, 96, 64, &BlendSettings::default());
+        let lut_scene = LutScene::build(&live, &flare.system, u, 96, 64, &BlendSettings::default(), &[]);
         assert_eq!(lut_scene.dropped_non_finite, 0);
         assert!(lut_scene.instances.iter().all(|i| i.is_finite()));
-        let (scene, lut_scene) = live.scenes(&flare, light, 96, 64, &BlendSettings::default(), true);
-        let image = live.render_cpu(&flare, &scene, &lut_scene);
+        let frame = scenes(&live, &flare, light, 96, 64, &BlendSettings::default(), true);
+        let (scene, lut_scene) = (frame.scene.clone(), frame.lut.clone().unwrap_or_default());
+        let image = render_cpu(&flare, &live, &scene, &lut_scene);
         assert!(image.pixels.iter().flatten().all(|v| v.is_finite() && *v >= 0.0), "{theta} {alpha}");
     }
 }
 
 #[test]
 fn the_gpu_draws_lut_ghosts_as_its_cpu_twin_does() {
-    let ctx = match flare_core::render::gpu::GpuContext::headless(true) {
-        Ok(ctx) => ctx,
-        Err(e) => {
-            eprintln!("skipped: {e}");
-            return;
-        }
-    };
+    let Some(ctx) = flare_core::render::gpu::test_context() else { return };
     let flare = flare("tessar");
     let live = LiveLut::new(small_lut(&flare));
     let light = light_position_deg(9.0, 140.0);
     for mode in [BlendMode::Additive, BlendMode::Alpha] {
         let blend = BlendSettings { mode, ..BlendSettings::default() };
-        let (mut scene, lut_scene) = live.scenes(&flare, light, 160, 120, &blend, true);
+        let frame = scenes(&live, &flare, light, 160, 120, &blend, true);
+        let (mut scene, lut_scene) = (frame.scene.clone(), frame.lut.clone().unwrap_or_default());
         scene.globals.starburst = [0.0; 4];
         assert!(!lut_scene.instances.is_empty());
-        let cpu = live.render_cpu(&flare, &scene, &lut_scene);
+        let cpu = render_cpu(&flare, &live, &scene, &lut_scene);
         let mut renderer =
             flare_core::render::gpu::FlareRenderer::new(&ctx.device, &ctx.queue, wgpu::TextureFormat::Rgba8Unorm);
         renderer.set_aperture(&ctx.device, &ctx.queue, &flare.mask);
@@ -340,9 +371,10 @@ fn a_photo_lut_plays_back_its_images_turned_with_the_light() {
             theta.to_radians().tan() * azimuth_frame.to_radians().sin(),
         );
         let light = [x.atan().to_degrees(), y.atan().to_degrees()];
-        let (scene, lut_scene) = live.scenes(&flare, light, 60, 40, &BlendSettings::default(), false);
+        let frame = scenes(&live, &flare, light, 60, 40, &BlendSettings::default(), false);
+        let (scene, lut_scene) = (frame.scene.clone(), frame.lut.clone().unwrap_or_default());
         assert!(scene.instances.is_empty(), "a photo plays alone");
-        live.render_cpu(&flare, &scene, &lut_scene)
+        render_cpu(&flare, &live, &scene, &lut_scene)
     };
     let bright = |img: &HdrImage| {
         let (mut sx, mut sy, mut e) = (0.0, 0.0, 0.0);
@@ -590,9 +622,10 @@ fn a_ghost_that_vanishes_within_an_interval_is_refined_not_cross_faded() {
     // into the small ellipse the ghost has become). At 7.5 deg the edge sweeps faster than the finest step.
     for (theta, bound) in [(6.95, 0.2), (7.5, 0.6), (8.0, 0.2)] {
         let light = light_position_deg(theta, 30.0);
-        let (scene, lut_scene) = live.scenes(&flare, light, w, h, &BlendSettings::default(), false);
+        let frame = scenes(&live, &flare, light, w, h, &BlendSettings::default(), false);
+        let (scene, lut_scene) = (frame.scene.clone(), frame.lut.clone().unwrap_or_default());
         let mut image = HdrImage { width: w, height: h, pixels: vec![[0.0; 4]; (w * h) as usize] };
-        lut_pass(&scene, &lut_scene, &live.lut, &mut image);
+        lut_pass((scene.width, scene.height), &lut_scene, &live.lut, &mut image);
         let truth = renderer.render_selected(light, w, h, Grid::Adaptive(128), |k| k == g).unwrap().hdr;
         let luma = |p: &[f32; 4]| metrics::luminance([p[0], p[1], p[2]].map(f64::from));
         let energy: f64 = truth.pixels.iter().map(luma).sum();

@@ -60,7 +60,7 @@ fn check_paraxial(flare: &PreparedFlare, light_deg: [f64; 2], what: &str) -> Fla
     assert_eq!(scene.dropped_non_finite, 0, "{what}: a sprite was not finite");
     assert!(scene.instances.iter().all(|i| i.is_finite()), "{what}");
     // What reaches the GPU is f32: each instance's centre and half-size equal the f64 sprite's to f32 rounding.
-    let settings = flare.frame_settings(64, 48);
+    let settings = flare.frame_settings(64, 48, 1.0);
     let k = 64.0 / settings.sensor.width_mm;
     let drawn = frame.sprites.iter().filter(|s| s.culled.is_none());
     for (sprite, instance) in drawn.zip(&scene.instances) {

@@ -36,16 +36,16 @@ use half::f16;
 use rayon::prelude::*;
 
 use super::{
-    FNV_OFFSET, Fit, GhostLut, LutEntry, LutGhost, LutKind, MIN_TEXEL_MM, Mat2, Symmetry, fit_picks, fnv1a,
+    Fit, GhostLut, LutEntry, LutGhost, LutKind, MIN_TEXEL_MM, Mat2, Symmetry, fit_picks,
     light_position_deg, mat_apply, mat_det, mat_inverse, texels_with_coverage,
 };
 use crate::flare::PreparedFlare;
-use crate::metrics::luminance;
+use crate::color::luminance;
 use crate::raytrace::{Grid, RayGridRenderer, View, Window};
-use crate::render::light_slopes_for_frame_position;
+use crate::ghost::light_slopes_for_frame_position;
 
 /// How a LUT is baked.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct BakeSettings {
     /// Largest theta (default: the lens's useful field, [`useful_field_deg`]).
     pub theta_max_deg: Option<f64>,
@@ -303,15 +303,13 @@ pub fn interpolation_error(a: &LutEntry, b: &LutEntry, t: f64, target: &LutEntry
 }
 
 /// Revision of how entries are chosen and rendered, part of every ghost's key: a LUT baked by an older
-/// revision is re-baked, not kept, by `--update`. 2: refinement always splits large errors and fits its
-/// narrowest intervals. 3: entries rendered with the box filter (each triangle's light shared among the pixels it
-/// covers by area).
+/// revision is re-baked, not kept, by `--update` (what each revision changed: CHANGELOG.md).
 const BAKE_REVISION: u32 = 3;
 
-/// The key of ghost `g` for these settings (see the module documentation).
+/// The key of ghost `g` for these settings (see the module documentation): a [`crate::fingerprint::of`] of
+/// the bake revision, the lens's fingerprint, the ghost and the settings.
 fn ghost_key(fingerprint: u64, g: usize, surfaces: (usize, usize), theta_max: f64, settings: &BakeSettings) -> u64 {
-    let text = format!("{BAKE_REVISION}|{g}|{surfaces:?}|{theta_max}|{settings:?}");
-    fnv1a(text.as_bytes(), fingerprint ^ FNV_OFFSET)
+    crate::fingerprint::of(&(BAKE_REVISION, fingerprint, g, surfaces, theta_max, settings))
 }
 
 /// Bakes `ghosts` of `flare` (lens indices). `previous` lends the ghosts whose key is unchanged; `progress`
@@ -429,6 +427,7 @@ pub fn bake(
         kind: LutKind::RayTraced,
         lens_id: lens.id.clone(),
         lens_fingerprint: fingerprint,
+        fingerprint_scheme: crate::fingerprint::SCHEME,
         wavelengths_nm: flare.config.spectrum.wavelengths_nm.clone(),
         f_number,
         symmetry,

@@ -30,8 +30,8 @@ use super::{
     EntryShape, Fit, GhostLut, LutEntry, LutKind, fit_picks, light_direction_deg, mat_apply, mat_mul, rotation,
 };
 use crate::ghost::{GhostSystem, ParaxialFrame};
+use crate::image::HdrImage;
 use crate::raytrace::Window;
-use crate::render::{FlareScene, HdrImage};
 
 /// Side of an atlas page (texels): within every adapter's limits (WebGL2's 2048 included).
 pub const ATLAS_PAGE: u32 = 2048;
@@ -250,7 +250,9 @@ fn bracket(xs: &[f64], x: f64) -> Vec<(usize, f64)> {
 
 impl LutScene {
     /// The instances of every LUT ghost for light slopes `u` in a `width` x `height` frame. `system` is the live
-    /// lens's (for a photo LUT it is not used).
+    /// lens's (for a photo LUT it is not used). `gains[g]` multiplies the images of lens ghost `g` as it does
+    /// its sprites (missing entries are 1; a photo LUT's single image is not one ghost and keeps gain 1).
+    #[allow(clippy::too_many_arguments)]
     pub fn build(
         live_lut: &LiveLut,
         system: &GhostSystem,
@@ -258,6 +260,7 @@ impl LutScene {
         width: u32,
         height: u32,
         blend: &BlendSettings,
+        gains: &[f32],
     ) -> Self {
         let (lut, layout) = (&live_lut.lut, &live_lut.layout);
         let out = Window::frame(width, height);
@@ -272,7 +275,8 @@ impl LutScene {
             if !photo {
                 scene.paraxial_weights.push((ghost.ghost, (1.0 - w) as f32));
             }
-            if w <= 0.0 || ghost.entries.is_empty() {
+            let user_gain = if photo { 1.0 } else { f64::from(gains.get(ghost.ghost as usize).copied().unwrap_or(1.0)) };
+            if w <= 0.0 || ghost.entries.is_empty() || user_gain.is_nan() || user_gain <= 0.0 {
                 continue;
             }
             let live = if photo {
@@ -315,7 +319,7 @@ impl LutScene {
                     &out,
                     page,
                     [x0, y0],
-                    (weight * ratio * w * blend.gain) as f32,
+                    (weight * ratio * w * blend.gain * user_gain) as f32,
                 );
                 if instance.is_finite() {
                     scene.instances.push(instance);
@@ -328,28 +332,9 @@ impl LutScene {
         scene
     }
 
-    /// Scales the paraxial sprites of LUT ghosts by their weights (dropping those at 0).
-    pub fn apply_paraxial_weights(&self, scene: &mut FlareScene) {
-        if self.paraxial_weights.is_empty() {
-            return;
-        }
-        let weight_of = |g: u32| self.paraxial_weights.iter().find(|(h, _)| *h == g).map_or(1.0, |(_, w)| *w);
-        let mut kept = 0;
-        for k in 0..scene.instances.len() {
-            let weight = weight_of(scene.instance_ghosts[k]);
-            if weight <= 0.0 {
-                continue;
-            }
-            let mut instance = scene.instances[k];
-            for c in &mut instance.colour[..3] {
-                *c *= weight;
-            }
-            scene.instances[kept] = instance;
-            scene.instance_ghosts[kept] = scene.instance_ghosts[k];
-            kept += 1;
-        }
-        scene.instances.truncate(kept);
-        scene.instance_ghosts.truncate(kept);
+    /// The weight the paraxial sprites of lens ghost `g` keep (1 for a ghost the LUT does not hold).
+    pub fn paraxial_weight(&self, g: u32) -> f32 {
+        self.paraxial_weights.iter().find(|(h, _)| *h == g).map_or(1.0, |(_, w)| *w)
     }
 }
 
@@ -392,11 +377,12 @@ fn place(
 /// Rows per parallel band of the CPU pass.
 const BAND_ROWS: usize = 16;
 
-/// `lut_ghosts.wgsl`: every LUT instance onto the HDR accumulation `hdr` of `scene` (added, or composited over
-/// it through alpha), sampling each instance's entry exactly as the GPU samples the atlas.
-pub fn lut_pass(scene: &FlareScene, lut_scene: &LutScene, lut: &GhostLut, hdr: &mut HdrImage) {
+/// `lut_ghosts.wgsl`: every LUT instance onto the HDR accumulation `hdr` of a `frame_width` x `frame_height`
+/// frame (the accumulation may be smaller; instances are in frame pixels), added or composited over it through
+/// alpha, sampling each instance's entry exactly as the GPU samples the atlas.
+pub fn lut_pass(frame_size: (u32, u32), lut_scene: &LutScene, lut: &GhostLut, hdr: &mut HdrImage) {
     let (w, h) = (hdr.width as usize, hdr.height as usize);
-    let (sx, sy) = (scene.width as f32 / scene.hdr_width as f32, scene.height as f32 / scene.hdr_height as f32);
+    let (sx, sy) = (frame_size.0 as f32 / hdr.width as f32, frame_size.1 as f32 / hdr.height as f32);
     let prepared: Vec<_> = lut_scene
         .instances
         .iter()
@@ -446,55 +432,5 @@ impl LiveLut {
         let layout = AtlasLayout::new(&lut);
         let shapes = lut.ghosts.par_iter().map(|g| g.entries.iter().map(LutEntry::shape).collect()).collect();
         Self { lut, layout, shapes }
-    }
-
-    /// The paraxial scene (LUT ghosts' sprites weighted) and the LUT instances for a light at the frame
-    /// position `light_deg`. With `paraxial` false (a photo played back alone) the scene has no sprites.
-    pub fn scenes(
-        &self,
-        flare: &crate::flare::PreparedFlare,
-        light_deg: [f64; 2],
-        width: u32,
-        height: u32,
-        blend: &BlendSettings,
-        paraxial: bool,
-    ) -> (FlareScene, LutScene) {
-        let (mut scene, _) = flare.scene(light_deg, width, height);
-        let lut_scene = self.blend_into(flare, &mut scene, light_deg, blend, paraxial);
-        (scene, lut_scene)
-    }
-
-    /// [`Self::scenes`] on a paraxial scene already built for `light_deg` (by [`crate::flare::PreparedFlare::scene`],
-    /// at the scene's size): weights its LUT ghosts' sprites (or drops every sprite when `paraxial` is false)
-    /// and returns the LUT instances.
-    pub fn blend_into(
-        &self,
-        flare: &crate::flare::PreparedFlare,
-        scene: &mut FlareScene,
-        light_deg: [f64; 2],
-        blend: &BlendSettings,
-        paraxial: bool,
-    ) -> LutScene {
-        let u = crate::render::light_slopes_for_frame_position(light_deg[0], light_deg[1]);
-        let lut_scene = LutScene::build(self, &flare.system, u, scene.width, scene.height, blend);
-        if paraxial {
-            lut_scene.apply_paraxial_weights(scene);
-        } else {
-            scene.instances.clear();
-            scene.instance_ghosts.clear();
-        }
-        lut_scene
-    }
-
-    /// The blended ghosts on the CPU (no starburst): the paraxial pass, then the LUT pass.
-    pub fn render_cpu(
-        &self,
-        flare: &crate::flare::PreparedFlare,
-        scene: &FlareScene,
-        lut_scene: &LutScene,
-    ) -> HdrImage {
-        let mut hdr = crate::render::cpu::ghost_pass(scene, &flare.mask);
-        lut_pass(scene, lut_scene, &self.lut, &mut hdr);
-        hdr
     }
 }

@@ -23,9 +23,10 @@ use rayon::prelude::*;
 
 use crate::flare::PreparedFlare;
 use crate::ghost::{CullReason, Sensor};
-use crate::metrics::luminance;
+use crate::color::luminance;
 use crate::raytrace::{Grid, RayGridRenderer, Window};
-use crate::render::{FlareScene, HdrImage, cpu};
+use crate::image::HdrImage;
+use crate::render::{FlareScene, cpu};
 
 /// The default [`ClassifySettings::faint_fraction`]: 0, every non-linear ghost is baked. Measured on the
 /// double Gauss at 20 degrees: at 2e-3 (11 of its 28 non-linear ghosts baked) the blended frame loses 5 dB
@@ -52,15 +53,19 @@ pub struct ClassifySettings {
     pub grid: usize,
 }
 
+/// The flare gain (about 6.6 stops) at which classification judges a ghost visible. It is fixed, not the
+/// user's exposure, so that a LUT does not depend on a display setting.
+pub const VISIBILITY_GAIN: f32 = 100.0;
+
 impl ClassifySettings {
     /// Defaults for `flare`: 4 angles to `theta_max_deg`, threshold 0.15, visible from a quarter of an 8-bit
-    /// step at the display exposure (the culling level of the paraxial renderer).
+    /// step at the flare gain [`VISIBILITY_GAIN`] (the culling level of the paraxial renderer there).
     pub fn for_flare(flare: &PreparedFlare, theta_max_deg: f64) -> Self {
         Self {
             angles: 4,
             theta_max_deg,
             threshold: 0.15,
-            visible_irradiance: flare.config.threshold(),
+            visible_irradiance: flare.config.threshold(VISIBILITY_GAIN),
             faint_fraction: DEFAULT_FAINT_FRACTION,
             res: 64,
             grid: 32,
@@ -128,8 +133,9 @@ fn shape(image: &HdrImage, window: &Window) -> (f64, [f64; 2], f64, f64) {
 
 /// The paraxial sprites of ghost `g` alone, through the CPU twin, into `window`.
 pub(crate) fn paraxial_image(flare: &PreparedFlare, g: usize, light_deg: [f64; 2], window: &Window) -> HdrImage {
-    let u = crate::render::light_slopes_for_frame_position(light_deg[0], light_deg[1]);
-    let mut settings = flare.frame_settings(window.width, window.height);
+    let u = crate::ghost::light_slopes_for_frame_position(light_deg[0], light_deg[1]);
+    let display = crate::render::DisplaySettings::default();
+    let mut settings = flare.frame_settings(window.width, window.height, display.flare_gain());
     settings.sensor = Sensor {
         width_mm: window.width_mm,
         height_mm: window.width_mm * f64::from(window.height) / f64::from(window.width),
@@ -139,9 +145,8 @@ pub(crate) fn paraxial_image(flare: &PreparedFlare, g: usize, light_deg: [f64; 2
     for sprite in &mut frame.sprites {
         sprite.culled = if sprite.ghost != g || sprite.irradiance <= 0.0 { Some(CullReason::OffSensor) } else { None };
     }
-    let mut display = flare.config.display;
-    display.accumulation_divisor = 1;
-    let mut scene = FlareScene::build(&flare.system, &frame, u, &settings, &display, window.width, window.height);
+    let mut scene =
+        FlareScene::build(&flare.system, &frame, u, &settings, &display, window.width, window.height, &[]);
     let k = window.px_per_mm();
     for inst in &mut scene.instances {
         inst.centre_half[0] += (window.centre_mm[0] * k) as f32;
@@ -181,7 +186,7 @@ pub fn classify(
             };
             for &theta in &angles {
                 let light = super::light_position_deg(theta, axis);
-                let u = crate::render::light_slopes_for_frame_position(light[0], light[1]);
+                let u = crate::ghost::light_slopes_for_frame_position(light[0], light[1]);
                 let para = flare.system.paraxial_frame(g, u, super::MIN_TEXEL_MM);
                 let Some(traced) = renderer.footprint_mm(g, light, 24) else { continue };
                 let r = 1.5 * para.half_mm;

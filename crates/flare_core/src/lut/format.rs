@@ -9,7 +9,7 @@
 //! | 4 | format version ([`VERSION`]) |
 //! | 8 | header length H |
 //! | 8 | FNV-1a 64 of the header bytes |
-//! | H | header: UTF-8 JSON, [`Header`]: kind, lens id and fingerprint, wavelengths, f-number, symmetry, theta range, per ghost its surfaces, key, thetas, azimuths and per entry its light, paraxial frame, window, size, and where its data lies |
+//! | H | header: UTF-8 JSON, [`Header`]: kind, lens id, fingerprint and its scheme, wavelengths, f-number, symmetry, theta range, per ghost its surfaces, key, thetas, azimuths and per entry its light, paraxial frame, window, size, and where its data lies |
 //! | ... | per entry, in header order: its texels compressed with deflate (zlib, `flate2`) |
 //!
 //! An entry's uncompressed data is `width x height` RGB half floats (rounded to
@@ -34,7 +34,8 @@ use flate2::write::ZlibEncoder;
 use half::f16;
 use serde::{Deserialize, Serialize};
 
-use super::{FNV_OFFSET, GhostLut, LutEntry, LutGhost, LutKind, Symmetry, fnv1a};
+use super::{GhostLut, LutEntry, LutGhost, LutKind, Symmetry};
+use crate::fingerprint::{FNV_OFFSET, fnv1a};
 use crate::ghost::ParaxialFrame;
 
 /// The file's magic bytes.
@@ -70,6 +71,10 @@ pub enum LutError {
         "this LUT was baked for another lens or settings (`{lut_lens}`, fingerprint {lut:016x}; the live lens `{lens}` has {live:016x}): bake it again"
     )]
     OtherLens { lut_lens: String, lut: u64, lens: String, live: u64 },
+    #[error(
+        "this LUT (`{lut_lens}`) was baked by an older FlareLab whose lens fingerprint this one cannot compare: bake it again (`flarelab bake LENS`)"
+    )]
+    OldFingerprint { lut_lens: String },
 }
 
 /// The JSON header.
@@ -81,6 +86,10 @@ pub struct Header {
     pub lens_id: String,
     /// 16 hex digits.
     pub lens_fingerprint: String,
+    /// The rule the fingerprint was made by ([`crate::fingerprint::SCHEME`]); absent in files from before
+    /// schemes (read as 0: a ray-traced LUT among them is refused with a request to bake it again).
+    #[serde(default)]
+    pub fingerprint_scheme: u32,
     pub wavelengths_nm: Vec<f64>,
     pub f_number: f64,
     pub symmetry_order: u32,
@@ -216,6 +225,7 @@ fn encode_version(lut: &GhostLut, version: u32) -> Vec<u8> {
         },
         lens_id: lut.lens_id.clone(),
         lens_fingerprint: hex(lut.lens_fingerprint),
+        fingerprint_scheme: lut.fingerprint_scheme,
         wavelengths_nm: lut.wavelengths_nm.clone(),
         f_number: lut.f_number,
         symmetry_order: lut.symmetry.order,
@@ -239,7 +249,7 @@ fn encode_version(lut: &GhostLut, version: u32) -> Vec<u8> {
 /// Writes `lut` to `path` atomically (temporary file, then rename).
 pub fn write_lut(path: &Path, lut: &GhostLut) -> std::io::Result<u64> {
     let bytes = encode(lut);
-    crate::optics::formats::write_atomic(path, &bytes)?;
+    crate::files::write_atomic(path, &bytes)?;
     Ok(bytes.len() as u64)
 }
 
@@ -366,6 +376,7 @@ pub fn decode(mut reader: impl Read, length: u64) -> Result<GhostLut, LutError> 
         kind,
         lens_id: header.lens_id,
         lens_fingerprint: unhex(&header.lens_fingerprint, "lens fingerprint")?,
+        fingerprint_scheme: header.fingerprint_scheme,
         wavelengths_nm: header.wavelengths_nm,
         f_number: header.f_number,
         symmetry: Symmetry { order: header.symmetry_order, axis_deg: header.symmetry_axis_deg },
@@ -455,6 +466,9 @@ impl GhostLut {
         if self.kind == LutKind::Photo {
             return Ok(());
         }
+        if self.fingerprint_scheme != crate::fingerprint::SCHEME {
+            return Err(LutError::OldFingerprint { lut_lens: self.lens_id.clone() });
+        }
         let live = super::fingerprint(lens, config);
         if live != self.lens_fingerprint {
             return Err(LutError::OtherLens {
@@ -488,6 +502,7 @@ mod tests {
             kind: LutKind::RayTraced,
             lens_id: "tiny".into(),
             lens_fingerprint: 42,
+            fingerprint_scheme: crate::fingerprint::SCHEME,
             wavelengths_nm: vec![650.0, 510.0, 475.0],
             f_number: 2.0,
             symmetry: Symmetry { order: 0, axis_deg: 0.0 },

@@ -440,6 +440,9 @@ pub struct GhostLut {
     pub lens_id: String,
     /// [`fingerprint`] of the lens and settings it was baked for (0 for a photo LUT: any lens).
     pub lens_fingerprint: u64,
+    /// The rule `lens_fingerprint` was made by ([`crate::fingerprint::SCHEME`]; 0: a file from before schemes,
+    /// whose fingerprint cannot be compared).
+    pub fingerprint_scheme: u32,
     pub wavelengths_nm: Vec<f64>,
     /// The f-number it was baked at (0 for a photo).
     pub f_number: f64,
@@ -465,28 +468,16 @@ impl GhostLut {
     }
 }
 
-/// 64-bit FNV-1a: a stable hash (unlike `std`'s, it never changes between Rust releases), for fingerprints.
-pub(crate) fn fnv1a(bytes: &[u8], mut hash: u64) -> u64 {
-    for &b in bytes {
-        hash ^= u64::from(b);
-        hash = hash.wrapping_mul(0x0000_0100_0000_01b3);
-    }
-    hash
-}
-
-pub(crate) const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
-
 /// A stable fingerprint of everything a ray-traced LUT depends on: the lens (every surface, glass, coating,
 /// aperture and the sensor distance), the spectrum, the stop's shape and f-number and any coating override.
 /// A LUT whose fingerprint differs from the live lens's is refused on load.
+/// It is a [`crate::fingerprint::of`] (canonical JSON, scheme [`crate::fingerprint::SCHEME`]).
 pub fn fingerprint(lens: &Lens, config: &FlareConfig) -> u64 {
-    let text = format!(
-        "{:?}|{:?}|{:?}|{:?}|{:?}",
-        lens.surfaces,
-        config.spectrum.wavelengths_nm,
-        config.aperture,
-        config.coating_override,
-        config.spectrum.weights_rgb
-    );
-    fnv1a(text.as_bytes(), FNV_OFFSET)
+    crate::fingerprint::of(&(
+        &lens.surfaces,
+        &config.spectrum.wavelengths_nm,
+        &config.spectrum.weights_rgb,
+        &config.aperture,
+        &config.coating_override,
+    ))
 }

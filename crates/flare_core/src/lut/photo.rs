@@ -56,10 +56,6 @@ pub fn angle_from_name(name: &str) -> Option<f64> {
     text.trim_end_matches('.').parse().ok()
 }
 
-fn srgb_to_linear(v: f32) -> f32 {
-    if v <= 0.04045 { v / 12.92 } else { ((v + 0.055) / 1.055).powf(2.4) }
-}
-
 /// One image as linear RGB (PNG decoded from sRGB), downscaled to [`MAX_PHOTO_SIDE`].
 fn load_linear(path: &Path) -> Result<image::Rgb32FImage, PhotoError> {
     let err = |message: String| PhotoError::File { path: path.to_owned(), message };
@@ -68,7 +64,7 @@ fn load_linear(path: &Path) -> Result<image::Rgb32FImage, PhotoError> {
     let mut rgb = decoded.to_rgb32f();
     if !exr {
         for p in rgb.pixels_mut() {
-            p.0 = p.0.map(srgb_to_linear);
+            p.0 = p.0.map(crate::color::srgb_decode);
         }
     }
     let (w, h) = rgb.dimensions();
@@ -142,6 +138,7 @@ pub fn import_folder(folder: &Path) -> Result<GhostLut, PhotoError> {
         kind: LutKind::Photo,
         lens_id: folder.file_name().and_then(|n| n.to_str()).unwrap_or("photo").to_owned(),
         lens_fingerprint: 0,
+        fingerprint_scheme: crate::fingerprint::SCHEME,
         wavelengths_nm: vec![650.0, 510.0, 475.0],
         f_number: 0.0,
         // The light at frame azimuth A has slopes at azimuth A + 180 degrees.

@@ -11,9 +11,10 @@
 
 use rayon::prelude::*;
 
-use super::{DisplayImage, FlareScene, GhostInstance, HdrImage};
+use super::{FlareScene, GhostInstance};
 use crate::aperture::ApertureMask;
-use crate::metrics::{GhostMoments, luminance};
+use crate::color::{display_value, luminance, to_u8};
+use crate::image::{DisplayImage, GhostMoments, HdrImage, Sampling};
 use crate::starburst::Starburst;
 
 /// Starburst texture as the GPU holds it: RGBA rounded to half floats.
@@ -212,55 +213,46 @@ pub fn starburst_pass(scene: &FlareScene, texture: &StarburstTexture, hdr: &mut 
     }
 }
 
-fn aces(x: f32) -> f32 {
-    ((x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14)).clamp(0.0, 1.0)
-}
-
-fn encode_srgb(c: f32) -> f32 {
-    if c <= 0.0031308 { c * 12.92 } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 }
-}
-
-/// `tonemap.wgsl` for one linear HDR value: exposure, operator, clamp, sRGB encode.
+/// `tonemap.wgsl` for one composite value (flare and plate already multiplied by their gains): the operator,
+/// a clamp and the sRGB encoding.
 pub fn tonemap_pixel(c: [f32; 3], globals: &super::Globals) -> [f32; 3] {
-    let [exposure, operator, encode, _] = globals.tonemap;
-    c.map(|v| {
-        let mut v = (v * exposure).max(0.0);
-        if operator > 1.5 {
-            v = aces(v);
-        } else if operator > 0.5 {
-            v /= 1.0 + v;
-        }
-        v = v.clamp(0.0, 1.0);
-        if encode > 0.5 { encode_srgb(v) } else { v }
-    })
+    let encode = globals.tonemap[2] > 0.5;
+    c.map(|v| display_value(v, globals.operator(), encode))
 }
 
-/// The first step of `tonemap.wgsl`: the HDR accumulation (bilinear, upsampled to the image size) plus the
-/// optional background plate (nearest sample), linear and before the exposure. The EXR output is this times
-/// the exposure.
-pub fn composite(scene: &FlareScene, hdr: &HdrImage, background: Option<&HdrImage>) -> HdrImage {
-    let (w, h) = (scene.width as usize, scene.height as usize);
-    let mut pixels = Vec::with_capacity(w * h);
-    for y in 0..h {
-        for x in 0..w {
-            let (s, t) = ((x as f32 + 0.5) / w as f32, (y as f32 + 0.5) / h as f32);
-            let mut p = hdr.sample_bilinear(s, t);
-            if let Some(bg) = background {
-                let b = bg.sample_nearest(s, t);
-                for k in 0..3 {
-                    p[k] += b[k];
-                }
-            }
-            pixels.push(p);
-        }
+/// The first step of `tonemap.wgsl`: the composite `flare * 2^flare_ev + plate * 2^plate_ev` at the image
+/// size, the HDR accumulation read bilinearly (upsampled when it is smaller) and the plate at its nearest
+/// texel, linear.
+pub fn composite(scene: &FlareScene, hdr: &HdrImage, plate: Option<&HdrImage>) -> HdrImage {
+    let flare = flare_layer(scene, hdr);
+    match plate {
+        Some(plate) => flare.plus(&plate_layer(scene, plate)),
+        None => flare,
     }
-    HdrImage { width: scene.width, height: scene.height, pixels }
 }
 
-/// `tonemap.wgsl`: [`composite`], then exposure, tonemap and sRGB into 8-bit display pixels.
-pub fn tonemap_pass(scene: &FlareScene, hdr: &HdrImage, background: Option<&HdrImage>) -> DisplayImage {
-    let linear = composite(scene, hdr, background);
-    let pixels = linear
+/// The flare alone at the image size, times its gain (what the EXR's `flare` layer holds).
+pub fn flare_layer(scene: &FlareScene, hdr: &HdrImage) -> HdrImage {
+    hdr.resampled(scene.width, scene.height, Sampling::Bilinear, scene.globals.flare_gain())
+}
+
+/// The plate at the image size, times its gain (what the EXR's `plate` layer holds).
+pub fn plate_layer(scene: &FlareScene, plate: &HdrImage) -> HdrImage {
+    let mut layer = plate.resampled(scene.width, scene.height, Sampling::Nearest, scene.globals.plate_gain());
+    for p in &mut layer.pixels {
+        p[3] = 1.0;
+    }
+    layer
+}
+
+/// `tonemap.wgsl`: [`composite`], then tonemap and sRGB into 8-bit display pixels.
+pub fn tonemap_pass(scene: &FlareScene, hdr: &HdrImage, plate: Option<&HdrImage>) -> DisplayImage {
+    display_of(scene, &composite(scene, hdr, plate))
+}
+
+/// The display image of a composite already at the image size.
+pub fn display_of(scene: &FlareScene, composite: &HdrImage) -> DisplayImage {
+    let pixels = composite
         .pixels
         .iter()
         .map(|p| {
@@ -269,10 +261,6 @@ pub fn tonemap_pass(scene: &FlareScene, hdr: &HdrImage, background: Option<&HdrI
         })
         .collect();
     DisplayImage { width: scene.width, height: scene.height, pixels }
-}
-
-fn to_u8(v: f32) -> u8 {
-    (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
 }
 
 /// The whole frame on the CPU: ghosts, starburst, then (for display) tonemapping.

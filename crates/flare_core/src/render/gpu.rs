@@ -16,7 +16,8 @@
 //! Rows copied to buffers are padded to 256 bytes as wgpu requires.
 
 use super::shaders::{GHOSTS_WGSL, LUT_GHOSTS_WGSL, STARBURST_WGSL, TONEMAP_WGSL};
-use super::{DisplayImage, FlareScene, GhostInstance, Globals, HdrImage};
+use super::{FlareScene, GhostInstance, Globals};
+use crate::image::{DisplayImage, HdrImage};
 use crate::aperture::ApertureMask;
 use crate::lut::blend::{ATLAS_PAGE, LiveLut, LutInstance, LutScene};
 use crate::starburst::Starburst;
@@ -72,6 +73,28 @@ impl GpuContext {
         }))
         .map_err(|e| GpuError::Device { adapter: info.name.clone(), message: e.to_string() })?;
         Ok(Self { device, queue, adapter: info })
+    }
+}
+
+/// True when `FLARELAB_REQUIRE_GPU=1`: tests that need a GPU adapter (or a display) must then fail instead of
+/// skipping (CI sets it: lavapipe and Xvfb are installed there).
+pub fn gpu_required() -> bool {
+    std::env::var("FLARELAB_REQUIRE_GPU").is_ok_and(|v| v == "1")
+}
+
+/// The adapter tests use: a software one first (reproducible images). `None` with the reason printed when
+/// there is none, unless [`gpu_required`], where it panics with the reason.
+pub fn test_context() -> Option<GpuContext> {
+    match GpuContext::headless(true) {
+        Ok(ctx) => {
+            println!("GPU adapter: {} ({:?}, {:?})", ctx.adapter.name, ctx.adapter.device_type, ctx.adapter.backend);
+            Some(ctx)
+        }
+        Err(e) if gpu_required() => panic!("FLARELAB_REQUIRE_GPU=1 but {e}"),
+        Err(e) => {
+            println!("SKIPPED (no GPU adapter): {e}");
+            None
+        }
     }
 }
 
@@ -465,7 +488,7 @@ impl FlareRenderer {
         }
         let mut globals = scene.globals;
         globals.tonemap[2] = if self.target_format.is_srgb() { 0.0 } else { 1.0 };
-        globals.tonemap[3] = if self.has_background { 1.0 } else { 0.0 };
+        globals.plate[1] = if self.has_background { 1.0 } else { 0.0 };
         queue.write_buffer(&self.globals, 0, bytemuck::bytes_of(&globals));
         if scene.instances.len() > self.instance_capacity {
             self.instance_capacity = scene.instances.len().next_power_of_two();

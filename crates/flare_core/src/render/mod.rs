@@ -17,39 +17,24 @@
 
 pub mod cpu;
 pub mod gpu;
-pub mod output;
 pub mod shaders;
 
 use bytemuck::{Pod, Zeroable};
 
-use crate::ghost::{FrameSettings, GhostFrame, GhostSystem, Sensor};
+pub use crate::color::Tonemap;
+use crate::color::gain_from_ev;
+use crate::ghost::{FrameSettings, GhostFrame, GhostSystem};
+pub use crate::ghost::{light_slopes_for_frame_position, sensor_to_pixel};
+pub use crate::image::{DisplayImage, HdrImage};
 
-/// Tonemapping operator.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Tonemap {
-    /// Clamp only.
-    None,
-    /// `c / (1 + c)` per channel.
-    Reinhard,
-    /// Narkowicz's fit of the ACES filmic curve.
-    Aces,
-}
-
-impl Tonemap {
-    fn code(self) -> f32 {
-        match self {
-            Self::None => 0.0,
-            Self::Reinhard => 1.0,
-            Self::Aces => 2.0,
-        }
-    }
-}
-
-/// How the frame is shown.
+/// How the frame is shown: the exposures, the tonemap and the starburst. None of these changes the optics, so
+/// none of them rebuilds the ghost system, the starburst's FFT or a GPU texture.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DisplaySettings {
-    /// Linear multiplier before tonemapping.
-    pub exposure: f32,
+    /// The flare's exposure in stops: its relative irradiance (the light's is 1) is multiplied by `2^flare_ev`.
+    pub flare_ev: f64,
+    /// The background plate's exposure in stops (0: as shot).
+    pub plate_ev: f64,
     pub tonemap: Tonemap,
     /// Draw the starburst at the light's image.
     pub starburst: bool,
@@ -63,10 +48,14 @@ pub struct DisplaySettings {
     pub accumulation_divisor: u32,
 }
 
+/// The default flare exposure (stops): a quarter-wave coated lens's ghosts (about 1e-4 of the light) show.
+pub const DEFAULT_FLARE_EV: f64 = 10.5;
+
 impl Default for DisplaySettings {
     fn default() -> Self {
         Self {
-            exposure: 100.0,
+            flare_ev: DEFAULT_FLARE_EV,
+            plate_ev: 0.0,
             tonemap: Tonemap::Aces,
             starburst: true,
             starburst_size: 0.35,
@@ -76,7 +65,20 @@ impl Default for DisplaySettings {
     }
 }
 
-/// Uniforms shared by every shader. Must be kept in sync with `struct Globals` in `shaders/*.wgsl`.
+impl DisplaySettings {
+    /// The flare's linear gain, `2^flare_ev`.
+    pub fn flare_gain(&self) -> f32 {
+        gain_from_ev(self.flare_ev)
+    }
+
+    /// The plate's linear gain, `2^plate_ev`.
+    pub fn plate_gain(&self) -> f32 {
+        gain_from_ev(self.plate_ev)
+    }
+}
+
+/// Uniforms shared by every shader: the Rust side of `struct Globals` in `shaders/common.wgsl` (the one WGSL
+/// declaration; a test checks size and offsets with naga).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 pub struct Globals {
@@ -84,10 +86,29 @@ pub struct Globals {
     pub viewport: [f32; 4],
     /// centre x, centre y, half-size (pixels), intensity.
     pub starburst: [f32; 4],
-    /// exposure, operator (0 none, 1 Reinhard, 2 ACES), encode sRGB (0/1), background (0/1).
+    /// flare gain (`2^flare_ev`), operator ([`Tonemap::code`]), encode sRGB (0/1, set by the renderer), unused.
     pub tonemap: [f32; 4],
+    /// plate gain (`2^plate_ev`), plate present (0/1, set by the renderer), unused, unused.
+    pub plate: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<Globals>() == 48);
+const _: () = assert!(std::mem::size_of::<Globals>() == 64);
+
+impl Globals {
+    /// The flare's linear gain.
+    pub fn flare_gain(&self) -> f32 {
+        self.tonemap[0]
+    }
+
+    /// The plate's linear gain.
+    pub fn plate_gain(&self) -> f32 {
+        self.plate[0]
+    }
+
+    /// The tonemap operator.
+    pub fn operator(&self) -> Tonemap {
+        Tonemap::from_code(self.tonemap[1])
+    }
+}
 
 /// One ghost sprite for the GPU. Must be kept in sync with `struct GhostInstance` in `shaders/ghosts.wgsl`.
 #[repr(C)]
@@ -127,20 +148,11 @@ pub struct FlareScene {
     pub dropped_non_finite: usize,
 }
 
-/// The light slopes of a light seen at the frame position given by field angles (degrees, X right, Y up).
-pub fn light_slopes_for_frame_position(x_deg: f64, y_deg: f64) -> [f64; 2] {
-    [-x_deg.to_radians().tan(), -y_deg.to_radians().tan()]
-}
-
-/// Pixel position of the sensor point `p_mm` (display rotated by 180 degrees).
-pub fn sensor_to_pixel(p_mm: [f64; 2], sensor: &Sensor, width: u32, height: u32) -> [f64; 2] {
-    let k = width as f64 / sensor.width_mm;
-    [0.5 * width as f64 - p_mm[0] * k, 0.5 * height as f64 + p_mm[1] * k]
-}
-
 impl FlareScene {
     /// The instances and uniforms for light slopes `u`, with the frame already computed by the caller
-    /// (so the app can reuse it for its ghost list).
+    /// (so the app can reuse it for its ghost list). `gains[g]` multiplies every sprite of lens ghost `g`
+    /// (missing entries are 1); a ghost at gain 0 (off, or not the solo one) makes no instance.
+    #[allow(clippy::too_many_arguments)]
     pub fn build(
         system: &GhostSystem,
         frame: &GhostFrame,
@@ -149,6 +161,7 @@ impl FlareScene {
         display: &DisplaySettings,
         width: u32,
         height: u32,
+        gains: &[f32],
     ) -> Self {
         let sensor = &frame_settings.sensor;
         let k = width as f64 / sensor.width_mm;
@@ -158,6 +171,10 @@ impl FlareScene {
         let mut instance_ghosts = Vec::with_capacity(frame.stats.drawn);
         let mut dropped_non_finite = 0;
         for (index, sprite) in frame.sprites.iter().enumerate().filter(|(_, s)| s.culled.is_none()) {
+            let gain = gains.get(sprite.ghost).copied().unwrap_or(1.0);
+            if !(gain > 0.0) {
+                continue;
+            }
             let masks = system.sprite_masks(index, u);
             let c = sensor_to_pixel(sprite.centre_mm, sensor, width, height);
             let half_px = sprite.half_size_mm * k;
@@ -170,7 +187,12 @@ impl FlareScene {
             let aa = (front.scale.abs() / half_px.abs()).max(1e-6);
             let instance = GhostInstance {
                 centre_half: [c[0] as f32, c[1] as f32, -half_px as f32, half_px as f32],
-                colour: [sprite.rgb[0] as f32, sprite.rgb[1] as f32, sprite.rgb[2] as f32, 0.0],
+                colour: [
+                    sprite.rgb[0] as f32 * gain,
+                    sprite.rgb[1] as f32 * gain,
+                    sprite.rgb[2] as f32 * gain,
+                    0.0,
+                ],
                 stops,
                 front: [front.scale as f32, front.offset[0] as f32, front.offset[1] as f32, aa as f32],
             };
@@ -190,54 +212,9 @@ impl FlareScene {
         let globals = Globals {
             viewport: [width as f32, height as f32, 1.0 / width as f32, 1.0 / height as f32],
             starburst: starburst.map(|v| if v.is_finite() { v } else { 0.0 }),
-            tonemap: [display.exposure, display.tonemap.code(), 1.0, 0.0],
+            tonemap: [display.flare_gain(), display.tonemap.code(), 1.0, 0.0],
+            plate: [display.plate_gain(), 0.0, 0.0, 0.0],
         };
         Self { width, height, hdr_width, hdr_height, globals, instances, instance_ghosts, dropped_non_finite }
     }
-}
-
-/// A linear HDR image: `width` x `height` RGBA f32, row-major from the top.
-#[derive(Clone, Debug, PartialEq)]
-pub struct HdrImage {
-    pub width: u32,
-    pub height: u32,
-    pub pixels: Vec<[f32; 4]>,
-}
-
-impl HdrImage {
-    /// Nearest sample at texture coordinates (s, t) in [0, 1]^2: what `textureLoad` at the scaled pixel reads.
-    pub fn sample_nearest(&self, s: f32, t: f32) -> [f32; 4] {
-        let x = ((s * self.width as f32) as usize).min(self.width as usize - 1);
-        let y = ((t * self.height as f32) as usize).min(self.height as usize - 1);
-        self.pixels[y * self.width as usize + x]
-    }
-
-    /// Bilinear sample at texture coordinates (s, t) in [0, 1]^2, clamped to the edge: what a GPU's linear
-    /// sampler returns.
-    pub fn sample_bilinear(&self, s: f32, t: f32) -> [f32; 4] {
-        let (w, h) = (self.width as usize, self.height as usize);
-        let (x, y) = (s * w as f32 - 0.5, t * h as f32 - 0.5);
-        let (x0, y0) = (x.floor(), y.floor());
-        let (fx, fy) = (x - x0, y - y0);
-        let at = |i: f32, j: f32| {
-            let i = (i.max(0.0) as usize).min(w - 1);
-            let j = (j.max(0.0) as usize).min(h - 1);
-            self.pixels[j * w + i]
-        };
-        let mut out = [0.0; 4];
-        for (c, o) in out.iter_mut().enumerate() {
-            let top = at(x0, y0)[c] * (1.0 - fx) + at(x0 + 1.0, y0)[c] * fx;
-            let bottom = at(x0, y0 + 1.0)[c] * (1.0 - fx) + at(x0 + 1.0, y0 + 1.0)[c] * fx;
-            *o = top * (1.0 - fy) + bottom * fy;
-        }
-        out
-    }
-}
-
-/// A display image: 8-bit sRGB RGBA.
-#[derive(Clone, Debug, PartialEq)]
-pub struct DisplayImage {
-    pub width: u32,
-    pub height: u32,
-    pub pixels: Vec<[u8; 4]>,
 }

@@ -1,20 +1,31 @@
 //! The WGSL shaders, embedded at compile time from `shaders/` (never read from the working folder).
+//!
+//! # How it works
+//! `shaders/common.wgsl` holds the one declaration of the uniforms every pass reads ([`super::Globals`]); it
+//! is prepended to each shader that uses them here, at compile time, so no shader carries a copy to keep in
+//! sync. A test parses every shader with naga and checks that the WGSL `Globals` has the Rust struct's size
+//! and member offsets.
 
+/// The shared uniforms (prepended to the shaders below).
+pub const COMMON_WGSL: &str = include_str!("../../../../shaders/common.wgsl");
 /// Instanced ghost sprites.
-pub const GHOSTS_WGSL: &str = include_str!("../../../../shaders/ghosts.wgsl");
+pub const GHOSTS_WGSL: &str =
+    concat!(include_str!("../../../../shaders/common.wgsl"), include_str!("../../../../shaders/ghosts.wgsl"));
 /// The starburst quad.
-pub const STARBURST_WGSL: &str = include_str!("../../../../shaders/starburst.wgsl");
-/// Background, exposure, tonemap, sRGB.
-pub const TONEMAP_WGSL: &str = include_str!("../../../../shaders/tonemap.wgsl");
-
+pub const STARBURST_WGSL: &str =
+    concat!(include_str!("../../../../shaders/common.wgsl"), include_str!("../../../../shaders/starburst.wgsl"));
+/// Flare and plate exposures, tonemap, sRGB.
+pub const TONEMAP_WGSL: &str =
+    concat!(include_str!("../../../../shaders/common.wgsl"), include_str!("../../../../shaders/tonemap.wgsl"));
 /// LUT ghosts from the atlas.
-pub const LUT_GHOSTS_WGSL: &str = include_str!("../../../../shaders/lut_ghosts.wgsl");
-
+pub const LUT_GHOSTS_WGSL: &str =
+    concat!(include_str!("../../../../shaders/common.wgsl"), include_str!("../../../../shaders/lut_ghosts.wgsl"));
 /// The app's viewport pass (the flare texture into egui's render pass; used by the app, validated here).
 pub const VIEWPORT_WGSL: &str = include_str!("../../../../shaders/viewport.wgsl");
 
 /// Every shader with its file name (for validation and error messages).
 pub const ALL: &[(&str, &str)] = &[
+    ("common.wgsl", COMMON_WGSL),
     ("ghosts.wgsl", GHOSTS_WGSL),
     ("starburst.wgsl", STARBURST_WGSL),
     ("tonemap.wgsl", TONEMAP_WGSL),

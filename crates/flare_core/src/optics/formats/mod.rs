@@ -6,14 +6,15 @@
 //! and then by content ([`LensFormat::detect`]), parses it, and validates the lens
 //! ([`crate::optics::lens::Lens::validate`]). Every failure is a [`FormatError`] that names the file's line
 //! (text formats) or the JSON path, and the field; nothing is half-loaded. Writers produce text that the
-//! readers read back to the same lens ([`to_json`], [`zmx::write`], [`pbrt::write`]), and [`write_atomic`]
-//! puts it on disk through a temporary file and a rename, so a crash never leaves half a file.
+//! readers read back to the same lens ([`to_json`], [`zmx::write`], [`pbrt::write`]), and
+//! [`crate::files::write_atomic`] puts it on disk through a temporary file and a rename, so a crash never
+//! leaves half a file.
 
 pub mod json;
 pub mod pbrt;
 pub mod zmx;
 
-use std::io::{Read, Write};
+use std::io::Read;
 use std::path::Path;
 
 use super::lens::{Lens, LensError, Surface};
@@ -203,38 +204,6 @@ pub fn load_lens_file(path: &Path) -> Result<Lens, FormatError> {
 /// The native JSON text of a lens (pretty, one key per line), which [`json::parse`] reads back identically.
 pub fn to_json(lens: &Lens) -> String {
     json::write(lens)
-}
-
-/// Writes `contents` to `path` through a temporary file in the same folder and a rename: readers see the
-/// old file or the new one, never half of one.
-pub fn write_atomic(path: &Path, contents: &[u8]) -> std::io::Result<()> {
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
-    let mut tmp = tempfile::NamedTempFile::new_in(dir)?;
-    tmp.write_all(contents)?;
-    // The temporary file is private (0600); the result keeps the permissions of the file it replaces, or
-    // gets the usual 0644 when it is new.
-    let permissions = match std::fs::metadata(path) {
-        Ok(existing) => existing.permissions(),
-        Err(_) => default_permissions(tmp.as_file())?,
-    };
-    tmp.as_file().set_permissions(permissions)?;
-    tmp.as_file().sync_all()?;
-    tmp.persist(path).map_err(|e| e.error)?;
-    Ok(())
-}
-
-#[cfg(unix)]
-fn default_permissions(_file: &std::fs::File) -> std::io::Result<std::fs::Permissions> {
-    use std::os::unix::fs::PermissionsExt;
-    Ok(std::fs::Permissions::from_mode(0o644))
-}
-
-#[cfg(not(unix))]
-fn default_permissions(file: &std::fs::File) -> std::io::Result<std::fs::Permissions> {
-    Ok(file.metadata()?.permissions())
 }
 
 /// Names, validates and returns a lens read from a text format; `surface_lines[k]` is the file line of

@@ -23,11 +23,17 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use flare_core::flare::{FlareConfig, PreparedFlare};
 use flare_core::metrics::{self, Comparison};
-use flare_core::optics::formats::write_atomic;
+use flare_core::files::write_atomic;
 use flare_core::raytrace::{Grid, REFERENCE_GRID, RayGridImage, RayGridRenderer};
-use flare_core::render::{DisplayImage, FlareScene, HdrImage, cpu, gpu, output};
+use flare_core::frame::{self, Frame, FrameRequest, GpuDrawer, LutUse, Sources};
+use flare_core::image::{DisplayImage, HdrImage, Sampling};
+use flare_core::render::{DisplaySettings, FlareScene, cpu, gpu};
 
-use crate::cli::open_lens;
+pub mod plot;
+
+pub use plot::Row;
+
+use super::common::open_lens;
 
 /// Azimuth of the light in the frame (degrees from the horizontal): off the axes, so that nothing is
 /// symmetric by accident.
@@ -70,23 +76,10 @@ pub struct BenchArgs {
     pub out: PathBuf,
     /// Which ghosts the blended method bakes.
     #[command(flatten)]
-    pub lut: crate::lut_cli::LutChoice,
+    pub lut: super::lut::LutChoice,
     /// Most texels across a LUT entry of the blended method.
     #[arg(long, default_value_t = flare_core::lut::bake::BakeSettings::default().res)]
     pub lut_res: u32,
-}
-
-/// One method at one lens and angle.
-#[derive(Clone, Debug)]
-pub struct Row {
-    pub lens: String,
-    pub surfaces: usize,
-    pub ghosts: usize,
-    pub field_deg: f64,
-    pub method: String,
-    pub ms_median: f64,
-    pub runs: usize,
-    pub errors: Comparison,
 }
 
 /// Image change as the reference grid doubles.
@@ -134,7 +127,7 @@ pub fn light_position_deg(theta_deg: f64) -> [f64; 2] {
 }
 
 pub fn run(args: &BenchArgs) -> Result<()> {
-    let (width, height) = crate::cli::parse_size(&args.size).map_err(|e| anyhow::anyhow!("--size: {e}"))?;
+    let (width, height) = flare_core::frame::parse_size(&args.size).map_err(|e| anyhow::anyhow!("--size: {e}"))?;
     let lenses: Vec<String> = if !args.lens.is_empty() {
         args.lens.clone()
     } else if args.quick {
@@ -184,13 +177,10 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let mut bakes = Vec::new();
     for name in &lenses {
         let lens = open_lens(name)?;
-        let mut flare = PreparedFlare::new(&lens, &FlareConfig::default()).with_context(|| name.clone())?;
+        let flare = PreparedFlare::new(&lens, &FlareConfig::default()).with_context(|| name.clone())?;
         let tracer = RayGridRenderer::new(&flare);
-        if let Some(gpu) = gpu.as_mut() {
-            gpu.set_flare(&flare);
-        }
         // The blended method's LUT: classified and baked at the default settings, timed and measured once.
-        let (lut, _, bake_s) = crate::lut_cli::bake_lut(
+        let (lut, _, bake_s) = super::lut::bake_lut(
             &flare,
             &tracer,
             &args.lut,
@@ -278,38 +268,56 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                     grid /= 2;
                 }
             }
-            // Paraxial: the exposure (and with it the culling threshold) from the reference.
-            flare.config.display.exposure = exposure;
-            flare.config.display.starburst = false;
+            // Paraxial: frames drawn at the reference's exposure (which sets the culling threshold), no
+            // starburst, through the one frame pipeline; the timing covers building the frame and the CPU
+            // twin's passes, as the app does it.
+            let display = DisplaySettings {
+                flare_ev: f64::from(exposure).log2(),
+                starburst: false,
+                ..DisplaySettings::default()
+            };
+            let request = FrameRequest { light_deg: light, width, height, display, ..FrameRequest::default() };
+            let sources = Sources { flare: &flare, lut: None, plate: None };
             let (ms, runs, (image, scene)) = timed(repeats, || {
-                let (scene, _) = flare.scene(light, width, height);
-                Ok((cpu::ghost_pass(&scene, &flare.mask), scene))
+                let frame = Frame::build(&flare, None, &request);
+                Ok((frame::draw_cpu_hdr(&frame, &sources), frame.scene))
             })?;
             let moments = cpu::ghost_moments(&scene, &flare.mask, ghosts);
             rows.push(row("paraxial".into(), ms, runs, against("paraxial", &image, &moments)?));
             // The same at half accumulation resolution (the app's choice on software adapters), upsampled.
-            let mut half = flare.clone();
-            half.config.display.accumulation_divisor = 2;
+            let half_request = FrameRequest {
+                display: DisplaySettings { accumulation_divisor: 2, ..display },
+                ..request.clone()
+            };
             let (ms, runs, (image, scene)) = timed(repeats, || {
-                let (scene, _) = half.scene(light, width, height);
-                Ok((cpu::ghost_pass(&scene, &half.mask), scene))
+                let frame = Frame::build(&flare, None, &half_request);
+                Ok((frame::draw_cpu_hdr(&frame, &sources), frame.scene))
             })?;
-            let moments = cpu::ghost_moments(&scene, &half.mask, ghosts);
-            let upsampled = cpu::composite(&scene, &image, None);
+            let moments = cpu::ghost_moments(&scene, &flare.mask, ghosts);
+            let upsampled = image.resampled(width, height, Sampling::Bilinear, 1.0);
             rows.push(row("paraxial-half".into(), ms, runs, against("paraxial-half", &upsampled, &moments)?));
             // Blended: the paraxial flare with the LUT ghosts (CPU twin), as the paraxial row is timed.
-            let (ms, runs, (image, scene, lut_scene)) = timed(repeats, || {
-                let (scene, lut_scene) = live.scenes(&flare, light, width, height, &blend, true);
-                Ok((live.render_cpu(&flare, &scene, &lut_scene), scene, lut_scene))
+            let blended_request =
+                FrameRequest { blend: blend.clone(), lut_use: LutUse::Blend, ..request.clone() };
+            let blended_sources = Sources { lut: Some(&live), ..sources };
+            let (ms, runs, (image, frame)) = timed(repeats, || {
+                let frame = Frame::build(&flare, Some(&live), &blended_request);
+                Ok((frame::draw_cpu_hdr(&frame, &blended_sources), frame))
             })?;
-            let mut moments = cpu::ghost_moments(&scene, &flare.mask, ghosts);
-            lut_moments(&scene, &lut_scene, &live.lut, &mut moments);
+            let mut moments = cpu::ghost_moments(&frame.scene, &flare.mask, ghosts);
+            if let Some(lut_scene) = &frame.lut {
+                lut_moments(&frame.scene, lut_scene, &live.lut, &mut moments);
+            }
             rows.push(row("blended".into(), ms, runs, against("blended", &image, &moments)?));
-            // On the GPU, as the app draws it: sprites, upload, draw, wait (no read-back in the timing).
+            // On the GPU, as the app draws it: frame, upload, draw, wait (no read-back in the timing).
             if let Some(gpu) = gpu.as_mut() {
-                let (ms, runs, scene) = timed(repeats, || gpu.frame(&flare, light, width, height))?;
-                let image = gpu.read_hdr()?;
-                let moments = cpu::ghost_moments(&scene, &flare.mask, ghosts);
+                let (ms, runs, frame) = timed(repeats, || {
+                    let frame = Frame::build(&flare, None, &request);
+                    gpu.drawer.render_into(&frame, &sources, &gpu.view)?;
+                    Ok(frame)
+                })?;
+                let image = gpu::read_hdr(&gpu.drawer.ctx, &gpu.drawer.renderer)?;
+                let moments = cpu::ghost_moments(&frame.scene, &flare.mask, ghosts);
                 rows.push(row("paraxial-gpu".into(), ms, runs, against("paraxial-gpu", &image, &moments)?));
             }
             for &grid in &grids {
@@ -322,7 +330,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         }
     }
     let elapsed_s = started.elapsed().as_secs_f64();
-    let device = gpu.as_ref().map_or_else(|| "no GPU adapter".to_owned(), |g| format!("GPU: {}", g.ctx.adapter.name));
+    let device = gpu.as_ref().map_or_else(|| "no GPU adapter".to_owned(), |g| format!("GPU: {}", g.drawer.ctx.adapter.name));
     let settings = format!(
         "{width}x{height}, {device}, RGB (650/510/475 nm), 6-blade aperture wide open, each lens's own coatings, light at {LIGHT_AZIMUTH_DEG} deg azimuth; reference grid {reference_grid}; {} threads; median of {repeats} timed runs per method (1 for runs over {:.0} s); whole run {elapsed_s:.0} s",
         rayon::current_num_threads(),
@@ -332,7 +340,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let mut markdown = markdown(&rows, &convergence, &settings);
     markdown.push_str(&bake_table(&bakes, &rows));
     write_atomic(&args.out.join("bench.md"), markdown.as_bytes())?;
-    crate::plot::error_against_time(&rows, &args.out.join("bench.png"))?;
+    plot::error_against_time(&rows, &args.out.join("bench.png"))?;
     if let Some(readme) = &args.update_readme {
         update_readme(readme, &markdown)?;
     }
@@ -341,19 +349,17 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
-/// The wgpu renderer, headless, for the paraxial-gpu rows.
+/// The frame pipeline's GPU drawer and a target to draw into, for the paraxial-gpu rows.
 struct GpuBench {
-    ctx: gpu::GpuContext,
-    renderer: gpu::FlareRenderer,
+    drawer: GpuDrawer,
     view: wgpu::TextureView,
 }
 
 impl GpuBench {
     fn new(width: u32, height: u32) -> Result<Self> {
-        let ctx = gpu::GpuContext::headless(false)?;
-        let renderer = gpu::FlareRenderer::new(&ctx.device, &ctx.queue, wgpu::TextureFormat::Rgba8Unorm);
+        let drawer = GpuDrawer::new(false)?;
         let target = gpu::texture_2d(
-            &ctx.device,
+            &drawer.ctx.device,
             "bench target",
             width,
             height,
@@ -361,26 +367,7 @@ impl GpuBench {
             wgpu::TextureUsages::RENDER_ATTACHMENT,
         );
         let view = target.create_view(&wgpu::TextureViewDescriptor::default());
-        Ok(Self { ctx, renderer, view })
-    }
-
-    fn set_flare(&mut self, flare: &PreparedFlare) {
-        self.renderer.set_aperture(&self.ctx.device, &self.ctx.queue, &flare.mask);
-        self.renderer.set_starburst(&self.ctx.device, &self.ctx.queue, &flare.starburst);
-    }
-
-    /// One frame, waited for.
-    fn frame(&mut self, flare: &PreparedFlare, light: [f64; 2], width: u32, height: u32) -> Result<FlareScene> {
-        let (scene, _) = flare.scene(light, width, height);
-        let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
-        self.renderer.render(&self.ctx.device, &self.ctx.queue, &mut encoder, &self.view, &scene);
-        self.ctx.queue.submit(Some(encoder.finish()));
-        self.ctx.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| anyhow::anyhow!("GPU: {e}"))?;
-        Ok(scene)
-    }
-
-    fn read_hdr(&self) -> Result<HdrImage> {
-        Ok(gpu::read_hdr(&self.ctx, &self.renderer)?)
+        Ok(Self { drawer, view })
     }
 }
 
@@ -418,7 +405,7 @@ fn lut_moments(
             height: scene.hdr_height,
             pixels: vec![[0.0; 4]; (scene.hdr_width * scene.hdr_height) as usize],
         };
-        flare_core::lut::blend::lut_pass(scene, &part, lut, &mut image);
+        flare_core::lut::blend::lut_pass((scene.width, scene.height), &part, lut, &mut image);
         let m = &mut moments[ghost.ghost as usize];
         for (k, p) in image.pixels.iter().enumerate() {
             let luma = metrics::luminance([p[0], p[1], p[2]].map(f64::from));
@@ -579,7 +566,7 @@ fn write_display(path: &Path, image: &HdrImage, exposure: f32) -> Result<()> {
         .into_iter()
         .map(|p| [to_u8(p[0]), to_u8(p[1]), to_u8(p[2]), 255])
         .collect();
-    output::write_png(path, &DisplayImage { width: image.width, height: image.height, pixels })?;
+    flare_core::output::write_png(path, &DisplayImage { width: image.width, height: image.height, pixels })?;
     Ok(())
 }
 

@@ -1,4 +1,6 @@
 //! `flarelab classify`, `flarelab bake`, `flarelab photo-lut`: the LUT ghosts from the command line.
+//!
+//! Bakes print their progress on stderr as they go; the LUT is written through a temporary file and a rename.
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -32,10 +34,50 @@ pub struct LutChoice {
     pub force_linear: Vec<String>,
 }
 
+/// The optics a LUT is for: the document's (a preset, or the default one, with LENS and the flags applied),
+/// exactly as `flarelab render` and the app build them, so that the LUT's fingerprint matches theirs.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct OpticsChoice {
+    /// Lens file or built-in lens name (default: the preset's lens, else the default lens).
+    pub file: Option<String>,
+    /// A preset (a .json file or a shipped name) whose optics to use.
+    #[arg(long)]
+    pub preset: Option<String>,
+    /// Coating on every surface: lens (each surface's own), none, quarter-wave[:NM], multilayer:N/T,...
+    /// (default: the preset's).
+    #[arg(long)]
+    pub coating: Option<String>,
+    /// f-number (default: the preset's, else wide open).
+    #[arg(long)]
+    pub f_number: Option<f64>,
+}
+
+impl OpticsChoice {
+    /// The prepared flare of this choice.
+    pub fn flare(&self) -> Result<PreparedFlare> {
+        let mut doc = match &self.preset {
+            Some(name) => flare_core::preset::Document::open_named(name).with_context(|| format!("--preset {name}"))?,
+            None => flare_core::preset::Document::default(),
+        };
+        if let Some(file) = &self.file {
+            doc.lens = super::common::open_lens(file)?;
+        }
+        if let Some(spec) = &self.coating {
+            doc.coating_override = super::common::parse_coating_override(spec)?;
+        }
+        if let Some(f) = self.f_number {
+            doc.aperture.f_number = Some(f);
+        }
+        doc.check().map_err(|e| anyhow::anyhow!("{e}"))?;
+        let config = doc.flare_config().map_err(|e| anyhow::anyhow!("{e}"))?;
+        PreparedFlare::new(&doc.lens, &config).with_context(|| doc.lens.id.clone())
+    }
+}
+
 #[derive(clap::Args, Debug)]
 pub struct ClassifyArgs {
-    /// Lens file or built-in lens name.
-    pub file: String,
+    #[command(flatten)]
+    pub optics: OpticsChoice,
     #[command(flatten)]
     pub choice: LutChoice,
     /// One JSON document instead of the table.
@@ -45,10 +87,10 @@ pub struct ClassifyArgs {
 
 #[derive(clap::Args, Debug)]
 pub struct BakeArgs {
-    /// Lens file or built-in lens name.
-    pub file: String,
+    #[command(flatten)]
+    pub optics: OpticsChoice,
     /// Output LUT (default: the lens's id with .flut).
-    #[arg(long)]
+    #[arg(short = 'o', long = "out", alias = "output")]
     pub out: Option<PathBuf>,
     #[command(flatten)]
     pub choice: LutChoice,
@@ -77,7 +119,7 @@ pub struct PhotoArgs {
     /// Folder of PNG/EXR images of a flare swept over theta (angles in flare.json or the file names).
     pub folder: PathBuf,
     /// Output LUT.
-    #[arg(long)]
+    #[arg(short = 'o', long = "out", alias = "output")]
     pub out: PathBuf,
 }
 
@@ -219,9 +261,8 @@ fn print_classes(flare: &PreparedFlare, classes: &[GhostClass]) {
 }
 
 pub fn classify_command(args: &ClassifyArgs) -> Result<()> {
-    let lens = crate::cli::open_lens(&args.file)?;
-    let flare =
-        PreparedFlare::new(&lens, &flare_core::flare::FlareConfig::default()).with_context(|| args.file.clone())?;
+    let flare = args.optics.flare()?;
+    let lens = &flare.system.lens;
     let renderer = RayGridRenderer::new(&flare);
     let classes = classify_ghosts(&flare, &renderer, &args.choice)?;
     if args.json {
@@ -245,9 +286,8 @@ pub fn classify_command(args: &ClassifyArgs) -> Result<()> {
 }
 
 pub fn bake_command(args: &BakeArgs) -> Result<()> {
-    let lens = crate::cli::open_lens(&args.file)?;
-    let config = flare_core::flare::FlareConfig::default();
-    let flare = PreparedFlare::new(&lens, &config).with_context(|| args.file.clone())?;
+    let flare = args.optics.flare()?;
+    let lens = flare.system.lens.clone();
     let renderer = RayGridRenderer::new(&flare);
     let previous = args
         .update
@@ -297,82 +337,6 @@ pub fn photo_command(args: &PhotoArgs) -> Result<()> {
         lut.ghosts[0].thetas_deg,
         args.out.display(),
         bytes as f64 / 1e6
-    );
-    Ok(())
-}
-
-/// `flarelab render --method blended|photo`: the paraxial flare with LUT ghosts (or a photo LUT alone).
-#[allow(clippy::too_many_arguments)]
-pub fn render_with_lut(
-    flare: &PreparedFlare,
-    lens: &flare_core::optics::Lens,
-    lut_path: Option<&std::path::Path>,
-    photo_only: bool,
-    blend: &flare_core::lut::blend::BlendSettings,
-    light_deg: [f64; 2],
-    (width, height): (u32, u32),
-    device: &str,
-    background: Option<&flare_core::render::HdrImage>,
-    out: &std::path::Path,
-) -> Result<()> {
-    use flare_core::lut::LutKind;
-    use flare_core::lut::blend::LiveLut;
-    use flare_core::render::{cpu, gpu, output};
-    let lut = match lut_path {
-        Some(path) => {
-            let lut = format::read_lut(path).with_context(|| format!("reading {}", path.display()))?;
-            lut.check_for(lens, &flare.config)?;
-            if photo_only && lut.kind != LutKind::Photo {
-                bail!("{}: --method photo needs a photo LUT (this one is ray-traced)", path.display());
-            }
-            lut
-        }
-        None => {
-            let renderer = RayGridRenderer::new(flare);
-            bake_lut(flare, &renderer, &LutChoice::default(), &BakeSettings::default(), None, false)?.0
-        }
-    };
-    let live = LiveLut::new(lut);
-    let (scene, lut_scene) = live.scenes(flare, light_deg, width, height, blend, !photo_only);
-    let starburst = cpu::StarburstTexture::from_starburst(&flare.starburst);
-    let (display, hdr) = match device {
-        "cpu" => {
-            let mut hdr = live.render_cpu(flare, &scene, &lut_scene);
-            if flare.config.display.starburst {
-                cpu::starburst_pass(&scene, &starburst, &mut hdr);
-            }
-            (cpu::tonemap_pass(&scene, &hdr, background), hdr)
-        }
-        "gpu" => {
-            let ctx = gpu::GpuContext::headless(false).map_err(|e| anyhow::anyhow!("{e} (or use --device cpu)"))?;
-            let mut renderer = gpu::FlareRenderer::new(&ctx.device, &ctx.queue, wgpu::TextureFormat::Rgba8Unorm);
-            renderer.set_aperture(&ctx.device, &ctx.queue, &flare.mask);
-            renderer.set_starburst(&ctx.device, &ctx.queue, &flare.starburst);
-            renderer.set_background(&ctx.device, &ctx.queue, background);
-            renderer.set_lut(&ctx.device, &ctx.queue, Some(&live));
-            let display = gpu::render_display_with_lut(&ctx, &mut renderer, &scene, Some(&lut_scene))?;
-            (display, gpu::read_hdr(&ctx, &renderer)?)
-        }
-        other => bail!("--device {other}: use gpu or cpu"),
-    };
-    match output::ImageKind::from_path(out)? {
-        output::ImageKind::Png => output::write_png(out, &display)?,
-        output::ImageKind::Exr => {
-            let mut linear = cpu::composite(&scene, &hdr, background);
-            for p in &mut linear.pixels {
-                for c in p.iter_mut().take(3) {
-                    *c *= flare.config.display.exposure;
-                }
-            }
-            output::write_exr(out, &linear)?
-        }
-    }
-    eprintln!(
-        "wrote {} ({width}x{height}): {} paraxial sprites, {} LUT images from {} LUT ghosts",
-        out.display(),
-        scene.instances.len(),
-        lut_scene.instances.len(),
-        live.lut.ghosts.len()
     );
     Ok(())
 }

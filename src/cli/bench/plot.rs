@@ -9,9 +9,22 @@ use anyhow::{Result, anyhow};
 use plotters::prelude::*;
 use plotters::style::FontStyle;
 
-use crate::bench::Row;
+use flare_core::metrics::Comparison;
 
 const SIZE: (u32, u32) = (1100, 700);
+
+/// One method at one lens and angle: a point of the chart and a row of the tables.
+#[derive(Clone, Debug)]
+pub struct Row {
+    pub lens: String,
+    pub surfaces: usize,
+    pub ghosts: usize,
+    pub field_deg: f64,
+    pub method: String,
+    pub ms_median: f64,
+    pub runs: usize,
+    pub errors: Comparison,
+}
 
 /// The method's family and its colour.
 fn family(method: &str) -> (&'static str, RGBColor) {
@@ -99,6 +112,6 @@ pub fn error_against_time(rows: &[Row], path: &Path) -> Result<()> {
     let image = image::RgbImage::from_raw(SIZE.0, SIZE.1, buffer).ok_or_else(|| anyhow!("plot: buffer size"))?;
     let mut bytes = Vec::new();
     image.write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png)?;
-    flare_core::optics::formats::write_atomic(path, &bytes)?;
+    flare_core::files::write_atomic(path, &bytes)?;
     Ok(())
 }

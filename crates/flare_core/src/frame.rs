@@ -1,0 +1,396 @@
+//! One frame, drawn the same everywhere: the app's viewport and export, `flarelab render`, the benchmark and the
+//! tests all turn a [`FrameRequest`] into a [`Frame`], draw it with one GPU entry point or its CPU twin
+//! ([`Device`]), and write it with one writer ([`crate::output::write_frame`]).
+//!
+//! # How it works
+//! A [`FrameRequest`] is everything that decides a frame besides the prepared optics: the light's position,
+//! the size, the display settings (exposures in stops, tonemap, starburst), each lens ghost's gain (toggles
+//! and solo already folded in, see [`crate::preset::Document::ghost_gains`]) and how LUT ghosts are used.
+//! [`Frame::build`] makes the drawable frame in one pass: the LUT instances first (they say how much of each
+//! non-linear ghost its paraxial sprite keeps), then the paraxial instances with the user's gain times that
+//! weight applied as they are built, and the starburst's placement. Nothing edits a built frame afterwards.
+//!
+//! [`Device::draw`] draws a frame into an HDR accumulation (linear relative irradiance, before any gain) and
+//! an 8-bit display image: on the GPU through [`FlareRenderer::render_with_lut`] (the same call the app's
+//! viewport makes), or on the CPU through the twin passes of [`crate::render::cpu`] and
+//! [`crate::lut::blend::lut_pass`]. [`Drawn::layers`] turns that into what a compositor gets, every layer at
+//! the frame's size and linear: `flare` (accumulation x `2^flare_ev`), `starburst` (its share of the flare),
+//! `plate` (the plate x `2^plate_ev`) and the composite `flare + plate`, which is what the display image
+//! shows tonemapped; [`ghost_layers`] adds one layer per drawn ghost, each drawn alone on the same device.
+
+use crate::flare::PreparedFlare;
+use crate::ghost::{GhostFrame, light_slopes_for_frame_position};
+use crate::image::{DisplayImage, HdrImage};
+use crate::lut::LutKind;
+use crate::lut::blend::{BlendSettings, LiveLut, LutScene, lut_pass};
+pub use crate::output::FrameLayers;
+use crate::render::cpu;
+use crate::render::gpu::{FlareRenderer, GpuContext, GpuError};
+use crate::render::{DisplaySettings, FlareScene};
+
+/// How the LUT ghosts of a frame are used.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum LutUse {
+    /// Paraxial ghosts only (a LUT, if given, is not drawn).
+    #[default]
+    Off,
+    /// LUT ghosts blended with the paraxial flare ([`BlendSettings`]).
+    Blend,
+    /// The LUT alone, no paraxial sprite (a photo LUT played back).
+    Alone,
+}
+
+/// Everything that decides a frame besides the prepared optics (see the module documentation).
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameRequest {
+    /// Where the light appears in the frame (degrees, X right, Y up).
+    pub light_deg: [f64; 2],
+    pub width: u32,
+    pub height: u32,
+    pub display: DisplaySettings,
+    /// Per lens ghost index, its gain (missing entries are 1, 0 leaves the ghost out).
+    pub ghost_gains: Vec<f32>,
+    pub blend: BlendSettings,
+    pub lut_use: LutUse,
+}
+
+impl Default for FrameRequest {
+    fn default() -> Self {
+        Self {
+            light_deg: [6.0, 4.0],
+            width: 1280,
+            height: 720,
+            display: DisplaySettings::default(),
+            ghost_gains: Vec::new(),
+            blend: BlendSettings::default(),
+            lut_use: LutUse::Off,
+        }
+    }
+}
+
+/// A frame ready to draw.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Frame {
+    /// The paraxial instances (gains applied), the starburst's placement and the uniforms.
+    pub scene: FlareScene,
+    /// The LUT instances, when a LUT is drawn.
+    pub lut: Option<LutScene>,
+    /// Every sprite of the frame with why it is culled, and the counts (for ghost lists and status lines).
+    pub sprites: GhostFrame,
+}
+
+impl Frame {
+    /// Builds the frame `request` asks for from `flare` and, when LUT ghosts are used, `lut`.
+    pub fn build(flare: &PreparedFlare, lut: Option<&LiveLut>, request: &FrameRequest) -> Self {
+        let (w, h) = (request.width.max(1), request.height.max(1));
+        let lut = lut.filter(|_| request.lut_use != LutUse::Off);
+        let ghosts = flare.system.ghosts.len();
+        let mut gains: Vec<f32> =
+            (0..ghosts).map(|g| request.ghost_gains.get(g).copied().unwrap_or(1.0).max(0.0)).collect();
+        let lut_scene = lut.map(|live| {
+            let u = light_slopes_for_frame_position(request.light_deg[0], request.light_deg[1]);
+            LutScene::build(live, &flare.system, u, w, h, &request.blend, &gains)
+        });
+        if let Some(l) = &lut_scene {
+            // A photo LUT is the whole flare photographed: it is never drawn over paraxial sprites.
+            let alone = request.lut_use == LutUse::Alone || lut.is_some_and(|live| live.lut.kind == LutKind::Photo);
+            for (g, gain) in gains.iter_mut().enumerate() {
+                *gain = if alone { 0.0 } else { *gain * l.paraxial_weight(g as u32) };
+            }
+        }
+        let (scene, sprites) = flare.scene_with(request.light_deg, w, h, &request.display, &gains);
+        Self { scene, lut: lut_scene, sprites }
+    }
+
+    /// The frame's size in pixels.
+    pub fn size(&self) -> (u32, u32) {
+        (self.scene.width, self.scene.height)
+    }
+
+    /// The lens ghosts this frame draws (paraxial or LUT instances), in index order.
+    pub fn drawn_ghosts(&self, lut: Option<&LiveLut>) -> Vec<u32> {
+        let mut ghosts: Vec<u32> = self.scene.instance_ghosts.clone();
+        if let (Some(l), Some(live)) = (&self.lut, lut) {
+            ghosts.extend(l.sources.iter().map(|&(lg, _)| live.lut.ghosts[lg as usize].ghost));
+        }
+        ghosts.sort_unstable();
+        ghosts.dedup();
+        ghosts.retain(|&g| g != crate::lut::PHOTO_GHOST);
+        ghosts
+    }
+
+    /// This frame with only lens ghost `g` (its sprites and LUT images) and no starburst.
+    pub fn ghost_alone(&self, g: u32, lut: Option<&LiveLut>) -> Self {
+        let (instances, instance_ghosts) = self
+            .scene
+            .instances
+            .iter()
+            .zip(&self.scene.instance_ghosts)
+            .filter(|&(_, &h)| h == g)
+            .map(|(inst, &h)| (*inst, h))
+            .unzip();
+        let mut scene = FlareScene { instances, instance_ghosts, ..self.scene.clone() };
+        scene.globals.starburst = [0.0; 4];
+        let lut_scene = match (&self.lut, lut) {
+            (Some(l), Some(live)) => {
+                let mut only = LutScene { alpha_over: l.alpha_over, ..LutScene::default() };
+                for (inst, &(lg, entry)) in l.instances.iter().zip(&l.sources) {
+                    if live.lut.ghosts[lg as usize].ghost == g {
+                        only.instances.push(*inst);
+                        only.sources.push((lg, entry));
+                    }
+                }
+                Some(only)
+            }
+            _ => None,
+        };
+        Self { scene, lut: lut_scene, sprites: self.sprites.clone() }
+    }
+}
+
+/// What a frame reads besides itself: the prepared optics (aperture mask, starburst), the LUT and the plate.
+#[derive(Clone, Copy)]
+pub struct Sources<'a> {
+    pub flare: &'a PreparedFlare,
+    pub lut: Option<&'a LiveLut>,
+    pub plate: Option<&'a HdrImage>,
+}
+
+/// A drawn frame: the HDR accumulation (linear relative irradiance before any gain, at the accumulation's
+/// size) and the display image (the tonemapped composite at the frame's size).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Drawn {
+    pub hdr: HdrImage,
+    pub display: DisplayImage,
+}
+
+impl Drawn {
+    /// The frame's linear layers (no ghost layers; see [`ghost_layers`]).
+    pub fn layers(&self, frame: &Frame, sources: &Sources) -> FrameLayers {
+        let scene = &frame.scene;
+        let flare = cpu::flare_layer(scene, &self.hdr);
+        let mut starburst = HdrImage::black(scene.hdr_width, scene.hdr_height);
+        cpu::starburst_pass(scene, &sources.flare.starburst_texture, &mut starburst);
+        let starburst = cpu::flare_layer(scene, &starburst);
+        let plate = sources.plate.map(|p| cpu::plate_layer(scene, p));
+        let mut composite = match &plate {
+            Some(p) => flare.plus(p),
+            None => flare.clone(),
+        };
+        for p in &mut composite.pixels {
+            p[3] = 1.0;
+        }
+        FrameLayers { composite, flare, starburst, plate, ghosts: Vec::new() }
+    }
+}
+
+/// Why a frame could not be drawn or written.
+#[derive(Debug, thiserror::Error)]
+pub enum FrameError {
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+    #[error(transparent)]
+    Image(#[from] crate::output::ImageError),
+    #[error("{0}")]
+    Request(String),
+}
+
+/// A headless GPU renderer with the sources it last uploaded (uploads happen only when a source changes).
+pub struct GpuDrawer {
+    pub ctx: GpuContext,
+    pub renderer: FlareRenderer,
+    /// Addresses of the sources last uploaded: (prepared flare, LUT, plate).
+    uploaded: Option<(usize, usize, usize)>,
+}
+
+impl GpuDrawer {
+    /// A headless device (`prefer_software`: a CPU adapter such as lavapipe first, for reproducible images).
+    pub fn new(prefer_software: bool) -> Result<Self, GpuError> {
+        Ok(Self::on(GpuContext::headless(prefer_software)?))
+    }
+
+    /// A drawer on a device already made.
+    pub fn on(ctx: GpuContext) -> Self {
+        let renderer = FlareRenderer::new(&ctx.device, &ctx.queue, wgpu::TextureFormat::Rgba8Unorm);
+        Self { ctx, renderer, uploaded: None }
+    }
+
+    /// Uploads `sources` to the renderer unless they are the ones last uploaded.
+    fn upload(&mut self, sources: &Sources) {
+        let address = |p: Option<*const u8>| p.map_or(0, |p| p as usize);
+        let key = (
+            sources.flare as *const PreparedFlare as usize,
+            address(sources.lut.map(|l| l as *const LiveLut as *const u8)),
+            address(sources.plate.map(|p| p as *const HdrImage as *const u8)),
+        );
+        if self.uploaded == Some(key) {
+            return;
+        }
+        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        self.renderer.set_aperture(device, queue, &sources.flare.mask);
+        self.renderer.set_starburst(device, queue, &sources.flare.starburst);
+        self.renderer.set_background(device, queue, sources.plate);
+        self.renderer.set_lut(device, queue, sources.lut);
+        self.uploaded = Some(key);
+    }
+
+    /// Draws `frame` and reads back its accumulation and display image.
+    pub fn draw(&mut self, frame: &Frame, sources: &Sources) -> Result<Drawn, GpuError> {
+        self.upload(sources);
+        let display = crate::render::gpu::render_display_with_lut(
+            &self.ctx,
+            &mut self.renderer,
+            &frame.scene,
+            frame.lut.as_ref(),
+        )?;
+        let hdr = crate::render::gpu::read_hdr(&self.ctx, &self.renderer)?;
+        Ok(Drawn { hdr, display })
+    }
+
+    /// Draws `frame` into `target` (of the renderer's format and the frame's size) and waits for the GPU,
+    /// reading nothing back (what a benchmark times).
+    pub fn render_into(&mut self, frame: &Frame, sources: &Sources, target: &wgpu::TextureView) -> Result<(), GpuError> {
+        self.upload(sources);
+        let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
+        self.renderer.render_with_lut(
+            &self.ctx.device,
+            &self.ctx.queue,
+            &mut encoder,
+            target,
+            &frame.scene,
+            frame.lut.as_ref(),
+        );
+        self.ctx.queue.submit(Some(encoder.finish()));
+        self.ctx.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
+        Ok(())
+    }
+}
+
+/// Where frames are drawn: a GPU (any wgpu adapter, software ones included) or the CPU twin.
+pub enum Device {
+    Gpu(Box<GpuDrawer>),
+    Cpu,
+}
+
+impl Device {
+    /// A headless GPU device (see [`GpuDrawer::new`]).
+    pub fn gpu(prefer_software: bool) -> Result<Self, GpuError> {
+        Ok(Self::Gpu(Box::new(GpuDrawer::new(prefer_software)?)))
+    }
+
+    /// The adapter's name, or "CPU twin".
+    pub fn name(&self) -> String {
+        match self {
+            Self::Gpu(g) => format!("{} ({:?})", g.ctx.adapter.name, g.ctx.adapter.backend),
+            Self::Cpu => "CPU twin".into(),
+        }
+    }
+
+    /// Draws `frame` (see the module documentation).
+    pub fn draw(&mut self, frame: &Frame, sources: &Sources) -> Result<Drawn, GpuError> {
+        match self {
+            Self::Gpu(g) => g.draw(frame, sources),
+            Self::Cpu => Ok(draw_cpu(frame, sources)),
+        }
+    }
+}
+
+/// The CPU twin of [`GpuDrawer::draw`]: [`draw_cpu_hdr`], then the tonemap pass.
+pub fn draw_cpu(frame: &Frame, sources: &Sources) -> Drawn {
+    let hdr = draw_cpu_hdr(frame, sources);
+    let display = cpu::tonemap_pass(&frame.scene, &hdr, sources.plate);
+    Drawn { hdr, display }
+}
+
+/// The accumulation passes of the CPU twin: ghosts, LUT ghosts, starburst.
+pub fn draw_cpu_hdr(frame: &Frame, sources: &Sources) -> HdrImage {
+    let scene = &frame.scene;
+    let mut hdr = cpu::ghost_pass(scene, &sources.flare.mask);
+    if let (Some(l), Some(live)) = (&frame.lut, sources.lut) {
+        lut_pass(frame.size(), l, &live.lut, &mut hdr);
+    }
+    cpu::starburst_pass(scene, &sources.flare.starburst_texture, &mut hdr);
+    hdr
+}
+
+/// One layer per ghost the frame draws (`ghost_I_J`, surfaces I < J), each drawn alone on `device` and
+/// multiplied by the flare's gain.
+pub fn ghost_layers(
+    device: &mut Device,
+    frame: &Frame,
+    sources: &Sources,
+) -> Result<Vec<(String, HdrImage)>, GpuError> {
+    let mut layers = Vec::new();
+    for g in frame.drawn_ghosts(sources.lut) {
+        let Some(model) = sources.flare.system.ghosts.get(g as usize) else { continue };
+        let alone = frame.ghost_alone(g, sources.lut);
+        let drawn = device.draw(&alone, &Sources { plate: None, ..*sources })?;
+        layers.push((format!("ghost_{}_{}", model.i, model.j), cpu::flare_layer(&alone.scene, &drawn.hdr)));
+    }
+    Ok(layers)
+}
+
+/// Which layers a file gets.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct LayerChoice {
+    /// One layer per drawn ghost (EXR only).
+    pub ghosts: bool,
+}
+
+/// Draws `frame` on `device` and writes it to `path` through [`crate::output::write_frame`] (PNG: the
+/// tonemapped composite; EXR: the layers). Returns what was drawn.
+pub fn render_to_file(
+    device: &mut Device,
+    frame: &Frame,
+    sources: &Sources,
+    choice: LayerChoice,
+    path: &std::path::Path,
+) -> Result<Drawn, FrameError> {
+    let kind = crate::output::ImageKind::from_path(path)?;
+    if choice.ghosts && kind != crate::output::ImageKind::Exr {
+        return Err(FrameError::Request(format!(
+            "{}: ghost layers need an EXR file (a PNG holds one tonemapped image)",
+            path.display()
+        )));
+    }
+    let drawn = device.draw(frame, sources)?;
+    write_drawn(device, frame, sources, &drawn, choice, path)?;
+    Ok(drawn)
+}
+
+/// Writes a frame already drawn (by [`Device::draw`], or by a ray-traced method into the same kind of
+/// accumulation) to `path`: the one rule for every image file FlareLab writes.
+pub fn write_drawn(
+    device: &mut Device,
+    frame: &Frame,
+    sources: &Sources,
+    drawn: &Drawn,
+    choice: LayerChoice,
+    path: &std::path::Path,
+) -> Result<(), FrameError> {
+    let layers = match crate::output::ImageKind::from_path(path)? {
+        crate::output::ImageKind::Png => None,
+        crate::output::ImageKind::Exr => {
+            let mut layers = drawn.layers(frame, sources);
+            if choice.ghosts {
+                layers.ghosts = ghost_layers(device, frame, sources)?;
+            }
+            Some(layers)
+        }
+    };
+    crate::output::write_frame(path, &drawn.display, layers.as_ref())?;
+    Ok(())
+}
+
+/// Parses an image size `WIDTHxHEIGHT` (each side 1 to 8192 pixels).
+pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("`{s}` is not WIDTHxHEIGHT"))?;
+    let (w, h): (u32, u32) = (
+        w.trim().parse().map_err(|_| format!("`{s}` is not WIDTHxHEIGHT"))?,
+        h.trim().parse().map_err(|_| format!("`{s}` is not WIDTHxHEIGHT"))?,
+    );
+    if !(1..=8192).contains(&w) || !(1..=8192).contains(&h) {
+        return Err(format!("`{s}`: each side must be 1 to 8192 pixels"));
+    }
+    Ok((w, h))
+}

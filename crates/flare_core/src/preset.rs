@@ -1,0 +1,548 @@
+//! The document: everything a preset saves and undo restores (lens, aperture, coatings, spectrum, blend, ghost
+//! gains, light, exposures), shared by the app and the command line, with one [`Default`]: the app's fresh
+//! start and `flarelab render` with no flags are the same frame.
+//!
+//! # How it works
+//! [`Document`] is plain data with `#[serde(default)]` on every struct, so a preset written by an older
+//! FlareLab (a lower [`PRESET_VERSION`], fewer fields) loads with today's defaults for what it lacks; a preset
+//! from a newer FlareLab is refused by its version, never half-read. Version 1 stored a linear `exposure`
+//! multiplier: it converts to `flare_ev = log2(exposure)` on load. [`Document::from_json`] names the field that
+//! is wrong (through `serde_path_to_error`) and then checks values serde cannot (a lens that is not
+//! physically possible, a negative gain, an unknown blend mode); [`Document::save`] writes through a
+//! temporary file renamed over the target.
+//!
+//! What the document implies is derived in two halves that never mix: [`Document::flare_config`] (the optics:
+//! lens, aperture, coatings, spectrum, culling) keyed by [`Document::optics_fingerprint`], and
+//! [`Document::frame_request`] (light, display settings, per-ghost gains, blend), which costs only a new
+//! frame. Exposures, tonemap, plate and starburst are display settings: changing them rebuilds no optics.
+//!
+//! Presets shipped in the binary ([`shipped`]) are JSON files under `assets/presets/`, read through the same
+//! loader; [`Document::open_named`] takes a file path or a shipped name.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::aperture::{Aperture, ApertureShape, DEFAULT_MASK_SIZE};
+use crate::color::Tonemap;
+use crate::files::write_atomic;
+use crate::flare::FlareConfig;
+use crate::frame::{FrameRequest, LutUse};
+use crate::ghost::GhostSystem;
+use crate::lut::blend::{BlendMode, BlendSettings};
+use crate::optics::library::default_lens;
+use crate::optics::{Coating, Lens};
+use crate::render::{DEFAULT_FLARE_EV, DisplaySettings};
+use crate::spectrum::Spectrum;
+
+/// The preset format this build writes; it reads every version up to this one.
+pub const PRESET_VERSION: u32 = 2;
+
+/// Why a preset is refused.
+#[derive(Debug, thiserror::Error)]
+pub enum PresetError {
+    #[error("{0}")]
+    Io(#[from] std::io::Error),
+    #[error("not a FlareLab preset: at `{path}`: {reason}")]
+    Json { path: String, reason: String },
+    #[error("preset version {0} is newer than this FlareLab reads ({PRESET_VERSION}); update FlareLab")]
+    Newer(u64),
+    #[error("preset field `{field}`: {reason}")]
+    Value { field: String, reason: String },
+    #[error("no preset file or shipped preset named `{name}`; the shipped presets are: {shipped}")]
+    Unknown { name: String, shipped: String },
+}
+
+/// The stop: blade count (0 for a circle), their rotation and roundness, and the f-number.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct ApertureDoc {
+    pub blades: u32,
+    pub rotation_deg: f64,
+    /// 0 straight blades, 1 a circle.
+    pub roundness: f64,
+    /// `None`: the lens wide open.
+    pub f_number: Option<f64>,
+    /// A custom aperture image (grey, white open) replacing the blades.
+    pub image: Option<String>,
+}
+
+impl Default for ApertureDoc {
+    fn default() -> Self {
+        Self { blades: 6, rotation_deg: 0.0, roundness: 0.0, f_number: None, image: None }
+    }
+}
+
+/// Where the LUT ghosts come from.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum LutSource {
+    /// Paraxial ghosts only.
+    #[default]
+    None,
+    /// Baked from the lens by ray tracing (in the app, or loaded from `path`).
+    Simulated { path: Option<String> },
+    /// A photo LUT file.
+    Photo { path: String },
+}
+
+/// How LUT ghosts blend with the paraxial flare.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct BlendDoc {
+    /// `additive`, `alpha`, `linear:FROM:TO` or `smooth:FROM:TO` (degrees); see [`BlendMode::parse`].
+    pub mode: String,
+    /// Multiplies the LUT layer.
+    pub gain: f64,
+    pub lut: LutSource,
+}
+
+impl Default for BlendDoc {
+    fn default() -> Self {
+        Self { mode: "additive".into(), gain: 1.0, lut: LutSource::None }
+    }
+}
+
+/// One ghost's switches: on or off, and a gain.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct GhostDoc {
+    pub enabled: bool,
+    pub gain: f64,
+}
+
+impl Default for GhostDoc {
+    fn default() -> Self {
+        Self { enabled: true, gain: 1.0 }
+    }
+}
+
+/// Everything the user edits (see the module documentation).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct Document {
+    pub version: u32,
+    pub lens: Lens,
+    pub aperture: ApertureDoc,
+    /// One coating for every surface, replacing the lens's own (`None`: each surface's own, as edited in the
+    /// coatings panel).
+    pub coating_override: Option<Coating>,
+    /// Wavelengths the flare is made of: 3 is RGB (650 / 510 / 475 nm), 2 to 32 are CIE-weighted, 1 the d-line.
+    pub wavelengths: usize,
+    /// The culling threshold (relative irradiance all culled sprites together may take from a pixel);
+    /// `None`: a quarter of an 8-bit step at the flare's exposure.
+    pub cull_threshold: Option<f64>,
+    pub blend: BlendDoc,
+    /// Per ghost, keyed by its surface pair `"I-J"`; absent ghosts are on at gain 1.
+    pub ghosts: BTreeMap<String, GhostDoc>,
+    /// Show only this ghost (`"I-J"`).
+    pub solo: Option<String>,
+    /// Where the light appears in the frame (degrees, X right, Y up).
+    pub light_deg: [f64; 2],
+    /// The flare's exposure in stops (its relative irradiance times `2^flare_ev`).
+    pub flare_ev: f64,
+    /// The background plate's exposure in stops (0: as shot).
+    pub plate_ev: f64,
+    pub tonemap: Tonemap,
+    pub starburst: bool,
+    /// Background plate file (PNG/EXR/HDR/JPEG), if any.
+    pub background: Option<String>,
+}
+
+impl Default for Document {
+    fn default() -> Self {
+        Self {
+            version: PRESET_VERSION,
+            lens: default_lens(),
+            aperture: ApertureDoc::default(),
+            // Coated ghosts are ~100x dimmer than bare ones: the default exposure matches a quarter-wave coat.
+            coating_override: Some(Coating::QuarterWave { design_wavelength_nm: 550.0, layer_index: None }),
+            wavelengths: 3,
+            cull_threshold: None,
+            blend: BlendDoc::default(),
+            ghosts: BTreeMap::new(),
+            solo: None,
+            light_deg: [6.0, 4.0],
+            flare_ev: DEFAULT_FLARE_EV,
+            plate_ev: 0.0,
+            tonemap: Tonemap::Aces,
+            starburst: true,
+            background: None,
+        }
+    }
+}
+
+/// The key of a ghost in [`Document::ghosts`].
+pub fn ghost_key(i: usize, j: usize) -> String {
+    format!("{i}-{j}")
+}
+
+/// The part of a document that decides the optics (for [`Document::optics_fingerprint`]).
+#[derive(Serialize)]
+struct OpticsPart<'a> {
+    lens: &'a Lens,
+    aperture: &'a ApertureDoc,
+    coating_override: &'a Option<Coating>,
+    wavelengths: usize,
+    cull_threshold: Option<f64>,
+}
+
+impl Document {
+    /// A fresh document on `lens` (everything else the default).
+    pub fn for_lens(lens: Lens) -> Self {
+        Self { lens, ..Self::default() }
+    }
+
+    /// The aperture this document asks for (the image file read when there is one).
+    pub fn aperture(&self) -> Result<Aperture, PresetError> {
+        let a = &self.aperture;
+        let shape = match &a.image {
+            Some(path) => Aperture::image_shape_from_file(Path::new(path), DEFAULT_MASK_SIZE)
+                .map_err(|e| PresetError::Value { field: "aperture.image".into(), reason: e.to_string() })?,
+            None if a.blades < 3 => ApertureShape::Circle,
+            None => ApertureShape::Blades { count: a.blades, rotation_deg: a.rotation_deg, roundness: a.roundness },
+        };
+        Ok(Aperture { shape, f_number: a.f_number })
+    }
+
+    /// The optics settings of this document (everything but the lens that changes the ghosts).
+    pub fn flare_config(&self) -> Result<FlareConfig, PresetError> {
+        let spectrum = Spectrum::with_count(self.wavelengths)
+            .map_err(|e| PresetError::Value { field: "wavelengths".into(), reason: e.to_string() })?;
+        Ok(FlareConfig {
+            aperture: self.aperture()?,
+            spectrum,
+            coating_override: self.coating_override.clone(),
+            intensity_threshold: self.cull_threshold,
+        })
+    }
+
+    /// A stable fingerprint of what [`Self::flare_config`] and the lens depend on: the app rebuilds the ghost
+    /// system only when it changes, and never for a display setting.
+    pub fn optics_fingerprint(&self) -> u64 {
+        crate::fingerprint::of(&OpticsPart {
+            lens: &self.lens,
+            aperture: &self.aperture,
+            coating_override: &self.coating_override,
+            wavelengths: self.wavelengths,
+            cull_threshold: self.cull_threshold,
+        })
+    }
+
+    /// The display settings (`divisor`: the accumulation divisor, 1 for files).
+    pub fn display(&self, divisor: u32) -> DisplaySettings {
+        DisplaySettings {
+            flare_ev: self.flare_ev,
+            plate_ev: self.plate_ev,
+            tonemap: self.tonemap,
+            starburst: self.starburst,
+            accumulation_divisor: divisor,
+            ..DisplaySettings::default()
+        }
+    }
+
+    /// The gain ghost (i, j) is drawn with: 0 when it is off or another ghost is solo.
+    pub fn ghost_gain(&self, i: usize, j: usize) -> f64 {
+        let key = ghost_key(i, j);
+        if self.solo.as_ref().is_some_and(|s| *s != key) {
+            return 0.0;
+        }
+        match self.ghosts.get(&key) {
+            Some(g) if !g.enabled => 0.0,
+            Some(g) => g.gain,
+            None => 1.0,
+        }
+    }
+
+    /// Every lens ghost's gain, by the ghost's index in `system`.
+    pub fn ghost_gains(&self, system: &GhostSystem) -> Vec<f32> {
+        system.ghosts.iter().map(|g| self.ghost_gain(g.i, g.j) as f32).collect()
+    }
+
+    /// The ghost's switches, created on first edit.
+    pub fn ghost_mut(&mut self, i: usize, j: usize) -> &mut GhostDoc {
+        self.ghosts.entry(ghost_key(i, j)).or_default()
+    }
+
+    /// The blend settings (an unparsable mode falls back to additive; [`Self::check`] refuses it on load).
+    pub fn blend_settings(&self) -> BlendSettings {
+        BlendSettings {
+            mode: BlendMode::parse(&self.blend.mode).unwrap_or(BlendMode::Additive),
+            gain: self.blend.gain,
+            ..BlendSettings::default()
+        }
+    }
+
+    /// How the LUT ghosts are used: blended for a ray-traced LUT, alone for a photo.
+    pub fn lut_use(&self) -> LutUse {
+        match self.blend.lut {
+            LutSource::None => LutUse::Off,
+            LutSource::Simulated { .. } => LutUse::Blend,
+            LutSource::Photo { .. } => LutUse::Alone,
+        }
+    }
+
+    /// The frame this document shows at `width` x `height` (`divisor`: the accumulation divisor).
+    pub fn frame_request(&self, system: &GhostSystem, width: u32, height: u32, divisor: u32) -> FrameRequest {
+        FrameRequest {
+            light_deg: self.light_deg,
+            width,
+            height,
+            display: self.display(divisor),
+            ghost_gains: self.ghost_gains(system),
+            blend: self.blend_settings(),
+            lut_use: self.lut_use(),
+        }
+    }
+
+    /// The preset's JSON text.
+    pub fn to_json(&self) -> String {
+        let mut doc = self.clone();
+        doc.version = PRESET_VERSION;
+        serde_json::to_string_pretty(&doc).expect("a document always serialises")
+    }
+
+    /// Reads a preset (any version up to [`PRESET_VERSION`]) and checks it.
+    pub fn from_json(text: &str) -> Result<Self, PresetError> {
+        let mut value: serde_json::Value = serde_json::from_str(text)
+            .map_err(|e| PresetError::Json { path: format!("line {}", e.line()), reason: e.to_string() })?;
+        let version = value.get("version").and_then(serde_json::Value::as_u64).unwrap_or(0);
+        if version > u64::from(PRESET_VERSION) {
+            return Err(PresetError::Newer(version));
+        }
+        if version < 2 {
+            upgrade_exposure(&mut value)?;
+        }
+        let mut doc: Document = serde_path_to_error::deserialize(value)
+            .map_err(|e| PresetError::Json { path: e.path().to_string(), reason: e.inner().to_string() })?;
+        doc.version = PRESET_VERSION;
+        doc.check()?;
+        Ok(doc)
+    }
+
+    /// Values serde cannot check.
+    pub fn check(&self) -> Result<(), PresetError> {
+        let bad = |field: &str, reason: String| Err(PresetError::Value { field: field.into(), reason });
+        if let Err(e) = self.lens.validate() {
+            return bad("lens", e.to_string());
+        }
+        for (field, ev) in [("flare_ev", self.flare_ev), ("plate_ev", self.plate_ev)] {
+            if !(ev.is_finite() && (-40.0..=40.0).contains(&ev)) {
+                return bad(field, format!("{ev}: stops from -40 to 40"));
+            }
+        }
+        if !self.light_deg.iter().all(|a| a.is_finite() && a.abs() <= 89.0) {
+            return bad("light_deg", format!("{:?}: angles from -89 to 89 degrees", self.light_deg));
+        }
+        if let Err(e) = Spectrum::with_count(self.wavelengths) {
+            return bad("wavelengths", e.to_string());
+        }
+        if let Some(t) = self.cull_threshold
+            && !(t.is_finite() && t >= 0.0)
+        {
+            return bad("cull_threshold", format!("{t} must be 0 or more"));
+        }
+        if let Some(f) = self.aperture.f_number
+            && !(f.is_finite() && f > 0.0)
+        {
+            return bad("aperture.f_number", format!("{f} must be positive"));
+        }
+        if !(self.aperture.roundness.is_finite() && (0.0..=1.0).contains(&self.aperture.roundness)) {
+            return bad("aperture.roundness", format!("{} must be from 0 to 1", self.aperture.roundness));
+        }
+        if self.aperture.blades > 32 || !self.aperture.rotation_deg.is_finite() {
+            return bad("aperture", "at most 32 blades, a finite rotation".into());
+        }
+        if let Err(e) = BlendMode::parse(&self.blend.mode) {
+            return bad("blend.mode", e);
+        }
+        if !(self.blend.gain.is_finite() && self.blend.gain >= 0.0) {
+            return bad("blend.gain", format!("{} must be 0 or more", self.blend.gain));
+        }
+        for (key, g) in &self.ghosts {
+            if !(g.gain.is_finite() && g.gain >= 0.0) {
+                return bad(&format!("ghosts.{key}.gain"), format!("{} must be 0 or more", g.gain));
+            }
+        }
+        Ok(())
+    }
+
+    /// Opens a preset file.
+    pub fn open(path: &Path) -> Result<Self, PresetError> {
+        Self::from_json(&std::fs::read_to_string(path)?)
+    }
+
+    /// Opens a preset file, or a shipped preset by name when no such file exists.
+    pub fn open_named(name: &str) -> Result<Self, PresetError> {
+        let path = Path::new(name);
+        if path.exists() {
+            return Self::open(path);
+        }
+        match shipped().iter().find(|p| p.name == name) {
+            Some(p) => p.document(),
+            None => Err(PresetError::Unknown {
+                name: name.to_owned(),
+                shipped: shipped().iter().map(|p| p.name).collect::<Vec<_>>().join(", "),
+            }),
+        }
+    }
+
+    /// Writes the preset atomically (temporary file, then rename).
+    pub fn save(&self, path: &Path) -> Result<(), PresetError> {
+        write_atomic(path, self.to_json().as_bytes())?;
+        Ok(())
+    }
+}
+
+/// Version 1's linear `exposure` becomes `flare_ev = log2(exposure)`.
+fn upgrade_exposure(value: &mut serde_json::Value) -> Result<(), PresetError> {
+    let Some(object) = value.as_object_mut() else { return Ok(()) };
+    let Some(exposure) = object.remove("exposure") else { return Ok(()) };
+    let linear = exposure.as_f64().filter(|e| e.is_finite() && *e > 0.0).ok_or_else(|| PresetError::Value {
+        field: "exposure".into(),
+        reason: format!("{exposure} must be a positive number (a version 1 linear exposure)"),
+    })?;
+    object.insert("flare_ev".into(), serde_json::json!(linear.log2()));
+    Ok(())
+}
+
+/// A preset shipped in the binary.
+#[derive(Clone, Copy, Debug)]
+pub struct ShippedPreset {
+    pub name: &'static str,
+    pub title: &'static str,
+    pub json: &'static str,
+}
+
+impl ShippedPreset {
+    /// The preset's document (through the same loader and checks as a file).
+    pub fn document(&self) -> Result<Document, PresetError> {
+        Document::from_json(self.json)
+    }
+}
+
+/// The presets shipped in the binary (`assets/presets/*.json`).
+pub fn shipped() -> &'static [ShippedPreset] {
+    const PRESETS: &[ShippedPreset] = &[
+        ShippedPreset {
+            name: "default",
+            title: "Heliar, quarter-wave coated, f/4.5 wide open: the app's first frame",
+            json: include_str!("../../../assets/presets/default.json"),
+        },
+        ShippedPreset {
+            name: "nikon-zoom",
+            title: "Nikon 28-75 mm zoom, quarter-wave coated, a chain of polygonal ghosts",
+            json: include_str!("../../../assets/presets/nikon-zoom.json"),
+        },
+        ShippedPreset {
+            name: "dgauss-uncoated",
+            title: "Double Gauss 50 mm, bare glass: bright, colourless ghosts",
+            json: include_str!("../../../assets/presets/dgauss-uncoated.json"),
+        },
+        ShippedPreset {
+            name: "tessar-f8",
+            title: "Tessar stopped down to f/8 with 7 rounded blades",
+            json: include_str!("../../../assets/presets/tessar-f8.json"),
+        },
+    ];
+    PRESETS
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_preset_round_trips_and_an_older_one_loads_with_defaults() {
+        let mut doc = Document { light_deg: [3.0, -2.0], ..Document::default() };
+        doc.ghost_mut(2, 5).gain = 0.5;
+        doc.solo = Some(ghost_key(2, 5));
+        assert_eq!(Document::from_json(&doc.to_json()).unwrap(), doc);
+        // Version 0 (before versions were written): only a light and a linear exposure, which becomes stops.
+        let old = Document::from_json(r#"{"light_deg": [1.0, 2.0], "exposure": 1024.0}"#).unwrap();
+        assert_eq!(old.light_deg, [1.0, 2.0]);
+        assert_eq!(old.flare_ev, 10.0);
+        assert_eq!(old.plate_ev, 0.0);
+        assert_eq!(old.aperture, ApertureDoc::default());
+        assert_eq!(old.version, PRESET_VERSION);
+        // Version 1 with its exposure.
+        let v1 = Document::from_json(r#"{"version": 1, "exposure": 2.0}"#).unwrap();
+        assert_eq!(v1.flare_ev, 1.0);
+    }
+
+    #[test]
+    fn bad_presets_are_refused_with_the_field_named() {
+        let e = Document::from_json(r#"{"version": 99}"#).unwrap_err().to_string();
+        assert!(e.contains("99") && e.contains("newer"), "{e}");
+        let e = Document::from_json(r#"{"aperture": {"blades": "six"}}"#).unwrap_err().to_string();
+        assert!(e.contains("aperture.blades"), "{e}");
+        let e = Document::from_json(r#"{"exposure": -1}"#).unwrap_err().to_string();
+        assert!(e.contains("exposure"), "{e}");
+        let e = Document::from_json(r#"{"version": 2, "flare_ev": 1e9}"#).unwrap_err().to_string();
+        assert!(e.contains("flare_ev"), "{e}");
+        let e = Document::from_json(r#"{"blend": {"mode": "sideways"}}"#).unwrap_err().to_string();
+        assert!(e.contains("blend.mode"), "{e}");
+        let e = Document::from_json(r#"{"wavelengths": 0}"#).unwrap_err().to_string();
+        assert!(e.contains("wavelengths"), "{e}");
+        let e = Document::from_json("{ not json").unwrap_err().to_string();
+        assert!(e.contains("line 1"), "{e}");
+        let mut doc = Document::default();
+        doc.lens.surfaces[0].semi_aperture_mm = -3.0;
+        let e = Document::from_json(&doc.to_json()).unwrap_err().to_string();
+        assert!(e.contains("lens") && e.contains("surface 0"), "{e}");
+    }
+
+    #[test]
+    fn gains_follow_toggles_and_solo() {
+        let mut doc = Document::default();
+        assert_eq!(doc.ghost_gain(1, 2), 1.0);
+        doc.ghost_mut(1, 2).enabled = false;
+        assert_eq!(doc.ghost_gain(1, 2), 0.0);
+        doc.ghost_mut(3, 4).gain = 2.0;
+        doc.solo = Some(ghost_key(3, 4));
+        assert_eq!((doc.ghost_gain(3, 4), doc.ghost_gain(0, 5)), (2.0, 0.0));
+    }
+
+    #[test]
+    fn display_settings_do_not_change_the_optics_fingerprint() {
+        let doc = Document::default();
+        let key = doc.optics_fingerprint();
+        let display = Document {
+            flare_ev: 3.0,
+            plate_ev: -2.0,
+            tonemap: Tonemap::Reinhard,
+            starburst: false,
+            light_deg: [1.0, 1.0],
+            background: Some("plate.exr".into()),
+            ..doc.clone()
+        };
+        assert_eq!(display.optics_fingerprint(), key);
+        let mut optics = doc.clone();
+        optics.aperture.f_number = Some(8.0);
+        assert_ne!(optics.optics_fingerprint(), key);
+        let mut lens = doc;
+        lens.lens.surfaces[1].radius_mm += 1e-9;
+        assert_ne!(lens.optics_fingerprint(), key);
+    }
+
+    #[test]
+    fn shipped_presets_load_and_the_default_one_is_the_default_document() {
+        for p in shipped() {
+            p.document().unwrap_or_else(|e| panic!("{}: {e}", p.name));
+        }
+        assert_eq!(shipped()[0].document().unwrap(), Document::default());
+        let e = Document::open_named("no-such-look").unwrap_err().to_string();
+        assert!(e.contains("no-such-look") && e.contains("nikon-zoom") && e.contains("default"), "{e}");
+    }
+
+    #[test]
+    fn saving_replaces_the_file_whole() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("flare.json");
+        std::fs::write(&path, "old").unwrap();
+        Document::default().save(&path).unwrap();
+        assert_eq!(Document::open(&path).unwrap(), Document::default());
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1, "no temporary file left behind");
+    }
+}

@@ -1,0 +1,10 @@
+// The uniforms every pass reads: the one WGSL declaration, prepended to each shader when it is embedded
+// (crates/flare_core/src/render/shaders.rs). Mirrors `Globals` in crates/flare_core/src/render/mod.rs; a test
+// checks with naga that both have the same size and member offsets.
+
+struct Globals {
+    viewport: vec4<f32>,   // width, height, 1/width, 1/height (pixels)
+    starburst: vec4<f32>,  // centre x, centre y, half-size (pixels), intensity
+    tonemap: vec4<f32>,    // flare gain (2^flare_ev), operator (0 none, 1 Reinhard, 2 ACES), encode sRGB (0/1), unused
+    plate: vec4<f32>,      // plate gain (2^plate_ev), plate present (0/1), unused, unused
+};

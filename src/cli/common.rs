@@ -1,0 +1,132 @@
+//! What every subcommand shares: opening a lens by file or built-in name, and parsing the small value syntaxes
+//! of the flags (pairs of numbers, coatings, apertures).
+
+use std::path::Path;
+
+use anyhow::{Context, Result, bail};
+use flare_core::optics::formats::load_lens_file;
+use flare_core::optics::library::builtin_lens;
+use flare_core::optics::{Coating, CoatingLayer, Lens};
+use flare_core::preset::ApertureDoc;
+
+fn parse_pair<T: std::str::FromStr>(s: &str, what: &str) -> Result<(T, T), String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    match parts.as_slice() {
+        [a, b] => match (a.parse(), b.parse()) {
+            (Ok(a), Ok(b)) => Ok((a, b)),
+            _ => Err(format!("`{s}` is not two {what} separated by a comma")),
+        },
+        _ => Err(format!("`{s}` is not two {what} separated by a comma")),
+    }
+}
+
+pub fn parse_pair_f64(s: &str) -> Result<(f64, f64), String> {
+    let (a, b) = parse_pair::<f64>(s, "numbers")?;
+    if a.is_finite() && b.is_finite() { Ok((a, b)) } else { Err(format!("`{s}` is not finite")) }
+}
+
+pub fn parse_pair_usize(s: &str) -> Result<(usize, usize), String> {
+    parse_pair(s, "surface numbers")
+}
+
+/// Opens a lens: a file if the path exists, else a built-in lens by name.
+pub fn open_lens(name: &str) -> Result<Lens> {
+    let path = Path::new(name);
+    if path.exists() {
+        return load_lens_file(path).with_context(|| name.to_string());
+    }
+    let looks_like_path = name.contains(['/', '\\']) || name.contains('.');
+    match builtin_lens(name) {
+        Ok(lens) => Ok(lens),
+        Err(_) if looks_like_path => bail!("{name}: no such file"),
+        Err(e) => bail!("{name}: no such file, and {e}"),
+    }
+}
+
+pub fn check_wavelength(nm: f64) -> Result<()> {
+    if !(200.0..=3000.0).contains(&nm) {
+        bail!("--wavelength-nm {nm}: outside 200-3000 nm");
+    }
+    Ok(())
+}
+
+/// `WIDTHxHEIGHT` for clap (see [`flare_core::frame::parse_size`]).
+pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    flare_core::frame::parse_size(s)
+}
+
+/// Parses a coating override: `lens` (each surface's own: no override), none, quarter-wave[:NM],
+/// multilayer:INDEX/THICKNESS_NM,...
+pub fn parse_coating_override(spec: &str) -> Result<Option<Coating>> {
+    if spec == "lens" { Ok(None) } else { parse_coating(spec).map(Some) }
+}
+
+/// Parses a coating: none, quarter-wave[:NM], multilayer:INDEX/THICKNESS_NM,...
+pub fn parse_coating(spec: &str) -> Result<Coating> {
+    let (kind, rest) = spec.split_once(':').unwrap_or((spec, ""));
+    let coating = match kind {
+        "none" | "uncoated" => Coating::Uncoated,
+        "quarter-wave" | "qw" => Coating::QuarterWave {
+            design_wavelength_nm: if rest.is_empty() {
+                550.0
+            } else {
+                rest.parse().with_context(|| format!("--coating {spec}: `{rest}` is not a wavelength"))?
+            },
+            layer_index: None,
+        },
+        "multilayer" => {
+            let mut layers = Vec::new();
+            for layer in rest.split(',').filter(|l| !l.is_empty()) {
+                let (n, t) = layer
+                    .split_once('/')
+                    .with_context(|| format!("--coating {spec}: layer `{layer}` is not INDEX/THICKNESS_NM"))?;
+                let (index, thickness_nm) = (n.parse::<f64>(), t.parse::<f64>());
+                let (Ok(index), Ok(thickness_nm)) = (index, thickness_nm) else {
+                    bail!("--coating {spec}: layer `{layer}` is not two numbers")
+                };
+                layers.push(CoatingLayer { index, thickness_nm });
+            }
+            if layers.is_empty() {
+                bail!("--coating {spec}: a multilayer needs at least one INDEX/THICKNESS_NM layer");
+            }
+            Coating::Multilayer { layers }
+        }
+        other => bail!("--coating {other}: use lens, none, quarter-wave[:NM] or multilayer:N/T,..."),
+    };
+    // Validate through a lens surface so that the rules are the lens file's rules.
+    let mut probe = flare_core::optics::library::default_lens();
+    probe.surfaces[0].coating = coating.clone();
+    probe.validate().map_err(|e| anyhow::anyhow!("--coating {spec}: {e}"))?;
+    Ok(coating)
+}
+
+/// Parses an aperture: circle, blades:N[:ROTATION_DEG[:ROUNDNESS]], image:PATH (the f-number is kept as it is).
+pub fn parse_aperture(spec: &str, f_number: Option<f64>) -> Result<ApertureDoc> {
+    let mut parts = spec.split(':');
+    let mut doc = ApertureDoc { f_number, ..ApertureDoc::default() };
+    match parts.next().unwrap_or("") {
+        "circle" => doc.blades = 0,
+        "blades" => {
+            doc.blades =
+                parts.next().unwrap_or("6").parse().with_context(|| format!("--aperture {spec}: blade count"))?;
+            let mut optional = |what: &str| -> Result<f64> {
+                let value = parts.next().map(str::parse::<f64>).transpose();
+                Ok(value.with_context(|| format!("--aperture {spec}: {what}"))?.unwrap_or(0.0))
+            };
+            doc.rotation_deg = optional("rotation")?;
+            doc.roundness = optional("roundness")?;
+            if !(3..=32).contains(&doc.blades) {
+                bail!("--aperture {spec}: 3 to 32 blades");
+            }
+        }
+        "image" => {
+            let path = spec.split_once(':').map(|(_, p)| p).unwrap_or("");
+            if !Path::new(path).is_file() {
+                bail!("--aperture {spec}: no such image file");
+            }
+            doc.image = Some(path.to_owned());
+        }
+        other => bail!("--aperture {other}: use circle, blades:N[:ROTATION_DEG[:ROUNDNESS]] or image:PATH"),
+    }
+    Ok(doc)
+}

@@ -1,0 +1,118 @@
+//! `flarelab ghosts`: every two-reflection ghost for a light direction, with its sprite, brightness, colour
+//! and whether it is culled.
+
+use anyhow::{Context, Result, bail};
+use flare_core::ghost::{FrameSettings, GhostSettings, GhostSystem};
+use flare_core::spectrum::Spectrum;
+use serde_json::json;
+
+use super::common::{open_lens, parse_coating};
+
+#[derive(clap::Args, Debug)]
+pub struct GhostsArgs {
+    /// Lens file or built-in lens name.
+    file: String,
+    /// Field angle of the light in the y-z plane, degrees (incoming slope tan T, as in `trace`).
+    #[arg(long, allow_negative_numbers = true)]
+    field_deg: f64,
+    /// One wavelength (the sprite is then exactly the stop's image); default: RGB at 650 / 510 / 475 nm.
+    #[arg(long, allow_negative_numbers = true)]
+    wavelength_nm: Option<f64>,
+    /// Coating on every surface instead of the lens's own: none, quarter-wave[:NM], multilayer:N/T,N/T...
+    #[arg(long)]
+    coating: Option<String>,
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn run(args: &GhostsArgs) -> Result<()> {
+    if !(args.field_deg.is_finite() && args.field_deg.abs() < 90.0) {
+        bail!("--field-deg {}: must be finite and strictly between -90 and 90", args.field_deg);
+    }
+    let spectrum = match args.wavelength_nm {
+        Some(w) => Spectrum::single(w).map_err(|e| anyhow::anyhow!("--wavelength-nm: {e}"))?,
+        None => Spectrum::rgb(),
+    };
+    let lens = open_lens(&args.file)?;
+    let coating_override = args.coating.as_deref().map(parse_coating).transpose()?;
+    let settings = GhostSettings { spectrum: spectrum.clone(), stop_scale: 1.0, coating_override };
+    let system = GhostSystem::build(&lens, &settings).with_context(|| args.file.clone())?;
+    let u = [0.0, args.field_deg.to_radians().tan()];
+    let frame_settings = FrameSettings::default();
+    let frame = system.frame(u, &frame_settings);
+    let reported = spectrum.len() / 2; // the single wavelength, or G of RGB
+    let mut rows = Vec::with_capacity(system.ghosts.len());
+    for (g, ghost) in system.ghosts.iter().enumerate() {
+        let sprites: Vec<_> = frame.sprites.iter().filter(|s| s.ghost == g).collect();
+        let mut rgb = [0.0; 3];
+        for s in &sprites {
+            for (sum, c) in rgb.iter_mut().zip(s.rgb) {
+                *sum += c;
+            }
+        }
+        let intensity = sprites.iter().map(|s| s.irradiance).sum::<f64>() / sprites.len().max(1) as f64;
+        let culled = if sprites.iter().all(|s| s.culled.is_some()) {
+            sprites.first().and_then(|s| s.culled).map(|c| c.word())
+        } else {
+            None
+        };
+        let sprite = system.stop_image_sprite(g, reported, u);
+        let per_wavelength: Vec<_> = (0..spectrum.len())
+            .map(|w| {
+                let s = system.stop_image_sprite(g, w, u);
+                json!({"wavelength_nm": spectrum.wavelengths_nm[w], "center_mm": s.map(|s| s.0.map(|v| v + 0.0)), "radius_mm": s.map(|s| s.1)})
+            })
+            .collect();
+        rows.push(json!({
+            "i": ghost.i, "j": ghost.j,
+            "center_mm": sprite.map(|s| s.0.map(|v| v + 0.0)), "radius_mm": sprite.map(|s| s.1),
+            "intensity": intensity, "rgb": rgb,
+            "straddles_stop": ghost.straddles_stop,
+            "stop_crossings": if ghost.straddles_stop { 3 } else { 1 },
+            "culled": culled,
+            "per_wavelength": per_wavelength,
+        }));
+    }
+    let st = frame.stats;
+    if args.json {
+        let out = json!({
+            "lens": lens.id, "field_deg": args.field_deg, "wavelengths_nm": spectrum.wavelengths_nm,
+            "reported_wavelength_nm": spectrum.wavelengths_nm[reported],
+            "sensor_mm": [frame_settings.sensor.width_mm, frame_settings.sensor.height_mm],
+            "ghosts": rows,
+            "sprites": {"total": st.sprites, "drawn": st.drawn, "below_threshold": st.below_threshold,
+                        "off_sensor": st.off_sensor, "empty_entrance_region": st.empty_entrance_region},
+        });
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    println!(
+        "{} at {} deg: {} ghosts, {} sprites drawn, culled {} dim / {} off sensor / {} empty entrance",
+        lens.id,
+        args.field_deg,
+        system.ghosts.len(),
+        st.drawn,
+        st.below_threshold,
+        st.off_sensor,
+        st.empty_entrance_region
+    );
+    println!("  {:>3} {:>3}  {:>10} {:>9}  {:>10}  {:<8} culled", "i", "j", "centre y", "radius", "intensity", "stop");
+    let mut order: Vec<usize> = (0..rows.len()).collect();
+    order.sort_by(|&a, &b| {
+        rows[b]["intensity"].as_f64().partial_cmp(&rows[a]["intensity"].as_f64()).unwrap_or(std::cmp::Ordering::Equal)
+    });
+    for k in order {
+        let r = &rows[k];
+        let centre = r["center_mm"][1].as_f64().map(|v| format!("{v:.3}")).unwrap_or_else(|| "-".into());
+        let radius = r["radius_mm"].as_f64().map(|v| format!("{v:.3}")).unwrap_or_else(|| "-".into());
+        println!(
+            "  {:>3} {:>3}  {centre:>10} {radius:>9}  {:>10.3e}  {:<8} {}",
+            r["i"],
+            r["j"],
+            r["intensity"].as_f64().unwrap_or(0.0),
+            if r["straddles_stop"] == true { "3 times" } else { "once" },
+            r["culled"].as_str().unwrap_or("")
+        );
+    }
+    Ok(())
+}
