@@ -19,6 +19,12 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
+use crate::history::History;
+use crate::panels::aperture::AperturePreview;
+use crate::panels::coatings::CoatingsState;
+use crate::panels::ray_diagram::RayDiagram;
+use crate::panels::{Action, BakeStatus, GhostRow, LensProblem, PanelContext};
+use crate::viewport::{FlareCallback, ViewFrame, ViewportResources};
 use anyhow::{Result, bail};
 use eframe::egui_wgpu::RenderState;
 use eframe::{egui, wgpu};
@@ -33,12 +39,6 @@ use flare_core::optics::FirstOrder;
 use flare_core::optics::formats::load_lens_file;
 use flare_core::preset::{Document, LutSource};
 use flare_core::render::sensor_to_pixel;
-use crate::history::History;
-use crate::panels::aperture::AperturePreview;
-use crate::panels::coatings::CoatingsState;
-use crate::panels::ray_diagram::RayDiagram;
-use crate::panels::{Action, BakeStatus, GhostRow, LensProblem, PanelContext};
-use crate::viewport::{FlareCallback, ViewFrame, ViewportResources};
 
 const NO_DISPLAY: &str = "no display to open the app's window on (DISPLAY and WAYLAND_DISPLAY are unset). \
 The command line works without one: `flarelab lens list`, `flarelab lens info LENS`, \
@@ -188,10 +188,8 @@ impl FlareLabApp {
             ViewportResources::install(rs);
         }
         let doc = stored.unwrap_or_default();
-        let drag_bench = std::env::var("FLARELAB_DRAG_BENCH")
-            .ok()
-            .and_then(|n| n.parse().ok())
-            .map(|frames| DragBench {
+        let drag_bench =
+            std::env::var("FLARELAB_DRAG_BENCH").ok().and_then(|n| n.parse().ok()).map(|frames| DragBench {
                 exposure: std::env::var("FLARELAB_DRAG_BENCH_WHAT").is_ok_and(|w| w == "exposure"),
                 rebuilds_at_start: None,
                 frames,
@@ -569,9 +567,19 @@ impl FlareLabApp {
     fn display_ui(&mut self, ui: &mut egui::Ui) {
         ui.horizontal(|ui| {
             // Exposures in stops: the flare's relative irradiance times 2^EV, the plate as shot at 0 EV.
-            ui.add(egui::Slider::new(&mut self.doc.flare_ev, -4.0..=24.0).step_by(0.1).suffix(" EV").text("flare exposure"));
+            ui.add(
+                egui::Slider::new(&mut self.doc.flare_ev, -4.0..=24.0)
+                    .step_by(0.1)
+                    .suffix(" EV")
+                    .text("flare exposure"),
+            );
             if self.doc.background.is_some() {
-                ui.add(egui::Slider::new(&mut self.doc.plate_ev, -8.0..=8.0).step_by(0.1).suffix(" EV").text("plate exposure"));
+                ui.add(
+                    egui::Slider::new(&mut self.doc.plate_ev, -8.0..=8.0)
+                        .step_by(0.1)
+                        .suffix(" EV")
+                        .text("plate exposure"),
+                );
             }
             egui::ComboBox::from_label("tonemap").selected_text(self.doc.tonemap.name()).show_ui(ui, |ui| {
                 for t in flare_core::color::Tonemap::ALL {
@@ -596,7 +604,8 @@ impl FlareLabApp {
         );
         // FLARELAB_VIEW_PX=WxH renders the flare at a fixed size, whatever the widget's (the drag bench's
         // frame times at 1280x720).
-        if let Some(fixed) = std::env::var("FLARELAB_VIEW_PX").ok().and_then(|s| flare_core::frame::parse_size(&s).ok()) {
+        if let Some(fixed) = std::env::var("FLARELAB_VIEW_PX").ok().and_then(|s| flare_core::frame::parse_size(&s).ok())
+        {
             px = fixed;
         }
         if px != self.view_px {
@@ -913,7 +922,7 @@ impl FlareLabApp {
         };
         let (cancel, progress, result) = (job.cancel.clone(), job.progress.clone(), job.result.clone());
         std::thread::spawn(move || {
-            let renderer = flare_core::raytrace::RayGridRenderer::new(&flare);
+            let renderer = flare_core::raytrace::RayGridRenderer::new(&flare.system, &flare.mask);
             let theta_max = flare_core::lut::bake::useful_field_deg(&flare);
             let settings = flare_core::lut::classify::ClassifySettings::for_flare(&flare, theta_max);
             let classes = flare_core::lut::classify::classify(&flare, &renderer, &settings, &[]);

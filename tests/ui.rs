@@ -444,7 +444,8 @@ fn the_apps_export_and_render_preset_give_the_same_image() {
         println!("SKIPPED the GPU half: {stderr}");
         return;
     }
-    let (a, b) = (image::open(&gpu_png).unwrap().to_rgba8(), image::open(dir.path().join("app.png")).unwrap().to_rgba8());
+    let (a, b) =
+        (image::open(&gpu_png).unwrap().to_rgba8(), image::open(dir.path().join("app.png")).unwrap().to_rgba8());
     let diffs: Vec<u8> = a.as_raw().iter().zip(b.as_raw()).map(|(x, y)| x.abs_diff(*y)).collect();
     let mean = diffs.iter().map(|&d| f64::from(d)).sum::<f64>() / diffs.len() as f64;
     let worst = diffs.iter().copied().max().unwrap();

@@ -263,7 +263,7 @@ fn print_classes(flare: &PreparedFlare, classes: &[GhostClass]) {
 pub fn classify_command(args: &ClassifyArgs) -> Result<()> {
     let flare = args.optics.flare()?;
     let lens = &flare.system.lens;
-    let renderer = RayGridRenderer::new(&flare);
+    let renderer = RayGridRenderer::new(&flare.system, &flare.mask);
     let classes = classify_ghosts(&flare, &renderer, &args.choice)?;
     if args.json {
         let rows: Vec<serde_json::Value> = classes
@@ -288,7 +288,7 @@ pub fn classify_command(args: &ClassifyArgs) -> Result<()> {
 pub fn bake_command(args: &BakeArgs) -> Result<()> {
     let flare = args.optics.flare()?;
     let lens = flare.system.lens.clone();
-    let renderer = RayGridRenderer::new(&flare);
+    let renderer = RayGridRenderer::new(&flare.system, &flare.mask);
     let previous = args
         .update
         .as_deref()

@@ -254,7 +254,7 @@ fn lut_for(doc: &Document, flare: &PreparedFlare, method: Method) -> Result<Ghos
         }
         None if method == Method::Photo => bail!("--method photo needs --lut F.flut (made by `flarelab photo-lut`)"),
         None => {
-            let renderer = RayGridRenderer::new(flare);
+            let renderer = RayGridRenderer::new(&flare.system, &flare.mask);
             let choice = super::lut::LutChoice::default();
             Ok(super::lut::bake_lut(flare, &renderer, &choice, &Default::default(), None, false)?.0)
         }
@@ -329,7 +329,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         Some(n) => {
             // Ray-traced ghosts replace the paraxial accumulation; starburst, tonemap and writer are the same.
             let started = std::time::Instant::now();
-            let traced = RayGridRenderer::new(&flare).render(doc.light_deg, width, height, n)?;
+            let traced = RayGridRenderer::new(&flare.system, &flare.mask).render(doc.light_deg, width, height, n)?;
             let st = traced.stats;
             eprintln!(
                 "ray-traced {} ghost x wavelength jobs, {n:?} grid: {} rays, {} triangles, {} jobs with no light, {:.2} s",

@@ -10,7 +10,8 @@ use flare_core::flare::{FlareConfig, PreparedFlare};
 use flare_core::ghost::{FrameSettings, GhostFrame, GhostSettings, GhostSystem};
 use flare_core::optics::Lens;
 use flare_core::optics::library::{builtin_lens, synthetic_lens};
-use flare_core::render::gpu::{FlareRenderer, GpuContext};
+use flare_core::frame::{Frame, FrameRequest, GpuDrawer, Sources};
+use flare_core::render::DisplaySettings;
 
 fn lenses() -> Vec<(String, Lens)> {
     vec![
@@ -51,44 +52,43 @@ fn ghost_rebuild(c: &mut Criterion) {
 }
 
 fn gpu_frame(c: &mut Criterion) {
-    let ctx = match GpuContext::headless(false) {
-        Ok(ctx) => ctx,
+    // The app's path: a frame built by the one pipeline, drawn by the GPU entry point, waited for.
+    let mut drawer = match GpuDrawer::new(false) {
+        Ok(drawer) => drawer,
         Err(e) => {
             println!("gpu_frame skipped: {e}");
             return;
         }
     };
-    println!("gpu_frame on {} ({:?})", ctx.adapter.name, ctx.adapter.device_type);
+    println!("gpu_frame on {} ({:?})", drawer.ctx.adapter.name, drawer.ctx.adapter.device_type);
     let mut group = c.benchmark_group("gpu_frame_1280x720");
     group.sample_size(10);
+    let target = flare_core::render::gpu::texture_2d(
+        &drawer.ctx.device,
+        "bench target",
+        1280,
+        720,
+        wgpu::TextureFormat::Rgba8Unorm,
+        wgpu::TextureUsages::RENDER_ATTACHMENT,
+    );
+    let view = target.create_view(&wgpu::TextureViewDescriptor::default());
     let cases = [("heliar_9", 1), ("heliar_9_half_res", 2), ("synthetic_26", 1), ("synthetic_26_half_res", 2)];
     for (name, divisor) in cases {
         let lens = if name.starts_with("heliar") { builtin_lens("heliar").unwrap() } else { synthetic_lens(26) };
-        let mut config = FlareConfig::default();
-        config.display.accumulation_divisor = divisor;
-        let flare = PreparedFlare::new(&lens, &config).unwrap();
-        let mut renderer = FlareRenderer::new(&ctx.device, &ctx.queue, wgpu::TextureFormat::Rgba8Unorm);
-        renderer.set_aperture(&ctx.device, &ctx.queue, &flare.mask);
-        renderer.set_starburst(&ctx.device, &ctx.queue, &flare.starburst);
-        let target = flare_core::render::gpu::texture_2d(
-            &ctx.device,
-            "bench target",
-            1280,
-            720,
-            wgpu::TextureFormat::Rgba8Unorm,
-            wgpu::TextureUsages::RENDER_ATTACHMENT,
-        );
-        let view = target.create_view(&wgpu::TextureViewDescriptor::default());
+        let flare = PreparedFlare::new(&lens, &FlareConfig::default()).unwrap();
+        let sources = Sources { flare: &flare, lut: None, plate: None };
         let mut k = 0u32;
         group.bench_function(name, |b| {
             b.iter(|| {
                 k = k.wrapping_add(1);
                 let t = (k % 50) as f64 * 0.1;
-                let (scene, _) = flare.scene([4.0 + t, 3.0 - t], 1280, 720);
-                let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
-                renderer.render(&ctx.device, &ctx.queue, &mut encoder, &view, &scene);
-                ctx.queue.submit(Some(encoder.finish()));
-                ctx.device.poll(wgpu::PollType::wait_indefinitely()).unwrap();
+                let request = FrameRequest {
+                    light_deg: [4.0 + t, 3.0 - t],
+                    display: DisplaySettings { accumulation_divisor: divisor, ..DisplaySettings::default() },
+                    ..FrameRequest::default()
+                };
+                let frame = Frame::build(&flare, None, &request);
+                drawer.render_into(&frame, &sources, &view).unwrap();
             })
         });
     }

@@ -40,4 +40,3 @@ fn default_permissions(_file: &std::fs::File) -> std::io::Result<std::fs::Permis
 fn default_permissions(file: &std::fs::File) -> std::io::Result<std::fs::Permissions> {
     Ok(file.metadata()?.permissions())
 }
-

@@ -10,9 +10,9 @@
 //! frame. [`crate::frame`] builds every frame of the app, the command line and the benchmarks through it.
 
 use crate::aperture::{Aperture, ApertureError, ApertureMask, DEFAULT_MASK_SIZE};
+use crate::ghost::light_slopes_for_frame_position;
 use crate::ghost::{FrameSettings, GhostError, GhostFrame, GhostSettings, GhostSystem, Sensor};
 use crate::optics::{Coating, Lens};
-use crate::ghost::light_slopes_for_frame_position;
 use crate::render::cpu::StarburstTexture;
 use crate::render::{DisplaySettings, FlareScene};
 use crate::spectrum::Spectrum;
@@ -115,5 +115,41 @@ impl PreparedFlare {
         let frame = self.system.frame(u, &frame_settings);
         let scene = FlareScene::build(&self.system, &frame, u, &frame_settings, display, width, height, gains);
         (scene, frame)
+    }
+}
+
+/// A stable fingerprint of everything a ray-traced LUT depends on: the lens (every surface, glass, coating,
+/// aperture and the sensor distance), the spectrum, the stop's shape and f-number and any coating override.
+/// A LUT whose fingerprint differs from the live lens's is refused on load.
+/// It is a [`crate::fingerprint::of`] (canonical JSON, scheme [`crate::fingerprint::SCHEME`]).
+pub fn lut_fingerprint(lens: &Lens, config: &FlareConfig) -> u64 {
+    crate::fingerprint::of(&(
+        &lens.surfaces,
+        &config.spectrum.wavelengths_nm,
+        &config.spectrum.weights_rgb,
+        &config.aperture,
+        &config.coating_override,
+    ))
+}
+
+impl crate::lut::GhostLut {
+    /// Refuses a ray-traced LUT baked for another lens or other settings than `lens` with `config`.
+    pub fn check_for(&self, lens: &Lens, config: &FlareConfig) -> Result<(), crate::lut::format::LutError> {
+        if self.kind == crate::lut::LutKind::Photo {
+            return Ok(());
+        }
+        if self.fingerprint_scheme != crate::fingerprint::SCHEME {
+            return Err(crate::lut::format::LutError::OldFingerprint { lut_lens: self.lens_id.clone() });
+        }
+        let live = lut_fingerprint(lens, config);
+        if live != self.lens_fingerprint {
+            return Err(crate::lut::format::LutError::OtherLens {
+                lut_lens: self.lens_id.clone(),
+                lut: self.lens_fingerprint,
+                lens: lens.id.clone(),
+                live,
+            });
+        }
+        Ok(())
     }
 }

@@ -249,7 +249,12 @@ impl GpuDrawer {
 
     /// Draws `frame` into `target` (of the renderer's format and the frame's size) and waits for the GPU,
     /// reading nothing back (what a benchmark times).
-    pub fn render_into(&mut self, frame: &Frame, sources: &Sources, target: &wgpu::TextureView) -> Result<(), GpuError> {
+    pub fn render_into(
+        &mut self,
+        frame: &Frame,
+        sources: &Sources,
+        target: &wgpu::TextureView,
+    ) -> Result<(), GpuError> {
         self.upload(sources);
         let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
         self.renderer.render_with_lut(

@@ -52,12 +52,11 @@ use rayon::prelude::*;
 
 use crate::aperture::ApertureMask;
 use crate::coating::InterfaceTables;
-use crate::flare::PreparedFlare;
+use crate::ghost::light_slopes_for_frame_position;
 use crate::ghost::{GhostSystem, Sensor};
 use crate::image::GhostMoments;
-use crate::optics::{LightPath, Ray, Tracer};
-use crate::ghost::light_slopes_for_frame_position;
 use crate::image::HdrImage;
+use crate::optics::{LightPath, Ray, Tracer};
 
 /// Most grid cells across a ghost's entrance region in the reference renderer (see the convergence table in the
 /// README).
@@ -374,9 +373,9 @@ struct JobFrame<'a> {
 }
 
 impl RayGridRenderer {
-    /// Prepares every ghost of `flare` (its lens, spectrum, f-number, coatings and aperture).
-    pub fn new(flare: &PreparedFlare) -> Self {
-        let system = flare.system.clone();
+    /// Prepares every ghost of `system` (its lens, spectrum, f-number and coatings) with the stop shape `mask`.
+    pub fn new(system: &GhostSystem, mask: &ApertureMask) -> Self {
+        let system = system.clone();
         let lens = &system.lens;
         let spectrum = &system.settings.spectrum;
         let sensor_z_mm = system.first_order.sensor_z_mm();
@@ -415,10 +414,10 @@ impl RayGridRenderer {
         let front = &lens.surfaces[0];
         let front_radius_mm = front.semi_aperture_mm;
         let front_sag_mm = front.sag_mm(front_radius_mm).unwrap_or(front_radius_mm).abs();
-        let open_radius2 = f64::from(flare.mask.open_radius()).powi(2);
+        let open_radius2 = f64::from(mask.open_radius()).powi(2);
         Self {
             stop: lens.stop_index(),
-            mask: flare.mask.clone(),
+            mask: mask.clone(),
             open_radius2,
             system,
             jobs,
@@ -1181,7 +1180,8 @@ mod tests {
     use crate::optics::library::builtin_lens;
 
     fn renderer(id: &str) -> RayGridRenderer {
-        RayGridRenderer::new(&PreparedFlare::new(&builtin_lens(id).unwrap(), &FlareConfig::default()).unwrap())
+        let flare = crate::flare::PreparedFlare::new(&builtin_lens(id).unwrap(), &FlareConfig::default()).unwrap();
+        RayGridRenderer::new(&flare.system, &flare.mask)
     }
 
     #[test]

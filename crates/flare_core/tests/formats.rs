@@ -4,11 +4,11 @@
 
 use std::path::Path;
 
+use flare_core::files::write_atomic;
 use flare_core::optics::formats::{
     FormatError, LensFormat, MAX_FILE_BYTES, decode_text, load_lens_file, parse_lens, parse_lens_bytes, pbrt, to_json,
     zmx,
 };
-use flare_core::files::write_atomic;
 use flare_core::optics::library::{BUILTIN_LENSES, builtin_lens, ids};
 use flare_core::optics::{D_LINE_NM, FirstOrder, Lens, LightPath, TraceOptions, TraceStatus, Tracer, pupil_ray};
 

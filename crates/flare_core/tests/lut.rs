@@ -3,6 +3,7 @@
 use std::sync::atomic::AtomicBool;
 
 use flare_core::flare::{FlareConfig, PreparedFlare};
+use flare_core::frame::{Frame, FrameRequest, LutUse};
 use flare_core::lut::bake::{BakeSettings, bake};
 use flare_core::lut::blend::{BlendMode, BlendSettings, LiveLut, LutScene, lut_pass};
 use flare_core::lut::format::{LutError, decode, encode};
@@ -10,7 +11,6 @@ use flare_core::lut::{GhostLut, Symmetry, light_position_deg, mat_apply, photo};
 use flare_core::metrics;
 use flare_core::optics::library::builtin_lens;
 use flare_core::raytrace::{Grid, RayGridRenderer};
-use flare_core::frame::{Frame, FrameRequest, LutUse};
 use flare_core::render::{DisplaySettings, FlareScene, HdrImage, light_slopes_for_frame_position};
 use proptest::prelude::*;
 
@@ -54,7 +54,7 @@ fn render_cpu(flare: &PreparedFlare, live: &LiveLut, scene: &FlareScene, lut_sce
 }
 
 fn small_lut(flare: &PreparedFlare) -> GhostLut {
-    let renderer = RayGridRenderer::new(flare);
+    let renderer = RayGridRenderer::new(&flare.system, &flare.mask);
     let settings = BakeSettings { theta_max_deg: Some(16.0), ..small_settings() };
     bake(flare, &renderer, &[3, 7], &settings, None, &|_| {}, &AtomicBool::new(false)).unwrap()
 }
@@ -84,7 +84,7 @@ fn a_blended_lut_ghost_matches_the_ray_traced_ghost_between_samples() {
     let flare = flare("tessar");
     let lut = small_lut(&flare);
     let live = LiveLut::new(lut);
-    let renderer = RayGridRenderer::new(&flare);
+    let renderer = RayGridRenderer::new(&flare.system, &flare.mask);
     let (w, h) = (240, 160);
     for (theta, alpha) in [(7.0, 200.0), (11.0, -47.0), (4.0, 95.0)] {
         let light = light_position_deg(theta, alpha);
@@ -133,7 +133,7 @@ fn the_lut_file_round_trips_and_a_rebake_keeps_unchanged_ghosts() {
     flare_core::lut::format::write_lut(&path, &lut).unwrap();
     assert_eq!(flare_core::lut::format::read_lut(&path).unwrap(), lut);
     // A re-bake with one more ghost renders only that one.
-    let renderer = RayGridRenderer::new(&flare);
+    let renderer = RayGridRenderer::new(&flare.system, &flare.mask);
     let settings = BakeSettings { theta_max_deg: Some(16.0), ..small_settings() };
     let kept = std::sync::Mutex::new(0);
     let again = bake(
@@ -207,7 +207,7 @@ fn fuzz_source() -> Vec<u8> {
     BYTES
         .get_or_init(|| {
             let flare = flare("tessar");
-            let renderer = RayGridRenderer::new(&flare);
+            let renderer = RayGridRenderer::new(&flare.system, &flare.mask);
             let settings = BakeSettings {
                 theta_max_deg: Some(8.0),
                 res: 16,
@@ -261,7 +261,7 @@ fn blend_modes_weigh_the_lut_against_the_sprite() {
     let blend = BlendSettings { mode: linear, ..BlendSettings::default() };
     let (full, _) = flare.scene(light, 120, 80);
     let frame = scenes(&live, &flare, light, 120, 80, &blend, true);
-        let (scene, lut_scene) = (frame.scene.clone(), frame.lut.clone().unwrap_or_default());
+    let (scene, lut_scene) = (frame.scene.clone(), frame.lut.clone().unwrap_or_default());
     for (g, w) in &lut_scene.paraxial_weights {
         assert!((w - 0.5).abs() < 1e-6, "ghost {g}: {w}");
     }
@@ -273,7 +273,7 @@ fn blend_modes_weigh_the_lut_against_the_sprite() {
     // Alpha: the LUT layer over the linear flare, out = lut + (1 - alpha) linear, on the CPU twin.
     let over = BlendSettings { mode: BlendMode::Alpha, ..BlendSettings::default() };
     let frame = scenes(&live, &flare, light, 120, 80, &over, true);
-        let (scene, lut_scene) = (frame.scene.clone(), frame.lut.clone().unwrap_or_default());
+    let (scene, lut_scene) = (frame.scene.clone(), frame.lut.clone().unwrap_or_default());
     assert!(lut_scene.alpha_over);
     let base = flare_core::render::cpu::ghost_pass(&scene, &flare.mask);
     let mut composed = base.clone();
@@ -405,7 +405,7 @@ fn a_photo_lut_plays_back_its_images_turned_with_the_light() {
 #[test]
 fn classification_finds_the_known_non_linear_ghost_and_honours_forced_choices() {
     let flare = flare("pbrt_dgauss_50mm");
-    let renderer = RayGridRenderer::new(&flare);
+    let renderer = RayGridRenderer::new(&flare.system, &flare.mask);
     let settings = flare_core::lut::classify::ClassifySettings::for_flare(&flare, 20.0);
     let g46 = flare.system.ghosts.iter().position(|g| (g.i, g.j) == (4, 6)).unwrap();
     let classes = flare_core::lut::classify::classify(&flare, &renderer, &settings, &[(0, true), (g46, false)]);
@@ -508,7 +508,7 @@ fn fitting_the_picks_draws_a_moving_ghost_once_not_twice() {
 fn a_turned_view_is_the_render_at_the_turned_light() {
     use flare_core::raytrace::{View, Window};
     let flare = flare("tessar");
-    let renderer = RayGridRenderer::new(&flare);
+    let renderer = RayGridRenderer::new(&flare.system, &flare.mask);
     let g = 7;
     let (theta, turns) = (9.0, [0.0, 15.0, 30.0]);
     let base = light_position_deg(theta, 0.0);
@@ -559,7 +559,7 @@ fn a_turned_view_is_the_render_at_the_turned_light() {
 fn a_scouted_render_is_the_plain_render_for_fewer_rays() {
     use flare_core::raytrace::{View, Window};
     let flare = flare("dgauss");
-    let renderer = RayGridRenderer::new(&flare);
+    let renderer = RayGridRenderer::new(&flare.system, &flare.mask);
     for (g, theta) in [(7, 9.0), (20, 15.0), (0, 5.0)] {
         let light = light_position_deg(theta, 0.0);
         let scout = renderer.scout(g, light, 48, &[0.0]);
@@ -609,7 +609,7 @@ fn refinement_stops_for_lack_of_gain_only_on_moderate_errors() {
 #[test]
 fn a_ghost_that_vanishes_within_an_interval_is_refined_not_cross_faded() {
     let flare = flare("nikon_zoom_28_75mm");
-    let renderer = RayGridRenderer::new(&flare);
+    let renderer = RayGridRenderer::new(&flare.system, &flare.mask);
     let g = flare.system.ghosts.iter().position(|m| (m.i, m.j) == (4, 5)).unwrap();
     let lut = bake(&flare, &renderer, &[g], &BakeSettings::default(), None, &|_| {}, &AtomicBool::new(false)).unwrap();
     let thetas = &lut.ghosts[0].thetas_deg;

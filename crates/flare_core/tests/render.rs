@@ -125,11 +125,9 @@ fn gpu_matches_its_cpu_twin() {
     let Some(ctx) = test_context() else { return };
     let mut device = Device::Gpu(Box::new(GpuDrawer::on(ctx)));
     let plate = HdrImage { width: 64, height: 40, pixels: vec![[0.02, 0.03, 0.05, 1.0]; 64 * 40] };
-    for (lens, light, divisor, with_plate) in [
-        ("heliar", [6.0, 4.0], 1, false),
-        ("dgauss", [-12.0, 7.0], 1, true),
-        ("tessar", [5.0, -3.0], 2, false),
-    ] {
+    for (lens, light, divisor, with_plate) in
+        [("heliar", [6.0, 4.0], 1, false), ("dgauss", [-12.0, 7.0], 1, true), ("tessar", [5.0, -3.0], 2, false)]
+    {
         let flare = flare(lens);
         let frame = Frame::build(&flare, None, &request(light, 256, 160, divisor));
         let sources = Sources { flare: &flare, lut: None, plate: with_plate.then_some(&plate) };
@@ -153,12 +151,7 @@ fn gpu_matches_its_cpu_twin() {
 fn read_exr(path: &Path) -> std::collections::BTreeMap<String, Vec<f32>> {
     let image = exr::prelude::read_all_flat_layers_from_file(path).unwrap();
     let layer = &image.layer_data[0];
-    layer
-        .channel_data
-        .list
-        .iter()
-        .map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect()))
-        .collect()
+    layer.channel_data.list.iter().map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect())).collect()
 }
 
 #[test]
@@ -180,14 +173,16 @@ fn a_frame_is_written_as_png_and_as_a_layered_exr() {
         let frame = Frame::build(&flare, None, &req);
         let sources = Sources { flare: &flare, lut: None, plate };
         let path = dir.path().join(name);
-        let drawn =
-            frame::render_to_file(&mut Device::Cpu, &frame, &sources, LayerChoice { ghosts }, &path).unwrap();
+        let drawn = frame::render_to_file(&mut Device::Cpu, &frame, &sources, LayerChoice { ghosts }, &path).unwrap();
         (path, drawn, frame)
     };
     // PNG: the tonemapped composite, byte for byte.
     let (png, drawn, _) = write(1.0, Some(&plate), "flare.png", false);
     let back = image::open(&png).unwrap().to_rgba8();
-    assert_eq!(back.as_raw().as_slice(), drawn.display.pixels.iter().flatten().copied().collect::<Vec<u8>>().as_slice());
+    assert_eq!(
+        back.as_raw().as_slice(),
+        drawn.display.pixels.iter().flatten().copied().collect::<Vec<u8>>().as_slice()
+    );
     // EXR: composite = plate + flare; the plate layer is the plate times 2^plate_ev; the flare layer does not
     // change with the plate or its exposure.
     let (exr1, _, frame) = write(1.0, Some(&plate), "a.exr", true);
@@ -210,9 +205,16 @@ fn a_frame_is_written_as_png_and_as_a_layered_exr() {
     let corner = (0..a["R"].len())
         .find(|&k| ["flare.R", "flare.G", "flare.B"].iter().all(|c| a[*c][k] == 0.0))
         .unwrap_or_else(|| {
-            let lit: Vec<usize> = ["flare.R", "flare.G", "flare.B", "R"].iter().map(|c| a[*c].iter().filter(|v| **v != 0.0).count()).collect();
+            let lit: Vec<usize> = ["flare.R", "flare.G", "flare.B", "R"]
+                .iter()
+                .map(|c| a[*c].iter().filter(|v| **v != 0.0).count())
+                .collect();
             let min = a["flare.G"].iter().copied().fold(f32::MAX, f32::min);
-            panic!("no pixel without flare: {lit:?} lit of {}, min {min}, {} instances", a["R"].len(), frame.scene.instances.len())
+            panic!(
+                "no pixel without flare: {lit:?} lit of {}, min {min}, {} instances",
+                a["R"].len(),
+                frame.scene.instances.len()
+            )
         });
     assert_eq!(a["R"][corner], plate.pixels[corner][0] * 2.0);
     assert_eq!(b["plate.G"][corner], plate.pixels[corner][1] * 0.25);

@@ -21,12 +21,12 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use flare_core::flare::{FlareConfig, PreparedFlare};
-use flare_core::metrics::{self, Comparison};
 use flare_core::files::write_atomic;
-use flare_core::raytrace::{Grid, REFERENCE_GRID, RayGridImage, RayGridRenderer};
+use flare_core::flare::{FlareConfig, PreparedFlare};
 use flare_core::frame::{self, Frame, FrameRequest, GpuDrawer, LutUse, Sources};
 use flare_core::image::{DisplayImage, HdrImage, Sampling};
+use flare_core::metrics::{self, Comparison};
+use flare_core::raytrace::{Grid, REFERENCE_GRID, RayGridImage, RayGridRenderer};
 use flare_core::render::{DisplaySettings, FlareScene, cpu, gpu};
 
 pub mod plot;
@@ -178,7 +178,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     for name in &lenses {
         let lens = open_lens(name)?;
         let flare = PreparedFlare::new(&lens, &FlareConfig::default()).with_context(|| name.clone())?;
-        let tracer = RayGridRenderer::new(&flare);
+        let tracer = RayGridRenderer::new(&flare.system, &flare.mask);
         // The blended method's LUT: classified and baked at the default settings, timed and measured once.
         let (lut, _, bake_s) = super::lut::bake_lut(
             &flare,
@@ -285,10 +285,8 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             let moments = cpu::ghost_moments(&scene, &flare.mask, ghosts);
             rows.push(row("paraxial".into(), ms, runs, against("paraxial", &image, &moments)?));
             // The same at half accumulation resolution (the app's choice on software adapters), upsampled.
-            let half_request = FrameRequest {
-                display: DisplaySettings { accumulation_divisor: 2, ..display },
-                ..request.clone()
-            };
+            let half_request =
+                FrameRequest { display: DisplaySettings { accumulation_divisor: 2, ..display }, ..request.clone() };
             let (ms, runs, (image, scene)) = timed(repeats, || {
                 let frame = Frame::build(&flare, None, &half_request);
                 Ok((frame::draw_cpu_hdr(&frame, &sources), frame.scene))
@@ -297,8 +295,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             let upsampled = image.resampled(width, height, Sampling::Bilinear, 1.0);
             rows.push(row("paraxial-half".into(), ms, runs, against("paraxial-half", &upsampled, &moments)?));
             // Blended: the paraxial flare with the LUT ghosts (CPU twin), as the paraxial row is timed.
-            let blended_request =
-                FrameRequest { blend: blend.clone(), lut_use: LutUse::Blend, ..request.clone() };
+            let blended_request = FrameRequest { blend: blend.clone(), lut_use: LutUse::Blend, ..request.clone() };
             let blended_sources = Sources { lut: Some(&live), ..sources };
             let (ms, runs, (image, frame)) = timed(repeats, || {
                 let frame = Frame::build(&flare, Some(&live), &blended_request);
@@ -330,7 +327,8 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         }
     }
     let elapsed_s = started.elapsed().as_secs_f64();
-    let device = gpu.as_ref().map_or_else(|| "no GPU adapter".to_owned(), |g| format!("GPU: {}", g.drawer.ctx.adapter.name));
+    let device =
+        gpu.as_ref().map_or_else(|| "no GPU adapter".to_owned(), |g| format!("GPU: {}", g.drawer.ctx.adapter.name));
     let settings = format!(
         "{width}x{height}, {device}, RGB (650/510/475 nm), 6-blade aperture wide open, each lens's own coatings, light at {LIGHT_AZIMUTH_DEG} deg azimuth; reference grid {reference_grid}; {} threads; median of {repeats} timed runs per method (1 for runs over {:.0} s); whole run {elapsed_s:.0} s",
         rayon::current_num_threads(),

@@ -36,13 +36,13 @@ use half::f16;
 use rayon::prelude::*;
 
 use super::{
-    Fit, GhostLut, LutEntry, LutGhost, LutKind, MIN_TEXEL_MM, Mat2, Symmetry, fit_picks,
-    light_position_deg, mat_apply, mat_det, mat_inverse, texels_with_coverage,
+    Fit, GhostLut, LutEntry, LutGhost, LutKind, MIN_TEXEL_MM, Mat2, Symmetry, fit_picks, light_position_deg, mat_apply,
+    mat_det, mat_inverse, texels_with_coverage,
 };
-use crate::flare::PreparedFlare;
 use crate::color::luminance;
-use crate::raytrace::{Grid, RayGridRenderer, View, Window};
+use crate::flare::PreparedFlare;
 use crate::ghost::light_slopes_for_frame_position;
+use crate::raytrace::{Grid, RayGridRenderer, View, Window};
 
 /// How a LUT is baked.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -329,7 +329,7 @@ pub fn bake(
         return Err(BakeError::NoGhost(bad, total));
     }
     let lens = &flare.system.lens;
-    let fingerprint = super::fingerprint(lens, &flare.config);
+    let fingerprint = crate::flare::lut_fingerprint(lens, &flare.config);
     let symmetry = Symmetry::of_aperture(&flare.config.aperture);
     let theta_max = settings.theta_max_deg.unwrap_or_else(|| useful_field_deg(flare));
     let phis = symmetry.phi_samples(settings.phi_steps);

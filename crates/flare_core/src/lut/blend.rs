@@ -275,7 +275,8 @@ impl LutScene {
             if !photo {
                 scene.paraxial_weights.push((ghost.ghost, (1.0 - w) as f32));
             }
-            let user_gain = if photo { 1.0 } else { f64::from(gains.get(ghost.ghost as usize).copied().unwrap_or(1.0)) };
+            let user_gain =
+                if photo { 1.0 } else { f64::from(gains.get(ghost.ghost as usize).copied().unwrap_or(1.0)) };
             if w <= 0.0 || ghost.entries.is_empty() || user_gain.is_nan() || user_gain <= 0.0 {
                 continue;
             }

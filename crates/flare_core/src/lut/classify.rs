@@ -21,11 +21,11 @@
 
 use rayon::prelude::*;
 
+use crate::color::luminance;
 use crate::flare::PreparedFlare;
 use crate::ghost::{CullReason, Sensor};
-use crate::color::luminance;
-use crate::raytrace::{Grid, RayGridRenderer, Window};
 use crate::image::HdrImage;
+use crate::raytrace::{Grid, RayGridRenderer, Window};
 use crate::render::{FlareScene, cpu};
 
 /// The default [`ClassifySettings::faint_fraction`]: 0, every non-linear ghost is baked. Measured on the
@@ -145,8 +145,7 @@ pub(crate) fn paraxial_image(flare: &PreparedFlare, g: usize, light_deg: [f64; 2
     for sprite in &mut frame.sprites {
         sprite.culled = if sprite.ghost != g || sprite.irradiance <= 0.0 { Some(CullReason::OffSensor) } else { None };
     }
-    let mut scene =
-        FlareScene::build(&flare.system, &frame, u, &settings, &display, window.width, window.height, &[]);
+    let mut scene = FlareScene::build(&flare.system, &frame, u, &settings, &display, window.width, window.height, &[]);
     let k = window.px_per_mm();
     for inst in &mut scene.instances {
         inst.centre_half[0] += (window.centre_mm[0] * k) as f32;

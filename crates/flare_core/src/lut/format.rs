@@ -460,28 +460,6 @@ fn check_header(h: &Header, data_len: u64) -> Result<(), LutError> {
     Ok(())
 }
 
-impl GhostLut {
-    /// Refuses a ray-traced LUT baked for another lens or other settings than `lens` with `config`.
-    pub fn check_for(&self, lens: &crate::optics::Lens, config: &crate::flare::FlareConfig) -> Result<(), LutError> {
-        if self.kind == LutKind::Photo {
-            return Ok(());
-        }
-        if self.fingerprint_scheme != crate::fingerprint::SCHEME {
-            return Err(LutError::OldFingerprint { lut_lens: self.lens_id.clone() });
-        }
-        let live = super::fingerprint(lens, config);
-        if live != self.lens_fingerprint {
-            return Err(LutError::OtherLens {
-                lut_lens: self.lens_id.clone(),
-                lut: self.lens_fingerprint,
-                lens: lens.id.clone(),
-                live,
-            });
-        }
-        Ok(())
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

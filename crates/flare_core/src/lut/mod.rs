@@ -35,9 +35,7 @@ pub mod photo;
 use half::f16;
 
 use crate::aperture::{Aperture, ApertureShape};
-use crate::flare::FlareConfig;
 use crate::ghost::ParaxialFrame;
-use crate::optics::Lens;
 use crate::raytrace::Window;
 
 /// Half-diagonal of the 36 x 24 mm sensor: the light angle whose image reaches a corner sets the useful field.
@@ -438,7 +436,7 @@ impl LutGhost {
 pub struct GhostLut {
     pub kind: LutKind,
     pub lens_id: String,
-    /// [`fingerprint`] of the lens and settings it was baked for (0 for a photo LUT: any lens).
+    /// [`crate::flare::lut_fingerprint`] of the lens and settings it was baked for (0 for a photo LUT: any lens).
     pub lens_fingerprint: u64,
     /// The rule `lens_fingerprint` was made by ([`crate::fingerprint::SCHEME`]; 0: a file from before schemes,
     /// whose fingerprint cannot be compared).
@@ -466,18 +464,4 @@ impl GhostLut {
     pub fn ghost(&self, g: usize) -> Option<&LutGhost> {
         self.ghosts.iter().find(|l| l.ghost as usize == g)
     }
-}
-
-/// A stable fingerprint of everything a ray-traced LUT depends on: the lens (every surface, glass, coating,
-/// aperture and the sensor distance), the spectrum, the stop's shape and f-number and any coating override.
-/// A LUT whose fingerprint differs from the live lens's is refused on load.
-/// It is a [`crate::fingerprint::of`] (canonical JSON, scheme [`crate::fingerprint::SCHEME`]).
-pub fn fingerprint(lens: &Lens, config: &FlareConfig) -> u64 {
-    crate::fingerprint::of(&(
-        &lens.surfaces,
-        &config.spectrum.wavelengths_nm,
-        &config.spectrum.weights_rgb,
-        &config.aperture,
-        &config.coating_override,
-    ))
 }

@@ -23,8 +23,6 @@
 //!
 //! At exactly the d-line every model returns `n_d` bit for bit, so d-line results never depend on the model.
 
-use super::lens::Medium;
-
 /// Helium d-line, the wavelength at which `n_d` is given.
 pub const D_LINE_NM: f64 = 587.5618;
 /// Hydrogen F-line.
@@ -116,16 +114,18 @@ pub enum Dispersion {
 }
 
 impl Dispersion {
-    pub fn for_medium(m: &Medium) -> Self {
-        if m.is_air() {
+    /// The model for a medium of index `n_d` (exactly 1: air), Abbe number `v_d` and catalogue name `glass`
+    /// as a file gives them ([`super::lens::Medium::dispersion`] calls this).
+    pub fn for_medium(n_d: f64, v_d: Option<f64>, glass: Option<&str>) -> Self {
+        if n_d == 1.0 {
             return Self::Air;
         }
-        if let Some(glass) = m.glass.as_deref().and_then(find_glass) {
-            return Self::Sellmeier { n_d: m.n_d, glass };
+        if let Some(glass) = glass.and_then(find_glass) {
+            return Self::Sellmeier { n_d, glass };
         }
-        match m.v_d {
-            Some(v_d) => Self::Cauchy { n_d: m.n_d, v_d, assumed: false },
-            None => Self::Cauchy { n_d: m.n_d, v_d: ASSUMED_ABBE, assumed: true },
+        match v_d {
+            Some(v_d) => Self::Cauchy { n_d, v_d, assumed: false },
+            None => Self::Cauchy { n_d, v_d: ASSUMED_ABBE, assumed: true },
         }
     }
 
@@ -172,6 +172,8 @@ fn cauchy_b_nm2(n_d: f64, v_d: f64) -> f64 {
 mod tests {
     use super::*;
 
+    use crate::optics::lens::Medium;
+
     fn medium(n_d: f64, v_d: Option<f64>, glass: Option<&str>) -> Medium {
         Medium { n_d, v_d, glass: glass.map(str::to_owned) }
     }
@@ -200,7 +202,7 @@ mod tests {
 
     #[test]
     fn cauchy_model_reproduces_the_abbe_number() {
-        let d = Dispersion::for_medium(&medium(1.652, Some(58.5), None));
+        let d = medium(1.652, Some(58.5), None).dispersion();
         let vd = (d.index_at(D_LINE_NM) - 1.0) / (d.index_at(F_LINE_NM) - d.index_at(C_LINE_NM));
         assert!((vd - 58.5).abs() < 1e-9, "{vd}");
         assert!(d.index_at(450.0) > d.index_at(650.0), "normal dispersion: blue bends more");
@@ -233,7 +235,7 @@ mod tests {
         assert_eq!(find_glass("n_bk7").map(|g| g.name), Some("N-BK7"));
         assert_eq!(find_glass(" f5 ").map(|g| g.name), Some("F5"));
         assert!(find_glass("UNOBTAINIUM").is_none());
-        assert!(Dispersion::for_medium(&medium(1.6, None, None)).is_assumed());
-        assert!(!Dispersion::for_medium(&medium(1.6, None, Some("F5"))).is_assumed());
+        assert!(medium(1.6, None, None).dispersion().is_assumed());
+        assert!(!medium(1.6, None, Some("F5")).dispersion().is_assumed());
     }
 }

@@ -71,7 +71,7 @@ impl Medium {
 
     /// The dispersion model for this medium (see [`crate::optics::glass`]).
     pub fn dispersion(&self) -> Dispersion {
-        Dispersion::for_medium(self)
+        Dispersion::for_medium(self.n_d, self.v_d, self.glass.as_deref())
     }
 
     /// Refractive index at `wavelength_nm`; exactly `n_d` at the d-line.

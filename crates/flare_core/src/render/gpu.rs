@@ -17,8 +17,8 @@
 
 use super::shaders::{GHOSTS_WGSL, LUT_GHOSTS_WGSL, STARBURST_WGSL, TONEMAP_WGSL};
 use super::{FlareScene, GhostInstance, Globals};
-use crate::image::{DisplayImage, HdrImage};
 use crate::aperture::ApertureMask;
+use crate::image::{DisplayImage, HdrImage};
 use crate::lut::blend::{ATLAS_PAGE, LiveLut, LutInstance, LutScene};
 use crate::starburst::Starburst;
 

@@ -172,7 +172,7 @@ impl FlareScene {
         let mut dropped_non_finite = 0;
         for (index, sprite) in frame.sprites.iter().enumerate().filter(|(_, s)| s.culled.is_none()) {
             let gain = gains.get(sprite.ghost).copied().unwrap_or(1.0);
-            if !(gain > 0.0) {
+            if gain.is_nan() || gain <= 0.0 {
                 continue;
             }
             let masks = system.sprite_masks(index, u);
@@ -187,12 +187,7 @@ impl FlareScene {
             let aa = (front.scale.abs() / half_px.abs()).max(1e-6);
             let instance = GhostInstance {
                 centre_half: [c[0] as f32, c[1] as f32, -half_px as f32, half_px as f32],
-                colour: [
-                    sprite.rgb[0] as f32 * gain,
-                    sprite.rgb[1] as f32 * gain,
-                    sprite.rgb[2] as f32 * gain,
-                    0.0,
-                ],
+                colour: [sprite.rgb[0] as f32 * gain, sprite.rgb[1] as f32 * gain, sprite.rgb[2] as f32 * gain, 0.0],
                 stops,
                 front: [front.scale as f32, front.offset[0] as f32, front.offset[1] as f32, aa as f32],
             };

@@ -1,7 +1,7 @@
 //! The native JSON lens form (`lenses/README.md`): read with the path of any bad value, written back
 //! losslessly (unknown keys are kept, numbers are written in their shortest exact form).
 
-use super::FormatError;
+use super::text::FormatError;
 use crate::optics::lens::Lens;
 
 /// Parses and validates a JSON lens.

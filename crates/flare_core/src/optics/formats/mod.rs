@@ -12,15 +12,15 @@
 
 pub mod json;
 pub mod pbrt;
+mod text;
 pub mod zmx;
+
+pub use text::{FormatError, MAX_FILE_BYTES};
 
 use std::io::Read;
 use std::path::Path;
 
-use super::lens::{Lens, LensError, Surface};
-
-/// Lens files are a few kilobytes; anything beyond this is refused before it is read.
-pub const MAX_FILE_BYTES: u64 = 16 * 1024 * 1024;
+use super::lens::Lens;
 
 /// The file formats FlareLab reads.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -75,50 +75,6 @@ impl LensFormat {
             }
         }
         (numeric_rows > 0).then_some(Self::PbrtDat)
-    }
-}
-
-/// Why a lens file could not be read. Each message fits on one line.
-#[derive(Debug, thiserror::Error)]
-pub enum FormatError {
-    #[error("cannot read {path}: {source}")]
-    Io { path: String, source: std::io::Error },
-    #[error("the file is {bytes} bytes; lens files are small (at most {MAX_FILE_BYTES})")]
-    TooLarge { bytes: u64 },
-    #[error("the file is empty")]
-    Empty,
-    #[error("the file is not text (binary bytes near byte {offset})")]
-    NotText { offset: usize },
-    #[error("not a lens file: it is neither JSON, a Zemax .zmx nor a pbrt .dat")]
-    UnknownFormat,
-    #[error("JSON line {line}, column {column}{at}: {message}", at = json_at(.path))]
-    Json { line: usize, column: usize, path: String, message: String },
-    #[error("{format} line {line}: {message}")]
-    Line { format: &'static str, line: usize, message: String },
-    #[error("{format} line {line}: {what} is not supported")]
-    Unsupported { format: &'static str, line: usize, what: String },
-    #[error("{format}: {message}")]
-    Structure { format: &'static str, message: String },
-    #[error("{where_}{source}", where_ = line_prefix(.line))]
-    Invalid { line: Option<usize>, source: LensError },
-}
-
-fn json_at(path: &str) -> String {
-    if path.is_empty() || path == "." { String::new() } else { format!(", at `{path}`") }
-}
-
-fn line_prefix(line: &Option<usize>) -> String {
-    line.map(|l| format!("line {l}: ")).unwrap_or_default()
-}
-
-impl FormatError {
-    /// Wraps a validation error, naming the file line of the surface where the format has lines.
-    pub(crate) fn invalid(source: LensError, surface_lines: &[usize]) -> Self {
-        let line = match &source {
-            LensError::Field { surface, .. } => surface_lines.get(*surface).copied(),
-            _ => None,
-        };
-        Self::Invalid { line, source }
     }
 }
 
@@ -204,28 +160,4 @@ pub fn load_lens_file(path: &Path) -> Result<Lens, FormatError> {
 /// The native JSON text of a lens (pretty, one key per line), which [`json::parse`] reads back identically.
 pub fn to_json(lens: &Lens) -> String {
     json::write(lens)
-}
-
-/// Names, validates and returns a lens read from a text format; `surface_lines[k]` is the file line of
-/// surface k, so that a validation error names it.
-pub(crate) fn finish_text_lens(
-    surfaces: Vec<Surface>,
-    name: String,
-    id_hint: &str,
-    surface_lines: &[usize],
-) -> Result<Lens, FormatError> {
-    let lens = Lens {
-        id: id_hint.to_owned(),
-        name: if name.is_empty() { id_hint.to_owned() } else { name },
-        surfaces,
-        extra: Default::default(),
-    };
-    lens.validate().map_err(|e| FormatError::invalid(e, surface_lines))?;
-    Ok(lens)
-}
-
-/// Formats a number so that it reads back to the same f64 (shortest round-trip form).
-pub(crate) fn exact(v: f64) -> String {
-    let s = format!("{v:?}");
-    s.strip_suffix(".0").map(str::to_owned).unwrap_or(s)
 }

@@ -9,7 +9,7 @@
 //! [`crate::optics::glass`]; at the d-line it is identical to its JSON twin. The first comment line, if
 //! any, names the lens.
 
-use super::{FormatError, exact, finish_text_lens};
+use super::text::{FormatError, exact, finish_text_lens};
 use crate::optics::lens::{Lens, Medium, Surface};
 
 const FORMAT: &str = "pbrt .dat";

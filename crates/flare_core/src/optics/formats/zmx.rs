@@ -10,7 +10,7 @@
 //! non-circular apertures, non-sequential mode) is refused by name with its line; purely cosmetic keywords
 //! (comments, colours, solves' flags) are skipped.
 
-use super::{FormatError, exact, finish_text_lens};
+use super::text::{FormatError, exact, finish_text_lens};
 use crate::optics::glass::find_glass;
 use crate::optics::lens::{Lens, Medium, Surface};
 
