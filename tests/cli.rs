@@ -302,8 +302,7 @@ fn render_on_the_gpu_matches_the_cpu_twin() {
     if !gpu.status.success() {
         let stderr = String::from_utf8_lossy(&gpu.stderr);
         assert!(stderr.contains("no GPU adapter"), "{stderr}");
-        assert!(!flare_core::render::gpu::gpu_required(), "FLARELAB_REQUIRE_GPU=1 but {stderr}");
-        println!("SKIPPED: {stderr}");
+        flare_core::render::gpu::skip_without_gpu(&stderr);
         return;
     }
     assert!(run("cpu", &cpu_png).status.success());

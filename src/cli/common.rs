@@ -4,10 +4,11 @@
 use std::path::Path;
 
 use anyhow::{Context, Result, bail};
+use flare_core::flare::PreparedFlare;
 use flare_core::optics::formats::load_lens_file;
 use flare_core::optics::library::builtin_lens;
 use flare_core::optics::{Coating, CoatingLayer, Lens};
-use flare_core::preset::ApertureDoc;
+use flare_core::preset::{ApertureDoc, Document};
 
 fn parse_pair<T: std::str::FromStr>(s: &str, what: &str) -> Result<(T, T), String> {
     let parts: Vec<&str> = s.split(',').map(str::trim).collect();
@@ -129,4 +130,52 @@ pub fn parse_aperture(spec: &str, f_number: Option<f64>) -> Result<ApertureDoc> 
         other => bail!("--aperture {other}: use circle, blades:N[:ROTATION_DEG[:ROUNDNESS]] or image:PATH"),
     }
     Ok(doc)
+}
+
+/// The document a command works on: a preset (or the default document, the app's first frame) with LENS,
+/// the coating and the f-number given replacing its fields. `render`, `classify` and `bake` all start here,
+/// so a LUT's optics (and fingerprint) match the frames it is used in.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct OpticsChoice {
+    /// Lens file or built-in lens name (default: the preset's lens, else the default lens).
+    #[arg(value_name = "LENS")]
+    pub file: Option<String>,
+    /// A preset: a .json file or the name of a shipped one (`flarelab preset list`).
+    #[arg(long)]
+    pub preset: Option<String>,
+    /// Coating on every surface: lens (each surface's own), none, quarter-wave[:NM], multilayer:N/T,...
+    /// (default: the preset's).
+    #[arg(long)]
+    pub coating: Option<String>,
+    /// f-number (default: the preset's, else wide open).
+    #[arg(long)]
+    pub f_number: Option<f64>,
+}
+
+impl OpticsChoice {
+    /// The document: the preset or the default, with these fields replaced (not yet checked).
+    pub fn document(&self) -> Result<Document> {
+        let mut doc = match &self.preset {
+            Some(name) => Document::open_named(name).with_context(|| format!("--preset {name}"))?,
+            None => Document::default(),
+        };
+        if let Some(file) = &self.file {
+            doc.lens = open_lens(file)?;
+        }
+        if let Some(spec) = &self.coating {
+            doc.coating_override = parse_coating_override(spec)?;
+        }
+        if let Some(f) = self.f_number {
+            doc.aperture.f_number = Some(f);
+        }
+        Ok(doc)
+    }
+
+    /// The prepared flare of the checked document.
+    pub fn flare(&self) -> Result<PreparedFlare> {
+        let doc = self.document()?;
+        doc.check().map_err(|e| anyhow::anyhow!("{e}"))?;
+        let config = doc.flare_config().map_err(|e| anyhow::anyhow!("{e}"))?;
+        PreparedFlare::new(&doc.lens, &config).with_context(|| doc.lens.id.clone())
+    }
 }

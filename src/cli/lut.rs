@@ -34,50 +34,10 @@ pub struct LutChoice {
     pub force_linear: Vec<String>,
 }
 
-/// The optics a LUT is for: the document's (a preset, or the default one, with LENS and the flags applied),
-/// exactly as `flarelab render` and the app build them, so that the LUT's fingerprint matches theirs.
-#[derive(clap::Args, Debug, Clone, Default)]
-pub struct OpticsChoice {
-    /// Lens file or built-in lens name (default: the preset's lens, else the default lens).
-    pub file: Option<String>,
-    /// A preset (a .json file or a shipped name) whose optics to use.
-    #[arg(long)]
-    pub preset: Option<String>,
-    /// Coating on every surface: lens (each surface's own), none, quarter-wave[:NM], multilayer:N/T,...
-    /// (default: the preset's).
-    #[arg(long)]
-    pub coating: Option<String>,
-    /// f-number (default: the preset's, else wide open).
-    #[arg(long)]
-    pub f_number: Option<f64>,
-}
-
-impl OpticsChoice {
-    /// The prepared flare of this choice.
-    pub fn flare(&self) -> Result<PreparedFlare> {
-        let mut doc = match &self.preset {
-            Some(name) => flare_core::preset::Document::open_named(name).with_context(|| format!("--preset {name}"))?,
-            None => flare_core::preset::Document::default(),
-        };
-        if let Some(file) = &self.file {
-            doc.lens = super::common::open_lens(file)?;
-        }
-        if let Some(spec) = &self.coating {
-            doc.coating_override = super::common::parse_coating_override(spec)?;
-        }
-        if let Some(f) = self.f_number {
-            doc.aperture.f_number = Some(f);
-        }
-        doc.check().map_err(|e| anyhow::anyhow!("{e}"))?;
-        let config = doc.flare_config().map_err(|e| anyhow::anyhow!("{e}"))?;
-        PreparedFlare::new(&doc.lens, &config).with_context(|| doc.lens.id.clone())
-    }
-}
-
 #[derive(clap::Args, Debug)]
 pub struct ClassifyArgs {
     #[command(flatten)]
-    pub optics: OpticsChoice,
+    pub optics: super::common::OpticsChoice,
     #[command(flatten)]
     pub choice: LutChoice,
     /// One JSON document instead of the table.
@@ -88,7 +48,7 @@ pub struct ClassifyArgs {
 #[derive(clap::Args, Debug)]
 pub struct BakeArgs {
     #[command(flatten)]
-    pub optics: OpticsChoice,
+    pub optics: super::common::OpticsChoice,
     /// Output LUT (default: the lens's id with .flut).
     #[arg(short = 'o', long = "out", alias = "output")]
     pub out: Option<PathBuf>,

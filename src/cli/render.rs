@@ -22,7 +22,7 @@ use flare_core::preset::{Document, LutSource};
 use flare_core::raytrace::{self, RayGridRenderer};
 use flare_core::render::cpu;
 
-use super::common::{open_lens, parse_aperture, parse_coating_override, parse_pair_f64, parse_size};
+use super::common::{OpticsChoice, parse_aperture, parse_pair_f64, parse_size};
 
 /// How the ghosts are made.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -75,11 +75,10 @@ pub enum Layers {
 
 #[derive(clap::Args, Debug)]
 pub struct RenderArgs {
-    /// Lens file or built-in lens name (default: the preset's lens, else the default lens).
-    pub lens: Option<String>,
-    /// A preset: a .json file or the name of a shipped one (`flarelab preset list`). Flags override its fields.
-    #[arg(long)]
-    pub preset: Option<String>,
+    /// The document: LENS, --preset (a .json file or a shipped name: `flarelab preset list`), --coating and
+    /// --f-number; the other flags override its fields too.
+    #[command(flatten)]
+    pub optics: OpticsChoice,
     /// Where the light appears in the frame, as horizontal and vertical field angles in degrees.
     #[arg(long, allow_hyphen_values = true, value_parser = parse_pair_f64)]
     pub light_deg: Option<(f64, f64)>,
@@ -101,12 +100,6 @@ pub struct RenderArgs {
     /// Aperture: circle, blades:N[:ROTATION_DEG[:ROUNDNESS]], or image:PATH (grayscale).
     #[arg(long)]
     pub aperture: Option<String>,
-    /// f-number (default: the preset's, else wide open).
-    #[arg(long)]
-    pub f_number: Option<f64>,
-    /// Coating on every surface: lens (each surface's own), none, quarter-wave[:NM], multilayer:N/T,N/T...
-    #[arg(long)]
-    pub coating: Option<String>,
     /// Wavelengths: 3 is RGB (650/510/475 nm), 2..32 are CIE-weighted, 1 is the d-line alone.
     #[arg(long)]
     pub spectrum: Option<usize>,
@@ -152,24 +145,13 @@ pub fn document(args: &RenderArgs) -> Result<Document> {
         let stops = if linear > 0.0 { format!("--exposure-ev {:.2}", linear.log2()) } else { "--exposure-ev".into() };
         bail!("--exposure {linear}: exposures are in stops now; use {stops}");
     }
-    let mut doc = match &args.preset {
-        Some(name) => Document::open_named(name).with_context(|| format!("--preset {name}"))?,
-        None => Document::default(),
-    };
-    if let Some(lens) = &args.lens {
-        doc.lens = open_lens(lens)?;
-    }
+    let mut doc = args.optics.document()?;
     if let Some((x, y)) = args.light_deg {
         doc.light_deg = [x, y];
     }
     if let Some(spec) = &args.aperture {
-        doc.aperture = parse_aperture(spec, doc.aperture.f_number)?;
-    }
-    if let Some(f) = args.f_number {
-        doc.aperture.f_number = Some(f);
-    }
-    if let Some(spec) = &args.coating {
-        doc.coating_override = parse_coating_override(spec)?;
+        let f_number = args.optics.f_number.or(doc.aperture.f_number);
+        doc.aperture = parse_aperture(spec, f_number)?;
     }
     if let Some(n) = args.spectrum {
         doc.wavelengths = n;
@@ -218,10 +200,12 @@ fn flag_of(args: &RenderArgs, field: &str) -> Option<String> {
         "light_deg" => args.light_deg.map(|(x, y)| format!("--light-deg {x},{y}")),
         "flare_ev" => given(args.exposure_ev.is_some(), "--exposure-ev", format!("{}", args.exposure_ev?)),
         "plate_ev" => given(args.plate_ev.is_some(), "--plate-ev", format!("{}", args.plate_ev?)),
-        "aperture.f_number" => given(args.f_number.is_some(), "--f-number", format!("{}", args.f_number?)),
+        "aperture.f_number" => {
+            given(args.optics.f_number.is_some(), "--f-number", format!("{}", args.optics.f_number?))
+        }
         "aperture" | "aperture.roundness" => args.aperture.as_ref().map(|a| format!("--aperture {a}")),
         "cull_threshold" => given(args.threshold.is_some(), "--threshold", format!("{}", args.threshold?)),
-        "lens" => args.lens.clone(),
+        "lens" => args.optics.file.clone(),
         _ => None,
     }
 }

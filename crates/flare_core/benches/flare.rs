@@ -7,10 +7,10 @@ use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use flare_core::flare::{FlareConfig, PreparedFlare};
+use flare_core::frame::{Frame, FrameRequest, GpuDrawer, Sources};
 use flare_core::ghost::{FrameSettings, GhostFrame, GhostSettings, GhostSystem};
 use flare_core::optics::Lens;
 use flare_core::optics::library::{builtin_lens, synthetic_lens};
-use flare_core::frame::{Frame, FrameRequest, GpuDrawer, Sources};
 use flare_core::render::DisplaySettings;
 
 fn lenses() -> Vec<(String, Lens)> {

@@ -427,7 +427,7 @@ pub fn shipped() -> &'static [ShippedPreset] {
     const PRESETS: &[ShippedPreset] = &[
         ShippedPreset {
             name: "default",
-            title: "Heliar, quarter-wave coated, f/4.5 wide open: the app's first frame",
+            title: "Heliar 100 mm wide open (f/3.4), quarter-wave coated: the app's first frame",
             json: include_str!("../../../assets/presets/default.json"),
         },
         ShippedPreset {

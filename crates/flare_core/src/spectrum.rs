@@ -3,7 +3,7 @@
 //! # How it works
 //! A [`Spectrum`] is a list of wavelengths with a linear-sRGB weight each; a ghost rendered at every
 //! wavelength and summed with these weights gives its colour, fringes included.
-//! - [`Spectrum::rgb`]: the three wavelengths of `docs/method.md` (650, 510, 475 nm), each feeding one
+//! - [`Spectrum::rgb`]: the three wavelengths of `crates/flare_core/METHOD.md` (650, 510, 475 nm), each feeding one
 //!   channel: cheap, and the usual real-time choice.
 //! - [`Spectrum::cie`]: N wavelengths (2 to 32) spread evenly over 400-700 nm, weighted by the CIE 1931 2-degree
 //!   colour-matching functions and converted XYZ -> linear sRGB (D65 primaries). The matching functions are

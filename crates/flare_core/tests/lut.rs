@@ -132,6 +132,22 @@ fn the_lut_file_round_trips_and_a_rebake_keeps_unchanged_ghosts() {
     let path = dir.path().join("t.flut");
     flare_core::lut::format::write_lut(&path, &lut).unwrap();
     assert_eq!(flare_core::lut::format::read_lut(&path).unwrap(), lut);
+    // It fits its own lens and settings, not another coating; a LUT whose fingerprint was made by an older
+    // rule (files from before fingerprint schemes read as scheme 0) is refused with a request to re-bake.
+    let lens = &flare.system.lens;
+    lut.check_for(lens, &flare.config).unwrap();
+    let coated = FlareConfig {
+        coating_override: Some(flare_core::optics::Coating::QuarterWave {
+            design_wavelength_nm: 550.0,
+            layer_index: None,
+        }),
+        ..flare.config.clone()
+    };
+    assert!(lut.check_for(lens, &coated).unwrap_err().to_string().contains("bake it again"));
+    let old = flare_core::lut::GhostLut { fingerprint_scheme: 0, ..lut.clone() };
+    let old = decode(encode(&old).as_slice(), encode(&old).len() as u64).unwrap();
+    let e = old.check_for(lens, &flare.config).unwrap_err().to_string();
+    assert!(e.contains("older FlareLab") && e.contains("bake it again"), "{e}");
     // A re-bake with one more ghost renders only that one.
     let renderer = RayGridRenderer::new(&flare.system, &flare.mask);
     let settings = BakeSettings { theta_max_deg: Some(16.0), ..small_settings() };

@@ -11,7 +11,7 @@
 //!    design wavelength (where the reference figures are computed) and takes only the *shape* of the curve
 //!    from the catalogue.
 //! 3. **n_d and V_d only**: the two-term Cauchy fit `n(L) = n_d + B (1/L^2 - 1/L_d^2)` whose
-//!    `n_F - n_C = (n_d - 1) / V_d` (F = 486.1327 nm, C = 656.2725 nm), the fit of `docs/method.md`.
+//!    `n_F - n_C = (n_d - 1) / V_d` (F = 486.1327 nm, C = 656.2725 nm), the fit of `crates/flare_core/METHOD.md`.
 //!    Measured against the catalogue's Sellmeier curves (test `cauchy_model_error_against_sellmeier`):
 //!    crowns (V_d > 50) within 4.5e-4 in index over 400-700 nm and 1.2e-4 over 450-650 nm; flints within
 //!    7.4e-3 over 400-700 nm (the worst is a dense flint at 400 nm, whose index rises faster in the blue

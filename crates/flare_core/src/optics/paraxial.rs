@@ -3,14 +3,14 @@
 //! # How it works
 //! Near the axis (sin t ~ t, cos t ~ 1) a meridional ray is the 2-vector (y, u): its height and its slope
 //! along the direction of travel. Every interaction is a 2x2 matrix ([`Mat2`]), the forms of
-//! `docs/method.md` (Lee & Eisemann 2013; KR 10-1465658):
+//! `crates/flare_core/METHOD.md` (Lee & Eisemann 2013; KR 10-1465658):
 //! - translation over the axial distance d = |dz|: `T(d) = [[1, d], [0, 1]]`;
 //! - refraction at curvature c from index n1 to n2: `[[1, 0], [-s (n2 - n1) c / n2, n1 / n2]]`;
 //! - reflection at curvature c in any medium: `[[1, 0], [2 s c, 1]]`;
 //!
 //! where s = +1 when the light arrives travelling towards +z and s = -1 when it arrives travelling back
-//! (after an odd number of reflections). For forward travel these are exactly method.md's `T`, `R` and `L`;
-//! s carries the backward case, which method.md writes with inverse matrices of a slope measured along +z
+//! (after an odd number of reflections). For forward travel these are exactly METHOD.md's `T`, `R` and `L`;
+//! s carries the backward case, which METHOD.md writes with inverse matrices of a slope measured along +z
 //! instead of along the travel direction (the two agree on every height). Multiplying the matrices along a
 //! [`LightPath`] gives its matrix from the *entrance plane* (the plane of the first vertex, z = 0, in object
 //! space) to the sensor. From the image path come the first-order data ([`FirstOrder`]); for a ghost the

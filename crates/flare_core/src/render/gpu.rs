@@ -3,16 +3,18 @@
 //! # How it works
 //! [`FlareRenderer`] owns its pipelines, the aperture mask (R8Unorm), the starburst (Rgba16Float), an
 //! optional background plate (Rgba16Float) and an HDR accumulation target (Rgba16Float, resized on demand).
-//! [`FlareRenderer::render`] records three passes into the caller's encoder:
-//! 1. `ghosts.wgsl`: clear the HDR target, draw one instanced quad per ghost sprite, additive blending;
-//! 2. `lut_ghosts.wgsl` (when a LUT is set and the frame has LUT instances): LUT images from the atlas (a 2D
-//!    array of [`ATLAS_PAGE`]-texel Rgba16Float pages), added or composited over through alpha;
-//! 3. `starburst.wgsl`: the diffraction texture at the light's image, additive;
-//! 4. `tonemap.wgsl`: background + HDR, exposure, tonemap and (for non-sRGB targets) sRGB encoding into the
-//!    caller's view.
+//! [`FlareRenderer::render_with_lut`], the one entry point every frame goes through (the app's viewport and
+//! [`crate::frame`]'s headless drawer), records two render passes into the caller's encoder:
+//! 1. the accumulation: clear the HDR target, then `ghosts.wgsl` (one instanced quad per ghost sprite,
+//!    additive), `lut_ghosts.wgsl` (when a LUT is set and the frame has LUT instances: LUT images from the
+//!    atlas, a 2D array of [`ATLAS_PAGE`]-texel Rgba16Float pages, added or composited over through alpha) and
+//!    `starburst.wgsl` (the diffraction texture at the light's image, additive);
+//! 2. `tonemap.wgsl`: the composite `hdr x 2^flare_ev + plate x 2^plate_ev`, the tonemap and (for non-sRGB
+//!    targets) the sRGB encoding into the caller's view.
 //!
 //! It never owns a window: the app hands it egui's device and a view, tests and the command line hand it a
-//! headless device ([`GpuContext::headless`]) and read the result back ([`read_display`], [`read_hdr`]).
+//! headless device ([`GpuContext::headless`]) and read the result back ([`render_display_with_lut`],
+//! [`read_hdr`]).
 //! Rows copied to buffers are padded to 256 bytes as wgpu requires.
 
 use super::shaders::{GHOSTS_WGSL, LUT_GHOSTS_WGSL, STARBURST_WGSL, TONEMAP_WGSL};
@@ -82,17 +84,23 @@ pub fn gpu_required() -> bool {
     std::env::var("FLARELAB_REQUIRE_GPU").is_ok_and(|v| v == "1")
 }
 
-/// The adapter tests use: a software one first (reproducible images). `None` with the reason printed when
-/// there is none, unless [`gpu_required`], where it panics with the reason.
+/// A test that needs a GPU adapter or a display skips for want of one: it says so, or, when
+/// [`gpu_required`], fails with `reason`.
+pub fn skip_without_gpu(reason: &str) {
+    assert!(!gpu_required(), "FLARELAB_REQUIRE_GPU=1 but {reason}");
+    println!("SKIPPED: {reason}");
+}
+
+/// The adapter tests use: a software one first (reproducible images); `None` when there is none (see
+/// [`skip_without_gpu`]).
 pub fn test_context() -> Option<GpuContext> {
     match GpuContext::headless(true) {
         Ok(ctx) => {
             println!("GPU adapter: {} ({:?}, {:?})", ctx.adapter.name, ctx.adapter.device_type, ctx.adapter.backend);
             Some(ctx)
         }
-        Err(e) if gpu_required() => panic!("FLARELAB_REQUIRE_GPU=1 but {e}"),
         Err(e) => {
-            println!("SKIPPED (no GPU adapter): {e}");
+            skip_without_gpu(&e.to_string());
             None
         }
     }
@@ -443,19 +451,6 @@ impl FlareRenderer {
         self.hdr.as_ref().map(|(t, _, _)| t)
     }
 
-    /// Records the frame into `encoder`, drawing into `target` (of the renderer's target format, the
-    /// scene's size).
-    pub fn render(
-        &mut self,
-        device: &wgpu::Device,
-        queue: &wgpu::Queue,
-        encoder: &mut wgpu::CommandEncoder,
-        target: &wgpu::TextureView,
-        scene: &FlareScene,
-    ) {
-        self.render_with_lut(device, queue, encoder, target, scene, None);
-    }
-
     /// Uploads a LUT's atlas (`None` removes it).
     pub fn set_lut(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, lut: Option<&LiveLut>) {
         match lut.filter(|l| l.layout.pages > 0) {
@@ -468,8 +463,9 @@ impl FlareRenderer {
         }
     }
 
-    /// [`Self::render`] with the LUT instances of `lut` drawn after the paraxial ghosts (the atlas from
-    /// [`Self::set_lut`]).
+    /// Records the frame into `encoder`, drawing into `target` (of the renderer's target format, the scene's
+    /// size): the paraxial ghosts, the LUT instances of `lut` (the atlas from [`Self::set_lut`]), the
+    /// starburst, then the tonemap pass.
     pub fn render_with_lut(
         &mut self,
         device: &wgpu::Device,
@@ -637,16 +633,8 @@ fn read_texture(ctx: &GpuContext, texture: &wgpu::Texture, bytes_per_pixel: u32)
     Ok(out)
 }
 
-/// Renders `scene` headless into an Rgba8Unorm texture and reads the display image back.
-pub fn render_display(
-    ctx: &GpuContext,
-    renderer: &mut FlareRenderer,
-    scene: &FlareScene,
-) -> Result<DisplayImage, GpuError> {
-    render_display_with_lut(ctx, renderer, scene, None)
-}
-
-/// [`render_display`] with LUT instances ([`FlareRenderer::render_with_lut`]).
+/// Renders `scene` (with the LUT instances `lut`) headless into a texture of the renderer's format through
+/// [`FlareRenderer::render_with_lut`] and reads the display image back.
 pub fn render_display_with_lut(
     ctx: &GpuContext,
     renderer: &mut FlareRenderer,
