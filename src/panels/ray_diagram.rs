@@ -21,18 +21,19 @@ const FAN: usize = 11;
 /// The traced fan, cached while the lens, the light and the ghost are unchanged.
 #[derive(Default)]
 pub struct RayDiagram {
-    key: String,
+    /// The stable fingerprint of what the fan was traced for (see `flare_core::fingerprint`).
+    key: Option<u64>,
     rays: Vec<(Vec<[f64; 2]>, TraceStatus)>,
     reflections: Vec<[f64; 2]>,
 }
 
 impl RayDiagram {
     fn update(&mut self, lens: &Lens, fo: &FirstOrder, field_deg: f64, ghost: Option<(usize, usize)>) {
-        let key = format!("{lens:?}|{field_deg}|{ghost:?}");
-        if key == self.key {
+        let key = flare_core::fingerprint::of(&(lens, field_deg, ghost));
+        if self.key == Some(key) {
             return;
         }
-        self.key = key;
+        self.key = Some(key);
         self.rays.clear();
         self.reflections.clear();
         let path = match ghost {

@@ -207,6 +207,16 @@ pub struct FlareRenderer {
     lut_atlas: wgpu::Texture,
     lut_instances: wgpu::Buffer,
     lut_capacity: usize,
+    /// The bind groups of the last frame, made again only when a texture they bind was replaced.
+    groups: Option<BindGroups>,
+}
+
+/// Every bind group a frame uses (see [`FlareRenderer::bind_groups`]).
+struct BindGroups {
+    ghosts: wgpu::BindGroup,
+    starburst: wgpu::BindGroup,
+    lut: wgpu::BindGroup,
+    tonemap: wgpu::BindGroup,
 }
 
 impl FlareRenderer {
@@ -395,6 +405,7 @@ impl FlareRenderer {
             lut_atlas,
             lut_instances,
             lut_capacity,
+            groups: None,
             ghost_pipeline,
             starburst_pipeline,
             tonemap_pipeline,
@@ -420,6 +431,7 @@ impl FlareRenderer {
 
     /// Replaces the aperture mask (when the aperture settings change).
     pub fn set_aperture(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, mask: &ApertureMask) {
+        self.groups = None;
         let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
         self.aperture =
             texture_2d(device, "aperture", mask.size as u32, mask.size as u32, wgpu::TextureFormat::R8Unorm, usage);
@@ -428,6 +440,7 @@ impl FlareRenderer {
 
     /// Replaces the starburst texture.
     pub fn set_starburst(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, starburst: &Starburst) {
+        self.groups = None;
         let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
         self.starburst =
             texture_2d(device, "starburst", starburst.size as u32, starburst.size as u32, HDR_FORMAT, usage);
@@ -436,6 +449,7 @@ impl FlareRenderer {
 
     /// Sets or clears the background plate (linear).
     pub fn set_background(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, plate: Option<&HdrImage>) {
+        self.groups = None;
         self.has_background = plate.is_some();
         let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
         let (w, h, pixels) = match plate {
@@ -453,6 +467,7 @@ impl FlareRenderer {
 
     /// Uploads a LUT's atlas (`None` removes it).
     pub fn set_lut(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, lut: Option<&LiveLut>) {
+        self.groups = None;
         match lut.filter(|l| l.layout.pages > 0) {
             Some(live) => {
                 self.lut_atlas = atlas_texture(device, ATLAS_PAGE, live.layout.pages);
@@ -460,6 +475,41 @@ impl FlareRenderer {
                 upload(queue, &self.lut_atlas, bytemuck::cast_slice(&texels), 8);
             }
             None => self.lut_atlas = empty_atlas(device, queue),
+        }
+    }
+
+    /// The bind groups of every pass for the current textures (made when one of them was replaced or the
+    /// accumulation resized, not every frame).
+    fn bind_groups(&self, device: &wgpu::Device, hdr_view: &wgpu::TextureView) -> BindGroups {
+        let aperture_view = self.aperture.create_view(&wgpu::TextureViewDescriptor::default());
+        let starburst_view = self.starburst.create_view(&wgpu::TextureViewDescriptor::default());
+        let background_view = self.background.create_view(&wgpu::TextureViewDescriptor::default());
+        let atlas_view = self.lut_atlas.create_view(&wgpu::TextureViewDescriptor {
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        });
+        let sampler = wgpu::BindingResource::Sampler(&self.sampler);
+        let bind = |label, layout: &wgpu::BindGroupLayout, view: &wgpu::TextureView, third: wgpu::BindingResource| {
+            let mut entries = vec![
+                wgpu::BindGroupEntry { binding: 0, resource: self.globals.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(view) },
+                wgpu::BindGroupEntry { binding: 2, resource: third },
+            ];
+            if std::ptr::eq(layout, &self.tonemap_layout) {
+                entries.push(wgpu::BindGroupEntry { binding: 3, resource: sampler.clone() });
+            }
+            device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries: &entries })
+        };
+        BindGroups {
+            ghosts: bind("ghosts", &self.ghost_layout, &aperture_view, sampler.clone()),
+            starburst: bind("starburst", &self.ghost_layout, &starburst_view, sampler.clone()),
+            lut: bind("lut ghosts", &self.lut_layout, &atlas_view, sampler.clone()),
+            tonemap: bind(
+                "tonemap",
+                &self.tonemap_layout,
+                hdr_view,
+                wgpu::BindingResource::TextureView(&background_view),
+            ),
         }
     }
 
@@ -481,6 +531,7 @@ impl FlareRenderer {
                 | wgpu::TextureUsages::TEXTURE_BINDING
                 | wgpu::TextureUsages::COPY_SRC;
             self.hdr = Some((texture_2d(device, "hdr", w, h, HDR_FORMAT, usage), w, h));
+            self.groups = None;
         }
         let mut globals = scene.globals;
         globals.tonemap[2] = if self.target_format.is_srgb() { 0.0 } else { 1.0 };
@@ -503,30 +554,10 @@ impl FlareRenderer {
         }
         let Some((hdr, _, _)) = &self.hdr else { return };
         let hdr_view = hdr.create_view(&wgpu::TextureViewDescriptor::default());
-        let aperture_view = self.aperture.create_view(&wgpu::TextureViewDescriptor::default());
-        let starburst_view = self.starburst.create_view(&wgpu::TextureViewDescriptor::default());
-        let background_view = self.background.create_view(&wgpu::TextureViewDescriptor::default());
-        let bind = |layout: &wgpu::BindGroupLayout,
-                    view: &wgpu::TextureView,
-                    third: wgpu::BindingResource,
-                    sampler: bool| {
-            let mut entries = vec![
-                wgpu::BindGroupEntry { binding: 0, resource: self.globals.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(view) },
-                wgpu::BindGroupEntry { binding: 2, resource: third },
-            ];
-            if sampler {
-                entries
-                    .push(wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(&self.sampler) });
-            }
-            device.create_bind_group(&wgpu::BindGroupDescriptor { label: None, layout, entries: &entries })
-        };
-        let ghost_group =
-            bind(&self.ghost_layout, &aperture_view, wgpu::BindingResource::Sampler(&self.sampler), false);
-        let starburst_group =
-            bind(&self.ghost_layout, &starburst_view, wgpu::BindingResource::Sampler(&self.sampler), false);
-        let tonemap_group =
-            bind(&self.tonemap_layout, &hdr_view, wgpu::BindingResource::TextureView(&background_view), true);
+        if self.groups.is_none() {
+            self.groups = Some(self.bind_groups(device, &hdr_view));
+        }
+        let Some(groups) = &self.groups else { return };
         {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("flare hdr"),
@@ -543,32 +574,19 @@ impl FlareRenderer {
             });
             if !scene.instances.is_empty() {
                 pass.set_pipeline(&self.ghost_pipeline);
-                pass.set_bind_group(0, &ghost_group, &[]);
+                pass.set_bind_group(0, &groups.ghosts, &[]);
                 pass.set_vertex_buffer(0, self.instances.slice(..));
                 pass.draw(0..6, 0..scene.instances.len() as u32);
             }
             if let Some(lut) = lut {
-                let atlas_view = self.lut_atlas.create_view(&wgpu::TextureViewDescriptor {
-                    dimension: Some(wgpu::TextureViewDimension::D2Array),
-                    ..Default::default()
-                });
-                let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("lut ghosts"),
-                    layout: &self.lut_layout,
-                    entries: &[
-                        wgpu::BindGroupEntry { binding: 0, resource: self.globals.as_entire_binding() },
-                        wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&atlas_view) },
-                        wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::Sampler(&self.sampler) },
-                    ],
-                });
                 pass.set_pipeline(if lut.alpha_over { &self.lut_over_pipeline } else { &self.lut_add_pipeline });
-                pass.set_bind_group(0, &group, &[]);
+                pass.set_bind_group(0, &groups.lut, &[]);
                 pass.set_vertex_buffer(0, self.lut_instances.slice(..));
                 pass.draw(0..6, 0..lut.instances.len() as u32);
             }
             if globals.starburst[2] > 0.0 && globals.starburst[3] != 0.0 {
                 pass.set_pipeline(&self.starburst_pipeline);
-                pass.set_bind_group(0, &starburst_group, &[]);
+                pass.set_bind_group(0, &groups.starburst, &[]);
                 pass.draw(0..6, 0..1);
             }
         }
@@ -583,7 +601,7 @@ impl FlareRenderer {
             ..Default::default()
         });
         pass.set_pipeline(&self.tonemap_pipeline);
-        pass.set_bind_group(0, &tonemap_group, &[]);
+        pass.set_bind_group(0, &groups.tonemap, &[]);
         pass.draw(0..3, 0..1);
     }
 }
