@@ -1,5 +1,5 @@
 // Ghost sprites: one instanced quad per (ghost, wavelength), additively blended into the HDR target.
-// CPU twin: crates/flare_core/src/render/cpu.rs, `ghost_pass` (same names, same steps).
+// CPU twin: crates/flare_core/src/render/cpu/ghosts.rs, `ghost_pass` (same names, same steps).
 // Must be kept in sync with `GhostInstance` in crates/flare_core/src/render/mod.rs (the uniforms `Globals`
 // come from common.wgsl).
 

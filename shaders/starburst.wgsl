@@ -1,5 +1,5 @@
 // The starburst: the aperture's diffraction texture on a quad centred on the light's image, additive.
-// CPU twin: crates/flare_core/src/render/cpu.rs, `starburst_pass`.
+// CPU twin: crates/flare_core/src/render/cpu/starburst.rs, `starburst_pass`.
 // The uniforms `Globals` come from common.wgsl, prepended when the shader is embedded.
 
 struct VertexOut {

@@ -1,6 +1,6 @@
 // HDR to display: the composite flare * 2^flare_ev (accumulation upsampled) + plate * 2^plate_ev, then the
 // tonemap (none / Reinhard / ACES filmic) and sRGB encoding.
-// CPU twin: crates/flare_core/src/render/cpu.rs, `tonemap_pass` and `tonemap_pixel`.
+// CPU twin: crates/flare_core/src/render/cpu/tonemap.rs, `tonemap_pass` and `tonemap_pixel`.
 // The uniforms `Globals` come from common.wgsl, prepended when the shader is embedded.
 
 @group(0) @binding(0) var<uniform> globals: Globals;

@@ -1,34 +1,13 @@
-//! The CPU twin of the GPU renderer: the same passes, the same names, the same steps as `shaders/*.wgsl`.
-//!
-//! # How it works
-//! [`ghost_pass`] is `ghosts.wgsl`: for each instance it visits the pixels whose centres fall inside the
-//! quad, recovers the quad coordinate q, multiplies the aperture mask (bilinear, 0 outside [-1, 1]^2) at every
-//! enabled stop crossing and the anti-aliased front disc, and adds the colour. [`starburst_pass`] is
-//! `starburst.wgsl` and [`tonemap_pass`] is `tonemap.wgsl`. [`ghost_moments`] walks the same fragments to measure
-//! each ghost's energy and centroid for the metrics. The GPU accumulates in half floats and the CPU in
-//! f32; the comparison test bounds the mean difference. The twin also renders on machines with no GPU
-//! adapter at all (`flarelab render --device cpu`).
+//! `ghosts.wgsl` on the CPU: the instanced ghost sprites into the HDR accumulation, and the per-ghost moments
+//! of the same fragments.
 
 use rayon::prelude::*;
 
-use super::{FlareScene, GhostInstance};
+use super::{accumulation_scale, covered};
 use crate::aperture::ApertureMask;
-use crate::color::{display_value, luminance, to_u8};
-use crate::image::{DisplayImage, GhostMoments, HdrImage, Sampling};
-use crate::starburst::Starburst;
-
-/// Starburst texture as the GPU holds it: RGBA rounded to half floats.
-#[derive(Clone, Debug, PartialEq)]
-pub struct StarburstTexture {
-    pub image: HdrImage,
-}
-
-impl StarburstTexture {
-    pub fn from_starburst(s: &Starburst) -> Self {
-        let pixels = s.rgba.iter().map(|t| t.map(|v| half::f16::from_f32(v).to_f32())).collect();
-        Self { image: HdrImage { width: s.size as u32, height: s.size as u32, pixels } }
-    }
-}
+use crate::color::luminance;
+use crate::image::{GhostMoments, HdrImage};
+use crate::render::{FlareScene, GhostInstance};
 
 fn stop_mask(mask: &ApertureMask, map: [f32; 4], q: [f32; 2]) -> f32 {
     if map[3] == 0.0 {
@@ -41,18 +20,6 @@ fn front_mask(map: [f32; 4], q: [f32; 2]) -> f32 {
     let (x, y) = (map[0] * q[0] + map[1], map[0] * q[1] + map[2]);
     let r = (x * x + y * y).sqrt();
     (0.5 + (1.0 - r) / map[3]).clamp(0.0, 1.0)
-}
-
-/// Image-pixel coordinates per accumulation pixel, horizontally and vertically.
-fn accumulation_scale(scene: &FlareScene) -> (f32, f32) {
-    (scene.width as f32 / scene.hdr_width as f32, scene.height as f32 / scene.hdr_height as f32)
-}
-
-/// The accumulation pixels a quad of centre `c` and half-size `half` (image pixels) covers.
-fn covered(c: f32, half: f32, scale: f32, size: usize) -> std::ops::Range<usize> {
-    let lo = ((c - half.abs()) / scale).floor().max(0.0) as usize;
-    let hi = (((c + half.abs()) / scale).ceil().max(0.0) as usize).min(size);
-    lo..hi
 }
 
 /// The fragments of one instance in the accumulation rows `rows`: `fragment(x, y, m)` for every covered pixel
@@ -188,86 +155,4 @@ pub fn ghost_moments(scene: &FlareScene, mask: &ApertureMask, ghosts: usize) -> 
         });
     }
     moments
-}
-
-/// `starburst.wgsl`: the starburst quad added onto `hdr`.
-pub fn starburst_pass(scene: &FlareScene, texture: &StarburstTexture, hdr: &mut HdrImage) {
-    let [cx, cy, half, intensity] = scene.globals.starburst;
-    if half <= 0.0 || intensity == 0.0 {
-        return;
-    }
-    let (w, h) = (hdr.width as usize, hdr.height as usize);
-    let (sx, sy) = accumulation_scale(scene);
-    for y in covered(cy, half, sy, h) {
-        for x in covered(cx, half, sx, w) {
-            let q = [((x as f32 + 0.5) * sx - cx) / half, ((y as f32 + 0.5) * sy - cy) / half];
-            if q[0].abs() > 1.0 || q[1].abs() > 1.0 {
-                continue;
-            }
-            let t = texture.image.sample_bilinear(q[0] * 0.5 + 0.5, q[1] * 0.5 + 0.5);
-            let p = &mut hdr.pixels[y * w + x];
-            for c in 0..3 {
-                p[c] += t[c] * intensity;
-            }
-        }
-    }
-}
-
-/// `tonemap.wgsl` for one composite value (flare and plate already multiplied by their gains): the operator,
-/// a clamp and the sRGB encoding.
-pub fn tonemap_pixel(c: [f32; 3], globals: &super::Globals) -> [f32; 3] {
-    let encode = globals.tonemap[2] > 0.5;
-    c.map(|v| display_value(v, globals.operator(), encode))
-}
-
-/// The first step of `tonemap.wgsl`: the composite `flare * 2^flare_ev + plate * 2^plate_ev` at the image
-/// size, the HDR accumulation read bilinearly (upsampled when it is smaller) and the plate at its nearest
-/// texel, linear.
-pub fn composite(scene: &FlareScene, hdr: &HdrImage, plate: Option<&HdrImage>) -> HdrImage {
-    let flare = flare_layer(scene, hdr);
-    match plate {
-        Some(plate) => flare.plus(&plate_layer(scene, plate)),
-        None => flare,
-    }
-}
-
-/// The flare alone at the image size, times its gain (what the EXR's `flare` layer holds).
-pub fn flare_layer(scene: &FlareScene, hdr: &HdrImage) -> HdrImage {
-    hdr.resampled(scene.width, scene.height, Sampling::Bilinear, scene.globals.flare_gain())
-}
-
-/// The plate at the image size, times its gain (what the EXR's `plate` layer holds).
-pub fn plate_layer(scene: &FlareScene, plate: &HdrImage) -> HdrImage {
-    let mut layer = plate.resampled(scene.width, scene.height, Sampling::Nearest, scene.globals.plate_gain());
-    for p in &mut layer.pixels {
-        p[3] = 1.0;
-    }
-    layer
-}
-
-/// `tonemap.wgsl`: [`composite`], then tonemap and sRGB into 8-bit display pixels.
-pub fn tonemap_pass(scene: &FlareScene, hdr: &HdrImage, plate: Option<&HdrImage>) -> DisplayImage {
-    display_of(scene, &composite(scene, hdr, plate))
-}
-
-/// The display image of a composite already at the image size.
-pub fn display_of(scene: &FlareScene, composite: &HdrImage) -> DisplayImage {
-    let pixels = composite
-        .pixels
-        .iter()
-        .map(|p| {
-            let t = tonemap_pixel([p[0], p[1], p[2]], &scene.globals);
-            [to_u8(t[0]), to_u8(t[1]), to_u8(t[2]), 255]
-        })
-        .collect();
-    DisplayImage { width: scene.width, height: scene.height, pixels }
-}
-
-/// The whole frame on the CPU: ghosts, starburst, then (for display) tonemapping.
-pub fn render_hdr(scene: &FlareScene, mask: &ApertureMask, starburst: Option<&StarburstTexture>) -> HdrImage {
-    let mut hdr = ghost_pass(scene, mask);
-    if let Some(texture) = starburst {
-        starburst_pass(scene, texture, &mut hdr);
-    }
-    hdr
 }

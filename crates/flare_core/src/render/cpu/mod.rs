@@ -1,0 +1,35 @@
+//! The CPU twin of the GPU renderer: one file beside each shader, the same passes, the same names, the same
+//! steps as `shaders/*.wgsl`.
+//!
+//! # How it works
+//! [`ghosts::ghost_pass`] is `ghosts.wgsl`: for each instance it visits the pixels whose centres fall inside
+//! the quad, recovers the quad coordinate q, multiplies the aperture mask (bilinear, 0 outside [-1, 1]^2) at
+//! every enabled stop crossing and the anti-aliased front disc, and adds the colour;
+//! [`ghosts::ghost_moments`] walks the same fragments to measure each ghost's energy and centroid for the
+//! metrics. [`starburst::starburst_pass`] is `starburst.wgsl` and [`tonemap::tonemap_pass`] is `tonemap.wgsl`
+//! (the composite of the exposed flare and plate, the tonemap, sRGB). `lut_ghosts.wgsl`'s twin,
+//! [`crate::lut::blend::lut_pass`], lives beside the LUT instances it draws. The GPU accumulates in half floats
+//! and the CPU in f32; the comparison tests bound the difference. The twin also renders on machines with no GPU
+//! adapter at all (`flarelab render --device cpu`).
+
+pub mod ghosts;
+pub mod starburst;
+pub mod tonemap;
+
+pub use ghosts::{ghost_moments, ghost_pass};
+pub use starburst::{StarburstTexture, starburst_pass};
+pub use tonemap::{composite, display_of, flare_layer, plate_layer, tonemap_pass, tonemap_pixel};
+
+use super::FlareScene;
+
+/// Image-pixel coordinates per accumulation pixel, horizontally and vertically.
+pub(super) fn accumulation_scale(scene: &FlareScene) -> (f32, f32) {
+    (scene.width as f32 / scene.hdr_width as f32, scene.height as f32 / scene.hdr_height as f32)
+}
+
+/// The accumulation pixels a quad of centre `c` and half-size `half` (image pixels) covers.
+pub(super) fn covered(c: f32, half: f32, scale: f32, size: usize) -> std::ops::Range<usize> {
+    let lo = ((c - half.abs()) / scale).floor().max(0.0) as usize;
+    let hi = (((c + half.abs()) / scale).ceil().max(0.0) as usize).min(size);
+    lo..hi
+}
