@@ -3,7 +3,7 @@
 
 use rayon::prelude::*;
 
-use super::{accumulation_scale, covered};
+use super::quads::{accumulation_scale, covered};
 use crate::aperture::ApertureMask;
 use crate::color::luminance;
 use crate::image::{GhostMoments, HdrImage};

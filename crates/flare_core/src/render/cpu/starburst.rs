@@ -1,6 +1,6 @@
 //! `starburst.wgsl` on the CPU: the aperture's diffraction texture on a quad at the light's image, additive.
 
-use super::{accumulation_scale, covered};
+use super::quads::{accumulation_scale, covered};
 use crate::image::HdrImage;
 use crate::render::FlareScene;
 use crate::starburst::Starburst;
