@@ -79,3 +79,11 @@ pub fn assemble(drafts: &[Draft], stop_choice: usize) -> Lens {
 pub fn lens_strategy(min: usize, max: usize) -> impl Strategy<Value = Lens> {
     (prop::collection::vec(draft(), min..=max), any::<usize>()).prop_map(|(d, s)| assemble(&d, s))
 }
+
+/// [`lens_strategy`] kept to the lenses that form a real image (most long random stacks do not: their paraxial
+/// focus lies in front of the last surface, and they are refused with that reason), so that a property that
+/// needs a flare gets one.
+pub fn focusing_lens_strategy(min: usize, max: usize) -> impl Strategy<Value = Lens> {
+    lens_strategy(min, max)
+        .prop_filter("the lens forms a real image", |lens| flare_core::optics::FirstOrder::d_line(lens).is_ok())
+}
