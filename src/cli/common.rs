@@ -56,13 +56,13 @@ pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
     flare_core::frame::parse_size(s)
 }
 
-/// Parses a coating override: `lens` (each surface's own: no override), none, quarter-wave[:NM],
+/// Parses a coating override: `lens` (each surface's own: no override), `none`, `quarter-wave[:NM]`,
 /// multilayer:INDEX/THICKNESS_NM,...
 pub fn parse_coating_override(spec: &str) -> Result<Option<Coating>> {
     if spec == "lens" { Ok(None) } else { parse_coating(spec).map(Some) }
 }
 
-/// Parses a coating: none, quarter-wave[:NM], multilayer:INDEX/THICKNESS_NM,...
+/// Parses a coating: `none`, `quarter-wave[:NM]`, `multilayer:INDEX/THICKNESS_NM,...`
 pub fn parse_coating(spec: &str) -> Result<Coating> {
     let (kind, rest) = spec.split_once(':').unwrap_or((spec, ""));
     let coating = match kind {
@@ -101,7 +101,7 @@ pub fn parse_coating(spec: &str) -> Result<Coating> {
     Ok(coating)
 }
 
-/// Parses an aperture: circle, blades:N[:ROTATION_DEG[:ROUNDNESS]], image:PATH (the f-number is kept as it is).
+/// Parses an aperture: `circle`, `blades:N[:ROTATION_DEG[:ROUNDNESS]]`, `image:PATH` (the f-number is kept).
 pub fn parse_aperture(spec: &str, f_number: Option<f64>) -> Result<ApertureDoc> {
     let mut parts = spec.split(':');
     let mut doc = ApertureDoc { f_number, ..ApertureDoc::default() };

@@ -8,28 +8,39 @@
 //! (ghost matrices, aperture mask, starburst, and their GPU textures) when
 //! [`Document::optics_fingerprint`] changes (an impossible lens keeps the last valid flare and marks the bad
 //! cell), the plate's texture when the plate file changes, then the frame ([`Frame::build`], the one frame
-//! pipeline) when its [`FrameRequest`] (light, gains, blend, exposures, tonemap, view size) or the LUT
+//! pipeline) when its `FrameRequest` (light, gains, blend, exposures, tonemap, view size) or the LUT
 //! changed. Display settings never rebuild the optics or a texture ([`RebuildCounts`] counts what was
 //! rebuilt). A new frame is handed to the viewport's paint callback ([`crate::viewport`]); otherwise the
 //! callback only re-draws the last texture, and the app never asks for a repaint unless something is under
-//! way (a bake, a drag bench), so an idle window costs nothing. Bakes run on a thread with progress and
-//! cancel; images are exported through the same frame pipeline and writer as `flarelab render`.
+//! way (a bake, a drag bench), so an idle window costs nothing. Images are exported through the same frame
+//! pipeline and writer as `flarelab render`.
+//!
+//! The parts that stand on their own live beside this file: [`derived`] (what a frame was built from, the
+//! rebuild counts, the ghost list), [`bake`] (the bake thread, with progress and Cancel) and [`drag_bench`]
+//! (the app timing itself); [`crate::viewport`] is the bridge to the GPU, [`crate::history`] the undo.
 
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::Instant;
 
 use crate::history::History;
+
+pub mod bake;
+pub mod derived;
+pub mod drag_bench;
+
 use crate::panels::aperture::AperturePreview;
 use crate::panels::coatings::CoatingsState;
 use crate::panels::ray_diagram::RayDiagram;
 use crate::panels::{Action, BakeStatus, GhostRow, LensProblem, PanelContext};
 use crate::viewport::{FlareCallback, ViewFrame, ViewportResources};
 use anyhow::{Result, bail};
+use bake::{BakeJob, BakePoll};
+use derived::{FrameKey, RebuildCounts, ghost_rows};
+use drag_bench::DragBench;
 use eframe::egui_wgpu::RenderState;
 use eframe::{egui, wgpu};
 use flare_core::flare::PreparedFlare;
-use flare_core::frame::{Device, Frame, FrameRequest, LayerChoice, Sources};
+use flare_core::frame::{Device, Frame, LayerChoice, Sources};
 use flare_core::ghost::{FrameStats, Sensor};
 use flare_core::image::HdrImage;
 use flare_core::lut::blend::LiveLut;
@@ -90,50 +101,6 @@ pub enum Tab {
     Blend,
 }
 
-/// What a bake thread hands back: the LUT and the classification, or why it stopped.
-type BakeOutcome = Result<(GhostLut, Vec<GhostClass>), String>;
-
-/// A bake running on its thread.
-struct BakeJob {
-    cancel: Arc<AtomicBool>,
-    progress: Arc<Mutex<(f32, String)>>,
-    result: Arc<Mutex<Option<BakeOutcome>>>,
-}
-
-/// How often the app rebuilt what the document implies, for the tests and the status bar: display settings
-/// (exposures, tonemap, starburst, plate exposure) must change only `frames`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct RebuildCounts {
-    /// Prepared flares built (ghost system, aperture mask, starburst FFT).
-    pub optics: u64,
-    /// GPU texture uploads (aperture, starburst, plate, LUT atlas).
-    pub textures: u64,
-    /// Frames built.
-    pub frames: u64,
-}
-
-/// What the latest frame was built from: a new frame is built only when this changes.
-#[derive(Clone, Debug, PartialEq)]
-struct FrameKey {
-    optics: u64,
-    request: FrameRequest,
-    lut_generation: u64,
-    plate_generation: u64,
-}
-
-/// Frame-time measurement of `FLARELAB_DRAG_BENCH=N`: the light swept for N frames, then the app exits.
-struct DragBench {
-    /// Sweep the exposure instead of the light (`FLARELAB_DRAG_BENCH_WHAT=exposure`).
-    exposure: bool,
-    /// What had been rebuilt when the sweep began.
-    rebuilds_at_start: Option<RebuildCounts>,
-    frames: usize,
-    done: usize,
-    last: Option<Instant>,
-    intervals_ms: Vec<f64>,
-    scene_ms: Vec<f64>,
-}
-
 pub struct FlareLabApp {
     pub doc: Document,
     pub history: History,
@@ -188,16 +155,7 @@ impl FlareLabApp {
             ViewportResources::install(rs);
         }
         let doc = stored.unwrap_or_default();
-        let drag_bench =
-            std::env::var("FLARELAB_DRAG_BENCH").ok().and_then(|n| n.parse().ok()).map(|frames| DragBench {
-                exposure: std::env::var("FLARELAB_DRAG_BENCH_WHAT").is_ok_and(|w| w == "exposure"),
-                rebuilds_at_start: None,
-                frames,
-                done: 0,
-                last: None,
-                intervals_ms: Vec::new(),
-                scene_ms: Vec::new(),
-            });
+        let drag_bench = DragBench::from_env();
         let mut app = Self {
             history: History::new(&doc),
             doc,
@@ -368,26 +326,7 @@ impl FlareLabApp {
         let frame = Frame::build(&flare, self.lut.as_deref(), &key.request);
         self.frame_key = Some(key);
         self.rebuilds.frames += 1;
-        // The ghost list: each ghost's light summed over its wavelengths, and why it is culled.
-        let mut rows: Vec<GhostRow> = flare
-            .system
-            .ghosts
-            .iter()
-            .enumerate()
-            .map(|(ghost, m)| GhostRow { ghost, i: m.i, j: m.j, rgb: [0.0; 3], culled: Some("no sprite") })
-            .collect();
-        for s in &frame.sprites.sprites {
-            let row = &mut rows[s.ghost];
-            for c in 0..3 {
-                row.rgb[c] += s.rgb[c];
-            }
-            row.culled = match (row.culled, s.culled) {
-                (_, None) => None,
-                (None, Some(_)) => None,
-                (Some("no sprite"), Some(r)) => Some(r.word()),
-                (other, Some(_)) => other,
-            };
-        }
+        let rows = ghost_rows(&flare.system, &frame.sprites);
         self.ghosts = rows;
         self.sprites = frame.sprites.sprites.clone();
         self.stats = frame.sprites.stats;
@@ -415,7 +354,7 @@ impl FlareLabApp {
         // Whatever changed the document since the last frame (a test, a restored session) is drawn now.
         self.sync();
         self.keys(ui.ctx());
-        self.poll_bake(ui.ctx());
+        self.poll_bake();
         self.drag_bench_step(ui.ctx());
         let mut actions = Vec::new();
         egui::Panel::top("menu").show(ui, |ui| self.menu_ui(ui));
@@ -774,7 +713,7 @@ impl FlareLabApp {
             Action::Bake => self.start_bake(),
             Action::CancelBake => {
                 if let Some(job) = &self.bake {
-                    job.cancel.store(true, Ordering::Relaxed);
+                    job.cancel();
                 }
             }
             Action::OpenLut => {
@@ -915,55 +854,28 @@ impl FlareLabApp {
             return;
         }
         let previous = self.lut.as_ref().filter(|l| l.lut.kind == LutKind::RayTraced).map(|l| l.lut.clone());
-        let job = BakeJob {
-            cancel: Arc::new(AtomicBool::new(false)),
-            progress: Arc::new(Mutex::new((0.0, "classifying the ghosts…".into()))),
-            result: Arc::new(Mutex::new(None)),
-        };
-        let (cancel, progress, result) = (job.cancel.clone(), job.progress.clone(), job.result.clone());
-        std::thread::spawn(move || {
-            let renderer = flare_core::raytrace::RayGridRenderer::new(&flare.system, &flare.mask);
-            let theta_max = flare_core::lut::bake::useful_field_deg(&flare);
-            let settings = flare_core::lut::classify::ClassifySettings::for_flare(&flare, theta_max);
-            let classes = flare_core::lut::classify::classify(&flare, &renderer, &settings, &[]);
-            let chosen: Vec<usize> = classes.iter().filter(|c| c.nonlinear()).map(|c| c.ghost).collect();
-            let report = |p: flare_core::lut::bake::BakeProgress| {
-                if let Ok(mut g) = progress.lock() {
-                    *g = (
-                        p.ghosts_done as f32 / p.ghosts_total.max(1) as f32,
-                        format!("{}/{} ghosts, {} entries", p.ghosts_done, p.ghosts_total, p.entries),
-                    );
-                }
-            };
-            let baked = flare_core::lut::bake::bake(
-                &flare,
-                &renderer,
-                &chosen,
-                &flare_core::lut::bake::BakeSettings::default(),
-                previous.as_ref(),
-                &report,
-                &cancel,
-            )
-            .map(|lut| (lut, classes))
-            .map_err(|e| e.to_string());
-            if let Ok(mut r) = result.lock() {
-                *r = Some(baked);
-            }
-        });
-        self.bake = Some(job);
-        self.bake_status = BakeStatus::Running { fraction: 0.0, text: "classifying the ghosts…".into() };
+        self.bake = Some(BakeJob::start(flare, previous));
+        self.bake_status = BakeStatus::Running { fraction: 0.0, text: bake::CLASSIFYING.into() };
     }
 
-    fn poll_bake(&mut self, _ctx: &egui::Context) {
-        let Some(job) = &self.bake else { return };
-        let finished = job.result.lock().ok().and_then(|mut r| r.take());
-        match finished {
-            None => {
-                if let Ok(p) = job.progress.lock() {
-                    self.bake_status = BakeStatus::Running { fraction: p.0, text: p.1.clone() };
-                }
+    /// One frame of the drag bench (see [`DragBench`]); closes the window when it is done.
+    fn drag_bench_step(&mut self, ctx: &egui::Context) {
+        let Some(bench) = &mut self.drag_bench else { return };
+        match bench.step(&mut self.doc, self.scene_ms, self.rebuilds, self.view_px) {
+            Some(line) => {
+                println!("{line}");
+                self.drag_bench = None;
+                ctx.send_viewport_cmd(egui::ViewportCommand::Close);
             }
-            Some(Ok((lut, classes))) => {
+            None => ctx.request_repaint(),
+        }
+    }
+
+    fn poll_bake(&mut self) {
+        let Some(job) = &self.bake else { return };
+        match job.poll() {
+            BakePoll::Running(fraction, text) => self.bake_status = BakeStatus::Running { fraction, text },
+            BakePoll::Finished(Ok((lut, classes))) => {
                 self.bake = None;
                 self.bake_status = BakeStatus::Done(format!(
                     "baked {} non-linear ghosts ({} entries)",
@@ -974,57 +886,10 @@ impl FlareLabApp {
                 self.doc.blend.lut = LutSource::Simulated { path: None };
                 self.set_lut(Some(lut));
             }
-            Some(Err(e)) => {
+            BakePoll::Finished(Err(e)) => {
                 self.bake = None;
                 self.bake_status = BakeStatus::Failed(format!("bake stopped: {e}"));
             }
-        }
-    }
-
-    /// `FLARELAB_DRAG_BENCH=N`: sweeps the light along a line through the optical centre (or, with
-    /// `FLARELAB_DRAG_BENCH_WHAT=exposure`, the flare's exposure from 6 to 14 EV), one step a frame, for N
-    /// frames, prints the median frame interval and scene time and what was rebuilt, and closes the window.
-    fn drag_bench_step(&mut self, ctx: &egui::Context) {
-        let rebuilds = self.rebuilds;
-        let Some(bench) = &mut self.drag_bench else { return };
-        let now = Instant::now();
-        if let Some(last) = bench.last {
-            bench.intervals_ms.push(now.duration_since(last).as_secs_f64() * 1e3);
-            bench.scene_ms.push(self.scene_ms);
-        }
-        // The first frame builds the optics and uploads the textures; rebuilds are counted after it.
-        if bench.done == 1 {
-            bench.rebuilds_at_start = Some(rebuilds);
-        }
-        bench.last = Some(now);
-        let t = bench.done as f64 / bench.frames.max(1) as f64;
-        if bench.exposure {
-            self.doc.flare_ev = 6.0 + 8.0 * t;
-        } else {
-            self.doc.light_deg = [-20.0 + 40.0 * t, -10.0 + 20.0 * t];
-        }
-        bench.done += 1;
-        if bench.done > bench.frames {
-            let median = |v: &mut Vec<f64>| {
-                v.sort_by(f64::total_cmp);
-                v.get(v.len() / 2).copied().unwrap_or(0.0)
-            };
-            let (interval, scene) = (median(&mut bench.intervals_ms), median(&mut bench.scene_ms));
-            let start = bench.rebuilds_at_start.unwrap_or(rebuilds);
-            println!(
-                "drag bench: {}: {} frames at {}x{}: median frame interval {interval:.1} ms, median scene build {scene:.2} ms; {} optics rebuilds, {} texture uploads, {} frames built during the sweep",
-                if bench.exposure { "exposure" } else { "light" },
-                bench.frames,
-                self.view_px.0,
-                self.view_px.1,
-                rebuilds.optics - start.optics,
-                rebuilds.textures - start.textures,
-                rebuilds.frames - start.frames,
-            );
-            self.drag_bench = None;
-            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
-        } else {
-            ctx.request_repaint();
         }
     }
 }
