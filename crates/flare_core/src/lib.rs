@@ -4,13 +4,18 @@
 //! [`optics`] is the foundation: a lens prescription, its files, exact f64 ray tracing and the paraxial
 //! ray-transfer matrices of every ghost path. [`ghost`] turns those matrices into one sprite per ghost and
 //! wavelength (with [`coating`] reflectances, [`spectrum`] colours and the [`aperture`] shape); [`starburst`]
-//! diffracts the aperture; [`render`] draws it all with wgpu (WGSL in `shaders/`) or its CPU twin; [`flare`]
-//! ties a lens and its settings into something that renders any light position. [`raytrace`] is the other
-//! family: ghosts ray-traced exactly on a grid (the ground-truth reference, and Hullin 2011's ray grids), and
-//! [`metrics`] measures any image against the reference. All numerics are f64 on the
-//! CPU; every singular case (total internal reflection, a ray missing a surface, a flat surface, an afocal
-//! lens, a ghost focused to a point) is an explicit outcome or a bounded value, never a NaN, and only
-//! finite values reach GPU buffers.
+//! diffracts the aperture; [`flare`] prepares a lens and its optics settings once. [`preset`] is the document
+//! the user edits (the app's and the command line's), [`frame`] the one pipeline every frame goes through
+//! (request, frame, drawn by [`render`]'s wgpu renderer or its CPU twin, layers), and [`output`] the one image
+//! writer. [`raytrace`] is the other family: ghosts ray-traced exactly on a grid (the ground-truth reference,
+//! and Hullin 2011's ray grids); [`lut`] bakes the non-linear ones into LUTs blended at run time; [`metrics`]
+//! measures any image against the reference. [`color`], [`image`], [`files`] and [`fingerprint`] are the small
+//! shared pieces (tonemaps and exposures in stops, images, atomic writes, stable hashes).
+//!
+//! All numerics are f64 on the CPU; every singular case (total internal reflection, a ray missing a surface,
+//! a flat surface, an afocal lens, a ghost focused to a point) is an explicit outcome or a bounded value, never
+//! a NaN, and only finite values reach GPU buffers. The physics and the two patented methods are summed up in
+//! `crates/flare_core/METHOD.md`.
 
 pub mod aperture;
 pub mod coating;

@@ -10,12 +10,17 @@ use flare_core::lut::format::{LutError, decode, encode};
 use flare_core::lut::{GhostLut, Symmetry, light_position_deg, mat_apply, photo};
 use flare_core::metrics;
 use flare_core::optics::library::builtin_lens;
-use flare_core::raytrace::{Grid, RayGridRenderer};
+use flare_core::raytrace::{Grid, RayGridImage, RayGridRenderer, RayGridRequest};
 use flare_core::render::{DisplaySettings, FlareScene, HdrImage, light_slopes_for_frame_position};
 use proptest::prelude::*;
 
 fn flare(id: &str) -> PreparedFlare {
     PreparedFlare::new(&builtin_lens(id).unwrap(), &FlareConfig::default()).unwrap()
+}
+
+/// Ghost `g` alone, ray-traced at the reference's grid into a `w` x `h` frame.
+fn ray_traced(renderer: &RayGridRenderer, light: [f64; 2], w: u32, h: u32, g: usize) -> RayGridImage {
+    renderer.render_request(&RayGridRequest::frame(light, w, h, Grid::Adaptive(128)).only(g)).unwrap().remove(0)
 }
 
 fn small_settings() -> BakeSettings {
@@ -96,7 +101,7 @@ fn a_blended_lut_ghost_matches_the_ray_traced_ghost_between_samples() {
         let (scene, lut_scene) = (frame.scene.clone(), frame.lut.clone().unwrap_or_default());
         let mut image = HdrImage { width: w, height: h, pixels: vec![[0.0; 4]; (w * h) as usize] };
         lut_pass((scene.width, scene.height), &lut_scene, &single.lut, &mut image);
-        let truth = renderer.render_selected(light, w, h, Grid::Adaptive(128), |k| k == g).unwrap();
+        let truth = ray_traced(&renderer, light, w, h, g);
         let e_lut: f64 = image.pixels.iter().map(|p| f64::from(p[1])).sum();
         let e_ref: f64 = truth.hdr.pixels.iter().map(|p| f64::from(p[1])).sum();
         assert!(e_ref > 0.0, "the ghost has light at {theta} deg");
@@ -546,11 +551,13 @@ fn a_turned_view_is_the_render_at_the_turned_light() {
             }
         })
         .collect();
-    let turned = renderer.render_turned(base, &views, Grid::Adaptive(128), |k| k == g).unwrap();
+    let turned =
+        renderer.render_request(&RayGridRequest::views(base, views.clone(), Grid::Adaptive(128)).only(g)).unwrap();
     for ((view, image), &turn) in views.iter().zip(&turned).zip(&turns) {
-        let direct = renderer
-            .render_window(light_position_deg(theta, turn), &view.window, Grid::Adaptive(128), |k| k == g)
-            .unwrap();
+        let unturned = View { turn_deg: 0.0, ..*view };
+        let light = light_position_deg(theta, turn);
+        let request = RayGridRequest::views(light, vec![unturned], Grid::Adaptive(128)).only(g);
+        let direct = renderer.render_request(&request).unwrap().remove(0);
         let single = renderer.footprint_mm(g, light_position_deg(theta, turn), 48).unwrap();
         let footprint = footprints[turns.iter().position(|t| *t == turn).unwrap()].unwrap();
         let size = (single[2] - single[0]).max(single[3] - single[1]);
@@ -584,9 +591,18 @@ fn a_scouted_render_is_the_plain_render_for_fewer_rays() {
         let window =
             Window { centre_mm: [0.5 * (b[0] + b[2]), 0.5 * (b[1] + b[3])], width_mm: side, width: 96, height: 96 };
         let views = [View { window, turn_deg: 0.0 }];
-        let scouted = renderer.render_scouted(&scout, &views, Grid::Adaptive(128)).unwrap().remove(0);
-        let plain = renderer.render_turned(light, &views, Grid::Adaptive(128), |k| k == g).unwrap().remove(0);
-        let fine = renderer.render_turned(light, &views, Grid::Adaptive(256), |k| k == g).unwrap().remove(0);
+        let scouted = renderer
+            .render_request(&RayGridRequest::scouted(&scout, views.to_vec(), Grid::Adaptive(128)))
+            .unwrap()
+            .remove(0);
+        let plain = renderer
+            .render_request(&RayGridRequest::views(light, views.to_vec(), Grid::Adaptive(128)).only(g))
+            .unwrap()
+            .remove(0);
+        let fine = renderer
+            .render_request(&RayGridRequest::views(light, views.to_vec(), Grid::Adaptive(256)).only(g))
+            .unwrap()
+            .remove(0);
         let energy = |i: &HdrImage| i.pixels.iter().map(|p| f64::from(p[1])).sum::<f64>();
         let (e_scouted, e_fine) = (energy(&scouted.hdr), energy(&fine.hdr));
         let (l1_scouted, l1_plain) =
@@ -642,7 +658,7 @@ fn a_ghost_that_vanishes_within_an_interval_is_refined_not_cross_faded() {
         let (scene, lut_scene) = (frame.scene.clone(), frame.lut.clone().unwrap_or_default());
         let mut image = HdrImage { width: w, height: h, pixels: vec![[0.0; 4]; (w * h) as usize] };
         lut_pass((scene.width, scene.height), &lut_scene, &live.lut, &mut image);
-        let truth = renderer.render_selected(light, w, h, Grid::Adaptive(128), |k| k == g).unwrap().hdr;
+        let truth = ray_traced(&renderer, light, w, h, g).hdr;
         let luma = |p: &[f32; 4]| metrics::luminance([p[0], p[1], p[2]].map(f64::from));
         let energy: f64 = truth.pixels.iter().map(luma).sum();
         if bright == 0.0 {

@@ -7,11 +7,11 @@
 //!    with the azimuth `axis + phi`), from one set of traced rays: the lens is rotationally symmetric, so the
 //!    rays traced for the first azimuth, turned about the axis, are the rays of every other; only the stop's
 //!    blades do not turn, and the mask is looked up at the turned stop coordinates
-//!    ([`RayGridRenderer::render_turned`]). Where the ghost lands is found by a scout
+//!    ([`crate::raytrace::RayGridRequest`]'s views). Where the ghost lands is found by a scout
 //!    ([`RayGridRenderer::scout`]); the window around it gets at most [`BakeSettings::res`] texels across
 //!    (never finer than [`super::MIN_TEXEL_MM`]), and the ghost alone is rendered into it by the reference
 //!    renderer ([`Grid::Adaptive`], up to [`BakeSettings::grid`] cells, over only the region the scout saw
-//!    light pass: [`RayGridRenderer::render_scouted`]). Alpha is the coverage ([`super::texels_with_coverage`]).
+//!    light pass: [`crate::raytrace::Ghosts::Scouted`]). Alpha is the coverage ([`super::texels_with_coverage`]).
 //! 2. **Thetas where the pattern changes**: the angles start at `initial_steps` even steps from 0 to the
 //!    useful field (the light angle whose image reaches the corner of the 36 x 24 mm sensor). Every interval
 //!    wider than twice [`BakeSettings::min_step_deg`] gets its middle rendered and kept; while the run time's
@@ -42,7 +42,7 @@ use super::{
 use crate::color::luminance;
 use crate::flare::PreparedFlare;
 use crate::ghost::light_slopes_for_frame_position;
-use crate::raytrace::{Grid, RayGridRenderer, View, Window};
+use crate::raytrace::{Grid, RayGridRenderer, RayGridRequest, View, Window};
 
 /// How a LUT is baked.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -175,7 +175,7 @@ pub fn render_entry(
 }
 
 /// Renders the entries of ghost `g` at `theta_deg` for every azimuth `axis + phi` of `phis_deg`, from one
-/// set of traced rays ([`RayGridRenderer::render_turned`]: the lens turns the image with the light).
+/// set of traced rays (a view per azimuth: the lens turns the image with the light).
 pub fn render_column(
     flare: &PreparedFlare,
     renderer: &RayGridRenderer,
@@ -223,7 +223,8 @@ pub fn render_column(
         return entries;
     }
     let only: Vec<View> = views.iter().map(|v| v.1).collect();
-    let Ok(images) = renderer.render_scouted(&scout, &only, Grid::Adaptive(settings.grid)) else {
+    let request = RayGridRequest::scouted(&scout, only, Grid::Adaptive(settings.grid));
+    let Ok(images) = renderer.render_request(&request) else {
         return entries.into_iter().map(|e| LutEntry::empty(e.theta_deg, e.phi_deg, e.paraxial)).collect();
     };
     for ((k, _), image) in views.into_iter().zip(images) {

@@ -25,7 +25,7 @@ use crate::color::luminance;
 use crate::flare::PreparedFlare;
 use crate::ghost::{CullReason, Sensor};
 use crate::image::HdrImage;
-use crate::raytrace::{Grid, RayGridRenderer, Window};
+use crate::raytrace::{Grid, RayGridRenderer, RayGridRequest, View, Window};
 use crate::render::{FlareScene, cpu};
 
 /// The default [`ClassifySettings::faint_fraction`]: 0, every non-linear ghost is baked. Measured on the
@@ -205,7 +205,9 @@ pub fn classify(
                 if !(side.is_finite() && side > 0.0) {
                     continue;
                 }
-                let Ok(t) = renderer.render_window(light, &window, Grid::Fixed(settings.grid), |k| k == g) else {
+                let view = View { window, turn_deg: 0.0 };
+                let request = RayGridRequest::views(light, vec![view], Grid::Fixed(settings.grid)).only(g);
+                let Ok(t) = renderer.render_request(&request).map(|mut images| images.remove(0)) else {
                     continue;
                 };
                 let p = paraxial_image(flare, g, light, &window);

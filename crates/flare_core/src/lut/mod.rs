@@ -16,7 +16,7 @@
 //!   from 0 to the lens's useful field, refined where the pattern changes fastest, and at the wedge's azimuths.
 //!   Each [`LutEntry`] stores its image (RGBA half floats, A = coverage) in a window of the sensor around
 //!   the ghost, with the ghost's paraxial frame (centre, half-size, energy) at that light.
-//! - [`format`]: the `.flut` file (versioned header, per-entry metadata, deflate-compressed half floats).
+//! - [`format`](mod@format): the `.flut` file (versioned header, per-entry metadata, deflate-compressed half floats).
 //! - [`photo`]: a photographed flare swept over theta as a 1D LUT.
 //! - [`blend`]: at run time, per LUT ghost, the (up to) two thetas and two azimuth samples around the light,
 //!   each mapped from its baked paraxial frame into the live one (the same normalised position, rotated by

@@ -1,0 +1,174 @@
+//! Ray-traced ghosts: the ground-truth reference renderer and Hullin et al. 2011's ray grids.
+//!
+//! # How it works
+//! Nothing here is paraxial. Per ghost and wavelength (one job; jobs run in parallel with rayon, each into a
+//! per-thread f64 image that is summed at the end) a regular grid of (N+1) x (N+1) rays leaves the entrance
+//! plane (z = 0, the first vertex) in the light's direction and is traced exactly, in f64, along the ghost's
+//! path ([`crate::optics::Tracer::trace_visit`]). Each ray records:
+//! - where it lands on the sensor (the same plane and pixel mapping as the paraxial renderer);
+//! - its **weight**: the reflectance R at both reflections times the transmittance 1 - R at every refraction,
+//!   each at the ray's own angle of incidence and wavelength, with the surface's coating (dense tables of
+//!   [`DENSE_TABLE_SAMPLES`] samples over sin^2 i from [`crate::coating`]);
+//! - its coordinates at every stop crossing (1 or 3), in units of the stop radius at the chosen f-number;
+//! - its largest relative height `h / semi-aperture` over every other surface it meets (Hullin's "relative
+//!   radius").
+//!
+//! A ray that misses a surface, is totally internally reflected, or turns back for good is invalid; every
+//! triangle touching it is dropped (its light really is lost). Each grid cell is split into two triangles and
+//! **splatted with energy conserved**: a triangle carries `cos(theta) x (entrance area) x (mean weight)` of
+//! the light (the irradiance on the entrance plane of a unit light is cos theta), spread over its footprint on
+//! the sensor, so irradiance = that energy / sensor area: where rays bunch into a caustic, the image
+//! brightens exactly as much as the footprint shrinks. The footprint is **box filtered**, as a sensor pixel
+//! integrates: the triangle is clipped to each pixel it covers (`Polygon`) and the pixel gets the
+//! irradiance times that area. The stop coordinates, relative radius and weight are interpolated
+//! barycentrically at the centroid of each covered part; the aperture mask is looked up at every stop crossing
+//! and multiplied (the stop's blade shape, anti-aliased; skipped when the triangle's corners all lie in the
+//! disc where the mask is fully open), and a part whose interpolated relative radius exceeds 1 is vignetted.
+//! Sampling at pixel centres instead aliases the grid into moire wherever triangles are a pixel or two across
+//! (the folds of a caustic most), differently at every grid; the box filter does not. A triangle inside one
+//! pixel, or collapsed to a line or a point (a ghost focused there), puts all of its light in that pixel: it
+//! keeps its energy and stays finite.
+//!
+//! Where the grid lies: a pre-pass of a coarse grid over the whole front lens (a square of half-side the front
+//! clear aperture plus the obliquity of its sag) finds the cells where some ray passes everything and lands in
+//! the frame; the dense grid covers their bounding box grown by one coarse cell (light that lands off the frame
+//! is not traced twice). When no coarse ray passes at all, it covers 1.25 x the paraxial entrance region instead
+//! (only a hint of where to look, never a result), so a ghost smaller than a coarse cell is not missed. Inside
+//! that box a dense ray is traced only in the lit cells of the pre-pass grown by one cell (`LitCells`): a
+//! ghost's light is often a disc, a crescent or a ring, and the rays far from it carry none. A LUT bake first
+//! **scouts** a ghost ([`RayGridRenderer::scout`]: a 32-cell pre-pass over the front lens, then 48 cells over
+//! where light passed) to size its windows, and that scout grid, much finer than one over the whole front
+//! lens, is then the render's pre-pass ([`Ghosts::Scouted`]).
+//!
+//! Every image comes from one entry point, [`RayGridRenderer::render_request`] (a [`RayGridRequest`]: the light,
+//! the views, the grid and which ghosts); [`RayGridRenderer::render`] is its whole-frame shorthand. The module
+//! is in three parts: [`grid`] (grid sizes, windows, the traced vertex), `tracer` (planning the jobs, the
+//! pre-pass, the scout, tracing) and `splat` (the box-filtered splatting and the accumulation).
+//!
+//! The two methods are this one algorithm at two densities ([`Grid`]):
+//! - **reference** (adaptive, up to [`REFERENCE_GRID`] cells across, about two per pixel of the ghost's extent
+//!   in the frame): the ground truth, converged (a test and `flarelab bench` show the image change falling as
+//!   the grid doubles);
+//! - **raygrid-N** (N = 16..128): Hullin et al. 2011's interactive method: a coarse grid of traced rays
+//!   rasterised as triangles with the aperture looked up per pixel.
+
+pub mod grid;
+mod splat;
+mod tracer;
+
+pub use grid::{DENSE_TABLE_SAMPLES, GRID_RANGE, Grid, REFERENCE_GRID, REFERENCE_MIN_GRID, View, Window};
+pub use splat::{RayGridImage, RayGridStats};
+pub use tracer::{Ghosts, RayGridError, RayGridRenderer, RayGridRequest, Scout};
+
+#[cfg(test)]
+mod tests {
+    use super::grid::Vertex;
+    use super::splat::{Accumulator, JobFrame, splat_triangle};
+    use super::*;
+    use crate::flare::FlareConfig;
+    use crate::optics::library::builtin_lens;
+
+    fn renderer(id: &str) -> RayGridRenderer {
+        let flare = crate::flare::PreparedFlare::new(&builtin_lens(id).unwrap(), &FlareConfig::default()).unwrap();
+        RayGridRenderer::new(&flare.system, &flare.mask)
+    }
+
+    #[test]
+    fn refuses_bad_requests() {
+        let r = renderer("tessar");
+        assert_eq!(r.render([0.0, 0.0], 32, 32, Grid::Fixed(1)).unwrap_err(), RayGridError::Grid(1));
+        assert_eq!(r.render([0.0, 0.0], 0, 32, Grid::Adaptive(16)).unwrap_err(), RayGridError::Size(0, 32));
+        assert!(matches!(r.render([f64::NAN, 0.0], 32, 32, Grid::Fixed(16)), Err(RayGridError::Angle(_))));
+    }
+
+    #[test]
+    fn images_are_finite_and_non_negative_at_0_and_89_degrees() {
+        let r = renderer("dgauss");
+        for light in [[0.0, 0.0], [0.0, 89.0], [89.0, -89.0], [3.0, 12.0]] {
+            let image = r.render(light, 48, 32, Grid::Fixed(16)).unwrap();
+            assert!(image.hdr.pixels.iter().flatten().all(|v| v.is_finite() && *v >= 0.0), "{light:?}");
+            assert!(image.moments.iter().all(|m| m.energy.is_finite() && m.energy >= 0.0));
+            assert_eq!(image.stats.jobs, r.ghost_count() * 3);
+        }
+    }
+
+    #[test]
+    fn a_point_focused_triangle_keeps_its_energy() {
+        let mask = crate::aperture::Aperture::default().rasterise(64);
+        let frame = JobFrame {
+            ghost: 0,
+            rgb: [1.0, 1.0, 1.0],
+            luma: 1.0,
+            stop_count: 1,
+            mask: &mask,
+            open_radius2: 0.0,
+            triangle_flux: 2.0,
+        };
+        let v = Vertex { valid: true, pixel: [10.3, 7.6], stops: [[0.0; 2]; 3], ratio: 0.5, weight: 0.25 };
+        let mut acc = Accumulator::new(20, 20, 1);
+        assert!(splat_triangle([&v, &v, &v], &frame, &mut acc));
+        let total: f64 = acc.energy.iter().map(|p| p[0]).sum();
+        assert!((total - 0.5).abs() < 1e-12, "{total}");
+        // A large triangle: irradiance = flux / area, times the area it covers of each pixel.
+        let tri = [[2.0, 2.0], [18.0, 2.0], [2.0, 18.0]].map(|pixel| Vertex { pixel, ..v });
+        let mut acc = Accumulator::new(20, 20, 1);
+        splat_triangle([&tri[0], &tri[1], &tri[2]], &frame, &mut acc);
+        let total: f64 = acc.energy.iter().map(|p| p[0]).sum();
+        assert!((total / 0.5 - 1.0).abs() < 1e-9, "box-filtered energy {total} vs 0.5");
+        // Partly off the frame: what lands in it is its share by area (x >= 0: a quarter of this one).
+        let tri = [[-8.0, 2.0], [8.0, 2.0], [-8.0, 18.0]].map(|pixel| Vertex { pixel, ..v });
+        let mut acc = Accumulator::new(20, 20, 1);
+        splat_triangle([&tri[0], &tri[1], &tri[2]], &frame, &mut acc);
+        let total: f64 = acc.energy.iter().map(|p| p[0]).sum();
+        assert!((total / 0.125 - 1.0).abs() < 1e-9, "{total} vs 1/4 of 0.5");
+    }
+
+    /// A mesh of triangles a pixel or so across, of one irradiance, tiles a region: every pixel inside it gets
+    /// exactly that irradiance (no moire from the grid), whatever the mesh's scale, skew and offset.
+    #[test]
+    fn a_uniform_mesh_splats_a_uniform_image() {
+        let mask = crate::aperture::Aperture::default().rasterise(64);
+        let v = Vertex { valid: true, pixel: [0.0; 2], stops: [[0.0; 2]; 3], ratio: 0.5, weight: 1.0 };
+        for (step, skew, offset) in [(1.37, 0.21, [3.3, 2.9]), (0.71, -0.4, [4.05, 3.5]), (2.3, 0.0, [2.5, 2.5])] {
+            // Cells are parallelograms of area step^2, each two triangles of half that.
+            let frame = JobFrame {
+                ghost: 0,
+                rgb: [1.0; 3],
+                luma: 1.0,
+                stop_count: 1,
+                mask: &mask,
+                open_radius2: f64::from(mask.open_radius()).powi(2),
+                triangle_flux: 0.5 * step * step,
+            };
+            let n = (24.0 / step) as usize;
+            let at = |i: usize, j: usize| {
+                let (x, y) = (i as f64 * step, j as f64 * step);
+                Vertex { pixel: [offset[0] + x + skew * y, offset[1] + y], ..v }
+            };
+            let mut acc = Accumulator::new(32, 32, 1);
+            for j in 0..n {
+                for i in 0..n {
+                    let (a, b, c, d) = (at(i, j), at(i + 1, j), at(i, j + 1), at(i + 1, j + 1));
+                    assert!(splat_triangle([&a, &b, &d], &frame, &mut acc));
+                    assert!(splat_triangle([&a, &d, &c], &frame, &mut acc));
+                }
+            }
+            // Pixels well inside the mesh: irradiance 1 (energy per unit area; a pixel is 1 x 1).
+            let inside = (0..32 * 32).filter(|k| {
+                let (x, y) = ((k % 32) as f64, (k / 32) as f64);
+                let (y0, y1) = (offset[1] + 1.0, offset[1] + n as f64 * step - 2.0);
+                let x_at = |y: f64| offset[0] + skew * (y - offset[1]);
+                y > y0
+                    && y + 1.0 < y1
+                    && x > x_at(y).max(x_at(y + 1.0)) + 1.0
+                    && x + 2.0 < x_at(y).min(x_at(y + 1.0)) + n as f64 * step
+            });
+            let mut count = 0;
+            for k in inside {
+                assert!((acc.energy[k][0] - 1.0).abs() < 1e-9, "step {step}: pixel {k} got {}", acc.energy[k][0]);
+                count += 1;
+            }
+            assert!(count > 100, "step {step}: only {count} pixels inside");
+        }
+    }
+}

@@ -1,0 +1,387 @@
+//! Splatting traced triangles with their energy conserved: each triangle clipped to the pixels it covers (a box
+//! filter, [`Polygon`]), its attributes interpolated at each covered part, the aperture mask looked up at every
+//! stop crossing, and the light added to a per-thread [`Accumulator`] that becomes a [`RayGridImage`].
+
+use crate::aperture::ApertureMask;
+use crate::image::{GhostMoments, HdrImage};
+
+use super::grid::{Vertex, Window};
+
+/// Counts of one render.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RayGridStats {
+    pub jobs: usize,
+    pub rays: u64,
+    pub triangles: u64,
+    /// Jobs (ghost x wavelength) where no ray passed everything.
+    pub empty_jobs: usize,
+}
+/// A ray-traced ghost image and what it is made of.
+#[derive(Clone, Debug)]
+pub struct RayGridImage {
+    /// Linear irradiance relative to the light, ghosts only, `width` x `height`.
+    pub hdr: HdrImage,
+    /// Per ghost: luminance-weighted energy and its first moments, over the pixels in the frame.
+    pub moments: Vec<GhostMoments>,
+    pub stats: RayGridStats,
+}
+/// Per-thread accumulation: energy per pixel (relative irradiance x mm^2) and per-ghost moments.
+pub(super) struct Accumulator {
+    pub(super) width: usize,
+    pub(super) height: usize,
+    pub(super) energy: Vec<[f64; 3]>,
+    pub(super) moments: Vec<GhostMoments>,
+    pub(super) stats: RayGridStats,
+}
+impl Accumulator {
+    pub(super) fn new(width: usize, height: usize, ghosts: usize) -> Self {
+        Self {
+            width,
+            height,
+            energy: vec![[0.0; 3]; width * height],
+            moments: vec![GhostMoments::default(); ghosts],
+            stats: RayGridStats::default(),
+        }
+    }
+
+    pub(super) fn merge(mut self, other: Self) -> Self {
+        for (a, b) in self.energy.iter_mut().zip(&other.energy) {
+            for c in 0..3 {
+                a[c] += b[c];
+            }
+        }
+        for (a, b) in self.moments.iter_mut().zip(&other.moments) {
+            a.add(b);
+        }
+        self.stats.jobs += other.stats.jobs;
+        self.stats.rays += other.stats.rays;
+        self.stats.triangles += other.stats.triangles;
+        self.stats.empty_jobs += other.stats.empty_jobs;
+        self
+    }
+
+    /// The image of `window`: energy per pixel / pixel area = irradiance; moments likewise in irradiance x
+    /// pixel^2, as the paraxial renderer's.
+    pub(super) fn into_image(self, window: &Window) -> RayGridImage {
+        let pixel_area_mm2 = window.px_per_mm().powi(-2);
+        let moments = self
+            .moments
+            .iter()
+            .map(|m| GhostMoments {
+                energy: m.energy / pixel_area_mm2,
+                sum_x: m.sum_x / pixel_area_mm2,
+                sum_y: m.sum_y / pixel_area_mm2,
+            })
+            .collect();
+        let pixels = self
+            .energy
+            .iter()
+            .map(|e| {
+                let v = e.map(|c| (c / pixel_area_mm2) as f32);
+                let v = v.map(|c| if c.is_finite() && c > 0.0 { c } else { 0.0 });
+                [v[0], v[1], v[2], 1.0]
+            })
+            .collect();
+        RayGridImage {
+            hdr: HdrImage { width: self.width as u32, height: self.height as u32, pixels },
+            moments,
+            stats: self.stats,
+        }
+    }
+
+    /// Adds `energy` (scalar, before the spectral weight) at pixel (x, y) when it lies in the frame.
+    pub(super) fn add(&mut self, x: i64, y: i64, energy: f64, job: &JobFrame) {
+        if x < 0 || y < 0 || x >= self.width as i64 || y >= self.height as i64 || energy.is_nan() || energy <= 0.0 {
+            return;
+        }
+        let p = &mut self.energy[y as usize * self.width + x as usize];
+        for (value, weight) in p.iter_mut().zip(job.rgb) {
+            *value += energy * weight;
+        }
+        let luma = energy * job.luma;
+        self.moments[job.ghost].add_sample(luma, [x as f64 + 0.5, y as f64 + 0.5]);
+    }
+}
+/// What a job's triangles need besides their vertices.
+pub(super) struct JobFrame<'a> {
+    pub(super) ghost: usize,
+    pub(super) rgb: [f64; 3],
+    pub(super) luma: f64,
+    pub(super) stop_count: usize,
+    pub(super) mask: &'a ApertureMask,
+    /// [`RayGridRenderer::open_radius2`].
+    pub(super) open_radius2: f64,
+    /// cos(theta) x the entrance area of one triangle (mm^2).
+    pub(super) triangle_flux: f64,
+}
+/// A quantity linear over a triangle: `a0 + ax x + ay y` at the pixel position (x, y).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Plane {
+    pub(super) a0: f64,
+    pub(super) ax: f64,
+    pub(super) ay: f64,
+}
+impl Plane {
+    pub(super) fn at(&self, p: [f64; 2]) -> f64 {
+        self.a0 + self.ax * p[0] + self.ay * p[1]
+    }
+}
+/// Barycentric interpolation over one triangle in pixel space: the three barycentric coordinates as planes.
+pub(super) struct Interpolator {
+    pub(super) bary: [Plane; 3],
+}
+impl Interpolator {
+    /// `None` for a triangle of zero area.
+    pub(super) fn new(v: [[f64; 2]; 3]) -> Option<Self> {
+        let area2 = (v[1][0] - v[0][0]) * (v[2][1] - v[0][1]) - (v[1][1] - v[0][1]) * (v[2][0] - v[0][0]);
+        if area2 == 0.0 || !area2.is_finite() {
+            return None;
+        }
+        // l_i is the edge function of the opposite edge (q, r) over twice the area.
+        let plane = |q: [f64; 2], r: [f64; 2]| Plane {
+            a0: (q[0] * r[1] - q[1] * r[0]) / area2,
+            ax: (q[1] - r[1]) / area2,
+            ay: (r[0] - q[0]) / area2,
+        };
+        Some(Self { bary: [plane(v[1], v[2]), plane(v[2], v[0]), plane(v[0], v[1])] })
+    }
+
+    /// The plane of a quantity with values `f` at the three vertices.
+    pub(super) fn attribute(&self, f: [f64; 3]) -> Plane {
+        let [l0, l1, l2] = self.bary;
+        Plane {
+            a0: l0.a0 * f[0] + l1.a0 * f[1] + l2.a0 * f[2],
+            ax: l0.ax * f[0] + l1.ax * f[1] + l2.ax * f[2],
+            ay: l0.ay * f[0] + l1.ay * f[1] + l2.ay * f[2],
+        }
+    }
+}
+/// The attributes of one triangle as planes: the light passing at a pixel is `shade`.
+pub(super) struct TriangleShader<'a> {
+    pub(super) ratio: Plane,
+    pub(super) weight: Plane,
+    pub(super) stops: [[Plane; 2]; 3],
+    /// Every stop crossing of the triangle lies in the disc where the mask is fully open (the stop coordinates
+    /// are linear over it, so it does if its corners do): no mask lookup needed.
+    pub(super) open: bool,
+    pub(super) frame: &'a JobFrame<'a>,
+}
+impl<'a> TriangleShader<'a> {
+    pub(super) fn new(tri: [&Vertex; 3], interp: &Interpolator, frame: &'a JobFrame<'a>) -> Self {
+        let attr = |f: &dyn Fn(&Vertex) -> f64| interp.attribute([f(tri[0]), f(tri[1]), f(tri[2])]);
+        Self {
+            ratio: attr(&|v| v.ratio),
+            weight: attr(&|v| v.weight),
+            stops: std::array::from_fn(|k| {
+                if k < frame.stop_count {
+                    [attr(&|v| v.stops[k][0]), attr(&|v| v.stops[k][1])]
+                } else {
+                    [Plane { a0: 0.0, ax: 0.0, ay: 0.0 }; 2]
+                }
+            }),
+            open: Self::open(tri, frame),
+            frame,
+        }
+    }
+
+    /// The attributes averaged over the vertices, constant: for a triangle collapsed to a line or a point.
+    pub(super) fn mean(tri: [&Vertex; 3], frame: &'a JobFrame<'a>) -> Self {
+        let mean = |f: &dyn Fn(&Vertex) -> f64| {
+            let value = (f(tri[0]) + f(tri[1]) + f(tri[2])) / 3.0;
+            Plane { a0: value, ax: 0.0, ay: 0.0 }
+        };
+        Self {
+            ratio: mean(&|v| v.ratio),
+            weight: mean(&|v| v.weight),
+            stops: std::array::from_fn(|k| [mean(&|v| v.stops[k][0]), mean(&|v| v.stops[k][1])]),
+            open: Self::open(tri, frame),
+            frame,
+        }
+    }
+
+    pub(super) fn open(tri: [&Vertex; 3], frame: &JobFrame) -> bool {
+        let inside = |s: [f64; 2]| s[0] * s[0] + s[1] * s[1] < frame.open_radius2;
+        tri.iter().all(|v| v.stops[..frame.stop_count].iter().all(|&s| inside(s)))
+    }
+
+    /// Weight x aperture masks at the pixel position `p`; 0 where vignetted.
+    pub(super) fn shade(&self, p: [f64; 2]) -> f64 {
+        if self.ratio.at(p) > 1.0 {
+            return 0.0;
+        }
+        let mut m = self.weight.at(p).max(0.0);
+        if self.open {
+            return m;
+        }
+        for [su, sv] in &self.stops[..self.frame.stop_count] {
+            if m == 0.0 {
+                break;
+            }
+            m *= f64::from(self.frame.mask.sample(su.at(p) as f32, sv.at(p) as f32));
+        }
+        m
+    }
+}
+/// Splats one triangle with its energy conserved; `false` when it carries no light.
+pub(super) fn splat_triangle(tri: [&Vertex; 3], frame: &JobFrame, acc: &mut Accumulator) -> bool {
+    if !tri.iter().all(|v| v.valid) || tri.iter().all(|v| v.ratio > 1.0) {
+        return false;
+    }
+    // Entirely outside the mask's square on one side at some crossing: nothing passes.
+    for k in 0..frame.stop_count {
+        for axis in 0..2 {
+            if tri.iter().all(|v| v.stops[k][axis] > 1.0) || tri.iter().all(|v| v.stops[k][axis] < -1.0) {
+                return false;
+            }
+        }
+    }
+    let pixels = [tri[0].pixel, tri[1].pixel, tri[2].pixel];
+    let x_lo = pixels.iter().map(|p| p[0]).fold(f64::INFINITY, f64::min);
+    let x_hi = pixels.iter().map(|p| p[0]).fold(f64::NEG_INFINITY, f64::max);
+    let y_lo = pixels.iter().map(|p| p[1]).fold(f64::INFINITY, f64::min);
+    let y_hi = pixels.iter().map(|p| p[1]).fold(f64::NEG_INFINITY, f64::max);
+    let (w, h) = (acc.width as f64, acc.height as f64);
+    if x_lo > w + 1.0 || y_lo > h + 1.0 || x_hi < -1.0 || y_hi < -1.0 {
+        return true; // Its light is real but lands off the frame.
+    }
+    let at = |l: [f64; 3]| [0, 1].map(|c| l[0] * pixels[0][c] + l[1] * pixels[1][c] + l[2] * pixels[2][c]);
+    let Some(interp) = Interpolator::new(pixels) else {
+        // Collapsed to a line or a point (a ghost focused there): all of its energy in the pixel of its centroid.
+        let c = at([1.0 / 3.0; 3]);
+        let energy = frame.triangle_flux * TriangleShader::mean(tri, frame).shade(c);
+        acc.add(c[0].floor() as i64, c[1].floor() as i64, energy, frame);
+        return true;
+    };
+    let shader = TriangleShader::new(tri, &interp, frame);
+    let b = &interp.bary;
+    let area_px = 0.5 / (b[0].ax * b[1].ay - b[0].ay * b[1].ax).abs();
+    let (col, row) = (x_lo.floor(), y_lo.floor());
+    if x_hi < col + 1.0 && y_hi < row + 1.0 {
+        // Inside one pixel: all of it there.
+        acc.add(col as i64, row as i64, frame.triangle_flux * shader.shade(at([1.0 / 3.0; 3])), frame);
+        return true;
+    }
+    // Irradiance (the triangle's flux over its footprint) x the area it covers of each pixel, shaded at the
+    // centroid of that part: the box filter a sensor pixel applies.
+    let irradiance = frame.triangle_flux / area_px;
+    // The part in the frame, cut into rows, each row into pixels.
+    let mut rows = Polygon::triangle(pixels);
+    if x_lo < 0.0 || y_lo < 0.0 || x_hi > w || y_hi > h {
+        rows = rows.clip(0, 0.0, false).clip(0, w, true).clip(1, 0.0, false).clip(1, h, true);
+    }
+    let Some([_, y_first, ..]) = rows.bounds() else { return true };
+    let mut y = y_first.floor();
+    while rows.count >= 3 {
+        let mut columns = rows.cut_below(1, y + 1.0);
+        if let Some([x_first, ..]) = columns.bounds() {
+            let mut x = x_first.floor();
+            while columns.count >= 3 {
+                let piece = columns.cut_below(0, x + 1.0);
+                if let Some((area, centroid)) = piece.area_centroid() {
+                    acc.add(x as i64, y as i64, irradiance * area * shader.shade(centroid), frame);
+                }
+                x += 1.0;
+            }
+        }
+        y += 1.0;
+    }
+    true
+}
+/// A convex polygon in pixel space: a triangle clipped to an axis-aligned box (the frame, a row of it, a pixel),
+/// so at most seven vertices (each side of the box adds at most one).
+#[derive(Clone, Copy)]
+pub(super) struct Polygon {
+    pub(super) vertices: [[f64; 2]; 8],
+    pub(super) count: usize,
+}
+impl Polygon {
+    const EMPTY: Self = Self { vertices: [[0.0; 2]; 8], count: 0 };
+
+    pub(super) fn triangle(v: [[f64; 2]; 3]) -> Self {
+        let mut vertices = [[0.0; 2]; 8];
+        vertices[..3].copy_from_slice(&v);
+        Self { vertices, count: 3 }
+    }
+
+    /// Cuts off and returns the part with `p[axis] <= at`, keeping the rest.
+    pub(super) fn cut_below(&mut self, axis: usize, at: f64) -> Self {
+        let (lower, upper) = self.split(axis, at);
+        *self = upper;
+        lower
+    }
+
+    /// The part with `p[axis] <= at` (`below`) or `p[axis] >= at`.
+    pub(super) fn clip(&self, axis: usize, at: f64, below: bool) -> Self {
+        let (lower, upper) = self.split(axis, at);
+        if below { lower } else { upper }
+    }
+
+    /// The parts with `p[axis] <= at` and with `p[axis] >= at` (Sutherland-Hodgman against one line, both sides
+    /// in one pass).
+    pub(super) fn split(&self, axis: usize, at: f64) -> (Self, Self) {
+        let vertices = &self.vertices[..self.count];
+        let empty = Self::EMPTY;
+        if vertices.iter().all(|p| p[axis] <= at) {
+            return (*self, empty);
+        }
+        if vertices.iter().all(|p| p[axis] >= at) {
+            return (empty, *self);
+        }
+        let (mut lower, mut upper) = (empty, empty);
+        let push = |poly: &mut Self, p: [f64; 2]| {
+            if poly.count < poly.vertices.len() {
+                poly.vertices[poly.count] = p;
+                poly.count += 1;
+            }
+        };
+        let mut a = vertices[vertices.len() - 1];
+        for &b in vertices {
+            if a[axis] <= at {
+                push(&mut lower, a);
+            }
+            if a[axis] >= at {
+                push(&mut upper, a);
+            }
+            if (a[axis] < at && b[axis] > at) || (a[axis] > at && b[axis] < at) {
+                // The edge crosses the line (so its ends differ along `axis`): the crossing belongs to both.
+                let t = (at - a[axis]) / (b[axis] - a[axis]);
+                let mut p = [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])];
+                p[axis] = at;
+                push(&mut lower, p);
+                push(&mut upper, p);
+            }
+            a = b;
+        }
+        (lower, upper)
+    }
+
+    /// `[x_min, y_min, x_max, y_max]`, `None` when the polygon is empty.
+    pub(super) fn bounds(&self) -> Option<[f64; 4]> {
+        (self.count >= 3).then(|| {
+            self.vertices[..self.count]
+                .iter()
+                .fold([f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY], |b, p| {
+                    [b[0].min(p[0]), b[1].min(p[1]), b[2].max(p[0]), b[3].max(p[1])]
+                })
+        })
+    }
+
+    /// Area (px^2) and centroid; `None` when empty or of no area.
+    pub(super) fn area_centroid(&self) -> Option<(f64, [f64; 2])> {
+        if self.count < 3 {
+            return None;
+        }
+        let o = self.vertices[0];
+        let (mut area2, mut cx, mut cy) = (0.0, 0.0, 0.0);
+        for i in 1..self.count - 1 {
+            let (a, b) = (self.vertices[i], self.vertices[i + 1]);
+            let (ax, ay, bx, by) = (a[0] - o[0], a[1] - o[1], b[0] - o[0], b[1] - o[1]);
+            let cross = ax * by - ay * bx;
+            area2 += cross;
+            cx += cross * (ax + bx);
+            cy += cross * (ay + by);
+        }
+        (area2 != 0.0 && area2.is_finite())
+            .then(|| (0.5 * area2.abs(), [o[0] + cx / (3.0 * area2), o[1] + cy / (3.0 * area2)]))
+    }
+}

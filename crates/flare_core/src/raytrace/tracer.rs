@@ -1,0 +1,606 @@
+//! Planning and tracing: the jobs (one per ghost and wavelength) of a [`RayGridRenderer`], the pre-pass that
+//! finds where light passes, the scout of a LUT bake, and the one entry point every ray-traced image goes
+//! through ([`RayGridRenderer::render_request`]).
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use crate::aperture::ApertureMask;
+use crate::coating::InterfaceTables;
+use crate::ghost::{GhostSystem, light_slopes_for_frame_position};
+use crate::optics::{LightPath, Ray, Tracer};
+
+use super::grid::*;
+use super::splat::*;
+
+/// What [`RayGridRenderer::scout`] found of one ghost for one light.
+#[derive(Clone, Debug)]
+pub struct Scout {
+    pub ghost: usize,
+    pub light_deg: [f64; 2],
+    /// Per turn: where the ghost lands, `[x_min, y_min, x_max, y_max]` in sensor mm; `None` when nothing does.
+    pub footprints_mm: Vec<Option<[f64; 4]>>,
+    /// Per wavelength: the grid traced over the region of the entrance plane where its light passes; `None`
+    /// where none does.
+    grids: Vec<Option<TracedGrid>>,
+}
+/// A grid of `cells` x `cells` cells traced over `region` of the entrance plane: (cells + 1)^2 vertices, row
+/// by row, in sensor mm (not yet seen by a view).
+#[derive(Clone, Debug)]
+pub(super) struct TracedGrid {
+    region: [f64; 4],
+    cells: usize,
+    vertices: Vec<Vertex>,
+}
+/// Which ghosts a ray-grid render draws.
+#[derive(Clone, Copy, Debug)]
+pub enum Ghosts<'a> {
+    /// Every ghost of the lens.
+    All,
+    /// One ghost (its index in the lens's ghost list).
+    Only(usize),
+    /// The ghost a [`Scout`] looked at, for the scout's light, with its grid as the pre-pass.
+    Scouted(&'a Scout),
+}
+
+/// One ray-grid render (see [`RayGridRenderer::render_request`]): a light, the views it is seen in, the grid
+/// and the ghosts.
+#[derive(Clone, Debug)]
+pub struct RayGridRequest<'a> {
+    /// Where the light appears in the frame (X right, Y up, degrees); a scouted request uses the scout's.
+    pub light_deg: [f64; 2],
+    /// Windows of the sensor plane, each with the light turned about the axis by its `turn_deg`.
+    pub views: Vec<View>,
+    pub grid: Grid,
+    pub ghosts: Ghosts<'a>,
+}
+
+impl<'a> RayGridRequest<'a> {
+    /// Every ghost in a `width` x `height` frame.
+    pub fn frame(light_deg: [f64; 2], width: u32, height: u32, grid: Grid) -> Self {
+        Self::views(light_deg, vec![View { window: Window::frame(width, height), turn_deg: 0.0 }], grid)
+    }
+
+    /// Every ghost in `views`.
+    pub fn views(light_deg: [f64; 2], views: Vec<View>, grid: Grid) -> Self {
+        Self { light_deg, views, grid, ghosts: Ghosts::All }
+    }
+
+    /// The scouted ghost, for the scout's light, in `views`.
+    pub fn scouted(scout: &'a Scout, views: Vec<View>, grid: Grid) -> Self {
+        Self { light_deg: scout.light_deg, views, grid, ghosts: Ghosts::Scouted(scout) }
+    }
+
+    /// This request for ghost `ghost` only.
+    pub fn only(self, ghost: usize) -> Self {
+        Self { ghosts: Ghosts::Only(ghost), ..self }
+    }
+}
+
+/// One ghost at one wavelength, ready to trace.
+#[derive(Clone, Debug)]
+struct Job {
+    ghost: usize,
+    wavelength: usize,
+    tracer: Tracer,
+    /// Per step of the path: the reflectance table of the surface side the light meets (a zero table where it
+    /// reflects nothing, so that 1 - R = 1).
+    step_tables: Vec<usize>,
+    /// Per step: 1 / semi-aperture^2 (0 at the stop, whose aperture is the mask).
+    inverse_semi_aperture2: Vec<f64>,
+}
+/// Everything a ray-traced render of one lens and configuration needs; made once, used for any light.
+#[derive(Clone, Debug)]
+pub struct RayGridRenderer {
+    system: GhostSystem,
+    mask: ApertureMask,
+    /// The square of the radius (stop radii) within which the mask is fully open ([`ApertureMask::open_radius`]).
+    open_radius2: f64,
+    jobs: Vec<Job>,
+    tables: InterfaceTables,
+    stop: usize,
+    /// Half-side of the square the pre-pass covers, before the light's obliquity: the front clear aperture.
+    front_radius_mm: f64,
+    /// |sag| of the front surface at its clear aperture.
+    front_sag_mm: f64,
+}
+/// Why a ray-grid render is refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RayGridError {
+    #[error("grid {0}: use {min} to {max} cells across", min = GRID_RANGE.start(), max = GRID_RANGE.end())]
+    Grid(usize),
+    #[error("image size {0}x{1}: both sides must be at least 1 pixel")]
+    Size(u32, u32),
+    #[error("window width {0} mm: must be finite and positive, with a finite centre")]
+    Window(f64),
+    #[error("light angle {0:?} deg: each angle must be finite and within +-89 degrees")]
+    Angle([f64; 2]),
+}
+impl RayGridRenderer {
+    /// Prepares every ghost of `system` (its lens, spectrum, f-number and coatings) with the stop shape `mask`.
+    pub fn new(system: &GhostSystem, mask: &ApertureMask) -> Self {
+        let system = system.clone();
+        let lens = &system.lens;
+        let spectrum = &system.settings.spectrum;
+        let sensor_z_mm = system.first_order.sensor_z_mm();
+        let tables = InterfaceTables::new(
+            lens,
+            system.settings.coating_override.as_ref(),
+            &spectrum.wavelengths_nm,
+            DENSE_TABLE_SAMPLES,
+        );
+        let mut jobs = Vec::with_capacity(system.ghosts.len() * spectrum.len());
+        for (g, ghost) in system.ghosts.iter().enumerate() {
+            let path = LightPath::ghost(lens, ghost.i, ghost.j).expect("the ghost system lists valid ghosts");
+            for (w, &wavelength_nm) in spectrum.wavelengths_nm.iter().enumerate() {
+                let step_tables =
+                    path.steps.iter().map(|s| tables.index(s.surface, s.arriving_direction < 0.0, w)).collect();
+                let inverse_semi_aperture2 = path
+                    .steps
+                    .iter()
+                    .map(|s| {
+                        if lens.surfaces[s.surface].stop {
+                            0.0
+                        } else {
+                            lens.surfaces[s.surface].semi_aperture_mm.powi(-2)
+                        }
+                    })
+                    .collect();
+                jobs.push(Job {
+                    ghost: g,
+                    wavelength: w,
+                    tracer: Tracer::new(lens, &path, wavelength_nm, sensor_z_mm),
+                    step_tables,
+                    inverse_semi_aperture2,
+                });
+            }
+        }
+        let front = &lens.surfaces[0];
+        let front_radius_mm = front.semi_aperture_mm;
+        let front_sag_mm = front.sag_mm(front_radius_mm).unwrap_or(front_radius_mm).abs();
+        let open_radius2 = f64::from(mask.open_radius()).powi(2);
+        Self {
+            stop: lens.stop_index(),
+            mask: mask.clone(),
+            open_radius2,
+            system,
+            jobs,
+            tables,
+            front_radius_mm,
+            front_sag_mm,
+        }
+    }
+
+    /// Number of ghosts (the length of [`RayGridImage::moments`]).
+    pub fn ghost_count(&self) -> usize {
+        self.system.ghosts.len()
+    }
+
+    /// The ghosts of a light seen at the frame position `light_deg` (X right, Y up, degrees) in a `width` x
+    /// `height` frame with `grid` cells across each ghost's entrance region: [`Self::render_request`] of
+    /// [`RayGridRequest::frame`].
+    pub fn render(
+        &self,
+        light_deg: [f64; 2],
+        width: u32,
+        height: u32,
+        grid: Grid,
+    ) -> Result<RayGridImage, RayGridError> {
+        let mut images = self.render_request(&RayGridRequest::frame(light_deg, width, height, grid))?;
+        Ok(images.remove(0))
+    }
+
+    /// The one entry point of every ray-traced image: the request's ghosts, traced once, seen in each of its
+    /// views. A view turns the light about the optical axis: a rotationally symmetric lens turns its image with
+    /// the light, all but the stop, so each traced ray is turned (its landing point and its stop coordinates,
+    /// where the mask is looked up) instead of traced again; this is how a LUT bake makes the azimuths of one
+    /// theta for the price of one trace. A scouted request uses the scout's grid over the region where each
+    /// wavelength's light passes as the pre-pass (finer than one over the whole front lens, and not traced
+    /// again), and does not trace a wavelength where none passed.
+    pub fn render_request(&self, request: &RayGridRequest) -> Result<Vec<RayGridImage>, RayGridError> {
+        let (light, views, grid) = (request.light_deg, request.views.as_slice(), request.grid);
+        match request.ghosts {
+            Ghosts::All => self.render_views(light, views, grid, |_: &Job| Some(None)),
+            Ghosts::Only(g) => self.render_views(light, views, grid, |job: &Job| (job.ghost == g).then_some(None)),
+            Ghosts::Scouted(scout) => self.render_views(scout.light_deg, views, grid, |job: &Job| {
+                if job.ghost != scout.ghost {
+                    return None;
+                }
+                scout.grids.get(job.wavelength).and_then(Option::as_ref).map(Some)
+            }),
+        }
+    }
+
+    /// Validates a request and renders it: `plan(job)` is `None` for a job not drawn, `Some(None)` for one
+    /// whose pre-pass is traced over the whole front lens and `Some(Some(grid))` for one whose pre-pass is the
+    /// scouted `grid`.
+    fn render_views<'s>(
+        &self,
+        light_deg: [f64; 2],
+        views: &[View],
+        grid: Grid,
+        plan: impl Fn(&Job) -> Option<Option<&'s TracedGrid>> + Sync,
+    ) -> Result<Vec<RayGridImage>, RayGridError> {
+        if !GRID_RANGE.contains(&grid.cells()) {
+            return Err(RayGridError::Grid(grid.cells()));
+        }
+        for view in views {
+            let window = &view.window;
+            if window.width == 0 || window.height == 0 {
+                return Err(RayGridError::Size(window.width, window.height));
+            }
+            if !(window.width_mm.is_finite()
+                && window.width_mm > 0.0
+                && window.centre_mm.iter().all(|c| c.is_finite())
+                && view.turn_deg.is_finite())
+            {
+                return Err(RayGridError::Window(window.width_mm));
+            }
+        }
+        if !light_deg.iter().all(|a| a.is_finite() && a.abs() <= 89.0) {
+            return Err(RayGridError::Angle(light_deg));
+        }
+        let u = light_slopes_for_frame_position(light_deg[0], light_deg[1]);
+        let ghosts = self.ghost_count();
+        let fresh = || -> Vec<Accumulator> {
+            views.iter().map(|v| Accumulator::new(v.window.width as usize, v.window.height as usize, ghosts)).collect()
+        };
+        let merge = |a: Vec<Accumulator>, b: Vec<Accumulator>| a.into_iter().zip(b).map(|(a, b)| a.merge(b)).collect();
+        let accs = self
+            .jobs
+            .par_iter()
+            .filter_map(|job| plan(job).map(|scouted| (job, scouted)))
+            .fold(fresh, |mut accs, (job, scouted)| {
+                self.render_job(job, u, views, grid, scouted, &mut accs);
+                accs
+            })
+            .reduce(fresh, merge);
+        Ok(views.iter().zip(accs).map(|(view, acc)| acc.into_image(&view.window)).collect())
+    }
+
+    /// Where ghost `ghost` lands on the sensor plane for a light at the frame position `light_deg`:
+    /// `[x_min, y_min, x_max, y_max]` in sensor mm over every wavelength, from a `cells` x `cells` grid over the
+    /// region where the pre-pass found light (each passing ray and its traced neighbours, so the partly lit
+    /// cells at the rim are inside). `None` when no ray of the ghost passes.
+    pub fn footprint_mm(&self, ghost: usize, light_deg: [f64; 2], cells: usize) -> Option<[f64; 4]> {
+        self.footprints_turned_mm(ghost, light_deg, cells, &[0.0]).remove(0)
+    }
+
+    /// [`Self::footprint_mm`] for the light turned by each of `turns_deg` about the axis (see
+    /// [`Self::render_request`]), from one set of traced rays.
+    pub fn footprints_turned_mm(
+        &self,
+        ghost: usize,
+        light_deg: [f64; 2],
+        cells: usize,
+        turns_deg: &[f64],
+    ) -> Vec<Option<[f64; 4]>> {
+        self.scout(ghost, light_deg, cells, turns_deg).footprints_mm
+    }
+
+    /// A quick look at ghost `ghost` for the light at `light_deg`: its footprints as
+    /// [`Self::footprints_turned_mm`] gives them, and per wavelength the region of the entrance plane where its
+    /// light passes, which a scouted request ([`Ghosts::Scouted`]) then covers instead of the whole front lens.
+    pub fn scout(&self, ghost: usize, light_deg: [f64; 2], cells: usize, turns_deg: &[f64]) -> Scout {
+        let u = light_slopes_for_frame_position(light_deg[0], light_deg[1]);
+        let d = DVec3::new(u[0], u[1], 1.0).normalize();
+        // 1 px per mm over a metre: nothing the lens can image is off this window.
+        let views: Vec<View> = turns_deg
+            .iter()
+            .map(|&turn_deg| View {
+                window: Window { centre_mm: [0.0, 0.0], width_mm: 1000.0, width: 1000, height: 1000 },
+                turn_deg,
+            })
+            .collect();
+        let n = cells.clamp(4, 512);
+        let mut bounds = vec![NO_BOUNDS; views.len()];
+        let mut grids = vec![None; self.system.settings.spectrum.len()];
+        let front = self.front_region(u);
+        for job in self.jobs.iter().filter(|j| j.ghost == ghost) {
+            let coarse = self.trace_grid(job, front, SCOUT_PRE_PASS_CELLS, d, None);
+            let Some(pre) = self.pre_pass(job, u, &coarse, &views) else {
+                continue;
+            };
+            // Only in the lit cells of the coarse pass, as a render's dense grid.
+            let traced = self.trace_grid(job, pre.bounds, n, d, pre.lit.as_ref());
+            let stop_count = self.stop_count(job);
+            for (view, bounds) in views.iter().zip(&mut bounds) {
+                let vertices: Vec<Vertex> = traced.vertices.iter().map(view.seer()).collect();
+                for iy in 0..=n {
+                    for ix in 0..=n {
+                        if !vertices[iy * (n + 1) + ix].passes(stop_count) {
+                            continue;
+                        }
+                        for (jx, jy) in (iy.saturating_sub(1)..=(iy + 1).min(n))
+                            .flat_map(|jy| (ix.saturating_sub(1)..=(ix + 1).min(n)).map(move |jx| (jx, jy)))
+                        {
+                            let v = &vertices[jy * (n + 1) + jx];
+                            if v.valid {
+                                *bounds = grow(*bounds, view.window.to_mm(v.pixel));
+                            }
+                        }
+                    }
+                }
+            }
+            grids[job.wavelength] = Some(traced);
+        }
+        Scout {
+            ghost,
+            light_deg,
+            footprints_mm: bounds.into_iter().map(|b| (b[0] <= b[2] && b[1] <= b[3]).then_some(b)).collect(),
+            grids,
+        }
+    }
+
+    /// How many stop crossings of `job` the masks look at (at most 3).
+    fn stop_count(&self, job: &Job) -> usize {
+        self.system.ghosts[job.ghost].per_wavelength[job.wavelength].matrices.stop_from_entrance.len().min(3)
+    }
+
+    /// Traces one ray of `job` from the entrance point `x0` (mm) in direction `d`; its `pixel` is the landing
+    /// point in sensor mm until a [`View`] sees it.
+    fn trace(&self, job: &Job, x0: [f64; 2], d: DVec3) -> Vertex {
+        let ray = Ray { origin_mm: DVec3::new(x0[0], x0[1], 0.0), direction: d };
+        let stop_radius = self.system.stop_radius_mm;
+        let mut v = Vertex { weight: 1.0, ..Vertex::default() };
+        let mut crossings = 0;
+        let mut ratio2 = 0.0f64;
+        let landing = job.tracer.trace_visit(&ray, |hit| {
+            let sin2 = 1.0 - hit.cos_incidence * hit.cos_incidence;
+            let r = self.tables.table(job.step_tables[hit.index]).at(sin2);
+            v.weight *= if hit.reflect { r } else { 1.0 - r };
+            let p = hit.point_mm;
+            if hit.surface == self.stop {
+                if crossings < 3 {
+                    v.stops[crossings] = [p.x / stop_radius, p.y / stop_radius];
+                    crossings += 1;
+                }
+            } else {
+                ratio2 = ratio2.max((p.x * p.x + p.y * p.y) * job.inverse_semi_aperture2[hit.index]);
+            }
+            true
+        });
+        v.ratio = ratio2.sqrt();
+        if let Ok(landing) = landing {
+            let p = [landing.point_mm.x, landing.point_mm.y];
+            v.valid = p.iter().all(|c| c.is_finite()) && v.weight.is_finite() && v.ratio.is_finite();
+            v.pixel = p;
+        }
+        v
+    }
+
+    /// The square of the entrance plane, `[x_min, y_min, x_max, y_max]`, that a pre-pass over the whole front
+    /// lens covers for the light slope `u`: half-side the front clear aperture plus the obliquity of its sag.
+    fn front_region(&self, u: [f64; 2]) -> [f64; 4] {
+        let half = self.front_radius_mm * 1.01 + u[0].hypot(u[1]) * self.front_sag_mm;
+        [-half, -half, half, half]
+    }
+
+    /// Traces `job` on a `cells` x `cells` grid over `region` of the entrance plane, direction `d`; a ray outside
+    /// `lit` (where given) is not traced and stays invalid.
+    fn trace_grid(&self, job: &Job, region: [f64; 4], cells: usize, d: DVec3, lit: Option<&LitCells>) -> TracedGrid {
+        let step = [(region[2] - region[0]) / cells as f64, (region[3] - region[1]) / cells as f64];
+        let vertices = (0..=cells)
+            .flat_map(|iy| (0..=cells).map(move |ix| (ix, iy)))
+            .map(|(ix, iy)| {
+                let x0 = [region[0] + ix as f64 * step[0], region[1] + iy as f64 * step[1]];
+                if lit.is_some_and(|lit| !lit.contains(x0)) { Vertex::default() } else { self.trace(job, x0, d) }
+            })
+            .collect();
+        TracedGrid { region, cells, vertices }
+    }
+
+    /// Where to lay the dense grid, from the pre-pass `traced`: see [`PrePass`]. `None` when no ray passes
+    /// (the pre-pass found none and the paraxial region is empty too).
+    fn pre_pass(&self, job: &Job, u: [f64; 2], traced: &TracedGrid, views: &[View]) -> Option<PrePass> {
+        let half = self.front_region(u)[2];
+        let (region, coarse) = (traced.region, traced.cells);
+        let stop_count = self.stop_count(job);
+        let step = [(region[2] - region[0]) / coarse as f64, (region[3] - region[1]) / coarse as f64];
+        let n = coarse + 1;
+        // The cells where light passes and lands in some view's frame (a cell's landings bound where its rays
+        // land); the extent is the largest over the views.
+        let (mut found, mut any_passes, mut extent_px) = (NO_BOUNDS, false, 0.0f64);
+        let mut lit = vec![false; coarse * coarse];
+        for view in views {
+            let see = view.seer();
+            let vertices: Vec<([f64; 2], Vertex)> = traced
+                .vertices
+                .iter()
+                .enumerate()
+                .map(|(k, v)| {
+                    let x0 = [region[0] + (k % n) as f64 * step[0], region[1] + (k / n) as f64 * step[1]];
+                    (x0, see(v))
+                })
+                .collect();
+            let (w, h) = (f64::from(view.window.width), f64::from(view.window.height));
+            let mut landed = NO_BOUNDS;
+            for iy in 0..coarse {
+                for ix in 0..coarse {
+                    let corners =
+                        [iy * n + ix, iy * n + ix + 1, (iy + 1) * n + ix, (iy + 1) * n + ix + 1].map(|k| &vertices[k]);
+                    if !corners.iter().any(|(_, v)| v.passes(stop_count)) {
+                        continue;
+                    }
+                    any_passes = true;
+                    let footprint =
+                        corners.iter().filter(|(_, v)| v.valid).fold(NO_BOUNDS, |b, (_, v)| grow(b, v.pixel));
+                    if footprint[0] > w + 1.0 || footprint[1] > h + 1.0 || footprint[2] < -1.0 || footprint[3] < -1.0 {
+                        continue;
+                    }
+                    lit[iy * coarse + ix] = true;
+                    for (x0, v) in corners {
+                        found = grow(found, *x0);
+                        if v.passes(stop_count) {
+                            landed = grow(landed, v.pixel);
+                        }
+                    }
+                }
+            }
+            if landed[0].is_finite() {
+                extent_px = extent_px
+                    .max((landed[2].min(w) - landed[0].max(0.0)).max(landed[3].min(h) - landed[1].max(0.0)).max(0.0));
+            }
+        }
+        let mut bounds = if found[0].is_finite() {
+            [found[0] - step[0], found[1] - step[1], found[2] + step[0], found[3] + step[1]]
+        } else {
+            NO_BOUNDS
+        };
+        let mut lit = found[0].is_finite().then(|| LitCells::grown(region, step, coarse, &lit));
+        if !any_passes {
+            // No coarse ray passed: look where the paraxial entrance region is, in case the ghost is smaller
+            // than a coarse cell (a hint of where to look, never a result), and trace all of it.
+            let sprite = job.ghost * self.system.settings.spectrum.len() + job.wavelength;
+            let front = self.system.sprite_masks(sprite, u).front_map;
+            let rho = front.scale.abs() * self.system.front_radius_mm;
+            let e = front.offset.map(|o| o * self.system.front_radius_mm);
+            if rho > 0.0 && rho.is_finite() && e.iter().all(|c| c.is_finite()) {
+                let r = 1.25 * rho;
+                bounds = [e[0] - r, e[1] - r, e[0] + r, e[1] + r];
+            }
+            lit = None;
+        }
+        let bounds = [bounds[0].max(-half), bounds[1].max(-half), bounds[2].min(half), bounds[3].min(half)];
+        (bounds[0] < bounds[2] && bounds[1] < bounds[3]).then_some(PrePass { bounds, extent_px, lit })
+    }
+
+    /// Traces `job` once and splats it into every view's accumulator (`accs[k]` for `views[k]`); the pre-pass
+    /// is `scouted`, or traced over the whole front lens.
+    fn render_job(
+        &self,
+        job: &Job,
+        u: [f64; 2],
+        views: &[View],
+        grid: Grid,
+        scouted: Option<&TracedGrid>,
+        accs: &mut [Accumulator],
+    ) {
+        for acc in accs.iter_mut() {
+            acc.stats.jobs += 1;
+        }
+        let d = DVec3::new(u[0], u[1], 1.0).normalize();
+        let pre = match scouted {
+            Some(traced) => self.pre_pass(job, u, traced, views),
+            None => {
+                let cells = (grid.cells() / 2).clamp(16, 64);
+                let traced = self.trace_grid(job, self.front_region(u), cells, d, None);
+                accs[0].stats.rays += traced.vertices.len() as u64;
+                self.pre_pass(job, u, &traced, views)
+            }
+        };
+        let Some(PrePass { bounds: b, extent_px, lit }) = pre else {
+            for acc in accs.iter_mut() {
+                acc.stats.empty_jobs += 1;
+            }
+            return;
+        };
+        let grid = grid.for_extent(extent_px);
+        let weights = self.system.settings.spectrum.weights_rgb[job.wavelength];
+        let frame = JobFrame {
+            ghost: job.ghost,
+            rgb: weights,
+            luma: crate::metrics::luminance(weights),
+            stop_count: self.stop_count(job),
+            mask: &self.mask,
+            open_radius2: self.open_radius2,
+            triangle_flux: d.z * 0.5 * (b[2] - b[0]) * (b[3] - b[1]) / (grid * grid) as f64,
+        };
+        let (dx, dy) = ((b[2] - b[0]) / grid as f64, (b[3] - b[1]) / grid as f64);
+        let mut traced: Vec<Vertex> = Vec::with_capacity(grid + 1);
+        // Per view: the previous and the current row as it sees them.
+        let mut previous: Vec<Vec<Vertex>> = vec![Vec::with_capacity(grid + 1); views.len()];
+        let mut current: Vec<Vec<Vertex>> = vec![Vec::with_capacity(grid + 1); views.len()];
+        let mut any = vec![false; views.len()];
+        let seers: Vec<_> = views.iter().map(View::seer).collect();
+        for iy in 0..=grid {
+            traced.clear();
+            let mut rays = 0;
+            for ix in 0..=grid {
+                let x0 = [b[0] + ix as f64 * dx, b[1] + iy as f64 * dy];
+                // Far from every lit cell of the pre-pass: no triangle of this ray carries light.
+                if lit.as_ref().is_some_and(|lit| !lit.contains(x0)) {
+                    traced.push(Vertex::default());
+                    continue;
+                }
+                traced.push(self.trace(job, x0, d));
+                rays += 1;
+            }
+            accs[0].stats.rays += rays;
+            for k in 0..views.len() {
+                current[k].clear();
+                current[k].extend(traced.iter().map(&seers[k]));
+                if iy > 0 {
+                    let (previous, current, acc) = (&previous[k], &current[k], &mut accs[k]);
+                    for ix in 0..grid {
+                        let (v00, v10, v01, v11) = (&previous[ix], &previous[ix + 1], &current[ix], &current[ix + 1]);
+                        for tri in [[v00, v10, v11], [v00, v11, v01]] {
+                            if splat_triangle(tri, &frame, acc) {
+                                acc.stats.triangles += 1;
+                                any[k] = true;
+                            }
+                        }
+                    }
+                }
+            }
+            std::mem::swap(&mut previous, &mut current);
+        }
+        for (acc, any) in accs.iter_mut().zip(any) {
+            if !any {
+                acc.stats.empty_jobs += 1;
+            }
+        }
+    }
+}
+/// Cells of the scout's pre-pass over the front lens.
+const SCOUT_PRE_PASS_CELLS: usize = 32;
+/// What a pre-pass found for one job.
+struct PrePass {
+    /// Where the dense grid lies on the entrance plane, `[x_min, y_min, x_max, y_max]`: the bounding box of the
+    /// lit cells grown by one cell, within the front lens.
+    bounds: [f64; 4],
+    /// The extent in pixels (the larger side of the bounding box, clipped to the frame) of where the passing
+    /// rays land, largest over the views.
+    extent_px: f64,
+    /// The lit cells, grown by one; `None` when the pre-pass saw no ray pass (the dense grid then traces all
+    /// of its bounds).
+    lit: Option<LitCells>,
+}
+/// The cells of a pre-pass where some corner ray passes everything and lands in some view's frame, grown by
+/// one cell each way (so that the dense triangles at the rim, half lit, are traced too). A dense ray outside
+/// them is not traced: inside the bounding box, a ghost's light is often a disc, a crescent or a ring.
+struct LitCells {
+    origin: [f64; 2],
+    step: [f64; 2],
+    cells: usize,
+    lit: Vec<bool>,
+}
+impl LitCells {
+    fn grown(region: [f64; 4], step: [f64; 2], cells: usize, lit: &[bool]) -> Self {
+        let mut grown = vec![false; cells * cells];
+        for iy in 0..cells {
+            for ix in 0..cells {
+                if lit[iy * cells + ix] {
+                    for jy in iy.saturating_sub(1)..=(iy + 1).min(cells - 1) {
+                        for jx in ix.saturating_sub(1)..=(ix + 1).min(cells - 1) {
+                            grown[jy * cells + jx] = true;
+                        }
+                    }
+                }
+            }
+        }
+        Self { origin: [region[0], region[1]], step, cells, lit: grown }
+    }
+
+    /// Whether the entrance point `p` lies in a lit cell (a point on a cell boundary belongs to both).
+    fn contains(&self, p: [f64; 2]) -> bool {
+        let cell = |axis: usize| -> (usize, usize) {
+            let f = (p[axis] - self.origin[axis]) / self.step[axis];
+            let lo = (f.floor().max(0.0) as usize).min(self.cells - 1);
+            let hi = ((f.ceil() - 1.0).max(0.0) as usize).min(self.cells - 1);
+            (lo.min(hi), lo.max(hi))
+        };
+        let ((x0, x1), (y0, y1)) = (cell(0), cell(1));
+        (y0..=y1).any(|y| (x0..=x1).any(|x| self.lit[y * self.cells + x]))
+    }
+}
