@@ -35,3 +35,13 @@ pub mod raytrace;
 pub mod render;
 pub mod spectrum;
 pub mod starburst;
+
+// What callers need most, at the crate root: the document, the prepared optics, the frame pipeline and the
+// writer. Everything else is reached through its module.
+pub use flare::{FlareConfig, PreparedFlare};
+pub use frame::{Device, Drawn, Frame, FrameLayers, FrameRequest, LayerChoice, LutUse, Sources};
+pub use image::{DisplayImage, HdrImage};
+pub use optics::Lens;
+pub use output::{ImageKind, read_plate, write_frame};
+pub use preset::Document;
+pub use render::DisplaySettings;
