@@ -72,7 +72,7 @@ pub struct BenchArgs {
     #[arg(long)]
     pub images: bool,
     /// Output folder.
-    #[arg(long)]
+    #[arg(short = 'o', long = "out", alias = "output")]
     pub out: PathBuf,
     /// Which ghosts the blended method bakes.
     #[command(flatten)]

@@ -52,9 +52,8 @@ pub struct BakeSettings {
     /// Most texels across an entry.
     pub res: u32,
     /// Most ray-grid cells across a ghost's entrance region (the reference renderer's adaptive grid). 64 by
-    /// default: over the scouted region that is about one cell per two texels. 128 took the 28-surface Nikon
-    /// zoom 95 s instead of 58 s for the same image (SSIM 0.9782 / 0.9796 at 13 deg, measured before the box
-    /// filter); 32 costs the double Gauss 0.002-0.004 SSIM at 0 and 13 deg (box filter).
+    /// default: over the scouted region that is about one cell per two texels; 32 costs the double Gauss
+    /// 0.002-0.004 SSIM at 0 and 13 deg (how the default was chosen: CHANGELOG.md).
     pub grid: usize,
     /// Azimuth steps over the symmetry wedge (0: one azimuth, rotation only).
     pub phi_steps: u32,
