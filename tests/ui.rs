@@ -434,7 +434,7 @@ fn the_apps_export_and_render_preset_give_the_same_image() {
     assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
     let pixels = |p: &std::path::Path| image::open(p).unwrap().to_rgba32f().into_raw();
     assert_eq!(pixels(&cli_exr), pixels(&dir.path().join("app.exr")));
-    // The GPU: within the twins' tolerance (see crates/flare_core/tests/render.rs).
+    // The GPU: within the twins' tolerance (see gpu_matches_its_cpu_twin in crates/flare_core/tests/render.rs).
     let (result, gpu_png) = render("gpu", "gpu.png");
     if !result.status.success() {
         let stderr = String::from_utf8_lossy(&result.stderr);
@@ -447,6 +447,7 @@ fn the_apps_export_and_render_preset_give_the_same_image() {
     let diffs: Vec<u8> = a.as_raw().iter().zip(b.as_raw()).map(|(x, y)| x.abs_diff(*y)).collect();
     let mean = diffs.iter().map(|&d| f64::from(d)).sum::<f64>() / diffs.len() as f64;
     let worst = diffs.iter().copied().max().unwrap();
+    let over_two = diffs.iter().filter(|&&d| d > 2).count() as f64 / diffs.len() as f64;
     println!("app export (CPU twin) vs render --device gpu: mean {mean:.3}/255, worst {worst}/255");
-    assert!(mean < 0.5 && worst <= 2, "mean {mean}, worst {worst}");
+    assert!(mean < 0.5 && worst <= 4 && over_two <= 1e-4, "mean {mean}, worst {worst}, over 2: {over_two}");
 }

@@ -27,6 +27,13 @@ pub fn fnv1a(bytes: &[u8], mut hash: u64) -> u64 {
     hash
 }
 
+/// A number no other call in this process returns: the identity of something built once and never changed
+/// (a prepared flare, a loaded LUT), for caches that must tell a new one from an old one at the same address.
+pub fn unique_id() -> u64 {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+    NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+}
+
 /// The fingerprint of `value`: FNV-1a of its canonical JSON.
 pub fn of<T: Serialize + ?Sized>(value: &T) -> u64 {
     // Serialising plain data to a Vec cannot fail (no map with non-string keys is fingerprinted); should it

@@ -68,6 +68,9 @@ pub struct PreparedFlare {
     pub starburst: Starburst,
     /// The starburst as the GPU holds it (half floats), for the CPU twin.
     pub starburst_texture: StarburstTexture,
+    /// This flare's identity ([`crate::fingerprint::unique_id`]; a clone keeps it): what a GPU drawer checks
+    /// before uploading the mask and the starburst again.
+    pub id: u64,
 }
 
 impl PreparedFlare {
@@ -83,7 +86,8 @@ impl PreparedFlare {
         let mask = config.aperture.rasterise(DEFAULT_MASK_SIZE);
         let starburst = Starburst::compute(&mask, &config.spectrum);
         let starburst_texture = StarburstTexture::from_starburst(&starburst);
-        Ok(Self { config: config.clone(), system, mask, starburst, starburst_texture })
+        let id = crate::fingerprint::unique_id();
+        Ok(Self { config: config.clone(), system, mask, starburst, starburst_texture, id })
     }
 
     /// Frame settings for an image of `width` x `height` pixels drawn at the flare gain `flare_gain`.

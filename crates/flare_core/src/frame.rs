@@ -199,8 +199,8 @@ pub enum FrameError {
 pub struct GpuDrawer {
     pub ctx: GpuContext,
     pub renderer: FlareRenderer,
-    /// Addresses of the sources last uploaded: (prepared flare, LUT, plate).
-    uploaded: Option<(usize, usize, usize)>,
+    /// What was last uploaded: the prepared flare's and the LUT's ids (0: none) and the plate's key.
+    uploaded: Option<(u64, u64, u64)>,
 }
 
 impl GpuDrawer {
@@ -217,12 +217,7 @@ impl GpuDrawer {
 
     /// Uploads `sources` to the renderer unless they are the ones last uploaded.
     fn upload(&mut self, sources: &Sources) {
-        let address = |p: Option<*const u8>| p.map_or(0, |p| p as usize);
-        let key = (
-            sources.flare as *const PreparedFlare as usize,
-            address(sources.lut.map(|l| l as *const LiveLut as *const u8)),
-            address(sources.plate.map(|p| p as *const HdrImage as *const u8)),
-        );
+        let key = (sources.flare.id, sources.lut.map_or(0, |l| l.id), sources.plate.map_or(0, plate_key));
         if self.uploaded == Some(key) {
             return;
         }
@@ -269,6 +264,15 @@ impl GpuDrawer {
         self.ctx.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
         Ok(())
     }
+}
+
+/// A plate's key for the upload cache: its size and a hash of every 97th pixel (plates can be large; two
+/// different plates of one size that agree on all of those pixels are not told apart, and would differ by
+/// less than can be seen).
+fn plate_key(plate: &HdrImage) -> u64 {
+    use crate::fingerprint::{FNV_OFFSET, fnv1a};
+    let size = fnv1a(&[plate.width.to_le_bytes(), plate.height.to_le_bytes()].concat(), FNV_OFFSET);
+    plate.pixels.iter().step_by(97).fold(size, |h, p| fnv1a(bytemuck::cast_slice(p), h)) | 1
 }
 
 /// Where frames are drawn: a GPU (any wgpu adapter, software ones included) or the CPU twin.

@@ -426,12 +426,14 @@ pub struct LiveLut {
     pub layout: AtlasLayout,
     /// Per LUT ghost and entry, its shape for [`super::fit_picks`] (measured once, on load).
     pub shapes: Vec<Vec<Option<EntryShape>>>,
+    /// This LUT's identity ([`crate::fingerprint::unique_id`]; a clone keeps it), for upload caches.
+    pub id: u64,
 }
 
 impl LiveLut {
     pub fn new(lut: GhostLut) -> Self {
         let layout = AtlasLayout::new(&lut);
         let shapes = lut.ghosts.par_iter().map(|g| g.entries.iter().map(LutEntry::shape).collect()).collect();
-        Self { lut, layout, shapes }
+        Self { lut, layout, shapes, id: crate::fingerprint::unique_id() }
     }
 }
