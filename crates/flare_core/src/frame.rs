@@ -8,7 +8,8 @@
 //! and solo already folded in, see [`crate::preset::Document::ghost_gains`]) and how LUT ghosts are used.
 //! [`Frame::build`] makes the drawable frame in one pass: the LUT instances first (they say how much of each
 //! non-linear ghost its paraxial sprite keeps), then the paraxial instances with the user's gain times that
-//! weight applied as they are built, and the starburst's placement. Nothing edits a built frame afterwards.
+//! weight applied as they are built, and the starburst's placement. Nothing edits a built frame afterwards: a
+//! ghost's own layer is a frame built again with the other ghosts at gain 0 ([`Frame::ghost_alone`]).
 //!
 //! [`Device::draw`] draws a frame into an HDR accumulation (linear relative irradiance, before any gain) and
 //! an 8-bit display image: on the GPU through [`FlareRenderer::render_with_lut`] (the same call the app's
@@ -77,6 +78,8 @@ pub struct Frame {
     pub lut: Option<LutScene>,
     /// Every sprite of the frame with why it is culled, and the counts (for ghost lists and status lines).
     pub sprites: GhostFrame,
+    /// What the frame was built from.
+    pub request: FrameRequest,
 }
 
 impl Frame {
@@ -99,7 +102,7 @@ impl Frame {
             }
         }
         let (scene, sprites) = flare.scene_with(request.light_deg, w, h, &request.display, &gains);
-        Self { scene, lut: lut_scene, sprites }
+        Self { scene, lut: lut_scene, sprites, request: request.clone() }
     }
 
     /// The frame's size in pixels.
@@ -119,32 +122,13 @@ impl Frame {
         ghosts
     }
 
-    /// This frame with only lens ghost `g` (its sprites and LUT images) and no starburst.
-    pub fn ghost_alone(&self, g: u32, lut: Option<&LiveLut>) -> Self {
-        let (instances, instance_ghosts) = self
-            .scene
-            .instances
-            .iter()
-            .zip(&self.scene.instance_ghosts)
-            .filter(|&(_, &h)| h == g)
-            .map(|(inst, &h)| (*inst, h))
-            .unzip();
-        let mut scene = FlareScene { instances, instance_ghosts, ..self.scene.clone() };
-        scene.globals.starburst = [0.0; 4];
-        let lut_scene = match (&self.lut, lut) {
-            (Some(l), Some(live)) => {
-                let mut only = LutScene { alpha_over: l.alpha_over, ..LutScene::default() };
-                for (inst, &(lg, entry)) in l.instances.iter().zip(&l.sources) {
-                    if live.lut.ghosts[lg as usize].ghost == g {
-                        only.instances.push(*inst);
-                        only.sources.push((lg, entry));
-                    }
-                }
-                Some(only)
-            }
-            _ => None,
-        };
-        Self { scene, lut: lut_scene, sprites: self.sprites.clone() }
+    /// The frame of the same request with only lens ghost `g` (its sprites and LUT images, at its gain) and no
+    /// starburst: built again, as any frame is, with every other ghost at gain 0.
+    pub fn ghost_alone(&self, g: u32, flare: &PreparedFlare, lut: Option<&LiveLut>) -> Self {
+        let gain = self.request.ghost_gains.get(g as usize).copied().unwrap_or(1.0);
+        let ghost_gains = (0..flare.system.ghosts.len() as u32).map(|h| if h == g { gain } else { 0.0 }).collect();
+        let display = DisplaySettings { starburst: false, ..self.request.display };
+        Frame::build(flare, lut, &FrameRequest { ghost_gains, display, ..self.request.clone() })
     }
 }
 
@@ -332,7 +316,7 @@ pub fn ghost_layers(
     let mut layers = Vec::new();
     for g in frame.drawn_ghosts(sources.lut) {
         let Some(model) = sources.flare.system.ghosts.get(g as usize) else { continue };
-        let alone = frame.ghost_alone(g, sources.lut);
+        let alone = frame.ghost_alone(g, sources.flare, sources.lut);
         let drawn = device.draw(&alone, &Sources { plate: None, ..*sources })?;
         layers.push((format!("ghost_{}_{}", model.i, model.j), cpu::flare_layer(&alone.scene, &drawn.hdr)));
     }
