@@ -8,7 +8,6 @@ use flare_core::flare::PreparedFlare;
 use flare_core::lut::GhostLut;
 use flare_core::lut::bake::{BakeProgress, BakeSettings, bake, useful_field_deg};
 use flare_core::lut::classify::{ClassifySettings, GhostClass, classify};
-use flare_core::raytrace::RayGridRenderer;
 
 /// What a bake thread hands back: the LUT and the classification, or why it stopped.
 pub type BakeOutcome = Result<(GhostLut, Vec<GhostClass>), String>;
@@ -42,7 +41,7 @@ impl BakeJob {
         };
         let (cancel, progress, result) = (job.cancel.clone(), job.progress.clone(), job.result.clone());
         std::thread::spawn(move || {
-            let renderer = RayGridRenderer::new(&flare.system, &flare.mask);
+            let renderer = flare.ray_grid_renderer();
             let settings = ClassifySettings::for_flare(&flare, useful_field_deg(&flare));
             let classes = classify(&flare, &renderer, &settings, &[]);
             let chosen: Vec<usize> = classes.iter().filter(|c| c.nonlinear()).map(|c| c.ghost).collect();

@@ -223,7 +223,7 @@ fn print_classes(flare: &PreparedFlare, classes: &[GhostClass]) {
 pub fn classify_command(args: &ClassifyArgs) -> Result<()> {
     let flare = args.optics.flare()?;
     let lens = &flare.system.lens;
-    let renderer = RayGridRenderer::new(&flare.system, &flare.mask);
+    let renderer = flare.ray_grid_renderer();
     let classes = classify_ghosts(&flare, &renderer, &args.choice)?;
     if args.json {
         let rows: Vec<serde_json::Value> = classes
@@ -248,7 +248,7 @@ pub fn classify_command(args: &ClassifyArgs) -> Result<()> {
 pub fn bake_command(args: &BakeArgs) -> Result<()> {
     let flare = args.optics.flare()?;
     let lens = flare.system.lens.clone();
-    let renderer = RayGridRenderer::new(&flare.system, &flare.mask);
+    let renderer = flare.ray_grid_renderer();
     let previous = args
         .update
         .as_deref()

@@ -19,7 +19,7 @@ use flare_core::lut::format;
 use flare_core::lut::{GhostLut, LutKind};
 use flare_core::output::read_plate;
 use flare_core::preset::{Document, LutSource};
-use flare_core::raytrace::{self, RayGridRenderer};
+use flare_core::raytrace::{self};
 use flare_core::render::cpu;
 
 use super::common::{OpticsChoice, parse_aperture, parse_pair_f64, parse_size};
@@ -238,7 +238,7 @@ fn lut_for(doc: &Document, flare: &PreparedFlare, method: Method) -> Result<Ghos
         }
         None if method == Method::Photo => bail!("--method photo needs --lut F.flut (made by `flarelab photo-lut`)"),
         None => {
-            let renderer = RayGridRenderer::new(&flare.system, &flare.mask);
+            let renderer = flare.ray_grid_renderer();
             let choice = super::lut::LutChoice::default();
             Ok(super::lut::bake_lut(flare, &renderer, &choice, &Default::default(), None, false)?.0)
         }
@@ -313,7 +313,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         Some(n) => {
             // Ray-traced ghosts replace the paraxial accumulation; starburst, tonemap and writer are the same.
             let started = std::time::Instant::now();
-            let traced = RayGridRenderer::new(&flare.system, &flare.mask).render(doc.light_deg, width, height, n)?;
+            let traced = flare.ray_grid_renderer().render(doc.light_deg, width, height, n)?;
             let st = traced.stats;
             eprintln!(
                 "ray-traced {} ghost x wavelength jobs, {n:?} grid: {} rays, {} triangles, {} jobs with no light, {:.2} s",

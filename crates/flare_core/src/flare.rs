@@ -157,3 +157,41 @@ impl crate::lut::GhostLut {
         Ok(())
     }
 }
+
+impl PreparedFlare {
+    /// The ray-traced renderer of this lens and its settings ([`ray_grid_setup`]).
+    pub fn ray_grid_renderer(&self) -> crate::raytrace::RayGridRenderer {
+        crate::raytrace::RayGridRenderer::new(ray_grid_setup(&self.system), &self.mask)
+    }
+}
+
+/// What the ray tracer needs of a ghost system: the lens and its settings, each ghost's surfaces and stop
+/// crossings, and the paraxial entrance region as the hint of where to look when no coarse ray passes. The
+/// ray tracer itself depends only on the optics, the coatings and the aperture.
+pub fn ray_grid_setup(system: &GhostSystem) -> crate::raytrace::RayGridSetup {
+    let ghosts = system
+        .ghosts
+        .iter()
+        .map(|g| crate::raytrace::TracedGhost {
+            i: g.i,
+            j: g.j,
+            stop_crossings: g.per_wavelength.iter().map(|w| w.matrices.stop_from_entrance.len()).collect(),
+        })
+        .collect();
+    let wavelengths = system.settings.spectrum.len();
+    let hint_system = std::sync::Arc::new(system.clone());
+    let entrance_hint: crate::raytrace::EntranceHint = std::sync::Arc::new(move |g, w, u| {
+        let front = hint_system.sprite_masks(g * wavelengths + w, u).front_map;
+        let radius_mm = hint_system.front_radius_mm;
+        Some((front.offset.map(|o| o * radius_mm), front.scale.abs() * radius_mm))
+    });
+    crate::raytrace::RayGridSetup {
+        lens: system.lens.clone(),
+        spectrum: system.settings.spectrum.clone(),
+        coating_override: system.settings.coating_override.clone(),
+        sensor_z_mm: system.first_order.sensor_z_mm(),
+        stop_radius_mm: system.stop_radius_mm,
+        ghosts,
+        entrance_hint,
+    }
+}

@@ -5,7 +5,7 @@ use flare_core::aperture::Aperture;
 use flare_core::flare::{FlareConfig, PreparedFlare};
 use flare_core::metrics::{self, GhostMoments};
 use flare_core::optics::library::builtin_lens;
-use flare_core::raytrace::{Grid, RayGridRenderer};
+use flare_core::raytrace::Grid;
 use flare_core::render::cpu;
 
 fn prepared(id: &str, f_number: Option<f64>) -> PreparedFlare {
@@ -21,7 +21,7 @@ fn prepared(id: &str, f_number: Option<f64>) -> PreparedFlare {
 #[test]
 fn the_reference_converges_as_its_grid_doubles() {
     let flare = prepared("brendel_tessar_usp2854889", None);
-    let renderer = RayGridRenderer::new(&flare.system, &flare.mask);
+    let renderer = flare.ray_grid_renderer();
     let (w, h) = (120, 80);
     for light in [[0.0, 0.0], [6.0, 4.0]] {
         let images: Vec<_> =
@@ -55,8 +55,7 @@ fn paraxial_and_reference_agree_where_the_paraxial_method_is_exact() {
     let mut psnr = Vec::new();
     for f_number in [Some(22.0), None] {
         let flare = prepared("brendel_tessar_usp2854889", f_number);
-        let reference =
-            RayGridRenderer::new(&flare.system, &flare.mask).render(light, w, h, Grid::Adaptive(256)).unwrap();
+        let reference = flare.ray_grid_renderer().render(light, w, h, Grid::Adaptive(256)).unwrap();
         let (scene, _) = flare.scene(light, w, h);
         let paraxial = cpu::ghost_pass(&scene, &flare.mask);
         let moments = cpu::ghost_moments(&scene, &flare.mask, flare.system.ghosts.len());

@@ -59,7 +59,7 @@ fn render_cpu(flare: &PreparedFlare, live: &LiveLut, scene: &FlareScene, lut_sce
 }
 
 fn small_lut(flare: &PreparedFlare) -> GhostLut {
-    let renderer = RayGridRenderer::new(&flare.system, &flare.mask);
+    let renderer = flare.ray_grid_renderer();
     let settings = BakeSettings { theta_max_deg: Some(16.0), ..small_settings() };
     bake(flare, &renderer, &[3, 7], &settings, None, &|_| {}, &AtomicBool::new(false)).unwrap()
 }
@@ -89,7 +89,7 @@ fn a_blended_lut_ghost_matches_the_ray_traced_ghost_between_samples() {
     let flare = flare("tessar");
     let lut = small_lut(&flare);
     let live = LiveLut::new(lut);
-    let renderer = RayGridRenderer::new(&flare.system, &flare.mask);
+    let renderer = flare.ray_grid_renderer();
     let (w, h) = (240, 160);
     for (theta, alpha) in [(7.0, 200.0), (11.0, -47.0), (4.0, 95.0)] {
         let light = light_position_deg(theta, alpha);
@@ -154,7 +154,7 @@ fn the_lut_file_round_trips_and_a_rebake_keeps_unchanged_ghosts() {
     let e = old.check_for(lens, &flare.config).unwrap_err().to_string();
     assert!(e.contains("older FlareLab") && e.contains("bake it again"), "{e}");
     // A re-bake with one more ghost renders only that one.
-    let renderer = RayGridRenderer::new(&flare.system, &flare.mask);
+    let renderer = flare.ray_grid_renderer();
     let settings = BakeSettings { theta_max_deg: Some(16.0), ..small_settings() };
     let kept = std::sync::Mutex::new(0);
     let again = bake(
@@ -228,7 +228,7 @@ fn fuzz_source() -> Vec<u8> {
     BYTES
         .get_or_init(|| {
             let flare = flare("tessar");
-            let renderer = RayGridRenderer::new(&flare.system, &flare.mask);
+            let renderer = flare.ray_grid_renderer();
             let settings = BakeSettings {
                 theta_max_deg: Some(8.0),
                 res: 16,
@@ -426,7 +426,7 @@ fn a_photo_lut_plays_back_its_images_turned_with_the_light() {
 #[test]
 fn classification_finds_the_known_non_linear_ghost_and_honours_forced_choices() {
     let flare = flare("pbrt_dgauss_50mm");
-    let renderer = RayGridRenderer::new(&flare.system, &flare.mask);
+    let renderer = flare.ray_grid_renderer();
     let settings = flare_core::lut::classify::ClassifySettings::for_flare(&flare, 20.0);
     let g46 = flare.system.ghosts.iter().position(|g| (g.i, g.j) == (4, 6)).unwrap();
     let classes = flare_core::lut::classify::classify(&flare, &renderer, &settings, &[(0, true), (g46, false)]);
@@ -529,7 +529,7 @@ fn fitting_the_picks_draws_a_moving_ghost_once_not_twice() {
 fn a_turned_view_is_the_render_at_the_turned_light() {
     use flare_core::raytrace::{View, Window};
     let flare = flare("tessar");
-    let renderer = RayGridRenderer::new(&flare.system, &flare.mask);
+    let renderer = flare.ray_grid_renderer();
     let g = 7;
     let (theta, turns) = (9.0, [0.0, 15.0, 30.0]);
     let base = light_position_deg(theta, 0.0);
@@ -582,7 +582,7 @@ fn a_turned_view_is_the_render_at_the_turned_light() {
 fn a_scouted_render_is_the_plain_render_for_fewer_rays() {
     use flare_core::raytrace::{View, Window};
     let flare = flare("dgauss");
-    let renderer = RayGridRenderer::new(&flare.system, &flare.mask);
+    let renderer = flare.ray_grid_renderer();
     for (g, theta) in [(7, 9.0), (20, 15.0), (0, 5.0)] {
         let light = light_position_deg(theta, 0.0);
         let scout = renderer.scout(g, light, 48, &[0.0]);
@@ -641,7 +641,7 @@ fn refinement_stops_for_lack_of_gain_only_on_moderate_errors() {
 #[test]
 fn a_ghost_that_vanishes_within_an_interval_is_refined_not_cross_faded() {
     let flare = flare("nikon_zoom_28_75mm");
-    let renderer = RayGridRenderer::new(&flare.system, &flare.mask);
+    let renderer = flare.ray_grid_renderer();
     let g = flare.system.ghosts.iter().position(|m| (m.i, m.j) == (4, 5)).unwrap();
     let lut = bake(&flare, &renderer, &[g], &BakeSettings::default(), None, &|_| {}, &AtomicBool::new(false)).unwrap();
     let thetas = &lut.ghosts[0].thetas_deg;

@@ -13,7 +13,7 @@ use flare_core::ghost::{FrameSettings, GhostSettings, GhostSystem};
 use flare_core::metrics::relative_l1;
 use flare_core::optics::library::{builtin_lens, ids, synthetic_lens};
 use flare_core::optics::{Coating, CoatingLayer, Lens};
-use flare_core::raytrace::{Grid, RayGridImage, RayGridRenderer};
+use flare_core::raytrace::{Grid, RayGridImage};
 use flare_core::render::{FlareScene, HdrImage, cpu, light_slopes_for_frame_position, sensor_to_pixel};
 use flare_core::spectrum::Spectrum;
 use proptest::prelude::*;
@@ -185,9 +185,7 @@ fn ray_grids_of_random_lenses_stay_finite() {
     counted("ray grids", strategy, 0.9, |(lens, theta, azimuth)| {
         let config = FlareConfig { spectrum: Spectrum::single(550.0).unwrap(), ..FlareConfig::default() };
         let Ok(flare) = PreparedFlare::new(&lens, &config) else { return Ok(false) };
-        let image = RayGridRenderer::new(&flare.system, &flare.mask)
-            .render(light(theta, azimuth), 32, 24, Grid::Fixed(6))
-            .unwrap();
+        let image = flare.ray_grid_renderer().render(light(theta, azimuth), 32, 24, Grid::Fixed(6)).unwrap();
         assert_ray_grid_ok(&image, "random lens");
         Ok(true)
     });
@@ -281,8 +279,8 @@ fn huge_radius_flares_equal_the_flat_ones() {
         assert!((p.irradiance - q.irradiance).abs() <= 1e-9 * p.irradiance, "{p:?} {q:?}");
     }
     let (ia, ib) = (
-        RayGridRenderer::new(&a.system, &a.mask).render([4.0, 7.0], 48, 32, Grid::Fixed(16)).unwrap(),
-        RayGridRenderer::new(&b.system, &b.mask).render([4.0, 7.0], 48, 32, Grid::Fixed(16)).unwrap(),
+        a.ray_grid_renderer().render([4.0, 7.0], 48, 32, Grid::Fixed(16)).unwrap(),
+        b.ray_grid_renderer().render([4.0, 7.0], 48, 32, Grid::Fixed(16)).unwrap(),
     );
     assert!(relative_l1(&ib.hdr, &ia.hdr) < 1e-6);
 }
@@ -337,9 +335,7 @@ fn render_everything(lens: &Lens, what: &str) {
     let flare = PreparedFlare::new(lens, &config).unwrap();
     for theta in [0.0, 1.0, 10.0] {
         check_paraxial(&flare, light(theta, 30.0), what);
-        let image = RayGridRenderer::new(&flare.system, &flare.mask)
-            .render(light(theta, 30.0), 48, 32, Grid::Fixed(32))
-            .unwrap();
+        let image = flare.ray_grid_renderer().render(light(theta, 30.0), 48, 32, Grid::Fixed(32)).unwrap();
         assert_ray_grid_ok(&image, what);
     }
 }
@@ -385,7 +381,7 @@ fn light_at_exactly_0_and_89_degrees() {
     for id in ids() {
         let config = FlareConfig { spectrum: Spectrum::single(550.0).unwrap(), ..FlareConfig::default() };
         let flare = PreparedFlare::new(&builtin_lens(id).unwrap(), &config).unwrap();
-        let renderer = RayGridRenderer::new(&flare.system, &flare.mask);
+        let renderer = flare.ray_grid_renderer();
         for theta in [0.0, 89.0] {
             for azimuth in [0.0, 90.0, 217.0] {
                 let what = format!("{id} at {theta} deg, azimuth {azimuth}");
@@ -411,8 +407,7 @@ fn a_sixty_surface_lens() {
     for theta in [0.0, 12.0, 60.0] {
         check_paraxial(&flare, light(theta, 30.0), "60 surfaces");
     }
-    let image =
-        RayGridRenderer::new(&flare.system, &flare.mask).render(light(12.0, 30.0), 32, 24, Grid::Fixed(4)).unwrap();
+    let image = flare.ray_grid_renderer().render(light(12.0, 30.0), 32, 24, Grid::Fixed(4)).unwrap();
     assert_ray_grid_ok(&image, "60 surfaces");
     assert_eq!(image.stats.jobs, 1770);
 }

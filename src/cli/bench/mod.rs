@@ -26,7 +26,7 @@ use flare_core::flare::{FlareConfig, PreparedFlare};
 use flare_core::frame::{self, Frame, FrameRequest, GpuDrawer, LutUse, Sources};
 use flare_core::image::{DisplayImage, HdrImage, Sampling};
 use flare_core::metrics::{self, Comparison};
-use flare_core::raytrace::{Grid, REFERENCE_GRID, RayGridImage, RayGridRenderer};
+use flare_core::raytrace::{Grid, REFERENCE_GRID, RayGridImage};
 use flare_core::render::{DisplaySettings, FlareScene, cpu, gpu};
 
 pub mod plot;
@@ -178,7 +178,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     for name in &lenses {
         let lens = open_lens(name)?;
         let flare = PreparedFlare::new(&lens, &FlareConfig::default()).with_context(|| name.clone())?;
-        let tracer = RayGridRenderer::new(&flare.system, &flare.mask);
+        let tracer = flare.ray_grid_renderer();
         // The blended method's LUT: classified and baked at the default settings, timed and measured once.
         let (lut, _, bake_s) = super::lut::bake_lut(
             &flare,

@@ -12,6 +12,7 @@ pub mod lens;
 pub mod library;
 pub mod paraxial;
 pub mod path;
+pub mod sensor;
 pub mod trace;
 
 pub use glass::D_LINE_NM;

@@ -1,7 +1,7 @@
 //! The grids and windows of the ray-traced renderer: grid sizes ([`Grid`]), windows of the sensor plane
 //! ([`Window`], [`View`]) and the traced vertex (`Vertex`) that a view sees.
 
-use crate::ghost::Sensor;
+use crate::optics::sensor::Sensor;
 
 /// Most grid cells across a ghost's entrance region in the reference renderer (see the convergence table in the
 /// README).

@@ -40,7 +40,9 @@
 //! where light passed) to size its windows, and that scout grid, much finer than one over the whole front
 //! lens, is then the render's pre-pass ([`Ghosts::Scouted`]).
 //!
-//! Every image comes from one entry point, [`RayGridRenderer::render_request`] (a [`RayGridRequest`]: the light,
+//! The tracer depends only on the optics, the coatings and the aperture: [`RayGridSetup`] is all it takes of
+//! a lens and its settings (made from a ghost system by [`crate::flare::ray_grid_setup`], whose paraxial
+//! entrance regions are its hint of where to look). Every image comes from one entry point, [`RayGridRenderer::render_request`] (a [`RayGridRequest`]: the light,
 //! the views, the grid and which ghosts); [`RayGridRenderer::render`] is its whole-frame shorthand. The module
 //! is in three parts: [`grid`] (grid sizes, windows, the traced vertex), `tracer` (planning the jobs, the
 //! pre-pass, the scout, tracing) and `splat` (the box-filtered splatting and the accumulation).
@@ -58,7 +60,9 @@ mod tracer;
 
 pub use grid::{DENSE_TABLE_SAMPLES, GRID_RANGE, Grid, REFERENCE_GRID, REFERENCE_MIN_GRID, View, Window};
 pub use splat::{RayGridImage, RayGridStats};
-pub use tracer::{Ghosts, RayGridError, RayGridRenderer, RayGridRequest, Scout};
+pub use tracer::{
+    EntranceHint, Ghosts, RayGridError, RayGridRenderer, RayGridRequest, RayGridSetup, Scout, TracedGhost,
+};
 
 #[cfg(test)]
 mod tests {
@@ -70,7 +74,7 @@ mod tests {
 
     fn renderer(id: &str) -> RayGridRenderer {
         let flare = crate::flare::PreparedFlare::new(&builtin_lens(id).unwrap(), &FlareConfig::default()).unwrap();
-        RayGridRenderer::new(&flare.system, &flare.mask)
+        flare.ray_grid_renderer()
     }
 
     #[test]

@@ -7,8 +7,11 @@ use rayon::prelude::*;
 
 use crate::aperture::ApertureMask;
 use crate::coating::InterfaceTables;
-use crate::ghost::{GhostSystem, light_slopes_for_frame_position};
-use crate::optics::{LightPath, Ray, Tracer};
+use std::sync::Arc;
+
+use crate::optics::sensor::light_slopes_for_frame_position;
+use crate::optics::{Coating, Lens, LightPath, Ray, Tracer};
+use crate::spectrum::Spectrum;
 
 use super::grid::*;
 use super::splat::*;
@@ -89,10 +92,53 @@ struct Job {
     /// Per step: 1 / semi-aperture^2 (0 at the stop, whose aperture is the mask).
     inverse_semi_aperture2: Vec<f64>,
 }
+/// One ghost as the ray tracer needs it: its two reflecting surfaces and, per wavelength, how many times its
+/// path crosses the stop (1, or 3 when the reflections lie on both sides of it).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TracedGhost {
+    pub i: usize,
+    pub j: usize,
+    pub stop_crossings: Vec<usize>,
+}
+
+/// Where to look when no coarse ray of ghost `g` at wavelength `w` passes, for light slopes `u`: the centre
+/// (mm) and radius (mm) of a disc on the entrance plane (a hint of where a ghost smaller than a coarse cell may
+/// be, never a result). The paraxial entrance region serves ([`crate::flare::ray_grid_setup`]).
+pub type EntranceHint = Arc<dyn Fn(usize, usize, [f64; 2]) -> Option<([f64; 2], f64)> + Send + Sync>;
+
+/// What the ray tracer needs of a lens and its settings: nothing but optics, coatings and the stop (the
+/// aperture mask comes with [`RayGridRenderer::new`]), and a hint of where to look.
+#[derive(Clone)]
+pub struct RayGridSetup {
+    pub lens: Lens,
+    pub spectrum: Spectrum,
+    /// When set, every reflecting surface wears this coating instead of its own.
+    pub coating_override: Option<Coating>,
+    /// The sensor plane (mm behind the first vertex).
+    pub sensor_z_mm: f64,
+    /// The stop's radius at the chosen f-number (the unit of the mask's coordinates).
+    pub stop_radius_mm: f64,
+    pub ghosts: Vec<TracedGhost>,
+    pub entrance_hint: EntranceHint,
+}
+
+/// The entrance hint, named in debug output.
+#[derive(Clone)]
+struct Hint(EntranceHint);
+
+impl std::fmt::Debug for Hint {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("EntranceHint")
+    }
+}
+
 /// Everything a ray-traced render of one lens and configuration needs; made once, used for any light.
 #[derive(Clone, Debug)]
 pub struct RayGridRenderer {
-    system: GhostSystem,
+    spectrum: Spectrum,
+    ghosts: Vec<TracedGhost>,
+    stop_radius_mm: f64,
+    hint: Hint,
     mask: ApertureMask,
     /// The square of the radius (stop radii) within which the mask is fully open ([`ApertureMask::open_radius`]).
     open_radius2: f64,
@@ -117,21 +163,15 @@ pub enum RayGridError {
     Angle([f64; 2]),
 }
 impl RayGridRenderer {
-    /// Prepares every ghost of `system` (its lens, spectrum, f-number and coatings) with the stop shape `mask`.
-    pub fn new(system: &GhostSystem, mask: &ApertureMask) -> Self {
-        let system = system.clone();
-        let lens = &system.lens;
-        let spectrum = &system.settings.spectrum;
-        let sensor_z_mm = system.first_order.sensor_z_mm();
-        let tables = InterfaceTables::new(
-            lens,
-            system.settings.coating_override.as_ref(),
-            &spectrum.wavelengths_nm,
-            DENSE_TABLE_SAMPLES,
-        );
-        let mut jobs = Vec::with_capacity(system.ghosts.len() * spectrum.len());
-        for (g, ghost) in system.ghosts.iter().enumerate() {
-            let path = LightPath::ghost(lens, ghost.i, ghost.j).expect("the ghost system lists valid ghosts");
+    /// Prepares every ghost of `setup` with the stop shape `mask`.
+    pub fn new(setup: RayGridSetup, mask: &ApertureMask) -> Self {
+        let RayGridSetup { lens, spectrum, coating_override, sensor_z_mm, stop_radius_mm, ghosts, entrance_hint } =
+            setup;
+        let tables =
+            InterfaceTables::new(&lens, coating_override.as_ref(), &spectrum.wavelengths_nm, DENSE_TABLE_SAMPLES);
+        let mut jobs = Vec::with_capacity(ghosts.len() * spectrum.len());
+        for (g, ghost) in ghosts.iter().enumerate() {
+            let Ok(path) = LightPath::ghost(&lens, ghost.i, ghost.j) else { continue };
             for (w, &wavelength_nm) in spectrum.wavelengths_nm.iter().enumerate() {
                 let step_tables =
                     path.steps.iter().map(|s| tables.index(s.surface, s.arriving_direction < 0.0, w)).collect();
@@ -149,7 +189,7 @@ impl RayGridRenderer {
                 jobs.push(Job {
                     ghost: g,
                     wavelength: w,
-                    tracer: Tracer::new(lens, &path, wavelength_nm, sensor_z_mm),
+                    tracer: Tracer::new(&lens, &path, wavelength_nm, sensor_z_mm),
                     step_tables,
                     inverse_semi_aperture2,
                 });
@@ -163,7 +203,10 @@ impl RayGridRenderer {
             stop: lens.stop_index(),
             mask: mask.clone(),
             open_radius2,
-            system,
+            spectrum,
+            ghosts,
+            stop_radius_mm,
+            hint: Hint(entrance_hint),
             jobs,
             tables,
             front_radius_mm,
@@ -173,7 +216,7 @@ impl RayGridRenderer {
 
     /// Number of ghosts (the length of [`RayGridImage::moments`]).
     pub fn ghost_count(&self) -> usize {
-        self.system.ghosts.len()
+        self.ghosts.len()
     }
 
     /// The ghosts of a light seen at the frame position `light_deg` (X right, Y up, degrees) in a `width` x
@@ -294,7 +337,7 @@ impl RayGridRenderer {
             .collect();
         let n = cells.clamp(4, 512);
         let mut bounds = vec![NO_BOUNDS; views.len()];
-        let mut grids = vec![None; self.system.settings.spectrum.len()];
+        let mut grids = vec![None; self.spectrum.len()];
         let front = self.front_region(u);
         for job in self.jobs.iter().filter(|j| j.ghost == ghost) {
             let coarse = self.trace_grid(job, front, SCOUT_PRE_PASS_CELLS, d, None);
@@ -334,14 +377,14 @@ impl RayGridRenderer {
 
     /// How many stop crossings of `job` the masks look at (at most 3).
     fn stop_count(&self, job: &Job) -> usize {
-        self.system.ghosts[job.ghost].per_wavelength[job.wavelength].matrices.stop_from_entrance.len().min(3)
+        self.ghosts[job.ghost].stop_crossings.get(job.wavelength).copied().unwrap_or(1).min(3)
     }
 
     /// Traces one ray of `job` from the entrance point `x0` (mm) in direction `d`; its `pixel` is the landing
     /// point in sensor mm until a [`View`] sees it.
     fn trace(&self, job: &Job, x0: [f64; 2], d: DVec3) -> Vertex {
         let ray = Ray { origin_mm: DVec3::new(x0[0], x0[1], 0.0), direction: d };
-        let stop_radius = self.system.stop_radius_mm;
+        let stop_radius = self.stop_radius_mm;
         let mut v = Vertex { weight: 1.0, ..Vertex::default() };
         let mut crossings = 0;
         let mut ratio2 = 0.0f64;
@@ -451,11 +494,11 @@ impl RayGridRenderer {
         if !any_passes {
             // No coarse ray passed: look where the paraxial entrance region is, in case the ghost is smaller
             // than a coarse cell (a hint of where to look, never a result), and trace all of it.
-            let sprite = job.ghost * self.system.settings.spectrum.len() + job.wavelength;
-            let front = self.system.sprite_masks(sprite, u).front_map;
-            let rho = front.scale.abs() * self.system.front_radius_mm;
-            let e = front.offset.map(|o| o * self.system.front_radius_mm);
-            if rho > 0.0 && rho.is_finite() && e.iter().all(|c| c.is_finite()) {
+            if let Some((e, rho)) = (self.hint.0)(job.ghost, job.wavelength, u)
+                && rho > 0.0
+                && rho.is_finite()
+                && e.iter().all(|c| c.is_finite())
+            {
                 let r = 1.25 * rho;
                 bounds = [e[0] - r, e[1] - r, e[0] + r, e[1] + r];
             }
@@ -496,11 +539,11 @@ impl RayGridRenderer {
             return;
         };
         let grid = grid.for_extent(extent_px);
-        let weights = self.system.settings.spectrum.weights_rgb[job.wavelength];
+        let weights = self.spectrum.weights_rgb[job.wavelength];
         let frame = JobFrame {
             ghost: job.ghost,
             rgb: weights,
-            luma: crate::metrics::luminance(weights),
+            luma: crate::color::luminance(weights),
             stop_count: self.stop_count(job),
             mask: &self.mask,
             open_radius2: self.open_radius2,
