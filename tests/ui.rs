@@ -50,14 +50,14 @@ fn editing_a_radius_marks_an_impossible_value_and_keeps_the_last_valid_lens() {
     h.run();
     let r = h.state().doc.lens.surfaces[1].radius_mm;
     assert!((r - before * 1.1).abs() < 1e-9, "radius {r}, wanted {}", before * 1.1);
-    assert!(h.state().lens_problem.is_none());
+    assert!(h.state().derived.lens_problem.is_none());
     let flare_before = h.state().flare().unwrap().system.lens.clone();
     assert_eq!(flare_before.surfaces[1].radius_mm, r, "the flare follows a valid edit");
     // The stop must be flat: a curved stop is refused, its cell marked, the flare kept.
     let stop = h.state().doc.lens.stop_index();
     h.get_by_label(&format!("radius {stop}")).set_value_accesskit(25.0);
     h.run();
-    let problem = h.state().lens_problem.clone().expect("a curved stop is refused");
+    let problem = h.state().derived.lens_problem.clone().expect("a curved stop is refused");
     assert_eq!((problem.surface, problem.field), (Some(stop), Some("radius")), "{problem:?}");
     assert!(problem.reason.contains("flat"), "{}", problem.reason);
     assert_eq!(h.state().flare().unwrap().system.lens, flare_before, "the viewport keeps the last valid lens");
@@ -66,7 +66,7 @@ fn editing_a_radius_marks_an_impossible_value_and_keeps_the_last_valid_lens() {
     h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
     h.run();
     assert_eq!(h.state().doc.lens.surfaces[stop].radius_mm, 0.0);
-    assert!(h.state().lens_problem.is_none());
+    assert!(h.state().derived.lens_problem.is_none());
 }
 
 #[test]
@@ -83,7 +83,7 @@ fn blades_ghost_toggles_and_undo_redo_change_the_document() {
     );
     // The ghost list: the brightest ghost first; switch it off, then give another a gain.
     show(&mut h, Tab::Ghosts);
-    let mut rows = h.state().ghosts.clone();
+    let mut rows = h.state().derived.ghosts.clone();
     rows.sort_by(|a, b| b.intensity().total_cmp(&a.intensity()));
     let (a, b) = (&rows[0], &rows[1]);
     assert!(a.culled.is_none(), "the brightest ghost is drawn");
@@ -285,7 +285,7 @@ fn snapshots_of_the_whole_window_with_the_flare() {
     h.state_mut().tab = Tab::Lens;
     snap(&mut h, "app_lens_panel");
     // The brightest drawn ghost selected: ringed in the viewport, traced in the ray diagram.
-    let mut rows = h.state().ghosts.clone();
+    let mut rows = h.state().derived.ghosts.clone();
     rows.sort_by(|a, b| b.intensity().total_cmp(&a.intensity()));
     h.state_mut().tab = Tab::Ghosts;
     h.state_mut().selected = rows.iter().find(|r| r.culled.is_none()).map(|r| r.ghost);
@@ -358,7 +358,7 @@ fn the_exposure_slider_rebuilds_no_optics_and_no_texture() {
     // On a GPU the viewport uploads textures: counted. Without one only the optics and frames are.
     let mut h = gpu_harness(None).unwrap_or_else(harness);
     show(&mut h, Tab::Ghosts);
-    let before = h.state().rebuilds;
+    let before = h.state().derived.rebuilds;
     assert!(before.optics >= 1 && before.frames >= 1, "{before:?}");
     let mut frame_ms = Vec::new();
     for ev in [8.0, 9.5, 11.0, 12.5, 4.0, 10.5] {
@@ -368,7 +368,7 @@ fn the_exposure_slider_rebuilds_no_optics_and_no_texture() {
         frame_ms.push(started.elapsed().as_secs_f64() * 1e3);
         assert_eq!(h.state().doc.flare_ev, ev);
     }
-    let after = h.state().rebuilds;
+    let after = h.state().derived.rebuilds;
     assert_eq!((after.optics, after.textures), (before.optics, before.textures), "{before:?} -> {after:?}");
     assert!(after.frames > before.frames, "each exposure is a new frame");
     frame_ms.sort_by(f64::total_cmp);
@@ -378,12 +378,12 @@ fn the_exposure_slider_rebuilds_no_optics_and_no_texture() {
     h.state_mut().doc.starburst = false;
     h.state_mut().doc.plate_ev = 2.0;
     h.run();
-    let display = h.state().rebuilds;
+    let display = h.state().derived.rebuilds;
     assert_eq!((display.optics, display.textures), (before.optics, before.textures));
     // An optics edit does rebuild: the counter can see one.
     h.state_mut().doc.aperture.f_number = Some(8.0);
     h.run();
-    assert_eq!(h.state().rebuilds.optics, before.optics + 1);
+    assert_eq!(h.state().derived.rebuilds.optics, before.optics + 1);
 }
 
 /// A look with most of the document off its defaults: ghost gains, exposures, tonemap, aperture, a plate.

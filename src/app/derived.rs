@@ -1,10 +1,24 @@
-//! What the app derives from the document, kept apart from the UI: what a frame was built from (a new frame
-//! is built only when it changes), how often anything was rebuilt, and the ghost list of a frame.
+//! What the app derives from the document, kept apart from the UI ([`Derived`]): the prepared flare (rebuilt
+//! only when the document's optics fingerprint changes; an impossible lens keeps the last valid one and says
+//! why), the plate, the LUT, and the frame (built again only when its request, the LUT or the plate changed),
+//! with their GPU uploads through [`crate::viewport`]; how often each was rebuilt ([`RebuildCounts`]); and the
+//! ghost list of a frame.
 
-use flare_core::frame::FrameRequest;
-use flare_core::ghost::{GhostFrame, GhostSystem};
+use std::sync::Arc;
+use std::time::Instant;
 
-use crate::panels::GhostRow;
+use eframe::egui_wgpu::RenderState;
+use flare_core::flare::PreparedFlare;
+use flare_core::frame::{Frame, FrameRequest};
+use flare_core::ghost::{FrameStats, GhostFrame, GhostSystem, Sprite};
+use flare_core::image::HdrImage;
+use flare_core::lut::blend::LiveLut;
+use flare_core::lut::{GhostLut, LutKind};
+use flare_core::optics::FirstOrder;
+use flare_core::preset::Document;
+
+use crate::panels::{GhostRow, LensProblem};
+use crate::viewport::{ViewFrame, ViewportResources};
 
 /// How often the app rebuilt what the document implies, for the tests and the status bar: display settings
 /// (exposures, tonemap, starburst, plate exposure) must change only `frames`.
@@ -48,4 +62,195 @@ pub fn ghost_rows(system: &GhostSystem, frame: &GhostFrame) -> Vec<GhostRow> {
         };
     }
     rows
+}
+
+/// What a sync tells the app.
+pub enum SyncEvent {
+    /// Something the user should read (a bad aperture image, an unreadable plate).
+    Message(String),
+    /// The ray-traced LUT in use was dropped: it was baked for another lens or other settings.
+    LutDropped,
+}
+
+/// The state derived from the document (see the module documentation).
+pub struct Derived {
+    /// The software adapter draws the viewport at half resolution.
+    pub software: bool,
+    pub optics_key: Option<u64>,
+    /// The prepared flare in use (the last valid one).
+    pub flare: Option<Arc<PreparedFlare>>,
+    /// What was rebuilt so far.
+    pub rebuilds: RebuildCounts,
+    pub first_order: Option<FirstOrder>,
+    pub lens_problem: Option<LensProblem>,
+    pub frame_key: Option<FrameKey>,
+    /// The viewport's size in pixels.
+    pub view_px: (u32, u32),
+    /// The latest frame for the viewport, with its generation (see [`crate::viewport`]).
+    pub view_frame: Option<ViewFrame>,
+    /// The frame was rebuilt after the viewport was painted this UI frame.
+    pub frame_pending: bool,
+    pub ghosts: Vec<GhostRow>,
+    pub sprites: Vec<Sprite>,
+    pub stats: FrameStats,
+    pub scene_ms: f64,
+    pub background_key: Option<String>,
+    /// The background plate (linear, as read), for exports.
+    pub plate: Option<Arc<HdrImage>>,
+    pub plate_generation: u64,
+    pub lut: Option<Arc<LiveLut>>,
+    pub lut_generation: u64,
+}
+
+impl Derived {
+    pub fn new(software: bool) -> Self {
+        Self {
+            software,
+            optics_key: None,
+            flare: None,
+            rebuilds: RebuildCounts::default(),
+            first_order: None,
+            lens_problem: None,
+            frame_key: None,
+            view_px: (960, 540),
+            view_frame: None,
+            frame_pending: false,
+            ghosts: Vec::new(),
+            sprites: Vec::new(),
+            stats: FrameStats::default(),
+            scene_ms: 0.0,
+            background_key: None,
+            plate: None,
+            plate_generation: 0,
+            lut: None,
+            lut_generation: 0,
+        }
+    }
+
+    /// Re-derives what changed in `doc` (an unreadable plate is removed from it), uploading to `gpu`.
+    pub fn sync(&mut self, doc: &mut Document, gpu: Option<&RenderState>) -> Vec<SyncEvent> {
+        let mut events = Vec::new();
+        self.sync_optics(doc, gpu, &mut events);
+        self.sync_background(doc, gpu, &mut events);
+        self.sync_frame(doc);
+        events
+    }
+
+    fn sync_optics(&mut self, doc: &Document, gpu: Option<&RenderState>, events: &mut Vec<SyncEvent>) {
+        let key = doc.optics_fingerprint();
+        if self.optics_key == Some(key) {
+            return;
+        }
+        self.optics_key = Some(key);
+        if let Err(e) = doc.lens.validate() {
+            let (surface, field) = match &e {
+                flare_core::optics::LensError::Field { surface, field, .. } => (Some(*surface), Some(*field)),
+                _ => (None, None),
+            };
+            self.lens_problem = Some(LensProblem { surface, field, reason: e.to_string() });
+            return;
+        }
+        let config = match doc.flare_config() {
+            Ok(config) => config,
+            Err(e) => {
+                // A bad aperture image or spectrum: the last valid flare stays, and the user is told.
+                events.push(SyncEvent::Message(e.to_string()));
+                return;
+            }
+        };
+        self.rebuilds.optics += 1;
+        match PreparedFlare::new(&doc.lens, &config) {
+            Ok(flare) => {
+                self.first_order = FirstOrder::d_line(&doc.lens).ok();
+                if let Some(rs) = gpu {
+                    ViewportResources::with(rs, |res, device, queue| {
+                        res.renderer.set_aperture(device, queue, &flare.mask);
+                        res.renderer.set_starburst(device, queue, &flare.starburst);
+                    });
+                    self.rebuilds.textures += 2;
+                }
+                // A ray-traced LUT is for one lens and its settings: refuse it for any other.
+                if let Some(lut) = &self.lut
+                    && lut.lut.kind == LutKind::RayTraced
+                    && lut.lut.check_for(&doc.lens, &flare.config).is_err()
+                {
+                    self.set_lut(None, gpu);
+                    events.push(SyncEvent::LutDropped);
+                }
+                self.flare = Some(Arc::new(flare));
+                self.lens_problem = None;
+            }
+            Err(e) => self.lens_problem = Some(LensProblem { surface: None, field: None, reason: e.to_string() }),
+        }
+    }
+
+    fn sync_background(&mut self, doc: &mut Document, gpu: Option<&RenderState>, events: &mut Vec<SyncEvent>) {
+        if self.background_key == doc.background {
+            return;
+        }
+        self.background_key = doc.background.clone();
+        let plate = match &doc.background {
+            Some(path) => match flare_core::output::read_plate(std::path::Path::new(path)) {
+                Ok(p) => Some(Arc::new(p)),
+                Err(e) => {
+                    events.push(SyncEvent::Message(e.to_string()));
+                    doc.background = None;
+                    self.background_key = None;
+                    None
+                }
+            },
+            None => None,
+        };
+        if let Some(rs) = gpu {
+            ViewportResources::with(rs, |res, device, queue| {
+                res.renderer.set_background(device, queue, plate.as_deref())
+            });
+            self.rebuilds.textures += 1;
+        }
+        self.plate = plate;
+        self.plate_generation += 1;
+    }
+
+    /// Replaces the LUT in use (uploading its atlas).
+    pub fn set_lut(&mut self, lut: Option<GhostLut>, gpu: Option<&RenderState>) {
+        let live = lut.map(|l| Arc::new(LiveLut::new(l)));
+        if let Some(rs) = gpu {
+            ViewportResources::with(rs, |res, device, queue| res.renderer.set_lut(device, queue, live.as_deref()));
+            self.rebuilds.textures += 1;
+        }
+        self.lut = live;
+        self.lut_generation += 1;
+    }
+
+    /// The accumulation divisor of the viewport: half resolution on software adapters.
+    pub fn view_divisor(&self) -> u32 {
+        if self.software { 2 } else { 1 }
+    }
+
+    /// Builds the frame when what it shows changed.
+    pub fn sync_frame(&mut self, doc: &Document) {
+        let (Some(flare), Some(optics)) = (self.flare.clone(), self.optics_key) else { return };
+        let (w, h) = self.view_px;
+        let key = FrameKey {
+            optics,
+            request: doc.frame_request(&flare.system, w, h, self.view_divisor()),
+            lut_generation: self.lut_generation,
+            plate_generation: self.plate_generation,
+        };
+        if self.frame_key.as_ref() == Some(&key) {
+            return;
+        }
+        let started = Instant::now();
+        let frame = Frame::build(&flare, self.lut.as_deref(), &key.request);
+        self.frame_key = Some(key);
+        self.rebuilds.frames += 1;
+        let rows = ghost_rows(&flare.system, &frame.sprites);
+        self.ghosts = rows;
+        self.sprites = frame.sprites.sprites.clone();
+        self.stats = frame.sprites.stats;
+        self.scene_ms = started.elapsed().as_secs_f64() * 1e3;
+        let generation = self.view_frame.as_ref().map_or(1, |f| f.0 + 1);
+        self.view_frame = Some((generation, Arc::new(frame)));
+        self.frame_pending = true;
+    }
 }

@@ -9,18 +9,15 @@
 //! [`Document::optics_fingerprint`] changes (an impossible lens keeps the last valid flare and marks the bad
 //! cell), the plate's texture when the plate file changes, then the frame ([`Frame::build`], the one frame
 //! pipeline) when its `FrameRequest` (light, gains, blend, exposures, tonemap, view size) or the LUT
-//! changed. Display settings never rebuild the optics or a texture ([`RebuildCounts`] counts what was
+//! changed. Display settings never rebuild the optics or a texture ([`derived::RebuildCounts`] counts what was
 //! rebuilt). A new frame is handed to the viewport's paint callback ([`crate::viewport`]); otherwise the
 //! callback only re-draws the last texture, and the app never asks for a repaint unless something is under
 //! way (a bake, a drag bench), so an idle window costs nothing. Images are exported through the same frame
 //! pipeline and writer as `flarelab render`.
 //!
-//! The parts that stand on their own live beside this file: [`derived`] (what a frame was built from, the
-//! rebuild counts, the ghost list), [`bake`] (the bake thread, with progress and Cancel) and [`drag_bench`]
+//! The parts that stand on their own live beside this file: [`derived`] (all of the above: the state derived
+//! from the document, its sync and its GPU uploads; the UI only reads it), [`bake`] (the bake thread, with progress and Cancel) and [`drag_bench`]
 //! (the app timing itself); [`crate::viewport`] is the bridge to the GPU, [`crate::history`] the undo.
-
-use std::sync::Arc;
-use std::time::Instant;
 
 use crate::history::History;
 
@@ -31,22 +28,19 @@ pub mod drag_bench;
 use crate::panels::aperture::AperturePreview;
 use crate::panels::coatings::CoatingsState;
 use crate::panels::ray_diagram::RayDiagram;
-use crate::panels::{Action, BakeStatus, GhostRow, LensProblem, PanelContext};
-use crate::viewport::{FlareCallback, ViewFrame, ViewportResources};
+use crate::panels::{Action, BakeStatus, PanelContext};
+use crate::viewport::{FlareCallback, ViewportResources};
 use anyhow::{Result, bail};
 use bake::{BakeJob, BakePoll};
-use derived::{FrameKey, RebuildCounts, ghost_rows};
+use derived::{Derived, SyncEvent};
 use drag_bench::DragBench;
 use eframe::egui_wgpu::RenderState;
 use eframe::{egui, wgpu};
 use flare_core::flare::PreparedFlare;
 use flare_core::frame::{Device, Frame, LayerChoice, Sources};
-use flare_core::ghost::{FrameStats, Sensor};
-use flare_core::image::HdrImage;
-use flare_core::lut::blend::LiveLut;
+use flare_core::ghost::Sensor;
 use flare_core::lut::classify::GhostClass;
 use flare_core::lut::{GhostLut, LutKind};
-use flare_core::optics::FirstOrder;
 use flare_core::optics::formats::load_lens_file;
 use flare_core::preset::{Document, LutSource};
 use flare_core::render::sensor_to_pixel;
@@ -107,32 +101,9 @@ pub struct FlareLabApp {
     pub tab: Tab,
     pub selected: Option<usize>,
     gpu: Option<RenderState>,
-    software: bool,
-    // Derived from the document.
-    optics_key: Option<u64>,
-    flare: Option<Arc<PreparedFlare>>,
-    /// What was rebuilt so far.
-    pub rebuilds: RebuildCounts,
-    first_order: Option<FirstOrder>,
-    pub lens_problem: Option<LensProblem>,
+    /// What the app derives from the document (see [`derived`]).
+    pub derived: Derived,
     pub message: Option<String>,
-    frame_key: Option<FrameKey>,
-    view_px: (u32, u32),
-    /// The latest scene for the viewport, with its generation (see [`crate::viewport`]).
-    view_frame: Option<ViewFrame>,
-    /// The scene was rebuilt after the viewport was painted this frame.
-    frame_pending: bool,
-    pub ghosts: Vec<GhostRow>,
-    sprites: Vec<flare_core::ghost::Sprite>,
-    stats: FrameStats,
-    scene_ms: f64,
-    background_key: Option<String>,
-    /// The background plate (linear, as read), for exports.
-    plate: Option<Arc<HdrImage>>,
-    plate_generation: u64,
-    // LUT.
-    lut: Option<Arc<LiveLut>>,
-    lut_generation: u64,
     classes: Option<Vec<GhostClass>>,
     bake: Option<BakeJob>,
     bake_status: BakeStatus,
@@ -162,26 +133,8 @@ impl FlareLabApp {
             tab: Tab::Ghosts,
             selected: None,
             gpu,
-            software,
-            optics_key: None,
-            flare: None,
-            rebuilds: RebuildCounts::default(),
-            first_order: None,
-            lens_problem: None,
+            derived: Derived::new(software),
             message: None,
-            frame_key: None,
-            view_px: (960, 540),
-            view_frame: None,
-            frame_pending: false,
-            ghosts: Vec::new(),
-            sprites: Vec::new(),
-            stats: FrameStats::default(),
-            scene_ms: 0.0,
-            background_key: None,
-            plate: None,
-            plate_generation: 0,
-            lut: None,
-            lut_generation: 0,
             classes: None,
             bake: None,
             bake_status: BakeStatus::Idle,
@@ -198,12 +151,12 @@ impl FlareLabApp {
 
     /// The prepared flare in use (the last valid one).
     pub fn flare(&self) -> Option<&PreparedFlare> {
-        self.flare.as_deref()
+        self.derived.flare.as_deref()
     }
 
     /// The LUT in use, if any.
     pub fn lut(&self) -> Option<&GhostLut> {
-        self.lut.as_deref().map(|l| &l.lut)
+        self.derived.lut.as_deref().map(|l| &l.lut)
     }
 
     /// Where the bake stands (for the Blend panel and the tests).
@@ -213,127 +166,24 @@ impl FlareLabApp {
 
     /// Re-derives what changed in the document (see the module documentation).
     pub fn sync(&mut self) {
-        self.sync_optics();
-        self.sync_background();
-        self.sync_frame();
-    }
-
-    fn sync_optics(&mut self) {
-        let key = self.doc.optics_fingerprint();
-        if self.optics_key == Some(key) {
-            return;
-        }
-        self.optics_key = Some(key);
-        if let Err(e) = self.doc.lens.validate() {
-            let (surface, field) = match &e {
-                flare_core::optics::LensError::Field { surface, field, .. } => (Some(*surface), Some(*field)),
-                _ => (None, None),
-            };
-            self.lens_problem = Some(LensProblem { surface, field, reason: e.to_string() });
-            return;
-        }
-        let config = match self.doc.flare_config() {
-            Ok(config) => config,
-            Err(e) => {
-                // A bad aperture image or spectrum: the last valid flare stays, and the user is told.
-                self.message = Some(e.to_string());
-                return;
-            }
-        };
-        self.rebuilds.optics += 1;
-        match PreparedFlare::new(&self.doc.lens, &config) {
-            Ok(flare) => {
-                self.first_order = FirstOrder::d_line(&self.doc.lens).ok();
-                if let Some(rs) = &self.gpu {
-                    ViewportResources::with(rs, |res, device, queue| {
-                        res.renderer.set_aperture(device, queue, &flare.mask);
-                        res.renderer.set_starburst(device, queue, &flare.starburst);
-                    });
-                    self.rebuilds.textures += 2;
-                }
-                // A ray-traced LUT is for one lens and its settings: refuse it for any other.
-                if let Some(lut) = &self.lut
-                    && lut.lut.kind == LutKind::RayTraced
-                    && lut.lut.check_for(&self.doc.lens, &flare.config).is_err()
-                {
-                    self.set_lut(None);
+        for event in self.derived.sync(&mut self.doc, self.gpu.as_ref()) {
+            match event {
+                SyncEvent::Message(text) => self.message = Some(text),
+                SyncEvent::LutDropped => {
                     self.classes = None;
                     self.bake_status = BakeStatus::Done("the lens changed: bake again for LUT ghosts".into());
                 }
-                self.flare = Some(Arc::new(flare));
-                self.lens_problem = None;
             }
-            Err(e) => self.lens_problem = Some(LensProblem { surface: None, field: None, reason: e.to_string() }),
         }
     }
 
-    fn sync_background(&mut self) {
-        if self.background_key == self.doc.background {
-            return;
-        }
-        self.background_key = self.doc.background.clone();
-        let plate = match &self.doc.background {
-            Some(path) => match flare_core::output::read_plate(std::path::Path::new(path)) {
-                Ok(p) => Some(Arc::new(p)),
-                Err(e) => {
-                    self.message = Some(e.to_string());
-                    self.doc.background = None;
-                    self.background_key = None;
-                    None
-                }
-            },
-            None => None,
-        };
-        if let Some(rs) = &self.gpu {
-            ViewportResources::with(rs, |res, device, queue| {
-                res.renderer.set_background(device, queue, plate.as_deref())
-            });
-            self.rebuilds.textures += 1;
-        }
-        self.plate = plate;
-        self.plate_generation += 1;
+    /// Builds the frame again if what it shows changed (after the view was resized).
+    fn sync_frame(&mut self) {
+        self.derived.sync_frame(&self.doc);
     }
 
     fn set_lut(&mut self, lut: Option<GhostLut>) {
-        let live = lut.map(|l| Arc::new(LiveLut::new(l)));
-        if let Some(rs) = &self.gpu {
-            ViewportResources::with(rs, |res, device, queue| res.renderer.set_lut(device, queue, live.as_deref()));
-            self.rebuilds.textures += 1;
-        }
-        self.lut = live;
-        self.lut_generation += 1;
-    }
-
-    /// The accumulation divisor of the viewport: half resolution on software adapters.
-    fn view_divisor(&self) -> u32 {
-        if self.software { 2 } else { 1 }
-    }
-
-    /// Builds the frame when what it shows changed.
-    fn sync_frame(&mut self) {
-        let (Some(flare), Some(optics)) = (self.flare.clone(), self.optics_key) else { return };
-        let (w, h) = self.view_px;
-        let key = FrameKey {
-            optics,
-            request: self.doc.frame_request(&flare.system, w, h, self.view_divisor()),
-            lut_generation: self.lut_generation,
-            plate_generation: self.plate_generation,
-        };
-        if self.frame_key.as_ref() == Some(&key) {
-            return;
-        }
-        let started = Instant::now();
-        let frame = Frame::build(&flare, self.lut.as_deref(), &key.request);
-        self.frame_key = Some(key);
-        self.rebuilds.frames += 1;
-        let rows = ghost_rows(&flare.system, &frame.sprites);
-        self.ghosts = rows;
-        self.sprites = frame.sprites.sprites.clone();
-        self.stats = frame.sprites.stats;
-        self.scene_ms = started.elapsed().as_secs_f64() * 1e3;
-        let generation = self.view_frame.as_ref().map_or(1, |f| f.0 + 1);
-        self.view_frame = Some((generation, Arc::new(frame)));
-        self.frame_pending = true;
+        self.derived.set_lut(lut, self.gpu.as_ref());
     }
 
     /// Undo and redo from the keyboard and the menu.
@@ -378,13 +228,15 @@ impl FlareLabApp {
             let height = ui.available_height();
             ui.allocate_ui(egui::vec2(ui.available_width(), height * 0.64), |ui| self.viewport_ui(ui, &mut actions));
             self.display_ui(ui);
-            let ghost =
-                self.selected.and_then(|g| self.flare.as_ref().map(|f| &f.system.ghosts[g])).map(|g| (g.i, g.j));
+            let ghost = self
+                .selected
+                .and_then(|g| self.derived.flare.as_ref().map(|f| &f.system.ghosts[g]))
+                .map(|g| (g.i, g.j));
             crate::panels::ray_diagram::ray_diagram_ui(
                 ui,
                 &mut self.ray_diagram,
                 &self.doc.lens,
-                self.first_order.as_ref(),
+                self.derived.first_order.as_ref(),
                 self.doc.light_deg,
                 ghost,
             );
@@ -394,7 +246,7 @@ impl FlareLabApp {
         }
         self.sync();
         // An edit in this frame made a new scene after the viewport was painted: paint once more.
-        if self.frame_pending && self.gpu.is_some() {
+        if self.derived.frame_pending && self.gpu.is_some() {
             ui.ctx().request_repaint();
         }
         // One undo step per gesture: commit when no button is held.
@@ -408,16 +260,16 @@ impl FlareLabApp {
 
     fn panel_ui(&mut self, ui: &mut egui::Ui, actions: &mut Vec<Action>) {
         let ctx = PanelContext {
-            flare: self.flare.as_deref(),
-            first_order: self.first_order.as_ref(),
-            lens_problem: self.lens_problem.as_ref(),
-            ghosts: &self.ghosts,
+            flare: self.derived.flare.as_deref(),
+            first_order: self.derived.first_order.as_ref(),
+            lens_problem: self.derived.lens_problem.as_ref(),
+            ghosts: &self.derived.ghosts,
             classes: self.classes.as_deref(),
             selected: self.selected,
             bake: &self.bake_status,
             lut_summary: None,
         };
-        let summary = self.lut.as_ref().map(|l| {
+        let summary = self.derived.lut.as_ref().map(|l| {
             format!(
                 "LUT: {} ghosts, {} entries, theta 0 to {:.1} deg ({})",
                 l.lut.ghosts.len(),
@@ -491,15 +343,15 @@ impl FlareLabApp {
             "light ({:.1}, {:.1}) deg | scene {:.2} ms, frame {:.1} ms at {}x{} | sprites drawn {}, culled {} dim / {} off sensor / {} empty entrance{}",
             self.doc.light_deg[0],
             self.doc.light_deg[1],
-            self.scene_ms,
+            self.derived.scene_ms,
             dt_ms,
-            self.view_px.0,
-            self.view_px.1,
-            self.stats.drawn,
-            self.stats.below_threshold,
-            self.stats.off_sensor,
-            self.stats.empty_entrance_region,
-            if self.lut.is_some() { " | LUT ghosts on" } else { "" }
+            self.derived.view_px.0,
+            self.derived.view_px.1,
+            self.derived.stats.drawn,
+            self.derived.stats.below_threshold,
+            self.derived.stats.off_sensor,
+            self.derived.stats.empty_entrance_region,
+            if self.derived.lut.is_some() { " | LUT ghosts on" } else { "" }
         ));
     }
 
@@ -547,8 +399,8 @@ impl FlareLabApp {
         {
             px = fixed;
         }
-        if px != self.view_px {
-            self.view_px = px;
+        if px != self.derived.view_px {
+            self.derived.view_px = px;
             self.sync_frame();
         }
         // Files dropped on the window: a background plate, a preset or a lens.
@@ -568,8 +420,8 @@ impl FlareLabApp {
                 egui::Color32::GRAY,
             );
         } else {
-            FlareCallback::paint(ui.painter(), rect, self.view_frame.clone());
-            self.frame_pending = false;
+            FlareCallback::paint(ui.painter(), rect, self.derived.view_frame.clone());
+            self.derived.frame_pending = false;
         }
         if response.dragged()
             && let Some(p) = response.interact_pointer_pos()
@@ -602,15 +454,15 @@ impl FlareLabApp {
 
     /// Where the light's image (the starburst's centre) is drawn in the viewport, in points.
     pub fn light_on_screen(&self) -> Option<egui::Pos2> {
-        let flare = self.flare.as_ref()?;
+        let flare = self.derived.flare.as_ref()?;
         let u = flare_core::render::light_slopes_for_frame_position(self.doc.light_deg[0], self.doc.light_deg[1]);
         self.to_screen(flare.system.light_image_mm(u), self.view_rect?)
     }
 
     /// Sensor mm to a point of the viewport rect.
     fn to_screen(&self, p_mm: [f64; 2], rect: egui::Rect) -> Option<egui::Pos2> {
-        self.flare.as_ref()?;
-        let (w, h) = self.view_px;
+        self.derived.flare.as_ref()?;
+        let (w, h) = self.derived.view_px;
         let sensor = Sensor::full_frame_for(w, h);
         let p = sensor_to_pixel(p_mm, &sensor, w, h);
         Some(
@@ -622,13 +474,13 @@ impl FlareLabApp {
     /// The light's marker and the selected ghost's ring.
     fn overlay_ui(&self, ui: &egui::Ui, rect: egui::Rect) {
         let painter = ui.painter().with_clip_rect(rect);
-        let Some(flare) = &self.flare else { return };
+        let Some(flare) = &self.derived.flare else { return };
         let u = flare_core::render::light_slopes_for_frame_position(self.doc.light_deg[0], self.doc.light_deg[1]);
         if let Some(p) = self.to_screen(flare.system.light_image_mm(u), rect) {
             painter.circle_stroke(p, 7.0, egui::Stroke::new(1.5, egui::Color32::from_rgb(255, 230, 120)));
         }
         let Some(g) = self.selected else { return };
-        for s in self.sprites.iter().filter(|s| s.ghost == g && s.wavelength == 1) {
+        for s in self.derived.sprites.iter().filter(|s| s.ghost == g && s.wavelength == 1) {
             if let (Some(c), Some(edge)) = (
                 self.to_screen(s.centre_mm, rect),
                 self.to_screen([s.centre_mm[0] + s.half_size_mm.abs(), s.centre_mm[1]], rect),
@@ -650,7 +502,7 @@ impl FlareLabApp {
     /// The brightest drawn ghost whose (green) sprite covers `p`, if any.
     fn ghost_at(&self, p: egui::Pos2, rect: egui::Rect) -> Option<usize> {
         let mut best: Option<(usize, f64)> = None;
-        for s in self.sprites.iter().filter(|s| s.culled.is_none() && s.wavelength == 1) {
+        for s in self.derived.sprites.iter().filter(|s| s.culled.is_none() && s.wavelength == 1) {
             let (Some(c), Some(edge)) = (
                 self.to_screen(s.centre_mm, rect),
                 self.to_screen([s.centre_mm[0] + s.half_size_mm.abs(), s.centre_mm[1]], rect),
@@ -658,7 +510,7 @@ impl FlareLabApp {
                 continue;
             };
             let r = (edge.x - c.x).abs().max(4.0);
-            let m = &self.ghosts[s.ghost];
+            let m = &self.derived.ghosts[s.ghost];
             let lum = m.intensity() * self.doc.ghost_gain(m.i, m.j);
             if c.distance(p) <= r && lum > 0.0 && best.is_none_or(|(_, b)| lum > b) {
                 best = Some((s.ghost, lum));
@@ -669,8 +521,8 @@ impl FlareLabApp {
 
     /// Puts the light where the pointer is (it may leave the frame: its ghosts keep coming).
     fn light_from_pointer(&mut self, pointer: egui::Pos2, rect: egui::Rect) {
-        let Some(flare) = &self.flare else { return };
-        let sensor = Sensor::full_frame_for(self.view_px.0, self.view_px.1);
+        let Some(flare) = &self.derived.flare else { return };
+        let sensor = Sensor::full_frame_for(self.derived.view_px.0, self.derived.view_px.1);
         let k_px_per_mm = f64::from(rect.width()) / sensor.width_mm;
         let x_mm = f64::from(pointer.x - rect.center().x) / k_px_per_mm;
         let y_mm = f64::from(rect.center().y - pointer.y) / k_px_per_mm;
@@ -722,7 +574,7 @@ impl FlareLabApp {
                 }
             }
             Action::ExportLut => {
-                let Some(live) = self.lut.clone() else {
+                let Some(live) = self.derived.lut.clone() else {
                     self.message = Some("no LUT to export: bake one (Blend panel) or open one".into());
                     return;
                 };
@@ -764,7 +616,7 @@ impl FlareLabApp {
 
     /// Opens a `.flut`: a photo LUT for any lens, a ray-traced one only for the lens it was baked for.
     pub fn open_lut(&mut self, path: &std::path::Path) {
-        let Some(flare) = self.flare.clone() else { return };
+        let Some(flare) = self.derived.flare.clone() else { return };
         match flare_core::lut::format::read_lut(path) {
             Ok(lut) => {
                 if lut.kind == LutKind::RayTraced
@@ -849,11 +701,11 @@ impl FlareLabApp {
     }
 
     fn start_bake(&mut self) {
-        let Some(flare) = self.flare.clone() else { return };
+        let Some(flare) = self.derived.flare.clone() else { return };
         if self.bake.is_some() {
             return;
         }
-        let previous = self.lut.as_ref().filter(|l| l.lut.kind == LutKind::RayTraced).map(|l| l.lut.clone());
+        let previous = self.derived.lut.as_ref().filter(|l| l.lut.kind == LutKind::RayTraced).map(|l| l.lut.clone());
         self.bake = Some(BakeJob::start(flare, previous));
         self.bake_status = BakeStatus::Running { fraction: 0.0, text: bake::CLASSIFYING.into() };
     }
@@ -861,7 +713,7 @@ impl FlareLabApp {
     /// One frame of the drag bench (see [`DragBench`]); closes the window when it is done.
     fn drag_bench_step(&mut self, ctx: &egui::Context) {
         let Some(bench) = &mut self.drag_bench else { return };
-        match bench.step(&mut self.doc, self.scene_ms, self.rebuilds, self.view_px) {
+        match bench.step(&mut self.doc, self.derived.scene_ms, self.derived.rebuilds, self.derived.view_px) {
             Some(line) => {
                 println!("{line}");
                 self.drag_bench = None;
@@ -912,10 +764,10 @@ impl FlareLabApp {
     /// written by the one writer (PNG tonemapped, EXR linear with layers), exactly as `flarelab render
     /// --preset` of this document with `--size` and `--device cpu` does.
     pub fn export_image_to(&self, size: (u32, u32), path: &std::path::Path) -> Result<()> {
-        let Some(flare) = &self.flare else { bail!("no valid lens") };
+        let Some(flare) = &self.derived.flare else { bail!("no valid lens") };
         let request = self.doc.frame_request(&flare.system, size.0, size.1, 1);
-        let frame = Frame::build(flare, self.lut.as_deref(), &request);
-        let sources = Sources { flare, lut: self.lut.as_deref(), plate: self.plate.as_deref() };
+        let frame = Frame::build(flare, self.derived.lut.as_deref(), &request);
+        let sources = Sources { flare, lut: self.derived.lut.as_deref(), plate: self.derived.plate.as_deref() };
         flare_core::frame::render_to_file(&mut Device::Cpu, &frame, &sources, LayerChoice::default(), path)?;
         Ok(())
     }
