@@ -51,11 +51,6 @@ pub fn check_wavelength(nm: f64) -> Result<()> {
     Ok(())
 }
 
-/// `WIDTHxHEIGHT` for clap (see [`flare_core::frame::parse_size`]).
-pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
-    flare_core::frame::parse_size(s)
-}
-
 /// Parses a coating override: `lens` (each surface's own: no override), `none`, `quarter-wave[:NM]`,
 /// multilayer:INDEX/THICKNESS_NM,...
 pub fn parse_coating_override(spec: &str) -> Result<Option<Coating>> {

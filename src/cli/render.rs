@@ -22,7 +22,9 @@ use flare_core::preset::{Document, LutSource};
 use flare_core::raytrace::{self};
 use flare_core::render::cpu;
 
-use super::common::{OpticsChoice, parse_aperture, parse_pair_f64, parse_size};
+use flare_core::frame::parse_size;
+
+use super::common::{OpticsChoice, parse_aperture, parse_pair_f64};
 
 /// How the ghosts are made.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -283,10 +285,10 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     }
     let choice = LayerChoice { ghosts: args.layers == Some(Layers::Ghosts) };
     // Everything that can be refused is checked before any work: the output's type, the plate.
-    let kind = flare_core::output::ImageKind::from_path(&args.out)?;
-    if choice.ghosts && kind != flare_core::output::ImageKind::Exr {
-        bail!("--layers ghosts: {} is not an EXR (a PNG holds one tonemapped image)", args.out.display());
-    }
+    frame::check_output(&args.out, choice).map_err(|e| match e {
+        frame::FrameError::Request(reason) => anyhow::anyhow!("--layers ghosts: {reason}"),
+        other => anyhow::anyhow!("{other}"),
+    })?;
     let plate = doc
         .background
         .as_deref()

@@ -330,6 +330,19 @@ pub struct LayerChoice {
     pub ghosts: bool,
 }
 
+/// The kind of image `path` names, when it can hold the layers `choice` asks for (a PNG holds one tonemapped
+/// image: no ghost layers). Callers check before any work; [`render_to_file`] checks too.
+pub fn check_output(path: &std::path::Path, choice: LayerChoice) -> Result<crate::output::ImageKind, FrameError> {
+    let kind = crate::output::ImageKind::from_path(path)?;
+    if choice.ghosts && kind != crate::output::ImageKind::Exr {
+        return Err(FrameError::Request(format!(
+            "{}: ghost layers need an EXR file (a PNG holds one tonemapped image)",
+            path.display()
+        )));
+    }
+    Ok(kind)
+}
+
 /// Draws `frame` on `device` and writes it to `path` through [`crate::output::write_frame`] (PNG: the
 /// tonemapped composite; EXR: the layers). Returns what was drawn.
 pub fn render_to_file(
@@ -339,13 +352,7 @@ pub fn render_to_file(
     choice: LayerChoice,
     path: &std::path::Path,
 ) -> Result<Drawn, FrameError> {
-    let kind = crate::output::ImageKind::from_path(path)?;
-    if choice.ghosts && kind != crate::output::ImageKind::Exr {
-        return Err(FrameError::Request(format!(
-            "{}: ghost layers need an EXR file (a PNG holds one tonemapped image)",
-            path.display()
-        )));
-    }
+    check_output(path, choice)?;
     let drawn = device.draw(frame, sources)?;
     write_drawn(device, frame, sources, &drawn, choice, path)?;
     Ok(drawn)

@@ -488,27 +488,28 @@ impl FlareRenderer {
             dimension: Some(wgpu::TextureViewDimension::D2Array),
             ..Default::default()
         });
-        let sampler = wgpu::BindingResource::Sampler(&self.sampler);
-        let bind = |label, layout: &wgpu::BindGroupLayout, view: &wgpu::TextureView, third: wgpu::BindingResource| {
-            let mut entries = vec![
-                wgpu::BindGroupEntry { binding: 0, resource: self.globals.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(view) },
-                wgpu::BindGroupEntry { binding: 2, resource: third },
-            ];
-            if std::ptr::eq(layout, &self.tonemap_layout) {
-                entries.push(wgpu::BindGroupEntry { binding: 3, resource: sampler.clone() });
-            }
-            device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries: &entries })
-        };
+        let sampler = || wgpu::BindingResource::Sampler(&self.sampler);
+        // Binding 0 is the uniforms, 1 the texture, then the layout's own resources.
+        let bind =
+            |label, layout: &wgpu::BindGroupLayout, view: &wgpu::TextureView, rest: Vec<wgpu::BindingResource>| {
+                let mut entries = vec![
+                    wgpu::BindGroupEntry { binding: 0, resource: self.globals.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(view) },
+                ];
+                entries.extend(
+                    rest.into_iter().zip(2..).map(|(resource, binding)| wgpu::BindGroupEntry { binding, resource }),
+                );
+                device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries: &entries })
+            };
         BindGroups {
-            ghosts: bind("ghosts", &self.ghost_layout, &aperture_view, sampler.clone()),
-            starburst: bind("starburst", &self.ghost_layout, &starburst_view, sampler.clone()),
-            lut: bind("lut ghosts", &self.lut_layout, &atlas_view, sampler.clone()),
+            ghosts: bind("ghosts", &self.ghost_layout, &aperture_view, vec![sampler()]),
+            starburst: bind("starburst", &self.ghost_layout, &starburst_view, vec![sampler()]),
+            lut: bind("lut ghosts", &self.lut_layout, &atlas_view, vec![sampler()]),
             tonemap: bind(
                 "tonemap",
                 &self.tonemap_layout,
                 hdr_view,
-                wgpu::BindingResource::TextureView(&background_view),
+                vec![wgpu::BindingResource::TextureView(&background_view), sampler()],
             ),
         }
     }
