@@ -360,15 +360,24 @@ fn render_without_any_adapter_says_so_clearly() {
     let out = dir.path().join("x.png");
     // Ask wgpu for a backend this platform does not have: no adapter at all.
     let backend = if cfg!(target_os = "macos") { "dx12" } else { "metal" };
-    let result = Command::new(env!("CARGO_BIN_EXE_flarelab"))
-        .args(["render", "heliar", "--size", "64x36", "-o", out.to_str().unwrap()])
-        .env("WGPU_BACKEND", backend)
-        .output()
-        .unwrap();
+    let run = |device: &str| {
+        Command::new(env!("CARGO_BIN_EXE_flarelab"))
+            .args(["render", "heliar", "--size", "64x36", "--device", device, "-o", out.to_str().unwrap()])
+            .env("WGPU_BACKEND", backend)
+            .output()
+            .unwrap()
+    };
+    let result = run("gpu");
     let stderr = String::from_utf8_lossy(&result.stderr);
     assert_eq!(result.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("no GPU adapter") && stderr.contains("--device cpu"), "{stderr}");
     assert!(!out.exists());
+    // The default, auto, says so and draws on the CPU twin.
+    let result = run("auto");
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(result.status.success(), "{stderr}");
+    assert!(stderr.contains("no GPU") && stderr.contains("CPU twin"), "{stderr}");
+    assert!(out.exists());
 }
 
 #[test]
@@ -718,4 +727,171 @@ fn render_writes_compositing_layers_with_the_plate_apart() {
         assert_eq!(a["plate.R"][k], p[0] * 2.0);
         assert_eq!(b["plate.B"][k], p[2] * 0.5);
     }
+}
+
+/// A synthetic plate sequence (`flarelab synth-shot`, 160x90) of `frames` in `dir`: the plates' pattern and
+/// the true track's path.
+fn synth_shot(dir: &Path, frames: &str, occluder: bool) -> (String, PathBuf) {
+    let plates = dir.join("plates/sun.####.exr").display().to_string();
+    let track = dir.join("track.csv");
+    let mut args =
+        vec!["synth-shot", "--size", "160x90", "--frames", frames, "--track", track.to_str().unwrap(), "-o", &plates];
+    if !occluder {
+        args.push("--no-occluder");
+    }
+    let out = flarelab(&args);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    (plates, track)
+}
+
+fn exr_channels(path: &Path) -> Vec<String> {
+    let image = exr::prelude::read_all_flat_layers_from_file(path).unwrap();
+    image.layer_data[0].channel_data.list.iter().map(|c| c.name.to_string()).collect()
+}
+
+#[test]
+fn render_a_sequence_with_the_light_found_in_the_plate_and_a_log() {
+    let dir = tempfile::tempdir().unwrap();
+    let (plates, track) = synth_shot(dir.path(), "1-6", true);
+    let out = dir.path().join("out/flare.####.exr").display().to_string();
+    let log = dir.path().join("log.json");
+    let render = |extra: &[&str]| {
+        let mut args = vec!["render", "--background", &plates, "--light", "auto", "--frames", "1-6", "--device", "cpu"];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["--log", log.to_str().unwrap(), "-o", &out]);
+        let result = flarelab(&args);
+        assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+        serde_json::from_str::<Value>(&std::fs::read_to_string(&log).unwrap()).unwrap()
+    };
+    let records = render(&[]);
+    let records = records.as_array().unwrap();
+    assert_eq!(records.len(), 6);
+    let truth: Vec<Vec<f64>> = std::fs::read_to_string(&track)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').skip(1).map(|v| v.parse().unwrap()).collect())
+        .collect();
+    for (k, r) in records.iter().enumerate() {
+        for key in ["frame", "light_px", "light_deg", "visibility", "ms"] {
+            assert!(r.get(key).is_some(), "record {k} lacks {key}: {r}");
+        }
+        assert_eq!(r["status"], "rendered");
+        let px = r["light_px"].as_array().unwrap();
+        let (x, y) = (px[0].as_f64().unwrap(), px[1].as_f64().unwrap());
+        assert!((x - truth[k][0]).hypot(y - truth[k][1]) < 0.5, "frame {}: ({x}, {y}) vs {:?}", k + 1, truth[k]);
+        let file = dir.path().join(format!("out/flare.{:04}.exr", k + 1));
+        let channels = exr_channels(&file);
+        for c in ["R", "G", "B", "A", "flare.R", "starburst.G", "plate.B"] {
+            assert!(channels.iter().any(|n| n == c), "{}: {c} in {channels:?}", file.display());
+        }
+    }
+    // Resume: only the missing frame is drawn again.
+    std::fs::remove_file(dir.path().join("out/flare.0003.exr")).unwrap();
+    let records = render(&["--skip-existing"]);
+    let status: Vec<&str> = records.as_array().unwrap().iter().map(|r| r["status"].as_str().unwrap()).collect();
+    assert_eq!(status, ["skipped", "skipped", "rendered", "skipped", "skipped", "skipped"]);
+    assert!(dir.path().join("out/flare.0003.exr").exists());
+    // A PNG sequence with a printf field, and a light off the plate has no pixel.
+    let png = dir.path().join("png/f.%04d.png").display().to_string();
+    let result = flarelab(&[
+        "render",
+        "--light-deg",
+        "60,0",
+        "--frames",
+        "1-2",
+        "--device",
+        "cpu",
+        "--size",
+        "96x54",
+        "--log",
+        log.to_str().unwrap(),
+        "-o",
+        &png,
+    ]);
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    assert!(dir.path().join("png/f.0001.png").exists() && dir.path().join("png/f.0002.png").exists());
+    let records: Value = serde_json::from_str(&std::fs::read_to_string(&log).unwrap()).unwrap();
+    assert!(records[0]["light_px"].is_null(), "{records}");
+}
+
+#[test]
+fn a_track_csv_and_light_auto_render_the_same_sequence() {
+    let dir = tempfile::tempdir().unwrap();
+    let (plates, track) = synth_shot(dir.path(), "1-3", false);
+    let render = |how: &[&str], name: &str| {
+        let out = dir.path().join(format!("{name}.####.png")).display().to_string();
+        let mut args = vec!["render", "--background", &plates, "--frames", "1-3", "--device", "cpu"];
+        args.extend_from_slice(how);
+        args.extend_from_slice(&["-o", &out]);
+        let result = flarelab(&args);
+        assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+        (1..=3)
+            .map(|f| image::open(dir.path().join(format!("{name}.{f:04}.png"))).unwrap().to_rgb8())
+            .collect::<Vec<_>>()
+    };
+    let auto = render(&["--light", "auto"], "auto");
+    let tracked = render(&["--track", track.to_str().unwrap()], "track");
+    for (a, t) in auto.iter().zip(&tracked) {
+        let diff: f64 = a.as_raw().iter().zip(t.as_raw()).map(|(x, y)| f64::from(x.abs_diff(*y))).sum::<f64>();
+        let mean = diff / a.as_raw().len() as f64;
+        assert!(mean < 0.5, "mean difference {mean} of 255");
+    }
+}
+
+#[test]
+fn a_missing_plate_frame_fails_that_frame_only() {
+    let dir = tempfile::tempdir().unwrap();
+    let (plates, _) = synth_shot(dir.path(), "1-5", true);
+    std::fs::remove_file(dir.path().join("plates/sun.0003.exr")).unwrap();
+    let out = dir.path().join("out/f.####.png").display().to_string();
+    let result = flarelab(&["render", "--background", &plates, "--frames", "1-5", "--device", "cpu", "-o", &out]);
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert_eq!(result.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("frame 3") && stderr.contains("sun.0003.exr"), "{stderr}");
+    assert!(!stderr.contains("panicked"));
+    for f in [1, 2, 4, 5] {
+        assert!(dir.path().join(format!("out/f.{f:04}.png")).exists(), "frame {f}");
+    }
+    assert!(!dir.path().join("out/f.0003.png").exists());
+}
+
+#[test]
+fn bad_shot_input_is_refused_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let (plates, _) = synth_shot(dir.path(), "1-5", true);
+    let out_dir = dir.path().join("out");
+    let out = out_dir.join("f.####.exr").display().to_string();
+    let track = dir.path().join("bad.csv");
+    std::fs::write(&track, "frame,x_px,y_px\n1,80,45\n2,eighty,45\n").unwrap();
+    let e = refusal(&["render", "--track", track.to_str().unwrap(), "--frames", "1-2", "--device", "cpu", "-o", &out]);
+    assert!(e.contains("bad.csv") && e.contains("line 3") && e.contains("x_px `eighty`"), "{e}");
+    let e = refusal(&["render", "--background", &plates, "--frames", "1-9", "--device", "cpu", "-o", &out]);
+    assert!(e.contains("outside the plate sequence") && e.contains("1-5"), "{e}");
+    let still = out_dir.join("f.exr").display().to_string();
+    let e = refusal(&["render", "--frames", "1-3", "--device", "cpu", "-o", &still]);
+    assert!(e.contains("frame field"), "{e}");
+    let e = refusal(&["render", "--device", "cpu", "-o", &out]);
+    assert!(e.contains("--frames"), "{e}");
+    let e = refusal(&["render", "--light", "auto", "--frames", "1-2", "--device", "cpu", "-o", &out]);
+    assert!(e.contains("--background"), "{e}");
+    let e = refusal(&[
+        "render",
+        "--background",
+        &plates,
+        "--light",
+        "auto",
+        "--light-smooth",
+        "4",
+        "--frames",
+        "1-2",
+        "-o",
+        &out,
+    ]);
+    assert!(e.contains("--light-smooth 4"), "{e}");
+    let far = dir.path().join("far.csv");
+    std::fs::write(&far, "1,80,45\n2,100000,45\n").unwrap();
+    let e = refusal(&["render", "--track", far.to_str().unwrap(), "--frames", "1-2", "--device", "cpu", "-o", &out]);
+    assert!(e.contains("line 2") && e.contains("outside the lens"), "{e}");
+    assert!(!out_dir.exists(), "nothing was written");
 }

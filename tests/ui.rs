@@ -117,14 +117,7 @@ fn dragging_in_the_viewport_moves_the_light_and_undo_takes_the_whole_drag_back()
     let before = h.state().doc.light_deg;
     // The viewport is the top left of the window (a placeholder without a GPU, with the same input).
     let (from, to) = (egui::pos2(300.0, 250.0), egui::pos2(420.0, 200.0));
-    h.drag_at(from);
-    h.run_steps(2);
-    for k in 1..=5 {
-        h.hover_at(from + (to - from) * (k as f32 / 5.0));
-        h.run_steps(1);
-    }
-    h.drop_at(to);
-    h.run();
+    drag(&mut h, from, to);
     let after = h.state().doc.light_deg;
     assert_ne!(after, before, "the drag moved the light");
     // The drop point is right of and above the view's centre: +x and +y in the frame.
@@ -137,7 +130,9 @@ fn dragging_in_the_viewport_moves_the_light_and_undo_takes_the_whole_drag_back()
     let flare = h.state().flare().unwrap();
     let ratios = |light: [f64; 2]| -> Vec<(usize, f64)> {
         let u = flare_core::render::light_slopes_for_frame_position(light[0], light[1]);
-        let l = flare.system.light_image_mm(u);
+        // The paraxial image of the light (the starburst sits at the real one, on the same radial line).
+        let k = flare.system.mapping.paraxial_mm_per_slope;
+        let l = [k * u[0], k * u[1]];
         let frame = flare.system.frame(u, &flare.frame_settings(960, 540, 1000.0));
         frame
             .sprites
@@ -450,4 +445,143 @@ fn the_apps_export_and_render_preset_give_the_same_image() {
     let over_two = diffs.iter().filter(|&&d| d > 2).count() as f64 / diffs.len() as f64;
     println!("app export (CPU twin) vs render --device gpu: mean {mean:.3}/255, worst {worst}/255");
     assert!(mean < 0.5 && worst <= 4 && over_two <= 1e-4, "mean {mean}, worst {worst}, over 2: {over_two}");
+}
+
+/// Drags in the viewport from `from` to `to` (the viewport is the top left of the window).
+fn drag(h: &mut Harness<'static, FlareLabApp>, from: egui::Pos2, to: egui::Pos2) {
+    h.drag_at(from);
+    h.run_steps(2);
+    for k in 1..=5 {
+        h.hover_at(from + (to - from) * (k as f32 / 5.0));
+        h.run_steps(1);
+    }
+    h.drop_at(to);
+    h.run();
+}
+
+#[test]
+fn the_timeline_keys_the_light_interpolates_plays_and_undo_covers_the_keys() {
+    let mut h = harness();
+    show(&mut h, Tab::Shot);
+    let a = [-10.0, 2.0];
+    h.state_mut().doc.light_deg = a;
+    h.run();
+    h.get_by_label("Set key").click();
+    h.run();
+    assert_eq!(h.state().doc.timeline.light_deg.keys.len(), 1);
+    assert_eq!(h.state().doc.timeline.light_deg.key_at(1).unwrap().value, a);
+    // Frame 11: dragging the light keys it there.
+    h.get_by_label("frame").set_value_accesskit(11.0);
+    h.run();
+    assert_eq!(h.state().playhead, 11);
+    drag(&mut h, egui::pos2(300.0, 250.0), egui::pos2(420.0, 200.0));
+    let b = h.state().doc.timeline.light_deg.key_at(11).expect("the drag keyed frame 11").value;
+    assert!(b[0] > 0.0 && b[1] > 0.0, "{b:?}");
+    assert_eq!(h.state().doc.light_deg, a, "the static light is not what a keyed drag moves");
+    assert_eq!(h.state().doc.timeline.key_frames(), vec![1, 11], "the ticks");
+    // Dragging again at a keyed frame edits that key.
+    drag(&mut h, egui::pos2(420.0, 200.0), egui::pos2(380.0, 230.0));
+    let b2 = h.state().doc.timeline.light_deg.key_at(11).unwrap().value;
+    assert_ne!(b2, b);
+    assert_eq!(h.state().doc.timeline.light_deg.keys.len(), 2);
+    // Frame 6 is between the keys: two keys make a straight line, smooth or not.
+    h.get_by_label("frame").set_value_accesskit(6.0);
+    h.run();
+    let mid = h.state().derived.light_deg(&h.state().doc);
+    for c in 0..2 {
+        assert!((mid[c] - 0.5 * (a[c] + b2[c])).abs() < 1e-9, "{mid:?} between {a:?} and {b2:?}");
+    }
+    // Undo takes the edit of the key back, then the key itself.
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
+    h.run();
+    assert_eq!(h.state().doc.timeline.light_deg.key_at(11).unwrap().value, b);
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
+    h.run();
+    assert!(h.state().doc.timeline.light_deg.key_at(11).is_none());
+    // Delete the key at frame 1.
+    h.get_by_label("frame").set_value_accesskit(1.0);
+    h.run();
+    h.get_by_label("Delete key").click();
+    h.run();
+    assert!(h.state().doc.timeline.light_deg.is_empty());
+    // Play advances the playhead at the timeline's rate; pause stops it.
+    h.get_by_label("Play").click();
+    h.run_steps(2);
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    h.step();
+    let playing_at = h.state().playhead;
+    assert!(playing_at > 1, "24 fps for 0.3 s: frame {playing_at}");
+    h.get_by_label("Pause").click();
+    h.run_steps(2);
+    h.run();
+    let paused_at = h.state().playhead;
+    std::thread::sleep(std::time::Duration::from_millis(200));
+    h.step();
+    assert_eq!(h.state().playhead, paused_at);
+}
+
+#[test]
+fn a_plate_sequence_finds_the_light_and_exports_on_a_thread_as_render_frames_does() {
+    use flare_core::shot::synthetic::SyntheticShot;
+    let dir = tempfile::tempdir().unwrap();
+    let shot = SyntheticShot { frames: 1..=4, ..SyntheticShot::small() };
+    let plates = dir.path().join("plates/sun.####.exr").display().to_string();
+    shot.write(&flare_core::shot::pattern::FramePattern::parse(&plates).unwrap().unwrap(), None).unwrap();
+    let mut doc = flare_core::preset::Document {
+        background: Some(plates),
+        auto_light: Some(Default::default()),
+        ..Default::default()
+    };
+    doc.timeline.first_frame = 1;
+    doc.timeline.last_frame = 4;
+    let preset = dir.path().join("shot.json");
+    doc.save(&preset).unwrap();
+    let mut h = Harness::builder()
+        .with_size(egui::vec2(1280.0, 800.0))
+        .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), FlareLabApp::new(None, Some(doc)));
+    h.state_mut().tab = Tab::Shot;
+    h.run();
+    step_until(&mut h, 120.0, |app| app.derived.shot_plan.is_some());
+    // The frame shown has the light found in its plate.
+    h.get_by_label("frame").set_value_accesskit(3.0);
+    h.run();
+    let found = h.state().derived.shot_plan.as_ref().unwrap().frames[2].clone();
+    assert_eq!(h.state().derived.light_deg(&h.state().doc), found.light_deg);
+    assert!(found.light_px.is_some_and(|p| (p[0] - shot.sun_px(3)[0]).hypot(p[1] - shot.sun_px(3)[1]) < 0.5));
+    // Export on a thread: the UI keeps running while it works.
+    let out = dir.path().join("app/f.####.png").display().to_string();
+    h.state_mut().export_sequence(&out, false);
+    assert!(h.state().shot_job.is_some());
+    let mut frames_while_exporting = 0;
+    while h.state().shot_job.is_some() {
+        h.step();
+        frames_while_exporting += 1;
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    assert!(frames_while_exporting > 1, "the window ran while the export worked");
+    let report = h.state().last_export.clone().expect("the export finished");
+    assert_eq!(report.rendered(), 4, "{}", h.state().shot_status);
+    // The same frames as `flarelab render --preset --frames`, byte for byte (both on the CPU twin).
+    let cli = dir.path().join("cli/f.####.png").display().to_string();
+    let result = std::process::Command::new(env!("CARGO_BIN_EXE_flarelab"))
+        .args(["render", "--preset", preset.to_str().unwrap(), "--frames", "1-4", "--device", "cpu", "-o", &cli])
+        .output()
+        .unwrap();
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    for f in 1..=4 {
+        let name = format!("f.{f:04}.png");
+        assert_eq!(
+            std::fs::read(dir.path().join("app").join(&name)).unwrap(),
+            std::fs::read(dir.path().join("cli").join(&name)).unwrap(),
+            "frame {f}"
+        );
+    }
+    // Cancel stops it; a pattern without a frame field is refused with the reason.
+    h.state_mut().export_sequence(&dir.path().join("again/f.####.png").display().to_string(), false);
+    h.state().shot_job.as_ref().unwrap().job.cancel();
+    step_until(&mut h, 60.0, |app| app.shot_job.is_none());
+    assert!(h.state().shot_status.contains("cancel"), "{}", h.state().shot_status);
+    h.state_mut().export_sequence(&dir.path().join("still.png").display().to_string(), false);
+    assert!(h.state().shot_job.is_none());
+    assert!(h.state().message.as_deref().is_some_and(|m| m.contains("frame field")), "{:?}", h.state().message);
 }

@@ -1,6 +1,7 @@
 //! What the app derives from the document, kept apart from the UI ([`Derived`]): the prepared flare (rebuilt
 //! only when the document's optics fingerprint changes; an impossible lens keeps the last valid one and says
-//! why), the plate, the LUT, and the frame (built again only when its request, the LUT or the plate changed),
+//! why), the plate of the playhead's frame (a sequence's files kept decoded for scrubbing and read ahead on
+//! threads while it plays), the LUT, and the frame (built again only when its request, the LUT or the plate changed),
 //! with their GPU uploads through [`crate::viewport`]; how often each was rebuilt ([`RebuildCounts`]); and the
 //! ghost list of a frame.
 
@@ -16,6 +17,58 @@ use flare_core::lut::blend::LiveLut;
 use flare_core::lut::{GhostLut, LutKind};
 use flare_core::optics::FirstOrder;
 use flare_core::preset::Document;
+use flare_core::shot::ShotPlan;
+use flare_core::shot::pattern::FramePattern;
+
+/// Plates kept decoded for scrubbing.
+const PLATE_CACHE: usize = 6;
+/// Frames of a plate sequence read ahead of the playhead.
+const PREFETCH: i64 = 2;
+
+/// A decoded plate and its file.
+type NamedPlate = (String, Arc<HdrImage>);
+
+/// Decoded plates by file, the latest [`PLATE_CACHE`] kept; [`Self::prefetch`] reads files on rayon's
+/// threads into it (a file that cannot be read is left out: reading it in turn reports why).
+#[derive(Default)]
+struct PlateCache {
+    plates: Arc<std::sync::Mutex<Vec<NamedPlate>>>,
+    loading: Arc<std::sync::Mutex<std::collections::BTreeSet<String>>>,
+}
+
+impl PlateCache {
+    fn get(&self, path: &str) -> Option<Arc<HdrImage>> {
+        let plates = self.plates.lock().ok()?;
+        plates.iter().find(|(p, _)| p == path).map(|(_, img)| img.clone())
+    }
+
+    fn put(&self, path: String, plate: Arc<HdrImage>) {
+        if let Ok(mut plates) = self.plates.lock() {
+            plates.retain(|(p, _)| *p != path);
+            plates.push((path, plate));
+            let excess = plates.len().saturating_sub(PLATE_CACHE);
+            plates.drain(..excess);
+        }
+    }
+
+    fn prefetch(&self, paths: &[String]) {
+        for path in paths {
+            let fresh = self.get(path).is_none() && self.loading.lock().is_ok_and(|mut l| l.insert(path.clone()));
+            if !fresh {
+                continue;
+            }
+            let (plates, loading, path) = (self.plates.clone(), self.loading.clone(), path.clone());
+            rayon::spawn(move || {
+                if let Ok(plate) = flare_core::output::read_plate(std::path::Path::new(&path)) {
+                    PlateCache { plates, loading: loading.clone() }.put(path.clone(), Arc::new(plate));
+                }
+                if let Ok(mut l) = loading.lock() {
+                    l.remove(&path);
+                }
+            });
+        }
+    }
+}
 
 use crate::panels::{GhostRow, LensProblem};
 use crate::viewport::{ViewFrame, ViewportResources};
@@ -94,9 +147,16 @@ pub struct Derived {
     pub sprites: Vec<Sprite>,
     pub stats: FrameStats,
     pub scene_ms: f64,
+    /// The plate file shown (the background, or its sequence's file of the playhead's frame).
     pub background_key: Option<String>,
     /// The background plate (linear, as read), for exports.
     pub plate: Option<Arc<HdrImage>>,
+    /// Plates read lately or ahead of the playhead ([`PlateCache`]).
+    plate_cache: PlateCache,
+    /// The timeline frame shown.
+    pub playhead: i64,
+    /// The light found in the plates, when the document asks for it and it has been found.
+    pub shot_plan: Option<Arc<ShotPlan>>,
     pub plate_generation: u64,
     pub lut: Option<Arc<LiveLut>>,
     pub lut_generation: u64,
@@ -121,6 +181,9 @@ impl Derived {
             scene_ms: 0.0,
             background_key: None,
             plate: None,
+            plate_cache: PlateCache::default(),
+            playhead: 1,
+            shot_plan: None,
             plate_generation: 0,
             lut: None,
             lut_generation: 0,
@@ -185,19 +248,33 @@ impl Derived {
     }
 
     fn sync_background(&mut self, doc: &mut Document, gpu: Option<&RenderState>, events: &mut Vec<SyncEvent>) {
-        if self.background_key == doc.background {
+        let file = doc.plate_at(self.playhead).map(|p| p.display().to_string());
+        if self.background_key == file {
             return;
         }
-        self.background_key = doc.background.clone();
-        let plate = match &doc.background {
-            Some(path) => match flare_core::output::read_plate(std::path::Path::new(path)) {
-                Ok(p) => Some(Arc::new(p)),
-                Err(e) => {
-                    events.push(SyncEvent::Message(e.to_string()));
-                    doc.background = None;
-                    self.background_key = None;
-                    None
-                }
+        self.background_key = file.clone();
+        let sequence = doc.background.as_deref().is_some_and(FramePattern::is_pattern);
+        let plate = match &file {
+            Some(path) => match self.plate_cache.get(path) {
+                Some(plate) => Some(plate),
+                None => match flare_core::output::read_plate(std::path::Path::new(path)) {
+                    Ok(p) => {
+                        let p = Arc::new(p);
+                        self.plate_cache.put(path.clone(), p.clone());
+                        Some(p)
+                    }
+                    Err(e) if sequence => {
+                        // One bad frame of a sequence: that frame shows no plate, the sequence stays.
+                        events.push(SyncEvent::Message(format!("frame {}: {e}", self.playhead)));
+                        None
+                    }
+                    Err(e) => {
+                        events.push(SyncEvent::Message(e.to_string()));
+                        doc.background = None;
+                        self.background_key = None;
+                        None
+                    }
+                },
             },
             None => None,
         };
@@ -209,6 +286,14 @@ impl Derived {
         }
         self.plate = plate;
         self.plate_generation += 1;
+        if sequence {
+            // The next frames are read on threads meanwhile: playing forward rarely waits for a file.
+            let ahead: Vec<String> = (1..=PREFETCH)
+                .filter_map(|k| doc.plate_at(self.playhead + k))
+                .map(|p| p.display().to_string())
+                .collect();
+            self.plate_cache.prefetch(&ahead);
+        }
     }
 
     /// Replaces the LUT in use (uploading its atlas).
@@ -227,13 +312,37 @@ impl Derived {
         if self.software { 2 } else { 1 }
     }
 
+    /// The request of the playhead's frame at `width` x `height`: the timeline's sample there, with the light
+    /// found in the plate when there is one for that frame.
+    pub fn request_at(
+        &self,
+        doc: &Document,
+        flare: &PreparedFlare,
+        width: u32,
+        height: u32,
+        divisor: u32,
+    ) -> FrameRequest {
+        let mut request = doc.frame_request_at(&flare.system, self.playhead as f64, width, height, divisor);
+        if let Some(planned) = self.shot_plan.as_ref().and_then(|p| p.frames.iter().find(|f| f.frame == self.playhead))
+        {
+            request.light_deg = planned.light_deg;
+            request.light_gain = planned.light_gain;
+        }
+        request
+    }
+
+    /// Where the light is in the frame shown (degrees).
+    pub fn light_deg(&self, doc: &Document) -> [f64; 2] {
+        self.frame_key.as_ref().map_or_else(|| doc.light_at(self.playhead as f64), |k| k.request.light_deg)
+    }
+
     /// Builds the frame when what it shows changed.
     pub fn sync_frame(&mut self, doc: &Document) {
         let (Some(flare), Some(optics)) = (self.flare.clone(), self.optics_key) else { return };
         let (w, h) = self.view_px;
         let key = FrameKey {
             optics,
-            request: doc.frame_request(&flare.system, w, h, self.view_divisor()),
+            request: self.request_at(doc, &flare, w, h, self.view_divisor()),
             lut_generation: self.lut_generation,
             plate_generation: self.plate_generation,
         };

@@ -1,6 +1,7 @@
 //! `FLARELAB_DRAG_BENCH=N`: the app measuring itself. The light (or, with `FLARELAB_DRAG_BENCH_WHAT=exposure`,
-//! the flare's exposure from 6 to 14 EV) moves one step a frame for N frames; then the median frame interval,
-//! the median scene build and what was rebuilt during the sweep are printed and the window closes.
+//! the flare's exposure from 6 to 14 EV; with `FLARELAB_DRAG_BENCH_WHAT=scrub`, the playhead, one frame of the
+//! timeline a UI frame, plates read and all) moves one step a frame for N frames; then the median frame
+//! interval, the median scene build and what was rebuilt during the sweep are printed and the window closes.
 
 use std::time::Instant;
 
@@ -8,10 +9,17 @@ use flare_core::preset::Document;
 
 use super::derived::RebuildCounts;
 
+/// What the bench sweeps.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Sweep {
+    Light,
+    Exposure,
+    Scrub,
+}
+
 /// The drag bench's state.
 pub struct DragBench {
-    /// Sweep the exposure instead of the light.
-    exposure: bool,
+    what: Sweep,
     /// What had been rebuilt when the sweep began (after the first frame).
     rebuilds_at_start: Option<RebuildCounts>,
     frames: usize,
@@ -26,7 +34,11 @@ impl DragBench {
     pub fn from_env() -> Option<Self> {
         let frames = std::env::var("FLARELAB_DRAG_BENCH").ok()?.parse().ok()?;
         Some(Self {
-            exposure: std::env::var("FLARELAB_DRAG_BENCH_WHAT").is_ok_and(|w| w == "exposure"),
+            what: match std::env::var("FLARELAB_DRAG_BENCH_WHAT").as_deref() {
+                Ok("exposure") => Sweep::Exposure,
+                Ok("scrub") => Sweep::Scrub,
+                _ => Sweep::Light,
+            },
             rebuilds_at_start: None,
             frames,
             done: 0,
@@ -41,6 +53,7 @@ impl DragBench {
     pub fn step(
         &mut self,
         doc: &mut Document,
+        playhead: &mut i64,
         scene_ms: f64,
         rebuilds: RebuildCounts,
         view_px: (u32, u32),
@@ -56,10 +69,13 @@ impl DragBench {
         }
         self.last = Some(now);
         let t = self.done as f64 / self.frames.max(1) as f64;
-        if self.exposure {
-            doc.flare_ev = 6.0 + 8.0 * t;
-        } else {
-            doc.light_deg = [-20.0 + 40.0 * t, -10.0 + 20.0 * t];
+        match self.what {
+            Sweep::Exposure => doc.flare_ev = 6.0 + 8.0 * t,
+            Sweep::Light => doc.light_deg = [-20.0 + 40.0 * t, -10.0 + 20.0 * t],
+            Sweep::Scrub => {
+                let (first, last) = (doc.timeline.first_frame, doc.timeline.last_frame);
+                *playhead = first + (self.done as i64).rem_euclid(last - first + 1);
+            }
         }
         self.done += 1;
         if self.done <= self.frames {
@@ -73,7 +89,11 @@ impl DragBench {
         let start = self.rebuilds_at_start.unwrap_or(rebuilds);
         Some(format!(
             "drag bench: {}: {} frames at {}x{}: median frame interval {interval:.1} ms, median scene build {scene:.2} ms; {} optics rebuilds, {} texture uploads, {} frames built during the sweep",
-            if self.exposure { "exposure" } else { "light" },
+            match self.what {
+                Sweep::Exposure => "exposure",
+                Sweep::Light => "light",
+                Sweep::Scrub => "scrub",
+            },
             self.frames,
             view_px.0,
             view_px.1,

@@ -24,6 +24,9 @@ use crate::history::History;
 pub mod bake;
 pub mod derived;
 pub mod drag_bench;
+pub mod job;
+pub mod shot;
+pub mod timeline;
 
 use crate::panels::aperture::AperturePreview;
 use crate::panels::coatings::CoatingsState;
@@ -38,7 +41,6 @@ use eframe::egui_wgpu::RenderState;
 use eframe::{egui, wgpu};
 use flare_core::flare::PreparedFlare;
 use flare_core::frame::{Device, Frame, LayerChoice, Sources};
-use flare_core::ghost::Sensor;
 use flare_core::lut::classify::GhostClass;
 use flare_core::lut::{GhostLut, LutKind};
 use flare_core::optics::formats::load_lens_file;
@@ -74,8 +76,20 @@ pub fn run() -> Result<()> {
         "FlareLab",
         options,
         Box::new(|cc| {
-            // FLARELAB_FRESH=1 starts from the default document instead of the last session.
-            let stored = if std::env::var_os("FLARELAB_FRESH").is_some() { None } else { cc.storage.and_then(restore) };
+            // FLARELAB_PRESET=FILE opens a preset; FLARELAB_FRESH=1 starts from the default document instead of
+            // the last session.
+            let preset = std::env::var_os("FLARELAB_PRESET").and_then(|p| {
+                Document::open(std::path::Path::new(&p))
+                    .map_err(|e| {
+                        eprintln!("flarelab: FLARELAB_PRESET {}: {e}; starting without it", p.to_string_lossy())
+                    })
+                    .ok()
+            });
+            let stored = if preset.is_some() || std::env::var_os("FLARELAB_FRESH").is_some() {
+                preset
+            } else {
+                cc.storage.and_then(restore)
+            };
             Ok(Box::new(FlareLabApp::new(cc.wgpu_render_state.clone(), stored)))
         }),
     );
@@ -93,6 +107,7 @@ pub enum Tab {
     Coatings,
     Ghosts,
     Blend,
+    Shot,
 }
 
 pub struct FlareLabApp {
@@ -116,6 +131,22 @@ pub struct FlareLabApp {
     export_size: (u32, u32),
     /// Where the viewport was last laid out (points).
     view_rect: Option<egui::Rect>,
+    /// The timeline frame shown (see [`timeline`]).
+    pub playhead: i64,
+    /// Playing since, from the frame then shown.
+    playing: Option<(std::time::Instant, i64)>,
+    /// Finding the light in the plates, or exporting a sequence.
+    pub shot_job: Option<shot::ShotJob>,
+    /// What the last shot job said.
+    pub shot_status: String,
+    /// What the light found in the plates was (or is being) found for.
+    light_key: Option<u64>,
+    /// The last exported sequence's records.
+    pub last_export: Option<flare_core::shot::sequence::SequenceReport>,
+    /// The Shot panel's text fields.
+    pub track_path: String,
+    pub sequence_path: String,
+    pub plate_path: String,
 }
 
 impl FlareLabApp {
@@ -144,7 +175,18 @@ impl FlareLabApp {
             drag_bench,
             export_size: (1920, 1080),
             view_rect: None,
+            playhead: 1,
+            playing: None,
+            shot_job: None,
+            shot_status: String::new(),
+            light_key: None,
+            last_export: None,
+            track_path: String::new(),
+            sequence_path: "flare.####.exr".into(),
+            plate_path: String::new(),
         };
+        app.playhead = app.doc.timeline.first_frame;
+        app.plate_path = app.doc.background.clone().unwrap_or_default();
         app.sync();
         app
     }
@@ -166,6 +208,8 @@ impl FlareLabApp {
 
     /// Re-derives what changed in the document (see the module documentation).
     pub fn sync(&mut self) {
+        self.playhead = self.playhead.clamp(self.doc.timeline.first_frame, self.doc.timeline.last_frame);
+        self.derived.playhead = self.playhead;
         for event in self.derived.sync(&mut self.doc, self.gpu.as_ref()) {
             match event {
                 SyncEvent::Message(text) => self.message = Some(text),
@@ -202,7 +246,10 @@ impl FlareLabApp {
     /// The whole window: menus, status bar, panels, viewport, ray diagram; then the frame's bookkeeping.
     pub fn ui_root(&mut self, ui: &mut egui::Ui) {
         // Whatever changed the document since the last frame (a test, a restored session) is drawn now.
+        self.step_playback(ui.ctx());
         self.sync();
+        self.sync_shot_light();
+        self.poll_shot();
         self.keys(ui.ctx());
         self.poll_bake();
         self.drag_bench_step(ui.ctx());
@@ -217,6 +264,7 @@ impl FlareLabApp {
                     (Tab::Coatings, "Coatings"),
                     (Tab::Ghosts, "Ghosts"),
                     (Tab::Blend, "Blend"),
+                    (Tab::Shot, "Shot"),
                 ] {
                     ui.selectable_value(&mut self.tab, tab, name);
                 }
@@ -226,7 +274,8 @@ impl FlareLabApp {
         });
         egui::CentralPanel::default().show(ui, |ui| {
             let height = ui.available_height();
-            ui.allocate_ui(egui::vec2(ui.available_width(), height * 0.64), |ui| self.viewport_ui(ui, &mut actions));
+            ui.allocate_ui(egui::vec2(ui.available_width(), height * 0.6), |ui| self.viewport_ui(ui, &mut actions));
+            self.timeline_ui(ui);
             self.display_ui(ui);
             let ghost = self
                 .selected
@@ -237,7 +286,7 @@ impl FlareLabApp {
                 &mut self.ray_diagram,
                 &self.doc.lens,
                 self.derived.first_order.as_ref(),
-                self.doc.light_deg,
+                self.derived.light_deg(&self.doc),
                 ghost,
             );
         });
@@ -253,12 +302,17 @@ impl FlareLabApp {
         if !ui.ctx().input(|i| i.pointer.any_down()) {
             self.history.commit(&self.doc);
         }
-        if self.bake.is_some() {
+        if self.bake.is_some() || self.shot_job.is_some() {
             ui.ctx().request_repaint_after(std::time::Duration::from_millis(100));
         }
     }
 
     fn panel_ui(&mut self, ui: &mut egui::Ui, actions: &mut Vec<Action>) {
+        if self.tab == Tab::Shot {
+            egui::ScrollArea::vertical().id_salt("panel_scroll").show(ui, |ui| self.shot_panel_ui(ui));
+            self.message_ui(ui);
+            return;
+        }
         let ctx = PanelContext {
             flare: self.derived.flare.as_deref(),
             first_order: self.derived.first_order.as_ref(),
@@ -287,7 +341,13 @@ impl FlareLabApp {
             Tab::Coatings => crate::panels::coatings::coatings_ui(ui, &mut self.doc, &mut self.coatings),
             Tab::Ghosts => crate::panels::ghosts::ghosts_ui(ui, &mut self.doc, &ctx, actions),
             Tab::Blend => crate::panels::blend::blend_ui(ui, &mut self.doc, &ctx, actions),
+            Tab::Shot => {}
         });
+        self.message_ui(ui);
+    }
+
+    /// The last message for the user, under the panel.
+    fn message_ui(&self, ui: &mut egui::Ui) {
         if let Some(message) = &self.message {
             ui.separator();
             ui.colored_label(egui::Color32::from_rgb(255, 170, 90), message);
@@ -309,6 +369,19 @@ impl FlareLabApp {
                 }
                 if self.doc.background.is_some() && ui.button("Remove background").clicked() {
                     self.doc.background = None;
+                    self.plate_path.clear();
+                }
+                if ui.button("Import light track…").clicked() {
+                    match rfd::FileDialog::new().add_filter("track", &["csv", "txt"]).pick_file() {
+                        Some(path) => self.import_track(&path),
+                        None => {
+                            self.tab = Tab::Shot;
+                            self.message = Some(
+                                "no file chosen (or no file dialog here): type the track's path in the Shot panel"
+                                    .into(),
+                            );
+                        }
+                    }
                 }
                 ui.separator();
                 ui.horizontal(|ui| {
@@ -322,6 +395,9 @@ impl FlareLabApp {
                         self.export_image(self.export_size);
                     }
                 });
+                if ui.button("Export sequence…").on_hover_text("the timeline's frames, on a thread").clicked() {
+                    self.export_sequence_dialog();
+                }
                 if ui.button("Export LUT…").clicked() {
                     self.act(Action::ExportLut);
                 }
@@ -339,10 +415,12 @@ impl FlareLabApp {
 
     fn status_ui(&mut self, ui: &mut egui::Ui) {
         let dt_ms = ui.ctx().input(|i| i.unstable_dt) * 1e3;
+        let light = self.derived.light_deg(&self.doc);
         ui.label(format!(
-            "light ({:.1}, {:.1}) deg | scene {:.2} ms, frame {:.1} ms at {}x{} | sprites drawn {}, culled {} dim / {} off sensor / {} empty entrance{}",
-            self.doc.light_deg[0],
-            self.doc.light_deg[1],
+            "frame {} | light ({:.1}, {:.1}) deg | scene {:.2} ms, frame {:.1} ms at {}x{} | sprites drawn {}, culled {} dim / {} off sensor / {} empty entrance{}",
+            self.playhead,
+            light[0],
+            light[1],
             self.derived.scene_ms,
             dt_ms,
             self.derived.view_px.0,
@@ -435,6 +513,8 @@ impl FlareLabApp {
         }
         if response.hovered() || response.has_focus() {
             let step = 0.25;
+            let light = self.derived.light_deg(&self.doc);
+            let mut moved = None;
             ui.input(|i| {
                 for (key, dx, dy) in [
                     (egui::Key::ArrowLeft, -step, 0.0),
@@ -443,11 +523,13 @@ impl FlareLabApp {
                     (egui::Key::ArrowDown, 0.0, -step),
                 ] {
                     if i.key_pressed(key) {
-                        self.doc.light_deg[0] = (self.doc.light_deg[0] + dx).clamp(-85.0, 85.0);
-                        self.doc.light_deg[1] = (self.doc.light_deg[1] + dy).clamp(-85.0, 85.0);
+                        moved = Some([(light[0] + dx).clamp(-85.0, 85.0), (light[1] + dy).clamp(-85.0, 85.0)]);
                     }
                 }
             });
+            if let Some(deg) = moved {
+                self.set_light(deg);
+            }
         }
         self.overlay_ui(ui, rect);
     }
@@ -455,7 +537,8 @@ impl FlareLabApp {
     /// Where the light's image (the starburst's centre) is drawn in the viewport, in points.
     pub fn light_on_screen(&self) -> Option<egui::Pos2> {
         let flare = self.derived.flare.as_ref()?;
-        let u = flare_core::render::light_slopes_for_frame_position(self.doc.light_deg[0], self.doc.light_deg[1]);
+        let light = self.derived.light_deg(&self.doc);
+        let u = flare_core::render::light_slopes_for_frame_position(light[0], light[1]);
         self.to_screen(flare.system.light_image_mm(u), self.view_rect?)
     }
 
@@ -463,8 +546,7 @@ impl FlareLabApp {
     fn to_screen(&self, p_mm: [f64; 2], rect: egui::Rect) -> Option<egui::Pos2> {
         self.derived.flare.as_ref()?;
         let (w, h) = self.derived.view_px;
-        let sensor = Sensor::full_frame_for(w, h);
-        let p = sensor_to_pixel(p_mm, &sensor, w, h);
+        let p = sensor_to_pixel(p_mm, &self.view_sensor(), w, h);
         Some(
             rect.min
                 + egui::vec2((p[0] / f64::from(w)) as f32 * rect.width(), (p[1] / f64::from(h)) as f32 * rect.height()),
@@ -475,7 +557,8 @@ impl FlareLabApp {
     fn overlay_ui(&self, ui: &egui::Ui, rect: egui::Rect) {
         let painter = ui.painter().with_clip_rect(rect);
         let Some(flare) = &self.derived.flare else { return };
-        let u = flare_core::render::light_slopes_for_frame_position(self.doc.light_deg[0], self.doc.light_deg[1]);
+        let light = self.derived.light_deg(&self.doc);
+        let u = flare_core::render::light_slopes_for_frame_position(light[0], light[1]);
         if let Some(p) = self.to_screen(flare.system.light_image_mm(u), rect) {
             painter.circle_stroke(p, 7.0, egui::Stroke::new(1.5, egui::Color32::from_rgb(255, 230, 120)));
         }
@@ -519,20 +602,23 @@ impl FlareLabApp {
         best.map(|(g, _)| g)
     }
 
-    /// Puts the light where the pointer is (it may leave the frame: its ghosts keep coming).
+    /// Puts the light where the pointer is, through the lens's own mapping (it may leave the frame: its ghosts
+    /// keep coming; past the lens's traced field the paraxial mapping continues it).
     fn light_from_pointer(&mut self, pointer: egui::Pos2, rect: egui::Rect) {
-        let Some(flare) = &self.derived.flare else { return };
-        let sensor = Sensor::full_frame_for(self.derived.view_px.0, self.derived.view_px.1);
-        let k_px_per_mm = f64::from(rect.width()) / sensor.width_mm;
-        let x_mm = f64::from(pointer.x - rect.center().x) / k_px_per_mm;
-        let y_mm = f64::from(rect.center().y - pointer.y) / k_px_per_mm;
-        // The light images at (sensor mm per unit slope) x tan(angle); the display is the sensor turned round.
-        let per_slope = flare.system.light_image_mm([1.0, 0.0])[0];
-        if per_slope.abs() > 1e-9 {
-            self.doc.light_deg = [
-                (x_mm / per_slope).atan().to_degrees().clamp(-85.0, 85.0),
-                (y_mm / per_slope).atan().to_degrees().clamp(-85.0, 85.0),
-            ];
+        let Some(flare) = self.derived.flare.clone() else { return };
+        let (w, h) = self.derived.view_px;
+        let px = [
+            f64::from((pointer.x - rect.left()) / rect.width()) * f64::from(w),
+            f64::from((pointer.y - rect.top()) / rect.height()) * f64::from(h),
+        ];
+        let sensor = self.view_sensor();
+        let deg = flare.system.mapping.light_deg_for_pixel(px, &sensor, w, h).or_else(|| {
+            let paraxial =
+                flare_core::optics::mapping::ImageMapping::paraxial(flare.system.mapping.paraxial_mm_per_slope);
+            paraxial.light_deg_for_pixel(px, &sensor, w, h)
+        });
+        if let Some(deg) = deg {
+            self.set_light(deg.map(|a| a.clamp(-85.0, 85.0)));
         }
     }
 
@@ -641,7 +727,8 @@ impl FlareLabApp {
     fn open_dropped(&mut self, path: &std::path::Path) {
         let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
         match ext.as_str() {
-            "png" | "exr" | "hdr" | "jpg" | "jpeg" => self.doc.background = Some(path.display().to_string()),
+            "png" | "exr" | "hdr" | "jpg" | "jpeg" => self.set_background(path),
+            "csv" => self.import_track(path),
             "flut" => self.open_lut(path),
             "zmx" | "dat" => self.open_lens(path),
             "json" => match Document::open(path) {
@@ -681,8 +768,13 @@ impl FlareLabApp {
     }
 
     fn pick_background(&mut self) {
-        if let Some(path) = rfd::FileDialog::new().add_filter("image", &["png", "exr", "hdr", "jpg"]).pick_file() {
-            self.doc.background = Some(path.display().to_string());
+        match rfd::FileDialog::new().add_filter("image", &["png", "exr", "hdr", "jpg"]).pick_file() {
+            Some(path) => self.set_background(&path),
+            None => {
+                self.tab = Tab::Shot;
+                self.message =
+                    Some("no file chosen (or no file dialog here): type the plate's path in the Shot panel".into());
+            }
         }
     }
 
@@ -706,14 +798,20 @@ impl FlareLabApp {
             return;
         }
         let previous = self.derived.lut.as_ref().filter(|l| l.lut.kind == LutKind::RayTraced).map(|l| l.lut.clone());
-        self.bake = Some(BakeJob::start(flare, previous));
+        self.bake = Some(bake::start_bake(flare, previous));
         self.bake_status = BakeStatus::Running { fraction: 0.0, text: bake::CLASSIFYING.into() };
     }
 
     /// One frame of the drag bench (see [`DragBench`]); closes the window when it is done.
     fn drag_bench_step(&mut self, ctx: &egui::Context) {
         let Some(bench) = &mut self.drag_bench else { return };
-        match bench.step(&mut self.doc, self.derived.scene_ms, self.derived.rebuilds, self.derived.view_px) {
+        match bench.step(
+            &mut self.doc,
+            &mut self.playhead,
+            self.derived.scene_ms,
+            self.derived.rebuilds,
+            self.derived.view_px,
+        ) {
             Some(line) => {
                 println!("{line}");
                 self.drag_bench = None;
@@ -760,12 +858,12 @@ pub fn restore(storage: &dyn eframe::Storage) -> Option<Document> {
 }
 
 impl FlareLabApp {
-    /// The document's frame at `size` (pixels), drawn by the CPU twin through the one frame pipeline and
+    /// The document's frame at the playhead at `size` (pixels), drawn by the CPU twin through the one frame pipeline and
     /// written by the one writer (PNG tonemapped, EXR linear with layers), exactly as `flarelab render
     /// --preset` of this document with `--size` and `--device cpu` does.
     pub fn export_image_to(&self, size: (u32, u32), path: &std::path::Path) -> Result<()> {
         let Some(flare) = &self.derived.flare else { bail!("no valid lens") };
-        let request = self.doc.frame_request(&flare.system, size.0, size.1, 1);
+        let request = self.derived.request_at(&self.doc, flare, size.0, size.1, 1);
         let frame = Frame::build(flare, self.derived.lut.as_deref(), &request);
         let sources = Sources { flare, lut: self.derived.lut.as_deref(), plate: self.derived.plate.as_deref() };
         flare_core::frame::render_to_file(&mut Device::Cpu, &frame, &sources, LayerChoice::default(), path)?;

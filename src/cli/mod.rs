@@ -12,6 +12,7 @@ pub mod lens;
 pub mod lut;
 pub mod preset;
 pub mod render;
+pub mod synth;
 pub mod trace;
 
 use anyhow::Result;
@@ -39,7 +40,7 @@ pub enum Command {
     /// Every two-reflection ghost for a light direction: sprite, brightness, colour, and whether it is culled.
     Ghosts(ghosts::GhostsArgs),
     /// Render a flare to an image (PNG: tonemapped 8-bit sRGB; EXR: linear float with named layers).
-    Render(render::RenderArgs),
+    Render(Box<render::RenderArgs>),
     /// Write a preset (the document the app saves), or list the shipped ones.
     #[command(subcommand)]
     Preset(preset::PresetCommand),
@@ -51,6 +52,8 @@ pub enum Command {
     Bake(lut::BakeArgs),
     /// Import a folder of photographs of a flare swept over theta as a photo LUT (.flut).
     PhotoLut(lut::PhotoArgs),
+    /// Write a synthetic plate sequence (a sun crossing a sky, a bar crossing the sun) and its track.
+    SynthShot(synth::SynthArgs),
 }
 
 pub fn run(command: Command) -> Result<()> {
@@ -64,5 +67,6 @@ pub fn run(command: Command) -> Result<()> {
         Command::Classify(args) => lut::classify_command(&args),
         Command::Bake(args) => lut::bake_command(&args),
         Command::PhotoLut(args) => lut::photo_command(&args),
+        Command::SynthShot(args) => synth::run(&args),
     }
 }

@@ -23,6 +23,15 @@ use flare_core::raytrace::{self};
 use flare_core::render::cpu;
 
 use flare_core::frame::parse_size;
+use flare_core::optics::sensor::{FULL_FRAME_WIDTH_MM, Sensor};
+use flare_core::shot::{
+    self,
+    pattern::FramePattern,
+    sequence::{FrameOutcome, SequenceOptions, ShotSources, render_sequence, write_log},
+    track::read_track,
+};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::sync::atomic::AtomicBool;
 
 use super::common::{OpticsChoice, parse_aperture, parse_pair_f64};
 
@@ -44,10 +53,22 @@ pub enum Method {
 /// Where the frame is drawn.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum DeviceArg {
-    /// wgpu (a software adapter such as lavapipe counts).
+    /// A GPU when wgpu finds an adapter, else the CPU twin (said on the terminal).
+    Auto,
+    /// wgpu (a software adapter such as lavapipe counts); refused when there is none.
     Gpu,
     /// The renderer's CPU twin.
     Cpu,
+}
+
+/// Where the light is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum LightArg {
+    /// Found in the plate on every frame: the brightest region above --light-threshold, its visibility
+    /// driving the flare's intensity.
+    Auto,
+    /// The timeline's light keys (or the static light): turns off a preset's auto light.
+    Keys,
 }
 
 /// Tonemap operators by name.
@@ -84,9 +105,45 @@ pub struct RenderArgs {
     /// Where the light appears in the frame, as horizontal and vertical field angles in degrees.
     #[arg(long, allow_hyphen_values = true, value_parser = parse_pair_f64)]
     pub light_deg: Option<(f64, f64)>,
-    /// Image size, e.g. 1280x720.
-    #[arg(long, default_value = "1280x720", value_parser = parse_size)]
-    pub size: (u32, u32),
+    /// Image size, e.g. 1280x720 (default: the plate's size, else 1280x720).
+    #[arg(long, value_parser = parse_size)]
+    pub size: Option<(u32, u32)>,
+    /// Render the frames A-B of the timeline (or one frame N) as a sequence; -o must have a frame field
+    /// (`out/flare.####.exr` or `%04d`).
+    #[arg(long, value_parser = parse_frames)]
+    pub frames: Option<(i64, i64)>,
+    /// The timeline frame of a still (default: the timeline's first frame).
+    #[arg(long, allow_negative_numbers = true, conflicts_with = "frames")]
+    pub frame: Option<i64>,
+    /// Where the light is: found in the plate (auto), or the keys.
+    #[arg(long, value_enum)]
+    pub light: Option<LightArg>,
+    /// A tracker's 2D track of the light: CSV rows `frame,x_px,y_px[,intensity_ev]`, pixels of the frame from
+    /// its top-left corner, y down (a header row is fine); they become light keys.
+    #[arg(long)]
+    pub track: Option<PathBuf>,
+    /// The sensor width the frame (and the plate) spans, in mm (default: the preset's, 36).
+    #[arg(long)]
+    pub sensor_mm: Option<f64>,
+    /// --light auto: the luminance above which a plate pixel belongs to the light (default 4; an 8-bit plate
+    /// clips at 1).
+    #[arg(long)]
+    pub light_threshold: Option<f64>,
+    /// --light auto: the light's unoccluded power (sum of its luminance; default: the largest in the range).
+    #[arg(long)]
+    pub light_power: Option<f64>,
+    /// --light auto: length of the visibility filter in frames, odd (default 5; 1 turns it off).
+    #[arg(long)]
+    pub light_smooth: Option<usize>,
+    /// A sequence: one JSON record per frame (frame, light_px, light_deg, visibility, ms, status).
+    #[arg(long)]
+    pub log: Option<PathBuf>,
+    /// A sequence: leave frames whose file exists as they are (resume a stopped render).
+    #[arg(long)]
+    pub skip_existing: bool,
+    /// A sequence on the CPU twin: draw the frames one after another instead of in parallel (to measure).
+    #[arg(long, hide = true)]
+    pub frames_in_turn: bool,
     /// How the ghosts are made (default: blended or photo when the preset uses a LUT, else paraxial).
     #[arg(long, value_enum)]
     pub method: Option<Method>,
@@ -120,7 +177,8 @@ pub struct RenderArgs {
     /// Leave out the starburst at the light.
     #[arg(long)]
     pub no_starburst: bool,
-    /// Background plate (PNG is taken as sRGB, EXR and HDR as linear), shown under the flare at --plate-ev.
+    /// Background plate (PNG is taken as sRGB, EXR and HDR as linear), shown under the flare at --plate-ev; a
+    /// sequence when it has a frame field (`plates/shot.####.exr` or `%04d`).
     #[arg(long)]
     pub background: Option<PathBuf>,
     /// Most relative irradiance culling may take from any pixel: the faintest sprites are culled while their peaks sum
@@ -131,14 +189,30 @@ pub struct RenderArgs {
     #[arg(long, default_value_t = 1)]
     pub accumulation_divisor: u32,
     /// Where to draw.
-    #[arg(long, value_enum, default_value = "gpu")]
+    #[arg(long, value_enum, default_value = "auto")]
     pub device: DeviceArg,
     /// Extra EXR layers (ghosts: one layer per drawn ghost).
     #[arg(long, value_enum)]
     pub layers: Option<Layers>,
-    /// Output image, .png (tonemapped) or .exr (linear, layered).
+    /// Output image, .png (tonemapped) or .exr (linear, layered); with --frames, a pattern such as
+    /// `out/flare.####.exr`.
     #[arg(short = 'o', long = "out", alias = "output")]
     pub out: PathBuf,
+}
+
+/// Parses `A-B` or `N` (frames may be negative: `-5--1`).
+fn parse_frames(s: &str) -> Result<(i64, i64), String> {
+    let bad = || format!("`{s}` is not a frame range A-B (or one frame N)");
+    if let Ok(n) = s.trim().parse::<i64>() {
+        return Ok((n, n));
+    }
+    let split = s.char_indices().skip(1).find(|&(_, c)| c == '-').map(|(i, _)| i).ok_or_else(bad)?;
+    let (a, b) = (s[..split].trim().parse::<i64>(), s[split + 1..].trim().parse::<i64>());
+    match (a, b) {
+        (Ok(a), Ok(b)) if a <= b => Ok((a, b)),
+        (Ok(a), Ok(b)) => Err(format!("`{s}`: the range runs backwards ({a} > {b})")),
+        _ => Err(bad()),
+    }
 }
 
 /// The document `args` describe: the preset (or the default), then LENS, then every flag given.
@@ -172,6 +246,30 @@ pub fn document(args: &RenderArgs) -> Result<Document> {
     }
     if let Some(plate) = &args.background {
         doc.background = Some(plate.display().to_string());
+    }
+    if let Some(w) = args.sensor_mm {
+        doc.sensor_width_mm = w;
+    }
+    match args.light {
+        Some(LightArg::Auto) => {
+            let auto = doc.auto_light.get_or_insert_with(Default::default);
+            if let Some(t) = args.light_threshold {
+                auto.threshold = t;
+            }
+            if args.light_power.is_some() {
+                auto.reference_power = args.light_power;
+            }
+            if let Some(n) = args.light_smooth {
+                auto.smooth_frames = n;
+            }
+        }
+        Some(LightArg::Keys) => doc.auto_light = None,
+        None => {}
+    }
+    if doc.auto_light.is_none()
+        && (args.light_threshold.is_some() || args.light_power.is_some() || args.light_smooth.is_some())
+    {
+        bail!("--light-threshold, --light-power and --light-smooth apply to --light auto");
     }
     if let Some(t) = args.threshold {
         doc.cull_threshold = Some(t);
@@ -207,6 +305,11 @@ fn flag_of(args: &RenderArgs, field: &str) -> Option<String> {
         }
         "aperture" | "aperture.roundness" => args.aperture.as_ref().map(|a| format!("--aperture {a}")),
         "cull_threshold" => given(args.threshold.is_some(), "--threshold", format!("{}", args.threshold?)),
+        "sensor_width_mm" => given(args.sensor_mm.is_some(), "--sensor-mm", format!("{}", args.sensor_mm?)),
+        "auto_light.threshold" => args.light_threshold.map(|t| format!("--light-threshold {t}")),
+        "auto_light.reference_power" => args.light_power.map(|p| format!("--light-power {p}")),
+        "auto_light.smooth_frames" => args.light_smooth.map(|n| format!("--light-smooth {n}")),
+        "background" => args.background.as_ref().map(|b| format!("--background {}", b.display())),
         "lens" => args.optics.file.clone(),
         _ => None,
     }
@@ -284,38 +387,117 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         bail!("--accumulation-divisor {}: use 1, 2 or 4", args.accumulation_divisor);
     }
     let choice = LayerChoice { ghosts: args.layers == Some(Layers::Ghosts) };
-    // Everything that can be refused is checked before any work: the output's type, the plate.
+    // Everything that can be refused is checked before any work: the output's name and type, the range, the
+    // plate, the track.
+    let out_text = args.out.display().to_string();
+    let out_pattern = FramePattern::parse(&out_text).map_err(|e| anyhow::anyhow!("-o {e}"))?;
+    let sequence = match (args.frames, out_pattern) {
+        (Some(_), Some(pattern)) => Some(pattern),
+        (Some(_), None) => bail!(
+            "-o {out_text}: a sequence needs a frame field in the file name, e.g. out/flare.####.exr or \
+             out/flare.%04d.exr"
+        ),
+        (None, Some(_)) => bail!("-o {out_text}: the name has a frame field; give --frames A-B to render a sequence"),
+        (None, None) => None,
+    };
+    if sequence.is_some() && grid.is_some() {
+        bail!("--frames renders the paraxial, blended and photo methods (a ray-traced frame takes minutes)");
+    }
+    if grid.is_some() && doc.sensor_width_mm != FULL_FRAME_WIDTH_MM {
+        bail!("--sensor-mm {}: the ray-traced methods draw the 36 mm frame", doc.sensor_width_mm);
+    }
+    if grid.is_some() && doc.auto_light.is_some() {
+        bail!("--light auto applies to the paraxial, blended and photo methods");
+    }
     frame::check_output(&args.out, choice).map_err(|e| match e {
         frame::FrameError::Request(reason) => anyhow::anyhow!("--layers ghosts: {reason}"),
         other => anyhow::anyhow!("{other}"),
     })?;
-    let plate = doc
-        .background
+    let range = match args.frames {
+        Some((a, b)) => a..=b,
+        None => {
+            let f = args.frame.unwrap_or(doc.timeline.first_frame);
+            f..=f
+        }
+    };
+    shot::plan::check_range(&doc, &range).map_err(|e| anyhow::anyhow!("--background: {e}"))?;
+    if doc.auto_light.is_some() && doc.background.is_none() {
+        bail!("--light auto finds the light in the plate: give --background (a plate or a sequence)");
+    }
+    if let Some(background) = doc.background.as_deref()
+        && !FramePattern::is_pattern(background)
+    {
+        read_plate(Path::new(background)).context("--background: the plate cannot be used")?;
+    }
+    let track = args
+        .track
         .as_deref()
-        .map(|p| read_plate(Path::new(p)))
-        .transpose()
-        .context("--background: the plate cannot be used")?;
+        .map(|p| read_track(p).map_err(|e| anyhow::anyhow!("--track {}: {e}", p.display())))
+        .transpose()?;
     let config = doc.flare_config().map_err(|e| anyhow::anyhow!("{e}"))?;
     let flare = PreparedFlare::new(&doc.lens, &config).with_context(|| doc.lens.id.clone())?;
+    if let (Some(rows), Some(path)) = (&track, &args.track) {
+        let (width, height) = shot::plan::frame_size(&doc, &range, args.size)?;
+        let sensor = Sensor::for_frame(doc.sensor_width_mm, width, height);
+        let (position, intensity) = shot::track::to_keys(rows, &flare.system.mapping, &sensor, width, height)
+            .map_err(|e| anyhow::anyhow!("--track {}: {e}", path.display()))?;
+        doc.timeline.light_deg = position;
+        if !intensity.is_empty() {
+            doc.timeline.light_ev = intensity;
+        }
+    }
     let lut = match method {
         Method::Blended | Method::Photo => Some(LiveLut::new(lut_for(&doc, &flare, method)?)),
         _ => None,
     };
-    let (width, height) = args.size;
-    // The ray-traced methods write their accumulation at the frame's full size.
-    let divisor = if grid.is_some() { 1 } else { args.accumulation_divisor };
-    let request = doc.frame_request(&flare.system, width, height, divisor);
-    let frame = Frame::build(&flare, lut.as_ref(), &request);
-    let sources = Sources { flare: &flare, lut: lut.as_ref(), plate: plate.as_ref() };
     let mut device = match (args.device, grid) {
         (_, Some(_)) | (DeviceArg::Cpu, None) => Device::Cpu,
         (DeviceArg::Gpu, None) => Device::gpu(false).map_err(|e| anyhow::anyhow!("{e} (or use --device cpu)"))?,
+        (DeviceArg::Auto, None) => Device::gpu(false).unwrap_or_else(|e| {
+            eprintln!("no GPU ({e}): drawing on the CPU twin");
+            Device::Cpu
+        }),
     };
+    let cancel = AtomicBool::new(false);
+    let scanning = (doc.auto_light.is_some() && range.clone().count() > 1)
+        .then(|| progress_bar(range.clone().count(), "finding the light"));
+    let plan = shot::plan::plan(
+        &doc,
+        &flare.system,
+        range,
+        args.size,
+        &|done, _| {
+            if let Some(bar) = &scanning {
+                bar.set_position(done as u64);
+            }
+        },
+        &cancel,
+    )?;
+    if let Some(bar) = scanning {
+        bar.finish_and_clear();
+    }
+    // The ray-traced methods write their accumulation at the frame's full size.
+    let divisor = if grid.is_some() { 1 } else { args.accumulation_divisor };
+    if let Some(out) = sequence {
+        let sources = ShotSources { doc: &doc, flare: &flare, lut: lut.as_ref(), plan: &plan };
+        return render_frames(args, &mut device, &sources, out, choice, divisor, &cancel);
+    }
+    let planned = &plan.frames[0];
+    let (width, height) = (plan.width, plan.height);
+    let plate = planned
+        .plate
+        .as_deref()
+        .map(read_plate)
+        .transpose()
+        .with_context(|| format!("--background: frame {}: the plate cannot be used", planned.frame))?;
+    let request = plan.request(&doc, &flare.system, planned, divisor);
+    let frame = Frame::build(&flare, lut.as_ref(), &request);
+    let sources = Sources { flare: &flare, lut: lut.as_ref(), plate: plate.as_ref() };
     match grid {
         Some(n) => {
             // Ray-traced ghosts replace the paraxial accumulation; starburst, tonemap and writer are the same.
             let started = std::time::Instant::now();
-            let traced = flare.ray_grid_renderer().render(doc.light_deg, width, height, n)?;
+            let traced = flare.ray_grid_renderer().render(planned.light_deg, width, height, n)?;
             let st = traced.stats;
             eprintln!(
                 "ray-traced {} ghost x wavelength jobs, {n:?} grid: {} rays, {} triangles, {} jobs with no light, {:.2} s",
@@ -352,5 +534,90 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             _ => String::new(),
         }
     );
+    Ok(())
+}
+
+/// A terminal progress bar with the rate and the time left.
+fn progress_bar(total: usize, what: &str) -> ProgressBar {
+    let bar = ProgressBar::new(total as u64);
+    let style = ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} frames, {per_sec}, ETA {eta}")
+        .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .progress_chars("=> ");
+    bar.set_style(style);
+    bar.set_message(what.to_string());
+    bar
+}
+
+/// Renders the planned frames to the sequence `out` with a progress bar; the log when asked; an error (a
+/// non-zero exit) when any frame failed, after all the others were rendered.
+fn render_frames(
+    args: &RenderArgs,
+    device: &mut Device,
+    sources: &ShotSources,
+    out: FramePattern,
+    layers: LayerChoice,
+    divisor: u32,
+    cancel: &AtomicBool,
+) -> Result<()> {
+    if let Some(dir) = Path::new(&out.text).parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("-o: cannot create {}", dir.display()))?;
+    }
+    let total = sources.plan.frames.len();
+    let bar = progress_bar(total, "rendering");
+    let started = std::time::Instant::now();
+    let options = SequenceOptions {
+        out,
+        layers,
+        skip_existing: args.skip_existing,
+        divisor,
+        parallel_frames: !args.frames_in_turn,
+    };
+    let report = render_sequence(
+        device,
+        sources,
+        &options,
+        &|record, done, _| {
+            bar.set_position(done as u64);
+            if let FrameOutcome::Failed(e) = &record.outcome {
+                bar.suspend(|| eprintln!("failed: {e}"));
+            }
+        },
+        cancel,
+    );
+    bar.finish_and_clear();
+    if let Some(log) = &args.log {
+        write_log(log, &report).with_context(|| format!("--log {}", log.display()))?;
+    }
+    let mut ms: Vec<f64> =
+        report.records.iter().filter(|r| r.outcome == FrameOutcome::Rendered).map(|r| r.ms).collect();
+    ms.sort_by(f64::total_cmp);
+    let median = ms.get(ms.len() / 2).copied().unwrap_or(0.0);
+    eprintln!(
+        "{} of {total} frames rendered ({} skipped, {} failed) in {:.1} s on {}, {}x{}: median {median:.0} ms a frame",
+        report.rendered(),
+        report.skipped(),
+        report.failed(),
+        started.elapsed().as_secs_f64(),
+        device.name(),
+        sources.plan.width,
+        sources.plan.height,
+    );
+    if report.failed() > 0 {
+        let failed: Vec<(i64, &str)> = report
+            .records
+            .iter()
+            .filter_map(|r| match &r.outcome {
+                FrameOutcome::Failed(e) => Some((r.frame, e.as_str())),
+                _ => None,
+            })
+            .collect();
+        let frames: Vec<String> = failed.iter().map(|(f, _)| f.to_string()).collect();
+        bail!(
+            "{} of {total} frames failed (frames {}; the first: {}); the others were written",
+            failed.len(),
+            frames.join(", "),
+            failed[0].1
+        );
+    }
     Ok(())
 }

@@ -90,9 +90,14 @@ impl PreparedFlare {
         Ok(Self { config: config.clone(), system, mask, starburst, starburst_texture, id })
     }
 
-    /// Frame settings for an image of `width` x `height` pixels drawn at the flare gain `flare_gain`.
+    /// Frame settings for an image of `width` x `height` pixels on the full-frame sensor drawn at the flare gain
+    /// `flare_gain`.
     pub fn frame_settings(&self, width: u32, height: u32, flare_gain: f32) -> FrameSettings {
-        let sensor = Sensor::full_frame_for(width, height);
+        self.frame_settings_on(Sensor::full_frame_for(width, height), width, flare_gain)
+    }
+
+    /// [`Self::frame_settings`] on `sensor` (the image `width` pixels across it).
+    pub fn frame_settings_on(&self, sensor: Sensor, width: u32, flare_gain: f32) -> FrameSettings {
         // A focused ghost is drawn at least a pixel across.
         let min_half_size_mm = 0.75 * sensor.width_mm / width.max(1) as f64;
         FrameSettings { sensor, intensity_threshold: self.config.threshold(flare_gain), min_half_size_mm }
@@ -102,20 +107,23 @@ impl PreparedFlare {
     /// Y up, degrees), at the default display settings with every ghost at gain 1 (the ghosts alone, as the
     /// ray-traced methods and the tests compare them; frames for the user come from [`crate::frame`]).
     pub fn scene(&self, light_deg: [f64; 2], width: u32, height: u32) -> (FlareScene, GhostFrame) {
-        self.scene_with(light_deg, width, height, &DisplaySettings::default(), &[])
+        let sensor = Sensor::full_frame_for(width, height);
+        self.scene_with(light_deg, sensor, width, height, &DisplaySettings::default(), &[])
     }
 
-    /// [`Self::scene`] with the frame's display settings and per-ghost gains (see [`FlareScene::build`]).
+    /// [`Self::scene`] on `sensor` with the frame's display settings and per-ghost gains (see
+    /// [`FlareScene::build`]).
     pub fn scene_with(
         &self,
         light_deg: [f64; 2],
+        sensor: Sensor,
         width: u32,
         height: u32,
         display: &DisplaySettings,
         gains: &[f32],
     ) -> (FlareScene, GhostFrame) {
         let u = light_slopes_for_frame_position(light_deg[0], light_deg[1]);
-        let frame_settings = self.frame_settings(width, height, display.flare_gain());
+        let frame_settings = self.frame_settings_on(sensor, width, display.flare_gain());
         let frame = self.system.frame(u, &frame_settings);
         let scene = FlareScene::build(&self.system, &frame, u, &frame_settings, display, width, height, gains);
         (scene, frame)

@@ -3,8 +3,9 @@
 //! ([`Device`]), and write it with one writer ([`crate::output::write_frame`]).
 //!
 //! # How it works
-//! A [`FrameRequest`] is everything that decides a frame besides the prepared optics: the light's position,
-//! the size, the display settings (exposures in stops, tonemap, starburst), each lens ghost's gain (toggles
+//! A [`FrameRequest`] is everything that decides a frame besides the prepared optics: the light's position
+//! and gain (a timeline's intensity times its visibility in the plate: it scales every ghost and the
+//! starburst, and 0 draws no flare), the size and the sensor width it spans, the display settings (exposures in stops, tonemap, starburst), each lens ghost's gain (toggles
 //! and solo already folded in, see [`crate::preset::Document::ghost_gains`]) and how LUT ghosts are used.
 //! [`Frame::build`] makes the drawable frame in one pass: the LUT instances first (they say how much of each
 //! non-linear ghost its paraxial sprite keeps), then the paraxial instances with the user's gain times that
@@ -20,11 +21,12 @@
 //! shows tonemapped; [`ghost_layers`] adds one layer per drawn ghost, each drawn alone on the same device.
 
 use crate::flare::PreparedFlare;
-use crate::ghost::{GhostFrame, light_slopes_for_frame_position};
+use crate::ghost::{GhostFrame, Sensor, light_slopes_for_frame_position};
 use crate::image::{DisplayImage, HdrImage};
 use crate::lut::LutKind;
 use crate::lut::blend::{BlendSettings, LiveLut, LutScene, lut_pass};
 pub use crate::output::FrameLayers;
+use crate::raytrace::Window;
 use crate::render::cpu;
 use crate::render::gpu::{FlareRenderer, GpuContext, GpuError};
 use crate::render::{DisplaySettings, FlareScene};
@@ -46,8 +48,13 @@ pub enum LutUse {
 pub struct FrameRequest {
     /// Where the light appears in the frame (degrees, X right, Y up).
     pub light_deg: [f64; 2],
+    /// The light's linear intensity relative to the document's (`2^light_ev` of the timeline times the
+    /// light's visibility in the plate): it multiplies every ghost's gain and the starburst; 0 draws no flare.
+    pub light_gain: f64,
     pub width: u32,
     pub height: u32,
+    /// The width of the sensor the frame spans (mm; 36 is full frame).
+    pub sensor_width_mm: f64,
     pub display: DisplaySettings,
     /// Per lens ghost index, its gain (missing entries are 1, 0 leaves the ghost out).
     pub ghost_gains: Vec<f32>,
@@ -59,8 +66,10 @@ impl Default for FrameRequest {
     fn default() -> Self {
         Self {
             light_deg: [6.0, 4.0],
+            light_gain: 1.0,
             width: 1280,
             height: 720,
+            sensor_width_mm: crate::optics::sensor::FULL_FRAME_WIDTH_MM,
             display: DisplaySettings::default(),
             ghost_gains: Vec::new(),
             blend: BlendSettings::default(),
@@ -88,11 +97,20 @@ impl Frame {
         let (w, h) = (request.width.max(1), request.height.max(1));
         let lut = lut.filter(|_| request.lut_use != LutUse::Off);
         let ghosts = flare.system.ghosts.len();
+        // The light's gain scales every ghost and the starburst; a NaN or negative gain draws no flare.
+        let light_gain = if request.light_gain.is_finite() { request.light_gain.max(0.0) as f32 } else { 0.0 };
         let mut gains: Vec<f32> =
-            (0..ghosts).map(|g| request.ghost_gains.get(g).copied().unwrap_or(1.0).max(0.0)).collect();
+            (0..ghosts).map(|g| request.ghost_gains.get(g).copied().unwrap_or(1.0).max(0.0) * light_gain).collect();
+        let sensor_width_mm = if request.sensor_width_mm.is_finite() && request.sensor_width_mm > 0.0 {
+            request.sensor_width_mm
+        } else {
+            crate::optics::sensor::FULL_FRAME_WIDTH_MM
+        };
+        let sensor = Sensor::for_frame(sensor_width_mm, w, h);
         let lut_scene = lut.map(|live| {
             let u = light_slopes_for_frame_position(request.light_deg[0], request.light_deg[1]);
-            LutScene::build(live, &flare.system, u, w, h, &request.blend, &gains)
+            let out = Window::for_sensor(sensor_width_mm, w, h);
+            LutScene::build(live, &flare.system, u, out, &request.blend, &gains)
         });
         if let Some(l) = &lut_scene {
             // A photo LUT is the whole flare photographed: it is never drawn over paraxial sprites.
@@ -101,7 +119,11 @@ impl Frame {
                 *gain = if alone { 0.0 } else { *gain * l.paraxial_weight(g as u32) };
             }
         }
-        let (scene, sprites) = flare.scene_with(request.light_deg, w, h, &request.display, &gains);
+        let display = DisplaySettings {
+            starburst_intensity: request.display.starburst_intensity * light_gain,
+            ..request.display
+        };
+        let (scene, sprites) = flare.scene_with(request.light_deg, sensor, w, h, &display, &gains);
         Self { scene, lut: lut_scene, sprites, request: request.clone() }
     }
 

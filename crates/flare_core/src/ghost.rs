@@ -36,6 +36,7 @@
 //! What changes per frame is only `u`: [`GhostSystem::frame`] is all the per-frame CPU work.
 
 use crate::coating::InterfaceTables;
+use crate::optics::mapping::ImageMapping;
 pub use crate::optics::sensor::{Sensor, light_slopes_for_frame_position, sensor_to_pixel};
 use crate::optics::{Coating, FirstOrder, Lens, Mat2, ParaxialError, PathMatrices};
 use crate::spectrum::Spectrum;
@@ -312,6 +313,8 @@ pub struct GhostSystem {
     pub ghosts: Vec<GhostModel>,
     /// Image path per wavelength: landing of the ray through the stop centre per unit light slope.
     image_centre_per_slope: Vec<f64>,
+    /// Where the light itself images, by exact chief rays at the spectrum's middle wavelength.
+    pub mapping: ImageMapping,
     /// Reflectance tables per (surface, arriving side, wavelength), shared by the ghosts.
     tables: InterfaceTables,
     /// Per (ghost, wavelength), ghost-major: the frame's coefficients.
@@ -448,6 +451,14 @@ impl GhostSystem {
             }
         }
         let front_radius_mm = lens.surfaces[0].semi_aperture_mm;
+        let middle = spectrum.wavelengths_nm.len() / 2;
+        let mapping = ImageMapping::new(
+            lens,
+            first_order.entrance_pupil(),
+            sensor_z,
+            spectrum.wavelengths_nm[middle],
+            image_centre_per_slope[middle],
+        );
         let mut coefficients = Vec::with_capacity(ghosts.len() * n_w);
         for (g, ghost) in ghosts.iter().enumerate() {
             for (w, optics) in ghost.per_wavelength.iter().enumerate() {
@@ -462,16 +473,17 @@ impl GhostSystem {
             front_radius_mm,
             ghosts,
             image_centre_per_slope,
+            mapping,
             tables,
             coefficients,
         })
     }
 
     /// Where the light source itself images on the sensor (its starburst), for light slope `u`, at the
-    /// spectrum's middle wavelength.
+    /// spectrum's middle wavelength: the lens's own mapping by exact chief rays ([`ImageMapping`]), which near
+    /// the axis is the paraxial `k u`.
     pub fn light_image_mm(&self, u: [f64; 2]) -> [f64; 2] {
-        let k = self.image_centre_per_slope[self.image_centre_per_slope.len() / 2];
-        [k * u[0], k * u[1]]
+        self.mapping.image_mm(u)
     }
 
     /// Lee & Eisemann's sprite of ghost `g` at wavelength `w`: the stop's opening imaged through the ghost

@@ -9,7 +9,9 @@
 //! (request, frame, drawn by [`render`]'s wgpu renderer or its CPU twin, layers), and [`output`] the one image
 //! writer. [`raytrace`] is the other family: ghosts ray-traced exactly on a grid (the ground-truth reference,
 //! and Hullin 2011's ray grids); [`lut`] bakes the non-linear ones into LUTs blended at run time; [`metrics`]
-//! measures any image against the reference. [`color`], [`image`], [`files`] and [`fingerprint`] are the small
+//! measures any image against the reference. [`timeline`] animates a document over frames and [`shot`] makes
+//! a shot of it: plate sequences, tracks, the light found in the plate, and sequences rendered frame by frame
+//! through [`frame`]. [`color`], [`image`], [`files`] and [`fingerprint`] are the small
 //! shared pieces (tonemaps and exposures in stops, images, atomic writes, stable hashes).
 //!
 //! All numerics are f64 on the CPU; every singular case (total internal reflection, a ray missing a surface,
@@ -33,8 +35,10 @@ pub mod output;
 pub mod preset;
 pub mod raytrace;
 pub mod render;
+pub mod shot;
 pub mod spectrum;
 pub mod starburst;
+pub mod timeline;
 
 // What callers need most, at the crate root: the document, the prepared optics, the frame pipeline and the
 // writer. Everything else is reached through its module.

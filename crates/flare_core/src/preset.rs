@@ -32,9 +32,13 @@ use crate::frame::{FrameRequest, LutUse};
 use crate::ghost::GhostSystem;
 use crate::lut::blend::{BlendMode, BlendSettings};
 use crate::optics::library::default_lens;
+use crate::optics::sensor::FULL_FRAME_WIDTH_MM;
 use crate::optics::{Coating, Lens};
 use crate::render::{DEFAULT_FLARE_EV, DisplaySettings};
+use crate::shot::detect::AutoLight;
+use crate::shot::pattern::FramePattern;
 use crate::spectrum::Spectrum;
+use crate::timeline::Timeline;
 
 /// The preset format this build writes; it reads every version up to this one.
 pub const PRESET_VERSION: u32 = 2;
@@ -146,8 +150,16 @@ pub struct Document {
     pub plate_ev: f64,
     pub tonemap: Tonemap,
     pub starburst: bool,
-    /// Background plate file (PNG/EXR/HDR/JPEG), if any.
+    /// Background plate file (PNG/EXR/HDR/JPEG), if any; a sequence when it has a frame field
+    /// (`shot.####.exr` or `shot.%04d.exr`, [`crate::shot::pattern`]).
     pub background: Option<String>,
+    /// The width of the sensor the frame (and the plate) spans, in mm (36: full frame).
+    pub sensor_width_mm: f64,
+    /// The shot: frame range, frame rate and keys ([`crate::timeline`]).
+    pub timeline: Timeline,
+    /// Find the light in the plate on every frame ([`crate::shot::detect`]); `None`: the keys or the static
+    /// light say where it is.
+    pub auto_light: Option<AutoLight>,
 }
 
 impl Default for Document {
@@ -169,6 +181,9 @@ impl Default for Document {
             tonemap: Tonemap::Aces,
             starburst: true,
             background: None,
+            sensor_width_mm: FULL_FRAME_WIDTH_MM,
+            timeline: Timeline::default(),
+            auto_light: None,
         }
     }
 }
@@ -244,20 +259,50 @@ impl Document {
 
     /// The gain ghost (i, j) is drawn with: 0 when it is off or another ghost is solo.
     pub fn ghost_gain(&self, i: usize, j: usize) -> f64 {
+        self.ghost_gain_keyed(i, j, None)
+    }
+
+    /// [`Self::ghost_gain`], the panel's gain replaced by `keyed` when the timeline animates it.
+    fn ghost_gain_keyed(&self, i: usize, j: usize, keyed: Option<f64>) -> f64 {
         let key = ghost_key(i, j);
         if self.solo.as_ref().is_some_and(|s| *s != key) {
             return 0.0;
         }
-        match self.ghosts.get(&key) {
-            Some(g) if !g.enabled => 0.0,
-            Some(g) => g.gain,
-            None => 1.0,
+        match (self.ghosts.get(&key), keyed) {
+            (Some(g), _) if !g.enabled => 0.0,
+            (_, Some(gain)) => gain,
+            (Some(g), None) => g.gain,
+            (None, None) => 1.0,
         }
     }
 
-    /// Every lens ghost's gain, by the ghost's index in `system`.
+    /// Every lens ghost's gain, by the ghost's index in `system` (the static gains, no timeline).
     pub fn ghost_gains(&self, system: &GhostSystem) -> Vec<f32> {
         system.ghosts.iter().map(|g| self.ghost_gain(g.i, g.j) as f32).collect()
+    }
+
+    /// Every lens ghost's gain at `frame` of the timeline.
+    pub fn ghost_gains_at(&self, system: &GhostSystem, frame: f64) -> Vec<f32> {
+        let sample = self.timeline.sample(frame);
+        system
+            .ghosts
+            .iter()
+            .map(|g| self.ghost_gain_keyed(g.i, g.j, sample.ghost_gain.get(&ghost_key(g.i, g.j)).copied()) as f32)
+            .collect()
+    }
+
+    /// Where the light is at `frame`: the timeline's light keys, else the static light.
+    pub fn light_at(&self, frame: f64) -> [f64; 2] {
+        self.timeline.light_deg.value_at(frame, self.timeline.interpolation).unwrap_or(self.light_deg)
+    }
+
+    /// The plate file of `frame`: the background itself, or its sequence's file of that frame.
+    pub fn plate_at(&self, frame: i64) -> Option<std::path::PathBuf> {
+        let background = self.background.as_deref()?;
+        Some(match FramePattern::parse(background) {
+            Ok(Some(pattern)) => pattern.path(frame),
+            _ => background.into(),
+        })
     }
 
     /// The ghost's switches, created on first edit.
@@ -283,14 +328,31 @@ impl Document {
         }
     }
 
-    /// The frame this document shows at `width` x `height` (`divisor`: the accumulation divisor).
+    /// The frame this document shows at the timeline's first frame, `width` x `height` (`divisor`: the
+    /// accumulation divisor): a still.
     pub fn frame_request(&self, system: &GhostSystem, width: u32, height: u32, divisor: u32) -> FrameRequest {
+        self.frame_request_at(system, self.timeline.first_frame as f64, width, height, divisor)
+    }
+
+    /// The frame this document shows at `frame` of its timeline: the keyed light, light intensity and ghost
+    /// gains there (the light found in a plate is applied on top by [`crate::shot::plan`]).
+    pub fn frame_request_at(
+        &self,
+        system: &GhostSystem,
+        frame: f64,
+        width: u32,
+        height: u32,
+        divisor: u32,
+    ) -> FrameRequest {
+        let sample = self.timeline.sample(frame);
         FrameRequest {
-            light_deg: self.light_deg,
+            light_deg: sample.light_deg.unwrap_or(self.light_deg),
+            light_gain: crate::color::gain_from_ev(sample.light_ev) as f64,
             width,
             height,
+            sensor_width_mm: self.sensor_width_mm,
             display: self.display(divisor),
-            ghost_gains: self.ghost_gains(system),
+            ghost_gains: self.ghost_gains_at(system, frame),
             blend: self.blend_settings(),
             lut_use: self.lut_use(),
         }
@@ -364,6 +426,22 @@ impl Document {
             if !(g.gain.is_finite() && g.gain >= 0.0) {
                 return bad(&format!("ghosts.{key}.gain"), format!("{} must be 0 or more", g.gain));
             }
+        }
+        if !(self.sensor_width_mm.is_finite() && (1.0..=200.0).contains(&self.sensor_width_mm)) {
+            return bad("sensor_width_mm", format!("{} mm: a sensor from 1 to 200 mm wide", self.sensor_width_mm));
+        }
+        if let Err((field, reason)) = self.timeline.check() {
+            return bad(&field, reason);
+        }
+        if let Some(auto) = &self.auto_light
+            && let Err((field, reason)) = auto.check()
+        {
+            return bad(&format!("auto_light.{field}"), reason);
+        }
+        if let Some(background) = &self.background
+            && let Err(reason) = FramePattern::parse(background)
+        {
+            return bad("background", reason);
         }
         Ok(())
     }

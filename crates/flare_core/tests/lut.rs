@@ -10,7 +10,7 @@ use flare_core::lut::format::{LutError, decode, encode};
 use flare_core::lut::{GhostLut, Symmetry, light_position_deg, mat_apply, photo};
 use flare_core::metrics;
 use flare_core::optics::library::builtin_lens;
-use flare_core::raytrace::{Grid, RayGridImage, RayGridRenderer, RayGridRequest};
+use flare_core::raytrace::{Grid, RayGridImage, RayGridRenderer, RayGridRequest, Window};
 use flare_core::render::{DisplaySettings, FlareScene, HdrImage, light_slopes_for_frame_position};
 use proptest::prelude::*;
 
@@ -322,7 +322,7 @@ fn every_lut_instance_and_image_is_finite() {
     for (theta, alpha) in [(0.0, 0.0), (16.0, 180.0), (40.0, 33.0), (89.0, -90.0)] {
         let light = light_position_deg(theta, alpha);
         let u = light_slopes_for_frame_position(light[0], light[1]);
-        let lut_scene = LutScene::build(&live, &flare.system, u, 96, 64, &BlendSettings::default(), &[]);
+        let lut_scene = LutScene::build(&live, &flare.system, u, Window::frame(96, 64), &BlendSettings::default(), &[]);
         assert_eq!(lut_scene.dropped_non_finite, 0);
         assert!(lut_scene.instances.iter().all(|i| i.is_finite()));
         let frame = scenes(&live, &flare, light, 96, 64, &BlendSettings::default(), true);

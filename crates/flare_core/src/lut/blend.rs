@@ -249,7 +249,7 @@ fn bracket(xs: &[f64], x: f64) -> Vec<(usize, f64)> {
 }
 
 impl LutScene {
-    /// The instances of every LUT ghost for light slopes `u` in a `width` x `height` frame. `system` is the live
+    /// The instances of every LUT ghost for light slopes `u` in the frame `out` (the whole sensor). `system` is the live
     /// lens's (for a photo LUT it is not used). `gains[g]` multiplies the images of lens ghost `g` as it does
     /// its sprites (missing entries are 1; a photo LUT's single image is not one ghost and keeps gain 1).
     #[allow(clippy::too_many_arguments)]
@@ -257,13 +257,11 @@ impl LutScene {
         live_lut: &LiveLut,
         system: &GhostSystem,
         u: [f64; 2],
-        width: u32,
-        height: u32,
+        out: Window,
         blend: &BlendSettings,
         gains: &[f32],
     ) -> Self {
         let (lut, layout) = (&live_lut.lut, &live_lut.layout);
-        let out = Window::frame(width, height);
         let (theta, alpha) = light_direction_deg(u);
         let (beta, base) = lut.symmetry.reduce(alpha);
         let min_half_mm = super::MIN_TEXEL_MM;

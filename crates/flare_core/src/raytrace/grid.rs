@@ -53,9 +53,14 @@ pub struct Window {
     pub height: u32,
 }
 impl Window {
-    /// The whole frame of a `width` x `height` image ([`Sensor::full_frame_for`]).
+    /// The whole frame of a `width` x `height` image on the full-frame sensor ([`Sensor::full_frame_for`]).
     pub fn frame(width: u32, height: u32) -> Self {
-        Self { centre_mm: [0.0, 0.0], width_mm: Sensor::full_frame_for(width, height).width_mm, width, height }
+        Self::for_sensor(Sensor::full_frame_for(width, height).width_mm, width, height)
+    }
+
+    /// The whole frame of a `width` x `height` image on a sensor `sensor_width_mm` wide.
+    pub fn for_sensor(sensor_width_mm: f64, width: u32, height: u32) -> Self {
+        Self { centre_mm: [0.0, 0.0], width_mm: sensor_width_mm, width, height }
     }
 
     /// Pixels per millimetre.

@@ -1,0 +1,201 @@
+//! The plan of a shot: for every frame of a range, where the light is, how bright, and which plate.
+//!
+//! # How it works
+//! [`check_range`] refuses, before any work, a range that a plate sequence does not cover (the frames on
+//! disk are listed; a frame missing *inside* the sequence is not refused here: that frame fails when it is
+//! drawn and the others still render). [`plan`] then fixes the frame size (the given size, else the plate's,
+//! else 1280x720) and the sensor it spans (the document's width, the image's aspect), and per frame takes the
+//! timeline's sample ([`crate::preset::Document::frame_request_at`]): the keyed or static light, and the light
+//! gain `2^light_ev`. When the document finds the light in the plate ([`super::detect`]), every plate of the
+//! range is read (in parallel) and scanned first; the solved position replaces the light and the filtered
+//! visibility multiplies the gain. The light's pixel is always the light angle through the lens's mapping
+//! ([`crate::optics::mapping::ImageMapping`]), `None` when it lands outside the frame.
+
+use std::ops::RangeInclusive;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use rayon::prelude::*;
+
+use super::detect::{self, DetectError, Scan};
+use super::pattern::FramePattern;
+use crate::frame::FrameRequest;
+use crate::ghost::GhostSystem;
+use crate::optics::sensor::Sensor;
+use crate::output::read_plate;
+use crate::preset::Document;
+
+/// The size of a frame with no plate and no size given.
+pub const DEFAULT_SIZE: (u32, u32) = (1280, 720);
+
+/// One planned frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FramePlan {
+    pub frame: i64,
+    /// Frame position of the light (degrees, X right, Y up).
+    pub light_deg: [f64; 2],
+    /// Where the light images (pixels from the top-left corner, y down); `None` outside the frame.
+    pub light_px: Option<[f64; 2]>,
+    /// The light's intensity relative to the document's: `2^light_ev` times the visibility.
+    pub light_gain: f64,
+    /// The light's visibility in the plate (1 when it is not found in the plate).
+    pub visibility: f64,
+    /// The plate file of the frame.
+    pub plate: Option<PathBuf>,
+}
+
+/// Every frame of a range, planned (see the module documentation).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ShotPlan {
+    pub frames: Vec<FramePlan>,
+    pub width: u32,
+    pub height: u32,
+    pub sensor: Sensor,
+}
+
+impl ShotPlan {
+    /// The frame request of planned frame `plan` (`divisor`: the accumulation divisor).
+    pub fn request(&self, doc: &Document, system: &GhostSystem, plan: &FramePlan, divisor: u32) -> FrameRequest {
+        let mut request = doc.frame_request_at(system, plan.frame as f64, self.width, self.height, divisor);
+        request.light_deg = plan.light_deg;
+        request.light_gain = plan.light_gain;
+        request
+    }
+}
+
+/// Why a shot cannot be planned.
+#[derive(Debug, thiserror::Error)]
+pub enum ShotError {
+    #[error("{0}")]
+    Range(String),
+    #[error("frame {frame}: plate {path}: {reason}")]
+    Plate { frame: i64, path: String, reason: String },
+    #[error(transparent)]
+    Detect(#[from] DetectError),
+    #[error("cancelled")]
+    Cancelled,
+}
+
+/// Refuses a range the document's plate sequence does not cover, or an empty range (see the module
+/// documentation); returns the frames of the sequence on disk (empty without a sequence).
+pub fn check_range(doc: &Document, frames: &RangeInclusive<i64>) -> Result<Vec<i64>, ShotError> {
+    if frames.is_empty() {
+        return Err(ShotError::Range(format!("frames {}-{}: the range is empty", frames.start(), frames.end())));
+    }
+    let Some(background) = doc.background.as_deref() else { return Ok(Vec::new()) };
+    let Some(pattern) = FramePattern::parse(background).map_err(ShotError::Range)? else { return Ok(Vec::new()) };
+    let on_disk = pattern.existing_frames();
+    let (Some(&first), Some(&last)) = (on_disk.first(), on_disk.last()) else {
+        return Err(ShotError::Range(format!("no file of the plate sequence {background} exists")));
+    };
+    if *frames.start() < first || *frames.end() > last {
+        return Err(ShotError::Range(format!(
+            "frames {}-{} are outside the plate sequence {background}, which has frames {first}-{last} ({} files)",
+            frames.start(),
+            frames.end(),
+            on_disk.len()
+        )));
+    }
+    Ok(on_disk)
+}
+
+/// The size of the frames of `range`: `size` when given, else the size of the first plate of the range on
+/// disk, else [`DEFAULT_SIZE`]. Refuses a range the plate sequence does not cover ([`check_range`]).
+pub fn frame_size(
+    doc: &Document,
+    range: &RangeInclusive<i64>,
+    size: Option<(u32, u32)>,
+) -> Result<(u32, u32), ShotError> {
+    let on_disk = check_range(doc, range)?;
+    if let Some(size) = size {
+        return Ok(size);
+    }
+    let first = range.clone().find(|f| on_disk.is_empty() || on_disk.contains(f));
+    let Some((frame, path)) = first.and_then(|f| Some((f, doc.plate_at(f)?))) else { return Ok(DEFAULT_SIZE) };
+    ::image::image_dimensions(&path).map_err(|e| ShotError::Plate {
+        frame,
+        path: path.display().to_string(),
+        reason: e.to_string(),
+    })
+}
+
+/// Plans `frames` of `doc` (see the module documentation). `size`: the frame size (`None`: the plate's);
+/// `progress(done, total)` is called while plates are scanned; `cancel` stops the scan.
+pub fn plan(
+    doc: &Document,
+    system: &GhostSystem,
+    frames: RangeInclusive<i64>,
+    size: Option<(u32, u32)>,
+    progress: &(dyn Fn(usize, usize) + Sync),
+    cancel: &AtomicBool,
+) -> Result<ShotPlan, ShotError> {
+    let list: Vec<i64> = frames.clone().collect();
+    let plates: Vec<Option<PathBuf>> = list.iter().map(|&f| doc.plate_at(f)).collect();
+    let (width, height) = frame_size(doc, &frames, size)?;
+    let sensor = Sensor::for_frame(doc.sensor_width_mm, width, height);
+    let mapping = &system.mapping;
+    let pixel_of = |deg: [f64; 2]| {
+        let p = mapping.pixel_for_light_deg(deg, &sensor, width, height);
+        let inside = p.iter().all(|v| v.is_finite())
+            && (0.0..=f64::from(width)).contains(&p[0])
+            && (0.0..=f64::from(height)).contains(&p[1]);
+        inside.then_some(p)
+    };
+    let solved = match &doc.auto_light {
+        None => None,
+        Some(auto) => {
+            let done = std::sync::atomic::AtomicUsize::new(0);
+            let scans: Vec<Option<Scan>> = plates
+                .par_iter()
+                .map(|path| {
+                    if cancel.load(Ordering::Relaxed) {
+                        return None;
+                    }
+                    // A plate that cannot be read is a frame with no light here; drawing it reports why.
+                    let scan = path.as_deref().and_then(|p| read_plate(p).ok()).map(|plate| {
+                        let scan = detect::detect(&plate, auto.threshold);
+                        // The scan's pixels are the plate's; the frame may be drawn at another size.
+                        let (sx, sy) =
+                            (f64::from(width) / f64::from(plate.width), f64::from(height) / f64::from(plate.height));
+                        Scan {
+                            detection: scan.detection.map(|d| detect::Detection {
+                                centroid_px: [d.centroid_px[0] * sx, d.centroid_px[1] * sy],
+                                ..d
+                            }),
+                            ..scan
+                        }
+                    });
+                    progress(done.fetch_add(1, Ordering::Relaxed) + 1, plates.len());
+                    scan
+                })
+                .collect();
+            if cancel.load(Ordering::Relaxed) {
+                return Err(ShotError::Cancelled);
+            }
+            let keyed = |f: i64| (!doc.timeline.light_deg.is_empty()).then(|| doc.light_at(f as f64));
+            let to_deg = |px: [f64; 2]| mapping.light_deg_for_pixel(px, &sensor, width, height);
+            Some(detect::solve(&list, &scans, auto, to_deg, keyed)?)
+        }
+    };
+    let frames = list
+        .iter()
+        .enumerate()
+        .map(|(i, &frame)| {
+            let sample = doc.timeline.sample(frame as f64);
+            let base_gain = f64::from(crate::color::gain_from_ev(sample.light_ev));
+            let (light_deg, visibility) = match &solved {
+                Some(s) => (s[i].light_deg, s[i].visibility),
+                None => (sample.light_deg.unwrap_or(doc.light_deg), 1.0),
+            };
+            FramePlan {
+                frame,
+                light_deg,
+                light_px: pixel_of(light_deg),
+                light_gain: base_gain * visibility,
+                visibility,
+                plate: plates[i].clone(),
+            }
+        })
+        .collect();
+    Ok(ShotPlan { frames, width, height, sensor })
+}

@@ -1,0 +1,268 @@
+//! Rendering a planned shot to an image sequence, every frame through the one frame pipeline and the one
+//! writer; the command line's `render --frames` and the app's File > Export sequence both call
+//! [`render_sequence`].
+//!
+//! # How it works
+//! Each planned frame ([`super::plan`]) becomes a [`FrameRequest`](crate::frame::FrameRequest), a
+//! [`Frame`] and a file, exactly as a still is made ([`crate::frame::render_to_file`]). A frame whose file
+//! exists is skipped when asked (`skip_existing`, to resume a stopped render); a frame that fails (its plate is
+//! missing or unreadable, the file cannot be written) is recorded with the reason and the others still render.
+//! On a GPU the frames are drawn one after another on the one device, while the previous frame's layers are
+//! encoded and written on a second thread (unless ghost layers are asked for: those are drawn on the same
+//! device, so they are written in turn). On the CPU twin the frames are drawn in parallel on rayon's pool (each
+//! frame's passes are parallel too; frames in parallel also overlap reading and writing). A plate shared by
+//! consecutive frames (a still background) is read once. Every frame reports a [`FrameRecord`]
+//! (frame, light pixel and angle, visibility, milliseconds, outcome), the same record [`write_log`] writes.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use rayon::prelude::*;
+use serde::Serialize;
+
+use super::pattern::FramePattern;
+use super::plan::{FramePlan, ShotPlan};
+use crate::flare::PreparedFlare;
+use crate::frame::{self, Device, Drawn, Frame, LayerChoice, Sources};
+use crate::image::HdrImage;
+use crate::lut::blend::LiveLut;
+use crate::output::read_plate;
+use crate::preset::Document;
+
+/// How a sequence is written.
+#[derive(Clone, Debug)]
+pub struct SequenceOptions {
+    /// The output files (`out/flare.####.exr`).
+    pub out: FramePattern,
+    pub layers: LayerChoice,
+    /// Leave a frame whose file exists as it is.
+    pub skip_existing: bool,
+    /// Accumulation divisor (1, 2 or 4).
+    pub divisor: u32,
+    /// On the CPU twin, draw frames in parallel (false: one after another, each frame's passes still
+    /// parallel; for measuring which is faster).
+    pub parallel_frames: bool,
+}
+
+/// What happened to a frame.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+#[serde(rename_all = "snake_case", tag = "status", content = "error")]
+pub enum FrameOutcome {
+    Rendered,
+    Skipped,
+    Failed(String),
+}
+
+/// One frame of the log.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct FrameRecord {
+    pub frame: i64,
+    /// Where the light images on the frame (pixels, y down); `null` when it is off the frame.
+    pub light_px: Option<[f64; 2]>,
+    pub light_deg: [f64; 2],
+    pub visibility: f64,
+    /// Wall time of the frame: reading its plate, building, drawing and writing.
+    pub ms: f64,
+    #[serde(flatten)]
+    pub outcome: FrameOutcome,
+    #[serde(skip)]
+    pub path: PathBuf,
+}
+
+/// Every frame's record, in frame order.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SequenceReport {
+    pub records: Vec<FrameRecord>,
+}
+
+impl SequenceReport {
+    pub fn count(&self, what: fn(&FrameOutcome) -> bool) -> usize {
+        self.records.iter().filter(|r| what(&r.outcome)).count()
+    }
+    pub fn failed(&self) -> usize {
+        self.count(|o| matches!(o, FrameOutcome::Failed(_)))
+    }
+    pub fn rendered(&self) -> usize {
+        self.count(|o| *o == FrameOutcome::Rendered)
+    }
+    pub fn skipped(&self) -> usize {
+        self.count(|o| *o == FrameOutcome::Skipped)
+    }
+}
+
+/// What one frame is drawn from.
+pub struct ShotSources<'a> {
+    pub doc: &'a Document,
+    pub flare: &'a PreparedFlare,
+    pub lut: Option<&'a LiveLut>,
+    pub plan: &'a ShotPlan,
+}
+
+/// The last plate read, kept for the next frame that uses the same file.
+type PlateCache = Option<(PathBuf, Arc<HdrImage>)>;
+
+fn plate_for(plan: &FramePlan, cache: &mut PlateCache) -> Result<Option<Arc<HdrImage>>, String> {
+    let Some(path) = &plan.plate else { return Ok(None) };
+    if let Some((p, img)) = cache
+        && p == path
+    {
+        return Ok(Some(img.clone()));
+    }
+    if !path.exists() {
+        return Err(format!("frame {}: plate {} is missing", plan.frame, path.display()));
+    }
+    let img = Arc::new(read_plate(path).map_err(|e| format!("frame {}: plate {e}", plan.frame))?);
+    *cache = Some((path.clone(), img.clone()));
+    Ok(Some(img))
+}
+
+fn record(plan: &FramePlan, path: PathBuf, started: Instant, outcome: FrameOutcome) -> FrameRecord {
+    FrameRecord {
+        frame: plan.frame,
+        light_px: plan.light_px,
+        light_deg: plan.light_deg,
+        visibility: plan.visibility,
+        ms: started.elapsed().as_secs_f64() * 1e3,
+        outcome,
+        path,
+    }
+}
+
+/// A drawn frame waiting to be written by the writer thread.
+struct Pending {
+    frame: Frame,
+    drawn: Drawn,
+    plate: Option<Arc<HdrImage>>,
+    path: PathBuf,
+    plan: FramePlan,
+    started: Instant,
+}
+
+/// Renders every planned frame (see the module documentation). `on_frame(record, done, total)` is called as
+/// each frame finishes (from worker threads on the CPU twin); `cancel` stops before the next frame.
+pub fn render_sequence(
+    device: &mut Device,
+    sources: &ShotSources,
+    options: &SequenceOptions,
+    on_frame: &(dyn Fn(&FrameRecord, usize, usize) + Sync),
+    cancel: &AtomicBool,
+) -> SequenceReport {
+    let total = sources.plan.frames.len();
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let finish = |r: FrameRecord| {
+        on_frame(&r, done.fetch_add(1, Ordering::Relaxed) + 1, total);
+        r
+    };
+    let skip = |path: &Path| options.skip_existing && path.exists();
+    let build = |plan: &FramePlan| {
+        let request = sources.plan.request(sources.doc, &sources.flare.system, plan, options.divisor);
+        Frame::build(sources.flare, sources.lut, &request)
+    };
+    let mut records: Vec<FrameRecord> = match device {
+        Device::Cpu => {
+            let one = |plan: &FramePlan| {
+                let started = Instant::now();
+                let path = options.out.path(plan.frame);
+                if cancel.load(Ordering::Relaxed) {
+                    return None;
+                }
+                if skip(&path) {
+                    return Some(finish(record(plan, path, started, FrameOutcome::Skipped)));
+                }
+                let outcome = (|| {
+                    let plate = plate_for(plan, &mut None)?;
+                    let frame = build(plan);
+                    let s = Sources { flare: sources.flare, lut: sources.lut, plate: plate.as_deref() };
+                    frame::render_to_file(&mut Device::Cpu, &frame, &s, options.layers, &path)
+                        .map_err(|e| format!("frame {}: {}: {e}", plan.frame, path.display()))
+                })();
+                let outcome = outcome.map_or_else(FrameOutcome::Failed, |_| FrameOutcome::Rendered);
+                Some(finish(record(plan, path, started, outcome)))
+            };
+            if options.parallel_frames {
+                sources.plan.frames.par_iter().filter_map(one).collect()
+            } else {
+                sources.plan.frames.iter().filter_map(one).collect()
+            }
+        }
+        Device::Gpu(_) => {
+            let write_apart = !options.layers.ghosts;
+            let (tx, rx) = std::sync::mpsc::sync_channel::<Pending>(1);
+            let finish = &finish;
+            std::thread::scope(|scope| {
+                let writer = scope.spawn(move || {
+                    rx.into_iter()
+                        .map(|p| {
+                            let s = Sources { flare: sources.flare, lut: sources.lut, plate: p.plate.as_deref() };
+                            // No ghost layers here: the CPU device is never asked to draw.
+                            let written =
+                                frame::write_drawn(&mut Device::Cpu, &p.frame, &s, &p.drawn, options.layers, &p.path);
+                            let outcome = written.map_or_else(
+                                |e| FrameOutcome::Failed(format!("frame {}: {}: {e}", p.plan.frame, p.path.display())),
+                                |_| FrameOutcome::Rendered,
+                            );
+                            finish(record(&p.plan, p.path, p.started, outcome))
+                        })
+                        .collect::<Vec<_>>()
+                });
+                let mut inline = Vec::new();
+                let mut cache: PlateCache = None;
+                for plan in &sources.plan.frames {
+                    if cancel.load(Ordering::Relaxed) {
+                        break;
+                    }
+                    let started = Instant::now();
+                    let path = options.out.path(plan.frame);
+                    if skip(&path) {
+                        inline.push(finish(record(plan, path, started, FrameOutcome::Skipped)));
+                        continue;
+                    }
+                    let plate = match plate_for(plan, &mut cache) {
+                        Ok(p) => p,
+                        Err(e) => {
+                            inline.push(finish(record(plan, path, started, FrameOutcome::Failed(e))));
+                            continue;
+                        }
+                    };
+                    let frame = build(plan);
+                    let s = Sources { flare: sources.flare, lut: sources.lut, plate: plate.as_deref() };
+                    let drawn = match device.draw(&frame, &s) {
+                        Ok(d) => d,
+                        Err(e) => {
+                            let failed = FrameOutcome::Failed(format!("frame {}: {e}", plan.frame));
+                            inline.push(finish(record(plan, path, started, failed)));
+                            continue;
+                        }
+                    };
+                    if write_apart {
+                        let pending = Pending { frame, drawn, plate, path, plan: plan.clone(), started };
+                        if tx.send(pending).is_err() {
+                            break;
+                        }
+                    } else {
+                        let written = frame::write_drawn(device, &frame, &s, &drawn, options.layers, &path);
+                        let outcome = written.map_or_else(
+                            |e| FrameOutcome::Failed(format!("frame {}: {}: {e}", plan.frame, path.display())),
+                            |_| FrameOutcome::Rendered,
+                        );
+                        inline.push(finish(record(plan, path, started, outcome)));
+                    }
+                }
+                drop(tx);
+                let mut all = writer.join().unwrap_or_default();
+                all.extend(inline);
+                all
+            })
+        }
+    };
+    records.sort_by_key(|r| r.frame);
+    SequenceReport { records }
+}
+
+/// Writes the log: a JSON array with one record per frame, through a temporary file and a rename.
+pub fn write_log(path: &Path, report: &SequenceReport) -> std::io::Result<()> {
+    let text = serde_json::to_string_pretty(&report.records).map_err(std::io::Error::other)?;
+    crate::files::write_atomic(path, text.as_bytes())
+}

@@ -1,0 +1,199 @@
+//! Shots on synthetic plate sequences (a sun disc on a sky gradient, moving, a bar crossing it): the light
+//! found in the plate, the flare following its visibility without a strobe, a covered sun drawing nothing, and
+//! a tracker's CSV giving the same flare as the light found in the plate.
+
+use std::sync::atomic::AtomicBool;
+
+use flare_core::flare::PreparedFlare;
+use flare_core::frame::{Frame, Sources, draw_cpu};
+use flare_core::preset::Document;
+use flare_core::render::cpu;
+use flare_core::shot::detect::{AutoLight, detect, triangular_filter};
+use flare_core::shot::pattern::FramePattern;
+use flare_core::shot::plan::{ShotPlan, plan};
+use flare_core::shot::synthetic::SyntheticShot;
+use flare_core::shot::track::{parse_track, to_keys};
+
+/// Writes `shot` to a temporary folder and returns the folder and the document reading it with the light
+/// found in the plate.
+fn shot_document(shot: &SyntheticShot, track: bool) -> (tempfile::TempDir, Document) {
+    let dir = tempfile::tempdir().unwrap();
+    let pattern = format!("{}/sun.####.exr", dir.path().display());
+    let track_path = dir.path().join("track.csv");
+    shot.write(&FramePattern::parse(&pattern).unwrap().unwrap(), track.then_some(track_path.as_path())).unwrap();
+    let doc = Document { background: Some(pattern), auto_light: Some(AutoLight::default()), ..Document::default() };
+    (dir, doc)
+}
+
+fn plan_of(doc: &Document, flare: &PreparedFlare, shot: &SyntheticShot) -> ShotPlan {
+    plan(doc, &flare.system, shot.frames.clone(), None, &|_, _| {}, &AtomicBool::new(false)).unwrap()
+}
+
+/// The flare layer's energy (sum of R + G + B) of every planned frame, drawn by the CPU twin; and whether
+/// every value of every layer was finite.
+fn flare_energies(doc: &Document, flare: &PreparedFlare, plan: &ShotPlan) -> (Vec<f64>, bool) {
+    let mut finite = true;
+    let energies = plan
+        .frames
+        .iter()
+        .map(|p| {
+            let request = plan.request(doc, &flare.system, p, 1);
+            let frame = Frame::build(flare, None, &request);
+            let plate = flare_core::output::read_plate(p.plate.as_deref().unwrap()).unwrap();
+            let sources = Sources { flare, lut: None, plate: Some(&plate) };
+            let drawn = draw_cpu(&frame, &sources);
+            let layers = drawn.layers(&frame, &sources);
+            finite &= layers.composite.pixels.iter().chain(&layers.flare.pixels).flatten().all(|v| v.is_finite());
+            let flare_layer = cpu::flare_layer(&frame.scene, &drawn.hdr);
+            flare_layer.pixels.iter().map(|q| f64::from(q[0]) + f64::from(q[1]) + f64::from(q[2])).sum()
+        })
+        .collect();
+    (energies, finite)
+}
+
+#[test]
+fn the_light_is_found_within_half_a_pixel_while_unoccluded() {
+    let shot = SyntheticShot::small();
+    let mut unoccluded = 0;
+    for frame in shot.frames.clone() {
+        let truth = shot.sun_px(frame);
+        let scan = detect(&shot.plate(frame), AutoLight::default().threshold);
+        let d = scan.detection.expect("the sun is found on every frame of this shot");
+        if shot.visible_fraction(frame) == 1.0 {
+            unoccluded += 1;
+            let error = (d.centroid_px[0] - truth[0]).hypot(d.centroid_px[1] - truth[1]);
+            assert!(error < 0.5, "frame {frame}: found {:?}, the disc's centre is {truth:?}", d.centroid_px);
+        }
+    }
+    assert!(unoccluded >= 10, "{unoccluded} unoccluded frames");
+}
+
+#[test]
+fn the_flare_follows_the_visible_fraction_without_a_strobe() {
+    let shot = SyntheticShot::small();
+    let (_dir, doc) = shot_document(&shot, false);
+    let flare = PreparedFlare::new(&doc.lens, &doc.flare_config().unwrap()).unwrap();
+    let plan = plan_of(&doc, &flare, &shot);
+    // The visibility found is the true visible fraction, filtered.
+    let truth: Vec<f64> = shot.frames.clone().map(|f| shot.visible_fraction(f)).collect();
+    let expected = triangular_filter(&truth, AutoLight::default().smooth_frames);
+    for (p, e) in plan.frames.iter().zip(&expected) {
+        assert!((p.visibility - e).abs() < 0.02, "frame {}: visibility {} vs {e}", p.frame, p.visibility);
+    }
+    assert!(truth.iter().any(|&v| v < 0.5), "the bar covers the sun: {truth:?}");
+    // The flare's energy is the unoccluded flare's times the visibility, and it never jumps by more than the
+    // visibility does (plus the change the light's motion alone makes).
+    let (energies, finite) = flare_energies(&doc, &flare, &plan);
+    assert!(finite);
+    let unoccluded_plan = ShotPlan {
+        frames: plan.frames.iter().map(|p| flare_core::shot::FramePlan { light_gain: 1.0, ..p.clone() }).collect(),
+        ..plan.clone()
+    };
+    let (full, _) = flare_energies(&doc, &flare, &unoccluded_plan);
+    let top = full.iter().copied().fold(0.0, f64::max);
+    assert!(top > 0.0);
+    for i in 0..energies.len() {
+        let ratio = energies[i] / full[i];
+        assert!(
+            (ratio - plan.frames[i].visibility).abs() < 1e-3,
+            "frame {}: {ratio} vs {}",
+            i,
+            plan.frames[i].visibility
+        );
+    }
+    let mut largest_jump: f64 = 0.0;
+    for i in 1..energies.len() {
+        let jump = (energies[i] - energies[i - 1]).abs() / top;
+        let visibility_change = (plan.frames[i].visibility - plan.frames[i - 1].visibility).abs();
+        let motion = (full[i] - full[i - 1]).abs() / top;
+        assert!(
+            jump <= visibility_change + motion + 0.02,
+            "frame {}: the flare jumps by {jump:.3} of its peak, the visibility by {visibility_change:.3}",
+            plan.frames[i].frame
+        );
+        largest_jump = largest_jump.max(visibility_change);
+    }
+    // The raw cut (the bar's edge) is a sharper change than the filtered fade.
+    let raw_jump = truth.windows(2).map(|w| (w[1] - w[0]).abs()).fold(0.0, f64::max);
+    assert!(largest_jump < raw_jump, "filtered {largest_jump} vs raw {raw_jump}");
+}
+
+#[test]
+fn a_fully_covered_sun_draws_no_flare_and_no_nan() {
+    // A bar much wider than the sun and slow: the sun is fully covered for many frames in a row.
+    let shot = SyntheticShot { occluder_width_px: 60.0, occluder_px: Some((100.0, 40.0)), ..SyntheticShot::small() };
+    let truth: Vec<f64> = shot.frames.clone().map(|f| shot.visible_fraction(f)).collect();
+    let covered: Vec<usize> =
+        (2..truth.len() - 2).filter(|&i| truth[i - 2..=i + 2].iter().all(|&v| v == 0.0)).collect();
+    assert!(covered.len() >= 3, "the shot covers the sun for long enough: {truth:?}");
+    let (_dir, doc) = shot_document(&shot, false);
+    let flare = PreparedFlare::new(&doc.lens, &doc.flare_config().unwrap()).unwrap();
+    let plan = plan_of(&doc, &flare, &shot);
+    let (energies, finite) = flare_energies(&doc, &flare, &plan);
+    assert!(finite, "no NaN or infinity in any layer");
+    for &i in &covered {
+        assert_eq!(plan.frames[i].visibility, 0.0, "frame {}", plan.frames[i].frame);
+        assert_eq!(energies[i], 0.0, "frame {}: a covered sun draws no flare", plan.frames[i].frame);
+        // Its position continues from the track (between the last and next frames it was seen).
+        assert!(plan.frames[i].light_deg.iter().all(|v| v.is_finite()));
+    }
+    assert!(energies.iter().any(|&e| e > 0.0));
+}
+
+#[test]
+fn a_track_csv_and_the_light_found_in_the_plate_give_the_same_flare() {
+    let shot = SyntheticShot { occluder_px: None, ..SyntheticShot::small() };
+    let (dir, auto_doc) = shot_document(&shot, true);
+    let flare = PreparedFlare::new(&auto_doc.lens, &auto_doc.flare_config().unwrap()).unwrap();
+    let auto_plan = plan_of(&auto_doc, &flare, &shot);
+    // The same shot with the tracker's CSV instead.
+    let rows = parse_track(&std::fs::read_to_string(dir.path().join("track.csv")).unwrap()).unwrap();
+    let sensor = auto_plan.sensor;
+    let (position, _) = to_keys(&rows, &flare.system.mapping, &sensor, shot.width, shot.height).unwrap();
+    let mut keyed_doc = Document { auto_light: None, ..auto_doc.clone() };
+    keyed_doc.timeline.light_deg = position;
+    let keyed_plan = plan_of(&keyed_doc, &flare, &shot);
+    for (a, k) in auto_plan.frames.iter().zip(&keyed_plan.frames) {
+        let d = (a.light_deg[0] - k.light_deg[0]).hypot(a.light_deg[1] - k.light_deg[1]);
+        assert!(d < 0.01, "frame {}: {:?} vs {:?}", a.frame, a.light_deg, k.light_deg);
+        assert!((a.visibility - 1.0).abs() < 0.01, "frame {}: unoccluded visibility {}", a.frame, a.visibility);
+        let (ap, kp) = (a.light_px.unwrap(), k.light_px.unwrap());
+        assert!((ap[0] - kp[0]).hypot(ap[1] - kp[1]) < 0.5);
+    }
+    let (auto_e, _) = flare_energies(&auto_doc, &flare, &auto_plan);
+    let (keyed_e, _) = flare_energies(&keyed_doc, &flare, &keyed_plan);
+    for (i, (a, k)) in auto_e.iter().zip(&keyed_e).enumerate() {
+        assert!((a - k).abs() <= 0.01 * k, "frame {i}: flare energy {a} vs {k}");
+    }
+}
+
+#[test]
+fn keys_animate_the_light_its_intensity_and_a_ghost_gain_and_a_preset_carries_them() {
+    let mut doc = Document::default();
+    let flare = PreparedFlare::new(&doc.lens, &doc.flare_config().unwrap()).unwrap();
+    let (i, j) = (flare.system.ghosts[3].i, flare.system.ghosts[3].j);
+    let key = flare_core::preset::ghost_key(i, j);
+    doc.timeline.interpolation = flare_core::timeline::Interpolation::Linear;
+    doc.timeline.light_deg.set(1, [-10.0, 0.0]);
+    doc.timeline.light_deg.set(11, [10.0, 4.0]);
+    doc.timeline.light_ev.set(1, 0.0);
+    doc.timeline.light_ev.set(11, -2.0);
+    doc.timeline.ghost_gain.entry(key.clone()).or_default().set(1, 0.0);
+    doc.timeline.ghost_gain.entry(key.clone()).or_default().set(11, 2.0);
+    let r = doc.frame_request_at(&flare.system, 6.0, 320, 180, 1);
+    assert_eq!(r.light_deg, [0.0, 2.0]);
+    assert!((r.light_gain - 0.5).abs() < 1e-6, "-1 EV halfway: {}", r.light_gain);
+    assert_eq!(r.ghost_gains[3], 1.0);
+    assert!(r.ghost_gains.iter().enumerate().all(|(g, &v)| g == 3 || v == 1.0));
+    // The ghost panel's off switch still wins over a key.
+    doc.ghost_mut(i, j).enabled = false;
+    assert_eq!(doc.frame_request_at(&flare.system, 6.0, 320, 180, 1).ghost_gains[3], 0.0);
+    // A preset carries the timeline.
+    let back = Document::from_json(&doc.to_json()).unwrap();
+    assert_eq!(back, doc);
+    // A bad key is refused with its field named.
+    let mut bad = doc.clone();
+    bad.timeline.light_ev.keys[1].frame = 1;
+    let e = Document::from_json(&bad.to_json()).unwrap_err().to_string();
+    assert!(e.contains("timeline.light_ev"), "{e}");
+}

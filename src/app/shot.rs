@@ -1,0 +1,107 @@
+//! The app's shot jobs, each on a thread with progress and Cancel, polled by the UI each frame (the window
+//! never blocks): finding the light in every plate of the shot, and exporting a sequence. Both go through
+//! `flare_core::shot` exactly as `flarelab render --frames` does.
+
+use std::sync::Arc;
+
+use super::job::Job;
+
+use flare_core::flare::PreparedFlare;
+use flare_core::frame::{Device, LayerChoice};
+use flare_core::lut::blend::LiveLut;
+use flare_core::preset::Document;
+use flare_core::shot::pattern::FramePattern;
+use flare_core::shot::plan::{ShotPlan, plan};
+use flare_core::shot::sequence::{FrameOutcome, SequenceOptions, SequenceReport, ShotSources, render_sequence};
+
+/// What a job hands back.
+pub enum ShotOutcome {
+    /// The light found in the plates: the plan of the timeline's range, for the document whose
+    /// [`light_key`] it was made from.
+    Light { plan: ShotPlan, key: u64 },
+    /// A sequence written (or stopped): every frame's record.
+    Exported { report: SequenceReport, pattern: String, device: String },
+}
+
+/// A shot job on its thread: finding the light (`exporting` false) or exporting a sequence.
+pub struct ShotJob {
+    pub exporting: bool,
+    pub job: Job<Result<ShotOutcome, String>>,
+}
+
+/// What the light found in the plates depends on: the plates, the detection settings, the range, the sensor,
+/// the lens (its mapping) and the light keys (they continue a covered light).
+pub fn light_key(doc: &Document) -> u64 {
+    flare_core::fingerprint::of(&(
+        &doc.background,
+        &doc.auto_light,
+        doc.timeline.first_frame,
+        doc.timeline.last_frame,
+        doc.sensor_width_mm,
+        &doc.timeline.light_deg,
+        doc.optics_fingerprint(),
+    ))
+}
+
+impl ShotJob {
+    /// Finds the light in every plate of `doc`'s timeline range.
+    pub fn find_light(doc: Document, flare: Arc<PreparedFlare>) -> Self {
+        let job = Job::spawn("finding the light…", move |cancel, report| {
+            let key = light_key(&doc);
+            let range = doc.timeline.frames();
+            let progress = |done: usize, total: usize| {
+                report(done as f32 / total.max(1) as f32, format!("finding the light: {done}/{total} plates"));
+            };
+            let plan = plan(&doc, &flare.system, range, None, &progress, cancel).map_err(|e| e.to_string())?;
+            Ok(ShotOutcome::Light { plan, key })
+        });
+        Self { exporting: false, job }
+    }
+
+    /// Renders `doc`'s timeline range to `pattern` (at the plate's size, else `size`) on a headless GPU when
+    /// there is one (`gpu`), else on the CPU twin.
+    pub fn export(
+        doc: Document,
+        flare: Arc<PreparedFlare>,
+        lut: Option<Arc<LiveLut>>,
+        pattern: FramePattern,
+        size: (u32, u32),
+        gpu: bool,
+    ) -> Self {
+        let job = Job::spawn("planning the frames…", move |cancel, report| {
+            let range = doc.timeline.frames();
+            let size = if doc.background.is_some() { None } else { Some(size) };
+            let scanning = |done: usize, total: usize| {
+                report(0.0, format!("finding the light: {done}/{total} plates"));
+            };
+            let plan = plan(&doc, &flare.system, range, size, &scanning, cancel).map_err(|e| e.to_string())?;
+            let mut device = if gpu { Device::gpu(false).unwrap_or(Device::Cpu) } else { Device::Cpu };
+            if let Some(dir) = std::path::Path::new(&pattern.text).parent().filter(|d| !d.as_os_str().is_empty()) {
+                std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+            }
+            let options = SequenceOptions {
+                out: pattern.clone(),
+                layers: LayerChoice::default(),
+                skip_existing: false,
+                divisor: 1,
+                parallel_frames: true,
+            };
+            let sources = ShotSources { doc: &doc, flare: &flare, lut: lut.as_deref(), plan: &plan };
+            let report = render_sequence(
+                &mut device,
+                &sources,
+                &options,
+                &|record, done, total| {
+                    let failed = matches!(record.outcome, FrameOutcome::Failed(_));
+                    report(
+                        done as f32 / total.max(1) as f32,
+                        format!("frame {} ({done}/{total}){}", record.frame, if failed { ", failed" } else { "" }),
+                    );
+                },
+                cancel,
+            );
+            Ok(ShotOutcome::Exported { report, pattern: pattern.text, device: device.name() })
+        });
+        Self { exporting: true, job }
+    }
+}

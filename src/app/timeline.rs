@@ -1,0 +1,521 @@
+//! The app's shot: the timeline strip under the viewport (play and pause, scrub, the frame number, set and
+//! delete a key, the keys shown as ticks), the Shot panel (frame range and rate, interpolation, the light
+//! found in the plate, a tracker's CSV, the plate sequence, the sensor, File > Export sequence), and the jobs
+//! they start.
+//!
+//! # How it works
+//! The playhead is the app's, not the document's (moving it is not an edit): the frame shown is the
+//! timeline's sample at the playhead ([`flare_core::preset::Document::frame_request_at`]), with the plate of
+//! that frame and, when the document finds the light in the plate, the light found there (a job scans every
+//! plate of the range once per change of what it depends on, [`super::shot::light_key`]). Keys are document
+//! edits, so undo covers them. Dragging the light when the timeline has light keys sets the key at the
+//! playhead (editing it when there is one); with no keys it moves the static light. Playback advances the
+//! playhead at the timeline's rate, looping over the range, and asks for a repaint only while it plays.
+
+use std::time::Instant;
+
+use eframe::egui;
+use flare_core::optics::sensor::Sensor;
+use flare_core::preset::ghost_key;
+use flare_core::shot::detect::AutoLight;
+use flare_core::shot::pattern::{FramePattern, sequence_of};
+use flare_core::shot::sequence::FrameOutcome;
+use flare_core::shot::track::{read_track, to_keys};
+use flare_core::timeline::Interpolation;
+
+use super::FlareLabApp;
+use super::job::JobPoll;
+use super::shot::{ShotJob, ShotOutcome, light_key};
+
+impl FlareLabApp {
+    /// The timeline strip (see the module documentation).
+    pub fn timeline_ui(&mut self, ui: &mut egui::Ui) {
+        let (first, last) = (self.doc.timeline.first_frame, self.doc.timeline.last_frame);
+        ui.horizontal(|ui| {
+            let playing = self.playing.is_some();
+            if ui.button(if playing { "Pause" } else { "Play" }).clicked() {
+                self.toggle_play();
+            }
+            if ui.button("|<").on_hover_text("first frame").clicked() {
+                self.seek(first);
+            }
+            if ui.button("<").on_hover_text("previous frame").clicked() {
+                self.seek(self.playhead - 1);
+            }
+            if ui.button(">").on_hover_text("next frame").clicked() {
+                self.seek(self.playhead + 1);
+            }
+            let mut frame = self.playhead;
+            let r = ui.add(egui::DragValue::new(&mut frame).range(first..=last).prefix("frame "));
+            crate::panels::labelled_value(r, "frame", frame as f64);
+            if frame != self.playhead {
+                self.seek(frame);
+            }
+            let keyed = self.doc.timeline.has_key_at(self.playhead);
+            if ui
+                .button(if keyed { "Update key" } else { "Set key" })
+                .on_hover_text("key the light's position and intensity (and the selected ghost's gain) at this frame")
+                .clicked()
+            {
+                self.set_key();
+            }
+            if ui.add_enabled(keyed, egui::Button::new("Delete key")).clicked() {
+                self.doc.timeline.delete_keys_at(self.playhead);
+            }
+            let mut ev = self.doc.timeline.sample(self.playhead as f64).light_ev;
+            let r = ui.add(egui::DragValue::new(&mut ev).range(-16.0..=16.0).speed(0.05).suffix(" EV"));
+            crate::panels::labelled_value(
+                r.on_hover_text("the light's intensity at this frame (sets a key)"),
+                "light intensity",
+                ev,
+            );
+            if ev != self.doc.timeline.sample(self.playhead as f64).light_ev {
+                self.doc.timeline.light_ev.set(self.playhead, ev);
+            }
+        });
+        self.scrub_bar_ui(ui, first, last);
+    }
+
+    /// The scrub bar: the range, a tick per key frame, the playhead; click or drag to move the playhead.
+    fn scrub_bar_ui(&mut self, ui: &mut egui::Ui, first: i64, last: i64) {
+        let (rect, response) =
+            ui.allocate_exact_size(egui::vec2(ui.available_width(), 18.0), egui::Sense::click_and_drag());
+        let span = (last - first).max(1) as f32;
+        let x_of = |f: i64| rect.left() + 6.0 + (f - first) as f32 / span * (rect.width() - 12.0);
+        if (response.dragged() || response.clicked())
+            && let Some(p) = response.interact_pointer_pos()
+        {
+            let t = ((p.x - rect.left() - 6.0) / (rect.width() - 12.0)).clamp(0.0, 1.0);
+            self.seek(first + (t * span).round() as i64);
+        }
+        let painter = ui.painter_at(rect);
+        painter.rect_filled(rect, 3.0, egui::Color32::from_gray(28));
+        let light_keys: Vec<i64> = self.doc.timeline.light_deg.keys.iter().map(|k| k.frame).collect();
+        for f in self.doc.timeline.key_frames() {
+            let colour = if light_keys.contains(&f) {
+                egui::Color32::from_rgb(255, 210, 90)
+            } else {
+                egui::Color32::from_rgb(120, 200, 255)
+            };
+            let x = x_of(f);
+            painter.line_segment([egui::pos2(x, rect.top() + 3.0), egui::pos2(x, rect.bottom() - 3.0)], (2.0, colour));
+        }
+        if let Some(plan) = &self.derived.shot_plan {
+            // The light's visibility found in the plate, as a curve along the bar.
+            let points: Vec<egui::Pos2> = plan
+                .frames
+                .iter()
+                .map(|p| egui::pos2(x_of(p.frame), rect.bottom() - 2.0 - p.visibility as f32 * (rect.height() - 4.0)))
+                .collect();
+            painter.add(egui::Shape::line(points, (1.0, egui::Color32::from_rgb(140, 230, 140))));
+        }
+        let x = x_of(self.playhead);
+        painter.line_segment(
+            [egui::pos2(x, rect.top()), egui::pos2(x, rect.bottom())],
+            (2.0, egui::Color32::from_rgb(255, 80, 80)),
+        );
+    }
+
+    /// Moves the playhead to `frame` (clamped to the range).
+    pub fn seek(&mut self, frame: i64) {
+        self.playhead = frame.clamp(self.doc.timeline.first_frame, self.doc.timeline.last_frame);
+        if let Some((_, start)) = &mut self.playing {
+            *start = self.playhead;
+        }
+        self.playing = self.playing.map(|(_, f)| (Instant::now(), f));
+    }
+
+    pub fn toggle_play(&mut self) {
+        self.playing = match self.playing {
+            Some(_) => None,
+            None => Some((Instant::now(), self.playhead)),
+        };
+    }
+
+    /// Advances the playhead while playing (looping over the range).
+    pub fn step_playback(&mut self, ctx: &egui::Context) {
+        let Some((since, start)) = self.playing else { return };
+        let (first, last) = (self.doc.timeline.first_frame, self.doc.timeline.last_frame);
+        let advanced = (since.elapsed().as_secs_f64() * self.doc.timeline.fps).floor() as i64;
+        let length = last - first + 1;
+        self.playhead = first + (start - first + advanced).rem_euclid(length.max(1));
+        ctx.request_repaint();
+    }
+
+    /// Keys the light's position and intensity, and the selected ghost's gain, at the playhead.
+    pub fn set_key(&mut self) {
+        let frame = self.playhead;
+        let light = self.derived.light_deg(&self.doc);
+        let sample = self.doc.timeline.sample(frame as f64);
+        self.doc.timeline.light_deg.set(frame, light);
+        self.doc.timeline.light_ev.set(frame, sample.light_ev);
+        if let Some(g) = self.selected.and_then(|g| self.derived.flare.as_ref().map(|f| f.system.ghosts[g].clone())) {
+            let key = ghost_key(g.i, g.j);
+            let gain = sample
+                .ghost_gain
+                .get(&key)
+                .copied()
+                .unwrap_or_else(|| self.doc.ghosts.get(&key).map_or(1.0, |d| d.gain));
+            self.doc.timeline.ghost_gain.entry(key).or_default().set(frame, gain);
+        }
+    }
+
+    /// Puts the light at `deg`: the key at the playhead when the timeline has light keys, else the static
+    /// light. With the light found in the plate, the plate decides and the user is told.
+    pub fn set_light(&mut self, deg: [f64; 2]) {
+        if self.doc.auto_light.is_some() && self.doc.background.is_some() {
+            self.message =
+                Some("the light is found in the plate: switch the Shot panel's light to keys to place it".into());
+            return;
+        }
+        if self.doc.timeline.light_deg.is_empty() {
+            self.doc.light_deg = deg;
+        } else {
+            self.doc.timeline.light_deg.set(self.playhead, deg);
+        }
+    }
+
+    /// The sensor the shown frame spans.
+    pub fn view_sensor(&self) -> Sensor {
+        Sensor::for_frame(self.doc.sensor_width_mm, self.derived.view_px.0, self.derived.view_px.1)
+    }
+
+    /// The frame size a track's pixels refer to: the plate's, else the export size.
+    fn track_frame_size(&self) -> (u32, u32) {
+        self.derived.plate.as_ref().map_or(self.export_size, |p| (p.width, p.height))
+    }
+
+    /// Imports a tracker's CSV as light keys (replacing the light keys; intensity keys too when it has them).
+    pub fn import_track(&mut self, path: &std::path::Path) {
+        let Some(flare) = self.derived.flare.clone() else { return };
+        let (w, h) = self.track_frame_size();
+        let sensor = Sensor::for_frame(self.doc.sensor_width_mm, w, h);
+        let keys = read_track(path).and_then(|rows| to_keys(&rows, &flare.system.mapping, &sensor, w, h));
+        match keys {
+            Ok((position, intensity)) => {
+                let (a, b) = (position.keys[0].frame, position.keys[position.keys.len() - 1].frame);
+                let count = position.keys.len();
+                self.doc.timeline.light_deg = position;
+                if !intensity.is_empty() {
+                    self.doc.timeline.light_ev = intensity;
+                }
+                if self.doc.background.as_deref().is_none_or(|b| !FramePattern::is_pattern(b)) {
+                    self.doc.timeline.first_frame = self.doc.timeline.first_frame.min(a);
+                    self.doc.timeline.last_frame = self.doc.timeline.last_frame.max(b);
+                }
+                self.message = Some(format!("{}: {count} light keys, frames {a}-{b} ({w}x{h} pixels)", path.display()));
+            }
+            Err(e) => self.message = Some(format!("{}: {e}", path.display())),
+        }
+    }
+
+    /// Uses `path` as the plate: a numbered file with siblings becomes its sequence, and the timeline spans it.
+    pub fn set_background(&mut self, path: &std::path::Path) {
+        match sequence_of(path) {
+            Some((pattern, frames)) => {
+                self.doc.background = Some(pattern.text.clone());
+                self.doc.timeline.first_frame = frames[0];
+                self.doc.timeline.last_frame = frames[frames.len() - 1];
+                self.playhead = self.playhead.clamp(frames[0], frames[frames.len() - 1]);
+                self.message = Some(format!("plate sequence {} ({} frames)", pattern.text, frames.len()));
+            }
+            None => self.doc.background = Some(path.display().to_string()),
+        }
+        self.plate_path = self.doc.background.clone().unwrap_or_default();
+    }
+
+    /// Starts exporting the timeline's range to the sequence `pattern` (on a thread, with progress and Cancel).
+    pub fn export_sequence(&mut self, pattern: &str, gpu: bool) {
+        if self.shot_job.as_ref().is_some_and(|j| j.exporting) {
+            self.message = Some("an export is already running".into());
+            return;
+        }
+        let Some(flare) = self.derived.flare.clone() else { return };
+        let checked = FramePattern::parse(pattern).and_then(|p| {
+            p.ok_or_else(|| {
+                format!("`{pattern}` has no frame field: name the files like out/flare.####.exr or out/flare.%04d.png")
+            })
+        });
+        let pattern = match checked.and_then(|p| {
+            flare_core::frame::check_output(std::path::Path::new(&p.text), Default::default())
+                .map(|_| p)
+                .map_err(|e| e.to_string())
+        }) {
+            Ok(p) => p,
+            Err(e) => {
+                self.message = Some(e);
+                return;
+            }
+        };
+        if let Err(e) = flare_core::shot::plan::check_range(&self.doc, &self.doc.timeline.frames()) {
+            self.message = Some(e.to_string());
+            return;
+        }
+        if let Some(job) = self.shot_job.take() {
+            job.job.cancel();
+        }
+        self.shot_job =
+            Some(ShotJob::export(self.doc.clone(), flare, self.derived.lut.clone(), pattern, self.export_size, gpu));
+        self.shot_status = "exporting…".into();
+    }
+
+    /// File > Export sequence…: a native dialog for the first file's name, else the Shot panel's field.
+    pub fn export_sequence_dialog(&mut self) {
+        let picked = rfd::FileDialog::new()
+            .add_filter("image sequence", &["exr", "png"])
+            .set_file_name("flare.####.exr")
+            .save_file();
+        match picked {
+            Some(path) => {
+                let mut text = path.display().to_string();
+                if !FramePattern::is_pattern(&text) {
+                    // `flare.exr` becomes `flare.####.exr`.
+                    let dot = text.rfind('.').filter(|&d| d > text.rfind('/').unwrap_or(0)).unwrap_or(text.len());
+                    text.insert_str(dot, ".####");
+                }
+                self.sequence_path = text.clone();
+                self.export_sequence(&text, true);
+            }
+            None => {
+                self.tab = super::Tab::Shot;
+                self.message = Some(
+                    "no file was chosen (or no file dialog is available here): type the sequence's name in the Shot \
+                     panel and press Export sequence"
+                        .into(),
+                );
+            }
+        }
+    }
+
+    /// Starts or replaces the job finding the light when what it depends on changed; drops the light found
+    /// when the document no longer asks for it.
+    pub fn sync_shot_light(&mut self) {
+        let wanted = self.doc.auto_light.is_some() && self.doc.background.is_some();
+        if !wanted {
+            self.derived.shot_plan = None;
+            self.light_key = None;
+            if self.shot_job.as_ref().is_some_and(|j| !j.exporting) {
+                self.shot_job = None;
+            }
+            return;
+        }
+        let key = light_key(&self.doc);
+        if self.light_key == Some(key) || self.shot_job.as_ref().is_some_and(|j| j.exporting) {
+            return;
+        }
+        let Some(flare) = self.derived.flare.clone() else { return };
+        if let Some(job) = self.shot_job.take() {
+            job.job.cancel();
+        }
+        self.light_key = Some(key);
+        self.shot_job = Some(ShotJob::find_light(self.doc.clone(), flare));
+    }
+
+    /// Takes a finished job's outcome.
+    pub fn poll_shot(&mut self) {
+        let Some(job) = &self.shot_job else { return };
+        match job.job.poll() {
+            JobPoll::Running(_, text) => self.shot_status = text,
+            JobPoll::Finished(outcome) => {
+                let cancelled = job.job.cancelled();
+                self.shot_job = None;
+                match outcome {
+                    Ok(ShotOutcome::Light { plan, key }) => {
+                        let found = plan.frames.iter().filter(|f| f.visibility > 0.0).count();
+                        self.shot_status = format!("light found on {found} of {} frames", plan.frames.len());
+                        if self.light_key == Some(key) {
+                            self.derived.shot_plan = Some(std::sync::Arc::new(plan));
+                            self.derived.frame_key = None;
+                        }
+                    }
+                    Ok(ShotOutcome::Exported { report, pattern, device }) => {
+                        let mut ms: Vec<f64> = report
+                            .records
+                            .iter()
+                            .filter(|r| r.outcome == FrameOutcome::Rendered)
+                            .map(|r| r.ms)
+                            .collect();
+                        ms.sort_by(f64::total_cmp);
+                        let median = ms.get(ms.len() / 2).copied().unwrap_or(0.0);
+                        let failed: Vec<String> = report
+                            .records
+                            .iter()
+                            .filter_map(|r| match &r.outcome {
+                                FrameOutcome::Failed(e) => Some(e.clone()),
+                                _ => None,
+                            })
+                            .collect();
+                        self.shot_status = format!(
+                            "{}{} frames written to {pattern} on {device} ({median:.0} ms a frame){}",
+                            if cancelled { "cancelled: " } else { "" },
+                            report.rendered(),
+                            if failed.is_empty() {
+                                String::new()
+                            } else {
+                                format!("; {} failed: {}", failed.len(), failed.join("; "))
+                            }
+                        );
+                        self.last_export = Some(report);
+                    }
+                    Err(e) => {
+                        if self.light_key.is_some() && !cancelled {
+                            self.message = Some(e.clone());
+                        }
+                        self.shot_status = if cancelled { "cancelled".into() } else { e };
+                    }
+                }
+            }
+        }
+    }
+
+    /// The Shot panel (see the module documentation).
+    pub fn shot_panel_ui(&mut self, ui: &mut egui::Ui) {
+        let tl = &mut self.doc.timeline;
+        ui.heading("Timeline");
+        ui.horizontal(|ui| {
+            let r = ui.add(egui::DragValue::new(&mut tl.first_frame).prefix("first "));
+            crate::panels::labelled_value(r, "first frame", tl.first_frame as f64);
+            let r = ui.add(egui::DragValue::new(&mut tl.last_frame).prefix("last "));
+            crate::panels::labelled_value(r, "last frame", tl.last_frame as f64);
+            tl.last_frame = tl.last_frame.max(tl.first_frame);
+            let r = ui.add(egui::DragValue::new(&mut tl.fps).range(1.0..=240.0).suffix(" fps"));
+            crate::panels::labelled_value(r, "fps", tl.fps);
+        });
+        ui.horizontal(|ui| {
+            ui.label("between keys:");
+            ui.selectable_value(&mut tl.interpolation, Interpolation::Linear, "linear");
+            ui.selectable_value(&mut tl.interpolation, Interpolation::Smooth, "smooth");
+        });
+        ui.label(format!(
+            "{} light keys, {} intensity keys, {} ghost tracks",
+            tl.light_deg.keys.len(),
+            tl.light_ev.keys.len(),
+            tl.ghost_gain.len()
+        ));
+        if ui.button("Clear all keys").clicked() {
+            tl.light_deg.keys.clear();
+            tl.light_ev.keys.clear();
+            tl.ghost_gain.clear();
+        }
+        self.playhead = self.playhead.clamp(self.doc.timeline.first_frame, self.doc.timeline.last_frame);
+        ui.separator();
+        ui.heading("Plate");
+        ui.horizontal(|ui| {
+            let r = ui.add(egui::TextEdit::singleline(&mut self.plate_path).hint_text("plates/shot.####.exr"));
+            r.on_hover_text("a plate, or a sequence with #### or %04d for the frame number");
+            if ui.button("Use").clicked() {
+                let text = self.plate_path.trim().to_string();
+                if text.is_empty() {
+                    self.doc.background = None;
+                } else if FramePattern::is_pattern(&text) {
+                    self.doc.background = Some(text);
+                } else {
+                    self.set_background(std::path::Path::new(&text));
+                }
+            }
+            if ui.button("Browse…").clicked() {
+                match rfd::FileDialog::new().add_filter("image", &["exr", "png", "hdr", "jpg"]).pick_file() {
+                    Some(path) => self.set_background(&path),
+                    None => {
+                        self.message =
+                            Some("no file chosen (or no file dialog here): type the plate's path and press Use".into())
+                    }
+                }
+            }
+        });
+        let r = ui.add(egui::DragValue::new(&mut self.doc.sensor_width_mm).range(1.0..=200.0).speed(0.1).suffix(" mm"));
+        crate::panels::labelled_value(
+            r.on_hover_text("the width of the sensor the frame (and the plate) spans"),
+            "sensor width",
+            self.doc.sensor_width_mm,
+        );
+        ui.separator();
+        ui.heading("Light");
+        let has_plate = self.doc.background.is_some();
+        let mut auto = self.doc.auto_light.is_some();
+        ui.horizontal(|ui| {
+            ui.radio_value(&mut auto, false, "keys");
+            ui.add_enabled_ui(has_plate, |ui| ui.radio_value(&mut auto, true, "found in the plate"))
+                .response
+                .on_disabled_hover_text("needs a plate");
+        });
+        match (auto, self.doc.auto_light.is_some()) {
+            (true, false) => self.doc.auto_light = Some(AutoLight::default()),
+            (false, true) => self.doc.auto_light = None,
+            _ => {}
+        }
+        if let Some(a) = &mut self.doc.auto_light {
+            ui.horizontal(|ui| {
+                let r =
+                    ui.add(egui::DragValue::new(&mut a.threshold).range(0.01..=1e6).speed(0.05).prefix("threshold "));
+                crate::panels::labelled_value(
+                    r.on_hover_text("plate luminance above which a pixel is the light"),
+                    "light threshold",
+                    a.threshold,
+                );
+                let mut n = a.smooth_frames as i64;
+                let r = ui.add(egui::DragValue::new(&mut n).range(1..=31).prefix("smooth ").suffix(" frames"));
+                crate::panels::labelled_value(
+                    r.on_hover_text("the visibility filter's length (odd; 1: off)"),
+                    "smooth frames",
+                    n as f64,
+                );
+                a.smooth_frames = (n.max(1) as usize) | 1;
+            });
+        }
+        if let Some(job) = &self.shot_job {
+            ui.horizontal(|ui| {
+                let (fraction, _) = job.job.progress();
+                ui.add(egui::ProgressBar::new(fraction).text(self.shot_status.clone()).desired_width(260.0));
+                if ui.button("Cancel").clicked() {
+                    job.job.cancel();
+                }
+            });
+        } else if !self.shot_status.is_empty() {
+            ui.label(&self.shot_status);
+        }
+        ui.horizontal(|ui| {
+            ui.add(egui::TextEdit::singleline(&mut self.track_path).hint_text("track.csv")).on_hover_text(
+                "a tracker's CSV: frame,x_px,y_px[,intensity_ev], pixels from the top-left corner, y down",
+            );
+            if ui.button("Import track").clicked() {
+                let path = std::path::PathBuf::from(self.track_path.trim());
+                self.import_track(&path);
+            }
+            if ui.button("Browse…").clicked() {
+                match rfd::FileDialog::new().add_filter("track", &["csv", "txt"]).pick_file() {
+                    Some(path) => {
+                        self.track_path = path.display().to_string();
+                        self.import_track(&path);
+                    }
+                    None => {
+                        self.message = Some(
+                            "no file chosen (or no file dialog here): type the track's path and press Import track"
+                                .into(),
+                        )
+                    }
+                }
+            }
+        });
+        ui.separator();
+        ui.heading("Export sequence");
+        ui.horizontal(|ui| {
+            ui.add(egui::TextEdit::singleline(&mut self.sequence_path).hint_text("out/flare.####.exr"))
+                .on_hover_text("EXR: linear layers (composite, flare, starburst, plate); PNG: tonemapped");
+            let exporting = self.shot_job.as_ref().is_some_and(|j| j.exporting);
+            if ui.add_enabled(!exporting, egui::Button::new("Export sequence")).clicked() {
+                let pattern = self.sequence_path.trim().to_string();
+                self.export_sequence(&pattern, true);
+            }
+        });
+        ui.label(format!(
+            "frames {}-{}, {}",
+            self.doc.timeline.first_frame,
+            self.doc.timeline.last_frame,
+            match &self.derived.plate {
+                Some(p) if has_plate => format!("{}x{} (the plate's size)", p.width, p.height),
+                _ => format!("{}x{} (File > export size)", self.export_size.0, self.export_size.1),
+            }
+        ));
+    }
+}
