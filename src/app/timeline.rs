@@ -63,7 +63,7 @@ impl FlareLabApp {
                 self.doc.timeline.delete_keys_at(self.playhead);
             }
             let mut ev = self.doc.timeline.sample(self.playhead as f64).light_ev;
-            let r = ui.add(egui::DragValue::new(&mut ev).range(-16.0..=16.0).speed(0.05).suffix(" EV"));
+            let r = ui.add(egui::DragValue::new(&mut ev).range(-64.0..=64.0).speed(0.05).suffix(" EV"));
             crate::panels::labelled_value(
                 r.on_hover_text("the light's intensity at this frame (sets a key)"),
                 "light intensity",
@@ -187,7 +187,10 @@ impl FlareLabApp {
 
     /// Imports a tracker's CSV as light keys (replacing the light keys; intensity keys too when it has them).
     pub fn import_track(&mut self, path: &std::path::Path) {
-        let Some(flare) = self.derived.flare.clone() else { return };
+        let Some(flare) = self.derived.flare.clone() else {
+            self.message = Some("no valid lens to map the track through".into());
+            return;
+        };
         let (w, h) = self.track_frame_size();
         let sensor = Sensor::for_frame(self.doc.sensor_width_mm, w, h);
         let keys = read_track(path).and_then(|rows| to_keys(&rows, &flare.system.mapping, &sensor, w, h));
@@ -230,7 +233,10 @@ impl FlareLabApp {
             self.message = Some("an export is already running".into());
             return;
         }
-        let Some(flare) = self.derived.flare.clone() else { return };
+        let Some(flare) = self.derived.flare.clone() else {
+            self.message = Some("no valid lens to render".into());
+            return;
+        };
         let checked = FramePattern::parse(pattern).and_then(|p| {
             p.ok_or_else(|| {
                 format!("`{pattern}` has no frame field: name the files like out/flare.####.exr or out/flare.%04d.png")
@@ -378,7 +384,7 @@ impl FlareLabApp {
             let r = ui.add(egui::DragValue::new(&mut tl.last_frame).prefix("last "));
             crate::panels::labelled_value(r, "last frame", tl.last_frame as f64);
             tl.last_frame = tl.last_frame.max(tl.first_frame);
-            let r = ui.add(egui::DragValue::new(&mut tl.fps).range(1.0..=240.0).suffix(" fps"));
+            let r = ui.add(egui::DragValue::new(&mut tl.fps).range(0.001..=1000.0).suffix(" fps"));
             crate::panels::labelled_value(r, "fps", tl.fps);
         });
         ui.horizontal(|ui| {
@@ -447,14 +453,14 @@ impl FlareLabApp {
         if let Some(a) = &mut self.doc.auto_light {
             ui.horizontal(|ui| {
                 let r =
-                    ui.add(egui::DragValue::new(&mut a.threshold).range(0.01..=1e6).speed(0.05).prefix("threshold "));
+                    ui.add(egui::DragValue::new(&mut a.threshold).range(1e-6..=1e9).speed(0.05).prefix("threshold "));
                 crate::panels::labelled_value(
                     r.on_hover_text("plate luminance above which a pixel is the light"),
                     "light threshold",
                     a.threshold,
                 );
                 let mut n = a.smooth_frames as i64;
-                let r = ui.add(egui::DragValue::new(&mut n).range(1..=31).prefix("smooth ").suffix(" frames"));
+                let r = ui.add(egui::DragValue::new(&mut n).range(1..=101).prefix("smooth ").suffix(" frames"));
                 crate::panels::labelled_value(
                     r.on_hover_text("the visibility filter's length (odd; 1: off)"),
                     "smooth frames",

@@ -197,3 +197,29 @@ fn keys_animate_the_light_its_intensity_and_a_ghost_gain_and_a_preset_carries_th
     let e = Document::from_json(&bad.to_json()).unwrap_err().to_string();
     assert!(e.contains("timeline.light_ev"), "{e}");
 }
+
+#[test]
+fn a_light_leaving_the_frame_keeps_its_flare_and_its_track() {
+    // The sun crosses the right edge at frame ~13 and is gone by frame ~15.
+    let shot =
+        SyntheticShot { start_px: [100.0, 40.0], end_px: [200.0, 46.0], occluder_px: None, ..SyntheticShot::small() };
+    let (_dir, doc) = shot_document(&shot, false);
+    let flare = PreparedFlare::new(&doc.lens, &doc.flare_config().unwrap()).unwrap();
+    let plan = plan_of(&doc, &flare, &shot);
+    let gone: Vec<usize> = (0..plan.frames.len()).filter(|&i| shot.sun_px(i as i64 + 1)[0] > 170.0).collect();
+    assert!(gone.len() >= 4, "the sun leaves the frame");
+    for &i in &gone {
+        let p = &plan.frames[i];
+        assert!(p.light_px.is_none(), "frame {}: off the plate", p.frame);
+        assert!((p.visibility - 1.0).abs() < 0.01, "frame {}: out of view is not covered: {}", p.frame, p.visibility);
+    }
+    // The track continues at the speed it had: the angle keeps growing to the right, evenly.
+    let x: Vec<f64> = plan.frames.iter().map(|p| p.light_deg[0]).collect();
+    let steps: Vec<f64> = x.windows(2).map(|w| w[1] - w[0]).collect();
+    assert!(steps.iter().all(|&d| d > 0.0), "{x:?}");
+    let (first, last) = (steps[0], steps[steps.len() - 1]);
+    assert!((last - first).abs() < 0.2 * first, "even steps: {steps:?}");
+    let (energies, finite) = flare_energies(&doc, &flare, &plan);
+    assert!(finite);
+    assert!(gone.iter().all(|&i| energies[i] > 0.0), "its ghosts keep coming from off-screen");
+}

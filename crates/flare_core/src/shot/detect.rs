@@ -11,7 +11,11 @@
 //! [`solve`] turns the detections of a whole range into one light per frame:
 //! - **visibility** = power / unoccluded power, the unoccluded power being the user's
 //!   ([`AutoLight::reference_power`]) or the largest detected in the range; it is clamped to 0..1 and is 0 on
-//!   a frame with no light found (covered, or out of the frame);
+//!   a frame with no light found where the light is on the plate (covered). A light off the plate (its region
+//!   touches the border, or its track puts it within its radius of the border or beyond, and nothing is found
+//!   there) is not covered, it is out of view: its visibility cannot be measured and is held from the nearest
+//!   frame where it could, so its ghosts keep coming from off-screen (a light that leaves the frame behind a
+//!   cloud stays dim);
 //! - a **temporal filter**, a centred triangular window of [`AutoLight::smooth_frames`] frames (default 5:
 //!   weights 1 2 3 2 1, renormalised at the ends of the range; 1 turns it off), smooths the visibility, so an
 //!   occluder crossing the light, or leaves flickering over it, becomes a fade and never a strobe; a light
@@ -191,6 +195,8 @@ pub struct SolvedLight {
     pub raw_visibility: f64,
     /// The position is this frame's own detection (not continued from the track).
     pub detected: bool,
+    /// The light is (partly) off the plate: its visibility is held from the nearest frame where it was on it.
+    pub off_plate: bool,
 }
 
 /// Why the light cannot be found.
@@ -206,13 +212,15 @@ pub enum DetectError {
 /// Solves the light of every frame of a range (see the module documentation). `scans[i]` is frame
 /// `frames[i]`'s scan (`None`: its plate could not be read, treated as no light); `to_deg` turns a pixel into
 /// a light angle (`None` past the lens's field); `keyed` is the timeline's light position at a frame, if it
-/// has light keys.
+/// has light keys; `on_plate(light_deg, margin_px)` says whether that light's image lands at least
+/// `margin_px` inside the frame.
 pub fn solve(
     frames: &[i64],
     scans: &[Option<Scan>],
     settings: &AutoLight,
     to_deg: impl Fn([f64; 2]) -> Option<[f64; 2]>,
     keyed: impl Fn(i64) -> Option<[f64; 2]>,
+    on_plate: impl Fn([f64; 2], f64) -> bool,
 ) -> Result<Vec<SolvedLight>, DetectError> {
     let detections: Vec<Option<Detection>> = scans.iter().map(|s| s.and_then(|s| s.detection)).collect();
     let largest = detections.iter().flatten().map(|d| d.power).fold(0.0, f64::max);
@@ -221,12 +229,12 @@ pub fn solve(
         return Err(DetectError::NothingFound { threshold: settings.threshold, peak });
     }
     let reference = settings.reference_power.unwrap_or(largest);
-    let raw: Vec<f64> = detections.iter().map(|d| d.map_or(0.0, |d| (d.power / reference).clamp(0.0, 1.0))).collect();
-    let visibility = triangular_filter(&raw, settings.smooth_frames);
+    let measured: Vec<f64> =
+        detections.iter().map(|d| d.map_or(0.0, |d| (d.power / reference).clamp(0.0, 1.0))).collect();
     // Positions of trusted frames, in degrees.
     let trusted: Vec<Option<[f64; 2]>> = detections
         .iter()
-        .zip(&raw)
+        .zip(&measured)
         .map(|(d, &v)| d.filter(|d| v >= TRUSTED_VISIBILITY && !d.touches_border).and_then(|d| to_deg(d.centroid_px)))
         .collect();
     let any_trusted = trusted.iter().any(Option::is_some);
@@ -236,11 +244,37 @@ pub fn solve(
         detections.iter().map(|d| d.and_then(|d| to_deg(d.centroid_px))).collect()
     };
     let continued = continue_track(frames, &fallback);
-    Ok((0..frames.len())
+    let light: Vec<[f64; 2]> = (0..frames.len())
+        .map(|i| fallback[i].or_else(|| keyed(frames[i])).or(continued[i]).unwrap_or([0.0, 0.0]))
+        .collect();
+    // Off the plate: the region touches the border, or nothing was found where the track puts the light within
+    // a radius of the border or beyond. Its visibility cannot be measured there: it is held from the nearest
+    // frame where it was.
+    let radius =
+        detections.iter().flatten().map(|d| (d.pixels as f64 / std::f64::consts::PI).sqrt()).fold(0.0, f64::max);
+    let off: Vec<bool> = (0..frames.len())
+        .map(|i| match detections[i] {
+            Some(d) => d.touches_border,
+            None => !on_plate(light[i], radius),
+        })
+        .collect();
+    let measurable: Vec<usize> = (0..frames.len()).filter(|&i| !off[i]).collect();
+    let raw: Vec<f64> = (0..frames.len())
         .map(|i| {
-            let own = fallback[i];
-            let light_deg = own.or_else(|| keyed(frames[i])).or(continued[i]).unwrap_or([0.0, 0.0]);
-            SolvedLight { light_deg, visibility: visibility[i], raw_visibility: raw[i], detected: own.is_some() }
+            if !off[i] {
+                return measured[i];
+            }
+            measurable.iter().min_by_key(|&&j| (j as i64 - i as i64).abs()).map_or(1.0, |&j| measured[j])
+        })
+        .collect();
+    let visibility = triangular_filter(&raw, settings.smooth_frames);
+    Ok((0..frames.len())
+        .map(|i| SolvedLight {
+            light_deg: light[i],
+            visibility: visibility[i],
+            raw_visibility: raw[i],
+            detected: fallback[i].is_some(),
+            off_plate: off[i],
         })
         .collect())
 }

@@ -9,7 +9,8 @@
 //! gain `2^light_ev`. When the document finds the light in the plate ([`super::detect`]), every plate of the
 //! range is read (in parallel) and scanned first; the solved position replaces the light and the filtered
 //! visibility multiplies the gain. The light's pixel is always the light angle through the lens's mapping
-//! ([`crate::optics::mapping::ImageMapping`]), `None` when it lands outside the frame.
+//! ([`crate::optics::mapping::ImageMapping`]), `None` when it lands outside the frame. The light found in the
+//! plate needs a plate: a document asking for it without one is refused.
 
 use std::ops::RangeInclusive;
 use std::path::PathBuf;
@@ -143,6 +144,9 @@ pub fn plan(
     };
     let solved = match &doc.auto_light {
         None => None,
+        Some(_) if doc.background.is_none() => {
+            return Err(ShotError::Range("the light is found in the plate, and the document has no plate".into()));
+        }
         Some(auto) => {
             let done = std::sync::atomic::AtomicUsize::new(0);
             let scans: Vec<Option<Scan>> = plates
@@ -174,7 +178,14 @@ pub fn plan(
             }
             let keyed = |f: i64| (!doc.timeline.light_deg.is_empty()).then(|| doc.light_at(f as f64));
             let to_deg = |px: [f64; 2]| mapping.light_deg_for_pixel(px, &sensor, width, height);
-            Some(detect::solve(&list, &scans, auto, to_deg, keyed)?)
+            let on_plate = |deg: [f64; 2], margin: f64| {
+                let p = mapping.pixel_for_light_deg(deg, &sensor, width, height);
+                p[0] >= margin
+                    && p[1] >= margin
+                    && p[0] <= f64::from(width) - margin
+                    && p[1] <= f64::from(height) - margin
+            };
+            Some(detect::solve(&list, &scans, auto, to_deg, keyed, on_plate)?)
         }
     };
     let frames = list

@@ -10,8 +10,8 @@
 //! On a GPU the frames are drawn one after another on the one device, while the previous frame's layers are
 //! encoded and written on a second thread (unless ghost layers are asked for: those are drawn on the same
 //! device, so they are written in turn). On the CPU twin the frames are drawn in parallel on rayon's pool (each
-//! frame's passes are parallel too; frames in parallel also overlap reading and writing). A plate shared by
-//! consecutive frames (a still background) is read once. Every frame reports a [`FrameRecord`]
+//! frame's passes are parallel too; frames in parallel also overlap reading and writing). On the GPU a plate
+//! shared by consecutive frames (a still background) is read once. Every frame reports a [`FrameRecord`]
 //! (frame, light pixel and angle, visibility, milliseconds, outcome), the same record [`write_log`] writes.
 
 use std::path::{Path, PathBuf};
@@ -130,6 +130,14 @@ fn record(plan: &FramePlan, path: PathBuf, started: Instant, outcome: FrameOutco
     }
 }
 
+/// A frame's outcome from the result of drawing or writing it to `path`.
+fn outcome_of<T>(frame: i64, path: &Path, result: Result<T, frame::FrameError>) -> FrameOutcome {
+    match result {
+        Ok(_) => FrameOutcome::Rendered,
+        Err(e) => FrameOutcome::Failed(format!("frame {frame}: {}: {e}", path.display())),
+    }
+}
+
 /// A drawn frame waiting to be written by the writer thread.
 struct Pending {
     frame: Frame,
@@ -171,14 +179,15 @@ pub fn render_sequence(
                 if skip(&path) {
                     return Some(finish(record(plan, path, started, FrameOutcome::Skipped)));
                 }
-                let outcome = (|| {
-                    let plate = plate_for(plan, &mut None)?;
-                    let frame = build(plan);
-                    let s = Sources { flare: sources.flare, lut: sources.lut, plate: plate.as_deref() };
-                    frame::render_to_file(&mut Device::Cpu, &frame, &s, options.layers, &path)
-                        .map_err(|e| format!("frame {}: {}: {e}", plan.frame, path.display()))
-                })();
-                let outcome = outcome.map_or_else(FrameOutcome::Failed, |_| FrameOutcome::Rendered);
+                let outcome = match plate_for(plan, &mut None) {
+                    Ok(plate) => {
+                        let frame = build(plan);
+                        let s = Sources { flare: sources.flare, lut: sources.lut, plate: plate.as_deref() };
+                        let written = frame::render_to_file(&mut Device::Cpu, &frame, &s, options.layers, &path);
+                        outcome_of(plan.frame, &path, written)
+                    }
+                    Err(e) => FrameOutcome::Failed(e),
+                };
                 Some(finish(record(plan, path, started, outcome)))
             };
             if options.parallel_frames {
@@ -199,10 +208,7 @@ pub fn render_sequence(
                             // No ghost layers here: the CPU device is never asked to draw.
                             let written =
                                 frame::write_drawn(&mut Device::Cpu, &p.frame, &s, &p.drawn, options.layers, &p.path);
-                            let outcome = written.map_or_else(
-                                |e| FrameOutcome::Failed(format!("frame {}: {}: {e}", p.plan.frame, p.path.display())),
-                                |_| FrameOutcome::Rendered,
-                            );
+                            let outcome = outcome_of(p.plan.frame, &p.path, written);
                             finish(record(&p.plan, p.path, p.started, outcome))
                         })
                         .collect::<Vec<_>>()
@@ -243,10 +249,7 @@ pub fn render_sequence(
                         }
                     } else {
                         let written = frame::write_drawn(device, &frame, &s, &drawn, options.layers, &path);
-                        let outcome = written.map_or_else(
-                            |e| FrameOutcome::Failed(format!("frame {}: {}: {e}", plan.frame, path.display())),
-                            |_| FrameOutcome::Rendered,
-                        );
+                        let outcome = outcome_of(plan.frame, &path, written);
                         inline.push(finish(record(plan, path, started, outcome)));
                     }
                 }
