@@ -431,6 +431,16 @@ impl FlareLabApp {
             self.derived.stats.empty_entrance_region,
             if self.derived.lut.is_some() { " | LUT ghosts on" } else { "" }
         ));
+        // A shot job shows its progress and Cancel here too, whichever panel is open.
+        if let Some(job) = &self.shot_job {
+            ui.horizontal(|ui| {
+                let (fraction, text) = job.job.progress();
+                ui.add(egui::ProgressBar::new(fraction).text(text).desired_width(360.0));
+                if ui.button("Cancel").clicked() {
+                    job.job.cancel();
+                }
+            });
+        }
     }
 
     fn display_ui(&mut self, ui: &mut egui::Ui) {
