@@ -57,11 +57,13 @@ pub fn parse_coating_override(spec: &str) -> Result<Option<Coating>> {
     if spec == "lens" { Ok(None) } else { parse_coating(spec).map(Some) }
 }
 
-/// Parses a coating: `none`, `quarter-wave[:NM]`, `multilayer:INDEX/THICKNESS_NM,...`
+/// Parses a coating: `none`, `quarter-wave[:NM]`, `broadband` ([`Coating::broadband`]),
+/// `multilayer:INDEX/THICKNESS_NM,...`
 pub fn parse_coating(spec: &str) -> Result<Coating> {
     let (kind, rest) = spec.split_once(':').unwrap_or((spec, ""));
     let coating = match kind {
         "none" | "uncoated" => Coating::Uncoated,
+        "broadband" => Coating::broadband(),
         "quarter-wave" | "qw" => Coating::QuarterWave {
             design_wavelength_nm: if rest.is_empty() {
                 550.0
@@ -138,7 +140,7 @@ pub struct OpticsChoice {
     /// A preset: a .json file or the name of a shipped one (`flarelab preset list`).
     #[arg(long)]
     pub preset: Option<String>,
-    /// Coating on every surface: lens (each surface's own), none, quarter-wave[:NM], multilayer:N/T,...
+    /// Coating on every surface: lens (each surface's own), none, quarter-wave[:NM], broadband, multilayer:N/T,...
     /// (default: the preset's).
     #[arg(long)]
     pub coating: Option<String>,

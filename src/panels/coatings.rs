@@ -42,12 +42,8 @@ fn coating_editor_ui(ui: &mut egui::Ui, coating: &mut Coating, id: &str) -> bool
         *coating = match chosen {
             "none" => Coating::Uncoated,
             "quarter-wave" => QUARTER_WAVE,
-            _ => Coating::Multilayer {
-                layers: vec![
-                    CoatingLayer { index: 1.38, thickness_nm: 99.6 },
-                    CoatingLayer { index: 2.1, thickness_nm: 130.9 },
-                ],
-            },
+            // A new multilayer starts as a real broadband AR design (quarter-half-quarter, cited there).
+            _ => Coating::broadband(),
         };
     }
     match coating {

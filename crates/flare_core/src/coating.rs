@@ -272,6 +272,19 @@ mod tests {
     }
 
     #[test]
+    fn the_broadband_coating_reflects_under_half_a_percent_across_the_visible() {
+        let coating = Coating::broadband();
+        for glass in [1.52, 1.62, 1.70] {
+            let samples: Vec<f64> =
+                (430..=670).map(|w| reflection(&coating, 1.0, glass, f64::from(w), 0.0).reflectance).collect();
+            let average = samples.iter().sum::<f64>() / samples.len() as f64;
+            assert!(average < 0.005, "n = {glass}: average {:.3}%", average * 100.0);
+            let violet = reflection(&coating, 1.0, glass, 400.0, 0.0).reflectance;
+            assert!(violet < bare(1.0, glass, 0.0), "n = {glass}: {violet} at 400 nm, more than bare glass");
+        }
+    }
+
+    #[test]
     fn coatings_tint_differently() {
         let colour = |c: &Coating| [650.0, 510.0, 475.0].map(|w| reflection(c, 1.0, 1.6, w, 0.1).reflectance);
         let bare = colour(&Coating::Uncoated);
