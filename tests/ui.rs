@@ -585,3 +585,34 @@ fn a_plate_sequence_finds_the_light_and_exports_on_a_thread_as_render_frames_doe
     assert!(h.state().shot_job.is_none());
     assert!(h.state().message.as_deref().is_some_and(|m| m.contains("frame field")), "{:?}", h.state().message);
 }
+
+#[test]
+fn inserting_a_surface_splits_a_gap_and_changes_nothing_optically() {
+    let mut h = harness();
+    show(&mut h, Tab::Lens);
+    let before = h.state().doc.lens.clone();
+    let fo = |app: &FlareLabApp| app.derived.first_order.clone().expect("a valid lens");
+    let (efl, bfd) = (fo(h.state()).efl_mm, fo(h.state()).bfd_mm);
+    // "+" on row 1 (inside glass) and on the last row.
+    let plus: Vec<_> = h.get_all_by_label("+").collect();
+    assert_eq!(plus.len(), before.surfaces.len());
+    plus[1].click();
+    h.run();
+    let plus: Vec<_> = h.get_all_by_label("+").collect();
+    plus[plus.len() - 1].click();
+    h.run();
+    let after = &h.state().doc.lens;
+    assert_eq!(after.surfaces.len(), before.surfaces.len() + 2);
+    assert!(h.state().derived.lens_problem.is_none(), "{:?}", h.state().derived.lens_problem);
+    assert_eq!(
+        after.surfaces[1].thickness_mm.unwrap() + after.surfaces[2].thickness_mm.unwrap(),
+        before.surfaces[1].thickness_mm.unwrap()
+    );
+    assert_eq!(after.surfaces[2].medium, before.surfaces[1].medium, "the same medium on both sides");
+    // The same focal length and focal plane; the back focal distance now counts from the new last surface,
+    // 1 mm behind the old one.
+    let now = fo(h.state());
+    assert!((now.efl_mm - efl).abs() < 1e-9, "{} vs {efl}", now.efl_mm);
+    assert!((now.bfd_mm + 1.0 - bfd).abs() < 1e-9, "{} vs {bfd}", now.bfd_mm);
+    assert_eq!(after.ghost_pairs().len(), before.ghost_pairs().len(), "no new reflecting surface");
+}

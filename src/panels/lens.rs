@@ -3,8 +3,8 @@
 //! makes the lens impossible is marked with the reason; the viewport keeps the last valid lens meanwhile.
 
 use eframe::egui;
+use flare_core::optics::Surface;
 use flare_core::optics::library::{builtin_lens, ids};
-use flare_core::optics::{Medium, Surface};
 
 use super::{Action, PanelContext, labelled_check, labelled_value};
 use flare_core::preset::Document;
@@ -14,9 +14,12 @@ const BAD: egui::Color32 = egui::Color32::from_rgb(255, 110, 110);
 pub fn lens_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, actions: &mut Vec<Action>) {
     ui.horizontal(|ui| {
         let mut chosen = doc.lens.id.clone();
-        egui::ComboBox::from_label("lens").selected_text(&chosen).width(190.0).show_ui(ui, |ui| {
+        let shown = if doc.lens.name.is_empty() { doc.lens.id.clone() } else { doc.lens.name.clone() };
+        egui::ComboBox::from_label("lens").selected_text(shown).width(260.0).show_ui(ui, |ui| {
             for id in ids() {
-                ui.selectable_value(&mut chosen, id.to_owned(), id);
+                // The lens's name (its patent or source), the id on hover.
+                let name = builtin_lens(id).map(|l| l.name).unwrap_or_else(|_| id.to_owned());
+                ui.selectable_value(&mut chosen, id.to_owned(), name).on_hover_text(id);
             }
         });
         if chosen != doc.lens.id
@@ -31,7 +34,6 @@ pub fn lens_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, action
             actions.push(Action::OpenLensFile);
         }
     });
-    ui.label(&doc.lens.name);
     if let Some(problem) = ctx.lens_problem {
         ui.colored_label(BAD, format!("(!) {} (the view shows the last valid lens)", problem.reason));
     }
@@ -67,6 +69,10 @@ fn surface_table_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, a
                 let cell = |ui: &mut egui::Ui, value: &mut f64, field: &'static str, label: &str, speed: f64| {
                     let bad = bad_cell(k, field);
                     let mut drag = egui::DragValue::new(value).speed(speed).max_decimals(4);
+                    if field == "vd" {
+                        // An unknown Abbe number (0 here: dispersion assumed) shows blank, not as 0.0.
+                        drag = drag.custom_formatter(|v, _| if v > 0.0 { format!("{v:.1}") } else { String::new() });
+                    }
                     if bad.is_some() {
                         drag = drag.prefix("! ");
                     }
@@ -114,7 +120,11 @@ fn surface_table_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, a
                     if ui.small_button("dn").on_hover_text("move down").clicked() && k + 1 < count {
                         edit = Some(RowEdit::Swap(k, k + 1));
                     }
-                    if ui.small_button("+").on_hover_text("insert a flat air surface after this one").clicked() {
+                    if ui
+                        .small_button("+")
+                        .on_hover_text("split the gap after this surface with a flat surface in the same medium (changes nothing optically)")
+                        .clicked()
+                    {
                         edit = Some(RowEdit::InsertAfter(k));
                     }
                     if ui.small_button("x").on_hover_text("remove this surface").clicked() {
@@ -128,8 +138,20 @@ fn surface_table_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, a
     match edit {
         Some(RowEdit::Swap(a, b)) => doc.lens.surfaces.swap(a, b),
         Some(RowEdit::InsertAfter(k)) => {
-            let semi = doc.lens.surfaces[k].semi_aperture_mm;
-            doc.lens.surfaces.insert(k + 1, Surface::new(0.0, Some(1.0), Medium::air(), semi));
+            // Half the gap each side of a flat surface between two parts of the same medium: no refraction, no
+            // reflection (not a ghost surface), so the lens stays as valid as it was. After the last surface
+            // (whose thickness, if any, runs to the image plane) it sits 1 mm behind, at most half way.
+            let surfaces = &mut doc.lens.surfaces;
+            let here = &surfaces[k];
+            let semi = here.semi_aperture_mm.max(surfaces.get(k + 1).map_or(0.0, |s| s.semi_aperture_mm));
+            let medium = here.medium.clone();
+            let (before, after) = match (here.thickness_mm, k + 1 < surfaces.len()) {
+                (Some(t), true) => (Some(0.5 * t), Some(0.5 * t)),
+                (Some(t), false) => (Some(t.min(2.0) * 0.5), Some(t - t.min(2.0) * 0.5)),
+                (None, _) => (Some(1.0), None),
+            };
+            surfaces[k].thickness_mm = before;
+            surfaces.insert(k + 1, Surface::new(0.0, after, medium, semi));
         }
         Some(RowEdit::Remove(k)) if doc.lens.surfaces.len() > 1 => {
             doc.lens.surfaces.remove(k);
