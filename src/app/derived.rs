@@ -325,8 +325,7 @@ impl Derived {
         let mut request = doc.frame_request_at(&flare.system, self.playhead as f64, width, height, divisor);
         if let Some(planned) = self.shot_plan.as_ref().and_then(|p| p.frames.iter().find(|f| f.frame == self.playhead))
         {
-            request.light_deg = planned.light_deg;
-            request.light_gain = planned.light_gain;
+            planned.apply_to(&mut request);
         }
         request
     }

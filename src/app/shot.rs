@@ -59,11 +59,13 @@ impl ShotJob {
     }
 
     /// Renders `doc`'s timeline range to `pattern` (at the plate's size, else `size`) on a headless GPU when
-    /// there is one (`gpu`), else on the CPU twin.
+    /// there is one (`gpu`), else on the CPU twin. `found`: the light already found in the plates for this
+    /// document (its [`light_key`] unchanged), which spares reading every plate again.
     pub fn export(
         doc: Document,
         flare: Arc<PreparedFlare>,
         lut: Option<Arc<LiveLut>>,
+        found: Option<Arc<ShotPlan>>,
         pattern: FramePattern,
         size: (u32, u32),
         gpu: bool,
@@ -74,7 +76,11 @@ impl ShotJob {
             let scanning = |done: usize, total: usize| {
                 report(0.0, format!("finding the light: {done}/{total} plates"));
             };
-            let plan = plan(&doc, &flare.system, range, size, &scanning, cancel).map_err(|e| e.to_string())?;
+            let plan = match found {
+                // Planned for the plates' size over the same range: the export's own plan would be the same.
+                Some(found) if size.is_none() => found,
+                _ => Arc::new(plan(&doc, &flare.system, range, size, &scanning, cancel).map_err(|e| e.to_string())?),
+            };
             let mut device = if gpu { Device::gpu(false).unwrap_or(Device::Cpu) } else { Device::Cpu };
             if let Some(dir) = std::path::Path::new(&pattern.text).parent().filter(|d| !d.as_os_str().is_empty()) {
                 std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;

@@ -19,7 +19,6 @@ use flare_core::optics::sensor::Sensor;
 use flare_core::preset::ghost_key;
 use flare_core::shot::detect::AutoLight;
 use flare_core::shot::pattern::{FramePattern, sequence_of};
-use flare_core::shot::sequence::FrameOutcome;
 use flare_core::shot::track::{read_track, to_keys};
 use flare_core::timeline::Interpolation;
 
@@ -257,11 +256,22 @@ impl FlareLabApp {
             self.message = Some(e.to_string());
             return;
         }
+        // The light found in the plates serves the export when it was found for this very document.
+        let found = self.derived.shot_plan.clone().filter(|_| {
+            self.doc.auto_light.is_some() && self.light_key == Some(light_key(&self.doc)) && self.shot_job.is_none()
+        });
         if let Some(job) = self.shot_job.take() {
             job.job.cancel();
         }
-        self.shot_job =
-            Some(ShotJob::export(self.doc.clone(), flare, self.derived.lut.clone(), pattern, self.export_size, gpu));
+        self.shot_job = Some(ShotJob::export(
+            self.doc.clone(),
+            flare,
+            self.derived.lut.clone(),
+            found,
+            pattern,
+            self.export_size,
+            gpu,
+        ));
         self.shot_status = "exporting…".into();
     }
 
@@ -335,22 +345,8 @@ impl FlareLabApp {
                         }
                     }
                     Ok(ShotOutcome::Exported { report, pattern, device }) => {
-                        let mut ms: Vec<f64> = report
-                            .records
-                            .iter()
-                            .filter(|r| r.outcome == FrameOutcome::Rendered)
-                            .map(|r| r.ms)
-                            .collect();
-                        ms.sort_by(f64::total_cmp);
-                        let median = ms.get(ms.len() / 2).copied().unwrap_or(0.0);
-                        let failed: Vec<String> = report
-                            .records
-                            .iter()
-                            .filter_map(|r| match &r.outcome {
-                                FrameOutcome::Failed(e) => Some(e.clone()),
-                                _ => None,
-                            })
-                            .collect();
+                        let median = report.median_ms();
+                        let failed: Vec<&str> = report.failures().into_iter().map(|(_, e)| e).collect();
                         self.shot_status = format!(
                             "{}{} frames written to {pattern} on {device} ({median:.0} ms a frame){}",
                             if cancelled { "cancelled: " } else { "" },

@@ -588,10 +588,7 @@ fn render_frames(
     if let Some(log) = &args.log {
         write_log(log, &report).with_context(|| format!("--log {}", log.display()))?;
     }
-    let mut ms: Vec<f64> =
-        report.records.iter().filter(|r| r.outcome == FrameOutcome::Rendered).map(|r| r.ms).collect();
-    ms.sort_by(f64::total_cmp);
-    let median = ms.get(ms.len() / 2).copied().unwrap_or(0.0);
+    let median = report.median_ms();
     eprintln!(
         "{} of {total} frames rendered ({} skipped, {} failed) in {:.1} s on {}, {}x{}: median {median:.0} ms a frame",
         report.rendered(),
@@ -602,15 +599,8 @@ fn render_frames(
         sources.plan.width,
         sources.plan.height,
     );
-    if report.failed() > 0 {
-        let failed: Vec<(i64, &str)> = report
-            .records
-            .iter()
-            .filter_map(|r| match &r.outcome {
-                FrameOutcome::Failed(e) => Some((r.frame, e.as_str())),
-                _ => None,
-            })
-            .collect();
+    let failed = report.failures();
+    if !failed.is_empty() {
         let frames: Vec<String> = failed.iter().map(|(f, _)| f.to_string()).collect();
         bail!(
             "{} of {total} frames failed (frames {}; the first: {}); the others were written",

@@ -86,7 +86,7 @@ fn the_flare_follows_the_visible_fraction_without_a_strobe() {
     let (energies, finite) = flare_energies(&doc, &flare, &plan);
     assert!(finite);
     let unoccluded_plan = ShotPlan {
-        frames: plan.frames.iter().map(|p| flare_core::shot::FramePlan { light_gain: 1.0, ..p.clone() }).collect(),
+        frames: plan.frames.iter().map(|p| flare_core::shot::FramePlan { visibility: 1.0, ..p.clone() }).collect(),
         ..plan.clone()
     };
     let (full, _) = flare_energies(&doc, &flare, &unoccluded_plan);

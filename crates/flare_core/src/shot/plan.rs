@@ -5,10 +5,12 @@
 //! disk are listed; a frame missing *inside* the sequence is not refused here: that frame fails when it is
 //! drawn and the others still render). [`plan`] then fixes the frame size (the given size, else the plate's,
 //! else 1280x720) and the sensor it spans (the document's width, the image's aspect), and per frame takes the
-//! timeline's sample ([`crate::preset::Document::frame_request_at`]): the keyed or static light, and the light
-//! gain `2^light_ev`. When the document finds the light in the plate ([`super::detect`]), every plate of the
-//! range is read (in parallel) and scanned first; the solved position replaces the light and the filtered
-//! visibility multiplies the gain. The light's pixel is always the light angle through the lens's mapping
+//! timeline's keyed or static light. When the document finds the light in the plate ([`super::detect`]),
+//! every plate of the range is read (in parallel) and scanned first; the solved position replaces the light
+//! and the filtered visibility is kept. A planned frame's request is the document's request of that frame
+//! ([`crate::preset::Document::frame_request_at`], whose light gain is `2^light_ev` there) with the planned
+//! light put in ([`FramePlan::apply_to`]: the position, and the gain times the visibility), so an intensity key
+//! edited after the light was found takes effect at once. The light's pixel is always the light angle through the lens's mapping
 //! ([`crate::optics::mapping::ImageMapping`]), `None` when it lands outside the frame. The light found in the
 //! plate needs a plate: a document asking for it without one is refused.
 
@@ -37,9 +39,8 @@ pub struct FramePlan {
     pub light_deg: [f64; 2],
     /// Where the light images (pixels from the top-left corner, y down); `None` outside the frame.
     pub light_px: Option<[f64; 2]>,
-    /// The light's intensity relative to the document's: `2^light_ev` times the visibility.
-    pub light_gain: f64,
-    /// The light's visibility in the plate (1 when it is not found in the plate).
+    /// The light's visibility in the plate (1 when it is not found in the plate): it multiplies the timeline's
+    /// `2^light_ev` into the frame's light gain ([`Self::apply_to`]).
     pub visibility: f64,
     /// The plate file of the frame.
     pub plate: Option<PathBuf>,
@@ -54,12 +55,20 @@ pub struct ShotPlan {
     pub sensor: Sensor,
 }
 
+impl FramePlan {
+    /// Puts this frame's light into `request` (the document's request of the same frame): its position, and
+    /// the visibility times the timeline's intensity there.
+    pub fn apply_to(&self, request: &mut FrameRequest) {
+        request.light_deg = self.light_deg;
+        request.light_gain *= self.visibility;
+    }
+}
+
 impl ShotPlan {
     /// The frame request of planned frame `plan` (`divisor`: the accumulation divisor).
     pub fn request(&self, doc: &Document, system: &GhostSystem, plan: &FramePlan, divisor: u32) -> FrameRequest {
         let mut request = doc.frame_request_at(system, plan.frame as f64, self.width, self.height, divisor);
-        request.light_deg = plan.light_deg;
-        request.light_gain = plan.light_gain;
+        plan.apply_to(&mut request);
         request
     }
 }
@@ -135,12 +144,11 @@ pub fn plan(
     let (width, height) = frame_size(doc, &frames, size)?;
     let sensor = Sensor::for_frame(doc.sensor_width_mm, width, height);
     let mapping = &system.mapping;
-    let pixel_of = |deg: [f64; 2]| {
+    // Where a light images, when that lands at least `margin` pixels inside the frame.
+    let inside = |deg: [f64; 2], margin: f64| {
         let p = mapping.pixel_for_light_deg(deg, &sensor, width, height);
-        let inside = p.iter().all(|v| v.is_finite())
-            && (0.0..=f64::from(width)).contains(&p[0])
-            && (0.0..=f64::from(height)).contains(&p[1]);
-        inside.then_some(p)
+        let within = |v: f64, size: u32| v.is_finite() && v >= margin && v <= f64::from(size) - margin;
+        (within(p[0], width) && within(p[1], height)).then_some(p)
     };
     let solved = match &doc.auto_light {
         None => None,
@@ -178,13 +186,7 @@ pub fn plan(
             }
             let keyed = |f: i64| (!doc.timeline.light_deg.is_empty()).then(|| doc.light_at(f as f64));
             let to_deg = |px: [f64; 2]| mapping.light_deg_for_pixel(px, &sensor, width, height);
-            let on_plate = |deg: [f64; 2], margin: f64| {
-                let p = mapping.pixel_for_light_deg(deg, &sensor, width, height);
-                p[0] >= margin
-                    && p[1] >= margin
-                    && p[0] <= f64::from(width) - margin
-                    && p[1] <= f64::from(height) - margin
-            };
+            let on_plate = |deg: [f64; 2], margin: f64| inside(deg, margin).is_some();
             Some(detect::solve(&list, &scans, auto, to_deg, keyed, on_plate)?)
         }
     };
@@ -192,20 +194,11 @@ pub fn plan(
         .iter()
         .enumerate()
         .map(|(i, &frame)| {
-            let sample = doc.timeline.sample(frame as f64);
-            let base_gain = f64::from(crate::color::gain_from_ev(sample.light_ev));
             let (light_deg, visibility) = match &solved {
                 Some(s) => (s[i].light_deg, s[i].visibility),
-                None => (sample.light_deg.unwrap_or(doc.light_deg), 1.0),
+                None => (doc.light_at(frame as f64), 1.0),
             };
-            FramePlan {
-                frame,
-                light_deg,
-                light_px: pixel_of(light_deg),
-                light_gain: base_gain * visibility,
-                visibility,
-                plate: plates[i].clone(),
-            }
+            FramePlan { frame, light_deg, light_px: inside(light_deg, 0.0), visibility, plate: plates[i].clone() }
         })
         .collect();
     Ok(ShotPlan { frames, width, height, sensor })

@@ -90,6 +90,25 @@ impl SequenceReport {
     pub fn skipped(&self) -> usize {
         self.count(|o| *o == FrameOutcome::Skipped)
     }
+
+    /// The median wall time of the rendered frames (0 when none was).
+    pub fn median_ms(&self) -> f64 {
+        let mut ms: Vec<f64> =
+            self.records.iter().filter(|r| r.outcome == FrameOutcome::Rendered).map(|r| r.ms).collect();
+        ms.sort_by(f64::total_cmp);
+        ms.get(ms.len() / 2).copied().unwrap_or(0.0)
+    }
+
+    /// Every failed frame with its reason, in frame order.
+    pub fn failures(&self) -> Vec<(i64, &str)> {
+        self.records
+            .iter()
+            .filter_map(|r| match &r.outcome {
+                FrameOutcome::Failed(e) => Some((r.frame, e.as_str())),
+                _ => None,
+            })
+            .collect()
+    }
 }
 
 /// What one frame is drawn from.
