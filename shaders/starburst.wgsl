@@ -1,15 +1,20 @@
-// The starburst: the aperture's diffraction texture on a quad centred on the light's image, additive.
+// The starburst: the light's own image spread by diffraction, evaluated per pixel on a quad centred on the
+// light's image out to its reach, additive (crates/flare_core/src/starburst.rs has the physics).
 // CPU twin: crates/flare_core/src/render/cpu/starburst.rs, `starburst_pass`.
 // The uniforms `Globals` come from common.wgsl, prepended when the shader is embedded.
 
 struct VertexOut {
     @builtin(position) position: vec4<f32>,
-    @location(0) tex: vec2<f32>,
+    // Image pixels (not accumulation pixels).
+    @location(0) pixel: vec2<f32>,
 };
 
 @group(0) @binding(0) var<uniform> globals: Globals;
-@group(0) @binding(1) var starburst_texture: texture_2d<f32>;
-@group(0) @binding(2) var starburst_sampler: sampler;
+// The angular profile c(phi) / peak, one texel per bin in the red channel.
+@group(0) @binding(1) var starburst_profile: texture_2d<f32>;
+
+const TAU: f32 = 6.283185307179586;
+const STARBURST_MAX: f32 = 3.0e4;
 
 @vertex
 fn vs_main(@builtin(vertex_index) vertex: u32) -> VertexOut {
@@ -21,12 +26,38 @@ fn vs_main(@builtin(vertex_index) vertex: u32) -> VertexOut {
     let pixel = globals.starburst.xy + globals.starburst.z * q;
     var out: VertexOut;
     out.position = vec4<f32>(pixel.x * globals.viewport.z * 2.0 - 1.0, 1.0 - pixel.y * globals.viewport.w * 2.0, 0.0, 1.0);
-    out.tex = q * 0.5 + 0.5;
+    out.pixel = pixel;
     return out;
+}
+
+// c(phi) / peak towards the offset d (x right, y down), between the two nearest bins, wrapping.
+fn profile_at(d: vec2<f32>) -> f32 {
+    let n = textureDimensions(starburst_profile).x;
+    let turn = atan2(d.y, d.x) / TAU;
+    var t = (turn - floor(turn)) * f32(n) - 0.5;
+    if (t < 0.0) {
+        t = t + f32(n);
+    }
+    let i0 = min(u32(t), n - 1u);
+    let f = t - f32(i0);
+    let a = textureLoad(starburst_profile, vec2<i32>(i32(i0), 0), 0).r;
+    let b = textureLoad(starburst_profile, vec2<i32>(i32((i0 + 1u) % n), 0), 0).r;
+    return a * (1.0 - f) + b * f;
 }
 
 @fragment
 fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
-    let c = textureSampleLevel(starburst_texture, starburst_sampler, in.tex, 0.0).rgb;
-    return vec4<f32>(c * globals.starburst.w, 0.0);
+    let d = in.pixel - globals.starburst.xy;
+    let r_px = length(d);
+    if (r_px > globals.starburst.z) {
+        return vec4<f32>(0.0);
+    }
+    var c: vec3<f32>;
+    if (r_px < globals.starburst.w) {
+        c = globals.starburst_core.rgb;
+    } else {
+        let r_mm = r_px * globals.starburst_far.w;
+        c = globals.starburst_far.rgb * (profile_at(d) / (r_mm * r_mm * r_mm));
+    }
+    return vec4<f32>(min(c, vec3<f32>(STARBURST_MAX)), 0.0);
 }

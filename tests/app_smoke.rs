@@ -123,7 +123,7 @@ fn the_drag_bench_sweeps_the_light_and_reports_frame_times() {
     let frames = 20;
     for what in ["light", "exposure"] {
         let script = format!(
-            "FLARELAB_VIEW_PX=1280x720 FLARELAB_DRAG_BENCH={frames} FLARELAB_DRAG_BENCH_WHAT={what} timeout 120 '{app}'"
+            "FLARELAB_AUTO_BAKE=0 FLARELAB_VIEW_PX=1280x720 FLARELAB_DRAG_BENCH={frames} FLARELAB_DRAG_BENCH_WHAT={what} timeout 120 '{app}'"
         );
         let text = under_xvfb("1280x720x24", &fb, dir.path(), &script);
         let line =

@@ -8,10 +8,18 @@ use flare_core::optics::{D_LINE_NM, FirstOrder, LightPath, TraceOptions, Tracer,
 use serde_json::Value;
 
 fn flarelab(args: &[&str]) -> Output {
+    // The tests' LUT cache: never the user's.
+    let cache = std::env::temp_dir().join(format!("flarelab-test-cache-{}", std::process::id()));
+    flarelab_cached(args, &cache)
+}
+
+/// `flarelab` with its LUT cache in `cache`.
+fn flarelab_cached(args: &[&str], cache: &Path) -> Output {
     Command::new(env!("CARGO_BIN_EXE_flarelab"))
         .args(args)
         .env_remove("DISPLAY")
         .env_remove("WAYLAND_DISPLAY")
+        .env("FLARELAB_CACHE_DIR", cache)
         .output()
         .expect("runs")
 }
@@ -637,15 +645,22 @@ fn render_reads_presets_and_flags_override_their_fields() {
     assert_eq!(render(&["--preset", "default"], "shipped.png"), plain, "so is the shipped `default`");
     // A flag overrides the preset's field.
     assert_ne!(render(&["--preset", "default", "--exposure-ev", "8"], "ev8.png"), plain);
-    // Every shipped preset renders.
+    // The default exposure is automatic: `auto` spelled out is the same frame.
+    assert_eq!(render(&["--exposure-ev", "auto"], "auto.png"), plain);
+    // Every shipped preset renders, and no two look the same.
     let list = flarelab(&["preset", "list", "--json"]);
     let shipped = json_of(&list);
-    assert!(shipped.as_array().unwrap().len() >= 4);
+    assert!(shipped.as_array().unwrap().len() >= 12);
+    let mut images: Vec<(String, Vec<u8>)> = Vec::new();
     for p in shipped.as_array().unwrap() {
         let name = p["name"].as_str().unwrap();
         assert!(p["lens"].is_string() && p["title"].is_string());
-        let image = render(&["--preset", name], &format!("{name}.png"));
-        assert!(!image.is_empty());
+        let file = format!("{name}.png");
+        let bytes = render(&["--preset", name], &file);
+        let decoded = image::open(dir.path().join(&file)).unwrap().to_rgb8();
+        assert!(decoded.pixels().any(|px| px.0.iter().any(|&v| v > 40)), "{name} shows a flare");
+        assert!(images.iter().all(|(other, b)| *b != bytes || other == name), "{name} repeats another look");
+        images.push((name.to_owned(), bytes));
     }
 }
 
@@ -655,7 +670,9 @@ fn bad_presets_plates_and_layers_are_refused_and_nothing_is_written() {
     let out = dir.path().join("out.exr");
     let out_s = out.display().to_string();
     let e = refusal(&["render", "--preset", "no-such-look", "-o", &out_s]);
-    assert!(e.contains("no-such-look") && e.contains("default") && e.contains("nikon-zoom"), "{e}");
+    assert!(e.contains("no-such-look") && e.contains("default") && e.contains("fisheye-10"), "{e}");
+    let e = refusal(&["render", "--exposure-ev", "bright", "-o", &out_s]);
+    assert!(e.contains("bright") && e.contains("auto"), "{e}");
     let newer = dir.path().join("newer.json");
     std::fs::write(&newer, r#"{"version": 99, "flare_ev": 3}"#).unwrap();
     let e = refusal(&["render", "--preset", &newer.display().to_string(), "-o", &out_s]);
@@ -689,7 +706,7 @@ fn render_writes_compositing_layers_with_the_plate_apart() {
         let result = flarelab(&[
             "render",
             "--preset",
-            "nikon-zoom",
+            "default",
             "--size",
             "80x45",
             "--device",
@@ -894,4 +911,80 @@ fn bad_shot_input_is_refused_before_any_work() {
     let e = refusal(&["render", "--track", far.to_str().unwrap(), "--frames", "1-2", "--device", "cpu", "-o", &out]);
     assert!(e.contains("line 2") && e.contains("outside the lens"), "{e}");
     assert!(!out_dir.exists(), "nothing was written");
+}
+
+/// The share of the starburst layer's light (R + G + B) more than `radius` pixels from the light's pixel
+/// (the brightest), in a render at `f_number`.
+fn starburst_share_beyond(dir: &Path, f_number: &str, radius: f64) -> f64 {
+    let out = dir.join(format!("f{f_number}.exr"));
+    let mut args: Vec<&str> =
+        "render pbrt_dgauss_50mm --light-deg 0,0 --size 320x180 --exposure-ev 30 --device cpu".split(' ').collect();
+    args.extend(["--f-number", f_number, "-o", out.to_str().unwrap()]);
+    let result = flarelab(&args);
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    let image = exr::prelude::read_all_flat_layers_from_file(&out).unwrap();
+    let layer = &image.layer_data[0];
+    let width = layer.size.0;
+    let channel = |name: &str| -> Vec<f32> {
+        let c = layer.channel_data.list.iter().find(|c| c.name.to_string() == name).expect(name);
+        c.sample_data.values_as_f32().collect()
+    };
+    let (r, g, b) = (channel("starburst.R"), channel("starburst.G"), channel("starburst.B"));
+    let light: Vec<f64> = (0..r.len()).map(|k| f64::from(r[k] + g[k] + b[k])).collect();
+    assert!(light.iter().all(|v| v.is_finite() && *v >= 0.0));
+    let centre = (0..light.len()).max_by(|&a, &b| light[a].total_cmp(&light[b])).unwrap();
+    let (cx, cy) = ((centre % width) as f64, (centre / width) as f64);
+    let total: f64 = light.iter().sum();
+    let beyond: f64 = light
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| ((k % width) as f64 - cx).hypot((k / width) as f64 - cy) > radius)
+        .map(|(_, v)| v)
+        .sum();
+    assert!(total > 0.0);
+    beyond / total
+}
+
+#[test]
+fn the_starburst_spreads_in_proportion_to_the_f_number() {
+    // Fraunhofer: the pattern scales with lambda N, so the share of its energy beyond a radius far outside
+    // the core (a few microns; 20 pixels here are 2.25 mm) grows in proportion to N. The double Gauss is
+    // f/2 wide open, so f/4 and f/8 are both set by the stop.
+    let dir = tempfile::tempdir().unwrap();
+    let f4 = starburst_share_beyond(dir.path(), "4", 20.0);
+    let f8 = starburst_share_beyond(dir.path(), "8", 20.0);
+    let ratio = f8 / f4;
+    assert!((ratio - 2.0).abs() <= 0.2, "f/4 {f4:.3e}, f/8 {f8:.3e}: ratio {ratio:.3}");
+    assert!(f4 > 1e-5, "the rays carry light: {f4:.3e}");
+    eprintln!("starburst share beyond 20 px: f/4 {f4:.3e}, f/8 {f8:.3e}, ratio {ratio:.3}");
+}
+
+#[test]
+fn blended_renders_share_the_lut_cache_and_a_damaged_entry_is_baked_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let cache = dir.path().join("cache");
+    let render = |name: &str| {
+        let out = dir.path().join(name);
+        let mut args: Vec<&str> = "render heliar --method blended --size 160x90 --device cpu -o".split(' ').collect();
+        args.push(out.to_str().unwrap());
+        let result = flarelab_cached(&args, &cache);
+        assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+        (std::fs::read(&out).unwrap(), String::from_utf8_lossy(&result.stderr).into_owned())
+    };
+    let (first, said) = render("first.png");
+    assert!(said.contains("cached the LUT as"), "{said}");
+    let entries: Vec<_> = std::fs::read_dir(&cache).unwrap().map(|e| e.unwrap().path()).collect();
+    assert_eq!(entries.len(), 1, "{entries:?}");
+    // The second render reads the cache: no bake, the same frame.
+    let (second, said) = render("second.png");
+    assert!(said.contains("from the cache") && !said.contains("baked"), "{said}");
+    assert_eq!(second, first);
+    // A damaged cache file is never trusted: reported, baked again, the same frame.
+    let mut bytes = std::fs::read(&entries[0]).unwrap();
+    let n = bytes.len();
+    bytes[n / 3] ^= 0x33;
+    std::fs::write(&entries[0], &bytes).unwrap();
+    let (third, said) = render("third.png");
+    assert!(said.contains("ignored") && said.contains("baking it again") && said.contains("cached the LUT"), "{said}");
+    assert_eq!(third, first);
 }

@@ -6,10 +6,28 @@ use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable;
 use flarelab::app::{FlareLabApp, Tab};
 
+/// The app with the automatic bake off and no disk cache: a test that is not about LUTs neither spends a
+/// core on a background bake nor writes to the user's cache.
+fn quiet(mut app: FlareLabApp) -> FlareLabApp {
+    app.autobake.enabled = false;
+    app.autobake.cache = None;
+    app
+}
+
 fn harness() -> Harness<'static, FlareLabApp> {
+    harness_on(None)
+}
+
+/// [`harness`] on `doc` (the default document when `None`).
+fn harness_on(doc: Option<flare_core::preset::Document>) -> Harness<'static, FlareLabApp> {
     Harness::builder()
         .with_size(egui::vec2(1280.0, 800.0))
-        .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), FlareLabApp::new(None, None))
+        .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), quiet(FlareLabApp::new(None, doc)))
+}
+
+/// The Heliar wide open (a small lens: a quick bake).
+fn heliar() -> flare_core::preset::Document {
+    flare_core::preset::Document::open_named("heliar-portrait").unwrap()
 }
 
 /// The app on a wgpu device (lavapipe in CI), so that its viewport draws and uploads textures as in the window;
@@ -27,7 +45,7 @@ fn gpu_harness(stored: Option<flare_core::preset::Document>) -> Option<Harness<'
         egui_kittest::wgpu::default_wgpu_setup(),
         eframe::egui_wgpu::RendererOptions::PREDICTABLE,
     );
-    let app = FlareLabApp::new(Some(render_state.clone()), stored);
+    let app = quiet(FlareLabApp::new(Some(render_state.clone()), stored));
     Some(
         Harness::builder()
             .with_size(egui::vec2(1280.0, 800.0))
@@ -210,7 +228,7 @@ fn step_until(h: &mut Harness<'static, FlareLabApp>, limit_s: f64, done: impl Fn
 fn the_blend_panel_bakes_on_a_thread_cancels_and_shows_the_classification() {
     use flare_core::preset::LutSource;
     use flarelab::panels::BakeStatus;
-    let mut h = harness();
+    let mut h = harness_on(Some(heliar()));
     show(&mut h, Tab::Blend);
     // Cancel stops a bake and says so; nothing changes in the document.
     h.get_by_label("Bake").click();
@@ -233,13 +251,13 @@ fn the_blend_panel_bakes_on_a_thread_cancels_and_shows_the_classification() {
     let baked = h.state().lut().unwrap().ghosts.len();
     assert!(baked > 0);
     show(&mut h, Tab::Ghosts);
-    assert_eq!(h.query_all_by_label("non-linear").count(), baked, "one row per baked ghost says non-linear");
+    assert_eq!(h.query_all_by_label("non-linear (baked)").count(), baked, "one row per baked ghost says so");
     // The baked LUT written to a file opens in a fresh app for the same lens; a damaged copy is refused
     // with the reason and changes nothing.
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("heliar.flut");
     flare_core::lut::format::write_lut(&path, h.state().lut().unwrap()).unwrap();
-    let mut fresh = FlareLabApp::new(None, None);
+    let mut fresh = quiet(FlareLabApp::new(None, Some(heliar())));
     let mut bytes = std::fs::read(&path).unwrap();
     let n = bytes.len();
     bytes[n / 2] ^= 0x5a;
@@ -342,9 +360,13 @@ fn the_session_round_trips_through_eframes_storage() {
     app.save(&mut storage);
     let restored = flarelab::app::restore(&storage).expect("the stored session reads back");
     assert_eq!(restored, app.doc);
+    // The recent files come back with it.
+    assert!(flarelab::app::restore_recent(&storage).is_empty());
+    app.files.remember(std::path::Path::new("/tmp/a look.json"));
+    app.save(&mut storage);
+    assert_eq!(flarelab::app::restore_recent(&storage), vec![std::path::PathBuf::from("/tmp/a look.json")]);
     // A damaged session is ignored, not a crash.
-    let key = storage.0.keys().next().cloned().unwrap();
-    storage.0.insert(key, "{ damaged".into());
+    storage.0.insert("flarelab_document".into(), "{ damaged".into());
     assert!(flarelab::app::restore(&storage).is_none());
 }
 
@@ -407,7 +429,7 @@ fn the_apps_export_and_render_preset_give_the_same_image() {
     doc.save(&preset).unwrap();
     let mut h = Harness::builder()
         .with_size(egui::vec2(1280.0, 800.0))
-        .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), FlareLabApp::new(None, Some(doc)));
+        .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), quiet(FlareLabApp::new(None, Some(doc))));
     h.run();
     let render = |device: &str, name: &str| {
         let out = dir.path().join(name);
@@ -538,7 +560,7 @@ fn a_plate_sequence_finds_the_light_and_exports_on_a_thread_as_render_frames_doe
     doc.save(&preset).unwrap();
     let mut h = Harness::builder()
         .with_size(egui::vec2(1280.0, 800.0))
-        .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), FlareLabApp::new(None, Some(doc)));
+        .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), quiet(FlareLabApp::new(None, Some(doc))));
     h.state_mut().tab = Tab::Shot;
     h.run();
     step_until(&mut h, 120.0, |app| app.derived.shot_plan.is_some());
@@ -588,7 +610,7 @@ fn a_plate_sequence_finds_the_light_and_exports_on_a_thread_as_render_frames_doe
 
 #[test]
 fn inserting_a_surface_splits_a_gap_and_changes_nothing_optically() {
-    let mut h = harness();
+    let mut h = harness_on(Some(heliar()));
     show(&mut h, Tab::Lens);
     let before = h.state().doc.lens.clone();
     let fo = |app: &FlareLabApp| app.derived.first_order.clone().expect("a valid lens");
@@ -615,4 +637,128 @@ fn inserting_a_surface_splits_a_gap_and_changes_nothing_optically() {
     assert!((now.efl_mm - efl).abs() < 1e-9, "{} vs {efl}", now.efl_mm);
     assert!((now.bfd_mm + 1.0 - bfd).abs() < 1e-9, "{} vs {bfd}", now.bfd_mm);
     assert_eq!(after.ghost_pairs().len(), before.ghost_pairs().len(), "no new reflecting surface");
+}
+
+#[test]
+fn lut_ghosts_bake_by_themselves_and_undo_to_a_baked_lens_needs_no_bake() {
+    use flare_core::lut::bake::BakeSettings;
+    use flare_core::lut::cache::LutCache;
+    use flare_core::preset::LutSource;
+    let dir = tempfile::tempdir().unwrap();
+    // Coarse bakes keep the test short; the cache key includes the settings.
+    let coarse = BakeSettings { res: 32, grid: 16, initial_steps: 2, tolerance: 0.5, ..BakeSettings::default() };
+    let app_on = |doc| {
+        let mut app = FlareLabApp::new(None, Some(doc));
+        app.autobake.cache = Some(LutCache::new(dir.path()));
+        app.autobake.settings = coarse.clone();
+        Harness::builder()
+            .with_size(egui::vec2(1280.0, 800.0))
+            .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), app)
+    };
+    let mut h = app_on(heliar());
+    h.run_steps(2);
+    // The bake starts by itself; until it is done the paraxial flare shows, and the status bar says so.
+    assert_eq!(h.state().autobake.bakes_started, 1);
+    assert!(h.state().lut().is_none());
+    assert!(h.query_by_label_contains("the paraxial flare until").is_some(), "the status bar says what shows");
+    step_until(&mut h, 600.0, |app| app.lut().is_some());
+    assert_eq!(h.state().lut().unwrap().lens_id, "heliar_tronnier_us2645156");
+    assert_eq!(h.state().doc.blend.lut, LutSource::Simulated { path: None }, "a saved preset renders it blended");
+    assert!(!h.state().history.can_undo(), "a bake is no edit to undo");
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1, "the LUT went into the cache");
+    // Change the lens: its bake starts by itself, the old LUT is not drawn for it, and the new one is used.
+    h.state_mut().doc.lens = flare_core::optics::library::builtin_lens("tessar").unwrap();
+    h.run_steps(2);
+    assert_eq!(h.state().autobake.bakes_started, 2);
+    assert!(h.state().lut().is_none());
+    step_until(&mut h, 600.0, |app| app.lut().is_some());
+    assert_eq!(h.state().lut().unwrap().lens_id, "brendel_tessar_usp2854889");
+    // Undo: the Heliar and its LUT at once, without a new bake.
+    h.state_mut().undo();
+    h.run();
+    assert_eq!(h.state().doc.lens.id, "heliar_tronnier_us2645156");
+    assert_eq!(h.state().lut().map(|l| l.lens_id.as_str()), Some("heliar_tronnier_us2645156"));
+    assert_eq!(h.state().autobake.bakes_started, 2, "no new bake");
+    // A new session finds both LUTs in the disk cache: no bake at all.
+    let mut fresh = app_on(heliar());
+    fresh.run_steps(2);
+    assert_eq!(fresh.state().autobake.bakes_started, 0);
+    assert_eq!(fresh.state().lut().map(|l| l.lens_id.as_str()), Some("heliar_tronnier_us2645156"));
+    // A damaged cache entry is not trusted: it is reported and baked again.
+    for entry in std::fs::read_dir(dir.path()).unwrap() {
+        let path = entry.unwrap().path();
+        let mut bytes = std::fs::read(&path).unwrap();
+        let n = bytes.len();
+        bytes[n / 2] ^= 0x5a;
+        std::fs::write(&path, bytes).unwrap();
+    }
+    let mut damaged = app_on(heliar());
+    damaged.run_steps(2);
+    assert_eq!(damaged.state().autobake.bakes_started, 1);
+    assert!(damaged.state().message.as_deref().is_some_and(|m| m.contains("ignored")), "{:?}", damaged.state().message);
+}
+
+#[test]
+fn without_a_native_dialog_file_actions_use_the_in_app_browser_and_remember_recent_files() {
+    use flarelab::app::files::FileUse;
+    let dir = tempfile::tempdir().unwrap();
+    // egui_file's own text fields carry no accessible names: the check is off for this window only.
+    let mut h = Harness::builder()
+        .with_size(egui::vec2(1280.0, 800.0))
+        .with_accessibility_check(false)
+        .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), quiet(FlareLabApp::new(None, None)));
+    h.state_mut().files.native = false;
+    h.get_by_label("File").click();
+    h.run();
+    h.get_by_label("Save preset…").click();
+    h.run();
+    // FlareLab's own browser is open for that action (a window titled like the action).
+    assert_eq!(h.state().files.browsing(), Some(FileUse::SavePreset));
+    assert!(h.query_by_label("💾  Save preset").is_some(), "the browser window is titled by the action");
+    // What it picks does the action and joins the recent files; Escape closes it and says so.
+    let path = dir.path().join("look.json");
+    h.state_mut().use_file(FileUse::SavePreset, &path);
+    assert!(path.exists());
+    assert!(h.state().message.as_deref().is_some_and(|m| m.contains("saved")), "{:?}", h.state().message);
+    h.key_press(egui::Key::Escape);
+    h.run();
+    assert_eq!(h.state().files.browsing(), None);
+    assert!(h.state().message.as_deref().is_some_and(|m| m.contains("no file chosen")), "{:?}", h.state().message);
+    // A failed action leaves its reason in the status bar, and the document as it was.
+    let lens = h.state().doc.lens.clone();
+    let bad = dir.path().join("bad.zmx");
+    std::fs::write(&bad, "SURF 0\n  CURV not-a-number\n").unwrap();
+    h.state_mut().use_file(FileUse::OpenLens, &bad);
+    h.run();
+    assert_eq!(h.state().doc.lens, lens);
+    let said = h.state().message.clone().unwrap_or_default();
+    assert!(said.contains("bad.zmx"), "{said}");
+    assert!(h.query_by_label_contains("bad.zmx").is_some(), "the reason is shown in the status bar");
+    // Open recent opens a remembered preset again by what it is.
+    assert_eq!(h.state().files.recent.first().and_then(|p| p.file_name()), Some(bad.file_name().unwrap()));
+    h.state_mut().doc.light_deg = [1.0, 1.0];
+    let saved = std::fs::canonicalize(&path).unwrap();
+    h.state_mut().open_recent(&saved);
+    assert_ne!(h.state().doc.light_deg, [1.0, 1.0], "the saved preset is open again");
+}
+
+#[test]
+fn the_looks_panel_renders_thumbnails_on_a_worker_and_applies_a_look_as_one_undo_step() {
+    let mut h = harness();
+    // The panel repaints while its worker runs: step, do not wait for it to settle.
+    h.state_mut().tab = Tab::Looks;
+    h.run_steps(2);
+    step_until(&mut h, 300.0, |app| app.looks.ready());
+    h.run_steps(2);
+    let shipped = flare_core::preset::shipped();
+    assert!(h.state().looks.thumbnails.iter().all(|t| matches!(t, Some(Ok(_)))), "every look has its thumbnail");
+    let before = h.state().doc.clone();
+    let k = shipped.iter().position(|p| p.name == "vintage-uncoated").unwrap();
+    h.get_by_label("vintage-uncoated").click();
+    h.run_steps(2);
+    assert_eq!(h.state().doc.lens.id, "pbrt_dgauss_50mm");
+    assert_eq!(h.state().doc.aperture, shipped[k].document().unwrap().aperture);
+    h.state_mut().undo();
+    h.run();
+    assert_eq!(h.state().doc.lens, before.lens, "one undo step takes the look back");
 }

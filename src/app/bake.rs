@@ -1,5 +1,6 @@
 //! The app's background bake: classification and LUT bake on a thread, with progress and Cancel, polled by
-//! the UI each frame (the window never blocks).
+//! the UI each frame (the window never blocks); the thread also writes the finished LUT into the on-disk
+//! cache, so a large LUT never stalls a frame.
 
 use std::sync::Arc;
 
@@ -8,10 +9,19 @@ use super::job::{Job, JobPoll};
 use flare_core::flare::PreparedFlare;
 use flare_core::lut::GhostLut;
 use flare_core::lut::bake::{BakeProgress, BakeSettings, bake, useful_field_deg};
+use flare_core::lut::cache::LutCache;
 use flare_core::lut::classify::{ClassifySettings, GhostClass, classify};
 
-/// What a bake thread hands back: the LUT and the classification, or why it stopped.
-pub type BakeOutcome = Result<(GhostLut, Vec<GhostClass>), String>;
+/// A finished bake: the LUT, the classification that chose its ghosts, and whether it went into the cache
+/// (the error when it could not).
+pub struct Baked {
+    pub lut: GhostLut,
+    pub classes: Vec<GhostClass>,
+    pub cached: Result<(), String>,
+}
+
+/// What a bake thread hands back, or why it stopped.
+pub type BakeOutcome = Result<Baked, String>;
 
 /// Where a bake stands.
 pub type BakePoll = JobPoll<BakeOutcome>;
@@ -22,13 +32,18 @@ pub type BakeJob = Job<BakeOutcome>;
 /// What a new bake says it is doing.
 pub const CLASSIFYING: &str = "classifying the ghosts…";
 
-/// Classifies `flare`'s ghosts and bakes the non-linear ones at the default settings on a new thread;
-/// `previous` lends the ghosts whose key is unchanged.
-pub fn start_bake(flare: Arc<PreparedFlare>, previous: Option<GhostLut>) -> BakeJob {
+/// Classifies `flare`'s ghosts and bakes the non-linear ones with `settings` on a new thread, then stores the
+/// LUT in `cache`; `previous` lends the ghosts whose key is unchanged.
+pub fn start_bake(
+    flare: Arc<PreparedFlare>,
+    previous: Option<GhostLut>,
+    settings: BakeSettings,
+    cache: Option<LutCache>,
+) -> BakeJob {
     Job::spawn(CLASSIFYING, move |cancel, progress| {
         let renderer = flare.ray_grid_renderer();
-        let settings = ClassifySettings::for_flare(&flare, useful_field_deg(&flare));
-        let classes = classify(&flare, &renderer, &settings, &[]);
+        let classify_settings = ClassifySettings::for_flare(&flare, useful_field_deg(&flare));
+        let classes = classify(&flare, &renderer, &classify_settings, &[]);
         let chosen: Vec<usize> = classes.iter().filter(|c| c.nonlinear()).map(|c| c.ghost).collect();
         let report = |p: BakeProgress| {
             progress(
@@ -36,8 +51,15 @@ pub fn start_bake(flare: Arc<PreparedFlare>, previous: Option<GhostLut>) -> Bake
                 format!("{}/{} ghosts, {} entries", p.ghosts_done, p.ghosts_total, p.entries),
             );
         };
-        bake(&flare, &renderer, &chosen, &BakeSettings::default(), previous.as_ref(), &report, cancel)
-            .map(|lut| (lut, classes))
-            .map_err(|e| e.to_string())
+        let lut = bake(&flare, &renderer, &chosen, &settings, previous.as_ref(), &report, cancel)
+            .map_err(|e| e.to_string())?;
+        let cached = match &cache {
+            Some(cache) => cache
+                .store(&flare.system.lens, &flare.config, &settings, &lut)
+                .map(|_| ())
+                .map_err(|e| format!("the LUT could not be cached in {}: {e}", cache.dir.display())),
+            None => Ok(()),
+        };
+        Ok(Baked { lut, classes, cached })
     })
 }

@@ -130,6 +130,8 @@ pub struct Derived {
     /// The software adapter draws the viewport at half resolution.
     pub software: bool,
     pub optics_key: Option<u64>,
+    /// The auto exposure and what it was computed for (the flare's id, the sensor width's bits).
+    auto_exposure: Option<((u64, u64), f64)>,
     /// The prepared flare in use (the last valid one).
     pub flare: Option<Arc<PreparedFlare>>,
     /// What was rebuilt so far.
@@ -167,6 +169,7 @@ impl Derived {
         Self {
             software,
             optics_key: None,
+            auto_exposure: None,
             flare: None,
             rebuilds: RebuildCounts::default(),
             first_order: None,
@@ -194,9 +197,29 @@ impl Derived {
     pub fn sync(&mut self, doc: &mut Document, gpu: Option<&RenderState>) -> Vec<SyncEvent> {
         let mut events = Vec::new();
         self.sync_optics(doc, gpu, &mut events);
+        self.sync_exposure(doc);
         self.sync_background(doc, gpu, &mut events);
         self.sync_frame(doc);
         events
+    }
+
+    /// Auto exposure: the flare's exposure follows the optics and the sensor (computed once per change of
+    /// either), unless the user locked it.
+    fn sync_exposure(&mut self, doc: &mut Document) {
+        let Some(flare) = self.flare.as_deref() else { return };
+        if !doc.exposure_auto {
+            return;
+        }
+        let key = (flare.id, doc.sensor_width_mm.to_bits());
+        let ev = match self.auto_exposure {
+            Some((k, ev)) if k == key => ev,
+            _ => {
+                let ev = flare_core::exposure::auto_flare_ev(&flare.system, doc.sensor_width_mm);
+                self.auto_exposure = Some((key, ev));
+                ev
+            }
+        };
+        doc.flare_ev = ev;
     }
 
     fn sync_optics(&mut self, doc: &Document, gpu: Option<&RenderState>, events: &mut Vec<SyncEvent>) {

@@ -21,10 +21,16 @@
 
 use crate::history::History;
 
+mod auto_bake_step;
+pub mod autobake;
 pub mod bake;
 pub mod derived;
 pub mod drag_bench;
+mod file_actions;
+pub mod files;
 pub mod job;
+pub mod looks;
+mod looks_panel;
 pub mod shot;
 pub mod timeline;
 
@@ -39,6 +45,7 @@ use derived::{Derived, SyncEvent};
 use drag_bench::DragBench;
 use eframe::egui_wgpu::RenderState;
 use eframe::{egui, wgpu};
+use files::FileUse;
 use flare_core::flare::PreparedFlare;
 use flare_core::frame::{Device, Frame, LayerChoice, Sources};
 use flare_core::lut::classify::GhostClass;
@@ -53,6 +60,8 @@ The command line works without one: `flarelab lens list`, `flarelab lens info LE
 
 /// The key eframe stores the last session's document under.
 const STORAGE_KEY: &str = "flarelab_document";
+/// The key of the recent files (a JSON list of paths).
+const RECENT_KEY: &str = "flarelab_recent_files";
 /// Largest viewport render (pixels across); a larger window is upsampled.
 const MAX_VIEW_WIDTH: f32 = 1920.0;
 
@@ -90,7 +99,15 @@ pub fn run() -> Result<()> {
             } else {
                 cc.storage.and_then(restore)
             };
-            Ok(Box::new(FlareLabApp::new(cc.wgpu_render_state.clone(), stored)))
+            let mut app = FlareLabApp::new(cc.wgpu_render_state.clone(), stored);
+            if std::env::var_os("FLARELAB_AUTO_BAKE").is_some_and(|v| v == "0") {
+                // For measurements: no background bake competing for the cores.
+                app.autobake.enabled = false;
+            }
+            if let Some(storage) = cc.storage {
+                app.files.recent = restore_recent(storage);
+            }
+            Ok(Box::new(app))
         }),
     );
     if let Err(e) = result {
@@ -102,6 +119,7 @@ pub fn run() -> Result<()> {
 /// Which panel the right side shows.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Tab {
+    Looks,
     Lens,
     Aperture,
     Coatings,
@@ -122,6 +140,12 @@ pub struct FlareLabApp {
     classes: Option<Vec<GhostClass>>,
     bake: Option<BakeJob>,
     bake_status: BakeStatus,
+    /// LUT ghosts without a click (see [`autobake`]).
+    pub autobake: autobake::AutoBake,
+    /// The Looks panel's thumbnails (see [`looks`]).
+    pub looks: looks::Looks,
+    /// File choosers and recent files (see [`files`]).
+    pub files: files::Files,
     // Panels' own state.
     aperture_preview: AperturePreview,
     coatings: CoatingsState,
@@ -169,6 +193,9 @@ impl FlareLabApp {
             classes: None,
             bake: None,
             bake_status: BakeStatus::Idle,
+            autobake: autobake::AutoBake::default(),
+            looks: looks::Looks::default(),
+            files: files::Files::default(),
             aperture_preview: AperturePreview::default(),
             coatings: CoatingsState::default(),
             ray_diagram: RayDiagram::default(),
@@ -188,6 +215,8 @@ impl FlareLabApp {
         app.playhead = app.doc.timeline.first_frame;
         app.plate_path = app.doc.background.clone().unwrap_or_default();
         app.sync();
+        // What the first sync settled (the auto exposure) is where the document starts, not an edit to undo.
+        app.history.reset(&app.doc);
         app
     }
 
@@ -215,7 +244,12 @@ impl FlareLabApp {
                 SyncEvent::Message(text) => self.message = Some(text),
                 SyncEvent::LutDropped => {
                     self.classes = None;
-                    self.bake_status = BakeStatus::Done("the lens changed: bake again for LUT ghosts".into());
+                    self.autobake.shown = None;
+                    self.bake_status = BakeStatus::Done(if self.autobake.enabled {
+                        "the optics changed: the paraxial flare until their LUT ghosts are ready".into()
+                    } else {
+                        "the optics changed: bake again for LUT ghosts".into()
+                    });
                 }
             }
         }
@@ -252,13 +286,16 @@ impl FlareLabApp {
         self.poll_shot();
         self.keys(ui.ctx());
         self.poll_bake();
+        self.auto_bake_step();
+        self.files_step(ui.ctx());
         self.drag_bench_step(ui.ctx());
         let mut actions = Vec::new();
         egui::Panel::top("menu").show(ui, |ui| self.menu_ui(ui));
         egui::Panel::bottom("status").show(ui, |ui| self.status_ui(ui));
-        egui::Panel::right("panels").default_size(470.0).resizable(true).show(ui, |ui| {
+        egui::Panel::right("panels").default_size(600.0).min_size(400.0).resizable(true).show(ui, |ui| {
             ui.horizontal(|ui| {
                 for (tab, name) in [
+                    (Tab::Looks, "Looks"),
                     (Tab::Lens, "Lens"),
                     (Tab::Aperture, "Aperture"),
                     (Tab::Coatings, "Coatings"),
@@ -274,9 +311,13 @@ impl FlareLabApp {
         });
         egui::CentralPanel::default().show(ui, |ui| {
             let height = ui.available_height();
+            eprintln!("DBG start {} {:?}", ui.available_width(), ui.max_rect());
             ui.allocate_ui(egui::vec2(ui.available_width(), height * 0.6), |ui| self.viewport_ui(ui, &mut actions));
+            eprintln!("DBG view {} {:?}", ui.available_width(), ui.min_rect());
             self.timeline_ui(ui);
+            eprintln!("DBG timeline {} {:?}", ui.available_width(), ui.min_rect());
             self.display_ui(ui);
+            eprintln!("DBG display {} {:?}", ui.available_width(), ui.min_rect());
             let ghost = self
                 .selected
                 .and_then(|g| self.derived.flare.as_ref().map(|f| &f.system.ghosts[g]))
@@ -284,8 +325,8 @@ impl FlareLabApp {
             crate::panels::ray_diagram::ray_diagram_ui(
                 ui,
                 &mut self.ray_diagram,
-                &self.doc.lens,
-                self.derived.first_order.as_ref(),
+                self.derived.flare.as_deref(),
+                self.derived.lens_problem.as_ref(),
                 self.derived.light_deg(&self.doc),
                 ghost,
             );
@@ -309,8 +350,17 @@ impl FlareLabApp {
 
     fn panel_ui(&mut self, ui: &mut egui::Ui, actions: &mut Vec<Action>) {
         if self.tab == Tab::Shot {
-            egui::ScrollArea::vertical().id_salt("panel_scroll").show(ui, |ui| self.shot_panel_ui(ui));
-            self.message_ui(ui);
+            egui::ScrollArea::both()
+                .id_salt("panel_scroll")
+                .auto_shrink([false, false])
+                .show(ui, |ui| self.shot_panel_ui(ui));
+            return;
+        }
+        if self.tab == Tab::Looks {
+            egui::ScrollArea::both()
+                .id_salt("panel_scroll")
+                .auto_shrink([false, false])
+                .show(ui, |ui| self.looks_ui(ui));
             return;
         }
         let ctx = PanelContext {
@@ -319,8 +369,10 @@ impl FlareLabApp {
             lens_problem: self.derived.lens_problem.as_ref(),
             ghosts: &self.derived.ghosts,
             classes: self.classes.as_deref(),
+            lut: self.derived.lut.as_deref().map(|l| &l.lut),
             selected: self.selected,
             bake: &self.bake_status,
+            auto_bake: self.autobake.enabled,
             lut_summary: None,
         };
         let summary = self.derived.lut.as_ref().map(|l| {
@@ -333,7 +385,7 @@ impl FlareLabApp {
             )
         });
         let ctx = PanelContext { lut_summary: summary.as_deref(), ..ctx };
-        egui::ScrollArea::vertical().id_salt("panel_scroll").show(ui, |ui| match self.tab {
+        egui::ScrollArea::both().id_salt("panel_scroll").auto_shrink([false, false]).show(ui, |ui| match self.tab {
             Tab::Lens => crate::panels::lens::lens_ui(ui, &mut self.doc, &ctx, actions),
             Tab::Aperture => {
                 crate::panels::aperture::aperture_ui(ui, &mut self.doc, &ctx, &mut self.aperture_preview, actions);
@@ -341,47 +393,39 @@ impl FlareLabApp {
             Tab::Coatings => crate::panels::coatings::coatings_ui(ui, &mut self.doc, &mut self.coatings),
             Tab::Ghosts => crate::panels::ghosts::ghosts_ui(ui, &mut self.doc, &ctx, actions),
             Tab::Blend => crate::panels::blend::blend_ui(ui, &mut self.doc, &ctx, actions),
-            Tab::Shot => {}
+            Tab::Shot | Tab::Looks => {}
         });
-        self.message_ui(ui);
-    }
-
-    /// The last message for the user, under the panel.
-    fn message_ui(&self, ui: &mut egui::Ui) {
-        if let Some(message) = &self.message {
-            ui.separator();
-            ui.colored_label(egui::Color32::from_rgb(255, 170, 90), message);
-        }
     }
 
     fn menu_ui(&mut self, ui: &mut egui::Ui) {
         egui::MenuBar::new().ui(ui, |ui| {
             ui.menu_button("File", |ui| {
                 if ui.button("Open preset…").clicked() {
-                    self.open_preset();
+                    self.pick_file(FileUse::OpenPreset);
                 }
+                ui.menu_button("Open recent", |ui| {
+                    if self.files.recent.is_empty() {
+                        ui.weak("no recent files yet");
+                    }
+                    for path in self.files.recent.clone() {
+                        if ui.button(path.display().to_string()).clicked() {
+                            self.open_recent(&path);
+                        }
+                    }
+                });
                 if ui.button("Save preset…").clicked() {
-                    self.save_preset();
+                    self.pick_file(FileUse::SavePreset);
                 }
                 ui.separator();
                 if ui.button("Background plate…").clicked() {
-                    self.pick_background();
+                    self.pick_file(FileUse::Background);
                 }
                 if self.doc.background.is_some() && ui.button("Remove background").clicked() {
                     self.doc.background = None;
                     self.plate_path.clear();
                 }
                 if ui.button("Import light track…").clicked() {
-                    match rfd::FileDialog::new().add_filter("track", &["csv", "txt"]).pick_file() {
-                        Some(path) => self.import_track(&path),
-                        None => {
-                            self.tab = Tab::Shot;
-                            self.message = Some(
-                                "no file chosen (or no file dialog here): type the track's path in the Shot panel"
-                                    .into(),
-                            );
-                        }
-                    }
+                    self.pick_file(FileUse::Track);
                 }
                 ui.separator();
                 ui.horizontal(|ui| {
@@ -392,7 +436,7 @@ impl FlareLabApp {
                     let r = ui.add(egui::DragValue::new(h).range(16..=8192).suffix(" px"));
                     crate::panels::labelled_value(r, "export height", f64::from(*h));
                     if ui.button("Export image…").on_hover_text("PNG (tonemapped) or EXR (linear)").clicked() {
-                        self.export_image(self.export_size);
+                        self.pick_file(FileUse::ExportImage);
                     }
                 });
                 if ui.button("Export sequence…").on_hover_text("the timeline's frames, on a thread").clicked() {
@@ -414,6 +458,15 @@ impl FlareLabApp {
     }
 
     fn status_ui(&mut self, ui: &mut egui::Ui) {
+        // What the last action did (or why it failed) stays here until the next one says something.
+        if let Some(message) = self.message.clone() {
+            ui.horizontal(|ui| {
+                ui.colored_label(egui::Color32::from_rgb(255, 170, 90), message);
+                if ui.small_button("x").on_hover_text("dismiss").clicked() {
+                    self.message = None;
+                }
+            });
+        }
         let dt_ms = ui.ctx().input(|i| i.unstable_dt) * 1e3;
         let light = self.derived.light_deg(&self.doc);
         ui.label(format!(
@@ -431,6 +484,16 @@ impl FlareLabApp {
             self.derived.stats.empty_entrance_region,
             if self.derived.lut.is_some() { " | LUT ghosts on" } else { "" }
         ));
+        // The bake (started by itself or from the Blend panel) shows its progress and Cancel here too.
+        if let (Some(job), BakeStatus::Running { fraction, text }) = (&self.bake, &self.bake_status) {
+            ui.horizontal(|ui| {
+                ui.label(format!("baking LUT ghosts, the paraxial flare until then: {text}"));
+                ui.add(egui::ProgressBar::new(*fraction).desired_width(160.0));
+                if ui.button("Cancel bake").clicked() {
+                    job.cancel();
+                }
+            });
+        }
         // A shot job shows its progress and Cancel here too, whichever panel is open.
         if let Some(job) = &self.shot_job {
             ui.horizontal(|ui| {
@@ -443,29 +506,54 @@ impl FlareLabApp {
         }
     }
 
+    /// The display settings under the view, in two rows (a slider and its value never wrap apart): the
+    /// exposures, then the tonemap and the starburst.
     fn display_ui(&mut self, ui: &mut egui::Ui) {
         ui.horizontal(|ui| {
-            // Exposures in stops: the flare's relative irradiance times 2^EV, the plate as shot at 0 EV.
-            ui.add(
-                egui::Slider::new(&mut self.doc.flare_ev, -4.0..=24.0)
-                    .step_by(0.1)
-                    .suffix(" EV")
-                    .text("flare exposure"),
+            // Exposures in stops: the flare's relative irradiance times 2^EV, the plate as shot at 0 EV. Moving
+            // the flare's exposure locks it; "auto" hands it back to the optics.
+            let moved = ui
+                .add(
+                    egui::Slider::new(&mut self.doc.flare_ev, -4.0..=40.0)
+                        .clamping(egui::SliderClamping::Never)
+                        .fixed_decimals(2)
+                        .suffix(" EV")
+                        .text("flare exposure"),
+                )
+                .changed();
+            if moved {
+                self.doc.exposure_auto = false;
+            }
+            ui.checkbox(&mut self.doc.exposure_auto, "auto").on_hover_text(
+                "the brightest ghost at a fixed display level, set again when the lens, coating or stop change",
             );
             if self.doc.background.is_some() {
                 ui.add(
                     egui::Slider::new(&mut self.doc.plate_ev, -8.0..=8.0)
-                        .step_by(0.1)
+                        .clamping(egui::SliderClamping::Never)
+                        .fixed_decimals(2)
                         .suffix(" EV")
                         .text("plate exposure"),
                 );
             }
+        });
+        ui.horizontal(|ui| {
             egui::ComboBox::from_label("tonemap").selected_text(self.doc.tonemap.name()).show_ui(ui, |ui| {
                 for t in flare_core::color::Tonemap::ALL {
                     ui.selectable_value(&mut self.doc.tonemap, t, t.name());
                 }
             });
             ui.checkbox(&mut self.doc.starburst, "starburst");
+            if self.doc.starburst {
+                ui.add(
+                    egui::Slider::new(&mut self.doc.starburst_ev, -12.0..=4.0)
+                        .clamping(egui::SliderClamping::Never)
+                        .fixed_decimals(1)
+                        .suffix(" EV")
+                        .text("starburst"),
+                )
+                .on_hover_text("the starburst's brightness against the physical one (0 EV)");
+            }
         });
     }
 
@@ -653,45 +741,23 @@ impl FlareLabApp {
                 self.coatings.surface = k;
                 self.tab = Tab::Coatings;
             }
-            Action::OpenLensFile => {
-                if let Some(path) = rfd::FileDialog::new().add_filter("lens", &["json", "zmx", "dat"]).pick_file() {
-                    self.open_lens(&path);
-                }
-            }
+            Action::OpenLensFile => self.pick_file(FileUse::OpenLens),
             Action::Bake => self.start_bake(),
+            Action::SetAutoBake(on) => self.autobake.enabled = on,
             Action::CancelBake => {
                 if let Some(job) = &self.bake {
                     job.cancel();
                 }
             }
-            Action::OpenLut => {
-                if let Some(path) = rfd::FileDialog::new().add_filter("FlareLab LUT", &["flut"]).pick_file() {
-                    self.open_lut(&path);
-                }
-            }
+            Action::OpenLut => self.pick_file(FileUse::OpenLut),
             Action::ExportLut => {
-                let Some(live) = self.derived.lut.clone() else {
+                if self.derived.lut.is_none() {
                     self.message = Some("no LUT to export: bake one (Blend panel) or open one".into());
                     return;
-                };
-                if let Some(path) =
-                    rfd::FileDialog::new().add_filter("FlareLab LUT", &["flut"]).set_file_name("flare.flut").save_file()
-                {
-                    self.message = Some(match flare_core::lut::format::write_lut(&path, &live.lut) {
-                        Ok(bytes) => format!("wrote {} ({:.1} MB)", path.display(), bytes as f64 / 1e6),
-                        Err(e) => format!("could not write {}: {e}", path.display()),
-                    });
                 }
+                self.pick_file(FileUse::ExportLut);
             }
-            Action::OpenApertureImage => {
-                if let Some(path) = rfd::FileDialog::new().add_filter("image", &["png", "jpg", "exr"]).pick_file() {
-                    let size = flare_core::aperture::DEFAULT_MASK_SIZE;
-                    match flare_core::aperture::Aperture::image_shape_from_file(&path, size) {
-                        Ok(_) => self.doc.aperture.image = Some(path.display().to_string()),
-                        Err(e) => self.message = Some(e.to_string()),
-                    }
-                }
-            }
+            Action::OpenApertureImage => self.pick_file(FileUse::ApertureImage),
         }
     }
 
@@ -752,9 +818,9 @@ impl FlareLabApp {
         }
     }
 
-    fn open_preset(&mut self) {
-        let Some(path) = rfd::FileDialog::new().add_filter("FlareLab preset", &["json"]).pick_file() else { return };
-        match Document::open(&path) {
+    /// Opens a preset file as the new document (a bad file changes nothing).
+    fn open_preset_file(&mut self, path: &std::path::Path) {
+        match Document::open(path) {
             Ok(doc) => {
                 self.doc = doc;
                 self.history.reset(&self.doc);
@@ -765,51 +831,54 @@ impl FlareLabApp {
         }
     }
 
-    fn save_preset(&mut self) {
-        let Some(path) =
-            rfd::FileDialog::new().add_filter("FlareLab preset", &["json"]).set_file_name("flare.json").save_file()
-        else {
-            return;
-        };
-        self.message = Some(match self.doc.save(&path) {
+    fn save_preset_to(&mut self, path: &std::path::Path) {
+        self.message = Some(match self.doc.save(path) {
             Ok(()) => format!("saved {}", path.display()),
             Err(e) => format!("could not save {}: {e}", path.display()),
         });
     }
 
-    fn pick_background(&mut self) {
-        match rfd::FileDialog::new().add_filter("image", &["png", "exr", "hdr", "jpg"]).pick_file() {
-            Some(path) => self.set_background(&path),
-            None => {
-                self.tab = Tab::Shot;
-                self.message =
-                    Some("no file chosen (or no file dialog here): type the plate's path in the Shot panel".into());
+    /// Writes the LUT in use to `path`.
+    fn export_lut_to(&mut self, path: &std::path::Path) {
+        let Some(live) = self.derived.lut.clone() else {
+            self.message = Some("no LUT to export: bake one (Blend panel) or open one".into());
+            return;
+        };
+        self.message = Some(match flare_core::lut::format::write_lut(path, &live.lut) {
+            Ok(bytes) => format!("wrote {} ({:.1} MB)", path.display(), bytes as f64 / 1e6),
+            Err(e) => format!("could not write {}: {e}", path.display()),
+        });
+    }
+
+    /// Uses a grey image as the stop (a bad image changes nothing).
+    fn use_aperture_image(&mut self, path: &std::path::Path) {
+        let size = flare_core::aperture::DEFAULT_MASK_SIZE;
+        match flare_core::aperture::Aperture::image_shape_from_file(path, size) {
+            Ok(_) => {
+                self.doc.aperture.image = Some(path.display().to_string());
+                self.message = Some(format!("aperture image {}", path.display()));
             }
+            Err(e) => self.message = Some(e.to_string()),
         }
     }
 
-    /// Renders the document's frame at `size` through the CPU twin and writes PNG (8-bit, tonemapped) or EXR
-    /// (linear), chosen by the file name.
-    fn export_image(&mut self, size: (u32, u32)) {
-        let Some(path) =
-            rfd::FileDialog::new().add_filter("image", &["png", "exr"]).set_file_name("flare.png").save_file()
-        else {
-            return;
-        };
-        self.message = Some(match self.export_image_to(size, &path) {
+    /// Renders the document's frame at the export size through the CPU twin and writes PNG (8-bit,
+    /// tonemapped) or EXR (linear), chosen by the file name.
+    fn export_image_file(&mut self, path: &std::path::Path) {
+        self.message = Some(match self.export_image_to(self.export_size, path) {
             Ok(()) => format!("wrote {}", path.display()),
             Err(e) => format!("could not export {}: {e:#}", path.display()),
         });
     }
 
+    /// The Bake button: a bake of the live optics now (the automatic bake does the same by itself).
     fn start_bake(&mut self) {
         let Some(flare) = self.derived.flare.clone() else { return };
         if self.bake.is_some() {
             return;
         }
-        let previous = self.derived.lut.as_ref().filter(|l| l.lut.kind == LutKind::RayTraced).map(|l| l.lut.clone());
-        self.bake = Some(bake::start_bake(flare, previous));
-        self.bake_status = BakeStatus::Running { fraction: 0.0, text: bake::CLASSIFYING.into() };
+        let Some(key) = self.live_bake_key() else { return };
+        self.spawn_bake(flare, key);
     }
 
     /// One frame of the drag bench (see [`DragBench`]); closes the window when it is done.
@@ -835,23 +904,19 @@ impl FlareLabApp {
         let Some(job) = &self.bake else { return };
         match job.poll() {
             BakePoll::Running(fraction, text) => self.bake_status = BakeStatus::Running { fraction, text },
-            BakePoll::Finished(Ok((lut, classes))) => {
+            BakePoll::Finished(outcome) => {
                 self.bake = None;
-                self.bake_status = BakeStatus::Done(format!(
-                    "baked {} non-linear ghosts ({} entries)",
-                    lut.ghosts.len(),
-                    lut.entry_count()
-                ));
-                self.classes = Some(classes);
-                self.doc.blend.lut = LutSource::Simulated { path: None };
-                self.set_lut(Some(lut));
-            }
-            BakePoll::Finished(Err(e)) => {
-                self.bake = None;
-                self.bake_status = BakeStatus::Failed(format!("bake stopped: {e}"));
+                self.finish_bake(outcome);
             }
         }
     }
+}
+
+/// The recent files from eframe's storage (none when absent or unreadable).
+pub fn restore_recent(storage: &dyn eframe::Storage) -> Vec<std::path::PathBuf> {
+    let text = storage.get_string(RECENT_KEY).unwrap_or_default();
+    let paths: Vec<String> = serde_json::from_str(&text).unwrap_or_default();
+    paths.into_iter().map(std::path::PathBuf::from).take(files::RECENT).collect()
 }
 
 /// The last session's document from eframe's storage, if there is a valid one (a damaged or newer one is
@@ -890,5 +955,7 @@ impl eframe::App for FlareLabApp {
     /// extra fields), and read back through the preset loader with all its checks ([`restore`]).
     fn save(&mut self, storage: &mut dyn eframe::Storage) {
         storage.set_string(STORAGE_KEY, self.doc.to_json());
+        let recent: Vec<String> = self.files.recent.iter().map(|p| p.display().to_string()).collect();
+        storage.set_string(RECENT_KEY, serde_json::to_string(&recent).unwrap_or_default());
     }
 }

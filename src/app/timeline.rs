@@ -275,32 +275,21 @@ impl FlareLabApp {
         self.shot_status = "exporting…".into();
     }
 
-    /// File > Export sequence…: a native dialog for the first file's name, else the Shot panel's field.
+    /// File > Export sequence…: the file chooser for the first file's name (a name without a frame field
+    /// gets one).
     pub fn export_sequence_dialog(&mut self) {
-        let picked = rfd::FileDialog::new()
-            .add_filter("image sequence", &["exr", "png"])
-            .set_file_name("flare.####.exr")
-            .save_file();
-        match picked {
-            Some(path) => {
-                let mut text = path.display().to_string();
-                if !FramePattern::is_pattern(&text) {
-                    // `flare.exr` becomes `flare.####.exr`.
-                    let dot = text.rfind('.').filter(|&d| d > text.rfind('/').unwrap_or(0)).unwrap_or(text.len());
-                    text.insert_str(dot, ".####");
-                }
-                self.sequence_path = text.clone();
-                self.export_sequence(&text, true);
-            }
-            None => {
-                self.tab = super::Tab::Shot;
-                self.message = Some(
-                    "no file was chosen (or no file dialog is available here): type the sequence's name in the Shot \
-                     panel and press Export sequence"
-                        .into(),
-                );
-            }
+        self.pick_file(super::files::FileUse::ExportSequence);
+    }
+
+    /// Exports the sequence named like `path` (`flare.exr` becomes `flare.####.exr`).
+    pub fn export_sequence_named(&mut self, path: &std::path::Path) {
+        let mut text = path.display().to_string();
+        if !FramePattern::is_pattern(&text) {
+            let dot = text.rfind('.').filter(|&d| d > text.rfind('/').unwrap_or(0)).unwrap_or(text.len());
+            text.insert_str(dot, ".####");
         }
+        self.sequence_path = text.clone();
+        self.export_sequence(&text, true);
     }
 
     /// Starts or replaces the job finding the light when what it depends on changed; drops the light found
@@ -416,13 +405,7 @@ impl FlareLabApp {
                 }
             }
             if ui.button("Browse…").clicked() {
-                match rfd::FileDialog::new().add_filter("image", &["exr", "png", "hdr", "jpg"]).pick_file() {
-                    Some(path) => self.set_background(&path),
-                    None => {
-                        self.message =
-                            Some("no file chosen (or no file dialog here): type the plate's path and press Use".into())
-                    }
-                }
+                self.pick_file(super::files::FileUse::Background);
             }
         });
         let r = ui.add(egui::DragValue::new(&mut self.doc.sensor_width_mm).range(1.0..=200.0).speed(0.1).suffix(" mm"));
@@ -485,18 +468,7 @@ impl FlareLabApp {
                 self.import_track(&path);
             }
             if ui.button("Browse…").clicked() {
-                match rfd::FileDialog::new().add_filter("track", &["csv", "txt"]).pick_file() {
-                    Some(path) => {
-                        self.track_path = path.display().to_string();
-                        self.import_track(&path);
-                    }
-                    None => {
-                        self.message = Some(
-                            "no file chosen (or no file dialog here): type the track's path and press Import track"
-                                .into(),
-                        )
-                    }
-                }
+                self.pick_file(super::files::FileUse::Track);
             }
         });
         ui.separator();

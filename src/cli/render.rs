@@ -162,9 +162,11 @@ pub struct RenderArgs {
     /// Wavelengths: 3 is RGB (650/510/475 nm), 2..32 are CIE-weighted, 1 is the d-line alone.
     #[arg(long)]
     pub spectrum: Option<usize>,
-    /// The flare's exposure in stops (its relative irradiance times 2^EV; ghosts are ~1e-6 to 1e-2 of the light).
-    #[arg(long, allow_negative_numbers = true)]
-    pub exposure_ev: Option<f64>,
+    /// The flare's exposure in stops (its relative irradiance times 2^EV; ghosts are ~1e-6 to 1e-2 of the light),
+    /// or `auto`: the brightest ghost at a fixed display level, from the optics (default: the preset's choice,
+    /// auto for the default document).
+    #[arg(long, allow_negative_numbers = true, value_parser = parse_exposure)]
+    pub exposure_ev: Option<Exposure>,
     /// The background plate's exposure in stops (0: as shot).
     #[arg(long, allow_negative_numbers = true)]
     pub plate_ev: Option<f64>,
@@ -177,6 +179,9 @@ pub struct RenderArgs {
     /// Leave out the starburst at the light.
     #[arg(long)]
     pub no_starburst: bool,
+    /// The starburst's brightness in stops relative to the physical one (default: the preset's, 0).
+    #[arg(long, allow_negative_numbers = true)]
+    pub starburst_ev: Option<f64>,
     /// Background plate (PNG is taken as sRGB, EXR and HDR as linear), shown under the flare at --plate-ev; a
     /// sequence when it has a frame field (`plates/shot.####.exr` or `%04d`).
     #[arg(long)]
@@ -198,6 +203,36 @@ pub struct RenderArgs {
     /// `out/flare.####.exr`.
     #[arg(short = 'o', long = "out", alias = "output")]
     pub out: PathBuf,
+}
+
+/// `--exposure-ev`: automatic, or a number of stops (which locks it).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Exposure {
+    Auto,
+    Stops(f64),
+}
+
+fn parse_exposure(s: &str) -> Result<Exposure, String> {
+    if s.eq_ignore_ascii_case("auto") {
+        return Ok(Exposure::Auto);
+    }
+    match s.trim().parse::<f64>() {
+        Ok(ev) if ev.is_finite() => Ok(Exposure::Stops(ev)),
+        _ => Err(format!("`{s}` is neither `auto` nor a number of stops")),
+    }
+}
+
+/// What the flare's exposure was and why.
+fn exposure_line(doc: &Document) -> String {
+    if doc.exposure_auto {
+        format!(
+            "flare exposure {:+.2} EV (auto: the brightest ghost at display level {}; --exposure-ev N locks it)",
+            doc.flare_ev,
+            flare_core::exposure::AUTO_DISPLAY_LEVEL
+        )
+    } else {
+        format!("flare exposure {:+.2} EV", doc.flare_ev)
+    }
 }
 
 /// Parses `A-B` or `N` (frames may be negative: `-5--1`).
@@ -232,8 +267,13 @@ pub fn document(args: &RenderArgs) -> Result<Document> {
     if let Some(n) = args.spectrum {
         doc.wavelengths = n;
     }
-    if let Some(ev) = args.exposure_ev {
-        doc.flare_ev = ev;
+    match args.exposure_ev {
+        Some(Exposure::Auto) => doc.exposure_auto = true,
+        Some(Exposure::Stops(ev)) => {
+            doc.flare_ev = ev;
+            doc.exposure_auto = false;
+        }
+        None => {}
     }
     if let Some(ev) = args.plate_ev {
         doc.plate_ev = ev;
@@ -243,6 +283,9 @@ pub fn document(args: &RenderArgs) -> Result<Document> {
     }
     if args.no_starburst {
         doc.starburst = false;
+    }
+    if let Some(ev) = args.starburst_ev {
+        doc.starburst_ev = ev;
     }
     if let Some(plate) = &args.background {
         doc.background = Some(plate.display().to_string());
@@ -298,8 +341,12 @@ fn flag_of(args: &RenderArgs, field: &str) -> Option<String> {
     match field {
         "wavelengths" => given(args.spectrum.is_some(), "--spectrum", format!("{}", args.spectrum?)),
         "light_deg" => args.light_deg.map(|(x, y)| format!("--light-deg {x},{y}")),
-        "flare_ev" => given(args.exposure_ev.is_some(), "--exposure-ev", format!("{}", args.exposure_ev?)),
+        "flare_ev" => match args.exposure_ev? {
+            Exposure::Stops(ev) => Some(format!("--exposure-ev {ev}")),
+            Exposure::Auto => None,
+        },
         "plate_ev" => given(args.plate_ev.is_some(), "--plate-ev", format!("{}", args.plate_ev?)),
+        "starburst_ev" => args.starburst_ev.map(|ev| format!("--starburst-ev {ev}")),
         "aperture.f_number" => {
             given(args.optics.f_number.is_some(), "--f-number", format!("{}", args.optics.f_number?))
         }
@@ -343,9 +390,30 @@ fn lut_for(doc: &Document, flare: &PreparedFlare, method: Method) -> Result<Ghos
         }
         None if method == Method::Photo => bail!("--method photo needs --lut F.flut (made by `flarelab photo-lut`)"),
         None => {
+            // The LUT baked for this lens and these settings: the app's and this command's shared cache, else
+            // baked now (and cached for next time).
+            let settings = flare_core::lut::bake::BakeSettings::default();
+            let cache = flare_core::lut::cache::LutCache::user();
+            if let Some(cache) = &cache {
+                match cache.load(&doc.lens, &flare.config, &settings) {
+                    flare_core::lut::cache::Lookup::Hit(lut) => {
+                        eprintln!("LUT ghosts from the cache ({})", cache.dir.display());
+                        return Ok(*lut);
+                    }
+                    flare_core::lut::cache::Lookup::Rejected(reason) => eprintln!("{reason}: baking it again"),
+                    flare_core::lut::cache::Lookup::Miss => {}
+                }
+            }
             let renderer = flare.ray_grid_renderer();
             let choice = super::lut::LutChoice::default();
-            Ok(super::lut::bake_lut(flare, &renderer, &choice, &Default::default(), None, false)?.0)
+            let lut = super::lut::bake_lut(flare, &renderer, &choice, &settings, None, false)?.0;
+            if let Some(cache) = &cache {
+                match cache.store(&doc.lens, &flare.config, &settings, &lut) {
+                    Ok(path) => eprintln!("cached the LUT as {}", path.display()),
+                    Err(e) => eprintln!("the LUT could not be cached in {}: {e}", cache.dir.display()),
+                }
+            }
+            Ok(lut)
         }
     }
 }
@@ -436,6 +504,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         .transpose()?;
     let config = doc.flare_config().map_err(|e| anyhow::anyhow!("{e}"))?;
     let flare = PreparedFlare::new(&doc.lens, &config).with_context(|| doc.lens.id.clone())?;
+    doc.resolve_exposure(&flare.system);
     if let (Some(rows), Some(path)) = (&track, &args.track) {
         let (width, height) = shot::plan::frame_size(&doc, &range, args.size)?;
         let sensor = Sensor::for_frame(doc.sensor_width_mm, width, height);
@@ -480,7 +549,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let divisor = if grid.is_some() { 1 } else { args.accumulation_divisor };
     if let Some(out) = sequence {
         let sources = ShotSources { doc: &doc, flare: &flare, lut: lut.as_ref(), plan: &plan };
-        return render_frames(args, &mut device, &sources, out, choice, divisor, &cancel);
+        let result = render_frames(args, &mut device, &sources, out, choice, divisor, &cancel);
+        eprintln!("{}", exposure_line(&doc));
+        return result;
     }
     let planned = &plan.frames[0];
     let (width, height) = (plan.width, plan.height);
@@ -518,6 +589,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             eprintln!("rendered on {}", device.name());
         }
     }
+    eprintln!("{}", exposure_line(&doc));
     let st = frame.sprites.stats;
     eprintln!(
         "wrote {} ({width}x{height}): {} ghosts x {} wavelengths, {} sprites drawn, culled {} dim / {} off sensor / {} empty entrance{}",

@@ -58,18 +58,18 @@ pub fn aperture_ui(
         let m = &flare.mask;
         let mask = egui::ColorImage::from_gray([m.size, m.size], &m.texels);
         preview.mask = Some(ui.ctx().load_texture("aperture mask", mask, egui::TextureOptions::LINEAR));
-        let s = &flare.starburst;
-        let peak = s.rgba.iter().map(|p| p[0].max(p[1]).max(p[2])).fold(0.0f32, f32::max).max(1e-12);
-        let pixels: Vec<egui::Color32> = s
-            .rgba
+        // The far field on a log scale (six decades) shows the rays and the rings at once.
+        let size = 128;
+        let pixels: Vec<egui::Color32> = flare
+            .starburst
+            .preview(size)
             .iter()
-            .map(|p| {
-                // A log scale shows the rays and the rings at once.
-                let c = |v: f32| ((1.0 + 1e3 * v / peak).ln() / (1.0 + 1e3f32).ln() * 255.0).clamp(0.0, 255.0) as u8;
-                egui::Color32::from_rgb(c(p[0]), c(p[1]), c(p[2]))
+            .map(|v| {
+                let c = (v * 255.0) as u8;
+                egui::Color32::from_rgb(c, c, c)
             })
             .collect();
-        let image = egui::ColorImage::new([s.size, s.size], pixels);
+        let image = egui::ColorImage::new([size, size], pixels);
         preview.starburst = Some(ui.ctx().load_texture("starburst", image, egui::TextureOptions::LINEAR));
     }
     ui.horizontal(|ui| {

@@ -47,9 +47,21 @@ pub fn blend_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, actio
     });
     match (source, &doc.blend.lut) {
         (0, LutSource::None) | (1, LutSource::Simulated { .. }) | (2, LutSource::Photo { .. }) => {}
-        (0, _) => doc.blend.lut = LutSource::None,
+        (0, _) => {
+            // Paraxial only: the automatic bake would bring the LUT back.
+            doc.blend.lut = LutSource::None;
+            actions.push(Action::SetAutoBake(false));
+        }
         (1, _) => doc.blend.lut = LutSource::Simulated { path: None },
         _ => actions.push(Action::OpenLut),
+    }
+    let mut auto = ctx.auto_bake;
+    if ui
+        .checkbox(&mut auto, "bake LUT ghosts by themselves")
+        .on_hover_text("when the lens, stop or coatings change: from the cache, else baked in the background")
+        .changed()
+    {
+        actions.push(Action::SetAutoBake(auto));
     }
     if let Some(summary) = ctx.lut_summary {
         ui.label(summary);

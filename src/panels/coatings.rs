@@ -123,11 +123,20 @@ pub fn coatings_ui(ui: &mut egui::Ui, doc: &mut Document, state: &mut CoatingsSt
             .map(|w| [f64::from(w), 100.0 * reflection(c, before, after, f64::from(w), 0.0).reflectance])
             .collect()
     };
+    // The scale: 0 to at least 5 %, a labelled tick every percent, the average over 430-670 nm written out.
+    let average = {
+        let band: Vec<f64> =
+            curve(&coating).into_iter().filter(|p| (430.0..=670.0).contains(&p[0])).map(|p| p[1]).collect();
+        band.iter().sum::<f64>() / band.len().max(1) as f64
+    };
+    ui.label(format!("reflectance at normal incidence: {average:.2} % on average from 430 to 670 nm"));
     Plot::new("reflectance")
-        .height(150.0)
+        .height(220.0)
         .legend(Legend::default())
         .x_axis_label("wavelength (nm)")
         .y_axis_label("reflectance (%)")
+        .y_axis_formatter(|mark, _range| format!("{:.0} %", mark.value))
+        .y_grid_spacer(egui_plot::uniform_grid_spacer(|_| [1.0, 5.0, 10.0]))
         .allow_scroll(false)
         .include_y(0.0)
         .include_y(5.0)

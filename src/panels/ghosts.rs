@@ -22,7 +22,9 @@ pub fn ghosts_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, acti
             doc.solo = None;
         }
     });
-    egui::ScrollArea::vertical().id_salt("ghost_list").max_height(300.0).show(ui, |ui| {
+    // The list takes the whole panel below its header.
+    let height = ui.available_height().max(200.0);
+    egui::ScrollArea::vertical().id_salt("ghost_list").max_height(height).auto_shrink([false, false]).show(ui, |ui| {
         egui::Grid::new("ghost_table").num_columns(7).striped(true).spacing([6.0, 2.0]).show(ui, |ui| {
             for h in ["on", "pair", "", "intensity", "kind", "gain", ""] {
                 ui.strong(h);
@@ -51,14 +53,9 @@ pub fn ghosts_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, acti
                     row.intensity(),
                     10.0 * (row.intensity() / brightest).max(1e-12).log10()
                 ));
-                let kind = match ctx.classes.and_then(|c| c.get(row.ghost)) {
-                    Some(c) if c.nonlinear() => "non-linear".to_owned(),
-                    Some(c) if c.faint => "faint".to_owned(),
-                    Some(_) => "linear".to_owned(),
-                    None => "-".to_owned(),
-                };
+                let kind = kind_words(ctx, row.ghost);
                 match row.culled {
-                    Some(reason) => ui.weak(format!("{kind}, culled: {reason}")),
+                    Some(reason) => ui.weak(format!("{kind}; culled: {}", culled_words(reason))),
                     None => ui.label(kind),
                 };
                 let mut gain = doc.ghosts.get(&key).map_or(1.0, |g| g.gain);
@@ -74,4 +71,28 @@ pub fn ghosts_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, acti
             }
         });
     });
+}
+
+/// The kind column in words: how the ghost is drawn and why.
+pub fn kind_words(ctx: &PanelContext, ghost: usize) -> &'static str {
+    let baked = ctx.lut.is_some_and(|lut| {
+        lut.kind == flare_core::lut::LutKind::RayTraced && lut.ghosts.iter().any(|g| g.ghost as usize == ghost)
+    });
+    match ctx.classes.and_then(|c| c.get(ghost)) {
+        _ if baked => "non-linear (baked)",
+        Some(c) if c.nonlinear() => "non-linear (paraxial)",
+        Some(c) if c.faint => "non-linear, too faint to bake",
+        Some(_) => "linear",
+        None => "paraxial",
+    }
+}
+
+/// Why a ghost is not drawn, in words.
+pub fn culled_words(reason: &str) -> &'static str {
+    match reason {
+        "below_threshold" => "too dim",
+        "off_sensor" => "off the frame",
+        "empty_entrance_region" => "no light gets through",
+        _ => "no sprite",
+    }
 }

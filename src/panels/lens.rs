@@ -56,7 +56,9 @@ fn surface_table_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, a
         problem.filter(|p| p.surface == Some(k) && p.field.is_some_and(|f| f == field)).map(|p| p.reason.clone())
     };
     let mut edit: Option<RowEdit> = None;
-    egui::ScrollArea::vertical().id_salt("surfaces").max_height(260.0).show(ui, |ui| {
+    // The table takes the panel's height below the summary (the panel itself scrolls sideways if narrow).
+    let height = ui.available_height().max(200.0);
+    egui::ScrollArea::vertical().id_salt("surfaces").max_height(height).show(ui, |ui| {
         egui::Grid::new("surface_table").num_columns(9).striped(true).spacing([4.0, 2.0]).show(ui, |ui| {
             for h in ["#", "radius", "thickness", "nd", "Vd", "semi-ap", "stop", "coating", ""] {
                 ui.strong(h);
@@ -108,16 +110,21 @@ fn surface_table_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, a
                 labelled_check(ui.checkbox(&mut s.stop, ""), &format!("stop {k}"), stop);
                 // The coating in use (the override when one is set), edited in the Coatings panel.
                 let coating = doc_override.as_ref().unwrap_or(&s.coating);
-                let text =
-                    if doc_override.is_some() { "all: " } else { "" }.to_owned() + super::coatings::kind(coating);
-                if ui.small_button(text).on_hover_text("edit in the Coatings panel").clicked() {
+                let (text, hover) = match doc_override {
+                    Some(_) => {
+                        let kind = super::coatings::kind(coating);
+                        ("all".to_owned(), format!("{kind} on every surface: edit in the Coatings panel"))
+                    }
+                    None => (super::coatings::kind(coating).to_owned(), "edit in the Coatings panel".to_owned()),
+                };
+                if ui.small_button(text).on_hover_text(hover).clicked() {
                     actions.push(Action::EditCoating(k));
                 }
                 ui.horizontal(|ui| {
-                    if ui.small_button("up").on_hover_text("move up").clicked() && k > 0 {
+                    if ui.small_button("⬆").on_hover_text("move up").clicked() && k > 0 {
                         edit = Some(RowEdit::Swap(k - 1, k));
                     }
-                    if ui.small_button("dn").on_hover_text("move down").clicked() && k + 1 < count {
+                    if ui.small_button("⬇").on_hover_text("move down").clicked() && k + 1 < count {
                         edit = Some(RowEdit::Swap(k, k + 1));
                     }
                     if ui

@@ -61,8 +61,12 @@ pub struct PanelContext<'a> {
     pub lens_problem: Option<&'a LensProblem>,
     pub ghosts: &'a [GhostRow],
     pub classes: Option<&'a [GhostClass]>,
+    /// The LUT in use (its ghosts are drawn from it).
+    pub lut: Option<&'a flare_core::lut::GhostLut>,
     pub selected: Option<usize>,
     pub bake: &'a BakeStatus,
+    /// LUT ghosts are baked by themselves when the optics change.
+    pub auto_bake: bool,
     pub lut_summary: Option<&'a str>,
 }
 
@@ -73,6 +77,8 @@ pub enum Action {
     SelectGhost(Option<usize>),
     Bake,
     CancelBake,
+    /// Turn the automatic bake on or off.
+    SetAutoBake(bool),
     OpenLut,
     ExportLut,
     OpenApertureImage,

@@ -1,35 +1,49 @@
-//! Ray diagram (egui_plot, zoom and pan): the lens cross-section to scale (each surface's arc up to its
-//! semi-aperture, the stop, the sensor at the paraxial focus) and a fan of exact rays at the current light
-//! angle, in the meridional plane of the light: the image path, or the selected ghost's path with its two
-//! reflections marked.
+//! Ray diagram (egui_plot, zoom and pan): the lens the view is drawn with (the last valid one, with the reason
+//! when the edited lens is refused) to scale, each surface's arc up to its semi-aperture, the stop open at the
+//! current f-number, the sensor at that lens's paraxial focus; and a fan of exact rays at the current light
+//! angle, in the meridional plane of the light: the image path, or the selected ghost's path, its legs
+//! coloured by direction (towards the sensor, back towards the front) with arrows, its two reflections marked.
 //!
 //! # How it works
-//! Rays start on a line across the entrance pupil (`pupil_ray`) and are traced by the exact f64 tracer
-//! with the clear apertures applied and every intersection recorded. A ray stopped early (vignetted, missed
-//! or totally reflected) is drawn grey up to where it stopped. The ghost path reflects first at surface `j`
-//! then at `i`, so its recorded points are: the start, the hits on surfaces `0..=j` (the last one is the
-//! first reflection), then on `j-1` down to `i` (the second reflection), then on to the sensor.
+//! The diagram takes the prepared flare's lens and first-order data together, so the sensor and the stop
+//! always belong to the lens drawn. Its stop's clear radius is scaled to the f-number
+//! ([`flare_core::ghost::GhostSystem`]'s stop scale) and the fan spans the entrance pupil scaled alike.
+//! Rays start on a line across that pupil (`pupil_ray`) and are traced by the exact f64 tracer with the clear
+//! apertures applied and every intersection recorded. A ray stopped early (vignetted, missed or totally
+//! reflected) is drawn grey up to where it stopped. The ghost path reflects first at surface `j` then at `i`,
+//! so its recorded points are: the start, the hits on surfaces `0..=j` (the last one is the first
+//! reflection), then on `j-1` down to `i` (the second reflection, where the backward leg ends), then on to
+//! the sensor.
 
 use eframe::egui;
-use egui_plot::{Legend, Line, Plot, PlotPoints, Points};
+use egui_plot::{Arrows, Legend, Line, Plot, PlotPoints, Points};
+use flare_core::flare::PreparedFlare;
 use flare_core::optics::glass::D_LINE_NM;
-use flare_core::optics::{FirstOrder, Lens, LightPath, TraceOptions, TraceStatus, Tracer, pupil_ray};
+use flare_core::optics::{EntrancePupil, FirstOrder, Lens, LightPath, TraceOptions, TraceStatus, Tracer, pupil_ray};
+
+use super::LensProblem;
 
 /// Rays across the pupil.
 const FAN: usize = 11;
+
+/// One traced ray: its points (z, y), how it ended, and for a landed ghost ray the indices of its two
+/// reflections among the points.
+type TracedRay = (Vec<[f64; 2]>, TraceStatus, Option<(usize, usize)>);
 
 /// The traced fan, cached while the lens, the light and the ghost are unchanged.
 #[derive(Default)]
 pub struct RayDiagram {
     /// The stable fingerprint of what the fan was traced for (see `flare_core::fingerprint`).
     key: Option<u64>,
-    rays: Vec<(Vec<[f64; 2]>, TraceStatus)>,
+    /// Each ray's points, how it ended, and for a landed ghost ray the index of its first and second
+    /// reflection among the points.
+    rays: Vec<TracedRay>,
     reflections: Vec<[f64; 2]>,
 }
 
 impl RayDiagram {
-    fn update(&mut self, lens: &Lens, fo: &FirstOrder, field_deg: f64, ghost: Option<(usize, usize)>) {
-        let key = flare_core::fingerprint::of(&(lens, field_deg, ghost));
+    fn update(&mut self, lens: &Lens, fo: &FirstOrder, stop_scale: f64, field_deg: f64, ghost: Option<(usize, usize)>) {
+        let key = flare_core::fingerprint::of(&(lens, fo.sensor_z_mm(), stop_scale, field_deg, ghost));
         if self.key == Some(key) {
             return;
         }
@@ -45,7 +59,8 @@ impl RayDiagram {
         };
         let tracer = Tracer::new(lens, &path, D_LINE_NM, fo.sensor_z_mm());
         let theta = field_deg.to_radians();
-        let pupil = fo.entrance_pupil();
+        let full = fo.entrance_pupil();
+        let pupil = EntrancePupil { z_mm: full.z_mm, radius_mm: full.radius_mm * stop_scale };
         for k in 0..FAN {
             let py = -1.0 + 2.0 * k as f64 / (FAN - 1) as f64;
             let out = tracer
@@ -56,44 +71,87 @@ impl RayDiagram {
                 let z0 = -0.15 * fo.total_track_mm;
                 points[0] = [z0, second[1] + (z0 - second[0]) * theta.tan()];
             }
+            let mut legs = None;
             if let (Some((i, j)), TraceStatus::Landed) = (ghost, out.status) {
-                for index in [1 + j, 1 + 2 * j - i] {
-                    if let Some(p) = points.get(index) {
-                        self.reflections.push(*p);
-                    }
+                let (first, second) = (1 + j, 1 + 2 * j - i);
+                if second < points.len() {
+                    self.reflections.extend([points[first], points[second]]);
+                    legs = Some((first, second));
                 }
             }
             if points.iter().all(|p| p.iter().all(|v| v.is_finite())) {
-                self.rays.push((points, out.status));
+                self.rays.push((points, out.status, legs));
             }
         }
     }
 }
 
+/// The lens the diagram draws: the prepared flare's (the last valid one), its stop opened to the f-number.
+fn lens_at_f_number(flare: &PreparedFlare) -> Lens {
+    let mut lens = flare.system.lens.clone();
+    let scale = flare.system.settings.stop_scale;
+    for s in lens.surfaces.iter_mut().filter(|s| s.stop) {
+        s.semi_aperture_mm *= scale;
+    }
+    lens
+}
+
+/// The middle of a polyline's part from point `a` to point `b` and a short step along it there (an arrow).
+fn arrow_on(points: &[[f64; 2]], a: usize, b: usize, length: f64) -> Option<([f64; 2], [f64; 2])> {
+    let part = points.get(a..=b)?;
+    let total: f64 = part.windows(2).map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1])).sum();
+    let mut walked = 0.0;
+    for w in part.windows(2) {
+        let d = (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]);
+        if d > 0.0 && walked + d >= 0.5 * total {
+            let t = (0.5 * total - walked) / d;
+            let at = [w[0][0] + t * (w[1][0] - w[0][0]), w[0][1] + t * (w[1][1] - w[0][1])];
+            let dir = [(w[1][0] - w[0][0]) / d, (w[1][1] - w[0][1]) / d];
+            return Some((at, [at[0] + length * dir[0], at[1] + length * dir[1]]));
+        }
+        walked += d;
+    }
+    None
+}
+
 pub fn ray_diagram_ui(
     ui: &mut egui::Ui,
     diagram: &mut RayDiagram,
-    lens: &Lens,
-    fo: Option<&FirstOrder>,
+    flare: Option<&PreparedFlare>,
+    problem: Option<&LensProblem>,
     light_deg: [f64; 2],
     ghost: Option<(usize, usize)>,
 ) {
-    let Some(fo) = fo else {
-        ui.label("no ray diagram: this lens has no real focus");
+    let Some(flare) = flare else {
+        ui.label("no ray diagram: no valid lens yet");
         return;
     };
+    let fo = &flare.system.first_order;
+    let lens = lens_at_f_number(flare);
+    let stop_scale = flare.system.settings.stop_scale;
     let field_deg = light_deg[0].hypot(light_deg[1]);
-    diagram.update(lens, fo, field_deg, ghost);
+    diagram.update(&lens, fo, stop_scale, field_deg, ghost);
     let z = lens.vertex_z_mm();
-    let h_max = lens.surfaces.iter().map(|s| s.semi_aperture_mm).fold(1.0, f64::max);
+    let h_max = flare.system.lens.surfaces.iter().map(|s| s.semi_aperture_mm).fold(1.0, f64::max);
+    let f_number = fo.f_number / stop_scale;
     let title = match ghost {
-        Some((i, j)) => format!("ghost {i}-{j}: exact rays at {field_deg:.1} deg (reflections marked)"),
-        None => format!("image path: exact rays at {field_deg:.1} deg (select a ghost to trace it)"),
+        Some((i, j)) => format!(
+            "ghost {i}-{j} at f/{f_number:.1}: exact rays at {field_deg:.1} deg, towards the sensor orange, back \
+             towards the front blue, reflections marked"
+        ),
+        None => format!("image path at f/{f_number:.1}: exact rays at {field_deg:.1} deg (select a ghost to trace it)"),
     };
-    ui.label(title);
+    // Wrapped: a long title must not widen the central panel under the side panel.
+    ui.add(egui::Label::new(title).wrap());
+    if let Some(problem) = problem {
+        let text = format!("showing the last valid lens: the edited one is refused ({})", problem.reason);
+        ui.add(egui::Label::new(egui::RichText::new(text).color(egui::Color32::from_rgb(255, 170, 90))).wrap());
+    }
+    let forward = egui::Color32::from_rgb(255, 140, 60);
+    let backward = egui::Color32::from_rgb(90, 170, 255);
     Plot::new("ray_diagram")
         .data_aspect(1.0)
-        .legend(Legend::default())
+        .legend(Legend::default().position(egui_plot::Corner::LeftTop))
         .x_axis_label("z (mm)")
         .y_axis_label("y (mm)")
         .show(ui, |plot| {
@@ -124,12 +182,49 @@ pub fn ray_diagram_ui(
                     .color(egui::Color32::from_gray(200))
                     .width(2.0),
             );
-            for (points, status) in &diagram.rays {
-                let (name, color) = match status {
-                    TraceStatus::Landed => ("rays", egui::Color32::from_rgb(255, 140, 60)),
-                    _ => ("stopped rays", egui::Color32::from_gray(130)),
-                };
-                plot.line(Line::new(name, PlotPoints::from(points.clone())).color(color).width(1.0));
+            let arrow = 0.04 * fo.total_track_mm.abs().max(1.0);
+            let (mut origins, mut tips) = (Vec::new(), Vec::new());
+            for (n, (points, status, legs)) in diagram.rays.iter().enumerate() {
+                match (status, legs) {
+                    (TraceStatus::Landed, Some((first, second))) => {
+                        // In, back between the reflections, out: two colours, one arrow per leg on the middle ray.
+                        let parts =
+                            [(0, *first, forward), (*first, *second, backward), (*second, points.len() - 1, forward)];
+                        for (a, b, color) in parts {
+                            let name = if color == forward { "to the sensor" } else { "backwards" };
+                            plot.line(
+                                Line::new(name, PlotPoints::from(points[a..=b].to_vec())).color(color).width(1.0),
+                            );
+                            if n == diagram.rays.len() / 2
+                                && let Some((o, t)) = arrow_on(points, a, b, arrow)
+                            {
+                                origins.push(o);
+                                tips.push(t);
+                            }
+                        }
+                    }
+                    (TraceStatus::Landed, None) => {
+                        plot.line(Line::new("rays", PlotPoints::from(points.clone())).color(forward).width(1.0));
+                        if n == diagram.rays.len() / 2
+                            && let Some((o, t)) = arrow_on(points, 0, points.len() - 1, arrow)
+                        {
+                            origins.push(o);
+                            tips.push(t);
+                        }
+                    }
+                    _ => plot.line(
+                        Line::new("stopped rays", PlotPoints::from(points.clone()))
+                            .color(egui::Color32::from_gray(130))
+                            .width(1.0),
+                    ),
+                }
+            }
+            if !origins.is_empty() {
+                plot.arrows(
+                    Arrows::new("direction", PlotPoints::from(origins), PlotPoints::from(tips))
+                        .color(egui::Color32::WHITE)
+                        .tip_length(10.0),
+                );
             }
             if !diagram.reflections.is_empty() {
                 plot.points(

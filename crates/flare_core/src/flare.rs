@@ -84,7 +84,7 @@ impl PreparedFlare {
         };
         let system = GhostSystem::build(lens, &settings)?;
         let mask = config.aperture.rasterise(DEFAULT_MASK_SIZE);
-        let starburst = Starburst::compute(&mask, &config.spectrum);
+        let starburst = Starburst::compute(&config.aperture.rasterise(crate::starburst::STARBURST_MASK_SIZE));
         let starburst_texture = StarburstTexture::from_starburst(&starburst);
         let id = crate::fingerprint::unique_id();
         Ok(Self { config: config.clone(), system, mask, starburst, starburst_texture, id })
@@ -125,7 +125,8 @@ impl PreparedFlare {
         let u = light_slopes_for_frame_position(light_deg[0], light_deg[1]);
         let frame_settings = self.frame_settings_on(sensor, width, display.flare_gain());
         let frame = self.system.frame(u, &frame_settings);
-        let scene = FlareScene::build(&self.system, &frame, u, &frame_settings, display, width, height, gains);
+        let mut scene = FlareScene::build(&self.system, &frame, u, &frame_settings, display, width, height, gains);
+        scene.place_starburst(&self.system, &self.starburst, u, &sensor, display);
         (scene, frame)
     }
 }

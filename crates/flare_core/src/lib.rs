@@ -4,7 +4,8 @@
 //! [`optics`] is the foundation: a lens prescription, its files, exact f64 ray tracing and the paraxial
 //! ray-transfer matrices of every ghost path. [`ghost`] turns those matrices into one sprite per ghost and
 //! wavelength (with [`coating`] reflectances, [`spectrum`] colours and the [`aperture`] shape); [`starburst`]
-//! diffracts the aperture; [`flare`] prepares a lens and its optics settings once. [`preset`] is the document
+//! diffracts the aperture; [`flare`] prepares a lens and its optics settings once; [`exposure`] picks the flare's
+//! exposure from the optics. [`preset`] is the document
 //! the user edits (the app's and the command line's), [`frame`] the one pipeline every frame goes through
 //! (request, frame, drawn by [`render`]'s wgpu renderer or its CPU twin, layers), and [`output`] the one image
 //! writer. [`raytrace`] is the other family: ghosts ray-traced exactly on a grid (the ground-truth reference,
@@ -22,6 +23,7 @@
 pub mod aperture;
 pub mod coating;
 pub mod color;
+pub mod exposure;
 pub mod files;
 pub mod fingerprint;
 pub mod flare;

@@ -17,7 +17,8 @@
 //! frame. Exposures, tonemap, plate and starburst are display settings: changing them rebuilds no optics.
 //!
 //! Presets shipped in the binary ([`shipped`]) are JSON files under `assets/presets/`, read through the same
-//! loader; [`Document::open_named`] takes a file path or a shipped name.
+//! loader; [`Document::open_named`] takes a file path or a shipped name. A preset's `lens` may be a built-in
+//! lens's name instead of a whole prescription (the shipped presets use that); it is saved whole.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -41,7 +42,7 @@ use crate::spectrum::Spectrum;
 use crate::timeline::Timeline;
 
 /// The preset format this build writes; it reads every version up to this one.
-pub const PRESET_VERSION: u32 = 2;
+pub const PRESET_VERSION: u32 = 3;
 
 /// Why a preset is refused.
 #[derive(Debug, thiserror::Error)]
@@ -144,12 +145,19 @@ pub struct Document {
     pub solo: Option<String>,
     /// Where the light appears in the frame (degrees, X right, Y up).
     pub light_deg: [f64; 2],
-    /// The flare's exposure in stops (its relative irradiance times `2^flare_ev`).
+    /// The flare's exposure in stops (its relative irradiance times `2^flare_ev`); with `exposure_auto`, set
+    /// from the optics by [`Self::resolve_exposure`].
     pub flare_ev: f64,
+    /// The flare's exposure follows the optics ([`crate::exposure::auto_flare_ev`]: the brightest ghost at a
+    /// fixed display level); false: the user locked `flare_ev`.
+    pub exposure_auto: bool,
     /// The background plate's exposure in stops (0: as shot).
     pub plate_ev: f64,
     pub tonemap: Tonemap,
     pub starburst: bool,
+    /// The starburst's brightness in stops relative to the physical one (0: the light's own image as the lens
+    /// makes it, see [`crate::starburst`]).
+    pub starburst_ev: f64,
     /// Background plate file (PNG/EXR/HDR/JPEG), if any; a sequence when it has a frame field
     /// (`shot.####.exr` or `shot.%04d.exr`, [`crate::shot::pattern`]).
     pub background: Option<String>,
@@ -168,18 +176,20 @@ impl Default for Document {
             version: PRESET_VERSION,
             lens: default_lens(),
             aperture: ApertureDoc::default(),
-            // Coated ghosts are ~100x dimmer than bare ones: the default exposure matches a quarter-wave coat.
+            // The default look: the zoom's chain of polygonal ghosts, coloured by a quarter-wave coat.
             coating_override: Some(Coating::QuarterWave { design_wavelength_nm: 550.0, layer_index: None }),
             wavelengths: 3,
             cull_threshold: None,
             blend: BlendDoc::default(),
             ghosts: BTreeMap::new(),
             solo: None,
-            light_deg: [6.0, 4.0],
+            light_deg: [9.0, 5.0],
             flare_ev: DEFAULT_FLARE_EV,
+            exposure_auto: true,
             plate_ev: 0.0,
             tonemap: Tonemap::Aces,
             starburst: true,
+            starburst_ev: 0.0,
             background: None,
             sensor_width_mm: FULL_FRAME_WIDTH_MM,
             timeline: Timeline::default(),
@@ -252,8 +262,8 @@ impl Document {
             plate_ev: self.plate_ev,
             tonemap: self.tonemap,
             starburst: self.starburst,
+            starburst_intensity: crate::color::gain_from_ev(self.starburst_ev),
             accumulation_divisor: divisor,
-            ..DisplaySettings::default()
         }
     }
 
@@ -358,6 +368,46 @@ impl Document {
         }
     }
 
+    /// Sets `flare_ev` from the optics of `system` when the exposure is automatic (see
+    /// [`crate::exposure`]); a locked exposure is left as it is. The app calls it when the optics change and
+    /// the command line before it draws, so both show the same exposure.
+    pub fn resolve_exposure(&mut self, system: &GhostSystem) {
+        if self.exposure_auto {
+            self.flare_ev = crate::exposure::auto_flare_ev(system, self.sensor_width_mm);
+        }
+    }
+
+    /// This document with `look`'s optics and display: lens, stop, coatings, spectrum, culling, blend, ghost
+    /// switches, exposures of the flare and the starburst, tonemap. The shot stays: the plate and its exposure,
+    /// the sensor, the timeline, the light found in the plate; the static light comes from the look unless the
+    /// timeline keys the light.
+    pub fn with_look(&self, look: &Document) -> Document {
+        Document {
+            background: self.background.clone(),
+            plate_ev: self.plate_ev,
+            sensor_width_mm: self.sensor_width_mm,
+            timeline: self.timeline.clone(),
+            auto_light: self.auto_light.clone(),
+            light_deg: if self.timeline.light_deg.is_empty() { look.light_deg } else { self.light_deg },
+            ..look.clone()
+        }
+    }
+
+    /// A small still of this document's first frame on the CPU twin (its own flare prepared, its exposure
+    /// resolved, no plate and no LUT): a preset's thumbnail.
+    pub fn thumbnail(&self, width: u32, height: u32) -> Result<crate::image::DisplayImage, PresetError> {
+        let config = self.flare_config()?;
+        let flare = crate::flare::PreparedFlare::new(&self.lens, &config)
+            .map_err(|e| PresetError::Value { field: "lens".into(), reason: e.to_string() })?;
+        let mut doc = self.clone();
+        doc.resolve_exposure(&flare.system);
+        doc.blend.lut = LutSource::None;
+        let request = doc.frame_request(&flare.system, width, height, 1);
+        let frame = crate::frame::Frame::build(&flare, None, &request);
+        let sources = crate::frame::Sources { flare: &flare, lut: None, plate: None };
+        Ok(crate::frame::draw_cpu(&frame, &sources).display)
+    }
+
     /// The preset's JSON text.
     pub fn to_json(&self) -> String {
         let mut doc = self.clone();
@@ -376,6 +426,18 @@ impl Document {
         if version < 2 {
             upgrade_exposure(&mut value)?;
         }
+        if let Some(id) = value.get("lens").and_then(serde_json::Value::as_str) {
+            // A built-in lens by name (as the shipped presets give it): its whole prescription.
+            let lens = crate::optics::library::builtin_lens(id)
+                .map_err(|e| PresetError::Value { field: "lens".into(), reason: e.to_string() })?;
+            value["lens"] = serde_json::to_value(&lens).expect("a lens always serialises");
+        }
+        if version < 3
+            && let Some(object) = value.as_object_mut()
+        {
+            // Before auto exposure, a preset's exposure was the one chosen: it stays locked.
+            object.entry("exposure_auto").or_insert(serde_json::Value::Bool(false));
+        }
         let mut doc: Document = serde_path_to_error::deserialize(value)
             .map_err(|e| PresetError::Json { path: e.path().to_string(), reason: e.inner().to_string() })?;
         doc.version = PRESET_VERSION;
@@ -389,7 +451,9 @@ impl Document {
         if let Err(e) = self.lens.validate() {
             return bad("lens", e.to_string());
         }
-        for (field, ev) in [("flare_ev", self.flare_ev), ("plate_ev", self.plate_ev)] {
+        for (field, ev) in
+            [("flare_ev", self.flare_ev), ("plate_ev", self.plate_ev), ("starburst_ev", self.starburst_ev)]
+        {
             if !(ev.is_finite() && (-40.0..=40.0).contains(&ev)) {
                 return bad(field, format!("{ev}: stops from -40 to 40"));
             }
@@ -505,23 +569,68 @@ pub fn shipped() -> &'static [ShippedPreset] {
     const PRESETS: &[ShippedPreset] = &[
         ShippedPreset {
             name: "default",
-            title: "Heliar 100 mm wide open (f/3.4), quarter-wave coated: the app's first frame",
+            title: "Nikon 28-75 mm zoom, quarter-wave coated: a chain of polygonal ghosts through the centre (the app's first frame)",
             json: include_str!("../../../assets/presets/default.json"),
         },
         ShippedPreset {
-            name: "nikon-zoom",
-            title: "Nikon 28-75 mm zoom, quarter-wave coated, a chain of polygonal ghosts",
-            json: include_str!("../../../assets/presets/nikon-zoom.json"),
+            name: "zoom-multicoated",
+            title: "Modern multicoated zoom: the Nikon with a broadband AR stack, faint warm ghosts and a crisp star",
+            json: include_str!("../../../assets/presets/zoom-multicoated.json"),
         },
         ShippedPreset {
-            name: "dgauss-uncoated",
-            title: "Double Gauss 50 mm, bare glass: bright, colourless ghosts",
-            json: include_str!("../../../assets/presets/dgauss-uncoated.json"),
+            name: "zoom-own-coatings",
+            title: "The Nikon zoom with each surface's own single coat (the patent table's design wavelengths): teal ghosts",
+            json: include_str!("../../../assets/presets/zoom-own-coatings.json"),
+        },
+        ShippedPreset {
+            name: "zoom-stopped-down",
+            title: "The Nikon zoom stopped down to f/11 with 7 rounded blades: small ghosts, a long star",
+            json: include_str!("../../../assets/presets/zoom-stopped-down.json"),
+        },
+        ShippedPreset {
+            name: "zoom-sun-sweep",
+            title: "The Nikon zoom with the sun sweeping across the frame over two seconds (timeline keys)",
+            json: include_str!("../../../assets/presets/zoom-sun-sweep.json"),
+        },
+        ShippedPreset {
+            name: "vintage-uncoated",
+            title: "Vintage uncoated double Gauss 50 mm, wide open, round stop: bright colourless ghosts and haze",
+            json: include_str!("../../../assets/presets/vintage-uncoated.json"),
+        },
+        ShippedPreset {
+            name: "dgauss-single-coat",
+            title: "Double Gauss 50 mm at f/4, single quarter-wave coat at 520 nm, 8 blades: the post-war look",
+            json: include_str!("../../../assets/presets/dgauss-single-coat.json"),
+        },
+        ShippedPreset {
+            name: "heliar-portrait",
+            title: "Heliar 100 mm wide open (f/3.4), quarter-wave coated: two large soft discs, the star toned down 4 stops",
+            json: include_str!("../../../assets/presets/heliar-portrait.json"),
         },
         ShippedPreset {
             name: "tessar-f8",
             title: "Tessar stopped down to f/8 with 7 rounded blades",
             json: include_str!("../../../assets/presets/tessar-f8.json"),
+        },
+        ShippedPreset {
+            name: "telephoto-250",
+            title: "Telephoto 250 mm, 9 rounded blades: a narrow field, the sun near the corner, the star toned down 6 stops",
+            json: include_str!("../../../assets/presets/telephoto-250.json"),
+        },
+        ShippedPreset {
+            name: "fisheye-10",
+            title: "Fisheye 10 mm, 5 blades: the sun far off axis, ghosts strung across the whole frame",
+            json: include_str!("../../../assets/presets/fisheye-10.json"),
+        },
+        ShippedPreset {
+            name: "wide-22-broadband",
+            title: "Wide angle 22 mm at f/5.6, broadband AR coat, 9 blades: a clean modern prime",
+            json: include_str!("../../../assets/presets/wide-22-broadband.json"),
+        },
+        ShippedPreset {
+            name: "wide-22-uncoated-night",
+            title: "Wide angle 22 mm at f/2.8, bare glass, a street light low in the frame: strong ghosts for night",
+            json: include_str!("../../../assets/presets/wide-22-uncoated-night.json"),
         },
     ];
     PRESETS
@@ -547,6 +656,9 @@ mod tests {
         // Version 1 with its exposure.
         let v1 = Document::from_json(r#"{"version": 1, "exposure": 2.0}"#).unwrap();
         assert_eq!(v1.flare_ev, 1.0);
+        // Before version 3 an exposure was always chosen by hand: it stays locked.
+        assert!(!v1.exposure_auto && !Document::from_json(r#"{"version": 2}"#).unwrap().exposure_auto);
+        assert!(Document::from_json(r#"{"version": 3}"#).unwrap().exposure_auto);
     }
 
     #[test]
@@ -606,12 +718,42 @@ mod tests {
 
     #[test]
     fn shipped_presets_load_and_the_default_one_is_the_default_document() {
-        for p in shipped() {
-            p.document().unwrap_or_else(|e| panic!("{}: {e}", p.name));
+        let docs: Vec<Document> =
+            shipped().iter().map(|p| p.document().unwrap_or_else(|e| panic!("{}: {e}", p.name))).collect();
+        assert!(docs.len() >= 12, "at least 12 looks ship: {}", docs.len());
+        assert_eq!(docs[0], Document::default());
+        // Every look is its own: no two share a name, a title or a document, and every built-in lens is used.
+        for (a, pa) in shipped().iter().enumerate() {
+            for (b, pb) in shipped().iter().enumerate().skip(a + 1) {
+                assert_ne!(pa.name, pb.name);
+                assert_ne!(pa.title, pb.title);
+                assert_ne!(docs[a], docs[b], "{} and {} are the same look", pa.name, pb.name);
+            }
         }
-        assert_eq!(shipped()[0].document().unwrap(), Document::default());
+        for id in crate::optics::library::ids() {
+            assert!(docs.iter().any(|d| d.lens.id == id), "no preset on {id}");
+        }
+        // Shipped looks follow the optics' exposure, and a preset naming its lens loads the whole prescription.
+        assert!(docs.iter().all(|d| d.exposure_auto));
+        assert_eq!(docs[0].lens, crate::optics::library::default_lens());
         let e = Document::open_named("no-such-look").unwrap_err().to_string();
-        assert!(e.contains("no-such-look") && e.contains("nikon-zoom") && e.contains("default"), "{e}");
+        assert!(e.contains("no-such-look") && e.contains("fisheye-10") && e.contains("default"), "{e}");
+        let e = Document::from_json(r#"{"version": 3, "lens": "zeiss"}"#).unwrap_err().to_string();
+        assert!(e.contains("lens") && e.contains("zeiss"), "{e}");
+    }
+
+    #[test]
+    fn a_look_replaces_the_optics_and_keeps_the_shot() {
+        let mut shot = Document { background: Some("plate.exr".into()), plate_ev: -1.0, ..Document::default() };
+        shot.timeline.last_frame = 48;
+        let look = Document::open_named("fisheye-10").unwrap();
+        let applied = shot.with_look(&look);
+        assert_eq!((&applied.lens, &applied.aperture, applied.light_deg), (&look.lens, &look.aperture, look.light_deg));
+        assert_eq!((&applied.background, applied.plate_ev), (&shot.background, -1.0));
+        assert_eq!(applied.timeline, shot.timeline);
+        let image = look.thumbnail(64, 36).unwrap();
+        assert_eq!((image.width, image.height), (64, 36));
+        assert!(image.pixels.iter().any(|p| p[0] > 40), "the thumbnail shows the flare");
     }
 
     #[test]

@@ -1,48 +1,70 @@
-//! The starburst: far-field (Fraunhofer) diffraction of the aperture, drawn at the light's image.
+//! The starburst: the light's own image, spread by far-field (Fraunhofer) diffraction at the stop, drawn at
+//! its true physical scale and brightness.
 //!
 //! # How it works
-//! The far-field pattern of an aperture is the squared magnitude of its Fourier transform. The mask (see
-//! [`crate::aperture`]) is drawn into a [`FFT_SIZE`]^2 grid at a quarter of its width (zero padding, so the
-//! pattern is sampled finely), transformed with rustfft (rows, then columns), squared and centred. That
-//! pattern belongs to one reference wavelength; the diffraction angle grows with the wavelength
-//! (theta ~ lambda / D), so the pattern for lambda is the reference pattern scaled by lambda / lambda_ref.
-//! [`Starburst::compute`] sums those scaled copies over the spectrum with each wavelength's RGB weight,
-//! which spreads red spikes further than blue ones: the coloured fringes of real starbursts. The result is
-//! normalised to 1 at the centre and faded to 0 at the texture edge, and is drawn as a texture centred on
-//! the light source's image.
+//! The point-spread function of an aperture is the squared magnitude of its Fourier transform. On the
+//! sensor it scales with `lambda N` (N the working f-number): a point `r` mm from the light's image sits at
+//! `u = r / (lambda N)` in the pattern's own units. Everything but a core a few microns wide is far field,
+//! and there the pattern is self-similar: along every direction `phi` the energy density falls as `u^-3`
+//! (straight blade edges throw their light into rays, a round stop into rings, both `u^-3` on average), so
+//!
+//! `I(r, phi) = E c(phi) lambda N / r^3`  (relative irradiance),
+//!
+//! with `E` the light's power through the entrance pupil (its area in mm^2 times the incoming irradiance)
+//! and `c(phi)` the pattern's angular profile. The share of the energy beyond any radius `R` well outside
+//! the core is then `C lambda N / R` with `C` the integral of `c` over the circle (2 / pi^2 for a circle):
+//! it grows in proportion to `lambda N` as the stop closes and is the same for every wavelength up to that
+//! factor, which spreads red rays further than blue ones.
+//!
+//! [`Starburst::compute`] measures `c(phi)` once per aperture: its [`STARBURST_MASK_SIZE`]^2 raster is drawn
+//! texel for texel into a grid twice as wide (one frequency bin is `lambda N / 2`), transformed with rustfft (rows, then columns),
+//! squared and normalised to a total energy of 1; then, on the ring [`BAND_START_U`] to [`BAND_END_U`]
+//! (well outside the core, well below the raster's one-texel edge ramp, which would dim the rays), `u^3` times the energy density is averaged
+//! into [`PROFILE_SIZE`] angular bins. The renderer ([`crate::render::FlareScene::build`] and the starburst
+//! pass of both twins) evaluates `I(r, phi)` at every pixel out to the radius where it falls below a
+//! quarter of an 8-bit step at the frame's exposure (or the whole frame), so a bright sun's rays reach as
+//! far as they would in a photograph and never fade at a texture's edge. Inside one pixel of the light's
+//! image the rest of the energy (`E` minus the far field's share) is spread evenly: the blown-out light.
 
 use rustfft::FftPlanner;
 use rustfft::num_complex::Complex32;
 
 use crate::aperture::ApertureMask;
-use crate::spectrum::Spectrum;
 
-/// FFT grid size.
-pub const FFT_SIZE: usize = 512;
-/// Output texture size.
-pub const STARBURST_SIZE: usize = 256;
-/// The wavelength the base pattern belongs to.
-pub const REFERENCE_WAVELENGTH_NM: f64 = 550.0;
+/// The aperture raster the starburst is computed from ([`crate::aperture::Aperture::rasterise`]); it is
+/// drawn texel for texel into an FFT grid twice as wide (one frequency bin is `lambda N / 2` on the sensor).
+pub const STARBURST_MASK_SIZE: usize = 512;
+/// Angular bins of the far-field profile, over the full circle (0.7 degrees each: on the measuring ring,
+/// FFT bins near a lattice direction lie up to 0.45 degrees apart).
+pub const PROFILE_SIZE: usize = 512;
+/// The ring the profile is measured on, in units of `lambda N` from the centre.
+pub const BAND_START_U: f64 = 16.0;
+pub const BAND_END_U: f64 = 64.0;
 
-/// A starburst texture: `size` x `size` RGBA (linear, peak 1), row-major.
+/// The aperture's far-field diffraction (see the module documentation).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Starburst {
-    pub size: usize,
-    pub rgba: Vec<[f32; 4]>,
+    /// `c(phi)` over [`PROFILE_SIZE`] bins, bin `k` centred on `phi = (k + 0.5) 2 pi / PROFILE_SIZE`
+    /// (pixel axes: x right, y down), divided by its peak (so the largest is 1).
+    pub profile: Vec<f32>,
+    /// The peak of `c(phi)` (per radian, for a total energy of 1).
+    pub profile_peak: f64,
+    /// `C`, the integral of `c(phi)` over the circle: the share of the energy beyond `R` is `C lambda N / R`.
+    pub far_total: f64,
 }
 
 impl Starburst {
-    /// The diffraction pattern of `mask` summed over `spectrum`.
-    pub fn compute(mask: &ApertureMask, spectrum: &Spectrum) -> Self {
-        let n = FFT_SIZE;
-        let aperture_px = n / 4;
+    /// The far-field profile of `mask` (its texels across the aperture's diameter; see
+    /// [`STARBURST_MASK_SIZE`]).
+    pub fn compute(mask: &ApertureMask) -> Self {
+        let a = mask.size.max(2);
+        let n = (2 * a).next_power_of_two();
         let mut grid = vec![Complex32::new(0.0, 0.0); n * n];
-        let offset = (n - aperture_px) / 2;
-        for j in 0..aperture_px {
-            for i in 0..aperture_px {
-                let u = -1.0 + 2.0 * (i as f32 + 0.5) / aperture_px as f32;
-                let v = 1.0 - 2.0 * (j as f32 + 0.5) / aperture_px as f32;
-                grid[(offset + j) * n + offset + i] = Complex32::new(mask.sample(u, v), 0.0);
+        let offset = (n - a) / 2;
+        for j in 0..a {
+            for i in 0..a {
+                let texel = f32::from(mask.texels.get(j * a + i).copied().unwrap_or(0)) / 255.0;
+                grid[(offset + j) * n + offset + i] = Complex32::new(texel, 0.0);
             }
         }
         let fft = FftPlanner::<f32>::new().plan_fft_forward(n);
@@ -59,59 +81,108 @@ impl Starburst {
                 grid[j * n + i] = column[j];
             }
         }
-        // Power, centred (fftshift).
-        let half = n / 2;
-        let mut power = vec![0.0f32; n * n];
-        for j in 0..n {
-            for i in 0..n {
-                power[((j + half) % n) * n + (i + half) % n] = grid[j * n + i].norm_sqr();
-            }
+        let total: f64 = grid.iter().map(|c| f64::from(c.norm_sqr())).sum();
+        if !(total.is_finite() && total > 0.0) {
+            // A closed stop lets no light through: no starburst.
+            return Self { profile: vec![0.0; PROFILE_SIZE], profile_peak: 0.0, far_total: 0.0 };
         }
-        let peak = power[half * n + half].max(f32::MIN_POSITIVE);
-        let sample = |x: f32, y: f32| -> f32 {
-            // Bilinear in the centred power grid; (x, y) in grid texels from the centre.
-            let gx = x + half as f32;
-            let gy = y + half as f32;
-            if gx < 0.0 || gy < 0.0 || gx >= (n - 1) as f32 || gy >= (n - 1) as f32 {
-                return 0.0;
-            }
-            let (x0, y0) = (gx.floor() as usize, gy.floor() as usize);
-            let (fx, fy) = (gx - x0 as f32, gy - y0 as f32);
-            let p = |i: usize, j: usize| power[j * n + i];
-            (p(x0, y0) * (1.0 - fx) + p(x0 + 1, y0) * fx) * (1.0 - fy)
-                + (p(x0, y0 + 1) * (1.0 - fx) + p(x0 + 1, y0 + 1) * fx) * fy
-        };
-        let size = STARBURST_SIZE;
-        let mut rgba = vec![[0.0f32; 4]; size * size];
-        let centre = size as f32 / 2.0;
-        for (k, &w_nm) in spectrum.wavelengths_nm.iter().enumerate() {
-            let weight = spectrum.weights_rgb[k];
-            let shrink = (REFERENCE_WAVELENGTH_NM / w_nm) as f32;
-            for j in 0..size {
-                for i in 0..size {
-                    let x = (i as f32 + 0.5 - centre) * shrink;
-                    let y = (j as f32 + 0.5 - centre) * shrink;
-                    let value = sample(x, y) / peak;
-                    let texel = &mut rgba[j * size + i];
-                    for c in 0..3 {
-                        texel[c] += weight[c] as f32 * value;
-                    }
+        // One bin is `bin_u` = a / n in units of lambda N; energy density per unit u^2 is energy / bin_u^2.
+        let bin_u = a as f64 / n as f64;
+        let mut sum = vec![0.0f64; PROFILE_SIZE];
+        let mut weight = vec![0.0f64; PROFILE_SIZE];
+        let half = (n / 2) as i64;
+        let reach = (BAND_END_U / bin_u).ceil() as i64;
+        for dj in -reach..=reach {
+            for di in -reach..=reach {
+                let u = (di as f64).hypot(dj as f64) * bin_u;
+                if !(BAND_START_U..BAND_END_U).contains(&u) {
+                    continue;
+                }
+                // Frequency (di, dj) is stored at ((di + n) % n, (dj + n) % n).
+                let (i, j) = ((di + half * 2) as usize % n, (dj + half * 2) as usize % n);
+                let density = f64::from(grid[j * n + i].norm_sqr()) / total / (bin_u * bin_u);
+                // Shared between the two nearest angular bins, as the renderer interpolates them.
+                let (k0, f) = angle_bins(dj as f64, di as f64);
+                for (k, w) in [(k0, 1.0 - f), ((k0 + 1) % PROFILE_SIZE, f)] {
+                    sum[k] += w * density * u.powi(3);
+                    weight[k] += w;
                 }
             }
         }
+        let c = fill_gaps(&sum, &weight);
+        let dphi = std::f64::consts::TAU / PROFILE_SIZE as f64;
+        let far_total = c.iter().sum::<f64>() * dphi;
+        let profile_peak = c.iter().copied().fold(0.0, f64::max);
+        let profile = c.iter().map(|v| if profile_peak > 0.0 { (v / profile_peak) as f32 } else { 0.0 }).collect();
+        Self { profile, profile_peak, far_total }
+    }
+
+    /// `c(phi) / peak` at the pixel offset (dx right, dy down), interpolated between the two nearest bins
+    /// (wrapping around the circle): what the starburst shader computes.
+    pub fn profile_at(profile: &[f32], dx: f32, dy: f32) -> f32 {
+        let n = profile.len();
+        if n == 0 {
+            return 0.0;
+        }
+        let turn = dy.atan2(dx) / std::f32::consts::TAU;
+        let t = (turn - turn.floor()) * n as f32 - 0.5;
+        let t = if t < 0.0 { t + n as f32 } else { t };
+        let i0 = (t as usize).min(n - 1);
+        let f = t - i0 as f32;
+        profile[i0] * (1.0 - f) + profile[(i0 + 1) % n] * f
+    }
+
+    /// A `size`^2 picture of the pattern from 1 to `size / 2` pixels out, log-scaled to 0..1 over six decades
+    /// (for the aperture panel).
+    pub fn preview(&self, size: usize) -> Vec<f32> {
+        let c = size as f32 / 2.0;
+        let mut out = vec![0.0f32; size * size];
         for j in 0..size {
             for i in 0..size {
-                let r = ((i as f32 + 0.5 - centre).hypot(j as f32 + 0.5 - centre) / centre).min(1.0);
-                let fade = (1.0 - r * r).powi(2);
-                let texel = &mut rgba[j * size + i];
-                for c in texel.iter_mut().take(3) {
-                    *c = (*c * fade).max(0.0);
-                }
-                texel[3] = 1.0;
+                let (dx, dy) = (i as f32 + 0.5 - c, j as f32 + 0.5 - c);
+                let r = dx.hypot(dy).max(1.0);
+                let value = Self::profile_at(&self.profile, dx, dy) / (r * r * r);
+                out[j * size + i] = ((value.max(1e-6).log10() + 6.0) / 6.0).clamp(0.0, 1.0);
             }
         }
-        Self { size, rgba }
+        out
     }
+}
+
+/// The lower of the two profile bins around the direction (dy, dx) (pixel axes: x right, y down) and the
+/// weight of the upper one (bin `k` is centred on `(k + 0.5) / PROFILE_SIZE` turns).
+fn angle_bins(dy: f64, dx: f64) -> (usize, f64) {
+    let n = PROFILE_SIZE as f64;
+    let turn = dy.atan2(dx) / std::f64::consts::TAU;
+    let t = (turn - turn.floor()) * n - 0.5;
+    let t = if t < 0.0 { t + n } else { t };
+    let k = (t as usize).min(PROFILE_SIZE - 1);
+    (k, t - k as f64)
+}
+
+/// Weighted means per bin; a bin no sample reached takes the value interpolated between its nearest
+/// reached neighbours around the circle (all zero when none was reached).
+fn fill_gaps(sum: &[f64], weight: &[f64]) -> Vec<f64> {
+    let n = sum.len();
+    let reached: Vec<usize> = (0..n).filter(|&k| weight[k] > 1e-9).collect();
+    let mean = |k: usize| sum[k] / weight[k];
+    (0..n)
+        .map(|k| {
+            if weight[k] > 1e-9 {
+                return mean(k);
+            }
+            let after = reached.iter().copied().find(|&r| r > k).or(reached.first().copied());
+            let before = reached.iter().copied().rev().find(|&r| r < k).or(reached.last().copied());
+            match (before, after) {
+                (Some(b), Some(a)) => {
+                    let (gap_b, gap_a) = ((k + n - b) % n, (a + n - k) % n);
+                    let t = gap_b as f64 / (gap_a + gap_b).max(1) as f64;
+                    mean(b) * (1.0 - t) + mean(a) * t
+                }
+                _ => 0.0,
+            }
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -120,45 +191,42 @@ mod tests {
     use crate::aperture::{Aperture, ApertureShape};
 
     #[test]
-    fn a_hexagon_makes_six_spikes_and_the_centre_is_brightest() {
-        let mask =
-            Aperture { shape: ApertureShape::Blades { count: 6, rotation_deg: 0.0, roundness: 0.0 }, f_number: None }
-                .rasterise(128);
-        let s = Starburst::compute(&mask, &Spectrum::single(550.0).unwrap());
-        let n = s.size;
-        let at = |x: f32, y: f32| s.rgba[((n as f32 / 2.0 + y) as usize) * n + (n as f32 / 2.0 + x) as usize][1];
-        // The four texels around the centre sit half a texel from the peak of the narrow Airy-like core.
-        let centre = at(0.0, 0.0).max(at(-1.0, 0.0)).max(at(0.0, -1.0)).max(at(-1.0, -1.0));
-        assert!((0.8..=1.0).contains(&centre), "{centre}");
-        assert!(s.rgba.iter().all(|t| t[1] <= centre + 1e-6), "the centre is the brightest");
-        assert!(s.rgba.iter().all(|t| t.iter().all(|v| v.is_finite() && *v >= 0.0)));
-        // Spikes run perpendicular to the hexagon's edges: edges face 30, 90, 150 degrees for a vertex on +x,
-        // so there is more light at radius 40 along 90 degrees than along 60 degrees (between spikes).
-        let r = 40.0f32;
-        let along = |deg: f32| {
-            (0..5)
-                .map(|d| {
-                    at(r * (deg + d as f32 - 2.0).to_radians().cos(), -r * (deg + d as f32 - 2.0).to_radians().sin())
-                })
-                .sum::<f32>()
-        };
-        assert!(along(90.0) > 3.0 * along(60.0), "spike {} vs gap {}", along(90.0), along(60.0));
+    fn a_round_stop_sends_two_over_pi_squared_of_its_light_past_u() {
+        // The Airy pattern's energy outside radius u (in lambda N) is 2 / (pi^2 u) far from the core.
+        let s = Starburst::compute(
+            &Aperture { shape: ApertureShape::Circle, f_number: None }.rasterise(STARBURST_MASK_SIZE),
+        );
+        let airy = 2.0 / std::f64::consts::PI.powi(2);
+        assert!((s.far_total / airy - 1.0).abs() < 0.1, "C = {} vs {airy}", s.far_total);
+        // And evenly in every direction.
+        let (lo, hi) = s.profile.iter().fold((f32::MAX, 0.0f32), |(lo, hi), &p| (lo.min(p), hi.max(p)));
+        assert!(lo > 0.7 * hi, "{lo} {hi}");
     }
 
     #[test]
-    fn longer_wavelengths_spread_further() {
-        let mask = Aperture { shape: ApertureShape::Circle, f_number: None }.rasterise(128);
-        let blue = Starburst::compute(&mask, &Spectrum::single(450.0).unwrap());
-        let red = Starburst::compute(&mask, &Spectrum::single(650.0).unwrap());
-        let energy_outside = |s: &Starburst| {
-            let c = s.size as f32 / 2.0;
-            s.rgba
-                .iter()
-                .enumerate()
-                .filter(|(k, _)| ((k % s.size) as f32 - c).hypot((k / s.size) as f32 - c) > 6.0)
-                .map(|(_, t)| t[0])
-                .sum::<f32>()
+    fn a_hexagon_makes_six_rays_across_its_edges() {
+        let mask =
+            Aperture { shape: ApertureShape::Blades { count: 6, rotation_deg: 0.0, roundness: 0.0 }, f_number: None }
+                .rasterise(STARBURST_MASK_SIZE);
+        let s = Starburst::compute(&mask);
+        assert!(s.profile.iter().all(|p| p.is_finite() && (0.0..=1.0).contains(p)));
+        // Rays run perpendicular to the edges: a vertex on +x puts edges facing 30, 90, 150 ... degrees, so
+        // there is far more light along 90 degrees than along 60 (between rays).
+        let along = |deg: f32| {
+            let (dx, dy) = (deg.to_radians().cos(), -deg.to_radians().sin());
+            Starburst::profile_at(&s.profile, dx, dy)
         };
-        assert!(energy_outside(&red) > 1.3 * energy_outside(&blue));
+        assert!(along(90.0) > 10.0 * along(60.0), "ray {} vs gap {}", along(90.0), along(60.0));
+        assert!((along(30.0) / along(90.0) - 1.0).abs() < 0.3, "six equal rays");
+        // Straight edges put more light in the far field than a circle of the same width.
+        assert!(s.far_total > 0.15 && s.far_total < 0.6, "{}", s.far_total);
+    }
+
+    #[test]
+    fn a_closed_stop_has_no_starburst() {
+        let mask = ApertureMask { size: 8, texels: vec![0; 64] };
+        let s = Starburst::compute(&mask);
+        assert_eq!((s.far_total, s.profile_peak), (0.0, 0.0));
+        assert!(s.profile.iter().all(|p| *p == 0.0));
     }
 }

@@ -36,13 +36,22 @@ fn the_one_wgsl_globals_has_the_rust_layout() {
     let (_, ty) = module.types.iter().find(|(_, t)| t.name.as_deref() == Some("Globals")).expect("struct Globals");
     let naga::TypeInner::Struct { members, span } = &ty.inner else { panic!("Globals is a struct") };
     assert_eq!(*span as usize, std::mem::size_of::<Globals>(), "size");
-    let g = Globals { viewport: [0.0; 4], starburst: [0.0; 4], tonemap: [0.0; 4], plate: [0.0; 4] };
+    let g = Globals {
+        viewport: [0.0; 4],
+        starburst: [0.0; 4],
+        tonemap: [0.0; 4],
+        plate: [0.0; 4],
+        starburst_far: [0.0; 4],
+        starburst_core: [0.0; 4],
+    };
     let base = &g as *const Globals as usize;
     let rust = [
         ("viewport", &g.viewport as *const _ as usize - base),
         ("starburst", &g.starburst as *const _ as usize - base),
         ("tonemap", &g.tonemap as *const _ as usize - base),
         ("plate", &g.plate as *const _ as usize - base),
+        ("starburst_far", &g.starburst_far as *const _ as usize - base),
+        ("starburst_core", &g.starburst_core as *const _ as usize - base),
     ];
     assert_eq!(members.len(), rust.len());
     for (member, (name, offset)) in members.iter().zip(rust) {

@@ -28,6 +28,7 @@
 
 pub mod bake;
 pub mod blend;
+pub mod cache;
 pub mod classify;
 pub mod format;
 pub mod photo;

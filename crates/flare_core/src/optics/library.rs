@@ -20,8 +20,9 @@ pub const BUILTIN_LENSES: &[(&str, &str)] = &[
     ("nikon_zoom_28_75mm", include_str!("../../../../lenses/nikon_zoom_28_75mm.json")),
 ];
 
-/// The lens the app opens with: the Heliar of the paraxial-flare patent's Table 1.
-pub const DEFAULT_LENS_ID: &str = "heliar_tronnier_us2645156";
+/// The lens the app opens with: the Nikon 28-75 mm zoom, whose chain of polygonal ghosts is what an artist
+/// expects a lens flare to look like.
+pub const DEFAULT_LENS_ID: &str = "nikon_zoom_28_75mm";
 
 /// Why a built-in lens could not be found.
 #[derive(Debug, thiserror::Error)]
@@ -141,7 +142,8 @@ mod tests {
 
     #[test]
     fn lookup_by_part_of_the_id() {
-        assert_eq!(builtin_lens("heliar").unwrap().id, DEFAULT_LENS_ID);
+        assert_eq!(builtin_lens("heliar").unwrap().id, "heliar_tronnier_us2645156");
+        assert_eq!(builtin_lens("nikon").unwrap().id, DEFAULT_LENS_ID);
         assert_eq!(builtin_lens("TESSAR").unwrap().id, "brendel_tessar_usp2854889");
         assert!(matches!(builtin_lens("pbrt"), Err(LibraryError::Ambiguous { .. })));
         assert!(matches!(builtin_lens("zeiss"), Err(LibraryError::NotFound(_))));

@@ -284,7 +284,7 @@ mod tests {
 
     #[test]
     fn ghost_matrices_split_at_the_stop_and_keep_every_crossing() {
-        let lens = crate::optics::library::default_lens();
+        let lens = crate::optics::library::builtin_lens("heliar").unwrap();
         let fo = FirstOrder::d_line(&lens).unwrap();
         let stop = lens.stop_index();
         let mut straddling = 0;

@@ -442,9 +442,9 @@ impl FlareRenderer {
     pub fn set_starburst(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, starburst: &Starburst) {
         self.groups = None;
         let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
-        self.starburst =
-            texture_2d(device, "starburst", starburst.size as u32, starburst.size as u32, HDR_FORMAT, usage);
-        upload(queue, &self.starburst, &half_floats(&starburst.rgba), 8);
+        let texels: Vec<[f32; 4]> = starburst.profile.iter().map(|&p| [p, p, p, 1.0]).collect();
+        self.starburst = texture_2d(device, "starburst", texels.len() as u32, 1, HDR_FORMAT, usage);
+        upload(queue, &self.starburst, &half_floats(&texels), 8);
     }
 
     /// Sets or clears the background plate (linear).
@@ -585,7 +585,7 @@ impl FlareRenderer {
                 pass.set_vertex_buffer(0, self.lut_instances.slice(..));
                 pass.draw(0..6, 0..lut.instances.len() as u32);
             }
-            if globals.starburst[2] > 0.0 && globals.starburst[3] != 0.0 {
+            if globals.starburst[2] > 0.0 {
                 pass.set_pipeline(&self.starburst_pipeline);
                 pass.set_bind_group(0, &groups.starburst, &[]);
                 pass.draw(0..6, 0..1);

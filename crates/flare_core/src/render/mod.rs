@@ -26,6 +26,8 @@ use crate::color::gain_from_ev;
 use crate::ghost::{FrameSettings, GhostFrame, GhostSystem};
 pub use crate::ghost::{light_slopes_for_frame_position, sensor_to_pixel};
 pub use crate::image::{DisplayImage, HdrImage};
+use crate::optics::sensor::Sensor;
+use crate::starburst::Starburst;
 
 /// How the frame is shown: the exposures, the tonemap and the starburst. None of these changes the optics, so
 /// none of them rebuilds the ghost system, the starburst's FFT or a GPU texture.
@@ -38,9 +40,8 @@ pub struct DisplaySettings {
     pub tonemap: Tonemap,
     /// Draw the starburst at the light's image.
     pub starburst: bool,
-    /// Starburst half-size as a fraction of the frame height.
-    pub starburst_size: f32,
-    /// Starburst peak brightness (relative irradiance).
+    /// Multiplies the starburst's physical brightness (1: the light's own image as the lens makes it, see
+    /// [`crate::starburst`]; the light's gain is folded in per frame).
     pub starburst_intensity: f32,
     /// Ghosts and starburst accumulate at 1 / this resolution (1, 2 or 4), then the tonemap pass upsamples
     /// bilinearly: 4x or 16x fewer fragments for a little softness. Worth it on software adapters, where
@@ -58,8 +59,7 @@ impl Default for DisplaySettings {
             plate_ev: 0.0,
             tonemap: Tonemap::Aces,
             starburst: true,
-            starburst_size: 0.35,
-            starburst_intensity: 0.3,
+            starburst_intensity: 1.0,
             accumulation_divisor: 1,
         }
     }
@@ -84,14 +84,18 @@ impl DisplaySettings {
 pub struct Globals {
     /// width, height, 1 / width, 1 / height (pixels).
     pub viewport: [f32; 4],
-    /// centre x, centre y, half-size (pixels), intensity.
+    /// The starburst: centre x, centre y, reach (pixels; 0: none), core radius (pixels).
     pub starburst: [f32; 4],
     /// flare gain (`2^flare_ev`), operator ([`Tonemap::code`]), encode sRGB (0/1, set by the renderer), unused.
     pub tonemap: [f32; 4],
     /// plate gain (`2^plate_ev`), plate present (0/1, set by the renderer), unused, unused.
     pub plate: [f32; 4],
+    /// The starburst's far field: `K` per channel (`I = K c(phi) / r_mm^3`), mm per pixel.
+    pub starburst_far: [f32; 4],
+    /// The starburst's core: relative irradiance per channel inside the core radius, unused.
+    pub starburst_core: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<Globals>() == 64);
+const _: () = assert!(std::mem::size_of::<Globals>() == 96);
 
 impl Globals {
     /// The flare's linear gain.
@@ -198,18 +202,76 @@ impl FlareScene {
                 dropped_non_finite += 1;
             }
         }
-        let light = sensor_to_pixel(system.light_image_mm(u), sensor, width, height);
-        let starburst = if display.starburst {
-            [light[0] as f32, light[1] as f32, display.starburst_size * height as f32, display.starburst_intensity]
-        } else {
-            [0.0, 0.0, 0.0, 0.0]
-        };
         let globals = Globals {
             viewport: [width as f32, height as f32, 1.0 / width as f32, 1.0 / height as f32],
-            starburst: starburst.map(|v| if v.is_finite() { v } else { 0.0 }),
+            starburst: [0.0; 4],
             tonemap: [display.flare_gain(), display.tonemap.code(), 1.0, 0.0],
             plate: [display.plate_gain(), 0.0, 0.0, 0.0],
+            starburst_far: [0.0; 4],
+            starburst_core: [0.0; 4],
         };
         Self { width, height, hdr_width, hdr_height, globals, instances, instance_ghosts, dropped_non_finite }
     }
+
+    /// Places the starburst of `starburst` at the image of a light of slopes `u` (see [`crate::starburst`]):
+    /// its physical brightness for the lens's entrance pupil at the working f-number, times
+    /// `display.starburst_intensity`, drawn out to where it falls below a quarter of an 8-bit step at the
+    /// flare's exposure (at most the frame's diagonal). Nothing when the display leaves it out.
+    pub fn place_starburst(
+        &mut self,
+        system: &GhostSystem,
+        starburst: &Starburst,
+        u: [f64; 2],
+        sensor: &Sensor,
+        display: &DisplaySettings,
+    ) {
+        let (g, width, height) = (&mut self.globals, self.width, self.height);
+        g.starburst = [0.0; 4];
+        g.starburst_far = [0.0; 4];
+        g.starburst_core = [0.0; 4];
+        let intensity = f64::from(display.starburst_intensity);
+        let lit = display.starburst && intensity.is_finite() && intensity > 0.0 && starburst.profile_peak > 0.0;
+        if !lit {
+            return;
+        }
+        let fo = &system.first_order;
+        let stop_scale = system.settings.stop_scale.clamp(1e-3, 1.0);
+        let f_number = fo.f_number.abs() / stop_scale;
+        let pupil_mm = fo.entrance_pupil_diameter_mm.abs() * stop_scale;
+        let cos_theta = 1.0 / (1.0 + u[0] * u[0] + u[1] * u[1]).sqrt();
+        // The light's power through the pupil, in relative irradiance x mm^2.
+        let power = intensity * std::f64::consts::FRAC_PI_4 * pupil_mm * pupil_mm * cos_theta;
+        let mm_per_px = sensor.width_mm / f64::from(width.max(1));
+        let spectrum = &system.settings.spectrum;
+        let core_radius_mm = STARBURST_CORE_PX * mm_per_px;
+        let core_area = std::f64::consts::PI * core_radius_mm * core_radius_mm;
+        let (mut far, mut core) = ([0.0f64; 3], [0.0f64; 3]);
+        for (w, weight) in spectrum.weights_rgb.iter().enumerate() {
+            let lambda_n_mm = spectrum.wavelengths_nm[w] * 1e-6 * f_number;
+            // The share beyond the core radius is C lambda N / r_core; the rest is the blown-out core.
+            let far_share = (starburst.far_total * lambda_n_mm / core_radius_mm).min(1.0);
+            for c in 0..3 {
+                far[c] += power * weight[c] * starburst.profile_peak * lambda_n_mm;
+                core[c] += power * weight[c] * (1.0 - far_share) / core_area;
+            }
+        }
+        let level = 0.25 / 255.0 / f64::from(display.flare_gain()).max(1e-30);
+        let brightest = far.iter().copied().fold(0.0, f64::max);
+        let reach_px = ((brightest / level).cbrt() / mm_per_px).min(f64::from(width).hypot(f64::from(height)));
+        let light = sensor_to_pixel(system.light_image_mm(u), sensor, width, height);
+        let finite = |v: f64| if v.is_finite() { v.clamp(-1e30, 1e30) as f32 } else { 0.0 };
+        if !(reach_px.is_finite() && reach_px > STARBURST_CORE_PX) {
+            return;
+        }
+        g.starburst = [finite(light[0]), finite(light[1]), finite(reach_px), STARBURST_CORE_PX as f32];
+        g.starburst_far = [finite(far[0]), finite(far[1]), finite(far[2]), finite(mm_per_px)];
+        let core = core.map(|v| v.min(STARBURST_MAX));
+        g.starburst_core = [finite(core[0]), finite(core[1]), finite(core[2]), 0.0];
+    }
 }
+
+/// The starburst's core radius in pixels: the light's blown-out image.
+pub const STARBURST_CORE_PX: f64 = 1.0;
+/// The most relative irradiance the starburst adds to a pixel (before the flare's gain): the half-float
+/// accumulation holds it, and the light's image is white long before it.
+pub const STARBURST_MAX: f64 = 3.0e4;

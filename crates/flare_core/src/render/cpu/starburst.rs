@@ -1,41 +1,49 @@
-//! `starburst.wgsl` on the CPU: the aperture's diffraction texture on a quad at the light's image, additive.
+//! `starburst.wgsl` on the CPU: the light's diffraction evaluated per pixel out to its reach, additive.
 
 use super::quads::{accumulation_scale, covered};
 use crate::image::HdrImage;
-use crate::render::FlareScene;
+use crate::render::{FlareScene, STARBURST_MAX};
 use crate::starburst::Starburst;
 
-/// Starburst texture as the GPU holds it: RGBA rounded to half floats.
+/// The starburst's angular profile as the GPU holds it: rounded to half floats.
 #[derive(Clone, Debug, PartialEq)]
 pub struct StarburstTexture {
-    pub image: HdrImage,
+    pub profile: Vec<f32>,
 }
 
 impl StarburstTexture {
     pub fn from_starburst(s: &Starburst) -> Self {
-        let pixels = s.rgba.iter().map(|t| t.map(|v| half::f16::from_f32(v).to_f32())).collect();
-        Self { image: HdrImage { width: s.size as u32, height: s.size as u32, pixels } }
+        Self { profile: s.profile.iter().map(|v| half::f16::from_f32(*v).to_f32()).collect() }
     }
 }
 
-/// `starburst.wgsl`: the starburst quad added onto `hdr`.
+/// `starburst.wgsl`: the starburst added onto `hdr`.
 pub fn starburst_pass(scene: &FlareScene, texture: &StarburstTexture, hdr: &mut HdrImage) {
-    let [cx, cy, half, intensity] = scene.globals.starburst;
-    if half <= 0.0 || intensity == 0.0 {
+    let [cx, cy, reach, core_px] = scene.globals.starburst;
+    if reach <= 0.0 {
         return;
     }
+    let [kr, kg, kb, mm_per_px] = scene.globals.starburst_far;
+    let core = scene.globals.starburst_core;
     let (w, h) = (hdr.width as usize, hdr.height as usize);
     let (sx, sy) = accumulation_scale(scene);
-    for y in covered(cy, half, sy, h) {
-        for x in covered(cx, half, sx, w) {
-            let q = [((x as f32 + 0.5) * sx - cx) / half, ((y as f32 + 0.5) * sy - cy) / half];
-            if q[0].abs() > 1.0 || q[1].abs() > 1.0 {
+    for y in covered(cy, reach, sy, h) {
+        for x in covered(cx, reach, sx, w) {
+            let (dx, dy) = ((x as f32 + 0.5) * sx - cx, (y as f32 + 0.5) * sy - cy);
+            let r_px = dx.hypot(dy);
+            if r_px > reach {
                 continue;
             }
-            let t = texture.image.sample_bilinear(q[0] * 0.5 + 0.5, q[1] * 0.5 + 0.5);
-            let p = &mut hdr.pixels[y * w + x];
-            for c in 0..3 {
-                p[c] += t[c] * intensity;
+            let c = if r_px < core_px {
+                [core[0], core[1], core[2]]
+            } else {
+                let r_mm = r_px * mm_per_px;
+                let p = Starburst::profile_at(&texture.profile, dx, dy) / (r_mm * r_mm * r_mm);
+                [kr * p, kg * p, kb * p]
+            };
+            let px = &mut hdr.pixels[y * w + x];
+            for k in 0..3 {
+                px[k] += c[k].min(STARBURST_MAX as f32);
             }
         }
     }

@@ -1,0 +1,99 @@
+//! LUT ghosts without a click: when the lens, its stop, coatings or spectrum change, the app looks for their
+//! LUT in memory, then in the on-disk cache ([`flare_core::lut::cache`]), and bakes it on a thread when
+//! neither has it, showing the paraxial flare (and saying so) until it is ready. This module holds the state;
+//! [`super::auto_bake_step`] the app's step.
+//!
+//! # How it works
+//! Each frame the app's `auto_bake_step` computes the cache key of the prepared flare (once per optics
+//! change) and, unless the LUT on screen already has that key, takes the first of: a LUT kept in memory
+//! ([`MEMORY`] of them, so an undo to a lens baked in this session is instant), a checked cache file (a
+//! damaged one is removed, reported, and baked again), or a new bake. A bake for older optics is cancelled
+//! when the optics change; a bake the user cancelled is not started again until they change. A finished
+//! bake is stored on disk and in memory, and shown if its optics are still the live ones. Showing a baked LUT
+//! sets the document's LUT source to "simulated" without an undo step of its own, so a preset saved then
+//! renders the same blended frame on the command line (which reads the same cache). Nothing happens while
+//! the user has a LUT file or a photo LUT open, or has turned automatic baking off.
+
+use std::sync::Arc;
+
+use flare_core::flare::PreparedFlare;
+use flare_core::lut::GhostLut;
+use flare_core::lut::bake::BakeSettings;
+use flare_core::lut::cache::LutCache;
+use flare_core::lut::classify::GhostClass;
+
+/// LUTs kept in memory.
+pub const MEMORY: usize = 6;
+
+/// A baked LUT and, when this session baked it, the classification that chose its ghosts.
+pub type Baked = (Arc<GhostLut>, Option<Vec<GhostClass>>);
+
+/// The automatic bake's state.
+pub struct AutoBake {
+    /// Bake LUT ghosts by themselves (the Blend panel's switch).
+    pub enabled: bool,
+    /// What the bakes use (the default settings; tests make them coarse).
+    pub settings: BakeSettings,
+    /// The on-disk cache (`None`: no home folder; memory only).
+    pub cache: Option<LutCache>,
+    memory: Vec<(u64, Baked)>,
+    /// The key of the running bake.
+    pub baking: Option<u64>,
+    /// The key of the LUT on screen.
+    pub shown: Option<u64>,
+    /// A key whose bake the user cancelled.
+    pub declined: Option<u64>,
+    /// A key already looked for on disk (a miss is not looked for again every frame).
+    pub looked_up: Option<u64>,
+    /// The optics fingerprint and the cache key computed for it.
+    pub key_of: Option<(u64, u64)>,
+    /// How many bakes were started (for the tests: an undo to a baked lens starts none).
+    pub bakes_started: u64,
+}
+
+impl Default for AutoBake {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            settings: BakeSettings::default(),
+            cache: LutCache::user(),
+            memory: Vec::new(),
+            baking: None,
+            shown: None,
+            declined: None,
+            looked_up: None,
+            key_of: None,
+            bakes_started: 0,
+        }
+    }
+}
+
+impl AutoBake {
+    /// The cache key of `flare` (computed again only when `optics` changes).
+    pub(super) fn key(&mut self, flare: &PreparedFlare, optics: u64) -> u64 {
+        match self.key_of {
+            Some((o, key)) if o == optics => key,
+            _ => {
+                let key = LutCache::key(&flare.system.lens, &flare.config, &self.settings);
+                self.key_of = Some((optics, key));
+                key
+            }
+        }
+    }
+
+    pub(super) fn remembered(&self, key: u64) -> Option<Baked> {
+        self.memory.iter().find(|(k, _)| *k == key).map(|(_, b)| b.clone())
+    }
+
+    pub(super) fn remember(&mut self, key: u64, baked: Baked) {
+        self.memory.retain(|(k, _)| *k != key);
+        self.memory.push((key, baked));
+        let excess = self.memory.len().saturating_sub(MEMORY);
+        self.memory.drain(..excess);
+    }
+
+    /// The latest LUT in memory: it lends a new bake the ghosts whose images cannot have changed.
+    pub(super) fn latest(&self) -> Option<GhostLut> {
+        self.memory.last().map(|(_, (lut, _))| (**lut).clone())
+    }
+}

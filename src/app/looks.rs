@@ -1,0 +1,90 @@
+//! The Looks panel's state: the presets shipped in the binary as rendered thumbnails (the panel and applying a
+//! look: [`super::looks_panel`]).
+//!
+//! # How it works
+//! The first time the panel is shown, a worker ([`super::job::Job`]) renders every shipped preset's thumbnail
+//! through the one frame pipeline on the CPU twin ([`flare_core::preset::Document::thumbnail`]); the panel shows
+//! the ones done so far and the worker's progress, and keeps the textures for the session (the thumbnails are made
+//! once). Clicking a look replaces the document's optics and display with the look's
+//! ([`flare_core::preset::Document::with_look`]: the plate, the timeline and the sensor stay) as one undo step; the
+//! automatic bake then fetches or bakes its LUT ghosts.
+
+use std::sync::{Arc, Mutex};
+
+use eframe::egui;
+use flare_core::image::DisplayImage;
+use flare_core::preset::shipped;
+
+use super::job::{Job, JobPoll};
+
+/// Thumbnail size in pixels.
+pub const THUMB: (u32, u32) = (192, 108);
+
+/// One look's thumbnail as the worker made it (or why it could not).
+type Rendered = (usize, Result<DisplayImage, String>);
+
+/// The panel's state.
+#[derive(Default)]
+pub struct Looks {
+    pub(super) job: Option<Job<()>>,
+    /// Rendered by the worker, not yet uploaded.
+    done: Arc<Mutex<Vec<Rendered>>>,
+    /// Per shipped preset: its texture, or why there is none.
+    pub thumbnails: Vec<Option<Result<egui::TextureHandle, String>>>,
+}
+
+impl Looks {
+    /// Starts the worker once.
+    pub(super) fn start(&mut self) {
+        if self.job.is_some() || !self.thumbnails.is_empty() {
+            return;
+        }
+        self.thumbnails = vec![None; shipped().len()];
+        let done = self.done.clone();
+        self.job = Some(Job::spawn("rendering the looks…", move |cancel, progress| {
+            // A pool of its own: a background bake keeps rayon's global pool busy for half a minute, and the
+            // thumbnails should not wait for it.
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().ok();
+            let total = shipped().len();
+            for (k, preset) in shipped().iter().enumerate() {
+                if cancel.load(std::sync::atomic::Ordering::Relaxed) {
+                    return;
+                }
+                progress(k as f32 / total as f32, format!("rendering the looks: {k}/{total}"));
+                let render =
+                    || preset.document().and_then(|d| d.thumbnail(THUMB.0, THUMB.1)).map_err(|e| e.to_string());
+                let image = match &pool {
+                    Some(pool) => pool.install(render),
+                    None => render(),
+                };
+                if let Ok(mut d) = done.lock() {
+                    d.push((k, image));
+                }
+            }
+        }));
+    }
+
+    /// Uploads what the worker finished; true while it still runs.
+    pub(super) fn poll(&mut self, ctx: &egui::Context) -> bool {
+        let finished: Vec<Rendered> = self.done.lock().map(|mut d| std::mem::take(&mut *d)).unwrap_or_default();
+        for (k, image) in finished {
+            self.thumbnails[k] = Some(image.map(|img| {
+                let pixels: Vec<egui::Color32> =
+                    img.pixels.iter().map(|p| egui::Color32::from_rgb(p[0], p[1], p[2])).collect();
+                let color = egui::ColorImage::new([img.width as usize, img.height as usize], pixels);
+                ctx.load_texture(format!("look {k}"), color, egui::TextureOptions::LINEAR)
+            }));
+        }
+        if let Some(job) = &self.job
+            && let JobPoll::Finished(()) = job.poll()
+        {
+            self.job = None;
+        }
+        self.job.is_some()
+    }
+
+    /// True once every thumbnail is made (for the tests).
+    pub fn ready(&self) -> bool {
+        !self.thumbnails.is_empty() && self.thumbnails.iter().all(Option::is_some)
+    }
+}

@@ -1,0 +1,59 @@
+//! The Looks panel's UI and applying a look (see [`super::looks`]).
+
+use eframe::egui;
+use flare_core::preset::shipped;
+
+use super::FlareLabApp;
+use super::looks::THUMB;
+
+impl FlareLabApp {
+    /// The Looks panel (see the module documentation).
+    pub(super) fn looks_ui(&mut self, ui: &mut egui::Ui) {
+        self.looks.start();
+        if self.looks.poll(ui.ctx()) {
+            ui.ctx().request_repaint_after(std::time::Duration::from_millis(100));
+            if let Some(job) = &self.looks.job {
+                let (fraction, text) = job.progress();
+                ui.add(egui::ProgressBar::new(fraction).text(text));
+            }
+        }
+        ui.label("A look replaces the lens, stop, coatings and display; your plate, timeline and sensor stay.");
+        let mut chosen = None;
+        egui::Grid::new("looks").num_columns(2).spacing([8.0, 8.0]).show(ui, |ui| {
+            for (k, preset) in shipped().iter().enumerate() {
+                ui.vertical(|ui| {
+                    let size = egui::vec2(THUMB.0 as f32, THUMB.1 as f32);
+                    let response = match self.looks.thumbnails.get(k).cloned().flatten() {
+                        Some(Ok(texture)) => {
+                            ui.add(egui::Image::from_texture((texture.id(), size)).sense(egui::Sense::click()))
+                        }
+                        Some(Err(e)) => ui.colored_label(egui::Color32::from_rgb(255, 110, 110), e),
+                        None => ui.add_sized(size, egui::Spinner::new()),
+                    };
+                    let button = ui.button(preset.name).on_hover_text(preset.title);
+                    if response.on_hover_text(preset.title).clicked() || button.clicked() {
+                        chosen = Some(k);
+                    }
+                });
+                if k % 2 == 1 {
+                    ui.end_row();
+                }
+            }
+        });
+        if let Some(k) = chosen {
+            self.apply_look(k);
+        }
+    }
+
+    /// Applies shipped look `k` (one undo step).
+    pub fn apply_look(&mut self, k: usize) {
+        let Some(preset) = shipped().get(k) else { return };
+        match preset.document() {
+            Ok(look) => {
+                self.doc = self.doc.with_look(&look);
+                self.message = Some(format!("look: {} ({})", preset.name, preset.title));
+            }
+            Err(e) => self.message = Some(format!("look {}: {e}", preset.name)),
+        }
+    }
+}
