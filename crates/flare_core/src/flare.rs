@@ -1,13 +1,14 @@
 //! One flare from end to end: a lens and its settings prepared once, then a scene per light position.
 //!
 //! # How it works
-//! [`FlareConfig`] is everything besides the lens that changes the optics: aperture (shape, f-number),
-//! spectrum, coating override and the culling threshold. [`PreparedFlare::new`] does the work that depends on
-//! those and on the lens (ghost matrices and reflectance tables, the aperture mask, the starburst's FFT); it
-//! is redone only when one of them changes, never for a display setting (exposure, tonemap, plate,
-//! starburst gain, view size). [`PreparedFlare::scene_with`] is the per-frame part: ghost sprites for the
-//! light's position and the GPU-ready [`FlareScene`], with the display settings and per-ghost gains of that
-//! frame. [`crate::frame`] builds every frame of the app, the command line and the benchmarks through it.
+//! [`FlareConfig`] is everything besides the lens that changes the optics: aperture (shape, f-number), spectrum,
+//! coating override and the culling threshold. [`PreparedFlare::new`] does the work that depends on those and on
+//! the lens (ghost matrices and reflectance tables, the aperture mask, the starburst's FFT, the last two kept per
+//! stop shape so a lens edit does not redo them); it is redone only when one of them changes, never for a display
+//! setting (exposure, tonemap, plate, starburst gain, view size). [`PreparedFlare::scene_with`] is the per-frame
+//! part: ghost sprites for the light's position and the GPU-ready [`FlareScene`], with the display settings and
+//! per-ghost gains of that frame. [`crate::frame`] builds every frame of the app, the command line and the
+//! benchmarks through it.
 
 use crate::aperture::{Aperture, ApertureError, ApertureMask, DEFAULT_MASK_SIZE};
 use crate::ghost::light_slopes_for_frame_position;
@@ -73,6 +74,32 @@ pub struct PreparedFlare {
     pub id: u64,
 }
 
+/// Stop shapes whose mask and starburst were made lately (a lens edit keeps its stop: no new FFT).
+const STOP_IMAGES_KEPT: usize = 4;
+
+/// The aperture mask and the starburst of `aperture`'s shape (they do not depend on the f-number, the lens or
+/// the spectrum), from a small process-wide cache keyed by the shape's fingerprint: the 1024^2 FFT and the
+/// 512^2 raster take ~50 ms, which a lens edit in the app should not pay.
+fn stop_images(aperture: &Aperture) -> (ApertureMask, Starburst) {
+    type Kept = Vec<(u64, ApertureMask, Starburst)>;
+    static KEPT: std::sync::Mutex<Kept> = std::sync::Mutex::new(Vec::new());
+    let key = crate::fingerprint::of(&aperture.shape);
+    if let Ok(kept) = KEPT.lock()
+        && let Some((_, mask, starburst)) = kept.iter().find(|(k, _, _)| *k == key)
+    {
+        return (mask.clone(), starburst.clone());
+    }
+    let mask = aperture.rasterise(DEFAULT_MASK_SIZE);
+    let starburst = Starburst::compute(&aperture.rasterise(crate::starburst::STARBURST_MASK_SIZE));
+    if let Ok(mut kept) = KEPT.lock() {
+        kept.retain(|(k, _, _)| *k != key);
+        kept.push((key, mask.clone(), starburst.clone()));
+        let excess = kept.len().saturating_sub(STOP_IMAGES_KEPT);
+        kept.drain(..excess);
+    }
+    (mask, starburst)
+}
+
 impl PreparedFlare {
     pub fn new(lens: &Lens, config: &FlareConfig) -> Result<Self, FlareError> {
         config.aperture.validate()?;
@@ -83,8 +110,7 @@ impl PreparedFlare {
             coating_override: config.coating_override.clone(),
         };
         let system = GhostSystem::build(lens, &settings)?;
-        let mask = config.aperture.rasterise(DEFAULT_MASK_SIZE);
-        let starburst = Starburst::compute(&config.aperture.rasterise(crate::starburst::STARBURST_MASK_SIZE));
+        let (mask, starburst) = stop_images(&config.aperture);
         let starburst_texture = StarburstTexture::from_starburst(&starburst);
         let id = crate::fingerprint::unique_id();
         Ok(Self { config: config.clone(), system, mask, starburst, starburst_texture, id })
