@@ -216,8 +216,22 @@ fn ghosts_json_lists_every_ghost_with_its_sprite() {
     let system = flare_core::ghost::GhostSystem::build(&lens, &settings).unwrap();
     let u = [0.0, 10f64.to_radians().tan()];
     for (g, row) in ghosts.iter().enumerate() {
-        for key in ["i", "j", "center_mm", "radius_mm", "intensity", "rgb", "straddles_stop", "culled"] {
+        for key in ["i", "j", "center_mm", "radius_mm", "intensity", "rgb", "straddles_stop", "culled", "focus_mm"] {
             assert!(row.get(key).is_some(), "ghost {g} lacks {key}: {row}");
+        }
+        // focus_mm is -A/C of the ghost's d-line matrix from the entrance to the image plane (null: afocal).
+        let (i, j) = (row["i"].as_u64().unwrap() as usize, row["j"].as_u64().unwrap() as usize);
+        let fo = FirstOrder::d_line(&lens).unwrap();
+        let m = flare_core::optics::PathMatrices::compute(
+            &lens,
+            &LightPath::ghost(&lens, i, j).unwrap(),
+            D_LINE_NM,
+            fo.sensor_z_mm(),
+        )
+        .sensor_from_entrance;
+        match row["focus_mm"].as_f64() {
+            Some(focus) => assert_eq!(focus, -m.a / m.c, "ghost {i}-{j}"),
+            None => assert_eq!(m.c, 0.0, "ghost {i}-{j} is not afocal"),
         }
         let (centre, radius) = system.stop_image_sprite(g, 0, u).unwrap();
         assert_eq!(row["center_mm"][1].as_f64().unwrap(), centre[1]);

@@ -3,6 +3,7 @@
 
 use anyhow::{Context, Result, bail};
 use flare_core::ghost::{FrameSettings, GhostSettings, GhostSystem};
+use flare_core::optics::{D_LINE_NM, LightPath, PathMatrices};
 use flare_core::spectrum::Spectrum;
 use serde_json::json;
 
@@ -63,8 +64,13 @@ pub fn run(args: &GhostsArgs) -> Result<()> {
                 json!({"wavelength_nm": spectrum.wavelengths_nm[w], "center_mm": s.map(|s| s.0.map(|v| v + 0.0)), "radius_mm": s.map(|s| s.1)})
             })
             .collect();
+        // Where this ghost's rays from the light focus at the d-line, from the image plane (None: afocal).
+        let focus_mm = LightPath::ghost(&lens, ghost.i, ghost.j).ok().and_then(|p| {
+            PathMatrices::compute(&lens, &p, D_LINE_NM, system.first_order.sensor_z_mm()).focus_after_sensor_mm()
+        });
         rows.push(json!({
             "i": ghost.i, "j": ghost.j,
+            "focus_mm": focus_mm,
             "center_mm": sprite.map(|s| s.0.map(|v| v + 0.0)), "radius_mm": sprite.map(|s| s.1),
             "intensity": intensity, "rgb": rgb,
             "straddles_stop": ghost.straddles_stop,

@@ -96,6 +96,16 @@ pub struct PathMatrices {
 }
 
 impl PathMatrices {
+    /// Where a collimated beam along this path comes to a paraxial focus, measured along the axis from the
+    /// sensor plane (positive towards the image side): with `sensor_from_entrance = [[A, B], [C, D]]`, the rays
+    /// of one direction meet where `A + C d = 0`, so `d = -A / C`. `None` when `C = 0`: the path is afocal
+    /// (its rays leave parallel, there is no focus).
+    pub fn focus_after_sensor_mm(&self) -> Option<f64> {
+        let m = &self.sensor_from_entrance;
+        let d = -m.a / m.c;
+        (m.c != 0.0 && d.is_finite()).then_some(d)
+    }
+
     /// Multiplies the matrices along `path` at `wavelength_nm`, ending on the plane `sensor_z_mm`.
     pub fn compute(lens: &Lens, path: &LightPath, wavelength_nm: f64, sensor_z_mm: f64) -> Self {
         let n = lens.media_indices_at(wavelength_nm);
@@ -280,6 +290,39 @@ mod tests {
     fn close(a: &Mat2, b: &Mat2) -> bool {
         let (a, b) = (a.as_rows(), b.as_rows());
         (0..2).all(|r| (0..2).all(|c| (a[r][c] - b[r][c]).abs() <= 1e-12 * (1.0 + b[r][c].abs())))
+    }
+
+    #[test]
+    fn a_ghosts_paraxial_focus_is_where_the_exact_rays_near_the_axis_meet() {
+        use crate::optics::{Ray, TraceOptions, TraceStatus, Tracer};
+        let lens = crate::optics::library::builtin_lens("heliar").unwrap();
+        let fo = FirstOrder::d_line(&lens).unwrap();
+        let mut checked = 0;
+        for (i, j) in lens.ghost_pairs() {
+            let path = LightPath::ghost(&lens, i, j).unwrap();
+            let m = PathMatrices::compute(&lens, &path, D_LINE_NM, fo.sensor_z_mm());
+            let Some(focus) = m.focus_after_sensor_mm() else { continue };
+            // Independently: an exact ray parallel to the axis at a small height crosses the axis at -y / slope
+            // beyond the sensor plane.
+            let tracer = Tracer::new(&lens, &path, D_LINE_NM, fo.sensor_z_mm());
+            let h = 1e-4 * fo.entrance_pupil_radius_mm();
+            let ray = Ray { origin_mm: glam::DVec3::new(0.0, h, -1.0), direction: glam::DVec3::new(0.0, 0.0, 1.0) };
+            let out = tracer.trace(&ray, TraceOptions { apply_apertures: false, record_points: false });
+            if out.status != TraceStatus::Landed {
+                continue;
+            }
+            let (p, d) = (out.sensor_point_mm.unwrap(), out.sensor_direction.unwrap());
+            let exact = -p.y / (d.y / d.z);
+            assert!(
+                (exact - focus).abs() <= 1e-6 * (1.0 + focus.abs()),
+                "ghost {i}-{j}: paraxial focus {focus} mm, exact rays meet at {exact} mm"
+            );
+            checked += 1;
+        }
+        assert!(checked >= 20, "{checked} ghosts checked");
+        // The image path focuses on the sensor itself.
+        let image = PathMatrices::compute(&lens, &LightPath::image(&lens), D_LINE_NM, fo.sensor_z_mm());
+        assert!(image.focus_after_sensor_mm().unwrap().abs() < 1e-9);
     }
 
     #[test]
