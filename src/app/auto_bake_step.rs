@@ -22,8 +22,7 @@ impl FlareLabApp {
         if self.derived.lens_problem.is_some() {
             return;
         }
-        let (Some(flare), Some(optics)) = (self.derived.flare.clone(), self.derived.optics_key) else { return };
-        let key = self.autobake.key(&flare, optics);
+        let (Some(key), Some(flare)) = (self.live_bake_key(), self.derived.flare.clone()) else { return };
         if self.autobake.shown == Some(key) && self.derived.lut.is_some() {
             return;
         }

@@ -350,17 +350,11 @@ impl FlareLabApp {
 
     fn panel_ui(&mut self, ui: &mut egui::Ui, actions: &mut Vec<Action>) {
         if self.tab == Tab::Shot {
-            egui::ScrollArea::both()
-                .id_salt("panel_scroll")
-                .auto_shrink([false, false])
-                .show(ui, |ui| self.shot_panel_ui(ui));
+            panel_scroll().show(ui, |ui| self.shot_panel_ui(ui));
             return;
         }
         if self.tab == Tab::Looks {
-            egui::ScrollArea::both()
-                .id_salt("panel_scroll")
-                .auto_shrink([false, false])
-                .show(ui, |ui| self.looks_ui(ui));
+            panel_scroll().show(ui, |ui| self.looks_ui(ui));
             return;
         }
         let ctx = PanelContext {
@@ -385,7 +379,7 @@ impl FlareLabApp {
             )
         });
         let ctx = PanelContext { lut_summary: summary.as_deref(), ..ctx };
-        egui::ScrollArea::both().id_salt("panel_scroll").auto_shrink([false, false]).show(ui, |ui| match self.tab {
+        panel_scroll().show(ui, |ui| match self.tab {
             Tab::Lens => crate::panels::lens::lens_ui(ui, &mut self.doc, &ctx, actions),
             Tab::Aperture => {
                 crate::panels::aperture::aperture_ui(ui, &mut self.doc, &ctx, &mut self.aperture_preview, actions);
@@ -910,6 +904,12 @@ impl FlareLabApp {
             }
         }
     }
+}
+
+/// The side panel's scroll area: it fills the panel and scrolls both ways, so no tab's content can widen the
+/// panel (the panel keeps its width across tabs).
+fn panel_scroll() -> egui::ScrollArea {
+    egui::ScrollArea::both().id_salt("panel_scroll").auto_shrink([false, false])
 }
 
 /// The recent files from eframe's storage (none when absent or unreadable).

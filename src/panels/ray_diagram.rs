@@ -19,7 +19,7 @@ use eframe::egui;
 use egui_plot::{Arrows, Legend, Line, Plot, PlotPoints, Points};
 use flare_core::flare::PreparedFlare;
 use flare_core::optics::glass::D_LINE_NM;
-use flare_core::optics::{EntrancePupil, FirstOrder, Lens, LightPath, TraceOptions, TraceStatus, Tracer, pupil_ray};
+use flare_core::optics::{EntrancePupil, Lens, LightPath, TraceOptions, TraceStatus, Tracer, pupil_ray};
 
 use super::LensProblem;
 
@@ -30,11 +30,17 @@ const FAN: usize = 11;
 /// reflections among the points.
 type TracedRay = (Vec<[f64; 2]>, TraceStatus, Option<(usize, usize)>);
 
-/// The traced fan, cached while the lens, the light and the ghost are unchanged.
+/// What a fan is traced for: the prepared flare's identity, the field angle's bits and the ghost.
+type FanKey = (u64, u64, Option<(usize, usize)>);
+
+/// The traced fan and the lens it was traced through, cached while the prepared flare, the light and the ghost
+/// are unchanged.
 #[derive(Default)]
 pub struct RayDiagram {
-    /// The stable fingerprint of what the fan was traced for (see `flare_core::fingerprint`).
-    key: Option<u64>,
+    /// What the fan was traced for.
+    key: Option<FanKey>,
+    /// The flare's lens with its stop opened to the f-number ([`lens_at_f_number`]).
+    lens: Option<Lens>,
     /// Each ray's points, how it ended, and for a landed ghost ray the index of its first and second
     /// reflection among the points.
     rays: Vec<TracedRay>,
@@ -42,14 +48,19 @@ pub struct RayDiagram {
 }
 
 impl RayDiagram {
-    fn update(&mut self, lens: &Lens, fo: &FirstOrder, stop_scale: f64, field_deg: f64, ghost: Option<(usize, usize)>) {
-        let key = flare_core::fingerprint::of(&(lens, fo.sensor_z_mm(), stop_scale, field_deg, ghost));
+    /// Traces the fan again when the flare (its lens, stop or f-number), the field or the ghost changed; the
+    /// flare's identity stands for all of its optics, so nothing is hashed or copied on an unchanged frame.
+    fn update(&mut self, flare: &PreparedFlare, field_deg: f64, ghost: Option<(usize, usize)>) {
+        let key = (flare.id, field_deg.to_bits(), ghost);
         if self.key == Some(key) {
             return;
         }
         self.key = Some(key);
+        let lens = self.lens.insert(lens_at_f_number(flare));
         self.rays.clear();
         self.reflections.clear();
+        let fo = &flare.system.first_order;
+        let stop_scale = flare.system.settings.stop_scale;
         let path = match ghost {
             Some((i, j)) => match LightPath::ghost(lens, i, j) {
                 Ok(p) => p,
@@ -127,10 +138,10 @@ pub fn ray_diagram_ui(
         return;
     };
     let fo = &flare.system.first_order;
-    let lens = lens_at_f_number(flare);
     let stop_scale = flare.system.settings.stop_scale;
     let field_deg = light_deg[0].hypot(light_deg[1]);
-    diagram.update(&lens, fo, stop_scale, field_deg, ghost);
+    diagram.update(flare, field_deg, ghost);
+    let Some(lens) = diagram.lens.as_ref() else { return };
     let z = lens.vertex_z_mm();
     let h_max = flare.system.lens.surfaces.iter().map(|s| s.semi_aperture_mm).fold(1.0, f64::max);
     let f_number = fo.f_number / stop_scale;
