@@ -311,13 +311,9 @@ impl FlareLabApp {
         });
         egui::CentralPanel::default().show(ui, |ui| {
             let height = ui.available_height();
-            eprintln!("DBG start {} {:?}", ui.available_width(), ui.max_rect());
             ui.allocate_ui(egui::vec2(ui.available_width(), height * 0.6), |ui| self.viewport_ui(ui, &mut actions));
-            eprintln!("DBG view {} {:?}", ui.available_width(), ui.min_rect());
             self.timeline_ui(ui);
-            eprintln!("DBG timeline {} {:?}", ui.available_width(), ui.min_rect());
             self.display_ui(ui);
-            eprintln!("DBG display {} {:?}", ui.available_width(), ui.min_rect());
             let ghost = self
                 .selected
                 .and_then(|g| self.derived.flare.as_ref().map(|f| &f.system.ghosts[g]))
