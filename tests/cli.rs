@@ -1002,3 +1002,45 @@ fn blended_renders_share_the_lut_cache_and_a_damaged_entry_is_baked_again() {
     assert!(said.contains("ignored") && said.contains("baking it again") && said.contains("cached the LUT"), "{said}");
     assert_eq!(third, first);
 }
+
+#[test]
+fn a_transcription_with_crossing_apertures_loads_with_a_warning_said_once_and_renders() {
+    let dir = tempfile::tempdir().unwrap();
+    // The Nikon of Hullin et al. as the public transcription gives it: semi-apertures 26.2 and 20 on surfaces
+    // 3 and 4, which meet at 18.61 mm.
+    let mut value: Value =
+        serde_json::from_str(&std::fs::read_to_string(repo("lenses/nikon_zoom_28_75mm.json")).unwrap()).unwrap();
+    value["surfaces"][3]["semi_aperture"] = 26.2.into();
+    value["surfaces"][4]["semi_aperture"] = 20.0.into();
+    let file = dir.path().join("nikon_transcribed.json");
+    std::fs::write(&file, serde_json::to_vec_pretty(&value).unwrap()).unwrap();
+    let file = file.display().to_string();
+
+    let info = json_of(&flarelab(&["lens", "info", &file, "--json"]));
+    let warnings = info["warnings"].as_array().unwrap();
+    assert_eq!(warnings.len(), 1, "{warnings:?}");
+    let w = warnings[0].as_str().unwrap();
+    assert!(w.contains("surfaces 3 and 4 meet at a height of 18.61 mm") && w.contains("clipped"), "{w}");
+    assert!((info["surface_table"][3]["semi_aperture_mm"].as_f64().unwrap() - 18.608).abs() < 1e-3);
+    // A lens that needs nothing has an empty list, and the aspheric terms are in the surface table.
+    let zoom = json_of(&flarelab(&["lens", "info", "aspheric_zoom_us5793533", "--json"]));
+    assert_eq!(zoom["warnings"], serde_json::json!([]));
+    assert_eq!(zoom["surface_table"][13]["conic"], serde_json::json!(-1.0));
+    assert_eq!(zoom["surface_table"][13]["aspheric"].as_array().unwrap().len(), 4);
+
+    // Commands say it on stderr, once, and go on.
+    let png = dir.path().join("nikon.png");
+    let out = flarelab(&["render", &file, "--size", "320x180", "-o", png.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert_eq!(stderr.matches("meet at a height").count(), 1, "{stderr}");
+    assert!(stderr.contains("warning: "), "{stderr}");
+    assert!(png.exists());
+
+    // Surfaces that meet where on-axis light passes are refused, with the reason once.
+    value["surfaces"][3]["thickness"] = 0.01.into();
+    std::fs::write(dir.path().join("crossing.json"), serde_json::to_vec_pretty(&value).unwrap()).unwrap();
+    let e = refusal(&["lens", "info", dir.path().join("crossing.json").to_str().unwrap()]);
+    assert_eq!(e.matches("meet at a height").count(), 1, "{e}");
+    assert!(e.contains("on-axis light through the stop"), "{e}");
+}

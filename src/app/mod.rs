@@ -50,7 +50,7 @@ use flare_core::flare::PreparedFlare;
 use flare_core::frame::{Device, Frame, LayerChoice, Sources};
 use flare_core::lut::classify::GhostClass;
 use flare_core::lut::{GhostLut, LutKind};
-use flare_core::optics::formats::load_lens_file;
+use flare_core::optics::formats::{LoadedLens, read_lens_file};
 use flare_core::preset::{Document, LutSource};
 use flare_core::render::sensor_to_pixel;
 
@@ -137,6 +137,9 @@ pub struct FlareLabApp {
     /// What the app derives from the document (see [`derived`]).
     pub derived: Derived,
     pub message: Option<String>,
+    /// What loading the open lens file had to decide (clipped apertures, the system aperture), with the id of
+    /// the lens it applies to: shown in the lens panel while that lens is open.
+    pub lens_warnings: Option<(String, Vec<String>)>,
     classes: Option<Vec<GhostClass>>,
     bake: Option<BakeJob>,
     bake_status: BakeStatus,
@@ -190,6 +193,7 @@ impl FlareLabApp {
             gpu,
             derived: Derived::new(software),
             message: None,
+            lens_warnings: None,
             classes: None,
             bake: None,
             bake_status: BakeStatus::Idle,
@@ -357,6 +361,10 @@ impl FlareLabApp {
             flare: self.derived.flare.as_deref(),
             first_order: self.derived.first_order.as_ref(),
             lens_problem: self.derived.lens_problem.as_ref(),
+            lens_warnings: match &self.lens_warnings {
+                Some((id, warnings)) if *id == self.doc.lens.id => warnings,
+                _ => &[],
+            },
             ghosts: &self.derived.ghosts,
             classes: self.classes.as_deref(),
             lut: self.derived.lut.as_deref().map(|l| &l.lut),
@@ -753,14 +761,22 @@ impl FlareLabApp {
 
     /// Opens a lens file into the document; a bad file leaves the document as it was.
     pub fn open_lens(&mut self, path: &std::path::Path) {
-        match load_lens_file(path) {
-            Ok(lens) => {
+        match read_lens_file(path) {
+            Ok(LoadedLens { lens, warnings }) => {
+                self.message = warnings.first().map(|w| {
+                    let more = if warnings.len() > 1 {
+                        format!(" (and {} more in the Lens panel)", warnings.len() - 1)
+                    } else {
+                        String::new()
+                    };
+                    format!("{}: {w}{more}", path.display())
+                });
+                self.lens_warnings = Some((lens.id.clone(), warnings));
                 self.doc.lens = lens;
                 self.doc.aperture.f_number = None;
                 self.doc.ghosts.clear();
                 self.doc.solo = None;
                 self.selected = None;
-                self.message = None;
             }
             Err(e) => self.message = Some(format!("{}: {e}", path.display())),
         }

@@ -5,7 +5,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result, bail};
 use flare_core::flare::PreparedFlare;
-use flare_core::optics::formats::load_lens_file;
+use flare_core::optics::formats::{LoadedLens, read_lens_file};
 use flare_core::optics::library::builtin_lens;
 use flare_core::optics::{Coating, CoatingLayer, Lens};
 use flare_core::preset::{ApertureDoc, Document};
@@ -30,15 +30,25 @@ pub fn parse_pair_usize(s: &str) -> Result<(usize, usize), String> {
     parse_pair(s, "surface numbers")
 }
 
-/// Opens a lens: a file if the path exists, else a built-in lens by name.
+/// Opens a lens: a file if the path exists, else a built-in lens by name. What loading had to decide (clipped
+/// clear apertures, the system aperture) is said on stderr, once per warning.
 pub fn open_lens(name: &str) -> Result<Lens> {
+    let loaded = open_lens_checked(name)?;
+    for warning in &loaded.warnings {
+        eprintln!("warning: {name}: {warning}");
+    }
+    Ok(loaded.lens)
+}
+
+/// [`open_lens`] with the warnings returned instead of printed.
+pub fn open_lens_checked(name: &str) -> Result<LoadedLens> {
     let path = Path::new(name);
     if path.exists() {
-        return load_lens_file(path).with_context(|| name.to_string());
+        return read_lens_file(path).with_context(|| name.to_string());
     }
     let looks_like_path = name.contains(['/', '\\']) || name.contains('.');
     match builtin_lens(name) {
-        Ok(lens) => Ok(lens),
+        Ok(lens) => Ok(LoadedLens { lens, warnings: Vec::new() }),
         Err(_) if looks_like_path => bail!("{name}: no such file"),
         Err(e) => bail!("{name}: no such file, and {e}"),
     }

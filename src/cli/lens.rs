@@ -12,7 +12,7 @@ use flare_core::optics::glass::D_LINE_NM;
 use flare_core::optics::library::{DEFAULT_LENS_ID, builtin_lens, ids};
 use serde_json::json;
 
-use super::common::{check_wavelength, open_lens};
+use super::common::{check_wavelength, open_lens, open_lens_checked};
 
 #[derive(Subcommand, Debug)]
 pub enum LensCommand {
@@ -61,7 +61,8 @@ pub fn run(command: LensCommand) -> Result<()> {
 
 fn lens_info(file: &str, as_json: bool, wavelength_nm: f64) -> Result<()> {
     check_wavelength(wavelength_nm)?;
-    let lens = open_lens(file)?;
+    let loaded = open_lens_checked(file)?;
+    let (lens, warnings) = (&loaded.lens, &loaded.warnings);
     let fo = FirstOrder::compute(&lens, wavelength_nm).with_context(|| file.to_string())?;
     let ghosts = lens.ghost_pairs();
     let assumed: Vec<usize> =
@@ -76,6 +77,7 @@ fn lens_info(file: &str, as_json: bool, wavelength_nm: f64) -> Result<()> {
                     "surface": k, "radius_mm": s.radius_mm, "thickness_mm": s.thickness_mm,
                     "nd": s.medium.n_d, "vd": s.medium.v_d, "glass": s.medium.glass,
                     "semi_aperture_mm": s.semi_aperture_mm, "stop": s.stop,
+                    "conic": s.conic, "aspheric_r2": s.aspheric_r2, "aspheric": s.aspheric,
                     "dispersion": s.medium.dispersion().describe(),
                 })
             })
@@ -91,6 +93,7 @@ fn lens_info(file: &str, as_json: bool, wavelength_nm: f64) -> Result<()> {
             "reflecting_surfaces": lens.reflecting_surfaces(),
             "dispersion_assumed_surfaces": assumed,
             "surface_table": table,
+            "warnings": warnings,
         });
         println!("{}", serde_json::to_string_pretty(&out)?);
         return Ok(());
@@ -123,16 +126,24 @@ fn lens_info(file: &str, as_json: bool, wavelength_nm: f64) -> Result<()> {
         let vd = s.medium.v_d.map(|v| format!("{v:.1}")).unwrap_or_else(|| "-".to_owned());
         let glass = s.medium.glass.clone().unwrap_or_else(|| "-".to_owned());
         println!(
-            "  {k:>3} {radius:>12} {thickness:>10} {:>8.4} {vd:>6} {glass:>8} {:>9.3}  {}{}",
+            "  {k:>3} {radius:>12} {thickness:>10} {:>8.4} {vd:>6} {glass:>8} {:>9.3}  {}{}{}",
             s.medium.n_d,
             s.semi_aperture_mm,
             s.medium.dispersion().describe(),
-            if s.stop { "  (stop)" } else { "" }
+            if s.stop { "  (stop)" } else { "" },
+            if s.is_spherical() {
+                String::new()
+            } else {
+                format!("  (asphere: k {}, r^2 {:e}, r^4.. {:?})", s.conic, s.aspheric_r2, s.aspheric)
+            }
         );
     }
     if !assumed.is_empty() {
         println!();
         println!("  note: surfaces {assumed:?} give no Abbe number or known glass; their dispersion is assumed.");
+    }
+    for warning in warnings {
+        println!("  warning: {warning}");
     }
     Ok(())
 }
@@ -171,7 +182,7 @@ fn lens_convert(file: &str, to: OutputFormat, output: &Path) -> Result<()> {
     let text = match to {
         OutputFormat::Json => to_json(&lens),
         OutputFormat::Zmx => zmx::write(&lens),
-        OutputFormat::Dat => pbrt::write(&lens),
+        OutputFormat::Dat => pbrt::write(&lens)?,
     };
     write_atomic(output, text.as_bytes()).with_context(|| format!("writing {}", output.display()))?;
     eprintln!("wrote {}", output.display());

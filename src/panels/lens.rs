@@ -10,6 +10,7 @@ use super::{Action, PanelContext, labelled_check, labelled_value};
 use flare_core::preset::Document;
 
 const BAD: egui::Color32 = egui::Color32::from_rgb(255, 110, 110);
+const WARN: egui::Color32 = egui::Color32::from_rgb(240, 200, 90);
 
 pub fn lens_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, actions: &mut Vec<Action>) {
     ui.horizontal(|ui| {
@@ -34,6 +35,9 @@ pub fn lens_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, action
             actions.push(Action::OpenLensFile);
         }
     });
+    for warning in ctx.lens_warnings {
+        ui.colored_label(WARN, format!("(i) {warning}"));
+    }
     if let Some(problem) = ctx.lens_problem {
         ui.colored_label(BAD, format!("(!) {} (the view shows the last valid lens)", problem.reason));
     }

@@ -59,6 +59,8 @@ pub struct PanelContext<'a> {
     pub flare: Option<&'a PreparedFlare>,
     pub first_order: Option<&'a FirstOrder>,
     pub lens_problem: Option<&'a LensProblem>,
+    /// What loading the open lens file had to decide, one sentence each (empty for most lenses).
+    pub lens_warnings: &'a [String],
     pub ghosts: &'a [GhostRow],
     pub classes: Option<&'a [GhostClass]>,
     /// The LUT in use (its ghosts are drawn from it).

@@ -342,7 +342,7 @@ impl GhostSystem {
         let spectrum = &settings.spectrum;
         let n_w = spectrum.len();
         let pairs = lens.ghost_pairs();
-        let curvature: Vec<f64> = lens.surfaces.iter().map(|s| s.curvature_per_mm()).collect();
+        let curvature: Vec<f64> = lens.surfaces.iter().map(|s| s.vertex_curvature_per_mm()).collect();
 
         let tables = InterfaceTables::new(
             lens,

@@ -593,6 +593,16 @@ pub fn shipped() -> &'static [ShippedPreset] {
             json: include_str!("../../../assets/presets/zoom-sun-sweep.json"),
         },
         ShippedPreset {
+            name: "master-prime-100",
+            title: "Cine prime 100 mm (Master Prime type, one asphere), single coat, 9 rounded blades at f/4: a row of soft nonagons",
+            json: include_str!("../../../assets/presets/master-prime-100.json"),
+        },
+        ShippedPreset {
+            name: "compact-zoom-aspheric",
+            title: "Compact zoom with three aspheres at f/5.6, six straight blades, single coat: a hexagon chain",
+            json: include_str!("../../../assets/presets/compact-zoom-aspheric.json"),
+        },
+        ShippedPreset {
             name: "vintage-uncoated",
             title: "Vintage uncoated double Gauss 50 mm, wide open, round stop: bright colourless ghosts and haze",
             json: include_str!("../../../assets/presets/vintage-uncoated.json"),
@@ -738,8 +748,8 @@ mod tests {
         assert_eq!(docs[0].lens, crate::optics::library::default_lens());
         let e = Document::open_named("no-such-look").unwrap_err().to_string();
         assert!(e.contains("no-such-look") && e.contains("fisheye-10") && e.contains("default"), "{e}");
-        let e = Document::from_json(r#"{"version": 3, "lens": "zeiss"}"#).unwrap_err().to_string();
-        assert!(e.contains("lens") && e.contains("zeiss"), "{e}");
+        let e = Document::from_json(r#"{"version": 3, "lens": "leica"}"#).unwrap_err().to_string();
+        assert!(e.contains("lens") && e.contains("leica"), "{e}");
     }
 
     #[test]

@@ -13,8 +13,12 @@
 //!   z = 0 and each later vertex sits `thickness_mm` behind the previous one.
 //! - `radius_mm > 0`: the centre of curvature lies on the image side (+z) of the vertex; `radius_mm < 0`:
 //!   on the object side; `radius_mm == 0`: the surface is flat (infinite radius).
-//! - Curvature `c = 1 / radius_mm` (0 for flat). The sag of a sphere at height h is
-//!   `z - z_vertex = c h^2 / (1 + sqrt(1 - c^2 h^2))`.
+//! - Curvature `c = 1 / radius_mm` (0 for flat). The sag of a surface at height h is the even asphere
+//!   `z - z_vertex = c h^2 / (1 + sqrt(1 - (1 + k) c^2 h^2)) + A2 h^2 + A4 h^4 + A6 h^6 + ...` with conic
+//!   constant `k` (`conic`, 0 for a sphere, -1 a paraboloid), the r^2 term `A2` (`aspheric_r2`, Zemax's
+//!   `PARM 1`) and the even terms `A4, A6, ...` (`aspheric`, from r^4 up). The sag is defined where the
+//!   square root is real; [`Surface::sag_limit_mm`] says how far, and validation refuses a clear aperture
+//!   beyond it. Paraxial optics sees the vertex curvature `c + 2 A2` ([`Surface::vertex_curvature_per_mm`]).
 //! - The medium of a surface is the one *after* it (on its +z side); the object space before surface 0 is
 //!   air, and so is the image space after the last surface (the sensor sits in air).
 //! - Heights x, y are measured from the axis, y in the meridional (y-z) plane; angles in radians unless a
@@ -33,6 +37,8 @@ pub const MAX_THICKNESS_MM: f64 = 1.0e6;
 pub const MAX_SEMI_APERTURE_MM: f64 = 1.0e4;
 /// Refractive indices above this are refused as absurd for visible light.
 pub const MAX_INDEX: f64 = 4.0;
+/// Most even aspheric terms above r^2 a surface may carry: A4 to A16, what Zemax's even asphere holds.
+pub const MAX_ASPHERIC_TERMS: usize = 7;
 /// Abbe numbers outside (0, this] are refused (real glasses lie between about 17 and 100).
 pub const MAX_ABBE: f64 = 200.0;
 /// Surfaces may touch but not cross: an edge gap below minus this is refused.
@@ -136,10 +142,20 @@ pub struct Surface {
     /// The medium after this surface.
     #[serde(flatten)]
     pub medium: Medium,
+    /// Conic constant k of the sag (0: sphere; -1: paraboloid; below -1: hyperboloid).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub conic: f64,
+    /// The r^2 term of the even asphere, mm^-1 (Zemax `PARM 1`; it adds 2 A2 to the vertex curvature).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub aspheric_r2: f64,
+    /// The even aspheric terms A4, A6, A8, ... (from r^4 up; A_2i in mm^(1-2i)).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub aspheric: Vec<f64>,
     /// Clear semi-aperture (half the clear diameter).
     #[serde(rename = "semi_aperture")]
     pub semi_aperture_mm: f64,
-    /// True on the aperture stop (a flat surface with the same medium on both sides).
+    /// True on the aperture stop: a flat surface in one medium (an iris), or a lens surface whose clear
+    /// aperture is the stop.
     #[serde(default)]
     pub stop: bool,
     /// Anti-reflection coating of this interface.
@@ -148,6 +164,10 @@ pub struct Surface {
     /// Any other keys the file gave for this surface, kept verbatim and written back.
     #[serde(flatten)]
     pub extra: serde_json::Map<String, serde_json::Value>,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 fn is_uncoated(c: &Coating) -> bool {
@@ -165,6 +185,9 @@ impl Surface {
             radius_mm,
             thickness_mm,
             medium,
+            conic: 0.0,
+            aspheric_r2: 0.0,
+            aspheric: Vec::new(),
             semi_aperture_mm,
             stop: false,
             coating: Coating::Uncoated,
@@ -181,11 +204,104 @@ impl Surface {
         self.radius_mm == 0.0
     }
 
-    /// Sag (z offset from the vertex) of this surface at height `h_mm`, or `None` beyond the sphere.
+    /// True for a sphere or plane: no conic constant and no aspheric term.
+    pub fn is_spherical(&self) -> bool {
+        self.conic == 0.0 && self.aspheric_r2 == 0.0 && self.aspheric.iter().all(|&a| a == 0.0)
+    }
+
+    /// The curvature paraxial optics sees at the vertex: `c + 2 A2` (the conic and the terms from r^4 up
+    /// do not change it).
+    pub fn vertex_curvature_per_mm(&self) -> f64 {
+        self.curvature_per_mm() + 2.0 * self.aspheric_r2
+    }
+
+    /// The shape of this surface as the tracer uses it.
+    pub fn shape(&self) -> SurfaceShape {
+        SurfaceShape::of(self)
+    }
+
+    /// Sag (z offset from the vertex) at height `h_mm`, or `None` where it is not defined (beyond
+    /// [`Self::sag_limit_mm`], or not finite).
     pub fn sag_mm(&self, h_mm: f64) -> Option<f64> {
-        let c = self.curvature_per_mm();
-        let root = 1.0 - c * c * h_mm * h_mm;
-        (root >= 0.0).then(|| c * h_mm * h_mm / (1.0 + root.sqrt()))
+        self.shape().sag_mm(h_mm * h_mm)
+    }
+
+    /// The largest height at which the sag is defined: `1 / (|c| sqrt(1 + k))` when `(1 + k) c^2 > 0`
+    /// (the rim of the sphere or ellipsoid), infinite otherwise (planes, paraboloids, hyperboloids).
+    pub fn sag_limit_mm(&self) -> f64 {
+        let q = (1.0 + self.conic) * self.curvature_per_mm().powi(2);
+        if q > 0.0 { 1.0 / q.sqrt() } else { f64::INFINITY }
+    }
+}
+
+/// A surface's shape in the form the inner loops want, `Copy` and allocation-free: curvature, conic, the
+/// r^2 term and up to [`MAX_ASPHERIC_TERMS`] even terms (unused ones 0).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfaceShape {
+    pub curvature_per_mm: f64,
+    pub conic: f64,
+    pub a2: f64,
+    /// A4, A6, ... A16.
+    pub terms: [f64; MAX_ASPHERIC_TERMS],
+    /// True when the conic and every term are 0 (the tracer then uses the exact sphere formulas alone).
+    pub spherical: bool,
+}
+
+impl SurfaceShape {
+    fn of(s: &Surface) -> Self {
+        let mut terms = [0.0; MAX_ASPHERIC_TERMS];
+        for (t, a) in terms.iter_mut().zip(&s.aspheric) {
+            *t = *a;
+        }
+        Self {
+            curvature_per_mm: s.curvature_per_mm(),
+            conic: s.conic,
+            a2: s.aspheric_r2,
+            terms,
+            spherical: s.is_spherical(),
+        }
+    }
+
+    /// The conic part's square-root argument `1 - (1 + k) c^2 r^2` at `r2 = r^2`.
+    fn root_arg(&self, r2: f64) -> f64 {
+        1.0 - (1.0 + self.conic) * self.curvature_per_mm * self.curvature_per_mm * r2
+    }
+
+    /// Sag at `r2 = x^2 + y^2`, `None` where the conic's root is imaginary or the value is not finite.
+    pub fn sag_mm(&self, r2: f64) -> Option<f64> {
+        let root = self.root_arg(r2);
+        if root < 0.0 {
+            return None;
+        }
+        let c = self.curvature_per_mm;
+        let mut z = c * r2 / (1.0 + root.sqrt()) + self.a2 * r2;
+        let mut power = r2 * r2;
+        for a in self.terms {
+            z += a * power;
+            power *= r2;
+        }
+        z.is_finite().then_some(z)
+    }
+
+    /// dz/dr divided by r at `r2 = r^2` (finite at the axis): `c / sqrt(1 - (1 + k) c^2 r^2) + 2 A2 + 4 A4
+    /// r^2 + 6 A6 r^4 + ...`; `None` where the sag is not defined or the slope is infinite (the rim).
+    pub fn slope_over_r(&self, r2: f64) -> Option<f64> {
+        let root = self.root_arg(r2);
+        if root <= 0.0 {
+            return None;
+        }
+        let v = self.curvature_per_mm / root.sqrt() + self.polynomial_slope_over_r(r2);
+        v.is_finite().then_some(v)
+    }
+
+    fn polynomial_slope_over_r(&self, r2: f64) -> f64 {
+        let mut v = 2.0 * self.a2;
+        let mut power = r2;
+        for (i, a) in self.terms.iter().enumerate() {
+            v += (2 * i + 4) as f64 * a * power;
+            power *= r2;
+        }
+        v
     }
 }
 
@@ -220,7 +336,7 @@ pub enum LensError {
 }
 
 impl LensError {
-    fn field(surface: usize, field: &'static str, reason: impl Into<String>) -> Self {
+    pub(crate) fn field(surface: usize, field: &'static str, reason: impl Into<String>) -> Self {
         Self::Field { surface, field, reason: reason.into() }
     }
 }
@@ -281,6 +397,13 @@ impl Lens {
 
     /// Checks that this is a lens light can go through; the first problem found is returned.
     pub fn validate(&self) -> Result<(), LensError> {
+        self.validate_except_edges()?;
+        self.validate_edges()
+    }
+
+    /// Every check of [`Self::validate`] but whether neighbouring surfaces cross (which
+    /// [`crate::optics::tolerance::repair`] may mend).
+    pub fn validate_except_edges(&self) -> Result<(), LensError> {
         let n = self.surfaces.len();
         if n == 0 {
             return Err(LensError::NoSurfaces);
@@ -313,7 +436,7 @@ impl Lens {
         if !last.is_air() {
             return Err(LensError::field(n - 1, "nd", "the image space after the last surface must be air (nd = 1)"));
         }
-        self.validate_edges()
+        Ok(())
     }
 
     fn validate_extras(&self) -> Result<(), LensError> {
@@ -346,25 +469,69 @@ impl Lens {
 
     /// Consecutive surfaces must not cross inside their common clear aperture.
     fn validate_edges(&self) -> Result<(), LensError> {
+        match self.edge_crossings().first() {
+            None => Ok(()),
+            Some(c) => Err(LensError::field(c.surface, "thickness", c.describe())),
+        }
+    }
+
+    /// Every pair of neighbouring surfaces that cross inside their common clear aperture, with the height
+    /// at which they meet (the first height, from the axis out, where the edge gap drops below
+    /// `-EDGE_OVERLAP_TOLERANCE_MM`, found by bisection to 1e-9 mm).
+    pub fn edge_crossings(&self) -> Vec<EdgeCrossing> {
+        let mut out = Vec::new();
         for k in 0..self.surfaces.len().saturating_sub(1) {
             let (a, b) = (&self.surfaces[k], &self.surfaces[k + 1]);
-            let h = a.semi_aperture_mm.min(b.semi_aperture_mm);
+            let h_max = a.semi_aperture_mm.min(b.semi_aperture_mm);
             let t = a.thickness_mm.unwrap_or(0.0);
-            let (Some(sag_a), Some(sag_b)) = (a.sag_mm(h), b.sag_mm(h)) else { continue };
-            let edge_gap = t + sag_b - sag_a;
-            if edge_gap < -EDGE_OVERLAP_TOLERANCE_MM {
-                return Err(LensError::field(
-                    k,
-                    "thickness",
-                    format!(
-                        "surfaces {k} and {} cross each other inside the clear aperture \
-                         (gap {edge_gap:.4} mm at height {h} mm)",
-                        k + 1
-                    ),
-                ));
+            let gap = |h: f64| match (a.sag_mm(h), b.sag_mm(h)) {
+                (Some(sag_a), Some(sag_b)) => t + sag_b - sag_a,
+                _ => f64::INFINITY,
+            };
+            let crosses = |h: f64| gap(h) < -EDGE_OVERLAP_TOLERANCE_MM;
+            let samples = 512;
+            let Some(i) = (1..=samples).find(|&i| crosses(h_max * i as f64 / samples as f64)) else { continue };
+            // The meeting point lies between the last height that does not cross and the first that does.
+            let (mut lo, mut hi) = (h_max * (i - 1) as f64 / samples as f64, h_max * i as f64 / samples as f64);
+            while hi - lo > 1e-9 {
+                let mid = 0.5 * (lo + hi);
+                if gap(mid) < 0.0 { hi = mid } else { lo = mid }
             }
+            out.push(EdgeCrossing {
+                surface: k,
+                meet_height_mm: lo,
+                semi_apertures_mm: [a.semi_aperture_mm, b.semi_aperture_mm],
+                gap_at_edge_mm: gap(h_max),
+            });
         }
-        Ok(())
+        out
+    }
+}
+
+/// Two neighbouring surfaces, `surface` and `surface + 1`, that cross inside their clear apertures.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EdgeCrossing {
+    pub surface: usize,
+    /// Height from the axis at which the two surfaces meet (the gap between them is 0 there).
+    pub meet_height_mm: f64,
+    /// The clear semi-apertures the lens gives the two surfaces.
+    pub semi_apertures_mm: [f64; 2],
+    /// The (negative) axial gap between them at the smaller clear semi-aperture.
+    pub gap_at_edge_mm: f64,
+}
+
+impl EdgeCrossing {
+    /// One sentence, numbers rounded for people.
+    pub fn describe(&self) -> String {
+        let [a, b] = self.semi_apertures_mm;
+        format!(
+            "surfaces {} and {} meet at a height of {} mm, inside their clear semi-apertures ({} and {} mm)",
+            self.surface,
+            self.surface + 1,
+            round(self.meet_height_mm),
+            round(a),
+            round(b)
+        )
     }
 }
 
@@ -409,14 +576,75 @@ fn validate_surface(k: usize, s: &Surface, is_last: bool) -> Result<(), LensErro
     if h > MAX_SEMI_APERTURE_MM {
         return Err(LensError::field(k, "semi_aperture", format!("{h} mm is absurdly large")));
     }
-    if r != 0.0 && r.abs() < h {
+    validate_shape(k, s, r, h)?;
+    validate_coating(k, &s.coating)
+}
+
+/// Heights at which validation samples an aspheric sag across the clear aperture.
+const SAG_SAMPLES: usize = 256;
+
+/// The sag must be defined, finite and of finite slope over the whole clear aperture `0..=h`.
+fn validate_shape(k: usize, s: &Surface, r: f64, h: f64) -> Result<(), LensError> {
+    let conic = finite(k, "conic", s.conic)?;
+    finite(k, "aspheric_r2", s.aspheric_r2)?;
+    if s.aspheric.len() > MAX_ASPHERIC_TERMS {
         return Err(LensError::field(
             k,
-            "radius",
-            format!("|{r}| mm is smaller than the semi-aperture {h} mm: no sphere is that wide"),
+            "aspheric",
+            format!("{} terms; at most {MAX_ASPHERIC_TERMS} (A4 to A16) are supported", s.aspheric.len()),
         ));
     }
-    validate_coating(k, &s.coating)
+    for a in &s.aspheric {
+        finite(k, "aspheric", *a)?;
+    }
+    let limit = s.sag_limit_mm();
+    if limit <= h {
+        let reason = if conic == 0.0 {
+            format!("|{}| mm is smaller than the semi-aperture {} mm: no sphere is that wide", round(r), round(h))
+        } else {
+            format!(
+                "with conic {} the surface is defined up to a height of {} mm, inside the clear semi-aperture \
+                 {} mm",
+                round(conic),
+                round(limit),
+                round(h)
+            )
+        };
+        return Err(LensError::field(k, if conic == 0.0 { "radius" } else { "conic" }, reason));
+    }
+    if !s.is_spherical() {
+        let shape = s.shape();
+        for i in 0..=SAG_SAMPLES {
+            let height = h * i as f64 / SAG_SAMPLES as f64;
+            let r2 = height * height;
+            if shape.sag_mm(r2).is_none() || shape.slope_over_r(r2).is_none() {
+                return Err(LensError::field(
+                    k,
+                    "aspheric",
+                    format!(
+                        "the sag is not finite at a height of {} mm, inside the clear semi-aperture {} mm",
+                        round(height),
+                        round(h)
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// A number as people read it in a message: two decimals at most (four below 1), no trailing zeros
+/// (18.8, not 18.799999999999997).
+pub fn round(v: f64) -> String {
+    if !v.is_finite() {
+        return v.to_string();
+    }
+    if v != 0.0 && (v.abs() >= 1e7 || v.abs() < 1e-4) {
+        return format!("{v:.2e}");
+    }
+    let s = if v.abs() >= 1.0 { format!("{v:.2}") } else { format!("{v:.4}") };
+    let s = s.trim_end_matches('0').trim_end_matches('.');
+    if s == "-0" { "0".to_owned() } else { s.to_owned() }
 }
 
 fn validate_coating(k: usize, c: &Coating) -> Result<(), LensError> {

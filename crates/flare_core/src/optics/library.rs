@@ -18,6 +18,8 @@ pub const BUILTIN_LENSES: &[(&str, &str)] = &[
     ("pbrt_fisheye_10mm", include_str!("../../../../lenses/pbrt_fisheye_10mm.json")),
     ("brendel_tessar_usp2854889", include_str!("../../../../lenses/brendel_tessar_usp2854889.json")),
     ("nikon_zoom_28_75mm", include_str!("../../../../lenses/nikon_zoom_28_75mm.json")),
+    ("zeiss_master_prime_us5537259", include_str!("../../../../lenses/zeiss_master_prime_us5537259.json")),
+    ("aspheric_zoom_us5793533", include_str!("../../../../lenses/aspheric_zoom_us5793533.json")),
 ];
 
 /// The lens the app opens with: the Nikon 28-75 mm zoom, whose chain of polygonal ghosts is what an artist
@@ -60,7 +62,7 @@ pub fn builtin_lens(name: &str) -> Result<Lens, LibraryError> {
             }
         }
     };
-    json::parse(text).map_err(|source| LibraryError::Broken { id: id.to_owned(), source })
+    json::parse(text).map(|loaded| loaded.lens).map_err(|source| LibraryError::Broken { id: id.to_owned(), source })
 }
 
 /// The default lens.
@@ -146,6 +148,6 @@ mod tests {
         assert_eq!(builtin_lens("nikon").unwrap().id, DEFAULT_LENS_ID);
         assert_eq!(builtin_lens("TESSAR").unwrap().id, "brendel_tessar_usp2854889");
         assert!(matches!(builtin_lens("pbrt"), Err(LibraryError::Ambiguous { .. })));
-        assert!(matches!(builtin_lens("zeiss"), Err(LibraryError::NotFound(_))));
+        assert!(matches!(builtin_lens("leica"), Err(LibraryError::NotFound(_))));
     }
 }

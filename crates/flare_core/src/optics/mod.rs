@@ -6,7 +6,8 @@
 //! interactions of the image and of every ghost; [`trace`] follows real rays along a path exactly, and
 //! [`paraxial`] multiplies the 2x2 matrices of the same path. [`mapping`] traces chief rays to map a light's
 //! direction to where it images (and back, for tracked pixels); [`sensor`] writes the frame convention down
-//! once. [`library`] embeds the shipped lenses.
+//! once. [`library`] embeds the shipped lenses. [`tolerance`] loads a prescription whose guessed clear apertures
+//! cross, clipped where that is harmless, with a warning.
 
 pub mod formats;
 pub mod glass;
@@ -16,6 +17,7 @@ pub mod mapping;
 pub mod paraxial;
 pub mod path;
 pub mod sensor;
+pub mod tolerance;
 pub mod trace;
 
 pub use glass::D_LINE_NM;

@@ -135,7 +135,7 @@ impl PathMatrices {
             total = travel.mul(&total);
             since_stop = travel.mul(&since_stop);
             visit(index, &total);
-            let c = lens.surfaces[k].curvature_per_mm();
+            let c = lens.surfaces[k].vertex_curvature_per_mm();
             let s = step.arriving_direction;
             let m = match step.interaction {
                 Interaction::Refract => Mat2::refraction(c, n[step.medium_in], n[step.medium_out], s),

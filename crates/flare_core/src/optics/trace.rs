@@ -1,4 +1,4 @@
-//! Exact sequential ray tracing in 3D, in f64, through spherical and flat interfaces.
+//! Exact sequential ray tracing in 3D, in f64, through spherical, flat, conic and even-aspheric interfaces.
 //!
 //! # How it works
 //! A [`Tracer`] is made once per (lens, light path, wavelength): it resolves each [`Step`] of the
@@ -7,7 +7,13 @@
 //! by Welford's form, which is exact for flat surfaces and stable for huge radii:
 //! with p the ray point relative to the vertex and d its unit direction,
 //! `s = (c |p|^2 - 2 p_z) / (s_dir sqrt(disc) - b)`, `b = c d.p - d_z`, `disc = b^2 - c (c |p|^2 - 2 p_z)`,
-//! where `s_dir` is the travel direction (+1 / -1) that picks the root on the vertex side. Then it refracts by
+//! where `s_dir` is the travel direction (+1 / -1) that picks the root on the vertex side. A conic or aspheric
+//! surface (see the sag in [`crate::optics::lens`]) starts from the same stable root for its quadric
+//! `c (x^2 + y^2 + (1 + k) z^2) - 2 z = 0` (or from the vertex plane where the line misses the quadric) and
+//! then solves `z(s) - sag(r(s)) = 0` by Newton's method, at most [`MAX_NEWTON_STEPS`] steps, until a step is
+//! below 1e-13 of the distance; a line that leaves the region where the sag is defined, or does not
+//! converge, missed the surface. Its normal is `(-m x, -m y, 1) / sqrt(1 + m^2 r^2)` with `m = (dz/dr) / r`.
+//! Then it refracts by
 //! the vector form of Snell's law, `n2 d' = n1 d + (n2 cos t - n1 cos i) N`, or reflects,
 //! `d' = d - 2 (d.N) N`, and finally meets the sensor plane.
 //!
@@ -28,7 +34,7 @@
 use glam::DVec3;
 use serde::Serialize;
 
-use super::lens::Lens;
+use super::lens::{Lens, SurfaceShape};
 use super::paraxial::EntrancePupil;
 use super::path::{Interaction, LightPath, Step};
 
@@ -111,7 +117,7 @@ pub struct TraceResult {
 struct ResolvedStep {
     surface: usize,
     vertex_z_mm: f64,
-    curvature_per_mm: f64,
+    shape: SurfaceShape,
     semi_aperture_mm: f64,
     /// n_in / n_out (1 between equal media).
     eta: f64,
@@ -140,7 +146,7 @@ impl Tracer {
                 ResolvedStep {
                     surface: s.surface,
                     vertex_z_mm: z[s.surface],
-                    curvature_per_mm: surf.curvature_per_mm(),
+                    shape: surf.shape(),
                     semi_aperture_mm: surf.semi_aperture_mm,
                     eta: n[s.medium_in] / n[s.medium_out],
                     reflect: s.interaction == Interaction::Reflect,
@@ -202,11 +208,13 @@ impl Tracer {
             // can meet the next sphere before the last one). This is the convention of the reference
             // figures; inside the clear apertures surfaces never cross (validation refuses that), so rays
             // traced with apertures applied always move forward along the path.
-            let Some(s) = intersect(local, d, step.curvature_per_mm, step.arriving_direction) else {
+            let Some(s) = intersect_shape(local, d, &step.shape, step.arriving_direction) else {
                 return Err(missed);
             };
             p += s * d;
-            let normal = surface_normal(p - DVec3::new(0.0, 0.0, step.vertex_z_mm), step.curvature_per_mm);
+            let Some(normal) = shape_normal(p - DVec3::new(0.0, 0.0, step.vertex_z_mm), &step.shape) else {
+                return Err(missed);
+            };
             let cos_i = d.dot(normal);
             let hit = StepHit {
                 index,
@@ -278,6 +286,59 @@ fn intersect(p: DVec3, d: DVec3, c: f64, z_dir: f64) -> Option<f64> {
     let denominator = z_dir * disc.sqrt() - b;
     let s = cx2 / denominator;
     (denominator != 0.0 && s.is_finite()).then_some(s)
+}
+
+/// Most Newton steps an aspheric intersection may take before the ray counts as missing the surface.
+pub const MAX_NEWTON_STEPS: usize = 40;
+
+/// Distance along unit direction `d` from `p` (relative to the vertex) to the surface `shape`, on the branch
+/// the sag describes; `None` when the line misses it (see the module's notes).
+pub fn intersect_shape(p: DVec3, d: DVec3, shape: &SurfaceShape, z_dir: f64) -> Option<f64> {
+    if shape.spherical {
+        return intersect(p, d, shape.curvature_per_mm, z_dir);
+    }
+    let c = shape.curvature_per_mm;
+    let q = 1.0 + shape.conic;
+    // The quadric alone, by the same stable root as the sphere: a s^2 + 2 b s + g0 = 0.
+    let g0 = c * (p.x * p.x + p.y * p.y + q * p.z * p.z) - 2.0 * p.z;
+    let a = c * (d.x * d.x + d.y * d.y + q * d.z * d.z);
+    let b = c * (p.x * d.x + p.y * d.y + q * p.z * d.z) - d.z;
+    let disc = b * b - a * g0;
+    let quadric = (disc >= 0.0).then(|| g0 / (z_dir * disc.sqrt() - b)).filter(|s| s.is_finite());
+    let mut s = match quadric {
+        Some(s) => s,
+        None if d.z != 0.0 => -p.z / d.z,
+        None => return None,
+    };
+    for _ in 0..MAX_NEWTON_STEPS {
+        let at = p + s * d;
+        let r2 = at.x * at.x + at.y * at.y;
+        let f = at.z - shape.sag_mm(r2)?;
+        let derivative = d.z - shape.slope_over_r(r2)? * (at.x * d.x + at.y * d.y);
+        if derivative == 0.0 {
+            return None;
+        }
+        let step = f / derivative;
+        s -= step;
+        if !s.is_finite() {
+            return None;
+        }
+        if step.abs() <= 1e-13 * (1.0 + s.abs()) {
+            return Some(s);
+        }
+    }
+    None
+}
+
+/// Unit normal of `shape` at the point `p` (relative to the vertex, on the surface), pointing to +z at the
+/// vertex; `None` where the slope is infinite (the rim of a sphere or ellipsoid met edge-on).
+pub fn shape_normal(p: DVec3, shape: &SurfaceShape) -> Option<DVec3> {
+    if shape.spherical {
+        return Some(surface_normal(p, shape.curvature_per_mm));
+    }
+    let m = shape.slope_over_r(p.x * p.x + p.y * p.y)?;
+    let n = DVec3::new(-m * p.x, -m * p.y, 1.0);
+    Some(n / n.length())
 }
 
 /// Unit normal of the surface of curvature `c` at the point `p` (relative to the vertex), pointing to +z

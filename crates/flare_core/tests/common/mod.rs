@@ -24,11 +24,27 @@ pub struct Draft {
     n_d: f64,
     v_d: f64,
     gap_mm: f64,
+    /// Conic constant and the sag departures (mm, at the rim) of the r^2, r^4 and r^6 terms; used on
+    /// every third surface, so the stress suites cover conics and even aspheres.
+    aspheric: Option<(f64, [f64; 3])>,
 }
 
 pub fn draft() -> impl Strategy<Value = Draft> {
-    (any::<u8>(), 1.1..40.0f64, any::<bool>(), 3.0..15.0f64, any::<u8>(), 1.45..1.95f64, 20.0..80.0f64, 0.1..12.0f64)
-        .prop_map(|(f, r, negative, h, g, n_d, v_d, gap_mm)| Draft {
+    let shape = (any::<u8>(), -3.0..0.2f64, -0.05..0.05f64, -0.2..0.2f64, -0.05..0.05f64);
+    (
+        (
+            any::<u8>(),
+            1.1..40.0f64,
+            any::<bool>(),
+            3.0..15.0f64,
+            any::<u8>(),
+            1.45..1.95f64,
+            20.0..80.0f64,
+            0.1..12.0f64,
+        ),
+        shape,
+    )
+        .prop_map(|((f, r, negative, h, g, n_d, v_d, gap_mm), (a, k, d2, d4, d6))| Draft {
             flat: f % 7 == 0,
             radius_over_aperture: r,
             negative,
@@ -37,6 +53,7 @@ pub fn draft() -> impl Strategy<Value = Draft> {
             n_d,
             v_d,
             gap_mm,
+            aspheric: (a % 3 == 0).then_some((k, [d2, d4, d6])),
         })
 }
 
@@ -56,7 +73,15 @@ pub fn assemble(drafts: &[Draft], stop_choice: usize) -> Lens {
         } else {
             d.radius_over_aperture * d.semi_aperture_mm * if d.negative { -1.0 } else { 1.0 }
         };
-        surfaces.push(surface(r, d.gap_mm, medium, d.semi_aperture_mm));
+        let mut s = surface(r, d.gap_mm, medium, d.semi_aperture_mm);
+        if let Some((k, [d2, d4, d6])) = d.aspheric {
+            // |c| h <= 1 / 1.1 and 1 + k <= 1.2 keep the sag defined across the aperture.
+            let h = d.semi_aperture_mm;
+            s.conic = k;
+            s.aspheric_r2 = d2 / (h * h);
+            s.aspheric = vec![d4 / h.powi(4), d6 / h.powi(6)];
+        }
+        surfaces.push(s);
     }
     // The stop goes in front of a surface that has air before it.
     let candidates: Vec<usize> = (0..surfaces.len()).filter(|&k| k == 0 || surfaces[k - 1].medium.is_air()).collect();
@@ -67,8 +92,14 @@ pub fn assemble(drafts: &[Draft], stop_choice: usize) -> Lens {
     surfaces.insert(at, stop);
     for k in 0..surfaces.len() - 1 {
         let h = surfaces[k].semi_aperture_mm.min(surfaces[k + 1].semi_aperture_mm);
-        let overlap = surfaces[k].sag_mm(h).unwrap() - surfaces[k + 1].sag_mm(h).unwrap();
-        let t = surfaces[k].thickness_mm.unwrap() + overlap.max(0.0);
+        // Aspheric terms can make the surfaces come closest inside the rim: look across the aperture.
+        let overlap = (0..=64)
+            .map(|i| {
+                let y = h * f64::from(i) / 64.0;
+                surfaces[k].sag_mm(y).unwrap() - surfaces[k + 1].sag_mm(y).unwrap()
+            })
+            .fold(0.0, f64::max);
+        let t = surfaces[k].thickness_mm.unwrap() + overlap + 1e-6;
         surfaces[k].thickness_mm = Some(t);
     }
     let lens = Lens { id: "random".into(), name: "random".into(), surfaces, extra: Default::default() };

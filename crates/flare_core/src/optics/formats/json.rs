@@ -1,11 +1,11 @@
 //! The native JSON lens form (`lenses/README.md`): read with the path of any bad value, written back
 //! losslessly (unknown keys are kept, numbers are written in their shortest exact form).
 
-use super::text::FormatError;
+use super::text::{FormatError, LoadedLens, finish_loaded};
 use crate::optics::lens::Lens;
 
-/// Parses and validates a JSON lens.
-pub fn parse(text: &str) -> Result<Lens, FormatError> {
+/// Parses and validates a JSON lens (tolerantly: see [`crate::optics::tolerance`]).
+pub fn parse(text: &str) -> Result<LoadedLens, FormatError> {
     let mut de = serde_json::Deserializer::from_str(text);
     let lens: Lens = serde_path_to_error::deserialize(&mut de).map_err(|e| {
         let path = e.path().to_string();
@@ -13,8 +13,7 @@ pub fn parse(text: &str) -> Result<Lens, FormatError> {
         json_error(&inner, path)
     })?;
     de.end().map_err(|e| json_error(&e, String::new()))?;
-    lens.validate().map_err(|e| FormatError::invalid(e, &[]))?;
-    Ok(lens)
+    finish_loaded(lens, Vec::new(), &[])
 }
 
 fn json_error(e: &serde_json::Error, path: String) -> FormatError {

@@ -4,7 +4,8 @@
 //! [`load_lens_file`] reads at most [`MAX_FILE_BYTES`], decodes the text (UTF-8, or UTF-16 with or without a
 //! byte-order mark as OpticStudio writes it, or Latin-1 for old `.zmx` files), picks the format by extension
 //! and then by content ([`LensFormat::detect`]), parses it, and validates the lens
-//! ([`crate::optics::lens::Lens::validate`]). Every failure is a [`FormatError`] that names the file's line
+//! tolerantly ([`crate::optics::tolerance::repair`]: guessed clear apertures that make neighbours cross are
+//! clipped, with a warning, where no axial light passes). Every failure is a [`FormatError`] that names the file's line
 //! (text formats) or the JSON path, and the field; nothing is half-loaded. Writers produce text that the
 //! readers read back to the same lens ([`to_json`], [`zmx::write`], [`pbrt::write`]), and
 //! [`crate::files::write_atomic`] puts it on disk through a temporary file and a rename, so a crash never
@@ -15,7 +16,7 @@ pub mod pbrt;
 mod text;
 pub mod zmx;
 
-pub use text::{FormatError, MAX_FILE_BYTES};
+pub use text::{FormatError, LoadedLens, MAX_FILE_BYTES};
 
 use std::io::Read;
 use std::path::Path;
@@ -122,9 +123,9 @@ pub fn decode_text(bytes: &[u8]) -> Result<String, FormatError> {
     Ok(text)
 }
 
-/// Parses lens text in `format` (or the detected one) and validates it. `id_hint` names the lens when the
-/// format has no id of its own (the file stem).
-pub fn parse_lens(text: &str, format: Option<LensFormat>, id_hint: &str) -> Result<Lens, FormatError> {
+/// Parses lens text in `format` (or the detected one) and validates it tolerantly, with the reader's
+/// warnings. `id_hint` names the lens when the format has no id of its own (the file stem).
+pub fn read_lens(text: &str, format: Option<LensFormat>, id_hint: &str) -> Result<LoadedLens, FormatError> {
     let format = match format {
         Some(f) => f,
         None => LensFormat::detect(text).ok_or(FormatError::UnknownFormat)?,
@@ -136,17 +137,27 @@ pub fn parse_lens(text: &str, format: Option<LensFormat>, id_hint: &str) -> Resu
     }
 }
 
-/// Parses lens file bytes: decoding, format from the extension of `name` or the content, validation.
-pub fn parse_lens_bytes(bytes: &[u8], name: &Path) -> Result<Lens, FormatError> {
+/// [`read_lens`] without the warnings.
+pub fn parse_lens(text: &str, format: Option<LensFormat>, id_hint: &str) -> Result<Lens, FormatError> {
+    read_lens(text, format, id_hint).map(|l| l.lens)
+}
+
+/// Reads lens file bytes: decoding, format from the extension of `name` or the content, validation.
+pub fn read_lens_bytes(bytes: &[u8], name: &Path) -> Result<LoadedLens, FormatError> {
     let text = decode_text(bytes)?;
     let stem = name.file_stem().and_then(|s| s.to_str()).unwrap_or("lens");
     let format = LensFormat::from_extension(name).or_else(|| LensFormat::detect(&text));
-    parse_lens(&text, format, stem)
+    read_lens(&text, format, stem)
 }
 
-/// Reads and validates a lens file of any supported format.
-pub fn load_lens_file(path: &Path) -> Result<Lens, FormatError> {
-    let io = |source| FormatError::Io { path: path.display().to_string(), source };
+/// [`read_lens_bytes`] without the warnings.
+pub fn parse_lens_bytes(bytes: &[u8], name: &Path) -> Result<Lens, FormatError> {
+    read_lens_bytes(bytes, name).map(|l| l.lens)
+}
+
+/// Reads and validates a lens file of any supported format, with the reader's warnings.
+pub fn read_lens_file(path: &Path) -> Result<LoadedLens, FormatError> {
+    let io = |error| FormatError::Io { path: path.display().to_string(), error };
     let file = std::fs::File::open(path).map_err(io)?;
     let bytes = file.metadata().map_err(io)?.len();
     if bytes > MAX_FILE_BYTES {
@@ -154,7 +165,12 @@ pub fn load_lens_file(path: &Path) -> Result<Lens, FormatError> {
     }
     let mut data = Vec::with_capacity(bytes as usize);
     file.take(MAX_FILE_BYTES + 1).read_to_end(&mut data).map_err(io)?;
-    parse_lens_bytes(&data, path)
+    read_lens_bytes(&data, path)
+}
+
+/// [`read_lens_file`] without the warnings.
+pub fn load_lens_file(path: &Path) -> Result<Lens, FormatError> {
+    read_lens_file(path).map(|l| l.lens)
 }
 
 /// The native JSON text of a lens (pretty, one key per line), which [`json::parse`] reads back identically.

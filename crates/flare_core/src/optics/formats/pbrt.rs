@@ -9,13 +9,13 @@
 //! [`crate::optics::glass`]; at the d-line it is identical to its JSON twin. The first comment line, if
 //! any, names the lens.
 
-use super::text::{FormatError, exact, finish_text_lens};
+use super::text::{FormatError, LoadedLens, exact, finish_text_lens};
 use crate::optics::lens::{Lens, Medium, Surface};
 
 const FORMAT: &str = "pbrt .dat";
 
 /// Parses and validates a pbrt `.dat` text.
-pub fn parse(text: &str, id_hint: &str) -> Result<Lens, FormatError> {
+pub fn parse(text: &str, id_hint: &str) -> Result<LoadedLens, FormatError> {
     let mut name = String::new();
     let mut surfaces: Vec<Surface> = Vec::new();
     let mut lines = Vec::new();
@@ -60,11 +60,18 @@ pub fn parse(text: &str, id_hint: &str) -> Result<Lens, FormatError> {
     {
         last.thickness_mm = None;
     }
-    finish_text_lens(surfaces, name, id_hint, &lines)
+    finish_text_lens(surfaces, name, id_hint, &lines, Vec::new())
 }
 
-/// The lens as a pbrt `.dat` table (aperture as diameter, index 0 on the stop, air as 1).
-pub fn write(lens: &Lens) -> String {
+/// The lens as a pbrt `.dat` table (aperture as diameter, index 0 on the stop, air as 1). pbrt's table has
+/// spheres only: an aspheric or conic surface is refused, naming it.
+pub fn write(lens: &Lens) -> Result<String, FormatError> {
+    if let Some(k) = lens.surfaces.iter().position(|s| !s.is_spherical()) {
+        return Err(FormatError::Structure {
+            format: "pbrt .dat",
+            message: format!("surface {k} is aspheric or conic, and pbrt's lens table holds spheres only"),
+        });
+    }
     let mut out =
         format!("# {}\n# radius\tthickness\tindex\taperture (diameter)\n", lens.name.replace(['\n', '\r'], " "));
     for s in &lens.surfaces {
@@ -77,5 +84,5 @@ pub fn write(lens: &Lens) -> String {
             exact(2.0 * s.semi_aperture_mm)
         ));
     }
-    out
+    Ok(out)
 }

@@ -4,6 +4,27 @@
 //! the shortest text that reads back to the same f64).
 
 use crate::optics::lens::{Lens, LensError, Surface};
+use crate::optics::tolerance;
+
+/// A lens as read from a file, with what the reader had to decide for it (clipped clear apertures, which
+/// system aperture won): one sentence per warning, for `lens info`, stderr and the app's lens panel.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LoadedLens {
+    pub lens: Lens,
+    pub warnings: Vec<String>,
+}
+
+/// Validates `lens` tolerantly ([`tolerance::repair`]), adding its warnings after the reader's own;
+/// `surface_lines[k]` is the file line of surface k, so that a refusal names it.
+pub(crate) fn finish_loaded(
+    mut lens: Lens,
+    mut warnings: Vec<String>,
+    surface_lines: &[usize],
+) -> Result<LoadedLens, FormatError> {
+    let repaired = tolerance::repair(&mut lens).map_err(|e| FormatError::invalid(e, surface_lines))?;
+    warnings.extend(repaired);
+    Ok(LoadedLens { lens, warnings })
+}
 
 /// Lens files larger than this are refused before they are read.
 pub const MAX_FILE_BYTES: u64 = 16 * 1024 * 1024;
@@ -11,8 +32,10 @@ pub const MAX_FILE_BYTES: u64 = 16 * 1024 * 1024;
 /// Why a lens file could not be read. Each message fits on one line.
 #[derive(Debug, thiserror::Error)]
 pub enum FormatError {
-    #[error("cannot read {path}: {source}")]
-    Io { path: String, source: std::io::Error },
+    // The causes are part of each message and deliberately not `source`s: an error chain printed with
+    // its sources would say them twice.
+    #[error("cannot read {path}: {error}")]
+    Io { path: String, error: std::io::Error },
     #[error("the file is {bytes} bytes; lens files are small (at most {MAX_FILE_BYTES})")]
     TooLarge { bytes: u64 },
     #[error("the file is empty")]
@@ -29,8 +52,8 @@ pub enum FormatError {
     Unsupported { format: &'static str, line: usize, what: String },
     #[error("{format}: {message}")]
     Structure { format: &'static str, message: String },
-    #[error("{where_}{source}", where_ = line_prefix(.line))]
-    Invalid { line: Option<usize>, source: LensError },
+    #[error("{where_}{error}", where_ = line_prefix(.line))]
+    Invalid { line: Option<usize>, error: LensError },
 }
 
 fn json_at(path: &str) -> String {
@@ -43,12 +66,12 @@ fn line_prefix(line: &Option<usize>) -> String {
 
 impl FormatError {
     /// Wraps a validation error, naming the file line of the surface where the format has lines.
-    pub(crate) fn invalid(source: LensError, surface_lines: &[usize]) -> Self {
-        let line = match &source {
+    pub(crate) fn invalid(error: LensError, surface_lines: &[usize]) -> Self {
+        let line = match &error {
             LensError::Field { surface, .. } => surface_lines.get(*surface).copied(),
             _ => None,
         };
-        Self::Invalid { line, source }
+        Self::Invalid { line, error }
     }
 }
 
@@ -59,15 +82,15 @@ pub(crate) fn finish_text_lens(
     name: String,
     id_hint: &str,
     surface_lines: &[usize],
-) -> Result<Lens, FormatError> {
+    warnings: Vec<String>,
+) -> Result<LoadedLens, FormatError> {
     let lens = Lens {
         id: id_hint.to_owned(),
         name: if name.is_empty() { id_hint.to_owned() } else { name },
         surfaces,
         extra: Default::default(),
     };
-    lens.validate().map_err(|e| FormatError::invalid(e, surface_lines))?;
-    Ok(lens)
+    finish_loaded(lens, warnings, surface_lines)
 }
 
 /// Formats a number so that it reads back to the same f64 (shortest round-trip form).

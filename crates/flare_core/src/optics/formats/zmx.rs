@@ -2,17 +2,22 @@
 //!
 //! # How it works
 //! A `.zmx` file is a list of keyword lines. `SURF n` opens surface n; surface 0 is the object and the last
-//! is the image, the ones between are the lens. Inside a surface FlareLab reads `TYPE` (only `STANDARD`),
-//! `CURV` (curvature, 1/length; 0 = flat), `DISZ` (thickness to the next surface), `GLAS` (name, then two
-//! flags, then n_d and V_d of the model or catalogue glass), `DIAM` (the *semi*-diameter), `STOP`, and
-//! `CONI` (which must be 0). `UNIT` scales lengths to millimetres and `NAME` names the lens. Anything that
-//! would change the optics and that FlareLab does not model (other surface types, conics, mirrors,
-//! non-circular apertures, non-sequential mode) is refused by name with its line; purely cosmetic keywords
-//! (comments, colours, solves' flags) are skipped.
+//! is the image, the ones between are the lens. Inside a surface FlareLab reads `TYPE` (`STANDARD` or
+//! `EVENASPH`), `CURV` (curvature, 1/length; 0 = flat), `CONI` (conic constant), `PARM n` of an even asphere
+//! (`PARM 1` the r^2 term, `PARM 2..8` the r^4..r^16 terms, scaled by the unit), `DISZ` (thickness to the
+//! next surface), `GLAS` (name, then two flags, then n_d and V_d of the model or catalogue glass), `DIAM` (the
+//! *semi*-diameter) and `STOP`. `UNIT` scales lengths to millimetres and `NAME` names the lens. The system
+//! aperture sets the stop's semi-diameter: `ENPD d` (entrance pupil diameter) or `FNUM F` (image-space F/#,
+//! so `d = EFL / F`) scale it so that the paraxial entrance pupil has that diameter, and a warning says
+//! which one won; `FLOA` (float by stop size) keeps the stop's `DIAM`. Anything that would change the optics
+//! and that FlareLab does not model (other surface types, mirrors, non-circular apertures, non-sequential
+//! mode, other aperture types) is refused by name with its line; purely cosmetic keywords (comments,
+//! colours, solves' flags) are skipped.
 
-use super::text::{FormatError, exact, finish_text_lens};
+use super::text::{FormatError, LoadedLens, exact, finish_text_lens};
 use crate::optics::glass::find_glass;
-use crate::optics::lens::{Lens, Medium, Surface};
+use crate::optics::lens::{Lens, MAX_ASPHERIC_TERMS, Medium, Surface, round};
+use crate::optics::paraxial::FirstOrder;
 
 const FORMAT: &str = "Zemax .zmx";
 
@@ -40,13 +45,26 @@ struct Block {
     glass: Option<(usize, Medium)>,
     semi_diameter: Option<f64>,
     stop: bool,
+    even_asphere: bool,
+    conic: f64,
+    /// PARM 1..8 as read (unscaled), with their lines.
+    parms: [(usize, f64); 8],
+}
+
+/// The system aperture a file declares, with its line.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum SystemAperture {
+    EntrancePupilDiameter { line: usize, diameter_mm: f64 },
+    ImageFNumber { line: usize, f_number: f64 },
+    FloatByStop { line: usize },
 }
 
 /// Parses and validates a `.zmx` text.
-pub fn parse(text: &str, id_hint: &str) -> Result<Lens, FormatError> {
+pub fn parse(text: &str, id_hint: &str) -> Result<LoadedLens, FormatError> {
     let mut blocks: Vec<Block> = Vec::new();
     let mut name = String::new();
     let mut scale_to_mm = 1.0;
+    let mut apertures: Vec<SystemAperture> = Vec::new();
     for (index, raw) in text.lines().enumerate() {
         let line = index + 1;
         let mut tokens = raw.split_whitespace();
@@ -75,16 +93,38 @@ pub fn parse(text: &str, id_hint: &str) -> Result<Lens, FormatError> {
                 }
                 blocks.push(Block { line, ..Block::default() });
             }
+            "ENPD" if blocks.is_empty() => {
+                let d = number(line, "ENPD", tokens.next())?;
+                if d <= 0.0 {
+                    return Err(line_error(line, format!("ENPD {d}: an entrance pupil diameter must be positive")));
+                }
+                apertures.push(SystemAperture::EntrancePupilDiameter { line, diameter_mm: d * scale_to_mm });
+            }
+            "FNUM" if blocks.is_empty() => {
+                let f = number(line, "FNUM", tokens.next())?;
+                if f <= 0.0 {
+                    return Err(line_error(line, format!("FNUM {f}: an f-number must be positive")));
+                }
+                apertures.push(SystemAperture::ImageFNumber { line, f_number: f });
+            }
+            "FLOA" if blocks.is_empty() => apertures.push(SystemAperture::FloatByStop { line }),
             _ if blocks.is_empty() => {}
             "TYPE" => match tokens.next() {
                 Some("STANDARD") => {}
+                Some("EVENASPH") => blocks.last_mut().unwrap().even_asphere = true,
                 other => return Err(unsupported(line, format!("surface TYPE {}", other.unwrap_or("(none)")))),
             },
             "CURV" => blocks.last_mut().unwrap().curvature = number(line, "CURV", tokens.next())? / scale_to_mm,
-            "CONI" => {
-                let k = number(line, "CONI", tokens.next())?;
-                if k != 0.0 {
-                    return Err(unsupported(line, format!("conic constant CONI {k} (aspheric surface)")));
+            "CONI" => blocks.last_mut().unwrap().conic = number(line, "CONI", tokens.next())?,
+            "PARM" => {
+                let n = number(line, "PARM", tokens.next())?;
+                let v = number(line, "PARM value", tokens.next())?;
+                if n.fract() != 0.0 || !(0.0..=8.0).contains(&n) {
+                    if v != 0.0 {
+                        return Err(unsupported(line, format!("PARM {n} = {v} (an even asphere has PARM 1 to 8)")));
+                    }
+                } else if n >= 1.0 {
+                    blocks.last_mut().unwrap().parms[n as usize - 1] = (line, v);
                 }
             }
             "DISZ" => {
@@ -109,7 +149,7 @@ pub fn parse(text: &str, id_hint: &str) -> Result<Lens, FormatError> {
             _ => {}
         }
     }
-    build(blocks, name, id_hint)
+    build(blocks, name, id_hint, &apertures, scale_to_mm)
 }
 
 /// Reads a `GLAS name flag flag n_d V_d ...` line.
@@ -134,7 +174,13 @@ fn glass_line(line: usize, tokens: &[&str]) -> Result<Medium, FormatError> {
     Ok(Medium { n_d, v_d, glass: (!model).then(|| name.to_owned()) })
 }
 
-fn build(blocks: Vec<Block>, name: String, id_hint: &str) -> Result<Lens, FormatError> {
+fn build(
+    blocks: Vec<Block>,
+    name: String,
+    id_hint: &str,
+    apertures: &[SystemAperture],
+    scale_to_mm: f64,
+) -> Result<LoadedLens, FormatError> {
     if blocks.len() < 3 {
         return Err(FormatError::Structure {
             format: FORMAT,
@@ -151,25 +197,122 @@ fn build(blocks: Vec<Block>, name: String, id_hint: &str) -> Result<Lens, Format
         return Err(unsupported(*line, "an object surface in glass (object space must be air)"));
     }
     let image = blocks.len() - 1;
+    let aperture = system_aperture(apertures);
+    let stop_sized_by_file =
+        matches!(aperture.0, Some(SystemAperture::EntrancePupilDiameter { .. } | SystemAperture::ImageFNumber { .. }));
     let mut surfaces = Vec::with_capacity(image - 1);
     let mut lines = Vec::with_capacity(image - 1);
     for (k, b) in blocks[1..image].iter().enumerate() {
         if b.thickness_infinite {
             return Err(line_error(b.line, format!("surface {k} has DISZ INFINITY (only the object may)")));
         }
-        let semi_aperture_mm = b
-            .semi_diameter
-            .ok_or_else(|| line_error(b.line, format!("surface {k} has no DIAM (clear semi-diameter)")))?;
+        let semi_aperture_mm = match b.semi_diameter {
+            Some(d) => d,
+            // The system aperture sizes the stop: any positive placeholder will be scaled.
+            None if b.stop && stop_sized_by_file => 1.0,
+            None => return Err(line_error(b.line, format!("surface {k} has no DIAM (clear semi-diameter)"))),
+        };
         let medium = b.glass.as_ref().map(|(_, m)| m.clone()).unwrap_or_else(Medium::air);
         let radius_mm = if b.curvature == 0.0 { 0.0 } else { 1.0 / b.curvature };
-        let surface = Surface::new(radius_mm, Some(b.thickness.unwrap_or(0.0)), medium, semi_aperture_mm);
-        surfaces.push(Surface { stop: b.stop, ..surface });
+        let mut surface = Surface::new(radius_mm, Some(b.thickness.unwrap_or(0.0)), medium, semi_aperture_mm);
+        surface.stop = b.stop;
+        surface.conic = b.conic;
+        if b.even_asphere {
+            // PARM n multiplies r^(2n): in file units it is length^(1-2n).
+            let scale = |n: usize| scale_to_mm.powi(1 - 2 * n as i32);
+            surface.aspheric_r2 = b.parms[0].1 * scale(1);
+            let mut terms: Vec<f64> = (2..=8).map(|n| b.parms[n - 1].1 * scale(n)).collect();
+            while terms.last() == Some(&0.0) {
+                terms.pop();
+            }
+            debug_assert!(terms.len() <= MAX_ASPHERIC_TERMS);
+            surface.aspheric = terms;
+        } else if let Some((n, (line, v))) = b.parms.iter().enumerate().find(|(_, (_, v))| *v != 0.0) {
+            return Err(unsupported(
+                *line,
+                format!("PARM {} = {v} on a STANDARD surface (only TYPE EVENASPH has them)", n + 1),
+            ));
+        }
+        surfaces.push(surface);
         lines.push(b.line);
     }
-    finish_text_lens(surfaces, name, id_hint, &lines)
+    let mut warnings = aperture.1;
+    if let Some(a) = aperture.0 {
+        size_stop(&mut surfaces, a, &lines, &mut warnings)?;
+    }
+    finish_text_lens(surfaces, name, id_hint, &lines, warnings)
 }
 
-/// The lens as a sequential `.zmx` text (UTF-8, millimetres, STANDARD surfaces), which [`parse`] reads back
+/// The system aperture that wins (ENPD over FNUM; FLOA, float by stop size, over both, as OpticStudio
+/// keeps the other values in the file when the type is changed) and the warnings for the ones it beat.
+fn system_aperture(apertures: &[SystemAperture]) -> (Option<SystemAperture>, Vec<String>) {
+    let rank = |a: &SystemAperture| match a {
+        SystemAperture::FloatByStop { .. } => 0,
+        SystemAperture::EntrancePupilDiameter { .. } => 1,
+        SystemAperture::ImageFNumber { .. } => 2,
+    };
+    let Some(winner) = apertures.iter().min_by_key(|a| rank(a)).copied() else { return (None, Vec::new()) };
+    let describe = |a: &SystemAperture| match *a {
+        SystemAperture::FloatByStop { line } => format!("FLOA (line {line})"),
+        SystemAperture::EntrancePupilDiameter { line, diameter_mm } => {
+            format!("ENPD {} mm (line {line})", round(diameter_mm))
+        }
+        SystemAperture::ImageFNumber { line, f_number } => format!("FNUM {} (line {line})", round(f_number)),
+    };
+    let warnings = apertures
+        .iter()
+        .filter(|a| **a != winner)
+        .map(|a| format!("the system aperture {} is ignored: {} wins", describe(a), describe(&winner)))
+        .collect();
+    (Some(winner), warnings)
+}
+
+/// Scales the stop's semi-diameter so that the paraxial entrance pupil has the diameter the file's ENPD
+/// or FNUM asks for, and says so.
+fn size_stop(
+    surfaces: &mut [Surface],
+    aperture: SystemAperture,
+    lines: &[usize],
+    warnings: &mut Vec<String>,
+) -> Result<(), FormatError> {
+    let Some(stop) = surfaces.iter().position(|s| s.stop) else { return Ok(()) };
+    let line = match aperture {
+        SystemAperture::FloatByStop { .. } => return Ok(()),
+        SystemAperture::EntrancePupilDiameter { line, .. } | SystemAperture::ImageFNumber { line, .. } => line,
+    };
+    let probe = Lens { id: String::new(), name: String::new(), surfaces: surfaces.to_vec(), extra: Default::default() };
+    let first_order = FirstOrder::d_line(&probe).map_err(|e| {
+        line_error(line, format!("the system aperture needs the lens's first-order data, and there are none: {e}"))
+    })?;
+    let (wanted_mm, said) = match aperture {
+        SystemAperture::EntrancePupilDiameter { diameter_mm, .. } => {
+            (diameter_mm, format!("ENPD {} mm", round(diameter_mm)))
+        }
+        SystemAperture::ImageFNumber { f_number, .. } => {
+            (first_order.efl_mm.abs() / f_number, format!("FNUM {}", round(f_number)))
+        }
+        SystemAperture::FloatByStop { .. } => unreachable!("returned above"),
+    };
+    let given = surfaces[stop].semi_aperture_mm;
+    let semi = given * wanted_mm / first_order.entrance_pupil_diameter_mm;
+    if !(semi.is_finite() && semi > 0.0) {
+        return Err(line_error(line, format!("{said} gives no usable stop size")));
+    }
+    surfaces[stop].semi_aperture_mm = semi;
+    let had = if (semi - given).abs() <= 1e-6 * semi {
+        "as its DIAM says".to_owned()
+    } else {
+        format!("its DIAM said {} mm", round(given))
+    };
+    warnings.push(format!(
+        "the system aperture {said} (line {line}) sets the stop's (surface {stop}, line {}) semi-diameter to {} mm ({had})",
+        lines[stop],
+        round(semi)
+    ));
+    Ok(())
+}
+
+/// The lens as a sequential `.zmx` text (UTF-8, millimetres, STANDARD or EVENASPH surfaces), which [`parse`] reads back
 /// to the same prescription (curvature is stored as 1/R, so radii round-trip to the last bit or one ulp).
 pub fn write(lens: &Lens) -> String {
     let mut out = String::new();
@@ -190,8 +333,21 @@ pub fn write(lens: &Lens) -> String {
         if s.stop {
             push("  STOP".to_owned());
         }
-        push("  TYPE STANDARD".to_owned());
+        if s.is_spherical() {
+            push("  TYPE STANDARD".to_owned());
+        } else {
+            push("  TYPE EVENASPH".to_owned());
+        }
         push(format!("  CURV {}", exact(s.curvature_per_mm())));
+        if s.conic != 0.0 {
+            push(format!("  CONI {}", exact(s.conic)));
+        }
+        if !s.is_spherical() {
+            push(format!("  PARM 1 {}", exact(s.aspheric_r2)));
+            for n in 2..=8 {
+                push(format!("  PARM {n} {}", exact(s.aspheric.get(n - 2).copied().unwrap_or(0.0))));
+            }
+        }
         push(format!("  DISZ {}", exact(s.thickness_mm.unwrap_or(0.0))));
         if !s.medium.is_air() {
             let name = s.medium.glass.as_deref().filter(|g| !g.is_empty() && !g.contains(char::is_whitespace));
