@@ -74,7 +74,7 @@ pub fn run(args: &GhostsArgs) -> Result<()> {
             "center_mm": sprite.map(|s| s.0.map(|v| v + 0.0)), "radius_mm": sprite.map(|s| s.1),
             "intensity": intensity, "rgb": rgb,
             "straddles_stop": ghost.straddles_stop,
-            "stop_crossings": if ghost.straddles_stop { 3 } else { 1 },
+            "stop_crossings": ghost.per_wavelength[reported].matrices.stop_from_entrance.len(),
             "culled": culled,
             "per_wavelength": per_wavelength,
         }));
@@ -116,7 +116,11 @@ pub fn run(args: &GhostsArgs) -> Result<()> {
             r["i"],
             r["j"],
             r["intensity"].as_f64().unwrap_or(0.0),
-            if r["straddles_stop"] == true { "3 times" } else { "once" },
+            match r["stop_crossings"].as_u64() {
+                Some(1) => "once".to_owned(),
+                Some(n) => format!("{n} times"),
+                None => "-".to_owned(),
+            },
             r["culled"].as_str().unwrap_or("")
         );
     }

@@ -63,7 +63,7 @@ fn lens_info(file: &str, as_json: bool, wavelength_nm: f64) -> Result<()> {
     check_wavelength(wavelength_nm)?;
     let loaded = open_lens_checked(file)?;
     let (lens, warnings) = (&loaded.lens, &loaded.warnings);
-    let fo = FirstOrder::compute(&lens, wavelength_nm).with_context(|| file.to_string())?;
+    let fo = FirstOrder::compute(lens, wavelength_nm).with_context(|| file.to_string())?;
     let ghosts = lens.ghost_pairs();
     let assumed: Vec<usize> =
         (0..lens.surfaces.len()).filter(|&k| lens.surfaces[k].medium.dispersion().is_assumed()).collect();

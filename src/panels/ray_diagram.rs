@@ -177,7 +177,9 @@ pub fn ray_diagram_ui(
                                 .width(3.0),
                         );
                     }
-                    continue;
+                    if !lens.stop_on_lens_surface() {
+                        continue;
+                    }
                 }
                 let pts: Vec<[f64; 2]> = (0..=40)
                     .map(|n| {

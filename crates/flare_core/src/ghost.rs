@@ -413,7 +413,9 @@ impl GhostSystem {
                 for k in (0..j).rev() {
                     let at_k = gap(k + 1, k).mul(&back);
                     if k == stop {
-                        backward_stop_crossing = Some(at_k);
+                        // Just after the stop's interaction, as `PathMatrices::walk` records it (the heights
+                        // are those on arrival: refraction and reflection keep them).
+                        backward_stop_crossing = Some(backward_refraction(k).mul(&at_k));
                     }
                     if reflecting[k]
                         && let Some(g) = ghost_index(k, j)
@@ -421,14 +423,19 @@ impl GhostSystem {
                         let after_i = Mat2::reflection(curvature[k], -1.0).mul(&at_k);
                         let sensor_from_entrance = to_sensor[k].mul(&after_i);
                         let mut stop_from_entrance = Vec::with_capacity(3);
+                        // The stop's crossings in path order, each just after its interaction there: going
+                        // forward to j (a reflection when the stop is surface j itself), coming back (a
+                        // reflection when it is surface i), and going forward again after i.
                         if stop < j {
-                            stop_from_entrance.push(arrive[stop]);
+                            stop_from_entrance.push(forward_refraction(stop).mul(&arrive[stop]));
+                        } else if stop == j {
+                            stop_from_entrance.push(Mat2::reflection(curvature[j], 1.0).mul(&arrive[stop]));
                         }
                         if let Some(crossing) = backward_stop_crossing {
-                            stop_from_entrance.push(crossing);
+                            stop_from_entrance.push(if k == stop { after_i } else { crossing });
                         }
                         if k < stop {
-                            stop_from_entrance.push(to_stop[k].mul(&after_i));
+                            stop_from_entrance.push(forward_refraction(stop).mul(&to_stop[k].mul(&after_i)));
                         }
                         let last_crossing = *stop_from_entrance.last().expect("every path crosses the stop");
                         let sensor_from_stop = sensor_from_entrance.mul(&last_crossing.inverse());
@@ -675,12 +682,16 @@ impl GhostSystem {
 mod tests {
     use super::*;
     use crate::optics::LightPath;
-    use crate::optics::library::{builtin_lens, ids, synthetic_lens};
+    use crate::optics::library::{builtin_lens, ids, synthetic_lens, with_stop_on_front_surface};
 
     #[test]
     fn shared_products_equal_each_ghost_path_multiplied_out() {
         let mut lenses: Vec<Lens> = ids().into_iter().map(|id| builtin_lens(id).unwrap()).collect();
         lenses.push(synthetic_lens(26));
+        // Stops on lens surfaces: ghosts that reflect at the stop cross it twice.
+        for id in ["tessar", "heliar", "dgauss"] {
+            lenses.push(with_stop_on_front_surface(&builtin_lens(id).unwrap()).unwrap());
+        }
         let close = |a: &Mat2, b: &Mat2| {
             let (a, b) = (a.as_rows(), b.as_rows());
             (0..2).all(|r| (0..2).all(|c| (a[r][c] - b[r][c]).abs() <= 1e-11 * (1.0 + b[r][c].abs())))

@@ -325,7 +325,7 @@ pub enum LensError {
     NoSurfaces,
     #[error("the lens has {count} surfaces; at most {MAX_SURFACES} are supported")]
     TooManySurfaces { count: usize },
-    #[error("the lens has no aperture stop (mark one flat air surface with \"stop\": true)")]
+    #[error("the lens has no aperture stop (mark one surface with \"stop\": true)")]
     NoStop,
     #[error("the lens has {count} aperture stops (surfaces {surfaces:?}); exactly one is needed")]
     SeveralStops { count: usize, surfaces: Vec<usize> },
@@ -376,11 +376,17 @@ impl Lens {
         std::iter::once(1.0).chain(self.surfaces.iter().map(|s| s.medium.index_at(wavelength_nm))).collect()
     }
 
-    /// Surfaces that reflect: the media on their two sides differ. The stop never counts.
+    /// Surfaces that reflect: the media on their two sides differ. A stop on a lens surface reflects like
+    /// any lens surface; an iris (a stop with one medium on both sides) never does.
     pub fn reflecting_surfaces(&self) -> Vec<usize> {
-        (0..self.surfaces.len())
-            .filter(|&k| !self.surfaces[k].stop && self.medium_before(k).differs_from(&self.surfaces[k].medium))
-            .collect()
+        (0..self.surfaces.len()).filter(|&k| self.medium_before(k).differs_from(&self.surfaces[k].medium)).collect()
+    }
+
+    /// True when the stop is a lens surface (curved, or between different media) rather than an iris in one
+    /// medium.
+    pub fn stop_on_lens_surface(&self) -> bool {
+        let k = self.stop_index();
+        self.surfaces.get(k).is_some_and(|s| !s.is_flat() || self.medium_before(k).differs_from(&s.medium))
     }
 
     /// Every two-reflection ghost (i, j), i < j: the light reflects at j, then at i.
@@ -420,17 +426,6 @@ impl Lens {
             0 => return Err(LensError::NoStop),
             1 => {}
             count => return Err(LensError::SeveralStops { count, surfaces: stops }),
-        }
-        let s = stops[0];
-        if !self.surfaces[s].is_flat() {
-            return Err(LensError::field(s, "radius", "the aperture stop must be flat (radius 0)"));
-        }
-        if self.medium_before(s).differs_from(&self.surfaces[s].medium) {
-            return Err(LensError::field(
-                s,
-                "nd",
-                "the aperture stop must have the same medium on both sides (it is not a refracting surface)",
-            ));
         }
         let last = &self.surfaces[n - 1].medium;
         if !last.is_air() {

@@ -22,6 +22,24 @@ pub const BUILTIN_LENSES: &[(&str, &str)] = &[
     ("aspheric_zoom_us5793533", include_str!("../../../../lenses/aspheric_zoom_us5793533.json")),
 ];
 
+/// `lens` with its iris removed and the stop moved onto the lens surface in front of it (the habit of many
+/// patent tables): that surface's clear aperture becomes the iris's, and the iris's gap joins the one in front.
+/// `None` when the stop is not an iris in air behind a lens surface.
+pub fn with_stop_on_front_surface(lens: &Lens) -> Option<Lens> {
+    let s = lens.stop_index();
+    if s == 0 || lens.stop_on_lens_surface() {
+        return None;
+    }
+    let mut out = lens.clone();
+    let iris = out.surfaces.remove(s);
+    let front = &mut out.surfaces[s - 1];
+    front.thickness_mm = Some(front.thickness_mm.unwrap_or(0.0) + iris.thickness_mm.unwrap_or(0.0));
+    front.semi_aperture_mm = front.semi_aperture_mm.min(iris.semi_aperture_mm);
+    front.stop = true;
+    out.id = format!("{}_stop_on_{}", lens.id, s - 1);
+    out.validate().ok().map(|()| out)
+}
+
 /// The lens the app opens with: the Nikon 28-75 mm zoom, whose chain of polygonal ghosts is what an artist
 /// expects a lens flare to look like.
 pub const DEFAULT_LENS_ID: &str = "nikon_zoom_28_75mm";

@@ -76,7 +76,8 @@ impl LightPath {
         Self { kind: PathKind::Image, steps }
     }
 
-    /// The ghost reflected at `j`, then at `i`. Both must be reflecting surfaces (not the stop, media differ).
+    /// The ghost reflected at `j`, then at `i`. Both must be reflecting surfaces (the media on their two sides
+    /// differ; a stop on a lens surface reflects, an iris does not).
     pub fn ghost(lens: &Lens, i: usize, j: usize) -> Result<Self, PathError> {
         let n = lens.surfaces.len();
         if i >= j {
@@ -86,9 +87,6 @@ impl LightPath {
             return Err(PathError::OutOfRange { i, j, surfaces: n });
         }
         for k in [i, j] {
-            if lens.surfaces[k].stop {
-                return Err(PathError::NotReflecting { i, j, k, why: "it is the aperture stop" });
-            }
             if !lens.medium_before(k).differs_from(&lens.surfaces[k].medium) {
                 return Err(PathError::NotReflecting { i, j, k, why: "the same medium lies on both sides" });
             }
@@ -111,15 +109,16 @@ impl LightPath {
     }
 
     /// Positions (in `steps`) at which the path crosses the aperture stop: one for most paths, three for a
-    /// ghost whose two reflections lie on opposite sides of the stop.
+    /// ghost whose two reflections lie on opposite sides of the stop, two for a ghost that reflects at a stop
+    /// on a lens surface.
     pub fn stop_crossings(&self, lens: &Lens) -> Vec<usize> {
         let stop = lens.stop_index();
         self.steps.iter().enumerate().filter(|(_, s)| s.surface == stop).map(|(k, _)| k).collect()
     }
 
-    /// True for a ghost whose reflections straddle the stop (it crosses the stop three times).
+    /// True for a ghost whose reflections lie on opposite sides of the stop (it crosses the stop three times).
     pub fn straddles_stop(&self, lens: &Lens) -> bool {
-        self.stop_crossings(lens).len() > 1
+        self.stop_crossings(lens).len() == 3
     }
 }
 

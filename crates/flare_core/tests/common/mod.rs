@@ -58,7 +58,8 @@ pub fn draft() -> impl Strategy<Value = Draft> {
 }
 
 /// Assembles drafts into a lens that passes validation by construction: media alternate sensibly, the
-/// last medium is air, the stop is a flat air surface inserted in an air gap, and every gap is widened so
+/// last medium is air, the stop is a flat air surface inserted in an air gap (or, one time in four, a lens
+/// surface with air in front, its clear aperture narrowed), and every gap is widened so
 /// that neighbouring surfaces never cross inside their clear apertures.
 pub fn assemble(drafts: &[Draft], stop_choice: usize) -> Lens {
     let mut surfaces = Vec::with_capacity(drafts.len() + 1);
@@ -87,9 +88,15 @@ pub fn assemble(drafts: &[Draft], stop_choice: usize) -> Lens {
     let candidates: Vec<usize> = (0..surfaces.len()).filter(|&k| k == 0 || surfaces[k - 1].medium.is_air()).collect();
     let at = candidates[stop_choice % candidates.len()];
     let h = surfaces[at].semi_aperture_mm * 0.7;
-    let mut stop = surface(0.0, 1.0, Medium::air(), h);
-    stop.stop = true;
-    surfaces.insert(at, stop);
+    if stop_choice % 4 == 3 {
+        // A patent's habit: the stop on a lens surface, whose clear aperture it is.
+        surfaces[at].stop = true;
+        surfaces[at].semi_aperture_mm = h;
+    } else {
+        let mut stop = surface(0.0, 1.0, Medium::air(), h);
+        stop.stop = true;
+        surfaces.insert(at, stop);
+    }
     for k in 0..surfaces.len() - 1 {
         let h = surfaces[k].semi_aperture_mm.min(surfaces[k + 1].semi_aperture_mm);
         // Aspheric terms can make the surfaces come closest inside the rim: look across the aperture.

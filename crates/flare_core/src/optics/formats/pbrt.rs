@@ -66,6 +66,15 @@ pub fn parse(text: &str, id_hint: &str) -> Result<LoadedLens, FormatError> {
 /// The lens as a pbrt `.dat` table (aperture as diameter, index 0 on the stop, air as 1). pbrt's table has
 /// spheres only: an aspheric or conic surface is refused, naming it.
 pub fn write(lens: &Lens) -> Result<String, FormatError> {
+    if lens.stop_on_lens_surface() || !lens.surfaces[lens.stop_index()].medium.is_air() {
+        return Err(FormatError::Structure {
+            format: "pbrt .dat",
+            message: format!(
+                "the stop is surface {} (a lens surface, or in glass), and pbrt's table needs it as a flat row in air",
+                lens.stop_index()
+            ),
+        });
+    }
     if let Some(k) = lens.surfaces.iter().position(|s| !s.is_spherical()) {
         return Err(FormatError::Structure {
             format: "pbrt .dat",
