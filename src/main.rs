@@ -38,14 +38,16 @@ fn main() -> ExitCode {
             // One line, as every other error: clap's first line, without its own "error: " prefix.
             let text = e.render().to_string();
             let first = text.lines().next().unwrap_or("invalid arguments").trim_start_matches("error: ");
-            // An enumerated flag's values are part of the one line.
-            let values = text
+            // The indented lines that follow it (the missing arguments, an enumerated flag's possible values)
+            // belong to the one line too.
+            let listed: Vec<&str> = text
                 .lines()
+                .skip(1)
+                .take_while(|l| l.starts_with("  ") && !l.trim().is_empty())
                 .map(str::trim)
-                .find(|l| l.starts_with("[possible values:"))
-                .map(|l| format!(" {l}"))
-                .unwrap_or_default();
-            eprintln!("flarelab: error: {first}{values} (see `flarelab --help`)");
+                .collect();
+            let first = if listed.is_empty() { first.to_owned() } else { format!("{first} {}", listed.join(", ")) };
+            eprintln!("flarelab: error: {first} (see `flarelab --help`)");
             return ExitCode::from(2);
         }
     };

@@ -1044,3 +1044,39 @@ fn a_transcription_with_crossing_apertures_loads_with_a_warning_said_once_and_re
     assert_eq!(e.matches("meet at a height").count(), 1, "{e}");
     assert!(e.contains("on-axis light through the stop"), "{e}");
 }
+
+#[test]
+fn the_ghost_report_ranks_ghosts_and_surfaces_as_text_json_and_csv() {
+    let report = json_of(&flarelab(&["ghosts", "dgauss", "--field-deg", "5", "--report", "--json"]));
+    let r = &report["report"];
+    let ghosts = r["ghosts"].as_array().unwrap();
+    assert_eq!(ghosts.len(), 45);
+    for key in [
+        "i", "j", "focus_mm", "image_diameter_mm", "f_number", "peak_vs_source", "mean_vs_source", "energy_fraction",
+        "energy_share", "straddles_stop", "stop_crossings",
+    ] {
+        assert!(ghosts.iter().all(|g| g.get(key).is_some()), "{key}");
+    }
+    let peaks: Vec<f64> = ghosts.iter().map(|g| g["peak_vs_source"].as_f64().unwrap()).collect();
+    assert!(peaks.windows(2).all(|w| w[0] >= w[1]), "worst first");
+    let shares: f64 = ghosts.iter().map(|g| g["energy_share"].as_f64().unwrap()).sum();
+    assert!((shares - 1.0).abs() < 1e-9);
+    // The focus is the same number `ghosts --json` gives.
+    let listing = json_of(&flarelab(&["ghosts", "dgauss", "--field-deg", "5", "--json"]));
+    let first = &ghosts[0];
+    let same = listing["ghosts"].as_array().unwrap().iter().find(|g| g["i"] == first["i"] && g["j"] == first["j"]).unwrap();
+    assert_eq!(same["focus_mm"], first["focus_mm"]);
+    let sensitivity = r["sensitivity"].as_array().unwrap();
+    assert_eq!(sensitivity.len(), 10, "one row per reflecting surface");
+    assert_eq!(r["sensitivity_coating"], "broadband multilayer (3 layers)");
+
+    let csv = flarelab(&["ghosts", "dgauss", "--field-deg", "5", "--report", "--csv"]);
+    assert!(csv.status.success());
+    let text = String::from_utf8(csv.stdout).unwrap();
+    assert_eq!(text.lines().count(), 46);
+    assert!(text.starts_with(flare_core::report::CSV_HEADER));
+    let text = flarelab(&["ghosts", "dgauss", "--field-deg", "5", "--report", "--f-number", "8"]);
+    let text = String::from_utf8(text.stdout).unwrap();
+    assert!(text.contains("f/8.00") && text.contains("coating sensitivity"), "{text}");
+    assert!(refusal(&["ghosts", "dgauss", "--field-deg", "5", "--csv"]).contains("--report"));
+}

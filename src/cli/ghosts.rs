@@ -2,7 +2,9 @@
 //! and whether it is culled.
 
 use anyhow::{Context, Result, bail};
+use flare_core::flare::{FlareConfig, PreparedFlare};
 use flare_core::ghost::{FrameSettings, GhostSettings, GhostSystem};
+use flare_core::report::{ghost_report, to_csv};
 use flare_core::optics::{D_LINE_NM, LightPath, PathMatrices};
 use flare_core::spectrum::Spectrum;
 use serde_json::json;
@@ -24,6 +26,16 @@ pub struct GhostsArgs {
     coating: Option<String>,
     #[arg(long)]
     json: bool,
+    /// The ghost report: each ghost's focus, size, f-number, peak and mean irradiance against the source's
+    /// image, energy share and stop crossings, worst first, and which surface's coating helps most.
+    #[arg(long)]
+    report: bool,
+    /// With --report: the ghost table as CSV.
+    #[arg(long, requires = "report", conflicts_with = "json")]
+    csv: bool,
+    /// With --report: the f-number (default: wide open).
+    #[arg(long, requires = "report")]
+    f_number: Option<f64>,
 }
 
 pub fn run(args: &GhostsArgs) -> Result<()> {
@@ -36,6 +48,9 @@ pub fn run(args: &GhostsArgs) -> Result<()> {
     };
     let lens = open_lens(&args.file)?;
     let coating_override = args.coating.as_deref().map(parse_coating).transpose()?;
+    if args.report {
+        return report(args, &lens, spectrum, coating_override);
+    }
     let settings = GhostSettings { spectrum: spectrum.clone(), stop_scale: 1.0, coating_override };
     let system = GhostSystem::build(&lens, &settings).with_context(|| args.file.clone())?;
     let u = [0.0, args.field_deg.to_radians().tan()];
@@ -123,6 +138,64 @@ pub fn run(args: &GhostsArgs) -> Result<()> {
             },
             r["culled"].as_str().unwrap_or("")
         );
+    }
+    Ok(())
+}
+
+/// `flarelab ghosts --report`: [`flare_core::report::ghost_report`] as text, JSON or CSV.
+fn report(
+    args: &GhostsArgs,
+    lens: &flare_core::optics::Lens,
+    spectrum: Spectrum,
+    coating_override: Option<flare_core::optics::Coating>,
+) -> Result<()> {
+    let aperture = flare_core::aperture::Aperture { f_number: args.f_number, ..Default::default() };
+    let config = FlareConfig { aperture, spectrum, coating_override, ..FlareConfig::default() };
+    let flare = PreparedFlare::new(lens, &config).with_context(|| args.file.clone())?;
+    let u = [0.0, args.field_deg.to_radians().tan()];
+    let r = ghost_report(lens, &flare.system, &flare.mask, u).with_context(|| args.file.clone())?;
+    if args.csv {
+        print!("{}", to_csv(&r));
+        return Ok(());
+    }
+    if args.json {
+        let out = json!({"lens": lens.id, "field_deg": args.field_deg, "report": r});
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    println!(
+        "{} at {} deg, f/{:.2}: {} ghosts carry {:.3e} of the light entering the pupil; worst first",
+        lens.id,
+        args.field_deg,
+        flare.system.first_order.f_number / flare.system.settings.stop_scale,
+        r.ghosts.len(),
+        r.total_energy_fraction
+    );
+    println!(
+        "  {:>4} {:>3} {:>3} {:>10} {:>9} {:>8} {:>10} {:>10} {:>7}  stop",
+        "rank", "i", "j", "focus mm", "size mm", "f/#", "peak/src", "mean/src", "share"
+    );
+    let opt = |v: Option<f64>, p: usize| v.map(|v| format!("{v:.p$}")).unwrap_or_else(|| "afocal".into());
+    for (rank, g) in r.ghosts.iter().enumerate() {
+        println!(
+            "  {:>4} {:>3} {:>3} {:>10} {:>9.3} {:>8} {:>10.2e} {:>10.2e} {:>6.2}%  {}",
+            rank + 1,
+            g.i,
+            g.j,
+            opt(g.focus_mm, 2),
+            g.image_diameter_mm,
+            opt(g.f_number, 1),
+            g.peak_vs_source,
+            g.mean_vs_source,
+            100.0 * g.energy_share,
+            if g.stop_crossings == 1 { "once".to_owned() } else { format!("{} times", g.stop_crossings) }
+        );
+    }
+    println!();
+    println!("  coating sensitivity: the share of the bare lens's ghost energy removed when one surface alone");
+    println!("  wears the {} (every other surface bare), most helpful first:", r.sensitivity_coating);
+    for s in &r.sensitivity {
+        println!("    surface {:>3}  {:>+7.2}%", s.surface, 100.0 * s.energy_drop);
     }
     Ok(())
 }

@@ -36,6 +36,7 @@ pub mod optics;
 pub mod output;
 pub mod preset;
 pub mod raytrace;
+pub mod report;
 pub mod render;
 pub mod shot;
 pub mod spectrum;

@@ -88,7 +88,12 @@ impl LightPath {
         }
         for k in [i, j] {
             if !lens.medium_before(k).differs_from(&lens.surfaces[k].medium) {
-                return Err(PathError::NotReflecting { i, j, k, why: "the same medium lies on both sides" });
+                let why = if lens.surfaces[k].stop {
+                    "it is the aperture stop, an iris with the same medium on both sides"
+                } else {
+                    "the same medium lies on both sides"
+                };
+                return Err(PathError::NotReflecting { i, j, k, why });
             }
         }
         let mut steps = Vec::with_capacity(j + 1 + (j - i) + (n - i - 1));
