@@ -1052,8 +1052,17 @@ fn the_ghost_report_ranks_ghosts_and_surfaces_as_text_json_and_csv() {
     let ghosts = r["ghosts"].as_array().unwrap();
     assert_eq!(ghosts.len(), 45);
     for key in [
-        "i", "j", "focus_mm", "image_diameter_mm", "f_number", "peak_vs_source", "mean_vs_source", "energy_fraction",
-        "energy_share", "straddles_stop", "stop_crossings",
+        "i",
+        "j",
+        "focus_mm",
+        "image_diameter_mm",
+        "f_number",
+        "peak_vs_source",
+        "mean_vs_source",
+        "energy_fraction",
+        "energy_share",
+        "straddles_stop",
+        "stop_crossings",
     ] {
         assert!(ghosts.iter().all(|g| g.get(key).is_some()), "{key}");
     }
@@ -1064,7 +1073,8 @@ fn the_ghost_report_ranks_ghosts_and_surfaces_as_text_json_and_csv() {
     // The focus is the same number `ghosts --json` gives.
     let listing = json_of(&flarelab(&["ghosts", "dgauss", "--field-deg", "5", "--json"]));
     let first = &ghosts[0];
-    let same = listing["ghosts"].as_array().unwrap().iter().find(|g| g["i"] == first["i"] && g["j"] == first["j"]).unwrap();
+    let same =
+        listing["ghosts"].as_array().unwrap().iter().find(|g| g["i"] == first["i"] && g["j"] == first["j"]).unwrap();
     assert_eq!(same["focus_mm"], first["focus_mm"]);
     let sensitivity = r["sensitivity"].as_array().unwrap();
     assert_eq!(sensitivity.len(), 10, "one row per reflecting surface");

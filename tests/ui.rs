@@ -762,3 +762,60 @@ fn the_looks_panel_renders_thumbnails_on_a_worker_and_applies_a_look_as_one_undo
     h.run();
     assert_eq!(h.state().doc.lens, before.lens, "one undo step takes the look back");
 }
+
+#[test]
+fn the_report_tab_ranks_ghosts_on_a_worker_sorts_selects_and_exports() {
+    let mut h = harness_on(Some(heliar()));
+    h.state_mut().tab = Tab::Report;
+    h.run_steps(2);
+    let ready = |app: &FlareLabApp| {
+        matches!(&app.report.shown, Some((_, Ok(r))) if r.ghosts.len() == 28)
+            && app.derived.flare.as_ref().is_some_and(|f| {
+                let light = app.derived.light_deg(&app.doc);
+                let u = flare_core::optics::sensor::light_slopes_for_frame_position(light[0], light[1]);
+                !app.report.stale(flarelab::app::ghost_report::ReportKey::new(f, u))
+            })
+    };
+    step_until(&mut h, 120.0, ready);
+    h.run_steps(2);
+    // Worst first by default; the peak header sorts by peak (highest first), a second click reverses it.
+    let report = match &h.state().report.shown {
+        Some((_, Ok(r))) => r.clone(),
+        _ => unreachable!(),
+    };
+    // A row selects its ghost (the viewport rings it, the ray diagram traces it).
+    let worst = format!("{}-{}", report.ghosts[0].i, report.ghosts[0].j);
+    h.get_by_label(worst.as_str()).click();
+    h.run_steps(2);
+    let selected = h.state().selected.expect("a ghost is selected");
+    let g = &h.state().derived.flare.as_ref().unwrap().system.ghosts[selected];
+    assert_eq!((g.i, g.j), (report.ghosts[0].i, report.ghosts[0].j));
+    // The peak header sorts by peak, highest first; a second click reverses it.
+    h.get_by_label("peak").click();
+    h.run_steps(2);
+    assert_eq!(h.state().report.sort, (flarelab::app::ghost_report::ReportColumn::Peak, true));
+    h.get_by_label("peak v").click();
+    h.run_steps(2);
+    assert_eq!(h.state().report.sort, (flarelab::app::ghost_report::ReportColumn::Peak, false));
+    // Moving the light recomputes the report for the new light.
+    h.state_mut().doc.light_deg = [-4.0, 2.0];
+    h.run_steps(2);
+    step_until(&mut h, 120.0, ready);
+    let moved = match &h.state().report.shown {
+        Some((_, Ok(r))) => r.clone(),
+        _ => unreachable!(),
+    };
+    assert_ne!(moved.light_slope, report.light_slope);
+    // Export: CSV (the command line's table) and JSON (everything), through the file actions.
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("report.csv");
+    h.state_mut().use_file(flarelab::app::files::FileUse::ExportReport, &csv);
+    let text = std::fs::read_to_string(&csv).unwrap();
+    assert!(text.starts_with(flare_core::report::CSV_HEADER) && text.lines().count() == 29, "{text}");
+    let json = dir.path().join("report.json");
+    h.state_mut().use_file(flarelab::app::files::FileUse::ExportReport, &json);
+    let value: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(value["ghosts"].as_array().unwrap().len(), 28);
+    assert_eq!(value["sensitivity"].as_array().unwrap().len(), 8);
+    assert!(h.state().message.as_deref().unwrap_or("").contains("wrote"));
+}

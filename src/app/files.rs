@@ -33,6 +33,7 @@ pub enum FileUse {
     Track,
     ApertureImage,
     ExportSequence,
+    ExportReport,
 }
 
 impl FileUse {
@@ -48,6 +49,7 @@ impl FileUse {
             Self::Track => "Import light track",
             Self::ApertureImage => "Custom aperture image",
             Self::ExportSequence => "Export sequence",
+            Self::ExportReport => "Export ghost report",
         }
     }
 
@@ -60,12 +62,16 @@ impl FileUse {
             Self::Background => &["exr", "png", "hdr", "jpg", "jpeg"],
             Self::Track => &["csv", "txt"],
             Self::ApertureImage => &["png", "jpg", "exr"],
+            Self::ExportReport => &["csv", "json"],
         }
     }
 
     /// True for a file to write.
     pub fn saving(self) -> bool {
-        matches!(self, Self::SavePreset | Self::ExportImage | Self::ExportLut | Self::ExportSequence)
+        matches!(
+            self,
+            Self::SavePreset | Self::ExportImage | Self::ExportLut | Self::ExportSequence | Self::ExportReport
+        )
     }
 
     pub(super) fn default_name(self) -> &'static str {
@@ -74,6 +80,7 @@ impl FileUse {
             Self::ExportImage => "flare.png",
             Self::ExportLut => "flare.flut",
             Self::ExportSequence => "flare.####.exr",
+            Self::ExportReport => "ghost-report.csv",
             _ => "",
         }
     }

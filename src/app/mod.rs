@@ -28,6 +28,8 @@ pub mod derived;
 pub mod drag_bench;
 mod file_actions;
 pub mod files;
+pub mod ghost_report;
+mod ghost_report_panel;
 pub mod job;
 pub mod looks;
 mod looks_panel;
@@ -124,6 +126,7 @@ pub enum Tab {
     Aperture,
     Coatings,
     Ghosts,
+    Report,
     Blend,
     Shot,
 }
@@ -147,6 +150,8 @@ pub struct FlareLabApp {
     pub autobake: autobake::AutoBake,
     /// The Looks panel's thumbnails (see [`looks`]).
     pub looks: looks::Looks,
+    /// The Report tab's ghost report (see [`ghost_report`]).
+    pub report: ghost_report::ReportState,
     /// File choosers and recent files (see [`files`]).
     pub files: files::Files,
     // Panels' own state.
@@ -199,6 +204,7 @@ impl FlareLabApp {
             bake_status: BakeStatus::Idle,
             autobake: autobake::AutoBake::default(),
             looks: looks::Looks::default(),
+            report: ghost_report::ReportState::default(),
             files: files::Files::default(),
             aperture_preview: AperturePreview::default(),
             coatings: CoatingsState::default(),
@@ -304,6 +310,7 @@ impl FlareLabApp {
                     (Tab::Aperture, "Aperture"),
                     (Tab::Coatings, "Coatings"),
                     (Tab::Ghosts, "Ghosts"),
+                    (Tab::Report, "Report"),
                     (Tab::Blend, "Blend"),
                     (Tab::Shot, "Shot"),
                 ] {
@@ -357,6 +364,10 @@ impl FlareLabApp {
             panel_scroll().show(ui, |ui| self.looks_ui(ui));
             return;
         }
+        if self.tab == Tab::Report {
+            panel_scroll().show(ui, |ui| self.report_ui(ui));
+            return;
+        }
         let ctx = PanelContext {
             flare: self.derived.flare.as_deref(),
             first_order: self.derived.first_order.as_ref(),
@@ -391,7 +402,7 @@ impl FlareLabApp {
             Tab::Coatings => crate::panels::coatings::coatings_ui(ui, &mut self.doc, &mut self.coatings),
             Tab::Ghosts => crate::panels::ghosts::ghosts_ui(ui, &mut self.doc, &ctx, actions),
             Tab::Blend => crate::panels::blend::blend_ui(ui, &mut self.doc, &ctx, actions),
-            Tab::Shot | Tab::Looks => {}
+            Tab::Shot | Tab::Looks | Tab::Report => {}
         });
     }
 

@@ -4,8 +4,8 @@
 use anyhow::{Context, Result, bail};
 use flare_core::flare::{FlareConfig, PreparedFlare};
 use flare_core::ghost::{FrameSettings, GhostSettings, GhostSystem};
-use flare_core::report::{ghost_report, to_csv};
 use flare_core::optics::{D_LINE_NM, LightPath, PathMatrices};
+use flare_core::report::{ghost_report, to_csv};
 use flare_core::spectrum::Spectrum;
 use serde_json::json;
 

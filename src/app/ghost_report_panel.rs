@@ -1,0 +1,163 @@
+//! The Report tab: the ghost report of the frame shown (see [`super::ghost_report`]) as a sortable table, the
+//! coating sensitivity, and the export to CSV or JSON.
+
+use eframe::egui;
+use flare_core::files::write_atomic;
+use flare_core::optics::sensor::light_slopes_for_frame_position;
+use flare_core::report::{GhostReport, GhostRow, to_csv};
+
+use super::FlareLabApp;
+use super::files::FileUse;
+use super::ghost_report::{ReportColumn, ReportKey};
+
+impl FlareLabApp {
+    /// The Report tab (see the module documentation).
+    pub(super) fn report_ui(&mut self, ui: &mut egui::Ui) {
+        let Some(flare) = self.derived.flare.clone() else {
+            ui.label("No valid lens: the report needs one (see the Lens tab).");
+            return;
+        };
+        let light = self.derived.light_deg(&self.doc);
+        let u = light_slopes_for_frame_position(light[0], light[1]);
+        let key = ReportKey::new(&flare, u);
+        if self.report.step(key, &self.doc.lens, &flare, u) {
+            ui.ctx().request_repaint_after(std::time::Duration::from_millis(100));
+        }
+        let stale = self.report.stale(key);
+        ui.horizontal(|ui| {
+            ui.label(format!(
+                "Light at ({:.1}, {:.1}) deg, f/{:.2}",
+                light[0],
+                light[1],
+                flare.system.first_order.f_number / flare.system.settings.stop_scale
+            ));
+            if stale {
+                ui.add(egui::Spinner::new());
+                ui.weak("computing…");
+            }
+            let ready = matches!(&self.report.shown, Some((_, Ok(_))));
+            if ui
+                .add_enabled(ready, egui::Button::new("Export…"))
+                .on_hover_text("the table as CSV, or all as JSON")
+                .clicked()
+            {
+                self.pick_file(FileUse::ExportReport);
+            }
+        });
+        let Some((_, shown)) = &self.report.shown else { return };
+        let report = match shown {
+            Ok(r) => r.clone(),
+            Err(e) => {
+                ui.colored_label(egui::Color32::from_rgb(255, 110, 110), format!("no report: {e}"));
+                return;
+            }
+        };
+        ui.label(format!(
+            "{} ghosts carry {:.2e} of the light entering the pupil. Peak and mean irradiance are relative to the \
+             peak of the source's own (diffraction-limited) image; focus is from the image plane, + behind it.",
+            report.ghosts.len(),
+            report.total_energy_fraction
+        ));
+        self.report_table(ui, &report, &flare);
+        ui.separator();
+        ui.strong("Coating sensitivity");
+        ui.label(format!(
+            "Share of the bare lens's ghost energy removed when one surface alone wears the {}:",
+            report.sensitivity_coating
+        ));
+        egui::Grid::new("coating_sensitivity").num_columns(2).striped(true).show(ui, |ui| {
+            for s in &report.sensitivity {
+                ui.label(format!("surface {}", s.surface));
+                ui.label(format!("{:+.1} %", 100.0 * s.energy_drop));
+                ui.end_row();
+            }
+        });
+    }
+
+    fn report_table(&mut self, ui: &mut egui::Ui, report: &GhostReport, flare: &flare_core::flare::PreparedFlare) {
+        let (column, descending) = self.report.sort;
+        let mut rows: Vec<(usize, &GhostRow)> = report.ghosts.iter().enumerate().collect();
+        let value = |r: &GhostRow, rank: usize| -> f64 {
+            match column {
+                ReportColumn::Rank => rank as f64,
+                ReportColumn::Pair => (r.i * 10_000 + r.j) as f64,
+                ReportColumn::Focus => r.focus_mm.map_or(f64::INFINITY, f64::abs),
+                ReportColumn::Size => r.image_diameter_mm,
+                ReportColumn::FNumber => r.f_number.unwrap_or(f64::INFINITY),
+                ReportColumn::Peak => r.peak_vs_source,
+                ReportColumn::Mean => r.mean_vs_source,
+                ReportColumn::Share => r.energy_share,
+                ReportColumn::Stop => r.stop_crossings as f64,
+            }
+        };
+        rows.sort_by(|a, b| {
+            let o = value(a.1, a.0).total_cmp(&value(b.1, b.0));
+            if descending { o.reverse() } else { o }
+        });
+        let height = (ui.available_height() * 0.6).max(200.0);
+        egui::ScrollArea::vertical().id_salt("report_rows").max_height(height).auto_shrink([false, false]).show(
+            ui,
+            |ui| {
+                egui::Grid::new("report_table").num_columns(9).striped(true).spacing([8.0, 2.0]).show(ui, |ui| {
+                    for (c, title, hover) in [
+                        (ReportColumn::Rank, "#", "rank, worst (highest peak) first"),
+                        (ReportColumn::Pair, "pair", "the surfaces it reflects at (j, then i)"),
+                        (ReportColumn::Focus, "focus mm", "where it focuses, from the image plane (sorts by |focus|)"),
+                        (ReportColumn::Size, "size mm", "its diameter on the sensor"),
+                        (ReportColumn::FNumber, "f/#", "its working f-number"),
+                        (ReportColumn::Peak, "peak", "peak irradiance / the source image's peak"),
+                        (ReportColumn::Mean, "mean", "mean irradiance over its lit area / the same"),
+                        (ReportColumn::Share, "share", "its share of all the ghosts' energy"),
+                        (ReportColumn::Stop, "stop", "how many times it crosses the stop"),
+                    ] {
+                        let arrow = if c == column { if descending { " v" } else { " ^" } } else { "" };
+                        if ui.button(format!("{title}{arrow}")).on_hover_text(hover).clicked() {
+                            self.report.sort = (c, if c == column { !descending } else { c != ReportColumn::Rank });
+                        }
+                    }
+                    ui.end_row();
+                    let opt = |v: Option<f64>, p: usize| v.map_or_else(|| "afocal".to_owned(), |v| format!("{v:.p$}"));
+                    for (rank, r) in rows {
+                        ui.label(format!("{}", rank + 1));
+                        let g = flare.system.ghosts.iter().position(|g| g.i == r.i && g.j == r.j);
+                        let selected = g.is_some() && self.selected == g;
+                        if ui.selectable_label(selected, format!("{}-{}", r.i, r.j)).clicked() {
+                            self.selected = if selected { None } else { g };
+                        }
+                        ui.label(opt(r.focus_mm, 2));
+                        ui.label(format!("{:.3}", r.image_diameter_mm));
+                        ui.label(opt(r.f_number, 1));
+                        ui.label(format!("{:.2e}", r.peak_vs_source));
+                        ui.label(format!("{:.2e}", r.mean_vs_source));
+                        ui.label(format!("{:.2} %", 100.0 * r.energy_share));
+                        ui.label(if r.stop_crossings == 1 {
+                            "once".to_owned()
+                        } else {
+                            format!("{}x", r.stop_crossings)
+                        });
+                        ui.end_row();
+                    }
+                });
+            },
+        );
+    }
+
+    /// Writes the report shown: CSV (the ghost table, the command line's `--report --csv`) or JSON (all of it),
+    /// by the file name, through a temporary file and a rename.
+    pub(super) fn export_report_to(&mut self, path: &std::path::Path) {
+        let Some((_, Ok(report))) = &self.report.shown else {
+            self.message = Some("no ghost report to export yet (open the Report tab)".into());
+            return;
+        };
+        let json = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("json"));
+        let text = if json {
+            serde_json::to_string_pretty(report).unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"))
+        } else {
+            to_csv(report)
+        };
+        self.message = Some(match write_atomic(path, text.as_bytes()) {
+            Ok(()) => format!("wrote {} ({} ghosts)", path.display(), report.ghosts.len()),
+            Err(e) => format!("could not write {}: {e}", path.display()),
+        });
+    }
+}
