@@ -241,3 +241,24 @@ fn the_aspheric_intersection_is_exact_and_reports_misses() {
     sphere_cap.aspheric = vec![1e-6];
     assert_eq!(intersect_shape(DVec3::new(0.0, 20.0, -1.0), DVec3::Y, &sphere_cap.shape(), 1.0), None);
 }
+
+#[test]
+fn a_stop_in_glass_or_on_a_curved_surface_loads_and_forms_its_pupil() {
+    // The dgauss's stop moved into the glass of the element behind it: a flat surface with glass on both
+    // sides, which does not reflect, and still sets the entrance pupil.
+    let mut lens = builtin_lens("dgauss").unwrap();
+    let stop = lens.stop_index();
+    let glass = lens.surfaces[stop + 1].medium.clone();
+    lens.surfaces[stop - 1].medium = glass.clone();
+    lens.surfaces[stop].medium = glass;
+    lens.validate().unwrap();
+    assert!(!lens.reflecting_surfaces().contains(&stop));
+    let fo = FirstOrder::d_line(&lens).unwrap();
+    assert!(fo.entrance_pupil_diameter_mm > 0.0 && fo.stop_surface == stop);
+    // A curved stop on a lens surface reflects, and its ghosts cross the stop twice.
+    let on_surface = flare_core::optics::library::with_stop_on_front_surface(&builtin_lens("heliar").unwrap()).unwrap();
+    let s = on_surface.stop_index();
+    assert!(!on_surface.surfaces[s].is_flat() && on_surface.reflecting_surfaces().contains(&s));
+    let (i, j) = *on_surface.ghost_pairs().iter().find(|(i, j)| *i == s || *j == s).unwrap();
+    assert_eq!(LightPath::ghost(&on_surface, i, j).unwrap().stop_crossings(&on_surface).len(), 2);
+}
