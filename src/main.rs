@@ -51,6 +51,12 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
+    for path in &cli.catalogs {
+        if let Err(e) = flare_core::optics::formats::load_glass_catalogue(path) {
+            eprintln!("flarelab: error: --catalog {e}");
+            return ExitCode::from(2);
+        }
+    }
     let result = match cli.command {
         None => app::run(),
         Some(command) => cli::run(command),

@@ -1090,3 +1090,39 @@ fn the_ghost_report_ranks_ghosts_and_surfaces_as_text_json_and_csv() {
     assert!(text.contains("f/8.00") && text.contains("coating sensitivity"), "{text}");
     assert!(refusal(&["ghosts", "dgauss", "--field-deg", "5", "--csv"]).contains("--report"));
 }
+
+#[test]
+fn a_vendor_catalogue_adds_glasses_that_lens_files_name() {
+    let dir = tempfile::tempdir().unwrap();
+    // A vendor file in the AGF layout (with the lines FlareLab skips), one glass in formula 1 (Schott) and one
+    // in formula 2 (Sellmeier 1, N-BK7's published coefficients under another name).
+    let agf = dir.path().join("acme.agf");
+    std::fs::write(
+        &agf,
+        "CC ACME optical glass\nNM AC-BK 2 517642 1.5168 64.17 0 0\nGC\nED 7.1 8.3 2.51 -0.0009 0\n\
+         CD 1.03961212 0.00600069867 0.231792344 0.0200179144 1.01046945 103.560653 0 0 0 0\n\
+         TD 0 0 0 0 0 0 20\nOD 2 0 1 0 2.3 0\nLD 0.3 2.5\nIT 0.35 0.99 25\n",
+    )
+    .unwrap();
+    let zmx = dir.path().join("singlet.zmx");
+    std::fs::write(
+        &zmx,
+        "MODE SEQ\nUNIT MM X W X CM MR CPMM\nSURF 0\n  DISZ INFINITY\nSURF 1\n  STOP\n  DISZ 2\n  DIAM 5\n\
+         SURF 2\n  CURV 0.02\n  DISZ 4\n  GLAS AC-BK 0 0\n  DIAM 8\nSURF 3\n  CURV -0.005\n  DISZ 90\n  DIAM 8\nSURF 4\n",
+    )
+    .unwrap();
+    let (agf, zmx) = (agf.to_str().unwrap(), zmx.to_str().unwrap());
+    // Without the catalogue the glass is unknown and the file gives no index: refused with the line.
+    let e = refusal(&["lens", "info", zmx]);
+    assert!(e.contains("line 12") && e.contains("AC-BK"), "{e}");
+    // With it, the glass is found by name and its formula gives the dispersion.
+    let info = json_of(&flarelab(&["--catalog", agf, "lens", "info", zmx, "--json"]));
+    let s = &info["surface_table"][1];
+    assert_eq!(s["nd"], 1.5168);
+    assert_eq!(s["dispersion"], "ACME AC-BK (AGF formula 2)");
+    // A broken line: the file and its line named, nothing run.
+    let broken = dir.path().join("broken.agf");
+    std::fs::write(&broken, "NM AC-X 2 1 1.6 40 0 0\nCD 1.2 0.01 oops\n").unwrap();
+    let e = refusal(&["--catalog", broken.to_str().unwrap(), "lens", "info", "heliar"]);
+    assert!(e.contains("broken.agf") && e.contains("line 2") && e.contains("oops"), "{e}");
+}

@@ -222,6 +222,12 @@ impl Derived {
         doc.flare_ev = ev;
     }
 
+    /// Forgets the optics' key, so the next sync rebuilds the flare (after something outside the document
+    /// changed its optics: a glass catalogue added).
+    pub fn invalidate_optics(&mut self) {
+        self.optics_key = None;
+    }
+
     fn sync_optics(&mut self, doc: &Document, gpu: Option<&RenderState>, events: &mut Vec<SyncEvent>) {
         let key = doc.optics_fingerprint();
         if self.optics_key == Some(key) {

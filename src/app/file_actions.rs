@@ -91,6 +91,7 @@ impl FlareLabApp {
             FileUse::ApertureImage => self.use_aperture_image(path),
             FileUse::ExportSequence => self.export_sequence_named(path),
             FileUse::ExportReport => self.export_report_to(path),
+            FileUse::GlassCatalogue => self.add_glass_catalogue(path),
         }
         if path.exists() {
             self.files.remember(path);

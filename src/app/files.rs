@@ -34,6 +34,7 @@ pub enum FileUse {
     ApertureImage,
     ExportSequence,
     ExportReport,
+    GlassCatalogue,
 }
 
 impl FileUse {
@@ -50,6 +51,7 @@ impl FileUse {
             Self::ApertureImage => "Custom aperture image",
             Self::ExportSequence => "Export sequence",
             Self::ExportReport => "Export ghost report",
+            Self::GlassCatalogue => "Add glass catalogue",
         }
     }
 
@@ -63,6 +65,7 @@ impl FileUse {
             Self::Track => &["csv", "txt"],
             Self::ApertureImage => &["png", "jpg", "exr"],
             Self::ExportReport => &["csv", "json"],
+            Self::GlassCatalogue => &["agf"],
         }
     }
 

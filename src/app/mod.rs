@@ -436,6 +436,13 @@ impl FlareLabApp {
                 if ui.button("Import light track…").clicked() {
                     self.pick_file(FileUse::Track);
                 }
+                if ui
+                    .button("Add glass catalogue…")
+                    .on_hover_text("a vendor's Zemax .agf file: lens files may name its glasses")
+                    .clicked()
+                {
+                    self.pick_file(FileUse::GlassCatalogue);
+                }
                 ui.separator();
                 ui.horizontal(|ui| {
                     let (w, h) = &mut self.export_size;
@@ -768,6 +775,19 @@ impl FlareLabApp {
             }
             Action::OpenApertureImage => self.pick_file(FileUse::ApertureImage),
         }
+    }
+
+    /// Adds a glass catalogue (.agf): lens files opened afterwards may name its glasses, and the open lens
+    /// takes their dispersion when it names them. A broken file adds nothing and says where.
+    pub fn add_glass_catalogue(&mut self, path: &std::path::Path) {
+        self.message = Some(match flare_core::optics::formats::load_glass_catalogue(path) {
+            Ok(n) => {
+                // The lens may name glasses it now finds: rebuild what depends on its dispersion.
+                self.derived.invalidate_optics();
+                format!("{}: {n} glasses added", path.display())
+            }
+            Err(e) => e,
+        });
     }
 
     /// Opens a lens file into the document; a bad file leaves the document as it was.

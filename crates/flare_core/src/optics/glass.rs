@@ -4,10 +4,11 @@
 //! Lens files give each medium's index at the d-line (`n_d`, 587.5618 nm), usually its Abbe number `V_d`,
 //! and sometimes a catalogue glass name. From that, [`Dispersion::for_medium`] picks one model:
 //! 1. **Air** (`n_d == 1`): constant 1. All indices are relative to air, the lens-design convention.
-//! 2. **Catalogue glass** (the name is in [`CATALOGUE`], case-insensitive): the glass's Sellmeier formula
-//!    `n^2 - 1 = sum B_i L^2 / (L^2 - C_i)` (L in micrometres, SCHOTT's published coefficients), shifted by
-//!    a constant so that it gives the file's `n_d` exactly at the d-line:
-//!    `n(L) = n_d + n_sellmeier(L) - n_sellmeier(L_d)`. The shift keeps the file authoritative at the
+//! 2. **Catalogue glass** (the name is a known glass, case-insensitive, see [`find_glass`]): the glass's
+//!    dispersion formula from its AGF catalogue ([`super::agf`]: the built-in SCHOTT glasses of
+//!    [`BUILTIN_CATALOGUES`], plus any catalogue added with [`add_catalogue`], e.g. `--catalog`), shifted
+//!    by a constant so that it gives the file's `n_d` exactly at the d-line:
+//!    `n(L) = n_d + n_formula(L) - n_formula(L_d)`. The shift keeps the file authoritative at the
 //!    design wavelength (where the reference figures are computed) and takes only the *shape* of the curve
 //!    from the catalogue.
 //! 3. **n_d and V_d only**: the two-term Cauchy fit `n(L) = n_d + B (1/L^2 - 1/L_d^2)` whose
@@ -32,74 +33,72 @@ pub const C_LINE_NM: f64 = 656.2725;
 /// Abbe number assumed for a glass whose dispersion the file does not give.
 pub const ASSUMED_ABBE: f64 = 50.0;
 
-/// One catalogue glass: name, catalogue n_d and V_d, Sellmeier B1..B3 and C1..C3 (C in um^2).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct CatalogueGlass {
-    pub name: &'static str,
-    pub n_d: f64,
-    pub v_d: f64,
-    pub b: [f64; 3],
-    pub c_um2: [f64; 3],
+pub use super::agf::CatalogueGlass;
+
+/// The formula's n_d and V_d = (n_d - 1) / (n_F - n_C) of a catalogue glass, to check against its published
+/// ones; `None` where the formula gives no index at those lines.
+pub fn computed_nd_vd(glass: &CatalogueGlass) -> Option<(f64, f64)> {
+    let (d, f, c) = (glass.formula_index(D_LINE_NM)?, glass.formula_index(F_LINE_NM)?, glass.formula_index(C_LINE_NM)?);
+    Some((d, (d - 1.0) / (f - c)))
 }
 
-impl CatalogueGlass {
-    /// The catalogue's own Sellmeier index at `wavelength_nm` (unshifted).
-    pub fn sellmeier_index(&self, wavelength_nm: f64) -> f64 {
-        let l2 = (wavelength_nm * 1e-3).powi(2);
-        let mut n2 = 1.0;
-        for i in 0..3 {
-            n2 += self.b[i] * l2 / (l2 - self.c_um2[i]);
+/// The catalogues embedded in the binary, as AGF files: (catalogue name, text).
+pub const BUILTIN_CATALOGUES: &[(&str, &str)] =
+    &[("SCHOTT", include_str!("../../../../assets/glass/flarelab-schott-28.agf"))];
+
+/// Every glass FlareLab knows: the built-in catalogues, then those added with [`add_catalogue`]. Glasses live
+/// for the whole process (a dispersion model refers to its glass), so added ones are leaked once each.
+fn registry() -> &'static std::sync::RwLock<Vec<&'static CatalogueGlass>> {
+    static REGISTRY: std::sync::OnceLock<std::sync::RwLock<Vec<&'static CatalogueGlass>>> = std::sync::OnceLock::new();
+    REGISTRY.get_or_init(|| {
+        let mut glasses = Vec::new();
+        for (name, text) in BUILTIN_CATALOGUES {
+            // The embedded files are checked by a test; a broken one would leave its glasses out, not crash.
+            if let Ok(list) = super::agf::parse_agf(text, name) {
+                glasses.extend(list.into_iter().map(|g| &*Box::leak(Box::new(g))));
+            }
         }
-        n2.max(1.0).sqrt()
+        std::sync::RwLock::new(glasses)
+    })
+}
+
+/// Every known glass (built-in first, then added catalogues in the order they were added).
+pub fn catalogue_glasses() -> Vec<&'static CatalogueGlass> {
+    registry().read().map(|r| r.clone()).unwrap_or_default()
+}
+
+/// Adds the glasses of an AGF text (catalogue `name`) to the ones found by name; a glass whose name is already
+/// known from another catalogue is kept too, and found by `CATALOGUE:NAME`. Returns how many were added.
+pub fn add_catalogue(text: &str, name: &str) -> Result<usize, super::agf::AgfError> {
+    let list = super::agf::parse_agf(text, name)?;
+    let count = list.len();
+    if let Ok(mut r) = registry().write() {
+        let known: std::collections::HashSet<(String, String)> =
+            r.iter().map(|g| (g.catalogue.clone(), normalise(&g.name))).collect();
+        for g in list {
+            if !known.contains(&(g.catalogue.clone(), normalise(&g.name))) {
+                r.push(Box::leak(Box::new(g)));
+            }
+        }
     }
+    Ok(count)
 }
-
-const fn g(name: &'static str, n_d: f64, v_d: f64, b: [f64; 3], c_um2: [f64; 3]) -> CatalogueGlass {
-    CatalogueGlass { name, n_d, v_d, b, c_um2 }
-}
-
-/// A small built-in catalogue: the SCHOTT glasses lens prescriptions name most often (SCHOTT optical glass
-/// data sheets, Sellmeier coefficients as published by SCHOTT).
-pub const CATALOGUE: &[CatalogueGlass] = &[
-    g("N-BK7", 1.5168, 64.17, [1.03961212, 0.231792344, 1.01046945], [0.00600069867, 0.0200179144, 103.560653]),
-    g("N-K5", 1.52249, 59.48, [1.08511833, 0.199562005, 0.930511663], [0.00661099503, 0.024110866, 111.982777]),
-    g("N-FK5", 1.48749, 70.41, [0.844309338, 0.344147824, 0.910790213], [0.00475111955, 0.0149814849, 97.8600293]),
-    g("N-BAK1", 1.5725, 57.55, [1.12365662, 0.309276848, 0.881511957], [0.00644742752, 0.0222284402, 107.297751]),
-    g("N-BAK4", 1.56883, 55.98, [1.28834642, 0.132817724, 0.945395373], [0.00779980626, 0.0315631177, 105.965875]),
-    g("N-BAF10", 1.67003, 47.11, [1.5851495, 0.143559385, 1.08521269], [0.00926681282, 0.0424489805, 105.613573]),
-    g("N-SK4", 1.61272, 58.63, [1.32993741, 0.228542996, 0.988465211], [0.00716874107, 0.0246455892, 100.886364]),
-    g("N-SK16", 1.62041, 60.32, [1.34317774, 0.241144399, 0.994317969], [0.00704687339, 0.0229005, 92.7508526]),
-    g("N-SSK2", 1.62229, 53.27, [1.4306027, 0.153150554, 1.01390904], [0.00823982975, 0.0333736841, 106.870822]),
-    g("N-LAK7", 1.6516, 58.52, [1.23679889, 0.445051837, 1.01745888], [0.00610105538, 0.0201388334, 90.638038]),
-    g("N-LAK9", 1.691, 54.71, [1.46231905, 0.344399589, 1.15508372], [0.00724270156, 0.0243353131, 85.4686868]),
-    g("N-LAK14", 1.6968, 55.41, [1.50781212, 0.318866829, 1.14287213], [0.00746098727, 0.0242024834, 80.9565165]),
-    g("N-LAF2", 1.74397, 44.85, [1.80984227, 0.15729555, 1.0930037], [0.0101711622, 0.0442431765, 100.687748]),
-    g("N-LASF9", 1.85025, 32.17, [2.00029547, 0.298926886, 1.80691843], [0.0121426017, 0.0538736236, 156.530829]),
-    g("LLF1", 1.54814, 45.75, [1.21640125, 0.13366454, 0.883399468], [0.00857807248, 0.0420143003, 107.59306]),
-    g("LF5", 1.58144, 40.85, [1.28035628, 0.163505973, 0.893930112], [0.00929854416, 0.0449135769, 110.493685]),
-    g("F2", 1.62004, 36.37, [1.34533359, 0.209073176, 0.937357162], [0.00997743871, 0.0470450767, 111.886764]),
-    g("F5", 1.60342, 38.03, [1.3104463, 0.19603426, 0.96612977], [0.00958633048, 0.0457627627, 115.011883]),
-    g("N-F2", 1.62005, 36.43, [1.39757037, 0.159201403, 1.2686543], [0.00995906143, 0.0546931752, 119.248346]),
-    g("SF2", 1.64769, 33.85, [1.40301821, 0.231767504, 0.939056586], [0.0105795466, 0.0493226978, 112.405955]),
-    g("SF5", 1.6727, 32.21, [1.46141885, 0.247713019, 0.949995832], [0.0111826126, 0.0508594669, 112.041888]),
-    g("SF6", 1.80518, 25.43, [1.72448482, 0.390104889, 1.04572858], [0.0134871947, 0.0569318095, 118.557185]),
-    g("SF10", 1.72825, 28.41, [1.61625977, 0.259229334, 1.07762317], [0.0127534559, 0.0581983954, 116.60768]),
-    g("SF11", 1.78472, 25.76, [1.73848403, 0.311168974, 1.17490871], [0.0136068604, 0.0615960463, 121.922711]),
-    g("N-SF2", 1.64769, 33.82, [1.47343127, 0.163681849, 1.36920899], [0.0109019098, 0.0585683687, 127.404933]),
-    g("N-SF5", 1.67271, 32.25, [1.52481889, 0.187085527, 1.42729015], [0.011254756, 0.0588995392, 129.141675]),
-    g("N-SF6", 1.80518, 25.36, [1.77931763, 0.338149866, 2.08734474], [0.0133714182, 0.0617533621, 174.01759]),
-    g("N-SF11", 1.78472, 25.68, [1.73759695, 0.313747346, 1.89878101], [0.013188707, 0.0623068142, 155.23629]),
-];
 
 /// Normalises a glass name for look-up: upper case, `_` and spaces read as `-`.
 fn normalise(name: &str) -> String {
     name.trim().to_ascii_uppercase().replace(['_', ' '], "-")
 }
 
-/// Finds a catalogue glass by name (case-insensitive; `N_BK7` and `n-bk7` both find N-BK7).
+/// Finds a catalogue glass by name (case-insensitive; `N_BK7` and `n-bk7` both find N-BK7), or by
+/// `CATALOGUE:NAME` (`OHARA:S-BSL7`) when two catalogues share a name; the first catalogue wins otherwise.
 pub fn find_glass(name: &str) -> Option<&'static CatalogueGlass> {
-    let key = normalise(name);
-    CATALOGUE.iter().find(|g| normalise(g.name) == key)
+    let (catalogue, glass) = match name.split_once(':') {
+        Some((c, g)) => (Some(c.trim().to_ascii_uppercase()), g),
+        None => (None, name),
+    };
+    let key = normalise(glass);
+    let r = registry().read().ok()?;
+    r.iter().copied().find(|g| normalise(&g.name) == key && catalogue.as_ref().is_none_or(|c| *c == g.catalogue))
 }
 
 /// How a medium's index varies with wavelength. Every variant returns exactly `n_d` at the d-line.
@@ -107,7 +106,7 @@ pub fn find_glass(name: &str) -> Option<&'static CatalogueGlass> {
 pub enum Dispersion {
     /// Air: index 1 at every wavelength.
     Air,
-    /// A catalogue glass's Sellmeier curve, shifted to pass through the file's `n_d`.
+    /// A catalogue glass's dispersion formula, shifted to pass through the file's `n_d`.
     Sellmeier { n_d: f64, glass: &'static CatalogueGlass },
     /// Two-term Cauchy fit through `n_d` and `V_d`; `assumed` when `V_d` was not given.
     Cauchy { n_d: f64, v_d: f64, assumed: bool },
@@ -142,7 +141,11 @@ impl Dispersion {
                 if wavelength_nm == D_LINE_NM {
                     return n_d;
                 }
-                n_d + glass.sellmeier_index(wavelength_nm) - glass.sellmeier_index(D_LINE_NM)
+                match (glass.formula_index(wavelength_nm), glass.formula_index(D_LINE_NM)) {
+                    (Some(n), Some(at_d)) => n_d + n - at_d,
+                    // Outside where the formula gives an index: the glass's own n_d and V_d (Cauchy).
+                    _ => Self::Cauchy { n_d, v_d: glass.v_d, assumed: false }.index_at(wavelength_nm),
+                }
             }
             Self::Cauchy { n_d, v_d, .. } => {
                 let b = cauchy_b_nm2(n_d, v_d);
@@ -151,11 +154,13 @@ impl Dispersion {
         }
     }
 
-    /// Short words for reports: "air", "Sellmeier F5", "Cauchy (V_d 58.5)", "Cauchy (V_d assumed 50)".
+    /// Short words for reports: "air", "SCHOTT F5 (AGF formula 2)", "Cauchy (V_d 58.5)", "Cauchy (V_d assumed 50)".
     pub fn describe(&self) -> String {
         match self {
             Self::Air => "air".to_owned(),
-            Self::Sellmeier { glass, .. } => format!("Sellmeier {}", glass.name),
+            Self::Sellmeier { glass, .. } => {
+                format!("{} {} (AGF formula {})", glass.catalogue, glass.name, glass.formula)
+            }
             Self::Cauchy { v_d, assumed: false, .. } => format!("Cauchy (V_d {v_d})"),
             Self::Cauchy { v_d, assumed: true, .. } => format!("Cauchy (V_d assumed {v_d})"),
         }
@@ -178,13 +183,16 @@ mod tests {
         Medium { n_d, v_d, glass: glass.map(str::to_owned) }
     }
 
+    /// Every catalogue glass gives its published n_d to 1e-5 and V_d to its published precision (two
+    /// decimals: 0.005) plus 1e-5.
     #[test]
-    fn catalogue_transcription_reproduces_catalogue_nd_and_vd() {
-        for g in CATALOGUE {
-            let nd = g.sellmeier_index(D_LINE_NM);
-            let vd = (nd - 1.0) / (g.sellmeier_index(F_LINE_NM) - g.sellmeier_index(C_LINE_NM));
-            assert!((nd - g.n_d).abs() < 2e-5, "{}: n_d {nd} vs catalogue {}", g.name, g.n_d);
-            assert!((vd - g.v_d).abs() < 0.05, "{}: V_d {vd} vs catalogue {}", g.name, g.v_d);
+    fn every_catalogue_glass_gives_its_published_nd_and_vd() {
+        let glasses = catalogue_glasses();
+        assert!(glasses.len() >= 28);
+        for g in glasses {
+            let (nd, vd) = computed_nd_vd(g).unwrap();
+            assert!((nd - g.n_d).abs() < 1e-5, "{} {}: n_d {nd} vs published {}", g.catalogue, g.name, g.n_d);
+            assert!((vd - g.v_d).abs() < 0.005 + 1e-5, "{} {}: V_d {vd} vs published {}", g.catalogue, g.name, g.v_d);
         }
     }
 
@@ -213,12 +221,12 @@ mod tests {
     fn cauchy_model_error_against_sellmeier() {
         let worst = |range: std::ops::RangeInclusive<u32>, crowns: bool| {
             let mut worst = 0.0_f64;
-            for g in CATALOGUE.iter().filter(|g| (g.v_d > 50.0) == crowns) {
+            for g in catalogue_glasses().into_iter().filter(|g| g.catalogue == "SCHOTT" && (g.v_d > 50.0) == crowns) {
                 let cauchy = Dispersion::Cauchy { n_d: g.n_d, v_d: g.v_d, assumed: false };
-                let shift = g.n_d - g.sellmeier_index(D_LINE_NM);
+                let shift = g.n_d - g.formula_index(D_LINE_NM).unwrap();
                 for w in range.clone().step_by(10) {
                     let w = w as f64;
-                    worst = worst.max((cauchy.index_at(w) - (g.sellmeier_index(w) + shift)).abs());
+                    worst = worst.max((cauchy.index_at(w) - (g.formula_index(w).unwrap() + shift)).abs());
                 }
             }
             worst
@@ -232,8 +240,10 @@ mod tests {
 
     #[test]
     fn glass_lookup_is_forgiving_about_case_and_separators() {
-        assert_eq!(find_glass("n_bk7").map(|g| g.name), Some("N-BK7"));
-        assert_eq!(find_glass(" f5 ").map(|g| g.name), Some("F5"));
+        assert_eq!(find_glass("n_bk7").map(|g| g.name.as_str()), Some("N-BK7"));
+        assert_eq!(find_glass(" f5 ").map(|g| g.name.as_str()), Some("F5"));
+        assert_eq!(find_glass("schott:f5").map(|g| g.name.as_str()), Some("F5"));
+        assert!(find_glass("OHARA:F5").is_none());
         assert!(find_glass("UNOBTAINIUM").is_none());
         assert!(medium(1.6, None, None).dispersion().is_assumed());
         assert!(!medium(1.6, None, Some("F5")).dispersion().is_assumed());

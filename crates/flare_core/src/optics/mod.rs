@@ -2,13 +2,15 @@
 //!
 //! # How it works
 //! [`lens`] holds the prescription and its one sign convention; [`formats`] reads and writes it (JSON,
-//! Zemax .zmx, pbrt .dat); [`glass`] gives each medium's index per wavelength; [`path`] lists the surface
+//! Zemax .zmx, pbrt .dat); [`glass`] gives each medium's index per wavelength, from catalogues read by
+//! [`agf`]; [`path`] lists the surface
 //! interactions of the image and of every ghost; [`trace`] follows real rays along a path exactly, and
 //! [`paraxial`] multiplies the 2x2 matrices of the same path. [`mapping`] traces chief rays to map a light's
 //! direction to where it images (and back, for tracked pixels); [`sensor`] writes the frame convention down
 //! once. [`library`] embeds the shipped lenses. [`tolerance`] loads a prescription whose guessed clear apertures
 //! cross, clipped where that is harmless, with a warning.
 
+pub mod agf;
 pub mod formats;
 pub mod glass;
 pub mod lens;

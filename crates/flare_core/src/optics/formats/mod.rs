@@ -177,3 +177,13 @@ pub fn load_lens_file(path: &Path) -> Result<Lens, FormatError> {
 pub fn to_json(lens: &Lens) -> String {
     json::write(lens)
 }
+
+/// Reads an AGF glass catalogue (any text encoding lens files may have) and adds its glasses to the ones
+/// found by name ([`crate::optics::glass::add_catalogue`]); the catalogue is named by the file stem in
+/// capitals (`ohara.agf` is OHARA). Returns how many glasses it holds; a broken file adds nothing.
+pub fn load_glass_catalogue(path: &Path) -> Result<usize, String> {
+    let bytes = std::fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let text = decode_text(&bytes).map_err(|e| format!("{}: {e}", path.display()))?;
+    let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("USER").to_ascii_uppercase();
+    crate::optics::glass::add_catalogue(&text, &name).map_err(|e| format!("{}: {e}", path.display()))
+}
