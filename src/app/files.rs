@@ -59,7 +59,7 @@ impl FileUse {
         match self {
             Self::OpenPreset | Self::SavePreset => &["json"],
             Self::ExportImage | Self::ExportSequence => &["png", "exr"],
-            Self::OpenLens => &["json", "zmx", "dat"],
+            Self::OpenLens => &["json", "zmx", "dat", "lens", "xml"],
             Self::OpenLut | Self::ExportLut => &["flut"],
             Self::Background => &["exr", "png", "hdr", "jpg", "jpeg"],
             Self::Track => &["csv", "txt"],

@@ -7,7 +7,7 @@ use anyhow::{Context, Result};
 use clap::{Subcommand, ValueEnum};
 use flare_core::files::write_atomic;
 use flare_core::optics::FirstOrder;
-use flare_core::optics::formats::{pbrt, to_json, zmx};
+use flare_core::optics::formats::{flaresim, pbrt, to_json, zmx};
 use flare_core::optics::glass::D_LINE_NM;
 use flare_core::optics::library::{DEFAULT_LENS_ID, builtin_lens, ids};
 use serde_json::json;
@@ -49,6 +49,8 @@ pub enum OutputFormat {
     Json,
     Zmx,
     Dat,
+    /// FlareSim's .lens.
+    Lens,
 }
 
 pub fn run(command: LensCommand) -> Result<()> {
@@ -183,6 +185,7 @@ fn lens_convert(file: &str, to: OutputFormat, output: &Path) -> Result<()> {
         OutputFormat::Json => to_json(&lens),
         OutputFormat::Zmx => zmx::write(&lens),
         OutputFormat::Dat => pbrt::write(&lens)?,
+        OutputFormat::Lens => flaresim::write(&lens)?,
     };
     write_atomic(output, text.as_bytes()).with_context(|| format!("writing {}", output.display()))?;
     eprintln!("wrote {}", output.display());

@@ -23,7 +23,7 @@ use clap::{Parser, Subcommand};
     name = "flarelab",
     version,
     about = "FlareLab: physically based lens flares. With no subcommand, opens the desktop app.",
-    after_help = "LENS is a file (.json, .zmx, .dat) or the name of a built-in lens (see `flarelab lens list`)."
+    after_help = "LENS is a file (.json, .zmx, .dat, FlareSim .lens, OpenLensFlare .xml) or the name of a built-in lens (see `flarelab lens list`)."
 )]
 pub struct Cli {
     #[command(subcommand)]

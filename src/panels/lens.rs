@@ -31,7 +31,11 @@ pub fn lens_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, action
             doc.ghosts.clear();
             doc.solo = None;
         }
-        if ui.button("Open…").on_hover_text("a lens file: .json, .zmx (Zemax), .dat (pbrt)").clicked() {
+        if ui
+            .button("Open…")
+            .on_hover_text("a lens file: .json, .zmx (Zemax), .dat (pbrt), .lens (FlareSim), .xml (OpenLensFlare)")
+            .clicked()
+        {
             actions.push(Action::OpenLensFile);
         }
     });

@@ -262,3 +262,171 @@ fn a_stop_in_glass_or_on_a_curved_surface_loads_and_forms_its_pupil() {
     let (i, j) = *on_surface.ghost_pairs().iter().find(|(i, j)| *i == s || *j == s).unwrap();
     assert_eq!(LightPath::ghost(&on_surface, i, j).unwrap().stop_crossings(&on_surface).len(), 2);
 }
+
+/// A FlareSim lens in the layout of its README's example: header, a comment row, a `stop` row, coatings.
+const FLARESIM: &str = "name: Double Gauss 58mm f/2 (test)
+focal_length: 58.0
+
+surfaces:
+# radius    thickness   ior     abbe    semi_ap  coating
+  39.68     8.36        1.670   47.2    25.0     1
+  152.73    0.20        1.000   0.0     25.0     0
+  25.59     11.40       1.670   47.2    21.0     1
+  0.0       2.50        1.699   30.1    21.0     0
+  16.99     8.34        1.000   0.0     14.0     2
+  stop      8.00        1.000   0.0     12.0     0
+  -20.95    2.00        1.603   38.0    14.0     1
+  0.0       9.53        1.658   57.3    16.0     0
+  -26.86    0.20        1.000   0.0     16.0     1
+  130.0     5.10        1.717   48.0    17.0     1
+  -71.04    40.0        1.000   0.0     17.0     1
+";
+
+#[test]
+fn flaresim_lens_files_read_by_extension_and_content() {
+    let loaded = read_lens_bytes(FLARESIM.as_bytes(), Path::new("dg.lens")).unwrap();
+    let lens = &loaded.lens;
+    assert_eq!(lens.name, "Double Gauss 58mm f/2 (test)");
+    assert_eq!(lens.surfaces.len(), 11);
+    assert!(lens.surfaces[5].stop && lens.surfaces[5].is_flat());
+    assert_eq!(lens.surfaces[0].medium.v_d, Some(47.2));
+    assert!(matches!(lens.surfaces[0].coating, flare_core::optics::Coating::QuarterWave { .. }));
+    assert_eq!(lens.surfaces[4].coating, flare_core::optics::Coating::broadband());
+    assert!(loaded.warnings.iter().any(|w| w.contains("coating column")), "{:?}", loaded.warnings);
+    // By content too (no extension), and the same lens.
+    assert_eq!(read_lens(FLARESIM, None, "dg").unwrap().lens.surfaces, lens.surfaces);
+    // The focal length it states is checked: a wrong one is said.
+    let wrong = FLARESIM.replace("focal_length: 58.0", "focal_length: 85.0");
+    let w = read_lens(&wrong, None, "dg").unwrap().warnings;
+    assert!(w.iter().any(|w| w.contains("line 2: focal_length 85 mm")), "{w:?}");
+    // Written back (our writer) and read again: the same optics.
+    let text = flare_core::optics::formats::flaresim::write(&builtin_lens("dgauss").unwrap()).unwrap();
+    let again = read_lens(&text, Some(LensFormat::FlareSimLens), "dg").unwrap().lens;
+    let fo = |l: &Lens| FirstOrder::d_line(l).unwrap().efl_mm;
+    assert!((fo(&again) - fo(&builtin_lens("dgauss").unwrap())).abs() < 1e-9);
+    // Malformed rows name their line and the reason.
+    for (edit, words) in [
+        (FLARESIM.replace("152.73    0.20        1.000", "152.73"), vec!["line 7", "expected 6 columns", "found 4"]),
+        (FLARESIM.replace("25.59", "25.5x"), vec!["line 8", "radius `25.5x`"]),
+        (FLARESIM.replace("1.699   30.1", "1.699   abc"), vec!["line 9", "abbe `abc`"]),
+        (FLARESIM.replace("surfaces:", "surfaces"), vec!["line 4", "neither a `key: value` header"]),
+    ] {
+        let e = read_lens(&edit, Some(LensFormat::FlareSimLens), "x").unwrap_err().to_string();
+        for w in words {
+            assert!(e.contains(w), "`{e}` lacks `{w}`");
+        }
+    }
+}
+
+/// An OpenLensFlare system in the layout of its examples: name, f-number, focal length, film, elements with
+/// a coating, the stop and the sensor.
+const OLF: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
+<opticalSystem>
+    <name>triplet-test</name>
+    <fnumber>4.0</fnumber>
+    <effectiveFocalLength>50</effectiveFocalLength>
+    <fieldOfView>40</fieldOfView>
+    <filmWidth>36</filmWidth>
+    <filmHeight>24</filmHeight>
+    <elements>
+        <element>
+            <type>lensSpherical</type>
+            <height>24.0</height>
+            <thickness>4.0</thickness>
+            <radius>30.0</radius>
+            <refractiveIndex>1.62</refractiveIndex>
+            <abbeNumber>60.3</abbeNumber>
+            <coatingLambda>550</coatingLambda>
+            <coatingIor>1.38</coatingIor>
+        </element>
+        <element>
+            <type>lensSpherical</type>
+            <height>24.0</height>
+            <thickness>5.0</thickness>
+            <radius>-200.0</radius>
+            <refractiveIndex>1.0</refractiveIndex>
+            <abbeNumber>89.3</abbeNumber>
+            <coatingLambda>0</coatingLambda>
+            <coatingIor>0</coatingIor>
+        </element>
+        <element>
+            <type>apertureStop</type>
+            <height>16.0</height>
+            <thickness>4.0</thickness>
+            <radius>0.0</radius>
+            <refractiveIndex>1.0</refractiveIndex>
+            <abbeNumber>89.3</abbeNumber>
+            <coatingLambda>0</coatingLambda>
+            <coatingIor>0</coatingIor>
+        </element>
+        <element>
+            <type>lensSpherical</type>
+            <height>18.0</height>
+            <thickness>3.0</thickness>
+            <radius>60.0</radius>
+            <refractiveIndex>1.62</refractiveIndex>
+            <abbeNumber>36.4</abbeNumber>
+            <coatingLambda>0</coatingLambda>
+            <coatingIor>0</coatingIor>
+        </element>
+        <element>
+            <type>lensSpherical</type>
+            <height>18.0</height>
+            <thickness>40.0</thickness>
+            <radius>-60.0</radius>
+            <refractiveIndex>1.0</refractiveIndex>
+            <abbeNumber>89.3</abbeNumber>
+            <coatingLambda>0</coatingLambda>
+            <coatingIor>0</coatingIor>
+        </element>
+        <element>
+            <type>sensor</type>
+            <height>43.0</height>
+            <thickness>0.001</thickness>
+            <radius>0.0</radius>
+            <refractiveIndex>1.0</refractiveIndex>
+            <abbeNumber>89.3</abbeNumber>
+            <coatingLambda>0</coatingLambda>
+            <coatingIor>0</coatingIor>
+        </element>
+    </elements>
+</opticalSystem>
+"#;
+
+#[test]
+fn openlensflare_systems_read_by_extension_and_content() {
+    let loaded = read_lens_bytes(OLF.as_bytes(), Path::new("t.xml")).unwrap();
+    let lens = &loaded.lens;
+    assert_eq!(lens.name, "triplet-test");
+    assert_eq!(lens.surfaces.len(), 5, "the sensor is not a surface");
+    assert_eq!(lens.surfaces[0].semi_aperture_mm, 12.0, "<height> is the clear diameter");
+    assert_eq!(
+        lens.surfaces[0].coating,
+        flare_core::optics::Coating::QuarterWave { design_wavelength_nm: 550.0, layer_index: Some(1.38) }
+    );
+    assert!(lens.surfaces[2].stop);
+    // <fnumber> sets the stop, and says so.
+    let fo = FirstOrder::d_line(lens).unwrap();
+    assert!((fo.f_number - 4.0).abs() < 1e-9, "{}", fo.f_number);
+    assert!(
+        loaded.warnings.iter().any(|w| w.starts_with("line 4: <fnumber> 4 sets the stop's")),
+        "{:?}",
+        loaded.warnings
+    );
+    assert_eq!(read_lens(OLF, None, "t").unwrap().lens.surfaces, lens.surfaces, "by content");
+    for (edit, words) in [
+        (
+            OLF.replacen("<thickness>5.0</thickness>", "<thickness>5.0x</thickness>", 1),
+            vec!["line 23", "<thickness> `5.0x`"],
+        ),
+        (OLF.replacen("lensSpherical", "lensAspherical", 1), vec!["line 11", "lensAspherical", "not supported"]),
+        (OLF.replacen("</element>", "", 1), vec!["not well-formed XML"]),
+        (OLF.replacen("<height>24.0</height>", "", 1), vec!["line 10", "no <height>"]),
+        (OLF.replacen("<fnumber>4.0</fnumber>", "<fnumber>-1</fnumber>", 1), vec!["line 4", "<fnumber>"]),
+    ] {
+        let e = read_lens(&edit, Some(LensFormat::OpenLensFlareXml), "x").unwrap_err().to_string();
+        for w in words {
+            assert!(e.contains(w), "`{e}` lacks `{w}`");
+        }
+    }
+}

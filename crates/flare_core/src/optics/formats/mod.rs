@@ -1,4 +1,5 @@
-//! Lens files: the native JSON form, Zemax OpticStudio `.zmx`, and pbrt `.dat`, read and written.
+//! Lens files: the native JSON form, Zemax OpticStudio `.zmx` and pbrt `.dat`, read and written; the
+//! formats of other flare tools, FlareSim `.lens` (read and written) and OpenLensFlare `.xml` (read).
 //!
 //! # How it works
 //! [`load_lens_file`] reads at most [`MAX_FILE_BYTES`], decodes the text (UTF-8, or UTF-16 with or without a
@@ -11,7 +12,9 @@
 //! [`crate::files::write_atomic`] puts it on disk through a temporary file and a rename, so a crash never
 //! leaves half a file.
 
+pub mod flaresim;
 pub mod json;
+pub mod olf;
 pub mod pbrt;
 mod text;
 pub mod zmx;
@@ -32,6 +35,10 @@ pub enum LensFormat {
     Zmx,
     /// pbrt's realistic-camera lens table.
     PbrtDat,
+    /// FlareSim's lens prescription.
+    FlareSimLens,
+    /// OpenLensFlare's optical system.
+    OpenLensFlareXml,
 }
 
 impl LensFormat {
@@ -40,6 +47,8 @@ impl LensFormat {
             Self::Json => "JSON",
             Self::Zmx => "Zemax .zmx",
             Self::PbrtDat => "pbrt .dat",
+            Self::FlareSimLens => "FlareSim .lens",
+            Self::OpenLensFlareXml => "OpenLensFlare .xml",
         }
     }
 
@@ -49,16 +58,24 @@ impl LensFormat {
             "json" => Some(Self::Json),
             "zmx" => Some(Self::Zmx),
             "dat" => Some(Self::PbrtDat),
+            "lens" => Some(Self::FlareSimLens),
+            "xml" => Some(Self::OpenLensFlareXml),
             _ => None,
         }
     }
 
-    /// The format the text looks like: JSON starts with `{`, a .zmx has SURF/VERS/MODE keywords, a .dat
-    /// has rows of numbers.
+    /// The format the text looks like: JSON starts with `{`, OpenLensFlare XML has an `<opticalSystem>`, a
+    /// FlareSim .lens a `surfaces:` line, a .zmx has SURF/VERS/MODE keywords, a .dat has rows of numbers.
     pub fn detect(text: &str) -> Option<Self> {
         let trimmed = text.trim_start();
         if trimmed.starts_with('{') {
             return Some(Self::Json);
+        }
+        if olf::looks_like(text) {
+            return Some(Self::OpenLensFlareXml);
+        }
+        if flaresim::looks_like(text) {
+            return Some(Self::FlareSimLens);
         }
         let mut numeric_rows = 0;
         for line in text.lines().map(str::trim).filter(|l| !l.is_empty()) {
@@ -134,6 +151,8 @@ pub fn read_lens(text: &str, format: Option<LensFormat>, id_hint: &str) -> Resul
         LensFormat::Json => json::parse(text),
         LensFormat::Zmx => zmx::parse(text, id_hint),
         LensFormat::PbrtDat => pbrt::parse(text, id_hint),
+        LensFormat::FlareSimLens => flaresim::parse(text, id_hint),
+        LensFormat::OpenLensFlareXml => olf::parse(text, id_hint),
     }
 }
 

@@ -42,7 +42,9 @@ pub enum FormatError {
     Empty,
     #[error("the file is not text (binary bytes near byte {offset})")]
     NotText { offset: usize },
-    #[error("not a lens file: it is neither JSON, a Zemax .zmx nor a pbrt .dat")]
+    #[error(
+        "not a lens file: it is neither JSON, a Zemax .zmx, a pbrt .dat, a FlareSim .lens nor an OpenLensFlare .xml"
+    )]
     UnknownFormat,
     #[error("JSON line {line}, column {column}{at}: {message}", at = json_at(.path))]
     Json { line: usize, column: usize, path: String, message: String },
