@@ -331,7 +331,7 @@ const OLF: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
     <elements>
         <element>
             <type>lensSpherical</type>
-            <height>24.0</height>
+            <height>12.0</height>
             <thickness>4.0</thickness>
             <radius>30.0</radius>
             <refractiveIndex>1.62</refractiveIndex>
@@ -341,7 +341,7 @@ const OLF: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
         </element>
         <element>
             <type>lensSpherical</type>
-            <height>24.0</height>
+            <height>12.0</height>
             <thickness>5.0</thickness>
             <radius>-200.0</radius>
             <refractiveIndex>1.0</refractiveIndex>
@@ -351,7 +351,7 @@ const OLF: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
         </element>
         <element>
             <type>apertureStop</type>
-            <height>16.0</height>
+            <height>8.0</height>
             <thickness>4.0</thickness>
             <radius>0.0</radius>
             <refractiveIndex>1.0</refractiveIndex>
@@ -361,7 +361,7 @@ const OLF: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
         </element>
         <element>
             <type>lensSpherical</type>
-            <height>18.0</height>
+            <height>9.0</height>
             <thickness>3.0</thickness>
             <radius>60.0</radius>
             <refractiveIndex>1.62</refractiveIndex>
@@ -371,7 +371,7 @@ const OLF: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
         </element>
         <element>
             <type>lensSpherical</type>
-            <height>18.0</height>
+            <height>9.0</height>
             <thickness>40.0</thickness>
             <radius>-60.0</radius>
             <refractiveIndex>1.0</refractiveIndex>
@@ -399,7 +399,7 @@ fn openlensflare_systems_read_by_extension_and_content() {
     let lens = &loaded.lens;
     assert_eq!(lens.name, "triplet-test");
     assert_eq!(lens.surfaces.len(), 5, "the sensor is not a surface");
-    assert_eq!(lens.surfaces[0].semi_aperture_mm, 12.0, "<height> is the clear diameter");
+    assert_eq!(lens.surfaces[0].semi_aperture_mm, 12.0, "<height> is the clear semi-aperture");
     assert_eq!(
         lens.surfaces[0].coating,
         flare_core::optics::Coating::QuarterWave { design_wavelength_nm: 550.0, layer_index: Some(1.38) }
@@ -421,7 +421,7 @@ fn openlensflare_systems_read_by_extension_and_content() {
         ),
         (OLF.replacen("lensSpherical", "lensAspherical", 1), vec!["line 11", "lensAspherical", "not supported"]),
         (OLF.replacen("</element>", "", 1), vec!["not well-formed XML"]),
-        (OLF.replacen("<height>24.0</height>", "", 1), vec!["line 10", "no <height>"]),
+        (OLF.replacen("<height>12.0</height>", "", 1), vec!["line 10", "no <height>"]),
         (OLF.replacen("<fnumber>4.0</fnumber>", "<fnumber>-1</fnumber>", 1), vec!["line 4", "<fnumber>"]),
     ] {
         let e = read_lens(&edit, Some(LensFormat::OpenLensFlareXml), "x").unwrap_err().to_string();

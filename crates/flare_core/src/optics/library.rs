@@ -1,4 +1,4 @@
-//! The built-in lens library: the seven prescriptions of `lenses/`, embedded in the binary so that the app
+//! The built-in lens library: the twenty prescriptions of `lenses/`, embedded in the binary so that the app
 //! and the command line work from any folder.
 //!
 //! # How it works
@@ -20,6 +20,17 @@ pub const BUILTIN_LENSES: &[(&str, &str)] = &[
     ("nikon_zoom_28_75mm", include_str!("../../../../lenses/nikon_zoom_28_75mm.json")),
     ("zeiss_master_prime_us5537259", include_str!("../../../../lenses/zeiss_master_prime_us5537259.json")),
     ("aspheric_zoom_us5793533", include_str!("../../../../lenses/aspheric_zoom_us5793533.json")),
+    ("kreitzer_tele_400mm", include_str!("../../../../lenses/kreitzer_tele_400mm.json")),
+    ("canon_zoom_70_200mm_at_70mm", include_str!("../../../../lenses/canon_zoom_70_200mm_at_70mm.json")),
+    ("canon_zoom_70_200mm_at_200mm", include_str!("../../../../lenses/canon_zoom_70_200mm_at_200mm.json")),
+    ("itoh_zoom_at_100mm", include_str!("../../../../lenses/itoh_zoom_at_100mm.json")),
+    ("itoh_zoom_at_123mm", include_str!("../../../../lenses/itoh_zoom_at_123mm.json")),
+    ("itoh_zoom_at_146mm", include_str!("../../../../lenses/itoh_zoom_at_146mm.json")),
+    ("canon_50mm_f1_8_jp1987_087922", include_str!("../../../../lenses/canon_50mm_f1_8_jp1987_087922.json")),
+    ("angenieux_double_gauss_us2701982", include_str!("../../../../lenses/angenieux_double_gauss_us2701982.json")),
+    ("kodak_petzval_us2500046", include_str!("../../../../lenses/kodak_petzval_us2500046.json")),
+    ("sigma_21mm_f1_4_art", include_str!("../../../../lenses/sigma_21mm_f1_4_art.json")),
+    ("aspherical_fish_eye_jp", include_str!("../../../../lenses/aspherical_fish_eye_jp.json")),
 ];
 
 /// `lens` with its iris removed and the stop moved onto the lens surface in front of it (the habit of many

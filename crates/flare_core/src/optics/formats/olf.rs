@@ -4,7 +4,8 @@
 //! The format (OpenLensFlare's `examples/systems/*.xml`): an `<opticalSystem>` with `<name>`, `<fnumber>`,
 //! `<effectiveFocalLength>`, `<fieldOfView>`, `<filmWidth>`, `<filmHeight>` and `<elements>`, each
 //! `<element>` holding `<type>` (`lensSpherical`, `apertureStop`, `sensor`), `<height>` (the clear
-//! *diameter*), `<thickness>` (to the next element), `<radius>` (0 flat), `<refractiveIndex>` (n_d after the
+//! semi-aperture: read so, the example systems' paraxial f-numbers come out near their stated `<fnumber>`,
+//! read as diameters twice it), `<thickness>` (to the next element), `<radius>` (0 flat), `<refractiveIndex>` (n_d after the
 //! surface), `<abbeNumber>`, `<coatingLambda>` (nm, 0 bare) and `<coatingIor>` (0: the ideal
 //! `max(sqrt(n0 n2), 1.38)`), as a quarter-wave coating. The `sensor` element ends the lens (the element
 //! before it gives the distance to the image). `<fnumber>` sets the stop's semi-diameter as a `.zmx` FNUM
@@ -138,8 +139,7 @@ pub fn parse(text: &str, id_hint: &str) -> Result<LoadedLens, FormatError> {
         let radius_mm = if stop { 0.0 } else { e.number("radius", Some(0.0))? };
         let v_d = (n_d != 1.0 && abbe > 0.0).then_some(abbe);
         let glass = (n_d == 1.0).then(|| "air".to_owned());
-        let mut s =
-            Surface::new(radius_mm, Some(e.number("thickness", None)?), Medium { n_d, v_d, glass }, 0.5 * height);
+        let mut s = Surface::new(radius_mm, Some(e.number("thickness", None)?), Medium { n_d, v_d, glass }, height);
         s.stop = stop;
         let lambda = e.number("coatingLambda", Some(0.0))?;
         let coating_ior = e.number("coatingIor", Some(0.0))?;
