@@ -819,3 +819,31 @@ fn the_report_tab_ranks_ghosts_on_a_worker_sorts_selects_and_exports() {
     assert_eq!(value["sensitivity"].as_array().unwrap().len(), 8);
     assert!(h.state().message.as_deref().unwrap_or("").contains("wrote"));
 }
+
+#[test]
+fn a_transcription_that_needs_clipping_opens_with_its_warning_in_the_lens_panel() {
+    let mut h = harness_on(Some(heliar()));
+    // The Nikon zoom as the public transcription gives it (semi-apertures 26.2 and 20 on surfaces 3 and 4).
+    let mut lens = flare_core::optics::library::builtin_lens("nikon").unwrap();
+    lens.surfaces[3].semi_aperture_mm = 26.2;
+    lens.surfaces[4].semi_aperture_mm = 20.0;
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("nikon_transcribed.json");
+    std::fs::write(&file, flare_core::optics::formats::to_json(&lens)).unwrap();
+    h.state_mut().open_lens(&file);
+    show(&mut h, Tab::Lens);
+    h.run_steps(2);
+    let state = h.state();
+    assert!((state.doc.lens.surfaces[3].semi_aperture_mm - 18.608).abs() < 1e-3, "clipped where they meet");
+    assert!(state.message.as_deref().unwrap_or("").contains("meet at a height of 18.61 mm"), "{:?}", state.message);
+    assert!(h.query_by_label_contains("(i) surfaces 3 and 4 meet at a height of 18.61 mm").is_some(), "in the panel");
+    // The conic column edits the surface's conic constant; the viewport's flare follows a valid edit.
+    h.get_by_label("conic 0").set_value_accesskit(-0.5);
+    h.run_steps(2);
+    assert_eq!(h.state().doc.lens.surfaces[0].conic, -0.5);
+    assert_eq!(h.state().flare().unwrap().system.lens.surfaces[0].conic, -0.5);
+    // Another lens: the warning is not shown for it.
+    h.state_mut().doc.lens = flare_core::optics::library::builtin_lens("tessar").unwrap();
+    h.run_steps(2);
+    assert!(h.query_by_label_contains("(i) surfaces 3 and 4").is_none());
+}

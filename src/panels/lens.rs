@@ -1,5 +1,6 @@
-//! Lens panel: the built-in library, opening a lens file, first-order data, and the interface table (radius,
-//! thickness, n_d / V_d, semi-aperture, stop) with rows added, removed and reordered. A cell whose value
+//! Lens panel: the built-in library, opening a lens file (and what loading it decided), first-order data, and the
+//! interface table (radius, conic with the aspheric terms on hover, thickness, n_d / V_d, semi-aperture, stop)
+//! with rows added, removed and reordered. A cell whose value
 //! makes the lens impossible is marked with the reason; the viewport keeps the last valid lens meanwhile.
 
 use eframe::egui;
@@ -67,8 +68,8 @@ fn surface_table_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, a
     // The table takes the panel's height below the summary (the panel itself scrolls sideways if narrow).
     let height = ui.available_height().max(200.0);
     egui::ScrollArea::vertical().id_salt("surfaces").max_height(height).show(ui, |ui| {
-        egui::Grid::new("surface_table").num_columns(9).striped(true).spacing([4.0, 2.0]).show(ui, |ui| {
-            for h in ["#", "radius", "thickness", "nd", "Vd", "semi-ap", "stop", "coating", ""] {
+        egui::Grid::new("surface_table").num_columns(10).striped(true).spacing([4.0, 2.0]).show(ui, |ui| {
+            for h in ["#", "radius", "conic", "thickness", "nd", "Vd", "semi-ap", "stop", "coating", ""] {
                 ui.strong(h);
             }
             ui.end_row();
@@ -98,6 +99,22 @@ fn surface_table_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, a
                     }
                 };
                 cell(ui, &mut s.radius_mm, "radius", "radius", 0.1);
+                // The conic constant; the even aspheric terms (read from the file) on hover.
+                let terms = if s.aspheric_r2 == 0.0 && s.aspheric.is_empty() {
+                    "no aspheric terms".to_owned()
+                } else {
+                    let mut t = format!("A2 {:e}", s.aspheric_r2);
+                    for (i, a) in s.aspheric.iter().enumerate() {
+                        t.push_str(&format!(", A{} {a:e}", 2 * i + 4));
+                    }
+                    t
+                };
+                let bad_terms = bad_cell(k, "aspheric");
+                let response = ui.scope(|ui| cell(ui, &mut s.conic, "conic", "conic", 0.01)).response;
+                response.on_hover_text(match bad_terms {
+                    Some(reason) => format!("{terms}\n(!) {reason}"),
+                    None => terms,
+                });
                 let mut t = s.thickness_mm.unwrap_or(0.0);
                 cell(ui, &mut t, "thickness", "thickness", 0.05);
                 if s.thickness_mm.is_some() || t != 0.0 {
