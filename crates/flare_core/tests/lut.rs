@@ -675,3 +675,41 @@ fn a_ghost_that_vanishes_within_an_interval_is_refined_not_cross_faded() {
         assert!(error / bright < bound, "{theta} deg: L1 {:.3} of the bright ghost's energy", error / bright);
     }
 }
+
+/// Ghosts that reflect at an even asphere bake (the ray grids trace the aspheric sag) and blend to finite
+/// images at any light angle.
+#[test]
+fn ghosts_of_an_aspheric_lens_bake_and_blend() {
+    let flare = flare("aspheric_zoom");
+    let lens = builtin_lens("aspheric_zoom").unwrap();
+    let aspheric: Vec<usize> = (0..lens.surfaces.len()).filter(|&k| !lens.surfaces[k].is_spherical()).collect();
+    let at_asphere: Vec<usize> = flare
+        .system
+        .ghosts
+        .iter()
+        .enumerate()
+        .filter(|(_, g)| aspheric.contains(&g.i) && aspheric.contains(&g.j))
+        .map(|(k, _)| k)
+        .take(2)
+        .collect();
+    assert_eq!(at_asphere.len(), 2, "ghosts reflecting at two aspheres");
+    let renderer = flare.ray_grid_renderer();
+    let settings = BakeSettings { theta_max_deg: Some(12.0), ..small_settings() };
+    let lut = bake(&flare, &renderer, &at_asphere, &settings, None, &|_| {}, &AtomicBool::new(false)).unwrap();
+    assert_eq!(lut.ghosts.len(), 2);
+    for g in &lut.ghosts {
+        assert!(!g.entries.is_empty());
+        let energy: f64 = g.entries.iter().flat_map(|e| e.texels.iter()).map(|t| f64::from(t[1])).sum();
+        assert!(energy.is_finite() && energy > 0.0, "ghost {} carries light", g.ghost);
+        assert!(g.entries.iter().all(|e| e.centre_mm.iter().all(|c| c.is_finite())));
+    }
+    let live = LiveLut::new(lut);
+    for (theta, alpha) in [(0.0, 0.0), (6.0, 40.0), (12.0, 200.0), (60.0, 90.0)] {
+        let light = light_position_deg(theta, alpha);
+        let frame = scenes(&live, &flare, light, 96, 64, &BlendSettings::default(), true);
+        let (scene, lut_scene) = (frame.scene.clone(), frame.lut.clone().unwrap_or_default());
+        assert_eq!(lut_scene.dropped_non_finite, 0);
+        let image = render_cpu(&flare, &live, &scene, &lut_scene);
+        assert!(image.pixels.iter().flatten().all(|v| v.is_finite() && *v >= 0.0), "{theta} {alpha}");
+    }
+}
