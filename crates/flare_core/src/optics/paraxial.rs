@@ -9,7 +9,8 @@
 //! - reflection at curvature c in any medium: `[[1, 0], [2 s c, 1]]`;
 //!
 //! where s = +1 when the light arrives travelling towards +z and s = -1 when it arrives travelling back
-//! (after an odd number of reflections). For forward travel these are exactly METHOD.md's `T`, `R` and `L`;
+//! (after an odd number of reflections), and c is the surface's vertex curvature (`1/R + 2 A2` for an even
+//! asphere: the conic and the terms from r^4 up do not act near the axis). For forward travel these are exactly METHOD.md's `T`, `R` and `L`;
 //! s carries the backward case, which METHOD.md writes with inverse matrices of a slope measured along +z
 //! instead of along the travel direction (the two agree on every height). Multiplying the matrices along a
 //! [`LightPath`] gives its matrix from the *entrance plane* (the plane of the first vertex, z = 0, in object

@@ -12,7 +12,8 @@
 //! `c (x^2 + y^2 + (1 + k) z^2) - 2 z = 0` (or from the vertex plane where the line misses the quadric) and
 //! then solves `z(s) - sag(r(s)) = 0` by Newton's method, at most [`MAX_NEWTON_STEPS`] steps, until a step is
 //! below 1e-13 of the distance; a line that leaves the region where the sag is defined, or does not
-//! converge, missed the surface. Its normal is `(-m x, -m y, 1) / sqrt(1 + m^2 r^2)` with `m = (dz/dr) / r`.
+//! converge, missed the surface. So a sphere is met as a whole sphere (the reference figures' convention, even
+//! off the hemisphere the sag describes), while a conic or asphere is met only on the branch its sag describes. Its normal is `(-m x, -m y, 1) / sqrt(1 + m^2 r^2)` with `m = (dz/dr) / r`.
 //! Then it refracts by
 //! the vector form of Snell's law, `n2 d' = n1 d + (n2 cos t - n1 cos i) N`, or reflects,
 //! `d' = d - 2 (d.N) N`, and finally meets the sensor plane.
