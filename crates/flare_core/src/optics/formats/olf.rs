@@ -17,8 +17,8 @@
 use quick_xml::Reader;
 use quick_xml::events::Event;
 
-use super::text::{FormatError, LoadedLens, finish_text_lens};
-use crate::optics::lens::{Coating, Lens, Medium, Surface, round};
+use super::text::{FormatError, LoadedLens, StopScaling, StopScalingError, finish_text_lens, scale_stop_to_pupil};
+use crate::optics::lens::{Coating, Medium, Surface, round};
 use crate::optics::paraxial::FirstOrder;
 
 const FORMAT: &str = "OpenLensFlare .xml";
@@ -198,22 +198,21 @@ fn size_stop_to_f_number(
     line: usize,
     warnings: &mut Vec<String>,
 ) -> Result<(), FormatError> {
-    let Some(stop) = surfaces.iter().position(|s| s.stop) else { return Ok(()) };
-    let probe = Lens { id: String::new(), name: String::new(), surfaces: surfaces.to_vec(), extra: Default::default() };
-    let fo = FirstOrder::d_line(&probe).map_err(|e| {
-        line_error(line, format!("<fnumber> needs the lens's first-order data, and there are none: {e}"))
+    let scaled = scale_stop_to_pupil(surfaces, |fo| fo.efl_mm / f_number).map_err(|e| match e {
+        StopScalingError::NoFirstOrder(e) => {
+            line_error(line, format!("<fnumber> needs the lens's first-order data, and there are none: {e}"))
+        }
+        StopScalingError::NoUsableSize => {
+            line_error(line, format!("<fnumber> {} gives no usable stop size", round(f_number)))
+        }
     })?;
-    let given = surfaces[stop].semi_aperture_mm;
-    let semi = given * fo.f_number / f_number;
-    if !(semi.is_finite() && semi > 0.0) {
-        return Err(line_error(line, format!("<fnumber> {} gives no usable stop size", round(f_number))));
+    if let Some(StopScaling { stop, given_mm, semi_mm }) = scaled {
+        warnings.push(format!(
+            "line {line}: <fnumber> {} sets the stop's (surface {stop}) semi-diameter to {} mm (its height said {} mm)",
+            round(f_number),
+            round(semi_mm),
+            round(given_mm)
+        ));
     }
-    surfaces[stop].semi_aperture_mm = semi;
-    warnings.push(format!(
-        "line {line}: <fnumber> {} sets the stop's (surface {stop}) semi-diameter to {} mm (its height said {} mm)",
-        round(f_number),
-        round(semi),
-        round(given)
-    ));
     Ok(())
 }

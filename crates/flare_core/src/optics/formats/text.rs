@@ -1,9 +1,11 @@
 //! What every lens format shares: the error a reader returns ([`FormatError`]: each message one line, naming
 //! the file line or JSON path), the last step of every text reader ([`finish_text_lens`]: name, validate,
-//! and map a validation error to the surface's line), and the number form every writer uses ([`exact`]:
-//! the shortest text that reads back to the same f64).
+//! and map a validation error to the surface's line), the stop sizing that a file's system aperture asks
+//! for ([`scale_stop_to_pupil`]), and the number form every writer uses ([`exact`]: the shortest text that
+//! reads back to the same f64).
 
 use crate::optics::lens::{Lens, LensError, Surface};
+use crate::optics::paraxial::{FirstOrder, ParaxialError};
 use crate::optics::tolerance;
 
 /// A lens as read from a file, with what the reader had to decide for it (clipped clear apertures, which
@@ -93,6 +95,40 @@ pub(crate) fn finish_text_lens(
         extra: Default::default(),
     };
     finish_loaded(lens, warnings, surface_lines)
+}
+
+/// What [`scale_stop_to_pupil`] did: the stop's surface index and its semi-diameter before and after.
+pub(crate) struct StopScaling {
+    pub stop: usize,
+    pub given_mm: f64,
+    pub semi_mm: f64,
+}
+
+/// Why [`scale_stop_to_pupil`] could not size the stop.
+pub(crate) enum StopScalingError {
+    /// The lens has no first-order data (afocal, or a paraxial ray that cannot pass).
+    NoFirstOrder(ParaxialError),
+    /// The scaled semi-diameter is not a positive finite number.
+    NoUsableSize,
+}
+
+/// Scales the stop's semi-diameter so that the paraxial entrance pupil (d line) has the diameter
+/// `wanted_epd_mm` computes from the lens's first-order data (ENPD as given, or EFL / F-number). `Ok(None)`
+/// when no surface is the stop; the caller words each error with its own line and field.
+pub(crate) fn scale_stop_to_pupil(
+    surfaces: &mut [Surface],
+    wanted_epd_mm: impl FnOnce(&FirstOrder) -> f64,
+) -> Result<Option<StopScaling>, StopScalingError> {
+    let Some(stop) = surfaces.iter().position(|s| s.stop) else { return Ok(None) };
+    let probe = Lens { id: String::new(), name: String::new(), surfaces: surfaces.to_vec(), extra: Default::default() };
+    let first_order = FirstOrder::d_line(&probe).map_err(StopScalingError::NoFirstOrder)?;
+    let given_mm = surfaces[stop].semi_aperture_mm;
+    let semi_mm = given_mm * wanted_epd_mm(&first_order) / first_order.entrance_pupil_diameter_mm;
+    if !(semi_mm.is_finite() && semi_mm > 0.0) {
+        return Err(StopScalingError::NoUsableSize);
+    }
+    surfaces[stop].semi_aperture_mm = semi_mm;
+    Ok(Some(StopScaling { stop, given_mm, semi_mm }))
 }
 
 /// Formats a number so that it reads back to the same f64 (shortest round-trip form).

@@ -14,7 +14,9 @@
 //! mode, other aperture types) is refused by name with its line; purely cosmetic keywords (comments,
 //! colours, solves' flags) are skipped.
 
-use super::text::{FormatError, LoadedLens, exact, finish_text_lens};
+use super::text::{
+    FormatError, LoadedLens, StopScaling, StopScalingError, exact, finish_text_lens, scale_stop_to_pupil,
+};
 use crate::optics::glass::find_glass;
 use crate::optics::lens::{Lens, MAX_ASPHERIC_TERMS, Medium, Surface, round};
 use crate::optics::paraxial::FirstOrder;
@@ -275,39 +277,34 @@ fn size_stop(
     lines: &[usize],
     warnings: &mut Vec<String>,
 ) -> Result<(), FormatError> {
-    let Some(stop) = surfaces.iter().position(|s| s.stop) else { return Ok(()) };
-    let line = match aperture {
+    let (line, said) = match aperture {
         SystemAperture::FloatByStop { .. } => return Ok(()),
-        SystemAperture::EntrancePupilDiameter { line, .. } | SystemAperture::ImageFNumber { line, .. } => line,
+        SystemAperture::EntrancePupilDiameter { line, diameter_mm } => {
+            (line, format!("ENPD {} mm", round(diameter_mm)))
+        }
+        SystemAperture::ImageFNumber { line, f_number } => (line, format!("FNUM {}", round(f_number))),
     };
-    let probe = Lens { id: String::new(), name: String::new(), surfaces: surfaces.to_vec(), extra: Default::default() };
-    let first_order = FirstOrder::d_line(&probe).map_err(|e| {
-        line_error(line, format!("the system aperture needs the lens's first-order data, and there are none: {e}"))
-    })?;
-    let (wanted_mm, said) = match aperture {
-        SystemAperture::EntrancePupilDiameter { diameter_mm, .. } => {
-            (diameter_mm, format!("ENPD {} mm", round(diameter_mm)))
-        }
-        SystemAperture::ImageFNumber { f_number, .. } => {
-            (first_order.efl_mm.abs() / f_number, format!("FNUM {}", round(f_number)))
-        }
+    let wanted_epd_mm = |first_order: &FirstOrder| match aperture {
+        SystemAperture::EntrancePupilDiameter { diameter_mm, .. } => diameter_mm,
+        SystemAperture::ImageFNumber { f_number, .. } => first_order.efl_mm.abs() / f_number,
         SystemAperture::FloatByStop { .. } => unreachable!("returned above"),
     };
-    let given = surfaces[stop].semi_aperture_mm;
-    let semi = given * wanted_mm / first_order.entrance_pupil_diameter_mm;
-    if !(semi.is_finite() && semi > 0.0) {
-        return Err(line_error(line, format!("{said} gives no usable stop size")));
-    }
-    surfaces[stop].semi_aperture_mm = semi;
-    let had = if (semi - given).abs() <= 1e-6 * semi {
+    let scaled = scale_stop_to_pupil(surfaces, wanted_epd_mm).map_err(|e| match e {
+        StopScalingError::NoFirstOrder(e) => {
+            line_error(line, format!("the system aperture needs the lens's first-order data, and there are none: {e}"))
+        }
+        StopScalingError::NoUsableSize => line_error(line, format!("{said} gives no usable stop size")),
+    })?;
+    let Some(StopScaling { stop, given_mm, semi_mm }) = scaled else { return Ok(()) };
+    let had = if (semi_mm - given_mm).abs() <= 1e-6 * semi_mm {
         "as its DIAM says".to_owned()
     } else {
-        format!("its DIAM said {} mm", round(given))
+        format!("its DIAM said {} mm", round(given_mm))
     };
     warnings.push(format!(
         "the system aperture {said} (line {line}) sets the stop's (surface {stop}, line {}) semi-diameter to {} mm ({had})",
         lines[stop],
-        round(semi)
+        round(semi_mm)
     ));
     Ok(())
 }
