@@ -47,15 +47,6 @@ fn vs_main(@builtin(vertex_index) vertex: u32, instance: GhostInstance) -> Verte
     return out;
 }
 
-// The aperture mask at uv in [-1, 1]^2 (v up), 0 outside.
-fn aperture_at(uv: vec2<f32>) -> f32 {
-    if (abs(uv.x) > 1.0 || abs(uv.y) > 1.0) {
-        return 0.0;
-    }
-    let tex = vec2<f32>(uv.x * 0.5 + 0.5, 0.5 - uv.y * 0.5);
-    return textureSampleLevel(aperture_texture, aperture_sampler, tex, 0.0).r;
-}
-
 fn stop_mask(map: vec4<f32>, q: vec2<f32>) -> f32 {
     if (map.w == 0.0) {
         return 1.0;

@@ -167,6 +167,14 @@ impl ViewportResources {
     }
 }
 
+impl ViewportResources {
+    /// Reads the resources without touching them (nothing is drawn again); `None` before they exist.
+    pub fn read<R>(render_state: &RenderState, f: impl FnOnce(&Self) -> R) -> Option<R> {
+        let renderer = render_state.renderer.read();
+        renderer.callback_resources.get::<Self>().map(f)
+    }
+}
+
 /// A frame to draw and its generation.
 pub type ViewFrame = (u64, Arc<Frame>);
 

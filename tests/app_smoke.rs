@@ -130,6 +130,11 @@ fn the_drag_bench_sweeps_the_light_and_reports_frame_times() {
             text.lines().find(|l| l.starts_with("drag bench:")).unwrap_or_else(|| panic!("no bench line:\n{text}"));
         println!("{line}");
         assert!(line.contains(&format!("{what}: {frames} frames at 1280x720")), "{line}");
+        // While it moves the viewport draws drafts (lavapipe: 1/4 resolution), then the full frame once it
+        // lets go; lavapipe has timestamp queries, so the flare's GPU time is measured by the GPU.
+        assert!(line.contains("drafts at 1/4 resolution drew a median"), "{line}");
+        assert!(line.contains("ms after letting go"), "{line}");
+        assert!(line.contains("ms of GPU time (llvmpipe"), "{line}");
         assert!(!text.contains("panicked"), "{text}");
         if what == "exposure" {
             // Sweeping the exposure rebuilds no optics and uploads no texture after the first frame.

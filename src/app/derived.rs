@@ -10,7 +10,7 @@ use std::time::Instant;
 
 use eframe::egui_wgpu::RenderState;
 use flare_core::flare::PreparedFlare;
-use flare_core::frame::{Frame, FrameRequest};
+use flare_core::frame::{Draft, DraftOutcome, Frame, FrameRequest};
 use flare_core::ghost::{FrameStats, GhostFrame, GhostSystem, Sprite};
 use flare_core::image::HdrImage;
 use flare_core::lut::blend::LiveLut;
@@ -162,6 +162,10 @@ pub struct Derived {
     pub plate_generation: u64,
     pub lut: Option<Arc<LiveLut>>,
     pub lut_generation: u64,
+    /// The viewport draws this draft instead of the full frame (see [`crate::app::draft`]).
+    pub draft: Option<Draft>,
+    /// What the frame shown left out, when it is a draft.
+    pub draft_shown: Option<DraftOutcome>,
 }
 
 impl Derived {
@@ -190,6 +194,8 @@ impl Derived {
             plate_generation: 0,
             lut: None,
             lut_generation: 0,
+            draft: None,
+            draft_shown: None,
         }
     }
 
@@ -370,7 +376,7 @@ impl Derived {
         let (w, h) = self.view_px;
         let key = FrameKey {
             optics,
-            request: self.request_at(doc, &flare, w, h, self.view_divisor()),
+            request: FrameRequest { draft: self.draft, ..self.request_at(doc, &flare, w, h, self.view_divisor()) },
             lut_generation: self.lut_generation,
             plate_generation: self.plate_generation,
         };
@@ -379,6 +385,7 @@ impl Derived {
         }
         let started = Instant::now();
         let frame = Frame::build(&flare, self.lut.as_deref(), &key.request);
+        self.draft_shown = frame.draft;
         self.frame_key = Some(key);
         self.rebuilds.frames += 1;
         let rows = ghost_rows(&flare.system, &frame.sprites);

@@ -1,10 +1,13 @@
 //! `FLARELAB_DRAG_BENCH=N`: the app measuring itself. The light (or, with `FLARELAB_DRAG_BENCH_WHAT=exposure`,
 //! the flare's exposure from 6 to 14 EV; with `FLARELAB_DRAG_BENCH_WHAT=scrub`, the playhead, one frame of the
-//! timeline a UI frame, plates read and all) moves one step a frame for N frames; then the median frame
-//! interval, the median scene build and what was rebuilt during the sweep are printed and the window closes.
+//! timeline a UI frame, plates read and all) moves one step a frame for N frames, as a drag would (the viewport
+//! draws drafts, see [`super::draft`]); then it lets go, waits for the full-quality frame, and prints the
+//! median frame interval, the median scene build, what the drafts drew, how long after letting go the full
+//! frame was on screen and what was rebuilt during the sweep; the window closes.
 
 use std::time::Instant;
 
+use flare_core::frame::DraftOutcome;
 use flare_core::preset::Document;
 
 use super::derived::RebuildCounts;
@@ -27,6 +30,16 @@ pub struct DragBench {
     last: Option<Instant>,
     intervals_ms: Vec<f64>,
     scene_ms: Vec<f64>,
+    /// Sprites drawn by each draft frame, and their divisor.
+    drawn: Vec<f64>,
+    sprites: Vec<f64>,
+    /// The GPU's own time of the flare's passes (timestamp queries), per frame where known.
+    gpu_ms: Vec<f64>,
+    divisor: u32,
+    /// The adapter that measured `gpu_ms`.
+    adapter: String,
+    /// When the sweep let go, and the line waiting for the full frame.
+    released: Option<(Instant, String)>,
 }
 
 impl DragBench {
@@ -45,11 +58,23 @@ impl DragBench {
             last: None,
             intervals_ms: Vec::new(),
             scene_ms: Vec::new(),
+            drawn: Vec::new(),
+            sprites: Vec::new(),
+            gpu_ms: Vec::new(),
+            divisor: 1,
+            adapter: String::new(),
+            released: None,
         })
     }
 
-    /// One frame: records its interval, moves the light or the exposure of `doc`, and when the sweep is done
-    /// returns the report line.
+    /// Still moving (the app draws drafts).
+    pub fn sweeping(&self) -> bool {
+        self.done <= self.frames
+    }
+
+    /// One frame: records its interval, moves the light or the exposure of `doc`; after the sweep, the frame
+    /// after letting go (the full one, `draft` none, was drawn in the UI frame before) returns the report line.
+    #[allow(clippy::too_many_arguments)]
     pub fn step(
         &mut self,
         doc: &mut Document,
@@ -57,11 +82,29 @@ impl DragBench {
         scene_ms: f64,
         rebuilds: RebuildCounts,
         view_px: (u32, u32),
+        draft: Option<DraftOutcome>,
+        flare_gpu: Option<(String, f64)>,
     ) -> Option<String> {
         let now = Instant::now();
+        if let Some((at, line)) = &self.released {
+            if draft.is_some() {
+                return None;
+            }
+            let ms = now.duration_since(*at).as_secs_f64() * 1e3;
+            return Some(format!("{line}; full quality {ms:.0} ms after letting go"));
+        }
         if let Some(last) = self.last {
             self.intervals_ms.push(now.duration_since(last).as_secs_f64() * 1e3);
             self.scene_ms.push(scene_ms);
+            if let Some((adapter, ms)) = &flare_gpu {
+                self.gpu_ms.push(*ms);
+                self.adapter = adapter.clone();
+            }
+            if let Some(d) = draft {
+                self.drawn.push(d.drawn as f64);
+                self.sprites.push((d.drawn + d.skipped) as f64);
+                self.divisor = d.divisor;
+            }
         }
         // The first frame builds the optics and uploads the textures; rebuilds are counted after it.
         if self.done == 1 {
@@ -86,9 +129,15 @@ impl DragBench {
             v.get(v.len() / 2).copied().unwrap_or(0.0)
         };
         let (interval, scene) = (median(&mut self.intervals_ms), median(&mut self.scene_ms));
+        let (drawn, sprites) = (median(&mut self.drawn), median(&mut self.sprites));
+        let gpu = if self.gpu_ms.is_empty() {
+            "no GPU timestamps".to_owned()
+        } else {
+            format!("the flare's passes took a median {:.1} ms of GPU time ({})", median(&mut self.gpu_ms), self.adapter)
+        };
         let start = self.rebuilds_at_start.unwrap_or(rebuilds);
-        Some(format!(
-            "drag bench: {}: {} frames at {}x{}: median frame interval {interval:.1} ms, median scene build {scene:.2} ms; {} optics rebuilds, {} texture uploads, {} frames built during the sweep",
+        let line = format!(
+            "drag bench: {}: {} frames at {}x{}: median frame interval {interval:.1} ms, median scene build {scene:.2} ms; drafts at 1/{} resolution drew a median {drawn:.0} of {sprites:.0} sprites; {gpu}; {} optics rebuilds, {} texture uploads, {} frames built during the sweep",
             match self.what {
                 Sweep::Exposure => "exposure",
                 Sweep::Light => "light",
@@ -97,9 +146,12 @@ impl DragBench {
             self.frames,
             view_px.0,
             view_px.1,
+            self.divisor,
             rebuilds.optics - start.optics,
             rebuilds.textures - start.textures,
             rebuilds.frames - start.frames,
-        ))
+        );
+        self.released = Some((now, line));
+        None
     }
 }

@@ -26,6 +26,7 @@ pub mod autobake;
 pub mod bake;
 pub mod derived;
 pub mod drag_bench;
+pub mod draft;
 mod file_actions;
 pub mod files;
 pub mod ghost_report;
@@ -79,10 +80,20 @@ pub fn run() -> Result<()> {
         .ok()
         .and_then(|s| flare_core::frame::parse_size(&s).ok())
         .map_or([1440.0, 900.0], |(w, h)| [w as f32, h as f32]);
-    let options = eframe::NativeOptions {
+    let mut options = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default().with_inner_size(size).with_title("FlareLab"),
         ..Default::default()
     };
+    // The device also asks for the timestamp queries the adapter offers: the renderer times its passes on the
+    // GPU (the status bar shows them).
+    if let eframe::egui_wgpu::WgpuSetup::CreateNew(create) = &mut options.wgpu_options.wgpu_setup {
+        let base = create.device_descriptor.clone();
+        create.device_descriptor = std::sync::Arc::new(move |adapter| {
+            let mut descriptor = base(adapter);
+            descriptor.required_features |= flare_core::render::gpu::timer_features(adapter);
+            descriptor
+        });
+    }
     let result = eframe::run_native(
         "FlareLab",
         options,
@@ -159,6 +170,8 @@ pub struct FlareLabApp {
     coatings: CoatingsState,
     ray_diagram: RayDiagram,
     drag_bench: Option<DragBench>,
+    /// Drafts while the user drags (see [`draft`]).
+    draft: draft::DraftControl,
     /// The size File > Export image renders at.
     export_size: (u32, u32),
     /// Where the viewport was last laid out (points).
@@ -210,6 +223,7 @@ impl FlareLabApp {
             coatings: CoatingsState::default(),
             ray_diagram: RayDiagram::default(),
             drag_bench,
+            draft: draft::DraftControl::new(software),
             export_size: (1920, 1080),
             view_rect: None,
             playhead: 1,
@@ -299,6 +313,7 @@ impl FlareLabApp {
         self.auto_bake_step();
         self.files_step(ui.ctx());
         self.drag_bench_step(ui.ctx());
+        self.draft_step(ui.ctx());
         let mut actions = Vec::new();
         egui::Panel::top("menu").show(ui, |ui| self.menu_ui(ui));
         egui::Panel::bottom("status").show(ui, |ui| self.status_ui(ui));
@@ -500,6 +515,23 @@ impl FlareLabApp {
             self.derived.stats.empty_entrance_region,
             if self.derived.lut.is_some() { " | LUT ghosts on" } else { "" }
         ));
+        // One line, always there: whether the view shows a draft, and the GPU's own time of the flare's passes.
+        let quality = match self.derived.draft_shown {
+            Some(d) => format!(
+                "draft while dragging: 1/{} resolution, the {} brightest of {} sprites (aiming at {:.0} ms a frame); full quality when you let go",
+                d.divisor,
+                d.drawn,
+                d.drawn + d.skipped,
+                draft::TARGET_MS
+            ),
+            None => "full quality".to_owned(),
+        };
+        let gpu_time = match (self.gpu.as_ref(), self.gpu_pass_times()) {
+            (_, Some((adapter, times))) => format!("GPU time ({adapter}, timestamp queries): {}", times.summary()),
+            (Some(_), None) => "GPU time: not measured (no timestamp queries on this adapter, or none back yet)".to_owned(),
+            (None, None) => "no GPU".to_owned(),
+        };
+        ui.label(format!("{quality} | {gpu_time}"));
         // The bake (started by itself or from the Blend panel) shows its progress and Cancel here too.
         if let (Some(job), BakeStatus::Running { fraction, text }) = (&self.bake, &self.bake_status) {
             ui.horizontal(|ui| {
@@ -918,8 +950,39 @@ impl FlareLabApp {
         self.spawn_bake(flare, key);
     }
 
+    /// The adapter's name and the GPU pass times of the latest viewport frame whose timestamps came back.
+    fn gpu_pass_times(&self) -> Option<(String, flare_core::render::gpu::PassTimes)> {
+        let rs = self.gpu.as_ref()?;
+        let times = ViewportResources::read(rs, |res| res.renderer.pass_times().cloned())??;
+        Some((rs.adapter.get_info().name, times))
+    }
+
+    /// Whether this UI frame draws a draft (see [`draft`]): while a drag moves (the light, a slider, a drag
+    /// value), an arrow key is held or the drag bench sweeps. The frame is rebuilt when that changes.
+    fn draft_step(&mut self, ctx: &egui::Context) {
+        let dragging = ctx.dragged_id().is_some()
+            && ctx.input(|i| i.pointer.time_since_last_movement() < draft::STILL_S);
+        let arrows = ctx.input(|i| {
+            [egui::Key::ArrowLeft, egui::Key::ArrowRight, egui::Key::ArrowUp, egui::Key::ArrowDown]
+                .iter()
+                .any(|k| i.key_down(*k))
+        });
+        let sweeping = self.drag_bench.as_ref().is_some_and(DragBench::sweeping);
+        let flare_gpu_ms = self.gpu_pass_times().map(|(_, t)| t.total_ms());
+        let draft = self.draft.step(dragging || arrows || sweeping, flare_gpu_ms, std::time::Instant::now());
+        if draft.is_some() && !sweeping {
+            // Refine to the full frame once the pointer rests, even if nothing else repaints.
+            ctx.request_repaint_after(std::time::Duration::from_secs_f32(draft::STILL_S));
+        }
+        if draft != self.derived.draft {
+            self.derived.draft = draft;
+            self.sync_frame();
+        }
+    }
+
     /// One frame of the drag bench (see [`DragBench`]); closes the window when it is done.
     fn drag_bench_step(&mut self, ctx: &egui::Context) {
+        let flare_gpu = self.gpu_pass_times().map(|(adapter, t)| (adapter, t.total_ms()));
         let Some(bench) = &mut self.drag_bench else { return };
         match bench.step(
             &mut self.doc,
@@ -927,6 +990,8 @@ impl FlareLabApp {
             self.derived.scene_ms,
             self.derived.rebuilds,
             self.derived.view_px,
+            self.derived.draft_shown,
+            flare_gpu,
         ) {
             Some(line) => {
                 println!("{line}");

@@ -156,6 +156,10 @@ pub struct RenderArgs {
     /// Grid cells across each ghost's entrance region, for raygrid and reference.
     #[arg(long)]
     pub grid: Option<usize>,
+    /// Ray grids on the GPU: samples per pixel across (1 to 8; each pixel is the mean of N x N, approaching the
+    /// CPU's box filter; 1 samples pixel centres, the fastest on a software adapter).
+    #[arg(long, default_value_t = flare_core::render::raygrid::SUPERSAMPLE)]
+    pub gpu_samples: u32,
     /// Aperture: circle, blades:N[:ROTATION_DEG[:ROUNDNESS]], or image:PATH (grayscale).
     #[arg(long)]
     pub aperture: Option<String>,
@@ -451,6 +455,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     if args.layers.is_some() && grid.is_some() {
         bail!("--layers ghosts applies to the paraxial, blended and photo methods");
     }
+    if !(1..=8).contains(&args.gpu_samples) {
+        bail!("--gpu-samples {}: use 1 to 8 samples a pixel across", args.gpu_samples);
+    }
     if ![1, 2, 4].contains(&args.accumulation_divisor) {
         bail!("--accumulation-divisor {}: use 1, 2 or 4", args.accumulation_divisor);
     }
@@ -519,10 +526,14 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         Method::Blended | Method::Photo => Some(LiveLut::new(lut_for(&doc, &flare, method)?)),
         _ => None,
     };
+    // Ray grids trace on the GPU too (`render::raygrid`); the reference is the f64 CPU tracer.
     let mut device = match (args.device, grid) {
-        (_, Some(_)) | (DeviceArg::Cpu, None) => Device::Cpu,
-        (DeviceArg::Gpu, None) => Device::gpu(false).map_err(|e| anyhow::anyhow!("{e} (or use --device cpu)"))?,
-        (DeviceArg::Auto, None) => Device::gpu(false).unwrap_or_else(|e| {
+        (DeviceArg::Gpu, Some(raytrace::Grid::Adaptive(_))) => bail!(
+            "--device gpu: the reference is the f64 CPU tracer; for ray grids on the GPU use --method raygrid --grid N"
+        ),
+        (_, Some(raytrace::Grid::Adaptive(_))) | (DeviceArg::Cpu, _) => Device::Cpu,
+        (DeviceArg::Gpu, _) => Device::gpu(false).map_err(|e| anyhow::anyhow!("{e} (or use --device cpu)"))?,
+        (DeviceArg::Auto, _) => Device::gpu(false).unwrap_or_else(|e| {
             eprintln!("no GPU ({e}): drawing on the CPU twin");
             Device::Cpu
         }),
@@ -568,17 +579,36 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         Some(n) => {
             // Ray-traced ghosts replace the paraxial accumulation; starburst, tonemap and writer are the same.
             let started = std::time::Instant::now();
-            let traced = flare.ray_grid_renderer().render(planned.light_deg, width, height, n)?;
-            let st = traced.stats;
-            eprintln!(
-                "ray-traced {} ghost x wavelength jobs, {n:?} grid: {} rays, {} triangles, {} jobs with no light, {:.2} s",
-                st.jobs,
-                st.rays,
-                st.triangles,
-                st.empty_jobs,
-                started.elapsed().as_secs_f64()
-            );
-            let mut hdr = traced.hdr;
+            let renderer = flare.ray_grid_renderer();
+            let mut hdr = match (&device, n) {
+                (Device::Gpu(drawer), raytrace::Grid::Fixed(cells)) => {
+                    let gpu = flare_core::render::raygrid::GpuRayGrid::new(&drawer.ctx.device);
+                    let window = raytrace::Window::frame(width, height);
+                    let samples = args.gpu_samples;
+                    let traced = gpu.render(&drawer.ctx, &renderer, planned.light_deg, window, cells, samples)?;
+                    eprintln!(
+                        "ray grids on the GPU ({}): {} ghost x wavelength jobs with light, {cells}-cell grid, {samples}x{samples} samples a pixel, {} batches, {:.2} s",
+                        drawer.ctx.adapter.name,
+                        traced.jobs,
+                        traced.batches,
+                        started.elapsed().as_secs_f64()
+                    );
+                    traced.hdr
+                }
+                _ => {
+                    let traced = renderer.render(planned.light_deg, width, height, n)?;
+                    let st = traced.stats;
+                    eprintln!(
+                        "ray-traced on the CPU {} ghost x wavelength jobs, {n:?} grid: {} rays, {} triangles, {} jobs with no light, {:.2} s",
+                        st.jobs,
+                        st.rays,
+                        st.triangles,
+                        st.empty_jobs,
+                        started.elapsed().as_secs_f64()
+                    );
+                    traced.hdr
+                }
+            };
             cpu::starburst_pass(&frame.scene, &flare.starburst_texture, &mut hdr);
             let display = cpu::tonemap_pass(&frame.scene, &hdr, plate.as_ref());
             let drawn = Drawn { hdr, display };

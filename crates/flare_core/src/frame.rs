@@ -60,6 +60,33 @@ pub struct FrameRequest {
     pub ghost_gains: Vec<f32>,
     pub blend: BlendSettings,
     pub lut_use: LutUse,
+    /// Draw a draft instead (the app while the user drags; never an export or a command's frame).
+    pub draft: Option<Draft>,
+}
+
+/// A draft of a frame: what the app draws while the light is dragged or a value scrubbed, chosen to hold a
+/// frame time ([`Frame::build`]). Its accumulation is at 1/`divisor` of the request's size (2 or 4; at least
+/// the request's own divisor): with a divisor of 2 or more the whole frame, tonemap included, is drawn at half
+/// the size (a viewport stretches it) and accumulated at the rest of the divisor. Of the paraxial sprites only
+/// the brightest are drawn, as many as fit in `fragment_budget` accumulation fragments (a sprite's quad
+/// clipped to the accumulation): the faint ones, which cost as much to fill as the bright ones, are skipped
+/// first. LUT instances and the starburst are kept.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Draft {
+    pub divisor: u32,
+    pub fragment_budget: u64,
+}
+
+/// What a draft left out of its frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct DraftOutcome {
+    /// The accumulation drawn, as a divisor of the request's size.
+    pub divisor: u32,
+    /// Sprites drawn and skipped for the budget.
+    pub drawn: usize,
+    pub skipped: usize,
+    /// Accumulation fragments of the sprites drawn.
+    pub fragments: u64,
 }
 
 impl Default for FrameRequest {
@@ -74,6 +101,7 @@ impl Default for FrameRequest {
             ghost_gains: Vec::new(),
             blend: BlendSettings::default(),
             lut_use: LutUse::Off,
+            draft: None,
         }
     }
 }
@@ -89,12 +117,19 @@ pub struct Frame {
     pub sprites: GhostFrame,
     /// What the frame was built from.
     pub request: FrameRequest,
+    /// When the request asked for a draft: what it left out.
+    pub draft: Option<DraftOutcome>,
 }
 
 impl Frame {
     /// Builds the frame `request` asks for from `flare` and, when LUT ghosts are used, `lut`.
     pub fn build(flare: &PreparedFlare, lut: Option<&LiveLut>, request: &FrameRequest) -> Self {
-        let (w, h) = (request.width.max(1), request.height.max(1));
+        let (mut w, mut h) = (request.width.max(1), request.height.max(1));
+        // A draft of divisor 2 or more is drawn at half the size (see [`Draft`]).
+        let draft_divisor = request.draft.map(|d| d.divisor.max(request.display.accumulation_divisor).clamp(1, 4));
+        if draft_divisor.is_some_and(|d| d >= 2) {
+            (w, h) = (w.div_ceil(2), h.div_ceil(2));
+        }
         let lut = lut.filter(|_| request.lut_use != LutUse::Off);
         let ghosts = flare.system.ghosts.len();
         // The light's gain scales every ghost and the starburst; a NaN or negative gain draws no flare.
@@ -119,12 +154,21 @@ impl Frame {
                 *gain = if alone { 0.0 } else { *gain * l.paraxial_weight(g as u32) };
             }
         }
-        let display = DisplaySettings {
+        let mut display = DisplaySettings {
             starburst_intensity: request.display.starburst_intensity * light_gain,
             ..request.display
         };
-        let (scene, sprites) = flare.scene_with(request.light_deg, sensor, w, h, &display, &gains);
-        Self { scene, lut: lut_scene, sprites, request: request.clone() }
+        if let Some(d) = draft_divisor {
+            display.accumulation_divisor = if d >= 2 { d / 2 } else { 1 };
+        }
+        let (mut scene, sprites) = flare.scene_with(request.light_deg, sensor, w, h, &display, &gains);
+        let draft = request.draft.map(|d| {
+            let skipped = scene.keep_brightest(d.fragment_budget);
+            let fragments = scene.instances.iter().map(|i| scene.fragments(i)).sum();
+            let divisor = request.width.max(1).div_ceil(scene.hdr_width.max(1));
+            DraftOutcome { divisor, drawn: scene.instances.len(), skipped, fragments }
+        });
+        Self { scene, lut: lut_scene, sprites, request: request.clone(), draft }
     }
 
     /// The frame's size in pixels.
@@ -150,7 +194,7 @@ impl Frame {
         let gain = self.request.ghost_gains.get(g as usize).copied().unwrap_or(1.0);
         let ghost_gains = (0..flare.system.ghosts.len() as u32).map(|h| if h == g { gain } else { 0.0 }).collect();
         let display = DisplaySettings { starburst: false, ..self.request.display };
-        Frame::build(flare, lut, &FrameRequest { ghost_gains, display, ..self.request.clone() })
+        Frame::build(flare, lut, &FrameRequest { ghost_gains, display, draft: None, ..self.request.clone() })
     }
 }
 

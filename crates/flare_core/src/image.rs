@@ -27,6 +27,31 @@ pub enum Sampling {
 }
 
 impl HdrImage {
+    /// The mean of every `factor` x `factor` block (a box filter down to 1 / `factor` of the size; the size
+    /// must be a multiple of it, else the last partial blocks are left out).
+    pub fn box_reduced(&self, factor: u32) -> HdrImage {
+        if factor <= 1 {
+            return self.clone();
+        }
+        let (w, h) = (self.width / factor, self.height / factor);
+        let f = factor as usize;
+        let mut pixels = vec![[0.0f32; 4]; (w * h) as usize];
+        for (k, out) in pixels.iter_mut().enumerate() {
+            let (x, y) = (k % w as usize, k / w as usize);
+            let mut sum = [0.0f64; 4];
+            for dy in 0..f {
+                for dx in 0..f {
+                    let p = self.pixels[(y * f + dy) * self.width as usize + x * f + dx];
+                    for c in 0..4 {
+                        sum[c] += f64::from(p[c]);
+                    }
+                }
+            }
+            *out = sum.map(|v| (v / (f * f) as f64) as f32);
+        }
+        HdrImage { width: w, height: h, pixels }
+    }
+
     /// A black image (alpha 0).
     pub fn black(width: u32, height: u32) -> Self {
         Self { width, height, pixels: vec![[0.0; 4]; width as usize * height as usize] }

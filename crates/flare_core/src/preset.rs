@@ -365,6 +365,7 @@ impl Document {
             ghost_gains: self.ghost_gains_at(system, frame),
             blend: self.blend_settings(),
             lut_use: self.lut_use(),
+            draft: None,
         }
     }
 

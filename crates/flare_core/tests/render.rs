@@ -22,10 +22,14 @@ fn every_shader_parses_and_validates_with_naga() {
         naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all())
             .validate(&module)
             .unwrap_or_else(|e| panic!("{name}: {e:?}"));
-        if *name != "common.wgsl" {
-            for entry in ["vs_main", "fs_main"] {
-                assert!(module.entry_points.iter().any(|e| e.name == entry), "{name} lacks {entry}");
-            }
+        let entries: &[&str] = match *name {
+            "common.wgsl" => &[],
+            "raygrid_trace.wgsl" => &["trace_main"],
+            "raygrid_splat.wgsl" => &["vs_splat", "fs_splat"],
+            _ => &["vs_main", "fs_main"],
+        };
+        for entry in entries {
+            assert!(module.entry_points.iter().any(|e| e.name == *entry), "{name} lacks {entry}");
         }
     }
 }
@@ -105,6 +109,49 @@ fn ghost_gains_are_applied_as_the_frame_is_built() {
     for k in 0..3 {
         assert_eq!(pick(&half).colour[k], pick(&full).colour[k] * 0.5);
     }
+}
+
+/// A draft keeps the brightest sprites within its fragment budget, at its divisor; with a budget that holds
+/// everything it is the frame at that divisor; it never reaches an export (a full request has no draft).
+#[test]
+fn a_draft_keeps_the_brightest_sprites_within_its_budget() {
+    let flare = flare("nikon_zoom_28_75mm");
+    let base = request([8.0, 5.0], 640, 360, 1);
+    let full = Frame::build(&flare, None, &base);
+    assert!(full.draft.is_none());
+    // A draft of divisor 4 is the frame at half the size, accumulated at half of that.
+    let quarter = Frame::build(&flare, None, &request([8.0, 5.0], 320, 180, 2));
+    let all: u64 = quarter.scene.instances.iter().map(|i| quarter.scene.fragments(i)).sum();
+    let roomy = Frame::build(
+        &flare,
+        None,
+        &FrameRequest { draft: Some(frame::Draft { divisor: 4, fragment_budget: all }), ..base.clone() },
+    );
+    assert_eq!(roomy.scene, quarter.scene, "a draft with room for every sprite is that frame");
+    assert_eq!(roomy.draft.unwrap().divisor, 4);
+    assert_eq!(roomy.draft.unwrap().skipped, 0);
+    let budget = all / 10;
+    let draft = Frame::build(
+        &flare,
+        None,
+        &FrameRequest { draft: Some(frame::Draft { divisor: 4, fragment_budget: budget }), ..base.clone() },
+    );
+    let outcome = draft.draft.unwrap();
+    assert_eq!((draft.scene.hdr_width, draft.scene.hdr_height), (160, 90));
+    assert!(outcome.fragments <= budget && outcome.fragments > budget / 2, "{outcome:?} budget {budget}");
+    assert_eq!(outcome.drawn + outcome.skipped, quarter.scene.instances.len());
+    assert!(outcome.skipped > 0 && outcome.drawn > 0, "{outcome:?}");
+    // Every skipped sprite that would have fitted alone is no brighter than the faintest one drawn with it...
+    let peak = |i: &flare_core::render::GhostInstance| i.colour[0].max(i.colour[1]).max(i.colour[2]);
+    let brightest = quarter.scene.instances.iter().map(peak).fold(0.0, f32::max);
+    assert!(draft.scene.instances.iter().any(|i| peak(i) == brightest), "the brightest sprite is drawn");
+    // ... and the draft's light is most of the frame's: the faint sprites it skips carry little.
+    let energy = |s: &flare_core::render::FlareScene| -> f64 {
+        s.instances.iter().map(|i| f64::from(peak(i)) * s.fragments(i) as f64).sum()
+    };
+    let share = energy(&draft.scene) / energy(&quarter.scene);
+    assert!(share > 0.5, "the draft draws {share:.2} of the frame's light");
+    eprintln!("draft: {outcome:?}, {share:.2} of the light for {:.2} of the fragments", outcome.fragments as f64 / all as f64);
 }
 
 /// Mean relative HDR difference, the mean and worst 8-bit display difference, and the share of channels that

@@ -175,6 +175,8 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let mut rows = Vec::new();
     let mut convergence = Vec::new();
     let mut bakes = Vec::new();
+    // GPU ray grids against CPU ray grids at the same grid: (lens, angle, grid, comparison).
+    let mut twins: Vec<(String, f64, usize, Comparison)> = Vec::new();
     for name in &lenses {
         let lens = open_lens(name)?;
         let flare = PreparedFlare::new(&lens, &FlareConfig::default()).with_context(|| name.clone())?;
@@ -230,6 +232,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                 ms_median,
                 runs,
                 errors,
+                gpu: None,
             };
             // Each method's image against the reference, and written out with --images.
             let truth = metrics::Reference::new(&reference.hdr, &reference.moments);
@@ -307,21 +310,52 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             }
             rows.push(row("blended".into(), ms, runs, against("blended", &image, &moments)?));
             // On the GPU, as the app draws it: frame, upload, draw, wait (no read-back in the timing).
+            // The GPU's own time of the passes (timestamp queries) is reported beside the wall-clock time.
             if let Some(gpu) = gpu.as_mut() {
+                let mut gpu_times = Vec::new();
                 let (ms, runs, frame) = timed(repeats, || {
                     let frame = Frame::build(&flare, None, &request);
                     gpu.drawer.render_into(&frame, &sources, &gpu.view)?;
                     Ok(frame)
                 })?;
+                // Timed apart, so that waiting for the timestamps is not in the wall-clock time.
+                for _ in 0..runs {
+                    let frame = Frame::build(&flare, None, &request);
+                    gpu.drawer.render_into(&frame, &sources, &gpu.view)?;
+                    let (device, queue) = (&gpu.drawer.ctx.device, &gpu.drawer.ctx.queue);
+                    if let Some(times) = gpu.drawer.renderer.wait_pass_times(device, queue) {
+                        gpu_times.push(times);
+                    }
+                }
                 let image = gpu::read_hdr(&gpu.drawer.ctx, &gpu.drawer.renderer)?;
                 let moments = cpu::ghost_moments(&frame.scene, &flare.mask, ghosts);
-                rows.push(row("paraxial-gpu".into(), ms, runs, against("paraxial-gpu", &image, &moments)?));
+                let mut measured = row("paraxial-gpu".into(), ms, runs, against("paraxial-gpu", &image, &moments)?);
+                if let Some(last) = gpu_times.last() {
+                    let totals: Vec<f64> = gpu_times.iter().map(gpu::PassTimes::total_ms).collect();
+                    measured.gpu = Some((metrics::median(&totals), last.summary()));
+                }
+                rows.push(measured);
             }
             for &grid in &grids {
                 let (ms, runs, image) = timed(repeats, || render(Grid::Fixed(grid)))?;
                 let method = format!("raygrid-{grid}");
                 let errors = against(&method, &image.hdr, &image.moments)?;
                 rows.push(row(method, ms, runs, errors));
+                // The same grid traced and drawn on the GPU (4 x 4 samples a pixel), against the reference and
+                // against the CPU's image at this grid.
+                if let Some(gpu) = gpu.as_ref() {
+                    let window = flare_core::raytrace::Window::frame(width, height);
+                    let samples = flare_core::render::raygrid::SUPERSAMPLE;
+                    let (ms, runs, gpu_image) = timed(repeats, || {
+                        Ok(gpu.raygrid.render(&gpu.drawer.ctx, &tracer, light, window, grid, samples)?)
+                    })?;
+                    let method = format!("raygrid-{grid}-gpu");
+                    // No per-ghost moments from the GPU: no centroid error ("-" in the table).
+                    let errors = against(&method, &gpu_image.hdr, &[])?;
+                    let twin = metrics::compare(&gpu_image.hdr, &[], &image.hdr, &[]);
+                    rows.push(row(method, ms, runs, errors));
+                    twins.push((lens.id.clone(), theta, grid, twin));
+                }
             }
             eprintln!("[{:6.1} s] {} at {theta} deg: done", started.elapsed().as_secs_f64(), lens.id);
         }
@@ -336,6 +370,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     );
     write_atomic(&args.out.join("bench.csv"), csv(&rows).as_bytes())?;
     let mut markdown = markdown(&rows, &convergence, &settings);
+    markdown.push_str(&twin_table(&twins, gpu.as_ref().map(|g| g.drawer.ctx.adapter.name.as_str())));
     markdown.push_str(&bake_table(&bakes, &rows));
     write_atomic(&args.out.join("bench.md"), markdown.as_bytes())?;
     plot::error_against_time(&rows, &args.out.join("bench.png"))?;
@@ -347,10 +382,29 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
-/// The frame pipeline's GPU drawer and a target to draw into, for the paraxial-gpu rows.
+/// GPU ray grids against the CPU's at the same grid (PSNR and SSIM of the GPU image at the CPU image's
+/// exposure).
+fn twin_table(twins: &[(String, f64, usize, Comparison)], adapter: Option<&str>) -> String {
+    let mut md = String::new();
+    let Some(adapter) = adapter.filter(|_| !twins.is_empty()) else { return md };
+    let _ = writeln!(
+        md,
+        "\nRay grids on the GPU ({adapter}, f32, 4 x 4 samples a pixel) against the CPU's (f64, box-filtered) at the same grid:\n"
+    );
+    let _ = writeln!(md, "| lens | field (deg) | grid | PSNR (dB) | SSIM | rel. L1 |");
+    let _ = writeln!(md, "|---|---:|---:|---:|---:|---:|");
+    for (lens, field, grid, c) in twins {
+        let _ = writeln!(md, "| {lens} | {field} | {grid} | {:.1} | {:.4} | {:.4} |", c.psnr_db, c.ssim, c.relative_l1);
+    }
+    md
+}
+
+/// The frame pipeline's GPU drawer and a target to draw into, for the paraxial-gpu rows, and the GPU ray
+/// grids.
 struct GpuBench {
     drawer: GpuDrawer,
     view: wgpu::TextureView,
+    raygrid: flare_core::render::raygrid::GpuRayGrid,
 }
 
 impl GpuBench {
@@ -365,7 +419,8 @@ impl GpuBench {
             wgpu::TextureUsages::RENDER_ATTACHMENT,
         );
         let view = target.create_view(&wgpu::TextureViewDescriptor::default());
-        Ok(Self { drawer, view })
+        let raygrid = flare_core::render::raygrid::GpuRayGrid::new(&drawer.ctx.device);
+        Ok(Self { drawer, view, raygrid })
     }
 }
 
@@ -459,13 +514,13 @@ fn bake_table(bakes: &[Bake], rows: &[Row]) -> String {
 
 fn csv(rows: &[Row]) -> String {
     let mut out = String::from(
-        "lens,field_deg,method,ms_median,psnr_db,ssim,rel_l1,centroid_px,centroid_ghosts,runs,surfaces,ghosts\n",
+        "lens,field_deg,method,ms_median,psnr_db,ssim,rel_l1,centroid_px,centroid_ghosts,runs,surfaces,ghosts,gpu_ms\n",
     );
     for r in rows {
         let e = &r.errors;
         let _ = writeln!(
             out,
-            "{},{},{},{:.3},{:.2},{:.4},{:.4},{:.2},{},{},{},{}",
+            "{},{},{},{:.3},{:.2},{:.4},{:.4},{:.2},{},{},{},{},{}",
             r.lens,
             r.field_deg,
             r.method,
@@ -477,7 +532,8 @@ fn csv(rows: &[Row]) -> String {
             e.centroid_ghosts,
             r.runs,
             r.surfaces,
-            r.ghosts
+            r.ghosts,
+            r.gpu.as_ref().map_or(String::new(), |g| format!("{:.3}", g.0))
         );
     }
     out
@@ -486,15 +542,19 @@ fn csv(rows: &[Row]) -> String {
 fn markdown(rows: &[Row], convergence: &[Convergence], settings: &str) -> String {
     let mut md = String::new();
     let _ = writeln!(md, "Settings: {settings}.\n");
-    let _ =
-        writeln!(md, "| lens | field (deg) | method | ms (median) | PSNR (dB) | SSIM | rel. L1 | centroid err. (px) |");
-    let _ = writeln!(md, "|---|---:|---|---:|---:|---:|---:|---:|");
+    let _ = writeln!(
+        md,
+        "| lens | field (deg) | method | ms (median) | PSNR (dB) | SSIM | rel. L1 | centroid err. (px) | GPU passes (timestamps, ms) |"
+    );
+    let _ = writeln!(md, "|---|---:|---|---:|---:|---:|---:|---:|---|");
     for r in rows.iter().filter(|r| r.method != "reference") {
         let e = &r.errors;
+        let gpu = r.gpu.as_ref().map_or_else(|| "-".to_owned(), |g| format!("{:.2} ({})", g.0, g.1));
+        let centroid = if e.centroid_ghosts == 0 { "-".to_owned() } else { format!("{:.1}", e.centroid_px) };
         let _ = writeln!(
             md,
-            "| {} | {} | {} | {:.1} | {:.1} | {:.3} | {:.3} | {:.1} |",
-            r.lens, r.field_deg, r.method, r.ms_median, e.psnr_db, e.ssim, e.relative_l1, e.centroid_px
+            "| {} | {} | {} | {:.1} | {:.1} | {:.3} | {:.3} | {centroid} | {gpu} |",
+            r.lens, r.field_deg, r.method, r.ms_median, e.psnr_db, e.ssim, e.relative_l1
         );
     }
     let _ = writeln!(

@@ -24,6 +24,9 @@ pub struct Row {
     pub ms_median: f64,
     pub runs: usize,
     pub errors: Comparison,
+    /// GPU rows: the median GPU time of the frame's passes measured by timestamp queries (ms, no read-back, no
+    /// CPU work), and the last run's per-pass split.
+    pub gpu: Option<(f64, String)>,
 }
 
 /// The method's family and its colour.
@@ -34,6 +37,8 @@ fn family(method: &str) -> (&'static str, RGBColor) {
         ("paraxial sprites (CPU, half-res accumulation)", RGBColor(203, 75, 22))
     } else if method == "paraxial-gpu" {
         ("paraxial sprites (wgpu)", RGBColor(211, 54, 130))
+    } else if method.starts_with("raygrid") && method.ends_with("-gpu") {
+        ("ray grids on the GPU (wgpu)", RGBColor(42, 161, 152))
     } else if method.starts_with("raygrid") {
         ("ray grids (Hullin 2011)", RGBColor(38, 139, 210))
     } else if method.starts_with("blended") {

@@ -113,17 +113,19 @@ pub struct TraceResult {
     pub points_mm: Vec<DVec3>,
 }
 
-/// One step of a path with everything the inner loop needs.
+/// One step of a path with everything the inner loop needs (the GPU tracer reads the same, see
+/// [`Tracer::steps`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
-struct ResolvedStep {
-    surface: usize,
-    vertex_z_mm: f64,
-    shape: SurfaceShape,
-    semi_aperture_mm: f64,
+pub struct ResolvedStep {
+    pub surface: usize,
+    pub vertex_z_mm: f64,
+    pub shape: SurfaceShape,
+    pub semi_aperture_mm: f64,
     /// n_in / n_out (1 between equal media).
-    eta: f64,
-    reflect: bool,
-    arriving_direction: f64,
+    pub eta: f64,
+    pub reflect: bool,
+    /// +1 when the light arrives travelling to +z, -1 when travelling back.
+    pub arriving_direction: f64,
 }
 
 /// Traces rays along one light path of one lens at one wavelength.
@@ -156,6 +158,16 @@ impl Tracer {
             })
             .collect();
         Self { steps, sensor_z_mm, sensor_index: lens.surfaces.len() }
+    }
+
+    /// The resolved steps, in path order (what a GPU twin of the tracer uploads).
+    pub fn steps(&self) -> &[ResolvedStep] {
+        &self.steps
+    }
+
+    /// The sensor plane (mm behind the first vertex).
+    pub fn sensor_z_mm(&self) -> f64 {
+        self.sensor_z_mm
     }
 
     /// Traces one ray to the sensor.
@@ -194,55 +206,95 @@ impl Tracer {
 
     /// The tracing loop itself, allocation-free: `visit` sees every intersection (before the interaction) and
     /// returns `false` to stop the ray there as vignetted. The ray-grid renderers read incidence angles and
-    /// stop crossings through it; [`Self::trace`] is built on it.
+    /// stop crossings through it; [`Self::trace`] is built on it. One lane of [`Self::trace_visit_lanes`].
     pub fn trace_visit(&self, ray: &Ray, mut visit: impl FnMut(&StepHit) -> bool) -> Result<Landing, TraceStatus> {
-        let mut p = ray.origin_mm;
-        let mut d = ray.direction.normalize_or_zero();
-        if d == DVec3::ZERO || !p.is_finite() {
-            return Err(TraceStatus::Missed { surface: 0 });
+        let [outcome] = self.trace_visit_lanes([*ray], |_, hit| visit(hit));
+        outcome
+    }
+
+    /// [`Self::trace_visit`] for `L` independent rays at once, step by step in lockstep: `visit(lane, hit)`.
+    /// Each lane does exactly the arithmetic of a lone ray (the results are identical, bit for bit); the
+    /// lanes only interleave, so that the processor overlaps one ray's square roots and divisions with the
+    /// next one's instead of waiting on each in turn (a ray is one long chain of dependent operations). The
+    /// ray-grid renderers trace 4 at a time.
+    pub fn trace_visit_lanes<const L: usize>(
+        &self,
+        rays: [Ray; L],
+        mut visit: impl FnMut(usize, &StepHit) -> bool,
+    ) -> [Result<Landing, TraceStatus>; L] {
+        let mut p = rays.map(|r| r.origin_mm);
+        let mut d = rays.map(|r| r.direction.normalize_or_zero());
+        let mut outcome: [Option<TraceStatus>; L] = [None; L];
+        for lane in 0..L {
+            if d[lane] == DVec3::ZERO || !p[lane].is_finite() {
+                outcome[lane] = Some(TraceStatus::Missed { surface: 0 });
+            }
         }
         for (index, step) in self.steps.iter().enumerate() {
-            let missed = TraceStatus::Missed { surface: step.surface };
-            let local = p - DVec3::new(0.0, 0.0, step.vertex_z_mm);
-            // The ray is a line and each surface a whole sphere: an intersection may lie behind the current
-            // point (the entrance pupil is often inside the lens, and a ray far outside the clear apertures
-            // can meet the next sphere before the last one). This is the convention of the reference
-            // figures; inside the clear apertures surfaces never cross (validation refuses that), so rays
-            // traced with apertures applied always move forward along the path.
-            let Some(s) = intersect_shape(local, d, &step.shape, step.arriving_direction) else {
-                return Err(missed);
-            };
-            p += s * d;
-            let Some(normal) = shape_normal(p - DVec3::new(0.0, 0.0, step.vertex_z_mm), &step.shape) else {
-                return Err(missed);
-            };
-            let cos_i = d.dot(normal);
-            let hit = StepHit {
-                index,
-                surface: step.surface,
-                point_mm: p,
-                cos_incidence: cos_i.abs().min(1.0),
-                reflect: step.reflect,
-                semi_aperture_mm: step.semi_aperture_mm,
-            };
-            if !visit(&hit) {
-                return Err(TraceStatus::Vignetted { surface: step.surface });
-            }
-            d = if step.reflect {
-                reflect(d, normal)
-            } else if step.eta == 1.0 {
-                d
-            } else {
-                match refract(d, normal, step.eta) {
-                    Some(d) => d,
-                    None => return Err(TraceStatus::Tir { surface: step.surface }),
+            let vertex = DVec3::new(0.0, 0.0, step.vertex_z_mm);
+            for lane in 0..L {
+                if outcome[lane].is_some() {
+                    continue;
                 }
-            };
-            if !d.is_finite() || !p.is_finite() {
-                return Err(missed);
+                match self.step_ray(index, step, vertex, &mut p[lane], &mut d[lane], |hit| visit(lane, hit)) {
+                    Ok(()) => {}
+                    Err(status) => outcome[lane] = Some(status),
+                }
             }
         }
-        // The sensor plane, facing the light travelling to +z.
+        std::array::from_fn(|lane| match outcome[lane] {
+            Some(status) => Err(status),
+            None => self.to_sensor(p[lane], d[lane]),
+        })
+    }
+
+    /// One step of one ray: meet the surface, show the hit to `visit`, refract or reflect.
+    #[inline(always)]
+    fn step_ray(
+        &self,
+        index: usize,
+        step: &ResolvedStep,
+        vertex: DVec3,
+        p: &mut DVec3,
+        d: &mut DVec3,
+        mut visit: impl FnMut(&StepHit) -> bool,
+    ) -> Result<(), TraceStatus> {
+        let missed = TraceStatus::Missed { surface: step.surface };
+        // The ray is a line and each surface a whole sphere: an intersection may lie behind the current
+        // point (the entrance pupil is often inside the lens, and a ray far outside the clear apertures
+        // can meet the next sphere before the last one). This is the convention of the reference
+        // figures; inside the clear apertures surfaces never cross (validation refuses that), so rays
+        // traced with apertures applied always move forward along the path.
+        let s = intersect_shape(*p - vertex, *d, &step.shape, step.arriving_direction).ok_or(missed)?;
+        *p += s * *d;
+        let normal = shape_normal(*p - vertex, &step.shape).ok_or(missed)?;
+        let cos_i = d.dot(normal);
+        let hit = StepHit {
+            index,
+            surface: step.surface,
+            point_mm: *p,
+            cos_incidence: cos_i.abs().min(1.0),
+            reflect: step.reflect,
+            semi_aperture_mm: step.semi_aperture_mm,
+        };
+        if !visit(&hit) {
+            return Err(TraceStatus::Vignetted { surface: step.surface });
+        }
+        *d = if step.reflect {
+            reflect(*d, normal)
+        } else if step.eta == 1.0 {
+            *d
+        } else {
+            refract(*d, normal, step.eta).ok_or(TraceStatus::Tir { surface: step.surface })?
+        };
+        if !d.is_finite() || !p.is_finite() {
+            return Err(missed);
+        }
+        Ok(())
+    }
+
+    /// From the last surface to the sensor plane, facing the light travelling to +z.
+    fn to_sensor(&self, p: DVec3, d: DVec3) -> Result<Landing, TraceStatus> {
         if d.z <= 0.0 {
             return Err(TraceStatus::Backward);
         }

@@ -301,6 +301,78 @@ impl RayGridRenderer {
         Ok(views.iter().zip(accs).map(|(view, acc)| acc.into_image(&view.window)).collect())
     }
 
+    /// The jobs of a fixed-grid frame render as [`Self::render`] lays them out, for a twin that traces them
+    /// elsewhere (the GPU ray grids, [`super::gpu`]): per job with light, its tracer and tables, and where its
+    /// `cells` x `cells` grid lies on the entrance plane (the same CPU pre-pass: a coarse grid over the front
+    /// lens). Jobs where no light passes are left out.
+    pub fn plan_fixed(
+        &self,
+        light_deg: [f64; 2],
+        window: Window,
+        cells: usize,
+    ) -> Result<Vec<PlannedJob<'_>>, RayGridError> {
+        if !GRID_RANGE.contains(&cells) {
+            return Err(RayGridError::Grid(cells));
+        }
+        if window.width == 0 || window.height == 0 {
+            return Err(RayGridError::Size(window.width, window.height));
+        }
+        if !light_deg.iter().all(|a| a.is_finite() && a.abs() <= 89.0) {
+            return Err(RayGridError::Angle(light_deg));
+        }
+        let u = light_slopes_for_frame_position(light_deg[0], light_deg[1]);
+        let d = DVec3::new(u[0], u[1], 1.0).normalize();
+        let views = [View { window, turn_deg: 0.0 }];
+        let grid = Grid::Fixed(cells);
+        Ok(self
+            .jobs
+            .par_iter()
+            .filter_map(|job| {
+                let coarse = (cells / 2).clamp(16, 64);
+                let traced = self.trace_grid(job, self.front_region(u), coarse, d, None);
+                let b = self.pre_pass(job, u, &traced, &views)?.bounds;
+                let n = grid.cells();
+                Some(PlannedJob {
+                    ghost: job.ghost,
+                    tracer: &job.tracer,
+                    step_tables: &job.step_tables,
+                    inverse_semi_aperture2: &job.inverse_semi_aperture2,
+                    bounds: b,
+                    cells: n,
+                    direction: d,
+                    triangle_flux: d.z * 0.5 * (b[2] - b[0]) * (b[3] - b[1]) / (n * n) as f64,
+                    stop_count: self.stop_count(job),
+                    rgb: self.spectrum.weights_rgb[job.wavelength],
+                })
+            })
+            .collect())
+    }
+
+    /// The reflectance tables the jobs' `step_tables` index.
+    pub fn tables(&self) -> &InterfaceTables {
+        &self.tables
+    }
+
+    /// The stop's surface index and its radius at the chosen f-number (mm).
+    pub fn stop(&self) -> (usize, f64) {
+        (self.stop, self.stop_radius_mm)
+    }
+
+    /// The stop's shape.
+    pub fn mask(&self) -> &ApertureMask {
+        &self.mask
+    }
+
+    /// The f64 twin of one GPU grid vertex: the ray of `job` from the entrance point `x0` (mm), its landing
+    /// point in sensor mm in `pixel` (see [`Self::plan_fixed`]).
+    pub fn trace_planned(&self, job: &PlannedJob, x0: [f64; 2]) -> ([f64; 2], bool) {
+        let Some(owner) = self.jobs.iter().find(|j| std::ptr::eq(&j.tracer, job.tracer)) else {
+            return ([0.0; 2], false);
+        };
+        let [v, ..] = self.trace_lanes(owner, [x0; LANES], job.direction);
+        (v.pixel, v.valid)
+    }
+
     /// Where ghost `ghost` lands on the sensor plane for a light at the frame position `light_deg`:
     /// `[x_min, y_min, x_max, y_max]` in sensor mm over every wavelength, from a `cells` x `cells` grid over the
     /// region where the pre-pass found light (each passing ray and its traced neighbours, so the partly lit
@@ -380,36 +452,63 @@ impl RayGridRenderer {
         self.ghosts[job.ghost].stop_crossings.get(job.wavelength).copied().unwrap_or(1).min(3)
     }
 
-    /// Traces one ray of `job` from the entrance point `x0` (mm) in direction `d`; its `pixel` is the landing
-    /// point in sensor mm until a [`View`] sees it.
-    fn trace(&self, job: &Job, x0: [f64; 2], d: DVec3) -> Vertex {
-        let ray = Ray { origin_mm: DVec3::new(x0[0], x0[1], 0.0), direction: d };
+    /// Traces `LANES` rays of `job` from the entrance points `x0` (mm) in direction `d`, together
+    /// ([`Tracer::trace_visit_lanes`]); each one's `pixel` is its landing point in sensor mm until a [`View`]
+    /// sees it.
+    fn trace_lanes(&self, job: &Job, x0: [[f64; 2]; LANES], d: DVec3) -> [Vertex; LANES] {
+        let rays = x0.map(|x| Ray { origin_mm: DVec3::new(x[0], x[1], 0.0), direction: d });
         let stop_radius = self.stop_radius_mm;
-        let mut v = Vertex { weight: 1.0, ..Vertex::default() };
-        let mut crossings = 0;
-        let mut ratio2 = 0.0f64;
-        let landing = job.tracer.trace_visit(&ray, |hit| {
+        let mut v = [Vertex { weight: 1.0, ..Vertex::default() }; LANES];
+        let mut crossings = [0usize; LANES];
+        let mut ratio2 = [0.0f64; LANES];
+        let landings = job.tracer.trace_visit_lanes(rays, |lane, hit| {
             let sin2 = 1.0 - hit.cos_incidence * hit.cos_incidence;
             let r = self.tables.table(job.step_tables[hit.index]).at(sin2);
+            let v = &mut v[lane];
             v.weight *= if hit.reflect { r } else { 1.0 - r };
             let p = hit.point_mm;
             if hit.surface == self.stop {
-                if crossings < 3 {
-                    v.stops[crossings] = [p.x / stop_radius, p.y / stop_radius];
-                    crossings += 1;
+                if crossings[lane] < 3 {
+                    v.stops[crossings[lane]] = [p.x / stop_radius, p.y / stop_radius];
+                    crossings[lane] += 1;
                 }
             } else {
-                ratio2 = ratio2.max((p.x * p.x + p.y * p.y) * job.inverse_semi_aperture2[hit.index]);
+                ratio2[lane] = ratio2[lane].max((p.x * p.x + p.y * p.y) * job.inverse_semi_aperture2[hit.index]);
             }
             true
         });
-        v.ratio = ratio2.sqrt();
-        if let Ok(landing) = landing {
-            let p = [landing.point_mm.x, landing.point_mm.y];
-            v.valid = p.iter().all(|c| c.is_finite()) && v.weight.is_finite() && v.ratio.is_finite();
-            v.pixel = p;
+        for ((v, landing), ratio2) in v.iter_mut().zip(landings).zip(ratio2) {
+            v.ratio = ratio2.sqrt();
+            if let Ok(landing) = landing {
+                let p = [landing.point_mm.x, landing.point_mm.y];
+                v.valid = p.iter().all(|c| c.is_finite()) && v.weight.is_finite() && v.ratio.is_finite();
+                v.pixel = p;
+            }
         }
         v
+    }
+
+    /// `count` vertices of `job` in direction `d`: vertex k traced from the entrance point `at(k)`, or left
+    /// invalid where that is `None`. The traced ones go [`LANES`] at a time; returns how many were traced.
+    fn trace_selected(
+        &self,
+        job: &Job,
+        d: DVec3,
+        count: usize,
+        at: impl Fn(usize) -> Option<[f64; 2]>,
+        out: &mut Vec<Vertex>,
+    ) -> u64 {
+        let start = out.len();
+        out.resize(start + count, Vertex::default());
+        let wanted: Vec<(usize, [f64; 2])> = (0..count).filter_map(|k| at(k).map(|x0| (k, x0))).collect();
+        for group in wanted.chunks(LANES) {
+            // A short last group repeats its last ray (traced, then dropped).
+            let x0 = std::array::from_fn(|lane| group[lane.min(group.len() - 1)].1);
+            for ((k, _), vertex) in group.iter().zip(self.trace_lanes(job, x0, d)) {
+                out[start + k] = vertex;
+            }
+        }
+        wanted.len() as u64
     }
 
     /// The square of the entrance plane, `[x_min, y_min, x_max, y_max]`, that a pre-pass over the whole front
@@ -423,13 +522,18 @@ impl RayGridRenderer {
     /// `lit` (where given) is not traced and stays invalid.
     fn trace_grid(&self, job: &Job, region: [f64; 4], cells: usize, d: DVec3, lit: Option<&LitCells>) -> TracedGrid {
         let step = [(region[2] - region[0]) / cells as f64, (region[3] - region[1]) / cells as f64];
-        let vertices = (0..=cells)
-            .flat_map(|iy| (0..=cells).map(move |ix| (ix, iy)))
-            .map(|(ix, iy)| {
-                let x0 = [region[0] + ix as f64 * step[0], region[1] + iy as f64 * step[1]];
-                if lit.is_some_and(|lit| !lit.contains(x0)) { Vertex::default() } else { self.trace(job, x0, d) }
-            })
-            .collect();
+        let n = cells + 1;
+        let mut vertices = Vec::with_capacity(n * n);
+        self.trace_selected(
+            job,
+            d,
+            n * n,
+            |k| {
+                let x0 = [region[0] + (k % n) as f64 * step[0], region[1] + (k / n) as f64 * step[1]];
+                (!lit.is_some_and(|lit| !lit.contains(x0))).then_some(x0)
+            },
+            &mut vertices,
+        );
         TracedGrid { region, cells, vertices }
     }
 
@@ -558,18 +662,12 @@ impl RayGridRenderer {
         let seers: Vec<_> = views.iter().map(View::seer).collect();
         for iy in 0..=grid {
             traced.clear();
-            let mut rays = 0;
-            for ix in 0..=grid {
+            // A ray far from every lit cell of the pre-pass is not traced: no triangle of it carries light.
+            let at = |ix: usize| {
                 let x0 = [b[0] + ix as f64 * dx, b[1] + iy as f64 * dy];
-                // Far from every lit cell of the pre-pass: no triangle of this ray carries light.
-                if lit.as_ref().is_some_and(|lit| !lit.contains(x0)) {
-                    traced.push(Vertex::default());
-                    continue;
-                }
-                traced.push(self.trace(job, x0, d));
-                rays += 1;
-            }
-            accs[0].stats.rays += rays;
+                (!lit.as_ref().is_some_and(|lit| !lit.contains(x0))).then_some(x0)
+            };
+            accs[0].stats.rays += self.trace_selected(job, d, grid + 1, at, &mut traced);
             for k in 0..views.len() {
                 current[k].clear();
                 current[k].extend(traced.iter().map(&seers[k]));
@@ -595,6 +693,30 @@ impl RayGridRenderer {
         }
     }
 }
+/// One job of a fixed-grid render, planned on the CPU for a twin that traces it elsewhere
+/// ([`RayGridRenderer::plan_fixed`]).
+pub struct PlannedJob<'a> {
+    pub ghost: usize,
+    pub tracer: &'a Tracer,
+    /// Per step of the path: the index of its reflectance table in [`RayGridRenderer::tables`].
+    pub step_tables: &'a [usize],
+    /// Per step: 1 / semi-aperture^2 (0 at the stop).
+    pub inverse_semi_aperture2: &'a [f64],
+    /// The grid's square on the entrance plane, `[x_min, y_min, x_max, y_max]` (mm).
+    pub bounds: [f64; 4],
+    pub cells: usize,
+    /// The light's unit direction.
+    pub direction: DVec3,
+    /// cos(theta) x the entrance area of one triangle (mm^2).
+    pub triangle_flux: f64,
+    /// Stop crossings the mask is looked up at (1 or 3).
+    pub stop_count: usize,
+    /// The wavelength's RGB weight.
+    pub rgb: [f64; 3],
+}
+
+/// Rays traced together ([`Tracer::trace_visit_lanes`]).
+const LANES: usize = 4;
 /// Cells of the scout's pre-pass over the front lens.
 const SCOUT_PRE_PASS_CELLS: usize = 32;
 /// What a pre-pass found for one job.

@@ -3,19 +3,28 @@
 //! # How it works
 //! [`FlareRenderer`] owns its pipelines, the aperture mask (R8Unorm), the starburst (Rgba16Float), an
 //! optional background plate (Rgba16Float) and an HDR accumulation target (Rgba16Float, resized on demand).
-//! [`FlareRenderer::render_with_lut`], the one entry point every frame goes through (the app's viewport and
-//! [`crate::frame`]'s headless drawer), records two render passes into the caller's encoder:
-//! 1. the accumulation: clear the HDR target, then `ghosts.wgsl` (one instanced quad per ghost sprite,
-//!    additive), `lut_ghosts.wgsl` (when a LUT is set and the frame has LUT instances: LUT images from the
-//!    atlas, a 2D array of [`ATLAS_PAGE`]-texel Rgba16Float pages, added or composited over through alpha) and
-//!    `starburst.wgsl` (the diffraction texture at the light's image, additive);
+//! [`crate::frame`]'s headless drawer), records its render passes into the caller's encoder:
+//! 1. the accumulation, in up to three passes into the HDR target: `ghosts.wgsl` (clearing it first; one
+//!    instanced quad per ghost sprite, additive), `lut_ghosts.wgsl` (when a LUT is set and the frame has LUT
+//!    instances: LUT images from the atlas, a 2D array of [`ATLAS_PAGE`]-texel Rgba16Float pages, added or
+//!    composited over through alpha) and `starburst.wgsl` (the diffraction texture at the light's image,
+//!    additive);
 //! 2. `tonemap.wgsl`: the composite `hdr x 2^flare_ev + plate x 2^plate_ev`, the tonemap and (for non-sRGB
 //!    targets) the sRGB encoding into the caller's view.
+//!
+//! **GPU time, measured by the GPU**: every pass is a scope of a `wgpu_profiler::GpuProfiler`, which writes
+//! timestamp queries at its start and end when the device has `TIMESTAMP_QUERY` (devices made here and the
+//! app's ask for it where the adapter offers it; lavapipe does). Results come back asynchronously, a frame or
+//! more later, without stalling: [`FlareRenderer::pass_times`] is the latest frame's ([`PassTimes`], per pass in
+//! ms, named with the adapter), read by the app's status bar; a headless caller that wants this frame's waits
+//! for it with [`FlareRenderer::wait_pass_times`]. Without timestamp support there are simply no times.
 //!
 //! It never owns a window: the app hands it egui's device and a view, tests and the command line hand it a
 //! headless device ([`GpuContext::headless`]) and read the result back ([`render_display_with_lut`],
 //! [`read_hdr`]).
 //! Rows copied to buffers are padded to 256 bytes as wgpu requires.
+
+use wgpu_profiler::{GpuProfiler, GpuProfilerSettings, GpuTimerQueryResult};
 
 use super::shaders::{GHOSTS_WGSL, LUT_GHOSTS_WGSL, STARBURST_WGSL, TONEMAP_WGSL};
 use super::{FlareScene, GhostInstance, Globals};
@@ -69,12 +78,63 @@ impl GpuContext {
         let info = adapter.get_info();
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("flarelab"),
-            required_features: wgpu::Features::empty(),
+            required_features: timer_features(&adapter) | (adapter.features() & wgpu::Features::FLOAT32_BLENDABLE),
             required_limits: wgpu::Limits::downlevel_defaults().using_resolution(adapter.limits()),
             ..Default::default()
         }))
         .map_err(|e| GpuError::Device { adapter: info.name.clone(), message: e.to_string() })?;
         Ok(Self { device, queue, adapter: info })
+    }
+}
+
+/// The timestamp-query features `adapter` offers (none on adapters without them): what a device asks for so
+/// that [`FlareRenderer`] can time its passes.
+pub fn timer_features(adapter: &wgpu::Adapter) -> wgpu::Features {
+    adapter.features() & GpuProfiler::ALL_WGPU_TIMER_FEATURES
+}
+
+/// GPU time of each pass of one frame, measured by timestamp queries on the GPU (ms), in drawing order.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PassTimes {
+    pub passes: Vec<(String, f64)>,
+}
+
+impl PassTimes {
+    /// From the profiler's results: every nested scope that has a time.
+    fn from_results(results: &[GpuTimerQueryResult]) -> Self {
+        fn walk(results: &[GpuTimerQueryResult], out: &mut Vec<(String, f64)>) {
+            for r in results {
+                if r.nested_queries.is_empty() {
+                    if let Some(t) = &r.time {
+                        let ms = (t.end - t.start) * 1e3;
+                        if ms.is_finite() && ms >= 0.0 {
+                            out.push((r.label.clone(), ms));
+                        }
+                    }
+                } else {
+                    walk(&r.nested_queries, out);
+                }
+            }
+        }
+        let mut passes = Vec::new();
+        walk(results, &mut passes);
+        Self { passes }
+    }
+
+    /// The sum over the passes (ms).
+    pub fn total_ms(&self) -> f64 {
+        self.passes.iter().map(|p| p.1).sum()
+    }
+
+    /// The time of the pass `name` (ms), if it ran.
+    pub fn get(&self, name: &str) -> Option<f64> {
+        self.passes.iter().find(|p| p.0 == name).map(|p| p.1)
+    }
+
+    /// "ghosts 1.20 + starburst 0.10 + tonemap 0.80 = 2.10 ms".
+    pub fn summary(&self) -> String {
+        let parts: Vec<String> = self.passes.iter().map(|(n, ms)| format!("{n} {ms:.2}")).collect();
+        format!("{} = {:.2} ms", parts.join(" + "), self.total_ms())
     }
 }
 
@@ -209,6 +269,13 @@ pub struct FlareRenderer {
     lut_capacity: usize,
     /// The bind groups of the last frame, made again only when a texture they bind was replaced.
     groups: Option<BindGroups>,
+    /// Timestamp scopes around every pass (see the module documentation).
+    profiler: GpuProfiler,
+    /// A frame was recorded whose profiler frame is not yet ended (it is, once submitted: at the next render
+    /// or [`Self::wait_pass_times`]).
+    profiled_open: bool,
+    /// The latest frame's GPU pass times that came back.
+    pass_times: Option<PassTimes>,
 }
 
 /// Every bind group a frame uses (see [`FlareRenderer::bind_groups`]).
@@ -406,6 +473,10 @@ impl FlareRenderer {
             lut_instances,
             lut_capacity,
             groups: None,
+            profiler: GpuProfiler::new(device, GpuProfilerSettings::default())
+                .expect("the default profiler settings are valid"),
+            profiled_open: false,
+            pass_times: None,
             ghost_pipeline,
             starburst_pipeline,
             tonemap_pipeline,
@@ -526,6 +597,8 @@ impl FlareRenderer {
         scene: &FlareScene,
         lut: Option<&LutScene>,
     ) {
+        // The previous frame was submitted by now: end its profiler frame and collect what came back.
+        self.end_profiled_frame(queue);
         let (w, h) = (scene.hdr_width.max(1), scene.hdr_height.max(1));
         if !matches!(&self.hdr, Some((_, hw, hh)) if *hw == w && *hh == h) {
             let usage = wgpu::TextureUsages::RENDER_ATTACHMENT
@@ -559,56 +632,114 @@ impl FlareRenderer {
             self.groups = Some(self.bind_groups(device, &hdr_view));
         }
         let Some(groups) = &self.groups else { return };
+        let hdr_target = |load| {
+            [Some(wgpu::RenderPassColorAttachment {
+                view: &hdr_view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations { load, store: wgpu::StoreOp::Store },
+            })]
+        };
+        let (clear, load) = (hdr_target(wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT)), hdr_target(wgpu::LoadOp::Load));
+        let accumulate = |attachments| wgpu::RenderPassDescriptor {
+            label: Some("flare hdr"),
+            color_attachments: attachments,
+            ..Default::default()
+        };
         {
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("flare hdr"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &hdr_view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                ..Default::default()
-            });
-            if !scene.instances.is_empty() {
-                pass.set_pipeline(&self.ghost_pipeline);
-                pass.set_bind_group(0, &groups.ghosts, &[]);
-                pass.set_vertex_buffer(0, self.instances.slice(..));
-                pass.draw(0..6, 0..scene.instances.len() as u32);
+            let mut frame = self.profiler.scope("flare", encoder);
+            {
+                let mut pass = frame.scoped_render_pass("ghosts", accumulate(&clear));
+                if !scene.instances.is_empty() {
+                    pass.set_pipeline(&self.ghost_pipeline);
+                    pass.set_bind_group(0, &groups.ghosts, &[]);
+                    pass.set_vertex_buffer(0, self.instances.slice(..));
+                    pass.draw(0..6, 0..scene.instances.len() as u32);
+                }
             }
             if let Some(lut) = lut {
+                let mut pass = frame.scoped_render_pass("lut", accumulate(&load));
                 pass.set_pipeline(if lut.alpha_over { &self.lut_over_pipeline } else { &self.lut_add_pipeline });
                 pass.set_bind_group(0, &groups.lut, &[]);
                 pass.set_vertex_buffer(0, self.lut_instances.slice(..));
                 pass.draw(0..6, 0..lut.instances.len() as u32);
             }
             if globals.starburst[2] > 0.0 {
+                let mut pass = frame.scoped_render_pass("starburst", accumulate(&load));
                 pass.set_pipeline(&self.starburst_pipeline);
                 pass.set_bind_group(0, &groups.starburst, &[]);
                 pass.draw(0..6, 0..1);
             }
+            let mut pass = frame.scoped_render_pass(
+                "tonemap",
+                wgpu::RenderPassDescriptor {
+                    label: Some("flare tonemap"),
+                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                        view: target,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                            store: wgpu::StoreOp::Store,
+                        },
+                    })],
+                    ..Default::default()
+                },
+            );
+            pass.set_pipeline(&self.tonemap_pipeline);
+            pass.set_bind_group(0, &groups.tonemap, &[]);
+            pass.draw(0..3, 0..1);
         }
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("flare tonemap"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: target,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::BLACK), store: wgpu::StoreOp::Store },
-            })],
-            ..Default::default()
-        });
-        pass.set_pipeline(&self.tonemap_pipeline);
-        pass.set_bind_group(0, &groups.tonemap, &[]);
-        pass.draw(0..3, 0..1);
+        self.profiler.resolve_queries(encoder);
+        self.profiled_open = true;
+    }
+
+    /// The GPU time of each pass of the latest frame whose timestamps have come back (`None` before any, or
+    /// when the device has no timestamp queries). Never waits.
+    pub fn pass_times(&self) -> Option<&PassTimes> {
+        self.pass_times.as_ref()
+    }
+
+    /// Ends the profiler frame of the last render (its commands must have been submitted) and takes whatever
+    /// results have come back.
+    fn end_profiled_frame(&mut self, queue: &wgpu::Queue) {
+        if std::mem::take(&mut self.profiled_open) {
+            // An error here means a scope was left open: a bug, but never worth a frame.
+            let _ = self.profiler.end_frame();
+        }
+        while let Some(results) = self.profiler.process_finished_frame(queue.get_timestamp_period()) {
+            let times = PassTimes::from_results(&results);
+            if !times.passes.is_empty() {
+                self.pass_times = Some(times);
+            }
+        }
+    }
+
+    /// After the last render was submitted: waits for its timestamps and returns its pass times (`None`
+    /// without timestamp queries). For headless callers (the benchmark); the app reads [`Self::pass_times`].
+    pub fn wait_pass_times(&mut self, device: &wgpu::Device, queue: &wgpu::Queue) -> Option<PassTimes> {
+        if !self.profiled_open {
+            return None;
+        }
+        self.pass_times = None;
+        self.profiled_open = false;
+        let _ = self.profiler.end_frame();
+        for _ in 0..4 {
+            let _ = device.poll(wgpu::PollType::wait_indefinitely());
+            if let Some(results) = self.profiler.process_finished_frame(queue.get_timestamp_period()) {
+                let times = PassTimes::from_results(&results);
+                self.pass_times = (!times.passes.is_empty()).then_some(times);
+                // Older frames first: keep reading until the newest.
+                continue;
+            }
+            break;
+        }
+        self.pass_times.clone()
     }
 }
 
 /// Copies `texture` (of `bytes_per_pixel`) into CPU memory, unpadding the 256-byte rows.
-fn read_texture(ctx: &GpuContext, texture: &wgpu::Texture, bytes_per_pixel: u32) -> Result<Vec<u8>, GpuError> {
+pub(crate) fn read_texture(ctx: &GpuContext, texture: &wgpu::Texture, bytes_per_pixel: u32) -> Result<Vec<u8>, GpuError> {
     let size = texture.size();
     let row = size.width * bytes_per_pixel;
     let padded = row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;

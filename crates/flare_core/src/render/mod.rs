@@ -5,7 +5,8 @@
 //! one [`GhostInstance`] per drawn sprite (pixel centre and signed half-size, colour, the affine maps into
 //! the aperture mask at every stop crossing and into the front-lens disc), the starburst's placement, and
 //! the display settings in [`Globals`]. The GPU path ([`gpu`]) and the CPU twin ([`cpu`]) read exactly these
-//! structs, so a test can compare their images pixel by pixel.
+//! structs, so a test can compare their images pixel by pixel. [`raygrid`] is the other GPU renderer: the
+//! ray-traced ghosts of [`crate::raytrace`] (its f64 CPU twin) traced and splatted on the GPU.
 //!
 //! Frame convention: the sensor image is rotated by 180 degrees for display (as a camera does), so the
 //! displayed point of sensor coordinate (x, y) mm is (-x, -y); pixels run right and down from the top-left
@@ -17,6 +18,7 @@
 
 pub mod cpu;
 pub mod gpu;
+pub mod raygrid;
 pub mod shaders;
 
 use bytemuck::{Pod, Zeroable};
@@ -211,6 +213,40 @@ impl FlareScene {
             starburst_core: [0.0; 4],
         };
         Self { width, height, hdr_width, hdr_height, globals, instances, instance_ghosts, dropped_non_finite }
+    }
+
+    /// The accumulation fragments `inst` covers: its quad clipped to the accumulation (what a sprite costs a
+    /// rasteriser, whatever its brightness).
+    pub fn fragments(&self, inst: &GhostInstance) -> u64 {
+        let (sx, sy) = (self.width as f32 / self.hdr_width as f32, self.height as f32 / self.hdr_height as f32);
+        let [cx, cy, hx, hy] = inst.centre_half;
+        let span = |c: f32, h: f32, scale: f32, size: u32| {
+            let (lo, hi) = (((c - h.abs()) / scale).max(0.0), ((c + h.abs()) / scale).min(size as f32));
+            f64::from((hi - lo).max(0.0))
+        };
+        (span(cx, hx, sx, self.hdr_width) * span(cy, hy, sy, self.hdr_height)).ceil() as u64
+    }
+
+    /// Keeps, of the instances, the brightest (by their brightest channel) whose fragments together fit in
+    /// `budget`, in their order; a sprite that does not fit is skipped and fainter ones may still fit. Returns
+    /// how many were dropped.
+    pub fn keep_brightest(&mut self, budget: u64) -> usize {
+        let peak = |i: &GhostInstance| i.colour[0].max(i.colour[1]).max(i.colour[2]);
+        let mut order: Vec<usize> = (0..self.instances.len()).collect();
+        order.sort_by(|&a, &b| peak(&self.instances[b]).total_cmp(&peak(&self.instances[a])).then(a.cmp(&b)));
+        let mut keep = vec![false; self.instances.len()];
+        let mut used = 0u64;
+        for k in order {
+            let cost = self.fragments(&self.instances[k]);
+            if used + cost <= budget {
+                used += cost;
+                keep[k] = true;
+            }
+        }
+        let before = self.instances.len();
+        self.instances = self.instances.iter().zip(&keep).filter(|(_, k)| **k).map(|(i, _)| *i).collect();
+        self.instance_ghosts = self.instance_ghosts.iter().zip(&keep).filter(|(_, k)| **k).map(|(g, _)| *g).collect();
+        before - self.instances.len()
     }
 
     /// Places the starburst of `starburst` at the image of a light of slopes `u` (see [`crate::starburst`]):

@@ -3,14 +3,18 @@
 //! # How it works
 //! `shaders/common.wgsl` holds the one declaration of the uniforms every pass reads ([`super::Globals`]); it
 //! is prepended to each shader that uses them here, at compile time, so no shader carries a copy to keep in
-//! sync. A test parses every shader with naga and checks that the WGSL `Globals` has the Rust struct's size
+//! sync. Likewise `aperture.wgsl` (the mask lookup) for the two passes that read the aperture, and
+//! `raygrid_common.wgsl` (the ray-grid structs) for the GPU ray grids' two passes. A test parses every shader with naga and checks that the WGSL `Globals` has the Rust struct's size
 //! and member offsets.
 
 /// The shared uniforms (prepended to the shaders below).
 pub const COMMON_WGSL: &str = include_str!("../../../../shaders/common.wgsl");
 /// Instanced ghost sprites.
-pub const GHOSTS_WGSL: &str =
-    concat!(include_str!("../../../../shaders/common.wgsl"), include_str!("../../../../shaders/ghosts.wgsl"));
+pub const GHOSTS_WGSL: &str = concat!(
+    include_str!("../../../../shaders/common.wgsl"),
+    include_str!("../../../../shaders/aperture.wgsl"),
+    include_str!("../../../../shaders/ghosts.wgsl")
+);
 /// The starburst quad.
 pub const STARBURST_WGSL: &str =
     concat!(include_str!("../../../../shaders/common.wgsl"), include_str!("../../../../shaders/starburst.wgsl"));
@@ -20,6 +24,17 @@ pub const TONEMAP_WGSL: &str =
 /// LUT ghosts from the atlas.
 pub const LUT_GHOSTS_WGSL: &str =
     concat!(include_str!("../../../../shaders/common.wgsl"), include_str!("../../../../shaders/lut_ghosts.wgsl"));
+/// Ray grids on the GPU, pass 1: the compute tracer (with the declarations both passes share).
+pub const RAYGRID_TRACE_WGSL: &str = concat!(
+    include_str!("../../../../shaders/raygrid_common.wgsl"),
+    include_str!("../../../../shaders/raygrid_trace.wgsl")
+);
+/// Ray grids on the GPU, pass 2: the triangles splatted, energy conserved.
+pub const RAYGRID_SPLAT_WGSL: &str = concat!(
+    include_str!("../../../../shaders/raygrid_common.wgsl"),
+    include_str!("../../../../shaders/aperture.wgsl"),
+    include_str!("../../../../shaders/raygrid_splat.wgsl")
+);
 /// The app's viewport pass (the flare texture into egui's render pass; used by the app, validated here).
 pub const VIEWPORT_WGSL: &str = include_str!("../../../../shaders/viewport.wgsl");
 
@@ -31,4 +46,6 @@ pub const ALL: &[(&str, &str)] = &[
     ("tonemap.wgsl", TONEMAP_WGSL),
     ("lut_ghosts.wgsl", LUT_GHOSTS_WGSL),
     ("viewport.wgsl", VIEWPORT_WGSL),
+    ("raygrid_trace.wgsl", RAYGRID_TRACE_WGSL),
+    ("raygrid_splat.wgsl", RAYGRID_SPLAT_WGSL),
 ];

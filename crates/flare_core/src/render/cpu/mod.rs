@@ -17,6 +17,6 @@ mod quads;
 pub mod starburst;
 pub mod tonemap;
 
-pub use ghosts::{ghost_moments, ghost_pass};
+pub use ghosts::{ghost_moments, ghost_pass, ghost_pass_direct};
 pub use starburst::{StarburstTexture, starburst_pass};
 pub use tonemap::{composite, display_of, flare_layer, plate_layer, tonemap_pass, tonemap_pixel};

@@ -1,0 +1,490 @@
+//! Ray grids on the GPU: Hullin et al. 2011's method traced and splatted in WGSL, the f64 CPU renderer
+//! ([`crate::raytrace`], which knows nothing of the GPU) its twin.
+//!
+//! # How it works
+//! The CPU plans the frame exactly as a fixed-grid CPU render does ([`RayGridRenderer::plan_fixed`]: per ghost
+//! and wavelength, a coarse pre-pass over the front lens says where the dense grid of `cells` x `cells` cells
+//! lies), then uploads per job its path ([`GpuStep`]: vertex, curvature, conic and aspheric terms, n_in / n_out,
+//! reflect or refract, the clear aperture, which reflectance table) and the grid ([`GpuJob`]), and every dense
+//! reflectance table (1025 samples over sin^2 i, the CPU renderer's own). Two passes follow:
+//! 1. `raygrid_trace.wgsl` (compute, one invocation per grid vertex, workgroup row = job): each ray traced
+//!    exactly in f32 through every surface kind the CPU tracer has (spheres by the stable root, conics and even
+//!    aspheres by the quadric's root then bounded Newton steps), its weight the reflectance at both reflections
+//!    times `1 - R` at every refraction at its own angle and wavelength, its stop coordinates at every
+//!    crossing and its largest height over the other clear apertures, into a [`GpuVertex`] buffer;
+//! 2. `raygrid_splat.wgsl` (one instanced draw: instance = job, six vertices per cell): each cell's two
+//!    triangles (the CPU's split), a triangle carrying its flux `cos(theta) x entrance area x weight` over its
+//!    footprint, the mask looked up per pixel at each stop crossing, vignetted where the interpolated height
+//!    passes a clear aperture, added into an Rgba32Float target (Rgba16Float where the adapter cannot blend
+//!    32-bit floats).
+//!
+//! The CPU twin box-filters its triangles (clips each to the pixels it covers); the GPU samples pixel centres,
+//! as rasterisers do. A triangle collapsed to a line or a point (a ghost focused there) is dropped here where
+//! the CPU puts its light in one pixel. A test compares landings (the f32 drift, per lens) and images.
+//! **Limits**: a grid whose dispatch or vertex buffer exceeds the adapter's limits is refused with the limit
+//! named; a frame's jobs are traced and drawn in batches that fit the largest storage buffer the adapter binds.
+
+use bytemuck::{Pod, Zeroable};
+use wgpu::util::DeviceExt;
+
+use super::gpu::{GpuContext, GpuError, read_texture, texture_2d};
+use super::shaders::{RAYGRID_SPLAT_WGSL, RAYGRID_TRACE_WGSL};
+use crate::image::HdrImage;
+use crate::raytrace::{DENSE_TABLE_SAMPLES, PlannedJob, RayGridError, RayGridRenderer, Window};
+
+/// One step of a ghost's path. Must be kept in sync with `struct Step` in `shaders/raygrid_common.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuStep {
+    /// vertex z (mm), curvature (1/mm), conic, r^2 term.
+    pub geometry: [f32; 4],
+    /// A4, A6, A8, A10.
+    pub terms_lo: [f32; 4],
+    /// A12, A14, A16, spherical (1: the sphere formulas alone).
+    pub terms_hi: [f32; 4],
+    /// n_in / n_out, reflect (0/1), arriving direction (+1/-1), 1 / semi-aperture^2 (0 at the stop).
+    pub optics: [f32; 4],
+    /// Offset of the reflectance table in the tables buffer, is the stop (0/1), unused, unused.
+    pub table: [u32; 4],
+}
+const _: () = assert!(std::mem::size_of::<GpuStep>() == 80);
+
+/// One ghost at one wavelength. Must be kept in sync with `struct Job` in `shaders/raygrid_common.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuJob {
+    /// First step, step count, first vertex, cells across.
+    pub steps: [u32; 4],
+    /// x0, y0 of the grid (mm), cell size x, y (mm).
+    pub region: [f32; 4],
+    /// The light's unit direction, the sensor plane's z (mm).
+    pub direction: [f32; 4],
+    /// Window centre x, y (sensor mm), pixels per mm, stop radius (mm).
+    pub view: [f32; 4],
+    /// Width, height (pixels), stop crossings looked at, a triangle's flux over a pixel's area.
+    pub frame: [f32; 4],
+    /// The wavelength's RGB weight, unused.
+    pub rgb: [f32; 4],
+}
+const _: () = assert!(std::mem::size_of::<GpuJob>() == 96);
+
+/// One traced grid vertex. Must be kept in sync with `struct Vertex` in `shaders/raygrid_common.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuVertex {
+    /// Landing point (image pixels).
+    pub pixel: [f32; 2],
+    pub ratio: f32,
+    pub weight: f32,
+    pub stops: [[f32; 2]; 3],
+    /// 1 when the ray reached the sensor.
+    pub valid: f32,
+    pub pad: f32,
+}
+const _: () = assert!(std::mem::size_of::<GpuVertex>() == 48);
+
+/// Samples per pixel across (x this down) that [`GpuRayGrid::render`] is asked for by default: 4 x 4.
+pub const SUPERSAMPLE: u32 = 4;
+/// Samples per dense reflectance table (the CPU renderer's).
+const TABLE_SAMPLES: usize = DENSE_TABLE_SAMPLES;
+/// Invocations per workgroup of the tracer (`@workgroup_size` in `raygrid_trace.wgsl`).
+const WORKGROUP: u32 = 64;
+
+/// Why a GPU ray-grid render is refused or failed.
+#[derive(Debug, thiserror::Error)]
+pub enum GpuRayGridError {
+    #[error(transparent)]
+    Plan(#[from] RayGridError),
+    #[error("grid {cells}: {what} would need {needed}, beyond this adapter's limit {limit} ({name})")]
+    Limit { cells: usize, what: &'static str, needed: u64, limit: u64, name: &'static str },
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+}
+
+/// What one GPU ray-grid render made.
+#[derive(Clone, Debug)]
+pub struct GpuRayGridImage {
+    /// Linear irradiance relative to the light, ghosts only (as [`crate::raytrace::RayGridImage::hdr`]).
+    pub hdr: HdrImage,
+    /// Jobs drawn (ghost x wavelength with light) and batches they took.
+    pub jobs: usize,
+    pub batches: usize,
+}
+
+/// The uploaded form of a planned frame.
+struct Upload {
+    steps: Vec<GpuStep>,
+    jobs: Vec<GpuJob>,
+    tables: Vec<f32>,
+}
+
+/// The GPU ray-grid renderer: its two pipelines, made once per device.
+pub struct GpuRayGrid {
+    trace_pipeline: wgpu::ComputePipeline,
+    splat_pipeline: wgpu::RenderPipeline,
+    sampler: wgpu::Sampler,
+    target_format: wgpu::TextureFormat,
+}
+
+impl GpuRayGrid {
+    pub fn new(device: &wgpu::Device) -> Self {
+        let trace_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("raygrid_trace.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(RAYGRID_TRACE_WGSL.into()),
+        });
+        let splat_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("raygrid_splat.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(RAYGRID_SPLAT_WGSL.into()),
+        });
+        let trace_pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("raygrid trace"),
+            layout: None,
+            module: &trace_module,
+            entry_point: Some("trace_main"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        let target_format = if device.features().contains(wgpu::Features::FLOAT32_BLENDABLE) {
+            wgpu::TextureFormat::Rgba32Float
+        } else {
+            wgpu::TextureFormat::Rgba16Float
+        };
+        let additive = wgpu::BlendComponent {
+            src_factor: wgpu::BlendFactor::One,
+            dst_factor: wgpu::BlendFactor::One,
+            operation: wgpu::BlendOperation::Add,
+        };
+        let splat_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("raygrid splat"),
+            layout: None,
+            vertex: wgpu::VertexState {
+                module: &splat_module,
+                entry_point: Some("vs_splat"),
+                buffers: &[],
+                compilation_options: Default::default(),
+            },
+            fragment: Some(wgpu::FragmentState {
+                module: &splat_module,
+                entry_point: Some("fs_splat"),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: target_format,
+                    blend: Some(wgpu::BlendState { color: additive, alpha: additive }),
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+                compilation_options: Default::default(),
+            }),
+            primitive: wgpu::PrimitiveState::default(),
+            depth_stencil: None,
+            multisample: wgpu::MultisampleState::default(),
+            multiview_mask: None,
+            cache: None,
+        });
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("raygrid aperture"),
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            ..Default::default()
+        });
+        Self { trace_pipeline, splat_pipeline, sampler, target_format }
+    }
+
+    /// The ghosts of `renderer` for a light at the frame position `light_deg`, seen in `window`, a `cells` x
+    /// `cells` grid per ghost and wavelength, traced and drawn on `ctx`'s GPU. Each pixel is the mean of
+    /// `supersample` x `supersample` samples (the triangles rasterised at that many times the resolution, then
+    /// averaged): the box filter of the CPU twin, approached as the samples grow ([`SUPERSAMPLE`] by default).
+    pub fn render(
+        &self,
+        ctx: &GpuContext,
+        renderer: &RayGridRenderer,
+        light_deg: [f64; 2],
+        window: Window,
+        cells: usize,
+        supersample: u32,
+    ) -> Result<GpuRayGridImage, GpuRayGridError> {
+        let planned = renderer.plan_fixed(light_deg, window, cells)?;
+        let s = supersample.clamp(1, 8);
+        let fine = Window { width: window.width * s, height: window.height * s, ..window };
+        let (device, queue) = (&ctx.device, &ctx.queue);
+        let limits = device.limits();
+        let per_job_vertices = ((cells + 1) * (cells + 1)) as u64;
+        let per_job_bytes = per_job_vertices * std::mem::size_of::<GpuVertex>() as u64;
+        let groups_x = per_job_vertices.div_ceil(u64::from(WORKGROUP));
+        let limit = |what, needed: u64, limit: u64, name| {
+            (needed > limit).then_some(GpuRayGridError::Limit { cells, what, needed, limit, name })
+        };
+        let binding = u64::from(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size);
+        if let Some(e) = limit(
+            "workgroups per dispatch",
+            groups_x,
+            u64::from(limits.max_compute_workgroups_per_dimension),
+            "max_compute_workgroups_per_dimension",
+        )
+        .or_else(|| limit("bytes of vertices for one ghost", per_job_bytes, binding, "max_storage_buffer_binding_size"))
+        .or_else(|| limit("vertices per draw", (cells * cells * 6) as u64, u64::from(u32::MAX), "u32 vertex index"))
+        .or_else(|| {
+            let side = u64::from(fine.width.max(fine.height));
+            limit("texels across the supersampled target", side, u64::from(limits.max_texture_dimension_2d), "max_texture_dimension_2d")
+        }) {
+            return Err(e);
+        }
+        let target = texture_2d(
+            device,
+            "raygrid hdr",
+            fine.width,
+            fine.height,
+            self.target_format,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+        );
+        let target_view = target.create_view(&wgpu::TextureViewDescriptor::default());
+        let mask = renderer.mask();
+        let aperture = texture_2d(
+            device,
+            "raygrid aperture",
+            mask.size as u32,
+            mask.size as u32,
+            wgpu::TextureFormat::R8Unorm,
+            wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        );
+        queue.write_texture(
+            aperture.as_image_copy(),
+            &mask.texels,
+            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(mask.size as u32), rows_per_image: None },
+            aperture.size(),
+        );
+        let aperture_view = aperture.create_view(&wgpu::TextureViewDescriptor::default());
+        // Batches of jobs whose vertices fit one storage binding (at most 256 MB, and at most 65535 jobs, the
+        // dispatch's y).
+        let per_batch = (binding.min(256 << 20) / per_job_bytes.max(1))
+            .min(u64::from(limits.max_compute_workgroups_per_dimension))
+            .max(1) as usize;
+        let mut batches = 0;
+        let mut first = true;
+        for batch in planned.chunks(per_batch) {
+            let upload = upload(renderer, batch, fine);
+            let buffer = |label, contents: &[u8], usage| {
+                device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
+            };
+            let steps = buffer("raygrid steps", bytemuck::cast_slice(&upload.steps), wgpu::BufferUsages::STORAGE);
+            let jobs = buffer("raygrid jobs", bytemuck::cast_slice(&upload.jobs), wgpu::BufferUsages::STORAGE);
+            let tables = buffer("raygrid tables", bytemuck::cast_slice(&upload.tables), wgpu::BufferUsages::STORAGE);
+            let vertices = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("raygrid vertices"),
+                size: per_job_bytes * batch.len() as u64,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            });
+            let trace_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("raygrid trace"),
+                layout: &self.trace_pipeline.get_bind_group_layout(0),
+                entries: &[
+                    wgpu::BindGroupEntry { binding: 0, resource: steps.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 1, resource: jobs.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 2, resource: tables.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 3, resource: vertices.as_entire_binding() },
+                ],
+            });
+            let splat_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("raygrid splat"),
+                layout: &self.splat_pipeline.get_bind_group_layout(0),
+                entries: &[
+                    wgpu::BindGroupEntry { binding: 0, resource: vertices.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 1, resource: jobs.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&aperture_view) },
+                    wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(&self.sampler) },
+                ],
+            });
+            let mut encoder =
+                device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("raygrid") });
+            {
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("raygrid trace"),
+                    timestamp_writes: None,
+                });
+                pass.set_pipeline(&self.trace_pipeline);
+                pass.set_bind_group(0, &trace_group, &[]);
+                pass.dispatch_workgroups(groups_x as u32, batch.len() as u32, 1);
+            }
+            {
+                let load = if first { wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT) } else { wgpu::LoadOp::Load };
+                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("raygrid splat"),
+                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                        view: &target_view,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations { load, store: wgpu::StoreOp::Store },
+                    })],
+                    ..Default::default()
+                });
+                pass.set_pipeline(&self.splat_pipeline);
+                pass.set_bind_group(0, &splat_group, &[]);
+                pass.draw(0..(cells * cells * 6) as u32, 0..batch.len() as u32);
+            }
+            queue.submit(Some(encoder.finish()));
+            first = false;
+            batches += 1;
+        }
+        if first {
+            // No job has light: a black image.
+            return Ok(GpuRayGridImage { hdr: HdrImage::black(window.width, window.height), jobs: 0, batches: 0 });
+        }
+        let hdr = read_hdr(ctx, &target, self.target_format)?.box_reduced(s);
+        Ok(GpuRayGridImage { hdr, jobs: planned.len(), batches })
+    }
+
+    /// The traced vertices of the first `jobs` planned jobs (for the landing comparison with the f64 tracer),
+    /// with the plan they came from.
+    pub fn trace_vertices<'r>(
+        &self,
+        ctx: &GpuContext,
+        renderer: &'r RayGridRenderer,
+        light_deg: [f64; 2],
+        window: Window,
+        cells: usize,
+        jobs: usize,
+    ) -> Result<(Vec<PlannedJob<'r>>, Vec<GpuVertex>), GpuRayGridError> {
+        let mut planned = renderer.plan_fixed(light_deg, window, cells)?;
+        planned.truncate(jobs);
+        let (device, queue) = (&ctx.device, &ctx.queue);
+        let upload = upload(renderer, &planned, window);
+        let per_job = (cells + 1) * (cells + 1);
+        let size = (per_job * planned.len() * std::mem::size_of::<GpuVertex>()).max(16) as u64;
+        let buffer = |label, contents: &[u8]| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage: wgpu::BufferUsages::STORAGE,
+            })
+        };
+        let (steps, jobs_buffer, tables) = (
+            buffer("raygrid steps", bytemuck::cast_slice(&upload.steps)),
+            buffer("raygrid jobs", bytemuck::cast_slice(&upload.jobs)),
+            buffer("raygrid tables", bytemuck::cast_slice(&upload.tables)),
+        );
+        let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+        let vertices =
+            device.create_buffer(&wgpu::BufferDescriptor { label: Some("vertices"), size, usage, mapped_at_creation: false });
+        let readback = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("vertices readback"),
+            size,
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        });
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("raygrid trace"),
+            layout: &self.trace_pipeline.get_bind_group_layout(0),
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: steps.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: jobs_buffer.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: tables.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 3, resource: vertices.as_entire_binding() },
+            ],
+        });
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("trace") });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
+            pass.set_pipeline(&self.trace_pipeline);
+            pass.set_bind_group(0, &group, &[]);
+            pass.dispatch_workgroups((per_job as u32).div_ceil(WORKGROUP), planned.len().max(1) as u32, 1);
+        }
+        encoder.copy_buffer_to_buffer(&vertices, 0, &readback, 0, size);
+        queue.submit(Some(encoder.finish()));
+        let (sender, receiver) = std::sync::mpsc::channel();
+        readback.slice(..).map_async(wgpu::MapMode::Read, move |r| {
+            let _ = sender.send(r);
+        });
+        device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
+        receiver.recv().map_err(|e| GpuError::Readback(e.to_string()))?.map_err(|e| GpuError::Readback(e.to_string()))?;
+        let view = readback.slice(..).get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?;
+        let out: Vec<GpuVertex> = bytemuck::cast_slice(&view[..per_job * planned.len() * 48]).to_vec();
+        Ok((planned, out))
+    }
+}
+
+/// The steps, jobs and tables of `jobs`, every float finite (a value that is not becomes 0 and the job is
+/// left out: nothing that is not finite reaches a GPU buffer).
+fn upload(renderer: &RayGridRenderer, jobs: &[PlannedJob], window: Window) -> Upload {
+    let tables = renderer.tables();
+    let (stop, stop_radius_mm) = renderer.stop();
+    let mut out = Upload { steps: Vec::new(), jobs: Vec::new(), tables: Vec::new() };
+    // Each table the jobs use, once, at its offset.
+    let mut offsets = std::collections::HashMap::new();
+    let px_per_mm = window.px_per_mm();
+    let pixel_area_mm2 = px_per_mm.powi(-2);
+    let mut vertex = 0u32;
+    for job in jobs {
+        let first = out.steps.len() as u32;
+        for (k, step) in job.tracer.steps().iter().enumerate() {
+            let table = job.step_tables[k];
+            let offset = *offsets.entry(table).or_insert_with(|| {
+                let at = out.tables.len() as u32;
+                let samples = tables.table(table).samples();
+                // Tables are resampled to the shader's fixed size (they already have it; a zero table has 2).
+                out.tables.extend((0..TABLE_SAMPLES).map(|i| {
+                    let x = i as f64 / (TABLE_SAMPLES - 1) as f64;
+                    let value = tables.table(table).at(x);
+                    debug_assert!(samples.len() >= 2);
+                    finite(value)
+                }));
+                at
+            });
+            let shape = &step.shape;
+            let t = shape.terms;
+            out.steps.push(GpuStep {
+                geometry: [step.vertex_z_mm, shape.curvature_per_mm, shape.conic, shape.a2].map(finite),
+                terms_lo: [t[0], t[1], t[2], t[3]].map(finite),
+                terms_hi: [t[4], t[5], t[6], if shape.spherical { 1.0 } else { 0.0 }].map(finite),
+                optics: [
+                    step.eta,
+                    if step.reflect { 1.0 } else { 0.0 },
+                    step.arriving_direction,
+                    job.inverse_semi_aperture2[k],
+                ]
+                .map(finite),
+                table: [offset, u32::from(step.surface == stop), 0, 0],
+            });
+        }
+        let b = job.bounds;
+        let n = job.cells as f64;
+        let d = job.direction;
+        out.jobs.push(GpuJob {
+            steps: [first, out.steps.len() as u32 - first, vertex, job.cells as u32],
+            region: [b[0], b[1], (b[2] - b[0]) / n, (b[3] - b[1]) / n].map(finite),
+            direction: [d.x, d.y, d.z, job.tracer.sensor_z_mm()].map(finite),
+            view: [window.centre_mm[0], window.centre_mm[1], px_per_mm, stop_radius_mm].map(finite),
+            frame: [
+                f64::from(window.width),
+                f64::from(window.height),
+                job.stop_count as f64,
+                job.triangle_flux / pixel_area_mm2,
+            ]
+            .map(finite),
+            rgb: [job.rgb[0], job.rgb[1], job.rgb[2], 0.0].map(finite),
+        });
+        vertex += ((job.cells + 1) * (job.cells + 1)) as u32;
+    }
+    out
+}
+
+/// `v` as f32, 0 where it is not finite.
+fn finite(v: f64) -> f32 {
+    let f = v as f32;
+    if f.is_finite() { f } else { 0.0 }
+}
+
+/// Reads the accumulation back as linear RGB.
+fn read_hdr(ctx: &GpuContext, target: &wgpu::Texture, format: wgpu::TextureFormat) -> Result<HdrImage, GpuError> {
+    let size = target.size();
+    let pixels: Vec<[f32; 4]> = if format == wgpu::TextureFormat::Rgba32Float {
+        let bytes = read_texture(ctx, target, 16)?;
+        bytemuck::cast_slice::<u8, f32>(&bytes).chunks_exact(4).map(|c| [c[0], c[1], c[2], 1.0]).collect()
+    } else {
+        let bytes = read_texture(ctx, target, 8)?;
+        bytemuck::cast_slice::<u8, half::f16>(&bytes)
+            .chunks_exact(4)
+            .map(|c| [c[0].to_f32(), c[1].to_f32(), c[2].to_f32(), 1.0])
+            .collect()
+    };
+    let pixels = pixels.into_iter().map(|p| p.map(|v| if v.is_finite() && v > 0.0 { v } else { 0.0 })).collect();
+    Ok(HdrImage { width: size.width, height: size.height, pixels })
+}

@@ -1,0 +1,36 @@
+// Ray grids on the GPU (Hullin et al. 2011), the declarations both passes share (prepended to
+// raygrid_trace.wgsl and raygrid_splat.wgsl when they are embedded): a compute pass traces every grid ray of
+// every job (ghost x wavelength) exactly, in f32, along the ghost's path; a raster pass draws each grid cell
+// as two triangles, energy conserved, additively.
+// CPU twin: crates/flare_core/src/raytrace/ (`RayGridRenderer`, f64, box-filtered splatting); the
+// comparison test is in crates/flare_core/tests/raygrid_gpu.rs.
+// Must be kept in sync with `GpuStep`, `GpuJob` and `GpuVertex` in crates/flare_core/src/render/raygrid.rs.
+
+struct Step {
+    geometry: vec4<f32>,   // vertex z (mm), curvature (1/mm), conic, r^2 term
+    terms_lo: vec4<f32>,   // A4, A6, A8, A10
+    terms_hi: vec4<f32>,   // A12, A14, A16, spherical (1: the sphere formulas alone)
+    optics: vec4<f32>,     // eta = n_in / n_out, reflect (0/1), arriving direction (+1/-1), 1 / semi-aperture^2 (0 at the stop)
+    table: vec4<u32>,      // offset of the reflectance table in `tables`, is the stop (0/1), unused, unused
+};
+
+struct Job {
+    steps: vec4<u32>,      // first step, step count, first vertex, cells across (n)
+    region: vec4<f32>,     // x0, y0 of the grid on the entrance plane (mm), cell size x, y (mm)
+    direction: vec4<f32>,  // the light's unit direction, sensor plane z (mm)
+    view: vec4<f32>,       // window centre x, y (sensor mm), pixels per mm, stop radius (mm)
+    frame: vec4<f32>,      // width, height (pixels), stop crossings looked at, irradiance per unit area ratio
+    rgb: vec4<f32>,        // the wavelength's RGB weight, unused
+};
+
+struct Vertex {
+    pixel: vec2<f32>,      // landing point (image pixels)
+    ratio: f32,            // largest h / semi-aperture over the surfaces other than the stop
+    weight: f32,           // Fresnel and coating reflectance and transmittance along the path
+    stop0: vec2<f32>,      // coordinates at each stop crossing (stop radii)
+    stop1: vec2<f32>,
+    stop2: vec2<f32>,
+    valid: f32,            // 1 when the ray reached the sensor
+    pad: f32,
+};
+

@@ -1,0 +1,203 @@
+// Ray grids on the GPU, pass 1: trace every grid ray of every job (workgroup row y = job) exactly, in f32.
+// CPU twin: `RayGridRenderer::trace_lanes` in crates/flare_core/src/raytrace/tracer.rs (f64), with the tracer of
+// crates/flare_core/src/optics/trace.rs. The declarations come from raygrid_common.wgsl.
+
+// Entries of each reflectance table (over sin^2 i in [0, 1]).
+const TABLE_SAMPLES: u32 = 1025u;
+const MAX_NEWTON_STEPS: u32 = 40u;
+
+@group(0) @binding(0) var<storage, read> steps: array<Step>;
+@group(0) @binding(1) var<storage, read> jobs: array<Job>;
+@group(0) @binding(2) var<storage, read> tables: array<f32>;
+@group(0) @binding(3) var<storage, read_write> vertices: array<Vertex>;
+
+fn table_at(offset: u32, sin2: f32) -> f32 {
+    let x = clamp(sin2, 0.0, 1.0) * f32(TABLE_SAMPLES - 1u);
+    let k = min(u32(x), TABLE_SAMPLES - 2u);
+    let f = x - f32(k);
+    return tables[offset + k] * (1.0 - f) + tables[offset + k + 1u] * f;
+}
+
+// The sag and its slope over r of an aspheric step at r^2; a negative `ok` where it is undefined.
+struct Sag {
+    z: f32,
+    slope_over_r: f32,
+    ok: bool,
+};
+
+fn sag(s: Step, r2: f32) -> Sag {
+    var out: Sag;
+    let c = s.geometry.y;
+    let root = 1.0 - (1.0 + s.geometry.z) * c * c * r2;
+    if (root <= 0.0) {
+        out.ok = false;
+        return out;
+    }
+    let sq = sqrt(root);
+    var z = c * r2 / (1.0 + sq) + s.geometry.w * r2;
+    var m = c / sq + 2.0 * s.geometry.w;
+    var terms = array<f32, 7>(s.terms_lo.x, s.terms_lo.y, s.terms_lo.z, s.terms_lo.w, s.terms_hi.x, s.terms_hi.y, s.terms_hi.z);
+    var power = r2 * r2;
+    var slope_power = r2;
+    for (var i = 0u; i < 7u; i = i + 1u) {
+        z = z + terms[i] * power;
+        m = m + f32(2u * i + 4u) * terms[i] * slope_power;
+        power = power * r2;
+        slope_power = slope_power * r2;
+    }
+    out.z = z;
+    out.slope_over_r = m;
+    out.ok = true;
+    return out;
+}
+
+// Distance along d from p (relative to the vertex) to the step's surface; negative infinity-free: `hit` says.
+struct Hit {
+    s: f32,
+    hit: bool,
+};
+
+fn intersect(p: vec3<f32>, d: vec3<f32>, st: Step) -> Hit {
+    var out: Hit;
+    out.hit = false;
+    let c = st.geometry.y;
+    let z_dir = st.optics.z;
+    let q = select(1.0 + st.geometry.z, 1.0, st.terms_hi.w > 0.5);
+    // The quadric (the sphere when spherical) by the stable root: a s^2 + 2 b s + g0 = 0.
+    let g0 = c * (p.x * p.x + p.y * p.y + q * p.z * p.z) - 2.0 * p.z;
+    let a = c * (d.x * d.x + d.y * d.y + q * d.z * d.z);
+    let b = c * (p.x * d.x + p.y * d.y + q * p.z * d.z) - d.z;
+    let disc = b * b - a * g0;
+    var s = 0.0;
+    var have = false;
+    if (disc >= 0.0) {
+        let den = z_dir * sqrt(disc) - b;
+        if (den != 0.0) {
+            s = g0 / den;
+            have = true;
+        }
+    }
+    if (st.terms_hi.w > 0.5) {
+        out.s = s;
+        out.hit = have;
+        return out;
+    }
+    if (!have) {
+        if (d.z == 0.0) {
+            return out;
+        }
+        s = -p.z / d.z;
+    }
+    for (var i = 0u; i < MAX_NEWTON_STEPS; i = i + 1u) {
+        let at = p + s * d;
+        let r2 = at.x * at.x + at.y * at.y;
+        let sg = sag(st, r2);
+        if (!sg.ok) {
+            return out;
+        }
+        let f = at.z - sg.z;
+        let derivative = d.z - sg.slope_over_r * (at.x * d.x + at.y * d.y);
+        if (derivative == 0.0) {
+            return out;
+        }
+        let step = f / derivative;
+        s = s - step;
+        if (abs(step) <= 1e-6 * (1.0 + abs(s))) {
+            out.s = s;
+            out.hit = true;
+            return out;
+        }
+    }
+    return out;
+}
+
+fn normal_at(p: vec3<f32>, st: Step) -> vec4<f32> {
+    let c = st.geometry.y;
+    if (st.terms_hi.w > 0.5) {
+        return vec4<f32>(normalize(vec3<f32>(-c * p.x, -c * p.y, 1.0 - c * p.z)), 1.0);
+    }
+    let sg = sag(st, p.x * p.x + p.y * p.y);
+    if (!sg.ok) {
+        return vec4<f32>(0.0);
+    }
+    return vec4<f32>(normalize(vec3<f32>(-sg.slope_over_r * p.x, -sg.slope_over_r * p.y, 1.0)), 1.0);
+}
+
+@compute @workgroup_size(64)
+fn trace_main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(workgroup_id) group: vec3<u32>) {
+    let job = jobs[group.y];
+    let n = job.steps.w;
+    let k = id.x;
+    if (k >= (n + 1u) * (n + 1u)) {
+        return;
+    }
+    var v: Vertex;
+    v.valid = 0.0;
+    v.weight = 1.0;
+    var p = vec3<f32>(job.region.x + f32(k % (n + 1u)) * job.region.z, job.region.y + f32(k / (n + 1u)) * job.region.w, 0.0);
+    var d = job.direction.xyz;
+    var crossings = 0u;
+    var ratio2 = 0.0;
+    var alive = true;
+    let stop_radius = job.view.w;
+    for (var i = 0u; i < job.steps.y; i = i + 1u) {
+        let st = steps[job.steps.x + i];
+        let vertex = vec3<f32>(0.0, 0.0, st.geometry.x);
+        let h = intersect(p - vertex, d, st);
+        if (!h.hit) {
+            alive = false;
+            break;
+        }
+        p = p + h.s * d;
+        let nn = normal_at(p - vertex, st);
+        if (nn.w == 0.0) {
+            alive = false;
+            break;
+        }
+        let normal = nn.xyz;
+        let cos_i = dot(d, normal);
+        let c = min(abs(cos_i), 1.0);
+        let r = table_at(st.table.x, 1.0 - c * c);
+        if (st.optics.y > 0.5) {
+            v.weight = v.weight * r;
+        } else {
+            v.weight = v.weight * (1.0 - r);
+        }
+        if (st.table.y == 1u) {
+            let q = p.xy / stop_radius;
+            if (crossings == 0u) {
+                v.stop0 = q;
+            } else if (crossings == 1u) {
+                v.stop1 = q;
+            } else if (crossings == 2u) {
+                v.stop2 = q;
+            }
+            crossings = crossings + 1u;
+        } else {
+            ratio2 = max(ratio2, dot(p.xy, p.xy) * st.optics.w);
+        }
+        if (st.optics.y > 0.5) {
+            d = d - 2.0 * cos_i * normal;
+        } else if (st.optics.x != 1.0) {
+            let eta = st.optics.x;
+            let root = 1.0 - eta * eta * max(1.0 - cos_i * cos_i, 0.0);
+            if (root < 0.0) {
+                alive = false;
+                break;
+            }
+            let cos_t = sign(cos_i) * sqrt(root);
+            d = eta * d + (cos_t - eta * cos_i) * normal;
+        }
+    }
+    v.ratio = sqrt(ratio2);
+    if (alive && d.z > 0.0) {
+        let t = (job.direction.w - p.z) / d.z;
+        let landing = p + t * d;
+        let kpx = job.view.z;
+        v.pixel = vec2<f32>(0.5 * job.frame.x - (landing.x - job.view.x) * kpx, 0.5 * job.frame.y + (landing.y - job.view.y) * kpx);
+        let finite = abs(v.pixel.x) < 1e30 && abs(v.pixel.y) < 1e30 && abs(v.weight) < 1e30 && v.ratio < 1e30;
+        v.valid = select(0.0, 1.0, finite);
+    }
+    vertices[job.steps.z + k] = v;
+}
+
