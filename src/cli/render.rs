@@ -580,22 +580,35 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             // Ray-traced ghosts replace the paraxial accumulation; starburst, tonemap and writer are the same.
             let started = std::time::Instant::now();
             let renderer = flare.ray_grid_renderer();
-            let mut hdr = match (&device, n) {
+            let on_gpu = match (&device, n) {
                 (Device::Gpu(drawer), raytrace::Grid::Fixed(cells)) => {
                     let gpu = flare_core::render::raygrid::GpuRayGrid::new(&drawer.ctx.device);
                     let window = raytrace::Window::frame(width, height);
                     let samples = args.gpu_samples;
-                    let traced = gpu.render(&drawer.ctx, &renderer, planned.light_deg, window, cells, samples)?;
-                    eprintln!(
-                        "ray grids on the GPU ({}): {} ghost x wavelength jobs with light, {cells}-cell grid, {samples}x{samples} samples a pixel, {} batches, {:.2} s",
-                        drawer.ctx.adapter.name,
-                        traced.jobs,
-                        traced.batches,
-                        started.elapsed().as_secs_f64()
-                    );
-                    traced.hdr
+                    match gpu.render(&drawer.ctx, &renderer, planned.light_deg, window, cells, samples) {
+                        // A lost device (or an error it reported) falls back to the CPU; a refused grid is an error.
+                        Err(flare_core::render::raygrid::GpuRayGridError::Gpu(e)) => {
+                            eprintln!("ray grids on the GPU failed ({e}): tracing on the CPU instead");
+                            None
+                        }
+                        Err(e) => return Err(e.into()),
+                        Ok(traced) => {
+                            eprintln!(
+                                "ray grids on the GPU ({}): {} ghost x wavelength jobs with light, {cells}-cell grid, {samples}x{samples} samples a pixel, {} batches, {:.2} s",
+                                drawer.ctx.adapter.name,
+                                traced.jobs,
+                                traced.batches,
+                                started.elapsed().as_secs_f64()
+                            );
+                            Some(traced.hdr)
+                        }
+                    }
                 }
-                _ => {
+                _ => None,
+            };
+            let mut hdr = match on_gpu {
+                Some(hdr) => hdr,
+                None => {
                     let traced = renderer.render(planned.light_deg, width, height, n)?;
                     let st = traced.stats;
                     eprintln!(

@@ -279,8 +279,26 @@ impl GpuDrawer {
         self.uploaded = Some(key);
     }
 
-    /// Draws `frame` and reads back its accumulation and display image.
+    /// Draws `frame` and reads back its accumulation and display image; [`GpuError::Lost`] when the device
+    /// was lost or reported an error of its own, before or during the draw.
     pub fn draw(&mut self, frame: &Frame, sources: &Sources) -> Result<Drawn, GpuError> {
+        if let Some(reason) = self.ctx.failure() {
+            return Err(GpuError::Lost(reason));
+        }
+        // Refused before anything is made: a texture beyond the adapter's limit would be a validation error.
+        let max = self.ctx.device.limits().max_texture_dimension_2d;
+        let (width, height) = frame.size();
+        if width > max || height > max {
+            return Err(GpuError::TooLarge { width, height, max });
+        }
+        let drawn = self.draw_unchecked(frame, sources);
+        match self.ctx.failure() {
+            Some(reason) => Err(GpuError::Lost(reason)),
+            None => drawn,
+        }
+    }
+
+    fn draw_unchecked(&mut self, frame: &Frame, sources: &Sources) -> Result<Drawn, GpuError> {
         self.upload(sources);
         let display = crate::render::gpu::render_display_with_lut(
             &self.ctx,
@@ -329,6 +347,8 @@ fn plate_key(plate: &HdrImage) -> u64 {
 pub enum Device {
     Gpu(Box<GpuDrawer>),
     Cpu,
+    /// Was a GPU whose device was lost (the reason): draws on the CPU twin from then on.
+    LostGpu(String),
 }
 
 impl Device {
@@ -342,14 +362,22 @@ impl Device {
         match self {
             Self::Gpu(g) => format!("{} ({:?})", g.ctx.adapter.name, g.ctx.adapter.backend),
             Self::Cpu => "CPU twin".into(),
+            Self::LostGpu(reason) => format!("CPU twin (the GPU device was lost: {reason})"),
         }
     }
 
-    /// Draws `frame` (see the module documentation).
+    /// Draws `frame` (see the module documentation). A GPU whose device is lost (before or during the draw)
+    /// is dropped for the CPU twin, which draws this frame and the next ones; [`Self::name`] says why.
     pub fn draw(&mut self, frame: &Frame, sources: &Sources) -> Result<Drawn, GpuError> {
         match self {
-            Self::Gpu(g) => g.draw(frame, sources),
-            Self::Cpu => Ok(draw_cpu(frame, sources)),
+            Self::Gpu(g) => match g.draw(frame, sources) {
+                Err(GpuError::Lost(reason)) => {
+                    *self = Self::LostGpu(reason);
+                    Ok(draw_cpu(frame, sources))
+                }
+                drawn => drawn,
+            },
+            Self::Cpu | Self::LostGpu(_) => Ok(draw_cpu(frame, sources)),
         }
     }
 }

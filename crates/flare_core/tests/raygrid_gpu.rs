@@ -114,3 +114,16 @@ fn a_grid_beyond_the_adapters_limits_is_refused() {
     assert!(text.contains("limit") && text.contains("max_"), "{text}");
     eprintln!("{text}");
 }
+
+/// A device lost before a render: an error that says so (the command line then traces on the CPU), no panic.
+#[test]
+fn a_lost_device_is_an_error_not_a_panic() {
+    let Some(ctx) = test_context() else { return };
+    let raygrid = GpuRayGrid::new(&ctx.device);
+    let flare = prepared("heliar");
+    let renderer = flare.ray_grid_renderer();
+    ctx.device.destroy();
+    let e = raygrid.render(&ctx, &renderer, [3.0, 2.0], Window::frame(64, 48), 16, 1).unwrap_err();
+    assert!(matches!(e, GpuRayGridError::Gpu(flare_core::render::gpu::GpuError::Lost(_))), "{e}");
+    eprintln!("{e}");
+}

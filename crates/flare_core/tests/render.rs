@@ -111,6 +111,37 @@ fn ghost_gains_are_applied_as_the_frame_is_built() {
     }
 }
 
+/// A GPU device lost between frames: the pipeline does not panic, it draws that frame and the next on the CPU
+/// twin and its name says why.
+#[test]
+fn a_lost_device_falls_back_to_the_cpu_twin() {
+    let Some(ctx) = test_context() else { return };
+    let flare = flare("heliar");
+    let frame = Frame::build(&flare, None, &request([6.0, 4.0], 96, 64, 1));
+    let sources = Sources { flare: &flare, lut: None, plate: None };
+    let mut device = Device::Gpu(Box::new(GpuDrawer::on(ctx)));
+    device.draw(&frame, &sources).unwrap();
+    assert!(matches!(device, Device::Gpu(_)));
+    if let Device::Gpu(g) = &device {
+        g.ctx.device.destroy();
+    }
+    let drawn = device.draw(&frame, &sources).unwrap();
+    assert!(matches!(device, Device::LostGpu(_)), "{}", device.name());
+    assert!(device.name().contains("CPU twin (the GPU device was lost"), "{}", device.name());
+    assert_eq!(drawn, frame::draw_cpu(&frame, &sources));
+    // And the frames after it.
+    assert_eq!(device.draw(&frame, &sources).unwrap(), drawn);
+    eprintln!("{}", device.name());
+    // A frame beyond the adapter's texture limit is refused with the limit named, before anything is made.
+    let Some(ctx) = test_context() else { return };
+    let max = ctx.device.limits().max_texture_dimension_2d;
+    let mut drawer = GpuDrawer::on(ctx);
+    let wide = Frame::build(&flare, None, &request([6.0, 4.0], max + 1, 2, 1));
+    let e = drawer.draw(&wide, &sources).unwrap_err();
+    assert!(e.to_string().contains("max_texture_dimension_2d"), "{e}");
+    assert!(drawer.ctx.failure().is_none(), "refused, not a validation error");
+}
+
 /// A draft keeps the brightest sprites within its fragment budget, at its divisor; with a budget that holds
 /// everything it is the frame at that divisor; it never reaches an export (a full request has no draft).
 #[test]

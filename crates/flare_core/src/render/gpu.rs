@@ -47,6 +47,12 @@ pub enum GpuError {
     Device { adapter: String, message: String },
     #[error("reading the image back from the GPU failed: {0}")]
     Readback(String),
+    #[error("the GPU device was lost ({0})")]
+    Lost(String),
+    #[error(
+        "a {width}x{height} frame is beyond this adapter's limit of {max} pixels a side (max_texture_dimension_2d); use a smaller size or --device cpu"
+    )]
+    TooLarge { width: u32, height: u32, max: u32 },
 }
 
 /// A device and queue made without any window.
@@ -54,6 +60,9 @@ pub struct GpuContext {
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
     pub adapter: wgpu::AdapterInfo,
+    /// Why the device was lost, or the first error wgpu reported outside any call that returns one (the
+    /// device is not trusted after either); `None` while it is healthy.
+    failure: std::sync::Arc<std::sync::Mutex<Option<String>>>,
 }
 
 impl GpuContext {
@@ -83,7 +92,25 @@ impl GpuContext {
             ..Default::default()
         }))
         .map_err(|e| GpuError::Device { adapter: info.name.clone(), message: e.to_string() })?;
-        Ok(Self { device, queue, adapter: info })
+        // A lost device or an uncaptured error is recorded, never a panic: the drawer then reports
+        // `GpuError::Lost` and the frame pipeline falls back to the CPU twin.
+        let failure = std::sync::Arc::new(std::sync::Mutex::new(None::<String>));
+        // On one line: wgpu's messages run over several.
+        let record = |failure: &std::sync::Arc<std::sync::Mutex<Option<String>>>, text: String| {
+            if let Ok(mut f) = failure.lock() {
+                f.get_or_insert(text.split_whitespace().collect::<Vec<_>>().join(" "));
+            }
+        };
+        let lost = failure.clone();
+        device.set_device_lost_callback(move |reason, message| record(&lost, format!("{reason:?}: {message}")));
+        let errors = failure.clone();
+        device.on_uncaptured_error(std::sync::Arc::new(move |e: wgpu::Error| record(&errors, e.to_string())));
+        Ok(Self { device, queue, adapter: info, failure })
+    }
+
+    /// Why the device can no longer be trusted (lost, or an error wgpu reported on its own), if it cannot.
+    pub fn failure(&self) -> Option<String> {
+        self.failure.lock().ok().and_then(|f| f.clone())
     }
 }
 

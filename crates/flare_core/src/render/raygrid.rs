@@ -21,12 +21,12 @@
 //! The CPU twin box-filters its triangles (clips each to the pixels it covers); the GPU samples pixel centres,
 //! as rasterisers do. A triangle collapsed to a line or a point (a ghost focused there) is dropped here where
 //! the CPU puts its light in one pixel. A test compares landings (the f32 drift, per lens) and images.
-//! **Limits**: a grid whose dispatch or vertex buffer exceeds the adapter's limits is refused with the limit
-//! named; a frame's jobs are traced and drawn in batches that fit the largest storage buffer the adapter binds.
+//! **Limits**: a grid whose dispatch, vertex buffer or supersampled target exceeds the adapter's limits is
+//! refused with the limit named, before anything is dispatched; a frame's jobs are traced and drawn in batches
+//! that fit the largest storage buffer the adapter binds. A device lost on the way is
+//! [`GpuError::Lost`] (the command line then traces on the CPU).
 
 use bytemuck::{Pod, Zeroable};
-use wgpu::util::DeviceExt;
-
 use super::gpu::{GpuContext, GpuError, read_texture, texture_2d};
 use super::shaders::{RAYGRID_SPLAT_WGSL, RAYGRID_TRACE_WGSL};
 use crate::image::HdrImage;
@@ -202,6 +202,9 @@ impl GpuRayGrid {
         supersample: u32,
     ) -> Result<GpuRayGridImage, GpuRayGridError> {
         let planned = renderer.plan_fixed(light_deg, window, cells)?;
+        if let Some(reason) = ctx.failure() {
+            return Err(GpuError::Lost(reason).into());
+        }
         let s = supersample.clamp(1, 8);
         let fine = Window { width: window.width * s, height: window.height * s, ..window };
         let (device, queue) = (&ctx.device, &ctx.queue);
@@ -261,9 +264,7 @@ impl GpuRayGrid {
         let mut first = true;
         for batch in planned.chunks(per_batch) {
             let upload = upload(renderer, batch, fine);
-            let buffer = |label, contents: &[u8], usage| {
-                device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
-            };
+            let buffer = |label, contents: &[u8], usage| storage(device, queue, label, contents, usage);
             let steps = buffer("raygrid steps", bytemuck::cast_slice(&upload.steps), wgpu::BufferUsages::STORAGE);
             let jobs = buffer("raygrid jobs", bytemuck::cast_slice(&upload.jobs), wgpu::BufferUsages::STORAGE);
             let tables = buffer("raygrid tables", bytemuck::cast_slice(&upload.tables), wgpu::BufferUsages::STORAGE);
@@ -328,8 +329,12 @@ impl GpuRayGrid {
             // No job has light: a black image.
             return Ok(GpuRayGridImage { hdr: HdrImage::black(window.width, window.height), jobs: 0, batches: 0 });
         }
-        let hdr = read_hdr(ctx, &target, self.target_format)?.box_reduced(s);
-        Ok(GpuRayGridImage { hdr, jobs: planned.len(), batches })
+        let hdr = read_hdr(ctx, &target, self.target_format);
+        // A device lost on the way (or an error it reported on its own) spoils the image, whatever came back.
+        if let Some(reason) = ctx.failure() {
+            return Err(GpuError::Lost(reason).into());
+        }
+        Ok(GpuRayGridImage { hdr: hdr?.box_reduced(s), jobs: planned.len(), batches })
     }
 
     /// The traced vertices of the first `jobs` planned jobs (for the landing comparison with the f64 tracer),
@@ -349,13 +354,7 @@ impl GpuRayGrid {
         let upload = upload(renderer, &planned, window);
         let per_job = (cells + 1) * (cells + 1);
         let size = (per_job * planned.len() * std::mem::size_of::<GpuVertex>()).max(16) as u64;
-        let buffer = |label, contents: &[u8]| {
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents,
-                usage: wgpu::BufferUsages::STORAGE,
-            })
-        };
+        let buffer = |label, contents: &[u8]| storage(device, queue, label, contents, wgpu::BufferUsages::STORAGE);
         let (steps, jobs_buffer, tables) = (
             buffer("raygrid steps", bytemuck::cast_slice(&upload.steps)),
             buffer("raygrid jobs", bytemuck::cast_slice(&upload.jobs)),
@@ -464,6 +463,26 @@ fn upload(renderer: &RayGridRenderer, jobs: &[PlannedJob], window: Window) -> Up
         vertex += ((job.cells + 1) * (job.cells + 1)) as u32;
     }
     out
+}
+
+/// A buffer of `usage` holding `contents`, written through the queue (on a lost device this is an error the
+/// device records, not a panic as a buffer mapped at creation would be).
+fn storage(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    label: &str,
+    contents: &[u8],
+    usage: wgpu::BufferUsages,
+) -> wgpu::Buffer {
+    let size = (contents.len() as u64).max(16).next_multiple_of(4);
+    let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size,
+        usage: usage | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    queue.write_buffer(&buffer, 0, contents);
+    buffer
 }
 
 /// `v` as f32, 0 where it is not finite.

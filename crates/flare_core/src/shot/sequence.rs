@@ -188,7 +188,7 @@ pub fn render_sequence(
         Frame::build(sources.flare, sources.lut, &request)
     };
     let mut records: Vec<FrameRecord> = match device {
-        Device::Cpu => {
+        Device::Cpu | Device::LostGpu(_) => {
             let one = |plan: &FramePlan| {
                 let started = Instant::now();
                 let path = options.out.path(plan.frame);
