@@ -9,7 +9,8 @@
 //! the user edits (the app's and the command line's), [`frame`] the one pipeline every frame goes through
 //! (request, frame, drawn by [`render`]'s wgpu renderer or its CPU twin, layers), and [`output`] the one image
 //! writer. [`raytrace`] is the other family: ghosts ray-traced exactly on a grid (the ground-truth reference,
-//! and Hullin 2011's ray grids); [`lut`] bakes the non-linear ones into LUTs blended at run time; [`metrics`]
+//! and Hullin 2011's ray grids, which [`render`]'s `raygrid` also traces and draws on the GPU, in f32, the f64
+//! tracer its twin); [`lut`] bakes the non-linear ones into LUTs blended at run time; [`metrics`]
 //! measures any image against the reference. [`timeline`] animates a document over frames and [`shot`] makes
 //! a shot of it: plate sequences, tracks, the light found in the plate, and sequences rendered frame by frame
 //! through [`frame`]. [`color`], [`image`], [`files`] and [`fingerprint`] are the small
