@@ -302,7 +302,7 @@ impl RayGridRenderer {
     }
 
     /// The jobs of a fixed-grid frame render as [`Self::render`] lays them out, for a twin that traces them
-    /// elsewhere (the GPU ray grids, [`super::gpu`]): per job with light, its tracer and tables, and where its
+    /// elsewhere (the GPU ray grids, `render::raygrid`): per job with light, its tracer and tables, and where its
     /// `cells` x `cells` grid lies on the entrance plane (the same CPU pre-pass: a coarse grid over the front
     /// lens). Jobs where no light passes are left out.
     pub fn plan_fixed(

@@ -147,7 +147,7 @@ pub fn ghost_pass_direct(scene: &FlareScene, mask: &ApertureMask) -> HdrImage {
 /// are exactly 1 (no lookup can change the fragment, which is the instance's colour), flanked by its edges. The
 /// edges are shaded pixel by pixel as the shader does; the open span is added in O(1) as two entries of a
 /// per-row difference buffer (f64), summed along the row once per band after every instance. A frame-filling
-/// ghost then costs its edges, not its area. Where the open span lies comes from [`MaskRows`] (per band of
+/// ghost then costs its edges, not its area. Where the open span lies comes from `MaskRows` (per band of
 /// mask rows, where its bilinear sample is exactly 1 and where it can be non-zero), with half a texel of margin
 /// on the safe side: a pixel in doubt is shaded. Bands of rows run in parallel (rayon); the result does not
 /// depend on the thread count.
