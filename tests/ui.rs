@@ -185,6 +185,31 @@ fn an_image_exports_at_the_chosen_size_as_png_and_exr() {
     assert!(e.contains("bmp") || e.contains("png"), "{e}");
 }
 
+/// File > Export image draws and writes on a thread: the window goes on, the status bar has its progress and
+/// Cancel, a second export waits its turn, and the outcome lands in the status bar.
+#[test]
+fn the_image_export_runs_on_a_thread() {
+    let mut h = harness();
+    h.run();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("flare.exr");
+    h.state_mut().export_image_file(&path);
+    assert!(h.state().export_job.is_some());
+    h.state_mut().export_image_file(&dir.path().join("other.png"));
+    assert!(h.state().message.as_deref().is_some_and(|m| m.contains("an export is running")));
+    let started = std::time::Instant::now();
+    while h.state().export_job.is_some() {
+        assert!(started.elapsed().as_secs() < 120, "the export did not finish");
+        h.run();
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let message = h.state().message.clone().unwrap_or_default();
+    assert!(message.starts_with("wrote ") && message.contains("flare.exr"), "{message}");
+    let img = image::open(&path).unwrap().to_rgb32f();
+    assert!(img.pixels().any(|p| p.0.iter().sum::<f32>() > 0.05), "the export shows the flare");
+    assert!(!dir.path().join("other.png").exists());
+}
+
 #[test]
 fn dragging_the_light_moves_the_ghosts_along_the_line_through_the_optical_centre() {
     let mut h = harness();

@@ -1,5 +1,5 @@
 //! Work on a thread with progress and Cancel, polled by the UI each frame (the window never blocks): the
-//! bake ([`super::bake`]) and the shot jobs ([`super::shot`]).
+//! bake ([`super::bake`]), the shot jobs ([`super::shot`]) and File > Export image.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};

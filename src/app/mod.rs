@@ -182,6 +182,8 @@ pub struct FlareLabApp {
     playing: Option<(std::time::Instant, i64)>,
     /// Finding the light in the plates, or exporting a sequence.
     pub shot_job: Option<shot::ShotJob>,
+    /// File > Export image, drawing and writing on its thread (the file it writes, the job).
+    pub export_job: Option<(std::path::PathBuf, job::Job<Result<(), String>>)>,
     /// What the last shot job said.
     pub shot_status: String,
     /// What the light found in the plates was (or is being) found for.
@@ -229,6 +231,7 @@ impl FlareLabApp {
             playhead: 1,
             playing: None,
             shot_job: None,
+            export_job: None,
             shot_status: String::new(),
             light_key: None,
             last_export: None,
@@ -310,6 +313,7 @@ impl FlareLabApp {
         self.poll_shot();
         self.keys(ui.ctx());
         self.poll_bake();
+        self.poll_export();
         self.auto_bake_step();
         self.files_step(ui.ctx());
         self.drag_bench_step(ui.ctx());
@@ -365,7 +369,7 @@ impl FlareLabApp {
         if !ui.ctx().input(|i| i.pointer.any_down()) {
             self.history.commit(&self.doc);
         }
-        if self.bake.is_some() || self.shot_job.is_some() {
+        if self.bake.is_some() || self.shot_job.is_some() || self.export_job.is_some() {
             ui.ctx().request_repaint_after(std::time::Duration::from_millis(100));
         }
     }
@@ -538,6 +542,17 @@ impl FlareLabApp {
                 ui.label(format!("baking LUT ghosts, the paraxial flare until then: {text}"));
                 ui.add(egui::ProgressBar::new(*fraction).desired_width(160.0));
                 if ui.button("Cancel bake").clicked() {
+                    job.cancel();
+                }
+            });
+        }
+        // An image export shows its progress and Cancel here.
+        if let Some((path, job)) = &self.export_job {
+            ui.horizontal(|ui| {
+                let (fraction, text) = job.progress();
+                ui.add(egui::ProgressBar::new(fraction).text(text).desired_width(360.0));
+                ui.label(format!("exporting {}", path.display()));
+                if ui.button("Cancel export").clicked() {
                     job.cancel();
                 }
             });
@@ -932,12 +947,48 @@ impl FlareLabApp {
     }
 
     /// Renders the document's frame at the export size through the CPU twin and writes PNG (8-bit,
-    /// tonemapped) or EXR (linear), chosen by the file name.
-    fn export_image_file(&mut self, path: &std::path::Path) {
-        self.message = Some(match self.export_image_to(self.export_size, path) {
-            Ok(()) => format!("wrote {}", path.display()),
-            Err(e) => format!("could not export {}: {e:#}", path.display()),
+    /// tonemapped) or EXR (linear), chosen by the file name, on a thread: the status bar shows it with Cancel
+    /// (a cancelled export writes nothing), and the window goes on meanwhile (a blended 1920x1080 frame takes
+    /// seconds on the CPU).
+    pub fn export_image_file(&mut self, path: &std::path::Path) {
+        if self.export_job.is_some() {
+            self.message = Some("an export is running: wait for it or cancel it".into());
+            return;
+        }
+        let prepared = match self.export_frame(self.export_size) {
+            Ok(p) => p,
+            Err(e) => {
+                self.message = Some(format!("could not export {}: {e:#}", path.display()));
+                return;
+            }
+        };
+        let target = path.to_path_buf();
+        let job = job::Job::spawn("drawing the frame on the CPU", move |cancel, report| {
+            let (frame, flare, lut, plate) = prepared;
+            let sources = Sources { flare: &flare, lut: lut.as_deref(), plate: plate.as_deref() };
+            let mut device = Device::Cpu;
+            let drawn = device.draw(&frame, &sources).map_err(|e| e.to_string())?;
+            if cancel.load(std::sync::atomic::Ordering::Relaxed) {
+                return Err("cancelled: nothing written".into());
+            }
+            report(0.5, format!("writing {}", target.display()));
+            flare_core::frame::write_drawn(&mut device, &frame, &sources, &drawn, LayerChoice::default(), &target)
+                .map_err(|e| e.to_string())
         });
+        self.message = Some(format!("exporting {}", path.display()));
+        self.export_job = Some((path.to_path_buf(), job));
+    }
+
+    /// Takes a finished export's outcome into the status bar.
+    fn poll_export(&mut self) {
+        let Some((path, job)) = &self.export_job else { return };
+        if let job::JobPoll::Finished(outcome) = job.poll() {
+            self.message = Some(match outcome {
+                Ok(()) => format!("wrote {}", path.display()),
+                Err(e) => format!("could not export {}: {e}", path.display()),
+            });
+            self.export_job = None;
+        }
     }
 
     /// The Bake button: a bake of the live optics now (the automatic bake does the same by itself).
@@ -1045,12 +1096,27 @@ impl FlareLabApp {
     /// written by the one writer (PNG tonemapped, EXR linear with layers), exactly as `flarelab render
     /// --preset` of this document with `--size` and `--device cpu` does.
     pub fn export_image_to(&self, size: (u32, u32), path: &std::path::Path) -> Result<()> {
-        let Some(flare) = &self.derived.flare else { bail!("no valid lens") };
-        let request = self.derived.request_at(&self.doc, flare, size.0, size.1, 1);
-        let frame = Frame::build(flare, self.derived.lut.as_deref(), &request);
-        let sources = Sources { flare, lut: self.derived.lut.as_deref(), plate: self.derived.plate.as_deref() };
+        let (frame, flare, lut, plate) = self.export_frame(size)?;
+        let sources = Sources { flare: &flare, lut: lut.as_deref(), plate: plate.as_deref() };
         flare_core::frame::render_to_file(&mut Device::Cpu, &frame, &sources, LayerChoice::default(), path)?;
         Ok(())
+    }
+
+    /// The frame an export draws at `size` and what it reads, owned (for a thread).
+    #[allow(clippy::type_complexity)]
+    fn export_frame(
+        &self,
+        size: (u32, u32),
+    ) -> Result<(
+        Frame,
+        std::sync::Arc<flare_core::flare::PreparedFlare>,
+        Option<std::sync::Arc<flare_core::lut::blend::LiveLut>>,
+        Option<std::sync::Arc<flare_core::image::HdrImage>>,
+    )> {
+        let Some(flare) = self.derived.flare.clone() else { bail!("no valid lens") };
+        let request = self.derived.request_at(&self.doc, &flare, size.0, size.1, 1);
+        let frame = Frame::build(&flare, self.derived.lut.as_deref(), &request);
+        Ok((frame, flare, self.derived.lut.clone(), self.derived.plate.clone()))
     }
 }
 
