@@ -90,11 +90,6 @@ impl ReflectanceTable {
         Self { samples: vec![0.0, 0.0] }
     }
 
-    /// The samples, evenly spaced over sin^2 i in [0, 1].
-    pub fn samples(&self) -> &[f64] {
-        &self.samples
-    }
-
     /// Reflectance at `sin2_i` (clamped to [0, 1]).
     pub fn at(&self, sin2_i: f64) -> f64 {
         let n = self.samples.len();

@@ -264,25 +264,7 @@ impl RayGridRenderer {
         grid: Grid,
         plan: impl Fn(&Job) -> Option<Option<&'s TracedGrid>> + Sync,
     ) -> Result<Vec<RayGridImage>, RayGridError> {
-        if !GRID_RANGE.contains(&grid.cells()) {
-            return Err(RayGridError::Grid(grid.cells()));
-        }
-        for view in views {
-            let window = &view.window;
-            if window.width == 0 || window.height == 0 {
-                return Err(RayGridError::Size(window.width, window.height));
-            }
-            if !(window.width_mm.is_finite()
-                && window.width_mm > 0.0
-                && window.centre_mm.iter().all(|c| c.is_finite())
-                && view.turn_deg.is_finite())
-            {
-                return Err(RayGridError::Window(window.width_mm));
-            }
-        }
-        if !light_deg.iter().all(|a| a.is_finite() && a.abs() <= 89.0) {
-            return Err(RayGridError::Angle(light_deg));
-        }
+        validate(light_deg, views, grid)?;
         let u = light_slopes_for_frame_position(light_deg[0], light_deg[1]);
         let ghosts = self.ghost_count();
         let fresh = || -> Vec<Accumulator> {
@@ -311,41 +293,40 @@ impl RayGridRenderer {
         window: Window,
         cells: usize,
     ) -> Result<Vec<PlannedJob<'_>>, RayGridError> {
-        if !GRID_RANGE.contains(&cells) {
-            return Err(RayGridError::Grid(cells));
-        }
-        if window.width == 0 || window.height == 0 {
-            return Err(RayGridError::Size(window.width, window.height));
-        }
-        if !light_deg.iter().all(|a| a.is_finite() && a.abs() <= 89.0) {
-            return Err(RayGridError::Angle(light_deg));
-        }
-        let u = light_slopes_for_frame_position(light_deg[0], light_deg[1]);
-        let d = DVec3::new(u[0], u[1], 1.0).normalize();
         let views = [View { window, turn_deg: 0.0 }];
         let grid = Grid::Fixed(cells);
+        validate(light_deg, &views, grid)?;
+        let u = light_slopes_for_frame_position(light_deg[0], light_deg[1]);
+        let d = DVec3::new(u[0], u[1], 1.0).normalize();
         Ok(self
             .jobs
             .par_iter()
-            .filter_map(|job| {
-                let coarse = (cells / 2).clamp(16, 64);
-                let traced = self.trace_grid(job, self.front_region(u), coarse, d, None);
-                let b = self.pre_pass(job, u, &traced, &views)?.bounds;
-                let n = grid.cells();
+            .enumerate()
+            .filter_map(|(index, job)| {
+                let b = self.front_pre_pass(job, u, d, grid, &views).0?.bounds;
                 Some(PlannedJob {
+                    index,
                     ghost: job.ghost,
                     tracer: &job.tracer,
                     step_tables: &job.step_tables,
                     inverse_semi_aperture2: &job.inverse_semi_aperture2,
                     bounds: b,
-                    cells: n,
+                    cells,
                     direction: d,
-                    triangle_flux: d.z * 0.5 * (b[2] - b[0]) * (b[3] - b[1]) / (n * n) as f64,
+                    triangle_flux: triangle_flux(d, b, cells),
                     stop_count: self.stop_count(job),
                     rgb: self.spectrum.weights_rgb[job.wavelength],
                 })
             })
             .collect())
+    }
+
+    /// The pre-pass of a render with no scout: a coarse grid (half the render's, 16 to 64 cells) over the whole
+    /// front lens, and how many rays it traced.
+    fn front_pre_pass(&self, job: &Job, u: [f64; 2], d: DVec3, grid: Grid, views: &[View]) -> (Option<PrePass>, u64) {
+        let cells = (grid.cells() / 2).clamp(16, 64);
+        let traced = self.trace_grid(job, self.front_region(u), cells, d, None);
+        (self.pre_pass(job, u, &traced, views), traced.vertices.len() as u64)
     }
 
     /// The reflectance tables the jobs' `step_tables` index.
@@ -366,10 +347,7 @@ impl RayGridRenderer {
     /// The f64 twin of one GPU grid vertex: the ray of `job` from the entrance point `x0` (mm), its landing
     /// point in sensor mm in `pixel` (see [`Self::plan_fixed`]).
     pub fn trace_planned(&self, job: &PlannedJob, x0: [f64; 2]) -> ([f64; 2], bool) {
-        let Some(owner) = self.jobs.iter().find(|j| std::ptr::eq(&j.tracer, job.tracer)) else {
-            return ([0.0; 2], false);
-        };
-        let [v, ..] = self.trace_lanes(owner, [x0; LANES], job.direction);
+        let [v, ..] = self.trace_lanes(&self.jobs[job.index], [x0; LANES], job.direction);
         (v.pixel, v.valid)
     }
 
@@ -630,10 +608,9 @@ impl RayGridRenderer {
         let pre = match scouted {
             Some(traced) => self.pre_pass(job, u, traced, views),
             None => {
-                let cells = (grid.cells() / 2).clamp(16, 64);
-                let traced = self.trace_grid(job, self.front_region(u), cells, d, None);
-                accs[0].stats.rays += traced.vertices.len() as u64;
-                self.pre_pass(job, u, &traced, views)
+                let (pre, rays) = self.front_pre_pass(job, u, d, grid, views);
+                accs[0].stats.rays += rays;
+                pre
             }
         };
         let Some(PrePass { bounds: b, extent_px, lit }) = pre else {
@@ -651,7 +628,7 @@ impl RayGridRenderer {
             stop_count: self.stop_count(job),
             mask: &self.mask,
             open_radius2: self.open_radius2,
-            triangle_flux: d.z * 0.5 * (b[2] - b[0]) * (b[3] - b[1]) / (grid * grid) as f64,
+            triangle_flux: triangle_flux(d, b, grid),
         };
         let (dx, dy) = ((b[2] - b[0]) / grid as f64, (b[3] - b[1]) / grid as f64);
         let mut traced: Vec<Vertex> = Vec::with_capacity(grid + 1);
@@ -696,6 +673,8 @@ impl RayGridRenderer {
 /// One job of a fixed-grid render, planned on the CPU for a twin that traces it elsewhere
 /// ([`RayGridRenderer::plan_fixed`]).
 pub struct PlannedJob<'a> {
+    /// The job's place among the renderer's jobs (for [`RayGridRenderer::trace_planned`]).
+    pub index: usize,
     pub ghost: usize,
     pub tracer: &'a Tracer,
     /// Per step of the path: the index of its reflectance table in [`RayGridRenderer::tables`].
@@ -713,6 +692,36 @@ pub struct PlannedJob<'a> {
     pub stop_count: usize,
     /// The wavelength's RGB weight.
     pub rgb: [f64; 3],
+}
+
+/// Refuses a render of `grid` cells, seen in `views`, for a light at `light_deg` that cannot be made.
+fn validate(light_deg: [f64; 2], views: &[View], grid: Grid) -> Result<(), RayGridError> {
+    if !GRID_RANGE.contains(&grid.cells()) {
+        return Err(RayGridError::Grid(grid.cells()));
+    }
+    for view in views {
+        let window = &view.window;
+        if window.width == 0 || window.height == 0 {
+            return Err(RayGridError::Size(window.width, window.height));
+        }
+        if !(window.width_mm.is_finite()
+            && window.width_mm > 0.0
+            && window.centre_mm.iter().all(|c| c.is_finite())
+            && view.turn_deg.is_finite())
+        {
+            return Err(RayGridError::Window(window.width_mm));
+        }
+    }
+    if !light_deg.iter().all(|a| a.is_finite() && a.abs() <= 89.0) {
+        return Err(RayGridError::Angle(light_deg));
+    }
+    Ok(())
+}
+
+/// cos(theta) x the entrance area of one triangle (mm^2) of a `cells` x `cells` grid over `bounds`, for light
+/// in the unit direction `d`.
+fn triangle_flux(d: DVec3, bounds: [f64; 4], cells: usize) -> f64 {
+    d.z * 0.5 * (bounds[2] - bounds[0]) * (bounds[3] - bounds[1]) / (cells * cells) as f64
 }
 
 /// Rays traced together ([`Tracer::trace_visit_lanes`]).

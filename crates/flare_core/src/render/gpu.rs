@@ -625,7 +625,7 @@ impl FlareRenderer {
         lut: Option<&LutScene>,
     ) {
         // The previous frame was submitted by now: end its profiler frame and collect what came back.
-        self.end_profiled_frame(queue);
+        self.end_profiled_frame(queue, None);
         let (w, h) = (scene.hdr_width.max(1), scene.hdr_height.max(1));
         if !matches!(&self.hdr, Some((_, hw, hh)) if *hw == w && *hh == h) {
             let usage = wgpu::TextureUsages::RENDER_ATTACHMENT
@@ -727,13 +727,17 @@ impl FlareRenderer {
         self.pass_times.as_ref()
     }
 
-    /// Ends the profiler frame of the last render (its commands must have been submitted) and takes whatever
-    /// results have come back.
-    fn end_profiled_frame(&mut self, queue: &wgpu::Queue) {
+    /// Ends the profiler frame of the last render (its commands must have been submitted), waits for the GPU
+    /// when given the device, and takes whatever results have come back.
+    fn end_profiled_frame(&mut self, queue: &wgpu::Queue, wait: Option<&wgpu::Device>) {
         if std::mem::take(&mut self.profiled_open) {
             // An error here means a scope was left open: a bug, but never worth a frame.
             let _ = self.profiler.end_frame();
         }
+        if let Some(device) = wait {
+            let _ = device.poll(wgpu::PollType::wait_indefinitely());
+        }
+        // Older frames first: keep reading until the newest.
         while let Some(results) = self.profiler.process_finished_frame(queue.get_timestamp_period()) {
             let times = PassTimes::from_results(&results);
             if !times.passes.is_empty() {
@@ -749,18 +753,7 @@ impl FlareRenderer {
             return None;
         }
         self.pass_times = None;
-        self.profiled_open = false;
-        let _ = self.profiler.end_frame();
-        for _ in 0..4 {
-            let _ = device.poll(wgpu::PollType::wait_indefinitely());
-            if let Some(results) = self.profiler.process_finished_frame(queue.get_timestamp_period()) {
-                let times = PassTimes::from_results(&results);
-                self.pass_times = (!times.passes.is_empty()).then_some(times);
-                // Older frames first: keep reading until the newest.
-                continue;
-            }
-            break;
-        }
+        self.end_profiled_frame(queue, Some(device));
         self.pass_times.clone()
     }
 }

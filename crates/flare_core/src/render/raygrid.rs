@@ -263,27 +263,9 @@ impl GpuRayGrid {
         let mut batches = 0;
         let mut first = true;
         for batch in planned.chunks(per_batch) {
-            let upload = upload(renderer, batch, fine);
-            let buffer = |label, contents: &[u8], usage| storage(device, queue, label, contents, usage);
-            let steps = buffer("raygrid steps", bytemuck::cast_slice(&upload.steps), wgpu::BufferUsages::STORAGE);
-            let jobs = buffer("raygrid jobs", bytemuck::cast_slice(&upload.jobs), wgpu::BufferUsages::STORAGE);
-            let tables = buffer("raygrid tables", bytemuck::cast_slice(&upload.tables), wgpu::BufferUsages::STORAGE);
-            let vertices = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("raygrid vertices"),
-                size: per_job_bytes * batch.len() as u64,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            });
-            let trace_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("raygrid trace"),
-                layout: &self.trace_pipeline.get_bind_group_layout(0),
-                entries: &[
-                    wgpu::BindGroupEntry { binding: 0, resource: steps.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 1, resource: jobs.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 2, resource: tables.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 3, resource: vertices.as_entire_binding() },
-                ],
-            });
+            let mut encoder =
+                device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("raygrid") });
+            let (jobs, vertices) = self.trace(device, queue, &mut encoder, renderer, batch, fine);
             let splat_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("raygrid splat"),
                 layout: &self.splat_pipeline.get_bind_group_layout(0),
@@ -294,17 +276,6 @@ impl GpuRayGrid {
                     wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(&self.sampler) },
                 ],
             });
-            let mut encoder =
-                device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("raygrid") });
-            {
-                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("raygrid trace"),
-                    timestamp_writes: None,
-                });
-                pass.set_pipeline(&self.trace_pipeline);
-                pass.set_bind_group(0, &trace_group, &[]);
-                pass.dispatch_workgroups(groups_x as u32, batch.len() as u32, 1);
-            }
             {
                 let load = if first { wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT) } else { wgpu::LoadOp::Load };
                 let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -351,22 +322,51 @@ impl GpuRayGrid {
         let mut planned = renderer.plan_fixed(light_deg, window, cells)?;
         planned.truncate(jobs);
         let (device, queue) = (&ctx.device, &ctx.queue);
-        let upload = upload(renderer, &planned, window);
-        let per_job = (cells + 1) * (cells + 1);
-        let size = (per_job * planned.len() * std::mem::size_of::<GpuVertex>()).max(16) as u64;
-        let buffer = |label, contents: &[u8]| storage(device, queue, label, contents, wgpu::BufferUsages::STORAGE);
-        let (steps, jobs_buffer, tables) = (
-            buffer("raygrid steps", bytemuck::cast_slice(&upload.steps)),
-            buffer("raygrid jobs", bytemuck::cast_slice(&upload.jobs)),
-            buffer("raygrid tables", bytemuck::cast_slice(&upload.tables)),
-        );
-        let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
-        let vertices =
-            device.create_buffer(&wgpu::BufferDescriptor { label: Some("vertices"), size, usage, mapped_at_creation: false });
+        let size = ((cells + 1) * (cells + 1) * planned.len() * std::mem::size_of::<GpuVertex>()) as u64;
         let readback = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("vertices readback"),
-            size,
+            size: size.max(16),
             usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        });
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("trace") });
+        let (_, vertices) = self.trace(device, queue, &mut encoder, renderer, &planned, window);
+        encoder.copy_buffer_to_buffer(&vertices, 0, &readback, 0, size);
+        queue.submit(Some(encoder.finish()));
+        let (sender, receiver) = std::sync::mpsc::channel();
+        readback.slice(..).map_async(wgpu::MapMode::Read, move |r| {
+            let _ = sender.send(r);
+        });
+        device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
+        receiver.recv().map_err(|e| GpuError::Readback(e.to_string()))?.map_err(|e| GpuError::Readback(e.to_string()))?;
+        let view = readback.slice(..).get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?;
+        let out: Vec<GpuVertex> = bytemuck::cast_slice(&view[..size as usize]).to_vec();
+        Ok((planned, out))
+    }
+}
+
+impl GpuRayGrid {
+    /// Uploads `jobs` (seen in `window`) and records the tracer's dispatch into `encoder`: every grid vertex of
+    /// every job, `(cells + 1)^2` a job in job order. Returns the jobs buffer and the vertex buffer.
+    fn trace(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        renderer: &RayGridRenderer,
+        jobs: &[PlannedJob],
+        window: Window,
+    ) -> (wgpu::Buffer, wgpu::Buffer) {
+        let upload = upload(renderer, jobs, window);
+        let per_job = jobs.first().map_or(1, |j| (j.cells + 1) * (j.cells + 1)) as u64;
+        let buffer = |label, contents: &[u8]| storage(device, queue, label, contents, wgpu::BufferUsages::STORAGE);
+        let steps = buffer("raygrid steps", bytemuck::cast_slice(&upload.steps));
+        let jobs_buffer = buffer("raygrid jobs", bytemuck::cast_slice(&upload.jobs));
+        let tables = buffer("raygrid tables", bytemuck::cast_slice(&upload.tables));
+        let vertices = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("raygrid vertices"),
+            size: (per_job * jobs.len() as u64 * std::mem::size_of::<GpuVertex>() as u64).max(16),
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: false,
         });
         let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -379,24 +379,13 @@ impl GpuRayGrid {
                 wgpu::BindGroupEntry { binding: 3, resource: vertices.as_entire_binding() },
             ],
         });
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("trace") });
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
-            pass.set_pipeline(&self.trace_pipeline);
-            pass.set_bind_group(0, &group, &[]);
-            pass.dispatch_workgroups((per_job as u32).div_ceil(WORKGROUP), planned.len().max(1) as u32, 1);
-        }
-        encoder.copy_buffer_to_buffer(&vertices, 0, &readback, 0, size);
-        queue.submit(Some(encoder.finish()));
-        let (sender, receiver) = std::sync::mpsc::channel();
-        readback.slice(..).map_async(wgpu::MapMode::Read, move |r| {
-            let _ = sender.send(r);
-        });
-        device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
-        receiver.recv().map_err(|e| GpuError::Readback(e.to_string()))?.map_err(|e| GpuError::Readback(e.to_string()))?;
-        let view = readback.slice(..).get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?;
-        let out: Vec<GpuVertex> = bytemuck::cast_slice(&view[..per_job * planned.len() * 48]).to_vec();
-        Ok((planned, out))
+        let mut pass =
+            encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("raygrid trace"), timestamp_writes: None });
+        pass.set_pipeline(&self.trace_pipeline);
+        pass.set_bind_group(0, &group, &[]);
+        pass.dispatch_workgroups((per_job as u32).div_ceil(WORKGROUP), jobs.len().max(1) as u32, 1);
+        drop(pass);
+        (jobs_buffer, vertices)
     }
 }
 
@@ -417,14 +406,8 @@ fn upload(renderer: &RayGridRenderer, jobs: &[PlannedJob], window: Window) -> Up
             let table = job.step_tables[k];
             let offset = *offsets.entry(table).or_insert_with(|| {
                 let at = out.tables.len() as u32;
-                let samples = tables.table(table).samples();
                 // Tables are resampled to the shader's fixed size (they already have it; a zero table has 2).
-                out.tables.extend((0..TABLE_SAMPLES).map(|i| {
-                    let x = i as f64 / (TABLE_SAMPLES - 1) as f64;
-                    let value = tables.table(table).at(x);
-                    debug_assert!(samples.len() >= 2);
-                    finite(value)
-                }));
+                out.tables.extend((0..TABLE_SAMPLES).map(|i| finite(tables.table(table).at(i as f64 / (TABLE_SAMPLES - 1) as f64))));
                 at
             });
             let shape = &step.shape;
