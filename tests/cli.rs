@@ -1143,3 +1143,98 @@ fn a_vendor_catalogue_adds_glasses_that_lens_files_name() {
     let e = refusal(&["--catalog", broken.to_str().unwrap(), "lens", "info", "heliar"]);
     assert!(e.contains("broken.agf") && e.contains("line 2") && e.contains("oops"), "{e}");
 }
+
+/// `flarelab dof`: the synthetic street defocused (EXR and PNG, live and reference), and bad input refused with
+/// the reason and nothing written.
+#[test]
+fn dof_defocuses_a_plate_and_refuses_bad_depths_and_sizes() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |name: &str| dir.path().join(name).display().to_string();
+    let out = flarelab(&["synth-dof", "--size", "240x135", "-o", &p("street.exr"), "--depth", &p("z.exr")]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let run = |extra: &[&str], target: &str| {
+        let (plate, z, target) = (p("street.exr"), p("z.exr"), p(target));
+        let mut args = vec!["dof", plate.as_str(), "--depth"];
+        args.extend([z.as_str(), "--lens", "heliar", "--focus-m", "5", "-o", target.as_str()]);
+        args.extend(extra);
+        let args: Vec<String> = args.iter().map(|s| s.to_string()).collect();
+        flarelab(&args.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    let out = run(&["--device", "cpu"], "live.exr");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success() && stderr.contains("live on the CPU"), "{stderr}");
+    let plate = flare_core::output::read_plate(Path::new(&p("street.exr"))).unwrap();
+    let live = flare_core::output::read_plate(Path::new(&p("live.exr"))).unwrap();
+    assert_eq!((live.width, live.height), (240, 135));
+    assert!(live.pixels.iter().zip(&plate.pixels).filter(|(a, b)| (a[0] - b[0]).abs() > 1e-3).count() > 1000);
+    let out = run(&["--method", "reference"], "reference.png");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(image::open(p("reference.png")).is_ok());
+    // A depth map of another size.
+    let small = flare_core::dof::depth::DepthMap { width: 10, height: 10, metres: vec![3.0; 100] };
+    flare_core::dof::depth::write_exr(Path::new(&p("small.exr")), &small).unwrap();
+    let e = refusal(&["dof", &p("street.exr"), "--depth", &p("small.exr"), "--focus-m", "5", "--device", "cpu", "-o", &p("bad1.exr")]);
+    assert!(e.contains("10x10") && e.contains("240x135"), "{e}");
+    // Negative and NaN depths, named by pixel.
+    for (value, reason) in [(-1.0, "not above 0"), (f64::NAN, "not a number")] {
+        // Written by the exr crate itself (FlareLab's writer never writes a NaN): no Z channel, so the first
+        // channel is read.
+        let map = flare_core::dof::depth::DepthMap::read(Path::new(&p("z.exr")), None).unwrap();
+        exr::prelude::write_rgb_file(p("broken.exr"), 240, 135, |x, y| {
+            let d = if (x, y) == (142, 0) { value as f32 } else { map.metres[y * 240 + x] as f32 };
+            (d, d, d)
+        })
+        .unwrap();
+        let e = refusal(&["dof", &p("street.exr"), "--depth", &p("broken.exr"), "--focus-m", "5", "--device", "cpu", "-o", &p("bad2.exr")]);
+        assert!(e.contains("pixel (142, 0)") && e.contains(reason), "{e}");
+    }
+    // A focus distance inside the lens, and one closer than it focuses.
+    let e = refusal(&["dof", &p("street.exr"), "--depth", &p("z.exr"), "--lens", "heliar", "--focus-m", "0.001", "-o", &p("bad3.exr")]);
+    assert!(e.contains("inside the lens"), "{e}");
+    let e = refusal(&["dof", &p("street.exr"), "--depth", &p("z.exr"), "--lens", "heliar", "--focus-m", "0.1", "-o", &p("bad4.exr")]);
+    assert!(e.contains("closer than this lens can focus"), "{e}");
+    let e = refusal(&["dof", &p("street.exr"), "--depth", &p("z.exr"), "--method", "reference", "--device", "gpu", "-o", &p("bad5.exr")]);
+    assert!(e.contains("reference runs on the CPU"), "{e}");
+    for bad in ["bad1.exr", "bad2.exr", "bad3.exr", "bad4.exr", "bad5.exr"] {
+        assert!(!dir.path().join(bad).exists(), "{bad} was written");
+    }
+}
+
+/// A preset with its depth of field on: `render --preset` defocuses the plate before the flare, for a still and
+/// for every frame of a sequence, and `--no-dof` leaves it sharp.
+#[test]
+fn render_with_a_preset_whose_depth_of_field_is_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |name: &str| dir.path().join(name).display().to_string();
+    assert!(flarelab(&["synth-dof", "--size", "192x108", "-o", &p("street.exr"), "--depth", &p("z.exr")]).status.success());
+    assert!(flarelab(&["preset", "new", "heliar", "-o", &p("look.json")]).status.success());
+    let mut doc: Value = serde_json::from_str(&std::fs::read_to_string(p("look.json")).unwrap()).unwrap();
+    doc["dof"] = serde_json::json!({"enabled": true, "depth": p("z.exr"), "focus_m": 2.0});
+    std::fs::write(p("look.json"), serde_json::to_string(&doc).unwrap()).unwrap();
+    let render = |extra: &[&str], out: &str| {
+        let (look, plate, target) = (p("look.json"), p("street.exr"), p(out));
+        let mut args = vec!["render", "--preset", look.as_str(), "--background", plate.as_str(), "--device", "cpu"];
+        args.extend(extra);
+        args.extend(["-o", target.as_str()]);
+        flarelab(&args)
+    };
+    let out = render(&[], "dof.exr");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success() && stderr.contains("depth of field: live method, focus 2 m"), "{stderr}");
+    let out = render(&["--no-dof"], "sharp.exr");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    // The EXR's plate layer: defocused, against the sharp one.
+    let plate_layer = |name: &str| {
+        let image = exr::prelude::read_all_flat_layers_from_file(p(name)).unwrap();
+        let channel = image.layer_data[0].channel_data.list.iter().find(|c| c.name.to_string() == "plate.R").unwrap();
+        channel.sample_data.values_as_f32().collect::<Vec<f32>>()
+    };
+    let (dof, sharp) = (plate_layer("dof.exr"), plate_layer("sharp.exr"));
+    let changed = dof.iter().zip(&sharp).filter(|(a, b)| (*a - *b).abs() > 1e-3).count();
+    assert!(changed > dof.len() / 10, "{changed} of {} plate pixels changed", dof.len());
+    // A sequence: every frame defocused the same (one plate, one depth map).
+    let out = render(&["--frames", "1-2"], "seq.####.png");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (a, b) = (image::open(p("seq.0001.png")).unwrap().to_rgb8(), image::open(p("seq.0002.png")).unwrap().to_rgb8());
+    assert_eq!(a, b);
+}

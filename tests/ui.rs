@@ -874,3 +874,53 @@ fn a_transcription_that_needs_clipping_opens_with_its_warning_in_the_lens_panel(
     h.run_steps(2);
     assert!(h.query_by_label_contains("(i) surfaces 3 and 4").is_none());
 }
+
+/// The DoF row: a plate defocused on a thread (the CPU twin here, no GPU in this harness) exactly as the
+/// command line defocuses it from the same document; focus by click; a depth map of another size said once.
+#[test]
+fn the_depth_of_field_defocuses_the_plate_on_a_thread_as_the_command_line_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let (plate, depth) = flare_core::dof::scene::street(320, 180);
+    let (plate_path, depth_path) = (dir.path().join("street.exr"), dir.path().join("street_z.exr"));
+    flare_core::output::write_linear(&plate_path, &plate).unwrap();
+    flare_core::dof::depth::write_exr(&depth_path, &depth).unwrap();
+    let mut doc = heliar();
+    doc.background = Some(plate_path.display().to_string());
+    doc.dof.depth = Some(depth_path.display().to_string());
+    doc.dof.focus_m = 5.0;
+    let mut h = harness_on(Some(doc));
+    h.run();
+    // Off: the plate as read.
+    assert!(!h.state().doc.dof.enabled);
+    h.get_by_label("depth of field").click();
+    h.step();
+    h.step();
+    assert!(h.state().doc.dof.enabled);
+    step_until(&mut h, 60.0, |app| !app.dof_work.busy() && app.dof_work.status.contains("live on the CPU twin"));
+    let app = h.state();
+    let (shown, sharp) = (app.derived.plate.clone().unwrap(), app.derived.sharp_plate.clone().unwrap());
+    assert_ne!(shown.pixels, sharp.pixels, "the plate is defocused");
+    let flare = app.flare().unwrap();
+    let cli = flare_core::shot::plate::defocus(&app.doc, flare, app.playhead, &sharp).unwrap();
+    assert_eq!(cli.pixels, shown.pixels, "the app's plate is the command line's");
+    // Focus by click: the toggle, then a click in the view focuses on the depth there.
+    h.get_by_label("focus by click").click();
+    h.step();
+    h.step();
+    assert!(h.state().focus_pick);
+    let rect = egui::Rect::from_min_size(egui::pos2(0.0, 0.0), egui::vec2(320.0, 180.0));
+    h.state_mut().focus_from_pointer(egui::pos2(100.0, 90.0), rect);
+    assert_eq!(h.state().doc.dof.focus_px, Some([100, 90]));
+    assert!(!h.state().focus_pick);
+    step_until(&mut h, 60.0, |app| !app.dof_work.busy() && app.dof_work.status.contains("focus 5.00 m"));
+    // A depth map of another size: said once, the sharp plate shown, nothing lost.
+    let (_, small) = flare_core::dof::scene::street(160, 90);
+    let wrong = dir.path().join("small_z.exr");
+    flare_core::dof::depth::write_exr(&wrong, &small).unwrap();
+    h.state_mut().doc.dof.depth = Some(wrong.display().to_string());
+    step_until(&mut h, 60.0, |app| !app.dof_work.busy() && app.dof_work.status.contains("same size"));
+    let app = h.state();
+    assert!(app.message.as_deref().is_some_and(|m| m.contains("160x90") && m.contains("320x180")), "{:?}", app.message);
+    assert_eq!(app.derived.plate.as_ref().unwrap().pixels, app.derived.sharp_plate.as_ref().unwrap().pixels);
+    assert!(app.doc.dof.enabled && app.doc.background.is_some());
+}

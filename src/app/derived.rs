@@ -151,8 +151,11 @@ pub struct Derived {
     pub scene_ms: f64,
     /// The plate file shown (the background, or its sequence's file of the playhead's frame).
     pub background_key: Option<String>,
-    /// The background plate (linear, as read), for exports.
+    /// The background plate the view and exports use (defocused when the depth of field is on and done).
     pub plate: Option<Arc<HdrImage>>,
+    /// The plate as read, and a count of its changes (what the depth of field defocuses, `crate::app::dof`).
+    pub sharp_plate: Option<Arc<HdrImage>>,
+    pub sharp_generation: u64,
     /// Plates read lately or ahead of the playhead ([`PlateCache`]).
     plate_cache: PlateCache,
     /// The timeline frame shown.
@@ -188,6 +191,8 @@ impl Derived {
             scene_ms: 0.0,
             background_key: None,
             plate: None,
+            sharp_plate: None,
+            sharp_generation: 0,
             plate_cache: PlateCache::default(),
             playhead: 1,
             shot_plan: None,
@@ -319,6 +324,8 @@ impl Derived {
             });
             self.rebuilds.textures += 1;
         }
+        self.sharp_plate = plate.clone();
+        self.sharp_generation += 1;
         self.plate = plate;
         self.plate_generation += 1;
         if sequence {
@@ -329,6 +336,17 @@ impl Derived {
                 .collect();
             self.plate_cache.prefetch(&ahead);
         }
+    }
+
+    /// Uploads `plate` as the background the view draws and exports use (the depth of field's result, or the
+    /// sharp plate back).
+    pub fn show_plate(&mut self, plate: Option<Arc<HdrImage>>, gpu: Option<&RenderState>) {
+        if let Some(rs) = gpu {
+            ViewportResources::with(rs, |res, device, queue| res.renderer.set_background(device, queue, plate.as_deref()));
+            self.rebuilds.textures += 1;
+        }
+        self.plate = plate;
+        self.plate_generation += 1;
     }
 
     /// Replaces the LUT in use (uploading its atlas).

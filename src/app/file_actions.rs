@@ -92,6 +92,7 @@ impl FlareLabApp {
             FileUse::ExportSequence => self.export_sequence_named(path),
             FileUse::ExportReport => self.export_report_to(path),
             FileUse::GlassCatalogue => self.add_glass_catalogue(path),
+            FileUse::DepthMap => self.set_depth_map(path),
         }
         if path.exists() {
             self.files.remember(path);

@@ -35,6 +35,7 @@ pub enum FileUse {
     ExportSequence,
     ExportReport,
     GlassCatalogue,
+    DepthMap,
 }
 
 impl FileUse {
@@ -52,6 +53,7 @@ impl FileUse {
             Self::ExportSequence => "Export sequence",
             Self::ExportReport => "Export ghost report",
             Self::GlassCatalogue => "Add glass catalogue",
+            Self::DepthMap => "Depth map",
         }
     }
 
@@ -66,6 +68,7 @@ impl FileUse {
             Self::ApertureImage => &["png", "jpg", "exr"],
             Self::ExportReport => &["csv", "json"],
             Self::GlassCatalogue => &["agf"],
+            Self::DepthMap => &["exr", "png"],
         }
     }
 

@@ -25,6 +25,8 @@ mod auto_bake_step;
 pub mod autobake;
 pub mod bake;
 pub mod derived;
+pub mod dof;
+mod dof_row;
 pub mod drag_bench;
 pub mod draft;
 mod file_actions;
@@ -194,6 +196,10 @@ pub struct FlareLabApp {
     pub track_path: String,
     pub sequence_path: String,
     pub plate_path: String,
+    /// The plate's depth of field in progress and shown (see [`dof`]).
+    pub dof_work: dof::DofWork,
+    /// The next click in the view focuses the depth of field there.
+    pub focus_pick: bool,
 }
 
 impl FlareLabApp {
@@ -238,6 +244,8 @@ impl FlareLabApp {
             track_path: String::new(),
             sequence_path: "flare.####.exr".into(),
             plate_path: String::new(),
+            dof_work: dof::DofWork::default(),
+            focus_pick: false,
         };
         app.playhead = app.doc.timeline.first_frame;
         app.plate_path = app.doc.background.clone().unwrap_or_default();
@@ -266,7 +274,11 @@ impl FlareLabApp {
     pub fn sync(&mut self) {
         self.playhead = self.playhead.clamp(self.doc.timeline.first_frame, self.doc.timeline.last_frame);
         self.derived.playhead = self.playhead;
-        for event in self.derived.sync(&mut self.doc, self.gpu.as_ref()) {
+        let mut events = self.derived.sync(&mut self.doc, self.gpu.as_ref());
+        self.dof_work.sync(&mut self.derived, &self.doc, self.gpu.as_ref(), &mut events);
+        // A defocused plate that just arrived is a new plate for the frame.
+        self.derived.sync_frame(&self.doc);
+        for event in events {
             match event {
                 SyncEvent::Message(text) => self.message = Some(text),
                 SyncEvent::LutDropped => {
@@ -344,6 +356,7 @@ impl FlareLabApp {
             ui.allocate_ui(egui::vec2(ui.available_width(), height * 0.6), |ui| self.viewport_ui(ui, &mut actions));
             self.timeline_ui(ui);
             self.display_ui(ui);
+            self.dof_ui(ui);
             let ghost = self
                 .selected
                 .and_then(|g| self.derived.flare.as_ref().map(|f| &f.system.ghosts[g]))
@@ -369,7 +382,7 @@ impl FlareLabApp {
         if !ui.ctx().input(|i| i.pointer.any_down()) {
             self.history.commit(&self.doc);
         }
-        if self.bake.is_some() || self.shot_job.is_some() || self.export_job.is_some() {
+        if self.bake.is_some() || self.shot_job.is_some() || self.export_job.is_some() || self.dof_work.busy() {
             ui.ctx().request_repaint_after(std::time::Duration::from_millis(100));
         }
     }
@@ -536,6 +549,9 @@ impl FlareLabApp {
             (None, None) => "no GPU".to_owned(),
         };
         ui.label(format!("{quality} | {gpu_time}"));
+        if !self.dof_work.status.is_empty() {
+            ui.label(&self.dof_work.status);
+        }
         // The bake (started by itself or from the Blend panel) shows its progress and Cancel here too.
         if let (Some(job), BakeStatus::Running { fraction, text }) = (&self.bake, &self.bake_status) {
             ui.horizontal(|ui| {
@@ -670,7 +686,11 @@ impl FlareLabApp {
         if response.clicked()
             && let Some(p) = response.interact_pointer_pos()
         {
-            actions.push(Action::SelectGhost(self.ghost_at(p, rect)));
+            if self.focus_pick {
+                self.focus_from_pointer(p, rect);
+            } else {
+                actions.push(Action::SelectGhost(self.ghost_at(p, rect)));
+            }
         }
         if response.hovered() || response.has_focus() {
             let step = 0.25;
@@ -965,6 +985,7 @@ impl FlareLabApp {
         let target = path.to_path_buf();
         let job = job::Job::spawn("drawing the frame on the CPU", move |cancel, report| {
             let (frame, flare, lut, plate) = prepared;
+            let plate = plate.resolve(&flare, report)?;
             let sources = Sources { flare: &flare, lut: lut.as_deref(), plate: plate.as_deref() };
             let mut device = Device::Cpu;
             let drawn = device.draw(&frame, &sources).map_err(|e| e.to_string())?;
@@ -1097,6 +1118,7 @@ impl FlareLabApp {
     /// --preset` of this document with `--size` and `--device cpu` does.
     pub fn export_image_to(&self, size: (u32, u32), path: &std::path::Path) -> Result<()> {
         let (frame, flare, lut, plate) = self.export_frame(size)?;
+        let plate = plate.resolve(&flare, &|_, _| {}).map_err(|e| anyhow::anyhow!(e))?;
         let sources = Sources { flare: &flare, lut: lut.as_deref(), plate: plate.as_deref() };
         flare_core::frame::render_to_file(&mut Device::Cpu, &frame, &sources, LayerChoice::default(), path)?;
         Ok(())
@@ -1111,12 +1133,44 @@ impl FlareLabApp {
         Frame,
         std::sync::Arc<flare_core::flare::PreparedFlare>,
         Option<std::sync::Arc<flare_core::lut::blend::LiveLut>>,
-        Option<std::sync::Arc<flare_core::image::HdrImage>>,
+        ExportPlate,
     )> {
         let Some(flare) = self.derived.flare.clone() else { bail!("no valid lens") };
         let request = self.derived.request_at(&self.doc, &flare, size.0, size.1, 1);
         let frame = Frame::build(&flare, self.derived.lut.as_deref(), &request);
-        Ok((frame, flare, self.derived.lut.clone(), self.derived.plate.clone()))
+        // The plate the view shows, or the sharp one to defocus on the export's thread when the view's depth
+        // of field is not done yet (an export never waits for the view, nor goes out without its DoF).
+        let plate = if self.dof_work.ready(&self.derived, &self.doc) {
+            ExportPlate::Ready(self.derived.plate.clone())
+        } else {
+            ExportPlate::Defocus(Box::new(self.doc.clone()), self.playhead, self.derived.sharp_plate.clone())
+        };
+        Ok((frame, flare, self.derived.lut.clone(), plate))
+    }
+}
+
+/// The plate of an export: ready, or to be defocused first (the document, its frame, the sharp plate).
+pub enum ExportPlate {
+    Ready(Option<std::sync::Arc<flare_core::image::HdrImage>>),
+    Defocus(Box<Document>, i64, Option<std::sync::Arc<flare_core::image::HdrImage>>),
+}
+
+impl ExportPlate {
+    /// The plate to draw under the flare, defocused first when it has to be (the CPU live method or the
+    /// reference, as the document says: what the command line draws from the same preset).
+    fn resolve(
+        self,
+        flare: &flare_core::flare::PreparedFlare,
+        report: &(dyn Fn(f32, String) + Sync),
+    ) -> Result<Option<std::sync::Arc<flare_core::image::HdrImage>>, String> {
+        match self {
+            Self::Ready(plate) => Ok(plate),
+            Self::Defocus(_, _, None) => Ok(None),
+            Self::Defocus(doc, frame, Some(sharp)) => {
+                report(0.1, "the plate's depth of field".into());
+                flare_core::shot::plate::defocus(&doc, flare, frame, &sharp).map(|p| Some(std::sync::Arc::new(p)))
+            }
+        }
     }
 }
 

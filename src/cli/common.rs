@@ -26,6 +26,12 @@ pub fn parse_pair_f64(s: &str) -> Result<(f64, f64), String> {
     if a.is_finite() && b.is_finite() { Ok((a, b)) } else { Err(format!("`{s}` is not finite")) }
 }
 
+pub fn parse_pair_u32(s: &str) -> Result<(u32, u32), String> {
+    let (a, b) = s.split_once(',').ok_or_else(|| format!("`{s}`: give A,B"))?;
+    let parse = |v: &str| v.trim().parse::<u32>().map_err(|_| format!("`{v}` is not a whole number"));
+    Ok((parse(a)?, parse(b)?))
+}
+
 pub fn parse_pair_usize(s: &str) -> Result<(usize, usize), String> {
     parse_pair(s, "surface numbers")
 }
@@ -186,3 +192,31 @@ impl OpticsChoice {
         PreparedFlare::new(&doc.lens, &config).with_context(|| doc.lens.id.clone())
     }
 }
+
+/// Where the frame is drawn.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum DeviceArg {
+    /// A GPU when wgpu finds an adapter, else the CPU twin (said on the terminal).
+    Auto,
+    /// wgpu (a software adapter such as lavapipe counts); refused when there is none.
+    Gpu,
+    /// The renderer's CPU twin.
+    Cpu,
+}
+
+/// The depth of field's method (`dof --method`, `render --dof-method`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum MethodArg {
+    Live,
+    Reference,
+}
+
+impl From<MethodArg> for flare_core::dof::DofMethod {
+    fn from(m: MethodArg) -> Self {
+        match m {
+            MethodArg::Live => Self::Live,
+            MethodArg::Reference => Self::Reference,
+        }
+    }
+}
+

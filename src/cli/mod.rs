@@ -7,6 +7,7 @@
 
 pub mod bench;
 pub mod common;
+pub mod dof;
 pub mod ghosts;
 pub mod lens;
 pub mod lut;
@@ -58,6 +59,10 @@ pub enum Command {
     PhotoLut(lut::PhotoArgs),
     /// Write a synthetic plate sequence (a sun crossing a sky, a bar crossing the sun) and its track.
     SynthShot(synth::SynthArgs),
+    /// Defocus a plate through the lens's own aperture with a depth map (depth of field).
+    Dof(Box<dof::DofArgs>),
+    /// Write a synthetic night street (plate and depth map) to try the depth of field with.
+    SynthDof(dof::SynthDofArgs),
 }
 
 pub fn run(command: Command) -> Result<()> {
@@ -67,10 +72,14 @@ pub fn run(command: Command) -> Result<()> {
         Command::Ghosts(args) => ghosts::run(&args),
         Command::Render(args) => render::run(&args),
         Command::Preset(command) => preset::run(command),
+        // The depth of field's bench is its own (its module uses the flare bench's rows and chart).
+        Command::Bench(args) if args.dof => bench::dof::run(&args),
         Command::Bench(args) => bench::run(&args),
         Command::Classify(args) => lut::classify_command(&args),
         Command::Bake(args) => lut::bake_command(&args),
         Command::PhotoLut(args) => lut::photo_command(&args),
         Command::SynthShot(args) => synth::run(&args),
+        Command::Dof(args) => dof::run(&args),
+        Command::SynthDof(args) => dof::synth(&args),
     }
 }

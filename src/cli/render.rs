@@ -33,7 +33,7 @@ use flare_core::shot::{
 use indicatif::{ProgressBar, ProgressStyle};
 use std::sync::atomic::AtomicBool;
 
-use super::common::{OpticsChoice, parse_aperture, parse_pair_f64};
+use super::common::{DeviceArg, OpticsChoice, parse_aperture, parse_pair_f64};
 
 /// How the ghosts are made.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -48,17 +48,6 @@ pub enum Method {
     Raygrid,
     /// The ray-traced ground truth (--grid defaults to the converged size).
     Reference,
-}
-
-/// Where the frame is drawn.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum DeviceArg {
-    /// A GPU when wgpu finds an adapter, else the CPU twin (said on the terminal).
-    Auto,
-    /// wgpu (a software adapter such as lavapipe counts); refused when there is none.
-    Gpu,
-    /// The renderer's CPU twin.
-    Cpu,
 }
 
 /// Where the light is.
@@ -190,6 +179,28 @@ pub struct RenderArgs {
     /// sequence when it has a frame field (`plates/shot.####.exr` or `%04d`).
     #[arg(long)]
     pub background: Option<PathBuf>,
+    /// Depth of field: the plate's depth map (EXR in metres, channel Z; a sequence when it has a frame field):
+    /// the plate is defocused through the lens's own aperture before the flare is added.
+    #[arg(long)]
+    pub depth: Option<String>,
+    /// Depth of field: NEAR:FAR metres of a 16-bit PNG depth map.
+    #[arg(long, value_parser = flare_core::dof::depth::PngRange::parse)]
+    pub depth_range: Option<flare_core::dof::depth::PngRange>,
+    /// Depth of field: the focus distance from the entrance pupil (m).
+    #[arg(long)]
+    pub focus_m: Option<f64>,
+    /// Depth of field: focus on the depth at this plate pixel, X,Y from the top-left.
+    #[arg(long, value_parser = super::common::parse_pair_u32)]
+    pub focus_px: Option<(u32, u32)>,
+    /// Depth of field: live (layered gather, the default) or reference (every pixel's kernel scattered).
+    #[arg(long, value_enum)]
+    pub dof_method: Option<super::common::MethodArg>,
+    /// Depth of field: each of R, G and B defocused at its own wavelength (axial colour).
+    #[arg(long)]
+    pub axial_colour: bool,
+    /// Leave the depth of field off even when the preset has it on.
+    #[arg(long)]
+    pub no_dof: bool,
     /// Most relative irradiance culling may take from any pixel: the faintest sprites are culled while their peaks sum
     /// to at most this (default: a quarter of an 8-bit step at the exposure).
     #[arg(long)]
@@ -297,6 +308,29 @@ pub fn document(args: &RenderArgs) -> Result<Document> {
     if let Some(w) = args.sensor_mm {
         doc.sensor_width_mm = w;
     }
+    if let Some(depth) = &args.depth {
+        doc.dof.enabled = true;
+        doc.dof.depth = Some(depth.clone());
+    }
+    if args.depth_range.is_some() {
+        doc.dof.depth_range_m = args.depth_range;
+    }
+    if let Some(f) = args.focus_m {
+        doc.dof.focus_m = f;
+        doc.dof.focus_px = None;
+    }
+    if let Some((x, y)) = args.focus_px {
+        doc.dof.focus_px = Some([x, y]);
+    }
+    if let Some(method) = args.dof_method {
+        doc.dof.method = method.into();
+    }
+    if args.axial_colour {
+        doc.dof.axial_colour = true;
+    }
+    if args.no_dof {
+        doc.dof.enabled = false;
+    }
     match args.light {
         Some(LightArg::Auto) => {
             let auto = doc.auto_light.get_or_insert_with(Default::default);
@@ -361,6 +395,8 @@ fn flag_of(args: &RenderArgs, field: &str) -> Option<String> {
         "auto_light.reference_power" => args.light_power.map(|p| format!("--light-power {p}")),
         "auto_light.smooth_frames" => args.light_smooth.map(|n| format!("--light-smooth {n}")),
         "background" => args.background.as_ref().map(|b| format!("--background {}", b.display())),
+        "dof.depth" => args.depth.as_ref().map(|d| format!("--depth {d}")),
+        "dof.focus_m" => args.focus_m.map(|f| format!("--focus-m {f}")),
         "lens" => args.optics.file.clone(),
         _ => None,
     }
@@ -569,9 +605,20 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let plate = planned
         .plate
         .as_deref()
-        .map(read_plate)
+        .map(|p| shot::plate::frame_plate(&doc, &flare, planned.frame, p).map_err(|e| anyhow::anyhow!(e)))
         .transpose()
         .with_context(|| format!("--background: frame {}: the plate cannot be used", planned.frame))?;
+    if doc.dof.enabled {
+        match &plate {
+            Some(_) => eprintln!(
+                "depth of field: {} method, focus {}, f/{:.1}",
+                doc.dof.method.word(),
+                doc.dof.focus_px.map_or(format!("{} m", doc.dof.focus_m), |[x, y]| format!("on pixel ({x}, {y})")),
+                flare.system.first_order.f_number / flare.system.settings.stop_scale
+            ),
+            None => eprintln!("the preset's depth of field is on, but there is no plate to defocus (give --background)"),
+        }
+    }
     let request = plan.request(&doc, &flare.system, planned, divisor);
     let frame = Frame::build(&flare, lut.as_ref(), &request);
     let sources = Sources { flare: &flare, lut: lut.as_ref(), plate: plate.as_ref() };

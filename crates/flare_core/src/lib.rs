@@ -23,6 +23,7 @@
 
 pub mod aperture;
 pub mod coating;
+pub mod dof;
 pub mod color;
 pub mod exposure;
 pub mod files;

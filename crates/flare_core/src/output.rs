@@ -107,10 +107,32 @@ fn channels(prefix: &str, image: &HdrImage, alpha: bool) -> Vec<exr::prelude::An
         .collect()
 }
 
+/// Writes one linear image with no tonemap: an EXR's default layer `R, G, B, A`, or an 8-bit sRGB PNG of the
+/// values clamped to [0, 1] (a plate written as it was read: `flarelab dof`'s output).
+pub fn write_linear(path: &Path, image: &HdrImage) -> Result<(), ImageError> {
+    match ImageKind::from_path(path)? {
+        ImageKind::Png => {
+            let encode8 = |v: f32| (crate::color::srgb_encode(if v.is_finite() { v.clamp(0.0, 1.0) } else { 0.0 }) * 255.0).round() as u8;
+            let pixels = image.pixels.iter().map(|p| [encode8(p[0]), encode8(p[1]), encode8(p[2]), 255]).collect();
+            write_png(path, &DisplayImage { width: image.width, height: image.height, pixels })
+        }
+        ImageKind::Exr => write_exr_channels(path, image.width, image.height, channels("", image, true)),
+    }
+}
+
+/// Writes one float channel named `name` as an EXR (a depth map's `Z`, in metres).
+pub fn write_exr_channel(path: &Path, w: u32, h: u32, name: &str, values: &[f32]) -> Result<(), ImageError> {
+    use exr::prelude::{AnyChannel, FlatSamples};
+    if values.len() != w as usize * h as usize {
+        return Err(encode(path, format!("{} values for {w}x{h} pixels", values.len())));
+    }
+    let samples = values.iter().map(|&v| if v.is_nan() { 0.0 } else { v }).collect();
+    write_exr_channels(path, w, h, vec![AnyChannel::new(name, FlatSamples::F32(samples))])
+}
+
 /// Writes the layers as one EXR part (see the module documentation).
 pub fn write_exr_layers(path: &Path, layers: &FrameLayers) -> Result<(), ImageError> {
-    use exr::prelude::{AnyChannels, Encoding, Image, Layer, LayerAttributes, SmallVec, WritableImage};
-    let (w, h) = (layers.composite.width as usize, layers.composite.height as usize);
+    let (w, h) = (layers.composite.width, layers.composite.height);
     let mut list = channels("", &layers.composite, true);
     list.extend(channels("flare", &layers.flare, false));
     list.extend(channels("starburst", &layers.starburst, false));
@@ -120,8 +142,19 @@ pub fn write_exr_layers(path: &Path, layers: &FrameLayers) -> Result<(), ImageEr
     for (name, image) in &layers.ghosts {
         list.extend(channels(name, image, false));
     }
+    write_exr_channels(path, w, h, list)
+}
+
+/// Writes `list` as one EXR part of `w` x `h` pixels, ZIP-compressed, through a temporary file.
+fn write_exr_channels(
+    path: &Path,
+    w: u32,
+    h: u32,
+    list: Vec<exr::prelude::AnyChannel<exr::prelude::FlatSamples>>,
+) -> Result<(), ImageError> {
+    use exr::prelude::{AnyChannels, Encoding, Image, Layer, LayerAttributes, SmallVec, WritableImage};
     let layer = Layer::new(
-        (w, h),
+        (w as usize, h as usize),
         LayerAttributes::default(),
         Encoding::SMALL_LOSSLESS,
         AnyChannels::sort(SmallVec::from_vec(list)),

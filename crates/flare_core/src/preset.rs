@@ -168,6 +168,8 @@ pub struct Document {
     /// Find the light in the plate on every frame ([`crate::shot::detect`]); `None`: the keys or the static
     /// light say where it is.
     pub auto_light: Option<AutoLight>,
+    /// Depth of field of the plate through the same lens and stop ([`crate::dof`]).
+    pub dof: crate::dof::DofDoc,
 }
 
 impl Default for Document {
@@ -194,6 +196,7 @@ impl Default for Document {
             sensor_width_mm: FULL_FRAME_WIDTH_MM,
             timeline: Timeline::default(),
             auto_light: None,
+            dof: crate::dof::DofDoc::default(),
         }
     }
 }
@@ -312,6 +315,16 @@ impl Document {
         Some(match FramePattern::parse(background) {
             Ok(Some(pattern)) => pattern.path(frame),
             _ => background.into(),
+        })
+    }
+
+    /// The depth map file of `frame` (the depth of field's): the file itself, or its sequence's file of that
+    /// frame, like [`Self::plate_at`].
+    pub fn depth_at(&self, frame: i64) -> Option<std::path::PathBuf> {
+        let depth = self.dof.depth.as_deref()?;
+        Some(match FramePattern::parse(depth) {
+            Ok(Some(pattern)) => pattern.path(frame),
+            _ => depth.into(),
         })
     }
 
@@ -507,6 +520,14 @@ impl Document {
             && let Err(reason) = FramePattern::parse(background)
         {
             return bad("background", reason);
+        }
+        if let Err((field, reason)) = self.dof.check() {
+            return bad(&field, reason);
+        }
+        if let Some(depth) = &self.dof.depth
+            && let Err(reason) = FramePattern::parse(depth)
+        {
+            return bad("dof.depth", reason);
         }
         Ok(())
     }

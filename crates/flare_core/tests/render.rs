@@ -26,6 +26,7 @@ fn every_shader_parses_and_validates_with_naga() {
             "common.wgsl" => &[],
             "raygrid_trace.wgsl" => &["trace_main"],
             "raygrid_splat.wgsl" => &["vs_splat", "fs_splat"],
+            "dof.wgsl" => &["split", "gather", "composite", "resolve"],
             _ => &["vs_main", "fs_main"],
         };
         for entry in entries {

@@ -33,6 +33,8 @@ pub mod plot;
 
 pub use plot::Row;
 
+pub mod dof;
+
 use super::common::open_lens;
 
 /// Azimuth of the light in the frame (degrees from the horizontal): off the axes, so that nothing is
@@ -53,9 +55,9 @@ pub struct BenchArgs {
     /// Light angles from the axis, degrees, comma-separated (default 0,10,20 quick, 0,5,10,15,20,25 full).
     #[arg(long)]
     pub field_deg: Option<String>,
-    /// Image size (the default is the 3:2 of a full-frame sensor).
-    #[arg(long, default_value = "480x320")]
-    pub size: String,
+    /// Image size (the default is the 3:2 of a full-frame sensor; 960x540 with --dof).
+    #[arg(long)]
+    pub size: Option<String>,
     /// Ray-grid sizes to benchmark (default 16,32,64 quick, 16,32,64,128 full).
     #[arg(long)]
     pub grids: Option<String>,
@@ -71,6 +73,11 @@ pub struct BenchArgs {
     /// Also write every method's image (ghosts only, at the reference's exposure, ACES, sRGB) to OUT/images.
     #[arg(long)]
     pub images: bool,
+    /// The depth of field instead of the flare: its reference and live method (CPU twin and GPU) on the
+    /// synthetic street, error against run time, and the live method's frame time at 1920x1080 (default lens:
+    /// the Master Prime; --size for the error rows, default 960x540 here).
+    #[arg(long)]
+    pub dof: bool,
     /// Output folder.
     #[arg(short = 'o', long = "out", alias = "output")]
     pub out: PathBuf,
@@ -127,7 +134,8 @@ pub fn light_position_deg(theta_deg: f64) -> [f64; 2] {
 }
 
 pub fn run(args: &BenchArgs) -> Result<()> {
-    let (width, height) = flare_core::frame::parse_size(&args.size).map_err(|e| anyhow::anyhow!("--size: {e}"))?;
+    let (width, height) = flare_core::frame::parse_size(args.size.as_deref().unwrap_or("480x320"))
+        .map_err(|e| anyhow::anyhow!("--size: {e}"))?;
     let lenses: Vec<String> = if !args.lens.is_empty() {
         args.lens.clone()
     } else if args.quick {

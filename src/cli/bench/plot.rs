@@ -43,6 +43,12 @@ fn family(method: &str) -> (&'static str, RGBColor) {
         ("ray grids (Hullin 2011)", RGBColor(38, 139, 210))
     } else if method.starts_with("blended") {
         ("blended LUT ghosts", RGBColor(133, 153, 0))
+    } else if method.starts_with("dof-live-cpu") {
+        ("depth of field, live (CPU twin)", RGBColor(220, 50, 47))
+    } else if method.starts_with("dof-live-gpu") {
+        ("depth of field, live (wgpu)", RGBColor(211, 54, 130))
+    } else if method.starts_with("reference-") {
+        ("depth of field, reference (thicker layers)", RGBColor(38, 139, 210))
     } else {
         ("other", RGBColor(88, 88, 88))
     }
@@ -50,9 +56,18 @@ fn family(method: &str) -> (&'static str, RGBColor) {
 
 /// Writes the chart of `rows` (the reference itself left out) to `path`.
 pub fn error_against_time(rows: &[Row], path: &Path) -> Result<()> {
+    error_against_time_titled(rows, path, "Error against run time (each point: one lens, light angle and method)")
+}
+
+/// [`error_against_time`] with another title; rows whose PSNR is not finite (a reference against itself) are
+/// left out.
+pub fn error_against_time_titled(rows: &[Row], path: &Path, title: &str) -> Result<()> {
     // Registering twice is harmless; the font is compiled in.
     let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, epaint_default_fonts::UBUNTU_LIGHT);
-    let points: Vec<&Row> = rows.iter().filter(|r| r.method != "reference" && r.ms_median > 0.0).collect();
+    let points: Vec<&Row> = rows
+        .iter()
+        .filter(|r| r.method != "reference" && r.ms_median > 0.0 && r.errors.psnr_db.is_finite())
+        .collect();
     let mut buffer = vec![255u8; (SIZE.0 * SIZE.1 * 3) as usize];
     {
         let root = BitMapBackend::with_buffer(&mut buffer, SIZE).into_drawing_area();
@@ -64,7 +79,7 @@ pub fn error_against_time(rows: &[Row], path: &Path) -> Result<()> {
         let p_max = points.iter().map(|r| r.errors.psnr_db).fold(40.0f64, f64::max).min(100.0) + 5.0;
         let p_min = points.iter().map(|r| r.errors.psnr_db).fold(20.0f64, f64::min) - 5.0;
         let mut chart = ChartBuilder::on(&root)
-            .caption("Error against run time (each point: one lens, light angle and method)", ("sans-serif", 24))
+            .caption(title, ("sans-serif", 24))
             .margin(15)
             .x_label_area_size(45)
             .y_label_area_size(60)

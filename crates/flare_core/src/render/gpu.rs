@@ -53,6 +53,8 @@ pub enum GpuError {
         "a {width}x{height} frame is beyond this adapter's limit of {max} pixels a side (max_texture_dimension_2d); use a smaller size or --device cpu"
     )]
     TooLarge { width: u32, height: u32, max: u32 },
+    #[error("{what}, beyond this adapter's limit of {limit} ({name}); use a smaller size or --device cpu")]
+    Limit { what: String, limit: u64, name: &'static str },
 }
 
 /// A device and queue made without any window.
@@ -128,7 +130,7 @@ pub struct PassTimes {
 
 impl PassTimes {
     /// From the profiler's results: every nested scope that has a time.
-    fn from_results(results: &[GpuTimerQueryResult]) -> Self {
+    pub(crate) fn from_results(results: &[GpuTimerQueryResult]) -> Self {
         fn walk(results: &[GpuTimerQueryResult], out: &mut Vec<(String, f64)>) {
             for r in results {
                 if r.nested_queries.is_empty() {

@@ -6,7 +6,8 @@
 //! the aperture mask at every stop crossing and into the front-lens disc), the starburst's placement, and
 //! the display settings in [`Globals`]. The GPU path ([`gpu`]) and the CPU twin ([`cpu`]) read exactly these
 //! structs, so a test can compare their images pixel by pixel. [`raygrid`] is the other GPU renderer: the
-//! ray-traced ghosts of [`crate::raytrace`] (its f64 CPU twin) traced and splatted on the GPU.
+//! ray-traced ghosts of [`crate::raytrace`] (its f64 CPU twin) traced and splatted on the GPU; [`dof_gpu`]
+//! the live depth of field of the plate ([`crate::dof::live`] its CPU twin).
 //!
 //! Frame convention: the sensor image is rotated by 180 degrees for display (as a camera does), so the
 //! displayed point of sensor coordinate (x, y) mm is (-x, -y); pixels run right and down from the top-left
@@ -17,6 +18,7 @@
 //! dropped and counted, never uploaded.
 
 pub mod cpu;
+pub mod dof_gpu;
 pub mod gpu;
 pub mod raygrid;
 pub mod shaders;

@@ -35,6 +35,8 @@ pub const RAYGRID_SPLAT_WGSL: &str = concat!(
     include_str!("../../../../shaders/aperture.wgsl"),
     include_str!("../../../../shaders/raygrid_splat.wgsl")
 );
+/// The live depth of field: split, gather, composite, resolve (`crate::dof::live`).
+pub const DOF_WGSL: &str = include_str!("../../../../shaders/dof.wgsl");
 /// The app's viewport pass (the flare texture into egui's render pass; used by the app, validated here).
 pub const VIEWPORT_WGSL: &str = include_str!("../../../../shaders/viewport.wgsl");
 
@@ -48,4 +50,5 @@ pub const ALL: &[(&str, &str)] = &[
     ("viewport.wgsl", VIEWPORT_WGSL),
     ("raygrid_trace.wgsl", RAYGRID_TRACE_WGSL),
     ("raygrid_splat.wgsl", RAYGRID_SPLAT_WGSL),
+    ("dof.wgsl", DOF_WGSL),
 ];

@@ -9,11 +9,13 @@
 //! a tracker's CSV, [`track`]), or the document's static light. [`plan`] works that out for every frame of a
 //! range before anything is drawn ([`FramePlan`]: light angle, light pixel, gain, visibility, plate file);
 //! [`sequence`] then draws each planned frame with [`crate::frame`] and writes it with the one writer.
+//! [`plate`] gives every caller a frame's plate, defocused when the document's depth of field is on.
 //! [`synthetic`] makes a test shot (a sun crossing a sky, a bar crossing the sun) with its true track.
 
 pub mod detect;
 pub mod pattern;
 pub mod plan;
+pub mod plate;
 pub mod sequence;
 pub mod synthetic;
 pub mod track;

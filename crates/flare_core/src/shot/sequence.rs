@@ -28,7 +28,6 @@ use crate::flare::PreparedFlare;
 use crate::frame::{self, Device, Drawn, Frame, LayerChoice, Sources};
 use crate::image::HdrImage;
 use crate::lut::blend::LiveLut;
-use crate::output::read_plate;
 use crate::preset::Document;
 
 /// How a sequence is written.
@@ -119,21 +118,26 @@ pub struct ShotSources<'a> {
     pub plan: &'a ShotPlan,
 }
 
-/// The last plate read, kept for the next frame that uses the same file.
-type PlateCache = Option<(PathBuf, Arc<HdrImage>)>;
+/// The last plate read (defocused, with the depth of field on), kept for the next frame that uses the same
+/// plate and depth files.
+type PlateCache = Option<((PathBuf, Option<PathBuf>), Arc<HdrImage>)>;
 
-fn plate_for(plan: &FramePlan, cache: &mut PlateCache) -> Result<Option<Arc<HdrImage>>, String> {
+fn plate_for(plan: &FramePlan, sources: &ShotSources, cache: &mut PlateCache) -> Result<Option<Arc<HdrImage>>, String> {
     let Some(path) = &plan.plate else { return Ok(None) };
-    if let Some((p, img)) = cache
-        && p == path
+    let key = (path.clone(), sources.doc.dof.enabled.then(|| sources.doc.depth_at(plan.frame)).flatten());
+    if let Some((k, img)) = cache
+        && *k == key
     {
         return Ok(Some(img.clone()));
     }
     if !path.exists() {
         return Err(format!("frame {}: plate {} is missing", plan.frame, path.display()));
     }
-    let img = Arc::new(read_plate(path).map_err(|e| format!("frame {}: plate {e}", plan.frame))?);
-    *cache = Some((path.clone(), img.clone()));
+    let img = Arc::new(
+        super::plate::frame_plate(sources.doc, sources.flare, plan.frame, path)
+            .map_err(|e| format!("frame {}: plate {}: {e}", plan.frame, path.display()))?,
+    );
+    *cache = Some((key, img.clone()));
     Ok(Some(img))
 }
 
@@ -198,7 +202,7 @@ pub fn render_sequence(
                 if skip(&path) {
                     return Some(finish(record(plan, path, started, FrameOutcome::Skipped)));
                 }
-                let outcome = match plate_for(plan, &mut None) {
+                let outcome = match plate_for(plan, sources, &mut None) {
                     Ok(plate) => {
                         let frame = build(plan);
                         let s = Sources { flare: sources.flare, lut: sources.lut, plate: plate.as_deref() };
@@ -244,7 +248,7 @@ pub fn render_sequence(
                         inline.push(finish(record(plan, path, started, FrameOutcome::Skipped)));
                         continue;
                     }
-                    let plate = match plate_for(plan, &mut cache) {
+                    let plate = match plate_for(plan, sources, &mut cache) {
                         Ok(p) => p,
                         Err(e) => {
                             inline.push(finish(record(plan, path, started, FrameOutcome::Failed(e))));

@@ -1,0 +1,148 @@
+//! The blur kernel: the stop's shape seen through the entrance pupil, scaled to the blur diameter, cut off-axis
+//! by the front clear aperture (the cat's eye), normalised to 1.
+//!
+//! # How it works
+//! A frame offset `o` (pixels, X right, Y up) from a source of signed defocus `sigma` (pixels, see
+//! [`super::DofModel::defocus_px`]) is the pupil point `q = sign(sigma) o / (|sigma| / 2)` in pupil radii:
+//! upright behind the focus plane, point-reflected in front of it. Its weight is the aperture mask at
+//! `mask_sign q` (the stop imaged into the pupil) times, with the cat's eye, the coverage of the front aperture's
+//! circle in pupil units ([`super::DofModel::cat_eye_at`]) with a soft edge `edge` wide (the sampling step, so
+//! that the cut is antialiased like the mask). [`raster`] integrates it over each target pixel (s x s samples)
+//! for the reference; [`super::live`] samples it per tap.
+
+use crate::aperture::ApertureMask;
+
+/// The pupil point (pupil radii) of the frame offset `o` (pixels, X right, Y up) for the signed defocus `sigma`.
+#[inline]
+pub fn pupil_point(o: [f64; 2], sigma: f64) -> [f64; 2] {
+    let k = 2.0 / sigma;
+    [o[0] * k, o[1] * k]
+}
+
+/// The coverage of the circle `cat` (centre, radius in pupil radii) at `q`, with a soft edge `edge` wide.
+#[inline]
+pub fn cat_eye_coverage(q: [f64; 2], cat: Option<([f64; 2], f64)>, edge: f64) -> f64 {
+    match cat {
+        None => 1.0,
+        Some((c, r)) => {
+            let d = (q[0] - c[0]).hypot(q[1] - c[1]);
+            (0.5 + (r - d) / edge.max(1e-9)).clamp(0.0, 1.0)
+        }
+    }
+}
+
+/// The kernel's weight at the pupil point `q` (before normalisation).
+#[inline]
+pub fn weight(mask: &ApertureMask, mask_sign: f64, q: [f64; 2], cat: Option<([f64; 2], f64)>, edge: f64) -> f64 {
+    let open = f64::from(mask.sample((mask_sign * q[0]) as f32, (mask_sign * q[1]) as f32));
+    if open == 0.0 { 0.0 } else { open * cat_eye_coverage(q, cat, edge) }
+}
+
+/// A kernel rasterised on the pixel grid around its source: `(2 radius + 1)^2` weights, row by row from the top
+/// (pixel rows, Y down), summing to 1.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RasterKernel {
+    pub radius: i32,
+    pub weights: Vec<f32>,
+}
+
+impl RasterKernel {
+    /// All of the light stays in its pixel (a blur under a sample's spacing).
+    pub fn identity() -> Self {
+        Self { radius: 0, weights: vec![1.0] }
+    }
+}
+
+/// Samples per pixel side for a blur of `diameter_px`: fine for small kernels, whose shape a few samples decide.
+pub fn samples_per_pixel(diameter_px: f64) -> usize {
+    if diameter_px < 24.0 { 4 } else { 2 }
+}
+
+/// The kernel of a source of defocus `sigma` (pixels) integrated over each target pixel with s x s samples
+/// ([`samples_per_pixel`]), normalised to 1; the identity when no sample falls inside (a blur below the sample
+/// spacing, or a cat's eye that closes the pupil: then the pixel keeps its own light).
+pub fn raster(mask: &ApertureMask, mask_sign: f64, sigma: f64, cat: Option<([f64; 2], f64)>) -> RasterKernel {
+    let half = 0.5 * sigma.abs();
+    if !(half.is_finite() && half > 1e-6) {
+        return RasterKernel::identity();
+    }
+    let radius = (half + 1.0).ceil() as i32;
+    let s = samples_per_pixel(sigma.abs());
+    let step = 1.0 / s as f64;
+    let edge = step / half;
+    let side = (2 * radius + 1) as usize;
+    let mut weights = vec![0.0f64; side * side];
+    for (k, w) in weights.iter_mut().enumerate() {
+        let (i, j) = ((k % side) as i32 - radius, (k / side) as i32 - radius);
+        let mut sum = 0.0;
+        for sy in 0..s {
+            for sx in 0..s {
+                // The sample's frame offset (X right, Y up) from the source's centre.
+                let ox = f64::from(i) - 0.5 + (sx as f64 + 0.5) * step;
+                let oy = -(f64::from(j) - 0.5 + (sy as f64 + 0.5) * step);
+                sum += weight(mask, mask_sign, pupil_point([ox, oy], sigma), cat, edge);
+            }
+        }
+        *w = sum;
+    }
+    let total: f64 = weights.iter().sum();
+    if total <= 0.0 {
+        return RasterKernel::identity();
+    }
+    RasterKernel { radius, weights: weights.into_iter().map(|w| (w / total) as f32).collect() }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::aperture::{Aperture, ApertureShape};
+
+    fn mask(shape: ApertureShape) -> ApertureMask {
+        Aperture { shape, f_number: None }.rasterise(256)
+    }
+
+    #[test]
+    fn a_kernel_sums_to_one_and_spans_its_diameter() {
+        let m = mask(ApertureShape::Circle);
+        for sigma in [0.3, 3.0, 17.5, -40.0] {
+            let k = raster(&m, 1.0, sigma, None);
+            let total: f64 = k.weights.iter().map(|&w| f64::from(w)).sum();
+            assert!((total - 1.0).abs() < 1e-5, "{sigma}: {total}");
+            // The widest row holds about the diameter's worth of lit pixels.
+            let side = (2 * k.radius + 1) as usize;
+            let middle = &k.weights[k.radius as usize * side..(k.radius as usize + 1) * side];
+            let peak = middle.iter().cloned().fold(0.0f32, f32::max);
+            let across: f32 = middle.iter().map(|w| w / peak).sum();
+            assert!((f64::from(across) - sigma.abs().max(1.0)).abs() < 1.0, "{sigma}: {across}");
+        }
+        assert_eq!(raster(&m, 1.0, 0.0, None), RasterKernel::identity());
+    }
+
+    #[test]
+    fn in_front_of_the_focus_plane_the_pupil_is_point_reflected() {
+        // Five blades are not point-symmetric: the kernel in front is the one behind turned by 180 degrees.
+        let m = mask(ApertureShape::Blades { count: 5, rotation_deg: 0.0, roundness: 0.0 });
+        let (behind, front) = (raster(&m, 1.0, 21.0, None), raster(&m, 1.0, -21.0, None));
+        let flipped: Vec<f32> = front.weights.iter().rev().cloned().collect();
+        let diff = behind.weights.iter().zip(&flipped).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
+        assert!(diff < 1e-6, "{diff}");
+        let asymmetry = behind.weights.iter().zip(&front.weights).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
+        assert!(asymmetry > 1e-4, "five blades differ turned");
+    }
+
+    #[test]
+    fn the_cat_eye_cuts_the_side_towards_its_offset() {
+        let m = mask(ApertureShape::Circle);
+        let full = raster(&m, 1.0, 30.0, None);
+        let cut = raster(&m, 1.0, 30.0, Some(([1.2, 0.0], 1.0)));
+        // Lit pixels: fewer, and all on the right half (X > 0) where the circle centred at +1.2 overlaps.
+        let lit = |k: &RasterKernel| k.weights.iter().filter(|&&w| w > 0.0).count();
+        assert!(lit(&cut) < lit(&full) / 2, "{} of {}", lit(&cut), lit(&full));
+        let side = (2 * cut.radius + 1) as usize;
+        for (k, &w) in cut.weights.iter().enumerate() {
+            if w > 0.0 {
+                assert!((k % side) as i32 - cut.radius >= 0, "lit at column {}", k % side);
+            }
+        }
+    }
+}

@@ -1,0 +1,442 @@
+//! The live depth of field: a few depth layers, each gathered at a resolution that keeps its kernel about
+//! [`TAPS_ACROSS`] texels across, composited far to near. `render::dof_gpu` runs it in WGSL
+//! (`shaders/dof.wgsl`); [`LivePlan::render_cpu`] is its twin, step for step in f32.
+//!
+//! # How it works
+//! The CPU plans ([`LivePlan::new`]): every pixel's signed defocus, and layer centres spaced evenly over the
+//! defocus range (at most [`MAX_LAYERS`], at least 1 px apart; a layer no pixel reaches is dropped). A pixel
+//! belongs to its two nearest layers with hat weights (`1 - |sigma - sigma_k| / spacing`, summing to 1), so no
+//! band shows where one layer meets the next. A layer of defocus sigma_k is gathered at `1 / factor` of the
+//! resolution, `factor = max(1, round(|sigma_k| / TAPS_ACROSS))`, over taps on its texel grid whose weights are
+//! the kernel ([`super::kernel`]) averaged over 3 x 3 points of each tap's cell. Per layer, four steps (the
+//! WGSL entry points of the same names):
+//! 1. `split`: each pixel's premultiplied colour and coverage `(rgb w_k, w_k)` shared among its four nearest
+//!    texels by tent weights (its light and its position kept), per texel area;
+//! 2. `gather`: each texel sums its neighbours, each at the tap from it (scatter as gather: the weight is the
+//!    kernel of the *source* texel, cut by the cat's eye at the source's position), times the source's
+//!    normalisation, bilinear in a 17 x 17 table over the frame (the kernel's taps summed there);
+//! 3. `composite`: every pixel samples the gathered layer bilinearly and puts it over what is behind
+//!    ([`super::over`]);
+//!
+//! Each step runs only over the layer's region: the plan keeps the box of the layer's pixels, grown by the tent
+//! (`low`, the texels the split can fill) and by the taps' reach (`out`, the texels its light can reach); the
+//! composite covers the pixels those texels touch. A layer of a thin band of depths costs a thin band.
+//! 4. after the nearest layer, `resolve` divides by the coverage ([`super::resolve`]).
+
+use rayon::prelude::*;
+
+use super::kernel::{pupil_point, weight};
+use super::model::{DofError, DofModel, defocus_map, over, resolve};
+use crate::aperture::ApertureMask;
+use crate::image::HdrImage;
+
+/// Most layers a frame is split into (the default).
+pub const MAX_LAYERS: usize = 24;
+/// A layer's kernel spans about this many texels across at its resolution (the default).
+pub const TAPS_ACROSS: f64 = 12.0;
+
+/// The live method's speed against its error: how many layers at most, how many taps across a kernel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LiveSettings {
+    pub max_layers: usize,
+    pub taps_across: f64,
+}
+
+impl Default for LiveSettings {
+    fn default() -> Self {
+        Self { max_layers: MAX_LAYERS, taps_across: TAPS_ACROSS }
+    }
+}
+/// Cells of the normalisation table across the frame (nodes: one more).
+pub const NORM_CELLS: usize = 16;
+
+/// One layer of a plan. Must be kept in sync with `struct Layer` in `shaders/dof.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct LiveLayer {
+    /// Frame width, height; the layer's width, height (texels).
+    pub size: [u32; 4],
+    /// First tap, tap count, factor (pixels per texel), first normalisation node.
+    pub taps: [u32; 4],
+    /// The texels where the layer's split can be other than zero: x0, y0, x1, y1 (ends excluded).
+    pub low: [u32; 4],
+    /// The texels where its gathered light can be other than zero: `low` grown by the taps' reach.
+    pub out: [u32; 4],
+    /// The pixels the composite covers ([`composite_pixels`]).
+    pub pixels: [u32; 4],
+    /// The layer's defocus, the spacing of the layers (hat weights), the lowest and the highest layer's defocus.
+    pub shape: [f32; 4],
+    /// The cat's eye centre (pupil radii) at pixel (x, y): `[c0x + cx x, c0y + cy y]`: c0x, cx, c0y, cy.
+    pub cat: [f32; 4],
+    /// The cat's eye radius, its soft edge (pupil radii), 1 when the cat's eye is on, 2 / |sigma_k|.
+    pub cat_more: [f32; 4],
+    /// 2 / |sigma_k| sign(sigma_k) (pupil radii per pixel of offset, reflected in front of the focus), unused x 3.
+    pub pupil: [f32; 4],
+}
+const _: () = assert!(std::mem::size_of::<LiveLayer>() == 144);
+
+/// Everything the live method needs, planned on the CPU for either twin.
+#[derive(Clone, Debug)]
+pub struct LivePlan {
+    pub width: u32,
+    pub height: u32,
+    /// Signed defocus per pixel (pixels).
+    pub sigma: Vec<f32>,
+    /// Layers, far first.
+    pub layers: Vec<LiveLayer>,
+    /// All layers' taps: offset (texels, X right, Y down: source = target - offset), base weight, unused.
+    pub taps: Vec<[f32; 4]>,
+    /// All layers' normalisation tables, (NORM_CELLS + 1)^2 nodes each, row by row.
+    pub norm: Vec<f32>,
+}
+
+/// The hat weight of defocus `s` in the layer `layer` (the end layers take everything beyond them).
+#[inline]
+pub fn hat(layer: &LiveLayer, s: f32) -> f32 {
+    let [centre, spacing, lo, hi] = layer.shape;
+    let s = s.clamp(lo, hi);
+    if spacing <= 0.0 {
+        return 1.0;
+    }
+    (1.0 - (s - centre).abs() / spacing).max(0.0)
+}
+
+/// The cat's eye factor of a tap at the pupil point `q` from the source texel centre at pixel (`x`, `y`).
+#[inline]
+fn cat_factor(layer: &LiveLayer, q: [f32; 2], x: f32, y: f32) -> f32 {
+    if layer.cat_more[2] == 0.0 {
+        return 1.0;
+    }
+    let c = [layer.cat[0] + layer.cat[1] * x, layer.cat[2] + layer.cat[3] * y];
+    let d = ((q[0] - c[0]) * (q[0] - c[0]) + (q[1] - c[1]) * (q[1] - c[1])).sqrt();
+    (0.5 + (layer.cat_more[0] - d) / layer.cat_more[1]).clamp(0.0, 1.0)
+}
+
+/// The pupil point of tap offset `t` (texels, Y down) in `layer`.
+#[inline]
+fn tap_pupil(layer: &LiveLayer, t: [f32; 2]) -> [f32; 2] {
+    let k = layer.pupil[0] * layer.taps[2] as f32;
+    [t[0] * k, -t[1] * k]
+}
+
+/// The normalisation at pixel (`x`, `y`), bilinear in the layer's table.
+#[inline]
+fn norm_at(layer: &LiveLayer, norm: &[f32], x: f32, y: f32) -> f32 {
+    if layer.cat_more[2] == 0.0 {
+        return norm[layer.taps[3] as usize];
+    }
+    let n = NORM_CELLS as f32;
+    let gx = (x / layer.size[0] as f32 * n).clamp(0.0, n);
+    let gy = (y / layer.size[1] as f32 * n).clamp(0.0, n);
+    let (ix, iy) = ((gx as usize).min(NORM_CELLS - 1), (gy as usize).min(NORM_CELLS - 1));
+    let (fx, fy) = (gx - ix as f32, gy - iy as f32);
+    let at = |i: usize, j: usize| norm[layer.taps[3] as usize + j * (NORM_CELLS + 1) + i];
+    let top = at(ix, iy) * (1.0 - fx) + at(ix + 1, iy) * fx;
+    let bottom = at(ix, iy + 1) * (1.0 - fx) + at(ix + 1, iy + 1) * fx;
+    top * (1.0 - fy) + bottom * fy
+}
+
+impl LivePlan {
+    /// Plans the live method for the depth map `depth_mm` (mm from the entrance pupil, one per pixel).
+    pub fn new(depth_mm: &[f64], model: &DofModel, mask: &ApertureMask) -> Result<Self, DofError> {
+        Self::with_settings(depth_mm, model, mask, LiveSettings::default())
+    }
+
+    /// [`Self::new`] with other settings than the default.
+    pub fn with_settings(
+        depth_mm: &[f64],
+        model: &DofModel,
+        mask: &ApertureMask,
+        settings: LiveSettings,
+    ) -> Result<Self, DofError> {
+        let sigma = defocus_map(model, depth_mm)?;
+        Ok(Self::from_defocus(&sigma, model, mask, settings))
+    }
+
+    /// Plans the live method for per-pixel defocus `sigma` (checked already).
+    pub fn from_defocus(sigma: &[f64], model: &DofModel, mask: &ApertureMask, settings: LiveSettings) -> Self {
+        let (lo, hi) = sigma.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &s| (a.min(s), b.max(s)));
+        let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (0.0, 0.0) };
+        let range = hi - lo;
+        let count = ((range / 1.0).floor() as usize + 1).clamp(1, settings.max_layers.max(1));
+        let spacing = if count > 1 { range / (count - 1) as f64 } else { 0.0 };
+        let centres: Vec<f64> = (0..count).map(|k| hi - spacing * k as f64).collect();
+        // Where each layer's pixels are (x0, y0, x1, y1, ends excluded; empty: none).
+        let (width, height) = (model.width, model.height);
+        let mut boxes = vec![[u32::MAX, u32::MAX, 0, 0]; count];
+        for (i, &s) in sigma.iter().enumerate() {
+            let pos = if spacing > 0.0 { (hi - s) / spacing } else { 0.0 };
+            let k = (pos.floor().max(0.0) as usize).min(count - 1);
+            let (x, y) = ((i % width as usize) as u32, (i / width as usize) as u32);
+            let grow = |b: &mut [u32; 4]| *b = [b[0].min(x), b[1].min(y), b[2].max(x + 1), b[3].max(y + 1)];
+            grow(&mut boxes[k]);
+            if pos.fract() > 0.0 && k + 1 < count {
+                grow(&mut boxes[k + 1]);
+            }
+        }
+        let mut plan = Self { width, height, sigma: sigma.iter().map(|&s| s as f32).collect(), layers: Vec::new(), taps: Vec::new(), norm: Vec::new() };
+        for (k, &centre) in centres.iter().enumerate() {
+            if boxes[k][0] == u32::MAX {
+                continue;
+            }
+            plan.add_layer(centre, [spacing, lo, hi], boxes[k], model, mask, settings.taps_across.max(1.0));
+        }
+        plan
+    }
+
+    fn add_layer(
+        &mut self,
+        centre: f64,
+        [spacing, lo, hi]: [f64; 3],
+        pixels: [u32; 4],
+        model: &DofModel,
+        mask: &ApertureMask,
+        taps_across: f64,
+    ) {
+        let diameter = centre.abs();
+        // At most `taps_across` texels across the kernel (so at most ~0.8 taps_across^2 taps).
+        let factor = (diameter / taps_across).ceil().max(1.0) as u32;
+        let (lw, lh) = (self.width.div_ceil(factor), self.height.div_ceil(factor));
+        let f = f64::from(factor);
+        let small = diameter < 1e-3;
+        let pupil_per_px = if small { 0.0 } else { 2.0 / centre };
+        // The cat's eye at the layer's depth: linear in the pixel position.
+        let depth_mm = depth_of(model, centre);
+        let cat = model.cat_eye_at(0.0, 0.0, depth_mm).zip(model.cat_eye_at(1.0, 1.0, depth_mm));
+        let (cat_coeffs, cat_radius) = match cat {
+            Some(((c0, r), (c1, _))) => ([c0[0], c1[0] - c0[0], c0[1], c1[1] - c0[1]], r),
+            None => ([0.0; 4], 0.0),
+        };
+        let cell_pupil = if small { 1.0 } else { 2.0 * f / diameter };
+        let reach = if small { 0 } else { (diameter / (2.0 * f) + 0.5).ceil() as u32 };
+        // The texels a pixel's tent weights reach, and those the taps reach from them.
+        let low = [
+            (pixels[0] / factor).saturating_sub(1),
+            (pixels[1] / factor).saturating_sub(1),
+            (pixels[2].div_ceil(factor) + 1).min(lw),
+            (pixels[3].div_ceil(factor) + 1).min(lh),
+        ];
+        let out = [
+            low[0].saturating_sub(reach),
+            low[1].saturating_sub(reach),
+            (low[2] + reach).min(lw),
+            (low[3] + reach).min(lh),
+        ];
+        let mut layer = LiveLayer {
+            size: [self.width, self.height, lw, lh],
+            taps: [self.taps.len() as u32, 0, factor, self.norm.len() as u32],
+            low,
+            out,
+            pixels: [0; 4],
+            shape: [centre as f32, spacing as f32, lo as f32, hi as f32],
+            cat: cat_coeffs.map(|v| v as f32),
+            cat_more: [cat_radius as f32, cell_pupil as f32, if cat.is_some() { 1.0 } else { 0.0 }, 0.0],
+            pupil: [pupil_per_px as f32, 0.0, 0.0, 0.0],
+        };
+        // Taps: the kernel averaged over 3 x 3 points of each texel cell (no cat's eye: that is per source).
+        let reach = reach as i32;
+        let mut taps = Vec::new();
+        for ty in -reach..=reach {
+            for tx in -reach..=reach {
+                let mut sum = 0.0;
+                for sy in 0..3 {
+                    for sx in 0..3 {
+                        let ox = (f64::from(tx) + (f64::from(sx) - 1.0) / 3.0) * f;
+                        let oy = -(f64::from(ty) + (f64::from(sy) - 1.0) / 3.0) * f;
+                        sum += weight(mask, model.mask_sign, pupil_point([ox, oy], centre), None, 1.0);
+                    }
+                }
+                if sum > 0.0 {
+                    taps.push([tx as f32, ty as f32, (sum / 9.0) as f32, 0.0]);
+                }
+            }
+        }
+        if taps.is_empty() {
+            taps.push([0.0, 0.0, 1.0, 0.0]);
+        }
+        layer.taps[1] = taps.len() as u32;
+        // Normalisation: one value, or a table over the frame with the cat's eye.
+        if cat.is_none() {
+            let total: f32 = taps.iter().map(|t| t[2]).sum();
+            self.norm.push(1.0 / total);
+        } else {
+            let n = NORM_CELLS + 1;
+            for j in 0..n {
+                for i in 0..n {
+                    let x = i as f32 / NORM_CELLS as f32 * self.width as f32;
+                    let y = j as f32 / NORM_CELLS as f32 * self.height as f32;
+                    let total: f32 =
+                        taps.iter().map(|t| t[2] * cat_factor(&layer, tap_pupil(&layer, [t[0], t[1]]), x, y)).sum();
+                    // A cat's eye that closes the pupil: the centre tap keeps the light (as the reference does).
+                    self.norm.push(if total > 1e-12 { 1.0 / total } else { 0.0 });
+                }
+            }
+        }
+        layer.pixels = composite_pixels(&layer);
+        self.taps.extend(taps);
+        self.layers.push(layer);
+    }
+
+    /// The live method on the CPU: the twin of `render::dof_gpu` (see the module documentation).
+    pub fn render_cpu(&self, plate: &HdrImage) -> HdrImage {
+        let (w, h) = (self.width as usize, self.height as usize);
+        let mut out = vec![[0.0f32; 4]; w * h];
+        for layer in &self.layers {
+            let low = self.split(layer, plate);
+            let gathered = self.gather(layer, &low);
+            composite(layer, &gathered, &mut out);
+        }
+        HdrImage { width: self.width, height: self.height, pixels: out.into_par_iter().map(resolve).collect() }
+    }
+
+    /// Step 1: the layer's premultiplied colour and coverage, each pixel shared among the four nearest texel
+    /// centres by tent weights (`1 - |distance| / factor` on each axis: a partition of unity, so every pixel's
+    /// light and its position are kept), divided by the texel's area.
+    pub fn split(&self, layer: &LiveLayer, plate: &HdrImage) -> Vec<[f32; 4]> {
+        let [w, h, lw, lh] = layer.size.map(|v| v as usize);
+        let [x0, y0, x1, y1] = layer.low.map(|v| v as usize);
+        let f = layer.taps[2] as usize;
+        let ff = f as f32;
+        let scale = 1.0 / (ff * ff);
+        let tent = |p: usize, t: usize| (1.0 - ((p as f32 + 0.5) - (t as f32 + 0.5) * ff).abs() / ff).max(0.0);
+        let mut low = vec![[0.0f32; 4]; lw * lh];
+        low.par_chunks_mut(lw).enumerate().skip(y0).take(y1.saturating_sub(y0)).for_each(|(ty, row)| {
+            for (tx, texel) in row.iter_mut().enumerate().take(x1).skip(x0) {
+                let mut acc = [0.0f32; 4];
+                for y in (ty * f).saturating_sub(f)..((ty + 2) * f).min(h) {
+                    let wy = tent(y, ty);
+                    if wy == 0.0 {
+                        continue;
+                    }
+                    for x in (tx * f).saturating_sub(f)..((tx + 2) * f).min(w) {
+                        let i = y * w + x;
+                        let wgt = hat(layer, self.sigma[i]) * wy * tent(x, tx);
+                        if wgt > 0.0 {
+                            let p = plate.pixels[i];
+                            acc = [acc[0] + p[0] * wgt, acc[1] + p[1] * wgt, acc[2] + p[2] * wgt, acc[3] + wgt];
+                        }
+                    }
+                }
+                *texel = acc.map(|v| v * scale);
+            }
+        });
+        low
+    }
+
+    /// Step 2: scatter as gather over the layer's taps.
+    pub fn gather(&self, layer: &LiveLayer, low: &[[f32; 4]]) -> Vec<[f32; 4]> {
+        let [_, _, lw, lh] = layer.size.map(|v| v as i32);
+        let [lx0, ly0, lx1, ly1] = layer.low.map(|v| v as i32);
+        let [x0, y0, x1, y1] = layer.out.map(|v| v as usize);
+        let taps = &self.taps[layer.taps[0] as usize..][..layer.taps[1] as usize];
+        let f = layer.taps[2] as f32;
+        let mut gathered = vec![[0.0f32; 4]; (lw * lh) as usize];
+        gathered.par_chunks_mut(lw as usize).enumerate().skip(y0).take(y1.saturating_sub(y0)).for_each(|(y, row)| {
+            let y = y as i32;
+            for (x, texel) in row.iter_mut().enumerate().take(x1).skip(x0) {
+                let x = x as i32;
+                let mut acc = [0.0f32; 4];
+                for t in taps {
+                    let (sx, sy) = (x - t[0] as i32, y - t[1] as i32);
+                    // Outside the split's region the layer is empty.
+                    if sx < lx0 || sy < ly0 || sx >= lx1 || sy >= ly1 {
+                        continue;
+                    }
+                    let src = low[(sy * lw + sx) as usize];
+                    if src[3] == 0.0 {
+                        continue;
+                    }
+                    let (px, py) = ((sx as f32 + 0.5) * f, (sy as f32 + 0.5) * f);
+                    let wgt = t[2]
+                        * cat_factor(layer, tap_pupil(layer, [t[0], t[1]]), px, py)
+                        * norm_at(layer, &self.norm, px, py);
+                    acc = [acc[0] + src[0] * wgt, acc[1] + src[1] * wgt, acc[2] + src[2] * wgt, acc[3] + src[3] * wgt];
+                }
+                *texel = acc;
+            }
+        });
+        gathered
+    }
+}
+
+/// The pixels (x0, y0, x1, y1, ends excluded) whose bilinear sample of the gathered layer can touch its `out`
+/// texels.
+pub fn composite_pixels(layer: &LiveLayer) -> [u32; 4] {
+    let [w, h, ..] = layer.size;
+    let f = layer.taps[2];
+    let [x0, y0, x1, y1] = layer.out;
+    [(x0 * f).saturating_sub(f), (y0 * f).saturating_sub(f), ((x1 + 1) * f).min(w), ((y1 + 1) * f).min(h)]
+}
+
+/// Step 3: every pixel samples the gathered layer bilinearly (clamped at the frame's edges; zero outside the
+/// layer's `out` texels) and puts it over `out`.
+pub fn composite(layer: &LiveLayer, gathered: &[[f32; 4]], out: &mut [[f32; 4]]) {
+    let [w, ..] = layer.size.map(|v| v as usize);
+    let [x0, y0, x1, y1] = layer.pixels.map(|v| v as usize);
+    let f = layer.taps[2] as f32;
+    out.par_chunks_mut(w).enumerate().skip(y0).take(y1.saturating_sub(y0)).for_each(|(y, row)| {
+        for (x, o) in row.iter_mut().enumerate().take(x1).skip(x0) {
+            let sample = sample_bilinear(layer, gathered, (x as f32 + 0.5) / f - 0.5, (y as f32 + 0.5) / f - 0.5);
+            if sample[3] > 0.0 || sample[0] != 0.0 || sample[1] != 0.0 || sample[2] != 0.0 {
+                over(o, sample);
+            }
+        }
+    });
+}
+
+/// Bilinear sample of the gathered layer at texel coordinates (`x`, `y`) (texel centres at integers), clamped to
+/// the layer's texels; a texel outside its `out` region is zero.
+#[inline]
+pub fn sample_bilinear(layer: &LiveLayer, image: &[[f32; 4]], x: f32, y: f32) -> [f32; 4] {
+    let [_, _, w, h] = layer.size.map(|v| v as usize);
+    let [bx0, by0, bx1, by1] = layer.out.map(|v| v as usize);
+    let x = x.clamp(0.0, (w - 1) as f32);
+    let y = y.clamp(0.0, (h - 1) as f32);
+    let (x0, y0) = (x as usize, y as usize);
+    let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
+    let (fx, fy) = (x - x0 as f32, y - y0 as f32);
+    let at = |i: usize, j: usize| {
+        if i < bx0 || j < by0 || i >= bx1 || j >= by1 { [0.0f32; 4] } else { image[j * w + i] }
+    };
+    let (a, b, c, d) = (at(x0, y0), at(x1, y0), at(x0, y1), at(x1, y1));
+    let mut out = [0.0f32; 4];
+    for k in 0..4 {
+        let top = a[k] * (1.0 - fx) + b[k] * fx;
+        let bottom = c[k] * (1.0 - fx) + d[k] * fx;
+        out[k] = top * (1.0 - fy) + bottom * fy;
+    }
+    out
+}
+
+/// The depth (mm from the pupil) whose defocus is `sigma` pixels: `S_f / (1 - sigma / sigma_far)`, infinite at
+/// and beyond the far field's.
+pub fn depth_of(model: &DofModel, sigma: f64) -> f64 {
+    let far = model.far_defocus_px();
+    if far <= 0.0 || sigma >= far {
+        return f64::INFINITY;
+    }
+    model.focus_mm / (1.0 - sigma / far)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::optics::library::builtin_lens;
+
+    #[test]
+    fn hat_weights_sum_to_one_and_depth_inverts_the_defocus() {
+        let model = DofModel::new(&builtin_lens("heliar").unwrap(), 1.0, 2.0, 36.0, (640, 360), false).unwrap();
+        for s in [500.0, 1999.0, 2000.0, 3000.0, 1e6] {
+            let sigma = model.defocus_px(s);
+            assert!((depth_of(&model, sigma) / s - 1.0).abs() < 1e-9, "{s}");
+        }
+        let sigma: Vec<f64> = (0..200).map(|k| -10.0 + 0.173 * k as f64).collect();
+        let mask = crate::aperture::Aperture::default().rasterise(64);
+        let plan = LivePlan::from_defocus(&sigma, &model, &mask, LiveSettings::default());
+        for &s in &sigma {
+            let total: f32 = plan.layers.iter().map(|l| hat(l, s as f32)).sum();
+            assert!((total - 1.0).abs() < 1e-5, "{s}: {total}");
+        }
+        assert!(plan.layers.windows(2).all(|l| l[0].shape[0] > l[1].shape[0]), "far first");
+    }
+}

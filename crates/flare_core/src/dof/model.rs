@@ -1,0 +1,390 @@
+//! The defocus model: the blur diameter of every depth from the lens's first-order data, and the compositing
+//! both methods share (see the parent module's documentation for the derivation).
+
+use crate::image::HdrImage;
+use crate::optics::{D_LINE_NM, Lens, LightPath, PathMatrices};
+
+/// Why a depth of field is refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DofError {
+    #[error("focus distance {0} m: must be a finite distance above 0")]
+    Focus(f64),
+    #[error(
+        "focus distance {focus_m} m is inside the lens: the front vertex is {front_m:.3} m in front of the entrance pupil"
+    )]
+    FocusInsideLens { focus_m: f64, front_m: f64 },
+    #[error(
+        "focus distance {focus_m} m is closer than this lens can focus (its image would be virtual; the focal length is {efl_mm:.1} mm)"
+    )]
+    TooClose { focus_m: f64, efl_mm: f64 },
+    #[error("the lens has no usable first-order data: {0}")]
+    Lens(String),
+    #[error("sensor width {0} mm: must be finite and positive")]
+    Sensor(f64),
+    #[error("depth map is {depth_w}x{depth_h}, the plate {plate_w}x{plate_h}: they must be the same size")]
+    DepthSize { depth_w: u32, depth_h: u32, plate_w: u32, plate_h: u32 },
+    #[error("depth map, pixel ({x}, {y}): depth {value} m is {reason}")]
+    Depth { x: u32, y: u32, value: f64, reason: &'static str },
+    #[error("depth map {path}: {reason}")]
+    DepthFile { path: String, reason: String },
+    #[error("focus pixel ({x}, {y}) is outside the {width}x{height} depth map")]
+    FocusPixel { x: u32, y: u32, width: u32, height: u32 },
+}
+
+/// How the plate is defocused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum DofMethod {
+    /// The layered gather ([`live`]): the app's and the default.
+    #[default]
+    Live,
+    /// Every pixel's own kernel scattered into thin layers ([`reference`]): slow and exact.
+    Reference,
+}
+
+impl DofMethod {
+    pub fn word(self) -> &'static str {
+        match self {
+            Self::Live => "live",
+            Self::Reference => "reference",
+        }
+    }
+}
+
+/// The lens's defocus model for one focus distance, f-number and frame (see the module documentation).
+#[derive(Clone, Debug, PartialEq)]
+pub struct DofModel {
+    /// Entrance pupil: distance behind the first vertex, radius at the chosen f-number (mm).
+    pub pupil_z_mm: f64,
+    pub pupil_radius_mm: f64,
+    /// Focus distance from the entrance pupil (mm).
+    pub focus_mm: f64,
+    /// Lateral magnification of the focus plane onto the sensor (negative: a real, inverted image).
+    pub focus_magnification: f64,
+    /// Front clear semi-aperture (mm).
+    pub front_radius_mm: f64,
+    /// +1 or -1: the stop's image in the entrance pupil is upright or inverted (the mask's orientation).
+    pub mask_sign: f64,
+    /// Sensor millimetres per pixel (the plate spans the sensor width).
+    pub pixel_mm: f64,
+    pub width: u32,
+    pub height: u32,
+    /// Cut the kernel by the front clear aperture off-axis.
+    pub cat_eye: bool,
+    /// The wavelength this model's light has (the d-line unless axial colour is drawn per channel).
+    pub wavelength_nm: f64,
+}
+
+/// The lens's paraxial data a model needs, from the d-line image path.
+struct LensData {
+    system: [f64; 4],
+    pupil_z_mm: f64,
+    pupil_radius_mm: f64,
+    efl_mm: f64,
+    mask_sign: f64,
+}
+
+fn lens_data(lens: &Lens) -> Result<LensData, DofError> {
+    let fo = crate::optics::FirstOrder::d_line(lens).map_err(|e| DofError::Lens(e.to_string()))?;
+    let z_last = lens.vertex_z_mm().last().copied().unwrap_or(0.0);
+    let m = PathMatrices::compute(lens, &LightPath::image(lens), D_LINE_NM, z_last);
+    let a_stop = m.stop_from_entrance.first().map_or(1.0, |s| s.a);
+    let s = fo.system;
+    Ok(LensData {
+        system: [s.a, s.b, s.c, s.d],
+        pupil_z_mm: fo.entrance_pupil_z_mm,
+        pupil_radius_mm: fo.entrance_pupil_radius_mm(),
+        efl_mm: fo.efl_mm,
+        mask_sign: if a_stop < 0.0 { -1.0 } else { 1.0 },
+    })
+}
+
+/// The image distance behind the last vertex and the magnification of an object `d_mm` in front of the first
+/// vertex, through the system matrix `[a, b, c, d]`; `None` for a virtual image or none.
+fn conjugate(system: [f64; 4], d_mm: f64) -> Option<(f64, f64)> {
+    let [a, b, c, d] = system;
+    let denominator = c * d_mm + d;
+    if denominator == 0.0 || !denominator.is_finite() {
+        return None;
+    }
+    let image_mm = -(a * d_mm + b) / denominator;
+    (image_mm > 0.0 && image_mm.is_finite()).then_some((image_mm, a + image_mm * c))
+}
+
+impl DofModel {
+    /// The model of `lens` stopped down by `stop_scale` (the flare's: chosen stop radius / full), focused at
+    /// `focus_m` metres from the entrance pupil, for a `width` x `height` frame spanning `sensor_width_mm`.
+    pub fn new(
+        lens: &Lens,
+        stop_scale: f64,
+        focus_m: f64,
+        sensor_width_mm: f64,
+        (width, height): (u32, u32),
+        cat_eye: bool,
+    ) -> Result<Self, DofError> {
+        if !(focus_m.is_finite() && focus_m > 0.0) {
+            return Err(DofError::Focus(focus_m));
+        }
+        if !(sensor_width_mm.is_finite() && sensor_width_mm > 0.0) {
+            return Err(DofError::Sensor(sensor_width_mm));
+        }
+        let data = lens_data(lens)?;
+        let focus_mm = focus_m * 1000.0;
+        let d_mm = focus_mm - data.pupil_z_mm;
+        if d_mm <= 0.0 {
+            return Err(DofError::FocusInsideLens { focus_m, front_m: data.pupil_z_mm / 1000.0 });
+        }
+        let (_, focus_magnification) =
+            conjugate(data.system, d_mm).ok_or(DofError::TooClose { focus_m, efl_mm: data.efl_mm })?;
+        Ok(Self {
+            pupil_z_mm: data.pupil_z_mm,
+            pupil_radius_mm: data.pupil_radius_mm * stop_scale.clamp(1e-3, 1.0),
+            focus_mm,
+            focus_magnification,
+            front_radius_mm: lens.surfaces.first().map_or(f64::INFINITY, |s| s.semi_aperture_mm),
+            mask_sign: data.mask_sign,
+            pixel_mm: sensor_width_mm / f64::from(width.max(1)),
+            width,
+            height,
+            cat_eye,
+            wavelength_nm: D_LINE_NM,
+        })
+    }
+
+    /// Axial colour: the model for light of `wavelength_nm`, the sensor staying where the d-line focuses
+    /// (`self`). With the system matrix `[[A, B], [C, D]]` at that wavelength, the object plane imaged onto the
+    /// sensor (b behind the last vertex) lies `d = -(B + b D) / (A + b C)` in front of the first vertex, with
+    /// the magnification `A + b C`: the lens is in focus at another distance for each colour, and every blur
+    /// follows from there. Refused (as too close) when no real object plane is imaged there.
+    pub fn at_wavelength(&self, lens: &Lens, wavelength_nm: f64) -> Result<Self, DofError> {
+        let d_line = lens_data(lens)?;
+        let d_mm = self.focus_mm - d_line.pupil_z_mm;
+        let too_close = DofError::TooClose { focus_m: self.focus_mm / 1000.0, efl_mm: d_line.efl_mm };
+        let (image_mm, _) = conjugate(d_line.system, d_mm).ok_or(too_close.clone())?;
+        let z_last = lens.vertex_z_mm().last().copied().unwrap_or(0.0);
+        let m = PathMatrices::compute(lens, &LightPath::image(lens), wavelength_nm, z_last).sensor_from_entrance;
+        let denominator = m.a + image_mm * m.c;
+        let d_lambda = -(m.b + image_mm * m.d) / denominator;
+        if !(d_lambda.is_finite() && d_lambda > 0.0 && denominator.is_finite()) {
+            return Err(too_close);
+        }
+        Ok(Self {
+            focus_mm: d_lambda + d_line.pupil_z_mm,
+            focus_magnification: denominator,
+            wavelength_nm,
+            ..self.clone()
+        })
+    }
+
+    /// Checks one depth (mm from the entrance pupil): positive, not NaN, in front of the first vertex. Infinity
+    /// is the far field.
+    pub fn check_depth_mm(&self, depth_mm: f64) -> Result<(), &'static str> {
+        if depth_mm.is_nan() {
+            Err("not a number")
+        } else if depth_mm <= 0.0 {
+            Err("not above 0")
+        } else if depth_mm <= self.pupil_z_mm {
+            Err("inside the lens (behind its front vertex)")
+        } else {
+            Ok(())
+        }
+    }
+
+    /// The signed blur diameter in pixels of an object `depth_mm` from the entrance pupil: positive behind the
+    /// focus plane, negative in front of it; its magnitude is `D_ep |S - S_f| / S |m_f|` (module documentation).
+    pub fn defocus_px(&self, depth_mm: f64) -> f64 {
+        let factor = if depth_mm.is_infinite() { 1.0 } else { (depth_mm - self.focus_mm) / depth_mm };
+        2.0 * self.pupil_radius_mm * factor * self.focus_magnification.abs() / self.pixel_mm
+    }
+
+    /// The blur diameter on the sensor (mm) of an object `depth_mm` from the entrance pupil.
+    pub fn coc_mm(&self, depth_mm: f64) -> f64 {
+        self.defocus_px(depth_mm).abs() * self.pixel_mm
+    }
+
+    /// The largest blur a depth can have (pixels): that of the far field.
+    pub fn far_defocus_px(&self) -> f64 {
+        self.defocus_px(f64::INFINITY)
+    }
+
+    /// The cat's eye of a source pixel at (`x`, `y`) (pixel centres, from the top-left) at depth `depth_mm`:
+    /// the front aperture's circle in pupil units (centre, radius) that the kernel is cut by; `None` when the
+    /// cat's eye is off.
+    pub fn cat_eye_at(&self, x: f64, y: f64, depth_mm: f64) -> Option<([f64; 2], f64)> {
+        if !self.cat_eye {
+            return None;
+        }
+        // Frame millimetres (X right, Y up) are minus the sensor's (the display is turned by 180 degrees). An
+        // object at height X in the focus plane images at m_f X on the sensor, and its chief ray has the slope
+        // u = -X / S_f, so u = frame / (m_f S_f). The ray through the pupil point P crosses the first vertex's
+        // plane at P (1 - z_ep / S) - u z_ep: in pupil radii, |q - c| <= rho with c = u z_ep / (r_ep shrink).
+        let frame_mm =
+            [(x - 0.5 * f64::from(self.width)) * self.pixel_mm, (0.5 * f64::from(self.height) - y) * self.pixel_mm];
+        let per = 1.0 / (self.focus_magnification * self.focus_mm);
+        let slope = [frame_mm[0] * per, frame_mm[1] * per];
+        let shrink = if depth_mm.is_infinite() { 1.0 } else { 1.0 - self.pupil_z_mm / depth_mm };
+        let shrink = shrink.max(1e-6);
+        let k = self.pupil_z_mm / (self.pupil_radius_mm * shrink);
+        Some(([slope[0] * k, slope[1] * k], self.front_radius_mm / (self.pupil_radius_mm * shrink)))
+    }
+}
+
+/// The defocus of every pixel (signed diameter, pixels) of a depth map in mm, checking each depth.
+pub fn defocus_map(model: &DofModel, depth_mm: &[f64]) -> Result<Vec<f64>, DofError> {
+    let w = model.width.max(1) as usize;
+    depth_mm
+        .iter()
+        .enumerate()
+        .map(|(k, &d)| {
+            model.check_depth_mm(d).map(|()| model.defocus_px(d)).map_err(|reason| DofError::Depth {
+                x: (k % w) as u32,
+                y: (k / w) as u32,
+                value: d / 1000.0,
+                reason,
+            })
+        })
+        .collect()
+}
+
+/// Refuses a plate or depth map of another size than the model's frame.
+pub fn check_size(plate: &HdrImage, depth_mm: &[f64], model: &DofModel) -> Result<(), DofError> {
+    let expected = model.width as usize * model.height as usize;
+    if plate.width != model.width || plate.height != model.height || depth_mm.len() != expected {
+        let (depth_w, depth_h) =
+            if depth_mm.len() == expected { (model.width, model.height) } else { (depth_mm.len() as u32, 1) };
+        return Err(DofError::DepthSize { depth_w, depth_h, plate_w: plate.width, plate_h: plate.height });
+    }
+    Ok(())
+}
+
+/// Composites one layer (premultiplied colour and coverage, `[r, g, b, a]`) over what is behind it:
+/// `out = C + (1 - A) out`, the coverage clamped to 1. Both methods and the GPU use this order of operations.
+#[inline]
+pub fn over(out: &mut [f32; 4], layer: [f32; 4]) {
+    let keep = 1.0 - layer[3].min(1.0);
+    for k in 0..3 {
+        out[k] = layer[k] + keep * out[k];
+    }
+    out[3] = layer[3].min(1.0) + keep * out[3];
+}
+
+/// The composite divided by its coverage (the holes of a 2.5D plate filled by their neighbours' mean); black
+/// where nothing covers (no NaN).
+#[inline]
+pub fn resolve(out: [f32; 4]) -> [f32; 4] {
+    if out[3] > 1e-6 { [out[0] / out[3], out[1] / out[3], out[2] / out[3], 1.0] } else { [0.0, 0.0, 0.0, 1.0] }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::optics::library::builtin_lens;
+
+    fn heliar_model(focus_m: f64) -> DofModel {
+        DofModel::new(&builtin_lens("heliar").unwrap(), 1.0, focus_m, 36.0, (1920, 1080), false).unwrap()
+    }
+
+    #[test]
+    fn the_blur_follows_the_cone_through_the_pupil() {
+        let lens = builtin_lens("heliar").unwrap();
+        let fo = crate::optics::FirstOrder::d_line(&lens).unwrap();
+        let m = heliar_model(2.0);
+        // In focus: no blur; the far field: D_ep |m_f|.
+        assert!(m.defocus_px(2000.0).abs() < 1e-12);
+        let far = fo.entrance_pupil_diameter_mm * m.focus_magnification.abs();
+        assert!((m.coc_mm(f64::INFINITY) - far).abs() < 1e-12);
+        // Twice as far: half the far field's; in front: negative (point-reflected), larger.
+        assert!((m.coc_mm(4000.0) - 0.5 * far).abs() < 1e-12);
+        assert!(m.defocus_px(1000.0) < 0.0 && (m.coc_mm(1000.0) - far).abs() < 1e-12);
+        // Monotonic in depth.
+        let d: Vec<f64> = [500.0, 1000.0, 2000.0, 8000.0, f64::INFINITY].iter().map(|&s| m.defocus_px(s)).collect();
+        assert!(d.windows(2).all(|w| w[0] < w[1]), "{d:?}");
+        // The thin-lens limit far away: m_f -> -f / (S_f - f) roughly; at 100 m it is within 0.5% of -f / S_f.
+        let far_focus = heliar_model(100.0);
+        let thin = -fo.efl_mm / 100_000.0;
+        assert!((far_focus.focus_magnification / thin - 1.0).abs() < 5e-3, "{}", far_focus.focus_magnification);
+    }
+
+    #[test]
+    fn the_magnification_is_the_conjugate_through_the_matrices() {
+        // Check m_f by tracing a paraxial ray: from an axial object point at S_f, a ray at slope 0.001 through
+        // the system crosses the axis at the image distance; the height ratio of an off-axis point is m_f.
+        let lens = builtin_lens("heliar").unwrap();
+        let data = lens_data(&lens).unwrap();
+        let model = heliar_model(1.5);
+        let d_mm = model.focus_mm - data.pupil_z_mm;
+        let (image_mm, m) = conjugate(data.system, d_mm).unwrap();
+        let [a, b, c, dd] = data.system;
+        // An object at height 1 with slope 0 after d and the system: height a + ... then b more to the image.
+        let (y0, u0) = (1.0, 0.0);
+        let (y1, u1) = (y0 + d_mm * u0, u0);
+        let (y2, u2) = (a * y1 + b * u1, c * y1 + dd * u1);
+        let y_image = y2 + image_mm * u2;
+        assert!((y_image - m).abs() < 1e-12);
+        // And any ray from the axial point meets the axis there.
+        let (y1, u1) = (0.0 + d_mm * 0.001, 0.001);
+        let (y2, u2) = (a * y1 + b * u1, c * y1 + dd * u1);
+        assert!((y2 + image_mm * u2).abs() < 1e-12);
+        assert!((m - model.focus_magnification).abs() < 1e-15 && m < 0.0);
+    }
+
+    #[test]
+    fn impossible_focus_and_depths_are_refused_with_the_reason() {
+        let lens = builtin_lens("heliar").unwrap();
+        let new = |f| DofModel::new(&lens, 1.0, f, 36.0, (64, 64), false);
+        assert_eq!(new(0.0).unwrap_err(), DofError::Focus(0.0));
+        assert!(matches!(new(f64::NAN), Err(DofError::Focus(_))));
+        // 1 mm: inside the lens or closer than it can focus.
+        let close = new(0.001).unwrap_err().to_string();
+        assert!(close.contains("inside the lens") || close.contains("closer than"), "{close}");
+        // Just beyond the front vertex but well inside the focal length: a virtual image.
+        let fo = crate::optics::FirstOrder::d_line(&lens).unwrap();
+        let inside_f = (fo.entrance_pupil_z_mm + 0.3 * fo.efl_mm) / 1000.0;
+        assert!(matches!(new(inside_f), Err(DofError::TooClose { .. })), "{:?}", new(inside_f));
+        let m = new(2.0).unwrap();
+        assert_eq!(m.check_depth_mm(-1.0), Err("not above 0"));
+        assert_eq!(m.check_depth_mm(f64::NAN), Err("not a number"));
+        assert!(m.check_depth_mm(f64::INFINITY).is_ok());
+        let m = DofModel { width: 2, height: 1, ..m };
+        let err = defocus_map(&m, &[1000.0, f64::NAN]).unwrap_err().to_string();
+        assert_eq!(err, "depth map, pixel (1, 0): depth NaN m is not a number");
+    }
+
+    #[test]
+    fn axial_colour_moves_the_focus_plane_by_the_paraxial_colour_shift() {
+        // The d-line's own model is the model; for red and blue, the plane in focus differs, and an axial ray
+        // from it traced paraxially at that wavelength meets the axis on the sensor.
+        let lens = builtin_lens("heliar").unwrap();
+        let m = DofModel::new(&lens, 1.0, 3.0, 36.0, (1920, 1080), false).unwrap();
+        let same = m.at_wavelength(&lens, D_LINE_NM).unwrap();
+        assert!((same.focus_mm - m.focus_mm).abs() < 1e-6 && (same.focus_magnification - m.focus_magnification).abs() < 1e-12);
+        for wavelength in [475.0, 650.0] {
+            let c = m.at_wavelength(&lens, wavelength).unwrap();
+            // Trace an axial ray from the colour's focus plane at that wavelength: it meets the axis on the sensor.
+            let z_last = *lens.vertex_z_mm().last().unwrap();
+            let sys = PathMatrices::compute(&lens, &LightPath::image(&lens), wavelength, z_last).sensor_from_entrance;
+            let d = c.focus_mm - m.pupil_z_mm;
+            let (y, u) = (d * 0.001, 0.001);
+            let (y2, u2) = (sys.a * y + sys.b * u, sys.c * y + sys.d * u);
+            let data = lens_data(&lens).unwrap();
+            let (image_mm, _) = conjugate(data.system, m.focus_mm - m.pupil_z_mm).unwrap();
+            assert!((y2 + image_mm * u2).abs() < 1e-9, "{wavelength}: {}", y2 + image_mm * u2);
+            assert!((c.focus_mm - m.focus_mm).abs() > 1e-3, "{wavelength}: no colour shift at all");
+        }
+    }
+
+    #[test]
+    fn the_cat_eye_moves_with_the_field_and_is_off_on_axis() {
+        let lens = builtin_lens("heliar").unwrap();
+        let m = DofModel::new(&lens, 1.0, 2.0, 36.0, (1920, 1080), true).unwrap();
+        let (c, r) = m.cat_eye_at(960.0, 540.0, 5000.0).unwrap();
+        assert!(c[0].abs() < 1e-12 && c[1].abs() < 1e-12 && r > 1.0);
+        // The top-left corner: the front lens cuts the outer side of the pupil, so the circle that keeps the
+        // light lies towards the frame's centre (right and down: +X, -Y).
+        let (corner, _) = m.cat_eye_at(0.0, 0.0, 5000.0).unwrap();
+        assert!(corner[0] > 0.0 && corner[1] < 0.0, "{corner:?}");
+        // Opposite corners cut opposite sides.
+        let (other, _) = m.cat_eye_at(1920.0, 1080.0, 5000.0).unwrap();
+        assert!((corner[0] + other[0]).abs() < 1e-12 && (corner[1] + other[1]).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,329 @@
+//! Depth of field on synthetic scenes made here: points at known depths blur to the model's diameter, six blades
+//! make a hexagon, occlusion behaves as a lens's does, energy is conserved; the live method against the
+//! reference; bad input refused.
+
+use flare_core::aperture::{Aperture, ApertureMask, ApertureShape};
+use flare_core::dof::live::LivePlan;
+use flare_core::dof::{self, DofMethod, DofModel};
+use flare_core::image::HdrImage;
+use flare_core::optics::library::builtin_lens;
+
+const W: u32 = 200;
+const H: u32 = 120;
+
+fn mask(shape: ApertureShape) -> ApertureMask {
+    Aperture { shape, f_number: None }.rasterise(256)
+}
+
+fn model(focus_m: f64) -> DofModel {
+    // The plate spans 12 mm of the sensor: blurs of 10 to 40 px at this size.
+    DofModel::new(&builtin_lens("heliar").unwrap(), 1.0, focus_m, 12.0, (W, H), false).unwrap()
+}
+
+/// A black plate at `background_mm` with single bright pixels at the given (x, y, depth mm).
+fn points(points: &[(u32, u32, f64)], background_mm: f64) -> (HdrImage, Vec<f64>) {
+    let mut plate = HdrImage::black(W, H);
+    let mut depth = vec![background_mm; (W * H) as usize];
+    for &(x, y, d) in points {
+        let k = (y * W + x) as usize;
+        plate.pixels[k] = [100.0, 100.0, 100.0, 1.0];
+        depth[k] = d;
+    }
+    (plate, depth)
+}
+
+fn both(plate: &HdrImage, depth: &[f64], model: &DofModel, mask: &ApertureMask) -> [(&'static str, HdrImage); 2] {
+    [
+        ("reference", dof::apply(plate, depth, model, mask, DofMethod::Reference).unwrap()),
+        ("live", dof::apply(plate, depth, model, mask, DofMethod::Live).unwrap()),
+    ]
+}
+
+/// The luminance-free red channel around (cx, cy) within `r` pixels.
+fn patch(image: &HdrImage, cx: u32, cy: u32, r: i32) -> Vec<(i32, i32, f32)> {
+    let mut out = Vec::new();
+    for dy in -r..=r {
+        for dx in -r..=r {
+            let (x, y) = (cx as i32 + dx, cy as i32 + dy);
+            if x >= 0 && y >= 0 && x < W as i32 && y < H as i32 {
+                out.push((dx, dy, image.pixels[(y as u32 * W + x as u32) as usize][0]));
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn points_blur_to_the_model_diameter_and_keep_their_energy() {
+    let m = model(2.0);
+    let circle = mask(ApertureShape::Circle);
+    // In front of the focus, behind it, far behind; a black sky behind them all.
+    let spots = [(40, 60, 1400.0), (100, 60, 3000.0), (160, 60, 50_000.0)];
+    let (plate, depth) = points(&spots, f64::INFINITY);
+    let energy_in: f64 = plate.pixels.iter().map(|p| f64::from(p[0])).sum();
+    for (name, out) in both(&plate, &depth, &m, &circle) {
+        let energy_out: f64 = out.pixels.iter().map(|p| f64::from(p[0])).sum();
+        assert!((energy_out / energy_in - 1.0).abs() < 2e-3, "{name}: energy {energy_out} of {energy_in}");
+        for &(x, y, d) in &spots {
+            let expected = m.coc_mm(d) / m.pixel_mm;
+            let around = patch(&out, x, y, (expected / 2.0 + 3.0) as i32);
+            let peak = around.iter().map(|p| p.2).fold(0.0f32, f32::max);
+            let total: f32 = around.iter().map(|p| p.2).sum();
+            // The area the disc covers, from its flat top: diameter = 2 sqrt(area / pi).
+            let diameter = 2.0 * (f64::from(total / peak) / std::f64::consts::PI).sqrt();
+            let row_width = around.iter().filter(|p| p.1 == 0 && p.2 > 0.5 * peak).count() as f64;
+            let tolerance = (0.05 * expected).max(1.0);
+            assert!((diameter - expected).abs() <= tolerance, "{name}: at {d} mm diameter {diameter:.2} px, model {expected:.2}");
+            assert!((row_width - expected).abs() <= tolerance + 1.0, "{name}: row {row_width} px, model {expected:.2}");
+            eprintln!("{name}: depth {d} mm: model {expected:.2} px, disc {diameter:.2} px, row {row_width}");
+        }
+    }
+}
+
+#[test]
+fn six_blades_make_a_hexagon() {
+    // Focused at 1 m: the far field blurs to about 50 px.
+    let m = model(1.0);
+    let hex = mask(ApertureShape::Blades { count: 6, rotation_deg: 0.0, roundness: 0.0 });
+    let (plate, depth) = points(&[(100, 60, 50_000.0)], f64::INFINITY);
+    for (name, out) in both(&plate, &depth, &m, &hex) {
+        let around = patch(&out, 100, 60, 30);
+        let peak = around.iter().map(|p| p.2).fold(0.0f32, f32::max);
+        // The farthest lit pixel (half the flat top) along each direction, every 5 degrees.
+        let reach: Vec<f64> = (0..72)
+            .map(|k| {
+                let phi = f64::from(k) * 5.0_f64.to_radians();
+                (0..400)
+                    .map(|s| f64::from(s) * 0.1)
+                    .take_while(|&r| {
+                        let (x, y) = ((100.0 + r * phi.cos()).round() as i32, (60.0 - r * phi.sin()).round() as i32);
+                        around.iter().any(|p| p.0 == x - 100 && p.1 == y - 60 && p.2 > 0.5 * peak)
+                    })
+                    .last()
+                    .unwrap_or(0.0)
+            })
+            .collect();
+        let (lo, hi) = reach.iter().fold((f64::INFINITY, 0.0f64), |(a, b), &r| (a.min(r), b.max(r)));
+        // A regular hexagon: corner / edge distance = 1 / cos 30 deg = 1.155 (a circle: 1).
+        let ratio = hi / lo;
+        assert!((ratio - 1.155).abs() < 0.06, "{name}: corner/edge {ratio:.3} ({lo:.1}..{hi:.1} px)");
+        // Six-fold: the reach repeats every 60 degrees.
+        let period_error = (0..72).map(|k| (reach[k] - reach[(k + 12) % 72]).abs()).fold(0.0, f64::max);
+        assert!(period_error <= 1.5, "{name}: not six-fold ({period_error:.1} px)");
+    }
+}
+
+/// Left half at `left_mm` (red), right half at `right_mm` (blue, with a bright dot pattern).
+fn halves(left_mm: f64, right_mm: f64) -> (HdrImage, Vec<f64>) {
+    let mut plate = HdrImage::black(W, H);
+    let mut depth = vec![0.0; (W * H) as usize];
+    for y in 0..H {
+        for x in 0..W {
+            let k = (y * W + x) as usize;
+            if x < W / 2 {
+                plate.pixels[k] = [1.0, 0.0, 0.0, 1.0];
+                depth[k] = left_mm;
+            } else {
+                let dot = if x % 8 == 0 && y % 8 == 0 { 20.0 } else { 0.5 };
+                plate.pixels[k] = [0.0, 0.0, dot, 1.0];
+                depth[k] = right_mm;
+            }
+        }
+    }
+    (plate, depth)
+}
+
+#[test]
+fn a_sharp_foreground_edge_does_not_bleed_and_a_blurred_one_covers_the_background() {
+    let m = model(2.0);
+    let circle = mask(ApertureShape::Circle);
+    // Red in focus in front of a blue background far behind (blur about 17 px).
+    let (plate, depth) = halves(2000.0, 20_000.0);
+    let blur = m.coc_mm(20_000.0) / m.pixel_mm;
+    assert!(blur > 10.0, "{blur}");
+    for (name, out) in both(&plate, &depth, &m, &circle) {
+        let at = |x: u32| out.pixels[(60 * W + x) as usize];
+        // The red stays red up to its edge: no blue blurred over it...
+        for x in 0..W / 2 {
+            let p = at(x);
+            assert!((p[0] - 1.0).abs() < 1e-3 && p[2] < 1e-3, "{name}: x {x}: {p:?}");
+        }
+        // ...and no red spread over the blue background beside it.
+        for x in W / 2 + 1..W {
+            assert!(at(x)[0] < 1e-3, "{name}: red at x {x}: {:?}", at(x));
+        }
+        // The background itself is blurred: its dots are spread.
+        let peak = (W / 2 + 20..W - 20).map(|x| at(x)[2]).fold(0.0f32, f32::max);
+        assert!(peak < 5.0, "{name}: the dots stay sharp ({peak})");
+    }
+    // Red out of focus in front (about -26 px) of a sharp blue background at the focus.
+    let (plate, depth) = halves(1000.0, 2000.0);
+    let blur = m.coc_mm(1000.0) / m.pixel_mm;
+    for (name, out) in both(&plate, &depth, &m, &circle) {
+        let at = |x: u32| out.pixels[(60 * W + x) as usize];
+        // Beside the edge, the blurred red covers part of the background, less with distance, none beyond
+        // half the blur (the live method's layer is drawn at a third of the resolution here: its edge is
+        // softer by about a texel, 3 px).
+        let red: Vec<f32> = (0..(blur / 2.0) as u32 + 7).map(|d| at(W / 2 + d)[0]).collect();
+        assert!(red[0] > 0.3 && red[2] > 0.15, "{name}: the blurred edge does not cover: {red:?}");
+        assert!(red.windows(2).all(|w| w[1] <= w[0] + 1e-4), "{name}: {red:?}");
+        let beyond = (blur / 2.0) as usize + if name == "live" { 5 } else { 2 };
+        assert!(red[beyond..].iter().all(|&r| r < 1e-3), "{name}: reaches beyond its blur: {red:?}");
+        // Far from the edge the background is as sharp as the plate (in focus).
+        let x = W - 20;
+        assert!((at(x)[2] - plate.pixels[(60 * W + x) as usize][2]).abs() < 1e-3, "{name}");
+    }
+}
+
+#[test]
+fn the_live_method_follows_the_reference_on_a_layered_scene() {
+    let m = model(2.5);
+    let hex = mask(ApertureShape::Blades { count: 6, rotation_deg: 15.0, roundness: 0.2 });
+    // A ramp of depths (ground), a wall in focus, a near post, bright dots all over.
+    let mut plate = HdrImage::black(W, H);
+    let mut depth = vec![0.0; (W * H) as usize];
+    for y in 0..H {
+        for x in 0..W {
+            let k = (y * W + x) as usize;
+            let (xf, yf) = (f64::from(x), f64::from(y));
+            let mut d = 1500.0 + 60.0 * (H - y) as f64;
+            let mut c = [0.2 + 0.3 * (xf / 200.0) as f32, 0.3, 0.25 + 0.2 * (yf / 120.0) as f32];
+            if (70..110).contains(&x) && y < 80 {
+                d = 2500.0;
+                c = [0.6, 0.5, 0.3];
+            }
+            if (20..30).contains(&x) {
+                d = 900.0;
+                c = [0.1, 0.1, 0.1];
+            }
+            if x % 13 == 5 && y % 11 == 3 {
+                c = [8.0, 6.0, 3.0];
+            }
+            plate.pixels[k] = [c[0], c[1], c[2], 1.0];
+            depth[k] = d;
+        }
+    }
+    let [(_, reference), (_, live)] = both(&plate, &depth, &m, &hex);
+    let exposure = flare_core::metrics::exposure_for(&reference);
+    let (r, l) = (
+        flare_core::metrics::display_values(&reference, exposure),
+        flare_core::metrics::display_values(&live, exposure),
+    );
+    let psnr = flare_core::metrics::psnr(&l, &r);
+    let ssim = flare_core::metrics::ssim(&l, &r, W as usize, H as usize);
+    eprintln!("live against reference: {psnr:.1} dB, SSIM {ssim:.4}");
+    assert!(psnr > 30.0 && ssim > 0.9, "{psnr:.1} dB, SSIM {ssim:.4}");
+}
+
+#[test]
+fn the_cat_eye_cuts_the_outer_side_of_corner_bokeh_in_both_methods() {
+    // The whole 36 mm sensor (the corners far off-axis), focused at 0.5 m so that the far field blurs to ~35 px.
+    let m = DofModel::new(&builtin_lens("heliar").unwrap(), 1.0, 0.5, 36.0, (W, H), true).unwrap();
+    let circle = mask(ApertureShape::Circle);
+    let (plate, depth) = points(&[(100, 60, 50_000.0), (22, 22, 50_000.0)], f64::INFINITY);
+    for (name, out) in both(&plate, &depth, &m, &circle) {
+        let area = |cx, cy| {
+            let around = patch(&out, cx, cy, 25);
+            let peak = around.iter().map(|p| p.2).fold(0.0f32, f32::max);
+            let total: f32 = around.iter().map(|p| p.2).sum();
+            let lit: Vec<_> = around.iter().filter(|p| p.2 > 0.5 * peak).collect();
+            // The lit pixels' centroid (X right, Y down).
+            let n = lit.len() as f32;
+            let c = [lit.iter().map(|p| p.0 as f32).sum::<f32>() / n, lit.iter().map(|p| p.1 as f32).sum::<f32>() / n];
+            (total / peak, c)
+        };
+        let (centre, c0) = area(100, 60);
+        let (corner, c1) = area(22, 22);
+        eprintln!("{name}: centre area {centre:.0} px (centroid {c0:?}), corner {corner:.0} px (centroid {c1:?})");
+        assert!(corner < 0.9 * centre, "{name}: {corner} of {centre}");
+        assert!(c0[0].abs() < 0.3 && c0[1].abs() < 0.3, "{name}: {c0:?}");
+        // What is left lies towards the frame's centre (right and down of the point near the top-left corner).
+        let towards = [100.0 - 22.0, 60.0 - 22.0f32];
+        let along = (c1[0] * towards[0] + c1[1] * towards[1]) / towards[0].hypot(towards[1]);
+        assert!(along > 0.5, "{name}: {c1:?}");
+    }
+}
+
+#[test]
+fn bad_depths_and_sizes_are_refused_with_the_reason() {
+    let m = model(2.0);
+    let circle = mask(ApertureShape::Circle);
+    let (plate, mut depth) = points(&[], 3000.0);
+    let small = vec![3000.0; 10];
+    let e = dof::apply(&plate, &small, &m, &circle, DofMethod::Live).unwrap_err().to_string();
+    assert!(e.contains("must be the same size"), "{e}");
+    for (value, reason) in [(-2.0, "not above 0"), (f64::NAN, "not a number"), (0.0, "not above 0")] {
+        depth[W as usize * 7 + 9] = value;
+        for method in [DofMethod::Live, DofMethod::Reference] {
+            let e = dof::apply(&plate, &depth, &m, &circle, method).unwrap_err().to_string();
+            assert!(e.contains("pixel (9, 7)") && e.contains(reason), "{e}");
+        }
+    }
+    // Infinity is the far field, not an error.
+    depth[W as usize * 7 + 9] = f64::INFINITY;
+    assert!(LivePlan::new(&depth, &m, &circle).is_ok());
+}
+
+/// The GPU's live depth of field (`shaders/dof.wgsl`) against its CPU twin, with and without the cat's eye.
+#[test]
+fn the_gpu_live_method_matches_its_cpu_twin() {
+    let Some(ctx) = flare_core::render::gpu::test_context() else { return };
+    let mut gpu = flare_core::render::dof_gpu::GpuDof::new(&ctx.device);
+    let hex = mask(ApertureShape::Blades { count: 7, rotation_deg: 10.0, roundness: 0.1 });
+    let (mut plate, mut depth) = halves(900.0, 30_000.0);
+    for (k, (p, d)) in plate.pixels.iter_mut().zip(&mut depth).enumerate() {
+        if k % 37 == 0 {
+            *p = [30.0, 20.0, 10.0, 1.0];
+            *d = 1500.0 + (k % 7) as f64 * 2000.0;
+        }
+    }
+    for cat_eye in [false, true] {
+        let m = DofModel::new(&builtin_lens("heliar").unwrap(), 1.0, 0.8, 36.0, (W, H), cat_eye).unwrap();
+        let plan = LivePlan::new(&depth, &m, &hex).unwrap();
+        let cpu = plan.render_cpu(&plate);
+        let out = gpu.render(&ctx, &plan, &plate).unwrap();
+        let worst = cpu
+            .pixels
+            .iter()
+            .zip(&out.image.pixels)
+            .map(|(a, b)| (0..3).map(|c| (a[c] - b[c]).abs() / (1.0 + a[c].abs())).fold(0.0f32, f32::max))
+            .fold(0.0f32, f32::max);
+        eprintln!("cat's eye {cat_eye}: {} layers, worst relative difference {worst:.2e}, GPU {:?} ms", plan.layers.len(), out.gpu_ms);
+        assert!(worst < 1e-4, "{worst}");
+        assert!(out.image.pixels.iter().all(|p| p.iter().all(|v| v.is_finite())));
+        // Not two blank images: light is there, and blurred (unlike the plate).
+        let total: f32 = out.image.pixels.iter().map(|p| p[0]).sum();
+        let changed = out.image.pixels.iter().zip(&plate.pixels).filter(|(a, b)| (a[0] - b[0]).abs() > 0.01).count();
+        assert!(total > 100.0 && changed > (W * H / 4) as usize, "{total} {changed}");
+    }
+}
+
+/// Axial colour: each channel of a white point blurs to its own wavelength's diameter (the sensor where the
+/// d-line focuses), by both methods.
+#[test]
+fn with_axial_colour_each_channel_blurs_to_its_own_wavelength() {
+    let lens = builtin_lens("heliar").unwrap();
+    let m = model(1.0);
+    let models: Vec<DofModel> = [650.0, 510.0, 475.0].iter().map(|&nm| m.at_wavelength(&lens, nm).unwrap()).collect();
+    let circle = mask(ApertureShape::Circle);
+    // Near the focus plane the colours' blurs differ most in proportion: a point just in front of it.
+    let d = 800.0;
+    let (plate, depth) = points(&[(100, 60, d)], f64::INFINITY);
+    let sizes: Vec<f64> = models.iter().map(|m| m.coc_mm(d) / m.pixel_mm).collect();
+    eprintln!("at {d} mm: R {:.2} px, G {:.2} px, B {:.2} px", sizes[0], sizes[1], sizes[2]);
+    for method in [DofMethod::Reference, DofMethod::Live] {
+        let out = dof::per_channel(&plate, &models, |p, model| dof::apply(p, &depth, model, &circle, method)).unwrap();
+        for (k, expected) in sizes.iter().enumerate() {
+            let values: Vec<f32> = (0..(2 * 30 + 1) * (2 * 30 + 1))
+                .map(|i| {
+                    let (dx, dy) = (i % 61 - 30, i / 61 - 30);
+                    out.pixels[((60 + dy) * W as i32 + 100 + dx) as usize][k]
+                })
+                .collect();
+            let peak = values.iter().cloned().fold(0.0f32, f32::max);
+            let total: f32 = values.iter().sum();
+            let diameter = 2.0 * (f64::from(total / peak) / std::f64::consts::PI).sqrt();
+            assert!((diameter - expected).abs() <= (0.05 * expected).max(1.0), "{method:?} channel {k}: {diameter:.2} px, model {expected:.2}");
+        }
+    }
+}
