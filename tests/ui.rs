@@ -924,3 +924,29 @@ fn the_depth_of_field_defocuses_the_plate_on_a_thread_as_the_command_line_does()
     assert_eq!(app.derived.plate.as_ref().unwrap().pixels, app.derived.sharp_plate.as_ref().unwrap().pixels);
     assert!(app.doc.dof.enabled && app.doc.background.is_some());
 }
+
+/// The app's depth of field on its own wgpu device (lavapipe here, made to use it although the CPU twin is
+/// faster there) gives the CPU twin's plate to the bit.
+#[test]
+fn the_depth_of_field_runs_on_the_apps_gpu_as_its_cpu_twin_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let (plate, depth) = flare_core::dof::scene::street(256, 144);
+    let (plate_path, depth_path) = (dir.path().join("street.exr"), dir.path().join("street_z.exr"));
+    flare_core::output::write_linear(&plate_path, &plate).unwrap();
+    flare_core::dof::depth::write_exr(&depth_path, &depth).unwrap();
+    let mut doc = heliar();
+    doc.background = Some(plate_path.display().to_string());
+    doc.dof = flare_core::dof::DofDoc { enabled: true, depth: Some(depth_path.display().to_string()), focus_m: 5.0, ..Default::default() };
+    let Some(mut h) = gpu_harness(Some(doc)) else { return };
+    // The first frame may have started a job on the CPU twin already: a new focus starts one on the GPU.
+    h.state_mut().dof_work.gpu_on_software = true;
+    h.state_mut().doc.dof.focus_m = 1.0;
+    step_until(&mut h, 120.0, |app| !app.dof_work.busy() && app.dof_work.status.contains("focus 1.00 m"));
+    let app = h.state();
+    let status = app.dof_work.status.clone();
+    assert!(status.contains("live on") && !status.contains("CPU twin"), "{status}");
+    let shown = app.derived.plate.clone().unwrap();
+    let cpu = flare_core::shot::plate::defocus(&app.doc, app.flare().unwrap(), app.playhead, app.derived.sharp_plate.as_ref().unwrap())
+        .unwrap();
+    assert_eq!(shown.pixels, cpu.pixels, "{status}");
+}

@@ -44,6 +44,9 @@ pub struct DofWork {
     pub status: String,
     /// The live method's pipelines on the app's device, made once.
     gpu: Arc<Mutex<Option<GpuDof>>>,
+    /// Draw the live method on the app's device even when it is a software adapter (where the CPU twin is
+    /// faster; the tests use it to run the GPU path on lavapipe).
+    pub gpu_on_software: bool,
 }
 
 impl DofWork {
@@ -139,7 +142,8 @@ impl DofWork {
         let frame = derived.playhead;
         let device: Option<AppDevice> = gpu.map(|rs| {
             let info = rs.adapter.get_info();
-            (rs.device.clone(), rs.queue.clone(), info.name, info.device_type == wgpu::DeviceType::Cpu)
+            let software = info.device_type == wgpu::DeviceType::Cpu && !self.gpu_on_software;
+            (rs.device.clone(), rs.queue.clone(), info.name, software)
         });
         let pipelines = self.gpu.clone();
         Job::spawn("reading the depth map", move |cancel, report| {

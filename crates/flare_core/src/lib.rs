@@ -13,7 +13,9 @@
 //! tracer its twin); [`lut`] bakes the non-linear ones into LUTs blended at run time; [`metrics`]
 //! measures any image against the reference. [`timeline`] animates a document over frames and [`shot`] makes
 //! a shot of it: plate sequences, tracks, the light found in the plate, and sequences rendered frame by frame
-//! through [`frame`]. [`color`], [`image`], [`files`] and [`fingerprint`] are the small
+//! through [`frame`]. [`dof`] defocuses the plate through the same lens and aperture from a depth map (an
+//! exact layered reference and a live layered method that `render` also runs on the GPU) before the flare is
+//! drawn over it. [`color`], [`image`], [`files`] and [`fingerprint`] are the small
 //! shared pieces (tonemaps and exposures in stops, images, atomic writes, stable hashes).
 //!
 //! All numerics are f64 on the CPU; every singular case (total internal reflection, a ray missing a surface,
