@@ -162,7 +162,8 @@ impl DofWork {
             if doc.dof.method == DofMethod::Reference {
                 report(0.2, "the reference method (every pixel's kernel, on the CPU)".into());
                 let image = dof::per_channel(&plate, &models, |plate, model| {
-                    dof::reference::render(plate, &depth_mm, model, &flare.mask).map_err(|e| e.to_string())
+                    dof::reference::render_until(plate, &depth_mm, model, &flare.mask, dof::reference::LAYER_PX, cancel)
+                        .map_err(|e| e.to_string())
                 })?;
                 return Ok((image, format!("reference on the CPU, {focus}, {:.2} s", started.elapsed().as_secs_f64())));
             }
@@ -192,7 +193,7 @@ impl DofWork {
                     _ => String::new(),
                 };
                 how = format!("live on the CPU twin{why}, {layers} layers");
-                Ok::<_, String>(plan.render_cpu(plate))
+                plan.render_cpu_until(plate, cancel).ok_or_else(|| "cancelled".to_string())
             })?;
             Ok((image, format!("{how}, {focus}, {:.0} ms", started.elapsed().as_secs_f64() * 1e3)))
         })

@@ -261,7 +261,12 @@ fn bad_depths_and_sizes_are_refused_with_the_reason() {
     }
     // Infinity is the far field, not an error.
     depth[W as usize * 7 + 9] = f64::INFINITY;
-    assert!(LivePlan::new(&depth, &m, &circle).is_ok());
+    let plan = LivePlan::new(&depth, &m, &circle).unwrap();
+    // A cancelled defocus stops (the app cancels the one a newer focus replaced).
+    let cancel = std::sync::atomic::AtomicBool::new(true);
+    assert!(plan.render_cpu_until(&plate, &cancel).is_none());
+    let e = dof::reference::render_until(&plate, &depth, &m, &circle, 0.5, &cancel).unwrap_err();
+    assert_eq!(e, dof::DofError::Cancelled);
 }
 
 /// The GPU's live depth of field (`shaders/dof.wgsl`) against its CPU twin, with and without the cat's eye.

@@ -279,14 +279,23 @@ impl LivePlan {
 
     /// The live method on the CPU: the twin of `render::dof_gpu` (see the module documentation).
     pub fn render_cpu(&self, plate: &HdrImage) -> HdrImage {
+        self.render_cpu_until(plate, &std::sync::atomic::AtomicBool::new(false)).expect("never cancelled")
+    }
+
+    /// [`Self::render_cpu`] that stops between layers once `cancel` is set (`None`): the app's focus slider
+    /// starts a new defocus at every step and must not leave the old ones running.
+    pub fn render_cpu_until(&self, plate: &HdrImage, cancel: &std::sync::atomic::AtomicBool) -> Option<HdrImage> {
         let (w, h) = (self.width as usize, self.height as usize);
         let mut out = vec![[0.0f32; 4]; w * h];
         for layer in &self.layers {
+            if cancel.load(std::sync::atomic::Ordering::Relaxed) {
+                return None;
+            }
             let low = self.split(layer, plate);
             let gathered = self.gather(layer, &low);
             composite(layer, &gathered, &mut out);
         }
-        HdrImage { width: self.width, height: self.height, pixels: out.into_par_iter().map(resolve).collect() }
+        Some(HdrImage { width: self.width, height: self.height, pixels: out.into_par_iter().map(resolve).collect() })
     }
 
     /// Step 1: the layer's premultiplied colour and coverage, each pixel shared among the four nearest texel

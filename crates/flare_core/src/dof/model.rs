@@ -27,6 +27,8 @@ pub enum DofError {
     Depth { x: u32, y: u32, value: f64, reason: &'static str },
     #[error("depth map {path}: {reason}")]
     DepthFile { path: String, reason: String },
+    #[error("cancelled")]
+    Cancelled,
     #[error("focus pixel ({x}, {y}) is outside the {width}x{height} depth map")]
     FocusPixel { x: u32, y: u32, width: u32, height: u32 },
 }

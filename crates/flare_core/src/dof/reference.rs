@@ -61,6 +61,18 @@ pub fn render_layers(
     mask: &ApertureMask,
     layer_px: f64,
 ) -> Result<HdrImage, DofError> {
+    render_until(plate, depth_mm, model, mask, layer_px, &std::sync::atomic::AtomicBool::new(false))
+}
+
+/// [`render_layers`] that stops between layers once `cancel` is set ([`DofError::Cancelled`]).
+pub fn render_until(
+    plate: &HdrImage,
+    depth_mm: &[f64],
+    model: &DofModel,
+    mask: &ApertureMask,
+    layer_px: f64,
+    cancel: &std::sync::atomic::AtomicBool,
+) -> Result<HdrImage, DofError> {
     super::model::check_size(plate, depth_mm, model)?;
     let sigma = defocus_map(model, depth_mm)?;
     let (w, h) = (plate.width as usize, plate.height as usize);
@@ -69,6 +81,9 @@ pub fn render_layers(
     let mut out = vec![[0.0f32; 4]; w * h];
     let mut start = 0;
     while start < order.len() {
+        if cancel.load(std::sync::atomic::Ordering::Relaxed) {
+            return Err(DofError::Cancelled);
+        }
         let first = sigma[order[start]];
         let end = start + order[start..].partition_point(|&k| first - sigma[k] <= layer_px);
         let mut layer: Vec<(usize, Key)> = order[start..end]
