@@ -12,7 +12,7 @@
 
 use wgpu_profiler::{GpuProfiler, GpuProfilerSettings};
 
-use super::gpu::{GpuContext, GpuError, PassTimes};
+use super::gpu::{GpuContext, GpuError, PassTimes, map_read, storage};
 use super::shaders::DOF_WGSL;
 use crate::dof::live::{LiveLayer, LivePlan};
 use crate::image::HdrImage;
@@ -95,16 +95,7 @@ impl GpuDof {
         if plate.width != w || plate.height != h {
             return Err(GpuError::Readback(format!("plate {}x{} for a {w}x{h} plan", plate.width, plate.height)));
         }
-        let buffer = |label: &str, contents: &[u8], usage: wgpu::BufferUsages| {
-            let buffer = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size: (contents.len() as u64).max(16).next_multiple_of(4),
-                usage: usage | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
-            queue.write_buffer(&buffer, 0, contents);
-            buffer
-        };
+        let buffer = |label: &str, contents: &[u8], usage| storage(device, queue, label, contents, usage);
         let empty = |label: &str, size: u64, usage: wgpu::BufferUsages| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
@@ -190,14 +181,8 @@ impl GpuDof {
         encoder.copy_buffer_to_buffer(&out, 0, &readback, 0, frame_bytes);
         queue.submit(Some(encoder.finish()));
         let _ = self.profiler.end_frame();
-        let (sender, receiver) = std::sync::mpsc::channel();
-        readback.slice(..).map_async(wgpu::MapMode::Read, move |r| {
-            let _ = sender.send(r);
-        });
-        device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
-        receiver.recv().map_err(|e| GpuError::Readback(e.to_string()))?.map_err(|e| GpuError::Readback(e.to_string()))?;
-        let view = readback.slice(..).get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?;
-        let pixels: Vec<[f32; 4]> = bytemuck::cast_slice(&view[..frame_bytes as usize]).to_vec();
+        let view = map_read(device, &readback, frame_bytes)?;
+        let pixels: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&view);
         let mut gpu_ms = None;
         while let Some(results) = self.profiler.process_finished_frame(queue.get_timestamp_period()) {
             let times = PassTimes::from_results(&results);

@@ -790,19 +790,45 @@ pub(crate) fn read_texture(ctx: &GpuContext, texture: &wgpu::Texture, bytes_per_
         size,
     );
     ctx.queue.submit(Some(encoder.finish()));
-    let (sender, receiver) = std::sync::mpsc::channel();
-    buffer.slice(..).map_async(wgpu::MapMode::Read, move |r| {
-        let _ = sender.send(r);
-    });
-    ctx.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
-    receiver.recv().map_err(|e| GpuError::Readback(e.to_string()))?.map_err(|e| GpuError::Readback(e.to_string()))?;
-    let view = buffer.slice(..).get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?;
+    let view = map_read(&ctx.device, &buffer, u64::from(padded * size.height))?;
     let mut out = Vec::with_capacity((row * size.height) as usize);
     for y in 0..size.height as usize {
         let start = y * padded as usize;
         out.extend_from_slice(&view[start..start + row as usize]);
     }
     Ok(out)
+}
+
+/// The first `bytes` of a `MAP_READ` buffer whose copy has been submitted: maps it and waits for the GPU.
+pub(crate) fn map_read(device: &wgpu::Device, buffer: &wgpu::Buffer, bytes: u64) -> Result<Vec<u8>, GpuError> {
+    let (sender, receiver) = std::sync::mpsc::channel();
+    buffer.slice(..).map_async(wgpu::MapMode::Read, move |r| {
+        let _ = sender.send(r);
+    });
+    device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
+    receiver.recv().map_err(|e| GpuError::Readback(e.to_string()))?.map_err(|e| GpuError::Readback(e.to_string()))?;
+    let view = buffer.slice(..).get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?;
+    Ok(view[..bytes as usize].to_vec())
+}
+
+/// A buffer of `usage` holding `contents`, written through the queue (on a lost device this is an error the
+/// device records, not a panic as a buffer mapped at creation would be).
+pub(crate) fn storage(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    label: &str,
+    contents: &[u8],
+    usage: wgpu::BufferUsages,
+) -> wgpu::Buffer {
+    let size = (contents.len() as u64).max(16).next_multiple_of(4);
+    let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size,
+        usage: usage | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    queue.write_buffer(&buffer, 0, contents);
+    buffer
 }
 
 /// Renders `scene` (with the LUT instances `lut`) headless into a texture of the renderer's format through

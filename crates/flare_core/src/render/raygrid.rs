@@ -27,7 +27,7 @@
 //! [`GpuError::Lost`] (the command line then traces on the CPU).
 
 use bytemuck::{Pod, Zeroable};
-use super::gpu::{GpuContext, GpuError, read_texture, texture_2d};
+use super::gpu::{GpuContext, GpuError, map_read, read_texture, storage, texture_2d};
 use super::shaders::{RAYGRID_SPLAT_WGSL, RAYGRID_TRACE_WGSL};
 use crate::image::HdrImage;
 use crate::raytrace::{DENSE_TABLE_SAMPLES, PlannedJob, RayGridError, RayGridRenderer, Window};
@@ -333,14 +333,8 @@ impl GpuRayGrid {
         let (_, vertices) = self.trace(device, queue, &mut encoder, renderer, &planned, window);
         encoder.copy_buffer_to_buffer(&vertices, 0, &readback, 0, size);
         queue.submit(Some(encoder.finish()));
-        let (sender, receiver) = std::sync::mpsc::channel();
-        readback.slice(..).map_async(wgpu::MapMode::Read, move |r| {
-            let _ = sender.send(r);
-        });
-        device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
-        receiver.recv().map_err(|e| GpuError::Readback(e.to_string()))?.map_err(|e| GpuError::Readback(e.to_string()))?;
-        let view = readback.slice(..).get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?;
-        let out: Vec<GpuVertex> = bytemuck::cast_slice(&view[..size as usize]).to_vec();
+        let view = map_read(device, &readback, size)?;
+        let out: Vec<GpuVertex> = bytemuck::pod_collect_to_vec(&view);
         Ok((planned, out))
     }
 }
@@ -446,26 +440,6 @@ fn upload(renderer: &RayGridRenderer, jobs: &[PlannedJob], window: Window) -> Up
         vertex += ((job.cells + 1) * (job.cells + 1)) as u32;
     }
     out
-}
-
-/// A buffer of `usage` holding `contents`, written through the queue (on a lost device this is an error the
-/// device records, not a panic as a buffer mapped at creation would be).
-fn storage(
-    device: &wgpu::Device,
-    queue: &wgpu::Queue,
-    label: &str,
-    contents: &[u8],
-    usage: wgpu::BufferUsages,
-) -> wgpu::Buffer {
-    let size = (contents.len() as u64).max(16).next_multiple_of(4);
-    let buffer = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size,
-        usage: usage | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    queue.write_buffer(&buffer, 0, contents);
-    buffer
 }
 
 /// `v` as f32, 0 where it is not finite.
