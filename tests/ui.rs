@@ -875,19 +875,30 @@ fn a_transcription_that_needs_clipping_opens_with_its_warning_in_the_lens_panel(
     assert!(h.query_by_label_contains("(i) surfaces 3 and 4").is_none());
 }
 
+/// The Heliar over the synthetic street of `width` x `height` written into `dir` (plate and depth map), focused
+/// at 5 m, its depth of field `enabled` or not.
+fn street_doc(dir: &std::path::Path, width: u32, height: u32, enabled: bool) -> flare_core::preset::Document {
+    let (plate, depth) = flare_core::dof::scene::street(width, height);
+    let (plate_path, depth_path) = (dir.join("street.exr"), dir.join("street_z.exr"));
+    flare_core::output::write_linear(&plate_path, &plate).unwrap();
+    flare_core::dof::depth::write_exr(&depth_path, &depth).unwrap();
+    let mut doc = heliar();
+    doc.background = Some(plate_path.display().to_string());
+    doc.dof = flare_core::dof::DofDoc {
+        enabled,
+        depth: Some(depth_path.display().to_string()),
+        focus_m: 5.0,
+        ..Default::default()
+    };
+    doc
+}
+
 /// The DoF row: a plate defocused on a thread (the CPU twin here, no GPU in this harness) exactly as the
 /// command line defocuses it from the same document; focus by click; a depth map of another size said once.
 #[test]
 fn the_depth_of_field_defocuses_the_plate_on_a_thread_as_the_command_line_does() {
     let dir = tempfile::tempdir().unwrap();
-    let (plate, depth) = flare_core::dof::scene::street(320, 180);
-    let (plate_path, depth_path) = (dir.path().join("street.exr"), dir.path().join("street_z.exr"));
-    flare_core::output::write_linear(&plate_path, &plate).unwrap();
-    flare_core::dof::depth::write_exr(&depth_path, &depth).unwrap();
-    let mut doc = heliar();
-    doc.background = Some(plate_path.display().to_string());
-    doc.dof.depth = Some(depth_path.display().to_string());
-    doc.dof.focus_m = 5.0;
+    let doc = street_doc(dir.path(), 320, 180, false);
     let mut h = harness_on(Some(doc));
     h.run();
     // Off: the plate as read.
@@ -930,13 +941,7 @@ fn the_depth_of_field_defocuses_the_plate_on_a_thread_as_the_command_line_does()
 #[test]
 fn the_depth_of_field_runs_on_the_apps_gpu_as_its_cpu_twin_does() {
     let dir = tempfile::tempdir().unwrap();
-    let (plate, depth) = flare_core::dof::scene::street(256, 144);
-    let (plate_path, depth_path) = (dir.path().join("street.exr"), dir.path().join("street_z.exr"));
-    flare_core::output::write_linear(&plate_path, &plate).unwrap();
-    flare_core::dof::depth::write_exr(&depth_path, &depth).unwrap();
-    let mut doc = heliar();
-    doc.background = Some(plate_path.display().to_string());
-    doc.dof = flare_core::dof::DofDoc { enabled: true, depth: Some(depth_path.display().to_string()), focus_m: 5.0, ..Default::default() };
+    let doc = street_doc(dir.path(), 256, 144, true);
     let Some(mut h) = gpu_harness(Some(doc)) else { return };
     // The first frame may have started a job on the CPU twin already: a new focus starts one on the GPU.
     h.state_mut().dof_work.gpu_on_software = true;

@@ -20,6 +20,10 @@ use crate::preset::Document;
 /// says which file and why.
 pub fn frame_plate(doc: &Document, flare: &PreparedFlare, frame: i64, path: &Path) -> Result<HdrImage, String> {
     let plate = read_plate(path).map_err(|e| e.to_string())?;
+    // With the depth of field off the plate is handed on as read (no copy of a frame per frame).
+    if !doc.dof.enabled {
+        return Ok(plate);
+    }
     defocus(doc, flare, frame, &plate)
 }
 
