@@ -430,7 +430,17 @@ fn render_with_the_ray_traced_methods() {
     // Asked for the CPU, ray grids stay there; the reference is never on the GPU.
     let out = dir.path().join("cpu.png");
     let result = flarelab(&[
-        "render", "tessar", "--size", "96x64", "--method", "raygrid", "--grid", "16", "--device", "cpu", "-o",
+        "render",
+        "tessar",
+        "--size",
+        "96x64",
+        "--method",
+        "raygrid",
+        "--grid",
+        "16",
+        "--device",
+        "cpu",
+        "-o",
         out.to_str().unwrap(),
     ]);
     assert!(String::from_utf8_lossy(&result.stderr).contains("ray-traced on the CPU"));
@@ -1173,7 +1183,18 @@ fn dof_defocuses_a_plate_and_refuses_bad_depths_and_sizes() {
     // A depth map of another size.
     let small = flare_core::dof::depth::DepthMap { width: 10, height: 10, metres: vec![3.0; 100] };
     flare_core::dof::depth::write_exr(Path::new(&p("small.exr")), &small).unwrap();
-    let e = refusal(&["dof", &p("street.exr"), "--depth", &p("small.exr"), "--focus-m", "5", "--device", "cpu", "-o", &p("bad1.exr")]);
+    let e = refusal(&[
+        "dof",
+        &p("street.exr"),
+        "--depth",
+        &p("small.exr"),
+        "--focus-m",
+        "5",
+        "--device",
+        "cpu",
+        "-o",
+        &p("bad1.exr"),
+    ]);
     assert!(e.contains("10x10") && e.contains("240x135"), "{e}");
     // Negative and NaN depths, named by pixel.
     for (value, reason) in [(-1.0, "not above 0"), (f64::NAN, "not a number")] {
@@ -1185,15 +1206,40 @@ fn dof_defocuses_a_plate_and_refuses_bad_depths_and_sizes() {
             (d, d, d)
         })
         .unwrap();
-        let e = refusal(&["dof", &p("street.exr"), "--depth", &p("broken.exr"), "--focus-m", "5", "--device", "cpu", "-o", &p("bad2.exr")]);
+        let e = refusal(&[
+            "dof",
+            &p("street.exr"),
+            "--depth",
+            &p("broken.exr"),
+            "--focus-m",
+            "5",
+            "--device",
+            "cpu",
+            "-o",
+            &p("bad2.exr"),
+        ]);
         assert!(e.contains("pixel (142, 0)") && e.contains(reason), "{e}");
     }
     // A focus distance inside the lens, and one closer than it focuses.
-    let e = refusal(&["dof", &p("street.exr"), "--depth", &p("z.exr"), "--lens", "heliar", "--focus-m", "0.001", "-o", &p("bad3.exr")]);
-    assert!(e.contains("inside the lens"), "{e}");
-    let e = refusal(&["dof", &p("street.exr"), "--depth", &p("z.exr"), "--lens", "heliar", "--focus-m", "0.1", "-o", &p("bad4.exr")]);
-    assert!(e.contains("closer than this lens can focus"), "{e}");
-    let e = refusal(&["dof", &p("street.exr"), "--depth", &p("z.exr"), "--method", "reference", "--device", "gpu", "-o", &p("bad5.exr")]);
+    for (focus_m, out, reason) in
+        [("0.001", "bad3.exr", "inside the lens"), ("0.1", "bad4.exr", "closer than this lens can focus")]
+    {
+        let (street, depth, out) = (p("street.exr"), p("z.exr"), p(out));
+        let e = refusal(&["dof", &street, "--depth", &depth, "--lens", "heliar", "--focus-m", focus_m, "-o", &out]);
+        assert!(e.contains(reason), "{e}");
+    }
+    let e = refusal(&[
+        "dof",
+        &p("street.exr"),
+        "--depth",
+        &p("z.exr"),
+        "--method",
+        "reference",
+        "--device",
+        "gpu",
+        "-o",
+        &p("bad5.exr"),
+    ]);
     assert!(e.contains("reference runs on the CPU"), "{e}");
     for bad in ["bad1.exr", "bad2.exr", "bad3.exr", "bad4.exr", "bad5.exr"] {
         assert!(!dir.path().join(bad).exists(), "{bad} was written");
@@ -1206,7 +1252,9 @@ fn dof_defocuses_a_plate_and_refuses_bad_depths_and_sizes() {
 fn render_with_a_preset_whose_depth_of_field_is_on() {
     let dir = tempfile::tempdir().unwrap();
     let p = |name: &str| dir.path().join(name).display().to_string();
-    assert!(flarelab(&["synth-dof", "--size", "192x108", "-o", &p("street.exr"), "--depth", &p("z.exr")]).status.success());
+    assert!(
+        flarelab(&["synth-dof", "--size", "192x108", "-o", &p("street.exr"), "--depth", &p("z.exr")]).status.success()
+    );
     assert!(flarelab(&["preset", "new", "heliar", "-o", &p("look.json")]).status.success());
     let mut doc: Value = serde_json::from_str(&std::fs::read_to_string(p("look.json")).unwrap()).unwrap();
     doc["dof"] = serde_json::json!({"enabled": true, "depth": p("z.exr"), "focus_m": 2.0});

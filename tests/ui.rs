@@ -951,7 +951,12 @@ fn the_depth_of_field_runs_on_the_apps_gpu_as_its_cpu_twin_does() {
     let status = app.dof_work.status.clone();
     assert!(status.contains("live on") && !status.contains("CPU twin"), "{status}");
     let shown = app.derived.plate.clone().unwrap();
-    let cpu = flare_core::shot::plate::defocus(&app.doc, app.flare().unwrap(), app.playhead, app.derived.sharp_plate.as_ref().unwrap())
-        .unwrap();
+    let cpu = flare_core::shot::plate::defocus(
+        &app.doc,
+        app.flare().unwrap(),
+        app.playhead,
+        app.derived.sharp_plate.as_ref().unwrap(),
+    )
+    .unwrap();
     assert_eq!(shown.pixels, cpu.pixels, "{status}");
 }

@@ -342,7 +342,9 @@ impl Derived {
     /// sharp plate back).
     pub fn show_plate(&mut self, plate: Option<Arc<HdrImage>>, gpu: Option<&RenderState>) {
         if let Some(rs) = gpu {
-            ViewportResources::with(rs, |res, device, queue| res.renderer.set_background(device, queue, plate.as_deref()));
+            ViewportResources::with(rs, |res, device, queue| {
+                res.renderer.set_background(device, queue, plate.as_deref())
+            });
             self.rebuilds.textures += 1;
         }
         self.plate = plate;

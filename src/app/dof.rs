@@ -87,7 +87,13 @@ impl DofWork {
     }
 
     /// Starts, polls or undoes the defocus of `derived`'s plate (see the module documentation).
-    pub fn sync(&mut self, derived: &mut Derived, doc: &Document, gpu: Option<&RenderState>, events: &mut Vec<SyncEvent>) {
+    pub fn sync(
+        &mut self,
+        derived: &mut Derived,
+        doc: &Document,
+        gpu: Option<&RenderState>,
+        events: &mut Vec<SyncEvent>,
+    ) {
         let Some(key) = Self::key(derived, doc) else {
             if let Some((_, job)) = self.job.take() {
                 job.cancel();
@@ -158,7 +164,8 @@ impl DofWork {
             }
             let model = &models[0];
             let colour = if models.len() == 3 { ", R, G, B each at its wavelength" } else { "" };
-            let focus = format!("focus {:.2} m, far field {:.0} px{colour}", model.focus_mm / 1000.0, model.far_defocus_px());
+            let focus =
+                format!("focus {:.2} m, far field {:.0} px{colour}", model.focus_mm / 1000.0, model.far_defocus_px());
             if doc.dof.method == DofMethod::Reference {
                 report(0.2, "the reference method (every pixel's kernel, on the CPU)".into());
                 let image = dof::per_channel(&plate, &models, |plate, model| {
@@ -199,4 +206,3 @@ impl DofWork {
         })
     }
 }
-

@@ -35,7 +35,11 @@ impl FlareLabApp {
         ui.horizontal(|ui| {
             let mut focus = self.doc.dof.focus_m;
             let r = ui.add(
-                egui::Slider::new(&mut focus, 0.2..=200.0).logarithmic(true).fixed_decimals(2).suffix(" m").text("focus"),
+                egui::Slider::new(&mut focus, 0.2..=200.0)
+                    .logarithmic(true)
+                    .fixed_decimals(2)
+                    .suffix(" m")
+                    .text("focus"),
             );
             if r.changed() {
                 self.doc.dof.focus_m = focus;
@@ -58,8 +62,9 @@ impl FlareLabApp {
             });
             ui.checkbox(&mut self.doc.dof.cat_eye, "cat's eye")
                 .on_hover_text("cut the blur off-axis by the front lens's clear aperture");
-            ui.checkbox(&mut self.doc.dof.axial_colour, "axial colour")
-                .on_hover_text("R, G and B each defocused at its own wavelength, as the lens focuses them (3x the work)");
+            ui.checkbox(&mut self.doc.dof.axial_colour, "axial colour").on_hover_text(
+                "R, G and B each defocused at its own wavelength, as the lens focuses them (3x the work)",
+            );
         });
         if self.doc.dof.depth.as_deref().is_some_and(|d| d.to_ascii_lowercase().ends_with(".png")) {
             ui.horizontal(|ui| {

@@ -133,7 +133,11 @@ impl DragBench {
         let gpu = if self.gpu_ms.is_empty() {
             "no GPU timestamps".to_owned()
         } else {
-            format!("the flare's passes took a median {:.1} ms of GPU time ({})", median(&mut self.gpu_ms), self.adapter)
+            format!(
+                "the flare's passes took a median {:.1} ms of GPU time ({})",
+                median(&mut self.gpu_ms),
+                self.adapter
+            )
         };
         let start = self.rebuilds_at_start.unwrap_or(rebuilds);
         let line = format!(

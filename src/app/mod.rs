@@ -27,8 +27,8 @@ pub mod bake;
 pub mod derived;
 pub mod dof;
 mod dof_row;
-pub mod drag_bench;
 pub mod draft;
+pub mod drag_bench;
 mod file_actions;
 pub mod files;
 pub mod ghost_report;
@@ -545,7 +545,9 @@ impl FlareLabApp {
         };
         let gpu_time = match (self.gpu.as_ref(), self.gpu_pass_times()) {
             (_, Some((adapter, times))) => format!("GPU time ({adapter}, timestamp queries): {}", times.summary()),
-            (Some(_), None) => "GPU time: not measured (no timestamp queries on this adapter, or none back yet)".to_owned(),
+            (Some(_), None) => {
+                "GPU time: not measured (no timestamp queries on this adapter, or none back yet)".to_owned()
+            }
             (None, None) => "no GPU".to_owned(),
         };
         ui.label(format!("{quality} | {gpu_time}"));
@@ -1032,8 +1034,8 @@ impl FlareLabApp {
     /// Whether this UI frame draws a draft (see [`draft`]): while a drag moves (the light, a slider, a drag
     /// value), an arrow key is held or the drag bench sweeps. The frame is rebuilt when that changes.
     fn draft_step(&mut self, ctx: &egui::Context) {
-        let dragging = ctx.dragged_id().is_some()
-            && ctx.input(|i| i.pointer.time_since_last_movement() < draft::STILL_S);
+        let dragging =
+            ctx.dragged_id().is_some() && ctx.input(|i| i.pointer.time_since_last_movement() < draft::STILL_S);
         let arrows = ctx.input(|i| {
             [egui::Key::ArrowLeft, egui::Key::ArrowRight, egui::Key::ArrowUp, egui::Key::ArrowDown]
                 .iter()

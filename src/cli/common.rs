@@ -219,4 +219,3 @@ impl From<MethodArg> for flare_core::dof::DofMethod {
         }
     }
 }
-

@@ -74,7 +74,8 @@ pub fn run(args: &DofArgs) -> Result<()> {
     if args.method == MethodArg::Reference && args.device == DeviceArg::Gpu {
         bail!("--device gpu: the reference runs on the CPU (it is the exact method); use --method live on the GPU");
     }
-    let optics = OpticsChoice { file: args.lens.clone(), preset: args.preset.clone(), coating: None, f_number: args.f_number };
+    let optics =
+        OpticsChoice { file: args.lens.clone(), preset: args.preset.clone(), coating: None, f_number: args.f_number };
     let mut doc = optics.document()?;
     if let Some(spec) = &args.aperture {
         doc.aperture = parse_aperture(spec, doc.aperture.f_number)?;
@@ -122,9 +123,9 @@ pub fn run(args: &DofArgs) -> Result<()> {
         (_, DeviceArg::Gpu) => {
             Some(GpuContext::headless(false).map_err(|e| anyhow::anyhow!("{e} (or use --device cpu)"))?)
         }
-        (_, DeviceArg::Auto) => GpuContext::headless(false)
-            .map_err(|e| eprintln!("no GPU ({e}): the live method's CPU twin draws it"))
-            .ok(),
+        (_, DeviceArg::Auto) => {
+            GpuContext::headless(false).map_err(|e| eprintln!("no GPU ({e}): the live method's CPU twin draws it")).ok()
+        }
     };
     let mut gpu_dof = gpu.as_ref().map(|ctx| GpuDof::new(&ctx.device));
     let mut said = Vec::new();
@@ -147,7 +148,9 @@ pub fn run(args: &DofArgs) -> Result<()> {
                 Err(e) if args.device == DeviceArg::Gpu && !matches!(e, flare_core::render::gpu::GpuError::Lost(_)) => {
                     bail!("the live method on {}: {e}", ctx.adapter.name)
                 }
-                Err(e) => said.push(format!("the live method on {} failed ({e}): its CPU twin draws it", ctx.adapter.name)),
+                Err(e) => {
+                    said.push(format!("the live method on {} failed ({e}): its CPU twin draws it", ctx.adapter.name))
+                }
             }
         }
         said.push(format!("live on the CPU: {} layers", plan.layers.len()));
@@ -187,7 +190,8 @@ pub fn synth(args: &SynthDofArgs) -> Result<()> {
     let (plate, depth) = dof::scene::street(args.size.0, args.size.1);
     write_linear(&args.out, &plate)?;
     dof::depth::write_exr(&args.depth, &depth).map_err(|e| anyhow::anyhow!("{}: {e}", args.depth.display()))?;
-    let (near, far) = depth.metres.iter().filter(|d| d.is_finite()).fold((f64::INFINITY, 0.0f64), |(a, b), &d| (a.min(d), b.max(d)));
+    let (near, far) =
+        depth.metres.iter().filter(|d| d.is_finite()).fold((f64::INFINITY, 0.0f64), |(a, b), &d| (a.min(d), b.max(d)));
     eprintln!(
         "wrote {} and {} ({}x{}): depths {near:.1} to {far:.0} m and the sky; a sign at 5 m, lamps from 3 to 59 m, a post at 1.2 m; the sun at pixel ({:.0}, {:.0})",
         args.out.display(),

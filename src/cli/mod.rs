@@ -29,8 +29,9 @@ use clap::{Parser, Subcommand};
 pub struct Cli {
     #[command(subcommand)]
     pub command: Option<Command>,
-    /// A glass catalogue (Zemax .agf, e.g. a vendor's SCHOTT, OHARA, HOYA or CDGM file) whose glasses lens
-    /// files may name; repeat for several. Named by the file stem (ohara.agf is OHARA; OHARA:S-BSL7 picks it).
+    /// A glass catalogue (Zemax .agf) whose glasses lens files may name, beside the built-in SCHOTT, OHARA,
+    /// HOYA and CDGM ones; repeat for several. Named by the file stem (ohara.agf is OHARA and replaces the
+    /// built-in OHARA glasses it holds; OHARA:S-BSL7 picks one).
     #[arg(long = "catalog", global = true, value_name = "FILE.agf")]
     pub catalogs: Vec<std::path::PathBuf>,
 }

@@ -616,7 +616,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                 doc.dof.focus_px.map_or(format!("{} m", doc.dof.focus_m), |[x, y]| format!("on pixel ({x}, {y})")),
                 flare.system.first_order.f_number / flare.system.settings.stop_scale
             ),
-            None => eprintln!("the preset's depth of field is on, but there is no plate to defocus (give --background)"),
+            None => {
+                eprintln!("the preset's depth of field is on, but there is no plate to defocus (give --background)")
+            }
         }
     }
     let request = plan.request(&doc, &flare.system, planned, divisor);

@@ -161,14 +161,22 @@ impl PreparedFlare {
 /// aperture and the sensor distance), the spectrum, the stop's shape and f-number and any coating override.
 /// A LUT whose fingerprint differs from the live lens's is refused on load.
 /// It is a [`crate::fingerprint::of`] (canonical JSON, scheme [`crate::fingerprint::SCHEME`]).
+///
+/// A medium named as a catalogue glass takes its curve from the catalogue, which `--catalog` can replace, so
+/// its indices at the spectrum's wavelengths are part of the fingerprint too; a lens with no such medium keeps
+/// the fingerprint it had before this was added (its LUTs stay valid).
 pub fn lut_fingerprint(lens: &Lens, config: &FlareConfig) -> u64 {
-    crate::fingerprint::of(&(
-        &lens.surfaces,
-        &config.spectrum.wavelengths_nm,
-        &config.spectrum.weights_rgb,
-        &config.aperture,
-        &config.coating_override,
-    ))
+    let wavelengths = &config.spectrum.wavelengths_nm;
+    let base =
+        (&lens.surfaces, wavelengths, &config.spectrum.weights_rgb, &config.aperture, &config.coating_override);
+    let curves: Vec<(usize, Vec<f64>)> = lens
+        .surfaces
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| matches!(s.medium.dispersion(), crate::optics::glass::Dispersion::Sellmeier { .. }))
+        .map(|(k, s)| (k, wavelengths.iter().map(|&w| s.medium.index_at(w)).collect()))
+        .collect();
+    if curves.is_empty() { crate::fingerprint::of(&base) } else { crate::fingerprint::of(&(base, curves)) }
 }
 
 impl crate::lut::GhostLut {
@@ -228,5 +236,29 @@ pub fn ray_grid_setup(system: &GhostSystem) -> crate::raytrace::RayGridSetup {
         stop_radius_mm: system.stop_radius_mm,
         ghosts,
         entrance_hint,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A LUT of a lens that names a catalogue glass is refused once another catalogue file replaces that glass.
+    #[test]
+    fn a_replaced_catalogue_glass_changes_the_lut_fingerprint() {
+        let glass = |k: &str| {
+            format!("NM FP-G1 2 517642 1.5168 64.17 0 1\nCD {k} 0.00600069867 0.231792344 0.0200179144 1.01046945 103.560653 0 0 0 0\n")
+        };
+        crate::optics::glass::add_catalogue(&glass("1.03961212"), "FPTEST").unwrap();
+        let mut lens = crate::optics::library::builtin_lens("pbrt_dgauss_50mm").unwrap();
+        let config = FlareConfig::default();
+        let unnamed = lut_fingerprint(&lens, &config);
+        let k = lens.surfaces.iter().position(|s| !s.medium.is_air()).unwrap();
+        lens.surfaces[k].medium.glass = Some("FPTEST:FP-G1".to_owned());
+        let before = lut_fingerprint(&lens, &config);
+        assert_ne!(before, unnamed);
+        assert_eq!(lut_fingerprint(&lens, &config), before, "stable");
+        crate::optics::glass::add_catalogue(&glass("1.05"), "FPTEST").unwrap();
+        assert_ne!(lut_fingerprint(&lens, &config), before, "the glass's curve changed");
     }
 }

@@ -25,8 +25,8 @@
 
 pub mod aperture;
 pub mod coating;
-pub mod dof;
 pub mod color;
+pub mod dof;
 pub mod exposure;
 pub mod files;
 pub mod fingerprint;

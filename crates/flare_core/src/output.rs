@@ -112,7 +112,9 @@ fn channels(prefix: &str, image: &HdrImage, alpha: bool) -> Vec<exr::prelude::An
 pub fn write_linear(path: &Path, image: &HdrImage) -> Result<(), ImageError> {
     match ImageKind::from_path(path)? {
         ImageKind::Png => {
-            let encode8 = |v: f32| (crate::color::srgb_encode(if v.is_finite() { v.clamp(0.0, 1.0) } else { 0.0 }) * 255.0).round() as u8;
+            let encode8 = |v: f32| {
+                (crate::color::srgb_encode(if v.is_finite() { v.clamp(0.0, 1.0) } else { 0.0 }) * 255.0).round() as u8
+            };
             let pixels = image.pixels.iter().map(|p| [encode8(p[0]), encode8(p[1]), encode8(p[2]), 255]).collect();
             write_png(path, &DisplayImage { width: image.width, height: image.height, pixels })
         }

@@ -73,7 +73,10 @@ fn points_blur_to_the_model_diameter_and_keep_their_energy() {
             let diameter = 2.0 * (f64::from(total / peak) / std::f64::consts::PI).sqrt();
             let row_width = around.iter().filter(|p| p.1 == 0 && p.2 > 0.5 * peak).count() as f64;
             let tolerance = (0.05 * expected).max(1.0);
-            assert!((diameter - expected).abs() <= tolerance, "{name}: at {d} mm diameter {diameter:.2} px, model {expected:.2}");
+            assert!(
+                (diameter - expected).abs() <= tolerance,
+                "{name}: at {d} mm diameter {diameter:.2} px, model {expected:.2}"
+            );
             assert!((row_width - expected).abs() <= tolerance + 1.0, "{name}: row {row_width} px, model {expected:.2}");
             eprintln!("{name}: depth {d} mm: model {expected:.2} px, disc {diameter:.2} px, row {row_width}");
         }
@@ -293,7 +296,11 @@ fn the_gpu_live_method_matches_its_cpu_twin() {
             .zip(&out.image.pixels)
             .map(|(a, b)| (0..3).map(|c| (a[c] - b[c]).abs() / (1.0 + a[c].abs())).fold(0.0f32, f32::max))
             .fold(0.0f32, f32::max);
-        eprintln!("cat's eye {cat_eye}: {} layers, worst relative difference {worst:.2e}, GPU {:?} ms", plan.layers.len(), out.gpu_ms);
+        eprintln!(
+            "cat's eye {cat_eye}: {} layers, worst relative difference {worst:.2e}, GPU {:?} ms",
+            plan.layers.len(),
+            out.gpu_ms
+        );
         assert!(worst < 1e-4, "{worst}");
         assert!(out.image.pixels.iter().all(|p| p.iter().all(|v| v.is_finite())));
         // Not two blank images: light is there, and blurred (unlike the plate).
@@ -328,7 +335,10 @@ fn with_axial_colour_each_channel_blurs_to_its_own_wavelength() {
             let peak = values.iter().cloned().fold(0.0f32, f32::max);
             let total: f32 = values.iter().sum();
             let diameter = 2.0 * (f64::from(total / peak) / std::f64::consts::PI).sqrt();
-            assert!((diameter - expected).abs() <= (0.05 * expected).max(1.0), "{method:?} channel {k}: {diameter:.2} px, model {expected:.2}");
+            assert!(
+                (diameter - expected).abs() <= (0.05 * expected).max(1.0),
+                "{method:?} channel {k}: {diameter:.2} px, model {expected:.2}"
+            );
         }
     }
 }

@@ -207,6 +207,25 @@ fn opticstudio_sample_reads_with_units_and_glasses() {
     FirstOrder::d_line(&lens).unwrap();
 }
 
+/// A `GCAT` line picks the catalogue of a name two catalogues share: SCHOTT and CDGM both have F5, and
+/// `GCAT CDGM` makes it CDGM's (kept as `CDGM:F5`, whose dispersion differs from SCHOTT's); the writer gives
+/// the GCAT back, so the lens reads back with the same glass.
+#[test]
+fn a_gcat_line_picks_the_catalogue_of_a_shared_glass_name() {
+    let schott = parse_lens(OPTICSTUDIO_SAMPLE.replace("GLAS N-BK7 0 0", "GLAS F5 0 0").as_str(), None, "s").unwrap();
+    assert_eq!(schott.surfaces[1].medium.glass.as_deref(), Some("F5"), "GCAT SCHOTT: the plain name");
+    let text = OPTICSTUDIO_SAMPLE.replace("GLAS N-BK7 0 0", "GLAS F5 0 0").replace("GCAT SCHOTT", "GCAT CDGM SCHOTT");
+    let cdgm = parse_lens(&text, None, "c").unwrap();
+    let medium = &cdgm.surfaces[1].medium;
+    assert_eq!(medium.glass.as_deref(), Some("CDGM:F5"));
+    assert_eq!(medium.dispersion().describe(), "CDGM F5 (AGF formula 1)");
+    assert_ne!(medium.index_at(450.0), schott.surfaces[1].medium.index_at(450.0), "two different curves");
+    let written = flare_core::optics::formats::zmx::write(&cdgm);
+    assert!(written.contains("GCAT CDGM\n") && written.contains("GLAS F5 "), "{written}");
+    let back = parse_lens(&written, None, "c").unwrap();
+    assert_eq!(back.surfaces[1].medium.glass.as_deref(), Some("CDGM:F5"));
+}
+
 /// Loads `text` as a file called `name` and returns the error message.
 fn refusal(name: &str, bytes: &[u8]) -> String {
     match parse_lens_bytes(bytes, Path::new(name)) {

@@ -4,9 +4,9 @@
 use flare_core::flare::{FlareConfig, PreparedFlare};
 use flare_core::metrics;
 use flare_core::optics::library::builtin_lens;
-use flare_core::render::raygrid::{GpuRayGrid, GpuRayGridError, SUPERSAMPLE};
 use flare_core::raytrace::{Grid, Window};
 use flare_core::render::gpu::test_context;
+use flare_core::render::raygrid::{GpuRayGrid, GpuRayGridError, SUPERSAMPLE};
 
 fn prepared(id: &str) -> PreparedFlare {
     PreparedFlare::new(&builtin_lens(id).unwrap(), &FlareConfig::default()).unwrap()
@@ -79,23 +79,27 @@ fn gpu_ray_grids_draw_the_cpu_ray_grid_image() {
     let Some(ctx) = test_context() else { return };
     let raygrid = GpuRayGrid::new(&ctx.device);
     let (w, h) = (240, 160);
-    for (id, light, cells) in [
-        ("pbrt_dgauss_50mm", [6.0, 3.0], 64),
-        ("heliar", [10.0, -4.0], 64),
-        ("zeiss_master_prime", [5.0, 3.0], 48),
-    ] {
+    for (id, light, cells) in
+        [("pbrt_dgauss_50mm", [6.0, 3.0], 64), ("heliar", [10.0, -4.0], 64), ("zeiss_master_prime", [5.0, 3.0], 48)]
+    {
         let flare = prepared(id);
         let renderer = flare.ray_grid_renderer();
         let cpu = renderer.render(light, w, h, Grid::Fixed(cells)).unwrap();
         let gpu = raygrid.render(&ctx, &renderer, light, Window::frame(w, h), cells, SUPERSAMPLE).unwrap();
         let point = raygrid.render(&ctx, &renderer, light, Window::frame(w, h), cells, 1).unwrap();
-        eprintln!("{id}: one sample per pixel: PSNR {:.1} dB", metrics::compare(&point.hdr, &[], &cpu.hdr, &[]).psnr_db);
+        eprintln!(
+            "{id}: one sample per pixel: PSNR {:.1} dB",
+            metrics::compare(&point.hdr, &[], &cpu.hdr, &[]).psnr_db
+        );
         let c = metrics::compare(&gpu.hdr, &[], &cpu.hdr, &[]);
         let energy = |img: &flare_core::image::HdrImage| -> f64 {
             img.pixels.iter().map(|p| f64::from(p[0] + p[1] + p[2])).sum()
         };
         let ratio = energy(&gpu.hdr) / energy(&cpu.hdr);
-        eprintln!("{id} grid {cells}: {} jobs, PSNR {:.1} dB, SSIM {:.4}, energy GPU/CPU {ratio:.4}", gpu.jobs, c.psnr_db, c.ssim);
+        eprintln!(
+            "{id} grid {cells}: {} jobs, PSNR {:.1} dB, SSIM {:.4}, energy GPU/CPU {ratio:.4}",
+            gpu.jobs, c.psnr_db, c.ssim
+        );
         assert!((ratio - 1.0).abs() < 0.02, "{id}: energy {ratio}");
         assert!(c.psnr_db > 40.0, "{id}: {c:?}");
     }

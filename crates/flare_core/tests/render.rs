@@ -183,7 +183,10 @@ fn a_draft_keeps_the_brightest_sprites_within_its_budget() {
     };
     let share = energy(&draft.scene) / energy(&quarter.scene);
     assert!(share > 0.5, "the draft draws {share:.2} of the frame's light");
-    eprintln!("draft: {outcome:?}, {share:.2} of the light for {:.2} of the fragments", outcome.fragments as f64 / all as f64);
+    eprintln!(
+        "draft: {outcome:?}, {share:.2} of the light for {:.2} of the fragments",
+        outcome.fragments as f64 / all as f64
+    );
 }
 
 /// Mean relative HDR difference, the mean and worst 8-bit display difference, and the share of channels that

@@ -37,7 +37,8 @@ struct Scene {
 
 fn scene(flare: &PreparedFlare, width: u32, height: u32) -> Result<Scene> {
     let (plate, depth) = dof::scene::street(width, height);
-    let model = DofModel::new(&flare.system.lens, flare.system.settings.stop_scale, FOCUS_M, 36.0, (width, height), true)?;
+    let model =
+        DofModel::new(&flare.system.lens, flare.system.settings.stop_scale, FOCUS_M, 36.0, (width, height), true)?;
     Ok(Scene { plate, depth_mm: depth.millimetres(), model })
 }
 
@@ -102,9 +103,11 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     for (taps, layers) in LIVE {
         let settings = LiveSettings { taps_across: taps, max_layers: layers };
         let label = format!("{taps}x{layers}");
-        let (ms, runs, image) = timed(repeats, || {
-            Ok(LivePlan::with_settings(&s.depth_mm, &s.model, mask, settings)?.render_cpu(&s.plate))
-        })?;
+        let (ms, runs, image) =
+            timed(
+                repeats,
+                || Ok(LivePlan::with_settings(&s.depth_mm, &s.model, mask, settings)?.render_cpu(&s.plate)),
+            )?;
         rows.push(row(format!("dof-live-cpu-{label}"), ms, runs, judge.compare(&image, &[]), None));
         if settings == LiveSettings::default() {
             write_png(&images.join("live.png"), &image)?;
@@ -120,7 +123,10 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             let gpu_time = (!gpu_ms.is_empty()).then(|| (metrics::median(&gpu_ms), "dof".to_owned()));
             rows.push(row(format!("dof-live-gpu-{label}"), ms, runs, judge.compare(&out, &[]), gpu_time));
         }
-        eprintln!("live {label}: {}", rows.iter().rev().take(1 + usize::from(gpu.is_some())).map(summary).collect::<Vec<_>>().join("; "));
+        eprintln!(
+            "live {label}: {}",
+            rows.iter().rev().take(1 + usize::from(gpu.is_some())).map(summary).collect::<Vec<_>>().join("; ")
+        );
     }
     // The live method's frame time at 1920x1080 (default settings).
     let full = scene(&flare, 1920, 1080)?;
@@ -135,7 +141,12 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             gpu_ms.extend(out.gpu_ms);
             Ok(())
         })?;
-        hd.push((format!("GPU: {}", ctx.adapter.name), ms, runs, (!gpu_ms.is_empty()).then(|| metrics::median(&gpu_ms))));
+        hd.push((
+            format!("GPU: {}", ctx.adapter.name),
+            ms,
+            runs,
+            (!gpu_ms.is_empty()).then(|| metrics::median(&gpu_ms)),
+        ));
     }
     let threads = rayon::current_num_threads();
     let md = markdown(&rows, &hd, &lens.id, width, height, s.model.far_defocus_px(), threads, adapter.as_deref());

@@ -64,10 +64,8 @@ pub fn error_against_time(rows: &[Row], path: &Path) -> Result<()> {
 pub fn error_against_time_titled(rows: &[Row], path: &Path, title: &str) -> Result<()> {
     // Registering twice is harmless; the font is compiled in.
     let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, epaint_default_fonts::UBUNTU_LIGHT);
-    let points: Vec<&Row> = rows
-        .iter()
-        .filter(|r| r.method != "reference" && r.ms_median > 0.0 && r.errors.psnr_db.is_finite())
-        .collect();
+    let points: Vec<&Row> =
+        rows.iter().filter(|r| r.method != "reference" && r.ms_median > 0.0 && r.errors.psnr_db.is_finite()).collect();
     let mut buffer = vec![255u8; (SIZE.0 * SIZE.1 * 3) as usize];
     {
         let root = BitMapBackend::with_buffer(&mut buffer, SIZE).into_drawing_area();

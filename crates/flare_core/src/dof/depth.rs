@@ -61,9 +61,8 @@ impl DepthMap {
         match ext.as_str() {
             "exr" => read_exr(path).map_err(fail),
             "png" => {
-                let range = png_range.ok_or_else(|| {
-                    fail("a PNG depth map needs its range in metres (--depth-range NEAR:FAR)".into())
-                })?;
+                let range = png_range
+                    .ok_or_else(|| fail("a PNG depth map needs its range in metres (--depth-range NEAR:FAR)".into()))?;
                 read_png(path, range).map_err(fail)
             }
             other => Err(fail(format!("`.{other}`: use an EXR in metres (channel Z) or a 16-bit PNG with a range"))),

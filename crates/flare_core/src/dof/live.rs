@@ -174,7 +174,14 @@ impl LivePlan {
                 grow(&mut boxes[k + 1]);
             }
         }
-        let mut plan = Self { width, height, sigma: sigma.iter().map(|&s| s as f32).collect(), layers: Vec::new(), taps: Vec::new(), norm: Vec::new() };
+        let mut plan = Self {
+            width,
+            height,
+            sigma: sigma.iter().map(|&s| s as f32).collect(),
+            layers: Vec::new(),
+            taps: Vec::new(),
+            norm: Vec::new(),
+        };
         for (k, &centre) in centres.iter().enumerate() {
             if boxes[k][0] == u32::MAX {
                 continue;

@@ -178,16 +178,21 @@ pub fn per_channel<E>(
     if models.len() != 3 {
         return draw(plate, &models[0]);
     }
-    let mut out = HdrImage { width: plate.width, height: plate.height, pixels: vec![[0.0, 0.0, 0.0, 1.0]; plate.pixels.len()] };
+    let mut out =
+        HdrImage { width: plate.width, height: plate.height, pixels: vec![[0.0, 0.0, 0.0, 1.0]; plate.pixels.len()] };
     for (k, model) in models.iter().enumerate() {
         let alone = HdrImage {
             width: plate.width,
             height: plate.height,
-            pixels: plate.pixels.iter().map(|p| {
-                let mut q = [0.0, 0.0, 0.0, p[3]];
-                q[k] = p[k];
-                q
-            }).collect(),
+            pixels: plate
+                .pixels
+                .iter()
+                .map(|p| {
+                    let mut q = [0.0, 0.0, 0.0, p[3]];
+                    q[k] = p[k];
+                    q
+                })
+                .collect(),
         };
         let drawn = draw(&alone, model)?;
         for (o, d) in out.pixels.iter_mut().zip(&drawn.pixels) {

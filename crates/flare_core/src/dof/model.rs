@@ -359,7 +359,10 @@ mod tests {
         let lens = builtin_lens("heliar").unwrap();
         let m = DofModel::new(&lens, 1.0, 3.0, 36.0, (1920, 1080), false).unwrap();
         let same = m.at_wavelength(&lens, D_LINE_NM).unwrap();
-        assert!((same.focus_mm - m.focus_mm).abs() < 1e-6 && (same.focus_magnification - m.focus_magnification).abs() < 1e-12);
+        assert!(
+            (same.focus_mm - m.focus_mm).abs() < 1e-6
+                && (same.focus_magnification - m.focus_magnification).abs() < 1e-12
+        );
         for wavelength in [475.0, 650.0] {
             let c = m.at_wavelength(&lens, wavelength).unwrap();
             // Trace an axial ray from the colour's focus plane at that wavelength: it meets the axis on the sensor.

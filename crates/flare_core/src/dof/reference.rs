@@ -44,12 +44,7 @@ fn kernel_of(key: Key, model: &DofModel, mask: &ApertureMask) -> RasterKernel {
 
 /// The plate defocused by the reference method (see the module documentation); `depth_mm` per pixel from the
 /// entrance pupil.
-pub fn render(
-    plate: &HdrImage,
-    depth_mm: &[f64],
-    model: &DofModel,
-    mask: &ApertureMask,
-) -> Result<HdrImage, DofError> {
+pub fn render(plate: &HdrImage, depth_mm: &[f64], model: &DofModel, mask: &ApertureMask) -> Result<HdrImage, DofError> {
     render_layers(plate, depth_mm, model, mask, LAYER_PX)
 }
 
@@ -101,7 +96,13 @@ pub fn render_until(
 }
 
 /// Scatters one layer's pixels (sorted by index, so by row) and composites it over `out`.
-fn scatter_layer(layer: &[(usize, Key)], plate: &HdrImage, model: &DofModel, mask: &ApertureMask, out: &mut [[f32; 4]]) {
+fn scatter_layer(
+    layer: &[(usize, Key)],
+    plate: &HdrImage,
+    model: &DofModel,
+    mask: &ApertureMask,
+    out: &mut [[f32; 4]],
+) {
     let w = plate.width as usize;
     let mut keys: Vec<Key> = layer.iter().map(|&(_, k)| k).collect();
     keys.sort_unstable();

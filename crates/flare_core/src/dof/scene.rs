@@ -133,7 +133,7 @@ mod tests {
         assert!(near > 1.0 && near < 1.3, "{near}");
         assert!(sky > 1000, "{sky}");
         for z in [5.0, 14.0] {
-            assert!(depth.metres.iter().any(|&d| d == z), "{z}");
+            assert!(depth.metres.contains(&z), "{z}");
         }
     }
 }

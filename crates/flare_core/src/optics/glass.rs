@@ -5,12 +5,15 @@
 //! and sometimes a catalogue glass name. From that, [`Dispersion::for_medium`] picks one model:
 //! 1. **Air** (`n_d == 1`): constant 1. All indices are relative to air, the lens-design convention.
 //! 2. **Catalogue glass** (the name is a known glass, case-insensitive, see [`find_glass`]): the glass's
-//!    dispersion formula from its AGF catalogue ([`super::agf`]: the 154 built-in SCHOTT glasses of
-//!    [`BUILTIN_CATALOGUES`], plus any catalogue added with [`add_catalogue`], e.g. `--catalog`), shifted
-//!    by a constant so that it gives the file's `n_d` exactly at the d-line:
-//!    `n(L) = n_d + n_formula(L) - n_formula(L_d)`. The shift keeps the file authoritative at the
-//!    design wavelength (where the reference figures are computed) and takes only the *shape* of the curve
-//!    from the catalogue.
+//!    dispersion formula from its AGF catalogue ([`super::agf`]: the 830 built-in glasses of
+//!    [`BUILTIN_CATALOGUES`], 154 SCHOTT, 213 OHARA, 186 HOYA and 277 CDGM, plus any catalogue added with
+//!    [`add_catalogue`], e.g. `--catalog`), shifted by a constant so that it gives the file's `n_d` exactly
+//!    at the d-line and the file's `V_d` (the catalogue's, when the file gives none) exactly:
+//!    `n(L) = n_d + s (n_formula(L) - n_formula(L_d))` with `s = (n_d - 1) / (V_d (n_F - n_C)_formula)`.
+//!    The file stays authoritative at the design wavelength (where the reference figures are computed) and in
+//!    its total dispersion; the catalogue gives the *shape* of the curve (its partial dispersions). For a
+//!    catalogue glass as published, `s` is 1 within the catalogue's own consistency (below), so the curve is
+//!    the vendor's; where the formula gives no index at F or C, the Cauchy model 3 is used with the same numbers.
 //! 3. **n_d and V_d only**: the two-term Cauchy fit `n(L) = n_d + B (1/L^2 - 1/L_d^2)` whose
 //!    `n_F - n_C = (n_d - 1) / V_d` (F = 486.1327 nm, C = 656.2725 nm), the fit of `crates/flare_core/METHOD.md`.
 //!    Measured against the 154 built-in SCHOTT Sellmeier curves (test `cauchy_model_error_against_sellmeier`):
@@ -23,6 +26,15 @@
 //!    and `lens info` can say so.
 //!
 //! At exactly the d-line every model returns `n_d` bit for bit, so d-line results never depend on the model.
+//!
+//! Every built-in glass, as the model above gives it, has its catalogue's published n_d and V_d to 1e-5
+//! (test `every_catalogue_glass_gives_its_published_nd_and_vd`). The vendors' formulas alone give the
+//! published n_d within 5.5e-6 and V_d within their catalogue's own consistency (test
+//! `catalogue_formulas_match_their_published_numbers`): SCHOTT 0.005 (V_d published to two decimals), OHARA
+//! and CDGM 5e-7 (they publish the formula's own V_d), HOYA 0.0088 (FC5; HOYA's fits miss its two-decimal
+//! V_d by up to that, 0.013% of n_F - n_C), so `s` is within 1.3e-4 of 1. A name two catalogues share (SCHOTT and CDGM both have F2 and F5) finds the first catalogue in
+//! the order SCHOTT, OHARA, HOYA, CDGM, then added ones; `CDGM:F5` picks one, and a Zemax file's `GCAT`
+//! line does so for its glasses.
 
 /// Helium d-line, the wavelength at which `n_d` is given.
 pub const D_LINE_NM: f64 = 587.5618;
@@ -43,8 +55,14 @@ pub fn computed_nd_vd(glass: &CatalogueGlass) -> Option<(f64, f64)> {
 }
 
 /// The catalogues embedded in the binary, as AGF files: (catalogue name, text).
-pub const BUILTIN_CATALOGUES: &[(&str, &str)] =
-    &[("SCHOTT", include_str!("../../../../assets/glass/flarelab-schott.agf"))];
+/// Sources and dates are in each file's `CC` lines (SCHOTT 2013; OHARA 2017, HOYA 2017 and CDGM 2022 from the
+/// public-domain refractiveindex.info database).
+pub const BUILTIN_CATALOGUES: &[(&str, &str)] = &[
+    ("SCHOTT", include_str!("../../../../assets/glass/flarelab-schott.agf")),
+    ("OHARA", include_str!("../../../../assets/glass/flarelab-ohara.agf")),
+    ("HOYA", include_str!("../../../../assets/glass/flarelab-hoya.agf")),
+    ("CDGM", include_str!("../../../../assets/glass/flarelab-cdgm.agf")),
+];
 
 /// Every glass FlareLab knows: the built-in catalogues, then those added with [`add_catalogue`]. Glasses live
 /// for the whole process (a dispersion model refers to its glass), so added ones are leaked once each.
@@ -68,16 +86,19 @@ pub fn catalogue_glasses() -> Vec<&'static CatalogueGlass> {
 }
 
 /// Adds the glasses of an AGF text (catalogue `name`) to the ones found by name; a glass whose name is already
-/// known from another catalogue is kept too, and found by `CATALOGUE:NAME`. Returns how many were added.
+/// known from another catalogue is kept too, and found by `CATALOGUE:NAME`. A glass of the same catalogue
+/// and name (a newer `ohara.agf` than the built-in OHARA) replaces the known one in place, so the user's
+/// file wins; models made before keep the glass they had. Returns how many glasses the file holds.
 pub fn add_catalogue(text: &str, name: &str) -> Result<usize, super::agf::AgfError> {
     let list = super::agf::parse_agf(text, name)?;
     let count = list.len();
     if let Ok(mut r) = registry().write() {
-        let known: std::collections::HashSet<(String, String)> =
-            r.iter().map(|g| (g.catalogue.clone(), normalise(&g.name))).collect();
         for g in list {
-            if !known.contains(&(g.catalogue.clone(), normalise(&g.name))) {
-                r.push(Box::leak(Box::new(g)));
+            let key = (g.catalogue.clone(), normalise(&g.name));
+            let glass: &'static CatalogueGlass = Box::leak(Box::new(g));
+            match r.iter().position(|k| (k.catalogue.clone(), normalise(&k.name)) == key) {
+                Some(i) => r[i] = glass,
+                None => r.push(glass),
             }
         }
     }
@@ -106,8 +127,9 @@ pub fn find_glass(name: &str) -> Option<&'static CatalogueGlass> {
 pub enum Dispersion {
     /// Air: index 1 at every wavelength.
     Air,
-    /// A catalogue glass's dispersion formula, shifted to pass through the file's `n_d`.
-    Sellmeier { n_d: f64, glass: &'static CatalogueGlass },
+    /// A catalogue glass's dispersion formula, moved and scaled about the d-line (by `scale`) to give the
+    /// file's `n_d` and `v_d` (module documentation, model 2).
+    Sellmeier { n_d: f64, v_d: f64, scale: f64, glass: &'static CatalogueGlass },
     /// Two-term Cauchy fit through `n_d` and `V_d`; `assumed` when `V_d` was not given.
     Cauchy { n_d: f64, v_d: f64, assumed: bool },
 }
@@ -120,7 +142,13 @@ impl Dispersion {
             return Self::Air;
         }
         if let Some(glass) = glass.and_then(find_glass) {
-            return Self::Sellmeier { n_d, glass };
+            let v_d = v_d.unwrap_or(glass.v_d);
+            let spread = glass.formula_index(F_LINE_NM).zip(glass.formula_index(C_LINE_NM)).map(|(f, c)| f - c);
+            return match spread.map(|spread| (n_d - 1.0) / (v_d * spread)) {
+                Some(scale) if scale.is_finite() && scale > 0.0 => Self::Sellmeier { n_d, v_d, scale, glass },
+                // The formula gives no index at F or C (or no dispersion): the same numbers, Cauchy's curve.
+                _ => Self::Cauchy { n_d, v_d, assumed: false },
+            };
         }
         match v_d {
             Some(v_d) => Self::Cauchy { n_d, v_d, assumed: false },
@@ -137,14 +165,14 @@ impl Dispersion {
     pub fn index_at(&self, wavelength_nm: f64) -> f64 {
         match *self {
             Self::Air => 1.0,
-            Self::Sellmeier { n_d, glass } => {
+            Self::Sellmeier { n_d, v_d, scale, glass } => {
                 if wavelength_nm == D_LINE_NM {
                     return n_d;
                 }
                 match (glass.formula_index(wavelength_nm), glass.formula_index(D_LINE_NM)) {
-                    (Some(n), Some(at_d)) => n_d + n - at_d,
-                    // Outside where the formula gives an index: the glass's own n_d and V_d (Cauchy).
-                    _ => Self::Cauchy { n_d, v_d: glass.v_d, assumed: false }.index_at(wavelength_nm),
+                    (Some(n), Some(at_d)) => n_d + scale * (n - at_d),
+                    // Outside where the formula gives an index: the same n_d and V_d by Cauchy.
+                    _ => Self::Cauchy { n_d, v_d, assumed: false }.index_at(wavelength_nm),
                 }
             }
             Self::Cauchy { n_d, v_d, .. } => {
@@ -183,16 +211,52 @@ mod tests {
         Medium { n_d, v_d, glass: glass.map(str::to_owned) }
     }
 
-    /// Every catalogue glass gives its published n_d to 1e-5 and V_d to its published precision (two
-    /// decimals: 0.005) plus 1e-5.
+    /// The measure: every built-in glass, as FlareLab models it (named in a lens with its published
+    /// n_d), gives its published n_d and V_d to 1e-5; each catalogue has all the glasses of its file.
     #[test]
     fn every_catalogue_glass_gives_its_published_nd_and_vd() {
-        let glasses = catalogue_glasses();
-        assert!(glasses.len() >= 28);
-        for g in glasses {
-            let (nd, vd) = computed_nd_vd(g).unwrap();
-            assert!((nd - g.n_d).abs() < 1e-5, "{} {}: n_d {nd} vs published {}", g.catalogue, g.name, g.n_d);
-            assert!((vd - g.v_d).abs() < 0.005 + 1e-5, "{} {}: V_d {vd} vs published {}", g.catalogue, g.name, g.v_d);
+        for (catalogue, count) in [("SCHOTT", 154), ("OHARA", 213), ("HOYA", 186), ("CDGM", 277)] {
+            let glasses: Vec<_> = catalogue_glasses().into_iter().filter(|g| g.catalogue == catalogue).collect();
+            assert_eq!(glasses.len(), count, "{catalogue}: every glass of the embedded file is read");
+            for g in glasses {
+                let qualified = format!("{catalogue}:{}", g.name);
+                let model = medium(g.n_d, None, Some(&qualified)).dispersion();
+                assert!(matches!(model, Dispersion::Sellmeier { .. }), "{qualified}: {model:?}");
+                let (d, f, c) = (model.index_at(D_LINE_NM), model.index_at(F_LINE_NM), model.index_at(C_LINE_NM));
+                let vd = (d - 1.0) / (f - c);
+                assert!((d - g.n_d).abs() < 1e-5, "{qualified}: n_d {d} vs published {}", g.n_d);
+                assert!((vd - g.v_d).abs() < 1e-5, "{qualified}: V_d {vd} vs published {}", g.v_d);
+            }
+        }
+    }
+
+    /// The vendors' formulas on their own, before the model's scaling: the bounds in the module documentation.
+    #[test]
+    fn catalogue_formulas_match_their_published_numbers() {
+        for (catalogue, vd_bound) in [("SCHOTT", 0.005 + 1e-5), ("OHARA", 1e-6), ("HOYA", 0.0089), ("CDGM", 1e-6)] {
+            let (mut worst_nd, mut worst_vd) = (0.0_f64, 0.0_f64);
+            for g in catalogue_glasses().into_iter().filter(|g| g.catalogue == catalogue) {
+                let (nd, vd) = computed_nd_vd(g).unwrap();
+                assert!(g.n_d > 1.4 && g.n_d < 2.2 && g.v_d > 15.0 && g.v_d < 100.0, "{catalogue} {}", g.name);
+                worst_nd = worst_nd.max((nd - g.n_d).abs());
+                worst_vd = worst_vd.max((vd - g.v_d).abs());
+            }
+            println!("{catalogue}: formula misses published n_d by {worst_nd:.1e} at worst, V_d by {worst_vd:.1e}");
+            assert!(worst_nd < 5.5e-6 + 1e-8 && worst_vd < vd_bound, "{catalogue}: {worst_nd} {worst_vd}");
+        }
+    }
+
+    /// Over the visible range every built-in glass gives a real index that falls with wavelength (normal
+    /// dispersion), so no glass falls back to Cauchy or bends red more than blue.
+    #[test]
+    fn every_catalogue_glass_disperses_normally_over_the_visible() {
+        for g in catalogue_glasses() {
+            let mut previous = f64::INFINITY;
+            for w in (380..=780).step_by(10) {
+                let n = g.formula_index(f64::from(w)).unwrap_or_else(|| panic!("{} {} at {w} nm", g.catalogue, g.name));
+                assert!(n < previous, "{} {}: index rises at {w} nm", g.catalogue, g.name);
+                previous = n;
+            }
         }
     }
 
@@ -201,6 +265,7 @@ mod tests {
         for m in [
             medium(1.0, None, Some("air")),
             medium(1.603, Some(38.0), Some("F5")),
+            medium(1.7, Some(30.0), Some("N-BK7")),
             medium(1.652, Some(58.5), Some("LAKN7")),
             medium(1.67, None, None),
         ] {
@@ -214,6 +279,21 @@ mod tests {
         let vd = (d.index_at(D_LINE_NM) - 1.0) / (d.index_at(F_LINE_NM) - d.index_at(C_LINE_NM));
         assert!((vd - 58.5).abs() < 1e-9, "{vd}");
         assert!(d.index_at(450.0) > d.index_at(650.0), "normal dispersion: blue bends more");
+    }
+
+    /// A named glass whose file gives another V_d than the catalogue: the model gives the file's n_d and V_d
+    /// and keeps the catalogue's shape (its relative partial dispersion P_g,F, g = 435.8343 nm).
+    #[test]
+    fn a_named_glass_takes_the_files_numbers_and_the_catalogues_shape() {
+        let partial = |d: &Dispersion| {
+            (d.index_at(435.8343) - d.index_at(F_LINE_NM)) / (d.index_at(F_LINE_NM) - d.index_at(C_LINE_NM))
+        };
+        let catalogue = medium(1.5168, None, Some("N-BK7")).dispersion();
+        let file = medium(1.52, Some(60.0), Some("N-BK7")).dispersion();
+        let vd = (file.index_at(D_LINE_NM) - 1.0) / (file.index_at(F_LINE_NM) - file.index_at(C_LINE_NM));
+        assert!((vd - 60.0).abs() < 1e-9, "{vd}");
+        assert!((partial(&file) - partial(&catalogue)).abs() < 1e-12, "same shape");
+        assert_eq!(file.describe(), "SCHOTT N-BK7 (AGF formula 2)");
     }
 
     /// The error bounds quoted in the module documentation.
@@ -238,6 +318,24 @@ mod tests {
         assert!(crown_narrow > 1e-5, "the test compares two different models");
     }
 
+    /// A catalogue added twice under the same name replaces its glasses (the user's newer file wins), and
+    /// one sharing a glass name with a built-in catalogue adds a second glass found by `CATALOGUE:NAME`.
+    #[test]
+    fn an_added_catalogue_replaces_its_own_glasses_and_keeps_others() {
+        let version = |n_d: &str| {
+            format!(
+                "NM TEST-G1 2 517642 {n_d} 64.17 0 1\nCD 1.03961212 0.00600069867 0.231792344 0.0200179144 1.01046945 103.560653 0 0 0 0\nNM F5 2 603380 1.60342 38.03 0 1\nCD 1.3104463 0.00958633048 0.19603426 0.0457627627 0.96612977 115.011883 0 0 0 0\n"
+            )
+        };
+        assert_eq!(add_catalogue(&version("1.5168"), "REPLACETEST").unwrap(), 2);
+        assert_eq!(add_catalogue(&version("1.5200"), "REPLACETEST").unwrap(), 2);
+        let ours: Vec<_> = catalogue_glasses().into_iter().filter(|g| g.catalogue == "REPLACETEST").collect();
+        assert_eq!(ours.len(), 2, "the second file replaced the first, it did not add to it");
+        assert_eq!(find_glass("REPLACETEST:TEST-G1").map(|g| g.n_d), Some(1.52));
+        assert_eq!(find_glass("F5").map(|g| g.catalogue.as_str()), Some("SCHOTT"), "built-ins come first");
+        assert_eq!(find_glass("replacetest:f5").map(|g| g.catalogue.as_str()), Some("REPLACETEST"));
+    }
+
     #[test]
     fn glass_lookup_is_forgiving_about_case_and_separators() {
         assert_eq!(find_glass("n_bk7").map(|g| g.name.as_str()), Some("N-BK7"));
@@ -245,6 +343,18 @@ mod tests {
         assert_eq!(find_glass("schott:f5").map(|g| g.name.as_str()), Some("F5"));
         assert!(find_glass("OHARA:F5").is_none());
         assert!(find_glass("UNOBTAINIUM").is_none());
+        // One glass of each other built-in catalogue, with its published n_d; a shared name finds SCHOTT first.
+        for (name, catalogue, n_d) in [
+            ("s-bsl7", "OHARA", 1.51633),
+            ("S_LAH55V", "OHARA", 1.834807),
+            ("fcd1", "HOYA", 1.497),
+            ("H-K9L", "CDGM", 1.5168),
+        ] {
+            let g = find_glass(name).unwrap_or_else(|| panic!("{name}"));
+            assert_eq!((g.catalogue.as_str(), g.n_d), (catalogue, n_d), "{name}");
+        }
+        assert_eq!(find_glass("F5").map(|g| g.catalogue.as_str()), Some("SCHOTT"));
+        assert_eq!(find_glass("cdgm:F5").map(|g| g.catalogue.as_str()), Some("CDGM"));
         assert!(medium(1.6, None, None).dispersion().is_assumed());
         assert!(!medium(1.6, None, Some("F5")).dispersion().is_assumed());
     }

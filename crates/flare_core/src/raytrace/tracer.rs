@@ -508,7 +508,7 @@ impl RayGridRenderer {
             n * n,
             |k| {
                 let x0 = [region[0] + (k % n) as f64 * step[0], region[1] + (k / n) as f64 * step[1]];
-                (!lit.is_some_and(|lit| !lit.contains(x0))).then_some(x0)
+                lit.is_none_or(|lit| lit.contains(x0)).then_some(x0)
             },
             &mut vertices,
         );
@@ -642,7 +642,7 @@ impl RayGridRenderer {
             // A ray far from every lit cell of the pre-pass is not traced: no triangle of it carries light.
             let at = |ix: usize| {
                 let x0 = [b[0] + ix as f64 * dx, b[1] + iy as f64 * dy];
-                (!lit.as_ref().is_some_and(|lit| !lit.contains(x0))).then_some(x0)
+                lit.as_ref().is_none_or(|lit| lit.contains(x0)).then_some(x0)
             };
             accs[0].stats.rays += self.trace_selected(job, d, grid + 1, at, &mut traced);
             for k in 0..views.len() {

@@ -84,7 +84,7 @@ impl GpuDof {
         let pixels = u64::from(w) * u64::from(h);
         let frame_bytes = pixels * 16;
         let limits = device.limits();
-        let binding = u64::from(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size);
+        let binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         if frame_bytes > binding {
             return Err(GpuError::Limit {
                 what: format!("a {w}x{h} depth of field needs {frame_bytes} bytes a buffer"),
@@ -133,7 +133,9 @@ impl GpuDof {
         };
         let group = |pipeline: &wgpu::ComputePipeline, k: usize, entries: &[(u32, &wgpu::Buffer)]| {
             let mut list = vec![wgpu::BindGroupEntry { binding: 0, resource: layer_binding(k) }];
-            list.extend(entries.iter().map(|&(binding, b)| wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() }));
+            list.extend(
+                entries.iter().map(|&(binding, b)| wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() }),
+            );
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("dof"),
                 layout: &pipeline.get_bind_group_layout(0),

@@ -761,7 +761,11 @@ impl FlareRenderer {
 }
 
 /// Copies `texture` (of `bytes_per_pixel`) into CPU memory, unpadding the 256-byte rows.
-pub(crate) fn read_texture(ctx: &GpuContext, texture: &wgpu::Texture, bytes_per_pixel: u32) -> Result<Vec<u8>, GpuError> {
+pub(crate) fn read_texture(
+    ctx: &GpuContext,
+    texture: &wgpu::Texture,
+    bytes_per_pixel: u32,
+) -> Result<Vec<u8>, GpuError> {
     let size = texture.size();
     let row = size.width * bytes_per_pixel;
     let padded = row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;

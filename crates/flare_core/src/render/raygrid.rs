@@ -26,11 +26,11 @@
 //! that fit the largest storage buffer the adapter binds. A device lost on the way is
 //! [`GpuError::Lost`] (the command line then traces on the CPU).
 
-use bytemuck::{Pod, Zeroable};
 use super::gpu::{GpuContext, GpuError, map_read, read_texture, storage, texture_2d};
 use super::shaders::{RAYGRID_SPLAT_WGSL, RAYGRID_TRACE_WGSL};
 use crate::image::HdrImage;
 use crate::raytrace::{DENSE_TABLE_SAMPLES, PlannedJob, RayGridError, RayGridRenderer, Window};
+use bytemuck::{Pod, Zeroable};
 
 /// One step of a ghost's path. Must be kept in sync with `struct Step` in `shaders/raygrid_common.wgsl`.
 #[repr(C)]
@@ -215,7 +215,7 @@ impl GpuRayGrid {
         let limit = |what, needed: u64, limit: u64, name| {
             (needed > limit).then_some(GpuRayGridError::Limit { cells, what, needed, limit, name })
         };
-        let binding = u64::from(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size);
+        let binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         if let Some(e) = limit(
             "workgroups per dispatch",
             groups_x,
@@ -226,7 +226,12 @@ impl GpuRayGrid {
         .or_else(|| limit("vertices per draw", (cells * cells * 6) as u64, u64::from(u32::MAX), "u32 vertex index"))
         .or_else(|| {
             let side = u64::from(fine.width.max(fine.height));
-            limit("texels across the supersampled target", side, u64::from(limits.max_texture_dimension_2d), "max_texture_dimension_2d")
+            limit(
+                "texels across the supersampled target",
+                side,
+                u64::from(limits.max_texture_dimension_2d),
+                "max_texture_dimension_2d",
+            )
         }) {
             return Err(e);
         }
@@ -263,8 +268,7 @@ impl GpuRayGrid {
         let mut batches = 0;
         let mut first = true;
         for batch in planned.chunks(per_batch) {
-            let mut encoder =
-                device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("raygrid") });
+            let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("raygrid") });
             let (jobs, vertices) = self.trace(device, queue, &mut encoder, renderer, batch, fine);
             let splat_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("raygrid splat"),
@@ -373,8 +377,8 @@ impl GpuRayGrid {
                 wgpu::BindGroupEntry { binding: 3, resource: vertices.as_entire_binding() },
             ],
         });
-        let mut pass =
-            encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("raygrid trace"), timestamp_writes: None });
+        let mut pass = encoder
+            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("raygrid trace"), timestamp_writes: None });
         pass.set_pipeline(&self.trace_pipeline);
         pass.set_bind_group(0, &group, &[]);
         pass.dispatch_workgroups((per_job as u32).div_ceil(WORKGROUP), jobs.len().max(1) as u32, 1);
@@ -401,7 +405,9 @@ fn upload(renderer: &RayGridRenderer, jobs: &[PlannedJob], window: Window) -> Up
             let offset = *offsets.entry(table).or_insert_with(|| {
                 let at = out.tables.len() as u32;
                 // Tables are resampled to the shader's fixed size (they already have it; a zero table has 2).
-                out.tables.extend((0..TABLE_SAMPLES).map(|i| finite(tables.table(table).at(i as f64 / (TABLE_SAMPLES - 1) as f64))));
+                out.tables.extend(
+                    (0..TABLE_SAMPLES).map(|i| finite(tables.table(table).at(i as f64 / (TABLE_SAMPLES - 1) as f64))),
+                );
                 at
             });
             let shape = &step.shape;

@@ -5,7 +5,8 @@
 //! is the image, the ones between are the lens. Inside a surface FlareLab reads `TYPE` (`STANDARD` or
 //! `EVENASPH`), `CURV` (curvature, 1/length; 0 = flat), `CONI` (conic constant), `PARM n` of an even asphere
 //! (`PARM 1` the r^2 term, `PARM 2..8` the r^4..r^16 terms, scaled by the unit), `DISZ` (thickness to the
-//! next surface), `GLAS` (name, then two flags, then n_d and V_d of the model or catalogue glass), `DIAM` (the
+//! next surface), `GLAS` (name, then two flags, then n_d and V_d of the model or catalogue glass; the name is
+//! looked up in the file's `GCAT` catalogues first, in their order, so `GCAT CDGM` makes `F5` CDGM's), `DIAM` (the
 //! *semi*-diameter) and `STOP`. `UNIT` scales lengths to millimetres and `NAME` names the lens. The system
 //! aperture sets the stop's semi-diameter: `ENPD d` (entrance pupil diameter) or `FNUM F` (image-space F/#,
 //! so `d = EFL / F`) scale it so that the paraxial entrance pupil has that diameter, and a warning says
@@ -67,6 +68,12 @@ pub fn parse(text: &str, id_hint: &str) -> Result<LoadedLens, FormatError> {
     let mut name = String::new();
     let mut scale_to_mm = 1.0;
     let mut apertures: Vec<SystemAperture> = Vec::new();
+    // The catalogues the file's glasses come from, in the order OpticStudio searches them.
+    let gcat: Vec<String> = text
+        .lines()
+        .filter_map(|l| l.trim().strip_prefix("GCAT "))
+        .flat_map(|rest| rest.split_whitespace().map(str::to_ascii_uppercase))
+        .collect();
     for (index, raw) in text.lines().enumerate() {
         let line = index + 1;
         let mut tokens = raw.split_whitespace();
@@ -141,7 +148,7 @@ pub fn parse(text: &str, id_hint: &str) -> Result<LoadedLens, FormatError> {
             }
             "STOP" => blocks.last_mut().unwrap().stop = true,
             "GLAS" => {
-                let medium = glass_line(line, &raw.split_whitespace().collect::<Vec<_>>())?;
+                let medium = glass_line(line, &raw.split_whitespace().collect::<Vec<_>>(), &gcat)?;
                 blocks.last_mut().unwrap().glass = Some((line, medium));
             }
             "SQAP" | "ELAP" | "OBSC" | "OBDC" | "SPID" => {
@@ -154,15 +161,23 @@ pub fn parse(text: &str, id_hint: &str) -> Result<LoadedLens, FormatError> {
     build(blocks, name, id_hint, &apertures, scale_to_mm)
 }
 
-/// Reads a `GLAS name flag flag n_d V_d ...` line.
-fn glass_line(line: usize, tokens: &[&str]) -> Result<Medium, FormatError> {
+/// Reads a `GLAS name flag flag n_d V_d ...` line. The name is looked up in the file's `GCAT` catalogues
+/// first; where that finds another glass than the plain name would, the medium keeps `CATALOGUE:NAME`.
+fn glass_line(line: usize, tokens: &[&str], gcat: &[String]) -> Result<Medium, FormatError> {
     let name = *tokens.get(1).ok_or_else(|| line_error(line, "GLAS has no glass name"))?;
     if name.eq_ignore_ascii_case("MIRROR") {
         return Err(unsupported(line, "GLAS MIRROR (mirror surface; FlareLab models refractive lenses)"));
     }
     let given = |i: usize| tokens.get(i).and_then(|t| t.parse::<f64>().ok()).filter(|v| v.is_finite() && *v != 0.0);
     let model = name == "___BLANK";
-    let catalogue = find_glass(name);
+    let plain = find_glass(name);
+    let from_gcat = gcat.iter().find_map(|c| find_glass(&format!("{c}:{name}")));
+    let catalogue = from_gcat.or(plain);
+    let glass_name = match (from_gcat, plain) {
+        (Some(g), Some(p)) if !std::ptr::eq(g, p) => format!("{}:{name}", g.catalogue),
+        (Some(g), None) => format!("{}:{name}", g.catalogue),
+        _ => name.to_owned(),
+    };
     let (n_d, v_d) = match (given(4), catalogue) {
         (Some(n_d), _) => (n_d, given(5)),
         (None, Some(g)) => (g.n_d, Some(g.v_d)),
@@ -173,7 +188,7 @@ fn glass_line(line: usize, tokens: &[&str]) -> Result<Medium, FormatError> {
             ));
         }
     };
-    Ok(Medium { n_d, v_d, glass: (!model).then(|| name.to_owned()) })
+    Ok(Medium { n_d, v_d, glass: (!model).then_some(glass_name) })
 }
 
 fn build(
@@ -321,6 +336,20 @@ pub fn write(lens: &Lens) -> String {
     push("MODE SEQ".to_owned());
     push(format!("NAME {}", lens.name.replace(['\n', '\r'], " ")));
     push("UNIT MM X W X CM MR CPMM".to_owned());
+    // A glass kept as `CATALOGUE:NAME` (one that a GCAT picked on reading) is written by its plain name, with
+    // a GCAT line naming the catalogues of the lens's glasses in the order they first appear.
+    let named = |s: &crate::optics::lens::Surface| {
+        s.medium.glass.clone().filter(|g| !s.medium.is_air() && !g.is_empty() && !g.contains(char::is_whitespace))
+    };
+    if lens.surfaces.iter().filter_map(named).any(|g| g.contains(':')) {
+        let mut catalogues: Vec<String> = Vec::new();
+        for g in lens.surfaces.iter().filter_map(named).filter_map(|g| find_glass(&g)) {
+            if !catalogues.contains(&g.catalogue) {
+                catalogues.push(g.catalogue.clone());
+            }
+        }
+        push(format!("GCAT {}", catalogues.join(" ")));
+    }
     push("SURF 0".to_owned());
     push("  TYPE STANDARD".to_owned());
     push("  CURV 0.0".to_owned());
@@ -347,10 +376,10 @@ pub fn write(lens: &Lens) -> String {
         }
         push(format!("  DISZ {}", exact(s.thickness_mm.unwrap_or(0.0))));
         if !s.medium.is_air() {
-            let name = s.medium.glass.as_deref().filter(|g| !g.is_empty() && !g.contains(char::is_whitespace));
+            let name = named(s).map(|g| g.rsplit(':').next().unwrap_or_default().to_owned());
             push(format!(
                 "  GLAS {} 1 0 {} {} 0 0 0 0 0 0",
-                name.unwrap_or("___BLANK"),
+                name.as_deref().unwrap_or("___BLANK"),
                 exact(s.medium.n_d),
                 exact(s.medium.v_d.unwrap_or(0.0))
             ));

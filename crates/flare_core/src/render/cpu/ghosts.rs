@@ -168,9 +168,10 @@ pub fn ghost_pass(scene: &FlareScene, mask: &ApertureMask) -> HdrImage {
             sweep_instance(inst, mask, &rows_of_mask, scale, (w, h), rows.clone(), |fragment| match fragment {
                 Fragment::Open { y, x0, x1 } => {
                     let row = &mut spans[(y - y0) * (w + 1)..][..w + 1];
-                    for c in 0..3 {
-                        row[x0][c] += f64::from(inst.colour[c]);
-                        row[x1 + 1][c] -= f64::from(inst.colour[c]);
+                    // RGB only: the fourth channel of `colour` is not an image channel.
+                    for (c, colour) in inst.colour.iter().take(3).map(|&v| f64::from(v)).enumerate() {
+                        row[x0][c] += colour;
+                        row[x1 + 1][c] -= colour;
                     }
                 }
                 Fragment::Edge { x, y, m } => {
