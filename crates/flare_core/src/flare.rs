@@ -167,8 +167,7 @@ impl PreparedFlare {
 /// the fingerprint it had before this was added (its LUTs stay valid).
 pub fn lut_fingerprint(lens: &Lens, config: &FlareConfig) -> u64 {
     let wavelengths = &config.spectrum.wavelengths_nm;
-    let base =
-        (&lens.surfaces, wavelengths, &config.spectrum.weights_rgb, &config.aperture, &config.coating_override);
+    let base = (&lens.surfaces, wavelengths, &config.spectrum.weights_rgb, &config.aperture, &config.coating_override);
     let curves: Vec<(usize, Vec<f64>)> = lens
         .surfaces
         .iter()
@@ -247,7 +246,9 @@ mod tests {
     #[test]
     fn a_replaced_catalogue_glass_changes_the_lut_fingerprint() {
         let glass = |k: &str| {
-            format!("NM FP-G1 2 517642 1.5168 64.17 0 1\nCD {k} 0.00600069867 0.231792344 0.0200179144 1.01046945 103.560653 0 0 0 0\n")
+            format!(
+                "NM FP-G1 2 517642 1.5168 64.17 0 1\nCD {k} 0.00600069867 0.231792344 0.0200179144 1.01046945 103.560653 0 0 0 0\n"
+            )
         };
         crate::optics::glass::add_catalogue(&glass("1.03961212"), "FPTEST").unwrap();
         let mut lens = crate::optics::library::builtin_lens("pbrt_dgauss_50mm").unwrap();
