@@ -172,8 +172,11 @@ pub fn lut_fingerprint(lens: &Lens, config: &FlareConfig) -> u64 {
         .surfaces
         .iter()
         .enumerate()
-        .filter(|(_, s)| matches!(s.medium.dispersion(), crate::optics::glass::Dispersion::Sellmeier { .. }))
-        .map(|(k, s)| (k, wavelengths.iter().map(|&w| s.medium.index_at(w)).collect()))
+        .filter_map(|(k, s)| {
+            let d = s.medium.dispersion();
+            matches!(d, crate::optics::glass::Dispersion::Sellmeier { .. })
+                .then(|| (k, wavelengths.iter().map(|&w| d.index_at(w)).collect()))
+        })
         .collect();
     if curves.is_empty() { crate::fingerprint::of(&base) } else { crate::fingerprint::of(&(base, curves)) }
 }

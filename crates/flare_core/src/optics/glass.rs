@@ -7,8 +7,8 @@
 //! 2. **Catalogue glass** (the name is a known glass, case-insensitive, see [`find_glass`]): the glass's
 //!    dispersion formula from its AGF catalogue ([`super::agf`]: the 830 built-in glasses of
 //!    [`BUILTIN_CATALOGUES`], 154 SCHOTT, 213 OHARA, 186 HOYA and 277 CDGM, plus any catalogue added with
-//!    [`add_catalogue`], e.g. `--catalog`), shifted by a constant so that it gives the file's `n_d` exactly
-//!    at the d-line and the file's `V_d` (the catalogue's, when the file gives none) exactly:
+//!    [`add_catalogue`], e.g. `--catalog`), moved and scaled about the d-line so that it gives the file's
+//!    `n_d` exactly at the d-line and the file's `V_d` (the catalogue's, when the file gives none) exactly:
 //!    `n(L) = n_d + s (n_formula(L) - n_formula(L_d))` with `s = (n_d - 1) / (V_d (n_F - n_C)_formula)`.
 //!    The file stays authoritative at the design wavelength (where the reference figures are computed) and in
 //!    its total dispersion; the catalogue gives the *shape* of the curve (its partial dispersions). For a
@@ -32,9 +32,11 @@
 //! published n_d within 5.5e-6 and V_d within their catalogue's own consistency (test
 //! `catalogue_formulas_match_their_published_numbers`): SCHOTT 0.005 (V_d published to two decimals), OHARA
 //! and CDGM 5e-7 (they publish the formula's own V_d), HOYA 0.0088 (FC5; HOYA's fits miss its two-decimal
-//! V_d by up to that), so `s` is within 2.6e-4 of 1 (HOYA M-FDS2, V_d 19.32). A name two catalogues share (SCHOTT and CDGM both have F2 and F5) finds the first catalogue in
-//! the order SCHOTT, OHARA, HOYA, CDGM, then added ones; `CDGM:F5` picks one, and a Zemax file's `GCAT`
-//! line does so for its glasses.
+//! V_d by up to that), so `s` is within 2.6e-4 of 1 (HOYA M-FDS2, V_d 19.32).
+//!
+//! A name two catalogues share (SCHOTT and CDGM both have F2 and F5) finds the first catalogue in the order
+//! SCHOTT, OHARA, HOYA, CDGM, then added ones; `CDGM:F5` picks one, and a Zemax file's `GCAT` line does so
+//! for its glasses.
 
 /// Helium d-line, the wavelength at which `n_d` is given.
 pub const D_LINE_NM: f64 = 587.5618;
@@ -66,14 +68,17 @@ pub const BUILTIN_CATALOGUES: &[(&str, &str)] = &[
 
 /// Every glass FlareLab knows: the built-in catalogues, then those added with [`add_catalogue`]. Glasses live
 /// for the whole process (a dispersion model refers to its glass), so added ones are leaked once each.
-fn registry() -> &'static std::sync::RwLock<Vec<&'static CatalogueGlass>> {
-    static REGISTRY: std::sync::OnceLock<std::sync::RwLock<Vec<&'static CatalogueGlass>>> = std::sync::OnceLock::new();
+/// Each glass is kept with its [`normalise`]d name, made once, so a look-up (every index a lens asks for
+/// names its glass) compares strings without making any.
+fn registry() -> &'static std::sync::RwLock<Vec<(String, &'static CatalogueGlass)>> {
+    type Registry = std::sync::RwLock<Vec<(String, &'static CatalogueGlass)>>;
+    static REGISTRY: std::sync::OnceLock<Registry> = std::sync::OnceLock::new();
     REGISTRY.get_or_init(|| {
         let mut glasses = Vec::new();
         for (name, text) in BUILTIN_CATALOGUES {
             // The embedded files are checked by a test; a broken one would leave its glasses out, not crash.
             if let Ok(list) = super::agf::parse_agf(text, name) {
-                glasses.extend(list.into_iter().map(|g| &*Box::leak(Box::new(g))));
+                glasses.extend(list.into_iter().map(|g| (normalise(&g.name), &*Box::leak(Box::new(g)))));
             }
         }
         std::sync::RwLock::new(glasses)
@@ -82,7 +87,7 @@ fn registry() -> &'static std::sync::RwLock<Vec<&'static CatalogueGlass>> {
 
 /// Every known glass (built-in first, then added catalogues in the order they were added).
 pub fn catalogue_glasses() -> Vec<&'static CatalogueGlass> {
-    registry().read().map(|r| r.clone()).unwrap_or_default()
+    registry().read().map(|r| r.iter().map(|(_, g)| *g).collect()).unwrap_or_default()
 }
 
 /// Adds the glasses of an AGF text (catalogue `name`) to the ones found by name; a glass whose name is already
@@ -94,11 +99,11 @@ pub fn add_catalogue(text: &str, name: &str) -> Result<usize, super::agf::AgfErr
     let count = list.len();
     if let Ok(mut r) = registry().write() {
         for g in list {
-            let key = (g.catalogue.clone(), normalise(&g.name));
+            let key = normalise(&g.name);
             let glass: &'static CatalogueGlass = Box::leak(Box::new(g));
-            match r.iter().position(|k| (k.catalogue.clone(), normalise(&k.name)) == key) {
-                Some(i) => r[i] = glass,
-                None => r.push(glass),
+            match r.iter().position(|(k, known)| *k == key && known.catalogue == glass.catalogue) {
+                Some(i) => r[i].1 = glass,
+                None => r.push((key, glass)),
             }
         }
     }
@@ -119,7 +124,7 @@ pub fn find_glass(name: &str) -> Option<&'static CatalogueGlass> {
     };
     let key = normalise(glass);
     let r = registry().read().ok()?;
-    r.iter().copied().find(|g| normalise(&g.name) == key && catalogue.as_ref().is_none_or(|c| *c == g.catalogue))
+    r.iter().find(|(k, g)| *k == key && catalogue.as_ref().is_none_or(|c| *c == g.catalogue)).map(|(_, g)| *g)
 }
 
 /// How a medium's index varies with wavelength. Every variant returns exactly `n_d` at the d-line.
@@ -234,21 +239,17 @@ mod tests {
     #[test]
     fn catalogue_formulas_match_their_published_numbers() {
         for (catalogue, vd_bound) in [("SCHOTT", 0.005 + 1e-5), ("OHARA", 1e-6), ("HOYA", 0.0089), ("CDGM", 1e-6)] {
-            let (mut worst_nd, mut worst_vd) = (0.0_f64, 0.0_f64);
+            let (mut worst_nd, mut worst_vd, mut worst_scale) = (0.0_f64, 0.0_f64, 0.0_f64);
             for g in catalogue_glasses().into_iter().filter(|g| g.catalogue == catalogue) {
                 let (nd, vd) = computed_nd_vd(g).unwrap();
                 assert!(g.n_d > 1.4 && g.n_d < 2.2 && g.v_d > 15.0 && g.v_d < 100.0, "{catalogue} {}", g.name);
                 worst_nd = worst_nd.max((nd - g.n_d).abs());
                 worst_vd = worst_vd.max((vd - g.v_d).abs());
-            }
-            let worst_scale = catalogue_glasses()
-                .into_iter()
-                .filter(|g| g.catalogue == catalogue)
-                .map(|g| match medium(g.n_d, None, Some(&format!("{catalogue}:{}", g.name))).dispersion() {
-                    Dispersion::Sellmeier { scale, .. } => (scale - 1.0).abs(),
+                match medium(g.n_d, None, Some(&format!("{catalogue}:{}", g.name))).dispersion() {
+                    Dispersion::Sellmeier { scale, .. } => worst_scale = worst_scale.max((scale - 1.0).abs()),
                     other => panic!("{catalogue} {}: {other:?}", g.name),
-                })
-                .fold(0.0_f64, f64::max);
+                }
+            }
             println!(
                 "{catalogue}: formula misses published n_d by {worst_nd:.1e} at worst, V_d by {worst_vd:.1e}; scale within {worst_scale:.1e} of 1"
             );

@@ -173,9 +173,8 @@ fn glass_line(line: usize, tokens: &[&str], gcat: &[String]) -> Result<Medium, F
     let plain = find_glass(name);
     let from_gcat = gcat.iter().find_map(|c| find_glass(&format!("{c}:{name}")));
     let catalogue = from_gcat.or(plain);
-    let glass_name = match (from_gcat, plain) {
-        (Some(g), Some(p)) if !std::ptr::eq(g, p) => format!("{}:{name}", g.catalogue),
-        (Some(g), None) => format!("{}:{name}", g.catalogue),
+    let glass_name = match from_gcat {
+        Some(g) if plain.is_none_or(|p| !std::ptr::eq(g, p)) => format!("{}:{name}", g.catalogue),
         _ => name.to_owned(),
     };
     let (n_d, v_d) = match (given(4), catalogue) {
