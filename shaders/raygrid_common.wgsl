@@ -20,7 +20,7 @@ struct Job {
     direction: vec4<f32>,  // the light's unit direction, sensor plane z (mm)
     view: vec4<f32>,       // window centre x, y (sensor mm), pixels per mm, stop radius (mm)
     frame: vec4<f32>,      // width, height (pixels), stop crossings looked at, irradiance per unit area ratio
-    rgb: vec4<f32>,        // the wavelength's RGB weight, unused
+    rgb: vec4<f32>,        // the wavelength's RGB weight, the view's turn about the axis (radians, counter-clockwise)
 };
 
 struct Vertex {

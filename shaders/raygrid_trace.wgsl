@@ -192,7 +192,19 @@ fn trace_main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(workgroup_i
     v.ratio = sqrt(ratio2);
     if (alive && d.z > 0.0) {
         let t = (job.direction.w - p.z) / d.z;
-        let landing = p + t * d;
+        var landing = p + t * d;
+        // The view's turn about the axis (the CPU twin's `View::seer`): the landing point and the stop
+        // coordinates turn with the light; the blades, looked up at the turned coordinates, do not.
+        let turn = job.rgb.w;
+        if (turn != 0.0) {
+            let cs = cos(turn);
+            let sn = sin(turn);
+            let m = mat2x2<f32>(vec2<f32>(cs, sn), vec2<f32>(-sn, cs));
+            landing = vec3<f32>(m * landing.xy, landing.z);
+            v.stop0 = m * v.stop0;
+            v.stop1 = m * v.stop1;
+            v.stop2 = m * v.stop2;
+        }
         let kpx = job.view.z;
         v.pixel = vec2<f32>(0.5 * job.frame.x - (landing.x - job.view.x) * kpx, 0.5 * job.frame.y + (landing.y - job.view.y) * kpx);
         let finite = abs(v.pixel.x) < 1e30 && abs(v.pixel.y) < 1e30 && abs(v.weight) < 1e30 && v.ratio < 1e30;

@@ -40,6 +40,8 @@ pub struct ViewportResources {
     bind_group: wgpu::BindGroup,
     /// The scene generation the texture shows (0: none yet).
     drawn: u64,
+    /// The texture holds an image handed over by [`Self::show_image`] (the ray-grid view), not a drawn frame.
+    shows_image: bool,
 }
 
 impl ViewportResources {
@@ -127,8 +129,18 @@ impl ViewportResources {
         });
         render_state.queue.write_buffer(&params, 0, bytemuck::cast_slice(&[encode, 0.0, 0.0, 0.0]));
         let (target, bind_group) = Self::target(device, &layout, &sampler, &params, (16, 16));
-        let resources =
-            Self { renderer, target, size: (16, 16), pipeline, layout, sampler, params, bind_group, drawn: 0 };
+        let resources = Self {
+            renderer,
+            target,
+            size: (16, 16),
+            pipeline,
+            layout,
+            sampler,
+            params,
+            bind_group,
+            drawn: 0,
+            shows_image: false,
+        };
         render_state.renderer.write().callback_resources.insert(resources);
     }
 
@@ -139,7 +151,9 @@ impl ViewportResources {
         params: &wgpu::Buffer,
         size: (u32, u32),
     ) -> (wgpu::Texture, wgpu::BindGroup) {
-        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT
+            | wgpu::TextureUsages::TEXTURE_BINDING
+            | wgpu::TextureUsages::COPY_DST;
         let texture = texture_2d(device, "viewport flare", size.0, size.1, VIEW_FORMAT, usage);
         let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -163,11 +177,42 @@ impl ViewportResources {
         let mut renderer = render_state.renderer.write();
         let resources = renderer.callback_resources.get_mut::<Self>()?;
         resources.drawn = 0;
+        resources.shows_image = false;
         Some(f(resources, &render_state.device, &render_state.queue))
     }
 }
 
 impl ViewportResources {
+    /// Shows `image` (display pixels, sRGB) as the frame of `generation` instead of drawing that frame: the
+    /// app's ray-grid view. A frame of another generation is drawn as usual; `false` when the resources are
+    /// missing.
+    pub fn show_image(render_state: &RenderState, generation: u64, image: &flare_core::image::DisplayImage) -> bool {
+        let mut renderer = render_state.renderer.write();
+        let Some(res) = renderer.callback_resources.get_mut::<Self>() else { return false };
+        let size = (image.width.max(1), image.height.max(1));
+        if size != res.size {
+            (res.target, res.bind_group) =
+                Self::target(&render_state.device, &res.layout, &res.sampler, &res.params, size);
+            res.size = size;
+        }
+        if image.pixels.len() == (image.width * image.height) as usize && image.width > 0 && image.height > 0 {
+            render_state.queue.write_texture(
+                res.target.as_image_copy(),
+                bytemuck::cast_slice(&image.pixels),
+                wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(4 * image.width), rows_per_image: None },
+                wgpu::Extent3d { width: image.width, height: image.height, depth_or_array_layers: 1 },
+            );
+        }
+        res.drawn = generation;
+        res.shows_image = true;
+        true
+    }
+
+    /// Whether the texture shows an image handed over by [`Self::show_image`] for the frame of `generation`.
+    pub fn shows_image(render_state: &RenderState, generation: u64) -> bool {
+        Self::read(render_state, |res| res.shows_image && res.drawn == generation).unwrap_or(false)
+    }
+
     /// Reads the resources without touching them (nothing is drawn again); `None` before they exist.
     pub fn read<R>(render_state: &RenderState, f: impl FnOnce(&Self) -> R) -> Option<R> {
         let renderer = render_state.renderer.read();
@@ -214,6 +259,7 @@ impl CallbackTrait for FlareCallback {
             return Vec::new();
         }
         res.drawn = *generation;
+        res.shows_image = false;
         let (scene, lut) = (&frame.scene, &frame.lut);
         let size = (scene.width.max(1), scene.height.max(1));
         if size != res.size {

@@ -960,3 +960,59 @@ fn the_depth_of_field_runs_on_the_apps_gpu_as_its_cpu_twin_does() {
     .unwrap();
     assert_eq!(shown.pixels, cpu.pixels, "{status}");
 }
+
+/// The view's ray-grid mode traces the frame shown on a thread (here on the CPU: the only adapter is software)
+/// and the viewport shows it: every ghost traced exactly, a different image from the paraxial one, drawn
+/// through the frame pipeline as `render --method raygrid` draws. A drag shows paraxial drafts and the new
+/// frame is traced when input stops; Cancel stops a trace; the look comes back when the mode is left.
+#[test]
+fn the_ray_grid_view_traces_the_frame_shown_and_shows_it_in_the_viewport() {
+    let Some(mut h) = gpu_harness(Some(heliar())) else { return };
+    h.run();
+    h.state_mut().raygrid.grid = Some(16);
+    let traced = |app: &FlareLabApp| app.view_shows_traced();
+    step_until(&mut h, 120.0, traced);
+    let app = h.state();
+    assert!(app.raygrid.status.starts_with("ray grid 16 (CPU"), "{}", app.raygrid.status);
+    let (generation, frame) = app.derived.view_frame.clone().unwrap();
+    let shown = app.raygrid.traced(generation).unwrap().display.clone();
+    // The same frame's ghosts traced again through the public pipeline give the same pixels.
+    let flare = app.flare().unwrap();
+    let scene = &frame.scene;
+    let window =
+        flare_core::raytrace::Window::for_sensor(frame.request.sensor_width_mm, scene.hdr_width, scene.hdr_height);
+    let view = flare_core::raytrace::View { window, turn_deg: 0.0 };
+    let request = flare_core::raytrace::RayGridRequest::views(
+        frame.request.light_deg,
+        vec![view],
+        flare_core::raytrace::Grid::Fixed(16),
+    );
+    let ghosts = flare.ray_grid_renderer().render_request(&request).unwrap().remove(0).hdr;
+    let sources = flare_core::frame::Sources { flare, lut: None, plate: None };
+    let again = flare_core::frame::drawn_with_traced_ghosts(&frame, &sources, ghosts);
+    assert_eq!(again.display.pixels, shown.pixels);
+    // Not the paraxial drawing of the frame, but as bright overall (the same light through the same lens).
+    let paraxial = flare_core::frame::draw_cpu(&frame, &sources).display;
+    let mean = |img: &flare_core::image::DisplayImage| {
+        img.pixels.iter().map(|p| f64::from(p[0]) + f64::from(p[1]) + f64::from(p[2])).sum::<f64>()
+            / img.pixels.len() as f64
+    };
+    assert_ne!(paraxial.pixels, shown.pixels);
+    let ratio = mean(&shown) / mean(&paraxial);
+    assert!((0.5..2.0).contains(&ratio), "traced / paraxial brightness {ratio}");
+    // A drag: paraxial drafts while it lasts, then the new frame is traced.
+    drag(&mut h, egui::pos2(300.0, 250.0), egui::pos2(380.0, 220.0));
+    assert!(!h.state().view_shows_traced(), "the frame changed: the traced image is not shown");
+    step_until(&mut h, 120.0, traced);
+    assert_ne!(h.state().derived.view_frame.as_ref().unwrap().0, generation);
+    // Cancel stops the trace of a new frame; leaving the mode draws the look again.
+    h.state_mut().raygrid.grid = Some(32);
+    h.step();
+    assert!(h.state().raygrid.busy());
+    h.state_mut().raygrid.cancel();
+    h.step();
+    assert!(!h.state().raygrid.busy() && h.state().raygrid.status.contains("cancelled"));
+    h.state_mut().raygrid.grid = None;
+    h.run();
+    assert!(!h.state().view_shows_traced() && h.state().raygrid.status.is_empty());
+}

@@ -82,11 +82,12 @@ impl FlareLabApp {
                     self.message = Some(e);
                 }
                 let ghosts = done.lut.ghosts.len();
+                let source = format!("baked {}", done.device);
                 let baked = (Arc::new(done.lut), Some(done.classes));
                 let Some(key) = key else { return };
                 self.autobake.remember(key, baked.clone());
                 if Some(key) == self.live_bake_key() {
-                    self.show_baked(key, baked, "baked");
+                    self.show_baked(key, baked, &source);
                 } else {
                     self.bake_status = BakeStatus::Done(format!("baked {ghosts} ghosts for earlier optics (kept)"));
                 }

@@ -8,9 +8,11 @@ use super::job::{Job, JobPoll};
 
 use flare_core::flare::PreparedFlare;
 use flare_core::lut::GhostLut;
-use flare_core::lut::bake::{BakeProgress, BakeSettings, bake, useful_field_deg};
+use flare_core::lut::bake::{BakeProgress, BakeSettings, ColumnTracer, CpuTracing, bake_with, useful_field_deg};
 use flare_core::lut::cache::LutCache;
 use flare_core::lut::classify::{ClassifySettings, GhostClass, classify};
+use flare_core::render::gpu::GpuContext;
+use flare_core::render::raygrid::{GpuBake, SUPERSAMPLE};
 
 /// A finished bake: the LUT, the classification that chose its ghosts, and whether it went into the cache
 /// (the error when it could not).
@@ -18,6 +20,8 @@ pub struct Baked {
     pub lut: GhostLut,
     pub classes: Vec<GhostClass>,
     pub cached: Result<(), String>,
+    /// Where its columns were traced: "on the CPU", "on the GPU (adapter)", or the GPU then the CPU and why.
+    pub device: String,
 }
 
 /// What a bake thread hands back, or why it stopped.
@@ -32,8 +36,9 @@ pub type BakeJob = Job<BakeOutcome>;
 /// What a new bake says it is doing.
 pub const CLASSIFYING: &str = "classifying the ghosts…";
 
-/// Classifies `flare`'s ghosts and bakes the non-linear ones with `settings` on a new thread, then stores the
-/// LUT in `cache`; `previous` lends the ghosts whose key is unchanged.
+/// Classifies `flare`'s ghosts and bakes the non-linear ones with `settings` on a new thread (each column on
+/// a hardware GPU when there is one, else on the CPU), then stores the LUT in `cache`; `previous` lends the
+/// ghosts whose key is unchanged.
 pub fn start_bake(
     flare: Arc<PreparedFlare>,
     previous: Option<GhostLut>,
@@ -51,8 +56,20 @@ pub fn start_bake(
                 format!("{}/{} ghosts, {} entries", p.ghosts_done, p.ghosts_total, p.entries),
             );
         };
-        let lut = bake(&flare, &renderer, &chosen, &settings, previous.as_ref(), &report, cancel)
+        // A hardware GPU traces the columns when there is one (a software adapter is slower than the CPU).
+        let gpu = GpuContext::hardware().ok();
+        let on_gpu = gpu.as_ref().map(|ctx| GpuBake::new(ctx, SUPERSAMPLE));
+        let tracing: &dyn ColumnTracer = match &on_gpu {
+            Some(g) => g,
+            None => &CpuTracing,
+        };
+        let lut = bake_with(&flare, &renderer, tracing, &chosen, &settings, previous.as_ref(), &report, cancel)
             .map_err(|e| e.to_string())?;
+        let device = match (&gpu, on_gpu.as_ref().and_then(GpuBake::fell_back)) {
+            (None, _) => "on the CPU".to_owned(),
+            (Some(ctx), None) => format!("on the GPU ({})", ctx.adapter.name),
+            (Some(ctx), Some(why)) => format!("on the GPU ({}), then on the CPU: {why}", ctx.adapter.name),
+        };
         let cached = match &cache {
             Some(cache) => cache
                 .store(&flare.system.lens, &flare.config, &settings, &lut)
@@ -60,6 +77,6 @@ pub fn start_bake(
                 .map_err(|e| format!("the LUT could not be cached in {}: {e}", cache.dir.display())),
             None => Ok(()),
         };
-        Ok(Baked { lut, classes, cached })
+        Ok(Baked { lut, classes, cached, device })
     })
 }

@@ -36,6 +36,7 @@ mod ghost_report_panel;
 pub mod job;
 pub mod looks;
 mod looks_panel;
+pub mod raygrid_view;
 pub mod shot;
 pub mod timeline;
 
@@ -86,6 +87,7 @@ pub fn run() -> Result<()> {
         viewport: egui::ViewportBuilder::default().with_inner_size(size).with_title("FlareLab"),
         ..Default::default()
     };
+
     // The device also asks for the timestamp queries the adapter offers: the renderer times its passes on the
     // GPU (the status bar shows them).
     if let eframe::egui_wgpu::WgpuSetup::CreateNew(create) = &mut options.wgpu_options.wgpu_setup {
@@ -198,6 +200,8 @@ pub struct FlareLabApp {
     pub plate_path: String,
     /// The plate's depth of field in progress and shown (see [`dof`]).
     pub dof_work: dof::DofWork,
+    /// The view's ray-grid mode (see [`raygrid_view`]).
+    pub raygrid: raygrid_view::RayGridView,
     /// The next click in the view focuses the depth of field there.
     pub focus_pick: bool,
 }
@@ -245,14 +249,28 @@ impl FlareLabApp {
             sequence_path: "flare.####.exr".into(),
             plate_path: String::new(),
             dof_work: dof::DofWork::default(),
+            raygrid: raygrid_view::RayGridView::default(),
             focus_pick: false,
         };
+        // FLARELAB_RAYGRID=N starts the view in its ray-grid mode (the Xvfb test and screenshots).
+        app.raygrid.grid = std::env::var("FLARELAB_RAYGRID")
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .filter(|n| raygrid_view::GRIDS.contains(n));
         app.playhead = app.doc.timeline.first_frame;
         app.plate_path = app.doc.background.clone().unwrap_or_default();
         app.sync();
         // What the first sync settled (the auto exposure) is where the document starts, not an edit to undo.
         app.history.reset(&app.doc);
         app
+    }
+
+    /// Whether the viewport shows the ray-grid view's traced image of the frame on screen (not its paraxial
+    /// drawing).
+    pub fn view_shows_traced(&self) -> bool {
+        let Some((generation, _)) = &self.derived.view_frame else { return false };
+        self.raygrid.traced(*generation).is_some()
+            && self.gpu.as_ref().is_some_and(|rs| crate::viewport::ViewportResources::shows_image(rs, *generation))
     }
 
     /// The prepared flare in use (the last valid one).
@@ -374,6 +392,7 @@ impl FlareLabApp {
             self.act(action);
         }
         self.sync();
+        self.raygrid.step(&self.derived, self.gpu.as_ref());
         // An edit in this frame made a new scene after the viewport was painted: paint once more.
         if self.derived.frame_pending && self.gpu.is_some() {
             ui.ctx().request_repaint();
@@ -382,7 +401,12 @@ impl FlareLabApp {
         if !ui.ctx().input(|i| i.pointer.any_down()) {
             self.history.commit(&self.doc);
         }
-        if self.bake.is_some() || self.shot_job.is_some() || self.export_job.is_some() || self.dof_work.busy() {
+        if self.bake.is_some()
+            || self.shot_job.is_some()
+            || self.export_job.is_some()
+            || self.dof_work.busy()
+            || self.raygrid.busy()
+        {
             ui.ctx().request_repaint_after(std::time::Duration::from_millis(100));
         }
     }
@@ -554,6 +578,19 @@ impl FlareLabApp {
         if !self.dof_work.status.is_empty() {
             ui.label(&self.dof_work.status);
         }
+        // The ray-grid view: what it shows or is tracing, with Cancel.
+        if !self.raygrid.status.is_empty() {
+            ui.horizontal(|ui| {
+                if let Some((fraction, text)) = self.raygrid.progress() {
+                    ui.add(egui::ProgressBar::new(fraction).text(text).desired_width(360.0));
+                    if ui.button("Cancel trace").clicked() {
+                        self.raygrid.cancel();
+                    }
+                } else {
+                    ui.label(&self.raygrid.status);
+                }
+            });
+        }
         // The bake (started by itself or from the Blend panel) shows its progress and Cancel here too.
         if let (Some(job), BakeStatus::Running { fraction, text }) = (&self.bake, &self.bake_status) {
             ui.horizontal(|ui| {
@@ -624,6 +661,23 @@ impl FlareLabApp {
                     ui.selectable_value(&mut self.doc.tonemap, t, t.name());
                 }
             });
+            let ghosts_label = |grid: Option<usize>| match grid {
+                None => "look".to_owned(),
+                Some(n) => format!("ray grid {n}"),
+            };
+            egui::ComboBox::from_label("ghosts")
+                .selected_text(ghosts_label(self.raygrid.grid))
+                .width(90.0)
+                .show_ui(ui, |ui| {
+                    ui.selectable_value(&mut self.raygrid.grid, None, "look (paraxial + LUT)");
+                    for n in raygrid_view::GRIDS {
+                        ui.selectable_value(&mut self.raygrid.grid, Some(n), format!("ray grid {n} (exact)"));
+                    }
+                })
+                .response
+                .on_hover_text(
+                    "the view's ghosts ray-traced exactly on an N x N grid per ghost (Hullin 2011), on a hardware GPU when there is one: drafts while dragging, traced when input stops; exports draw the look",
+                );
             ui.checkbox(&mut self.doc.starburst, "starburst");
             if self.doc.starburst {
                 ui.add(

@@ -8,10 +8,14 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use flare_core::flare::PreparedFlare;
-use flare_core::lut::bake::{BakeProgress, BakeSettings, bake, useful_field_deg};
+use flare_core::lut::bake::{BakeProgress, BakeSettings, ColumnTracer, CpuTracing, bake_with, useful_field_deg};
 use flare_core::lut::classify::{ClassifySettings, GhostClass, classify};
 use flare_core::lut::{GhostLut, format, photo};
 use flare_core::raytrace::RayGridRenderer;
+use flare_core::render::gpu::GpuContext;
+use flare_core::render::raygrid::{GpuBake, SUPERSAMPLE};
+
+use super::common::DeviceArg;
 
 /// Which ghosts to bake and how.
 #[derive(clap::Args, Debug, Clone)]
@@ -72,6 +76,11 @@ pub struct BakeArgs {
     /// A previous LUT of this lens: ghosts whose settings are unchanged are kept, not re-baked.
     #[arg(long)]
     pub update: Option<PathBuf>,
+    /// Where each column's rays are traced and drawn: `gpu` (any wgpu adapter, lavapipe included), `cpu`
+    /// (the f64 tracer), or `auto`: a hardware GPU when there is one, else the CPU (a software adapter is
+    /// slower than the CPU tracer, so `auto` does not pick it).
+    #[arg(long, value_enum, default_value_t = DeviceArg::Auto)]
+    pub device: DeviceArg,
 }
 
 #[derive(clap::Args, Debug)]
@@ -137,13 +146,33 @@ pub fn classify_ghosts(
     Ok(classify(flare, renderer, &settings, &forced))
 }
 
+/// The GPU a bake's columns go to for `--device` (`None`: the CPU), said on stderr unless `quiet`.
+pub fn bake_gpu(device: DeviceArg, quiet: bool) -> Result<Option<GpuContext>> {
+    Ok(match device {
+        DeviceArg::Cpu => None,
+        DeviceArg::Gpu => Some(GpuContext::headless(false).map_err(|e| anyhow::anyhow!("{e} (or use --device cpu)"))?),
+        DeviceArg::Auto => match GpuContext::hardware() {
+            Ok(ctx) => Some(ctx),
+            Err(why) => {
+                if !quiet {
+                    eprintln!("baking on the CPU: {why} (--device gpu uses any adapter)");
+                }
+                None
+            }
+        },
+    })
+}
+
 /// Classifies and bakes in memory, printing progress to stderr; the LUT, the classes and the bake seconds.
+/// With `gpu`, each column is traced and drawn there ([`GpuBake`]); a device lost on the way hands the rest
+/// to the CPU, said once.
 pub fn bake_lut(
     flare: &PreparedFlare,
     renderer: &RayGridRenderer,
     choice: &LutChoice,
     settings: &BakeSettings,
     previous: Option<&GhostLut>,
+    gpu: Option<&GpuContext>,
     quiet: bool,
 ) -> Result<(GhostLut, Vec<GhostClass>, f64)> {
     let started = Instant::now();
@@ -175,9 +204,27 @@ pub fn bake_lut(
     };
     let mut settings = settings.clone();
     settings.theta_max_deg = choice.theta_max;
-    let lut = bake(flare, renderer, &chosen, &settings, previous, &progress, &cancel)?;
+    let on_gpu = gpu.map(|ctx| GpuBake::new(ctx, SUPERSAMPLE));
+    let tracing: &dyn ColumnTracer = match &on_gpu {
+        Some(g) => g,
+        None => &CpuTracing,
+    };
+    let lut = bake_with(flare, renderer, tracing, &chosen, &settings, previous, &progress, &cancel)?;
     if !quiet {
         eprintln!();
+        match (&on_gpu, gpu) {
+            (Some(g), Some(ctx)) => {
+                let (columns_gpu, columns_cpu) = g.columns();
+                eprintln!(
+                    "columns traced on the GPU ({}, {SUPERSAMPLE}x{SUPERSAMPLE} samples a texel): {columns_gpu}, on the CPU: {columns_cpu}",
+                    ctx.adapter.name
+                );
+            }
+            _ => eprintln!("columns traced on the CPU (f64)"),
+        }
+    }
+    if let Some(reason) = on_gpu.as_ref().and_then(GpuBake::fell_back) {
+        eprintln!("the GPU failed during the bake ({reason}): the rest was traced on the CPU");
     }
     Ok((lut, classes, started.elapsed().as_secs_f64()))
 }
@@ -262,7 +309,9 @@ pub fn bake_command(args: &BakeArgs) -> Result<()> {
         min_step_deg: args.min_step,
         ..BakeSettings::default()
     };
-    let (lut, _, seconds) = bake_lut(&flare, &renderer, &args.choice, &settings, previous.as_ref(), false)?;
+    let gpu = bake_gpu(args.device, false)?;
+    let (lut, _, seconds) =
+        bake_lut(&flare, &renderer, &args.choice, &settings, previous.as_ref(), gpu.as_ref(), false)?;
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("{}.flut", lens.id)));
     let bytes = format::write_lut(&out, &lut).with_context(|| format!("writing {}", out.display()))?;
     for g in &lut.ghosts {

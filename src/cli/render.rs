@@ -13,14 +13,13 @@ use anyhow::{Context, Result, bail};
 use clap::ValueEnum;
 use flare_core::color::Tonemap;
 use flare_core::flare::PreparedFlare;
-use flare_core::frame::{self, Device, Drawn, Frame, LayerChoice, Sources};
+use flare_core::frame::{self, Device, Frame, LayerChoice, Sources};
 use flare_core::lut::blend::{BlendMode, LiveLut};
 use flare_core::lut::format;
 use flare_core::lut::{GhostLut, LutKind};
 use flare_core::output::read_plate;
 use flare_core::preset::{Document, LutSource};
 use flare_core::raytrace::{self};
-use flare_core::render::cpu;
 
 use flare_core::frame::parse_size;
 use flare_core::optics::sensor::{FULL_FRAME_WIDTH_MM, Sensor};
@@ -446,7 +445,8 @@ fn lut_for(doc: &Document, flare: &PreparedFlare, method: Method) -> Result<Ghos
             }
             let renderer = flare.ray_grid_renderer();
             let choice = super::lut::LutChoice::default();
-            let lut = super::lut::bake_lut(flare, &renderer, &choice, &settings, None, false)?.0;
+            let gpu = super::lut::bake_gpu(crate::cli::common::DeviceArg::Auto, false)?;
+            let lut = super::lut::bake_lut(flare, &renderer, &choice, &settings, None, gpu.as_ref(), false)?.0;
             if let Some(cache) = &cache {
                 match cache.store(&doc.lens, &flare.config, &settings, &lut) {
                     Ok(path) => eprintln!("cached the LUT as {}", path.display()),
@@ -643,11 +643,14 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                         Err(e) => return Err(e.into()),
                         Ok(traced) => {
                             eprintln!(
-                                "ray grids on the GPU ({}): {} ghost x wavelength jobs with light, {cells}-cell grid, {samples}x{samples} samples a pixel, {} batches, {:.2} s",
+                                "ray grids on the GPU ({}): {} ghost x wavelength jobs with light, {cells}-cell grid, {samples}x{samples} samples a pixel, {} batches, {:.2} s{}",
                                 drawer.ctx.adapter.name,
                                 traced.jobs,
                                 traced.batches,
-                                started.elapsed().as_secs_f64()
+                                started.elapsed().as_secs_f64(),
+                                traced
+                                    .gpu_times
+                                    .map_or(String::new(), |t| format!(" (GPU time by timestamps: {})", t.summary()))
                             );
                             Some(traced.hdr)
                         }
@@ -655,7 +658,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                 }
                 _ => None,
             };
-            let mut hdr = match on_gpu {
+            let hdr = match on_gpu {
                 Some(hdr) => hdr,
                 None => {
                     let traced = renderer.render(planned.light_deg, width, height, n)?;
@@ -671,9 +674,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                     traced.hdr
                 }
             };
-            cpu::starburst_pass(&frame.scene, &flare.starburst_texture, &mut hdr);
-            let display = cpu::tonemap_pass(&frame.scene, &hdr, plate.as_ref());
-            let drawn = Drawn { hdr, display };
+            let drawn = frame::drawn_with_traced_ghosts(&frame, &sources, hdr);
             frame::write_drawn(&mut device, &frame, &sources, &drawn, choice, &args.out)?;
         }
         None => {

@@ -389,6 +389,21 @@ pub fn draw_cpu(frame: &Frame, sources: &Sources) -> Drawn {
     Drawn { hdr, display }
 }
 
+/// A frame whose ghosts were ray-traced instead of drawn as sprites (`render --method raygrid`, the app's
+/// ray-grid view): `ghosts` is every ghost at gain 1 in linear relative irradiance (resampled to the frame's
+/// accumulation when its size differs), scaled by the frame's light gain (the timeline's light and its
+/// visibility in the plate, as the sprites are), then the frame's starburst, tonemap and plate as
+/// [`draw_cpu`] adds them. Per-ghost gains are not applied: a ray-traced image holds every ghost summed.
+pub fn drawn_with_traced_ghosts(frame: &Frame, sources: &Sources, ghosts: HdrImage) -> Drawn {
+    let scene = &frame.scene;
+    let light_gain = if frame.request.light_gain.is_finite() { frame.request.light_gain.max(0.0) as f32 } else { 0.0 };
+    // At its own size, bilinear resampling reads every pixel exactly: only the gain is applied then.
+    let mut hdr = ghosts.resampled(scene.hdr_width, scene.hdr_height, crate::image::Sampling::Bilinear, light_gain);
+    cpu::starburst_pass(scene, &sources.flare.starburst_texture, &mut hdr);
+    let display = cpu::tonemap_pass(scene, &hdr, sources.plate);
+    Drawn { hdr, display }
+}
+
 /// The accumulation passes of the CPU twin: ghosts, LUT ghosts, starburst.
 pub fn draw_cpu_hdr(frame: &Frame, sources: &Sources) -> HdrImage {
     let scene = &frame.scene;

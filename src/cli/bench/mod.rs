@@ -196,6 +196,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             &args.lut,
             &flare_core::lut::bake::BakeSettings { res: args.lut_res, ..Default::default() },
             None,
+            None,
             true,
         )?;
         let lut_bytes = flare_core::lut::format::encode(&lut).len();
@@ -354,14 +355,22 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                 if let Some(gpu) = gpu.as_ref() {
                     let window = flare_core::raytrace::Window::frame(width, height);
                     let samples = flare_core::render::raygrid::SUPERSAMPLE;
+                    let mut gpu_times = Vec::new();
                     let (ms, runs, gpu_image) = timed(repeats, || {
-                        Ok(gpu.raygrid.render(&gpu.drawer.ctx, &tracer, light, window, grid, samples)?)
+                        let image = gpu.raygrid.render(&gpu.drawer.ctx, &tracer, light, window, grid, samples)?;
+                        gpu_times.extend(image.gpu_times.clone());
+                        Ok(image)
                     })?;
                     let method = format!("raygrid-{grid}-gpu");
                     // No per-ghost moments from the GPU: no centroid error ("-" in the table).
                     let errors = against(&method, &gpu_image.hdr, &[])?;
                     let twin = metrics::compare(&gpu_image.hdr, &[], &image.hdr, &[]);
-                    rows.push(row(method, ms, runs, errors));
+                    let mut measured = row(method, ms, runs, errors);
+                    if let Some(last) = gpu_times.last() {
+                        let totals: Vec<f64> = gpu_times.iter().map(gpu::PassTimes::total_ms).collect();
+                        measured.gpu = Some((metrics::median(&totals), last.summary()));
+                    }
+                    rows.push(measured);
                     twins.push((lens.id.clone(), theta, grid, twin));
                 }
             }

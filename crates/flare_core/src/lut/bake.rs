@@ -24,6 +24,10 @@
 //!    their middle was the better one (a half split again decides for itself; one narrower than twice the
 //!    finest step keeps that choice).
 //!
+//! What draws a column once the scout has placed it is a [`ColumnTracer`]: the CPU reference renderer
+//! ([`CpuTracing`], [`bake`]) or its GPU twin (`render::raygrid::GpuBake` through [`bake_with`]); the scouts and
+//! the refinement are the same for both.
+//!
 //! Progress is reported per entry through a callback, and the bake stops at the next entry when the cancel
 //! flag is set. Given the previous LUT, a ghost whose key (the lens fingerprint, the ghost, the bake
 //! settings and the bake's revision) is unchanged is kept, not re-baked: re-classifying, forcing a ghost or
@@ -42,7 +46,39 @@ use super::{
 use crate::color::luminance;
 use crate::flare::PreparedFlare;
 use crate::ghost::light_slopes_for_frame_position;
-use crate::raytrace::{Grid, RayGridRenderer, RayGridRequest, View, Window};
+use crate::image::HdrImage;
+use crate::raytrace::{Grid, RayGridRenderer, RayGridRequest, Scout, View, Window};
+
+/// What draws a column's entries once the scout has placed their windows: the CPU reference renderer
+/// ([`CpuTracing`]) or its GPU twin (`render::raygrid::GpuBake`, which falls back to the CPU if its device is
+/// lost). Everything else of the bake (scouts, windows, refinement) is the same for both.
+pub trait ColumnTracer: Sync {
+    /// The scouted ghost, for the scout's light, seen in each of `views` (linear irradiance); `None` when it
+    /// cannot be drawn (the column's entries then stay empty).
+    fn trace_column(
+        &self,
+        renderer: &RayGridRenderer,
+        scout: &Scout,
+        views: Vec<View>,
+        grid: Grid,
+    ) -> Option<Vec<HdrImage>>;
+}
+
+/// The bake's columns traced on the CPU, in f64: [`RayGridRenderer::render_request`] of a scouted request.
+pub struct CpuTracing;
+
+impl ColumnTracer for CpuTracing {
+    fn trace_column(
+        &self,
+        renderer: &RayGridRenderer,
+        scout: &Scout,
+        views: Vec<View>,
+        grid: Grid,
+    ) -> Option<Vec<HdrImage>> {
+        let images = renderer.render_request(&RayGridRequest::scouted(scout, views, grid)).ok()?;
+        Some(images.into_iter().map(|i| i.hdr).collect())
+    }
+}
 
 /// How a LUT is baked.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -170,14 +206,16 @@ pub fn render_entry(
     symmetry: &Symmetry,
     settings: &BakeSettings,
 ) -> LutEntry {
-    render_column(flare, renderer, g, theta_deg, &[phi_deg], symmetry, settings).remove(0)
+    render_column(flare, renderer, &CpuTracing, g, theta_deg, &[phi_deg], symmetry, settings).remove(0)
 }
 
 /// Renders the entries of ghost `g` at `theta_deg` for every azimuth `axis + phi` of `phis_deg`, from one
-/// set of traced rays (a view per azimuth: the lens turns the image with the light).
+/// set of traced rays (a view per azimuth: the lens turns the image with the light), drawn by `tracing`.
+#[allow(clippy::too_many_arguments)]
 pub fn render_column(
     flare: &PreparedFlare,
     renderer: &RayGridRenderer,
+    tracing: &dyn ColumnTracer,
     g: usize,
     theta_deg: f64,
     phis_deg: &[f64],
@@ -222,18 +260,17 @@ pub fn render_column(
         return entries;
     }
     let only: Vec<View> = views.iter().map(|v| v.1).collect();
-    let request = RayGridRequest::scouted(&scout, only, Grid::Adaptive(settings.grid));
-    let Ok(images) = renderer.render_request(&request) else {
+    let Some(images) = tracing.trace_column(renderer, &scout, only, Grid::Adaptive(settings.grid)) else {
         return entries.into_iter().map(|e| LutEntry::empty(e.theta_deg, e.phi_deg, e.paraxial)).collect();
     };
     for ((k, _), image) in views.into_iter().zip(images) {
         let entry = &mut entries[k];
-        let peak = image.hdr.pixels.iter().map(|p| luminance([p[0], p[1], p[2]].map(f64::from))).fold(0.0, f64::max);
+        let peak = image.pixels.iter().map(|p| luminance([p[0], p[1], p[2]].map(f64::from))).fold(0.0, f64::max);
         if peak <= 0.0 {
             *entry = LutEntry::empty(entry.theta_deg, entry.phi_deg, entry.paraxial);
             continue;
         }
-        entry.texels = texels_with_coverage(image.hdr.pixels.iter().map(|p| [p[0], p[1], p[2]]));
+        entry.texels = texels_with_coverage(image.pixels.iter().map(|p| [p[0], p[1], p[2]]));
     }
     entries
 }
@@ -312,11 +349,27 @@ fn ghost_key(fingerprint: u64, g: usize, surfaces: (usize, usize), theta_max: f6
     crate::fingerprint::of(&(BAKE_REVISION, fingerprint, g, surfaces, theta_max, settings))
 }
 
-/// Bakes `ghosts` of `flare` (lens indices). `previous` lends the ghosts whose key is unchanged; `progress`
-/// is called after every entry and kept ghost; `cancel` stops the bake.
+/// Bakes `ghosts` of `flare` (lens indices) on the CPU: [`bake_with`] and [`CpuTracing`].
 pub fn bake(
     flare: &PreparedFlare,
     renderer: &RayGridRenderer,
+    ghosts: &[usize],
+    settings: &BakeSettings,
+    previous: Option<&GhostLut>,
+    progress: &(dyn Fn(BakeProgress) + Sync),
+    cancel: &AtomicBool,
+) -> Result<GhostLut, BakeError> {
+    bake_with(flare, renderer, &CpuTracing, ghosts, settings, previous, progress, cancel)
+}
+
+/// Bakes `ghosts` of `flare` (lens indices), each column's entries drawn by `tracing`. `previous` lends the
+/// ghosts whose key is unchanged; `progress` is called after every entry and kept ghost; `cancel` stops the
+/// bake.
+#[allow(clippy::too_many_arguments)]
+pub fn bake_with(
+    flare: &PreparedFlare,
+    renderer: &RayGridRenderer,
+    tracing: &dyn ColumnTracer,
     ghosts: &[usize],
     settings: &BakeSettings,
     previous: Option<&GhostLut>,
@@ -361,7 +414,7 @@ pub fn bake(
                 if cancel.load(Ordering::Relaxed) {
                     return Err(BakeError::Cancelled);
                 }
-                let column = render_column(flare, renderer, g, theta, &phis, &symmetry, settings);
+                let column = render_column(flare, renderer, tracing, g, theta, &phis, &symmetry, settings);
                 entries_done.fetch_add(column.len(), Ordering::Relaxed);
                 report();
                 Ok(column)

@@ -271,10 +271,12 @@ impl RayGridRenderer {
             views.iter().map(|v| Accumulator::new(v.window.width as usize, v.window.height as usize, ghosts)).collect()
         };
         let merge = |a: Vec<Accumulator>, b: Vec<Accumulator>| a.into_iter().zip(b).map(|(a, b)| a.merge(b)).collect();
-        let accs = self
-            .jobs
-            .par_iter()
-            .filter_map(|job| plan(job).map(|scouted| (job, scouted)))
+        // The jobs drawn, gathered first: a scouted request draws 3 of the lens's (up to thousands of) jobs,
+        // and every piece rayon splits the list into starts a fresh accumulator per view, merged at the end.
+        let drawn: Vec<(&Job, Option<&TracedGrid>)> =
+            self.jobs.iter().filter_map(|job| plan(job).map(|scouted| (job, scouted))).collect();
+        let accs = drawn
+            .into_par_iter()
             .fold(fresh, |mut accs, (job, scouted)| {
                 self.render_job(job, u, views, grid, scouted, &mut accs);
                 accs
@@ -304,21 +306,49 @@ impl RayGridRenderer {
             .enumerate()
             .filter_map(|(index, job)| {
                 let b = self.front_pre_pass(job, u, d, grid, &views).0?.bounds;
-                Some(PlannedJob {
-                    index,
-                    ghost: job.ghost,
-                    tracer: &job.tracer,
-                    step_tables: &job.step_tables,
-                    inverse_semi_aperture2: &job.inverse_semi_aperture2,
-                    bounds: b,
-                    cells,
-                    direction: d,
-                    triangle_flux: triangle_flux(d, b, cells),
-                    stop_count: self.stop_count(job),
-                    rgb: self.spectrum.weights_rgb[job.wavelength],
-                })
+                Some(self.planned(index, b, cells, d))
             })
             .collect())
+    }
+
+    /// The jobs of a scouted render ([`Ghosts::Scouted`] seen in `views`) as [`Self::render_request`] lays
+    /// them out, for a twin that traces them elsewhere (the GPU bake): per wavelength of the scouted ghost with
+    /// light, where its grid lies (the scout's grid as the pre-pass) and how many cells it has (`grid` for the
+    /// ghost's extent in the views). The CPU traces only the lit cells inside that square; a twin that traces
+    /// all of it gets the same light plus what the lit cells' margin left out (measured by the bake's test).
+    pub fn plan_scouted(&self, scout: &Scout, views: &[View], grid: Grid) -> Result<Vec<PlannedJob<'_>>, RayGridError> {
+        validate(scout.light_deg, views, grid)?;
+        let u = light_slopes_for_frame_position(scout.light_deg[0], scout.light_deg[1]);
+        let d = DVec3::new(u[0], u[1], 1.0).normalize();
+        Ok(self
+            .jobs
+            .iter()
+            .enumerate()
+            .filter(|(_, job)| job.ghost == scout.ghost)
+            .filter_map(|(index, job)| {
+                let traced = scout.grids.get(job.wavelength)?.as_ref()?;
+                let pre = self.pre_pass(job, u, traced, views)?;
+                Some(self.planned(index, pre.bounds, grid.for_extent(pre.extent_px), d))
+            })
+            .collect())
+    }
+
+    /// Job `index` planned on a `cells` x `cells` grid over `bounds` of the entrance plane, light direction `d`.
+    fn planned(&self, index: usize, bounds: [f64; 4], cells: usize, d: DVec3) -> PlannedJob<'_> {
+        let job = &self.jobs[index];
+        PlannedJob {
+            index,
+            ghost: job.ghost,
+            tracer: &job.tracer,
+            step_tables: &job.step_tables,
+            inverse_semi_aperture2: &job.inverse_semi_aperture2,
+            bounds,
+            cells,
+            direction: d,
+            triangle_flux: triangle_flux(d, bounds, cells),
+            stop_count: self.stop_count(job),
+            rgb: self.spectrum.weights_rgb[job.wavelength],
+        }
     }
 
     /// The pre-pass of a render with no scout: a coarse grid (half the render's, 16 to 64 cells) over the whole

@@ -110,6 +110,20 @@ impl GpuContext {
         Ok(Self { device, queue, adapter: info, failure })
     }
 
+    /// A headless device on a hardware GPU, for work that a software rasteriser does slower than the CPU (the
+    /// LUT bake's columns, the app's ray-grid view): `Err` saying why when there is none (no adapter, or only a
+    /// software one such as lavapipe).
+    pub fn hardware() -> Result<Self, String> {
+        let ctx = Self::headless(false).map_err(|e| e.to_string())?;
+        if ctx.adapter.device_type == wgpu::DeviceType::Cpu {
+            return Err(format!(
+                "the only GPU adapter is {}, a software rasteriser slower than the CPU tracer",
+                ctx.adapter.name
+            ));
+        }
+        Ok(ctx)
+    }
+
     /// Why the device can no longer be trusted (lost, or an error wgpu reported on its own), if it cannot.
     pub fn failure(&self) -> Option<String> {
         self.failure.lock().ok().and_then(|f| f.clone())
@@ -760,7 +774,8 @@ impl FlareRenderer {
     }
 }
 
-/// Copies `texture` (of `bytes_per_pixel`) into CPU memory, unpadding the 256-byte rows.
+/// Copies `texture` (of `bytes_per_pixel`) into CPU memory, unpadding the 256-byte rows. A texture larger than
+/// one buffer may be (the adapter's `max_buffer_size`; 64 MB at most here) comes back in strips of rows.
 pub(crate) fn read_texture(
     ctx: &GpuContext,
     texture: &wgpu::Texture,
@@ -769,36 +784,45 @@ pub(crate) fn read_texture(
     let size = texture.size();
     let row = size.width * bytes_per_pixel;
     let padded = row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
-    let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("readback"),
-        size: (padded * size.height) as u64,
-        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-        mapped_at_creation: false,
-    });
-    let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
-    encoder.copy_texture_to_buffer(
-        wgpu::TexelCopyTextureInfo {
-            texture,
-            mip_level: 0,
-            origin: wgpu::Origin3d::ZERO,
-            aspect: wgpu::TextureAspect::All,
-        },
-        wgpu::TexelCopyBufferInfo {
-            buffer: &buffer,
-            layout: wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(padded),
-                rows_per_image: Some(size.height),
-            },
-        },
-        size,
-    );
-    ctx.queue.submit(Some(encoder.finish()));
-    let view = map_read(&ctx.device, &buffer, u64::from(padded * size.height))?;
+    let largest = ctx.device.limits().max_buffer_size.min(64 << 20);
+    let strip_rows = (largest / u64::from(padded)).clamp(1, u64::from(size.height.max(1))) as u32;
     let mut out = Vec::with_capacity((row * size.height) as usize);
-    for y in 0..size.height as usize {
-        let start = y * padded as usize;
-        out.extend_from_slice(&view[start..start + row as usize]);
+    let mut y0 = 0;
+    while y0 < size.height {
+        let rows = strip_rows.min(size.height - y0);
+        let bytes = u64::from(padded) * u64::from(rows);
+        let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size: bytes,
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        });
+        let mut encoder =
+            ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
+        encoder.copy_texture_to_buffer(
+            wgpu::TexelCopyTextureInfo {
+                texture,
+                mip_level: 0,
+                origin: wgpu::Origin3d { x: 0, y: y0, z: 0 },
+                aspect: wgpu::TextureAspect::All,
+            },
+            wgpu::TexelCopyBufferInfo {
+                buffer: &buffer,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(padded),
+                    rows_per_image: Some(rows),
+                },
+            },
+            wgpu::Extent3d { width: size.width, height: rows, depth_or_array_layers: 1 },
+        );
+        ctx.queue.submit(Some(encoder.finish()));
+        let view = map_read(&ctx.device, &buffer, bytes)?;
+        for y in 0..rows as usize {
+            let start = y * padded as usize;
+            out.extend_from_slice(&view[start..start + row as usize]);
+        }
+        y0 += rows;
     }
     Ok(out)
 }

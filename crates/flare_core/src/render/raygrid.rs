@@ -18,6 +18,12 @@
 //!    passes a clear aperture, added into an Rgba32Float target (Rgba16Float where the adapter cannot blend
 //!    32-bit floats).
 //!
+//! Jobs go in batches of one grid size; each batch's two passes write timestamps (the GPU's own time, summed
+//! per pass into [`GpuRayGridImage::gpu_times`]) for a frame render. **The LUT bake** draws each column the
+//! same way ([`GpuRayGrid::render_scouted`], [`GpuBake`]): the CPU plans it from the scout
+//! ([`RayGridRenderer::plan_scouted`]), and the trace turns every landing and stop coordinate by the view's
+//! turn (`rgb.w` of [`GpuJob`]), as the CPU's [`View`] does, once per azimuth.
+//!
 //! The CPU twin box-filters its triangles (clips each to the pixels it covers); the GPU samples pixel centres,
 //! as rasterisers do. A triangle collapsed to a line or a point (a ghost focused there) is dropped here where
 //! the CPU puts its light in one pixel. A test compares landings (the f32 drift, per lens) and images.
@@ -26,11 +32,12 @@
 //! that fit the largest storage buffer the adapter binds. A device lost on the way is
 //! [`GpuError::Lost`] (the command line then traces on the CPU).
 
-use super::gpu::{GpuContext, GpuError, map_read, read_texture, storage, texture_2d};
+use super::gpu::{GpuContext, GpuError, PassTimes, map_read, read_texture, storage, texture_2d};
 use super::shaders::{RAYGRID_SPLAT_WGSL, RAYGRID_TRACE_WGSL};
 use crate::image::HdrImage;
-use crate::raytrace::{DENSE_TABLE_SAMPLES, PlannedJob, RayGridError, RayGridRenderer, Window};
+use crate::raytrace::{DENSE_TABLE_SAMPLES, Grid, PlannedJob, RayGridError, RayGridRenderer, Scout, View, Window};
 use bytemuck::{Pod, Zeroable};
+use wgpu_profiler::{GpuProfiler, GpuProfilerSettings};
 
 /// One step of a ghost's path. Must be kept in sync with `struct Step` in `shaders/raygrid_common.wgsl`.
 #[repr(C)]
@@ -63,7 +70,7 @@ pub struct GpuJob {
     pub view: [f32; 4],
     /// Width, height (pixels), stop crossings looked at, a triangle's flux over a pixel's area.
     pub frame: [f32; 4],
-    /// The wavelength's RGB weight, unused.
+    /// The wavelength's RGB weight, the view's turn about the axis (radians, counter-clockwise).
     pub rgb: [f32; 4],
 }
 const _: () = assert!(std::mem::size_of::<GpuJob>() == 96);
@@ -109,6 +116,9 @@ pub struct GpuRayGridImage {
     /// Jobs drawn (ghost x wavelength with light) and batches they took.
     pub jobs: usize,
     pub batches: usize,
+    /// GPU time of the passes, measured by timestamp queries ("trace" and "splat", every batch summed), where
+    /// the adapter has them; nothing of the CPU's planning or of the read-back.
+    pub gpu_times: Option<PassTimes>,
 }
 
 /// The uploaded form of a planned frame.
@@ -124,6 +134,8 @@ pub struct GpuRayGrid {
     splat_pipeline: wgpu::RenderPipeline,
     sampler: wgpu::Sampler,
     target_format: wgpu::TextureFormat,
+    /// Times a frame's passes ([`Self::render`]; the bake's columns, drawn from many threads, are not timed).
+    profiler: std::sync::Mutex<GpuProfiler>,
 }
 
 impl GpuRayGrid {
@@ -185,7 +197,9 @@ impl GpuRayGrid {
             min_filter: wgpu::FilterMode::Linear,
             ..Default::default()
         });
-        Self { trace_pipeline, splat_pipeline, sampler, target_format }
+        let profiler =
+            GpuProfiler::new(device, GpuProfilerSettings::default()).expect("the default settings are valid");
+        Self { trace_pipeline, splat_pipeline, sampler, target_format, profiler: std::sync::Mutex::new(profiler) }
     }
 
     /// The ghosts of `renderer` for a light at the frame position `light_deg`, seen in `window`, a `cells` x
@@ -202,27 +216,66 @@ impl GpuRayGrid {
         supersample: u32,
     ) -> Result<GpuRayGridImage, GpuRayGridError> {
         let planned = renderer.plan_fixed(light_deg, window, cells)?;
+        let jobs: Vec<&PlannedJob> = planned.iter().collect();
+        let mut profiler = self.profiler.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        self.draw(ctx, renderer, &jobs, View { window, turn_deg: 0.0 }, supersample, Some(&mut profiler))
+    }
+
+    /// The GPU twin of a scouted CPU render ([`RayGridRenderer::render_request`] of
+    /// [`crate::raytrace::RayGridRequest::scouted`]), what the GPU bake draws each LUT column with: the scout's
+    /// ghost for the scout's light, its grid per wavelength placed by the CPU from the scout
+    /// ([`RayGridRenderer::plan_scouted`]), traced and drawn once per view (each view turns the landings and the
+    /// stop coordinates, as the CPU's does).
+    pub fn render_scouted(
+        &self,
+        ctx: &GpuContext,
+        renderer: &RayGridRenderer,
+        scout: &Scout,
+        views: &[View],
+        grid: Grid,
+        supersample: u32,
+    ) -> Result<Vec<HdrImage>, GpuRayGridError> {
+        let planned = renderer.plan_scouted(scout, views, grid)?;
+        let jobs: Vec<&PlannedJob> = planned.iter().collect();
+        views.iter().map(|view| Ok(self.draw(ctx, renderer, &jobs, *view, supersample, None)?.hdr)).collect()
+    }
+
+    /// Traces and draws `planned` seen in `view`: jobs of one grid size go in batches that fit the adapter's
+    /// largest storage binding, every batch added into one target, read back once. With `profiler`, each
+    /// batch's two passes write timestamps.
+    fn draw(
+        &self,
+        ctx: &GpuContext,
+        renderer: &RayGridRenderer,
+        planned: &[&PlannedJob],
+        view: View,
+        supersample: u32,
+        mut profiler: Option<&mut GpuProfiler>,
+    ) -> Result<GpuRayGridImage, GpuRayGridError> {
         if let Some(reason) = ctx.failure() {
             return Err(GpuError::Lost(reason).into());
         }
+        let window = view.window;
         let s = supersample.clamp(1, 8);
         let fine = Window { width: window.width * s, height: window.height * s, ..window };
         let (device, queue) = (&ctx.device, &ctx.queue);
         let limits = device.limits();
-        let per_job_vertices = ((cells + 1) * (cells + 1)) as u64;
-        let per_job_bytes = per_job_vertices * std::mem::size_of::<GpuVertex>() as u64;
-        let groups_x = per_job_vertices.div_ceil(u64::from(WORKGROUP));
+        let cells = planned.iter().map(|j| j.cells).max().unwrap_or(1);
+        let vertices_of = |cells: usize| ((cells + 1) * (cells + 1)) as u64;
+        let bytes_of = |cells: usize| vertices_of(cells) * std::mem::size_of::<GpuVertex>() as u64;
         let limit = |what, needed: u64, limit: u64, name| {
             (needed > limit).then_some(GpuRayGridError::Limit { cells, what, needed, limit, name })
         };
         let binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         if let Some(e) = limit(
             "workgroups per dispatch",
-            groups_x,
+            vertices_of(cells).div_ceil(u64::from(WORKGROUP)),
             u64::from(limits.max_compute_workgroups_per_dimension),
             "max_compute_workgroups_per_dimension",
         )
-        .or_else(|| limit("bytes of vertices for one ghost", per_job_bytes, binding, "max_storage_buffer_binding_size"))
+        .or_else(|| {
+            limit("bytes of vertices for one ghost", bytes_of(cells), binding, "max_storage_buffer_binding_size")
+        })
         .or_else(|| limit("vertices per draw", (cells * cells * 6) as u64, u64::from(u32::MAX), "u32 vertex index"))
         .or_else(|| {
             let side = u64::from(fine.width.max(fine.height));
@@ -234,6 +287,11 @@ impl GpuRayGrid {
             )
         }) {
             return Err(e);
+        }
+        if planned.is_empty() {
+            // No job has light: a black image.
+            let hdr = HdrImage::black(window.width, window.height);
+            return Ok(GpuRayGridImage { hdr, jobs: 0, batches: 0, gpu_times: None });
         }
         let target = texture_2d(
             device,
@@ -260,28 +318,41 @@ impl GpuRayGrid {
             aperture.size(),
         );
         let aperture_view = aperture.create_view(&wgpu::TextureViewDescriptor::default());
-        // Batches of jobs whose vertices fit one storage binding (at most 256 MB, and at most 65535 jobs, the
-        // dispatch's y).
-        let per_batch = (binding.min(256 << 20) / per_job_bytes.max(1))
-            .min(u64::from(limits.max_compute_workgroups_per_dimension))
-            .max(1) as usize;
+        // Jobs of one grid size together, in batches whose vertices fit one storage binding (at most 256 MB,
+        // and at most 65535 jobs, the dispatch's y).
+        let mut order = planned.to_vec();
+        order.sort_by_key(|j| j.cells);
         let mut batches = 0;
-        let mut first = true;
-        for batch in planned.chunks(per_batch) {
-            let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("raygrid") });
-            let (jobs, vertices) = self.trace(device, queue, &mut encoder, renderer, batch, fine);
-            let splat_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("raygrid splat"),
-                layout: &self.splat_pipeline.get_bind_group_layout(0),
-                entries: &[
-                    wgpu::BindGroupEntry { binding: 0, resource: vertices.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 1, resource: jobs.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&aperture_view) },
-                    wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(&self.sampler) },
-                ],
-            });
-            {
-                let load = if first { wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT) } else { wgpu::LoadOp::Load };
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("raygrid") });
+        for same in order.chunk_by(|a, b| a.cells == b.cells) {
+            let cells = same[0].cells;
+            let per_batch = (binding.min(256 << 20) / bytes_of(cells).max(1))
+                .min(u64::from(limits.max_compute_workgroups_per_dimension))
+                .max(1) as usize;
+            for batch in same.chunks(per_batch) {
+                let query = profiler.as_deref().map(|p| p.begin_pass_query("trace", &mut encoder));
+                let writes = query.as_ref().and_then(|q| q.compute_pass_timestamp_writes());
+                let (jobs, vertices) =
+                    self.trace(device, queue, &mut encoder, renderer, batch, fine, view.turn_deg, writes);
+                if let (Some(p), Some(q)) = (profiler.as_deref(), query) {
+                    p.end_query(&mut encoder, q);
+                }
+                let query = profiler.as_deref().map(|p| p.begin_pass_query("splat", &mut encoder));
+                let splat_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("raygrid splat"),
+                    layout: &self.splat_pipeline.get_bind_group_layout(0),
+                    entries: &[
+                        wgpu::BindGroupEntry { binding: 0, resource: vertices.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 1, resource: jobs.as_entire_binding() },
+                        wgpu::BindGroupEntry {
+                            binding: 2,
+                            resource: wgpu::BindingResource::TextureView(&aperture_view),
+                        },
+                        wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(&self.sampler) },
+                    ],
+                });
+                let load =
+                    if batches == 0 { wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT) } else { wgpu::LoadOp::Load };
                 let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                     label: Some("raygrid splat"),
                     color_attachments: &[Some(wgpu::RenderPassColorAttachment {
@@ -290,26 +361,55 @@ impl GpuRayGrid {
                         resolve_target: None,
                         ops: wgpu::Operations { load, store: wgpu::StoreOp::Store },
                     })],
+                    timestamp_writes: query.as_ref().and_then(|q| q.render_pass_timestamp_writes()),
                     ..Default::default()
                 });
                 pass.set_pipeline(&self.splat_pipeline);
                 pass.set_bind_group(0, &splat_group, &[]);
                 pass.draw(0..(cells * cells * 6) as u32, 0..batch.len() as u32);
+                drop(pass);
+                if let Some(p) = profiler.as_deref_mut() {
+                    if let Some(q) = query {
+                        p.end_query(&mut encoder, q);
+                    }
+                    p.resolve_queries(&mut encoder);
+                }
+                batches += 1;
+                // Each batch's buffers are freed once it has run: submit as they are recorded.
+                queue.submit(Some(
+                    std::mem::replace(
+                        &mut encoder,
+                        device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("raygrid") }),
+                    )
+                    .finish(),
+                ));
             }
-            queue.submit(Some(encoder.finish()));
-            first = false;
-            batches += 1;
         }
-        if first {
-            // No job has light: a black image.
-            return Ok(GpuRayGridImage { hdr: HdrImage::black(window.width, window.height), jobs: 0, batches: 0 });
+        if let Some(p) = profiler.as_deref_mut() {
+            // An error here means a query was left open: a bug, but never worth an image.
+            let _ = p.end_frame();
         }
         let hdr = read_hdr(ctx, &target, self.target_format);
         // A device lost on the way (or an error it reported on its own) spoils the image, whatever came back.
         if let Some(reason) = ctx.failure() {
             return Err(GpuError::Lost(reason).into());
         }
-        Ok(GpuRayGridImage { hdr: hdr?.box_reduced(s), jobs: planned.len(), batches })
+        let gpu_times = profiler.and_then(|p| {
+            let _ = device.poll(wgpu::PollType::wait_indefinitely());
+            let mut summed: Option<PassTimes> = None;
+            while let Some(results) = p.process_finished_frame(queue.get_timestamp_period()) {
+                let mut times = PassTimes::default();
+                for (name, ms) in PassTimes::from_results(&results).passes {
+                    match times.passes.iter_mut().find(|(n, _)| *n == name) {
+                        Some((_, total)) => *total += ms,
+                        None => times.passes.push((name, ms)),
+                    }
+                }
+                summed = Some(times);
+            }
+            summed.filter(|t| !t.passes.is_empty())
+        });
+        Ok(GpuRayGridImage { hdr: hdr?.box_reduced(s), jobs: planned.len(), batches, gpu_times })
     }
 
     /// The traced vertices of the first `jobs` planned jobs (for the landing comparison with the f64 tracer),
@@ -334,7 +434,8 @@ impl GpuRayGrid {
             mapped_at_creation: false,
         });
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("trace") });
-        let (_, vertices) = self.trace(device, queue, &mut encoder, renderer, &planned, window);
+        let jobs: Vec<&PlannedJob> = planned.iter().collect();
+        let (_, vertices) = self.trace(device, queue, &mut encoder, renderer, &jobs, window, 0.0, None);
         encoder.copy_buffer_to_buffer(&vertices, 0, &readback, 0, size);
         queue.submit(Some(encoder.finish()));
         let view = map_read(device, &readback, size)?;
@@ -344,18 +445,22 @@ impl GpuRayGrid {
 }
 
 impl GpuRayGrid {
-    /// Uploads `jobs` (seen in `window`) and records the tracer's dispatch into `encoder`: every grid vertex of
-    /// every job, `(cells + 1)^2` a job in job order. Returns the jobs buffer and the vertex buffer.
+    /// Uploads `jobs` (of one grid size, seen in `window` with the light turned by `turn_deg`) and records the
+    /// tracer's dispatch into `encoder`: every grid vertex of every job, `(cells + 1)^2` a job in job order.
+    /// Returns the jobs buffer and the vertex buffer.
+    #[allow(clippy::too_many_arguments)]
     fn trace(
         &self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         encoder: &mut wgpu::CommandEncoder,
         renderer: &RayGridRenderer,
-        jobs: &[PlannedJob],
+        jobs: &[&PlannedJob],
         window: Window,
+        turn_deg: f64,
+        timestamp_writes: Option<wgpu::ComputePassTimestampWrites>,
     ) -> (wgpu::Buffer, wgpu::Buffer) {
-        let upload = upload(renderer, jobs, window);
+        let upload = upload(renderer, jobs, window, turn_deg);
         let per_job = jobs.first().map_or(1, |j| (j.cells + 1) * (j.cells + 1)) as u64;
         let buffer = |label, contents: &[u8]| storage(device, queue, label, contents, wgpu::BufferUsages::STORAGE);
         let steps = buffer("raygrid steps", bytemuck::cast_slice(&upload.steps));
@@ -377,8 +482,8 @@ impl GpuRayGrid {
                 wgpu::BindGroupEntry { binding: 3, resource: vertices.as_entire_binding() },
             ],
         });
-        let mut pass = encoder
-            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("raygrid trace"), timestamp_writes: None });
+        let mut pass =
+            encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("raygrid trace"), timestamp_writes });
         pass.set_pipeline(&self.trace_pipeline);
         pass.set_bind_group(0, &group, &[]);
         pass.dispatch_workgroups((per_job as u32).div_ceil(WORKGROUP), jobs.len().max(1) as u32, 1);
@@ -387,9 +492,9 @@ impl GpuRayGrid {
     }
 }
 
-/// The steps, jobs and tables of `jobs`, every float finite (a value that is not becomes 0 and the job is
-/// left out: nothing that is not finite reaches a GPU buffer).
-fn upload(renderer: &RayGridRenderer, jobs: &[PlannedJob], window: Window) -> Upload {
+/// The steps, jobs and tables of `jobs` seen in `window` with the light turned by `turn_deg`, every float
+/// finite (a value that is not becomes 0: nothing that is not finite reaches a GPU buffer).
+fn upload(renderer: &RayGridRenderer, jobs: &[&PlannedJob], window: Window, turn_deg: f64) -> Upload {
     let tables = renderer.tables();
     let (stop, stop_radius_mm) = renderer.stop();
     let mut out = Upload { steps: Vec::new(), jobs: Vec::new(), tables: Vec::new() };
@@ -441,7 +546,7 @@ fn upload(renderer: &RayGridRenderer, jobs: &[PlannedJob], window: Window) -> Up
                 job.triangle_flux / pixel_area_mm2,
             ]
             .map(finite),
-            rgb: [job.rgb[0], job.rgb[1], job.rgb[2], 0.0].map(finite),
+            rgb: [job.rgb[0], job.rgb[1], job.rgb[2], turn_deg.to_radians()].map(finite),
         });
         vertex += ((job.cells + 1) * (job.cells + 1)) as u32;
     }
@@ -469,4 +574,71 @@ fn read_hdr(ctx: &GpuContext, target: &wgpu::Texture, format: wgpu::TextureForma
     };
     let pixels = pixels.into_iter().map(|p| p.map(|v| if v.is_finite() && v > 0.0 { v } else { 0.0 })).collect();
     Ok(HdrImage { width: size.width, height: size.height, pixels })
+}
+
+/// The LUT bake's columns drawn on the GPU ([`GpuRayGrid::render_scouted`]; the scouts, windows and
+/// refinement stay on the CPU). A column the GPU refuses (a limit) is traced on the CPU; a device lost on the
+/// way sends that column and every later one to the CPU, and [`Self::fell_back`] says why, so the caller can
+/// say so once.
+pub struct GpuBake<'a> {
+    ctx: &'a GpuContext,
+    raygrid: GpuRayGrid,
+    supersample: u32,
+    lost: std::sync::Mutex<Option<String>>,
+    on_gpu: std::sync::atomic::AtomicUsize,
+    on_cpu: std::sync::atomic::AtomicUsize,
+}
+
+impl<'a> GpuBake<'a> {
+    /// Columns drawn on `ctx`'s GPU at `supersample` x `supersample` samples a texel.
+    pub fn new(ctx: &'a GpuContext, supersample: u32) -> Self {
+        Self {
+            ctx,
+            raygrid: GpuRayGrid::new(&ctx.device),
+            supersample,
+            lost: std::sync::Mutex::new(None),
+            on_gpu: Default::default(),
+            on_cpu: Default::default(),
+        }
+    }
+
+    /// Why the GPU stopped drawing columns (its device was lost), if it did.
+    pub fn fell_back(&self) -> Option<String> {
+        self.lost.lock().ok().and_then(|l| l.clone())
+    }
+
+    /// Columns drawn on the GPU and on the CPU so far.
+    pub fn columns(&self) -> (usize, usize) {
+        use std::sync::atomic::Ordering::Relaxed;
+        (self.on_gpu.load(Relaxed), self.on_cpu.load(Relaxed))
+    }
+}
+
+impl crate::lut::bake::ColumnTracer for GpuBake<'_> {
+    fn trace_column(
+        &self,
+        renderer: &RayGridRenderer,
+        scout: &Scout,
+        views: Vec<View>,
+        grid: Grid,
+    ) -> Option<Vec<HdrImage>> {
+        use std::sync::atomic::Ordering::Relaxed;
+        if self.fell_back().is_none() {
+            match self.raygrid.render_scouted(self.ctx, renderer, scout, &views, grid, self.supersample) {
+                Ok(images) => {
+                    self.on_gpu.fetch_add(1, Relaxed);
+                    return Some(images);
+                }
+                Err(GpuRayGridError::Gpu(e)) => {
+                    if let Ok(mut lost) = self.lost.lock() {
+                        lost.get_or_insert(e.to_string());
+                    }
+                }
+                // A refused grid or window: this column on the CPU.
+                Err(_) => {}
+            }
+        }
+        self.on_cpu.fetch_add(1, Relaxed);
+        crate::lut::bake::CpuTracing.trace_column(renderer, scout, views, grid)
+    }
 }

@@ -1,0 +1,228 @@
+//! The view's ray-grid mode: the frame shown, its ghosts ray-traced exactly (Hullin et al. 2011's ray grids,
+//! `flare_core::raytrace` and its GPU twin) instead of drawn as paraxial sprites, for a lens designer who
+//! wants to see the optics without the paraxial approximation, live.
+//!
+//! # How it works
+//! [`RayGridView::step`] runs once per UI frame after the frame is built. While the user drags or scrubs, the
+//! viewport draws its paraxial drafts as always (tracing every ghost is too slow to follow a drag on most
+//! machines). When a full-quality frame is up and has not been traced yet, a [`Job`] traces it on a thread:
+//! on a hardware GPU when there is one ([`GpuRayGrid`], at [`SUPERSAMPLE`] x [`SUPERSAMPLE`] samples a pixel;
+//! made once, on the first trace), else with the f64 CPU renderer (a software adapter such as lavapipe is
+//! slower than the CPU here); a GPU lost on the way hands this trace and every later one to the CPU, said in
+//! the status. The traced ghosts go through the frame pipeline's
+//! [`flare_core::frame::drawn_with_traced_ghosts`] (light gain, starburst, tonemap, plate), the same function
+//! `flarelab render --method raygrid` writes with, and the display image replaces the frame in the viewport
+//! ([`ViewportResources::show_image`]). A trace that finishes after the frame changed is dropped; Cancel stops
+//! the trace of this frame (the next frame is traced again). Exports and commands draw the document's look, not
+//! this view.
+
+use std::sync::atomic::Ordering;
+use std::sync::{Arc, OnceLock};
+
+use eframe::egui_wgpu::RenderState;
+use flare_core::frame::{Frame, Sources};
+use flare_core::image::{DisplayImage, HdrImage};
+use flare_core::raytrace::{Grid, RayGridRequest, View, Window};
+use flare_core::render::gpu::GpuContext;
+use flare_core::render::raygrid::{GpuRayGrid, GpuRayGridError, SUPERSAMPLE};
+
+use super::derived::Derived;
+use super::job::{Job, JobPoll};
+use crate::viewport::ViewportResources;
+
+/// The grids the view offers (cells across each ghost's entrance region).
+pub const GRIDS: [usize; 4] = [16, 32, 64, 128];
+
+/// A hardware GPU and its ray-grid pipelines, made once.
+struct TraceDevice {
+    ctx: GpuContext,
+    raygrid: GpuRayGrid,
+}
+
+/// The hardware GPU the traces use, decided on the first trace: `Err` says why there is none.
+type DeviceCell = Arc<OnceLock<Result<TraceDevice, String>>>;
+
+/// A trace on its thread: what it makes, or why it stopped.
+type TraceJob = Job<Result<Traced, String>>;
+
+/// A traced frame: its display image and what it took.
+pub struct Traced {
+    pub display: Arc<DisplayImage>,
+    pub summary: String,
+}
+
+/// The ray-grid view's state (see the module documentation).
+#[derive(Default)]
+pub struct RayGridView {
+    /// Cells across each ghost's grid; `None`: the view draws the document's look.
+    pub grid: Option<usize>,
+    /// The trace running: the frame generation and grid it is for.
+    job: Option<(u64, usize, TraceJob)>,
+    /// The latest traced frame: its generation, its grid and what it made.
+    shown: Option<(u64, usize, Traced)>,
+    /// A frame whose trace was cancelled: not traced again.
+    cancelled: Option<u64>,
+    /// What the status bar says.
+    pub status: String,
+    device: DeviceCell,
+}
+
+impl RayGridView {
+    /// True while a trace runs.
+    pub fn busy(&self) -> bool {
+        self.job.is_some()
+    }
+
+    /// The display image of the frame of `generation`, when it has been traced at the grid chosen.
+    pub fn traced(&self, generation: u64) -> Option<&Traced> {
+        self.shown.as_ref().filter(|(g, grid, _)| *g == generation && Some(*grid) == self.grid).map(|s| &s.2)
+    }
+
+    /// The running trace's progress.
+    pub fn progress(&self) -> Option<(f32, String)> {
+        self.job.as_ref().map(|(_, _, job)| job.progress())
+    }
+
+    /// Stops the running trace; the frame it was for is not traced again.
+    pub fn cancel(&mut self) {
+        if let Some((generation, _, job)) = self.job.take() {
+            job.cancel();
+            self.cancelled = Some(generation);
+            self.status = "ray grid: cancelled (the paraxial frame is shown; the next frame is traced)".into();
+        }
+    }
+
+    /// One UI frame's step (see the module documentation); `gpu` is the viewport's device, `None` in tests.
+    pub fn step(&mut self, derived: &Derived, gpu: Option<&RenderState>) {
+        let Some(grid) = self.grid else {
+            if let Some((_, _, job)) = self.job.take() {
+                job.cancel();
+            }
+            if self.shown.take().is_some()
+                && let Some(rs) = gpu
+            {
+                // The viewport draws the look again.
+                ViewportResources::with(rs, |_, _, _| ());
+            }
+            self.status.clear();
+            return;
+        };
+        let Some((generation, frame)) = derived.view_frame.clone() else { return };
+        let Some(flare) = derived.flare.clone() else { return };
+        // A finished trace: shown if it is still the frame on screen, dropped otherwise.
+        if let Some((for_generation, for_grid, job)) = &self.job
+            && let JobPoll::Finished(outcome) = job.poll()
+        {
+            let current = *for_generation == generation && *for_grid == grid;
+            match outcome {
+                Ok(traced) if current => {
+                    self.status = traced.summary.clone();
+                    self.shown = Some((generation, grid, traced));
+                }
+                Ok(_) => {}
+                Err(e) => self.status = format!("ray grid {grid}: {e}"),
+            }
+            self.job = None;
+        }
+        // Drafts while the user drags; the trace waits for the full frame.
+        if derived.draft.is_some() {
+            if let Some((_, _, job)) = self.job.take() {
+                job.cancel();
+            }
+            self.status = format!("ray grid {grid}: paraxial drafts while dragging; traced when input stops");
+            return;
+        }
+        if let Some((g, shown_grid, traced)) = &self.shown
+            && *g == generation
+            && *shown_grid == grid
+        {
+            // Shown; again if an upload since made the viewport draw the paraxial frame over it.
+            if let Some(rs) = gpu
+                && !ViewportResources::shows_image(rs, generation)
+            {
+                ViewportResources::show_image(rs, generation, &traced.display);
+            }
+            return;
+        }
+        if self.cancelled == Some(generation) {
+            return;
+        }
+        match &self.job {
+            Some((g, job_grid, _)) if *g == generation && *job_grid == grid => return,
+            Some((_, _, job)) => job.cancel(),
+            None => {}
+        }
+        let plate = derived.plate.clone();
+        let device = self.device.clone();
+        let job = Job::spawn(&format!("ray grid {grid}: tracing every ghost…"), move |cancel, report| {
+            trace_frame(&flare, &frame, plate.as_deref(), grid, &device, cancel, report)
+        });
+        self.status = format!("ray grid {grid}: tracing every ghost (the paraxial frame until then)…");
+        self.job = Some((generation, grid, job));
+    }
+}
+
+/// Traces `frame`'s ghosts on `grid` (GPU or CPU, see the module documentation) and draws the frame with them.
+fn trace_frame(
+    flare: &flare_core::flare::PreparedFlare,
+    frame: &Frame,
+    plate: Option<&HdrImage>,
+    grid: usize,
+    device: &DeviceCell,
+    cancel: &std::sync::atomic::AtomicBool,
+    report: &(dyn Fn(f32, String) + Sync),
+) -> Result<Traced, String> {
+    let started = std::time::Instant::now();
+    let scene = &frame.scene;
+    let sensor_width_mm = frame.request.sensor_width_mm;
+    let sensor_width_mm = if sensor_width_mm.is_finite() && sensor_width_mm > 0.0 {
+        sensor_width_mm
+    } else {
+        flare_core::optics::sensor::FULL_FRAME_WIDTH_MM
+    };
+    let window = Window::for_sensor(sensor_width_mm, scene.hdr_width.max(1), scene.hdr_height.max(1));
+    let light = frame.request.light_deg;
+    let renderer = flare.ray_grid_renderer();
+    let device = device
+        .get_or_init(|| GpuContext::hardware().map(|ctx| TraceDevice { raygrid: GpuRayGrid::new(&ctx.device), ctx }));
+    let mut note = String::new();
+    let mut ghosts = None;
+    if let Ok(d) = device {
+        report(0.1, format!("ray grid {grid}: tracing on the GPU ({})…", d.ctx.adapter.name));
+        match d.raygrid.render(&d.ctx, &renderer, light, window, grid, SUPERSAMPLE) {
+            Ok(image) => {
+                let times = image.gpu_times.map_or(String::new(), |t| format!(", GPU time {}", t.summary()));
+                note = format!("GPU {}, {SUPERSAMPLE}x{SUPERSAMPLE} samples a pixel{times}", d.ctx.adapter.name);
+                ghosts = Some(image.hdr);
+            }
+            Err(GpuRayGridError::Gpu(e)) => note = format!("CPU: the GPU failed ({e})"),
+            Err(e) => return Err(e.to_string()),
+        }
+    }
+    let ghosts = match ghosts {
+        Some(hdr) => hdr,
+        None => {
+            if note.is_empty() {
+                note = match device {
+                    Err(why) => format!("CPU, f64 ({why})"),
+                    Ok(_) => "CPU, f64".into(),
+                };
+            }
+            report(0.1, format!("ray grid {grid}: tracing on the CPU…"));
+            let request = RayGridRequest::views(light, vec![View { window, turn_deg: 0.0 }], Grid::Fixed(grid));
+            let mut images = renderer.render_request(&request).map_err(|e| e.to_string())?;
+            images.remove(0).hdr
+        }
+    };
+    if cancel.load(Ordering::Relaxed) {
+        return Err("cancelled".into());
+    }
+    report(0.9, format!("ray grid {grid}: tonemapping…"));
+    let sources = Sources { flare, lut: None, plate };
+    let drawn = flare_core::frame::drawn_with_traced_ghosts(frame, &sources, ghosts);
+    let summary = format!(
+        "ray grid {grid} ({note}): every ghost traced exactly in {:.2} s, at gain 1",
+        started.elapsed().as_secs_f64()
+    );
+    Ok(Traced { display: Arc::new(drawn.display), summary })
+}
