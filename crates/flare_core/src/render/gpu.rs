@@ -781,10 +781,19 @@ pub(crate) fn read_texture(
     texture: &wgpu::Texture,
     bytes_per_pixel: u32,
 ) -> Result<Vec<u8>, GpuError> {
+    read_texture_in_strips(ctx, texture, bytes_per_pixel, ctx.device.limits().max_buffer_size.min(64 << 20))
+}
+
+/// [`read_texture`] through read-back buffers of at most `largest` bytes (at least one row each).
+fn read_texture_in_strips(
+    ctx: &GpuContext,
+    texture: &wgpu::Texture,
+    bytes_per_pixel: u32,
+    largest: u64,
+) -> Result<Vec<u8>, GpuError> {
     let size = texture.size();
     let row = size.width * bytes_per_pixel;
     let padded = row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
-    let largest = ctx.device.limits().max_buffer_size.min(64 << 20);
     let strip_rows = (largest / u64::from(padded)).clamp(1, u64::from(size.height.max(1))) as u32;
     let mut out = Vec::with_capacity((row * size.height) as usize);
     let mut y0 = 0;
@@ -892,4 +901,35 @@ pub fn read_hdr(ctx: &GpuContext, renderer: &FlareRenderer) -> Result<HdrImage, 
     let halves: &[half::f16] = bytemuck::cast_slice(&bytes);
     let pixels = halves.chunks_exact(4).map(|c| [c[0].to_f32(), c[1].to_f32(), c[2].to_f32(), c[3].to_f32()]).collect();
     Ok(HdrImage { width: size.width, height: size.height, pixels })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A texture read back in strips of rows (as one larger than the adapter's largest buffer is) gives the
+    /// same bytes as in one piece, whatever the strip's height.
+    #[test]
+    fn a_texture_reads_back_the_same_in_strips() {
+        let Some(ctx) = test_context() else { return };
+        let (width, height) = (70u32, 37u32);
+        let usage = wgpu::TextureUsages::COPY_SRC | wgpu::TextureUsages::COPY_DST;
+        let texture = texture_2d(&ctx.device, "strips", width, height, wgpu::TextureFormat::Rgba8Unorm, usage);
+        let texels: Vec<u8> = (0..width * height * 4).map(|k| (k * 7 % 251) as u8).collect();
+        ctx.queue.write_texture(
+            texture.as_image_copy(),
+            &texels,
+            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(4 * width), rows_per_image: None },
+            texture.size(),
+        );
+        assert_eq!(read_texture(&ctx, &texture, 4).unwrap(), texels);
+        // A padded row is 512 bytes here: strips of 1, 3 and 8 rows, and a limit under one row (still one).
+        for largest in [512, 1536, 4096, 100] {
+            assert_eq!(
+                read_texture_in_strips(&ctx, &texture, 4, largest).unwrap(),
+                texels,
+                "strips of {largest} bytes"
+            );
+        }
+    }
 }
