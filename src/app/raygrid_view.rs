@@ -60,8 +60,8 @@ pub struct RayGridView {
     job: Option<(u64, usize, TraceJob)>,
     /// The latest traced frame: its generation, its grid and what it made.
     shown: Option<(u64, usize, Traced)>,
-    /// A frame whose trace was cancelled: not traced again.
-    cancelled: Option<u64>,
+    /// A frame and grid whose trace was cancelled: not traced again.
+    cancelled: Option<(u64, usize)>,
     /// What the status bar says.
     pub status: String,
     device: DeviceCell,
@@ -85,9 +85,9 @@ impl RayGridView {
 
     /// Stops the running trace; the frame it was for is not traced again.
     pub fn cancel(&mut self) {
-        if let Some((generation, _, job)) = self.job.take() {
+        if let Some((generation, grid, job)) = self.job.take() {
             job.cancel();
-            self.cancelled = Some(generation);
+            self.cancelled = Some((generation, grid));
             self.status = "ray grid: cancelled (the paraxial frame is shown; the next frame is traced)".into();
         }
     }
@@ -144,7 +144,7 @@ impl RayGridView {
             }
             return;
         }
-        if self.cancelled == Some(generation) {
+        if self.cancelled == Some((generation, grid)) {
             return;
         }
         match &self.job {
