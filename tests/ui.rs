@@ -1000,6 +1000,11 @@ fn the_ray_grid_view_traces_the_frame_shown_and_shows_it_in_the_viewport() {
     assert_ne!(paraxial.pixels, shown.pixels);
     let ratio = mean(&shown) / mean(&paraxial);
     assert!((0.5..2.0).contains(&ratio), "traced / paraxial brightness {ratio}");
+    // A new frame that differs only in its LUT (a bake that finished) shows the same trace, not a new one.
+    h.state_mut().derived.lut_generation += 1;
+    h.step();
+    assert_ne!(h.state().derived.view_frame.as_ref().unwrap().0, generation);
+    assert!(h.state().view_shows_traced() && !h.state().raygrid.busy(), "{}", h.state().raygrid.status);
     // A drag: paraxial drafts while it lasts, then the new frame is traced.
     drag(&mut h, egui::pos2(300.0, 250.0), egui::pos2(380.0, 220.0));
     assert!(!h.state().view_shows_traced(), "the frame changed: the traced image is not shown");

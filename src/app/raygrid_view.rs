@@ -12,8 +12,10 @@
 //! the status. The traced ghosts go through the frame pipeline's
 //! [`flare_core::frame::drawn_with_traced_ghosts`] (light gain, starburst, tonemap, plate), the same function
 //! `flarelab render --method raygrid` writes with, and the display image replaces the frame in the viewport
-//! ([`ViewportResources::show_image`]). A trace that finishes after the frame changed is dropped; Cancel stops
-//! the trace of this frame (the next frame is traced again). Exports and commands draw the document's look, not
+//! ([`ViewportResources::show_image`]). A trace is for the optics, the frame's request, the plate and the grid
+//! (`TraceKey`): one that finishes after any of them changed is dropped, and a new frame that differs only in
+//! its LUT (a bake that finished) shows the same trace again. Cancel stops the trace of this frame (the next
+//! frame is traced again). Exports and commands draw the document's look, not
 //! this view.
 
 use std::sync::atomic::Ordering;
@@ -51,17 +53,29 @@ pub struct Traced {
     pub summary: String,
 }
 
+/// What a traced image depends on: the optics, the frame's request (light, size, exposures, sensor...), the
+/// plate and the grid; not the LUT, which a ray-traced frame does not use (a LUT that arrives makes a new frame
+/// of the same key: the trace is shown again, not redone).
+#[derive(Clone, Debug, PartialEq)]
+struct TraceKey {
+    optics: u64,
+    request: flare_core::frame::FrameRequest,
+    plate_generation: u64,
+    grid: usize,
+}
+
 /// The ray-grid view's state (see the module documentation).
 #[derive(Default)]
 pub struct RayGridView {
     /// Cells across each ghost's grid; `None`: the view draws the document's look.
     pub grid: Option<usize>,
-    /// The trace running: the frame generation and grid it is for.
-    job: Option<(u64, usize, TraceJob)>,
-    /// The latest traced frame: its generation, its grid and what it made.
-    shown: Option<(u64, usize, Traced)>,
-    /// A frame and grid whose trace was cancelled: not traced again.
-    cancelled: Option<(u64, usize)>,
+    /// The trace running and what it is for.
+    job: Option<(TraceKey, TraceJob)>,
+    /// The latest traced frame: what it was traced for, the generation of the frame it is shown as, and what
+    /// it made.
+    shown: Option<(TraceKey, u64, Traced)>,
+    /// What a cancelled trace was for: not traced again.
+    cancelled: Option<TraceKey>,
     /// What the status bar says.
     pub status: String,
     device: DeviceCell,
@@ -73,21 +87,21 @@ impl RayGridView {
         self.job.is_some()
     }
 
-    /// The display image of the frame of `generation`, when it has been traced at the grid chosen.
+    /// The display image shown as the frame of `generation`, when it was traced at the grid chosen.
     pub fn traced(&self, generation: u64) -> Option<&Traced> {
-        self.shown.as_ref().filter(|(g, grid, _)| *g == generation && Some(*grid) == self.grid).map(|s| &s.2)
+        self.shown.as_ref().filter(|(key, g, _)| *g == generation && Some(key.grid) == self.grid).map(|s| &s.2)
     }
 
     /// The running trace's progress.
     pub fn progress(&self) -> Option<(f32, String)> {
-        self.job.as_ref().map(|(_, _, job)| job.progress())
+        self.job.as_ref().map(|(_, job)| job.progress())
     }
 
-    /// Stops the running trace; the frame it was for is not traced again.
+    /// Stops the running trace; what it was for is not traced again.
     pub fn cancel(&mut self) {
-        if let Some((generation, grid, job)) = self.job.take() {
+        if let Some((key, job)) = self.job.take() {
             job.cancel();
-            self.cancelled = Some((generation, grid));
+            self.cancelled = Some(key);
             self.status = "ray grid: cancelled (the paraxial frame is shown; the next frame is traced)".into();
         }
     }
@@ -95,7 +109,7 @@ impl RayGridView {
     /// One UI frame's step (see the module documentation); `gpu` is the viewport's device, `None` in tests.
     pub fn step(&mut self, derived: &Derived, gpu: Option<&RenderState>) {
         let Some(grid) = self.grid else {
-            if let Some((_, _, job)) = self.job.take() {
+            if let Some((_, job)) = self.job.take() {
                 job.cancel();
             }
             if self.shown.take().is_some()
@@ -107,17 +121,25 @@ impl RayGridView {
             self.status.clear();
             return;
         };
-        let Some((generation, frame)) = derived.view_frame.clone() else { return };
-        let Some(flare) = derived.flare.clone() else { return };
-        // A finished trace: shown if it is still the frame on screen, dropped otherwise.
-        if let Some((for_generation, for_grid, job)) = &self.job
+        let (Some((generation, frame)), Some(flare), Some(frame_key)) =
+            (derived.view_frame.clone(), derived.flare.clone(), derived.frame_key.as_ref())
+        else {
+            return;
+        };
+        let key = TraceKey {
+            optics: frame_key.optics,
+            request: frame_key.request.clone(),
+            plate_generation: frame_key.plate_generation,
+            grid,
+        };
+        // A finished trace: kept if it is still what the view shows, dropped otherwise.
+        if let Some((for_key, job)) = &self.job
             && let JobPoll::Finished(outcome) = job.poll()
         {
-            let current = *for_generation == generation && *for_grid == grid;
             match outcome {
-                Ok(traced) if current => {
+                Ok(traced) if *for_key == key => {
                     self.status = traced.summary.clone();
-                    self.shown = Some((generation, grid, traced));
+                    self.shown = Some((key.clone(), 0, traced));
                 }
                 Ok(_) => {}
                 Err(e) => self.status = format!("ray grid {grid}: {e}"),
@@ -126,17 +148,18 @@ impl RayGridView {
         }
         // Drafts while the user drags; the trace waits for the full frame.
         if derived.draft.is_some() {
-            if let Some((_, _, job)) = self.job.take() {
+            if let Some((_, job)) = self.job.take() {
                 job.cancel();
             }
             self.status = format!("ray grid {grid}: paraxial drafts while dragging; traced when input stops");
             return;
         }
-        if let Some((g, shown_grid, traced)) = &self.shown
-            && *g == generation
-            && *shown_grid == grid
+        if let Some((traced_for, shown_as, traced)) = &mut self.shown
+            && *traced_for == key
         {
-            // Shown; again if an upload since made the viewport draw the paraxial frame over it.
+            // Shown as this frame; again if the frame is new (a LUT arrived) or an upload since made the
+            // viewport draw the paraxial frame over it.
+            *shown_as = generation;
             if let Some(rs) = gpu
                 && !ViewportResources::shows_image(rs, generation)
             {
@@ -144,12 +167,12 @@ impl RayGridView {
             }
             return;
         }
-        if self.cancelled == Some((generation, grid)) {
+        if self.cancelled.as_ref() == Some(&key) {
             return;
         }
         match &self.job {
-            Some((g, job_grid, _)) if *g == generation && *job_grid == grid => return,
-            Some((_, _, job)) => job.cancel(),
+            Some((for_key, _)) if *for_key == key => return,
+            Some((_, job)) => job.cancel(),
             None => {}
         }
         let plate = derived.plate.clone();
@@ -158,7 +181,7 @@ impl RayGridView {
             trace_frame(&flare, &frame, plate.as_deref(), grid, &device, cancel, report)
         });
         self.status = format!("ray grid {grid}: tracing every ghost (the paraxial frame until then)…");
-        self.job = Some((generation, grid, job));
+        self.job = Some((key, job));
     }
 }
 
