@@ -210,7 +210,12 @@ fn trace_frame(
         .get_or_init(|| GpuContext::hardware().map(|ctx| TraceDevice { raygrid: GpuRayGrid::new(&ctx.device), ctx }));
     let mut note = String::new();
     let mut ghosts = None;
-    if let Ok(d) = device {
+    // A device lost on an earlier trace sends this one and every later one to the CPU.
+    let lost = device.as_ref().ok().and_then(|d| d.ctx.failure());
+    if let Some(why) = &lost {
+        note = format!("CPU: the GPU failed ({why})");
+    }
+    if let (Ok(d), None) = (device, &lost) {
         report(0.1, format!("ray grid {grid}: tracing on the GPU ({})…", d.ctx.adapter.name));
         match d.raygrid.render(&d.ctx, &renderer, light, window, grid, SUPERSAMPLE) {
             Ok(image) => {
