@@ -8,7 +8,7 @@ use super::job::{Job, JobPoll};
 
 use flare_core::flare::PreparedFlare;
 use flare_core::lut::GhostLut;
-use flare_core::lut::bake::{BakeProgress, BakeSettings, ColumnTracer, CpuTracing, bake_with, useful_field_deg};
+use flare_core::lut::bake::{BakeProgress, BakeSettings, bake_with, useful_field_deg};
 use flare_core::lut::cache::LutCache;
 use flare_core::lut::classify::{ClassifySettings, GhostClass, classify};
 use flare_core::render::gpu::GpuContext;
@@ -59,12 +59,17 @@ pub fn start_bake(
         // A hardware GPU traces the columns when there is one (a software adapter is slower than the CPU).
         let gpu = GpuContext::hardware().ok();
         let on_gpu = gpu.as_ref().map(|ctx| GpuBake::new(ctx, SUPERSAMPLE));
-        let tracing: &dyn ColumnTracer = match &on_gpu {
-            Some(g) => g,
-            None => &CpuTracing,
-        };
-        let lut = bake_with(&flare, &renderer, tracing, &chosen, &settings, previous.as_ref(), &report, cancel)
-            .map_err(|e| e.to_string())?;
+        let lut = bake_with(
+            &flare,
+            &renderer,
+            GpuBake::or_cpu(on_gpu.as_ref()),
+            &chosen,
+            &settings,
+            previous.as_ref(),
+            &report,
+            cancel,
+        )
+        .map_err(|e| e.to_string())?;
         let device = match (&gpu, on_gpu.as_ref().and_then(GpuBake::fell_back)) {
             (None, _) => "on the CPU".to_owned(),
             (Some(ctx), None) => format!("on the GPU ({})", ctx.adapter.name),

@@ -197,13 +197,7 @@ fn trace_frame(
 ) -> Result<Traced, String> {
     let started = std::time::Instant::now();
     let scene = &frame.scene;
-    let sensor_width_mm = frame.request.sensor_width_mm;
-    let sensor_width_mm = if sensor_width_mm.is_finite() && sensor_width_mm > 0.0 {
-        sensor_width_mm
-    } else {
-        flare_core::optics::sensor::FULL_FRAME_WIDTH_MM
-    };
-    let window = Window::for_sensor(sensor_width_mm, scene.hdr_width.max(1), scene.hdr_height.max(1));
+    let window = Window::for_sensor(frame.request.sensor_width(), scene.hdr_width.max(1), scene.hdr_height.max(1));
     let light = frame.request.light_deg;
     let renderer = flare.ray_grid_renderer();
     let device = device

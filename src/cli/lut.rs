@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use flare_core::flare::PreparedFlare;
-use flare_core::lut::bake::{BakeProgress, BakeSettings, ColumnTracer, CpuTracing, bake_with, useful_field_deg};
+use flare_core::lut::bake::{BakeProgress, BakeSettings, bake_with, useful_field_deg};
 use flare_core::lut::classify::{ClassifySettings, GhostClass, classify};
 use flare_core::lut::{GhostLut, format, photo};
 use flare_core::raytrace::RayGridRenderer;
@@ -205,11 +205,8 @@ pub fn bake_lut(
     let mut settings = settings.clone();
     settings.theta_max_deg = choice.theta_max;
     let on_gpu = gpu.map(|ctx| GpuBake::new(ctx, SUPERSAMPLE));
-    let tracing: &dyn ColumnTracer = match &on_gpu {
-        Some(g) => g,
-        None => &CpuTracing,
-    };
-    let lut = bake_with(flare, renderer, tracing, &chosen, &settings, previous, &progress, &cancel)?;
+    let lut =
+        bake_with(flare, renderer, GpuBake::or_cpu(on_gpu.as_ref()), &chosen, &settings, previous, &progress, &cancel)?;
     if !quiet {
         eprintln!();
         match (&on_gpu, gpu) {

@@ -64,6 +64,18 @@ pub struct FrameRequest {
     pub draft: Option<Draft>,
 }
 
+impl FrameRequest {
+    /// The width of the sensor the frame spans (mm): `sensor_width_mm`, or full frame where that is not finite
+    /// and positive.
+    pub fn sensor_width(&self) -> f64 {
+        if self.sensor_width_mm.is_finite() && self.sensor_width_mm > 0.0 {
+            self.sensor_width_mm
+        } else {
+            crate::optics::sensor::FULL_FRAME_WIDTH_MM
+        }
+    }
+}
+
 /// A draft of a frame: what the app draws while the light is dragged or a value scrubbed, chosen to hold a
 /// frame time ([`Frame::build`]). Its accumulation is at 1/`divisor` of the request's size (2 or 4; at least
 /// the request's own divisor): with a divisor of 2 or more the whole frame, tonemap included, is drawn at half
@@ -136,11 +148,7 @@ impl Frame {
         let light_gain = if request.light_gain.is_finite() { request.light_gain.max(0.0) as f32 } else { 0.0 };
         let mut gains: Vec<f32> =
             (0..ghosts).map(|g| request.ghost_gains.get(g).copied().unwrap_or(1.0).max(0.0) * light_gain).collect();
-        let sensor_width_mm = if request.sensor_width_mm.is_finite() && request.sensor_width_mm > 0.0 {
-            request.sensor_width_mm
-        } else {
-            crate::optics::sensor::FULL_FRAME_WIDTH_MM
-        };
+        let sensor_width_mm = request.sensor_width();
         let sensor = Sensor::for_frame(sensor_width_mm, w, h);
         let lut_scene = lut.map(|live| {
             let u = light_slopes_for_frame_position(request.light_deg[0], request.light_deg[1]);

@@ -602,6 +602,14 @@ impl<'a> GpuBake<'a> {
         }
     }
 
+    /// The columns' tracer of a bake: `gpu` where there is one, else the CPU's ([`crate::lut::bake::CpuTracing`]).
+    pub fn or_cpu<'g>(gpu: Option<&'g GpuBake<'a>>) -> &'g dyn crate::lut::bake::ColumnTracer {
+        match gpu {
+            Some(g) => g,
+            None => &crate::lut::bake::CpuTracing,
+        }
+    }
+
     /// Why the GPU stopped drawing columns (its device was lost), if it did.
     pub fn fell_back(&self) -> Option<String> {
         self.lost.lock().ok().and_then(|l| l.clone())
