@@ -22,7 +22,7 @@ use std::time::Instant;
 use flare_core::frame::Draft;
 
 /// The frame interval the drafts aim at (ms).
-pub const TARGET_MS: f64 = 40.0;
+pub const TARGET_MS: f64 = 35.0;
 /// A drag whose pointer has not moved for this long counts as stopped (s).
 pub const STILL_S: f32 = 0.25;
 /// The budget's bounds (accumulation fragments).
@@ -103,11 +103,11 @@ mod tests {
         // The first interval sets the floor (10 ms): the flare's share is nil, the budget grows.
         let grown = step(&mut control, 10);
         assert_eq!(grown, first.fragment_budget * 3 / 2);
-        // 130 ms against a floor of 10.2 and a target of 40: the flare takes far too much, halve.
+        // 130 ms against a floor of 10.2 and a target of 35: the flare takes far too much, halve.
         let halved = step(&mut control, 130);
         assert_eq!(halved, grown / 2);
-        // 40 ms: on target, the budget stays (within rounding).
-        let kept = step(&mut control, 40);
+        // 35 ms: on target, the budget stays (within rounding).
+        let kept = step(&mut control, TARGET_MS as u64);
         assert!((kept as f64 / halved as f64 - 1.0).abs() < 0.03, "{kept} vs {halved}");
         assert!(control.step(false, None, t + Duration::from_millis(50)).is_none());
         assert!(!control.drafting());
@@ -126,12 +126,12 @@ mod tests {
         let budget = slow.step(true, None, t).unwrap().fragment_budget;
         assert!(budget >= start, "{budget} < {start}: 12 ms of flare on a 60 ms floor is within its fifth");
         assert_eq!(DraftControl::new(false).step(true, None, t).unwrap().divisor, 2);
-        // With the GPU's own times: 50 ms frames of which the flare took 30: 20 ms of window leaves it 20 of
-        // the 40 ms target, so the budget goes to two thirds.
+        // With the GPU's own times: 45 ms frames of which the flare took 30: 15 ms of window leaves it 20 of
+        // the 35 ms target, so the budget goes to two thirds.
         let mut timed = DraftControl::new(true);
         let mut t = Instant::now();
         let start = timed.step(true, Some(30.0), t).unwrap().fragment_budget;
-        t += Duration::from_millis(50);
+        t += Duration::from_millis(45);
         let next = timed.step(true, Some(30.0), t).unwrap().fragment_budget;
         assert!((next as f64 / start as f64 - 2.0 / 3.0).abs() < 1e-3, "{next} vs {start}");
     }

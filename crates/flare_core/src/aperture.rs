@@ -70,7 +70,7 @@ pub struct ApertureMask {
 
 impl ApertureMask {
     /// Bilinear sample at (u, v) in [-1, 1]^2 (0 outside), the way a GPU samples the texture.
-    #[inline]
+    #[inline(always)]
     pub fn sample(&self, u: f32, v: f32) -> f32 {
         if !(-1.0..=1.0).contains(&u) || !(-1.0..=1.0).contains(&v) {
             return 0.0;

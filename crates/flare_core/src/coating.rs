@@ -20,6 +20,7 @@
 //!   the other side meets them in reverse order.
 
 use rustfft::num_complex::Complex64;
+use std::sync::Arc;
 
 use crate::optics::{Coating, CoatingLayer, Lens};
 
@@ -69,7 +70,8 @@ pub fn reflection(
 /// linear interpolation. The paraxial ghosts use a coarse table, the ray-traced renderers a dense one.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ReflectanceTable {
-    samples: Vec<f64>,
+    /// Shared: the ray tracer's jobs hold the tables of their steps ([`Self::samples`]).
+    samples: Arc<[f64]>,
 }
 
 impl ReflectanceTable {
@@ -85,9 +87,14 @@ impl ReflectanceTable {
         Self { samples }
     }
 
+    /// The samples, evenly spaced over sin^2 i from 0 to 1 (at least 2).
+    pub fn samples(&self) -> &Arc<[f64]> {
+        &self.samples
+    }
+
     /// A surface that reflects nothing (the stop, or the same medium on both sides).
     pub fn zero() -> Self {
-        Self { samples: vec![0.0, 0.0] }
+        Self { samples: Arc::from([0.0, 0.0]) }
     }
 
     /// Reflectance at `sin2_i` (clamped to [0, 1]).

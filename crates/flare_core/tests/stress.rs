@@ -101,10 +101,11 @@ proptest! {
             let errors: Option<Vec<f64>> = (0..7).map(|k| error(0.5f64.powi(k))).collect();
             let Some(errors) = errors else { continue };
             landed += 1;
-            // Below 1e-9 mm (a picometre) the difference is rounding, not aberration: a ghost path of a dozen
-            // surfaces, with its magnification, rounds the landing height at the 1e-10 mm level (case
-            // `2f9bb245`: 5e-10 mm after three halvings, its ratio down to 4.9).
-            let usable: Vec<f64> = errors.iter().copied().take_while(|&e| e > 1e-9).collect();
+            // Below 1e-8 mm (10 picometres) the difference is rounding, not aberration: a ghost path of a dozen
+            // surfaces, with its magnification, rounds the landing height at the 1e-10 to 5e-9 mm level (case
+            // `2f9bb245`: 5e-10 mm after three halvings, its ratio down to 4.9; case `eb789d13`, aspheric
+            // ghost (4, 5): 2.3e-9 then 4.8e-9 mm, a ratio of 0.48 made of rounding alone).
+            let usable: Vec<f64> = errors.iter().copied().take_while(|&e| e > 1e-8).collect();
             if usable.len() < 2 {
                 prop_assert!(errors[0] < 1e-6, "a tiny ray far from paraxial: {errors:?}");
                 continue;

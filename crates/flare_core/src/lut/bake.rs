@@ -301,30 +301,35 @@ pub fn interpolation_error(a: &LutEntry, b: &LutEntry, t: f64, target: &LutEntry
     // Per neighbour: the inverse of its fit (target's normalised position to its own) and its area factor.
     let inverse = |f: &Fit| (mat_inverse(f.linear), f.offset, mat_det(f.linear).abs());
     let maps = [inverse(&fits[0]), inverse(&fits[1])];
-    let sample = |e: &LutEntry, (inv, offset, det): (Mat2, [f64; 2], f64), p_mm: [f64; 2]| -> f64 {
-        if e.is_empty() {
-            return 0.0;
-        }
-        // The target's normalised position, carried back through e's fit into e's paraxial frame.
-        let n = [
-            (p_mm[0] - target.paraxial.centre_mm[0]) / target.paraxial.half_mm - offset[0],
-            (p_mm[1] - target.paraxial.centre_mm[1]) / target.paraxial.half_mm - offset[1],
-        ];
-        let n = mat_apply(inv, n);
-        let q =
-            [e.paraxial.centre_mm[0] + e.paraxial.half_mm * n[0], e.paraxial.centre_mm[1] + e.paraxial.half_mm * n[1]];
-        // Irradiance scales with 1 / area when the frame is scaled (and fitted).
-        let area = (e.paraxial.half_mm / target.paraxial.half_mm).powi(2) / det;
-        let px = e.window().to_pixel(q);
-        let v = e.sample((px[0] / f64::from(e.width)) as f32, (px[1] / f64::from(e.height)) as f32);
-        luminance([v[0], v[1], v[2]].map(f64::from)) * area
-    };
+    let decoded = [a.decoded(), b.decoded()];
+    let sample =
+        |e: &LutEntry, texels: &[[f32; 4]], (inv, offset, det): (Mat2, [f64; 2], f64), p_mm: [f64; 2]| -> f64 {
+            if e.is_empty() {
+                return 0.0;
+            }
+            // The target's normalised position, carried back through e's fit into e's paraxial frame.
+            let n = [
+                (p_mm[0] - target.paraxial.centre_mm[0]) / target.paraxial.half_mm - offset[0],
+                (p_mm[1] - target.paraxial.centre_mm[1]) / target.paraxial.half_mm - offset[1],
+            ];
+            let n = mat_apply(inv, n);
+            let q = [
+                e.paraxial.centre_mm[0] + e.paraxial.half_mm * n[0],
+                e.paraxial.centre_mm[1] + e.paraxial.half_mm * n[1],
+            ];
+            // Irradiance scales with 1 / area when the frame is scaled (and fitted).
+            let area = (e.paraxial.half_mm / target.paraxial.half_mm).powi(2) / det;
+            let px = e.window().to_pixel(q);
+            let v = e.sample_decoded(texels, (px[0] / f64::from(e.width)) as f32, (px[1] / f64::from(e.height)) as f32);
+            luminance([v[0], v[1], v[2]].map(f64::from)) * area
+        };
     let mut error = 0.0;
     let mut predicted_sum = 0.0;
     for y in 0..target.height {
         for x in 0..target.width {
             let p_mm = window.to_mm([f64::from(x) + 0.5, f64::from(y) + 0.5]);
-            let predicted = ratio * ((1.0 - t) * sample(a, maps[0], p_mm) + t * sample(b, maps[1], p_mm));
+            let predicted =
+                ratio * ((1.0 - t) * sample(a, &decoded[0], maps[0], p_mm) + t * sample(b, &decoded[1], maps[1], p_mm));
             let p = target.texels[(y * target.width + x) as usize];
             error += (predicted - luminance([p[0], p[1], p[2]].map(f16::to_f64))).abs();
             predicted_sum += predicted;

@@ -32,6 +32,7 @@ use flate2::Compression;
 use flate2::read::ZlibDecoder;
 use flate2::write::ZlibEncoder;
 use half::f16;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::{GhostLut, LutEntry, LutGhost, LutKind, Symmetry};
@@ -180,20 +181,13 @@ pub fn encode(lut: &GhostLut) -> Vec<u8> {
 
 /// The file's bytes in format `version` (1 for the tests of old files: RGBA, no `fitted` flags).
 fn encode_version(lut: &GhostLut, version: u32) -> Vec<u8> {
-    let mut blobs = Vec::new();
-    let ghosts = lut
+    // Every entry compressed in parallel (the bytes do not depend on the order they are made in).
+    let compressed: Vec<Vec<(EntryHeader, Vec<u8>)>> = lut
         .ghosts
         .iter()
-        .map(|g| GhostHeader {
-            ghost: g.ghost,
-            surfaces: g.surfaces,
-            key: hex(g.key),
-            thetas_deg: g.thetas_deg.clone(),
-            fitted: if version == 1 { Vec::new() } else { g.fitted.clone() },
-            phis_deg: g.phis_deg.clone(),
-            entries: g
-                .entries
-                .iter()
+        .map(|g| {
+            g.entries
+                .par_iter()
                 .map(|e| {
                     let raw = shuffle(&e.texels, stored_channels(version));
                     let mut encoder = ZlibEncoder::new(Vec::new(), Compression::default());
@@ -212,7 +206,27 @@ fn encode_version(lut: &GhostLut, version: u32) -> Vec<u8> {
                         compressed_bytes: compressed.len() as u64,
                         checksum: hex(fnv1a(&raw, FNV_OFFSET)),
                     };
-                    blobs.push(compressed);
+                    (header, compressed)
+                })
+                .collect()
+        })
+        .collect();
+    let mut blobs = Vec::new();
+    let ghosts = lut
+        .ghosts
+        .iter()
+        .zip(compressed)
+        .map(|(g, entries)| GhostHeader {
+            ghost: g.ghost,
+            surfaces: g.surfaces,
+            key: hex(g.key),
+            thetas_deg: g.thetas_deg.clone(),
+            fitted: if version == 1 { Vec::new() } else { g.fitted.clone() },
+            phis_deg: g.phis_deg.clone(),
+            entries: entries
+                .into_iter()
+                .map(|(header, blob)| {
+                    blobs.push(blob);
                     header
                 })
                 .collect(),

@@ -190,17 +190,30 @@ impl LutEntry {
     /// Bilinear sample at texture coordinates (s, t) in [0, 1]^2 (0 outside the image, as the zero border
     /// around each entry in the GPU atlas gives).
     pub fn sample(&self, s: f32, t: f32) -> [f32; 4] {
+        self.bilinear(s, t, |k| self.texels[k].map(f16::to_f32))
+    }
+
+    /// The texels as f32 (exact), for many [`Self::sample_decoded`] calls.
+    pub fn decoded(&self) -> Vec<[f32; 4]> {
+        self.texels.iter().map(|t| t.map(f16::to_f32)).collect()
+    }
+
+    /// [`Self::sample`] from this entry's [`Self::decoded`] texels (the same values, without converting four
+    /// half floats per sample).
+    pub fn sample_decoded(&self, decoded: &[[f32; 4]], s: f32, t: f32) -> [f32; 4] {
+        self.bilinear(s, t, |k| decoded[k])
+    }
+
+    /// Bilinear interpolation of the texels `texel(index)` at (s, t), 0 outside.
+    #[inline(always)]
+    fn bilinear(&self, s: f32, t: f32, texel: impl Fn(usize) -> [f32; 4]) -> [f32; 4] {
         let (w, h) = (self.width as i64, self.height as i64);
         let (x, y) = (s * w as f32 - 0.5, t * h as f32 - 0.5);
         let (x0, y0) = (x.floor(), y.floor());
         let (fx, fy) = (x - x0, y - y0);
         let (x0, y0) = (x0 as i64, y0 as i64);
         let at = |i: i64, j: i64| -> [f32; 4] {
-            if i < 0 || j < 0 || i >= w || j >= h {
-                [0.0; 4]
-            } else {
-                self.texels[(j * w + i) as usize].map(f16::to_f32)
-            }
+            if i < 0 || j < 0 || i >= w || j >= h { [0.0; 4] } else { texel((j * w + i) as usize) }
         };
         let (a, b, c, d) = (at(x0, y0), at(x0 + 1, y0), at(x0, y0 + 1), at(x0 + 1, y0 + 1));
         std::array::from_fn(|k| (a[k] * (1.0 - fx) + b[k] * fx) * (1.0 - fy) + (c[k] * (1.0 - fx) + d[k] * fx) * fy)

@@ -26,4 +26,8 @@ pub use glass::D_LINE_NM;
 pub use lens::{Coating, CoatingLayer, Lens, LensError, Medium, Surface};
 pub use paraxial::{EntrancePupil, FirstOrder, Mat2, ParaxialError, PathMatrices};
 pub use path::{Interaction, LightPath, PathKind, Step};
-pub use trace::{Landing, Ray, StepHit, TraceOptions, TraceResult, TraceStatus, Tracer, pupil_ray};
+#[cfg(target_arch = "x86_64")]
+pub use trace::simd_level;
+pub use trace::{
+    Landing, Ray, StepHit, TraceOptions, TraceResult, TraceStatus, Tracer, VertexRecipe, VertexRecord, pupil_ray,
+};

@@ -4,7 +4,8 @@
 //! Nothing here is paraxial. Per ghost and wavelength (one job; jobs run in parallel with rayon, each into a
 //! per-thread f64 image that is summed at the end) a regular grid of (N+1) x (N+1) rays leaves the entrance
 //! plane (z = 0, the first vertex) in the light's direction and is traced exactly, in f64, along the ghost's
-//! path ([`crate::optics::Tracer::trace_visit`]). Each ray records:
+//! path ([`crate::optics::Tracer::trace_vertices`]: 16 rays at a time as columns, vectorised with AVX2 or AVX-512
+//! where the processor has them, each bit for bit what one ray traced alone gives). Each ray records:
 //! - where it lands on the sensor (the same plane and pixel mapping as the paraxial renderer);
 //! - its **weight**: the reflectance R at both reflections times the transmittance 1 - R at every refraction,
 //!   each at the ray's own angle of incidence and wavelength, with the surface's coating (dense tables of

@@ -10,7 +10,7 @@ use crate::coating::InterfaceTables;
 use std::sync::Arc;
 
 use crate::optics::sensor::light_slopes_for_frame_position;
-use crate::optics::{Coating, Lens, LightPath, Ray, Tracer};
+use crate::optics::{Coating, Lens, LightPath, Ray, Tracer, VertexRecipe};
 use crate::spectrum::Spectrum;
 
 use super::grid::*;
@@ -89,6 +89,8 @@ struct Job {
     /// Per step of the path: the reflectance table of the surface side the light meets (a zero table where it
     /// reflects nothing, so that 1 - R = 1).
     step_tables: Vec<usize>,
+    /// Per step: that table's samples (what the tracer reads, [`VertexRecipe`]).
+    reflectance: Vec<Arc<[f64]>>,
     /// Per step: 1 / semi-aperture^2 (0 at the stop, whose aperture is the mask).
     inverse_semi_aperture2: Vec<f64>,
 }
@@ -173,7 +175,7 @@ impl RayGridRenderer {
         for (g, ghost) in ghosts.iter().enumerate() {
             let Ok(path) = LightPath::ghost(&lens, ghost.i, ghost.j) else { continue };
             for (w, &wavelength_nm) in spectrum.wavelengths_nm.iter().enumerate() {
-                let step_tables =
+                let step_tables: Vec<usize> =
                     path.steps.iter().map(|s| tables.index(s.surface, s.arriving_direction < 0.0, w)).collect();
                 let inverse_semi_aperture2 = path
                     .steps
@@ -186,7 +188,9 @@ impl RayGridRenderer {
                         }
                     })
                     .collect();
+                let reflectance = step_tables.iter().map(|&t| tables.table(t).samples().clone()).collect();
                 jobs.push(Job {
+                    reflectance,
                     ghost: g,
                     wavelength: w,
                     tracer: Tracer::new(&lens, &path, wavelength_nm, sensor_z_mm),
@@ -377,7 +381,7 @@ impl RayGridRenderer {
     /// The f64 twin of one GPU grid vertex: the ray of `job` from the entrance point `x0` (mm), its landing
     /// point in sensor mm in `pixel` (see [`Self::plan_fixed`]).
     pub fn trace_planned(&self, job: &PlannedJob, x0: [f64; 2]) -> ([f64; 2], bool) {
-        let [v, ..] = self.trace_lanes(&self.jobs[job.index], [x0; LANES], job.direction);
+        let [v] = self.trace_lanes(&self.jobs[job.index], [x0], job.direction);
         (v.pixel, v.valid)
     }
 
@@ -460,40 +464,32 @@ impl RayGridRenderer {
         self.ghosts[job.ghost].stop_crossings.get(job.wavelength).copied().unwrap_or(1).min(3)
     }
 
-    /// Traces `LANES` rays of `job` from the entrance points `x0` (mm) in direction `d`, together
-    /// ([`Tracer::trace_visit_lanes`]); each one's `pixel` is its landing point in sensor mm until a [`View`]
+    /// Traces `L` rays of `job` from the entrance points `x0` (mm) in direction `d`, together
+    /// ([`Tracer::trace_vertices`]); each one's `pixel` is its landing point in sensor mm until a [`View`]
     /// sees it.
-    fn trace_lanes(&self, job: &Job, x0: [[f64; 2]; LANES], d: DVec3) -> [Vertex; LANES] {
+    fn trace_lanes<const L: usize>(&self, job: &Job, x0: [[f64; 2]; L], d: DVec3) -> [Vertex; L] {
         let rays = x0.map(|x| Ray { origin_mm: DVec3::new(x[0], x[1], 0.0), direction: d });
-        let stop_radius = self.stop_radius_mm;
-        let mut v = [Vertex { weight: 1.0, ..Vertex::default() }; LANES];
-        let mut crossings = [0usize; LANES];
-        let mut ratio2 = [0.0f64; LANES];
-        let landings = job.tracer.trace_visit_lanes(rays, |lane, hit| {
-            let sin2 = 1.0 - hit.cos_incidence * hit.cos_incidence;
-            let r = self.tables.table(job.step_tables[hit.index]).at(sin2);
-            let v = &mut v[lane];
-            v.weight *= if hit.reflect { r } else { 1.0 - r };
-            let p = hit.point_mm;
-            if hit.surface == self.stop {
-                if crossings[lane] < 3 {
-                    v.stops[crossings[lane]] = [p.x / stop_radius, p.y / stop_radius];
-                    crossings[lane] += 1;
-                }
-            } else {
-                ratio2[lane] = ratio2[lane].max((p.x * p.x + p.y * p.y) * job.inverse_semi_aperture2[hit.index]);
-            }
-            true
-        });
-        for ((v, landing), ratio2) in v.iter_mut().zip(landings).zip(ratio2) {
-            v.ratio = ratio2.sqrt();
-            if let Ok(landing) = landing {
+        let recipe = VertexRecipe {
+            reflectance: &job.reflectance,
+            inverse_semi_aperture2: &job.inverse_semi_aperture2,
+            stop_surface: self.stop,
+            stop_radius_mm: self.stop_radius_mm,
+        };
+        let (landings, record) = job.tracer.trace_vertices(rays, &recipe);
+        std::array::from_fn(|lane| {
+            let mut v = Vertex {
+                weight: record.weight[lane],
+                stops: record.stops[lane],
+                ratio: record.ratio2[lane].sqrt(),
+                ..Vertex::default()
+            };
+            if let Ok(landing) = &landings[lane] {
                 let p = [landing.point_mm.x, landing.point_mm.y];
                 v.valid = p.iter().all(|c| c.is_finite()) && v.weight.is_finite() && v.ratio.is_finite();
                 v.pixel = p;
             }
-        }
-        v
+            v
+        })
     }
 
     /// `count` vertices of `job` in direction `d`: vertex k traced from the entrance point `at(k)`, or left
@@ -511,7 +507,7 @@ impl RayGridRenderer {
         let wanted: Vec<(usize, [f64; 2])> = (0..count).filter_map(|k| at(k).map(|x0| (k, x0))).collect();
         for group in wanted.chunks(LANES) {
             // A short last group repeats its last ray (traced, then dropped).
-            let x0 = std::array::from_fn(|lane| group[lane.min(group.len() - 1)].1);
+            let x0: [[f64; 2]; LANES] = std::array::from_fn(|lane| group[lane.min(group.len() - 1)].1);
             for ((k, _), vertex) in group.iter().zip(self.trace_lanes(job, x0, d)) {
                 out[start + k] = vertex;
             }
@@ -621,8 +617,43 @@ impl RayGridRenderer {
     }
 
     /// Traces `job` once and splats it into every view's accumulator (`accs[k]` for `views[k]`); the pre-pass
-    /// is `scouted`, or traced over the whole front lens.
+    /// is `scouted`, or traced over the whole front lens. Compiled for AVX2 too, used where the processor has
+    /// it (the splatting's floors and conversions are then single instructions; the same results).
     fn render_job(
+        &self,
+        job: &Job,
+        u: [f64; 2],
+        views: &[View],
+        grid: Grid,
+        scouted: Option<&TracedGrid>,
+        accs: &mut [Accumulator],
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if crate::optics::simd_level() >= 1 {
+            // SAFETY: the processor has AVX2 (checked once by `simd_level`).
+            return unsafe { self.render_job_avx2(job, u, views, grid, scouted, accs) };
+        }
+        self.render_job_body(job, u, views, grid, scouted, accs)
+    }
+
+    /// [`Self::render_job_body`] compiled for AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn render_job_avx2(
+        &self,
+        job: &Job,
+        u: [f64; 2],
+        views: &[View],
+        grid: Grid,
+        scouted: Option<&TracedGrid>,
+        accs: &mut [Accumulator],
+    ) {
+        self.render_job_body(job, u, views, grid, scouted, accs)
+    }
+
+    /// The body of [`Self::render_job`].
+    #[inline(always)]
+    fn render_job_body(
         &self,
         job: &Job,
         u: [f64; 2],
@@ -661,23 +692,24 @@ impl RayGridRenderer {
             triangle_flux: triangle_flux(d, b, grid),
         };
         let (dx, dy) = ((b[2] - b[0]) / grid as f64, (b[3] - b[1]) / grid as f64);
-        let mut traced: Vec<Vertex> = Vec::with_capacity(grid + 1);
+        // Every ray of the grid first (traced LANES at a time across rows: a row alone leaves lanes idle), a
+        // ray far from every lit cell of the pre-pass not at all (no triangle of it carries light).
+        let n = grid + 1;
+        let mut traced: Vec<Vertex> = Vec::with_capacity(n * n);
+        let at = |k: usize| {
+            let x0 = [b[0] + (k % n) as f64 * dx, b[1] + (k / n) as f64 * dy];
+            lit.as_ref().is_none_or(|lit| lit.contains(x0)).then_some(x0)
+        };
+        accs[0].stats.rays += self.trace_selected(job, d, n * n, at, &mut traced);
         // Per view: the previous and the current row as it sees them.
-        let mut previous: Vec<Vec<Vertex>> = vec![Vec::with_capacity(grid + 1); views.len()];
-        let mut current: Vec<Vec<Vertex>> = vec![Vec::with_capacity(grid + 1); views.len()];
+        let mut previous: Vec<Vec<Vertex>> = vec![Vec::with_capacity(n); views.len()];
+        let mut current: Vec<Vec<Vertex>> = vec![Vec::with_capacity(n); views.len()];
         let mut any = vec![false; views.len()];
         let seers: Vec<_> = views.iter().map(View::seer).collect();
-        for iy in 0..=grid {
-            traced.clear();
-            // A ray far from every lit cell of the pre-pass is not traced: no triangle of it carries light.
-            let at = |ix: usize| {
-                let x0 = [b[0] + ix as f64 * dx, b[1] + iy as f64 * dy];
-                lit.as_ref().is_none_or(|lit| lit.contains(x0)).then_some(x0)
-            };
-            accs[0].stats.rays += self.trace_selected(job, d, grid + 1, at, &mut traced);
+        for (iy, row) in traced.chunks(n).enumerate() {
             for k in 0..views.len() {
                 current[k].clear();
-                current[k].extend(traced.iter().map(&seers[k]));
+                current[k].extend(row.iter().map(&seers[k]));
                 if iy > 0 {
                     let (previous, current, acc) = (&previous[k], &current[k], &mut accs[k]);
                     for ix in 0..grid {
@@ -754,8 +786,9 @@ fn triangle_flux(d: DVec3, bounds: [f64; 4], cells: usize) -> f64 {
     d.z * 0.5 * (bounds[2] - bounds[0]) * (bounds[3] - bounds[1]) / (cells * cells) as f64
 }
 
-/// Rays traced together ([`Tracer::trace_visit_lanes`]).
-const LANES: usize = 4;
+/// Rays traced together ([`Tracer::trace_vertices`]): two AVX-512 registers of f64 (four AVX2 ones), so that
+/// the processor overlaps two chains of square roots and divisions.
+const LANES: usize = 16;
 /// Cells of the scout's pre-pass over the front lens.
 const SCOUT_PRE_PASS_CELLS: usize = 32;
 /// What a pre-pass found for one job.
