@@ -213,8 +213,8 @@ impl Tracer {
     }
 
     /// The tracing loop itself, allocation-free: `visit` sees every intersection (before the interaction) and
-    /// returns `false` to stop the ray there as vignetted. The ray-grid renderers read incidence angles and
-    /// stop crossings through it; [`Self::trace`] is built on it. One lane of [`Self::trace_visit_lanes`].
+    /// returns `false` to stop the ray there as vignetted. The mapping and tolerance analyses read hits through
+    /// it; [`Self::trace`] is built on it. One lane of [`Self::trace_visit_lanes`].
     pub fn trace_visit(&self, ray: &Ray, mut visit: impl FnMut(&StepHit) -> bool) -> Result<Landing, TraceStatus> {
         let [outcome] = self.trace_visit_lanes([*ray], |_, hit| visit(hit));
         outcome
@@ -236,9 +236,10 @@ impl Tracer {
     }
 
     /// `L` rays traced as [`Self::trace_visit_lanes`] does, each recording what a ray-grid vertex needs
-    /// ([`VertexRecipe`]): its weight, its stop crossings and its largest relative height. The recording is
-    /// vectorised with the step (the reflectance tables read by gathers), with the arithmetic of the
-    /// one-ray visit the ray-grid renderers used before (the same results, bit for bit).
+    /// ([`VertexRecipe`]): its weight, its stop crossings and its largest relative height. At a spherical step
+    /// the recording is vectorised too (what it needs kept in the step's loop, the reflectance tables then read
+    /// by gathers in a loop of their own), with the arithmetic of a one-ray visit (the same results, bit for
+    /// bit). The ray-grid renderers and the LUT bake trace through it, 16 rays at a time.
     pub fn trace_vertices<const L: usize>(
         &self,
         rays: [Ray; L],
@@ -565,7 +566,8 @@ fn sphere_step<const L: usize>(
 }
 
 /// What [`Tracer::trace_columns`] shows each intersection to: one lane's hit (a conic or aspheric step), or
-/// every lane of a spherical step at once. Returns whether a lane stops there as vignetted.
+/// every lane of a spherical step at once (the visitor runs the step, [`sphere_step`], so that it can record in
+/// its loop). Returns whether a lane stops there as vignetted.
 trait LaneVisitor<const L: usize> {
     fn lane(&mut self, lane: usize, hit: &StepHit) -> bool;
 
@@ -659,6 +661,7 @@ fn table_at(samples: &[f64], sin2_i: f64) -> f64 {
     samples[k] * (1.0 - f) + samples[k + 1] * f
 }
 
+/// Records a [`VertexRecipe`] for every lane ([`Tracer::trace_vertices`]).
 struct RecipeVisitor<'a, 'r, const L: usize> {
     recipe: &'r VertexRecipe<'a>,
     record: VertexRecord<L>,
