@@ -69,9 +69,9 @@ proptest! {
     }
 
     /// As the ray's pupil height and angle shrink together by t, |exact - paraxial| shrinks like t^3
-    /// (third-order aberrations) or faster, on the image path and on ghost paths. Halving t must divide the
-    /// last error above rounding by at least 6.5 (a wrong paraxial matrix leaves an O(t) error: a ratio of
-    /// 2). There is no upper bound: where a ghost's third-order coefficient nearly cancels, the fifth order
+    /// (third-order aberrations) or faster, on the image path and on ghost paths. Halving t must divide an
+    /// error above rounding by at least 5.5 somewhere over the range (a wrong paraxial matrix leaves an O(t)
+    /// error: a ratio of 2 everywhere). There is no upper bound: where a ghost's third-order coefficient nearly cancels, the fifth order
     /// dominates over the sampled range and the ratio reaches 12 to 60 (saved case `2f9bb245`: ghost (3, 5),
     /// ratios 62, 11.8).
     #[test]
@@ -101,18 +101,23 @@ proptest! {
             let errors: Option<Vec<f64>> = (0..7).map(|k| error(0.5f64.powi(k))).collect();
             let Some(errors) = errors else { continue };
             landed += 1;
-            // Below 1e-8 mm (10 picometres) the difference is rounding, not aberration: a ghost path of a dozen
+            // Below 1e-9 mm (a picometre) the difference is rounding, not aberration: a ghost path of a dozen
             // surfaces, with its magnification, rounds the landing height at the 1e-10 to 5e-9 mm level (case
-            // `2f9bb245`: 5e-10 mm after three halvings, its ratio down to 4.9; case `eb789d13`, aspheric
-            // ghost (4, 5): 2.3e-9 then 4.8e-9 mm, a ratio of 0.48 made of rounding alone).
-            let usable: Vec<f64> = errors.iter().copied().take_while(|&e| e > 1e-8).collect();
-            if usable.len() < 2 {
+            // `2f9bb245`: 5e-10 mm after three halvings). A path whose first error is under 1e-8 mm is rounding
+            // from the start (case `eb789d13`, aspheric ghost (4, 5): 2.3e-9 then 4.8e-9 mm) and is held to
+            // the tiny-ray bound instead.
+            let usable: Vec<f64> = errors.iter().copied().take_while(|&e| e > 1e-9).collect();
+            if usable.len() < 2 || usable[0] < 1e-8 {
                 prop_assert!(errors[0] < 1e-6, "a tiny ray far from paraxial: {errors:?}");
                 continue;
             }
-            let n = usable.len();
-            let ratio = usable[n - 2] / usable[n - 1];
-            prop_assert!(ratio >= 6.5, "{:?}: errors {usable:?}, last ratio {ratio:.2}", path.kind);
+            // Cubic convergence somewhere over the sampled range: the best ratio of consecutive errors is at
+            // least 5.5 (8 for a pure t^3; a t^2 error gives 4, and a wrong paraxial matrix, off by O(t), 2 at
+            // every height). The largest heights can be dominated by a fifth-order term of the opposite sign
+            // (case `68edd099`: 3.2e-7 then 5.1e-8 mm, a ratio of 6.31) and the smallest by rounding
+            // (a case of 1.3e-8 then 2.2e-9 mm, 5.99), so no single pair is the test.
+            let best = usable.windows(2).map(|w| w[0] / w[1]).fold(0.0f64, f64::max);
+            prop_assert!(best >= 5.5, "{:?}: errors {usable:?}, best ratio {best:.2}", path.kind);
         }
         // Every path that lands is checked: by its ratio, or (a nearly afocal lens whose difference stays at
         // rounding level, saved case `da46e37a`) by the tiny-ray bound.
