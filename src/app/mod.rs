@@ -117,6 +117,8 @@ pub fn run() -> Result<()> {
                 cc.storage.and_then(restore)
             };
             let mut app = FlareLabApp::new(cc.wgpu_render_state.clone(), stored);
+            // eframe clears the window to the panels' colour (`clear_color`).
+            app.cleared_by_window = true;
             if std::env::var_os("FLARELAB_AUTO_BAKE").is_some_and(|v| v == "0") {
                 // For measurements: no background bake competing for the cores.
                 app.autobake.enabled = false;
@@ -1246,7 +1248,6 @@ impl ExportPlate {
 
 impl eframe::App for FlareLabApp {
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
-        self.cleared_by_window = true;
         self.ui_root(ui);
     }
 

@@ -99,11 +99,7 @@ impl ReflectanceTable {
 
     /// Reflectance at `sin2_i` (clamped to [0, 1]).
     pub fn at(&self, sin2_i: f64) -> f64 {
-        let n = self.samples.len();
-        let x = sin2_i.clamp(0.0, 1.0) * (n - 1) as f64;
-        let k = (x as usize).min(n - 2);
-        let f = x - k as f64;
-        self.samples[k] * (1.0 - f) + self.samples[k + 1] * f
+        crate::optics::table_at(&self.samples, sin2_i)
     }
 }
 

@@ -30,4 +30,5 @@ pub use path::{Interaction, LightPath, PathKind, Step};
 pub use trace::simd_level;
 pub use trace::{
     Landing, Ray, StepHit, TraceOptions, TraceResult, TraceStatus, Tracer, VertexRecipe, VertexRecord, pupil_ray,
+    table_at,
 };

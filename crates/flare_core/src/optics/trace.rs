@@ -650,10 +650,11 @@ impl<const L: usize> VertexRecord<L> {
     }
 }
 
-/// The reflectance table `samples` at sin^2 i = `sin2_i`, linearly interpolated (the arithmetic of
-/// `coating::ReflectanceTable::at`).
+/// A reflectance table `samples` (at least 2, evenly spaced over sin^2 i from 0 to 1) at sin^2 i = `sin2_i`
+/// (clamped to [0, 1]), linearly interpolated: what `coating::ReflectanceTable::at` reads, and the one-lane
+/// form of the tracer's vectorised read.
 #[inline(always)]
-fn table_at(samples: &[f64], sin2_i: f64) -> f64 {
+pub fn table_at(samples: &[f64], sin2_i: f64) -> f64 {
     let n = samples.len();
     let x = sin2_i.clamp(0.0, 1.0) * (n - 1) as f64;
     let k = (x as usize).min(n - 2);
