@@ -417,7 +417,7 @@ pub fn draw_cpu_hdr(frame: &Frame, sources: &Sources) -> HdrImage {
     let scene = &frame.scene;
     let mut hdr = cpu::ghost_pass(scene, &sources.flare.mask);
     if let (Some(l), Some(live)) = (&frame.lut, sources.lut) {
-        lut_pass(frame.size(), l, &live.lut, &mut hdr);
+        lut_pass(frame.size(), l, live, &mut hdr);
     }
     cpu::starburst_pass(scene, &sources.flare.starburst_texture, &mut hdr);
     hdr

@@ -27,6 +27,8 @@ fn every_shader_parses_and_validates_with_naga() {
             "raygrid_trace.wgsl" => &["trace_main"],
             "raygrid_splat.wgsl" => &["vs_splat", "fs_splat"],
             "dof.wgsl" => &["split", "gather", "composite", "resolve"],
+            "ghosts_compute.wgsl" => &["spans", "resolve"],
+            "lut_compute.wgsl" => &["lut_tiles"],
             _ => &["vs_main", "fs_main"],
         };
         for entry in entries {

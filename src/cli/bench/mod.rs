@@ -315,7 +315,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             })?;
             let mut moments = cpu::ghost_moments(&frame.scene, &flare.mask, ghosts);
             if let Some(lut_scene) = &frame.lut {
-                lut_moments(&frame.scene, lut_scene, &live.lut, &mut moments);
+                lut_moments(&frame.scene, lut_scene, &live, &mut moments);
             }
             rows.push(row("blended".into(), ms, runs, against("blended", &image, &moments)?));
             // On the GPU, as the app draws it: frame, upload, draw, wait (no read-back in the timing).
@@ -457,10 +457,10 @@ struct Bake {
 fn lut_moments(
     scene: &FlareScene,
     lut_scene: &flare_core::lut::blend::LutScene,
-    lut: &flare_core::lut::GhostLut,
+    live: &flare_core::lut::blend::LiveLut,
     moments: &mut [metrics::GhostMoments],
 ) {
-    for (g, ghost) in lut.ghosts.iter().enumerate() {
+    for (g, ghost) in live.lut.ghosts.iter().enumerate() {
         let only: Vec<usize> = (0..lut_scene.sources.len()).filter(|&k| lut_scene.sources[k].0 as usize == g).collect();
         if only.is_empty() {
             continue;
@@ -475,7 +475,7 @@ fn lut_moments(
             height: scene.hdr_height,
             pixels: vec![[0.0; 4]; (scene.hdr_width * scene.hdr_height) as usize],
         };
-        flare_core::lut::blend::lut_pass((scene.width, scene.height), &part, lut, &mut image);
+        flare_core::lut::blend::lut_pass((scene.width, scene.height), &part, live, &mut image);
         let m = &mut moments[ghost.ghost as usize];
         for (k, p) in image.pixels.iter().enumerate() {
             let luma = metrics::luminance([p[0], p[1], p[2]].map(f64::from));

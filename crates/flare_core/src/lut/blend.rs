@@ -211,14 +211,6 @@ impl LutInstance {
             [(by * dx - bx * dy) / det, (ax * dy - ay * dx) / det]
         })
     }
-
-    /// Bounding box of the quad, image pixels: x_min, y_min, x_max, y_max.
-    fn bounds(&self) -> [f32; 4] {
-        let [cx, cy, ax, ay] = self.centre_axis_x;
-        let [bx, by, _, _] = self.axis_y_page;
-        let (rx, ry) = (ax.abs() + bx.abs(), ay.abs() + by.abs());
-        [cx - rx, cy - ry, cx + rx, cy + ry]
-    }
 }
 
 /// What one frame draws of a LUT.
@@ -376,45 +368,312 @@ fn place(
 /// Rows per parallel band of the CPU pass.
 const BAND_ROWS: usize = 16;
 
+/// An entry's size and the box of its lit texels (any channel non-zero; x0, x1, y0, y1 inclusive, or an
+/// empty box, x0 > x1, when none is lit): what placing and binning an instance need of it, measured once per
+/// LUT ([`LiveLut::footprints`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Footprint {
+    pub width: u32,
+    pub height: u32,
+    pub lit: [u32; 4],
+}
+
+/// Where an instance's entry lies over the accumulation: its texel coordinates as an affine function of the
+/// accumulation pixel, and the box of texel coordinates outside which its samples are 0.
+#[derive(Clone, Copy, Debug)]
+struct TexelMap {
+    /// Texel coordinates (x, y: `s w - 0.5`, `t h - 0.5`, as the bilinear sample takes them) of the
+    /// accumulation pixel (i, j): `origin + i d_di + j d_dj`.
+    origin: [f32; 2],
+    d_di: [f32; 2],
+    d_dj: [f32; 2],
+    /// Where a sample can be non-zero: inside the quad (|q| <= 1 is -0.5..w - 0.5 in texel coordinates) and
+    /// within a texel of the entry's lit texels. x_lo, x_hi, y_lo, y_hi.
+    support: [f32; 4],
+    /// The same, without the lit texels (the quad alone): the per-pixel test of the shader.
+    quad: [f32; 4],
+}
+
+/// One instance made ready for [`lut_pass`]: its entry, colour and texel map.
+struct Prepared<'a> {
+    entry: &'a LutEntry,
+    colour: [f32; 4],
+    map: TexelMap,
+}
+
+impl TexelMap {
+    /// `scale`: image pixels per accumulation pixel. `None` for an empty entry, a degenerate quad or no lit
+    /// texel.
+    fn new(inst: &LutInstance, footprint: Footprint, scale: (f32, f32)) -> Option<Self> {
+        if footprint.width == 0 || footprint.height == 0 {
+            return None;
+        }
+        // texel = (q * 0.5 + 0.5) * size - 0.5 at p = ((i + 0.5) sx, (j + 0.5) sy): affine in (i, j).
+        let q_of = inst.inverse()?;
+        let (w, h) = (footprint.width as f32, footprint.height as f32);
+        let (sx, sy) = scale;
+        let texel = |q: [f32; 2]| [(q[0] * 0.5 + 0.5) * w - 0.5, (q[1] * 0.5 + 0.5) * h - 0.5];
+        let origin = texel(q_of([0.5 * sx, 0.5 * sy]));
+        let step_i = texel(q_of([1.5 * sx, 0.5 * sy]));
+        let step_j = texel(q_of([0.5 * sx, 1.5 * sy]));
+        let d_di = [step_i[0] - origin[0], step_i[1] - origin[1]];
+        let d_dj = [step_j[0] - origin[0], step_j[1] - origin[1]];
+        let quad = [-0.5, w - 0.5, -0.5, h - 0.5];
+        let [lx0, lx1, ly0, ly1] = footprint.lit.map(|v| v as f32);
+        let support = [quad[0].max(lx0 - 1.0), quad[1].min(lx1 + 1.0), quad[2].max(ly0 - 1.0), quad[3].min(ly1 + 1.0)];
+        let finite = origin.iter().chain(&d_di).chain(&d_dj).all(|v| v.is_finite());
+        (finite && support[0] <= support[1] && support[2] <= support[3])
+            .then_some(Self { origin, d_di, d_dj, support, quad })
+    }
+
+    /// The accumulation pixels (x range, y range) of the support box's corners: where a sample can be
+    /// non-zero. `None` when the map from pixels to texels is singular.
+    fn pixel_bounds(&self) -> Option<[[f32; 2]; 2]> {
+        let det = self.d_di[0] * self.d_dj[1] - self.d_dj[0] * self.d_di[1];
+        if det == 0.0 || !det.is_finite() {
+            return None;
+        }
+        let [x0, x1, y0, y1] = self.support;
+        let (mut lo, mut hi) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
+        for t in [[x0, y0], [x1, y0], [x0, y1], [x1, y1]] {
+            let (dx, dy) = (t[0] - self.origin[0], t[1] - self.origin[1]);
+            let p = [(self.d_dj[1] * dx - self.d_dj[0] * dy) / det, (self.d_di[0] * dy - self.d_di[1] * dx) / det];
+            for a in 0..2 {
+                lo[a] = lo[a].min(p[a]);
+                hi[a] = hi[a].max(p[a]);
+            }
+        }
+        (lo.iter().chain(&hi).all(|v| v.is_finite())).then_some([[lo[0], hi[0]], [lo[1], hi[1]]])
+    }
+
+    /// The accumulation columns of row `j` in which a sample can be non-zero (a pixel of margin each side:
+    /// the per-pixel test decides).
+    fn columns(&self, j: usize, width: usize) -> std::ops::Range<usize> {
+        let (mut lo, mut hi) = (f32::NEG_INFINITY, f32::INFINITY);
+        let row = [self.origin[0] + j as f32 * self.d_dj[0], self.origin[1] + j as f32 * self.d_dj[1]];
+        for axis in 0..2 {
+            let (from, to) = (self.support[2 * axis], self.support[2 * axis + 1]);
+            let (start, step) = (row[axis], self.d_di[axis]);
+            if step == 0.0 {
+                if start < from || start > to {
+                    return 0..0;
+                }
+            } else {
+                let (a, b) = ((from - start) / step, (to - start) / step);
+                lo = lo.max(a.min(b));
+                hi = hi.min(a.max(b));
+            }
+        }
+        if !(lo <= hi) {
+            return 0..0;
+        }
+        let first = (lo - 1.0).floor().max(0.0).min(width as f32) as usize;
+        let end = (hi + 2.0).ceil().max(0.0).min(width as f32) as usize;
+        first..end
+    }
+}
+
+/// The LUT instances of a frame binned into square tiles of the accumulation (what `lut_compute.wgsl` reads):
+/// per tile, in the frame's order, the instances whose lit texels can reach it.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LutBins {
+    /// Accumulation pixels a side of a tile.
+    pub tile: u32,
+    pub tiles_x: u32,
+    pub tiles_y: u32,
+    /// Per tile (rows of tiles from the top), where its list starts in `list`; then the list's length.
+    pub starts: Vec<u32>,
+    /// Instance indices.
+    pub list: Vec<u32>,
+}
+
+/// The bins of `lut_scene`'s instances over an accumulation of `acc_size` pixels for a frame of `frame_size`.
+pub fn bin_instances(
+    frame_size: (u32, u32),
+    acc_size: (u32, u32),
+    lut_scene: &LutScene,
+    footprints: &[Vec<Footprint>],
+    tile: u32,
+) -> LutBins {
+    let (w, h) = (acc_size.0.max(1), acc_size.1.max(1));
+    let tile = tile.max(1);
+    let (tiles_x, tiles_y) = (w.div_ceil(tile), h.div_ceil(tile));
+    let scale = (frame_size.0 as f32 / w as f32, frame_size.1 as f32 / h as f32);
+    // Per instance, the tiles its lit support reaches: x0, x1, y0, y1 (inclusive), or none.
+    let reach: Vec<Option<[u32; 4]>> = lut_scene
+        .instances
+        .iter()
+        .zip(&lut_scene.sources)
+        .map(|(inst, &(g, k))| {
+            let footprint = *footprints.get(g as usize)?.get(k as usize)?;
+            let [bx, by] = TexelMap::new(inst, footprint, scale)?.pixel_bounds()?;
+            let tiles = |lo: f32, hi: f32, size: u32, count: u32| -> Option<(u32, u32)> {
+                let (lo, hi) = ((lo - 1.0).floor().max(0.0), (hi + 1.0).ceil().min(size as f32 - 1.0));
+                (lo <= hi).then(|| ((lo as u32 / tile).min(count - 1), (hi as u32 / tile).min(count - 1)))
+            };
+            let ((x0, x1), (y0, y1)) = (tiles(bx[0], bx[1], w, tiles_x)?, tiles(by[0], by[1], h, tiles_y)?);
+            Some([x0, x1, y0, y1])
+        })
+        .collect();
+    let tiles = (tiles_x * tiles_y) as usize;
+    let mut counts = vec![0u32; tiles + 1];
+    for r in reach.iter().flatten() {
+        for ty in r[2]..=r[3] {
+            for tx in r[0]..=r[1] {
+                counts[(ty * tiles_x + tx) as usize] += 1;
+            }
+        }
+    }
+    let mut starts = Vec::with_capacity(tiles + 1);
+    let mut total = 0u32;
+    for c in &counts[..tiles] {
+        starts.push(total);
+        total += c;
+    }
+    starts.push(total);
+    let mut fill = starts.clone();
+    let mut list = vec![0u32; total as usize];
+    for (index, r) in reach.iter().enumerate() {
+        let Some(r) = r else { continue };
+        for ty in r[2]..=r[3] {
+            for tx in r[0]..=r[1] {
+                let t = (ty * tiles_x + tx) as usize;
+                list[fill[t] as usize] = index as u32;
+                fill[t] += 1;
+            }
+        }
+    }
+    LutBins { tile, tiles_x, tiles_y, starts, list }
+}
+
+/// Per LUT ghost and entry, its [`Footprint`].
+fn footprints(lut: &GhostLut) -> Vec<Vec<Footprint>> {
+    lut.ghosts
+        .par_iter()
+        .map(|ghost| {
+            ghost
+                .entries
+                .iter()
+                .map(|e| {
+                    let mut b = [u32::MAX, 0, u32::MAX, 0];
+                    for (k, t) in e.texels.iter().enumerate() {
+                        if t.iter().any(|v| v.to_bits() & 0x7fff != 0) {
+                            let (x, y) = ((k % e.width as usize) as u32, (k / e.width as usize) as u32);
+                            b = [b[0].min(x), b[1].max(x), b[2].min(y), b[3].max(y)];
+                        }
+                    }
+                    let lit = if b[0] == u32::MAX { [1, 0, 1, 0] } else { b };
+                    Footprint { width: e.width, height: e.height, lit }
+                })
+                .collect()
+        })
+        .collect()
+}
+
 /// `lut_ghosts.wgsl`: every LUT instance onto the HDR accumulation `hdr` of a `frame_width` x `frame_height`
 /// frame (the accumulation may be smaller; instances are in frame pixels), added or composited over it through
-/// alpha, sampling each instance's entry exactly as the GPU samples the atlas.
-pub fn lut_pass(frame_size: (u32, u32), lut_scene: &LutScene, lut: &GhostLut, hdr: &mut HdrImage) {
+/// alpha, sampling each instance's entry exactly as the GPU samples the atlas (bilinear, 0 outside the entry).
+///
+/// Cost follows the pixels where an entry is lit, not its quad: per instance and row, the columns where its
+/// texel coordinates fall within a texel of the entry's lit texels are solved for (texel coordinates are
+/// affine in the pixel), and only those are sampled (the per-pixel test of the quad is the shader's).
+/// Bands of rows run in parallel; within a pixel the instances are applied in order, so the image does not
+/// depend on the thread count.
+pub fn lut_pass(frame_size: (u32, u32), lut_scene: &LutScene, live: &LiveLut, hdr: &mut HdrImage) {
     let (w, h) = (hdr.width as usize, hdr.height as usize);
-    let (sx, sy) = (frame_size.0 as f32 / hdr.width as f32, frame_size.1 as f32 / hdr.height as f32);
-    let prepared: Vec<_> = lut_scene
+    let scale = (frame_size.0 as f32 / hdr.width as f32, frame_size.1 as f32 / hdr.height as f32);
+    let prepared: Vec<Prepared> = lut_scene
         .instances
         .iter()
         .zip(&lut_scene.sources)
         .filter_map(|(inst, &(g, k))| {
-            let inverse = inst.inverse()?;
-            Some((inst, inverse, &lut.ghosts[g as usize].entries[k as usize]))
+            let entry = live.lut.ghosts.get(g as usize)?.entries.get(k as usize)?;
+            let footprint = *live.footprints.get(g as usize)?.get(k as usize)?;
+            Some(Prepared { entry, colour: inst.colour, map: TexelMap::new(inst, footprint, scale)? })
         })
         .collect();
+    let alpha_over = lut_scene.alpha_over;
     hdr.pixels.par_chunks_mut(w * BAND_ROWS).enumerate().for_each(|(band, chunk)| {
         let y0 = band * BAND_ROWS;
         let rows = y0..(y0 + BAND_ROWS).min(h);
-        for (inst, inverse, entry) in &prepared {
-            let [x_lo, y_lo, x_hi, y_hi] = inst.bounds();
-            let ys = ((y_lo / sy - 0.5).floor().max(rows.start as f32) as usize)
-                ..((y_hi / sy + 0.5).ceil().max(0.0) as usize).min(rows.end);
-            let xs = ((x_lo / sx - 0.5).floor().max(0.0) as usize)..((x_hi / sx + 0.5).ceil().max(0.0) as usize).min(w);
-            for y in ys {
-                for x in xs.clone() {
-                    let q = inverse([(x as f32 + 0.5) * sx, (y as f32 + 0.5) * sy]);
-                    if q[0].abs() > 1.0 || q[1].abs() > 1.0 {
-                        continue;
-                    }
-                    let t = entry.sample(q[0] * 0.5 + 0.5, q[1] * 0.5 + 0.5);
-                    let p = &mut chunk[(y - y0) * w + x];
-                    let keep = if lut_scene.alpha_over { 1.0 - (t[3] * inst.colour[3]).clamp(0.0, 1.0) } else { 1.0 };
-                    for c in 0..3 {
-                        p[c] = t[c] * inst.colour[c] + p[c] * keep;
-                    }
+        #[cfg(target_arch = "x86_64")]
+        if has_avx2_f16c() {
+            // SAFETY: the processor has AVX2 and F16C (checked at run time).
+            return unsafe { lut_band_avx2(&prepared, alpha_over, rows, w, chunk) };
+        }
+        lut_band(&prepared, alpha_over, rows, w, chunk, |t| t.map(half::f16::to_f32));
+    });
+}
+
+#[cfg(target_arch = "x86_64")]
+fn has_avx2_f16c() -> bool {
+    crate::optics::simd_level() >= 1 && std::arch::is_x86_feature_detected!("f16c")
+}
+
+/// [`lut_band`] compiled for AVX2, the texels converted by F16C.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,f16c")]
+unsafe fn lut_band_avx2(
+    prepared: &[Prepared],
+    alpha_over: bool,
+    rows: std::ops::Range<usize>,
+    width: usize,
+    chunk: &mut [[f32; 4]],
+) {
+    use std::arch::x86_64::{_mm_cvtph_ps, _mm_loadl_epi64, _mm_storeu_ps};
+    lut_band(prepared, alpha_over, rows, width, chunk, |t| {
+        let mut out = [0.0f32; 4];
+        // SAFETY: `t` is 8 readable bytes (four half floats); `out` 16 writable bytes.
+        unsafe { _mm_storeu_ps(out.as_mut_ptr(), _mm_cvtph_ps(_mm_loadl_epi64(t.as_ptr().cast()))) };
+        out
+    });
+}
+
+/// The instances over the accumulation rows `rows` (`chunk` holds them, `width` pixels a row). `decode` turns
+/// one texel's four half floats into f32 (exactly).
+#[inline(always)]
+fn lut_band(
+    prepared: &[Prepared],
+    alpha_over: bool,
+    rows: std::ops::Range<usize>,
+    width: usize,
+    chunk: &mut [[f32; 4]],
+    decode: impl Fn(&[half::f16; 4]) -> [f32; 4],
+) {
+    for inst in prepared {
+        let (ew, eh) = (inst.entry.width as i32, inst.entry.height as i32);
+        let texels = &inst.entry.texels;
+        let [qx0, qx1, qy0, qy1] = inst.map.quad;
+        let at = |i: i32, j: i32| -> [f32; 4] {
+            if (i as u32) < ew as u32 && (j as u32) < eh as u32 { decode(&texels[(j * ew + i) as usize]) } else { [0.0; 4] }
+        };
+        for y in rows.clone() {
+            let columns = inst.map.columns(y, width);
+            if columns.is_empty() {
+                continue;
+            }
+            let m = &inst.map;
+            let row = [m.origin[0] + y as f32 * m.d_dj[0], m.origin[1] + y as f32 * m.d_dj[1]];
+            let out = &mut chunk[(y - rows.start) * width..][..width];
+            for x in columns {
+                let (tx, ty) = (row[0] + x as f32 * m.d_di[0], row[1] + x as f32 * m.d_di[1]);
+                if !(tx >= qx0 && tx <= qx1 && ty >= qy0 && ty <= qy1) {
+                    continue;
+                }
+                // tx, ty >= -0.5 here: truncation of tx + 1 is the floor.
+                let (ix, iy) = ((tx + 1.0) as i32 - 1, (ty + 1.0) as i32 - 1);
+                let (fx, fy) = (tx - ix as f32, ty - iy as f32);
+                let (a, b, c, d) = (at(ix, iy), at(ix + 1, iy), at(ix, iy + 1), at(ix + 1, iy + 1));
+                let t: [f32; 4] =
+                    std::array::from_fn(|k| (a[k] * (1.0 - fx) + b[k] * fx) * (1.0 - fy) + (c[k] * (1.0 - fx) + d[k] * fx) * fy);
+                let p = &mut out[x];
+                let keep = if alpha_over { 1.0 - (t[3] * inst.colour[3]).clamp(0.0, 1.0) } else { 1.0 };
+                for ch in 0..3 {
+                    p[ch] = t[ch] * inst.colour[ch] + p[ch] * keep;
                 }
             }
         }
-    });
+    }
 }
 
 /// A LUT ready to draw: the LUT and where its entries lie in the atlas.
@@ -426,12 +685,16 @@ pub struct LiveLut {
     pub shapes: Vec<Vec<Option<EntryShape>>>,
     /// This LUT's identity ([`crate::fingerprint::unique_id`]; a clone keeps it), for upload caches.
     pub id: u64,
+    /// Per LUT ghost and entry, its size and lit texels (measured once, on load): what [`lut_pass`] samples and
+    /// [`bin_instances`] bins.
+    pub footprints: Vec<Vec<Footprint>>,
 }
 
 impl LiveLut {
     pub fn new(lut: GhostLut) -> Self {
         let layout = AtlasLayout::new(&lut);
         let shapes = lut.ghosts.par_iter().map(|g| g.entries.iter().map(LutEntry::shape).collect()).collect();
-        Self { lut, layout, shapes, id: crate::fingerprint::unique_id() }
+        let footprints = footprints(&lut);
+        Self { lut, layout, shapes, id: crate::fingerprint::unique_id(), footprints }
     }
 }

@@ -112,19 +112,19 @@ mod tests {
         let v = Vertex { valid: true, pixel: [10.3, 7.6], stops: [[0.0; 2]; 3], ratio: 0.5, weight: 0.25 };
         let mut acc = Accumulator::new(20, 20, 1);
         assert!(splat_triangle([&v, &v, &v], &frame, &mut acc));
-        let total: f64 = acc.energy.iter().map(|p| p[0]).sum();
+        let total: f64 = acc.energy().iter().map(|p| p[0]).sum();
         assert!((total - 0.5).abs() < 1e-12, "{total}");
         // A large triangle: irradiance = flux / area, times the area it covers of each pixel.
         let tri = [[2.0, 2.0], [18.0, 2.0], [2.0, 18.0]].map(|pixel| Vertex { pixel, ..v });
         let mut acc = Accumulator::new(20, 20, 1);
         splat_triangle([&tri[0], &tri[1], &tri[2]], &frame, &mut acc);
-        let total: f64 = acc.energy.iter().map(|p| p[0]).sum();
+        let total: f64 = acc.energy().iter().map(|p| p[0]).sum();
         assert!((total / 0.5 - 1.0).abs() < 1e-9, "box-filtered energy {total} vs 0.5");
         // Partly off the frame: what lands in it is its share by area (x >= 0: a quarter of this one).
         let tri = [[-8.0, 2.0], [8.0, 2.0], [-8.0, 18.0]].map(|pixel| Vertex { pixel, ..v });
         let mut acc = Accumulator::new(20, 20, 1);
         splat_triangle([&tri[0], &tri[1], &tri[2]], &frame, &mut acc);
-        let total: f64 = acc.energy.iter().map(|p| p[0]).sum();
+        let total: f64 = acc.energy().iter().map(|p| p[0]).sum();
         assert!((total / 0.125 - 1.0).abs() < 1e-9, "{total} vs 1/4 of 0.5");
     }
 
@@ -168,9 +168,9 @@ mod tests {
                     && x > x_at(y).max(x_at(y + 1.0)) + 1.0
                     && x + 2.0 < x_at(y).min(x_at(y + 1.0)) + n as f64 * step
             });
-            let mut count = 0;
+            let (mut count, energy) = (0, acc.energy());
             for k in inside {
-                assert!((acc.energy[k][0] - 1.0).abs() < 1e-9, "step {step}: pixel {k} got {}", acc.energy[k][0]);
+                assert!((energy[k][0] - 1.0).abs() < 1e-9, "step {step}: pixel {k} got {}", energy[k][0]);
                 count += 1;
             }
             assert!(count > 100, "step {step}: only {count} pixels inside");

@@ -25,29 +25,64 @@ pub struct RayGridImage {
     pub moments: Vec<GhostMoments>,
     pub stats: RayGridStats,
 }
+/// Pixels a side of an accumulator's tile.
+const TILE: usize = 32;
+
 /// Per-thread accumulation: energy per pixel (relative irradiance x mm^2) and per-ghost moments.
+///
+/// The energy is held in tiles of [`TILE`] x [`TILE`] pixels, each made (zeroed) when a triangle first lands
+/// in it: rayon's fold starts a fresh accumulator for every piece of the job list it hands a thread, and a
+/// ghost's light covers a part of the frame, so the cost of an accumulator (made, merged) follows the pixels
+/// its jobs touch, not the frame's size. The sums are those of one frame-sized buffer, bit for bit (a tile not
+/// yet made holds zeros).
 pub(super) struct Accumulator {
     pub(super) width: usize,
     pub(super) height: usize,
-    pub(super) energy: Vec<[f64; 3]>,
+    tiles_x: usize,
+    tiles: Vec<Option<Vec<[f64; 3]>>>,
     pub(super) moments: Vec<GhostMoments>,
     pub(super) stats: RayGridStats,
 }
 impl Accumulator {
     pub(super) fn new(width: usize, height: usize, ghosts: usize) -> Self {
+        let tiles_x = width.div_ceil(TILE);
         Self {
             width,
             height,
-            energy: vec![[0.0; 3]; width * height],
+            tiles_x,
+            tiles: vec![None; tiles_x * height.div_ceil(TILE)],
             moments: vec![GhostMoments::default(); ghosts],
             stats: RayGridStats::default(),
         }
     }
 
+    /// The energy of every pixel, rows from the top (zeros where nothing landed).
+    pub(super) fn energy(&self) -> Vec<[f64; 3]> {
+        let mut out = vec![[0.0; 3]; self.width * self.height];
+        for (t, tile) in self.tiles.iter().enumerate() {
+            let Some(tile) = tile else { continue };
+            let (x0, y0) = ((t % self.tiles_x) * TILE, (t / self.tiles_x) * TILE);
+            for y in y0..(y0 + TILE).min(self.height) {
+                for x in x0..(x0 + TILE).min(self.width) {
+                    out[y * self.width + x] = tile[(y - y0) * TILE + (x - x0)];
+                }
+            }
+        }
+        out
+    }
+
     pub(super) fn merge(mut self, other: Self) -> Self {
-        for (a, b) in self.energy.iter_mut().zip(&other.energy) {
-            for c in 0..3 {
-                a[c] += b[c];
+        for (a, b) in self.tiles.iter_mut().zip(other.tiles) {
+            match (a.as_mut(), b) {
+                (Some(a), Some(b)) => {
+                    for (p, q) in a.iter_mut().zip(&b) {
+                        for c in 0..3 {
+                            p[c] += q[c];
+                        }
+                    }
+                }
+                (None, Some(b)) => *a = Some(b),
+                (_, None) => {}
             }
         }
         for (a, b) in self.moments.iter_mut().zip(&other.moments) {
@@ -74,7 +109,7 @@ impl Accumulator {
             })
             .collect();
         let pixels = self
-            .energy
+            .energy()
             .iter()
             .map(|e| {
                 let v = e.map(|c| (c / pixel_area_mm2) as f32);
@@ -95,7 +130,9 @@ impl Accumulator {
         if x < 0 || y < 0 || x >= self.width as i64 || y >= self.height as i64 || energy.is_nan() || energy <= 0.0 {
             return;
         }
-        let p = &mut self.energy[y as usize * self.width + x as usize];
+        let (x, y) = (x as usize, y as usize);
+        let tile = self.tiles[(y / TILE) * self.tiles_x + x / TILE].get_or_insert_with(|| vec![[0.0; 3]; TILE * TILE]);
+        let p = &mut tile[(y % TILE) * TILE + x % TILE];
         for (value, weight) in p.iter_mut().zip(job.rgb) {
             *value += energy * weight;
         }
@@ -284,8 +321,20 @@ pub(super) fn splat_triangle(tri: [&Vertex; 3], frame: &JobFrame, acc: &mut Accu
     while rows.rest().count >= 3 {
         rows.cut_below(1, y + 1.0, columns.reset());
         if let Some([x_first, ..]) = columns.rest().bounds() {
+            // The pixels the row's part covers whole (area 1, centroid at the centre) are added without cutting.
+            let (full_lo, full_hi) = columns.rest().full_columns(y);
             let mut x = x_first.floor();
             while columns.rest().count >= 3 {
+                if x == full_lo {
+                    let mut c = full_lo;
+                    while c < full_hi {
+                        acc.add(c as i64, y as i64, irradiance * shader.shade([c + 0.5, y + 0.5]), frame);
+                        c += 1.0;
+                    }
+                    columns.cut_below(0, full_hi, &mut piece);
+                    x = full_hi;
+                    continue;
+                }
                 columns.cut_below(0, x + 1.0, &mut piece);
                 if let Some((area, centroid)) = piece.area_centroid() {
                     acc.add(x as i64, y as i64, irradiance * area * shader.shade(centroid), frame);
@@ -405,6 +454,24 @@ impl Polygon {
             a = b;
             a_bit = b_bit;
         }
+    }
+
+    /// For a convex polygon within the row `y..y + 1`: the columns `[lo, hi)` of the pixels it covers whole
+    /// (NaN when none). Only a polygon that spans the row's height covers any: its left side is convex
+    /// and its right side concave in y, so both are furthest in at the row's edges, where its vertices lie on
+    /// the cut lines.
+    #[inline(always)]
+    pub(super) fn full_columns(&self, y: f64) -> (f64, f64) {
+        let (mut bottom, mut top) = ([f64::INFINITY, f64::NEG_INFINITY], [f64::INFINITY, f64::NEG_INFINITY]);
+        for p in &self.vertices[..self.count] {
+            if p[1] == y {
+                bottom = [bottom[0].min(p[0]), bottom[1].max(p[0])];
+            } else if p[1] == y + 1.0 {
+                top = [top[0].min(p[0]), top[1].max(p[0])];
+            }
+        }
+        let (lo, hi) = (bottom[0].max(top[0]).ceil(), bottom[1].min(top[1]).floor());
+        if lo < hi { (lo, hi) } else { (f64::NAN, f64::NAN) }
     }
 
     /// `[x_min, y_min, x_max, y_max]`, `None` when the polygon is empty.

@@ -27,6 +27,10 @@
 use wgpu_profiler::{GpuProfiler, GpuProfilerSettings, GpuTimerQueryResult};
 
 use super::shaders::{GHOSTS_WGSL, LUT_GHOSTS_WGSL, STARBURST_WGSL, TONEMAP_WGSL};
+pub(crate) use super::buffers::storage;
+use super::gpu_ghosts::ComputeGhosts;
+use super::gpu_lut::{ComputeLut, TILE};
+use crate::lut::blend::{Footprint, bin_instances};
 use super::{FlareScene, GhostInstance, Globals};
 use crate::aperture::ApertureMask;
 use crate::image::{DisplayImage, HdrImage};
@@ -319,6 +323,13 @@ pub struct FlareRenderer {
     profiled_open: bool,
     /// The latest frame's GPU pass times that came back.
     pass_times: Option<PassTimes>,
+    /// The ghost sprites as compute ([`super::gpu_ghosts`]); `None` on a device that cannot run it, which
+    /// rasterises them (`ghosts.wgsl`).
+    compute: Option<ComputeGhosts>,
+    /// The LUT ghosts as compute ([`super::gpu_lut`]), with the ghosts'.
+    compute_lut: Option<ComputeLut>,
+    /// The uploaded LUT's entry sizes and lit texels, to bin its instances ([`bin_instances`]).
+    lut_footprints: Vec<Vec<Footprint>>,
 }
 
 /// Every bind group a frame uses (see [`FlareRenderer::bind_groups`]).
@@ -508,7 +519,12 @@ impl FlareRenderer {
         let lut_atlas = empty_atlas(device, queue);
         let lut_capacity = 64;
         let lut_instances = vertex_buffer::<LutInstance>(device, "lut instances", lut_capacity);
+        let compute = ComputeGhosts::supported(device).then(|| ComputeGhosts::new(device, queue));
+        let compute_lut = compute.is_some().then(|| ComputeLut::new(device));
         Self {
+            compute,
+            compute_lut,
+            lut_footprints: Vec::new(),
             lut_add_pipeline,
             lut_over_pipeline,
             lut_layout,
@@ -550,6 +566,31 @@ impl FlareRenderer {
         self.aperture =
             texture_2d(device, "aperture", mask.size as u32, mask.size as u32, wgpu::TextureFormat::R8Unorm, usage);
         upload(queue, &self.aperture, &mask.texels, 1);
+        if let Some(compute) = &mut self.compute {
+            compute.set_aperture(device, queue, mask);
+        }
+    }
+
+    /// Whether the ghost sprites are drawn by the compute pass (`ghosts_compute.wgsl`) rather than rasterised
+    /// (`ghosts.wgsl`, on devices without what the compute pass needs).
+    pub fn ghosts_as_compute(&self) -> bool {
+        self.compute.is_some()
+    }
+
+    /// Draws the ghost sprites by rasterising them (`ghosts.wgsl`) even where the compute pass could: the
+    /// raster path, kept for devices without compute, tested and benchmarked against it.
+    pub fn force_raster_ghosts(&mut self) {
+        self.compute = None;
+        self.compute_lut = None;
+        self.hdr = None;
+    }
+
+    /// Caps the bytes of the compute pass's difference buffer (a test's way to draw a frame in many strips, as
+    /// one beyond the adapter's storage binding limit is drawn).
+    pub fn limit_ghost_strip_bytes(&mut self, bytes: u64) {
+        if let Some(compute) = &mut self.compute {
+            compute.strip_bytes = bytes.min(compute.strip_bytes);
+        }
     }
 
     /// Replaces the starburst texture.
@@ -582,6 +623,7 @@ impl FlareRenderer {
     /// Uploads a LUT's atlas (`None` removes it).
     pub fn set_lut(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, lut: Option<&LiveLut>) {
         self.groups = None;
+        self.lut_footprints = lut.map(|l| l.footprints.clone()).unwrap_or_default();
         match lut.filter(|l| l.layout.pages > 0) {
             Some(live) => {
                 self.lut_atlas = atlas_texture(device, ATLAS_PAGE, live.layout.pages);
@@ -644,9 +686,12 @@ impl FlareRenderer {
         self.end_profiled_frame(queue, None);
         let (w, h) = (scene.hdr_width.max(1), scene.hdr_height.max(1));
         if !matches!(&self.hdr, Some((_, hw, hh)) if *hw == w && *hh == h) {
-            let usage = wgpu::TextureUsages::RENDER_ATTACHMENT
+            let mut usage = wgpu::TextureUsages::RENDER_ATTACHMENT
                 | wgpu::TextureUsages::TEXTURE_BINDING
                 | wgpu::TextureUsages::COPY_SRC;
+            if self.compute.is_some() {
+                usage |= wgpu::TextureUsages::STORAGE_BINDING;
+            }
             self.hdr = Some((texture_2d(device, "hdr", w, h, HDR_FORMAT, usage), w, h));
             self.groups = None;
         }
@@ -654,15 +699,15 @@ impl FlareRenderer {
         globals.tonemap[2] = if self.target_format.is_srgb() { 0.0 } else { 1.0 };
         globals.plate[1] = if self.has_background { 1.0 } else { 0.0 };
         queue.write_buffer(&self.globals, 0, bytemuck::bytes_of(&globals));
-        if scene.instances.len() > self.instance_capacity {
+        if self.compute.is_none() && scene.instances.len() > self.instance_capacity {
             self.instance_capacity = scene.instances.len().next_power_of_two();
             self.instances = vertex_buffer::<GhostInstance>(device, "ghost instances", self.instance_capacity);
         }
-        if !scene.instances.is_empty() {
+        if self.compute.is_none() && !scene.instances.is_empty() {
             queue.write_buffer(&self.instances, 0, bytemuck::cast_slice(&scene.instances));
         }
         let lut = lut.filter(|l| !l.instances.is_empty());
-        if let Some(lut) = lut {
+        if let Some(lut) = lut.filter(|_| self.compute_lut.is_none()) {
             if lut.instances.len() > self.lut_capacity {
                 self.lut_capacity = lut.instances.len().next_power_of_two();
                 self.lut_instances = vertex_buffer::<LutInstance>(device, "lut instances", self.lut_capacity);
@@ -691,7 +736,25 @@ impl FlareRenderer {
         };
         {
             let mut frame = self.profiler.scope("flare", encoder);
-            {
+            if let Some(compute) = &mut self.compute {
+                // The LUT layer first (the ghosts' resolve applies it), then the ghosts: every pixel of the
+                // accumulation is written once, so nothing clears it.
+                let layer = match (lut, &mut self.compute_lut) {
+                    (Some(lut), Some(compute_lut)) => {
+                        let bins = bin_instances((scene.width, scene.height), (w, h), lut, &self.lut_footprints, TILE);
+                        let atlas = self.lut_atlas.create_view(&wgpu::TextureViewDescriptor {
+                            dimension: Some(wgpu::TextureViewDimension::D2Array),
+                            ..Default::default()
+                        });
+                        let mut pass = frame.scoped_compute_pass("lut");
+                        let frame_size = (scene.width, scene.height);
+                        Some(compute_lut.encode(device, queue, &mut pass, frame_size, (w, h), lut, &bins, &atlas, &self.sampler))
+                    }
+                    _ => None,
+                };
+                let mut pass = frame.scoped_compute_pass("ghosts");
+                compute.encode(device, queue, &mut pass, scene, &hdr_view, layer.as_ref());
+            } else {
                 let mut pass = frame.scoped_render_pass("ghosts", accumulate(&clear));
                 if !scene.instances.is_empty() {
                     pass.set_pipeline(&self.ghost_pipeline);
@@ -700,7 +763,7 @@ impl FlareRenderer {
                     pass.draw(0..6, 0..scene.instances.len() as u32);
                 }
             }
-            if let Some(lut) = lut {
+            if let Some(lut) = lut.filter(|_| self.compute_lut.is_none()) {
                 let mut pass = frame.scoped_render_pass("lut", accumulate(&load));
                 pass.set_pipeline(if lut.alpha_over { &self.lut_over_pipeline } else { &self.lut_add_pipeline });
                 pass.set_bind_group(0, &groups.lut, &[]);
@@ -846,26 +909,6 @@ pub(crate) fn map_read(device: &wgpu::Device, buffer: &wgpu::Buffer, bytes: u64)
     receiver.recv().map_err(|e| GpuError::Readback(e.to_string()))?.map_err(|e| GpuError::Readback(e.to_string()))?;
     let view = buffer.slice(..).get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?;
     Ok(view[..bytes as usize].to_vec())
-}
-
-/// A buffer of `usage` holding `contents`, written through the queue (on a lost device this is an error the
-/// device records, not a panic as a buffer mapped at creation would be).
-pub(crate) fn storage(
-    device: &wgpu::Device,
-    queue: &wgpu::Queue,
-    label: &str,
-    contents: &[u8],
-    usage: wgpu::BufferUsages,
-) -> wgpu::Buffer {
-    let size = (contents.len() as u64).max(16).next_multiple_of(4);
-    let buffer = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size,
-        usage: usage | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    queue.write_buffer(&buffer, 0, contents);
-    buffer
 }
 
 /// Renders `scene` (with the LUT instances `lut`) headless into a texture of the renderer's format through

@@ -17,9 +17,12 @@
 //! Every float that reaches a GPU buffer passes [`GhostInstance::is_finite`]; a sprite that is not finite is
 //! dropped and counted, never uploaded.
 
+mod buffers;
 pub mod cpu;
 pub mod dof_gpu;
 pub mod gpu;
+mod gpu_ghosts;
+mod gpu_lut;
 pub mod raygrid;
 pub mod shaders;
 

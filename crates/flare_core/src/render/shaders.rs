@@ -15,6 +15,8 @@ pub const GHOSTS_WGSL: &str = concat!(
     include_str!("../../../../shaders/aperture.wgsl"),
     include_str!("../../../../shaders/ghosts.wgsl")
 );
+/// Ghost sprites as compute: open spans and edges into per-row differences, then one sum per row.
+pub const GHOSTS_COMPUTE_WGSL: &str = include_str!("../../../../shaders/ghosts_compute.wgsl");
 /// The starburst quad.
 pub const STARBURST_WGSL: &str =
     concat!(include_str!("../../../../shaders/common.wgsl"), include_str!("../../../../shaders/starburst.wgsl"));
@@ -24,6 +26,8 @@ pub const TONEMAP_WGSL: &str =
 /// LUT ghosts from the atlas.
 pub const LUT_GHOSTS_WGSL: &str =
     concat!(include_str!("../../../../shaders/common.wgsl"), include_str!("../../../../shaders/lut_ghosts.wgsl"));
+/// LUT ghosts as compute: the instances binned to each tile, sampled per pixel.
+pub const LUT_COMPUTE_WGSL: &str = include_str!("../../../../shaders/lut_compute.wgsl");
 /// Ray grids on the GPU, pass 1: the compute tracer (with the declarations both passes share).
 pub const RAYGRID_TRACE_WGSL: &str = concat!(
     include_str!("../../../../shaders/raygrid_common.wgsl"),
@@ -44,9 +48,11 @@ pub const VIEWPORT_WGSL: &str = include_str!("../../../../shaders/viewport.wgsl"
 pub const ALL: &[(&str, &str)] = &[
     ("common.wgsl", COMMON_WGSL),
     ("ghosts.wgsl", GHOSTS_WGSL),
+    ("ghosts_compute.wgsl", GHOSTS_COMPUTE_WGSL),
     ("starburst.wgsl", STARBURST_WGSL),
     ("tonemap.wgsl", TONEMAP_WGSL),
     ("lut_ghosts.wgsl", LUT_GHOSTS_WGSL),
+    ("lut_compute.wgsl", LUT_COMPUTE_WGSL),
     ("viewport.wgsl", VIEWPORT_WGSL),
     ("raygrid_trace.wgsl", RAYGRID_TRACE_WGSL),
     ("raygrid_splat.wgsl", RAYGRID_SPLAT_WGSL),

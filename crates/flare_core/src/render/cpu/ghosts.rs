@@ -202,7 +202,7 @@ pub fn ghost_pass(scene: &FlareScene, mask: &ApertureMask) -> HdrImage {
 
 /// The instance with every stop crossing whose whole quad maps inside the mask's fully open disc disabled (its
 /// mask is 1 wherever the quad is).
-fn without_open_stops(inst: &GhostInstance, open_radius: f32) -> GhostInstance {
+pub(crate) fn without_open_stops(inst: &GhostInstance, open_radius: f32) -> GhostInstance {
     let reach = |map: [f32; 4]| (map[1].abs() + map[0].abs()).hypot(map[2].abs() + map[0].abs());
     let mut inst = *inst;
     for stop in &mut inst.stops {
@@ -259,6 +259,11 @@ impl MaskRows {
             })
             .collect();
         Self { size: n, bands }
+    }
+
+    /// Per band: open u lo, hi, then non-zero u lo, hi (what `ghosts_compute.wgsl` reads).
+    pub(crate) fn table(&self) -> Vec<[f32; 4]> {
+        self.bands.iter().map(|(open, support)| [open[0], open[1], support[0], support[1]]).collect()
     }
 
     /// The open and non-zero u intervals of the mask's row band at `v` (the band [`ApertureMask::sample`]

@@ -15,7 +15,7 @@
 //! adapter at all (`flarelab render --device cpu`).
 
 pub mod ghosts;
-mod quads;
+pub(crate) mod quads;
 pub mod starburst;
 pub mod tonemap;
 

@@ -1,0 +1,131 @@
+//! The ghost sprites as a compute pass (`shaders/ghosts_compute.wgsl`) on a headless adapter (lavapipe in CI,
+//! where `FLARELAB_REQUIRE_GPU=1` makes a missing adapter a failure): against its CPU twin, the same bytes on
+//! every run, a frame drawn in strips (as one beyond the adapter's storage binding limit is) the same as in one
+//! piece, and the raster path it replaces still in step.
+
+use flare_core::aperture::{Aperture, ApertureShape};
+use flare_core::flare::{FlareConfig, PreparedFlare};
+use flare_core::frame::{self, Frame, FrameRequest, GpuDrawer, Sources};
+use flare_core::optics::library::builtin_lens;
+use flare_core::render::cpu::tonemap_pixel;
+use flare_core::render::gpu::test_context;
+use flare_core::render::{DisplaySettings, HdrImage};
+
+fn prepared(lens: &str, blades: u32) -> PreparedFlare {
+    let shape = if blades == 0 {
+        ApertureShape::Circle
+    } else {
+        ApertureShape::Blades { count: blades, rotation_deg: 10.0, roundness: 0.0 }
+    };
+    let config = FlareConfig { aperture: Aperture { shape, f_number: None }, ..FlareConfig::default() };
+    PreparedFlare::new(&builtin_lens(lens).unwrap(), &config).unwrap()
+}
+
+fn request(light_deg: [f64; 2], width: u32, height: u32, divisor: u32) -> FrameRequest {
+    FrameRequest {
+        light_deg,
+        width,
+        height,
+        display: DisplaySettings { starburst: false, accumulation_divisor: divisor, ..DisplaySettings::default() },
+        ..FrameRequest::default()
+    }
+}
+
+/// The worst and mean display difference (in 8-bit steps, as floats: before quantisation) between two
+/// accumulations of `frame`, and the share of lit pixels.
+fn display_difference(frame: &Frame, a: &HdrImage, b: &HdrImage) -> (f32, f64, f64) {
+    let gain = frame.scene.globals.flare_gain();
+    let (mut worst, mut sum, mut lit) = (0.0f32, 0.0f64, 0usize);
+    for (p, q) in a.pixels.iter().zip(&b.pixels) {
+        let (dp, dq) = (
+            tonemap_pixel([p[0], p[1], p[2]].map(|v| v * gain), &frame.scene.globals),
+            tonemap_pixel([q[0], q[1], q[2]].map(|v| v * gain), &frame.scene.globals),
+        );
+        for c in 0..3 {
+            let d = (dp[c] - dq[c]).abs() * 255.0;
+            worst = worst.max(d);
+            sum += f64::from(d);
+        }
+        lit += usize::from(q[0] + q[1] + q[2] > 0.0);
+    }
+    (worst, sum / (3 * a.pixels.len()) as f64, lit as f64 / a.pixels.len() as f64)
+}
+
+/// The compute pass draws the CPU twin's image: every display value within half an 8-bit step (the GPU keeps
+/// half floats; the twin f32 with f64 spans), on frame-filling zoom ghosts, blades and a round stop, a light
+/// off the frame and a quarter accumulation.
+#[test]
+fn the_compute_pass_draws_the_cpu_twins_image() {
+    let Some(ctx) = test_context() else { return };
+    let mut drawer = GpuDrawer::on(ctx);
+    assert!(drawer.renderer.ghosts_as_compute(), "lavapipe runs the compute pass");
+    for (lens, blades, light, divisor) in [
+        ("nikon_zoom_28_75mm", 6, [9.0, 5.0], 1),
+        ("pbrt_dgauss_50mm", 5, [-8.0, 4.0], 1),
+        ("heliar", 0, [12.0, -3.0], 2),
+        ("pbrt_dgauss_50mm", 7, [30.0, 25.0], 1),
+    ] {
+        let flare = prepared(lens, blades);
+        let frame = Frame::build(&flare, None, &request(light, 320, 200, divisor));
+        assert!(frame.scene.instances.len() > 10, "{lens}: {} sprites", frame.scene.instances.len());
+        let sources = Sources { flare: &flare, lut: None, plate: None };
+        let gpu = drawer.draw(&frame, &sources).unwrap();
+        let cpu = frame::draw_cpu(&frame, &sources);
+        let (worst, mean, lit) = display_difference(&frame, &gpu.hdr, &cpu.hdr);
+        eprintln!(
+            "{lens} ({blades} blades, 1/{divisor}): {} sprites, display worst {worst:.3}/255, mean {mean:.5}/255, {:.0}% lit",
+            frame.scene.instances.len(),
+            100.0 * lit
+        );
+        assert!(lit > 0.05, "{lens}: only {:.1}% of the pixels are lit", 100.0 * lit);
+        assert!(worst < 0.5, "{lens}: display values differ by {worst}/255");
+    }
+}
+
+/// The same frame twice gives the same bytes (the fixed-point sums do not depend on which sprite lands first),
+/// and a frame drawn in strips of a few rows (as a frame beyond the adapter's storage binding limit is) gives
+/// the bytes of one piece.
+#[test]
+fn the_compute_pass_is_deterministic_and_draws_in_strips() {
+    let Some(ctx) = test_context() else { return };
+    let mut drawer = GpuDrawer::on(ctx);
+    let flare = prepared("nikon_zoom_28_75mm", 6);
+    let frame = Frame::build(&flare, None, &request([6.0, -4.0], 300, 170, 1));
+    let sources = Sources { flare: &flare, lut: None, plate: None };
+    let first = drawer.draw(&frame, &sources).unwrap();
+    let again = drawer.draw(&frame, &sources).unwrap();
+    assert!(first.hdr.pixels.iter().any(|p| p[0] > 0.0));
+    assert!(first == again, "two runs differ");
+    // Strips of 3 rows (the buffer holds (width + 1) x 24 bytes a row): 57 strips.
+    drawer.renderer.limit_ghost_strip_bytes(3 * 301 * 24);
+    let strips = drawer.draw(&frame, &sources).unwrap();
+    assert!(strips == first, "drawn in strips, the frame differs");
+    // A frame whose width needs more than the whole buffer for one row is still drawn, a row at a time.
+    drawer.renderer.limit_ghost_strip_bytes(1);
+    let rows = drawer.draw(&frame, &sources).unwrap();
+    assert!(rows == first, "drawn a row at a time, the frame differs");
+}
+
+/// The raster pass (`ghosts.wgsl`), kept for adapters without compute, still draws the twin's image (within
+/// the bounds of `tests/render.rs`), and the compute pass draws it closer.
+#[test]
+fn the_raster_pass_stays_in_step() {
+    let Some(ctx) = test_context() else { return };
+    let flare = prepared("pbrt_dgauss_50mm", 6);
+    let frame = Frame::build(&flare, None, &request([-5.0, 3.0], 256, 160, 1));
+    let sources = Sources { flare: &flare, lut: None, plate: None };
+    let cpu = frame::draw_cpu(&frame, &sources);
+    let mut raster = GpuDrawer::on(ctx);
+    raster.renderer.force_raster_ghosts();
+    assert!(!raster.renderer.ghosts_as_compute());
+    let rastered = raster.draw(&frame, &sources).unwrap();
+    let (worst_raster, mean_raster, _) = display_difference(&frame, &rastered.hdr, &cpu.hdr);
+    let Some(ctx) = test_context() else { return };
+    let computed = GpuDrawer::on(ctx).draw(&frame, &sources).unwrap();
+    let (worst_compute, mean_compute, _) = display_difference(&frame, &computed.hdr, &cpu.hdr);
+    eprintln!(
+        "raster: worst {worst_raster:.3}/255, mean {mean_raster:.5}/255; compute: worst {worst_compute:.3}/255, mean {mean_compute:.5}/255"
+    );
+    assert!(mean_raster < 0.5 && worst_raster < 4.0, "raster {mean_raster} / {worst_raster}");
+    assert!(worst_compute < 0.5 && mean_compute <= mean_raster, "compute {mean_compute} / {worst_compute}");
+}

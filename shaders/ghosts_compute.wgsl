@@ -1,0 +1,392 @@
+// Ghost sprites as compute: the CPU twin's algorithm on the GPU, no rasteriser.
+// CPU twin: crates/flare_core/src/render/cpu/ghosts.rs, `ghost_pass` (`spans` is its `sweep_instance`, `resolve`
+// its per-row sum; same names, same steps). Must be kept in sync with `GhostInstance` in
+// crates/flare_core/src/render/mod.rs and `ComputeStrip` in crates/flare_core/src/render/gpu.rs.
+//
+// How it works. One invocation of `spans` per (sprite, accumulation row) the sprite covers: it finds the row's
+// open span (where the front disc and every stop crossing's mask are exactly 1, from the mask's per-row table)
+// and shades only the pixels outside it, as the fragment shader would. The row's values F(x) (0 outside the
+// sprite, the colour in the open span, colour x mask at an edge pixel) go into a per-row difference buffer as
+// F(x) - F(x - 1), wherever that is not 0: a frame-filling sprite costs its edges, not its area. `resolve` sums
+// each row once (a prefix sum) into the HDR texture, applying the LUT layer where the frame has one. The differences are fixed-point integers of 64 bits (two
+// u32 words, added with carry by atomics): integer addition does not depend on the order in which sprites
+// arrive, so the image is the same bytes on every run. The fixed-point unit is chosen per frame from the sum of
+// every sprite's brightest channel (no pixel can exceed it), 2^52 units for that sum.
+
+struct GhostInstance {
+    centre_half: vec4<f32>, // centre x, y (image pixels); half-size x, y (signed: q -> pixel)
+    colour: vec4<f32>,      // linear RGB irradiance
+    stop0: vec4<f32>,       // aperture map of stop crossing 0: scale, offset x, offset y, enabled
+    stop1: vec4<f32>,
+    stop2: vec4<f32>,
+    front: vec4<f32>,       // front-lens disc map: scale, offset x, offset y, anti-alias width
+};
+
+struct ComputeStrip {
+    width: u32,          // the accumulation's width and height (pixels)
+    height: u32,
+    first_row: u32,      // the strip: its first accumulation row and its number of rows
+    rows: u32,
+    instances: u32,      // sprites, (sprite, row) items of this strip, workgroups along x of `spans`
+    items: u32,
+    groups_x: u32,
+    mask_size: u32,      // texels a side of the aperture mask
+    scale_x: f32,        // image pixels per accumulation pixel
+    scale_y: f32,
+    fixed_per_unit: f32, // fixed-point units per unit of irradiance, and its inverse
+    unit_per_fixed: f32,
+    lut: u32,            // 1: apply the LUT layer (lut_compute.wgsl's (A, K)) as each pixel is written
+    unused0: u32,
+    unused1: u32,
+    unused2: u32,
+};
+
+@group(0) @binding(0) var<uniform> strip: ComputeStrip;
+@group(0) @binding(1) var<storage, read> instances: array<GhostInstance>;
+// Per sprite: its first item and its first row in this strip; then (items, 0).
+@group(0) @binding(2) var<storage, read> items: array<vec2<u32>>;
+// The aperture mask (one buffer: four storage buffers are all a downlevel adapter has): first, per band of mask
+// rows (mask_size + 1 of them), u where the bilinear sample is exactly 1 (lo, hi) and u outside which it is 0
+// (lo, hi), as f32 bits; then the mask's 8-bit texels, four to a word, rows from the top.
+@group(0) @binding(3) var<storage, read> mask: array<u32>;
+// Per strip row, per column 0..=width, per channel R, G, B: a 64-bit difference as (low word, high word).
+// All zero between strips: `resolve` clears what it read.
+@group(0) @binding(4) var<storage, read_write> diff: array<atomic<u32>>;
+@group(0) @binding(5) var hdr: texture_storage_2d<rgba16float, write>;
+// The LUT layer of this frame, (A, K): the pixel becomes A + K x the ghosts (a 1 x 1 texture when `lut` is 0).
+@group(0) @binding(6) var lut_layer: texture_2d<f32>;
+
+// ---- the aperture mask (ApertureMask::sample) ----
+
+fn mask_texel(i: i32, j: i32) -> f32 {
+    let last = i32(strip.mask_size) - 1;
+    let k = u32(clamp(j, 0, last) * (last + 1) + clamp(i, 0, last));
+    let texels = (strip.mask_size + 1u) * 4u;
+    return f32((mask[texels + (k >> 2u)] >> ((k & 3u) * 8u)) & 255u);
+}
+
+fn mask_sample(u: f32, v: f32) -> f32 {
+    if (!(abs(u) <= 1.0 && abs(v) <= 1.0)) {
+        return 0.0;
+    }
+    let n = f32(strip.mask_size);
+    let x = (u * 0.5 + 0.5) * n - 0.5;
+    let y = (0.5 - v * 0.5) * n - 0.5;
+    // x, y >= -0.5: truncating x + 1 floors x.
+    let x0 = i32(x + 1.0) - 1;
+    let y0 = i32(y + 1.0) - 1;
+    let fx = x - f32(x0);
+    let fy = y - f32(y0);
+    let top = mask_texel(x0, y0) * (1.0 - fx) + mask_texel(x0 + 1, y0) * fx;
+    let bottom = mask_texel(x0, y0 + 1) * (1.0 - fx) + mask_texel(x0 + 1, y0 + 1) * fx;
+    return (top * (1.0 - fy) + bottom * fy) / 255.0;
+}
+
+// The band of mask rows a sample at v reads (MaskRows::at); -1 outside [-1, 1].
+fn mask_band(v: f32) -> i32 {
+    if (!(abs(v) <= 1.0)) {
+        return -1;
+    }
+    let y = (0.5 - v * 0.5) * f32(strip.mask_size) - 0.5;
+    let y0 = i32(y + 1.0) - 1;
+    return max(y0 + 1, 0);
+}
+
+// ---- one fragment (ghosts.wgsl's fs_main) ----
+
+fn stop_mask(map: vec4<f32>, q: vec2<f32>) -> f32 {
+    if (map.w == 0.0) {
+        return 1.0;
+    }
+    return mask_sample(map.x * q.x + map.y, map.x * q.y + map.z);
+}
+
+fn front_mask(map: vec4<f32>, q: vec2<f32>) -> f32 {
+    let x = map.x * q.x + map.y;
+    let y = map.x * q.y + map.z;
+    let r = sqrt(x * x + y * y);
+    return clamp(0.5 + (1.0 - r) / map.w, 0.0, 1.0);
+}
+
+fn mask_product(inst: GhostInstance, front_open: bool, q: vec2<f32>) -> f32 {
+    if (abs(q.x) > 1.0 || abs(q.y) > 1.0) {
+        return 0.0;
+    }
+    var m = 1.0;
+    if (!front_open) {
+        m = front_mask(inst.front, q);
+    }
+    if (m <= 0.0) {
+        return 0.0;
+    }
+    m = m * stop_mask(inst.stop0, q);
+    if (m <= 0.0) {
+        return 0.0;
+    }
+    m = m * stop_mask(inst.stop1, q);
+    if (m <= 0.0) {
+        return 0.0;
+    }
+    return m * stop_mask(inst.stop2, q);
+}
+
+// ---- intervals of the quad coordinate q_x along a row ----
+
+// `scale q + offset` within [-reach, reach] narrows [lo, hi] (row_support's clip); false when never.
+fn clip_reach(span: ptr<function, vec2<f32>>, scale: f32, offset: f32, reach: f32) -> bool {
+    if (scale == 0.0) {
+        return abs(offset) <= reach;
+    }
+    let a = (-reach - offset) / scale;
+    let b = (reach - offset) / scale;
+    (*span).x = max((*span).x, min(a, b));
+    (*span).y = min((*span).y, max(a, b));
+    return true;
+}
+
+// `scale q + offset` within [u.x, u.y] narrows [lo, hi] (sweep_instance's clip): empty when u is.
+fn clip_to(span: ptr<function, vec2<f32>>, scale: f32, offset: f32, u: vec2<f32>) {
+    if (u.x > u.y) {
+        *span = vec2<f32>(1.0, -1.0);
+    } else if (scale == 0.0) {
+        if (offset < u.x || offset > u.y) {
+            *span = vec2<f32>(1.0, -1.0);
+        }
+    } else {
+        let a = (u.x - offset) / scale;
+        let b = (u.y - offset) / scale;
+        (*span).x = max((*span).x, min(a, b));
+        (*span).y = min((*span).y, max(a, b));
+    }
+}
+
+fn stop_of(inst: GhostInstance, k: u32) -> vec4<f32> {
+    if (k == 0u) {
+        return inst.stop0;
+    }
+    if (k == 1u) {
+        return inst.stop1;
+    }
+    return inst.stop2;
+}
+
+// ---- 64-bit fixed point in two u32 words ----
+
+fn fixed(v: f32) -> vec2<u32> {
+    let r = round(v);
+    if (abs(r) < 2147483648.0) {
+        let i = i32(r);
+        return vec2<u32>(bitcast<u32>(i), select(0u, 0xffffffffu, i < 0));
+    }
+    // |r| >= 2^31: a multiple of 2^8 at least; both steps are exact.
+    let hi = floor(r / 4294967296.0);
+    return vec2<u32>(u32(r - hi * 4294967296.0), bitcast<u32>(i32(hi)));
+}
+
+fn sub64(a: vec2<u32>, b: vec2<u32>) -> vec2<u32> {
+    return vec2<u32>(a.x - b.x, a.y - b.y - select(0u, 1u, a.x < b.x));
+}
+
+fn add64(a: vec2<u32>, b: vec2<u32>) -> vec2<u32> {
+    let lo = a.x + b.x;
+    return vec2<u32>(lo, a.y + b.y + select(0u, 1u, lo < a.x));
+}
+
+fn atomic_add64(word: u32, v: vec2<u32>) {
+    let old = atomicAdd(&diff[word], v.x);
+    atomicAdd(&diff[word + 1u], v.y + select(0u, 1u, old + v.x < old));
+}
+
+// Adds F(x) - F(x - 1) for the three channels at column x of strip row `row`.
+fn put(row: u32, x: u32, now: array<vec2<u32>, 3>, before: array<vec2<u32>, 3>) {
+    let word = (row * (strip.width + 1u) + x) * 6u;
+    for (var c = 0u; c < 3u; c = c + 1u) {
+        let d = sub64(now[c], before[c]);
+        if (d.x != 0u || d.y != 0u) {
+            atomic_add64(word + 2u * c, d);
+        }
+    }
+}
+
+fn fixed_colour(colour: vec4<f32>, m: f32) -> array<vec2<u32>, 3> {
+    let k = strip.fixed_per_unit;
+    return array<vec2<u32>, 3>(fixed(colour.x * m * k), fixed(colour.y * m * k), fixed(colour.z * m * k));
+}
+
+// ---- the passes ----
+
+@compute @workgroup_size(64)
+fn spans(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let item = gid.y * strip.groups_x * 64u + gid.x;
+    if (item >= strip.items) {
+        return;
+    }
+    // The sprite whose items hold this one: the last k with items[k].x <= item.
+    var lo = 0u;
+    var hi = strip.instances;
+    while (hi - lo > 1u) {
+        let mid = (lo + hi) / 2u;
+        if (items[mid].x <= item) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let inst = instances[lo];
+    let y = items[lo].y + (item - items[lo].x);
+    let cx = inst.centre_half.x;
+    let cy = inst.centre_half.y;
+    let hx = inst.centre_half.z;
+    let hy = inst.centre_half.w;
+    let sx = strip.scale_x;
+    let sy = strip.scale_y;
+    let f = inst.front;
+    let front_open = length(vec2<f32>(abs(f.y) + abs(f.x), abs(f.z) + abs(f.x))) <= 1.0 - 0.5 * f.w;
+    let q_y = ((f32(y) + 0.5) * sy - cy) / hy;
+    // row_support: where in this row the masks can be non-zero.
+    if (abs(q_y) > 1.0) {
+        return;
+    }
+    var support = vec2<f32>(-1.0, 1.0);
+    let reach = 1.0 + 0.5 * f.w;
+    let fy = f.x * q_y + f.z;
+    if (abs(fy) > reach || !clip_reach(&support, f.x, f.y, sqrt(max(reach * reach - fy * fy, 0.0)))) {
+        return;
+    }
+    for (var k = 0u; k < 3u; k = k + 1u) {
+        let s = stop_of(inst, k);
+        if (s.w != 0.0 && (abs(s.x * q_y + s.z) > 1.0 || !clip_reach(&support, s.x, s.y, 1.0))) {
+            return;
+        }
+    }
+    if (support.x > support.y) {
+        return;
+    }
+    // The open interval, narrowed by each mask; the support, by where each mask is non-zero.
+    var open = support;
+    if (!front_open) {
+        let inner = 1.0 - 0.5 * f.w;
+        if (inner <= abs(fy)) {
+            open = vec2<f32>(1.0, -1.0);
+        } else {
+            let half_width = sqrt(inner * inner - fy * fy);
+            clip_to(&open, f.x, f.y, vec2<f32>(-half_width, half_width));
+        }
+    }
+    for (var k = 0u; k < 3u; k = k + 1u) {
+        let s = stop_of(inst, k);
+        if (s.w == 0.0) {
+            continue;
+        }
+        let band = mask_band(s.x * q_y + s.z);
+        if (band < 0) {
+            return;
+        }
+        let at = u32(band) * 4u;
+        let rows = bitcast<vec4<f32>>(vec4<u32>(mask[at], mask[at + 1u], mask[at + 2u], mask[at + 3u]));
+        clip_to(&open, s.x, s.y, rows.xy);
+        clip_to(&support, s.x, s.y, rows.zw);
+    }
+    if (support.x > support.y) {
+        return;
+    }
+    // The sprite's columns (the rasteriser's coverage), then this row's.
+    let col_lo = max(floor((cx - abs(hx)) / sx), 0.0);
+    let col_hi = min(max(ceil((cx + abs(hx)) / sx), 0.0), f32(strip.width));
+    let a = (cx + support.x * hx) / sx - 0.5;
+    let b = (cx + support.y * hx) / sx - 0.5;
+    let first = u32(max(floor(min(a, b)) - 1.0, col_lo));
+    let last = u32(min(max(ceil(max(a, b)) + 2.0, 0.0), col_hi));
+    var open_first = 0xffffffffu;
+    var open_last = 0u;
+    if (open.x < open.y) {
+        let oa = (cx + open.x * hx) / sx - 0.5;
+        let ob = (cx + open.y * hx) / sx - 0.5;
+        let o_lo = max(ceil(min(oa, ob)) + 1.0, f32(first));
+        let o_hi = min(floor(max(oa, ob)) - 1.0, f32(last) - 1.0);
+        if (o_lo <= o_hi) {
+            open_first = u32(o_lo);
+            open_last = u32(o_hi);
+        }
+    }
+    let row = y - strip.first_row;
+    let zero = array<vec2<u32>, 3>(vec2<u32>(0u), vec2<u32>(0u), vec2<u32>(0u));
+    var before = zero;
+    var x = first;
+    while (x < last) {
+        if (x == open_first) {
+            let now = fixed_colour(inst.colour, 1.0);
+            put(row, x, now, before);
+            before = now;
+            x = open_last + 1u;
+            continue;
+        }
+        let m = mask_product(inst, front_open, vec2<f32>(((f32(x) + 0.5) * sx - cx) / hx, q_y));
+        var now = zero;
+        if (m > 0.0) {
+            now = fixed_colour(inst.colour, m);
+        }
+        put(row, x, now, before);
+        before = now;
+        x = x + 1u;
+    }
+    put(row, last, zero, before);
+}
+
+var<workgroup> partial: array<vec2<u32>, 192>;
+
+fn load64(word: u32) -> vec2<u32> {
+    return vec2<u32>(atomicLoad(&diff[word]), atomicLoad(&diff[word + 1u]));
+}
+
+fn to_float(v: vec2<u32>) -> f32 {
+    return (f32(bitcast<i32>(v.y)) * 4294967296.0 + f32(v.x)) * strip.unit_per_fixed;
+}
+
+// One workgroup per strip row: each invocation sums its run of columns, the runs' sums are added up in order,
+// and each invocation writes its run's running sums.
+@compute @workgroup_size(64)
+fn resolve(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) t: u32) {
+    let row = wid.x;
+    let run = (strip.width + 63u) / 64u;
+    let x0 = min(t * run, strip.width);
+    let x1 = min(x0 + run, strip.width);
+    let base = row * (strip.width + 1u) * 6u;
+    var sum = array<vec2<u32>, 3>(vec2<u32>(0u), vec2<u32>(0u), vec2<u32>(0u));
+    for (var x = x0; x < x1; x = x + 1u) {
+        for (var c = 0u; c < 3u; c = c + 1u) {
+            sum[c] = add64(sum[c], load64(base + x * 6u + 2u * c));
+        }
+    }
+    for (var c = 0u; c < 3u; c = c + 1u) {
+        partial[t * 3u + c] = sum[c];
+    }
+    workgroupBarrier();
+    var acc = array<vec2<u32>, 3>(vec2<u32>(0u), vec2<u32>(0u), vec2<u32>(0u));
+    for (var s = 0u; s < t; s = s + 1u) {
+        for (var c = 0u; c < 3u; c = c + 1u) {
+            acc[c] = add64(acc[c], partial[s * 3u + c]);
+        }
+    }
+    for (var x = x0; x < x1; x = x + 1u) {
+        for (var c = 0u; c < 3u; c = c + 1u) {
+            acc[c] = add64(acc[c], load64(base + x * 6u + 2u * c));
+        }
+        var value = vec4<f32>(to_float(acc[0]), to_float(acc[1]), to_float(acc[2]), 0.0);
+        if (strip.lut == 1u) {
+            let layer = textureLoad(lut_layer, vec2<u32>(x, strip.first_row + row), 0);
+            value = vec4<f32>(layer.rgb + layer.a * value.rgb, 0.0);
+        }
+        textureStore(hdr, vec2<u32>(x, strip.first_row + row), value);
+    }
+    // Leave the buffer all zero for the next strip: this run's words, and the row's last column (written by
+    // `spans` at a sprite's right end, never read).
+    for (var word = base + x0 * 6u; word < base + x1 * 6u; word = word + 1u) {
+        atomicStore(&diff[word], 0u);
+    }
+    if (t == 63u) {
+        for (var word = base + strip.width * 6u; word < base + strip.width * 6u + 6u; word = word + 1u) {
+            atomicStore(&diff[word], 0u);
+        }
+    }
+}
