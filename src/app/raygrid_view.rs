@@ -6,8 +6,8 @@
 //! [`RayGridView::step`] runs once per UI frame after the frame is built. While the user drags or scrubs, the
 //! viewport draws its paraxial drafts as always (tracing every ghost is too slow to follow a drag on most
 //! machines). When a full-quality frame is up and has not been traced yet, a [`Job`] traces it on a thread:
-//! on a hardware GPU when there is one ([`GpuRayGrid`], at [`SUPERSAMPLE`] x [`SUPERSAMPLE`] samples a pixel;
-//! made once, on the first trace), else with the f64 CPU renderer (a software adapter such as lavapipe is
+//! on a hardware GPU when there is one ([`GpuRayGrid`], its triangles box-filtered by a compute pass as the CPU
+//! does; made once, on the first trace), else with the f64 CPU renderer (a software adapter such as lavapipe is
 //! slower than the CPU here); a GPU lost on the way hands this trace and every later one to the CPU, said in
 //! the status. The traced ghosts go through the frame pipeline's
 //! [`flare_core::frame::drawn_with_traced_ghosts`] (light gain, starburst, tonemap, plate), the same function
@@ -214,7 +214,7 @@ fn trace_frame(
         match d.raygrid.render(&d.ctx, &renderer, light, window, grid, SUPERSAMPLE) {
             Ok(image) => {
                 let times = image.gpu_times.map_or(String::new(), |t| format!(", GPU time {}", t.summary()));
-                note = format!("GPU {}, {SUPERSAMPLE}x{SUPERSAMPLE} samples a pixel{times}", d.ctx.adapter.name);
+                note = format!("GPU {}, box-filtered{times}", d.ctx.adapter.name);
                 ghosts = Some(image.hdr);
             }
             Err(GpuRayGridError::Gpu(e)) => note = format!("CPU: the GPU failed ({e})"),

@@ -213,7 +213,7 @@ pub fn bake_lut(
             (Some(g), Some(ctx)) => {
                 let (columns_gpu, columns_cpu) = g.columns();
                 eprintln!(
-                    "columns traced on the GPU ({}, {SUPERSAMPLE}x{SUPERSAMPLE} samples a texel): {columns_gpu}, on the CPU: {columns_cpu}",
+                    "columns traced on the GPU ({}, box-filtered): {columns_gpu}, on the CPU: {columns_cpu}",
                     ctx.adapter.name
                 );
             }

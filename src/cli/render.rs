@@ -144,8 +144,9 @@ pub struct RenderArgs {
     /// Grid cells across each ghost's entrance region, for raygrid and reference.
     #[arg(long)]
     pub grid: Option<usize>,
-    /// Ray grids on the GPU: samples per pixel across (1 to 8; each pixel is the mean of N x N, approaching the
-    /// CPU's box filter; 1 samples pixel centres, the fastest on a software adapter).
+    /// Ray grids on the GPU: 0 (the default) box-filters every triangle exactly in a compute pass, as the CPU
+    /// does; 1 to 8 rasterise the triangles at N x N samples a pixel and average them (the earlier path, kept to
+    /// compare).
     #[arg(long, default_value_t = flare_core::render::raygrid::SUPERSAMPLE)]
     pub gpu_samples: u32,
     /// Aperture: circle, blades:N[:ROTATION_DEG[:ROUNDNESS]], or image:PATH (grayscale).
@@ -491,8 +492,8 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     if args.layers.is_some() && grid.is_some() {
         bail!("--layers ghosts applies to the paraxial, blended and photo methods");
     }
-    if !(1..=8).contains(&args.gpu_samples) {
-        bail!("--gpu-samples {}: use 1 to 8 samples a pixel across", args.gpu_samples);
+    if args.gpu_samples > 8 {
+        bail!("--gpu-samples {}: use 0 (the box filter) or 1 to 8 samples a pixel across", args.gpu_samples);
     }
     if ![1, 2, 4].contains(&args.accumulation_divisor) {
         bail!("--accumulation-divisor {}: use 1, 2 or 4", args.accumulation_divisor);
@@ -643,9 +644,10 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                         Err(e) => return Err(e.into()),
                         Ok(traced) => {
                             eprintln!(
-                                "ray grids on the GPU ({}): {} ghost x wavelength jobs with light, {cells}-cell grid, {samples}x{samples} samples a pixel, {} batches, {:.2} s{}",
+                                "ray grids on the GPU ({}): {} ghost x wavelength jobs with light, {cells}-cell grid, {}, {} batches, {:.2} s{}",
                                 drawer.ctx.adapter.name,
                                 traced.jobs,
+                                if samples == 0 { "box-filtered".to_string() } else { format!("{samples}x{samples} samples a pixel") },
                                 traced.batches,
                                 started.elapsed().as_secs_f64(),
                                 traced

@@ -73,7 +73,9 @@ fn gpu_landings_follow_the_f64_tracer() {
 }
 
 /// The GPU's image of a frame against the CPU renderer's at the same grid: PSNR and SSIM on display values at
-/// the CPU image's exposure.
+/// the CPU image's exposure. Box-filtered (the default, a compute pass) it is the CPU's image but for the f32
+/// trace: at least 50 dB and the energy within 0.5% (measured on lavapipe: 60.3, 91.0 and 61.1 dB); rasterised
+/// at one sample a pixel (the path kept to compare) it aliases (36-38 dB).
 #[test]
 fn gpu_ray_grids_draw_the_cpu_ray_grid_image() {
     let Some(ctx) = test_context() else { return };
@@ -100,9 +102,32 @@ fn gpu_ray_grids_draw_the_cpu_ray_grid_image() {
             "{id} grid {cells}: {} jobs, PSNR {:.1} dB, SSIM {:.4}, energy GPU/CPU {ratio:.4}",
             gpu.jobs, c.psnr_db, c.ssim
         );
-        assert!((ratio - 1.0).abs() < 0.02, "{id}: energy {ratio}");
-        assert!(c.psnr_db > 40.0, "{id}: {c:?}");
+        assert!((ratio - 1.0).abs() < 0.005, "{id}: energy {ratio}");
+        assert!(c.psnr_db > 50.0, "{id}: {c:?}");
     }
+}
+
+/// The box filter's sums are fixed-point integers: the same frame twice gives the same bytes, and a frame drawn
+/// in strips of rows (as one whose sums pass the adapter's storage binding limit is) gives the bytes of one
+/// piece.
+#[test]
+fn gpu_ray_grids_are_deterministic_and_draw_in_strips() {
+    let Some(ctx) = test_context() else { return };
+    let mut raygrid = GpuRayGrid::new(&ctx.device);
+    let flare = prepared("pbrt_dgauss_50mm");
+    let renderer = flare.ray_grid_renderer();
+    let (w, h) = (200, 130);
+    let render = |raygrid: &GpuRayGrid| {
+        raygrid.render(&ctx, &renderer, [7.0, -2.0], Window::frame(w, h), 32, SUPERSAMPLE).unwrap().hdr
+    };
+    let first = render(&raygrid);
+    assert!(first.pixels.iter().any(|p| p[0] > 0.0));
+    assert!(render(&raygrid) == first, "two runs differ");
+    // 7 rows a strip (24 bytes a pixel): 19 strips, each tracing the jobs again.
+    raygrid.box_strip_bytes = 7 * u64::from(w) * 24;
+    let strips = raygrid.render(&ctx, &renderer, [7.0, -2.0], Window::frame(w, h), 32, SUPERSAMPLE).unwrap();
+    assert!(strips.batches >= 19, "{} dispatches", strips.batches);
+    assert!(strips.hdr == first, "drawn in strips, the frame differs");
 }
 
 /// A grid beyond the adapter's limits is refused, naming the limit, before anything is dispatched.

@@ -26,6 +26,7 @@ fn every_shader_parses_and_validates_with_naga() {
             "common.wgsl" => &[],
             "raygrid_trace.wgsl" => &["trace_main"],
             "raygrid_splat.wgsl" => &["vs_splat", "fs_splat"],
+            "raygrid_box.wgsl" => &["splat_box", "resolve_box"],
             "dof.wgsl" => &["split", "gather", "composite", "resolve"],
             "ghosts_compute.wgsl" => &["spans", "resolve"],
             "lut_compute.wgsl" => &["lut_tiles"],

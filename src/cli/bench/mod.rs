@@ -350,7 +350,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                 let method = format!("raygrid-{grid}");
                 let errors = against(&method, &image.hdr, &image.moments)?;
                 rows.push(row(method, ms, runs, errors));
-                // The same grid traced and drawn on the GPU (4 x 4 samples a pixel), against the reference and
+                // The same grid traced and box-filtered on the GPU, against the reference and
                 // against the CPU's image at this grid.
                 if let Some(gpu) = gpu.as_ref() {
                     let window = flare_core::raytrace::Window::frame(width, height);
@@ -406,7 +406,7 @@ fn twin_table(twins: &[(String, f64, usize, Comparison)], adapter: Option<&str>)
     let Some(adapter) = adapter.filter(|_| !twins.is_empty()) else { return md };
     let _ = writeln!(
         md,
-        "\nRay grids on the GPU ({adapter}, f32, 4 x 4 samples a pixel) against the CPU's (f64, box-filtered) at the same grid:\n"
+        "\nRay grids on the GPU ({adapter}, f32, box-filtered in a compute pass) against the CPU's (f64, box-filtered) at the same grid:\n"
     );
     let _ = writeln!(md, "| lens | field (deg) | grid | PSNR (dB) | SSIM | rel. L1 |");
     let _ = writeln!(md, "|---|---:|---:|---:|---:|---:|");

@@ -57,6 +57,7 @@ impl Accumulator {
     }
 
     /// The energy of every pixel, rows from the top (zeros where nothing landed).
+    #[cfg(test)]
     pub(super) fn energy(&self) -> Vec<[f64; 3]> {
         let mut out = vec![[0.0; 3]; self.width * self.height];
         for (t, tile) in self.tiles.iter().enumerate() {
@@ -108,15 +109,19 @@ impl Accumulator {
                 sum_y: m.sum_y / pixel_area_mm2,
             })
             .collect();
-        let pixels = self
-            .energy()
-            .iter()
-            .map(|e| {
-                let v = e.map(|c| (c / pixel_area_mm2) as f32);
-                let v = v.map(|c| if c.is_finite() && c > 0.0 { c } else { 0.0 });
-                [v[0], v[1], v[2], 1.0]
-            })
-            .collect();
+        // Pixels no tile reached stay black; the tiles are read where they are (no frame of f64 made).
+        let mut pixels = vec![[0.0, 0.0, 0.0, 1.0]; self.width * self.height];
+        for (t, tile) in self.tiles.iter().enumerate() {
+            let Some(tile) = tile else { continue };
+            let (x0, y0) = ((t % self.tiles_x) * TILE, (t / self.tiles_x) * TILE);
+            for y in y0..(y0 + TILE).min(self.height) {
+                for x in x0..(x0 + TILE).min(self.width) {
+                    let v = tile[(y - y0) * TILE + (x - x0)].map(|c| (c / pixel_area_mm2) as f32);
+                    let v = v.map(|c| if c.is_finite() && c > 0.0 { c } else { 0.0 });
+                    pixels[y * self.width + x] = [v[0], v[1], v[2], 1.0];
+                }
+            }
+        }
         RayGridImage {
             hdr: HdrImage { width: self.width as u32, height: self.height as u32, pixels },
             moments,
@@ -133,8 +138,11 @@ impl Accumulator {
         let (x, y) = (x as usize, y as usize);
         let tile = self.tiles[(y / TILE) * self.tiles_x + x / TILE].get_or_insert_with(|| vec![[0.0; 3]; TILE * TILE]);
         let p = &mut tile[(y % TILE) * TILE + x % TILE];
+        // A channel the wavelength does not weigh is left alone (adding 0 would change nothing).
         for (value, weight) in p.iter_mut().zip(job.rgb) {
-            *value += energy * weight;
+            if weight != 0.0 {
+                *value += energy * weight;
+            }
         }
         let luma = energy * job.luma;
         self.moments[job.ghost].add_sample(luma, [x as f64 + 0.5, y as f64 + 0.5]);

@@ -275,17 +275,24 @@ impl RayGridRenderer {
             views.iter().map(|v| Accumulator::new(v.window.width as usize, v.window.height as usize, ghosts)).collect()
         };
         let merge = |a: Vec<Accumulator>, b: Vec<Accumulator>| a.into_iter().zip(b).map(|(a, b)| a.merge(b)).collect();
-        // The jobs drawn, gathered first: a scouted request draws 3 of the lens's (up to thousands of) jobs,
-        // and every piece rayon splits the list into starts a fresh accumulator per view, merged at the end.
+        // The jobs drawn, gathered first: a scouted request draws 3 of the lens's (up to thousands of) jobs.
+        // Each job takes a set of accumulators (one per view) from a shared stack, or makes one when none is
+        // free, and puts it back: as many sets are made as jobs ever run at once (about one per thread), not
+        // one per piece rayon splits the list into. A frame's ghosts each cover much of it, so every set ends
+        // up holding most of the frame's tiles: fewer sets are fewer tiles made, merged and freed.
         let drawn: Vec<(&Job, Option<&TracedGrid>)> =
             self.jobs.iter().filter_map(|job| plan(job).map(|scouted| (job, scouted))).collect();
-        let accs = drawn
-            .into_par_iter()
-            .fold(fresh, |mut accs, (job, scouted)| {
-                self.render_job(job, u, views, grid, scouted, &mut accs);
-                accs
-            })
-            .reduce(fresh, merge);
+        let free: std::sync::Mutex<Vec<Vec<Accumulator>>> = std::sync::Mutex::new(Vec::new());
+        let take = || free.lock().ok().and_then(|mut f| f.pop()).unwrap_or_else(fresh);
+        drawn.into_par_iter().for_each(|(job, scouted)| {
+            let mut accs = take();
+            self.render_job(job, u, views, grid, scouted, &mut accs);
+            if let Ok(mut f) = free.lock() {
+                f.push(accs);
+            }
+        });
+        let sets = free.into_inner().unwrap_or_else(std::sync::PoisonError::into_inner);
+        let accs = sets.into_iter().reduce(merge).unwrap_or_else(fresh);
         Ok(views.iter().zip(accs).map(|(view, acc)| acc.into_image(&view.window)).collect())
     }
 

@@ -33,7 +33,7 @@
 //! [`GpuError::Lost`] (the command line then traces on the CPU).
 
 use super::gpu::{GpuContext, GpuError, PassTimes, map_read, read_texture, storage, texture_2d};
-use super::shaders::{RAYGRID_SPLAT_WGSL, RAYGRID_TRACE_WGSL};
+use super::shaders::{RAYGRID_BOX_WGSL, RAYGRID_SPLAT_WGSL, RAYGRID_TRACE_WGSL};
 use crate::image::HdrImage;
 use crate::raytrace::{DENSE_TABLE_SAMPLES, Grid, PlannedJob, RayGridError, RayGridRenderer, Scout, View, Window};
 use bytemuck::{Pod, Zeroable};
@@ -90,8 +90,34 @@ pub struct GpuVertex {
 }
 const _: () = assert!(std::mem::size_of::<GpuVertex>() == 48);
 
-/// Samples per pixel across (x this down) that [`GpuRayGrid::render`] is asked for by default: 4 x 4.
-pub const SUPERSAMPLE: u32 = 4;
+/// What [`GpuRayGrid::render`] is asked for by default: [`BOX_FILTER`], each triangle box-filtered exactly
+/// in a compute pass (`raygrid_box.wgsl`), as the CPU twin does.
+pub const SUPERSAMPLE: u32 = BOX_FILTER;
+/// The `supersample` that box-filters (compute); 1 to 8 rasterise the triangles (`raygrid_splat.wgsl`) at that
+/// many samples a pixel across and average them, the earlier path, kept to compare.
+pub const BOX_FILTER: u32 = 0;
+
+/// The box-filter pass's parameters. Must be kept in sync with `struct BoxParams` in `shaders/raygrid_box.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+struct BoxParams {
+    width: u32,
+    height: u32,
+    jobs: u32,
+    first_row: u32,
+    rows: u32,
+    groups_x: u32,
+    unused: [u32; 2],
+    fixed_per_unit: f32,
+    unit_per_fixed: f32,
+    open_radius2: f32,
+    unused2: f32,
+}
+const _: () = assert!(std::mem::size_of::<BoxParams>() == 48);
+/// Bytes of one pixel's sums: R, G, B of 64 bits.
+const BOX_BYTES_PER_PIXEL: u64 = 24;
+/// Uniform offsets between dispatches (the largest alignment an adapter may ask for).
+const BOX_STRIDE: u64 = 256;
 /// Samples per dense reflectance table (the CPU renderer's).
 const TABLE_SAMPLES: usize = DENSE_TABLE_SAMPLES;
 /// Invocations per workgroup of the tracer (`@workgroup_size` in `raygrid_trace.wgsl`).
@@ -132,6 +158,10 @@ struct Upload {
 pub struct GpuRayGrid {
     trace_pipeline: wgpu::ComputePipeline,
     splat_pipeline: wgpu::RenderPipeline,
+    box_pipeline: wgpu::ComputePipeline,
+    resolve_pipeline: wgpu::ComputePipeline,
+    /// The most bytes the box filter's sums may take (the adapter's limits; tests lower it to draw in strips).
+    pub box_strip_bytes: u64,
     sampler: wgpu::Sampler,
     target_format: wgpu::TextureFormat,
     /// Times a frame's passes ([`Self::render`]; the bake's columns, drawn from many threads, are not timed).
@@ -199,7 +229,31 @@ impl GpuRayGrid {
         });
         let profiler =
             GpuProfiler::new(device, GpuProfilerSettings::default()).expect("the default settings are valid");
-        Self { trace_pipeline, splat_pipeline, sampler, target_format, profiler: std::sync::Mutex::new(profiler) }
+        let box_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("raygrid_box.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(RAYGRID_BOX_WGSL.into()),
+        });
+        let compute = |entry: &str| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: None,
+                module: &box_module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        let limits = device.limits();
+        Self {
+            trace_pipeline,
+            splat_pipeline,
+            box_pipeline: compute("splat_box"),
+            resolve_pipeline: compute("resolve_box"),
+            box_strip_bytes: u64::from(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size),
+            sampler,
+            target_format,
+            profiler: std::sync::Mutex::new(profiler),
+        }
     }
 
     /// The ghosts of `renderer` for a light at the frame position `light_deg`, seen in `window`, a `cells` x
@@ -254,6 +308,9 @@ impl GpuRayGrid {
     ) -> Result<GpuRayGridImage, GpuRayGridError> {
         if let Some(reason) = ctx.failure() {
             return Err(GpuError::Lost(reason).into());
+        }
+        if supersample == BOX_FILTER {
+            return self.draw_box(ctx, renderer, planned, view, profiler);
         }
         let window = view.window;
         let s = supersample.clamp(1, 8);
@@ -410,6 +467,248 @@ impl GpuRayGrid {
             summed.filter(|t| !t.passes.is_empty())
         });
         Ok(GpuRayGridImage { hdr: hdr?.box_reduced(s), jobs: planned.len(), batches, gpu_times })
+    }
+
+    /// [`Self::draw`] box-filtered: each batch traced, then its triangles splatted by `splat_box` into 64-bit
+    /// fixed-point sums (the unit is 2^-52 of the sum of every triangle's flux, a bound no pixel can pass), which
+    /// `resolve_box` turns into the image. A frame whose sums do not fit one storage binding is drawn in strips
+    /// of rows, each strip tracing the batches again.
+    fn draw_box(
+        &self,
+        ctx: &GpuContext,
+        renderer: &RayGridRenderer,
+        planned: &[&PlannedJob],
+        view: View,
+        mut profiler: Option<&mut GpuProfiler>,
+    ) -> Result<GpuRayGridImage, GpuRayGridError> {
+        let window = view.window;
+        let (device, queue) = (&ctx.device, &ctx.queue);
+        let limits = device.limits();
+        let cells = planned.iter().map(|j| j.cells).max().unwrap_or(1);
+        let vertices_of = |cells: usize| ((cells + 1) * (cells + 1)) as u64;
+        let bytes_of = |cells: usize| vertices_of(cells) * std::mem::size_of::<GpuVertex>() as u64;
+        let binding = u64::from(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size);
+        let max_groups = u64::from(limits.max_compute_workgroups_per_dimension);
+        let limit = |what, needed: u64, limit: u64, name| {
+            (needed > limit).then_some(GpuRayGridError::Limit { cells, what, needed, limit, name })
+        };
+        let row_bytes = u64::from(window.width) * BOX_BYTES_PER_PIXEL;
+        if let Some(e) = limit(
+            "workgroups per dispatch",
+            vertices_of(cells).div_ceil(u64::from(WORKGROUP)),
+            max_groups,
+            "max_compute_workgroups_per_dimension",
+        )
+        .or_else(|| {
+            limit(
+                "workgroups per dispatch",
+                (2 * cells * cells) as u64 / u64::from(WORKGROUP),
+                max_groups,
+                "max_compute_workgroups_per_dimension",
+            )
+        })
+        .or_else(|| limit("bytes of vertices for one ghost", bytes_of(cells), binding, "max_storage_buffer_binding_size"))
+        .or_else(|| limit("bytes of sums for one row", row_bytes, binding, "max_storage_buffer_binding_size"))
+        .or_else(|| {
+            let side = u64::from(window.width.max(window.height));
+            limit("pixels across the frame", side, u64::from(limits.max_texture_dimension_2d), "max_texture_dimension_2d")
+        }) {
+            return Err(e);
+        }
+        if planned.is_empty() {
+            let hdr = HdrImage::black(window.width, window.height);
+            return Ok(GpuRayGridImage { hdr, jobs: 0, batches: 0, gpu_times: None });
+        }
+        let target = texture_2d(
+            device,
+            "raygrid hdr",
+            window.width,
+            window.height,
+            wgpu::TextureFormat::Rgba32Float,
+            wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
+        );
+        let target_view = target.create_view(&wgpu::TextureViewDescriptor::default());
+        let mask = renderer.mask();
+        let aperture = texture_2d(
+            device,
+            "raygrid aperture",
+            mask.size as u32,
+            mask.size as u32,
+            wgpu::TextureFormat::R8Unorm,
+            wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        );
+        queue.write_texture(
+            aperture.as_image_copy(),
+            &mask.texels,
+            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(mask.size as u32), rows_per_image: None },
+            aperture.size(),
+        );
+        let aperture_view = aperture.create_view(&wgpu::TextureViewDescriptor::default());
+        // No pixel can gather more than every triangle's flux (weights and masks are at most 1).
+        let pixel_area_mm2 = window.px_per_mm().powi(-2);
+        let bound: f64 = planned
+            .iter()
+            .map(|j| {
+                let rgb = j.rgb[0].max(j.rgb[1]).max(j.rgb[2]).max(0.0);
+                2.0 * (j.cells * j.cells) as f64 * j.triangle_flux / pixel_area_mm2 * rgb
+            })
+            .filter(|v| v.is_finite())
+            .sum();
+        let units = 4_503_599_627_370_496.0; // 2^52
+        let (fixed_per_unit, unit_per_fixed) =
+            if bound > 0.0 && bound.is_finite() { ((units / bound) as f32, (bound / units) as f32) } else { (0.0, 0.0) };
+        let strip_rows = (self.box_strip_bytes.min(binding) / row_bytes).clamp(1, u64::from(window.height)) as u32;
+        let sums = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("raygrid sums"),
+            size: row_bytes * u64::from(strip_rows),
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        });
+        let open_radius2 = mask.open_radius().powi(2);
+        // Jobs of one grid size together, in batches whose vertices fit one storage binding (at most 256 MB,
+        // and at most 65535 jobs, the dispatch's y).
+        let mut order = planned.to_vec();
+        order.sort_by_key(|j| j.cells);
+        let mut batches: Vec<&[&PlannedJob]> = Vec::new();
+        for same in order.chunk_by(|a, b| a.cells == b.cells) {
+            let per_batch = (binding.min(256 << 20) / bytes_of(same[0].cells).max(1)).min(max_groups).max(1) as usize;
+            batches.extend(same.chunks(per_batch));
+        }
+        let strips: Vec<u32> = (0..window.height).step_by(strip_rows as usize).collect();
+        // One parameter block per (strip, batch) dispatch and one per strip's resolve, at 256-byte strides.
+        let blocks = strips.len() * (batches.len() + 1);
+        let mut uniforms = vec![0u8; BOX_STRIDE as usize * blocks];
+        let mut block = |k: usize, params: BoxParams| {
+            let at = k * BOX_STRIDE as usize;
+            uniforms[at..at + std::mem::size_of::<BoxParams>()].copy_from_slice(bytemuck::bytes_of(&params));
+        };
+        for (s, &first_row) in strips.iter().enumerate() {
+            let rows = strip_rows.min(window.height - first_row);
+            let pixels = window.width * rows;
+            let groups = u64::from(pixels.div_ceil(WORKGROUP));
+            let groups_x = groups.min(max_groups).max(1) as u32;
+            let base = BoxParams {
+                width: window.width,
+                height: window.height,
+                first_row,
+                rows,
+                groups_x,
+                fixed_per_unit,
+                unit_per_fixed,
+                open_radius2,
+                ..BoxParams::default()
+            };
+            for (b, batch) in batches.iter().enumerate() {
+                block(s * (batches.len() + 1) + b, BoxParams { jobs: batch.len() as u32, ..base });
+            }
+            block(s * (batches.len() + 1) + batches.len(), base);
+        }
+        let uniform_buffer = storage(device, queue, "raygrid box", &uniforms, wgpu::BufferUsages::UNIFORM);
+        let params = |k: usize| {
+            wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                buffer: &uniform_buffer,
+                offset: k as u64 * BOX_STRIDE,
+                size: wgpu::BufferSize::new(std::mem::size_of::<BoxParams>() as u64),
+            })
+        };
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("raygrid") });
+        let mut dispatched = 0;
+        for (s, &first_row) in strips.iter().enumerate() {
+            for (b, batch) in batches.iter().enumerate() {
+                let cells = batch[0].cells;
+                let query = profiler.as_deref().map(|p| p.begin_pass_query("trace", &mut encoder));
+                let writes = query.as_ref().and_then(|q| q.compute_pass_timestamp_writes());
+                let (jobs, vertices) =
+                    self.trace(device, queue, &mut encoder, renderer, batch, window, view.turn_deg, writes);
+                if let (Some(p), Some(q)) = (profiler.as_deref(), query) {
+                    p.end_query(&mut encoder, q);
+                }
+                let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("raygrid box"),
+                    layout: &self.box_pipeline.get_bind_group_layout(0),
+                    entries: &[
+                        wgpu::BindGroupEntry { binding: 0, resource: vertices.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 1, resource: jobs.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&aperture_view) },
+                        wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(&self.sampler) },
+                        wgpu::BindGroupEntry { binding: 4, resource: sums.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 5, resource: params(s * (batches.len() + 1) + b) },
+                    ],
+                });
+                let query = profiler.as_deref().map(|p| p.begin_pass_query("splat", &mut encoder));
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("raygrid box"),
+                    timestamp_writes: query.as_ref().and_then(|q| q.compute_pass_timestamp_writes()),
+                });
+                pass.set_pipeline(&self.box_pipeline);
+                pass.set_bind_group(0, &group, &[]);
+                pass.dispatch_workgroups((2 * cells * cells).div_ceil(WORKGROUP as usize) as u32, batch.len() as u32, 1);
+                drop(pass);
+                if let (Some(p), Some(q)) = (profiler.as_deref(), query) {
+                    p.end_query(&mut encoder, q);
+                }
+                dispatched += 1;
+                // Each batch's buffers are freed once it has run: submit as they are recorded.
+                queue.submit(Some(
+                    std::mem::replace(
+                        &mut encoder,
+                        device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("raygrid") }),
+                    )
+                    .finish(),
+                ));
+            }
+            let rows = strip_rows.min(window.height - first_row);
+            let groups = (window.width * rows).div_ceil(WORKGROUP);
+            let groups_x = groups.min(max_groups as u32).max(1);
+            let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("raygrid resolve"),
+                layout: &self.resolve_pipeline.get_bind_group_layout(0),
+                entries: &[
+                    wgpu::BindGroupEntry { binding: 4, resource: sums.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 5, resource: params(s * (batches.len() + 1) + batches.len()) },
+                    wgpu::BindGroupEntry { binding: 6, resource: wgpu::BindingResource::TextureView(&target_view) },
+                ],
+            });
+            let query = profiler.as_deref().map(|p| p.begin_pass_query("resolve", &mut encoder));
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("raygrid resolve"),
+                timestamp_writes: query.as_ref().and_then(|q| q.compute_pass_timestamp_writes()),
+            });
+            pass.set_pipeline(&self.resolve_pipeline);
+            pass.set_bind_group(0, &group, &[]);
+            pass.dispatch_workgroups(groups_x, groups.div_ceil(groups_x), 1);
+            drop(pass);
+            if let Some(p) = profiler.as_deref_mut() {
+                if let Some(q) = query {
+                    p.end_query(&mut encoder, q);
+                }
+                p.resolve_queries(&mut encoder);
+            }
+        }
+        queue.submit(Some(encoder.finish()));
+        if let Some(p) = profiler.as_deref_mut() {
+            let _ = p.end_frame();
+        }
+        let hdr = read_hdr(ctx, &target, wgpu::TextureFormat::Rgba32Float);
+        if let Some(reason) = ctx.failure() {
+            return Err(GpuError::Lost(reason).into());
+        }
+        let gpu_times = profiler.and_then(|p| {
+            let _ = device.poll(wgpu::PollType::wait_indefinitely());
+            let mut summed: Option<PassTimes> = None;
+            while let Some(results) = p.process_finished_frame(queue.get_timestamp_period()) {
+                let mut times = PassTimes::default();
+                for (name, ms) in PassTimes::from_results(&results).passes {
+                    match times.passes.iter_mut().find(|(n, _)| *n == name) {
+                        Some((_, total)) => *total += ms,
+                        None => times.passes.push((name, ms)),
+                    }
+                }
+                summed = Some(times);
+            }
+            summed.filter(|t| !t.passes.is_empty())
+        });
+        Ok(GpuRayGridImage { hdr: hdr?, jobs: planned.len(), batches: dispatched, gpu_times })
     }
 
     /// The traced vertices of the first `jobs` planned jobs (for the landing comparison with the f64 tracer),

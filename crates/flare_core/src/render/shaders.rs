@@ -39,6 +39,12 @@ pub const RAYGRID_SPLAT_WGSL: &str = concat!(
     include_str!("../../../../shaders/aperture.wgsl"),
     include_str!("../../../../shaders/raygrid_splat.wgsl")
 );
+/// Ray grids on the GPU, pass 2 as compute: each triangle box-filtered as the CPU twin does.
+pub const RAYGRID_BOX_WGSL: &str = concat!(
+    include_str!("../../../../shaders/raygrid_common.wgsl"),
+    include_str!("../../../../shaders/aperture.wgsl"),
+    include_str!("../../../../shaders/raygrid_box.wgsl")
+);
 /// The live depth of field: split, gather, composite, resolve (`crate::dof::live`).
 pub const DOF_WGSL: &str = include_str!("../../../../shaders/dof.wgsl");
 /// The app's viewport pass (the flare texture into egui's render pass; used by the app, validated here).
@@ -56,5 +62,6 @@ pub const ALL: &[(&str, &str)] = &[
     ("viewport.wgsl", VIEWPORT_WGSL),
     ("raygrid_trace.wgsl", RAYGRID_TRACE_WGSL),
     ("raygrid_splat.wgsl", RAYGRID_SPLAT_WGSL),
+    ("raygrid_box.wgsl", RAYGRID_BOX_WGSL),
     ("dof.wgsl", DOF_WGSL),
 ];
