@@ -42,6 +42,9 @@ pub struct ViewportResources {
     drawn: u64,
     /// The texture holds an image handed over by [`Self::show_image`] (the ray-grid view), not a drawn frame.
     shows_image: bool,
+    /// The adapter is a software rasteriser (lavapipe): drafts are drawn by the raster passes there
+    /// ([`FlareRenderer::rasterise_ghosts`]).
+    software: bool,
 }
 
 impl ViewportResources {
@@ -140,6 +143,7 @@ impl ViewportResources {
             bind_group,
             drawn: 0,
             shows_image: false,
+            software: render_state.adapter.get_info().device_type == wgpu::DeviceType::Cpu,
         };
         render_state.renderer.write().callback_resources.insert(resources);
     }
@@ -268,6 +272,7 @@ impl CallbackTrait for FlareCallback {
             res.size = size;
         }
         let view = res.target.create_view(&wgpu::TextureViewDescriptor::default());
+        res.renderer.rasterise_ghosts(res.software && frame.draft.is_some());
         res.renderer.render_with_lut(device, queue, encoder, &view, scene, lut.as_ref());
         Vec::new()
     }

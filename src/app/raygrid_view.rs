@@ -211,7 +211,7 @@ fn trace_frame(
     }
     if let (Ok(d), None) = (device, &lost) {
         report(0.1, format!("ray grid {grid}: tracing on the GPU ({})…", d.ctx.adapter.name));
-        match d.raygrid.render(&d.ctx, &renderer, light, window, grid, SUPERSAMPLE) {
+        match d.raygrid.render(&d.ctx, &renderer, light, window, grid, SUPERSAMPLE, &frame.request.ghost_gains) {
             Ok(image) => {
                 let times = image.gpu_times.map_or(String::new(), |t| format!(", GPU time {}", t.summary()));
                 note = format!("GPU {}, box-filtered{times}", d.ctx.adapter.name);
@@ -231,7 +231,8 @@ fn trace_frame(
                 };
             }
             report(0.1, format!("ray grid {grid}: tracing on the CPU…"));
-            let request = RayGridRequest::views(light, vec![View { window, turn_deg: 0.0 }], Grid::Fixed(grid));
+            let request = RayGridRequest::views(light, vec![View { window, turn_deg: 0.0 }], Grid::Fixed(grid))
+                .weighted(&frame.request.ghost_gains);
             let mut images = renderer.render_request(&request).map_err(|e| e.to_string())?;
             images.remove(0).hdr
         }
@@ -243,7 +244,7 @@ fn trace_frame(
     let sources = Sources { flare, lut: None, plate };
     let drawn = flare_core::frame::drawn_with_traced_ghosts(frame, &sources, ghosts);
     let summary = format!(
-        "ray grid {grid} ({note}): every ghost traced exactly in {:.2} s, at gain 1",
+        "ray grid {grid} ({note}): every ghost traced exactly in {:.2} s, at the look's ghost gains",
         started.elapsed().as_secs_f64()
     );
     Ok(Traced { display: Arc::new(drawn.display), summary })

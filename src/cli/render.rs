@@ -635,7 +635,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                     let gpu = flare_core::render::raygrid::GpuRayGrid::new(&drawer.ctx.device);
                     let window = raytrace::Window::frame(width, height);
                     let samples = args.gpu_samples;
-                    match gpu.render(&drawer.ctx, &renderer, planned.light_deg, window, cells, samples) {
+                    match gpu.render(&drawer.ctx, &renderer, planned.light_deg, window, cells, samples, &request.ghost_gains) {
                         // A lost device (or an error it reported) falls back to the CPU; a refused grid is an error.
                         Err(flare_core::render::raygrid::GpuRayGridError::Gpu(e)) => {
                             eprintln!("ray grids on the GPU failed ({e}): tracing on the CPU instead");
@@ -663,7 +663,12 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             let hdr = match on_gpu {
                 Some(hdr) => hdr,
                 None => {
-                    let traced = renderer.render(planned.light_deg, width, height, n)?;
+                    let traced = renderer
+                        .render_request(
+                            &raytrace::RayGridRequest::frame(planned.light_deg, width, height, n)
+                                .weighted(&request.ghost_gains),
+                        )?
+                        .remove(0);
                     let st = traced.stats;
                     eprintln!(
                         "ray-traced on the CPU {} ghost x wavelength jobs, {n:?} grid: {} rays, {} triangles, {} jobs with no light, {:.2} s",

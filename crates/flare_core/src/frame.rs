@@ -153,7 +153,10 @@ impl Frame {
         let lut_scene = lut.map(|live| {
             let u = light_slopes_for_frame_position(request.light_deg[0], request.light_deg[1]);
             let out = Window::for_sensor(sensor_width_mm, w, h);
-            LutScene::build(live, &flare.system, u, out, &request.blend, &gains)
+            let mut scene = LutScene::build(live, &flare.system, u, out, &request.blend, &gains);
+            // The LUT images too are culled where they cannot be seen at the frame's exposure.
+            scene.cull_faint(flare.config.threshold(request.display.flare_gain()), &live.footprints);
+            scene
         });
         if let Some(l) = &lut_scene {
             // A photo LUT is the whole flare photographed: it is never drawn over paraxial sprites.
@@ -401,7 +404,8 @@ pub fn draw_cpu(frame: &Frame, sources: &Sources) -> Drawn {
 /// ray-grid view): `ghosts` is every ghost at gain 1 in linear relative irradiance (resampled to the frame's
 /// accumulation when its size differs), scaled by the frame's light gain (the timeline's light and its
 /// visibility in the plate, as the sprites are), then the frame's starburst, tonemap and plate as
-/// [`draw_cpu`] adds them. Per-ghost gains are not applied: a ray-traced image holds every ghost summed.
+/// [`draw_cpu`] adds them. Per-ghost gains are the trace's to apply (a ray-traced image holds its ghosts summed):
+/// callers trace with the request's `ghost_gains` ([`crate::raytrace::Ghosts::Weighted`]).
 pub fn drawn_with_traced_ghosts(frame: &Frame, sources: &Sources, ghosts: HdrImage) -> Drawn {
     let scene = &frame.scene;
     let light_gain = if frame.request.light_gain.is_finite() { frame.request.light_gain.max(0.0) as f32 } else { 0.0 };

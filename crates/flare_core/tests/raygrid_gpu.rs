@@ -4,7 +4,7 @@
 use flare_core::flare::{FlareConfig, PreparedFlare};
 use flare_core::metrics;
 use flare_core::optics::library::builtin_lens;
-use flare_core::raytrace::{Grid, Window};
+use flare_core::raytrace::{Grid, RayGridRequest, Window};
 use flare_core::render::gpu::test_context;
 use flare_core::render::raygrid::{GpuRayGrid, GpuRayGridError, SUPERSAMPLE};
 
@@ -87,8 +87,8 @@ fn gpu_ray_grids_draw_the_cpu_ray_grid_image() {
         let flare = prepared(id);
         let renderer = flare.ray_grid_renderer();
         let cpu = renderer.render(light, w, h, Grid::Fixed(cells)).unwrap();
-        let gpu = raygrid.render(&ctx, &renderer, light, Window::frame(w, h), cells, SUPERSAMPLE).unwrap();
-        let point = raygrid.render(&ctx, &renderer, light, Window::frame(w, h), cells, 1).unwrap();
+        let gpu = raygrid.render(&ctx, &renderer, light, Window::frame(w, h), cells, SUPERSAMPLE, &[]).unwrap();
+        let point = raygrid.render(&ctx, &renderer, light, Window::frame(w, h), cells, 1, &[]).unwrap();
         eprintln!(
             "{id}: one sample per pixel: PSNR {:.1} dB",
             metrics::compare(&point.hdr, &[], &cpu.hdr, &[]).psnr_db
@@ -118,16 +118,53 @@ fn gpu_ray_grids_are_deterministic_and_draw_in_strips() {
     let renderer = flare.ray_grid_renderer();
     let (w, h) = (200, 130);
     let render = |raygrid: &GpuRayGrid| {
-        raygrid.render(&ctx, &renderer, [7.0, -2.0], Window::frame(w, h), 32, SUPERSAMPLE).unwrap().hdr
+        raygrid.render(&ctx, &renderer, [7.0, -2.0], Window::frame(w, h), 32, SUPERSAMPLE, &[]).unwrap().hdr
     };
     let first = render(&raygrid);
     assert!(first.pixels.iter().any(|p| p[0] > 0.0));
     assert!(render(&raygrid) == first, "two runs differ");
     // 7 rows a strip (24 bytes a pixel): 19 strips, each tracing the jobs again.
     raygrid.box_strip_bytes = 7 * u64::from(w) * 24;
-    let strips = raygrid.render(&ctx, &renderer, [7.0, -2.0], Window::frame(w, h), 32, SUPERSAMPLE).unwrap();
+    let strips = raygrid.render(&ctx, &renderer, [7.0, -2.0], Window::frame(w, h), 32, SUPERSAMPLE, &[]).unwrap();
     assert!(strips.batches >= 19, "{} dispatches", strips.batches);
     assert!(strips.hdr == first, "drawn in strips, the frame differs");
+}
+
+/// Per-ghost gains (a preset's gains, `enabled` and `solo`, as a frame request carries them) reach the ray
+/// grids: on the CPU, one ghost at gain 0.5 and the rest at 0 is exactly half of that ghost traced alone; on the
+/// GPU the same gains give the CPU's image (at least 50 dB).
+#[test]
+fn ray_grids_honour_per_ghost_gains() {
+    let flare = prepared("heliar");
+    let renderer = flare.ray_grid_renderer();
+    let (w, h, light) = (160, 100, [8.0, 3.0]);
+    let grid = Grid::Fixed(24);
+    let all = renderer.render(light, w, h, grid).unwrap();
+    // The brightest ghost: the one whose light is largest alone.
+    let energy = |img: &flare_core::image::HdrImage| -> f64 { img.pixels.iter().map(|p| f64::from(p[1])).sum() };
+    let g = (0..flare.system.ghosts.len())
+        .max_by(|&a, &b| all.moments[a].energy.total_cmp(&all.moments[b].energy))
+        .unwrap();
+    let alone = renderer.render_request(&RayGridRequest::frame(light, w, h, grid).only(g)).unwrap().remove(0);
+    let mut gains = vec![0.0f32; flare.system.ghosts.len()];
+    gains[g] = 0.5;
+    let half = renderer.render_request(&RayGridRequest::frame(light, w, h, grid).weighted(&gains)).unwrap().remove(0);
+    assert!(energy(&alone.hdr) > 0.0 && energy(&alone.hdr) < energy(&all.hdr));
+    for (a, b) in half.hdr.pixels.iter().zip(&alone.hdr.pixels) {
+        for c in 0..3 {
+            assert_eq!(a[c], 0.5 * b[c], "ghost {g} at gain 0.5 is half of it alone");
+        }
+    }
+    // Missing entries are 1: no gains is every ghost.
+    let ones = renderer.render_request(&RayGridRequest::frame(light, w, h, grid).weighted(&[])).unwrap().remove(0);
+    assert!((energy(&ones.hdr) / energy(&all.hdr) - 1.0).abs() < 1e-9);
+    let Some(ctx) = test_context() else { return };
+    let raygrid = GpuRayGrid::new(&ctx.device);
+    let gpu = raygrid.render(&ctx, &renderer, light, Window::frame(w, h), 24, SUPERSAMPLE, &gains).unwrap();
+    let c = metrics::compare(&gpu.hdr, &[], &half.hdr, &[]);
+    eprintln!("ghost {g} at gain 0.5 alone: GPU against CPU {:.1} dB, {} jobs", c.psnr_db, gpu.jobs);
+    assert!(c.psnr_db > 50.0, "{c:?}");
+    assert!(gpu.jobs <= 3, "only the ghost with gain is traced: {} jobs", gpu.jobs);
 }
 
 /// A grid beyond the adapter's limits is refused, naming the limit, before anything is dispatched.
@@ -137,7 +174,7 @@ fn a_grid_beyond_the_adapters_limits_is_refused() {
     let raygrid = GpuRayGrid::new(&ctx.device);
     let flare = prepared("heliar");
     let renderer = flare.ray_grid_renderer();
-    let e = raygrid.render(&ctx, &renderer, [3.0, 2.0], Window::frame(64, 48), 4096, 1).unwrap_err();
+    let e = raygrid.render(&ctx, &renderer, [3.0, 2.0], Window::frame(64, 48), 4096, 1, &[]).unwrap_err();
     assert!(matches!(e, GpuRayGridError::Limit { .. }), "{e}");
     let text = e.to_string();
     assert!(text.contains("limit") && text.contains("max_"), "{text}");
@@ -152,7 +189,7 @@ fn a_lost_device_is_an_error_not_a_panic() {
     let flare = prepared("heliar");
     let renderer = flare.ray_grid_renderer();
     ctx.device.destroy();
-    let e = raygrid.render(&ctx, &renderer, [3.0, 2.0], Window::frame(64, 48), 16, 1).unwrap_err();
+    let e = raygrid.render(&ctx, &renderer, [3.0, 2.0], Window::frame(64, 48), 16, 1, &[]).unwrap_err();
     assert!(matches!(e, GpuRayGridError::Gpu(flare_core::render::gpu::GpuError::Lost(_))), "{e}");
     eprintln!("{e}");
 }

@@ -357,7 +357,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                     let samples = flare_core::render::raygrid::SUPERSAMPLE;
                     let mut gpu_times = Vec::new();
                     let (ms, runs, gpu_image) = timed(repeats, || {
-                        let image = gpu.raygrid.render(&gpu.drawer.ctx, &tracer, light, window, grid, samples)?;
+                        let image = gpu.raygrid.render(&gpu.drawer.ctx, &tracer, light, window, grid, samples, &[])?;
                         gpu_times.extend(image.gpu_times.clone());
                         Ok(image)
                     })?;

@@ -323,6 +323,47 @@ impl LutScene {
         scene
     }
 
+    /// Leaves out the faintest instances, as many as can go while their peaks (the entry's brightest texel
+    /// times the instance's gain) sum to at most `threshold` (linear relative irradiance): what is left out
+    /// adds at most `threshold` to any pixel, however many overlap, as the paraxial sprites are culled
+    /// ([`crate::ghost::GhostSystem::frame_into`]). Returns how many were left out. In the alpha mode nothing
+    /// is left out (a faint image still covers what lies beneath it).
+    pub fn cull_faint(&mut self, threshold: f64, footprints: &[Vec<Footprint>]) -> usize {
+        if self.alpha_over || !(threshold > 0.0) {
+            return 0;
+        }
+        let peak = |k: usize| -> f64 {
+            let (g, e) = self.sources[k];
+            let texel = footprints.get(g as usize).and_then(|f| f.get(e as usize)).map_or(f32::MAX, |f| f.peak);
+            let c = self.instances[k].colour;
+            f64::from(texel) * f64::from(c[0].max(c[1]).max(c[2]).max(0.0))
+        };
+        let mut order: Vec<(f64, usize)> = (0..self.instances.len()).map(|k| (peak(k), k)).collect();
+        order.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let (mut sum, mut culled) = (0.0, vec![false; self.instances.len()]);
+        for &(p, k) in &order {
+            if !(sum + p <= threshold) {
+                break;
+            }
+            sum += p;
+            culled[k] = true;
+        }
+        let count = culled.iter().filter(|&&c| c).count();
+        if count > 0 {
+            let mut k = 0;
+            self.instances.retain(|_| {
+                k += 1;
+                !culled[k - 1]
+            });
+            let mut k = 0;
+            self.sources.retain(|_| {
+                k += 1;
+                !culled[k - 1]
+            });
+        }
+        count
+    }
+
     /// The weight the paraxial sprites of lens ghost `g` keep (1 for a ghost the LUT does not hold).
     pub fn paraxial_weight(&self, g: u32) -> f32 {
         self.paraxial_weights.iter().find(|(h, _)| *h == g).map_or(1.0, |(_, w)| *w)
@@ -371,11 +412,13 @@ const BAND_ROWS: usize = 16;
 /// An entry's size and the box of its lit texels (any channel non-zero; x0, x1, y0, y1 inclusive, or an
 /// empty box, x0 > x1, when none is lit): what placing and binning an instance need of it, measured once per
 /// LUT ([`LiveLut::footprints`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Footprint {
     pub width: u32,
     pub height: u32,
     pub lit: [u32; 4],
+    /// The largest value of any channel of any texel (a sample never exceeds it).
+    pub peak: f32,
 }
 
 /// Where an instance's entry lies over the accumulation: its texel coordinates as an affine function of the
@@ -556,14 +599,16 @@ fn footprints(lut: &GhostLut) -> Vec<Vec<Footprint>> {
                 .iter()
                 .map(|e| {
                     let mut b = [u32::MAX, 0, u32::MAX, 0];
+                    let mut peak = 0.0f32;
                     for (k, t) in e.texels.iter().enumerate() {
+                        peak = peak.max(t[0].to_f32()).max(t[1].to_f32()).max(t[2].to_f32());
                         if t.iter().any(|v| v.to_bits() & 0x7fff != 0) {
                             let (x, y) = ((k % e.width as usize) as u32, (k / e.width as usize) as u32);
                             b = [b[0].min(x), b[1].max(x), b[2].min(y), b[3].max(y)];
                         }
                     }
                     let lit = if b[0] == u32::MAX { [1, 0, 1, 0] } else { b };
-                    Footprint { width: e.width, height: e.height, lit }
+                    Footprint { width: e.width, height: e.height, lit, peak: if peak.is_finite() { peak } else { f32::MAX } }
                 })
                 .collect()
         })

@@ -44,6 +44,9 @@ pub enum Ghosts<'a> {
     Only(usize),
     /// The ghost a [`Scout`] looked at, for the scout's light, with its grid as the pre-pass.
     Scouted(&'a Scout),
+    /// Every ghost `g` at the gain `gains[g]` (as a frame's sprites: a preset's per-ghost gains, `enabled` and
+    /// `solo`; missing entries are 1; a ghost at gain 0, or one that is not finite and positive, is not traced).
+    Weighted(&'a [f32]),
 }
 
 /// One ray-grid render (see [`RayGridRenderer::render_request`]): a light, the views it is seen in, the grid
@@ -77,6 +80,11 @@ impl<'a> RayGridRequest<'a> {
     /// This request for ghost `ghost` only.
     pub fn only(self, ghost: usize) -> Self {
         Self { ghosts: Ghosts::Only(ghost), ..self }
+    }
+
+    /// This request with every ghost `g` at the gain `gains[g]` ([`Ghosts::Weighted`]).
+    pub fn weighted(self, gains: &'a [f32]) -> Self {
+        Self { ghosts: Ghosts::Weighted(gains), ..self }
     }
 }
 
@@ -247,26 +255,32 @@ impl RayGridRenderer {
     pub fn render_request(&self, request: &RayGridRequest) -> Result<Vec<RayGridImage>, RayGridError> {
         let (light, views, grid) = (request.light_deg, request.views.as_slice(), request.grid);
         match request.ghosts {
-            Ghosts::All => self.render_views(light, views, grid, |_: &Job| Some(None)),
-            Ghosts::Only(g) => self.render_views(light, views, grid, |job: &Job| (job.ghost == g).then_some(None)),
+            Ghosts::All => self.render_views(light, views, grid, |_: &Job| Some((None, 1.0))),
+            Ghosts::Only(g) => {
+                self.render_views(light, views, grid, |job: &Job| (job.ghost == g).then_some((None, 1.0)))
+            }
+            Ghosts::Weighted(gains) => self.render_views(light, views, grid, |job: &Job| {
+                let gain = ghost_gain(gains, job.ghost);
+                (gain > 0.0).then_some((None, gain))
+            }),
             Ghosts::Scouted(scout) => self.render_views(scout.light_deg, views, grid, |job: &Job| {
                 if job.ghost != scout.ghost {
                     return None;
                 }
-                scout.grids.get(job.wavelength).and_then(Option::as_ref).map(Some)
+                scout.grids.get(job.wavelength).and_then(Option::as_ref).map(|g| (Some(g), 1.0))
             }),
         }
     }
 
-    /// Validates a request and renders it: `plan(job)` is `None` for a job not drawn, `Some(None)` for one
-    /// whose pre-pass is traced over the whole front lens and `Some(Some(grid))` for one whose pre-pass is the
-    /// scouted `grid`.
+    /// Validates a request and renders it: `plan(job)` is `None` for a job not drawn, `Some((None, gain))` for
+    /// one whose pre-pass is traced over the whole front lens and `Some((Some(grid), gain))` for one whose
+    /// pre-pass is the scouted `grid`; its light is multiplied by `gain`.
     fn render_views<'s>(
         &self,
         light_deg: [f64; 2],
         views: &[View],
         grid: Grid,
-        plan: impl Fn(&Job) -> Option<Option<&'s TracedGrid>> + Sync,
+        plan: impl Fn(&Job) -> Option<(Option<&'s TracedGrid>, f64)> + Sync,
     ) -> Result<Vec<RayGridImage>, RayGridError> {
         validate(light_deg, views, grid)?;
         let u = light_slopes_for_frame_position(light_deg[0], light_deg[1]);
@@ -280,13 +294,13 @@ impl RayGridRenderer {
         // free, and puts it back: as many sets are made as jobs ever run at once (about one per thread), not
         // one per piece rayon splits the list into. A frame's ghosts each cover much of it, so every set ends
         // up holding most of the frame's tiles: fewer sets are fewer tiles made, merged and freed.
-        let drawn: Vec<(&Job, Option<&TracedGrid>)> =
-            self.jobs.iter().filter_map(|job| plan(job).map(|scouted| (job, scouted))).collect();
+        let drawn: Vec<(&Job, (Option<&TracedGrid>, f64))> =
+            self.jobs.iter().filter_map(|job| plan(job).map(|planned| (job, planned))).collect();
         let free: std::sync::Mutex<Vec<Vec<Accumulator>>> = std::sync::Mutex::new(Vec::new());
         let take = || free.lock().ok().and_then(|mut f| f.pop()).unwrap_or_else(fresh);
-        drawn.into_par_iter().for_each(|(job, scouted)| {
+        drawn.into_par_iter().for_each(|(job, (scouted, gain))| {
             let mut accs = take();
-            self.render_job(job, u, views, grid, scouted, &mut accs);
+            self.render_job(job, u, views, grid, scouted, gain, &mut accs);
             if let Ok(mut f) = free.lock() {
                 f.push(accs);
             }
@@ -305,6 +319,7 @@ impl RayGridRenderer {
         light_deg: [f64; 2],
         window: Window,
         cells: usize,
+        gains: &[f32],
     ) -> Result<Vec<PlannedJob<'_>>, RayGridError> {
         let views = [View { window, turn_deg: 0.0 }];
         let grid = Grid::Fixed(cells);
@@ -316,8 +331,14 @@ impl RayGridRenderer {
             .par_iter()
             .enumerate()
             .filter_map(|(index, job)| {
+                let gain = ghost_gain(gains, job.ghost);
+                if gain <= 0.0 {
+                    return None;
+                }
                 let b = self.front_pre_pass(job, u, d, grid, &views).0?.bounds;
-                Some(self.planned(index, b, cells, d))
+                let mut planned = self.planned(index, b, cells, d);
+                planned.rgb = planned.rgb.map(|w| w * gain);
+                Some(planned)
             })
             .collect())
     }
@@ -633,14 +654,15 @@ impl RayGridRenderer {
         views: &[View],
         grid: Grid,
         scouted: Option<&TracedGrid>,
+        gain: f64,
         accs: &mut [Accumulator],
     ) {
         #[cfg(target_arch = "x86_64")]
         if crate::optics::simd_level() >= 1 {
             // SAFETY: the processor has AVX2 (checked once by `simd_level`).
-            return unsafe { self.render_job_avx2(job, u, views, grid, scouted, accs) };
+            return unsafe { self.render_job_avx2(job, u, views, grid, scouted, gain, accs) };
         }
-        self.render_job_body(job, u, views, grid, scouted, accs)
+        self.render_job_body(job, u, views, grid, scouted, gain, accs)
     }
 
     /// [`Self::render_job_body`] compiled for AVX2.
@@ -653,9 +675,10 @@ impl RayGridRenderer {
         views: &[View],
         grid: Grid,
         scouted: Option<&TracedGrid>,
+        gain: f64,
         accs: &mut [Accumulator],
     ) {
-        self.render_job_body(job, u, views, grid, scouted, accs)
+        self.render_job_body(job, u, views, grid, scouted, gain, accs)
     }
 
     /// The body of [`Self::render_job`].
@@ -667,6 +690,7 @@ impl RayGridRenderer {
         views: &[View],
         grid: Grid,
         scouted: Option<&TracedGrid>,
+        gain: f64,
         accs: &mut [Accumulator],
     ) {
         for acc in accs.iter_mut() {
@@ -688,7 +712,7 @@ impl RayGridRenderer {
             return;
         };
         let grid = grid.for_extent(extent_px);
-        let weights = self.spectrum.weights_rgb[job.wavelength];
+        let weights = self.spectrum.weights_rgb[job.wavelength].map(|w| w * gain);
         let frame = JobFrame {
             ghost: job.ghost,
             rgb: weights,
@@ -761,6 +785,12 @@ pub struct PlannedJob<'a> {
     pub stop_count: usize,
     /// The wavelength's RGB weight.
     pub rgb: [f64; 3],
+}
+
+/// Ghost `g`'s gain in `gains` (missing: 1; not finite or negative: 0).
+fn ghost_gain(gains: &[f32], g: usize) -> f64 {
+    let gain = f64::from(gains.get(g).copied().unwrap_or(1.0));
+    if gain.is_finite() && gain > 0.0 { gain } else { 0.0 }
 }
 
 /// Refuses a render of `grid` cells, seen in `views`, for a light at `light_deg` that cannot be made.

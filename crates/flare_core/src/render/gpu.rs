@@ -330,6 +330,8 @@ pub struct FlareRenderer {
     compute_lut: Option<ComputeLut>,
     /// The uploaded LUT's entry sizes and lit texels, to bin its instances ([`bin_instances`]).
     lut_footprints: Vec<Vec<Footprint>>,
+    /// Draw the next frames by the raster passes even where the compute passes could ([`Self::rasterise_ghosts`]).
+    rasterise: bool,
 }
 
 /// Every bind group a frame uses (see [`FlareRenderer::bind_groups`]).
@@ -525,6 +527,7 @@ impl FlareRenderer {
             compute,
             compute_lut,
             lut_footprints: Vec::new(),
+            rasterise: false,
             lut_add_pipeline,
             lut_over_pipeline,
             lut_layout,
@@ -583,6 +586,14 @@ impl FlareRenderer {
         self.compute = None;
         self.compute_lut = None;
         self.hdr = None;
+    }
+
+    /// Draws the frames that follow by the raster passes (`ghosts.wgsl`, `lut_ghosts.wgsl`) while `yes`, even
+    /// where the compute passes could. The app does this for its drafts on a software adapter: lavapipe's
+    /// timestamps of compute passes come back far below the time they take, and the drafts' budget steers by
+    /// the GPU's time, which its raster passes report truly.
+    pub fn rasterise_ghosts(&mut self, yes: bool) {
+        self.rasterise = yes;
     }
 
     /// Caps the bytes of the compute pass's difference buffer (a test's way to draw a frame in many strips, as
@@ -699,15 +710,16 @@ impl FlareRenderer {
         globals.tonemap[2] = if self.target_format.is_srgb() { 0.0 } else { 1.0 };
         globals.plate[1] = if self.has_background { 1.0 } else { 0.0 };
         queue.write_buffer(&self.globals, 0, bytemuck::bytes_of(&globals));
-        if self.compute.is_none() && scene.instances.len() > self.instance_capacity {
+        let use_compute = self.compute.is_some() && !self.rasterise;
+        if !use_compute && scene.instances.len() > self.instance_capacity {
             self.instance_capacity = scene.instances.len().next_power_of_two();
             self.instances = vertex_buffer::<GhostInstance>(device, "ghost instances", self.instance_capacity);
         }
-        if self.compute.is_none() && !scene.instances.is_empty() {
+        if !use_compute && !scene.instances.is_empty() {
             queue.write_buffer(&self.instances, 0, bytemuck::cast_slice(&scene.instances));
         }
         let lut = lut.filter(|l| !l.instances.is_empty());
-        if let Some(lut) = lut.filter(|_| self.compute_lut.is_none()) {
+        if let Some(lut) = lut.filter(|_| !use_compute) {
             if lut.instances.len() > self.lut_capacity {
                 self.lut_capacity = lut.instances.len().next_power_of_two();
                 self.lut_instances = vertex_buffer::<LutInstance>(device, "lut instances", self.lut_capacity);
@@ -736,7 +748,7 @@ impl FlareRenderer {
         };
         {
             let mut frame = self.profiler.scope("flare", encoder);
-            if let Some(compute) = &mut self.compute {
+            if let (true, Some(compute)) = (use_compute, &mut self.compute) {
                 // The LUT layer first (the ghosts' resolve applies it), then the ghosts: every pixel of the
                 // accumulation is written once, so nothing clears it.
                 let layer = match (lut, &mut self.compute_lut) {
@@ -763,7 +775,7 @@ impl FlareRenderer {
                     pass.draw(0..6, 0..scene.instances.len() as u32);
                 }
             }
-            if let Some(lut) = lut.filter(|_| self.compute_lut.is_none()) {
+            if let Some(lut) = lut.filter(|_| !use_compute) {
                 let mut pass = frame.scoped_render_pass("lut", accumulate(&load));
                 pass.set_pipeline(if lut.alpha_over { &self.lut_over_pipeline } else { &self.lut_add_pipeline });
                 pass.set_bind_group(0, &groups.lut, &[]);

@@ -257,9 +257,13 @@ impl GpuRayGrid {
     }
 
     /// The ghosts of `renderer` for a light at the frame position `light_deg`, seen in `window`, a `cells` x
-    /// `cells` grid per ghost and wavelength, traced and drawn on `ctx`'s GPU. Each pixel is the mean of
-    /// `supersample` x `supersample` samples (the triangles rasterised at that many times the resolution, then
-    /// averaged): the box filter of the CPU twin, approached as the samples grow ([`SUPERSAMPLE`] by default).
+    /// `cells` grid per ghost and wavelength, traced and drawn on `ctx`'s GPU: with `supersample` [`BOX_FILTER`]
+    /// (the default) each triangle box-filtered exactly by a compute pass as the CPU twin does; else each pixel
+    /// the mean of `supersample` x `supersample` samples (the triangles rasterised at that many times the
+    /// resolution, then averaged), the earlier path, kept to compare.
+    /// Ghost `g` is drawn at the gain `gains[g]` (missing entries are 1, gain 0 leaves it out), as the CPU's
+    /// [`crate::raytrace::Ghosts::Weighted`].
+    #[allow(clippy::too_many_arguments)]
     pub fn render(
         &self,
         ctx: &GpuContext,
@@ -268,8 +272,9 @@ impl GpuRayGrid {
         window: Window,
         cells: usize,
         supersample: u32,
+        gains: &[f32],
     ) -> Result<GpuRayGridImage, GpuRayGridError> {
-        let planned = renderer.plan_fixed(light_deg, window, cells)?;
+        let planned = renderer.plan_fixed(light_deg, window, cells, gains)?;
         let jobs: Vec<&PlannedJob> = planned.iter().collect();
         let mut profiler = self.profiler.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
         self.draw(ctx, renderer, &jobs, View { window, turn_deg: 0.0 }, supersample, Some(&mut profiler))
@@ -722,7 +727,7 @@ impl GpuRayGrid {
         cells: usize,
         jobs: usize,
     ) -> Result<(Vec<PlannedJob<'r>>, Vec<GpuVertex>), GpuRayGridError> {
-        let mut planned = renderer.plan_fixed(light_deg, window, cells)?;
+        let mut planned = renderer.plan_fixed(light_deg, window, cells, &[])?;
         planned.truncate(jobs);
         let (device, queue) = (&ctx.device, &ctx.queue);
         let size = ((cells + 1) * (cells + 1) * planned.len() * std::mem::size_of::<GpuVertex>()) as u64;
