@@ -1,7 +1,8 @@
 // Ghost sprites as compute: the CPU twin's algorithm on the GPU, no rasteriser.
 // CPU twin: crates/flare_core/src/render/cpu/ghosts.rs, `ghost_pass` (`spans` is its `sweep_instance`, `resolve`
-// its per-row sum; same names, same steps). Must be kept in sync with `GhostInstance` in
-// crates/flare_core/src/render/mod.rs and `ComputeStrip` in crates/flare_core/src/render/gpu.rs.
+// its per-row sum; same names, same steps); the fixed-point helpers come from fixed64.wgsl. Must be kept in sync
+// with `GhostInstance` in crates/flare_core/src/render/mod.rs and `ComputeStrip` in
+// crates/flare_core/src/render/gpu_ghosts.rs.
 //
 // How it works. One invocation of `spans` per (sprite, accumulation row) the sprite covers: it finds the row's
 // open span (where the front disc and every stop crossing's mask are exactly 1, from the mask's per-row table)
@@ -170,27 +171,7 @@ fn stop_of(inst: GhostInstance, k: u32) -> vec4<f32> {
     return inst.stop2;
 }
 
-// ---- 64-bit fixed point in two u32 words ----
-
-fn fixed(v: f32) -> vec2<u32> {
-    let r = round(v);
-    if (abs(r) < 2147483648.0) {
-        let i = i32(r);
-        return vec2<u32>(bitcast<u32>(i), select(0u, 0xffffffffu, i < 0));
-    }
-    // |r| >= 2^31: a multiple of 2^8 at least; both steps are exact.
-    let hi = floor(r / 4294967296.0);
-    return vec2<u32>(u32(r - hi * 4294967296.0), bitcast<u32>(i32(hi)));
-}
-
-fn sub64(a: vec2<u32>, b: vec2<u32>) -> vec2<u32> {
-    return vec2<u32>(a.x - b.x, a.y - b.y - select(0u, 1u, a.x < b.x));
-}
-
-fn add64(a: vec2<u32>, b: vec2<u32>) -> vec2<u32> {
-    let lo = a.x + b.x;
-    return vec2<u32>(lo, a.y + b.y + select(0u, 1u, lo < a.x));
-}
+// ---- 64-bit fixed point (fixed64.wgsl): the atomic sum ----
 
 fn atomic_add64(word: u32, v: vec2<u32>) {
     let old = atomicAdd(&diff[word], v.x);
@@ -340,7 +321,7 @@ fn load64(word: u32) -> vec2<u32> {
 }
 
 fn to_float(v: vec2<u32>) -> f32 {
-    return (f32(bitcast<i32>(v.y)) * 4294967296.0 + f32(v.x)) * strip.unit_per_fixed;
+    return float64(v) * strip.unit_per_fixed;
 }
 
 // One workgroup per strip row: each invocation sums its run of columns, the runs' sums are added up in order,

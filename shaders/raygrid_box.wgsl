@@ -5,7 +5,7 @@
 // Energy goes into a per-pixel 64-bit fixed-point sum (two u32 words added with carry by atomics), so the image
 // does not depend on the order in which triangles land: the same bytes on every run. `resolve_box` turns the
 // sums into floats and clears them. The declarations come from raygrid_common.wgsl, the mask lookup from
-// aperture.wgsl. Must be kept in sync with `BoxParams` in crates/flare_core/src/render/raygrid.rs.
+// aperture.wgsl, the fixed-point helpers from fixed64.wgsl. Must be kept in sync with `BoxParams` in crates/flare_core/src/render/raygrid.rs.
 
 struct BoxParams {
     width: u32,           // the frame (pixels)
@@ -185,17 +185,7 @@ fn full_columns(p: Poly, y: f32) -> vec2<f32> {
     return vec2<f32>(ceil(max(bottom.x, top.x)), floor(min(bottom.y, top.y)));
 }
 
-// ---- 64-bit fixed point ----
-
-fn fixed(v: f32) -> vec2<u32> {
-    let r = round(v);
-    if (abs(r) < 2147483648.0) {
-        let i = i32(r);
-        return vec2<u32>(bitcast<u32>(i), select(0u, 0xffffffffu, i < 0));
-    }
-    let hi = floor(r / 4294967296.0);
-    return vec2<u32>(u32(r - hi * 4294967296.0), bitcast<u32>(i32(hi)));
-}
+// ---- 64-bit fixed point (fixed64.wgsl): the atomic sum ----
 
 fn atomic_add64(word: u32, v: vec2<u32>) {
     let old = atomicAdd(&sums[word], v.x);
@@ -402,7 +392,7 @@ fn resolve_box(@builtin(global_invocation_id) gid: vec3<u32>) {
         let word = pixel * 6u + 2u * c;
         let lo = atomicLoad(&sums[word]);
         let hi = atomicLoad(&sums[word + 1u]);
-        out[c] = max((f32(bitcast<i32>(hi)) * 4294967296.0 + f32(lo)) * box_params.unit_per_fixed, 0.0);
+        out[c] = max(float64(vec2<u32>(lo, hi)) * box_params.unit_per_fixed, 0.0);
         atomicStore(&sums[word], 0u);
         atomicStore(&sums[word + 1u], 0u);
     }

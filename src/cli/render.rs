@@ -635,7 +635,15 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                     let gpu = flare_core::render::raygrid::GpuRayGrid::new(&drawer.ctx.device);
                     let window = raytrace::Window::frame(width, height);
                     let samples = args.gpu_samples;
-                    match gpu.render(&drawer.ctx, &renderer, planned.light_deg, window, cells, samples, &request.ghost_gains) {
+                    match gpu.render(
+                        &drawer.ctx,
+                        &renderer,
+                        planned.light_deg,
+                        window,
+                        cells,
+                        samples,
+                        &request.ghost_gains,
+                    ) {
                         // A lost device (or an error it reported) falls back to the CPU; a refused grid is an error.
                         Err(flare_core::render::raygrid::GpuRayGridError::Gpu(e)) => {
                             eprintln!("ray grids on the GPU failed ({e}): tracing on the CPU instead");
@@ -647,7 +655,11 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                                 "ray grids on the GPU ({}): {} ghost x wavelength jobs with light, {cells}-cell grid, {}, {} batches, {:.2} s{}",
                                 drawer.ctx.adapter.name,
                                 traced.jobs,
-                                if samples == 0 { "box-filtered".to_string() } else { format!("{samples}x{samples} samples a pixel") },
+                                if samples == 0 {
+                                    "box-filtered".to_string()
+                                } else {
+                                    format!("{samples}x{samples} samples a pixel")
+                                },
                                 traced.batches,
                                 started.elapsed().as_secs_f64(),
                                 traced

@@ -1,47 +1,76 @@
-//! Ad-hoc timing: the paraxial frame on the CPU twin and on the GPU (compute and raster ghosts).
-use flare_core::flare::{FlareConfig, PreparedFlare};
-use flare_core::frame::{self, Frame, FrameRequest, GpuDrawer, Sources};
-use flare_core::optics::library::builtin_lens;
-use flare_core::render::DisplaySettings;
+//! The paraxial (or, given a `.flut`, blended) frame of a built-in lens on the CPU twin and on the GPU, with the
+//! ghosts drawn by the compute passes and by the raster passes: medians of 5 frames, each waited for (no
+//! read-back), and the GPU's own time of the passes by timestamps. What the README's lavapipe table came from.
+//!
+//! `cargo run --release -p flare_core --example gpu_timing -- LENS WIDTH HEIGHT [LUT.flut]`
+
 use std::time::Instant;
 
-fn main() {
+use flare_core::flare::{FlareConfig, PreparedFlare};
+use flare_core::frame::{self, Frame, FrameRequest, GpuDrawer, LutUse, Sources};
+use flare_core::lut::blend::LiveLut;
+use flare_core::optics::library::builtin_lens;
+use flare_core::render::DisplaySettings;
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
-    let lens = builtin_lens(&args[1]).unwrap();
-    let (w, h): (u32, u32) = (args[2].parse().unwrap(), args[3].parse().unwrap());
-    let flare = PreparedFlare::new(&lens, &FlareConfig::default()).unwrap();
-    let live = args.get(4).map(|p| flare_core::lut::blend::LiveLut::new(flare_core::lut::format::read_lut(std::path::Path::new(p)).unwrap()));
+    let usage = "usage: gpu_timing LENS WIDTH HEIGHT [LUT.flut]";
+    let lens = builtin_lens(args.get(1).ok_or(usage)?)?;
+    let (w, h): (u32, u32) = (args.get(2).ok_or(usage)?.parse()?, args.get(3).ok_or(usage)?.parse()?);
+    let flare = PreparedFlare::new(&lens, &FlareConfig::default())?;
+    let live = match args.get(4) {
+        Some(path) => Some(LiveLut::new(flare_core::lut::format::read_lut(std::path::Path::new(path))?)),
+        None => None,
+    };
     let request = FrameRequest {
         light_deg: [9.0, 5.0],
         width: w,
         height: h,
         display: DisplaySettings { starburst: false, ..DisplaySettings::default() },
-        lut_use: if live.is_some() { flare_core::frame::LutUse::Blend } else { flare_core::frame::LutUse::Off },
+        lut_use: if live.is_some() { LutUse::Blend } else { LutUse::Off },
         ..FrameRequest::default()
     };
     let sources = Sources { flare: &flare, lut: live.as_ref(), plate: None };
-    let med = |mut v: Vec<f64>| { v.sort_by(f64::total_cmp); v[v.len() / 2] };
-    let cpu: Vec<f64> = (0..5).map(|_| { let s = Instant::now(); let f = Frame::build(&flare, live.as_ref(), &request); let _ = frame::draw_cpu_hdr(&f, &sources); s.elapsed().as_secs_f64() * 1e3 }).collect();
-    println!("CPU twin: {:.1} ms", med(cpu));
-    for raster in [false, std::env::var("RASTER").is_ok()] {
-        if raster && std::env::var("RASTER").is_err() { break; }
-        let mut drawer = GpuDrawer::new(true).unwrap();
-        if raster { drawer.renderer.force_raster_ghosts(); }
-        let target = flare_core::render::gpu::texture_2d(&drawer.ctx.device, "t", w, h, wgpu::TextureFormat::Rgba8Unorm, wgpu::TextureUsages::RENDER_ATTACHMENT);
-        let view = target.create_view(&Default::default());
-        let mut wall = Vec::new();
-        let mut gpu = Vec::new();
-        for _ in 0..5 {
-            let s = Instant::now();
+    let cpu: Vec<f64> = (0..5)
+        .map(|_| {
+            let start = Instant::now();
             let f = Frame::build(&flare, live.as_ref(), &request);
-            let t1 = s.elapsed().as_secs_f64() * 1e3;
-            drawer.render_into(&f, &sources, &view).unwrap();
-            let t2 = s.elapsed().as_secs_f64() * 1e3;
-            let _ = drawer.ctx.device.poll(wgpu::PollType::wait_indefinitely());
-            wall.push(s.elapsed().as_secs_f64() * 1e3);
-            println!("  build {t1:.1} render_into {:.1} poll {:.1}", t2 - t1, wall.last().unwrap() - t2);
-            if let Some(t) = drawer.renderer.wait_pass_times(&drawer.ctx.device, &drawer.ctx.queue) { gpu.push(t.total_ms()); println!("  {}", t.summary()); }
+            let _ = frame::draw_cpu_hdr(&f, &sources);
+            start.elapsed().as_secs_f64() * 1e3
+        })
+        .collect();
+    println!("CPU twin: {:.1} ms", median(cpu));
+    for raster in [false, true] {
+        let mut drawer = GpuDrawer::new(true)?;
+        if raster {
+            drawer.renderer.force_raster_ghosts();
         }
-        println!("GPU ({}, {}): wall {:.1} ms, GPU {:.1} ms", drawer.ctx.adapter.name, if raster { "raster" } else { "compute" }, med(wall), if gpu.is_empty() { f64::NAN } else { med(gpu) });
+        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT;
+        let target =
+            flare_core::render::gpu::texture_2d(&drawer.ctx.device, "t", w, h, wgpu::TextureFormat::Rgba8Unorm, usage);
+        let view = target.create_view(&Default::default());
+        let (mut wall, mut gpu) = (Vec::new(), Vec::new());
+        for _ in 0..5 {
+            let start = Instant::now();
+            let f = Frame::build(&flare, live.as_ref(), &request);
+            drawer.render_into(&f, &sources, &view)?;
+            wall.push(start.elapsed().as_secs_f64() * 1e3);
+            if let Some(t) = drawer.renderer.wait_pass_times(&drawer.ctx.device, &drawer.ctx.queue) {
+                gpu.push(t.total_ms());
+            }
+        }
+        println!(
+            "GPU ({}, {} passes): wall {:.1} ms, GPU time by timestamps {:.1} ms",
+            drawer.ctx.adapter.name,
+            if raster { "raster" } else { "compute" },
+            median(wall),
+            median(gpu)
+        );
     }
+    Ok(())
 }

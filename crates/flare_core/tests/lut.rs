@@ -341,12 +341,9 @@ fn the_gpu_draws_lut_ghosts_as_its_cpu_twin_does() {
     let flare = flare("tessar");
     let live = LiveLut::new(small_lut(&flare));
     let light = light_position_deg(9.0, 140.0);
-    for (mode, raster) in [
-        (BlendMode::Additive, false),
-        (BlendMode::Alpha, false),
-        (BlendMode::Additive, true),
-        (BlendMode::Alpha, true),
-    ] {
+    for (mode, raster) in
+        [(BlendMode::Additive, false), (BlendMode::Alpha, false), (BlendMode::Additive, true), (BlendMode::Alpha, true)]
+    {
         let blend = BlendSettings { mode, ..BlendSettings::default() };
         let frame = scenes(&live, &flare, light, 160, 120, &blend, true);
         let (mut scene, lut_scene) = (frame.scene.clone(), frame.lut.clone().unwrap_or_default());

@@ -1,5 +1,6 @@
-//! Blending LUT ghosts into the live flare: the run-time half of the patent, on the GPU (`lut_ghosts.wgsl`)
-//! and its CPU twin ([`lut_pass`]).
+//! Blending LUT ghosts into the live flare: the run-time half of the patent, on the GPU (`lut_compute.wgsl`,
+//! binned by [`bin_instances`]; `lut_ghosts.wgsl` where the device has no compute) and its CPU twin
+//! ([`lut_pass`]).
 //!
 //! # How it works
 //! For a light of slopes u, [`LutScene::build`] takes the light's (theta, alpha), reduces alpha to the
@@ -21,7 +22,10 @@
 //!
 //! Instances reference their entry in an atlas ([`AtlasLayout`]): pages of [`ATLAS_PAGE`] texels with a
 //! zero border of one texel around every entry, so the GPU's bilinear sampler returns what
-//! [`super::LutEntry::sample`] does (0 outside the image).
+//! [`super::LutEntry::sample`] does (0 outside the image). Each entry's [`Footprint`] (size, the box of its lit
+//! texels, its brightest texel) is measured once per LUT: the CPU pass samples only where an entry is lit,
+//! [`bin_instances`] bins instances into tiles by it, and [`LutScene::cull_faint`] leaves out the images that
+//! cannot be seen at the frame's exposure.
 
 use bytemuck::{Pod, Zeroable};
 use rayon::prelude::*;
@@ -465,8 +469,13 @@ impl TexelMap {
         let [lx0, lx1, ly0, ly1] = footprint.lit.map(|v| v as f32);
         let support = [quad[0].max(lx0 - 1.0), quad[1].min(lx1 + 1.0), quad[2].max(ly0 - 1.0), quad[3].min(ly1 + 1.0)];
         let finite = origin.iter().chain(&d_di).chain(&d_dj).all(|v| v.is_finite());
-        (finite && support[0] <= support[1] && support[2] <= support[3])
-            .then_some(Self { origin, d_di, d_dj, support, quad })
+        (finite && support[0] <= support[1] && support[2] <= support[3]).then_some(Self {
+            origin,
+            d_di,
+            d_dj,
+            support,
+            quad,
+        })
     }
 
     /// The accumulation pixels (x range, y range) of the support box's corners: where a sample can be
@@ -608,7 +617,12 @@ fn footprints(lut: &GhostLut) -> Vec<Vec<Footprint>> {
                         }
                     }
                     let lit = if b[0] == u32::MAX { [1, 0, 1, 0] } else { b };
-                    Footprint { width: e.width, height: e.height, lit, peak: if peak.is_finite() { peak } else { f32::MAX } }
+                    Footprint {
+                        width: e.width,
+                        height: e.height,
+                        lit,
+                        peak: if peak.is_finite() { peak } else { f32::MAX },
+                    }
                 })
                 .collect()
         })
@@ -690,7 +704,11 @@ fn lut_band(
         let texels = &inst.entry.texels;
         let [qx0, qx1, qy0, qy1] = inst.map.quad;
         let at = |i: i32, j: i32| -> [f32; 4] {
-            if (i as u32) < ew as u32 && (j as u32) < eh as u32 { decode(&texels[(j * ew + i) as usize]) } else { [0.0; 4] }
+            if (i as u32) < ew as u32 && (j as u32) < eh as u32 {
+                decode(&texels[(j * ew + i) as usize])
+            } else {
+                [0.0; 4]
+            }
         };
         for y in rows.clone() {
             let columns = inst.map.columns(y, width);
@@ -709,8 +727,9 @@ fn lut_band(
                 let (ix, iy) = ((tx + 1.0) as i32 - 1, (ty + 1.0) as i32 - 1);
                 let (fx, fy) = (tx - ix as f32, ty - iy as f32);
                 let (a, b, c, d) = (at(ix, iy), at(ix + 1, iy), at(ix, iy + 1), at(ix + 1, iy + 1));
-                let t: [f32; 4] =
-                    std::array::from_fn(|k| (a[k] * (1.0 - fx) + b[k] * fx) * (1.0 - fy) + (c[k] * (1.0 - fx) + d[k] * fx) * fy);
+                let t: [f32; 4] = std::array::from_fn(|k| {
+                    (a[k] * (1.0 - fx) + b[k] * fx) * (1.0 - fy) + (c[k] * (1.0 - fx) + d[k] * fx) * fy
+                });
                 let p = &mut out[x];
                 let keep = if alpha_over { 1.0 - (t[3] * inst.colour[3]).clamp(0.0, 1.0) } else { 1.0 };
                 for ch in 0..3 {

@@ -1,9 +1,10 @@
-//! GPU buffers made the one way every pass makes them.
+//! GPU buffers, textures and compute pipelines made the one way every pass makes them.
 //!
 //! # How it works
 //! [`storage`] creates a buffer and writes its contents through the queue rather than mapping it at creation:
 //! on a lost device that is an error the device records (and the frame pipeline reports), never a panic. The
-//! renderer's passes, the ray grids and the depth of field all upload through it.
+//! renderer's passes, the ray grids and the depth of field all upload through it. [`compute_pipeline`] makes
+//! a compute pipeline with the layout its entry point implies (its bind groups are made from that layout).
 
 /// A buffer of `usage` holding `contents`, written through the queue (on a lost device this is an error the
 /// device records, not a panic as a buffer mapped at creation would be).
@@ -25,3 +26,42 @@ pub(crate) fn storage(
     buffer
 }
 
+/// The compute pipeline of `module`'s `entry` point, its layout the one the entry point implies.
+pub(crate) fn compute_pipeline(
+    device: &wgpu::Device,
+    module: &wgpu::ShaderModule,
+    entry: &str,
+) -> wgpu::ComputePipeline {
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(entry),
+        layout: None,
+        module,
+        entry_point: Some(entry),
+        compilation_options: Default::default(),
+        cache: None,
+    })
+}
+
+/// The HDR accumulation format.
+pub const HDR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+
+/// A plain 2D texture (one mip level, one sample).
+pub fn texture_2d(
+    device: &wgpu::Device,
+    label: &str,
+    width: u32,
+    height: u32,
+    format: wgpu::TextureFormat,
+    usage: wgpu::TextureUsages,
+) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage,
+        view_formats: &[],
+    })
+}

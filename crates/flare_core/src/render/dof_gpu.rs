@@ -12,7 +12,8 @@
 
 use wgpu_profiler::{GpuProfiler, GpuProfilerSettings};
 
-use super::gpu::{GpuContext, GpuError, PassTimes, map_read, storage};
+use super::buffers::{compute_pipeline, storage};
+use super::gpu::{GpuContext, GpuError, PassTimes, map_read};
 use super::shaders::DOF_WGSL;
 use crate::dof::live::{LiveLayer, LivePlan};
 use crate::image::HdrImage;
@@ -43,16 +44,7 @@ impl GpuDof {
             label: Some("dof.wgsl"),
             source: wgpu::ShaderSource::Wgsl(DOF_WGSL.into()),
         });
-        let pipeline = |entry: &str| {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry),
-                layout: None,
-                module: &module,
-                entry_point: Some(entry),
-                compilation_options: Default::default(),
-                cache: None,
-            })
-        };
+        let pipeline = |entry: &str| compute_pipeline(device, &module, entry);
         Self {
             split: pipeline("split"),
             gather: pipeline("gather"),

@@ -3,12 +3,17 @@
 //! # How it works
 //! [`FlareRenderer`] owns its pipelines, the aperture mask (R8Unorm), the starburst (Rgba16Float), an
 //! optional background plate (Rgba16Float) and an HDR accumulation target (Rgba16Float, resized on demand).
-//! [`crate::frame`]'s headless drawer), records its render passes into the caller's encoder:
-//! 1. the accumulation, in up to three passes into the HDR target: `ghosts.wgsl` (clearing it first; one
-//!    instanced quad per ghost sprite, additive), `lut_ghosts.wgsl` (when a LUT is set and the frame has LUT
-//!    instances: LUT images from the atlas, a 2D array of [`ATLAS_PAGE`]-texel Rgba16Float pages, added or
-//!    composited over through alpha) and `starburst.wgsl` (the diffraction texture at the light's image,
-//!    additive);
+//! [`crate::frame`]'s headless drawer), records its passes into the caller's encoder:
+//! 1. the accumulation into the HDR target. Where the device runs compute shaders (`ComputeGhosts::supported`:
+//!    every Vulkan, Metal and DX12 adapter), the LUT ghosts (`lut_compute.wgsl`, `render::gpu_lut`: per pixel
+//!    the instances binned to its tile, into a LUT layer) and then the ghost sprites (`ghosts_compute.wgsl`,
+//!    `render::gpu_ghosts`: per sprite and row the open span and the edges into 64-bit fixed-point row
+//!    differences, summed once per row while the LUT layer is applied) are compute passes that write every
+//!    pixel once, deterministically; elsewhere (a WebGL2-class device), and when
+//!    [`FlareRenderer::rasterise_ghosts`] asks, `ghosts.wgsl` (clearing the target; one instanced quad per
+//!    ghost sprite, additive) and `lut_ghosts.wgsl` (LUT images from the atlas, a 2D array of [`ATLAS_PAGE`]-texel
+//!    Rgba16Float pages, added or composited over through alpha) rasterise them. Then `starburst.wgsl` (the
+//!    diffraction texture at the light's image, additive);
 //! 2. `tonemap.wgsl`: the composite `hdr x 2^flare_ev + plate x 2^plate_ev`, the tonemap and (for non-sRGB
 //!    targets) the sRGB encoding into the caller's view.
 //!
@@ -26,19 +31,16 @@
 
 use wgpu_profiler::{GpuProfiler, GpuProfilerSettings, GpuTimerQueryResult};
 
-use super::shaders::{GHOSTS_WGSL, LUT_GHOSTS_WGSL, STARBURST_WGSL, TONEMAP_WGSL};
-pub(crate) use super::buffers::storage;
+pub use super::buffers::{HDR_FORMAT, texture_2d};
 use super::gpu_ghosts::ComputeGhosts;
 use super::gpu_lut::{ComputeLut, TILE};
-use crate::lut::blend::{Footprint, bin_instances};
+use super::shaders::{GHOSTS_WGSL, LUT_GHOSTS_WGSL, STARBURST_WGSL, TONEMAP_WGSL};
 use super::{FlareScene, GhostInstance, Globals};
 use crate::aperture::ApertureMask;
 use crate::image::{DisplayImage, HdrImage};
 use crate::lut::blend::{ATLAS_PAGE, LiveLut, LutInstance, LutScene};
+use crate::lut::blend::{Footprint, bin_instances};
 use crate::starburst::Starburst;
-
-/// The HDR accumulation format.
-pub const HDR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 
 /// Why the GPU path is not available or failed.
 #[derive(Debug, thiserror::Error)]
@@ -211,27 +213,6 @@ pub fn test_context() -> Option<GpuContext> {
             None
         }
     }
-}
-
-/// A plain 2D texture (one mip level, one sample).
-pub fn texture_2d(
-    device: &wgpu::Device,
-    label: &str,
-    width: u32,
-    height: u32,
-    format: wgpu::TextureFormat,
-    usage: wgpu::TextureUsages,
-) -> wgpu::Texture {
-    device.create_texture(&wgpu::TextureDescriptor {
-        label: Some(label),
-        size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
-        format,
-        usage,
-        view_formats: &[],
-    })
 }
 
 fn upload(queue: &wgpu::Queue, texture: &wgpu::Texture, bytes: &[u8], bytes_per_pixel: u32) {
@@ -760,7 +741,17 @@ impl FlareRenderer {
                         });
                         let mut pass = frame.scoped_compute_pass("lut");
                         let frame_size = (scene.width, scene.height);
-                        Some(compute_lut.encode(device, queue, &mut pass, frame_size, (w, h), lut, &bins, &atlas, &self.sampler))
+                        Some(compute_lut.encode(
+                            device,
+                            queue,
+                            &mut pass,
+                            frame_size,
+                            (w, h),
+                            lut,
+                            &bins,
+                            &atlas,
+                            &self.sampler,
+                        ))
                     }
                     _ => None,
                 };

@@ -20,14 +20,14 @@
 //! another into the same buffer (`resolve` leaves it zeroed); a strip's items beyond
 //! `max_compute_workgroups_per_dimension` workgroups go in a second dimension. [`ComputeGhosts::supported`]
 //! says whether a device can run the pass at all (compute shaders, four storage buffers, a storage texture);
-//! where it cannot (a WebGL-class adapter), [`super::gpu::FlareRenderer`] keeps the raster pass
+//! where it cannot (a WebGL-class adapter), `FlareRenderer` keeps the raster pass
 //! (`ghosts.wgsl`).
 
 use bytemuck::{Pod, Zeroable};
 
+use super::buffers::{HDR_FORMAT, compute_pipeline, storage, texture_2d};
 use super::cpu::ghosts::{MaskRows, without_open_stops};
 use super::cpu::quads::{accumulation_scale, covered};
-use super::buffers::storage;
 use super::shaders::GHOSTS_COMPUTE_WGSL;
 use super::{FlareScene, GhostInstance};
 use crate::aperture::ApertureMask;
@@ -175,16 +175,7 @@ impl ComputeGhosts {
             label: Some("ghosts_compute.wgsl"),
             source: wgpu::ShaderSource::Wgsl(GHOSTS_COMPUTE_WGSL.into()),
         });
-        let pipeline = |entry: &str| {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry),
-                layout: None,
-                module: &module,
-                entry_point: Some(entry),
-                compilation_options: Default::default(),
-                cache: None,
-            })
-        };
+        let pipeline = |entry: &str| compute_pipeline(device, &module, entry);
         let open = ApertureMask { size: 1, texels: vec![255] };
         let limits = device.limits();
         let mut this = Self {
@@ -195,7 +186,7 @@ impl ComputeGhosts {
             open_radius: 0.0,
             diff: None,
             strip_bytes: u64::from(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size),
-            no_layer: super::gpu::texture_2d(device, "no lut layer", 1, 1, super::gpu::HDR_FORMAT, wgpu::TextureUsages::TEXTURE_BINDING)
+            no_layer: texture_2d(device, "no lut layer", 1, 1, HDR_FORMAT, wgpu::TextureUsages::TEXTURE_BINDING)
                 .create_view(&wgpu::TextureViewDescriptor::default()),
         };
         this.set_aperture(device, queue, &open);
@@ -212,7 +203,7 @@ impl ComputeGhosts {
 
     /// Records the pass into `pass`: every sprite of `scene` into `hdr` (the accumulation, a storage texture of
     /// the scene's accumulation size), every pixel written (the pass also clears it), with the LUT layer
-    /// `lut_layer` ([`super::gpu_lut`]) applied as it is written.
+    /// `lut_layer` (`render::gpu_lut`) applied as it is written.
     pub(crate) fn encode(
         &mut self,
         device: &wgpu::Device,
@@ -244,11 +235,8 @@ impl ComputeGhosts {
             self.diff = Some((buffer, needed));
         }
         let Some((diff, _)) = &self.diff else { return };
-        let instance_bytes: &[u8] = if instances.is_empty() {
-            bytemuck::bytes_of(&[0.0f32; 24])
-        } else {
-            bytemuck::cast_slice(&instances)
-        };
+        let instance_bytes: &[u8] =
+            if instances.is_empty() { bytemuck::bytes_of(&[0.0f32; 24]) } else { bytemuck::cast_slice(&instances) };
         let instance_buffer = storage(device, queue, "ghost sprites", instance_bytes, wgpu::BufferUsages::STORAGE);
         let mut uniforms = vec![0u8; STRIP_STRIDE as usize * strips.len()];
         for (k, s) in strips.iter().enumerate() {
@@ -257,7 +245,8 @@ impl ComputeGhosts {
         }
         let uniform_buffer = storage(device, queue, "ghost strips", &uniforms, wgpu::BufferUsages::UNIFORM);
         for (k, s) in strips.iter().enumerate() {
-            let items = storage(device, queue, "ghost items", bytemuck::cast_slice(&s.items), wgpu::BufferUsages::STORAGE);
+            let items =
+                storage(device, queue, "ghost items", bytemuck::cast_slice(&s.items), wgpu::BufferUsages::STORAGE);
             let params = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
                 buffer: &uniform_buffer,
                 offset: k as u64 * STRIP_STRIDE,

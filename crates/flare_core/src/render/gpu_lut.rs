@@ -6,15 +6,14 @@
 //! ([`crate::lut::blend::bin_instances`]: each instance goes to the tiles its lit texels can reach). One
 //! invocation per pixel walks its tile's list in the frame's order and samples the atlas as the raster pass did;
 //! it writes the LUT layer as `(A, K)`, what the layer does to whatever lies beneath it (`A + K x under`), into
-//! a texture of the accumulation's size. The ghost pass's `resolve` ([`super::gpu_ghosts`]) applies it while
+//! a texture of the accumulation's size. The ghost pass's `resolve` (`render::gpu_ghosts`) applies it while
 //! it writes each pixel, so the accumulation is written once and every pixel pays only for the instances that
 //! reach its tile. With the ghosts rasterised (a device without compute) the raster LUT pass (`lut_ghosts.wgsl`)
 //! stays.
 
 use bytemuck::{Pod, Zeroable};
 
-use super::buffers::storage;
-use super::gpu::{HDR_FORMAT, texture_2d};
+use super::buffers::{HDR_FORMAT, compute_pipeline, storage, texture_2d};
 use super::shaders::LUT_COMPUTE_WGSL;
 use crate::lut::blend::{LutBins, LutScene};
 
@@ -51,15 +50,7 @@ impl ComputeLut {
             label: Some("lut_compute.wgsl"),
             source: wgpu::ShaderSource::Wgsl(LUT_COMPUTE_WGSL.into()),
         });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("lut tiles"),
-            layout: None,
-            module: &module,
-            entry_point: Some("lut_tiles"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        Self { pipeline, layer: None }
+        Self { pipeline: compute_pipeline(device, &module, "lut_tiles"), layer: None }
     }
 
     /// Records the pass into `pass` for the accumulation of `acc_size` pixels of a `frame_size` frame, and
@@ -95,7 +86,8 @@ impl ComputeLut {
             unused: 0,
         };
         let uniform = storage(device, queue, "lut tiles", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
-        let instances = storage(device, queue, "lut sprites", bytemuck::cast_slice(&lut.instances), wgpu::BufferUsages::STORAGE);
+        let instances =
+            storage(device, queue, "lut sprites", bytemuck::cast_slice(&lut.instances), wgpu::BufferUsages::STORAGE);
         let words: Vec<u32> = bins.starts.iter().chain(&bins.list).copied().collect();
         let bin_buffer = storage(device, queue, "lut bins", bytemuck::cast_slice(&words), wgpu::BufferUsages::STORAGE);
         let group = device.create_bind_group(&wgpu::BindGroupDescriptor {

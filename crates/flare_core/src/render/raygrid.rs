@@ -32,7 +32,8 @@
 //! that fit the largest storage buffer the adapter binds. A device lost on the way is
 //! [`GpuError::Lost`] (the command line then traces on the CPU).
 
-use super::gpu::{GpuContext, GpuError, PassTimes, map_read, read_texture, storage, texture_2d};
+use super::buffers::{compute_pipeline, storage};
+use super::gpu::{GpuContext, GpuError, PassTimes, map_read, read_texture, texture_2d};
 use super::shaders::{RAYGRID_BOX_WGSL, RAYGRID_SPLAT_WGSL, RAYGRID_TRACE_WGSL};
 use crate::image::HdrImage;
 use crate::raytrace::{DENSE_TABLE_SAMPLES, Grid, PlannedJob, RayGridError, RayGridRenderer, Scout, View, Window};
@@ -233,16 +234,7 @@ impl GpuRayGrid {
             label: Some("raygrid_box.wgsl"),
             source: wgpu::ShaderSource::Wgsl(RAYGRID_BOX_WGSL.into()),
         });
-        let compute = |entry: &str| {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry),
-                layout: None,
-                module: &box_module,
-                entry_point: Some(entry),
-                compilation_options: Default::default(),
-                cache: None,
-            })
-        };
+        let compute = |entry: &str| compute_pipeline(device, &box_module, entry);
         let limits = device.limits();
         Self {
             trace_pipeline,
@@ -365,21 +357,7 @@ impl GpuRayGrid {
         );
         let target_view = target.create_view(&wgpu::TextureViewDescriptor::default());
         let mask = renderer.mask();
-        let aperture = texture_2d(
-            device,
-            "raygrid aperture",
-            mask.size as u32,
-            mask.size as u32,
-            wgpu::TextureFormat::R8Unorm,
-            wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-        );
-        queue.write_texture(
-            aperture.as_image_copy(),
-            &mask.texels,
-            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(mask.size as u32), rows_per_image: None },
-            aperture.size(),
-        );
-        let aperture_view = aperture.create_view(&wgpu::TextureViewDescriptor::default());
+        let aperture_view = aperture_view(device, queue, mask);
         // Jobs of one grid size together, in batches whose vertices fit one storage binding (at most 256 MB,
         // and at most 65535 jobs, the dispatch's y).
         let mut order = planned.to_vec();
@@ -456,21 +434,7 @@ impl GpuRayGrid {
         if let Some(reason) = ctx.failure() {
             return Err(GpuError::Lost(reason).into());
         }
-        let gpu_times = profiler.and_then(|p| {
-            let _ = device.poll(wgpu::PollType::wait_indefinitely());
-            let mut summed: Option<PassTimes> = None;
-            while let Some(results) = p.process_finished_frame(queue.get_timestamp_period()) {
-                let mut times = PassTimes::default();
-                for (name, ms) in PassTimes::from_results(&results).passes {
-                    match times.passes.iter_mut().find(|(n, _)| *n == name) {
-                        Some((_, total)) => *total += ms,
-                        None => times.passes.push((name, ms)),
-                    }
-                }
-                summed = Some(times);
-            }
-            summed.filter(|t| !t.passes.is_empty())
-        });
+        let gpu_times = profiler.and_then(|p| summed_times(device, queue, p));
         Ok(GpuRayGridImage { hdr: hdr?.box_reduced(s), jobs: planned.len(), batches, gpu_times })
     }
 
@@ -512,11 +476,18 @@ impl GpuRayGrid {
                 "max_compute_workgroups_per_dimension",
             )
         })
-        .or_else(|| limit("bytes of vertices for one ghost", bytes_of(cells), binding, "max_storage_buffer_binding_size"))
+        .or_else(|| {
+            limit("bytes of vertices for one ghost", bytes_of(cells), binding, "max_storage_buffer_binding_size")
+        })
         .or_else(|| limit("bytes of sums for one row", row_bytes, binding, "max_storage_buffer_binding_size"))
         .or_else(|| {
             let side = u64::from(window.width.max(window.height));
-            limit("pixels across the frame", side, u64::from(limits.max_texture_dimension_2d), "max_texture_dimension_2d")
+            limit(
+                "pixels across the frame",
+                side,
+                u64::from(limits.max_texture_dimension_2d),
+                "max_texture_dimension_2d",
+            )
         }) {
             return Err(e);
         }
@@ -534,21 +505,7 @@ impl GpuRayGrid {
         );
         let target_view = target.create_view(&wgpu::TextureViewDescriptor::default());
         let mask = renderer.mask();
-        let aperture = texture_2d(
-            device,
-            "raygrid aperture",
-            mask.size as u32,
-            mask.size as u32,
-            wgpu::TextureFormat::R8Unorm,
-            wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-        );
-        queue.write_texture(
-            aperture.as_image_copy(),
-            &mask.texels,
-            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(mask.size as u32), rows_per_image: None },
-            aperture.size(),
-        );
-        let aperture_view = aperture.create_view(&wgpu::TextureViewDescriptor::default());
+        let aperture_view = aperture_view(device, queue, mask);
         // No pixel can gather more than every triangle's flux (weights and masks are at most 1).
         let pixel_area_mm2 = window.px_per_mm().powi(-2);
         let bound: f64 = planned
@@ -560,8 +517,11 @@ impl GpuRayGrid {
             .filter(|v| v.is_finite())
             .sum();
         let units = 4_503_599_627_370_496.0; // 2^52
-        let (fixed_per_unit, unit_per_fixed) =
-            if bound > 0.0 && bound.is_finite() { ((units / bound) as f32, (bound / units) as f32) } else { (0.0, 0.0) };
+        let (fixed_per_unit, unit_per_fixed) = if bound > 0.0 && bound.is_finite() {
+            ((units / bound) as f32, (bound / units) as f32)
+        } else {
+            (0.0, 0.0)
+        };
         let strip_rows = (self.box_strip_bytes.min(binding) / row_bytes).clamp(1, u64::from(window.height)) as u32;
         let sums = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("raygrid sums"),
@@ -634,7 +594,10 @@ impl GpuRayGrid {
                     entries: &[
                         wgpu::BindGroupEntry { binding: 0, resource: vertices.as_entire_binding() },
                         wgpu::BindGroupEntry { binding: 1, resource: jobs.as_entire_binding() },
-                        wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&aperture_view) },
+                        wgpu::BindGroupEntry {
+                            binding: 2,
+                            resource: wgpu::BindingResource::TextureView(&aperture_view),
+                        },
                         wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(&self.sampler) },
                         wgpu::BindGroupEntry { binding: 4, resource: sums.as_entire_binding() },
                         wgpu::BindGroupEntry { binding: 5, resource: params(s * (batches.len() + 1) + b) },
@@ -647,7 +610,11 @@ impl GpuRayGrid {
                 });
                 pass.set_pipeline(&self.box_pipeline);
                 pass.set_bind_group(0, &group, &[]);
-                pass.dispatch_workgroups((2 * cells * cells).div_ceil(WORKGROUP as usize) as u32, batch.len() as u32, 1);
+                pass.dispatch_workgroups(
+                    (2 * cells * cells).div_ceil(WORKGROUP as usize) as u32,
+                    batch.len() as u32,
+                    1,
+                );
                 drop(pass);
                 if let (Some(p), Some(q)) = (profiler.as_deref(), query) {
                     p.end_query(&mut encoder, q);
@@ -698,21 +665,7 @@ impl GpuRayGrid {
         if let Some(reason) = ctx.failure() {
             return Err(GpuError::Lost(reason).into());
         }
-        let gpu_times = profiler.and_then(|p| {
-            let _ = device.poll(wgpu::PollType::wait_indefinitely());
-            let mut summed: Option<PassTimes> = None;
-            while let Some(results) = p.process_finished_frame(queue.get_timestamp_period()) {
-                let mut times = PassTimes::default();
-                for (name, ms) in PassTimes::from_results(&results).passes {
-                    match times.passes.iter_mut().find(|(n, _)| *n == name) {
-                        Some((_, total)) => *total += ms,
-                        None => times.passes.push((name, ms)),
-                    }
-                }
-                summed = Some(times);
-            }
-            summed.filter(|t| !t.passes.is_empty())
-        });
+        let gpu_times = profiler.and_then(|p| summed_times(device, queue, p));
         Ok(GpuRayGridImage { hdr: hdr?, jobs: planned.len(), batches: dispatched, gpu_times })
     }
 
@@ -855,6 +808,47 @@ fn upload(renderer: &RayGridRenderer, jobs: &[&PlannedJob], window: Window, turn
         vertex += ((job.cells + 1) * (job.cells + 1)) as u32;
     }
     out
+}
+
+/// The aperture mask as an R8 texture's view, for the splat passes' `aperture_at`.
+fn aperture_view(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    mask: &crate::aperture::ApertureMask,
+) -> wgpu::TextureView {
+    let aperture = texture_2d(
+        device,
+        "raygrid aperture",
+        mask.size as u32,
+        mask.size as u32,
+        wgpu::TextureFormat::R8Unorm,
+        wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+    );
+    queue.write_texture(
+        aperture.as_image_copy(),
+        &mask.texels,
+        wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(mask.size as u32), rows_per_image: None },
+        aperture.size(),
+    );
+    aperture.create_view(&wgpu::TextureViewDescriptor::default())
+}
+
+/// Waits for the GPU and returns the time of each pass of a render's batches, every batch summed per pass name
+/// (`None` without timestamps).
+fn summed_times(device: &wgpu::Device, queue: &wgpu::Queue, profiler: &mut GpuProfiler) -> Option<PassTimes> {
+    let _ = device.poll(wgpu::PollType::wait_indefinitely());
+    let mut summed: Option<PassTimes> = None;
+    while let Some(results) = profiler.process_finished_frame(queue.get_timestamp_period()) {
+        let mut times = PassTimes::default();
+        for (name, ms) in PassTimes::from_results(&results).passes {
+            match times.passes.iter_mut().find(|(n, _)| *n == name) {
+                Some((_, total)) => *total += ms,
+                None => times.passes.push((name, ms)),
+            }
+        }
+        summed = Some(times);
+    }
+    summed.filter(|t| !t.passes.is_empty())
 }
 
 /// `v` as f32, 0 where it is not finite.

@@ -9,7 +9,9 @@
 //! a sprite, the span where every mask is exactly 1 is added in O(1) to a difference buffer and only its
 //! edges are shaded as above (a test holds the two within 0.2/255). [`ghosts::ghost_moments`] walks the
 //! direct pass's fragments to measure each ghost's energy and centroid for the metrics. [`starburst::starburst_pass`] is `starburst.wgsl` and [`tonemap::tonemap_pass`] is `tonemap.wgsl`
-//! (the composite of the exposed flare and plate, the tonemap, sRGB). `lut_ghosts.wgsl`'s twin,
+//! (the composite of the exposed flare and plate, the tonemap, sRGB). [`ghosts::ghost_pass`] is also the twin of
+//! the compute pass `ghosts_compute.wgsl` (its `spans` is [`ghosts::ghost_pass`]'s sweep of one sprite's row,
+//! its `resolve` the per-row sum). `lut_ghosts.wgsl`'s and `lut_compute.wgsl`'s twin,
 //! [`crate::lut::blend::lut_pass`], lives beside the LUT instances it draws. The GPU accumulates in half floats
 //! and the CPU in f32; the comparison tests bound the difference. The twin also renders on machines with no GPU
 //! adapter at all (`flarelab render --device cpu`).
