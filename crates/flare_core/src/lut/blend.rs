@@ -333,7 +333,7 @@ impl LutScene {
     /// ([`crate::ghost::GhostSystem::frame_into`]). Returns how many were left out. In the alpha mode nothing
     /// is left out (a faint image still covers what lies beneath it).
     pub fn cull_faint(&mut self, threshold: f64, footprints: &[Vec<Footprint>]) -> usize {
-        if self.alpha_over || !(threshold > 0.0) {
+        if self.alpha_over || threshold.is_nan() || threshold <= 0.0 {
             return 0;
         }
         let peak = |k: usize| -> f64 {
@@ -346,7 +346,7 @@ impl LutScene {
         order.sort_by(|a, b| a.0.total_cmp(&b.0));
         let (mut sum, mut culled) = (0.0, vec![false; self.instances.len()]);
         for &(p, k) in &order {
-            if !(sum + p <= threshold) {
+            if (sum + p).is_nan() || sum + p > threshold {
                 break;
             }
             sum += p;
@@ -503,9 +503,8 @@ impl TexelMap {
     fn columns(&self, j: usize, width: usize) -> std::ops::Range<usize> {
         let (mut lo, mut hi) = (f32::NEG_INFINITY, f32::INFINITY);
         let row = [self.origin[0] + j as f32 * self.d_dj[0], self.origin[1] + j as f32 * self.d_dj[1]];
-        for axis in 0..2 {
+        for (axis, (&start, &step)) in row.iter().zip(&self.d_di).enumerate() {
             let (from, to) = (self.support[2 * axis], self.support[2 * axis + 1]);
-            let (start, step) = (row[axis], self.d_di[axis]);
             if step == 0.0 {
                 if start < from || start > to {
                     return 0..0;
@@ -516,7 +515,7 @@ impl TexelMap {
                 hi = hi.min(a.max(b));
             }
         }
-        if !(lo <= hi) {
+        if lo.is_nan() || hi.is_nan() || lo > hi {
             return 0..0;
         }
         let first = (lo - 1.0).floor().max(0.0).min(width as f32) as usize;

@@ -647,6 +647,7 @@ impl RayGridRenderer {
     /// Traces `job` once and splats it into every view's accumulator (`accs[k]` for `views[k]`); the pre-pass
     /// is `scouted`, or traced over the whole front lens. Compiled for AVX2 too, used where the processor has
     /// it (the splatting's floors and conversions are then single instructions; the same results).
+    #[allow(clippy::too_many_arguments)]
     fn render_job(
         &self,
         job: &Job,
@@ -668,6 +669,7 @@ impl RayGridRenderer {
     /// [`Self::render_job_body`] compiled for AVX2.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
+    #[allow(clippy::too_many_arguments)]
     unsafe fn render_job_avx2(
         &self,
         job: &Job,
@@ -683,6 +685,7 @@ impl RayGridRenderer {
 
     /// The body of [`Self::render_job`].
     #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
     fn render_job_body(
         &self,
         job: &Job,

@@ -167,7 +167,7 @@ impl ComputeGhosts {
             && l.max_storage_buffers_per_shader_stage >= 4
             && l.max_storage_textures_per_shader_stage >= 1
             && l.max_compute_workgroup_storage_size >= 192 * 8
-            && u64::from(l.max_storage_buffer_binding_size) >= 16385 * BYTES_PER_COLUMN
+            && l.max_storage_buffer_binding_size >= 16385 * BYTES_PER_COLUMN
     }
 
     pub(crate) fn new(device: &wgpu::Device, queue: &wgpu::Queue) -> Self {
@@ -185,7 +185,7 @@ impl ComputeGhosts {
             mask_size: 1,
             open_radius: 0.0,
             diff: None,
-            strip_bytes: u64::from(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size),
+            strip_bytes: limits.max_storage_buffer_binding_size.min(limits.max_buffer_size),
             no_layer: texture_2d(device, "no lut layer", 1, 1, HDR_FORMAT, wgpu::TextureUsages::TEXTURE_BINDING)
                 .create_view(&wgpu::TextureViewDescriptor::default()),
         };

@@ -241,7 +241,7 @@ impl GpuRayGrid {
             splat_pipeline,
             box_pipeline: compute("splat_box"),
             resolve_pipeline: compute("resolve_box"),
-            box_strip_bytes: u64::from(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size),
+            box_strip_bytes: limits.max_storage_buffer_binding_size.min(limits.max_buffer_size),
             sampler,
             target_format,
             profiler: std::sync::Mutex::new(profiler),
@@ -456,7 +456,7 @@ impl GpuRayGrid {
         let cells = planned.iter().map(|j| j.cells).max().unwrap_or(1);
         let vertices_of = |cells: usize| ((cells + 1) * (cells + 1)) as u64;
         let bytes_of = |cells: usize| vertices_of(cells) * std::mem::size_of::<GpuVertex>() as u64;
-        let binding = u64::from(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size);
+        let binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         let max_groups = u64::from(limits.max_compute_workgroups_per_dimension);
         let limit = |what, needed: u64, limit: u64, name| {
             (needed > limit).then_some(GpuRayGridError::Limit { cells, what, needed, limit, name })
