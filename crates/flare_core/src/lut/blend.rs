@@ -628,16 +628,28 @@ fn footprints(lut: &GhostLut) -> Vec<Vec<Footprint>> {
         .collect()
 }
 
-/// `lut_ghosts.wgsl`: every LUT instance onto the HDR accumulation `hdr` of a `frame_width` x `frame_height`
-/// frame (the accumulation may be smaller; instances are in frame pixels), added or composited over it through
-/// alpha, sampling each instance's entry exactly as the GPU samples the atlas (bilinear, 0 outside the entry).
+/// `lut_compute.wgsl` and `lut_ghosts.wgsl`: every LUT instance onto the HDR accumulation `hdr` of a
+/// `frame_width` x `frame_height` frame (the accumulation may be smaller; instances are in frame pixels), added
+/// or composited over it through alpha, sampling each instance's entry exactly as the GPU samples the atlas
+/// (bilinear, 0 outside the entry).
 ///
 /// Cost follows the pixels where an entry is lit, not its quad: per instance and row, the columns where its
 /// texel coordinates fall within a texel of the entry's lit texels are solved for (texel coordinates are
-/// affine in the pixel), and only those are sampled (the per-pixel test of the quad is the shader's).
-/// Bands of rows run in parallel; within a pixel the instances are applied in order, so the image does not
-/// depend on the thread count.
+/// affine in the pixel), and only those are sampled (the per-pixel test of the quad is the shader's). Where
+/// the processor has AVX2 and F16C each pixel's four channels are one SSE register, the half floats converted
+/// by F16C, with the scalar path's products and sums in its order: the same image, bit for bit
+/// ([`lut_pass_scalar`] is the scalar path alone, which a test holds it to). Bands of rows run in parallel;
+/// within a pixel the instances are applied in order, so the image does not depend on the thread count.
 pub fn lut_pass(frame_size: (u32, u32), lut_scene: &LutScene, live: &LiveLut, hdr: &mut HdrImage) {
+    lut_pass_on(frame_size, lut_scene, live, hdr, true);
+}
+
+/// [`lut_pass`] without the SSE path, whatever the processor (what the SSE path is tested against).
+pub fn lut_pass_scalar(frame_size: (u32, u32), lut_scene: &LutScene, live: &LiveLut, hdr: &mut HdrImage) {
+    lut_pass_on(frame_size, lut_scene, live, hdr, false);
+}
+
+fn lut_pass_on(frame_size: (u32, u32), lut_scene: &LutScene, live: &LiveLut, hdr: &mut HdrImage, simd: bool) {
     let (w, h) = (hdr.width as usize, hdr.height as usize);
     let scale = (frame_size.0 as f32 / hdr.width as f32, frame_size.1 as f32 / hdr.height as f32);
     let prepared: Vec<Prepared> = lut_scene
@@ -655,11 +667,11 @@ pub fn lut_pass(frame_size: (u32, u32), lut_scene: &LutScene, live: &LiveLut, hd
         let y0 = band * BAND_ROWS;
         let rows = y0..(y0 + BAND_ROWS).min(h);
         #[cfg(target_arch = "x86_64")]
-        if has_avx2_f16c() {
+        if simd && has_avx2_f16c() {
             // SAFETY: the processor has AVX2 and F16C (checked at run time).
             return unsafe { lut_band_avx2(&prepared, alpha_over, rows, w, chunk) };
         }
-        lut_band(&prepared, alpha_over, rows, w, chunk, |t| t.map(half::f16::to_f32));
+        lut_band(&prepared, rows, w, chunk, |inst, i, f, p| bilinear_add(inst, alpha_over, i, f, p));
     });
 }
 
@@ -668,7 +680,8 @@ fn has_avx2_f16c() -> bool {
     crate::optics::simd_level() >= 1 && std::arch::is_x86_feature_detected!("f16c")
 }
 
-/// [`lut_band`] compiled for AVX2, the texels converted by F16C.
+/// [`lut_band`] compiled for AVX2, each pixel's four channels in one SSE register: the texels converted by
+/// F16C, then the same products and sums as [`bilinear_add`] in the same order (the same image, bit for bit).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,f16c")]
 unsafe fn lut_band_avx2(
@@ -678,37 +691,71 @@ unsafe fn lut_band_avx2(
     width: usize,
     chunk: &mut [[f32; 4]],
 ) {
-    use std::arch::x86_64::{_mm_cvtph_ps, _mm_loadl_epi64, _mm_storeu_ps};
-    lut_band(prepared, alpha_over, rows, width, chunk, |t| {
-        let mut out = [0.0f32; 4];
-        // SAFETY: `t` is 8 readable bytes (four half floats); `out` 16 writable bytes.
-        unsafe { _mm_storeu_ps(out.as_mut_ptr(), _mm_cvtph_ps(_mm_loadl_epi64(t.as_ptr().cast()))) };
-        out
+    use std::arch::x86_64::{
+        __m128, _mm_add_ps, _mm_blend_ps, _mm_cvtph_ps, _mm_cvtss_f32, _mm_loadl_epi64, _mm_loadu_ps, _mm_mul_ps,
+        _mm_set_ps, _mm_set1_ps, _mm_setzero_ps, _mm_shuffle_ps, _mm_storeu_ps,
+    };
+    lut_band(prepared, rows, width, chunk, |inst, [ix, iy], [fx, fy], p| {
+        let (ew, eh) = (inst.entry.width as i32, inst.entry.height as i32);
+        let texels = &inst.entry.texels;
+        let at = |i: i32, j: i32| -> __m128 {
+            if (i as u32) < ew as u32 && (j as u32) < eh as u32 {
+                // SAFETY: the index is inside the entry's texels, each 8 readable bytes (four half floats).
+                unsafe { _mm_cvtph_ps(_mm_loadl_epi64(texels.as_ptr().add((j * ew + i) as usize).cast())) }
+            } else {
+                _mm_setzero_ps()
+            }
+        };
+        let (a, b, c, d) = (at(ix, iy), at(ix + 1, iy), at(ix, iy + 1), at(ix + 1, iy + 1));
+        let (fxv, gxv, fyv, gyv) = (_mm_set1_ps(fx), _mm_set1_ps(1.0 - fx), _mm_set1_ps(fy), _mm_set1_ps(1.0 - fy));
+        let top = _mm_add_ps(_mm_mul_ps(a, gxv), _mm_mul_ps(b, fxv));
+        let bottom = _mm_add_ps(_mm_mul_ps(c, gxv), _mm_mul_ps(d, fxv));
+        let t = _mm_add_ps(_mm_mul_ps(top, gyv), _mm_mul_ps(bottom, fyv));
+        let [c0, c1, c2, c3] = inst.colour;
+        let keep =
+            if alpha_over { 1.0 - (_mm_cvtss_f32(_mm_shuffle_ps::<0xFF>(t, t)) * c3).clamp(0.0, 1.0) } else { 1.0 };
+        // SAFETY: `p` is 16 readable and writable bytes.
+        let old = unsafe { _mm_loadu_ps(p.as_ptr()) };
+        let new = _mm_add_ps(_mm_mul_ps(t, _mm_set_ps(0.0, c2, c1, c0)), _mm_mul_ps(old, _mm_set1_ps(keep)));
+        // The fourth channel is not an image channel: it keeps its value.
+        unsafe { _mm_storeu_ps(p.as_mut_ptr(), _mm_blend_ps::<0b1000>(new, old)) };
     });
 }
 
-/// The instances over the accumulation rows `rows` (`chunk` holds them, `width` pixels a row). `decode` turns
-/// one texel's four half floats into f32 (exactly).
+/// One accumulation pixel `p` of instance `inst`: the entry's bilinear sample at the texel `i` + `f` (0 outside
+/// the entry) times the instance's colour added, or composited over `p` through alpha.
+#[inline(always)]
+fn bilinear_add(inst: &Prepared, alpha_over: bool, [ix, iy]: [i32; 2], [fx, fy]: [f32; 2], p: &mut [f32; 4]) {
+    let (ew, eh) = (inst.entry.width as i32, inst.entry.height as i32);
+    let at = |i: i32, j: i32| -> [f32; 4] {
+        if (i as u32) < ew as u32 && (j as u32) < eh as u32 {
+            inst.entry.texels[(j * ew + i) as usize].map(half::f16::to_f32)
+        } else {
+            [0.0; 4]
+        }
+    };
+    let (a, b, c, d) = (at(ix, iy), at(ix + 1, iy), at(ix, iy + 1), at(ix + 1, iy + 1));
+    let t: [f32; 4] =
+        std::array::from_fn(|k| (a[k] * (1.0 - fx) + b[k] * fx) * (1.0 - fy) + (c[k] * (1.0 - fx) + d[k] * fx) * fy);
+    let keep = if alpha_over { 1.0 - (t[3] * inst.colour[3]).clamp(0.0, 1.0) } else { 1.0 };
+    for ch in 0..3 {
+        p[ch] = t[ch] * inst.colour[ch] + p[ch] * keep;
+    }
+}
+
+/// The instances over the accumulation rows `rows` (`chunk` holds them, `width` pixels a row): per instance and
+/// row the columns where it can be lit, per pixel inside its quad `pixel(instance, texel, fraction, p)` (the
+/// texel coordinate's floor and fraction: [`bilinear_add`] or its SSE form).
 #[inline(always)]
 fn lut_band(
     prepared: &[Prepared],
-    alpha_over: bool,
     rows: std::ops::Range<usize>,
     width: usize,
     chunk: &mut [[f32; 4]],
-    decode: impl Fn(&[half::f16; 4]) -> [f32; 4],
+    pixel: impl Fn(&Prepared, [i32; 2], [f32; 2], &mut [f32; 4]),
 ) {
     for inst in prepared {
-        let (ew, eh) = (inst.entry.width as i32, inst.entry.height as i32);
-        let texels = &inst.entry.texels;
         let [qx0, qx1, qy0, qy1] = inst.map.quad;
-        let at = |i: i32, j: i32| -> [f32; 4] {
-            if (i as u32) < ew as u32 && (j as u32) < eh as u32 {
-                decode(&texels[(j * ew + i) as usize])
-            } else {
-                [0.0; 4]
-            }
-        };
         for y in rows.clone() {
             let columns = inst.map.columns(y, width);
             if columns.is_empty() {
@@ -724,16 +771,7 @@ fn lut_band(
                 }
                 // tx, ty >= -0.5 here: truncation of tx + 1 is the floor.
                 let (ix, iy) = ((tx + 1.0) as i32 - 1, (ty + 1.0) as i32 - 1);
-                let (fx, fy) = (tx - ix as f32, ty - iy as f32);
-                let (a, b, c, d) = (at(ix, iy), at(ix + 1, iy), at(ix, iy + 1), at(ix + 1, iy + 1));
-                let t: [f32; 4] = std::array::from_fn(|k| {
-                    (a[k] * (1.0 - fx) + b[k] * fx) * (1.0 - fy) + (c[k] * (1.0 - fx) + d[k] * fx) * fy
-                });
-                let p = &mut out[x];
-                let keep = if alpha_over { 1.0 - (t[3] * inst.colour[3]).clamp(0.0, 1.0) } else { 1.0 };
-                for ch in 0..3 {
-                    p[ch] = t[ch] * inst.colour[ch] + p[ch] * keep;
-                }
+                pixel(inst, [ix, iy], [tx - ix as f32, ty - iy as f32], &mut out[x]);
             }
         }
     }
