@@ -700,7 +700,17 @@ impl FlareRenderer {
             queue.write_buffer(&self.instances, 0, bytemuck::cast_slice(&scene.instances));
         }
         let lut = lut.filter(|l| !l.instances.is_empty());
-        if let Some(lut) = lut.filter(|_| !use_compute) {
+        // The LUT instances binned for the compute pass; where the bins would pass the adapter's largest storage
+        // binding (a frame of many thousand pixels a side with hundreds of instances), this frame's LUT images
+        // are rasterised over the computed ghosts instead.
+        let bins = lut.filter(|_| use_compute && self.compute_lut.is_some()).and_then(|lut| {
+            let bins = bin_instances((scene.width, scene.height), (w, h), lut, &self.lut_footprints, TILE);
+            let bytes = 4 * (bins.starts.len() + bins.list.len()) as u64;
+            let limits = device.limits();
+            (bytes <= limits.max_storage_buffer_binding_size.min(limits.max_buffer_size)).then_some(bins)
+        });
+        let raster_lut = bins.is_none();
+        if let Some(lut) = lut.filter(|_| raster_lut) {
             if lut.instances.len() > self.lut_capacity {
                 self.lut_capacity = lut.instances.len().next_power_of_two();
                 self.lut_instances = vertex_buffer::<LutInstance>(device, "lut instances", self.lut_capacity);
@@ -732,9 +742,8 @@ impl FlareRenderer {
             if let (true, Some(compute)) = (use_compute, &mut self.compute) {
                 // The LUT layer first (the ghosts' resolve applies it), then the ghosts: every pixel of the
                 // accumulation is written once, so nothing clears it.
-                let layer = match (lut, &mut self.compute_lut) {
-                    (Some(lut), Some(compute_lut)) => {
-                        let bins = bin_instances((scene.width, scene.height), (w, h), lut, &self.lut_footprints, TILE);
+                let layer = match (lut, &mut self.compute_lut, &bins) {
+                    (Some(lut), Some(compute_lut), Some(bins)) => {
                         let atlas = self.lut_atlas.create_view(&wgpu::TextureViewDescriptor {
                             dimension: Some(wgpu::TextureViewDimension::D2Array),
                             ..Default::default()
@@ -748,7 +757,7 @@ impl FlareRenderer {
                             frame_size,
                             (w, h),
                             lut,
-                            &bins,
+                            bins,
                             &atlas,
                             &self.sampler,
                         ))
@@ -766,7 +775,7 @@ impl FlareRenderer {
                     pass.draw(0..6, 0..scene.instances.len() as u32);
                 }
             }
-            if let Some(lut) = lut.filter(|_| !use_compute) {
+            if let Some(lut) = lut.filter(|_| raster_lut) {
                 let mut pass = frame.scoped_render_pass("lut", accumulate(&load));
                 pass.set_pipeline(if lut.alpha_over { &self.lut_over_pipeline } else { &self.lut_add_pipeline });
                 pass.set_bind_group(0, &groups.lut, &[]);
