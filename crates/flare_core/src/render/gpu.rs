@@ -313,6 +313,8 @@ pub struct FlareRenderer {
     lut_footprints: Vec<Vec<Footprint>>,
     /// Draw the next frames by the raster passes even where the compute passes could ([`Self::rasterise_ghosts`]).
     rasterise: bool,
+    /// The most bytes a frame's LUT bins may take ([`Self::limit_lut_bin_bytes`]; the adapter's limits).
+    lut_bin_bytes: u64,
 }
 
 /// Every bind group a frame uses (see [`FlareRenderer::bind_groups`]).
@@ -509,6 +511,7 @@ impl FlareRenderer {
             compute_lut,
             lut_footprints: Vec::new(),
             rasterise: false,
+            lut_bin_bytes: device.limits().max_storage_buffer_binding_size.min(device.limits().max_buffer_size),
             lut_add_pipeline,
             lut_over_pipeline,
             lut_layout,
@@ -575,6 +578,12 @@ impl FlareRenderer {
     /// the GPU's time, which its raster passes report truly.
     pub fn rasterise_ghosts(&mut self, yes: bool) {
         self.rasterise = yes;
+    }
+
+    /// Caps the bytes of a frame's LUT bins (a test's way to reach the fallback of a frame whose bins pass the
+    /// adapter's storage binding limit: its LUT images rasterised over the computed ghosts).
+    pub fn limit_lut_bin_bytes(&mut self, bytes: u64) {
+        self.lut_bin_bytes = bytes.min(self.lut_bin_bytes);
     }
 
     /// Caps the bytes of the compute pass's difference buffer (a test's way to draw a frame in many strips, as
@@ -706,8 +715,7 @@ impl FlareRenderer {
         let bins = lut.filter(|_| use_compute && self.compute_lut.is_some()).and_then(|lut| {
             let bins = bin_instances((scene.width, scene.height), (w, h), lut, &self.lut_footprints, TILE);
             let bytes = 4 * (bins.starts.len() + bins.list.len()) as u64;
-            let limits = device.limits();
-            (bytes <= limits.max_storage_buffer_binding_size.min(limits.max_buffer_size)).then_some(bins)
+            (bytes <= self.lut_bin_bytes).then_some(bins)
         });
         let raster_lut = bins.is_none();
         if let Some(lut) = lut.filter(|_| raster_lut) {
