@@ -315,30 +315,16 @@ impl GpuRayGrid {
         let (device, queue) = (&ctx.device, &ctx.queue);
         let limits = device.limits();
         let cells = planned.iter().map(|j| j.cells).max().unwrap_or(1);
-        let vertices_of = |cells: usize| ((cells + 1) * (cells + 1)) as u64;
-        let bytes_of = |cells: usize| vertices_of(cells) * std::mem::size_of::<GpuVertex>() as u64;
-        let limit = |what, needed: u64, limit: u64, name| {
-            (needed > limit).then_some(GpuRayGridError::Limit { cells, what, needed, limit, name })
-        };
-        let binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
-        if let Some(e) = limit(
-            "workgroups per dispatch",
-            vertices_of(cells).div_ceil(u64::from(WORKGROUP)),
-            u64::from(limits.max_compute_workgroups_per_dimension),
-            "max_compute_workgroups_per_dimension",
-        )
-        .or_else(|| {
-            limit("bytes of vertices for one ghost", bytes_of(cells), binding, "max_storage_buffer_binding_size")
-        })
-        .or_else(|| limit("vertices per draw", (cells * cells * 6) as u64, u64::from(u32::MAX), "u32 vertex index"))
-        .or_else(|| {
-            let side = u64::from(fine.width.max(fine.height));
-            limit(
-                "texels across the supersampled target",
-                side,
-                u64::from(limits.max_texture_dimension_2d),
-                "max_texture_dimension_2d",
-            )
+        let side = u64::from(fine.width.max(fine.height));
+        if let Some(e) = shared_limits(&limits, cells, side, "texels across the supersampled target").or_else(|| {
+            let needed = (cells * cells * 6) as u64;
+            (needed > u64::from(u32::MAX)).then_some(GpuRayGridError::Limit {
+                cells,
+                what: "vertices per draw",
+                needed,
+                limit: u64::from(u32::MAX),
+                name: "u32 vertex index",
+            })
         }) {
             return Err(e);
         }
@@ -360,16 +346,12 @@ impl GpuRayGrid {
         let aperture_view = aperture_view(device, queue, mask);
         // Jobs of one grid size together, in batches whose vertices fit one storage binding (at most 256 MB,
         // and at most 65535 jobs, the dispatch's y).
-        let mut order = planned.to_vec();
-        order.sort_by_key(|j| j.cells);
         let mut batches = 0;
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("raygrid") });
-        for same in order.chunk_by(|a, b| a.cells == b.cells) {
-            let cells = same[0].cells;
-            let per_batch = (binding.min(256 << 20) / bytes_of(cells).max(1))
-                .min(u64::from(limits.max_compute_workgroups_per_dimension))
-                .max(1) as usize;
-            for batch in same.chunks(per_batch) {
+        {
+            for batch in batches_of(planned, &limits) {
+                let cells = batch[0].cells;
+                let batch = batch.as_slice();
                 let query = profiler.as_deref().map(|p| p.begin_pass_query("trace", &mut encoder));
                 let writes = query.as_ref().and_then(|q| q.compute_pass_timestamp_writes());
                 let (jobs, vertices) =
@@ -454,41 +436,20 @@ impl GpuRayGrid {
         let (device, queue) = (&ctx.device, &ctx.queue);
         let limits = device.limits();
         let cells = planned.iter().map(|j| j.cells).max().unwrap_or(1);
-        let vertices_of = |cells: usize| ((cells + 1) * (cells + 1)) as u64;
-        let bytes_of = |cells: usize| vertices_of(cells) * std::mem::size_of::<GpuVertex>() as u64;
         let binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         let max_groups = u64::from(limits.max_compute_workgroups_per_dimension);
         let limit = |what, needed: u64, limit: u64, name| {
             (needed > limit).then_some(GpuRayGridError::Limit { cells, what, needed, limit, name })
         };
         let row_bytes = u64::from(window.width) * BOX_BYTES_PER_PIXEL;
-        if let Some(e) = limit(
-            "workgroups per dispatch",
-            vertices_of(cells).div_ceil(u64::from(WORKGROUP)),
-            max_groups,
-            "max_compute_workgroups_per_dimension",
-        )
-        .or_else(|| {
-            limit(
-                "workgroups per dispatch",
-                (2 * cells * cells) as u64 / u64::from(WORKGROUP),
-                max_groups,
-                "max_compute_workgroups_per_dimension",
-            )
-        })
-        .or_else(|| {
-            limit("bytes of vertices for one ghost", bytes_of(cells), binding, "max_storage_buffer_binding_size")
-        })
-        .or_else(|| limit("bytes of sums for one row", row_bytes, binding, "max_storage_buffer_binding_size"))
-        .or_else(|| {
-            let side = u64::from(window.width.max(window.height));
-            limit(
-                "pixels across the frame",
-                side,
-                u64::from(limits.max_texture_dimension_2d),
-                "max_texture_dimension_2d",
-            )
-        }) {
+        let side = u64::from(window.width.max(window.height));
+        if let Some(e) = shared_limits(&limits, cells, side, "pixels across the frame")
+            .or_else(|| {
+                let groups = (2 * cells * cells) as u64 / u64::from(WORKGROUP);
+                limit("workgroups per dispatch", groups, max_groups, "max_compute_workgroups_per_dimension")
+            })
+            .or_else(|| limit("bytes of sums for one row", row_bytes, binding, "max_storage_buffer_binding_size"))
+        {
             return Err(e);
         }
         if planned.is_empty() {
@@ -532,13 +493,7 @@ impl GpuRayGrid {
         let open_radius2 = mask.open_radius().powi(2);
         // Jobs of one grid size together, in batches whose vertices fit one storage binding (at most 256 MB,
         // and at most 65535 jobs, the dispatch's y).
-        let mut order = planned.to_vec();
-        order.sort_by_key(|j| j.cells);
-        let mut batches: Vec<&[&PlannedJob]> = Vec::new();
-        for same in order.chunk_by(|a, b| a.cells == b.cells) {
-            let per_batch = (binding.min(256 << 20) / bytes_of(same[0].cells).max(1)).min(max_groups).max(1) as usize;
-            batches.extend(same.chunks(per_batch));
-        }
+        let batches = batches_of(planned, &limits);
         let strips: Vec<u32> = (0..window.height).step_by(strip_rows as usize).collect();
         // One parameter block per (strip, batch) dispatch and one per strip's resolve, at 256-byte strides.
         let blocks = strips.len() * (batches.len() + 1);
@@ -808,6 +763,48 @@ fn upload(renderer: &RayGridRenderer, jobs: &[&PlannedJob], window: Window, turn
         vertex += ((job.cells + 1) * (job.cells + 1)) as u32;
     }
     out
+}
+
+/// Bytes of one job's traced vertices on a `cells` grid.
+fn vertex_bytes(cells: usize) -> u64 {
+    ((cells + 1) * (cells + 1)) as u64 * std::mem::size_of::<GpuVertex>() as u64
+}
+
+/// The limits every GPU ray-grid render checks before anything is dispatched: the tracer's workgroups, one
+/// job's vertices in a storage binding, and the frame's `side` (named `what_side`) in a texture.
+fn shared_limits(limits: &wgpu::Limits, cells: usize, side: u64, what_side: &'static str) -> Option<GpuRayGridError> {
+    let limit = |what, needed: u64, limit: u64, name| {
+        (needed > limit).then_some(GpuRayGridError::Limit { cells, what, needed, limit, name })
+    };
+    let binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+    let vertices = ((cells + 1) * (cells + 1)) as u64;
+    let max_groups = u64::from(limits.max_compute_workgroups_per_dimension);
+    limit(
+        "workgroups per dispatch",
+        vertices.div_ceil(u64::from(WORKGROUP)),
+        max_groups,
+        "max_compute_workgroups_per_dimension",
+    )
+    .or_else(|| {
+        limit("bytes of vertices for one ghost", vertex_bytes(cells), binding, "max_storage_buffer_binding_size")
+    })
+    .or_else(|| limit(what_side, side, u64::from(limits.max_texture_dimension_2d), "max_texture_dimension_2d"))
+}
+
+/// `planned` in batches of one grid size whose vertices fit one storage binding (at most 256 MB, and at most
+/// the dispatch's y of jobs).
+fn batches_of<'a, 'p>(planned: &[&'a PlannedJob<'p>], limits: &wgpu::Limits) -> Vec<Vec<&'a PlannedJob<'p>>> {
+    let binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+    let mut order = planned.to_vec();
+    order.sort_by_key(|j| j.cells);
+    let mut batches = Vec::new();
+    for same in order.chunk_by(|a, b| a.cells == b.cells) {
+        let per_batch = (binding.min(256 << 20) / vertex_bytes(same[0].cells).max(1))
+            .min(u64::from(limits.max_compute_workgroups_per_dimension))
+            .max(1) as usize;
+        batches.extend(same.chunks(per_batch).map(<[_]>::to_vec));
+    }
+    batches
 }
 
 /// The aperture mask as an R8 texture's view, for the splat passes' `aperture_at`.
