@@ -726,17 +726,8 @@ unsafe fn lut_band_avx2(
 /// the entry) times the instance's colour added, or composited over `p` through alpha.
 #[inline(always)]
 fn bilinear_add(inst: &Prepared, alpha_over: bool, [ix, iy]: [i32; 2], [fx, fy]: [f32; 2], p: &mut [f32; 4]) {
-    let (ew, eh) = (inst.entry.width as i32, inst.entry.height as i32);
-    let at = |i: i32, j: i32| -> [f32; 4] {
-        if (i as u32) < ew as u32 && (j as u32) < eh as u32 {
-            inst.entry.texels[(j * ew + i) as usize].map(half::f16::to_f32)
-        } else {
-            [0.0; 4]
-        }
-    };
-    let (a, b, c, d) = (at(ix, iy), at(ix + 1, iy), at(ix, iy + 1), at(ix + 1, iy + 1));
-    let t: [f32; 4] =
-        std::array::from_fn(|k| (a[k] * (1.0 - fx) + b[k] * fx) * (1.0 - fy) + (c[k] * (1.0 - fx) + d[k] * fx) * fy);
+    let texels = &inst.entry.texels;
+    let t = inst.entry.bilinear_at([i64::from(ix), i64::from(iy)], [fx, fy], |k| texels[k].map(half::f16::to_f32));
     let keep = if alpha_over { 1.0 - (t[3] * inst.colour[3]).clamp(0.0, 1.0) } else { 1.0 };
     for ch in 0..3 {
         p[ch] = t[ch] * inst.colour[ch] + p[ch] * keep;

@@ -207,11 +207,20 @@ impl LutEntry {
     /// Bilinear interpolation of the texels `texel(index)` at (s, t), 0 outside.
     #[inline(always)]
     fn bilinear(&self, s: f32, t: f32, texel: impl Fn(usize) -> [f32; 4]) -> [f32; 4] {
-        let (w, h) = (self.width as i64, self.height as i64);
-        let (x, y) = (s * w as f32 - 0.5, t * h as f32 - 0.5);
+        let (x, y) = (s * self.width as f32 - 0.5, t * self.height as f32 - 0.5);
         let (x0, y0) = (x.floor(), y.floor());
-        let (fx, fy) = (x - x0, y - y0);
-        let (x0, y0) = (x0 as i64, y0 as i64);
+        self.bilinear_at([x0 as i64, y0 as i64], [x - x0, y - y0], texel)
+    }
+
+    /// [`Self::bilinear`] from the sample's texel (the floor of its texel coordinates) and its fraction.
+    #[inline(always)]
+    pub(crate) fn bilinear_at(
+        &self,
+        [x0, y0]: [i64; 2],
+        [fx, fy]: [f32; 2],
+        texel: impl Fn(usize) -> [f32; 4],
+    ) -> [f32; 4] {
+        let (w, h) = (i64::from(self.width), i64::from(self.height));
         let at = |i: i64, j: i64| -> [f32; 4] {
             if i < 0 || j < 0 || i >= w || j >= h { [0.0; 4] } else { texel((j * w + i) as usize) }
         };
