@@ -24,9 +24,12 @@
 //! ([`RayGridRenderer::plan_scouted`]), and the trace turns every landing and stop coordinate by the view's
 //! turn (`rgb.w` of [`GpuJob`]), as the CPU's [`View`] does, once per azimuth.
 //!
-//! The CPU twin box-filters its triangles (clips each to the pixels it covers); the GPU samples pixel centres,
-//! as rasterisers do. A triangle collapsed to a line or a point (a ghost focused there) is dropped here where
-//! the CPU puts its light in one pixel. A test compares landings (the f32 drift, per lens) and images.
+//! The CPU twin box-filters its triangles (cuts each into the pixels it covers). The default GPU path does the
+//! same in a compute pass (`raygrid_box.wgsl`): each pixel a triangle touches gets the area and centroid of the
+//! triangle's part in it, in closed form from the three edges (Green's theorem; no polygon is cut), and a
+//! triangle collapsed to a line or a point puts its light in one pixel as on the CPU. The raster path
+//! (`--gpu-samples 1..8`) samples pixel centres and drops collapsed triangles. Tests compare landings (the f32
+//! drift, per lens) and images.
 //! **Limits**: a grid whose dispatch, vertex buffer or supersampled target exceeds the adapter's limits is
 //! refused with the limit named, before anything is dispatched; a frame's jobs are traced and drawn in batches
 //! that fit the largest storage buffer the adapter binds. A device lost on the way is
@@ -108,7 +111,8 @@ struct BoxParams {
     first_row: u32,
     rows: u32,
     groups_x: u32,
-    unused: [u32; 2],
+    mask_size: u32,
+    unused: u32,
     fixed_per_unit: f32,
     unit_per_fixed: f32,
     open_radius2: f32,
@@ -466,7 +470,11 @@ impl GpuRayGrid {
         );
         let target_view = target.create_view(&wgpu::TextureViewDescriptor::default());
         let mask = renderer.mask();
-        let aperture_view = aperture_view(device, queue, mask);
+        // The mask's texels, four to a word, looked up and filtered in the shader as `ApertureMask::sample` does
+        // (a storage buffer: a software rasteriser samples a texture several times slower).
+        let mut packed = mask.texels.clone();
+        packed.resize(mask.texels.len().div_ceil(4).max(1) * 4, 0);
+        let mask_texels = storage(device, queue, "raygrid mask", &packed, wgpu::BufferUsages::STORAGE);
         // No pixel can gather more than every triangle's flux (weights and masks are at most 1).
         let pixel_area_mm2 = window.px_per_mm().powi(-2);
         let bound: f64 = planned
@@ -516,6 +524,7 @@ impl GpuRayGrid {
                 fixed_per_unit,
                 unit_per_fixed,
                 open_radius2,
+                mask_size: mask.size as u32,
                 ..BoxParams::default()
             };
             for (b, batch) in batches.iter().enumerate() {
@@ -549,13 +558,9 @@ impl GpuRayGrid {
                     entries: &[
                         wgpu::BindGroupEntry { binding: 0, resource: vertices.as_entire_binding() },
                         wgpu::BindGroupEntry { binding: 1, resource: jobs.as_entire_binding() },
-                        wgpu::BindGroupEntry {
-                            binding: 2,
-                            resource: wgpu::BindingResource::TextureView(&aperture_view),
-                        },
-                        wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(&self.sampler) },
+                        wgpu::BindGroupEntry { binding: 2, resource: mask_texels.as_entire_binding() },
                         wgpu::BindGroupEntry { binding: 4, resource: sums.as_entire_binding() },
-                        wgpu::BindGroupEntry { binding: 5, resource: params(s * (batches.len() + 1) + b) },
+                        wgpu::BindGroupEntry { binding: 3, resource: params(s * (batches.len() + 1) + b) },
                     ],
                 });
                 let query = profiler.as_deref().map(|p| p.begin_pass_query("splat", &mut encoder));
@@ -592,8 +597,8 @@ impl GpuRayGrid {
                 layout: &self.resolve_pipeline.get_bind_group_layout(0),
                 entries: &[
                     wgpu::BindGroupEntry { binding: 4, resource: sums.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 5, resource: params(s * (batches.len() + 1) + batches.len()) },
-                    wgpu::BindGroupEntry { binding: 6, resource: wgpu::BindingResource::TextureView(&target_view) },
+                    wgpu::BindGroupEntry { binding: 3, resource: params(s * (batches.len() + 1) + batches.len()) },
+                    wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::TextureView(&target_view) },
                 ],
             });
             let query = profiler.as_deref().map(|p| p.begin_pass_query("resolve", &mut encoder));

@@ -44,7 +44,6 @@ pub const RAYGRID_SPLAT_WGSL: &str = concat!(
 /// Ray grids on the GPU, pass 2 as compute: each triangle box-filtered as the CPU twin does.
 pub const RAYGRID_BOX_WGSL: &str = concat!(
     include_str!("../../../../shaders/raygrid_common.wgsl"),
-    include_str!("../../../../shaders/aperture.wgsl"),
     include_str!("../../../../shaders/fixed64.wgsl"),
     include_str!("../../../../shaders/raygrid_box.wgsl")
 );
