@@ -2,7 +2,7 @@
 //! it (`flarelab bake LENS -o LUT.flut`), at four light positions: medians of 5 frames, and the LUT instances
 //! drawn. What the README's table of the CPU twin's LUT pass came from.
 //!
-//! `cargo run --release -p flare_core --example blend_timing -- LENS LUT.flut WIDTH HEIGHT`
+//! `cargo run --release -p flare_core --example blend_timing -- LENS LUT.flut WIDTH HEIGHT [FLARE_EV]`
 
 use std::time::Instant;
 
@@ -19,18 +19,24 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
-    let usage = "usage: blend_timing LENS LUT.flut WIDTH HEIGHT";
+    let usage = "usage: blend_timing LENS LUT.flut WIDTH HEIGHT [FLARE_EV]";
     let lens = builtin_lens(args.get(1).ok_or(usage)?)?;
     let lut = flare_core::lut::format::read_lut(std::path::Path::new(args.get(2).ok_or(usage)?))?;
     let (w, h): (u32, u32) = (args.get(3).ok_or(usage)?.parse()?, args.get(4).ok_or(usage)?.parse()?);
     let flare = PreparedFlare::new(&lens, &FlareConfig::default())?;
     let live = LiveLut::new(lut);
-    for light in [[0.0, 0.0], [5.0, 3.0], [9.0, 5.0], [15.0, 10.0]] {
+    // An optional fifth argument: the flare exposure in stops (the bench draws at its reference's).
+    let flare_ev: Option<f64> = args.get(5).map(|s| s.parse()).transpose()?;
+    for light in [[0.0, 0.0], [5.0, 3.0], [9.0, 5.0], [15.0, 10.0], [8.66, 5.0], [17.32, 10.0]] {
         let request = FrameRequest {
             light_deg: light,
             width: w,
             height: h,
-            display: DisplaySettings { starburst: false, ..DisplaySettings::default() },
+            display: DisplaySettings {
+                starburst: false,
+                flare_ev: flare_ev.unwrap_or(DisplaySettings::default().flare_ev),
+                ..DisplaySettings::default()
+            },
             ..FrameRequest::default()
         };
         let blended = FrameRequest { lut_use: LutUse::Blend, ..request.clone() };

@@ -355,6 +355,31 @@ fn the_lut_pass_draws_the_same_bytes_with_and_without_sse() {
 /// On the GPU, as compute (`lut_compute.wgsl`, applied by the ghosts' resolve) and as the raster pass kept for
 /// devices without compute, added and composited over through alpha: within 2% of the CPU twin's energy, and as
 /// compute every display value within half an 8-bit step of the twin's.
+/// Magnified LUT images are sampled every 2 or 4 pixels and upsampled (`instance_levels`): on a frame where
+/// every instance is (the Tessar's small LUT over 480x360 and 160x120), the image stays within 50 dB of sampling
+/// every pixel, with the energy kept to 0.5%.
+#[test]
+fn coarsely_sampled_lut_images_match_every_pixel_sampling() {
+    let flare = flare("tessar");
+    let live = LiveLut::new(small_lut(&flare));
+    let light = light_position_deg(9.0, 140.0);
+    for (w, h) in [(480, 360), (160, 120)] {
+        let frame = scenes(&live, &flare, light, w, h, &BlendSettings::default(), true);
+        let lut_scene = frame.lut.clone().unwrap_or_default();
+        let acc = (frame.scene.hdr_width, frame.scene.hdr_height);
+        let levels = flare_core::lut::blend::instance_levels((w, h), acc, &lut_scene, &live.footprints);
+        assert!(levels.iter().all(|&l| l > 0), "{levels:?}");
+        let (mut coarse, mut fine) = (HdrImage::black(acc.0, acc.1), HdrImage::black(acc.0, acc.1));
+        flare_core::lut::blend::lut_pass((w, h), &lut_scene, &live, &mut coarse);
+        flare_core::lut::blend::lut_pass_every_pixel((w, h), &lut_scene, &live, &mut fine);
+        let c = flare_core::metrics::compare(&coarse, &[], &fine, &[]);
+        let energy = |img: &HdrImage| img.pixels.iter().map(|p| f64::from(p[0] + p[1] + p[2])).sum::<f64>();
+        let ratio = energy(&coarse) / energy(&fine);
+        eprintln!("{w}x{h}: levels {levels:?}, PSNR {:.1} dB, SSIM {:.4}, energy {ratio:.4}", c.psnr_db, c.ssim);
+        assert!(c.psnr_db > 50.0 && (ratio - 1.0).abs() < 0.005, "{c:?}, energy ratio {ratio}");
+    }
+}
+
 #[test]
 fn the_gpu_draws_lut_ghosts_as_its_cpu_twin_does() {
     let Some(ctx) = flare_core::render::gpu::test_context() else { return };
@@ -369,6 +394,11 @@ fn the_gpu_draws_lut_ghosts_as_its_cpu_twin_does() {
         let (mut scene, lut_scene) = (frame.scene.clone(), frame.lut.clone().unwrap_or_default());
         scene.globals.starburst = [0.0; 4];
         assert!(!lut_scene.instances.is_empty());
+        // Additive frames sample their magnified instances coarsely (`instance_levels`): the compute pass must
+        // interpolate them as the twin upsamples them.
+        let levels = flare_core::lut::blend::instance_levels((160, 120), (scene.hdr_width, scene.hdr_height), &lut_scene, &live.footprints);
+        eprintln!("{mode:?}: sampling levels {levels:?}");
+        assert_eq!(levels.iter().any(|&l| l > 0), mode == BlendMode::Additive, "{levels:?}");
         let cpu = render_cpu(&flare, &live, &scene, &lut_scene);
         let mut renderer =
             flare_core::render::gpu::FlareRenderer::new(&ctx.device, &ctx.queue, wgpu::TextureFormat::Rgba8Unorm);

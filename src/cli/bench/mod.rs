@@ -199,7 +199,9 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             None,
             true,
         )?;
-        let lut_bytes = flare_core::lut::format::encode(&lut).len();
+        // Kept beside the tables, so that the blended rows can be timed again (`blend_timing`).
+        let lut_bytes = flare_core::lut::format::write_lut(&args.out.join(format!("{}.flut", lens.id)), &lut)
+            .with_context(|| format!("writing the LUT of {}", lens.id))?;
         bakes.push(Bake {
             lens: lens.id.clone(),
             surfaces: lens.surfaces.len(),

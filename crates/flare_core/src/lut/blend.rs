@@ -25,7 +25,9 @@
 //! [`super::LutEntry::sample`] does (0 outside the image). Each entry's [`Footprint`] (size, the box of its lit
 //! texels, its brightest texel) is measured once per LUT: the CPU pass samples only where an entry is lit,
 //! [`bin_instances`] bins instances into tiles by it, and [`LutScene::cull_faint`] leaves out the images that
-//! cannot be seen at the frame's exposure.
+//! cannot be seen at the frame's exposure. An added instance magnified so that a texel spans a pixel or more
+//! is sampled every 2 or 4 pixels and its samples bilinearly upsampled ([`instance_levels`]), in the twin and
+//! the compute pass alike.
 
 use bytemuck::{Pod, Zeroable};
 use rayon::prelude::*;
@@ -536,6 +538,8 @@ pub struct LutBins {
     pub starts: Vec<u32>,
     /// Instance indices.
     pub list: Vec<u32>,
+    /// Per instance, its sampling level ([`instance_levels`]).
+    pub levels: Vec<u8>,
 }
 
 /// The bins of `lut_scene`'s instances over an accumulation of `acc_size` pixels for a frame of `frame_size`.
@@ -551,15 +555,19 @@ pub fn bin_instances(
     let (tiles_x, tiles_y) = (w.div_ceil(tile), h.div_ceil(tile));
     let scale = (frame_size.0 as f32 / w as f32, frame_size.1 as f32 / h as f32);
     // Per instance, the tiles its lit support reaches: x0, x1, y0, y1 (inclusive), or none.
+    let levels = instance_levels(frame_size, (w, h), lut_scene, footprints);
     let reach: Vec<Option<[u32; 4]>> = lut_scene
         .instances
         .iter()
         .zip(&lut_scene.sources)
-        .map(|(inst, &(g, k))| {
+        .zip(&levels)
+        .map(|((inst, &(g, k)), &level)| {
             let footprint = *footprints.get(g as usize)?.get(k as usize)?;
             let [bx, by] = TexelMap::new(inst, footprint, scale)?.pixel_bounds()?;
+            // Sampled every 2^level pixels and upsampled, an instance reaches that much further.
+            let reach = 1.0 + (1u32 << level) as f32;
             let tiles = |lo: f32, hi: f32, size: u32, count: u32| -> Option<(u32, u32)> {
-                let (lo, hi) = ((lo - 1.0).floor().max(0.0), (hi + 1.0).ceil().min(size as f32 - 1.0));
+                let (lo, hi) = ((lo - reach).floor().max(0.0), (hi + reach).ceil().min(size as f32 - 1.0));
                 (lo <= hi).then(|| ((lo as u32 / tile).min(count - 1), (hi as u32 / tile).min(count - 1)))
             };
             let ((x0, x1), (y0, y1)) = (tiles(bx[0], bx[1], w, tiles_x)?, tiles(by[0], by[1], h, tiles_y)?);
@@ -594,7 +602,7 @@ pub fn bin_instances(
             }
         }
     }
-    LutBins { tile, tiles_x, tiles_y, starts, list }
+    LutBins { tile, tiles_x, tiles_y, starts, list, levels }
 }
 
 /// Per LUT ghost and entry, its [`Footprint`].
@@ -640,39 +648,150 @@ fn footprints(lut: &GhostLut) -> Vec<Vec<Footprint>> {
 /// by F16C, with the scalar path's products and sums in its order: the same image, bit for bit
 /// ([`lut_pass_scalar`] is the scalar path alone, which a test holds it to). Bands of rows run in parallel;
 /// within a pixel the instances are applied in order, so the image does not depend on the thread count.
+///
+/// Added instances magnified so that a texel spans a pixel or more are sampled every 2 or 4 pixels into a
+/// smaller image whose bilinear upsample is added ([`LUT_LEVELS`], [`instance_levels`]): on the Nikon zoom at
+/// 480x320 this took the blended frame from 1.74x to 1.14x the paraxial frame at the same PSNR against the
+/// reference (39.0 dB); a test holds it within 50 dB of [`lut_pass_every_pixel`].
 pub fn lut_pass(frame_size: (u32, u32), lut_scene: &LutScene, live: &LiveLut, hdr: &mut HdrImage) {
-    lut_pass_on(frame_size, lut_scene, live, hdr, true);
+    lut_pass_on(frame_size, lut_scene, live, hdr, true, true);
 }
 
 /// [`lut_pass`] without the SSE path, whatever the processor (what the SSE path is tested against).
 pub fn lut_pass_scalar(frame_size: (u32, u32), lut_scene: &LutScene, live: &LiveLut, hdr: &mut HdrImage) {
-    lut_pass_on(frame_size, lut_scene, live, hdr, false);
+    lut_pass_on(frame_size, lut_scene, live, hdr, false, true);
 }
 
-fn lut_pass_on(frame_size: (u32, u32), lut_scene: &LutScene, live: &LiveLut, hdr: &mut HdrImage, simd: bool) {
-    let (w, h) = (hdr.width as usize, hdr.height as usize);
-    let scale = (frame_size.0 as f32 / hdr.width as f32, frame_size.1 as f32 / hdr.height as f32);
-    let prepared: Vec<Prepared> = lut_scene
+/// [`lut_pass`] with every instance sampled at every pixel (no coarse [`LUT_LEVELS`]): what the coarse levels
+/// are measured against.
+pub fn lut_pass_every_pixel(frame_size: (u32, u32), lut_scene: &LutScene, live: &LiveLut, hdr: &mut HdrImage) {
+    lut_pass_on(frame_size, lut_scene, live, hdr, true, false);
+}
+
+fn lut_pass_on(
+    frame_size: (u32, u32),
+    lut_scene: &LutScene,
+    live: &LiveLut,
+    hdr: &mut HdrImage,
+    simd: bool,
+    coarse: bool,
+) {
+    let (w, h) = (hdr.width, hdr.height);
+    let scale = (frame_size.0 as f32 / w as f32, frame_size.1 as f32 / h as f32);
+    let alpha_over = lut_scene.alpha_over;
+    // Per level (1, 2, 4 accumulation pixels a sample), the instances drawn at it, in the frame's order.
+    let mut levels: [Vec<Prepared>; LUT_LEVELS] = Default::default();
+    let of = instance_levels(frame_size, (w, h), lut_scene, &live.footprints);
+    for ((inst, &(g, k)), &level) in lut_scene.instances.iter().zip(&lut_scene.sources).zip(&of) {
+        let level = if coarse { level } else { 0 };
+        let (Some(entry), Some(&footprint)) = (
+            live.lut.ghosts.get(g as usize).and_then(|l| l.entries.get(k as usize)),
+            live.footprints.get(g as usize).and_then(|f| f.get(k as usize)),
+        ) else {
+            continue;
+        };
+        let k = (1u32 << level) as f32;
+        if let Some(map) = TexelMap::new(inst, footprint, (scale.0 * k, scale.1 * k)) {
+            levels[usize::from(level)].push(Prepared { entry, colour: inst.colour, map });
+        }
+    }
+    draw_level(&levels[0], alpha_over, hdr, simd);
+    for (level, prepared) in levels.iter().enumerate().skip(1) {
+        if prepared.is_empty() {
+            continue;
+        }
+        let k = 1u32 << level;
+        let mut coarse = HdrImage::black(w.div_ceil(k), h.div_ceil(k));
+        draw_level(prepared, false, &mut coarse, simd);
+        add_upsampled(&coarse, k, hdr);
+    }
+}
+
+/// Levels of sampling density of the LUT pass: a LUT image magnified so that one texel spans at least
+/// `1 / MAX_TEXELS_PER_SAMPLE` accumulation pixels x 2^level is sampled every 2^level pixels (level 1: 2, level 2:
+/// 4) into an image that much smaller, then added to the accumulation by bilinear upsampling (the same
+/// interpolation the texels get): a quarter or a sixteenth of the samples, where the samples would otherwise
+/// repeat the texels' own interpolation. Alpha blending composites instances in order, so it stays at level 0.
+pub const LUT_LEVELS: usize = 3;
+/// The most texels between neighbouring samples at a coarser level (see [`LUT_LEVELS`]).
+pub const MAX_TEXELS_PER_SAMPLE: f32 = 1.0;
+
+/// Per instance of `lut_scene`, the level ([`LUT_LEVELS`]) it is sampled at over an accumulation of `acc_size`
+/// pixels for a frame of `frame_size`: the coarsest at which neighbouring samples stay within
+/// [`MAX_TEXELS_PER_SAMPLE`] texels; 0 when composited through alpha, or when the instance draws nothing. The
+/// CPU twin ([`lut_pass`]), the bins ([`bin_instances`]) and the compute pass (`lut_compute.wgsl`) all take it from
+/// here.
+pub fn instance_levels(
+    frame_size: (u32, u32),
+    acc_size: (u32, u32),
+    lut_scene: &LutScene,
+    footprints: &[Vec<Footprint>],
+) -> Vec<u8> {
+    let scale = (frame_size.0 as f32 / acc_size.0.max(1) as f32, frame_size.1 as f32 / acc_size.1.max(1) as f32);
+    lut_scene
         .instances
         .iter()
         .zip(&lut_scene.sources)
-        .filter_map(|(inst, &(g, k))| {
-            let entry = live.lut.ghosts.get(g as usize)?.entries.get(k as usize)?;
-            let footprint = *live.footprints.get(g as usize)?.get(k as usize)?;
-            Some(Prepared { entry, colour: inst.colour, map: TexelMap::new(inst, footprint, scale)? })
+        .map(|(inst, &(g, k))| {
+            let footprint = footprints.get(g as usize).and_then(|f| f.get(k as usize));
+            let Some(map) = footprint.and_then(|&f| TexelMap::new(inst, f, scale)) else { return 0 };
+            if lut_scene.alpha_over {
+                return 0;
+            }
+            let step = map.d_di[0].hypot(map.d_di[1]).max(map.d_dj[0].hypot(map.d_dj[1]));
+            let mut level = 0;
+            while level + 1 < LUT_LEVELS && step * (2u32 << level) as f32 <= MAX_TEXELS_PER_SAMPLE {
+                level += 1;
+            }
+            level as u8
         })
-        .collect();
-    let alpha_over = lut_scene.alpha_over;
+        .collect()
+}
+
+/// The instances `prepared` onto `hdr` (their maps made for its size), in bands of rows in parallel.
+fn draw_level(prepared: &[Prepared], alpha_over: bool, hdr: &mut HdrImage, simd: bool) {
+    if prepared.is_empty() {
+        return;
+    }
+    let (w, h) = (hdr.width as usize, hdr.height as usize);
     hdr.pixels.par_chunks_mut(w * BAND_ROWS).enumerate().for_each(|(band, chunk)| {
         let y0 = band * BAND_ROWS;
         let rows = y0..(y0 + BAND_ROWS).min(h);
         #[cfg(target_arch = "x86_64")]
         if simd && has_avx2_f16c() {
             // SAFETY: the processor has AVX2 and F16C (checked at run time).
-            return unsafe { lut_band_avx2(&prepared, alpha_over, rows, w, chunk) };
+            return unsafe { lut_band_avx2(prepared, alpha_over, rows, w, chunk) };
         }
-        lut_band(&prepared, rows, w, chunk, |inst, i, f, p| bilinear_add(inst, alpha_over, i, f, p));
+        lut_band(prepared, rows, w, chunk, |inst, i, f, p| bilinear_add(inst, alpha_over, i, f, p));
     });
+}
+
+/// The coarse image's bilinear upsample by `k` (its pixel (i, j) centred on accumulation pixel position
+/// ((i + 0.5) k, (j + 0.5) k); indices clamped at the edges) added to `hdr`'s colour channels. What
+/// `upsampled_at` in `lut_compute.wgsl` computes per instance.
+fn add_upsampled(coarse: &HdrImage, k: u32, hdr: &mut HdrImage) {
+    let (w, cw, ch) = (hdr.width as usize, coarse.width as usize, coarse.height as usize);
+    let inv = 1.0 / k as f32;
+    hdr.pixels.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        let (j0, fy) = coarse_index((y as f32 + 0.5) * inv - 0.5, ch);
+        let (top, bottom) = (&coarse.pixels[j0[0] * cw..][..cw], &coarse.pixels[j0[1] * cw..][..cw]);
+        for (x, p) in row.iter_mut().enumerate() {
+            let (i0, fx) = coarse_index((x as f32 + 0.5) * inv - 0.5, cw);
+            for c in 0..3 {
+                let t = top[i0[0]][c] * (1.0 - fx) + top[i0[1]][c] * fx;
+                let b = bottom[i0[0]][c] * (1.0 - fx) + bottom[i0[1]][c] * fx;
+                p[c] += t * (1.0 - fy) + b * fy;
+            }
+        }
+    });
+}
+
+/// The two coarse indices either side of the coarse coordinate `u` (clamped to `0..n`) and the fraction.
+#[inline(always)]
+fn coarse_index(u: f32, n: usize) -> ([usize; 2], f32) {
+    let i = u.floor();
+    let last = n.saturating_sub(1) as f32;
+    ([i.clamp(0.0, last) as usize, (i + 1.0).clamp(0.0, last) as usize], u - i)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -680,8 +799,10 @@ fn has_avx2_f16c() -> bool {
     crate::optics::simd_level() >= 1 && std::arch::is_x86_feature_detected!("f16c")
 }
 
-/// [`lut_band`] compiled for AVX2, each pixel's four channels in one SSE register: the texels converted by
-/// F16C, then the same products and sums as [`bilinear_add`] in the same order (the same image, bit for bit).
+/// [`lut_band`] compiled for AVX2: two neighbouring pixels of a row at a time in one AVX register (four channels
+/// each), a pixel alone in one SSE register where its neighbour is outside the instance's quad or row; the texels
+/// converted by F16C, then the same products and sums as [`bilinear_add`] in the same order, lane by lane (the
+/// same image, bit for bit).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,f16c")]
 unsafe fn lut_band_avx2(
@@ -692,34 +813,92 @@ unsafe fn lut_band_avx2(
     chunk: &mut [[f32; 4]],
 ) {
     use std::arch::x86_64::{
-        __m128, _mm_add_ps, _mm_blend_ps, _mm_cvtph_ps, _mm_cvtss_f32, _mm_loadl_epi64, _mm_loadu_ps, _mm_mul_ps,
-        _mm_set_ps, _mm_set1_ps, _mm_setzero_ps, _mm_shuffle_ps, _mm_storeu_ps,
+        __m128, __m256, _mm_add_ps, _mm_blend_ps, _mm_cvtph_ps, _mm_cvtsi64_si128, _mm_cvtss_f32,
+        _mm_loadu_ps, _mm_mul_ps, _mm_set_epi64x, _mm_set_ps, _mm_set1_ps, _mm_shuffle_ps, _mm_storeu_ps,
+        _mm256_add_ps, _mm256_blend_ps, _mm256_castps256_ps128, _mm256_cvtph_ps, _mm256_extractf128_ps,
+        _mm256_loadu_ps, _mm256_mul_ps, _mm256_set_m128, _mm256_storeu_ps,
     };
-    lut_band(prepared, rows, width, chunk, |inst, [ix, iy], [fx, fy], p| {
+    for inst in prepared {
+        let m = &inst.map;
+        let [qx0, qx1, qy0, qy1] = m.quad;
         let (ew, eh) = (inst.entry.width as i32, inst.entry.height as i32);
         let texels = &inst.entry.texels;
-        let at = |i: i32, j: i32| -> __m128 {
+        // A texel's four half floats as 64 bits, 0 (four zeros) outside the entry.
+        let bits = |i: i32, j: i32| -> i64 {
             if (i as u32) < ew as u32 && (j as u32) < eh as u32 {
                 // SAFETY: the index is inside the entry's texels, each 8 readable bytes (four half floats).
-                unsafe { _mm_cvtph_ps(_mm_loadl_epi64(texels.as_ptr().add((j * ew + i) as usize).cast())) }
+                unsafe { texels.as_ptr().add((j * ew + i) as usize).cast::<i64>().read_unaligned() }
             } else {
-                _mm_setzero_ps()
+                0
             }
         };
-        let (a, b, c, d) = (at(ix, iy), at(ix + 1, iy), at(ix, iy + 1), at(ix + 1, iy + 1));
-        let (fxv, gxv, fyv, gyv) = (_mm_set1_ps(fx), _mm_set1_ps(1.0 - fx), _mm_set1_ps(fy), _mm_set1_ps(1.0 - fy));
-        let top = _mm_add_ps(_mm_mul_ps(a, gxv), _mm_mul_ps(b, fxv));
-        let bottom = _mm_add_ps(_mm_mul_ps(c, gxv), _mm_mul_ps(d, fxv));
-        let t = _mm_add_ps(_mm_mul_ps(top, gyv), _mm_mul_ps(bottom, fyv));
         let [c0, c1, c2, c3] = inst.colour;
-        let keep =
-            if alpha_over { 1.0 - (_mm_cvtss_f32(_mm_shuffle_ps::<0xFF>(t, t)) * c3).clamp(0.0, 1.0) } else { 1.0 };
-        // SAFETY: `p` is 16 readable and writable bytes.
-        let old = unsafe { _mm_loadu_ps(p.as_ptr()) };
-        let new = _mm_add_ps(_mm_mul_ps(t, _mm_set_ps(0.0, c2, c1, c0)), _mm_mul_ps(old, _mm_set1_ps(keep)));
-        // The fourth channel is not an image channel: it keeps its value.
-        unsafe { _mm_storeu_ps(p.as_mut_ptr(), _mm_blend_ps::<0b1000>(new, old)) };
-    });
+        let colour = _mm_set_ps(0.0, c2, c1, c0);
+        let colour2 = _mm256_set_m128(colour, colour);
+        let keep_of = |t: __m128| {
+            if alpha_over { 1.0 - (_mm_cvtss_f32(_mm_shuffle_ps::<0xFF>(t, t)) * c3).clamp(0.0, 1.0) } else { 1.0 }
+        };
+        for y in rows.clone() {
+            let columns = m.columns(y, width);
+            if columns.is_empty() {
+                continue;
+            }
+            let row = [m.origin[0] + y as f32 * m.d_dj[0], m.origin[1] + y as f32 * m.d_dj[1]];
+            let out = &mut chunk[(y - rows.start) * width..][..width];
+            // The sample's texel (floor) and fraction at column x; `None` outside the quad.
+            let at = |x: usize| -> Option<([i32; 2], [f32; 2])> {
+                let (tx, ty) = (row[0] + x as f32 * m.d_di[0], row[1] + x as f32 * m.d_di[1]);
+                if !(tx >= qx0 && tx <= qx1 && ty >= qy0 && ty <= qy1) {
+                    return None;
+                }
+                // tx, ty >= -0.5 here: truncation of tx + 1 is the floor.
+                let (ix, iy) = ((tx + 1.0) as i32 - 1, (ty + 1.0) as i32 - 1);
+                Some(([ix, iy], [tx - ix as f32, ty - iy as f32]))
+            };
+            let mut x = columns.start;
+            while x < columns.end {
+                let Some(([ix, iy], [fx, fy])) = at(x) else {
+                    x += 1;
+                    continue;
+                };
+                if let Some(([jx, jy], [gx, gy])) = if x + 1 < columns.end { at(x + 1) } else { None } {
+                    // Two pixels: lane k of each vector is channel k % 4 of pixel x + k / 4.
+                    let pair = |di: i32, dj: i32| -> __m256 {
+                        _mm256_cvtph_ps(_mm_set_epi64x(bits(jx + di, jy + dj), bits(ix + di, iy + dj)))
+                    };
+                    let (a, b, c, d) = (pair(0, 0), pair(1, 0), pair(0, 1), pair(1, 1));
+                    let both = |u: f32, v: f32| _mm256_set_m128(_mm_set1_ps(v), _mm_set1_ps(u));
+                    let (fxv, gxv, fyv, gyv) = (both(fx, gx), both(1.0 - fx, 1.0 - gx), both(fy, gy), both(1.0 - fy, 1.0 - gy));
+                    let top = _mm256_add_ps(_mm256_mul_ps(a, gxv), _mm256_mul_ps(b, fxv));
+                    let bottom = _mm256_add_ps(_mm256_mul_ps(c, gxv), _mm256_mul_ps(d, fxv));
+                    let t = _mm256_add_ps(_mm256_mul_ps(top, gyv), _mm256_mul_ps(bottom, fyv));
+                    let keep = both(keep_of(_mm256_castps256_ps128(t)), keep_of(_mm256_extractf128_ps::<1>(t)));
+                    let p = out[x..x + 2].as_mut_ptr().cast::<f32>();
+                    // SAFETY: `p` is two pixels, 32 readable and writable bytes.
+                    let old = unsafe { _mm256_loadu_ps(p) };
+                    let new = _mm256_add_ps(_mm256_mul_ps(t, colour2), _mm256_mul_ps(old, keep));
+                    // The fourth channel is not an image channel: it keeps its value.
+                    unsafe { _mm256_storeu_ps(p, _mm256_blend_ps::<0b1000_1000>(new, old)) };
+                    x += 2;
+                    continue;
+                }
+                let one = |di: i32, dj: i32| -> __m128 {
+                    _mm_cvtph_ps(_mm_cvtsi64_si128(bits(ix + di, iy + dj)))
+                };
+                let (a, b, c, d) = (one(0, 0), one(1, 0), one(0, 1), one(1, 1));
+                let (fxv, gxv, fyv, gyv) = (_mm_set1_ps(fx), _mm_set1_ps(1.0 - fx), _mm_set1_ps(fy), _mm_set1_ps(1.0 - fy));
+                let top = _mm_add_ps(_mm_mul_ps(a, gxv), _mm_mul_ps(b, fxv));
+                let bottom = _mm_add_ps(_mm_mul_ps(c, gxv), _mm_mul_ps(d, fxv));
+                let t = _mm_add_ps(_mm_mul_ps(top, gyv), _mm_mul_ps(bottom, fyv));
+                let p = out[x].as_mut_ptr();
+                // SAFETY: `p` is 16 readable and writable bytes.
+                let old = unsafe { _mm_loadu_ps(p) };
+                let new = _mm_add_ps(_mm_mul_ps(t, colour), _mm_mul_ps(old, _mm_set1_ps(keep_of(t))));
+                unsafe { _mm_storeu_ps(p, _mm_blend_ps::<0b1000>(new, old)) };
+                x += 1;
+            }
+        }
+    }
 }
 
 /// One accumulation pixel `p` of instance `inst`: the entry's bilinear sample at the texel `i` + `f` (0 outside

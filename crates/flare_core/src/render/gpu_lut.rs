@@ -15,7 +15,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::buffers::{HDR_FORMAT, compute_pipeline, storage, texture_2d};
 use super::shaders::LUT_COMPUTE_WGSL;
-use crate::lut::blend::{LutBins, LutScene};
+use crate::lut::blend::{LutInstance, LutBins, LutScene};
 
 /// Accumulation pixels a side of a tile.
 pub(crate) const TILE: u32 = 32;
@@ -86,8 +86,19 @@ impl ComputeLut {
             unused: 0,
         };
         let uniform = storage(device, queue, "lut tiles", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
+        // Each instance's sampling level ([`crate::lut::blend::instance_levels`]) in its unused last word.
+        let with_levels: Vec<LutInstance> = lut
+            .instances
+            .iter()
+            .zip(bins.levels.iter().chain(std::iter::repeat(&0)))
+            .map(|(inst, &level)| {
+                let mut inst = *inst;
+                inst.axis_y_page[3] = f32::from(level);
+                inst
+            })
+            .collect();
         let instances =
-            storage(device, queue, "lut sprites", bytemuck::cast_slice(&lut.instances), wgpu::BufferUsages::STORAGE);
+            storage(device, queue, "lut sprites", bytemuck::cast_slice(&with_levels), wgpu::BufferUsages::STORAGE);
         let words: Vec<u32> = bins.starts.iter().chain(&bins.list).copied().collect();
         let bin_buffer = storage(device, queue, "lut bins", bytemuck::cast_slice(&words), wgpu::BufferUsages::STORAGE);
         let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
