@@ -58,9 +58,14 @@ pub struct BakeArgs {
     pub out: Option<PathBuf>,
     #[command(flatten)]
     pub choice: LutChoice,
-    /// Most texels across an entry.
+    /// Most texels across an entry of a ghost small on the sensor.
     #[arg(long, default_value_t = BakeSettings::default().res)]
     pub res: u32,
+    /// Texels across the sensor's diagonal at the least (e.g. 512): large ghosts get finer entries (up to 1024
+    /// texels across) so that they show no stair steps when stretched over a large frame, at a cost in memory
+    /// and frame time (README); 0, the default, turns it off.
+    #[arg(long, default_value_t = BakeSettings::default().diagonal_texels)]
+    pub diagonal_texels: u32,
     /// Most ray-grid cells across a ghost's entrance region.
     #[arg(long, default_value_t = BakeSettings::default().grid)]
     pub grid: usize,
@@ -300,6 +305,7 @@ pub fn bake_command(args: &BakeArgs) -> Result<()> {
         .transpose()?;
     let settings = BakeSettings {
         res: args.res,
+        diagonal_texels: args.diagonal_texels,
         grid: args.grid,
         phi_steps: args.phi_steps,
         tolerance: args.tolerance,

@@ -64,6 +64,44 @@ fn small_lut(flare: &PreparedFlare) -> GhostLut {
     bake(flare, &renderer, &[3, 7], &settings, None, &|_| {}, &AtomicBool::new(false)).unwrap()
 }
 
+/// `diagonal_texels` makes the entries of a ghost large on the sensor finer than `res` alone would (each texel at
+/// most the sensor diagonal over it, up to 1024 texels across) and leaves small ghosts' entries as they were;
+/// an out-of-range value is refused naming the field.
+#[test]
+fn large_ghosts_get_finer_entries_with_diagonal_texels() {
+    let flare = flare("tessar");
+    let renderer = flare.ray_grid_renderer();
+    let base = BakeSettings { theta_max_deg: Some(8.0), initial_steps: 1, ..small_settings() };
+    let fine = BakeSettings { diagonal_texels: 256, ..base.clone() };
+    let never = AtomicBool::new(false);
+    let coarse_lut = bake(&flare, &renderer, &[3, 7], &base, None, &|_| {}, &never).unwrap();
+    let fine_lut = bake(&flare, &renderer, &[3, 7], &fine, None, &|_| {}, &never).unwrap();
+    let limit_mm = 2.0 * flare_core::lut::SENSOR_HALF_DIAGONAL_MM / 256.0;
+    let mut finer = 0;
+    for (a, b) in coarse_lut.ghosts.iter().flat_map(|g| &g.entries).zip(fine_lut.ghosts.iter().flat_map(|g| &g.entries))
+    {
+        // The same entry in both (the refinement could in principle split other intervals).
+        if a.width == 0 || a.theta_deg != b.theta_deg || a.phi_deg != b.phi_deg {
+            continue;
+        }
+        assert!(b.texel_mm <= a.texel_mm + 1e-12 && b.texel_mm <= limit_mm.max(a.texel_mm) + 1e-12);
+        assert!(
+            b.width <= flare_core::lut::bake::MAX_ENTRY_TEXELS + 4
+                && b.height <= flare_core::lut::bake::MAX_ENTRY_TEXELS + 4
+        );
+        if b.texel_mm < a.texel_mm {
+            finer += 1;
+            assert!(b.width > a.width, "{} -> {} texels", a.width, b.width);
+        } else {
+            assert_eq!((a.width, a.height), (b.width, b.height));
+        }
+    }
+    assert!(finer > 0, "no entry of the Tessar's ghosts 3 and 7 is large enough to be made finer");
+    let bad = BakeSettings { diagonal_texels: 5000, ..base };
+    let err = bake(&flare, &renderer, &[3], &bad, None, &|_| {}, &never).unwrap_err().to_string();
+    assert!(err.contains("diagonal_texels"), "{err}");
+}
+
 #[test]
 fn symmetry_reduces_every_azimuth_into_the_wedge_with_an_orthogonal_transform() {
     let s = Symmetry { order: 6, axis_deg: 10.0 };
@@ -396,7 +434,12 @@ fn the_gpu_draws_lut_ghosts_as_its_cpu_twin_does() {
         assert!(!lut_scene.instances.is_empty());
         // Additive frames sample their magnified instances coarsely (`instance_levels`): the compute pass must
         // interpolate them as the twin upsamples them.
-        let levels = flare_core::lut::blend::instance_levels((160, 120), (scene.hdr_width, scene.hdr_height), &lut_scene, &live.footprints);
+        let levels = flare_core::lut::blend::instance_levels(
+            (160, 120),
+            (scene.hdr_width, scene.hdr_height),
+            &lut_scene,
+            &live.footprints,
+        );
         eprintln!("{mode:?}: sampling levels {levels:?}");
         assert_eq!(levels.iter().any(|&l| l > 0), mode == BlendMode::Additive, "{levels:?}");
         let cpu = render_cpu(&flare, &live, &scene, &lut_scene);

@@ -85,8 +85,16 @@ impl ColumnTracer for CpuTracing {
 pub struct BakeSettings {
     /// Largest theta (default: the lens's useful field, [`useful_field_deg`]).
     pub theta_max_deg: Option<f64>,
-    /// Most texels across an entry.
+    /// Most texels across an entry of a ghost small on the sensor.
     pub res: u32,
+    /// Texels across the sensor's diagonal at the least: a ghost large on the sensor gets entries finer than
+    /// `res` texels across (up to [`MAX_ENTRY_TEXELS`]), so that stretched over the frame it does not show its
+    /// texels as stair steps. 0 (the default): `res` alone. Measured (README, "LUT images without stair
+    /// steps"): at 512 the Heliar's large ghost at 1536x1024 goes from 31.5 to 33.8 dB against the reference
+    /// with no visible steps (LUT 0.45 -> 5.4 MB), but the Nikon zoom's LUT from 45 M to 228 M texels and its
+    /// blended frame at 480x320 from 1.1-1.5x to 2.6-4.8x the paraxial frame: too dear to be the default before
+    /// the entries have a mip pyramid.
+    pub diagonal_texels: u32,
     /// Most ray-grid cells across a ghost's entrance region (the reference renderer's adaptive grid). 64 by
     /// default: over the scouted region that is about one cell per two texels; 32 costs the double Gauss
     /// 0.002-0.004 SSIM at 0 and 13 deg (how the default was chosen: CHANGELOG.md).
@@ -106,6 +114,7 @@ impl Default for BakeSettings {
         Self {
             theta_max_deg: None,
             res: 128,
+            diagonal_texels: 0,
             grid: 64,
             phi_steps: 2,
             initial_steps: 4,
@@ -156,6 +165,9 @@ impl BakeSettings {
         if !(8..=1024).contains(&self.res) {
             return bad("res", "use 8 to 1024 texels");
         }
+        if self.diagonal_texels > 4096 {
+            return bad("diagonal_texels", "use 0 (off) to 4096 texels");
+        }
         if !(4..=crate::raytrace::REFERENCE_GRID * 2).contains(&self.grid) {
             return bad("grid", "use 4 to 512 cells");
         }
@@ -195,6 +207,8 @@ pub fn refinement_done(error: f64, parent_error: f64, tolerance: f64) -> bool {
 
 /// An entry's window reaches this many times the sensor's half-diagonal from the axis, at most.
 pub const VISIBLE_MARGIN: f64 = 1.15;
+/// The most texels across an entry (a large ghost's, [`BakeSettings::diagonal_texels`]).
+pub const MAX_ENTRY_TEXELS: u32 = 1024;
 
 /// Renders one entry: ghost `g` with the light at `theta_deg` and the azimuth `axis + phi_deg`.
 pub fn render_entry(
@@ -242,7 +256,13 @@ pub fn render_column(
             .filter(|b| b[0] < b[2] && b[1] < b[3]);
         if let Some(b) = footprint {
             let (w_mm, h_mm) = ((b[2] - b[0]).max(0.0), (b[3] - b[1]).max(0.0));
-            let texel_mm = (w_mm.max(h_mm) / f64::from(settings.res - 2)).max(MIN_TEXEL_MM);
+            let mut texel_mm = w_mm.max(h_mm) / f64::from(settings.res - 2);
+            if settings.diagonal_texels > 0 {
+                // A large ghost: finer, up to 1024 texels across.
+                let fine_mm = 2.0 * super::SENSOR_HALF_DIAGONAL_MM / f64::from(settings.diagonal_texels);
+                texel_mm = texel_mm.min(fine_mm.max(w_mm.max(h_mm) / f64::from(MAX_ENTRY_TEXELS - 4)));
+            }
+            let texel_mm = texel_mm.max(MIN_TEXEL_MM);
             // Two texels of margin each side: the bilinear splats of the rim's triangles land there.
             let (width, height) = ((w_mm / texel_mm).ceil() as u32 + 4, (h_mm / texel_mm).ceil() as u32 + 4);
             let window = Window {

@@ -813,10 +813,10 @@ unsafe fn lut_band_avx2(
     chunk: &mut [[f32; 4]],
 ) {
     use std::arch::x86_64::{
-        __m128, __m256, _mm_add_ps, _mm_blend_ps, _mm_cvtph_ps, _mm_cvtsi64_si128, _mm_cvtss_f32,
-        _mm_loadu_ps, _mm_mul_ps, _mm_set_epi64x, _mm_set_ps, _mm_set1_ps, _mm_shuffle_ps, _mm_storeu_ps,
-        _mm256_add_ps, _mm256_blend_ps, _mm256_castps256_ps128, _mm256_cvtph_ps, _mm256_extractf128_ps,
-        _mm256_loadu_ps, _mm256_mul_ps, _mm256_set_m128, _mm256_storeu_ps,
+        __m128, __m256, _mm_add_ps, _mm_blend_ps, _mm_cvtph_ps, _mm_cvtsi64_si128, _mm_cvtss_f32, _mm_loadu_ps,
+        _mm_mul_ps, _mm_set_epi64x, _mm_set_ps, _mm_set1_ps, _mm_shuffle_ps, _mm_storeu_ps, _mm256_add_ps,
+        _mm256_blend_ps, _mm256_castps256_ps128, _mm256_cvtph_ps, _mm256_extractf128_ps, _mm256_loadu_ps,
+        _mm256_mul_ps, _mm256_set_m128, _mm256_storeu_ps,
     };
     for inst in prepared {
         let m = &inst.map;
@@ -868,7 +868,8 @@ unsafe fn lut_band_avx2(
                     };
                     let (a, b, c, d) = (pair(0, 0), pair(1, 0), pair(0, 1), pair(1, 1));
                     let both = |u: f32, v: f32| _mm256_set_m128(_mm_set1_ps(v), _mm_set1_ps(u));
-                    let (fxv, gxv, fyv, gyv) = (both(fx, gx), both(1.0 - fx, 1.0 - gx), both(fy, gy), both(1.0 - fy, 1.0 - gy));
+                    let (fxv, gxv, fyv, gyv) =
+                        (both(fx, gx), both(1.0 - fx, 1.0 - gx), both(fy, gy), both(1.0 - fy, 1.0 - gy));
                     let top = _mm256_add_ps(_mm256_mul_ps(a, gxv), _mm256_mul_ps(b, fxv));
                     let bottom = _mm256_add_ps(_mm256_mul_ps(c, gxv), _mm256_mul_ps(d, fxv));
                     let t = _mm256_add_ps(_mm256_mul_ps(top, gyv), _mm256_mul_ps(bottom, fyv));
@@ -882,11 +883,10 @@ unsafe fn lut_band_avx2(
                     x += 2;
                     continue;
                 }
-                let one = |di: i32, dj: i32| -> __m128 {
-                    _mm_cvtph_ps(_mm_cvtsi64_si128(bits(ix + di, iy + dj)))
-                };
+                let one = |di: i32, dj: i32| -> __m128 { _mm_cvtph_ps(_mm_cvtsi64_si128(bits(ix + di, iy + dj))) };
                 let (a, b, c, d) = (one(0, 0), one(1, 0), one(0, 1), one(1, 1));
-                let (fxv, gxv, fyv, gyv) = (_mm_set1_ps(fx), _mm_set1_ps(1.0 - fx), _mm_set1_ps(fy), _mm_set1_ps(1.0 - fy));
+                let (fxv, gxv, fyv, gyv) =
+                    (_mm_set1_ps(fx), _mm_set1_ps(1.0 - fx), _mm_set1_ps(fy), _mm_set1_ps(1.0 - fy));
                 let top = _mm_add_ps(_mm_mul_ps(a, gxv), _mm_mul_ps(b, fxv));
                 let bottom = _mm_add_ps(_mm_mul_ps(c, gxv), _mm_mul_ps(d, fxv));
                 let t = _mm_add_ps(_mm_mul_ps(top, gyv), _mm_mul_ps(bottom, fyv));

@@ -162,8 +162,8 @@ impl Accumulator {
         let mut x = x_lo as usize;
         while x < x_hi {
             let end = ((x / TILE + 1) * TILE).min(x_hi);
-            let tile = self.tiles[(y / TILE) * self.tiles_x + x / TILE]
-                .get_or_insert_with(|| vec![[0.0; 3]; TILE * TILE]);
+            let tile =
+                self.tiles[(y / TILE) * self.tiles_x + x / TILE].get_or_insert_with(|| vec![[0.0; 3]; TILE * TILE]);
             let row = &mut tile[(y % TILE) * TILE..(y % TILE + 1) * TILE];
             for (p, column) in row[x % TILE..x % TILE + (end - x)].iter_mut().zip(x..end) {
                 let centre = column as f64 + 0.5;

@@ -15,7 +15,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::buffers::{HDR_FORMAT, compute_pipeline, storage, texture_2d};
 use super::shaders::LUT_COMPUTE_WGSL;
-use crate::lut::blend::{LutInstance, LutBins, LutScene};
+use crate::lut::blend::{LutBins, LutInstance, LutScene};
 
 /// Accumulation pixels a side of a tile.
 pub(crate) const TILE: u32 = 32;
