@@ -427,6 +427,31 @@ fn render_with_the_ray_traced_methods() {
         let lit = image.pixels().filter(|p| p[0] > 40 || p[1] > 40 || p[2] > 40).count();
         assert!(lit > 50, "{method}: a flare is visible: {lit} lit pixels");
     }
+    // Sequences and per-ghost layers as with the other methods: a tracked light over two frames.
+    let track = dir.path().join("track.csv");
+    std::fs::write(&track, "frame,x_px,y_px\n1,30,20\n2,60,40\n").unwrap();
+    for method in [["--method", "raygrid", "--grid", "16"], ["--method", "reference", "--grid", "16"]] {
+        let pattern = dir.path().join(format!("{}/f.####.exr", method[1]));
+        let mut args = vec!["render", "tessar", "--size", "96x64", "--frames", "1-2", "--layers", "ghosts"];
+        args.extend(method);
+        args.extend(["--track", track.to_str().unwrap(), "-o", pattern.to_str().unwrap()]);
+        let result = flarelab(&args);
+        assert!(result.status.success(), "{args:?}: {}", String::from_utf8_lossy(&result.stderr));
+        for frame in ["0001", "0002"] {
+            let file = dir.path().join(format!("{}/f.{frame}.exr", method[1]));
+            let layers = exr::prelude::read_all_flat_layers_from_file(&file).unwrap();
+            let names: Vec<String> = layers
+                .layer_data
+                .iter()
+                .flat_map(|l| {
+                    let prefix = l.attributes.layer_name.as_ref().map(|n| format!("{n}.")).unwrap_or_default();
+                    l.channel_data.list.iter().map(move |c| format!("{prefix}{}", c.name))
+                })
+                .collect();
+            assert!(names.iter().any(|n| n == "flare.R"), "{names:?}");
+            assert!(names.iter().filter(|n| n.starts_with("ghost_") && n.ends_with(".R")).count() > 3, "{names:?}");
+        }
+    }
     // Asked for the CPU, ray grids stay there; the reference is never on the GPU.
     let out = dir.path().join("cpu.png");
     let result = flarelab(&[

@@ -91,6 +91,7 @@ impl ShotJob {
                 skip_existing: false,
                 divisor: 1,
                 parallel_frames: true,
+                traced: None,
             };
             let sources = ShotSources { doc: &doc, flare: &flare, lut: lut.as_deref(), plan: &plan };
             let report = render_sequence(

@@ -29,7 +29,9 @@ use flare_core::shot::{
     sequence::{FrameOutcome, SequenceOptions, ShotSources, render_sequence, write_log},
     track::read_track,
 };
+use flare_core::traced::TracedGhosts;
 use indicatif::{ProgressBar, ProgressStyle};
+use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
 use super::common::{DeviceArg, OpticsChoice, parse_aperture, parse_pair_f64};
@@ -489,9 +491,6 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         Method::Blended | Method::Photo => {}
         _ => doc.blend.lut = LutSource::None,
     }
-    if args.layers.is_some() && grid.is_some() {
-        bail!("--layers ghosts applies to the paraxial, blended and photo methods");
-    }
     if args.gpu_samples > 8 {
         bail!("--gpu-samples {}: use 0 (the box filter) or 1 to 8 samples a pixel across", args.gpu_samples);
     }
@@ -512,9 +511,6 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         (None, Some(_)) => bail!("-o {out_text}: the name has a frame field; give --frames A-B to render a sequence"),
         (None, None) => None,
     };
-    if sequence.is_some() && grid.is_some() {
-        bail!("--frames renders the paraxial, blended and photo methods (a ray-traced frame takes minutes)");
-    }
     if grid.is_some() && doc.sensor_width_mm != FULL_FRAME_WIDTH_MM {
         bail!("--sensor-mm {}: the ray-traced methods draw the 36 mm frame", doc.sensor_width_mm);
     }
@@ -595,9 +591,19 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     }
     // The ray-traced methods write their accumulation at the frame's full size.
     let divisor = if grid.is_some() { 1 } else { args.accumulation_divisor };
+    // The ray-traced methods trace each frame's ghosts, stills and sequences alike (`flare_core::traced`).
+    let traced = grid.map(|n| Arc::new(TracedGhosts::new(&flare, n, args.gpu_samples, &device)));
     if let Some(out) = sequence {
         let sources = ShotSources { doc: &doc, flare: &flare, lut: lut.as_ref(), plan: &plan };
-        let result = render_frames(args, &mut device, &sources, out, choice, divisor, &cancel);
+        let options = SequenceOptions {
+            out,
+            layers: choice,
+            skip_existing: args.skip_existing,
+            divisor,
+            parallel_frames: !args.frames_in_turn,
+            traced,
+        };
+        let result = render_frames(args, &mut device, &sources, &options, &cancel);
         eprintln!("{}", exposure_line(&doc));
         return result;
     }
@@ -625,76 +631,12 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let request = plan.request(&doc, &flare.system, planned, divisor);
     let frame = Frame::build(&flare, lut.as_ref(), &request);
     let sources = Sources { flare: &flare, lut: lut.as_ref(), plate: plate.as_ref() };
-    match grid {
-        Some(n) => {
+    match &traced {
+        Some(t) => {
             // Ray-traced ghosts replace the paraxial accumulation; starburst, tonemap and writer are the same.
-            let started = std::time::Instant::now();
-            let renderer = flare.ray_grid_renderer();
-            let on_gpu = match (&device, n) {
-                (Device::Gpu(drawer), raytrace::Grid::Fixed(cells)) => {
-                    let gpu = flare_core::render::raygrid::GpuRayGrid::new(&drawer.ctx.device);
-                    let window = raytrace::Window::frame(width, height);
-                    let samples = args.gpu_samples;
-                    match gpu.render(
-                        &drawer.ctx,
-                        &renderer,
-                        planned.light_deg,
-                        window,
-                        cells,
-                        samples,
-                        &request.ghost_gains,
-                    ) {
-                        // A lost device (or an error it reported) falls back to the CPU; a refused grid is an error.
-                        Err(flare_core::render::raygrid::GpuRayGridError::Gpu(e)) => {
-                            eprintln!("ray grids on the GPU failed ({e}): tracing on the CPU instead");
-                            None
-                        }
-                        Err(e) => return Err(e.into()),
-                        Ok(traced) => {
-                            eprintln!(
-                                "ray grids on the GPU ({}): {} ghost x wavelength jobs with light, {cells}-cell grid, {}, {} batches, {:.2} s{}",
-                                drawer.ctx.adapter.name,
-                                traced.jobs,
-                                if samples == 0 {
-                                    "box-filtered".to_string()
-                                } else {
-                                    format!("{samples}x{samples} samples a pixel")
-                                },
-                                traced.batches,
-                                started.elapsed().as_secs_f64(),
-                                traced
-                                    .gpu_times
-                                    .map_or(String::new(), |t| format!(" (GPU time by timestamps: {})", t.summary()))
-                            );
-                            Some(traced.hdr)
-                        }
-                    }
-                }
-                _ => None,
-            };
-            let hdr = match on_gpu {
-                Some(hdr) => hdr,
-                None => {
-                    let traced = renderer
-                        .render_request(
-                            &raytrace::RayGridRequest::frame(planned.light_deg, width, height, n)
-                                .weighted(&request.ghost_gains),
-                        )?
-                        .remove(0);
-                    let st = traced.stats;
-                    eprintln!(
-                        "ray-traced on the CPU {} ghost x wavelength jobs, {n:?} grid: {} rays, {} triangles, {} jobs with no light, {:.2} s",
-                        st.jobs,
-                        st.rays,
-                        st.triangles,
-                        st.empty_jobs,
-                        started.elapsed().as_secs_f64()
-                    );
-                    traced.hdr
-                }
-            };
-            let drawn = frame::drawn_with_traced_ghosts(&frame, &sources, hdr);
-            frame::write_drawn(&mut device, &frame, &sources, &drawn, choice, &args.out)?;
+            let (drawn, how) = t.draw(&device, &frame, &sources)?;
+            eprintln!("{how}");
+            t.write(&device, &frame, &sources, &drawn, choice, &args.out)?;
         }
         None => {
             frame::render_to_file(&mut device, &frame, &sources, choice, &args.out)?;
@@ -738,28 +680,19 @@ fn render_frames(
     args: &RenderArgs,
     device: &mut Device,
     sources: &ShotSources,
-    out: FramePattern,
-    layers: LayerChoice,
-    divisor: u32,
+    options: &SequenceOptions,
     cancel: &AtomicBool,
 ) -> Result<()> {
-    if let Some(dir) = Path::new(&out.text).parent().filter(|d| !d.as_os_str().is_empty()) {
+    if let Some(dir) = Path::new(&options.out.text).parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("-o: cannot create {}", dir.display()))?;
     }
     let total = sources.plan.frames.len();
     let bar = progress_bar(total, "rendering");
     let started = std::time::Instant::now();
-    let options = SequenceOptions {
-        out,
-        layers,
-        skip_existing: args.skip_existing,
-        divisor,
-        parallel_frames: !args.frames_in_turn,
-    };
     let report = render_sequence(
         device,
         sources,
-        &options,
+        options,
         &|record, done, _| {
             bar.set_position(done as u64);
             if let FrameOutcome::Failed(e) = &record.outcome {

@@ -408,12 +408,19 @@ pub fn draw_cpu(frame: &Frame, sources: &Sources) -> Drawn {
 /// callers trace with the request's `ghost_gains` ([`crate::raytrace::Ghosts::Weighted`]).
 pub fn drawn_with_traced_ghosts(frame: &Frame, sources: &Sources, ghosts: HdrImage) -> Drawn {
     let scene = &frame.scene;
-    let light_gain = if frame.request.light_gain.is_finite() { frame.request.light_gain.max(0.0) as f32 } else { 0.0 };
-    // At its own size, bilinear resampling reads every pixel exactly: only the gain is applied then.
-    let mut hdr = ghosts.resampled(scene.hdr_width, scene.hdr_height, crate::image::Sampling::Bilinear, light_gain);
+    let mut hdr = traced_accumulation(frame, &ghosts);
     cpu::starburst_pass(scene, &sources.flare.starburst_texture, &mut hdr);
     let display = cpu::tonemap_pass(scene, &hdr, sources.plate);
     Drawn { hdr, display }
+}
+
+/// Ray-traced ghosts (linear, before the light's gain, any size) as the frame's accumulation: at its size,
+/// times the light's gain (a changing light's intensity on a shot).
+pub fn traced_accumulation(frame: &Frame, ghosts: &HdrImage) -> HdrImage {
+    let scene = &frame.scene;
+    let light_gain = if frame.request.light_gain.is_finite() { frame.request.light_gain.max(0.0) as f32 } else { 0.0 };
+    // At its own size, bilinear resampling reads every pixel exactly: only the gain is applied then.
+    ghosts.resampled(scene.hdr_width, scene.hdr_height, crate::image::Sampling::Bilinear, light_gain)
 }
 
 /// The accumulation passes of the CPU twin: ghosts, LUT ghosts, starburst.
@@ -489,13 +496,25 @@ pub fn write_drawn(
     choice: LayerChoice,
     path: &std::path::Path,
 ) -> Result<(), FrameError> {
+    write_drawn_with(frame, sources, drawn, path, || {
+        if choice.ghosts { Ok(ghost_layers(device, frame, sources)?) } else { Ok(Vec::new()) }
+    })
+}
+
+/// [`write_drawn`] with the ghost layers from `ghost_layers` (called only for an EXR file): the drawn ghosts
+/// on a device, or ray-traced ones ([`crate::traced::TracedGhosts::write`]).
+pub fn write_drawn_with(
+    frame: &Frame,
+    sources: &Sources,
+    drawn: &Drawn,
+    path: &std::path::Path,
+    ghost_layers: impl FnOnce() -> Result<Vec<(String, HdrImage)>, FrameError>,
+) -> Result<(), FrameError> {
     let layers = match crate::output::ImageKind::from_path(path)? {
         crate::output::ImageKind::Png => None,
         crate::output::ImageKind::Exr => {
             let mut layers = drawn.layers(frame, sources);
-            if choice.ghosts {
-                layers.ghosts = ghost_layers(device, frame, sources)?;
-            }
+            layers.ghosts = ghost_layers()?;
             Some(layers)
         }
     };

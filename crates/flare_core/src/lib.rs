@@ -46,6 +46,7 @@ pub mod shot;
 pub mod spectrum;
 pub mod starburst;
 pub mod timeline;
+pub mod traced;
 
 // What callers need most, at the crate root: the document, the prepared optics, the frame pipeline and the
 // writer. Everything else is reached through its module.

@@ -11,7 +11,8 @@
 //! encoded and written on a second thread (unless ghost layers are asked for: those are drawn on the same
 //! device, so they are written in turn). On the CPU twin the frames are drawn in parallel on rayon's pool (each
 //! frame's passes are parallel too; frames in parallel also overlap reading and writing). On the GPU a plate
-//! shared by consecutive frames (a still background) is read once. Every frame reports a [`FrameRecord`]
+//! shared by consecutive frames (a still background) is read once. With `traced` set, each frame's ghosts are
+//! ray-traced ([`crate::traced`]) on the device (a GPU for a fixed grid, else the CPU) instead of drawn. Every frame reports a [`FrameRecord`]
 //! (frame, light pixel and angle, visibility, milliseconds, outcome), the same record [`write_log`] writes.
 
 use std::path::{Path, PathBuf};
@@ -25,10 +26,11 @@ use serde::Serialize;
 use super::pattern::FramePattern;
 use super::plan::{FramePlan, ShotPlan};
 use crate::flare::PreparedFlare;
-use crate::frame::{self, Device, Drawn, Frame, LayerChoice, Sources};
+use crate::frame::{self, Device, Drawn, Frame, FrameError, LayerChoice, Sources};
 use crate::image::HdrImage;
 use crate::lut::blend::LiveLut;
 use crate::preset::Document;
+use crate::traced::TracedGhosts;
 
 /// How a sequence is written.
 #[derive(Clone, Debug)]
@@ -43,6 +45,8 @@ pub struct SequenceOptions {
     /// On the CPU twin, draw frames in parallel (false: one after another, each frame's passes still
     /// parallel; for measuring which is faster).
     pub parallel_frames: bool,
+    /// Ghosts ray-traced instead of drawn (`--method raygrid | reference`); their layers traced too.
+    pub traced: Option<Arc<TracedGhosts>>,
 }
 
 /// What happened to a frame.
@@ -206,7 +210,15 @@ pub fn render_sequence(
                     Ok(plate) => {
                         let frame = build(plan);
                         let s = Sources { flare: sources.flare, lut: sources.lut, plate: plate.as_deref() };
-                        let written = frame::render_to_file(&mut Device::Cpu, &frame, &s, options.layers, &path);
+                        let written = match &options.traced {
+                            Some(t) => frame::check_output(&path, options.layers).and_then(|_| {
+                                let (drawn, _) = t.draw(&Device::Cpu, &frame, &s)?;
+                                t.write(&Device::Cpu, &frame, &s, &drawn, options.layers, &path)
+                            }),
+                            None => {
+                                frame::render_to_file(&mut Device::Cpu, &frame, &s, options.layers, &path).map(|_| ())
+                            }
+                        };
                         outcome_of(plan.frame, &path, written)
                     }
                     Err(e) => FrameOutcome::Failed(e),
@@ -257,7 +269,11 @@ pub fn render_sequence(
                     };
                     let frame = build(plan);
                     let s = Sources { flare: sources.flare, lut: sources.lut, plate: plate.as_deref() };
-                    let drawn = match device.draw(&frame, &s) {
+                    let drawn = match &options.traced {
+                        Some(t) => t.draw(device, &frame, &s).map(|(drawn, _)| drawn),
+                        None => device.draw(&frame, &s).map_err(FrameError::from),
+                    };
+                    let drawn = match drawn {
                         Ok(d) => d,
                         Err(e) => {
                             let failed = FrameOutcome::Failed(format!("frame {}: {e}", plan.frame));
@@ -271,7 +287,10 @@ pub fn render_sequence(
                             break;
                         }
                     } else {
-                        let written = frame::write_drawn(device, &frame, &s, &drawn, options.layers, &path);
+                        let written = match &options.traced {
+                            Some(t) => t.write(device, &frame, &s, &drawn, options.layers, &path),
+                            None => frame::write_drawn(device, &frame, &s, &drawn, options.layers, &path),
+                        };
                         let outcome = outcome_of(plan.frame, &path, written);
                         inline.push(finish(record(plan, path, started, outcome)));
                     }

@@ -1,0 +1,164 @@
+//! Frames whose ghosts are ray-traced instead of drawn as paraxial sprites (`render --method raygrid` and
+//! `--method reference`): stills, sequences (`--frames`) and per-ghost layers (`--layers ghosts`) alike.
+//!
+//! # How it works
+//! A frame is built as any other ([`Frame::build`]: its light, ghost gains, exposure and starburst); then
+//! [`TracedGhosts::trace`] traces its ghosts at its ghost gains (a preset's per-ghost gains, `enabled` and
+//! `solo`; [`RayGridRequest::weighted`]) into an accumulation at the frame's size: on the GPU
+//! ([`GpuRayGrid::render`]) when the device is a GPU and the grid fixed, else on the CPU's f64 tracer (the
+//! reference's adaptive grid is always there). A device lost on the way falls back to the CPU, said in the
+//! line [`Traced::how`] returns. [`frame::drawn_with_traced_ghosts`] adds the starburst and tonemaps as every
+//! frame is, and the one writer ([`TracedGhosts::write`] through [`frame::write_drawn_with`]) writes it; a
+//! ghost's own layer is that ghost traced alone (every other gain 0), so the layers sum to the flare.
+//! [`crate::shot::sequence::render_sequence`] traces each frame of a sequence this way when asked.
+
+use crate::flare::PreparedFlare;
+use crate::frame::{self, Device, Drawn, Frame, FrameError, LayerChoice, Sources};
+use crate::image::HdrImage;
+use crate::raytrace::{Grid, RayGridRenderer, RayGridRequest, Window};
+use crate::render::raygrid::{GpuRayGrid, GpuRayGridError};
+
+/// How a frame's ghosts are traced, with what tracing needs made once (the CPU tracer's tables, the GPU's
+/// pipelines) for every frame and layer of a render.
+pub struct TracedGhosts {
+    pub grid: Grid,
+    /// The GPU's samples a pixel across: 0, the box filter (default), or 1 to 8 (the raster path, to compare).
+    pub gpu_samples: u32,
+    renderer: RayGridRenderer,
+    gpu: Option<GpuRayGrid>,
+}
+
+impl std::fmt::Debug for TracedGhosts {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TracedGhosts")
+            .field("grid", &self.grid)
+            .field("gpu_samples", &self.gpu_samples)
+            .field("on_gpu", &self.gpu.is_some())
+            .finish()
+    }
+}
+
+/// One frame's ghosts traced: the accumulation (frame size, linear, before the light's gain) and a line saying
+/// where and how.
+pub struct Traced {
+    pub hdr: HdrImage,
+    pub how: String,
+}
+
+impl TracedGhosts {
+    /// For frames of `flare` drawn on `device` (its pipelines are made here when it is a GPU and the grid fixed).
+    pub fn new(flare: &PreparedFlare, grid: Grid, gpu_samples: u32, device: &Device) -> Self {
+        let gpu = match (device, grid) {
+            (Device::Gpu(drawer), Grid::Fixed(_)) => Some(GpuRayGrid::new(&drawer.ctx.device)),
+            _ => None,
+        };
+        Self { grid, gpu_samples, renderer: flare.ray_grid_renderer(), gpu }
+    }
+
+    /// `frame`'s ghosts at its ghost gains (see the module documentation). A grid beyond the GPU's limits is an
+    /// error naming the limit; a lost device falls back to the CPU.
+    pub fn trace(&self, device: &Device, frame: &Frame) -> Result<Traced, FrameError> {
+        self.trace_gains(device, frame, &frame.request.ghost_gains)
+    }
+
+    fn trace_gains(&self, device: &Device, frame: &Frame, gains: &[f32]) -> Result<Traced, FrameError> {
+        let started = std::time::Instant::now();
+        let (light, (width, height)) = (frame.request.light_deg, (frame.request.width, frame.request.height));
+        let mut fallback = String::new();
+        if let (Some(gpu), Device::Gpu(drawer), Grid::Fixed(cells)) = (&self.gpu, device, self.grid) {
+            let window = Window::frame(width, height);
+            match gpu.render(&drawer.ctx, &self.renderer, light, window, cells, self.gpu_samples, gains) {
+                Ok(traced) => {
+                    let how = format!(
+                        "ray grids on the GPU ({}): {} ghost x wavelength jobs with light, {cells}-cell grid, {}, {} batches, {:.2} s{}",
+                        drawer.ctx.adapter.name,
+                        traced.jobs,
+                        match self.gpu_samples {
+                            0 => "box-filtered".to_string(),
+                            s => format!("{s}x{s} samples a pixel"),
+                        },
+                        traced.batches,
+                        started.elapsed().as_secs_f64(),
+                        traced
+                            .gpu_times
+                            .map_or(String::new(), |t| format!(" (GPU time by timestamps: {})", t.summary()))
+                    );
+                    return Ok(Traced { hdr: traced.hdr, how });
+                }
+                Err(GpuRayGridError::Gpu(e)) => {
+                    fallback = format!("ray grids on the GPU failed ({e}): traced on the CPU instead; ");
+                }
+                Err(e) => return Err(FrameError::Request(e.to_string())),
+            }
+        }
+        let request = RayGridRequest::frame(light, width, height, self.grid).weighted(gains);
+        let traced = self
+            .renderer
+            .render_request(&request)
+            .map_err(|e| FrameError::Request(e.to_string()))?
+            .into_iter()
+            .next()
+            .ok_or_else(|| FrameError::Request("the ray-grid render drew no view".into()))?;
+        let st = traced.stats;
+        let how = format!(
+            "{fallback}ray-traced on the CPU {} ghost x wavelength jobs, {:?} grid: {} rays, {} triangles, {} jobs with no light, {:.2} s",
+            st.jobs,
+            self.grid,
+            st.rays,
+            st.triangles,
+            st.empty_jobs,
+            started.elapsed().as_secs_f64()
+        );
+        Ok(Traced { hdr: traced.hdr, how })
+    }
+
+    /// `frame` drawn with its ghosts traced (starburst and tonemap as every frame), and the tracing's line.
+    pub fn draw(&self, device: &Device, frame: &Frame, sources: &Sources) -> Result<(Drawn, String), FrameError> {
+        let traced = self.trace(device, frame)?;
+        Ok((frame::drawn_with_traced_ghosts(frame, sources, traced.hdr), traced.how))
+    }
+
+    /// One layer per ghost the frame traces with light (`ghost_I_J`), each traced alone at its gain, times the
+    /// flare's gain: they sum to the `flare` layer less the starburst.
+    pub fn ghost_layers(
+        &self,
+        device: &Device,
+        frame: &Frame,
+        sources: &Sources,
+    ) -> Result<Vec<(String, HdrImage)>, FrameError> {
+        let gains = &frame.request.ghost_gains;
+        let mut layers = Vec::new();
+        for (g, model) in sources.flare.system.ghosts.iter().enumerate() {
+            let gain = gains.get(g).copied().unwrap_or(1.0);
+            if !(gain > 0.0 && gain.is_finite()) {
+                continue;
+            }
+            let alone: Vec<f32> =
+                (0..sources.flare.system.ghosts.len()).map(|h| if h == g { gain } else { 0.0 }).collect();
+            let traced = self.trace_gains(device, frame, &alone)?;
+            if traced.hdr.pixels.iter().all(|p| p[0] == 0.0 && p[1] == 0.0 && p[2] == 0.0) {
+                continue;
+            }
+            let hdr = frame::traced_accumulation(frame, &traced.hdr);
+            layers
+                .push((format!("ghost_{}_{}", model.i, model.j), crate::render::cpu::flare_layer(&frame.scene, &hdr)));
+        }
+        Ok(layers)
+    }
+
+    /// Writes a frame drawn by [`Self::draw`] to `path` through the one writer; its ghost layers, when asked,
+    /// traced ([`Self::ghost_layers`]).
+    pub fn write(
+        &self,
+        device: &Device,
+        frame: &Frame,
+        sources: &Sources,
+        drawn: &Drawn,
+        choice: LayerChoice,
+        path: &std::path::Path,
+    ) -> Result<(), FrameError> {
+        frame::write_drawn_with(frame, sources, drawn, path, || {
+            if choice.ghosts { self.ghost_layers(device, frame, sources) } else { Ok(Vec::new()) }
+        })
+    }
+}
