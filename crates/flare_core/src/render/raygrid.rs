@@ -236,10 +236,7 @@ impl GpuRayGrid {
             GpuProfiler::new(device, GpuProfilerSettings::default()).expect("the default settings are valid");
         let box_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("raygrid_box.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(match std::env::var("DEVHACK_BOX") {
-                Ok(p) => std::fs::read_to_string(p).unwrap().into(),
-                Err(_) => RAYGRID_BOX_WGSL.into(),
-            }),
+            source: wgpu::ShaderSource::Wgsl(RAYGRID_BOX_WGSL.into()),
         });
         let compute = |entry: &str| compute_pipeline(device, &box_module, entry);
         let limits = device.limits();
