@@ -214,23 +214,31 @@ impl Derived {
         events
     }
 
-    /// Auto exposure: the flare's exposure follows the optics and the sensor (computed once per change of
-    /// either), unless the user locked it.
-    fn sync_exposure(&mut self, doc: &mut Document) {
+    /// Auto exposure: the flare's exposure that follows the optics and the sensor (computed once per change
+    /// of either). A derived value: it is never written into the document (an undo step must be the user's),
+    /// and [`Self::flare_ev`] gives it to what draws.
+    fn sync_exposure(&mut self, doc: &Document) {
         let Some(flare) = self.flare.as_deref() else { return };
-        if !doc.exposure_auto {
-            return;
-        }
         let key = (flare.id, doc.sensor_width_mm.to_bits());
-        let ev = match self.auto_exposure {
-            Some((k, ev)) if k == key => ev,
-            _ => {
-                let ev = flare_core::exposure::auto_flare_ev(&flare.system, doc.sensor_width_mm);
-                self.auto_exposure = Some((key, ev));
-                ev
-            }
-        };
-        doc.flare_ev = ev;
+        if !matches!(self.auto_exposure, Some((k, _)) if k == key) {
+            let ev = flare_core::exposure::auto_flare_ev(&flare.system, doc.sensor_width_mm);
+            self.auto_exposure = Some((key, ev));
+        }
+    }
+
+    /// The flare's exposure the frame uses: the automatic one while `doc.exposure_auto` (once the optics are
+    /// known), else the user's `doc.flare_ev`.
+    pub fn flare_ev(&self, doc: &Document) -> f64 {
+        match self.auto_exposure {
+            Some((_, ev)) if doc.exposure_auto => ev,
+            _ => doc.flare_ev,
+        }
+    }
+
+    /// A copy of `doc` for a job or a file, its exposure the one the view uses ([`Self::flare_ev`]): what the
+    /// command line draws from it (it resolves an automatic exposure the same way).
+    pub fn resolved(&self, doc: &Document) -> Document {
+        Document { flare_ev: self.flare_ev(doc), ..doc.clone() }
     }
 
     /// Forgets the optics' key, so the next sync rebuilds the flare (after something outside the document
@@ -378,6 +386,7 @@ impl Derived {
         divisor: u32,
     ) -> FrameRequest {
         let mut request = doc.frame_request_at(&flare.system, self.playhead as f64, width, height, divisor);
+        request.display.flare_ev = self.flare_ev(doc);
         if let Some(planned) = self.shot_plan.as_ref().and_then(|p| p.frames.iter().find(|f| f.frame == self.playhead))
         {
             planned.apply_to(&mut request);

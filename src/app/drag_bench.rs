@@ -113,7 +113,11 @@ impl DragBench {
         self.last = Some(now);
         let t = self.done as f64 / self.frames.max(1) as f64;
         match self.what {
-            Sweep::Exposure => doc.flare_ev = 6.0 + 8.0 * t,
+            Sweep::Exposure => {
+                // As the slider does: a moved exposure is the user's, locked.
+                doc.exposure_auto = false;
+                doc.flare_ev = 6.0 + 8.0 * t;
+            }
             Sweep::Light => doc.light_deg = [-20.0 + 40.0 * t, -10.0 + 20.0 * t],
             Sweep::Scrub => {
                 let (first, last) = (doc.timeline.first_frame, doc.timeline.last_frame);

@@ -646,9 +646,12 @@ impl FlareLabApp {
         ui.horizontal(|ui| {
             // Exposures in stops: the flare's relative irradiance times 2^EV, the plate as shot at 0 EV. Moving
             // the flare's exposure locks it; "auto" hands it back to the optics.
+            // The slider shows the exposure the view uses (the automatic one is derived, never written into the
+            // document); moving it writes the user's value and locks it.
+            let mut ev = self.derived.flare_ev(&self.doc);
             let moved = ui
                 .add(
-                    egui::Slider::new(&mut self.doc.flare_ev, -4.0..=40.0)
+                    egui::Slider::new(&mut ev, -4.0..=40.0)
                         .clamping(egui::SliderClamping::Never)
                         .fixed_decimals(2)
                         .suffix(" EV")
@@ -656,11 +659,23 @@ impl FlareLabApp {
                 )
                 .changed();
             if moved {
+                self.doc.flare_ev = ev;
                 self.doc.exposure_auto = false;
             }
-            ui.checkbox(&mut self.doc.exposure_auto, "auto").on_hover_text(
-                "the brightest ghost at a fixed display level, set again when the lens, coating or stop change",
-            );
+            let mut auto = self.doc.exposure_auto;
+            let toggled = ui
+                .checkbox(&mut auto, "auto")
+                .on_hover_text(
+                    "the brightest ghost at a fixed display level, set again when the lens, coating or stop change",
+                )
+                .changed();
+            if toggled {
+                // Locking keeps the exposure shown: the automatic value becomes the user's.
+                if !auto {
+                    self.doc.flare_ev = self.derived.flare_ev(&self.doc);
+                }
+                self.doc.exposure_auto = auto;
+            }
             if self.doc.background.is_some() {
                 ui.add(
                     egui::Slider::new(&mut self.doc.plate_ev, -8.0..=8.0)
@@ -1008,7 +1023,8 @@ impl FlareLabApp {
     }
 
     fn save_preset_to(&mut self, path: &std::path::Path) {
-        self.message = Some(match self.doc.save(path) {
+        // With the exposure the view shows, also when it is automatic (the file says so; a reader resolves it).
+        self.message = Some(match self.derived.resolved(&self.doc).save(path) {
             Ok(()) => format!("saved {}", path.display()),
             Err(e) => format!("could not save {}: {e}", path.display()),
         });
@@ -1215,7 +1231,11 @@ impl FlareLabApp {
         let plate = if self.dof_work.ready(&self.derived, &self.doc) {
             ExportPlate::Ready(self.derived.plate.clone())
         } else {
-            ExportPlate::Defocus(Box::new(self.doc.clone()), self.playhead, self.derived.sharp_plate.clone())
+            ExportPlate::Defocus(
+                Box::new(self.derived.resolved(&self.doc)),
+                self.playhead,
+                self.derived.sharp_plate.clone(),
+            )
         };
         Ok((frame, flare, self.derived.lut.clone(), plate))
     }

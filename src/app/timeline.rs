@@ -264,7 +264,7 @@ impl FlareLabApp {
             job.job.cancel();
         }
         self.shot_job = Some(ShotJob::export(
-            self.doc.clone(),
+            self.derived.resolved(&self.doc),
             flare,
             self.derived.lut.clone(),
             found,
@@ -313,7 +313,7 @@ impl FlareLabApp {
             job.job.cancel();
         }
         self.light_key = Some(key);
-        self.shot_job = Some(ShotJob::find_light(self.doc.clone(), flare));
+        self.shot_job = Some(ShotJob::find_light(self.derived.resolved(&self.doc), flare));
     }
 
     /// Takes a finished job's outcome.
