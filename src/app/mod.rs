@@ -907,6 +907,7 @@ impl FlareLabApp {
     fn act(&mut self, action: Action) {
         match action {
             Action::SelectGhost(g) => self.selected = g,
+            Action::Message(text) => self.message = Some(text),
             Action::EditCoating(k) => {
                 self.coatings.surface = k;
                 self.tab = Tab::Coatings;

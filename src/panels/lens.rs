@@ -4,7 +4,6 @@
 //! makes the lens impossible is marked with the reason; the viewport keeps the last valid lens meanwhile.
 
 use eframe::egui;
-use flare_core::optics::Surface;
 use flare_core::optics::library::{builtin_lens, ids};
 
 use super::{Action, PanelContext, labelled_check, labelled_value};
@@ -154,12 +153,12 @@ fn surface_table_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, a
                     }
                     if ui
                         .small_button("+")
-                        .on_hover_text("split the gap after this surface with a flat surface in the same medium (changes nothing optically)")
+                        .on_hover_text("split the gap after this surface with a dummy surface, one medium on both sides (changes nothing optically; x on it gives back the lens)")
                         .clicked()
                     {
                         edit = Some(RowEdit::InsertAfter(k));
                     }
-                    if ui.small_button("x").on_hover_text("remove this surface").clicked() {
+                    if ui.small_button("x").on_hover_text("remove this surface (the others stay where they are)").clicked() {
                         edit = Some(RowEdit::Remove(k));
                     }
                 });
@@ -170,23 +169,16 @@ fn surface_table_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, a
     match edit {
         Some(RowEdit::Swap(a, b)) => doc.lens.surfaces.swap(a, b),
         Some(RowEdit::InsertAfter(k)) => {
-            // Half the gap each side of a flat surface between two parts of the same medium: no refraction, no
-            // reflection (not a ghost surface), so the lens stays as valid as it was. After the last surface
-            // (whose thickness, if any, runs to the image plane) it sits 1 mm behind, at most half way.
-            let surfaces = &mut doc.lens.surfaces;
-            let here = &surfaces[k];
-            let semi = here.semi_aperture_mm.max(surfaces.get(k + 1).map_or(0.0, |s| s.semi_aperture_mm));
-            let medium = here.medium.clone();
-            let (before, after) = match (here.thickness_mm, k + 1 < surfaces.len()) {
-                (Some(t), true) => (Some(0.5 * t), Some(0.5 * t)),
-                (Some(t), false) => (Some(t.min(2.0) * 0.5), Some(t - t.min(2.0) * 0.5)),
-                (None, _) => (Some(1.0), None),
-            };
-            surfaces[k].thickness_mm = before;
-            surfaces.insert(k + 1, Surface::new(0.0, after, medium, semi));
+            // A dummy surface, one medium on both sides (`Lens::insert_dummy_after`): optically nothing changes.
+            if let Err(reason) = doc.lens.insert_dummy_after(k) {
+                actions.push(Action::Message(reason));
+            }
         }
-        Some(RowEdit::Remove(k)) if doc.lens.surfaces.len() > 1 => {
-            doc.lens.surfaces.remove(k);
+        Some(RowEdit::Remove(k)) => {
+            // Every other surface stays where it was (`Lens::remove_surface`).
+            if let Err(reason) = doc.lens.remove_surface(k) {
+                actions.push(Action::Message(reason));
+            }
         }
         _ => {}
     }

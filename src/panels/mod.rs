@@ -86,6 +86,8 @@ pub enum Action {
     OpenApertureImage,
     /// Show surface `k`'s coating in the Coatings panel.
     EditCoating(usize),
+    /// Say something in the status bar (an edit a panel refused, with the reason).
+    Message(String),
 }
 
 /// Gives a number widget (a table cell) an accessible label with its value: what screen readers and the UI

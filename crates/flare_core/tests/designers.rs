@@ -430,3 +430,48 @@ fn openlensflare_systems_read_by_extension_and_content() {
         }
     }
 }
+
+/// "+" (`Lens::insert_dummy_after`, a surface with one medium on both sides) on every row of every shipped lens is optically inert: the lens stays
+/// valid with the same focal length and ghost count (and, but after the last row, the same back focal distance);
+/// "x" (`Lens::remove_surface`) on the new row gives back the lens's EFL, BFD and ghosts to 1e-9 and its vertices
+/// where they were.
+#[test]
+fn a_dummy_surface_inserted_and_removed_on_every_row_of_every_shipped_lens_changes_nothing() {
+    let mut rows = 0;
+    for id in flare_core::optics::library::ids() {
+        let lens = builtin_lens(id).unwrap();
+        let before = FirstOrder::d_line(&lens).unwrap();
+        let ghosts = lens.ghost_pairs().len();
+        for k in 0..lens.surfaces.len() {
+            let mut plus = lens.clone();
+            let new = plus.insert_dummy_after(k).unwrap_or_else(|e| panic!("{id} row {k}: {e}"));
+            assert_eq!(new, k + 1);
+            plus.validate().unwrap_or_else(|e| panic!("{id} after + on row {k}: {e}"));
+            let inserted = FirstOrder::d_line(&plus).unwrap();
+            assert!(
+                (inserted.efl_mm - before.efl_mm).abs() < 1e-9,
+                "{id} row {k}: EFL {} -> {}",
+                before.efl_mm,
+                inserted.efl_mm
+            );
+            if k + 1 < lens.surfaces.len() {
+                assert!((inserted.bfd_mm - before.bfd_mm).abs() < 1e-9, "{id} row {k}: BFD");
+            }
+            assert_eq!(plus.ghost_pairs().len(), ghosts, "{id} row {k}: a new reflecting surface");
+            plus.remove_surface(new).unwrap();
+            let back = FirstOrder::d_line(&plus).unwrap();
+            assert!(
+                (back.efl_mm - before.efl_mm).abs() < 1e-9 && (back.bfd_mm - before.bfd_mm).abs() < 1e-9,
+                "{id} row {k}"
+            );
+            assert_eq!(plus.ghost_pairs().len(), ghosts);
+            for (a, b) in plus.vertex_z_mm().iter().zip(lens.vertex_z_mm()) {
+                assert!((a - b).abs() < 1e-9, "{id} row {k}: a vertex moved");
+            }
+            assert_eq!(plus.surfaces.len(), lens.surfaces.len());
+            rows += 1;
+        }
+    }
+    eprintln!("{rows} rows of shipped lenses: + then x changes nothing");
+    assert!(rows > 100);
+}

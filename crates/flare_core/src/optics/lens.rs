@@ -352,6 +352,95 @@ impl Lens {
         self.surfaces.iter().position(|s| s.stop).unwrap_or(0)
     }
 
+    /// Splits the gap after surface `k` with a dummy surface (the same medium on both sides): no refraction
+    /// and no reflection (not a ghost surface), its clear aperture the larger of its neighbours' (it clips no
+    /// ray they pass), so the lens is optically what it was. It is flat, half way between the deepest sag of
+    /// surface `k` and the shallowest of surface `k + 1` over their clear apertures, where a plane fits there;
+    /// else (a meniscus gap: surface `k`'s rim lies beyond the next vertex) it takes the shape of the neighbour
+    /// with the larger clear aperture, moved towards the other by half the narrowest gap between the two, so that
+    /// it crosses neither and every ray meets the surfaces in their order. After the last surface it is flat, 1 mm behind that surface's deepest sag
+    /// (at most half of its distance to the image, if it has one). Returns the new surface's index, or why there
+    /// is no room. [`Self::remove_surface`] on it gives back the lens.
+    pub fn insert_dummy_after(&mut self, k: usize) -> Result<usize, String> {
+        let Some(here) = self.surfaces.get(k) else {
+            return Err(format!("there is no surface {k} (the lens has {})", self.surfaces.len()));
+        };
+        let samples = 256;
+        let heights = |semi: f64| (0..=samples).map(move |i| semi * f64::from(i) / f64::from(samples));
+        // The extreme sag of a surface over its clear aperture: the largest (`deepest`) or the smallest.
+        let extreme = |s: &Surface, deepest: bool| -> f64 {
+            heights(s.semi_aperture_mm)
+                .filter_map(|h| s.sag_mm(h))
+                .fold(0.0, |m: f64, z| if deepest { m.max(z) } else { m.min(z) })
+        };
+        let lo = extreme(here, true);
+        let next = self.surfaces.get(k + 1);
+        let semi = here.semi_aperture_mm.max(next.map_or(0.0, |s| s.semi_aperture_mm));
+        let mut dummy = Surface::new(0.0, None, here.medium.clone(), semi);
+        let (before, after) = match (here.thickness_mm, next) {
+            (Some(t), Some(next)) if t + extreme(next, false) > lo => {
+                let d = 0.5 * (lo + t + extreme(next, false));
+                (Some(d), Some(t - d))
+            }
+            (Some(t), Some(next)) => {
+                // The shape of the neighbour with the larger clear aperture (defined over all of the dummy's),
+                // moved towards the other by half the narrowest gap between the two.
+                let gap = heights(here.semi_aperture_mm.min(next.semi_aperture_mm))
+                    .map(|h| match (here.sag_mm(h), next.sag_mm(h)) {
+                        (Some(a), Some(b)) => t + b - a,
+                        _ => f64::NEG_INFINITY,
+                    })
+                    .fold(f64::INFINITY, f64::min);
+                if !(gap > 0.0) {
+                    return Err(format!(
+                        "no room for a surface after surface {k}: it touches the next surface within their clear \
+                         apertures"
+                    ));
+                }
+                let (shape, d) = if here.semi_aperture_mm >= next.semi_aperture_mm {
+                    (here, 0.5 * gap)
+                } else {
+                    (next, t - 0.5 * gap)
+                };
+                (dummy.radius_mm, dummy.conic, dummy.aspheric_r2, dummy.aspheric) =
+                    (shape.radius_mm, shape.conic, shape.aspheric_r2, shape.aspheric.clone());
+                (Some(d), Some(t - d))
+            }
+            (Some(t), None) => {
+                let d = (lo + 1.0).min(0.5 * (lo.max(0.0) + t));
+                (Some(d), Some(t - d))
+            }
+            (None, _) => (Some(lo.max(0.0) + 1.0), None),
+        };
+        dummy.thickness_mm = after;
+        self.surfaces[k].thickness_mm = before;
+        self.surfaces.insert(k + 1, dummy);
+        Ok(k + 1)
+    }
+
+    /// Removes surface `k`, every other surface staying where it was: its gap joins the one before it (so
+    /// removing what [`Self::insert_dummy_after`] added gives back the lens). The last surface left is kept.
+    pub fn remove_surface(&mut self, k: usize) -> Result<(), String> {
+        if k >= self.surfaces.len() {
+            return Err(format!("there is no surface {k} (the lens has {})", self.surfaces.len()));
+        }
+        if self.surfaces.len() == 1 {
+            return Err("a lens needs at least one surface".into());
+        }
+        let removed = self.surfaces.remove(k);
+        if k > 0 {
+            let now_last = k == self.surfaces.len();
+            let previous = &mut self.surfaces[k - 1];
+            previous.thickness_mm = match (previous.thickness_mm, removed.thickness_mm) {
+                (Some(a), Some(b)) => Some(a + b),
+                // The removed surface was the last, with no distance to the image: neither has the new last.
+                (_, None) if now_last => None,
+                (a, _) => a,
+            };
+        }
+        Ok(())
+    }
+
     /// z of each surface vertex, the first at 0.
     pub fn vertex_z_mm(&self) -> Vec<f64> {
         let mut z = 0.0;
