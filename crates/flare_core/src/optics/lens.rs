@@ -391,7 +391,7 @@ impl Lens {
                         _ => f64::NEG_INFINITY,
                     })
                     .fold(f64::INFINITY, f64::min);
-                if !(gap > 0.0) {
+                if gap.is_nan() || gap <= 0.0 {
                     return Err(format!(
                         "no room for a surface after surface {k}: it touches the next surface within their clear \
                          apertures"
