@@ -1103,3 +1103,54 @@ fn plus_then_x_on_the_zooms_first_row_gives_back_the_lens() {
         assert!((a - b).abs() < 1e-9);
     }
 }
+
+/// The priority rule: a bake is a background job (its threads at the lowest priority), so a new focus of the
+/// depth of field, which the user waits for, finishes while the zoom's bake (tens of seconds) still runs
+/// (issue 32: the focus waited 75 s for the bake). Ordering, not timing, is what is held.
+#[test]
+fn a_focus_finishes_while_a_bake_runs_in_the_background() {
+    use flarelab::panels::BakeStatus;
+    let dir = tempfile::tempdir().unwrap();
+    let mut doc = street_doc(dir.path(), 320, 180, true);
+    doc.lens = flare_core::preset::Document::default().lens;
+    let mut h = harness_on(Some(doc));
+    h.run();
+    step_until(&mut h, 120.0, |app| !app.dof_work.busy() && app.dof_work.status.contains("focus 5.00 m"));
+    show(&mut h, Tab::Blend);
+    h.get_by_label("Bake").click();
+    h.run_steps(2);
+    assert!(matches!(h.state().bake_status(), BakeStatus::Running { .. }), "{:?}", h.state().bake_status());
+    h.state_mut().doc.dof.focus_m = 2.0;
+    let seconds = step_until(&mut h, 300.0, |app| !app.dof_work.busy() && app.dof_work.status.contains("focus 2.00 m"));
+    let status = h.state().bake_status();
+    println!("a focus while the zoom bakes: {seconds:.1} s ({status:?})");
+    assert!(matches!(status, BakeStatus::Running { .. }), "the bake finished first: {status:?}");
+    h.get_by_label("Cancel").click();
+    step_until(&mut h, 300.0, |app| !matches!(app.bake_status(), BakeStatus::Running { .. }));
+}
+
+/// Background jobs run at the lowest priority, their pool's threads too; interactive jobs at the app's.
+#[cfg(target_os = "linux")]
+#[test]
+fn background_jobs_run_at_the_lowest_priority() {
+    use flarelab::app::job::{Job, JobPoll, Priority};
+    let nice = || {
+        // SAFETY: getpriority reads the calling thread's nice value.
+        unsafe { libc::getpriority(libc::PRIO_PROCESS, 0) }
+    };
+    let app_nice = nice();
+    for (priority, expected) in [(Priority::Background, 19), (Priority::Interactive, app_nice)] {
+        let job = Job::spawn_with(priority, "", move |_, _| {
+            let pool: Vec<i32> = rayon::broadcast(|_| nice());
+            (nice(), pool)
+        });
+        let (own, pool) = loop {
+            if let JobPoll::Finished(outcome) = job.poll() {
+                break outcome;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        };
+        assert_eq!(own, expected, "{priority:?}: the job's thread");
+        assert!(pool.iter().all(|&n| n == expected), "{priority:?}: its pool's threads {pool:?}");
+    }
+}

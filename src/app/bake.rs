@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-use super::job::{Job, JobPoll};
+use super::job::{Job, JobPoll, Priority};
 
 use flare_core::flare::PreparedFlare;
 use flare_core::lut::GhostLut;
@@ -45,7 +45,7 @@ pub fn start_bake(
     settings: BakeSettings,
     cache: Option<LutCache>,
 ) -> BakeJob {
-    Job::spawn(CLASSIFYING, move |cancel, progress| {
+    Job::spawn_with(Priority::Background, CLASSIFYING, move |cancel, progress| {
         let renderer = flare.ray_grid_renderer();
         let classify_settings = ClassifySettings::for_flare(&flare, useful_field_deg(&flare));
         let classes = classify(&flare, &renderer, &classify_settings, &[]);

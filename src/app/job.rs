@@ -1,5 +1,12 @@
 //! Work on a thread with progress and Cancel, polled by the UI each frame (the window never blocks): the
 //! bake ([`super::bake`]), the shot jobs ([`super::shot`]) and File > Export image.
+//!
+//! One priority rule ([`Priority`]): what the user waits for (the depth of field's focus, an export, a ray-grid
+//! view) is **interactive** and runs on rayon's global pool at the app's priority; what only improves the view
+//! later (the bake, the looks' thumbnails) is **background** and runs on a pool of its own whose threads, and
+//! the job's own thread, run at the lowest priority the system gives (nice 19 on Unix). On a 2-core machine a
+//! bake at full speed then no longer starves a focus click: the scheduler gives the interactive threads
+//! nearly all of the processor while both run, and the bake the rest.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -19,10 +26,55 @@ pub struct Job<T> {
     result: Arc<Mutex<Option<T>>>,
 }
 
+/// Whom a job yields to (see the module documentation).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Priority {
+    /// The user waits for it: rayon's global pool, the app's priority.
+    Interactive,
+    /// It only improves the view later: its own pool at the lowest priority.
+    Background,
+}
+
+/// The pool background jobs run their parallel work on: as many threads as the global pool, each at the lowest
+/// priority.
+fn background_pool() -> Option<&'static rayon::ThreadPool> {
+    static POOL: std::sync::OnceLock<Option<rayon::ThreadPool>> = std::sync::OnceLock::new();
+    POOL.get_or_init(|| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(rayon::current_num_threads())
+            .thread_name(|k| format!("background-{k}"))
+            .start_handler(|_| lower_this_threads_priority())
+            .build()
+            .ok()
+    })
+    .as_ref()
+}
+
+/// Puts the calling thread at the lowest priority (nice 19; on Linux each thread has its own). Elsewhere, or if
+/// the system refuses, it stays as it was: the rule is a courtesy, never an error.
+pub fn lower_this_threads_priority() {
+    // SAFETY: setpriority has no memory effects; on Linux `who` 0 is the calling thread (elsewhere it would be
+    // the whole process, so other systems are left alone).
+    #[cfg(target_os = "linux")]
+    unsafe {
+        libc::setpriority(libc::PRIO_PROCESS, 0, 19);
+    }
+}
+
 impl<T: Send + 'static> Job<T> {
     /// Runs `work(cancel, report)` on a new thread; `report(fraction, text)` is what [`Self::poll`] shows
-    /// while it runs, starting with `first`.
+    /// while it runs, starting with `first`. An interactive job ([`Self::spawn_with`]).
     pub fn spawn(
+        first: &str,
+        work: impl FnOnce(&AtomicBool, &(dyn Fn(f32, String) + Sync)) -> T + Send + 'static,
+    ) -> Self {
+        Self::spawn_with(Priority::Interactive, first, work)
+    }
+
+    /// [`Self::spawn`] at `priority`: a background job's thread and its parallel work run at the lowest
+    /// priority, on a pool of their own.
+    pub fn spawn_with(
+        priority: Priority,
         first: &str,
         work: impl FnOnce(&AtomicBool, &(dyn Fn(f32, String) + Sync)) -> T + Send + 'static,
     ) -> Self {
@@ -38,7 +90,13 @@ impl<T: Send + 'static> Job<T> {
                     *p = (fraction, text);
                 }
             };
-            let outcome = work(&cancel, &report);
+            let outcome = match (priority, background_pool()) {
+                (Priority::Background, Some(pool)) => {
+                    lower_this_threads_priority();
+                    pool.install(|| work(&cancel, &report))
+                }
+                _ => work(&cancel, &report),
+            };
             if let Ok(mut r) = result.lock() {
                 *r = Some(outcome);
             }
