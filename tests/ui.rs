@@ -742,6 +742,14 @@ fn without_a_native_dialog_file_actions_use_the_in_app_browser_and_remember_rece
     // FlareLab's own browser is open for that action (a window titled like the action).
     assert_eq!(h.state().files.browsing(), Some(FileUse::SavePreset));
     assert!(h.query_by_label("💾  Save preset").is_some(), "the browser window is titled by the action");
+    // Why not the desktop's dialog is said, once.
+    if !flarelab::app::files::native_dialog_available() {
+        let said = h.state().message.clone().unwrap_or_default();
+        assert!(said.contains("no desktop file dialog") && said.contains("zenity"), "{said}");
+    }
+    // A name without the extension gets it.
+    h.state_mut().use_file(FileUse::SavePreset, &dir.path().join("mylook"));
+    assert!(dir.path().join("mylook.json").exists() && !dir.path().join("mylook").exists());
     // What it picks does the action and joins the recent files; Escape closes it and says so.
     let path = dir.path().join("look.json");
     h.state_mut().use_file(FileUse::SavePreset, &path);
@@ -1153,4 +1161,29 @@ fn background_jobs_run_at_the_lowest_priority() {
         assert_eq!(own, expected, "{priority:?}: the job's thread");
         assert!(pool.iter().all(|&n| n == expected), "{priority:?}: its pool's threads {pool:?}");
     }
+}
+
+/// File > Export image draws at the plate's size unless the user set one, as `render` does without --size
+/// (issue 32: it wrote 1920x1080 over a 960x540 plate); a size the user sets wins.
+#[test]
+fn an_export_over_a_plate_is_the_plates_size_unless_set() {
+    use flarelab::app::files::FileUse;
+    let dir = tempfile::tempdir().unwrap();
+    let doc = street_doc(dir.path(), 480, 270, false);
+    let mut h = harness_on(Some(doc));
+    h.run();
+    assert_eq!(h.state().export_px(), (480, 270));
+    let export = |h: &mut Harness<'static, FlareLabApp>, name: &str| {
+        let path = dir.path().join(name);
+        h.state_mut().use_file(FileUse::ExportImage, &path);
+        step_until(h, 120.0, |_| path.exists());
+        image::open(&path).unwrap().to_rgb8().dimensions()
+    };
+    assert_eq!(export(&mut h, "plate.png"), (480, 270));
+    h.get_by_label("File").click();
+    h.run();
+    h.get_by_label("export width").set_value_accesskit(320.0);
+    h.run();
+    assert_eq!(h.state().export_px(), (320, 270));
+    assert_eq!(export(&mut h, "set.png"), (320, 270));
 }

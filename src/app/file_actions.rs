@@ -18,6 +18,17 @@ impl FlareLabApp {
             return;
         }
         if !self.files.native {
+            if !self.files.told {
+                // Said once: why FlareLab's own browser and not the desktop's dialog.
+                self.files.told = true;
+                if !super::files::native_dialog_available() {
+                    self.message = Some(
+                        "no desktop file dialog here (no D-Bus session for the portal, no zenity on PATH): using \
+                         FlareLab's file browser"
+                            .into(),
+                    );
+                }
+            }
             self.files.open_browser(use_);
             return;
         }
@@ -42,8 +53,9 @@ impl FlareLabApp {
             match picked {
                 Some(path) => self.use_file(use_, &path),
                 None if quick => {
-                    // The dialog could not show: from now on the in-app browser.
+                    // The dialog could not show: from now on the in-app browser (said here, once).
                     self.files.native = false;
+                    self.files.told = true;
                     self.message = Some(
                         "the desktop's file dialog did not open (no portal or zenity?): using FlareLab's file browser"
                             .into(),
@@ -75,7 +87,11 @@ impl FlareLabApp {
     }
 
     /// Does what `use_` does with `path` (each action says in the status bar what happened) and remembers it.
+    /// A file to write whose name has none of the action's extensions gets the first (`mylook` is saved as
+    /// `mylook.json`).
     pub fn use_file(&mut self, use_: FileUse, path: &Path) {
+        let named = use_.saving().then(|| with_extension(path, use_.extensions())).flatten();
+        let path = named.as_deref().unwrap_or(path);
         match use_ {
             FileUse::OpenPreset => self.open_preset_file(path),
             FileUse::SavePreset => self.save_preset_to(path),
@@ -109,4 +125,17 @@ impl FlareLabApp {
         self.open_dropped(path);
         self.files.remember(path);
     }
+}
+
+/// `path` with `extensions[0]` added when its name ends in none of `extensions` (compared without case); `None`
+/// when it already does.
+fn with_extension(path: &Path, extensions: &[&str]) -> Option<std::path::PathBuf> {
+    let name = path.file_name()?.to_string_lossy().to_ascii_lowercase();
+    if extensions.iter().any(|e| name.ends_with(&format!(".{e}"))) {
+        return None;
+    }
+    let first = extensions.first()?;
+    let mut named = path.as_os_str().to_owned();
+    named.push(format!(".{first}"));
+    Some(named.into())
 }

@@ -100,11 +100,13 @@ pub struct Files {
     pub(super) pending: Option<(FileUse, Instant, Job<Option<PathBuf>>)>,
     /// Most recent first.
     pub recent: Vec<PathBuf>,
+    /// Whether the status bar said why the in-app browser is used (said once a session).
+    pub(super) told: bool,
 }
 
 impl Default for Files {
     fn default() -> Self {
-        Self { native: native_dialog_available(), browser: None, pending: None, recent: Vec::new() }
+        Self { native: native_dialog_available(), browser: None, pending: None, recent: Vec::new(), told: false }
     }
 }
 

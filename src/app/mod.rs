@@ -34,6 +34,9 @@ pub mod files;
 pub mod ghost_report;
 mod ghost_report_panel;
 pub mod job;
+
+/// The export size without a plate or a size the user set.
+pub const DEFAULT_EXPORT_PX: (u32, u32) = (1920, 1080);
 pub mod looks;
 mod looks_panel;
 pub mod raygrid_view;
@@ -179,7 +182,9 @@ pub struct FlareLabApp {
     /// Drafts while the user drags (see [`draft`]).
     draft: draft::DraftControl,
     /// The size File > Export image renders at.
-    export_size: (u32, u32),
+    /// The size File > Export image and sequence draw at, when the user set one; `None`: the plate's size, else
+    /// [`DEFAULT_EXPORT_PX`] (what the command line does without --size). See [`FlareLabApp::export_px`].
+    export_size: Option<(u32, u32)>,
     /// Where the viewport was last laid out (points).
     view_rect: Option<egui::Rect>,
     /// The timeline frame shown (see [`timeline`]).
@@ -242,7 +247,7 @@ impl FlareLabApp {
             ray_diagram: RayDiagram::default(),
             drag_bench,
             draft: draft::DraftControl::new(software),
-            export_size: (1920, 1080),
+            export_size: None,
             view_rect: None,
             playhead: 1,
             playing: None,
@@ -517,12 +522,21 @@ impl FlareLabApp {
                 }
                 ui.separator();
                 ui.horizontal(|ui| {
-                    let (w, h) = &mut self.export_size;
-                    let r = ui.add(egui::DragValue::new(w).range(16..=8192).suffix(" px"));
-                    crate::panels::labelled_value(r, "export width", f64::from(*w));
+                    // The plate's size until the user sets one (as the command line without --size).
+                    let (mut w, mut h) = self.export_px();
+                    let r = ui.add(egui::DragValue::new(&mut w).range(16..=8192).suffix(" px"));
+                    let mut changed = r.changed();
+                    crate::panels::labelled_value(r, "export width", f64::from(w));
                     ui.label("x");
-                    let r = ui.add(egui::DragValue::new(h).range(16..=8192).suffix(" px"));
-                    crate::panels::labelled_value(r, "export height", f64::from(*h));
+                    let r = ui.add(egui::DragValue::new(&mut h).range(16..=8192).suffix(" px"));
+                    changed |= r.changed();
+                    crate::panels::labelled_value(r, "export height", f64::from(h));
+                    if changed {
+                        self.export_size = Some((w, h));
+                    }
+                    if self.export_size.is_none() && self.derived.plate.is_some() {
+                        ui.label("(the plate's)");
+                    }
                     if ui.button("Export image…").on_hover_text("PNG (tonemapped) or EXR (linear)").clicked() {
                         self.pick_file(FileUse::ExportImage);
                     }
@@ -1064,7 +1078,7 @@ impl FlareLabApp {
             self.message = Some("an export is running: wait for it or cancel it".into());
             return;
         }
-        let prepared = match self.export_frame(self.export_size) {
+        let prepared = match self.export_frame(self.export_px()) {
             Ok(p) => p,
             Err(e) => {
                 self.message = Some(format!("could not export {}: {e:#}", path.display()));
@@ -1211,6 +1225,13 @@ impl FlareLabApp {
         let sources = Sources { flare: &flare, lut: lut.as_deref(), plate: plate.as_deref() };
         flare_core::frame::render_to_file(&mut Device::Cpu, &frame, &sources, LayerChoice::default(), path)?;
         Ok(())
+    }
+
+    /// The size an export draws at: the user's, else the plate's, else [`DEFAULT_EXPORT_PX`].
+    pub fn export_px(&self) -> (u32, u32) {
+        self.export_size
+            .or_else(|| self.derived.plate.as_ref().map(|p| (p.width, p.height)))
+            .unwrap_or(DEFAULT_EXPORT_PX)
     }
 
     /// The frame an export draws at `size` and what it reads, owned (for a thread).

@@ -67,12 +67,13 @@ impl ShotJob {
         lut: Option<Arc<LiveLut>>,
         found: Option<Arc<ShotPlan>>,
         pattern: FramePattern,
-        size: (u32, u32),
+        size: Option<(u32, u32)>,
         gpu: bool,
     ) -> Self {
         let job = Job::spawn("planning the frames…", move |cancel, report| {
             let range = doc.timeline.frames();
-            let size = if doc.background.is_some() { None } else { Some(size) };
+            // The user's size, else the plates' (the plan's own), else the default.
+            let size = size.or_else(|| doc.background.is_none().then_some(super::DEFAULT_EXPORT_PX));
             let scanning = |done: usize, total: usize| {
                 report(0.0, format!("finding the light: {done}/{total} plates"));
             };

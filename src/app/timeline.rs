@@ -181,7 +181,7 @@ impl FlareLabApp {
 
     /// The frame size a track's pixels refer to: the plate's, else the export size.
     fn track_frame_size(&self) -> (u32, u32) {
-        self.derived.plate.as_ref().map_or(self.export_size, |p| (p.width, p.height))
+        self.derived.plate.as_ref().map_or(self.export_px(), |p| (p.width, p.height))
     }
 
     /// Imports a tracker's CSV as light keys (replacing the light keys; intensity keys too when it has them).
@@ -487,8 +487,10 @@ impl FlareLabApp {
             self.doc.timeline.first_frame,
             self.doc.timeline.last_frame,
             match &self.derived.plate {
-                Some(p) if has_plate => format!("{}x{} (the plate's size)", p.width, p.height),
-                _ => format!("{}x{} (File > export size)", self.export_size.0, self.export_size.1),
+                Some(p) if has_plate && self.export_size.is_none() => {
+                    format!("{}x{} (the plate's size)", p.width, p.height)
+                }
+                _ => format!("{}x{} (File > export size)", self.export_px().0, self.export_px().1),
             }
         ));
     }
