@@ -9,6 +9,45 @@
 
 use flare_core::preset::Document;
 
+/// What differs between two documents, in the words of the document's fields: the top-level fields that
+/// changed (`lens`, `flare_ev`, `light_deg`, ...), a changed lens by its surfaces (`lens surface 6`), at most
+/// three, for the status bar's "undid ..." and "redid ...".
+pub fn difference(a: &Document, b: &Document) -> String {
+    let (Ok(serde_json::Value::Object(x)), Ok(serde_json::Value::Object(y))) =
+        (serde_json::to_value(a), serde_json::to_value(b))
+    else {
+        return "an edit".into();
+    };
+    let mut parts: Vec<String> = Vec::new();
+    for (key, value) in &x {
+        if y.get(key) == Some(value) {
+            continue;
+        }
+        let surfaces = |v: &serde_json::Value| v.get("surfaces").and_then(|s| s.as_array()).cloned().unwrap_or_default();
+        if key == "lens" {
+            let (p, q) = (surfaces(value), surfaces(y.get(key).unwrap_or(&serde_json::Value::Null)));
+            if p.len() != q.len() {
+                parts.push(format!("lens: {} -> {} surfaces", p.len(), q.len()));
+                continue;
+            }
+            let changed: Vec<String> = (0..p.len()).filter(|&k| p[k] != q[k]).map(|k| k.to_string()).collect();
+            if !changed.is_empty() {
+                parts.push(format!("lens surface {}", changed.join(", ")));
+                continue;
+            }
+        }
+        parts.push(key.replace('_', " "));
+    }
+    for key in y.keys().filter(|k| !x.contains_key(*k)) {
+        parts.push(key.replace('_', " "));
+    }
+    match parts.len() {
+        0 => "nothing".into(),
+        1..=3 => parts.join(", "),
+        n => format!("{} and {} more", parts[..3].join(", "), n - 3),
+    }
+}
+
 /// Most undo steps kept.
 pub const UNDO_LIMIT: usize = 200;
 
@@ -55,6 +94,16 @@ impl History {
         self.undo.push(std::mem::replace(&mut self.committed, after));
         *doc = self.committed.clone();
         true
+    }
+
+    /// The document [`Self::undo`] would give back, for saying what it undoes.
+    pub fn peek_undo(&self) -> Option<&Document> {
+        self.undo.last()
+    }
+
+    /// The document [`Self::redo`] would give back.
+    pub fn peek_redo(&self) -> Option<&Document> {
+        self.redo.last()
     }
 
     pub fn can_undo(&self) -> bool {

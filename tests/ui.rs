@@ -1067,10 +1067,15 @@ fn undo_and_redo_return_the_document_exactly_through_a_refused_edit_and_auto_exp
     for (k, expected) in [&j1, &j0, &j0, &j0, &j0].into_iter().enumerate() {
         undo(&mut h);
         assert!(json(&h) == *expected, "undo {}: the document is not what it was", k + 1);
+        // The status bar names what was undone, then that there is nothing more.
+        let said = h.state().message.clone().unwrap_or_default();
+        let wanted = if k < 2 { "undid: lens surface 6" } else { "nothing to undo" };
+        assert_eq!(said, wanted, "undo {}", k + 1);
     }
     assert_eq!(shown_ev(&h), ev0, "back on the first lens, its automatic exposure");
     redo(&mut h);
     assert!(json(&h) == j1, "redo 1");
+    assert_eq!(h.state().message.as_deref(), Some("redid: lens surface 6"));
     redo(&mut h);
     assert!(json(&h) == j2, "redo 2");
     redo(&mut h);

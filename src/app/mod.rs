@@ -334,15 +334,26 @@ impl FlareLabApp {
     }
 
     /// Undo and redo from the keyboard and the menu.
+    /// Each says in the status bar what it undid or redid, replacing the message before.
     pub fn undo(&mut self) {
+        self.history.commit(&self.doc);
+        let what = self.history.peek_undo().map(|before| crate::history::difference(&self.doc, before));
         if self.history.undo(&mut self.doc) {
+            self.message = Some(format!("undid: {}", what.unwrap_or_default()));
             self.sync();
+        } else {
+            self.message = Some("nothing to undo".into());
         }
     }
 
     pub fn redo(&mut self) {
+        self.history.commit(&self.doc);
+        let what = self.history.peek_redo().map(|after| crate::history::difference(&self.doc, after));
         if self.history.redo(&mut self.doc) {
+            self.message = Some(format!("redid: {}", what.unwrap_or_default()));
             self.sync();
+        } else {
+            self.message = Some("nothing to redo".into());
         }
     }
 
