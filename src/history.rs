@@ -23,7 +23,8 @@ pub fn difference(a: &Document, b: &Document) -> String {
         if y.get(key) == Some(value) {
             continue;
         }
-        let surfaces = |v: &serde_json::Value| v.get("surfaces").and_then(|s| s.as_array()).cloned().unwrap_or_default();
+        let surfaces =
+            |v: &serde_json::Value| v.get("surfaces").and_then(|s| s.as_array()).cloned().unwrap_or_default();
         if key == "lens" {
             let (p, q) = (surfaces(value), surfaces(y.get(key).unwrap_or(&serde_json::Value::Null)));
             if p.len() != q.len() {

@@ -678,6 +678,8 @@ fn lut_ghosts_bake_by_themselves_and_undo_to_a_baked_lens_needs_no_bake() {
         let mut app = FlareLabApp::new(None, Some(doc));
         app.autobake.cache = Some(LutCache::new(dir.path()));
         app.autobake.settings = coarse.clone();
+        // Bakes start as soon as the optics change here (the settling has its own test).
+        app.autobake.settle = std::time::Duration::ZERO;
         Harness::builder()
             .with_size(egui::vec2(1280.0, 800.0))
             .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), app)
@@ -1191,4 +1193,45 @@ fn an_export_over_a_plate_is_the_plates_size_unless_set() {
     h.run();
     assert_eq!(h.state().export_px(), (320, 270));
     assert_eq!(export(&mut h, "set.png"), (320, 270));
+}
+
+/// The automatic bake restarts only for the optics it serves, once an edit has stood (`autobake::SETTLE`): a
+/// drag of the exposure never restarts it; three quick edits of a radius start one bake, for the last value,
+/// which keeps the ghosts of the LUT before it that did not change.
+#[test]
+fn an_exposure_tweak_does_not_restart_the_bake_and_quick_lens_edits_start_one() {
+    use flare_core::lut::bake::BakeSettings;
+    use flarelab::panels::BakeStatus;
+    let coarse = BakeSettings { res: 32, grid: 16, initial_steps: 2, tolerance: 0.5, ..BakeSettings::default() };
+    let mut app = FlareLabApp::new(None, Some(flare_core::preset::Document::default()));
+    app.autobake.cache = None;
+    app.autobake.settings = coarse;
+    let mut h = Harness::builder()
+        .with_size(egui::vec2(1280.0, 800.0))
+        .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), app);
+    h.run_steps(2);
+    assert_eq!(h.state().autobake.bakes_started, 1, "the session's optics bake at once");
+    assert!(matches!(h.state().bake_status(), BakeStatus::Running { .. }));
+    for ev in [6.0, 9.0, 12.0] {
+        h.get_by_role_and_label(egui::accesskit::Role::Slider, "flare exposure").set_value_accesskit(ev);
+        h.run_steps(2);
+    }
+    assert_eq!(h.state().autobake.bakes_started, 1, "the exposure is not the optics");
+    assert!(matches!(h.state().bake_status(), BakeStatus::Running { .. }), "{:?}", h.state().bake_status());
+    h.state_mut().tab = Tab::Lens;
+    h.run_steps(2);
+    let r = h.state().doc.lens.surfaces[0].radius_mm;
+    for scale in [1.01, 1.02, 1.03] {
+        h.get_by_label("radius 0").set_value_accesskit(r * scale);
+        h.run_steps(2);
+    }
+    assert_eq!(h.state().autobake.bakes_started, 1, "nothing starts while the edits come");
+    step_until(&mut h, 60.0, |app| app.autobake.bakes_started == 2);
+    std::thread::sleep(std::time::Duration::from_millis(1000));
+    h.run_steps(2);
+    assert_eq!(h.state().autobake.bakes_started, 2, "one bake, for the last value");
+    h.state_mut().tab = Tab::Blend;
+    h.run_steps(2);
+    h.get_by_label("Cancel").click();
+    step_until(&mut h, 300.0, |app| !matches!(app.bake_status(), BakeStatus::Running { .. }));
 }

@@ -23,6 +23,13 @@ impl FlareLabApp {
             return;
         }
         let (Some(key), Some(flare)) = (self.live_bake_key(), self.derived.flare.clone()) else { return };
+        // An edit of the optics (not the optics the session started with) starts the settling clock.
+        if self.autobake.live != Some(key) {
+            if self.autobake.live.is_some() {
+                self.autobake.settling = Some((key, std::time::Instant::now()));
+            }
+            self.autobake.live = Some(key);
+        }
         if self.autobake.shown == Some(key) && self.derived.lut.is_some() {
             return;
         }
@@ -51,7 +58,16 @@ impl FlareLabApp {
         if let Some(old) = self.bake.take() {
             // A bake for optics that are no longer the live ones.
             old.cancel();
+            self.autobake.baking = None;
         }
+        // Optics an edit just made must stand for a moment before their bake starts (see `autobake::SETTLE`).
+        if let Some((k, since)) = self.autobake.settling
+            && k == key
+            && since.elapsed() < self.autobake.settle
+        {
+            return;
+        }
+        self.autobake.settling = None;
         self.spawn_bake(flare, key);
     }
 
@@ -113,5 +129,8 @@ impl FlareLabApp {
         }
         self.bake_status =
             BakeStatus::Done(format!("LUT ghosts on: {ghosts} non-linear ghosts, {entries} entries ({source})"));
+        // The look changes under the artist: said in the status bar, replacing what it said.
+        self.message =
+            Some(format!("LUT ghosts ({source}) now replace the paraxial flare's {ghosts} non-linear ghosts"));
     }
 }

@@ -9,7 +9,11 @@
 //! ([`MEMORY`] of them, so an undo to a lens baked in this session is instant), a checked cache file (a
 //! damaged one is removed, reported, and baked again), or a new bake. A bake for older optics is cancelled
 //! when the optics change; a bake the user cancelled is not started again until they change. A finished
-//! bake is stored on disk and in memory, and shown if its optics are still the live ones. Showing a baked LUT
+//! bake is stored on disk and in memory, and shown if its optics are still the live ones. A new bake starts only
+//! once the optics have stood for [`SETTLE`] (a drag through many values bakes the last one), and takes the
+//! ghosts it can from the latest LUT (`bake_with`'s `previous`: unchanged ghosts are not baked again); a setting
+//! outside the optics (exposure, tonemap, light, plate) never restarts it. When a bake lands, the status bar says
+//! that its LUT ghosts replace the paraxial ones. Showing a baked LUT
 //! sets the document's LUT source to "simulated" without an undo step of its own, so a preset saved then
 //! renders the same blended frame on the command line (which reads the same cache). Nothing happens while
 //! the user has a LUT file or a photo LUT open, or has turned automatic baking off.
@@ -49,7 +53,18 @@ pub struct AutoBake {
     pub key_of: Option<(u64, u64)>,
     /// How many bakes were started (for the tests: an undo to a baked lens starts none).
     pub bakes_started: u64,
+    /// The key of the live optics as last seen (an edit is a change of it).
+    pub live: Option<u64>,
+    /// Optics an edit made, waiting to settle before their bake starts: their key and since when they are the
+    /// live ones.
+    pub settling: Option<(u64, std::time::Instant)>,
+    /// How long the optics must stay as they are before a bake starts ([`SETTLE`]; tests set 0).
+    pub settle: std::time::Duration,
 }
+
+/// How long an edit of the optics must stand before the automatic bake starts for it: dragging a radius or a
+/// stop through many values starts one bake, for the value let go, not one per value.
+pub const SETTLE: std::time::Duration = std::time::Duration::from_millis(800);
 
 impl Default for AutoBake {
     fn default() -> Self {
@@ -64,6 +79,9 @@ impl Default for AutoBake {
             looked_up: None,
             key_of: None,
             bakes_started: 0,
+            live: None,
+            settling: None,
+            settle: SETTLE,
         }
     }
 }

@@ -272,7 +272,8 @@ impl FlareLabApp {
         app.playhead = app.doc.timeline.first_frame;
         app.plate_path = app.doc.background.clone().unwrap_or_default();
         app.sync();
-        // What the first sync settled (the auto exposure) is where the document starts, not an edit to undo.
+        // What the first sync settled (a plate that could not be read is dropped) is where the document
+        // starts, not an edit to undo.
         app.history.reset(&app.doc);
         app
     }
