@@ -35,8 +35,7 @@ pub mod ghost_report;
 mod ghost_report_panel;
 pub mod job;
 
-/// The export size without a plate or a size the user set.
-pub const DEFAULT_EXPORT_PX: (u32, u32) = (1920, 1080);
+pub use shot::DEFAULT_EXPORT_PX;
 pub mod looks;
 mod looks_panel;
 pub mod raygrid_view;

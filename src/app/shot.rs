@@ -14,6 +14,9 @@ use flare_core::shot::pattern::FramePattern;
 use flare_core::shot::plan::{ShotPlan, plan};
 use flare_core::shot::sequence::{FrameOutcome, SequenceOptions, SequenceReport, ShotSources, render_sequence};
 
+/// The export size without a plate or a size the user set.
+pub const DEFAULT_EXPORT_PX: (u32, u32) = (1920, 1080);
+
 /// What a job hands back.
 pub enum ShotOutcome {
     /// The light found in the plates: the plan of the timeline's range, for the document whose
@@ -73,7 +76,7 @@ impl ShotJob {
         let job = Job::spawn("planning the frames…", move |cancel, report| {
             let range = doc.timeline.frames();
             // The user's size, else the plates' (the plan's own), else the default.
-            let size = size.or_else(|| doc.background.is_none().then_some(super::DEFAULT_EXPORT_PX));
+            let size = size.or_else(|| doc.background.is_none().then_some(DEFAULT_EXPORT_PX));
             let scanning = |done: usize, total: usize| {
                 report(0.0, format!("finding the light: {done}/{total} plates"));
             };
