@@ -1235,3 +1235,26 @@ fn an_exposure_tweak_does_not_restart_the_bake_and_quick_lens_edits_start_one() 
     h.get_by_label("Cancel").click();
     step_until(&mut h, 300.0, |app| !matches!(app.bake_status(), BakeStatus::Running { .. }));
 }
+
+/// The Lens panel fits the default window, 1440x900: its Open button and every row's buttons lie inside it
+/// (issue 32 saw them clipped; the table scrolls where it is taller than the window).
+#[test]
+fn the_lens_panels_buttons_are_inside_the_default_window() {
+    let mut h = Harness::builder()
+        .with_size(egui::vec2(1440.0, 900.0))
+        .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), quiet(FlareLabApp::new(None, None)));
+    show(&mut h, Tab::Lens);
+    let window = egui::Rect::from_min_size(egui::Pos2::ZERO, egui::vec2(1440.0, 900.0));
+    let mut seen = 0;
+    for label in ["Open…", "+", "x", "⬆", "⬇"] {
+        for node in h.get_all_by_label(label) {
+            let r = node.rect();
+            // Rows scrolled below the panel's bottom are not shown; what is shown lies inside the window.
+            if r.min.y < window.max.y {
+                assert!(r.max.x <= window.max.x && r.min.x >= 0.0, "{label} at {r:?}");
+                seen += 1;
+            }
+        }
+    }
+    assert!(seen > 20, "{seen} buttons seen");
+}
