@@ -13,12 +13,15 @@ const BAD: egui::Color32 = egui::Color32::from_rgb(255, 110, 110);
 const WARN: egui::Color32 = egui::Color32::from_rgb(240, 200, 90);
 
 pub fn lens_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, actions: &mut Vec<Action>) {
-    ui.horizontal_wrapped(|ui| {
+    ui.horizontal(|ui| {
         let mut chosen = doc.lens.id.clone();
-        let shown = if doc.lens.name.is_empty() { doc.lens.id.clone() } else { doc.lens.name.clone() };
-        // The choice takes what the panel leaves beside its label and the Open button (it fits the window).
-        let width = (ui.available_width() - 110.0).clamp(120.0, 260.0);
-        egui::ComboBox::from_label("lens").selected_text(shown).width(width).truncate().show_ui(ui, |ui| {
+        let name = if doc.lens.name.is_empty() { doc.lens.id.clone() } else { doc.lens.name.clone() };
+        // A long name is cut (whole on hover), so that the choice, its label and Open fit the panel.
+        let shown = match name.char_indices().nth(44) {
+            Some((at, _)) => format!("{}…", name[..at].trim_end()),
+            None => name.clone(),
+        };
+        egui::ComboBox::from_label("lens").selected_text(shown).width(260.0).show_ui(ui, |ui| {
             for id in ids() {
                 // The lens's name (its patent or source), the id on hover.
                 let name = builtin_lens(id).map(|l| l.name).unwrap_or_else(|_| id.to_owned());
