@@ -1258,3 +1258,32 @@ fn the_lens_panels_buttons_are_inside_the_default_window() {
     }
     assert!(seen > 20, "{seen} buttons seen");
 }
+
+/// Lens table cells apply a typed value on Enter (or focus loss), not on every keystroke: typing "-12" never
+/// passes through the refused "-1" (issue 32: a refused intermediate value moved the table and once lost a
+/// keystroke).
+#[test]
+fn a_lens_cell_applies_a_typed_value_on_enter() {
+    let doc = flare_core::preset::Document {
+        lens: flare_core::optics::library::builtin_lens("dgauss").unwrap(),
+        ..flare_core::preset::Document::default()
+    };
+    let mut h = harness_on(Some(doc));
+    show(&mut h, Tab::Lens);
+    let before = h.state().doc.lens.surfaces[6].radius_mm;
+    let steps = h.state().history.can_undo();
+    h.get_by_label("radius 6").click();
+    h.run();
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::A);
+    h.event(egui::Event::Text("-1".into()));
+    h.run();
+    assert_eq!(h.state().doc.lens.surfaces[6].radius_mm, before, "nothing applies while typing");
+    assert!(h.state().derived.lens_problem.is_none(), "no refusal for a value not yet entered");
+    h.event(egui::Event::Text("2".into()));
+    h.run();
+    h.key_press(egui::Key::Enter);
+    h.run();
+    assert_eq!(h.state().doc.lens.surfaces[6].radius_mm, -12.0, "Enter applies the whole value");
+    assert!(h.state().derived.lens_problem.is_none());
+    assert!(h.state().history.can_undo() && !steps);
+}

@@ -83,7 +83,10 @@ fn surface_table_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, a
                 ui.label(k.to_string());
                 let cell = |ui: &mut egui::Ui, value: &mut f64, field: &'static str, label: &str, speed: f64| {
                     let bad = bad_cell(k, field);
-                    let mut drag = egui::DragValue::new(value).speed(speed).max_decimals(4);
+                    // A typed value applies on Enter or when the cell loses focus, so a refused intermediate value
+                    // ("-1" on the way to "-12") never reaches the lens.
+                    let mut drag =
+                        egui::DragValue::new(value).speed(speed).max_decimals(4).update_while_editing(false);
                     if field == "vd" {
                         // An unknown Abbe number (0 here: dispersion assumed) shows blank, not as 0.0.
                         drag = drag.custom_formatter(|v, _| if v > 0.0 { format!("{v:.1}") } else { String::new() });
