@@ -184,6 +184,8 @@ pub struct FlareLabApp {
     /// The size File > Export image and sequence draw at, when the user set one; `None`: the plate's size, else
     /// [`DEFAULT_EXPORT_PX`] (what the command line does without --size). See [`FlareLabApp::export_px`].
     export_size: Option<(u32, u32)>,
+    /// `FLARELAB_VIEW_PX`: the flare drawn at this size whatever the view's (read once, at start).
+    fixed_view_px: Option<(u32, u32)>,
     /// Where the viewport was last laid out (points).
     view_rect: Option<egui::Rect>,
     /// The timeline frame shown (see [`timeline`]).
@@ -247,6 +249,7 @@ impl FlareLabApp {
             drag_bench,
             draft: draft::DraftControl::new(software),
             export_size: None,
+            fixed_view_px: std::env::var("FLARELAB_VIEW_PX").ok().and_then(|s| flare_core::frame::parse_size(&s).ok()),
             view_rect: None,
             playhead: 1,
             playing: None,
@@ -760,10 +763,9 @@ impl FlareLabApp {
             (rect.width() * ppp * scale).round().max(16.0) as u32,
             (rect.height() * ppp * scale).round().max(16.0) as u32,
         );
-        // FLARELAB_VIEW_PX=WxH renders the flare at a fixed size, whatever the widget's (the drag bench's
-        // frame times at 1280x720).
-        if let Some(fixed) = std::env::var("FLARELAB_VIEW_PX").ok().and_then(|s| flare_core::frame::parse_size(&s).ok())
-        {
+        // FLARELAB_VIEW_PX=WxH (read once at start) renders the flare at a fixed size, whatever the widget's
+        // (the drag bench's frame times at 1280x720).
+        if let Some(fixed) = self.fixed_view_px {
             px = fixed;
         }
         if px != self.derived.view_px {
