@@ -36,6 +36,15 @@ mod ghost_report_panel;
 pub mod job;
 
 pub use shot::DEFAULT_EXPORT_PX;
+
+/// What undo or redo says: `verb` and what changed, then what the change made the app say (a dropped LUT).
+fn said_with(verb: &str, what: Option<String>, then: Option<String>) -> String {
+    let what = what.unwrap_or_default();
+    match then {
+        Some(then) => format!("{verb}: {what}; {then}"),
+        None => format!("{verb}: {what}"),
+    }
+}
 pub mod looks;
 mod looks_panel;
 pub mod raygrid_view;
@@ -317,11 +326,15 @@ impl FlareLabApp {
                 SyncEvent::LutDropped => {
                     self.classes = None;
                     self.autobake.shown = None;
-                    self.bake_status = BakeStatus::Done(if self.autobake.enabled {
+                    let said: String = if self.autobake.enabled {
                         "the optics changed: the paraxial flare until their LUT ghosts are ready".into()
                     } else {
                         "the optics changed: bake again for LUT ghosts".into()
-                    });
+                    };
+                    // Replaces what the status bar said (a landed bake's "LUT ghosts ... replace ..." is no longer
+                    // true).
+                    self.message = Some(said.clone());
+                    self.bake_status = BakeStatus::Done(said);
                 }
             }
         }
@@ -342,8 +355,9 @@ impl FlareLabApp {
         self.history.commit(&self.doc);
         let what = self.history.peek_undo().map(|before| crate::history::difference(&self.doc, before));
         if self.history.undo(&mut self.doc) {
-            self.message = Some(format!("undid: {}", what.unwrap_or_default()));
+            self.message = None;
             self.sync();
+            self.message = Some(said_with("undid", what, self.message.take()));
         } else {
             self.message = Some("nothing to undo".into());
         }
@@ -353,8 +367,9 @@ impl FlareLabApp {
         self.history.commit(&self.doc);
         let what = self.history.peek_redo().map(|after| crate::history::difference(&self.doc, after));
         if self.history.redo(&mut self.doc) {
-            self.message = Some(format!("redid: {}", what.unwrap_or_default()));
+            self.message = None;
             self.sync();
+            self.message = Some(said_with("redid", what, self.message.take()));
         } else {
             self.message = Some("nothing to redo".into());
         }
