@@ -535,9 +535,11 @@ impl FlareLabApp {
                 if ui.button("Background plate…").clicked() {
                     self.pick_file(FileUse::Background);
                 }
-                if self.doc.background.is_some() && ui.button("Remove background").clicked() {
+                // Always there (greyed without a plate), so the menu's items never move.
+                if ui.add_enabled(self.doc.background.is_some(), egui::Button::new("Remove background")).clicked() {
                     self.doc.background = None;
                     self.plate_path.clear();
+                    self.message = Some("background plate removed".into());
                 }
                 if ui.button("Import light track…").clicked() {
                     self.pick_file(FileUse::Track);
