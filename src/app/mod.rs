@@ -993,13 +993,17 @@ impl FlareLabApp {
     pub fn open_lens(&mut self, path: &std::path::Path) {
         match read_lens_file(path) {
             Ok(LoadedLens { lens, warnings }) => {
-                self.message = warnings.first().map(|w| {
-                    let more = if warnings.len() > 1 {
-                        format!(" (and {} more in the Lens panel)", warnings.len() - 1)
-                    } else {
-                        String::new()
-                    };
-                    format!("{}: {w}{more}", path.display())
+                // Said either way, replacing the message before: the file's first warning, or that it opened.
+                self.message = Some(match warnings.first() {
+                    Some(w) => {
+                        let more = if warnings.len() > 1 {
+                            format!(" (and {} more in the Lens panel)", warnings.len() - 1)
+                        } else {
+                            String::new()
+                        };
+                        format!("{}: {w}{more}", path.display())
+                    }
+                    None => format!("opened {} ({} surfaces)", path.display(), lens.surfaces.len()),
                 });
                 self.lens_warnings = Some((lens.id.clone(), warnings));
                 self.doc.lens = lens;

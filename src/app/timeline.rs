@@ -221,7 +221,10 @@ impl FlareLabApp {
                 self.playhead = self.playhead.clamp(frames[0], frames[frames.len() - 1]);
                 self.message = Some(format!("plate sequence {} ({} frames)", pattern.text, frames.len()));
             }
-            None => self.doc.background = Some(path.display().to_string()),
+            None => {
+                self.doc.background = Some(path.display().to_string());
+                self.message = Some(format!("background plate {}", path.display()));
+            }
         }
         self.plate_path = self.doc.background.clone().unwrap_or_default();
     }
