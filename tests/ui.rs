@@ -1261,9 +1261,9 @@ fn the_lens_panels_buttons_are_inside_the_default_window() {
 
 /// Lens table cells apply a typed value on Enter (or focus loss), not on every keystroke: typing "-12" never
 /// passes through the refused "-1" (issue 32: a refused intermediate value moved the table and once lost a
-/// keystroke).
+/// keystroke); Escape gives back the value the edit started from.
 #[test]
-fn a_lens_cell_applies_a_typed_value_on_enter() {
+fn a_lens_cell_applies_a_typed_value_on_enter_and_escape_reverts() {
     let doc = flare_core::preset::Document {
         lens: flare_core::optics::library::builtin_lens("dgauss").unwrap(),
         ..flare_core::preset::Document::default()
@@ -1286,4 +1286,13 @@ fn a_lens_cell_applies_a_typed_value_on_enter() {
     assert_eq!(h.state().doc.lens.surfaces[6].radius_mm, -12.0, "Enter applies the whole value");
     assert!(h.state().derived.lens_problem.is_none());
     assert!(h.state().history.can_undo() && !steps);
+    // Escape gives back the value the edit started from.
+    h.get_by_label("radius 6").click();
+    h.run();
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::A);
+    h.event(egui::Event::Text("-3".into()));
+    h.run();
+    h.key_press(egui::Key::Escape);
+    h.run();
+    assert_eq!(h.state().doc.lens.surfaces[6].radius_mm, -12.0, "Escape reverts");
 }

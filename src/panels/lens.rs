@@ -84,9 +84,12 @@ fn surface_table_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, a
                 let cell = |ui: &mut egui::Ui, value: &mut f64, field: &'static str, label: &str, speed: f64| {
                     let bad = bad_cell(k, field);
                     // A typed value applies on Enter or when the cell loses focus, so a refused intermediate value
-                    // ("-1" on the way to "-12") never reaches the lens.
+                    // ("-1" on the way to "-12") never reaches the lens; Escape gives back the value the edit
+                    // started from (egui's DragValue would apply the typed text on the frame after Escape: the
+                    // value is put back then).
+                    let before = *value;
                     let mut drag =
-                        egui::DragValue::new(value).speed(speed).max_decimals(4).update_while_editing(false);
+                        egui::DragValue::new(&mut *value).speed(speed).max_decimals(4).update_while_editing(false);
                     if field == "vd" {
                         // An unknown Abbe number (0 here: dispersion assumed) shows blank, not as 0.0.
                         drag = drag.custom_formatter(|v, _| if v > 0.0 { format!("{v:.1}") } else { String::new() });
@@ -95,6 +98,15 @@ fn surface_table_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, a
                         drag = drag.prefix("! ");
                     }
                     let response = labelled_value(ui.add(drag), &format!("{label} {k}"), *value);
+                    // While typing nothing applies, so the value before this frame is the one the edit started
+                    // from.
+                    let revert = response.id.with("revert");
+                    let escaped = ui.input(|i| i.key_pressed(egui::Key::Escape));
+                    if escaped && response.lost_focus() {
+                        ui.data_mut(|d| d.insert_temp(revert, before));
+                    } else if !escaped && let Some(v) = ui.data_mut(|d| d.remove_temp::<f64>(revert)) {
+                        *value = v;
+                    }
                     if let Some(reason) = bad {
                         ui.painter().rect_stroke(
                             response.rect,
