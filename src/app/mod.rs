@@ -159,6 +159,26 @@ pub enum Tab {
     Shot,
 }
 
+impl Tab {
+    /// Every tab, in the order of the tab bar: the one list of them.
+    pub const ALL: [Tab; 8] =
+        [Tab::Looks, Tab::Lens, Tab::Aperture, Tab::Coatings, Tab::Ghosts, Tab::Report, Tab::Blend, Tab::Shot];
+
+    /// Its name on the tab bar.
+    pub fn name(self) -> &'static str {
+        match self {
+            Tab::Looks => "Looks",
+            Tab::Lens => "Lens",
+            Tab::Aperture => "Aperture",
+            Tab::Coatings => "Coatings",
+            Tab::Ghosts => "Ghosts",
+            Tab::Report => "Report",
+            Tab::Blend => "Blend",
+            Tab::Shot => "Shot",
+        }
+    }
+}
+
 pub struct FlareLabApp {
     pub doc: Document,
     pub history: History,
@@ -403,17 +423,8 @@ impl FlareLabApp {
         let panels = egui::Panel::right("panels").frame(side).default_size(600.0).min_size(400.0).resizable(true);
         panels.show(ui, |ui| {
             ui.horizontal(|ui| {
-                for (tab, name) in [
-                    (Tab::Looks, "Looks"),
-                    (Tab::Lens, "Lens"),
-                    (Tab::Aperture, "Aperture"),
-                    (Tab::Coatings, "Coatings"),
-                    (Tab::Ghosts, "Ghosts"),
-                    (Tab::Report, "Report"),
-                    (Tab::Blend, "Blend"),
-                    (Tab::Shot, "Shot"),
-                ] {
-                    ui.selectable_value(&mut self.tab, tab, name);
+                for tab in Tab::ALL {
+                    ui.selectable_value(&mut self.tab, tab, tab.name());
                 }
             });
             ui.separator();
@@ -461,18 +472,13 @@ impl FlareLabApp {
         }
     }
 
+    /// The tab's panel: one match over [`Tab`], the app's own panels first, then the document's.
     fn panel_ui(&mut self, ui: &mut egui::Ui, actions: &mut Vec<Action>) {
-        if self.tab == Tab::Shot {
-            panel_scroll().show(ui, |ui| self.shot_panel_ui(ui));
-            return;
-        }
-        if self.tab == Tab::Looks {
-            panel_scroll().show(ui, |ui| self.looks_ui(ui));
-            return;
-        }
-        if self.tab == Tab::Report {
-            panel_scroll().show(ui, |ui| self.report_ui(ui));
-            return;
+        match self.tab {
+            Tab::Shot => return panel_scroll().show(ui, |ui| self.shot_panel_ui(ui)).inner,
+            Tab::Looks => return panel_scroll().show(ui, |ui| self.looks_ui(ui)).inner,
+            Tab::Report => return panel_scroll().show(ui, |ui| self.report_ui(ui)).inner,
+            Tab::Lens | Tab::Aperture | Tab::Coatings | Tab::Ghosts | Tab::Blend => {}
         }
         let ctx = PanelContext {
             flare: self.derived.flare.as_deref(),
