@@ -1296,3 +1296,23 @@ fn a_lens_cell_applies_a_typed_value_on_enter_and_escape_reverts() {
     h.run();
     assert_eq!(h.state().doc.lens.surfaces[6].radius_mm, -12.0, "Escape reverts");
 }
+
+/// A refused value does not move the lens table (its reason takes the line the first-order data had): the
+/// user's next click lands on the row aimed at (issue 32: the refusal's line pushed the table down, and "-12"
+/// went into the row above).
+#[test]
+fn a_refusal_does_not_move_the_lens_table() {
+    let doc = flare_core::preset::Document {
+        lens: flare_core::optics::library::builtin_lens("dgauss").unwrap(),
+        ..flare_core::preset::Document::default()
+    };
+    let mut h = harness_on(Some(doc));
+    show(&mut h, Tab::Lens);
+    let row = |h: &Harness<'static, FlareLabApp>| h.get_by_label("radius 7").rect();
+    let before = row(&h);
+    h.get_by_label("radius 6").set_value_accesskit(-1.0);
+    h.run();
+    assert!(h.state().derived.lens_problem.is_some());
+    assert!(h.query_by_label_contains("the view shows the last valid lens").is_some(), "the reason is shown");
+    assert_eq!(row(&h), before, "the table stayed where it was");
+}

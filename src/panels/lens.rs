@@ -47,18 +47,27 @@ pub fn lens_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, action
     for warning in ctx.lens_warnings {
         ui.colored_label(WARN, format!("(i) {warning}"));
     }
-    if let Some(problem) = ctx.lens_problem {
-        ui.colored_label(BAD, format!("(!) {} (the view shows the last valid lens)", problem.reason));
-    }
-    if let Some(fo) = ctx.first_order {
-        ui.label(format!(
-            "f = {:.2} mm, f/{:.2}, BFD {:.2} mm, {} surfaces, {} ghosts",
-            fo.efl_mm,
-            fo.f_number,
-            fo.bfd_mm,
-            doc.lens.surfaces.len(),
-            doc.lens.ghost_pairs().len()
-        ));
+    // One line, always there: the lens's first-order data, or why an edit is refused (one line, the whole
+    // reason on hover and on the cell's red frame). The table below never moves when a value is refused, so
+    // the next click lands on the row the user aimed at.
+    match (ctx.lens_problem, ctx.first_order) {
+        (Some(problem), _) => {
+            let text = format!("(!) {} (the view shows the last valid lens)", problem.reason);
+            ui.add(egui::Label::new(egui::RichText::new(&text).color(BAD)).truncate()).on_hover_text(&text);
+        }
+        (None, Some(fo)) => {
+            ui.label(format!(
+                "f = {:.2} mm, f/{:.2}, BFD {:.2} mm, {} surfaces, {} ghosts",
+                fo.efl_mm,
+                fo.f_number,
+                fo.bfd_mm,
+                doc.lens.surfaces.len(),
+                doc.lens.ghost_pairs().len()
+            ));
+        }
+        (None, None) => {
+            ui.label("");
+        }
     }
     surface_table_ui(ui, doc, ctx, actions);
 }
