@@ -777,6 +777,21 @@ fn without_a_native_dialog_file_actions_use_the_in_app_browser_and_remember_rece
     let saved = std::fs::canonicalize(&path).unwrap();
     h.state_mut().open_recent(&saved);
     assert_ne!(h.state().doc.light_deg, [1.0, 1.0], "the saved preset is open again");
+    // Opening by a typed name: the name field and the Open button do what Enter does.
+    h.state_mut().doc.light_deg = [2.0, 2.0];
+    h.state_mut().pick_file(FileUse::OpenPreset);
+    h.run();
+    assert_eq!(h.state().files.browsing(), Some(FileUse::OpenPreset));
+    let name_field = h.get_all_by_role(egui::accesskit::Role::TextInput).last().unwrap();
+    name_field.focus();
+    h.run();
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::A);
+    h.event(egui::Event::Text(path.display().to_string()));
+    h.run();
+    h.get_by_label("Open").click();
+    h.run();
+    assert_eq!(h.state().files.browsing(), None, "Open took the typed name");
+    assert_ne!(h.state().doc.light_deg, [2.0, 2.0], "the typed preset is open");
 }
 
 #[test]

@@ -152,7 +152,15 @@ impl Files {
         let mut dialog = if use_.saving() {
             egui_file::FileDialog::save_file().default_filename(use_.default_name())
         } else {
-            egui_file::FileDialog::open_file().show_files_filter(filter)
+            // egui_file's open dialog opens only a file picked in its list: its Open button ignores a typed name
+            // (Enter does not). Its save dialog takes the name field, which a click in the list fills, for
+            // both: so files are opened through it, its button named Open, without its folder and rename
+            // buttons. Enter and Open then do the same.
+            egui_file::FileDialog::save_file()
+                .save_button_text("Open".into())
+                .show_new_folder(false)
+                .show_rename(false)
+                .show_files_filter(filter)
         };
         dialog = dialog.title(use_.title());
         if let Some(dir) = self.start_dir().or_else(|| std::env::current_dir().ok()) {
