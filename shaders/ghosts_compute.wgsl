@@ -1,8 +1,8 @@
 // Ghost sprites as compute: the CPU twin's algorithm on the GPU, no rasteriser.
 // CPU twin: crates/flare_core/src/render/cpu/ghosts.rs, `ghost_pass` (`spans` is its `sweep_instance`, `resolve`
-// its per-row sum; same names, same steps); the fixed-point helpers come from fixed64.wgsl. Must be kept in sync
-// with `GhostInstance` in crates/flare_core/src/render/mod.rs and `ComputeStrip` in
-// crates/flare_core/src/render/gpu_ghosts.rs.
+// its per-row sum; same names, same steps); the fixed-point helpers come from fixed64.wgsl, the bilinear mask
+// lookup from mask_texels.wgsl. Must be kept in sync with `GhostInstance` in crates/flare_core/src/render/mod.rs
+// and `ComputeStrip` in crates/flare_core/src/render/gpu_ghosts.rs.
 //
 // How it works. One invocation of `spans` per (sprite, accumulation row) the sprite covers: it finds the row's
 // open span (where the front disc and every stop crossing's mask are exactly 1, from the mask's per-row table)
@@ -59,28 +59,13 @@ struct ComputeStrip {
 
 // ---- the aperture mask (ApertureMask::sample) ----
 
-fn mask_texel(i: i32, j: i32) -> f32 {
-    let last = i32(strip.mask_size) - 1;
-    let k = u32(clamp(j, 0, last) * (last + 1) + clamp(i, 0, last));
-    let texels = (strip.mask_size + 1u) * 4u;
-    return f32((mask[texels + (k >> 2u)] >> ((k & 3u) * 8u)) & 255u);
+// The packed texels follow the mask's row table (`mask_size + 1` rows of four words) in `mask`.
+fn mask_word(w: u32) -> u32 {
+    return mask[(strip.mask_size + 1u) * 4u + w];
 }
 
 fn mask_sample(u: f32, v: f32) -> f32 {
-    if (!(abs(u) <= 1.0 && abs(v) <= 1.0)) {
-        return 0.0;
-    }
-    let n = f32(strip.mask_size);
-    let x = (u * 0.5 + 0.5) * n - 0.5;
-    let y = (0.5 - v * 0.5) * n - 0.5;
-    // x, y >= -0.5: truncating x + 1 floors x.
-    let x0 = i32(x + 1.0) - 1;
-    let y0 = i32(y + 1.0) - 1;
-    let fx = x - f32(x0);
-    let fy = y - f32(y0);
-    let top = mask_texel(x0, y0) * (1.0 - fx) + mask_texel(x0 + 1, y0) * fx;
-    let bottom = mask_texel(x0, y0 + 1) * (1.0 - fx) + mask_texel(x0 + 1, y0 + 1) * fx;
-    return (top * (1.0 - fy) + bottom * fy) / 255.0;
+    return mask_bilinear(u, v, strip.mask_size);
 }
 
 // The band of mask rows a sample at v reads (MaskRows::at); -1 outside [-1, 1].

@@ -7,8 +7,8 @@
 // supersampling: the box filter is exact. Energy goes into a per-pixel 64-bit fixed-point sum (two u32 words
 // added with carry by atomics), so the image does not depend on the order in which triangles land: the same
 // bytes on every run. `resolve_box` turns the sums into floats and clears them. The declarations come from
-// raygrid_common.wgsl, the fixed-point helpers from fixed64.wgsl; the mask is read from a storage buffer and
-// filtered as `ApertureMask::sample` does. Must be kept in sync with `BoxParams` in
+// raygrid_common.wgsl, the fixed-point helpers from fixed64.wgsl, the mask lookup (a storage buffer, filtered
+// as `ApertureMask::sample` does) from mask_texels.wgsl. Must be kept in sync with `BoxParams` in
 // crates/flare_core/src/render/raygrid.rs.
 
 struct BoxParams {
@@ -60,27 +60,12 @@ struct Shader {
     crossings: u32,
 };
 
-fn texel(i: i32, j: i32) -> f32 {
-    let last = i32(box_params.mask_size) - 1;
-    let k = u32(clamp(j, 0, last)) * box_params.mask_size + u32(clamp(i, 0, last));
-    return f32((mask_texels[k / 4u] >> (8u * (k % 4u))) & 0xffu);
+fn mask_word(w: u32) -> u32 {
+    return mask_texels[w];
 }
 
-// The mask at (u, v) in [-1, 1]^2, 0 outside: bilinear between texel centres, `ApertureMask::sample`'s steps.
 fn mask_at(u: f32, v: f32) -> f32 {
-    if (abs(u) > 1.0 || abs(v) > 1.0) {
-        return 0.0;
-    }
-    let n = f32(box_params.mask_size);
-    let x = (u * 0.5 + 0.5) * n - 0.5;
-    let y = (0.5 - v * 0.5) * n - 0.5;
-    let x0 = i32(x + 1.0) - 1;
-    let y0 = i32(y + 1.0) - 1;
-    let fx = x - f32(x0);
-    let fy = y - f32(y0);
-    let top = texel(x0, y0) * (1.0 - fx) + texel(x0 + 1, y0) * fx;
-    let bottom = texel(x0, y0 + 1) * (1.0 - fx) + texel(x0 + 1, y0 + 1) * fx;
-    return (top * (1.0 - fy) + bottom * fy) / 255.0;
+    return mask_bilinear(u, v, box_params.mask_size);
 }
 
 fn shade(s: Shader, p: vec2<f32>) -> f32 {

@@ -5,7 +5,8 @@
 //! is prepended to each shader that uses them here, at compile time, so no shader carries a copy to keep in
 //! sync. Likewise `aperture.wgsl` (the mask lookup) for the two passes that read the aperture, and
 //! `raygrid_common.wgsl` (the ray-grid structs) for the GPU ray grids' passes, and `fixed64.wgsl` (64-bit fixed
-//! point in two u32 words) for the passes that sum light with integer atomics. A test parses every shader with
+//! point in two u32 words) for the passes that sum light with integer atomics, and `mask_texels.wgsl` (the mask
+//! looked up in a storage buffer) for the compute passes that read the aperture. A test parses every shader with
 //! naga and checks that the WGSL `Globals` has the Rust struct's size and member offsets.
 
 /// The shared uniforms (prepended to the shaders below).
@@ -17,8 +18,11 @@ pub const GHOSTS_WGSL: &str = concat!(
     include_str!("../../../../shaders/ghosts.wgsl")
 );
 /// Ghost sprites as compute: open spans and edges into per-row differences, then one sum per row.
-pub const GHOSTS_COMPUTE_WGSL: &str =
-    concat!(include_str!("../../../../shaders/fixed64.wgsl"), include_str!("../../../../shaders/ghosts_compute.wgsl"));
+pub const GHOSTS_COMPUTE_WGSL: &str = concat!(
+    include_str!("../../../../shaders/fixed64.wgsl"),
+    include_str!("../../../../shaders/mask_texels.wgsl"),
+    include_str!("../../../../shaders/ghosts_compute.wgsl")
+);
 /// The starburst quad.
 pub const STARBURST_WGSL: &str =
     concat!(include_str!("../../../../shaders/common.wgsl"), include_str!("../../../../shaders/starburst.wgsl"));
@@ -45,6 +49,7 @@ pub const RAYGRID_SPLAT_WGSL: &str = concat!(
 pub const RAYGRID_BOX_WGSL: &str = concat!(
     include_str!("../../../../shaders/raygrid_common.wgsl"),
     include_str!("../../../../shaders/fixed64.wgsl"),
+    include_str!("../../../../shaders/mask_texels.wgsl"),
     include_str!("../../../../shaders/raygrid_box.wgsl")
 );
 /// The live depth of field: split, gather, composite, resolve (`crate::dof::live`).
