@@ -799,10 +799,8 @@ fn has_avx2_f16c() -> bool {
     crate::optics::simd_level() >= 1 && std::arch::is_x86_feature_detected!("f16c")
 }
 
-/// [`lut_band`] compiled for AVX2: two neighbouring pixels of a row at a time in one AVX register (four channels
-/// each), a pixel alone in one SSE register where its neighbour is outside the instance's quad or row; the texels
-/// converted by F16C, then the same products and sums as [`bilinear_add`] in the same order, lane by lane (the
-/// same image, bit for bit).
+/// [`lut_band`] compiled for AVX2, each pixel's four channels in one SSE register: the texels converted by
+/// F16C, then the same products and sums as [`bilinear_add`] in the same order (the same image, bit for bit).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,f16c")]
 unsafe fn lut_band_avx2(
@@ -813,92 +811,34 @@ unsafe fn lut_band_avx2(
     chunk: &mut [[f32; 4]],
 ) {
     use std::arch::x86_64::{
-        __m128, __m256, _mm_add_ps, _mm_blend_ps, _mm_cvtph_ps, _mm_cvtsi64_si128, _mm_cvtss_f32, _mm_loadu_ps,
-        _mm_mul_ps, _mm_set_epi64x, _mm_set_ps, _mm_set1_ps, _mm_shuffle_ps, _mm_storeu_ps, _mm256_add_ps,
-        _mm256_blend_ps, _mm256_castps256_ps128, _mm256_cvtph_ps, _mm256_extractf128_ps, _mm256_loadu_ps,
-        _mm256_mul_ps, _mm256_set_m128, _mm256_storeu_ps,
+        __m128, _mm_add_ps, _mm_blend_ps, _mm_cvtph_ps, _mm_cvtss_f32, _mm_loadl_epi64, _mm_loadu_ps, _mm_mul_ps,
+        _mm_set_ps, _mm_set1_ps, _mm_setzero_ps, _mm_shuffle_ps, _mm_storeu_ps,
     };
-    for inst in prepared {
-        let m = &inst.map;
-        let [qx0, qx1, qy0, qy1] = m.quad;
+    lut_band(prepared, rows, width, chunk, |inst, [ix, iy], [fx, fy], p| {
         let (ew, eh) = (inst.entry.width as i32, inst.entry.height as i32);
         let texels = &inst.entry.texels;
-        // A texel's four half floats as 64 bits, 0 (four zeros) outside the entry.
-        let bits = |i: i32, j: i32| -> i64 {
+        let at = |i: i32, j: i32| -> __m128 {
             if (i as u32) < ew as u32 && (j as u32) < eh as u32 {
                 // SAFETY: the index is inside the entry's texels, each 8 readable bytes (four half floats).
-                unsafe { texels.as_ptr().add((j * ew + i) as usize).cast::<i64>().read_unaligned() }
+                unsafe { _mm_cvtph_ps(_mm_loadl_epi64(texels.as_ptr().add((j * ew + i) as usize).cast())) }
             } else {
-                0
+                _mm_setzero_ps()
             }
         };
+        let (a, b, c, d) = (at(ix, iy), at(ix + 1, iy), at(ix, iy + 1), at(ix + 1, iy + 1));
+        let (fxv, gxv, fyv, gyv) = (_mm_set1_ps(fx), _mm_set1_ps(1.0 - fx), _mm_set1_ps(fy), _mm_set1_ps(1.0 - fy));
+        let top = _mm_add_ps(_mm_mul_ps(a, gxv), _mm_mul_ps(b, fxv));
+        let bottom = _mm_add_ps(_mm_mul_ps(c, gxv), _mm_mul_ps(d, fxv));
+        let t = _mm_add_ps(_mm_mul_ps(top, gyv), _mm_mul_ps(bottom, fyv));
         let [c0, c1, c2, c3] = inst.colour;
-        let colour = _mm_set_ps(0.0, c2, c1, c0);
-        let colour2 = _mm256_set_m128(colour, colour);
-        let keep_of = |t: __m128| {
-            if alpha_over { 1.0 - (_mm_cvtss_f32(_mm_shuffle_ps::<0xFF>(t, t)) * c3).clamp(0.0, 1.0) } else { 1.0 }
-        };
-        for y in rows.clone() {
-            let columns = m.columns(y, width);
-            if columns.is_empty() {
-                continue;
-            }
-            let row = [m.origin[0] + y as f32 * m.d_dj[0], m.origin[1] + y as f32 * m.d_dj[1]];
-            let out = &mut chunk[(y - rows.start) * width..][..width];
-            // The sample's texel (floor) and fraction at column x; `None` outside the quad.
-            let at = |x: usize| -> Option<([i32; 2], [f32; 2])> {
-                let (tx, ty) = (row[0] + x as f32 * m.d_di[0], row[1] + x as f32 * m.d_di[1]);
-                if !(tx >= qx0 && tx <= qx1 && ty >= qy0 && ty <= qy1) {
-                    return None;
-                }
-                // tx, ty >= -0.5 here: truncation of tx + 1 is the floor.
-                let (ix, iy) = ((tx + 1.0) as i32 - 1, (ty + 1.0) as i32 - 1);
-                Some(([ix, iy], [tx - ix as f32, ty - iy as f32]))
-            };
-            let mut x = columns.start;
-            while x < columns.end {
-                let Some(([ix, iy], [fx, fy])) = at(x) else {
-                    x += 1;
-                    continue;
-                };
-                if let Some(([jx, jy], [gx, gy])) = if x + 1 < columns.end { at(x + 1) } else { None } {
-                    // Two pixels: lane k of each vector is channel k % 4 of pixel x + k / 4.
-                    let pair = |di: i32, dj: i32| -> __m256 {
-                        _mm256_cvtph_ps(_mm_set_epi64x(bits(jx + di, jy + dj), bits(ix + di, iy + dj)))
-                    };
-                    let (a, b, c, d) = (pair(0, 0), pair(1, 0), pair(0, 1), pair(1, 1));
-                    let both = |u: f32, v: f32| _mm256_set_m128(_mm_set1_ps(v), _mm_set1_ps(u));
-                    let (fxv, gxv, fyv, gyv) =
-                        (both(fx, gx), both(1.0 - fx, 1.0 - gx), both(fy, gy), both(1.0 - fy, 1.0 - gy));
-                    let top = _mm256_add_ps(_mm256_mul_ps(a, gxv), _mm256_mul_ps(b, fxv));
-                    let bottom = _mm256_add_ps(_mm256_mul_ps(c, gxv), _mm256_mul_ps(d, fxv));
-                    let t = _mm256_add_ps(_mm256_mul_ps(top, gyv), _mm256_mul_ps(bottom, fyv));
-                    let keep = both(keep_of(_mm256_castps256_ps128(t)), keep_of(_mm256_extractf128_ps::<1>(t)));
-                    let p = out[x..x + 2].as_mut_ptr().cast::<f32>();
-                    // SAFETY: `p` is two pixels, 32 readable and writable bytes.
-                    let old = unsafe { _mm256_loadu_ps(p) };
-                    let new = _mm256_add_ps(_mm256_mul_ps(t, colour2), _mm256_mul_ps(old, keep));
-                    // The fourth channel is not an image channel: it keeps its value.
-                    unsafe { _mm256_storeu_ps(p, _mm256_blend_ps::<0b1000_1000>(new, old)) };
-                    x += 2;
-                    continue;
-                }
-                let one = |di: i32, dj: i32| -> __m128 { _mm_cvtph_ps(_mm_cvtsi64_si128(bits(ix + di, iy + dj))) };
-                let (a, b, c, d) = (one(0, 0), one(1, 0), one(0, 1), one(1, 1));
-                let (fxv, gxv, fyv, gyv) =
-                    (_mm_set1_ps(fx), _mm_set1_ps(1.0 - fx), _mm_set1_ps(fy), _mm_set1_ps(1.0 - fy));
-                let top = _mm_add_ps(_mm_mul_ps(a, gxv), _mm_mul_ps(b, fxv));
-                let bottom = _mm_add_ps(_mm_mul_ps(c, gxv), _mm_mul_ps(d, fxv));
-                let t = _mm_add_ps(_mm_mul_ps(top, gyv), _mm_mul_ps(bottom, fyv));
-                let p = out[x].as_mut_ptr();
-                // SAFETY: `p` is 16 readable and writable bytes.
-                let old = unsafe { _mm_loadu_ps(p) };
-                let new = _mm_add_ps(_mm_mul_ps(t, colour), _mm_mul_ps(old, _mm_set1_ps(keep_of(t))));
-                unsafe { _mm_storeu_ps(p, _mm_blend_ps::<0b1000>(new, old)) };
-                x += 1;
-            }
-        }
-    }
+        let keep =
+            if alpha_over { 1.0 - (_mm_cvtss_f32(_mm_shuffle_ps::<0xFF>(t, t)) * c3).clamp(0.0, 1.0) } else { 1.0 };
+        // SAFETY: `p` is 16 readable and writable bytes.
+        let old = unsafe { _mm_loadu_ps(p.as_ptr()) };
+        let new = _mm_add_ps(_mm_mul_ps(t, _mm_set_ps(0.0, c2, c1, c0)), _mm_mul_ps(old, _mm_set1_ps(keep)));
+        // The fourth channel is not an image channel: it keeps its value.
+        unsafe { _mm_storeu_ps(p.as_mut_ptr(), _mm_blend_ps::<0b1000>(new, old)) };
+    });
 }
 
 /// One accumulation pixel `p` of instance `inst`: the entry's bilinear sample at the texel `i` + `f` (0 outside
