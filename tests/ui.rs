@@ -25,6 +25,14 @@ fn harness_on(doc: Option<flare_core::preset::Document>) -> Harness<'static, Fla
         .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), quiet(FlareLabApp::new(None, doc)))
 }
 
+/// The default document on the double Gauss (issue 32's scenarios of refused and accepted radii).
+fn dgauss() -> flare_core::preset::Document {
+    flare_core::preset::Document {
+        lens: flare_core::optics::library::builtin_lens("dgauss").unwrap(),
+        ..flare_core::preset::Document::default()
+    }
+}
+
 /// The Heliar wide open (a small lens: a quick bake).
 fn heliar() -> flare_core::preset::Document {
     flare_core::preset::Document::open_named("heliar-portrait").unwrap()
@@ -1053,11 +1061,7 @@ fn the_ray_grid_view_traces_the_frame_shown_and_shows_it_in_the_viewport() {
 /// document, so it makes no undo step and clears no redo.
 #[test]
 fn undo_and_redo_return_the_document_exactly_through_a_refused_edit_and_auto_exposure() {
-    let doc = flare_core::preset::Document {
-        lens: flare_core::optics::library::builtin_lens("dgauss").unwrap(),
-        ..flare_core::preset::Document::default()
-    };
-    let mut h = harness_on(Some(doc));
+    let mut h = harness_on(Some(dgauss()));
     show(&mut h, Tab::Lens);
     let json = |h: &Harness<'static, FlareLabApp>| h.state().doc.to_json();
     let shown_ev = |h: &Harness<'static, FlareLabApp>| h.state().derived.flare_ev(&h.state().doc);
@@ -1279,11 +1283,7 @@ fn the_lens_panels_buttons_are_inside_the_default_window() {
 /// keystroke); Escape gives back the value the edit started from.
 #[test]
 fn a_lens_cell_applies_a_typed_value_on_enter_and_escape_reverts() {
-    let doc = flare_core::preset::Document {
-        lens: flare_core::optics::library::builtin_lens("dgauss").unwrap(),
-        ..flare_core::preset::Document::default()
-    };
-    let mut h = harness_on(Some(doc));
+    let mut h = harness_on(Some(dgauss()));
     show(&mut h, Tab::Lens);
     let before = h.state().doc.lens.surfaces[6].radius_mm;
     let steps = h.state().history.can_undo();
@@ -1317,11 +1317,7 @@ fn a_lens_cell_applies_a_typed_value_on_enter_and_escape_reverts() {
 /// went into the row above).
 #[test]
 fn a_refusal_does_not_move_the_lens_table() {
-    let doc = flare_core::preset::Document {
-        lens: flare_core::optics::library::builtin_lens("dgauss").unwrap(),
-        ..flare_core::preset::Document::default()
-    };
-    let mut h = harness_on(Some(doc));
+    let mut h = harness_on(Some(dgauss()));
     show(&mut h, Tab::Lens);
     let row = |h: &Harness<'static, FlareLabApp>| h.get_by_label("radius 7").rect();
     let before = row(&h);

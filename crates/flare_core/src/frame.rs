@@ -446,9 +446,14 @@ pub fn ghost_layers(
         let Some(model) = sources.flare.system.ghosts.get(g as usize) else { continue };
         let alone = frame.ghost_alone(g, sources.flare, sources.lut);
         let drawn = device.draw(&alone, &Sources { plate: None, ..*sources })?;
-        layers.push((format!("ghost_{}_{}", model.i, model.j), cpu::flare_layer(&alone.scene, &drawn.hdr)));
+        layers.push((ghost_layer_name(model.i, model.j), cpu::flare_layer(&alone.scene, &drawn.hdr)));
     }
     Ok(layers)
+}
+
+/// The EXR layer name of ghost (i, j): `ghost_I_J`.
+pub fn ghost_layer_name(i: usize, j: usize) -> String {
+    format!("ghost_{i}_{j}")
 }
 
 /// Which layers a file gets.

@@ -141,7 +141,7 @@ impl TracedGhosts {
             }
             let hdr = frame::traced_accumulation(frame, &traced.hdr);
             layers
-                .push((format!("ghost_{}_{}", model.i, model.j), crate::render::cpu::flare_layer(&frame.scene, &hdr)));
+                .push((frame::ghost_layer_name(model.i, model.j), crate::render::cpu::flare_layer(&frame.scene, &hdr)));
         }
         Ok(layers)
     }
