@@ -34,22 +34,13 @@ pub mod files;
 pub mod ghost_report;
 mod ghost_report_panel;
 pub mod job;
-
-pub use shot::DEFAULT_EXPORT_PX;
-
-/// What undo or redo says: `verb` and what changed, then what the change made the app say (a dropped LUT).
-fn said_with(verb: &str, what: Option<String>, then: Option<String>) -> String {
-    let what = what.unwrap_or_default();
-    match then {
-        Some(then) => format!("{verb}: {what}; {then}"),
-        None => format!("{verb}: {what}"),
-    }
-}
 pub mod looks;
 mod looks_panel;
 pub mod raygrid_view;
 pub mod shot;
 pub mod timeline;
+
+pub use shot::DEFAULT_EXPORT_PX;
 
 use crate::panels::aperture::AperturePreview;
 use crate::panels::coatings::CoatingsState;
@@ -370,29 +361,32 @@ impl FlareLabApp {
     }
 
     /// Undo and redo from the keyboard and the menu.
-    /// Each says in the status bar what it undid or redid, replacing the message before.
     pub fn undo(&mut self) {
-        self.history.commit(&self.doc);
-        let what = self.history.peek_undo().map(|before| crate::history::difference(&self.doc, before));
-        if self.history.undo(&mut self.doc) {
-            self.message = None;
-            self.sync();
-            self.message = Some(said_with("undid", what, self.message.take()));
-        } else {
-            self.message = Some("nothing to undo".into());
-        }
+        self.walk_history(true);
     }
 
     pub fn redo(&mut self) {
+        self.walk_history(false);
+    }
+
+    /// Undo (`back`) or redo, saying in the status bar what it undid or redid (then what that made the app
+    /// say: a dropped LUT), or that there is nothing to; the message before is replaced.
+    fn walk_history(&mut self, back: bool) {
         self.history.commit(&self.doc);
-        let what = self.history.peek_redo().map(|after| crate::history::difference(&self.doc, after));
-        if self.history.redo(&mut self.doc) {
-            self.message = None;
-            self.sync();
-            self.message = Some(said_with("redid", what, self.message.take()));
-        } else {
-            self.message = Some("nothing to redo".into());
+        let (verb, nothing) = if back { ("undid", "nothing to undo") } else { ("redid", "nothing to redo") };
+        let next = if back { self.history.peek_undo() } else { self.history.peek_redo() };
+        let what = next.map(|doc| crate::history::difference(&self.doc, doc)).unwrap_or_default();
+        let moved = if back { self.history.undo(&mut self.doc) } else { self.history.redo(&mut self.doc) };
+        if !moved {
+            self.message = Some(nothing.into());
+            return;
         }
+        self.message = None;
+        self.sync();
+        self.message = Some(match self.message.take() {
+            Some(then) => format!("{verb}: {what}; {then}"),
+            None => format!("{verb}: {what}"),
+        });
     }
 
     /// The whole window: menus, status bar, panels, viewport, ray diagram; then the frame's bookkeeping.
