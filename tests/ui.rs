@@ -63,7 +63,7 @@ fn gpu_harness(stored: Option<flare_core::preset::Document>) -> Option<Harness<'
 }
 
 fn show(h: &mut Harness<'static, FlareLabApp>, tab: Tab) {
-    h.state_mut().tab = tab;
+    h.state_mut().show_tab(tab);
     h.run();
 }
 
@@ -71,16 +71,16 @@ fn show(h: &mut Harness<'static, FlareLabApp>, tab: Tab) {
 fn editing_a_radius_marks_an_impossible_value_and_keeps_the_last_valid_lens() {
     let mut h = harness();
     show(&mut h, Tab::Lens);
-    let before = h.state().doc.lens.surfaces[1].radius_mm;
+    let before = h.state().doc().lens.surfaces[1].radius_mm;
     h.get_by_label("radius 1").set_value_accesskit(before * 1.1);
     h.run();
-    let r = h.state().doc.lens.surfaces[1].radius_mm;
+    let r = h.state().doc().lens.surfaces[1].radius_mm;
     assert!((r - before * 1.1).abs() < 1e-9, "radius {r}, wanted {}", before * 1.1);
     assert!(h.state().derived.lens_problem.is_none());
     let flare_before = h.state().flare().unwrap().system.lens.clone();
     assert_eq!(flare_before.surfaces[1].radius_mm, r, "the flare follows a valid edit");
     // A radius smaller than the clear semi-aperture is no sphere: refused, its cell marked, the flare kept.
-    let stop = h.state().doc.lens.stop_index();
+    let stop = h.state().doc().lens.stop_index();
     h.get_by_label(&format!("radius {stop}")).set_value_accesskit(2.0);
     h.run();
     let problem = h.state().derived.lens_problem.clone().expect("an impossible radius is refused");
@@ -91,7 +91,7 @@ fn editing_a_radius_marks_an_impossible_value_and_keeps_the_last_valid_lens() {
     // Undo (Ctrl+Z) takes the bad value back and the lens is valid again.
     h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
     h.run();
-    assert_eq!(h.state().doc.lens.surfaces[stop].radius_mm, 0.0);
+    assert_eq!(h.state().doc().lens.surfaces[stop].radius_mm, 0.0);
     assert!(h.state().derived.lens_problem.is_none());
 }
 
@@ -101,7 +101,7 @@ fn blades_ghost_toggles_and_undo_redo_change_the_document() {
     show(&mut h, Tab::Aperture);
     h.get_by_role_and_label(egui::accesskit::Role::Slider, "blades").set_value_accesskit(9.0);
     h.run();
-    assert_eq!(h.state().doc.aperture.blades, 9);
+    assert_eq!(h.state().doc().aperture.blades, 9);
     let flare = h.state().flare().unwrap();
     assert!(
         matches!(flare.config.aperture.shape, flare_core::aperture::ApertureShape::Blades { count: 9, .. }),
@@ -115,36 +115,36 @@ fn blades_ghost_toggles_and_undo_redo_change_the_document() {
     assert!(a.culled.is_none(), "the brightest ghost is drawn");
     h.get_by_label(&format!("ghost {}-{}", a.i, a.j)).click();
     h.run();
-    assert_eq!(h.state().doc.ghost_gain(a.i, a.j), 0.0, "ghost {}-{} switched off", a.i, a.j);
+    assert_eq!(h.state().doc().ghost_gain(a.i, a.j), 0.0, "ghost {}-{} switched off", a.i, a.j);
     h.get_by_label(&format!("gain {}-{}", b.i, b.j)).set_value_accesskit(2.5);
     h.run();
-    assert_eq!(h.state().doc.ghost_gain(b.i, b.j), 2.5);
+    assert_eq!(h.state().doc().ghost_gain(b.i, b.j), 2.5);
     // Undo walks back one edit at a time: the gain, the toggle, the blades; redo comes forward again.
     let undo = |h: &mut Harness<'static, FlareLabApp>| {
         h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
         h.run();
     };
     undo(&mut h);
-    assert_eq!(h.state().doc.ghost_gain(b.i, b.j), 1.0);
-    assert_eq!(h.state().doc.ghost_gain(a.i, a.j), 0.0);
+    assert_eq!(h.state().doc().ghost_gain(b.i, b.j), 1.0);
+    assert_eq!(h.state().doc().ghost_gain(a.i, a.j), 0.0);
     undo(&mut h);
-    assert_eq!(h.state().doc.ghost_gain(a.i, a.j), 1.0);
+    assert_eq!(h.state().doc().ghost_gain(a.i, a.j), 1.0);
     undo(&mut h);
-    assert_eq!(h.state().doc.aperture.blades, 6);
+    assert_eq!(h.state().doc().aperture.blades, 6);
     h.key_press_modifiers(egui::Modifiers::COMMAND | egui::Modifiers::SHIFT, egui::Key::Z);
     h.run();
-    assert_eq!(h.state().doc.aperture.blades, 9);
+    assert_eq!(h.state().doc().aperture.blades, 9);
 }
 
 #[test]
 fn dragging_in_the_viewport_moves_the_light_and_undo_takes_the_whole_drag_back() {
     let mut h = harness();
     show(&mut h, Tab::Ghosts);
-    let before = h.state().doc.light_deg;
+    let before = h.state().doc().light_deg;
     // The viewport is the top left of the window (a placeholder without a GPU, with the same input).
     let (from, to) = (egui::pos2(300.0, 250.0), egui::pos2(420.0, 200.0));
     drag(&mut h, from, to);
-    let after = h.state().doc.light_deg;
+    let after = h.state().doc().light_deg;
     assert_ne!(after, before, "the drag moved the light");
     // The drop point is right of and above the view's centre: +x and +y in the frame.
     assert!(after[0] > 0.0 && after[1] > 0.0, "{after:?}");
@@ -173,7 +173,7 @@ fn dragging_in_the_viewport_moves_the_light_and_undo_takes_the_whole_drag_back()
     }
     h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
     h.run();
-    assert_eq!(h.state().doc.light_deg, before, "one undo step for the whole drag");
+    assert_eq!(h.state().doc().light_deg, before, "one undo step for the whole drag");
 }
 
 #[test]
@@ -204,14 +204,14 @@ fn the_image_export_runs_on_a_thread() {
     h.state_mut().export_image_file(&path);
     assert!(h.state().export_job.is_some());
     h.state_mut().export_image_file(&dir.path().join("other.png"));
-    assert!(h.state().message.as_deref().is_some_and(|m| m.contains("an export is running")));
+    assert!(h.state().message().is_some_and(|m| m.contains("an export is running")));
     let started = std::time::Instant::now();
     while h.state().export_job.is_some() {
         assert!(started.elapsed().as_secs() < 120, "the export did not finish");
         h.run();
         std::thread::sleep(std::time::Duration::from_millis(20));
     }
-    let message = h.state().message.clone().unwrap_or_default();
+    let message = h.state().message().map(str::to_owned).unwrap_or_default();
     assert!(message.starts_with("wrote ") && message.contains("flare.exr"), "{message}");
     let img = image::open(&path).unwrap().to_rgb32f();
     assert!(img.pixels().any(|p| p.0.iter().sum::<f32>() > 0.05), "the export shows the flare");
@@ -224,13 +224,15 @@ fn dragging_the_light_moves_the_ghosts_along_the_line_through_the_optical_centre
     show(&mut h, Tab::Ghosts);
     let centre_of = |h: &Harness<'static, FlareLabApp>| -> Vec<[f64; 2]> {
         let flare = h.state().flare().unwrap();
-        let u =
-            flare_core::render::light_slopes_for_frame_position(h.state().doc.light_deg[0], h.state().doc.light_deg[1]);
+        let u = flare_core::render::light_slopes_for_frame_position(
+            h.state().doc().light_deg[0],
+            h.state().doc().light_deg[1],
+        );
         let frame = flare.system.frame(u, &flare.frame_settings(960, 540, 1000.0));
         frame.sprites.iter().filter(|s| s.culled.is_none() && s.wavelength == 1).map(|s| s.centre_mm).collect()
     };
     for light in [[8.0, 3.0], [-5.0, 12.0], [40.0, -2.0]] {
-        h.state_mut().doc.light_deg = light;
+        h.state_mut().edit().light_deg = light;
         h.run();
         let flare = h.state().flare().unwrap();
         let u = flare_core::render::light_slopes_for_frame_position(light[0], light[1]);
@@ -280,7 +282,7 @@ fn the_blend_panel_bakes_on_a_thread_cancels_and_shows_the_classification() {
     h.run_steps(2);
     let seconds = step_until(&mut h, 600.0, |app| app.lut().is_some());
     println!("the Heliar baked from the Blend panel in {seconds:.1} s");
-    assert!(matches!(h.state().doc.blend.lut, LutSource::Simulated { path: None }));
+    assert!(matches!(h.state().doc().blend.lut, LutSource::Simulated { path: None }));
     let baked = h.state().lut().unwrap().ghosts.len();
     assert!(baked > 0);
     show(&mut h, Tab::Ghosts);
@@ -298,17 +300,17 @@ fn the_blend_panel_bakes_on_a_thread_cancels_and_shows_the_classification() {
     std::fs::write(&damaged, &bytes).unwrap();
     fresh.open_lut(&damaged);
     assert!(
-        fresh.lut().is_none() && fresh.message.as_deref().is_some_and(|m| m.contains("damaged.flut")),
+        fresh.lut().is_none() && fresh.message().is_some_and(|m| m.contains("damaged.flut")),
         "{:?}",
-        fresh.message
+        fresh.message()
     );
-    assert_eq!(fresh.doc.blend.lut, LutSource::None);
+    assert_eq!(fresh.doc().blend.lut, LutSource::None);
     fresh.open_lut(&path);
     assert_eq!(fresh.lut().map(|l| l.ghosts.len()), Some(baked));
-    assert!(matches!(&fresh.doc.blend.lut, LutSource::Simulated { path: Some(p) } if p.ends_with("heliar.flut")));
+    assert!(matches!(&fresh.doc().blend.lut, LutSource::Simulated { path: Some(p) } if p.ends_with("heliar.flut")));
     // A lens edit invalidates the LUT (it was baked for the old lens).
     show(&mut h, Tab::Lens);
-    let r = h.state().doc.lens.surfaces[0].radius_mm;
+    let r = h.state().doc().lens.surfaces[0].radius_mm;
     h.get_by_label("radius 0").set_value_accesskit(r * 1.05);
     h.run();
     assert!(h.state().lut().is_none(), "a LUT for another lens is not drawn");
@@ -330,14 +332,14 @@ fn snapshots_of_the_whole_window_with_the_flare() {
         h.mask(quality);
         h.snapshot_options(name, &options);
     };
-    h.state_mut().tab = Tab::Lens;
+    h.state_mut().show_tab(Tab::Lens);
     snap(&mut h, "app_lens_panel");
     // The brightest drawn ghost selected: ringed in the viewport, traced in the ray diagram.
     let mut rows = h.state().derived.ghosts.clone();
     rows.sort_by(|a, b| b.intensity().total_cmp(&a.intensity()));
-    h.state_mut().tab = Tab::Ghosts;
-    h.state_mut().selected = rows.iter().find(|r| r.culled.is_none()).map(|r| r.ghost);
-    h.state_mut().doc.light_deg = [10.0, 6.0];
+    h.state_mut().show_tab(Tab::Ghosts);
+    h.state_mut().select(rows.iter().find(|r| r.culled.is_none()).map(|r| r.ghost));
+    h.state_mut().edit().light_deg = [10.0, 6.0];
     snap(&mut h, "app_ghost_selected");
 }
 
@@ -348,10 +350,10 @@ fn a_bad_lens_file_is_refused_and_the_document_keeps_its_lens() {
     let bad = dir.path().join("bad.json");
     std::fs::write(&bad, r#"{"surfaces": [{"radius": "flat?", "thickness": 1, "nd": 1.5, "semi_aperture": 5}]}"#)
         .unwrap();
-    let lens = app.doc.lens.clone();
+    let lens = app.doc().lens.clone();
     app.open_lens(&bad);
-    assert_eq!(app.doc.lens, lens);
-    let message = app.message.clone().unwrap_or_default();
+    assert_eq!(app.doc().lens, lens);
+    let message = app.message().map(str::to_owned).unwrap_or_default();
     assert!(message.contains("bad.json") && message.contains("radius"), "{message}");
     // A good file replaces the lens.
     let good = dir.path().join("tessar.json");
@@ -362,8 +364,8 @@ fn a_bad_lens_file_is_refused_and_the_document_keeps_its_lens() {
     .unwrap();
     app.open_lens(&good);
     app.sync();
-    assert_eq!(app.flare().unwrap().system.lens.surfaces.len(), app.doc.lens.surfaces.len());
-    assert_ne!(app.doc.lens, lens);
+    assert_eq!(app.flare().unwrap().system.lens.surfaces.len(), app.doc().lens.surfaces.len());
+    assert_ne!(app.doc().lens, lens);
 }
 
 /// eframe's storage as a map (the app's `save` and the start-up read go through `eframe::{set,get}_value`).
@@ -387,14 +389,14 @@ impl eframe::Storage for MemoryStorage {
 fn the_session_round_trips_through_eframes_storage() {
     use eframe::App as _;
     let mut app = FlareLabApp::new(None, None);
-    app.doc.light_deg = [12.5, -3.0];
-    app.doc.aperture.blades = 7;
-    app.doc.ghost_mut(2, 6).gain = 0.25;
-    app.doc.lens.surfaces[0].radius_mm *= 1.01;
+    app.edit().light_deg = [12.5, -3.0];
+    app.edit().aperture.blades = 7;
+    app.edit().ghost_mut(2, 6).gain = 0.25;
+    app.edit().lens.surfaces[0].radius_mm *= 1.01;
     let mut storage = MemoryStorage::default();
     app.save(&mut storage);
     let restored = flarelab::app::restore(&storage).expect("the stored session reads back");
-    assert_eq!(restored, app.doc);
+    assert_eq!(restored, *app.doc());
     // The recent files come back with it.
     assert!(flarelab::app::restore_recent(&storage).is_empty());
     app.files.remember(std::path::Path::new("/tmp/a look.json"));
@@ -418,7 +420,7 @@ fn the_exposure_slider_rebuilds_no_optics_and_no_texture() {
         let started = std::time::Instant::now();
         h.run();
         frame_ms.push(started.elapsed().as_secs_f64() * 1e3);
-        assert_eq!(h.state().doc.flare_ev, ev);
+        assert_eq!(h.state().doc().flare_ev, ev);
     }
     let after = h.state().derived.rebuilds;
     assert_eq!((after.optics, after.textures), (before.optics, before.textures), "{before:?} -> {after:?}");
@@ -426,14 +428,14 @@ fn the_exposure_slider_rebuilds_no_optics_and_no_texture() {
     frame_ms.sort_by(f64::total_cmp);
     println!("exposure drag: median {:.1} ms per UI update (harness, all passes)", frame_ms[frame_ms.len() / 2]);
     // Tonemap, starburst and plate exposure are display settings too.
-    h.state_mut().doc.tonemap = flare_core::color::Tonemap::Reinhard;
-    h.state_mut().doc.starburst = false;
-    h.state_mut().doc.plate_ev = 2.0;
+    h.state_mut().edit().tonemap = flare_core::color::Tonemap::Reinhard;
+    h.state_mut().edit().starburst = false;
+    h.state_mut().edit().plate_ev = 2.0;
     h.run();
     let display = h.state().derived.rebuilds;
     assert_eq!((display.optics, display.textures), (before.optics, before.textures));
     // An optics edit does rebuild: the counter can see one.
-    h.state_mut().doc.aperture.f_number = Some(8.0);
+    h.state_mut().edit().aperture.f_number = Some(8.0);
     h.run();
     assert_eq!(h.state().derived.rebuilds.optics, before.optics + 1);
 }
@@ -521,46 +523,46 @@ fn the_timeline_keys_the_light_interpolates_plays_and_undo_covers_the_keys() {
     let mut h = harness();
     show(&mut h, Tab::Shot);
     let a = [-10.0, 2.0];
-    h.state_mut().doc.light_deg = a;
+    h.state_mut().edit().light_deg = a;
     h.run();
     h.get_by_label("Set key").click();
     h.run();
-    assert_eq!(h.state().doc.timeline.light_deg.keys.len(), 1);
-    assert_eq!(h.state().doc.timeline.light_deg.key_at(1).unwrap().value, a);
+    assert_eq!(h.state().doc().timeline.light_deg.keys.len(), 1);
+    assert_eq!(h.state().doc().timeline.light_deg.key_at(1).unwrap().value, a);
     // Frame 11: dragging the light keys it there.
     h.get_by_label("frame").set_value_accesskit(11.0);
     h.run();
     assert_eq!(h.state().playhead, 11);
     drag(&mut h, egui::pos2(300.0, 250.0), egui::pos2(420.0, 200.0));
-    let b = h.state().doc.timeline.light_deg.key_at(11).expect("the drag keyed frame 11").value;
+    let b = h.state().doc().timeline.light_deg.key_at(11).expect("the drag keyed frame 11").value;
     assert!(b[0] > 0.0 && b[1] > 0.0, "{b:?}");
-    assert_eq!(h.state().doc.light_deg, a, "the static light is not what a keyed drag moves");
-    assert_eq!(h.state().doc.timeline.key_frames(), vec![1, 11], "the ticks");
+    assert_eq!(h.state().doc().light_deg, a, "the static light is not what a keyed drag moves");
+    assert_eq!(h.state().doc().timeline.key_frames(), vec![1, 11], "the ticks");
     // Dragging again at a keyed frame edits that key.
     drag(&mut h, egui::pos2(420.0, 200.0), egui::pos2(380.0, 230.0));
-    let b2 = h.state().doc.timeline.light_deg.key_at(11).unwrap().value;
+    let b2 = h.state().doc().timeline.light_deg.key_at(11).unwrap().value;
     assert_ne!(b2, b);
-    assert_eq!(h.state().doc.timeline.light_deg.keys.len(), 2);
+    assert_eq!(h.state().doc().timeline.light_deg.keys.len(), 2);
     // Frame 6 is between the keys: two keys make a straight line, smooth or not.
     h.get_by_label("frame").set_value_accesskit(6.0);
     h.run();
-    let mid = h.state().derived.light_deg(&h.state().doc);
+    let mid = h.state().derived.light_deg(&h.state().doc());
     for c in 0..2 {
         assert!((mid[c] - 0.5 * (a[c] + b2[c])).abs() < 1e-9, "{mid:?} between {a:?} and {b2:?}");
     }
     // Undo takes the edit of the key back, then the key itself.
     h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
     h.run();
-    assert_eq!(h.state().doc.timeline.light_deg.key_at(11).unwrap().value, b);
+    assert_eq!(h.state().doc().timeline.light_deg.key_at(11).unwrap().value, b);
     h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
     h.run();
-    assert!(h.state().doc.timeline.light_deg.key_at(11).is_none());
+    assert!(h.state().doc().timeline.light_deg.key_at(11).is_none());
     // Delete the key at frame 1.
     h.get_by_label("frame").set_value_accesskit(1.0);
     h.run();
     h.get_by_label("Delete key").click();
     h.run();
-    assert!(h.state().doc.timeline.light_deg.is_empty());
+    assert!(h.state().doc().timeline.light_deg.is_empty());
     // Play advances the playhead at the timeline's rate; pause stops it.
     h.get_by_label("Play").click();
     h.run_steps(2);
@@ -596,14 +598,14 @@ fn a_plate_sequence_finds_the_light_and_exports_on_a_thread_as_render_frames_doe
     let mut h = Harness::builder()
         .with_size(egui::vec2(1280.0, 800.0))
         .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), quiet(FlareLabApp::new(None, Some(doc))));
-    h.state_mut().tab = Tab::Shot;
+    h.state_mut().show_tab(Tab::Shot);
     h.run();
     step_until(&mut h, 120.0, |app| app.derived.shot_plan.is_some());
     // The frame shown has the light found in its plate.
     h.get_by_label("frame").set_value_accesskit(3.0);
     h.run();
     let found = h.state().derived.shot_plan.as_ref().unwrap().frames[2].clone();
-    assert_eq!(h.state().derived.light_deg(&h.state().doc), found.light_deg);
+    assert_eq!(h.state().derived.light_deg(&h.state().doc()), found.light_deg);
     assert!(found.light_px.is_some_and(|p| (p[0] - shot.sun_px(3)[0]).hypot(p[1] - shot.sun_px(3)[1]) < 0.5));
     // Export on a thread: the UI keeps running while it works.
     let out = dir.path().join("app/f.####.png").display().to_string();
@@ -640,14 +642,14 @@ fn a_plate_sequence_finds_the_light_and_exports_on_a_thread_as_render_frames_doe
     assert!(h.state().shot_status.contains("cancel"), "{}", h.state().shot_status);
     h.state_mut().export_sequence(&dir.path().join("still.png").display().to_string(), false);
     assert!(h.state().shot_job.is_none());
-    assert!(h.state().message.as_deref().is_some_and(|m| m.contains("frame field")), "{:?}", h.state().message);
+    assert!(h.state().message().is_some_and(|m| m.contains("frame field")), "{:?}", h.state().message());
 }
 
 #[test]
 fn inserting_a_surface_splits_a_gap_and_changes_nothing_optically() {
     let mut h = harness_on(Some(heliar()));
     show(&mut h, Tab::Lens);
-    let before = h.state().doc.lens.clone();
+    let before = h.state().doc().lens.clone();
     let fo = |app: &FlareLabApp| app.derived.first_order.clone().expect("a valid lens");
     let (efl, bfd) = (fo(h.state()).efl_mm, fo(h.state()).bfd_mm);
     // "+" on row 1 (inside glass) and on the last row.
@@ -658,7 +660,7 @@ fn inserting_a_surface_splits_a_gap_and_changes_nothing_optically() {
     let plus: Vec<_> = h.get_all_by_label("+").collect();
     plus[plus.len() - 1].click();
     h.run();
-    let after = &h.state().doc.lens;
+    let after = &h.state().doc().lens;
     assert_eq!(after.surfaces.len(), before.surfaces.len() + 2);
     assert!(h.state().derived.lens_problem.is_none(), "{:?}", h.state().derived.lens_problem);
     assert_eq!(
@@ -700,11 +702,11 @@ fn lut_ghosts_bake_by_themselves_and_undo_to_a_baked_lens_needs_no_bake() {
     assert!(h.query_by_label_contains("the paraxial flare until").is_some(), "the status bar says what shows");
     step_until(&mut h, 600.0, |app| app.lut().is_some());
     assert_eq!(h.state().lut().unwrap().lens_id, "heliar_tronnier_us2645156");
-    assert_eq!(h.state().doc.blend.lut, LutSource::Simulated { path: None }, "a saved preset renders it blended");
-    assert!(!h.state().history.can_undo(), "a bake is no edit to undo");
+    assert_eq!(h.state().doc().blend.lut, LutSource::Simulated { path: None }, "a saved preset renders it blended");
+    assert!(!h.state().session().can_undo(), "a bake is no edit to undo");
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1, "the LUT went into the cache");
     // Change the lens: its bake starts by itself, the old LUT is not drawn for it, and the new one is used.
-    h.state_mut().doc.lens = flare_core::optics::library::builtin_lens("tessar").unwrap();
+    h.state_mut().edit().lens = flare_core::optics::library::builtin_lens("tessar").unwrap();
     h.run_steps(2);
     assert_eq!(h.state().autobake.bakes_started, 2);
     assert!(h.state().lut().is_none());
@@ -713,7 +715,7 @@ fn lut_ghosts_bake_by_themselves_and_undo_to_a_baked_lens_needs_no_bake() {
     // Undo: the Heliar and its LUT at once, without a new bake.
     h.state_mut().undo();
     h.run();
-    assert_eq!(h.state().doc.lens.id, "heliar_tronnier_us2645156");
+    assert_eq!(h.state().doc().lens.id, "heliar_tronnier_us2645156");
     assert_eq!(h.state().lut().map(|l| l.lens_id.as_str()), Some("heliar_tronnier_us2645156"));
     assert_eq!(h.state().autobake.bakes_started, 2, "no new bake");
     // A new session finds both LUTs in the disk cache: no bake at all.
@@ -732,7 +734,7 @@ fn lut_ghosts_bake_by_themselves_and_undo_to_a_baked_lens_needs_no_bake() {
     let mut damaged = app_on(heliar());
     damaged.run_steps(2);
     assert_eq!(damaged.state().autobake.bakes_started, 1);
-    assert!(damaged.state().message.as_deref().is_some_and(|m| m.contains("ignored")), "{:?}", damaged.state().message);
+    assert!(damaged.state().message().is_some_and(|m| m.contains("ignored")), "{:?}", damaged.state().message());
 }
 
 #[test]
@@ -754,7 +756,7 @@ fn without_a_native_dialog_file_actions_use_the_in_app_browser_and_remember_rece
     assert!(h.query_by_label("💾  Save preset").is_some(), "the browser window is titled by the action");
     // Why not the desktop's dialog is said, once.
     if !flarelab::app::files::native_dialog_available() {
-        let said = h.state().message.clone().unwrap_or_default();
+        let said = h.state().message().map(str::to_owned).unwrap_or_default();
         assert!(said.contains("no desktop file dialog") && said.contains("zenity"), "{said}");
     }
     // A name without the extension gets it.
@@ -764,29 +766,29 @@ fn without_a_native_dialog_file_actions_use_the_in_app_browser_and_remember_rece
     let path = dir.path().join("look.json");
     h.state_mut().use_file(FileUse::SavePreset, &path);
     assert!(path.exists());
-    assert!(h.state().message.as_deref().is_some_and(|m| m.contains("saved")), "{:?}", h.state().message);
+    assert!(h.state().message().is_some_and(|m| m.contains("saved")), "{:?}", h.state().message());
     h.key_press(egui::Key::Escape);
     h.run();
     assert_eq!(h.state().files.browsing(), None);
-    assert!(h.state().message.as_deref().is_some_and(|m| m.contains("no file chosen")), "{:?}", h.state().message);
+    assert!(h.state().message().is_some_and(|m| m.contains("no file chosen")), "{:?}", h.state().message());
     // A failed action leaves its reason in the status bar, and the document as it was.
-    let lens = h.state().doc.lens.clone();
+    let lens = h.state().doc().lens.clone();
     let bad = dir.path().join("bad.zmx");
     std::fs::write(&bad, "SURF 0\n  CURV not-a-number\n").unwrap();
     h.state_mut().use_file(FileUse::OpenLens, &bad);
     h.run();
-    assert_eq!(h.state().doc.lens, lens);
-    let said = h.state().message.clone().unwrap_or_default();
+    assert_eq!(h.state().doc().lens, lens);
+    let said = h.state().message().map(str::to_owned).unwrap_or_default();
     assert!(said.contains("bad.zmx"), "{said}");
     assert!(h.query_by_label_contains("bad.zmx").is_some(), "the reason is shown in the status bar");
     // Open recent opens a remembered preset again by what it is.
     assert_eq!(h.state().files.recent.first().and_then(|p| p.file_name()), Some(bad.file_name().unwrap()));
-    h.state_mut().doc.light_deg = [1.0, 1.0];
+    h.state_mut().edit().light_deg = [1.0, 1.0];
     let saved = std::fs::canonicalize(&path).unwrap();
     h.state_mut().open_recent(&saved);
-    assert_ne!(h.state().doc.light_deg, [1.0, 1.0], "the saved preset is open again");
+    assert_ne!(h.state().doc().light_deg, [1.0, 1.0], "the saved preset is open again");
     // Opening by a typed name: the name field and the Open button do what Enter does.
-    h.state_mut().doc.light_deg = [2.0, 2.0];
+    h.state_mut().edit().light_deg = [2.0, 2.0];
     h.state_mut().pick_file(FileUse::OpenPreset);
     h.run();
     assert_eq!(h.state().files.browsing(), Some(FileUse::OpenPreset));
@@ -799,39 +801,39 @@ fn without_a_native_dialog_file_actions_use_the_in_app_browser_and_remember_rece
     h.get_by_label("Open").click();
     h.run();
     assert_eq!(h.state().files.browsing(), None, "Open took the typed name");
-    assert_ne!(h.state().doc.light_deg, [2.0, 2.0], "the typed preset is open");
+    assert_ne!(h.state().doc().light_deg, [2.0, 2.0], "the typed preset is open");
 }
 
 #[test]
 fn the_looks_panel_renders_thumbnails_on_a_worker_and_applies_a_look_as_one_undo_step() {
     let mut h = harness();
     // The panel repaints while its worker runs: step, do not wait for it to settle.
-    h.state_mut().tab = Tab::Looks;
+    h.state_mut().show_tab(Tab::Looks);
     h.run_steps(2);
     step_until(&mut h, 300.0, |app| app.looks.ready());
     h.run_steps(2);
     let shipped = flare_core::preset::shipped();
     assert!(h.state().looks.thumbnails.iter().all(|t| matches!(t, Some(Ok(_)))), "every look has its thumbnail");
-    let before = h.state().doc.clone();
+    let before = h.state().doc().clone();
     let k = shipped.iter().position(|p| p.name == "vintage-uncoated").unwrap();
     h.get_by_label("vintage-uncoated").click();
     h.run_steps(2);
-    assert_eq!(h.state().doc.lens.id, "pbrt_dgauss_50mm");
-    assert_eq!(h.state().doc.aperture, shipped[k].document().unwrap().aperture);
+    assert_eq!(h.state().doc().lens.id, "pbrt_dgauss_50mm");
+    assert_eq!(h.state().doc().aperture, shipped[k].document().unwrap().aperture);
     h.state_mut().undo();
     h.run();
-    assert_eq!(h.state().doc.lens, before.lens, "one undo step takes the look back");
+    assert_eq!(h.state().doc().lens, before.lens, "one undo step takes the look back");
 }
 
 #[test]
 fn the_report_tab_ranks_ghosts_on_a_worker_sorts_selects_and_exports() {
     let mut h = harness_on(Some(heliar()));
-    h.state_mut().tab = Tab::Report;
+    h.state_mut().show_tab(Tab::Report);
     h.run_steps(2);
     let ready = |app: &FlareLabApp| {
         matches!(&app.report.shown, Some((_, Ok(r))) if r.ghosts.len() == 28)
             && app.derived.flare.as_ref().is_some_and(|f| {
-                let light = app.derived.light_deg(&app.doc);
+                let light = app.derived.light_deg(&app.doc());
                 let u = flare_core::optics::sensor::light_slopes_for_frame_position(light[0], light[1]);
                 !app.report.stale(flarelab::app::ghost_report::ReportKey::new(f, u))
             })
@@ -847,7 +849,7 @@ fn the_report_tab_ranks_ghosts_on_a_worker_sorts_selects_and_exports() {
     let worst = format!("{}-{}", report.ghosts[0].i, report.ghosts[0].j);
     h.get_by_label(worst.as_str()).click();
     h.run_steps(2);
-    let selected = h.state().selected.expect("a ghost is selected");
+    let selected = h.state().session().selected().expect("a ghost is selected");
     let g = &h.state().derived.flare.as_ref().unwrap().system.ghosts[selected];
     assert_eq!((g.i, g.j), (report.ghosts[0].i, report.ghosts[0].j));
     // The peak header sorts by peak, highest first; a second click reverses it.
@@ -858,7 +860,7 @@ fn the_report_tab_ranks_ghosts_on_a_worker_sorts_selects_and_exports() {
     h.run_steps(2);
     assert_eq!(h.state().report.sort, (flarelab::app::ghost_report::ReportColumn::Peak, false));
     // Moving the light recomputes the report for the new light.
-    h.state_mut().doc.light_deg = [-4.0, 2.0];
+    h.state_mut().edit().light_deg = [-4.0, 2.0];
     h.run_steps(2);
     step_until(&mut h, 120.0, ready);
     let moved = match &h.state().report.shown {
@@ -877,7 +879,7 @@ fn the_report_tab_ranks_ghosts_on_a_worker_sorts_selects_and_exports() {
     let value: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert_eq!(value["ghosts"].as_array().unwrap().len(), 28);
     assert_eq!(value["sensitivity"].as_array().unwrap().len(), 8);
-    assert!(h.state().message.as_deref().unwrap_or("").contains("wrote"));
+    assert!(h.state().message().unwrap_or("").contains("wrote"));
 }
 
 #[test]
@@ -894,16 +896,16 @@ fn a_transcription_that_needs_clipping_opens_with_its_warning_in_the_lens_panel(
     show(&mut h, Tab::Lens);
     h.run_steps(2);
     let state = h.state();
-    assert!((state.doc.lens.surfaces[3].semi_aperture_mm - 18.608).abs() < 1e-3, "clipped where they meet");
-    assert!(state.message.as_deref().unwrap_or("").contains("meet at a height of 18.61 mm"), "{:?}", state.message);
+    assert!((state.doc().lens.surfaces[3].semi_aperture_mm - 18.608).abs() < 1e-3, "clipped where they meet");
+    assert!(state.message().unwrap_or("").contains("meet at a height of 18.61 mm"), "{:?}", state.message());
     assert!(h.query_by_label_contains("(i) surfaces 3 and 4 meet at a height of 18.61 mm").is_some(), "in the panel");
     // The conic column edits the surface's conic constant; the viewport's flare follows a valid edit.
     h.get_by_label("conic 0").set_value_accesskit(-0.5);
     h.run_steps(2);
-    assert_eq!(h.state().doc.lens.surfaces[0].conic, -0.5);
+    assert_eq!(h.state().doc().lens.surfaces[0].conic, -0.5);
     assert_eq!(h.state().flare().unwrap().system.lens.surfaces[0].conic, -0.5);
     // Another lens: the warning is not shown for it.
-    h.state_mut().doc.lens = flare_core::optics::library::builtin_lens("tessar").unwrap();
+    h.state_mut().edit().lens = flare_core::optics::library::builtin_lens("tessar").unwrap();
     h.run_steps(2);
     assert!(h.query_by_label_contains("(i) surfaces 3 and 4").is_none());
 }
@@ -935,17 +937,17 @@ fn the_depth_of_field_defocuses_the_plate_on_a_thread_as_the_command_line_does()
     let mut h = harness_on(Some(doc));
     h.run();
     // Off: the plate as read.
-    assert!(!h.state().doc.dof.enabled);
+    assert!(!h.state().doc().dof.enabled);
     h.get_by_label("depth of field").click();
     h.step();
     h.step();
-    assert!(h.state().doc.dof.enabled);
+    assert!(h.state().doc().dof.enabled);
     step_until(&mut h, 60.0, |app| !app.dof_work.busy() && app.dof_work.status.contains("live on the CPU twin"));
     let app = h.state();
     let (shown, sharp) = (app.derived.plate.clone().unwrap(), app.derived.sharp_plate.clone().unwrap());
     assert_ne!(shown.pixels, sharp.pixels, "the plate is defocused");
     let flare = app.flare().unwrap();
-    let cli = flare_core::shot::plate::defocus(&app.doc, flare, app.playhead, &sharp).unwrap();
+    let cli = flare_core::shot::plate::defocus(&app.doc(), flare, app.playhead, &sharp).unwrap();
     assert_eq!(cli.pixels, shown.pixels, "the app's plate is the command line's");
     // Focus by click: the toggle, then a click in the view focuses on the depth there.
     h.get_by_label("focus by click").click();
@@ -954,19 +956,19 @@ fn the_depth_of_field_defocuses_the_plate_on_a_thread_as_the_command_line_does()
     assert!(h.state().focus_pick);
     let rect = egui::Rect::from_min_size(egui::pos2(0.0, 0.0), egui::vec2(320.0, 180.0));
     h.state_mut().focus_from_pointer(egui::pos2(100.0, 90.0), rect);
-    assert_eq!(h.state().doc.dof.focus_px, Some([100, 90]));
+    assert_eq!(h.state().doc().dof.focus_px, Some([100, 90]));
     assert!(!h.state().focus_pick);
     step_until(&mut h, 60.0, |app| !app.dof_work.busy() && app.dof_work.status.contains("focus 5.00 m"));
     // A depth map of another size: said once, the sharp plate shown, nothing lost.
     let (_, small) = flare_core::dof::scene::street(160, 90);
     let wrong = dir.path().join("small_z.exr");
     flare_core::dof::depth::write_exr(&wrong, &small).unwrap();
-    h.state_mut().doc.dof.depth = Some(wrong.display().to_string());
+    h.state_mut().edit().dof.depth = Some(wrong.display().to_string());
     step_until(&mut h, 60.0, |app| !app.dof_work.busy() && app.dof_work.status.contains("same size"));
     let app = h.state();
-    assert!(app.message.as_deref().is_some_and(|m| m.contains("160x90") && m.contains("320x180")), "{:?}", app.message);
+    assert!(app.message().is_some_and(|m| m.contains("160x90") && m.contains("320x180")), "{:?}", app.message());
     assert_eq!(app.derived.plate.as_ref().unwrap().pixels, app.derived.sharp_plate.as_ref().unwrap().pixels);
-    assert!(app.doc.dof.enabled && app.doc.background.is_some());
+    assert!(app.doc().dof.enabled && app.doc().background.is_some());
 }
 
 /// The app's depth of field on its own wgpu device (lavapipe here, made to use it although the CPU twin is
@@ -978,14 +980,14 @@ fn the_depth_of_field_runs_on_the_apps_gpu_as_its_cpu_twin_does() {
     let Some(mut h) = gpu_harness(Some(doc)) else { return };
     // The first frame may have started a job on the CPU twin already: a new focus starts one on the GPU.
     h.state_mut().dof_work.gpu_on_software = true;
-    h.state_mut().doc.dof.focus_m = 1.0;
+    h.state_mut().edit().dof.focus_m = 1.0;
     step_until(&mut h, 120.0, |app| !app.dof_work.busy() && app.dof_work.status.contains("focus 1.00 m"));
     let app = h.state();
     let status = app.dof_work.status.clone();
     assert!(status.contains("live on") && !status.contains("CPU twin"), "{status}");
     let shown = app.derived.plate.clone().unwrap();
     let cpu = flare_core::shot::plate::defocus(
-        &app.doc,
+        &app.doc(),
         app.flare().unwrap(),
         app.playhead,
         app.derived.sharp_plate.as_ref().unwrap(),
@@ -1063,9 +1065,9 @@ fn the_ray_grid_view_traces_the_frame_shown_and_shows_it_in_the_viewport() {
 fn undo_and_redo_return_the_document_exactly_through_a_refused_edit_and_auto_exposure() {
     let mut h = harness_on(Some(dgauss()));
     show(&mut h, Tab::Lens);
-    let json = |h: &Harness<'static, FlareLabApp>| h.state().doc.to_json();
-    let shown_ev = |h: &Harness<'static, FlareLabApp>| h.state().derived.flare_ev(&h.state().doc);
-    assert!(h.state().doc.exposure_auto);
+    let json = |h: &Harness<'static, FlareLabApp>| h.state().doc().to_json();
+    let shown_ev = |h: &Harness<'static, FlareLabApp>| h.state().derived.flare_ev(&h.state().doc());
+    assert!(h.state().doc().exposure_auto);
     let (j0, ev0) = (json(&h), shown_ev(&h));
     h.get_by_label("radius 6").set_value_accesskit(-1.0);
     h.run();
@@ -1089,14 +1091,14 @@ fn undo_and_redo_return_the_document_exactly_through_a_refused_edit_and_auto_exp
         undo(&mut h);
         assert!(json(&h) == *expected, "undo {}: the document is not what it was", k + 1);
         // The status bar names what was undone, then that there is nothing more.
-        let said = h.state().message.clone().unwrap_or_default();
+        let said = h.state().message().map(str::to_owned).unwrap_or_default();
         let wanted = if k < 2 { "undid: lens surface 6" } else { "nothing to undo" };
         assert_eq!(said, wanted, "undo {}", k + 1);
     }
     assert_eq!(shown_ev(&h), ev0, "back on the first lens, its automatic exposure");
     redo(&mut h);
     assert!(json(&h) == j1, "redo 1");
-    assert_eq!(h.state().message.as_deref(), Some("redid: lens surface 6"));
+    assert_eq!(h.state().message(), Some("redid: lens surface 6"));
     redo(&mut h);
     assert!(json(&h) == j2, "redo 2");
     redo(&mut h);
@@ -1105,7 +1107,7 @@ fn undo_and_redo_return_the_document_exactly_through_a_refused_edit_and_auto_exp
     // Locking the exposure keeps the value shown and is one step of its own.
     h.get_by_label("auto").click();
     h.run();
-    assert!(!h.state().doc.exposure_auto && h.state().doc.flare_ev == ev2);
+    assert!(!h.state().doc().exposure_auto && h.state().doc().flare_ev == ev2);
     undo(&mut h);
     assert!(json(&h) == j2, "the lock undone");
 }
@@ -1117,21 +1119,21 @@ fn undo_and_redo_return_the_document_exactly_through_a_refused_edit_and_auto_exp
 fn plus_then_x_on_the_zooms_first_row_gives_back_the_lens() {
     let mut h = harness();
     show(&mut h, Tab::Lens);
-    let before = h.state().doc.lens.clone();
+    let before = h.state().doc().lens.clone();
     let efl = |app: &FlareLabApp| app.derived.first_order.clone().expect("a valid lens").efl_mm;
     let efl0 = efl(h.state());
     h.get_all_by_label("+").next().unwrap().click();
     h.run();
     assert!(h.state().derived.lens_problem.is_none(), "{:?}", h.state().derived.lens_problem);
-    assert_eq!(h.state().doc.lens.surfaces.len(), before.surfaces.len() + 1);
+    assert_eq!(h.state().doc().lens.surfaces.len(), before.surfaces.len() + 1);
     assert!((efl(h.state()) - efl0).abs() < 1e-9);
     let xs = h.get_all_by_label("x").count();
     assert_eq!(xs, before.surfaces.len() + 1, "one x a row");
     // By accesskit: the pointer still hovers "+", whose tooltip covers its neighbour.
     h.get_all_by_label("x").nth(1).unwrap().click_accesskit();
     h.run();
-    let after = &h.state().doc.lens;
-    assert_eq!(after.surfaces.len(), before.surfaces.len(), "{:?}", h.state().message);
+    let after = &h.state().doc().lens;
+    assert_eq!(after.surfaces.len(), before.surfaces.len(), "{:?}", h.state().message());
     assert!((efl(h.state()) - efl0).abs() < 1e-9, "{} against {efl0}", efl(h.state()));
     for (a, b) in after.vertex_z_mm().iter().zip(before.vertex_z_mm()) {
         assert!((a - b).abs() < 1e-9);
@@ -1154,7 +1156,7 @@ fn a_focus_finishes_while_a_bake_runs_in_the_background() {
     h.get_by_label("Bake").click();
     h.run_steps(2);
     assert!(matches!(h.state().bake_status(), BakeStatus::Running { .. }), "{:?}", h.state().bake_status());
-    h.state_mut().doc.dof.focus_m = 2.0;
+    h.state_mut().edit().dof.focus_m = 2.0;
     let seconds = step_until(&mut h, 300.0, |app| !app.dof_work.busy() && app.dof_work.status.contains("focus 2.00 m"));
     let status = h.state().bake_status();
     println!("a focus while the zoom bakes: {seconds:.1} s ({status:?})");
@@ -1237,9 +1239,9 @@ fn an_exposure_tweak_does_not_restart_the_bake_and_quick_lens_edits_start_one() 
     }
     assert_eq!(h.state().autobake.bakes_started, 1, "the exposure is not the optics");
     assert!(matches!(h.state().bake_status(), BakeStatus::Running { .. }), "{:?}", h.state().bake_status());
-    h.state_mut().tab = Tab::Lens;
+    h.state_mut().show_tab(Tab::Lens);
     h.run_steps(2);
-    let r = h.state().doc.lens.surfaces[0].radius_mm;
+    let r = h.state().doc().lens.surfaces[0].radius_mm;
     for scale in [1.01, 1.02, 1.03] {
         h.get_by_label("radius 0").set_value_accesskit(r * scale);
         h.run_steps(2);
@@ -1249,7 +1251,7 @@ fn an_exposure_tweak_does_not_restart_the_bake_and_quick_lens_edits_start_one() 
     std::thread::sleep(std::time::Duration::from_millis(1000));
     h.run_steps(2);
     assert_eq!(h.state().autobake.bakes_started, 2, "one bake, for the last value");
-    h.state_mut().tab = Tab::Blend;
+    h.state_mut().show_tab(Tab::Blend);
     h.run_steps(2);
     h.get_by_label("Cancel").click();
     step_until(&mut h, 300.0, |app| !matches!(app.bake_status(), BakeStatus::Running { .. }));
@@ -1285,22 +1287,22 @@ fn the_lens_panels_buttons_are_inside_the_default_window() {
 fn a_lens_cell_applies_a_typed_value_on_enter_and_escape_reverts() {
     let mut h = harness_on(Some(dgauss()));
     show(&mut h, Tab::Lens);
-    let before = h.state().doc.lens.surfaces[6].radius_mm;
-    let steps = h.state().history.can_undo();
+    let before = h.state().doc().lens.surfaces[6].radius_mm;
+    let steps = h.state().session().can_undo();
     h.get_by_label("radius 6").click();
     h.run();
     h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::A);
     h.event(egui::Event::Text("-1".into()));
     h.run();
-    assert_eq!(h.state().doc.lens.surfaces[6].radius_mm, before, "nothing applies while typing");
+    assert_eq!(h.state().doc().lens.surfaces[6].radius_mm, before, "nothing applies while typing");
     assert!(h.state().derived.lens_problem.is_none(), "no refusal for a value not yet entered");
     h.event(egui::Event::Text("2".into()));
     h.run();
     h.key_press(egui::Key::Enter);
     h.run();
-    assert_eq!(h.state().doc.lens.surfaces[6].radius_mm, -12.0, "Enter applies the whole value");
+    assert_eq!(h.state().doc().lens.surfaces[6].radius_mm, -12.0, "Enter applies the whole value");
     assert!(h.state().derived.lens_problem.is_none());
-    assert!(h.state().history.can_undo() && !steps);
+    assert!(h.state().session().can_undo() && !steps);
     // Escape gives back the value the edit started from.
     h.get_by_label("radius 6").click();
     h.run();
@@ -1309,7 +1311,7 @@ fn a_lens_cell_applies_a_typed_value_on_enter_and_escape_reverts() {
     h.run();
     h.key_press(egui::Key::Escape);
     h.run();
-    assert_eq!(h.state().doc.lens.surfaces[6].radius_mm, -12.0, "Escape reverts");
+    assert_eq!(h.state().doc().lens.surfaces[6].radius_mm, -12.0, "Escape reverts");
 }
 
 /// A refused value does not move the lens table (its reason takes the line the first-order data had): the

@@ -15,7 +15,7 @@ impl FlareLabApp {
     /// One frame of the automatic bake (see the module documentation).
     pub(super) fn auto_bake_step(&mut self) {
         if !self.autobake.enabled
-            || !matches!(self.doc.blend.lut, LutSource::None | LutSource::Simulated { path: None })
+            || !matches!(self.session.doc().blend.lut, LutSource::None | LutSource::Simulated { path: None })
         {
             return;
         }
@@ -47,7 +47,7 @@ impl FlareLabApp {
                         self.show_baked(key, baked, "from the cache");
                         return;
                     }
-                    Lookup::Rejected(reason) => self.message = Some(format!("{reason}: baking it again")),
+                    Lookup::Rejected(reason) => self.session.say(format!("{reason}: baking it again")),
                     Lookup::Miss => {}
                 }
             }
@@ -95,7 +95,7 @@ impl FlareLabApp {
         match outcome {
             Ok(done) => {
                 if let Err(e) = done.cached {
-                    self.message = Some(e);
+                    self.session.say(e);
                 }
                 let ghosts = done.lut.ghosts.len();
                 let source = format!("baked {}", done.device);
@@ -123,14 +123,10 @@ impl FlareLabApp {
         self.set_lut(Some((*lut).clone()));
         self.classes = classes;
         self.autobake.shown = Some(key);
-        if self.doc.blend.lut == LutSource::None {
-            self.doc.blend.lut = LutSource::Simulated { path: None };
-            self.history.settle(&self.doc);
-        }
+        self.session.adopt_baked_lut();
         self.bake_status =
             BakeStatus::Done(format!("LUT ghosts on: {ghosts} non-linear ghosts, {entries} entries ({source})"));
         // The look changes under the artist: said in the status bar, replacing what it said.
-        self.message =
-            Some(format!("LUT ghosts ({source}) now replace the paraxial flare's {ghosts} non-linear ghosts"));
+        self.session.say(format!("LUT ghosts ({source}) now replace the paraxial flare's {ghosts} non-linear ghosts"));
     }
 }

@@ -204,8 +204,10 @@ impl Derived {
         }
     }
 
-    /// Re-derives what changed in `doc` (an unreadable plate is removed from it), uploading to `gpu`.
-    pub fn sync(&mut self, doc: &mut Document, gpu: Option<&RenderState>) -> Vec<SyncEvent> {
+    /// Re-derives what changed in `doc`, uploading to `gpu`. It only reads the document: an unreadable plate
+    /// shows as none (the reason in a [`SyncEvent::Message`], said once per file) and stays in the document
+    /// for the user to replace or remove.
+    pub fn sync(&mut self, doc: &Document, gpu: Option<&RenderState>) -> Vec<SyncEvent> {
         let mut events = Vec::new();
         self.sync_optics(doc, gpu, &mut events);
         self.sync_exposure(doc);
@@ -295,7 +297,7 @@ impl Derived {
         }
     }
 
-    fn sync_background(&mut self, doc: &mut Document, gpu: Option<&RenderState>, events: &mut Vec<SyncEvent>) {
+    fn sync_background(&mut self, doc: &Document, gpu: Option<&RenderState>, events: &mut Vec<SyncEvent>) {
         let file = doc.plate_at(self.playhead).map(|p| p.display().to_string());
         if self.background_key == file {
             return;
@@ -317,9 +319,8 @@ impl Derived {
                         None
                     }
                     Err(e) => {
-                        events.push(SyncEvent::Message(e.to_string()));
-                        doc.background = None;
-                        self.background_key = None;
+                        // Said once (the key stays: the file is not read again every frame until it changes).
+                        events.push(SyncEvent::Message(format!("{e}; the plate is not shown")));
                         None
                     }
                 },

@@ -13,27 +13,27 @@ impl FlareLabApp {
     /// The DoF row under the view: on/off, the depth map, the focus (distance or click), method, cat's eye.
     pub(super) fn dof_ui(&mut self, ui: &mut egui::Ui) {
         ui.horizontal(|ui| {
-            ui.checkbox(&mut self.doc.dof.enabled, "depth of field")
+            ui.checkbox(&mut self.session.edit().dof.enabled, "depth of field")
                 .on_hover_text("defocus the plate through this lens and aperture (the flare is added after, sharp)");
             if ui.button("Depth map…").on_hover_text("EXR in metres (channel Z), or a 16-bit PNG").clicked() {
                 self.pick_file(FileUse::DepthMap);
             }
-            match &self.doc.dof.depth {
+            match &self.session.doc().dof.depth {
                 Some(path) => ui.weak(path.clone()),
                 None => ui.weak("no depth map"),
             };
-            if self.doc.dof.enabled {
+            if self.session.doc().dof.enabled {
                 let busy = self.dof_work.busy();
                 if busy {
                     ui.spinner();
                 }
             }
         });
-        if !self.doc.dof.enabled {
+        if !self.session.doc().dof.enabled {
             return;
         }
         ui.horizontal(|ui| {
-            let mut focus = self.doc.dof.focus_m;
+            let mut focus = self.session.doc().dof.focus_m;
             let r = ui.add(
                 egui::Slider::new(&mut focus, 0.2..=200.0)
                     .logarithmic(true)
@@ -42,8 +42,8 @@ impl FlareLabApp {
                     .text("focus"),
             );
             if r.changed() {
-                self.doc.dof.focus_m = focus;
-                self.doc.dof.focus_px = None;
+                self.session.edit().dof.focus_m = focus;
+                self.session.edit().dof.focus_px = None;
             }
             let picking = self.focus_pick;
             if ui
@@ -53,22 +53,25 @@ impl FlareLabApp {
             {
                 self.focus_pick = !picking;
             }
-            if let Some([x, y]) = self.doc.dof.focus_px {
+            if let Some([x, y]) = self.session.doc().dof.focus_px {
                 ui.weak(format!("on pixel ({x}, {y})"));
             }
-            egui::ComboBox::from_label("method").selected_text(self.doc.dof.method.word()).show_ui(ui, |ui| {
-                ui.selectable_value(&mut self.doc.dof.method, DofMethod::Live, "live");
-                ui.selectable_value(&mut self.doc.dof.method, DofMethod::Reference, "reference");
-            });
-            ui.checkbox(&mut self.doc.dof.cat_eye, "cat's eye")
+            egui::ComboBox::from_label("method").selected_text(self.session.doc().dof.method.word()).show_ui(
+                ui,
+                |ui| {
+                    ui.selectable_value(&mut self.session.edit().dof.method, DofMethod::Live, "live");
+                    ui.selectable_value(&mut self.session.edit().dof.method, DofMethod::Reference, "reference");
+                },
+            );
+            ui.checkbox(&mut self.session.edit().dof.cat_eye, "cat's eye")
                 .on_hover_text("cut the blur off-axis by the front lens's clear aperture");
-            ui.checkbox(&mut self.doc.dof.axial_colour, "axial colour").on_hover_text(
+            ui.checkbox(&mut self.session.edit().dof.axial_colour, "axial colour").on_hover_text(
                 "R, G and B each defocused at its own wavelength, as the lens focuses them (3x the work)",
             );
         });
-        if self.doc.dof.depth.as_deref().is_some_and(|d| d.to_ascii_lowercase().ends_with(".png")) {
+        if self.session.doc().dof.depth.as_deref().is_some_and(|d| d.to_ascii_lowercase().ends_with(".png")) {
             ui.horizontal(|ui| {
-                let range = self.doc.dof.depth_range_m.get_or_insert(PngRange { near_m: 0.5, far_m: 100.0 });
+                let range = self.session.edit().dof.depth_range_m.get_or_insert(PngRange { near_m: 0.5, far_m: 100.0 });
                 ui.label("PNG depth: 0 is");
                 ui.add(egui::DragValue::new(&mut range.near_m).range(0.01..=1e4).suffix(" m"));
                 ui.label("65535 is");
@@ -81,25 +84,25 @@ impl FlareLabApp {
     /// Chooses the depth map (a PNG gets a near/far range to edit).
     pub(super) fn set_depth_map(&mut self, path: &std::path::Path) {
         let text = path.display().to_string();
-        if text.to_ascii_lowercase().ends_with(".png") && self.doc.dof.depth_range_m.is_none() {
-            self.doc.dof.depth_range_m = Some(PngRange { near_m: 0.5, far_m: 100.0 });
-            self.message = Some("a PNG depth map: 0 is 0.5 m and 65535 is 100 m until you edit the range".into());
+        if text.to_ascii_lowercase().ends_with(".png") && self.session.doc().dof.depth_range_m.is_none() {
+            self.session.edit().dof.depth_range_m = Some(PngRange { near_m: 0.5, far_m: 100.0 });
+            self.session.say("a PNG depth map: 0 is 0.5 m and 65535 is 100 m until you edit the range");
         }
-        self.doc.dof.depth = Some(text);
-        self.doc.dof.enabled = true;
+        self.session.edit().dof.depth = Some(text);
+        self.session.edit().dof.enabled = true;
     }
 
     /// Focus by click: the plate pixel under `pointer` in the view `rect`.
     pub fn focus_from_pointer(&mut self, pointer: egui::Pos2, rect: egui::Rect) {
         self.focus_pick = false;
         let Some(plate) = self.derived.sharp_plate.clone() else {
-            self.message = Some("focus by click needs a plate (File > Background plate)".into());
+            self.session.say("focus by click needs a plate (File > Background plate)");
             return;
         };
         let fx = ((pointer.x - rect.left()) / rect.width()).clamp(0.0, 0.9999);
         let fy = ((pointer.y - rect.top()) / rect.height()).clamp(0.0, 0.9999);
         let (x, y) = ((fx * plate.width as f32) as u32, (fy * plate.height as f32) as u32);
-        self.doc.dof.focus_px = Some([x, y]);
-        self.message = Some(format!("focus on the depth at plate pixel ({x}, {y})"));
+        self.session.edit().dof.focus_px = Some([x, y]);
+        self.session.say(format!("focus on the depth at plate pixel ({x}, {y})"));
     }
 }

@@ -14,7 +14,7 @@ impl FlareLabApp {
     /// Chooses a file for `use_` (see the module documentation); the action happens when one is chosen.
     pub fn pick_file(&mut self, use_: FileUse) {
         if self.files.busy() {
-            self.message = Some("a file chooser is already open".into());
+            self.session.say("a file chooser is already open");
             return;
         }
         if !self.files.native {
@@ -22,10 +22,9 @@ impl FlareLabApp {
                 // Said once: why FlareLab's own browser and not the desktop's dialog.
                 self.files.told = true;
                 if !super::files::native_dialog_available() {
-                    self.message = Some(
+                    self.session.say(
                         "no desktop file dialog here (no D-Bus session for the portal, no zenity on PATH): using \
-                         FlareLab's file browser"
-                            .into(),
+                         FlareLab's file browser",
                     );
                 }
             }
@@ -56,13 +55,12 @@ impl FlareLabApp {
                     // The dialog could not show: from now on the in-app browser (said here, once).
                     self.files.native = false;
                     self.files.told = true;
-                    self.message = Some(
-                        "the desktop's file dialog did not open (no portal or zenity?): using FlareLab's file browser"
-                            .into(),
+                    self.session.say(
+                        "the desktop's file dialog did not open (no portal or zenity?): using FlareLab's file browser",
                     );
                     self.files.open_browser(use_);
                 }
-                None => self.message = Some(format!("{}: no file chosen", use_.title())),
+                None => self.session.say(format!("{}: no file chosen", use_.title())),
             }
         } else if self.files.pending.is_some() {
             ctx.request_repaint_after(Duration::from_millis(100));
@@ -76,12 +74,12 @@ impl FlareLabApp {
                 self.files.browser = None;
                 match path {
                     Some(path) => self.use_file(use_, &path),
-                    None => self.message = Some(format!("{}: no file chosen", use_.title())),
+                    None => self.session.say(format!("{}: no file chosen", use_.title())),
                 }
             }
             egui_file::State::Cancelled | egui_file::State::Closed => {
                 self.files.browser = None;
-                self.message = Some(format!("{}: no file chosen", use_.title()));
+                self.session.say(format!("{}: no file chosen", use_.title()));
             }
         }
     }
@@ -118,7 +116,7 @@ impl FlareLabApp {
     /// File > Open recent: a recent file opened by what it is.
     pub fn open_recent(&mut self, path: &Path) {
         if !path.exists() {
-            self.message = Some(format!("{} is gone", path.display()));
+            self.session.say(format!("{} is gone", path.display()));
             self.files.recent.retain(|p| p != path);
             return;
         }

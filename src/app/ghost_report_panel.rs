@@ -17,10 +17,10 @@ impl FlareLabApp {
             ui.label("No valid lens: the report needs one (see the Lens tab).");
             return;
         };
-        let light = self.derived.light_deg(&self.doc);
+        let light = self.derived.light_deg(self.session.doc());
         let u = light_slopes_for_frame_position(light[0], light[1]);
         let key = ReportKey::new(&flare, u);
-        if self.report.step(key, &self.doc.lens, &flare, u) {
+        if self.report.step(key, &self.session.doc().lens, &flare, u) {
             ui.ctx().request_repaint_after(std::time::Duration::from_millis(100));
         }
         let stale = self.report.stale(key);
@@ -120,9 +120,9 @@ impl FlareLabApp {
                     for (rank, r) in rows {
                         ui.label(format!("{}", rank + 1));
                         let g = flare.system.ghosts.iter().position(|g| g.i == r.i && g.j == r.j);
-                        let selected = g.is_some() && self.selected == g;
+                        let selected = g.is_some() && self.session.selected() == g;
                         if ui.selectable_label(selected, format!("{}-{}", r.i, r.j)).clicked() {
-                            self.selected = if selected { None } else { g };
+                            self.session.select(if selected { None } else { g });
                         }
                         ui.label(opt(r.focus_mm, 2));
                         ui.label(format!("{:.3}", r.image_diameter_mm));
@@ -146,7 +146,7 @@ impl FlareLabApp {
     /// by the file name, through a temporary file and a rename.
     pub(super) fn export_report_to(&mut self, path: &std::path::Path) {
         let Some((_, Ok(report))) = &self.report.shown else {
-            self.message = Some("no ghost report to export yet (open the Report tab)".into());
+            self.session.say("no ghost report to export yet (open the Report tab)");
             return;
         };
         let json = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("json"));
@@ -155,7 +155,7 @@ impl FlareLabApp {
         } else {
             to_csv(report)
         };
-        self.message = Some(match write_atomic(path, text.as_bytes()) {
+        self.session.say(match write_atomic(path, text.as_bytes()) {
             Ok(()) => format!("wrote {} ({} ghosts)", path.display(), report.ghosts.len()),
             Err(e) => format!("could not write {}: {e}", path.display()),
         });

@@ -50,10 +50,11 @@ impl FlareLabApp {
         let Some(preset) = shipped().get(k) else { return };
         match preset.document() {
             Ok(look) => {
-                self.doc = self.doc.with_look(&look);
-                self.message = Some(format!("look: {} ({})", preset.name, preset.title));
+                let look_doc = self.session.doc().with_look(&look);
+                *self.session.edit() = look_doc;
+                self.session.say(format!("look: {} ({})", preset.name, preset.title));
             }
-            Err(e) => self.message = Some(format!("look {}: {e}", preset.name)),
+            Err(e) => self.session.say(format!("look {}: {e}", preset.name)),
         }
     }
 }

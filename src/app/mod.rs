@@ -19,7 +19,7 @@
 //! from the document, its sync and its GPU uploads; the UI only reads it), [`bake`] (the bake thread, with progress and Cancel) and [`drag_bench`]
 //! (the app timing itself); [`crate::viewport`] is the bridge to the GPU, [`crate::history`] the undo.
 
-use crate::history::History;
+use session::Session;
 
 mod auto_bake_step;
 pub mod autobake;
@@ -37,6 +37,7 @@ pub mod job;
 pub mod looks;
 mod looks_panel;
 pub mod raygrid_view;
+pub mod session;
 pub mod shot;
 pub mod timeline;
 
@@ -171,14 +172,11 @@ impl Tab {
 }
 
 pub struct FlareLabApp {
-    pub doc: Document,
-    pub history: History,
-    pub tab: Tab,
-    pub selected: Option<usize>,
+    /// The document, its history, the selection, the tab and the status line (see [`session`]).
+    session: Session,
     gpu: Option<RenderState>,
     /// What the app derives from the document (see [`derived`]).
     pub derived: Derived,
-    pub message: Option<String>,
     /// What loading the open lens file had to decide (clipped apertures, the system aperture), with the id of
     /// the lens it applies to: shown in the lens panel while that lens is open.
     pub lens_warnings: Option<(String, Vec<String>)>,
@@ -248,13 +246,9 @@ impl FlareLabApp {
         let doc = stored.unwrap_or_default();
         let drag_bench = DragBench::from_env();
         let mut app = Self {
-            history: History::new(&doc),
-            doc,
-            tab: Tab::Ghosts,
-            selected: None,
+            session: Session::new(doc),
             gpu,
             derived: Derived::new(software),
-            message: None,
             lens_warnings: None,
             classes: None,
             bake: None,
@@ -291,12 +285,9 @@ impl FlareLabApp {
             .ok()
             .and_then(|s| s.parse().ok())
             .filter(|n| raygrid_view::GRIDS.contains(n));
-        app.playhead = app.doc.timeline.first_frame;
-        app.plate_path = app.doc.background.clone().unwrap_or_default();
+        app.playhead = app.session.doc().timeline.first_frame;
+        app.plate_path = app.session.doc().background.clone().unwrap_or_default();
         app.sync();
-        // What the first sync settled (a plate that could not be read is dropped) is where the document
-        // starts, not an edit to undo.
-        app.history.reset(&app.doc);
         app
     }
 
@@ -306,6 +297,36 @@ impl FlareLabApp {
         let Some((generation, _)) = &self.derived.view_frame else { return false };
         self.raygrid.traced(*generation).is_some()
             && self.gpu.as_ref().is_some_and(|rs| crate::viewport::ViewportResources::shows_image(rs, *generation))
+    }
+
+    /// The document as the user left it (see [`session`]).
+    pub fn doc(&self) -> &Document {
+        self.session.doc()
+    }
+
+    /// The document to edit, as a panel does: one undo step at the end of the gesture.
+    pub fn edit(&mut self) -> &mut Document {
+        self.session.edit()
+    }
+
+    /// What the status line says.
+    pub fn message(&self) -> Option<&str> {
+        self.session.message()
+    }
+
+    /// Opens `tab` in the side panel, as its button does.
+    pub fn show_tab(&mut self, tab: Tab) {
+        self.session.show_tab(tab);
+    }
+
+    /// Selects a ghost (an index into the live flare's ghosts), as a click on it does.
+    pub fn select(&mut self, ghost: Option<usize>) {
+        self.session.select(ghost);
+    }
+
+    /// The session (document, history, selection, tab, status line), to read.
+    pub fn session(&self) -> &Session {
+        &self.session
     }
 
     /// The prepared flare in use (the last valid one).
@@ -325,15 +346,16 @@ impl FlareLabApp {
 
     /// Re-derives what changed in the document (see the module documentation).
     pub fn sync(&mut self) {
-        self.playhead = self.playhead.clamp(self.doc.timeline.first_frame, self.doc.timeline.last_frame);
+        self.playhead =
+            self.playhead.clamp(self.session.doc().timeline.first_frame, self.session.doc().timeline.last_frame);
         self.derived.playhead = self.playhead;
-        let mut events = self.derived.sync(&mut self.doc, self.gpu.as_ref());
-        self.dof_work.sync(&mut self.derived, &self.doc, self.gpu.as_ref(), &mut events);
+        let mut events = self.derived.sync(self.session.doc(), self.gpu.as_ref());
+        self.dof_work.sync(&mut self.derived, self.session.doc(), self.gpu.as_ref(), &mut events);
         // A defocused plate that just arrived is a new plate for the frame.
-        self.derived.sync_frame(&self.doc);
+        self.derived.sync_frame(self.session.doc());
         for event in events {
             match event {
-                SyncEvent::Message(text) => self.message = Some(text),
+                SyncEvent::Message(text) => self.session.say(text),
                 SyncEvent::LutDropped => {
                     self.classes = None;
                     self.autobake.shown = None;
@@ -344,7 +366,7 @@ impl FlareLabApp {
                     };
                     // Replaces what the status bar said (a landed bake's "LUT ghosts ... replace ..." is no longer
                     // true).
-                    self.message = Some(said.clone());
+                    self.session.say(said.clone());
                     self.bake_status = BakeStatus::Done(said);
                 }
             }
@@ -353,7 +375,7 @@ impl FlareLabApp {
 
     /// Builds the frame again if what it shows changed (after the view was resized).
     fn sync_frame(&mut self) {
-        self.derived.sync_frame(&self.doc);
+        self.derived.sync_frame(self.session.doc());
     }
 
     fn set_lut(&mut self, lut: Option<GhostLut>) {
@@ -372,21 +394,18 @@ impl FlareLabApp {
     /// Undo (`back`) or redo, saying in the status bar what it undid or redid (then what that made the app
     /// say: a dropped LUT), or that there is nothing to; the message before is replaced.
     fn walk_history(&mut self, back: bool) {
-        self.history.commit(&self.doc);
-        let (verb, nothing) = if back { ("undid", "nothing to undo") } else { ("redid", "nothing to redo") };
-        let next = if back { self.history.peek_undo() } else { self.history.peek_redo() };
-        let what = next.map(|doc| crate::history::difference(&self.doc, doc)).unwrap_or_default();
-        let moved = if back { self.history.undo(&mut self.doc) } else { self.history.redo(&mut self.doc) };
-        if !moved {
-            self.message = Some(nothing.into());
-            return;
-        }
-        self.message = None;
+        let verb = if back { "undid" } else { "redid" };
+        let what = match self.session.walk(back) {
+            Ok(what) => what,
+            Err(nothing) => return self.session.say(nothing),
+        };
+        self.session.hush();
         self.sync();
-        self.message = Some(match self.message.take() {
+        let said = match self.session.take_message() {
             Some(then) => format!("{verb}: {what}; {then}"),
             None => format!("{verb}: {what}"),
-        });
+        };
+        self.session.say(said);
     }
 
     /// The whole window: menus, status bar, panels, viewport, ray diagram; then the frame's bookkeeping.
@@ -418,7 +437,9 @@ impl FlareLabApp {
         panels.show(ui, |ui| {
             ui.horizontal(|ui| {
                 for tab in Tab::ALL {
-                    ui.selectable_value(&mut self.tab, tab, tab.name());
+                    if ui.selectable_label(self.session.tab() == tab, tab.name()).clicked() {
+                        self.session.show_tab(tab);
+                    }
                 }
             });
             ui.separator();
@@ -431,7 +452,8 @@ impl FlareLabApp {
             self.display_ui(ui);
             self.dof_ui(ui);
             let ghost = self
-                .selected
+                .session
+                .selected()
                 .and_then(|g| self.derived.flare.as_ref().map(|f| &f.system.ghosts[g]))
                 .map(|g| (g.i, g.j));
             crate::panels::ray_diagram::ray_diagram_ui(
@@ -439,7 +461,7 @@ impl FlareLabApp {
                 &mut self.ray_diagram,
                 self.derived.flare.as_deref(),
                 self.derived.lens_problem.as_ref(),
-                self.derived.light_deg(&self.doc),
+                self.derived.light_deg(self.session.doc()),
                 ghost,
             );
         });
@@ -454,7 +476,7 @@ impl FlareLabApp {
         }
         // One undo step per gesture: commit when no button is held.
         if !ui.ctx().input(|i| i.pointer.any_down()) {
-            self.history.commit(&self.doc);
+            self.session.commit();
         }
         if self.bake.is_some()
             || self.shot_job.is_some()
@@ -468,7 +490,7 @@ impl FlareLabApp {
 
     /// The tab's panel: one match over [`Tab`], the app's own panels first, then the document's.
     fn panel_ui(&mut self, ui: &mut egui::Ui, actions: &mut Vec<Action>) {
-        match self.tab {
+        match self.session.tab() {
             Tab::Shot => return panel_scroll().show(ui, |ui| self.shot_panel_ui(ui)).inner,
             Tab::Looks => return panel_scroll().show(ui, |ui| self.looks_ui(ui)).inner,
             Tab::Report => return panel_scroll().show(ui, |ui| self.report_ui(ui)).inner,
@@ -479,13 +501,13 @@ impl FlareLabApp {
             first_order: self.derived.first_order.as_ref(),
             lens_problem: self.derived.lens_problem.as_ref(),
             lens_warnings: match &self.lens_warnings {
-                Some((id, warnings)) if *id == self.doc.lens.id => warnings,
+                Some((id, warnings)) if *id == self.session.doc().lens.id => warnings,
                 _ => &[],
             },
             ghosts: &self.derived.ghosts,
             classes: self.classes.as_deref(),
             lut: self.derived.lut.as_deref().map(|l| &l.lut),
-            selected: self.selected,
+            selected: self.session.selected(),
             bake: &self.bake_status,
             auto_bake: self.autobake.enabled,
             lut_summary: None,
@@ -500,14 +522,20 @@ impl FlareLabApp {
             )
         });
         let ctx = PanelContext { lut_summary: summary.as_deref(), ..ctx };
-        panel_scroll().show(ui, |ui| match self.tab {
-            Tab::Lens => crate::panels::lens::lens_ui(ui, &mut self.doc, &ctx, actions),
+        panel_scroll().show(ui, |ui| match self.session.tab() {
+            Tab::Lens => crate::panels::lens::lens_ui(ui, &mut self.session.edit(), &ctx, actions),
             Tab::Aperture => {
-                crate::panels::aperture::aperture_ui(ui, &mut self.doc, &ctx, &mut self.aperture_preview, actions);
+                crate::panels::aperture::aperture_ui(
+                    ui,
+                    &mut self.session.edit(),
+                    &ctx,
+                    &mut self.aperture_preview,
+                    actions,
+                );
             }
-            Tab::Coatings => crate::panels::coatings::coatings_ui(ui, &mut self.doc, &mut self.coatings),
-            Tab::Ghosts => crate::panels::ghosts::ghosts_ui(ui, &mut self.doc, &ctx, actions),
-            Tab::Blend => crate::panels::blend::blend_ui(ui, &mut self.doc, &ctx, actions),
+            Tab::Coatings => crate::panels::coatings::coatings_ui(ui, &mut self.session.edit(), &mut self.coatings),
+            Tab::Ghosts => crate::panels::ghosts::ghosts_ui(ui, &mut self.session.edit(), &ctx, actions),
+            Tab::Blend => crate::panels::blend::blend_ui(ui, &mut self.session.edit(), &ctx, actions),
             Tab::Shot | Tab::Looks | Tab::Report => {}
         });
     }
@@ -536,10 +564,13 @@ impl FlareLabApp {
                     self.pick_file(FileUse::Background);
                 }
                 // Always there (greyed without a plate), so the menu's items never move.
-                if ui.add_enabled(self.doc.background.is_some(), egui::Button::new("Remove background")).clicked() {
-                    self.doc.background = None;
+                if ui
+                    .add_enabled(self.session.doc().background.is_some(), egui::Button::new("Remove background"))
+                    .clicked()
+                {
+                    self.session.edit().background = None;
                     self.plate_path.clear();
-                    self.message = Some("background plate removed".into());
+                    self.session.say("background plate removed");
                 }
                 if ui.button("Import light track…").clicked() {
                     self.pick_file(FileUse::Track);
@@ -580,10 +611,10 @@ impl FlareLabApp {
                 }
             });
             ui.menu_button("Edit", |ui| {
-                if ui.add_enabled(self.history.can_undo(), egui::Button::new("Undo  (Ctrl+Z)")).clicked() {
+                if ui.add_enabled(self.session.can_undo(), egui::Button::new("Undo  (Ctrl+Z)")).clicked() {
                     self.undo();
                 }
-                if ui.add_enabled(self.history.can_redo(), egui::Button::new("Redo  (Ctrl+Shift+Z)")).clicked() {
+                if ui.add_enabled(self.session.can_redo(), egui::Button::new("Redo  (Ctrl+Shift+Z)")).clicked() {
                     self.redo();
                 }
             });
@@ -592,16 +623,16 @@ impl FlareLabApp {
 
     fn status_ui(&mut self, ui: &mut egui::Ui) {
         // What the last action did (or why it failed) stays here until the next one says something.
-        if let Some(message) = self.message.clone() {
+        if let Some(message) = self.session.message().map(str::to_owned) {
             ui.horizontal(|ui| {
                 ui.colored_label(egui::Color32::from_rgb(255, 170, 90), message);
                 if ui.small_button("x").on_hover_text("dismiss").clicked() {
-                    self.message = None;
+                    self.session.hush();
                 }
             });
         }
         let dt_ms = ui.ctx().input(|i| i.unstable_dt) * 1e3;
-        let light = self.derived.light_deg(&self.doc);
+        let light = self.derived.light_deg(self.session.doc());
         ui.label(format!(
             "frame {} | light ({:.1}, {:.1}) deg | scene {:.2} ms, frame {:.1} ms at {}x{} | sprites drawn {}, culled {} dim / {} off sensor / {} empty entrance{}",
             self.playhead,
@@ -693,7 +724,7 @@ impl FlareLabApp {
             // the flare's exposure locks it; "auto" hands it back to the optics.
             // The slider shows the exposure the view uses (the automatic one is derived, never written into the
             // document); moving it writes the user's value and locks it.
-            let mut ev = self.derived.flare_ev(&self.doc);
+            let mut ev = self.derived.flare_ev(self.session.doc());
             let moved = ui
                 .add(
                     egui::Slider::new(&mut ev, -4.0..=40.0)
@@ -704,10 +735,10 @@ impl FlareLabApp {
                 )
                 .changed();
             if moved {
-                self.doc.flare_ev = ev;
-                self.doc.exposure_auto = false;
+                self.session.edit().flare_ev = ev;
+                self.session.edit().exposure_auto = false;
             }
-            let mut auto = self.doc.exposure_auto;
+            let mut auto = self.session.doc().exposure_auto;
             let toggled = ui
                 .checkbox(&mut auto, "auto")
                 .on_hover_text(
@@ -717,13 +748,13 @@ impl FlareLabApp {
             if toggled {
                 // Locking keeps the exposure shown: the automatic value becomes the user's.
                 if !auto {
-                    self.doc.flare_ev = self.derived.flare_ev(&self.doc);
+                    self.session.edit().flare_ev = self.derived.flare_ev(self.session.doc());
                 }
-                self.doc.exposure_auto = auto;
+                self.session.edit().exposure_auto = auto;
             }
-            if self.doc.background.is_some() {
+            if self.session.doc().background.is_some() {
                 ui.add(
-                    egui::Slider::new(&mut self.doc.plate_ev, -8.0..=8.0)
+                    egui::Slider::new(&mut self.session.edit().plate_ev, -8.0..=8.0)
                         .clamping(egui::SliderClamping::Never)
                         .fixed_decimals(2)
                         .suffix(" EV")
@@ -732,9 +763,9 @@ impl FlareLabApp {
             }
         });
         ui.horizontal(|ui| {
-            egui::ComboBox::from_label("tonemap").selected_text(self.doc.tonemap.name()).show_ui(ui, |ui| {
+            egui::ComboBox::from_label("tonemap").selected_text(self.session.doc().tonemap.name()).show_ui(ui, |ui| {
                 for t in flare_core::color::Tonemap::ALL {
-                    ui.selectable_value(&mut self.doc.tonemap, t, t.name());
+                    ui.selectable_value(&mut self.session.edit().tonemap, t, t.name());
                 }
             });
             let ghosts_label = |grid: Option<usize>| match grid {
@@ -754,10 +785,10 @@ impl FlareLabApp {
                 .on_hover_text(
                     "the view's ghosts ray-traced exactly on an N x N grid per ghost (Hullin 2011), on a hardware GPU when there is one: drafts while dragging, traced when input stops; exports draw the look",
                 );
-            ui.checkbox(&mut self.doc.starburst, "starburst");
-            if self.doc.starburst {
+            ui.checkbox(&mut self.session.edit().starburst, "starburst");
+            if self.session.doc().starburst {
                 ui.add(
-                    egui::Slider::new(&mut self.doc.starburst_ev, -12.0..=4.0)
+                    egui::Slider::new(&mut self.session.edit().starburst_ev, -12.0..=4.0)
                         .clamping(egui::SliderClamping::Never)
                         .fixed_decimals(1)
                         .suffix(" EV")
@@ -825,7 +856,7 @@ impl FlareLabApp {
         }
         if response.hovered() || response.has_focus() {
             let step = 0.25;
-            let light = self.derived.light_deg(&self.doc);
+            let light = self.derived.light_deg(self.session.doc());
             let mut moved = None;
             ui.input(|i| {
                 for (key, dx, dy) in [
@@ -849,7 +880,7 @@ impl FlareLabApp {
     /// Where the light's image (the starburst's centre) is drawn in the viewport, in points.
     pub fn light_on_screen(&self) -> Option<egui::Pos2> {
         let flare = self.derived.flare.as_ref()?;
-        let light = self.derived.light_deg(&self.doc);
+        let light = self.derived.light_deg(self.session.doc());
         let u = flare_core::render::light_slopes_for_frame_position(light[0], light[1]);
         self.to_screen(flare.system.light_image_mm(u), self.view_rect?)
     }
@@ -869,12 +900,12 @@ impl FlareLabApp {
     fn overlay_ui(&self, ui: &egui::Ui, rect: egui::Rect) {
         let painter = ui.painter().with_clip_rect(rect);
         let Some(flare) = &self.derived.flare else { return };
-        let light = self.derived.light_deg(&self.doc);
+        let light = self.derived.light_deg(self.session.doc());
         let u = flare_core::render::light_slopes_for_frame_position(light[0], light[1]);
         if let Some(p) = self.to_screen(flare.system.light_image_mm(u), rect) {
             painter.circle_stroke(p, 7.0, egui::Stroke::new(1.5, egui::Color32::from_rgb(255, 230, 120)));
         }
-        let Some(g) = self.selected else { return };
+        let Some(g) = self.session.selected() else { return };
         for s in self.derived.sprites.iter().filter(|s| s.ghost == g && s.wavelength == 1) {
             if let (Some(c), Some(edge)) = (
                 self.to_screen(s.centre_mm, rect),
@@ -906,7 +937,7 @@ impl FlareLabApp {
             };
             let r = (edge.x - c.x).abs().max(4.0);
             let m = &self.derived.ghosts[s.ghost];
-            let lum = m.intensity() * self.doc.ghost_gain(m.i, m.j);
+            let lum = m.intensity() * self.session.doc().ghost_gain(m.i, m.j);
             if c.distance(p) <= r && lum > 0.0 && best.is_none_or(|(_, b)| lum > b) {
                 best = Some((s.ghost, lum));
             }
@@ -950,11 +981,11 @@ impl FlareLabApp {
 
     fn act(&mut self, action: Action) {
         match action {
-            Action::SelectGhost(g) => self.selected = g,
-            Action::Message(text) => self.message = Some(text),
+            Action::SelectGhost(g) => self.session.select(g),
+            Action::Message(text) => self.session.say(text),
             Action::EditCoating(k) => {
                 self.coatings.surface = k;
-                self.tab = Tab::Coatings;
+                self.session.show_tab(Tab::Coatings);
             }
             Action::OpenLensFile => self.pick_file(FileUse::OpenLens),
             Action::Bake => self.start_bake(),
@@ -967,7 +998,7 @@ impl FlareLabApp {
             Action::OpenLut => self.pick_file(FileUse::OpenLut),
             Action::ExportLut => {
                 if self.derived.lut.is_none() {
-                    self.message = Some("no LUT to export: bake one (Blend panel) or open one".into());
+                    self.session.say("no LUT to export: bake one (Blend panel) or open one");
                     return;
                 }
                 self.pick_file(FileUse::ExportLut);
@@ -979,7 +1010,7 @@ impl FlareLabApp {
     /// Adds a glass catalogue (.agf): lens files opened afterwards may name its glasses, and the open lens
     /// takes their dispersion when it names them. A broken file adds nothing and says where.
     pub fn add_glass_catalogue(&mut self, path: &std::path::Path) {
-        self.message = Some(match flare_core::optics::formats::load_glass_catalogue(path) {
+        self.session.say(match flare_core::optics::formats::load_glass_catalogue(path) {
             Ok(n) => {
                 // The lens may name glasses it now finds: rebuild what depends on its dispersion.
                 self.derived.invalidate_optics();
@@ -994,7 +1025,7 @@ impl FlareLabApp {
         match read_lens_file(path) {
             Ok(LoadedLens { lens, warnings }) => {
                 // Said either way, replacing the message before: the file's first warning, or that it opened.
-                self.message = Some(match warnings.first() {
+                self.session.say(match warnings.first() {
                     Some(w) => {
                         let more = if warnings.len() > 1 {
                             format!(" (and {} more in the Lens panel)", warnings.len() - 1)
@@ -1006,13 +1037,13 @@ impl FlareLabApp {
                     None => format!("opened {} ({} surfaces)", path.display(), lens.surfaces.len()),
                 });
                 self.lens_warnings = Some((lens.id.clone(), warnings));
-                self.doc.lens = lens;
-                self.doc.aperture.f_number = None;
-                self.doc.ghosts.clear();
-                self.doc.solo = None;
-                self.selected = None;
+                self.session.edit().lens = lens;
+                self.session.edit().aperture.f_number = None;
+                self.session.edit().ghosts.clear();
+                self.session.edit().solo = None;
+                self.session.select(None);
             }
-            Err(e) => self.message = Some(format!("{}: {e}", path.display())),
+            Err(e) => self.session.say(format!("{}: {e}", path.display())),
         }
     }
 
@@ -1022,21 +1053,21 @@ impl FlareLabApp {
         match flare_core::lut::format::read_lut(path) {
             Ok(lut) => {
                 if lut.kind == LutKind::RayTraced
-                    && let Err(e) = lut.check_for(&self.doc.lens, &flare.config)
+                    && let Err(e) = lut.check_for(&self.session.doc().lens, &flare.config)
                 {
-                    self.message = Some(format!("{}: {e}", path.display()));
+                    self.session.say(format!("{}: {e}", path.display()));
                     return;
                 }
                 let p = path.display().to_string();
-                self.doc.blend.lut = if lut.kind == LutKind::Photo {
+                self.session.edit().blend.lut = if lut.kind == LutKind::Photo {
                     LutSource::Photo { path: p }
                 } else {
                     LutSource::Simulated { path: Some(p) }
                 };
                 self.set_lut(Some(lut));
-                self.message = None;
+                self.session.hush();
             }
-            Err(e) => self.message = Some(format!("{}: {e}", path.display())),
+            Err(e) => self.session.say(format!("{}: {e}", path.display())),
         }
     }
 
@@ -1049,12 +1080,11 @@ impl FlareLabApp {
             "zmx" | "dat" => self.open_lens(path),
             "json" => match Document::open(path) {
                 Ok(doc) => {
-                    self.doc = doc;
-                    self.history.reset(&self.doc);
+                    self.session.open(doc);
                 }
                 Err(_) => self.open_lens(path),
             },
-            _ => self.message = Some(format!("{}: drop a lens, a preset, a LUT or an image", path.display())),
+            _ => self.session.say(format!("{}: drop a lens, a preset, a LUT or an image", path.display())),
         }
     }
 
@@ -1062,18 +1092,17 @@ impl FlareLabApp {
     fn open_preset_file(&mut self, path: &std::path::Path) {
         match Document::open(path) {
             Ok(doc) => {
-                self.doc = doc;
-                self.history.reset(&self.doc);
-                self.message = Some(format!("opened {}", path.display()));
+                self.session.open(doc);
+                self.session.say(format!("opened {}", path.display()));
             }
             // The document in the window stays as it was.
-            Err(e) => self.message = Some(format!("{}: {e}", path.display())),
+            Err(e) => self.session.say(format!("{}: {e}", path.display())),
         }
     }
 
     fn save_preset_to(&mut self, path: &std::path::Path) {
         // With the exposure the view shows, also when it is automatic (the file says so; a reader resolves it).
-        self.message = Some(match self.derived.resolved(&self.doc).save(path) {
+        self.session.say(match self.derived.resolved(self.session.doc()).save(path) {
             Ok(()) => format!("saved {}", path.display()),
             Err(e) => format!("could not save {}: {e}", path.display()),
         });
@@ -1082,10 +1111,10 @@ impl FlareLabApp {
     /// Writes the LUT in use to `path`.
     fn export_lut_to(&mut self, path: &std::path::Path) {
         let Some(live) = self.derived.lut.clone() else {
-            self.message = Some("no LUT to export: bake one (Blend panel) or open one".into());
+            self.session.say("no LUT to export: bake one (Blend panel) or open one");
             return;
         };
-        self.message = Some(match flare_core::lut::format::write_lut(path, &live.lut) {
+        self.session.say(match flare_core::lut::format::write_lut(path, &live.lut) {
             Ok(bytes) => format!("wrote {} ({:.1} MB)", path.display(), bytes as f64 / 1e6),
             Err(e) => format!("could not write {}: {e}", path.display()),
         });
@@ -1096,10 +1125,10 @@ impl FlareLabApp {
         let size = flare_core::aperture::DEFAULT_MASK_SIZE;
         match flare_core::aperture::Aperture::image_shape_from_file(path, size) {
             Ok(_) => {
-                self.doc.aperture.image = Some(path.display().to_string());
-                self.message = Some(format!("aperture image {}", path.display()));
+                self.session.edit().aperture.image = Some(path.display().to_string());
+                self.session.say(format!("aperture image {}", path.display()));
             }
-            Err(e) => self.message = Some(e.to_string()),
+            Err(e) => self.session.say(e.to_string()),
         }
     }
 
@@ -1109,13 +1138,13 @@ impl FlareLabApp {
     /// seconds on the CPU).
     pub fn export_image_file(&mut self, path: &std::path::Path) {
         if self.export_job.is_some() {
-            self.message = Some("an export is running: wait for it or cancel it".into());
+            self.session.say("an export is running: wait for it or cancel it");
             return;
         }
         let prepared = match self.export_frame(self.export_px()) {
             Ok(p) => p,
             Err(e) => {
-                self.message = Some(format!("could not export {}: {e:#}", path.display()));
+                self.session.say(format!("could not export {}: {e:#}", path.display()));
                 return;
             }
         };
@@ -1133,7 +1162,7 @@ impl FlareLabApp {
             flare_core::frame::write_drawn(&mut device, &frame, &sources, &drawn, LayerChoice::default(), &target)
                 .map_err(|e| e.to_string())
         });
-        self.message = Some(format!("exporting {}", path.display()));
+        self.session.say(format!("exporting {}", path.display()));
         self.export_job = Some((path.to_path_buf(), job));
     }
 
@@ -1141,7 +1170,7 @@ impl FlareLabApp {
     fn poll_export(&mut self) {
         let Some((path, job)) = &self.export_job else { return };
         if let job::JobPoll::Finished(outcome) = job.poll() {
-            self.message = Some(match outcome {
+            self.session.say(match outcome {
                 Ok(()) => format!("wrote {}", path.display()),
                 Err(e) => format!("could not export {}: {e}", path.display()),
             });
@@ -1194,7 +1223,7 @@ impl FlareLabApp {
         let flare_gpu = self.gpu_pass_times().map(|(adapter, t)| (adapter, t.total_ms()));
         let Some(bench) = &mut self.drag_bench else { return };
         match bench.step(
-            &mut self.doc,
+            self.session.edit(),
             &mut self.playhead,
             self.derived.scene_ms,
             self.derived.rebuilds,
@@ -1280,15 +1309,15 @@ impl FlareLabApp {
         ExportPlate,
     )> {
         let Some(flare) = self.derived.flare.clone() else { bail!("no valid lens") };
-        let request = self.derived.request_at(&self.doc, &flare, size.0, size.1, 1);
+        let request = self.derived.request_at(self.session.doc(), &flare, size.0, size.1, 1);
         let frame = Frame::build(&flare, self.derived.lut.as_deref(), &request);
         // The plate the view shows, or the sharp one to defocus on the export's thread when the view's depth
         // of field is not done yet (an export never waits for the view, nor goes out without its DoF).
-        let plate = if self.dof_work.ready(&self.derived, &self.doc) {
+        let plate = if self.dof_work.ready(&self.derived, self.session.doc()) {
             ExportPlate::Ready(self.derived.plate.clone())
         } else {
             ExportPlate::Defocus(
-                Box::new(self.derived.resolved(&self.doc)),
+                Box::new(self.derived.resolved(self.session.doc())),
                 self.playhead,
                 self.derived.sharp_plate.clone(),
             )
@@ -1336,7 +1365,7 @@ impl eframe::App for FlareLabApp {
     /// The session is stored as the preset's JSON (RON, eframe's own format, cannot carry the lens's free-form
     /// extra fields), and read back through the preset loader with all its checks ([`restore`]).
     fn save(&mut self, storage: &mut dyn eframe::Storage) {
-        storage.set_string(STORAGE_KEY, self.doc.to_json());
+        storage.set_string(STORAGE_KEY, self.session.doc().to_json());
         let recent: Vec<String> = self.files.recent.iter().map(|p| p.display().to_string()).collect();
         storage.set_string(RECENT_KEY, serde_json::to_string(&recent).unwrap_or_default());
     }

@@ -29,7 +29,7 @@ use super::shot::{ShotJob, ShotOutcome, light_key};
 impl FlareLabApp {
     /// The timeline strip (see the module documentation).
     pub fn timeline_ui(&mut self, ui: &mut egui::Ui) {
-        let (first, last) = (self.doc.timeline.first_frame, self.doc.timeline.last_frame);
+        let (first, last) = (self.session.doc().timeline.first_frame, self.session.doc().timeline.last_frame);
         ui.horizontal(|ui| {
             let playing = self.playing.is_some();
             if ui.button(if playing { "Pause" } else { "Play" }).clicked() {
@@ -50,7 +50,7 @@ impl FlareLabApp {
             if frame != self.playhead {
                 self.seek(frame);
             }
-            let keyed = self.doc.timeline.has_key_at(self.playhead);
+            let keyed = self.session.doc().timeline.has_key_at(self.playhead);
             if ui
                 .button(if keyed { "Update key" } else { "Set key" })
                 .on_hover_text("key the light's position and intensity (and the selected ghost's gain) at this frame")
@@ -59,17 +59,17 @@ impl FlareLabApp {
                 self.set_key();
             }
             if ui.add_enabled(keyed, egui::Button::new("Delete key")).clicked() {
-                self.doc.timeline.delete_keys_at(self.playhead);
+                self.session.edit().timeline.delete_keys_at(self.playhead);
             }
-            let mut ev = self.doc.timeline.sample(self.playhead as f64).light_ev;
+            let mut ev = self.session.doc().timeline.sample(self.playhead as f64).light_ev;
             let r = ui.add(egui::DragValue::new(&mut ev).range(-64.0..=64.0).speed(0.05).suffix(" EV"));
             crate::panels::labelled_value(
                 r.on_hover_text("the light's intensity at this frame (sets a key)"),
                 "light intensity",
                 ev,
             );
-            if ev != self.doc.timeline.sample(self.playhead as f64).light_ev {
-                self.doc.timeline.light_ev.set(self.playhead, ev);
+            if ev != self.session.doc().timeline.sample(self.playhead as f64).light_ev {
+                self.session.edit().timeline.light_ev.set(self.playhead, ev);
             }
         });
         self.scrub_bar_ui(ui, first, last);
@@ -89,8 +89,8 @@ impl FlareLabApp {
         }
         let painter = ui.painter_at(rect);
         painter.rect_filled(rect, 3.0, egui::Color32::from_gray(28));
-        let light_keys: Vec<i64> = self.doc.timeline.light_deg.keys.iter().map(|k| k.frame).collect();
-        for f in self.doc.timeline.key_frames() {
+        let light_keys: Vec<i64> = self.session.doc().timeline.light_deg.keys.iter().map(|k| k.frame).collect();
+        for f in self.session.doc().timeline.key_frames() {
             let colour = if light_keys.contains(&f) {
                 egui::Color32::from_rgb(255, 210, 90)
             } else {
@@ -117,7 +117,7 @@ impl FlareLabApp {
 
     /// Moves the playhead to `frame` (clamped to the range).
     pub fn seek(&mut self, frame: i64) {
-        self.playhead = frame.clamp(self.doc.timeline.first_frame, self.doc.timeline.last_frame);
+        self.playhead = frame.clamp(self.session.doc().timeline.first_frame, self.session.doc().timeline.last_frame);
         if let Some((_, start)) = &mut self.playing {
             *start = self.playhead;
         }
@@ -134,8 +134,8 @@ impl FlareLabApp {
     /// Advances the playhead while playing (looping over the range).
     pub fn step_playback(&mut self, ctx: &egui::Context) {
         let Some((since, start)) = self.playing else { return };
-        let (first, last) = (self.doc.timeline.first_frame, self.doc.timeline.last_frame);
-        let advanced = (since.elapsed().as_secs_f64() * self.doc.timeline.fps).floor() as i64;
+        let (first, last) = (self.session.doc().timeline.first_frame, self.session.doc().timeline.last_frame);
+        let advanced = (since.elapsed().as_secs_f64() * self.session.doc().timeline.fps).floor() as i64;
         let length = last - first + 1;
         self.playhead = first + (start - first + advanced).rem_euclid(length.max(1));
         ctx.request_repaint();
@@ -144,39 +144,40 @@ impl FlareLabApp {
     /// Keys the light's position and intensity, and the selected ghost's gain, at the playhead.
     pub fn set_key(&mut self) {
         let frame = self.playhead;
-        let light = self.derived.light_deg(&self.doc);
-        let sample = self.doc.timeline.sample(frame as f64);
-        self.doc.timeline.light_deg.set(frame, light);
-        self.doc.timeline.light_ev.set(frame, sample.light_ev);
-        if let Some(g) = self.selected.and_then(|g| self.derived.flare.as_ref().map(|f| f.system.ghosts[g].clone())) {
+        let light = self.derived.light_deg(self.session.doc());
+        let sample = self.session.doc().timeline.sample(frame as f64);
+        self.session.edit().timeline.light_deg.set(frame, light);
+        self.session.edit().timeline.light_ev.set(frame, sample.light_ev);
+        if let Some(g) =
+            self.session.selected().and_then(|g| self.derived.flare.as_ref().map(|f| f.system.ghosts[g].clone()))
+        {
             let key = ghost_key(g.i, g.j);
             let gain = sample
                 .ghost_gain
                 .get(&key)
                 .copied()
-                .unwrap_or_else(|| self.doc.ghosts.get(&key).map_or(1.0, |d| d.gain));
-            self.doc.timeline.ghost_gain.entry(key).or_default().set(frame, gain);
+                .unwrap_or_else(|| self.session.doc().ghosts.get(&key).map_or(1.0, |d| d.gain));
+            self.session.edit().timeline.ghost_gain.entry(key).or_default().set(frame, gain);
         }
     }
 
     /// Puts the light at `deg`: the key at the playhead when the timeline has light keys, else the static
     /// light. With the light found in the plate, the plate decides and the user is told.
     pub fn set_light(&mut self, deg: [f64; 2]) {
-        if self.doc.auto_light.is_some() && self.doc.background.is_some() {
-            self.message =
-                Some("the light is found in the plate: switch the Shot panel's light to keys to place it".into());
+        if self.session.doc().auto_light.is_some() && self.session.doc().background.is_some() {
+            self.session.say("the light is found in the plate: switch the Shot panel's light to keys to place it");
             return;
         }
-        if self.doc.timeline.light_deg.is_empty() {
-            self.doc.light_deg = deg;
+        if self.session.doc().timeline.light_deg.is_empty() {
+            self.session.edit().light_deg = deg;
         } else {
-            self.doc.timeline.light_deg.set(self.playhead, deg);
+            self.session.edit().timeline.light_deg.set(self.playhead, deg);
         }
     }
 
     /// The sensor the shown frame spans.
     pub fn view_sensor(&self) -> Sensor {
-        Sensor::for_frame(self.doc.sensor_width_mm, self.derived.view_px.0, self.derived.view_px.1)
+        Sensor::for_frame(self.session.doc().sensor_width_mm, self.derived.view_px.0, self.derived.view_px.1)
     }
 
     /// The frame size a track's pixels refer to: the plate's, else the export size.
@@ -187,27 +188,27 @@ impl FlareLabApp {
     /// Imports a tracker's CSV as light keys (replacing the light keys; intensity keys too when it has them).
     pub fn import_track(&mut self, path: &std::path::Path) {
         let Some(flare) = self.derived.flare.clone() else {
-            self.message = Some("no valid lens to map the track through".into());
+            self.session.say("no valid lens to map the track through");
             return;
         };
         let (w, h) = self.track_frame_size();
-        let sensor = Sensor::for_frame(self.doc.sensor_width_mm, w, h);
+        let sensor = Sensor::for_frame(self.session.doc().sensor_width_mm, w, h);
         let keys = read_track(path).and_then(|rows| to_keys(&rows, &flare.system.mapping, &sensor, w, h));
         match keys {
             Ok((position, intensity)) => {
                 let (a, b) = (position.keys[0].frame, position.keys[position.keys.len() - 1].frame);
                 let count = position.keys.len();
-                self.doc.timeline.light_deg = position;
+                self.session.edit().timeline.light_deg = position;
                 if !intensity.is_empty() {
-                    self.doc.timeline.light_ev = intensity;
+                    self.session.edit().timeline.light_ev = intensity;
                 }
-                if self.doc.background.as_deref().is_none_or(|b| !FramePattern::is_pattern(b)) {
-                    self.doc.timeline.first_frame = self.doc.timeline.first_frame.min(a);
-                    self.doc.timeline.last_frame = self.doc.timeline.last_frame.max(b);
+                if self.session.doc().background.as_deref().is_none_or(|b| !FramePattern::is_pattern(b)) {
+                    self.session.edit().timeline.first_frame = self.session.doc().timeline.first_frame.min(a);
+                    self.session.edit().timeline.last_frame = self.session.doc().timeline.last_frame.max(b);
                 }
-                self.message = Some(format!("{}: {count} light keys, frames {a}-{b} ({w}x{h} pixels)", path.display()));
+                self.session.say(format!("{}: {count} light keys, frames {a}-{b} ({w}x{h} pixels)", path.display()));
             }
-            Err(e) => self.message = Some(format!("{}: {e}", path.display())),
+            Err(e) => self.session.say(format!("{}: {e}", path.display())),
         }
     }
 
@@ -215,28 +216,28 @@ impl FlareLabApp {
     pub fn set_background(&mut self, path: &std::path::Path) {
         match sequence_of(path) {
             Some((pattern, frames)) => {
-                self.doc.background = Some(pattern.text.clone());
-                self.doc.timeline.first_frame = frames[0];
-                self.doc.timeline.last_frame = frames[frames.len() - 1];
+                self.session.edit().background = Some(pattern.text.clone());
+                self.session.edit().timeline.first_frame = frames[0];
+                self.session.edit().timeline.last_frame = frames[frames.len() - 1];
                 self.playhead = self.playhead.clamp(frames[0], frames[frames.len() - 1]);
-                self.message = Some(format!("plate sequence {} ({} frames)", pattern.text, frames.len()));
+                self.session.say(format!("plate sequence {} ({} frames)", pattern.text, frames.len()));
             }
             None => {
-                self.doc.background = Some(path.display().to_string());
-                self.message = Some(format!("background plate {}", path.display()));
+                self.session.edit().background = Some(path.display().to_string());
+                self.session.say(format!("background plate {}", path.display()));
             }
         }
-        self.plate_path = self.doc.background.clone().unwrap_or_default();
+        self.plate_path = self.session.doc().background.clone().unwrap_or_default();
     }
 
     /// Starts exporting the timeline's range to the sequence `pattern` (on a thread, with progress and Cancel).
     pub fn export_sequence(&mut self, pattern: &str, gpu: bool) {
         if self.shot_job.as_ref().is_some_and(|j| j.exporting) {
-            self.message = Some("an export is already running".into());
+            self.session.say("an export is already running");
             return;
         }
         let Some(flare) = self.derived.flare.clone() else {
-            self.message = Some("no valid lens to render".into());
+            self.session.say("no valid lens to render");
             return;
         };
         let checked = FramePattern::parse(pattern).and_then(|p| {
@@ -251,23 +252,25 @@ impl FlareLabApp {
         }) {
             Ok(p) => p,
             Err(e) => {
-                self.message = Some(e);
+                self.session.say(e);
                 return;
             }
         };
-        if let Err(e) = flare_core::shot::plan::check_range(&self.doc, &self.doc.timeline.frames()) {
-            self.message = Some(e.to_string());
+        if let Err(e) = flare_core::shot::plan::check_range(self.session.doc(), &self.session.doc().timeline.frames()) {
+            self.session.say(e.to_string());
             return;
         }
         // The light found in the plates serves the export when it was found for this very document.
         let found = self.derived.shot_plan.clone().filter(|_| {
-            self.doc.auto_light.is_some() && self.light_key == Some(light_key(&self.doc)) && self.shot_job.is_none()
+            self.session.doc().auto_light.is_some()
+                && self.light_key == Some(light_key(self.session.doc()))
+                && self.shot_job.is_none()
         });
         if let Some(job) = self.shot_job.take() {
             job.job.cancel();
         }
         self.shot_job = Some(ShotJob::export(
-            self.derived.resolved(&self.doc),
+            self.derived.resolved(self.session.doc()),
             flare,
             self.derived.lut.clone(),
             found,
@@ -298,7 +301,7 @@ impl FlareLabApp {
     /// Starts or replaces the job finding the light when what it depends on changed; drops the light found
     /// when the document no longer asks for it.
     pub fn sync_shot_light(&mut self) {
-        let wanted = self.doc.auto_light.is_some() && self.doc.background.is_some();
+        let wanted = self.session.doc().auto_light.is_some() && self.session.doc().background.is_some();
         if !wanted {
             self.derived.shot_plan = None;
             self.light_key = None;
@@ -307,7 +310,7 @@ impl FlareLabApp {
             }
             return;
         }
-        let key = light_key(&self.doc);
+        let key = light_key(self.session.doc());
         if self.light_key == Some(key) || self.shot_job.as_ref().is_some_and(|j| j.exporting) {
             return;
         }
@@ -316,7 +319,7 @@ impl FlareLabApp {
             job.job.cancel();
         }
         self.light_key = Some(key);
-        self.shot_job = Some(ShotJob::find_light(self.derived.resolved(&self.doc), flare));
+        self.shot_job = Some(ShotJob::find_light(self.derived.resolved(self.session.doc()), flare));
     }
 
     /// Takes a finished job's outcome.
@@ -353,7 +356,7 @@ impl FlareLabApp {
                     }
                     Err(e) => {
                         if self.light_key.is_some() && !cancelled {
-                            self.message = Some(e.clone());
+                            self.session.say(e.clone());
                         }
                         self.shot_status = if cancelled { "cancelled".into() } else { e };
                     }
@@ -364,7 +367,7 @@ impl FlareLabApp {
 
     /// The Shot panel (see the module documentation).
     pub fn shot_panel_ui(&mut self, ui: &mut egui::Ui) {
-        let tl = &mut self.doc.timeline;
+        let tl = &mut self.session.edit().timeline;
         ui.heading("Timeline");
         ui.horizontal(|ui| {
             let r = ui.add(egui::DragValue::new(&mut tl.first_frame).prefix("first "));
@@ -391,7 +394,8 @@ impl FlareLabApp {
             tl.light_ev.keys.clear();
             tl.ghost_gain.clear();
         }
-        self.playhead = self.playhead.clamp(self.doc.timeline.first_frame, self.doc.timeline.last_frame);
+        self.playhead =
+            self.playhead.clamp(self.session.doc().timeline.first_frame, self.session.doc().timeline.last_frame);
         ui.separator();
         ui.heading("Plate");
         ui.horizontal(|ui| {
@@ -400,9 +404,9 @@ impl FlareLabApp {
             if ui.button("Use").clicked() {
                 let text = self.plate_path.trim().to_string();
                 if text.is_empty() {
-                    self.doc.background = None;
+                    self.session.edit().background = None;
                 } else if FramePattern::is_pattern(&text) {
-                    self.doc.background = Some(text);
+                    self.session.edit().background = Some(text);
                 } else {
                     self.set_background(std::path::Path::new(&text));
                 }
@@ -411,28 +415,30 @@ impl FlareLabApp {
                 self.pick_file(super::files::FileUse::Background);
             }
         });
-        let r = ui.add(egui::DragValue::new(&mut self.doc.sensor_width_mm).range(1.0..=200.0).speed(0.1).suffix(" mm"));
+        let r = ui.add(
+            egui::DragValue::new(&mut self.session.edit().sensor_width_mm).range(1.0..=200.0).speed(0.1).suffix(" mm"),
+        );
         crate::panels::labelled_value(
             r.on_hover_text("the width of the sensor the frame (and the plate) spans"),
             "sensor width",
-            self.doc.sensor_width_mm,
+            self.session.doc().sensor_width_mm,
         );
         ui.separator();
         ui.heading("Light");
-        let has_plate = self.doc.background.is_some();
-        let mut auto = self.doc.auto_light.is_some();
+        let has_plate = self.session.doc().background.is_some();
+        let mut auto = self.session.doc().auto_light.is_some();
         ui.horizontal(|ui| {
             ui.radio_value(&mut auto, false, "keys");
             ui.add_enabled_ui(has_plate, |ui| ui.radio_value(&mut auto, true, "found in the plate"))
                 .response
                 .on_disabled_hover_text("needs a plate");
         });
-        match (auto, self.doc.auto_light.is_some()) {
-            (true, false) => self.doc.auto_light = Some(AutoLight::default()),
-            (false, true) => self.doc.auto_light = None,
+        match (auto, self.session.doc().auto_light.is_some()) {
+            (true, false) => self.session.edit().auto_light = Some(AutoLight::default()),
+            (false, true) => self.session.edit().auto_light = None,
             _ => {}
         }
-        if let Some(a) = &mut self.doc.auto_light {
+        if let Some(a) = &mut self.session.edit().auto_light {
             ui.horizontal(|ui| {
                 let r =
                     ui.add(egui::DragValue::new(&mut a.threshold).range(1e-6..=1e9).speed(0.05).prefix("threshold "));
@@ -487,8 +493,8 @@ impl FlareLabApp {
         });
         ui.label(format!(
             "frames {}-{}, {}",
-            self.doc.timeline.first_frame,
-            self.doc.timeline.last_frame,
+            self.session.doc().timeline.first_frame,
+            self.session.doc().timeline.last_frame,
             match &self.derived.plate {
                 Some(p) if has_plate && self.export_size.is_none() => {
                     format!("{}x{} (the plate's size)", p.width, p.height)
