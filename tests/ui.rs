@@ -532,7 +532,7 @@ fn the_timeline_keys_the_light_interpolates_plays_and_undo_covers_the_keys() {
     // Frame 11: dragging the light keys it there.
     h.get_by_label("frame").set_value_accesskit(11.0);
     h.run();
-    assert_eq!(h.state().playhead, 11);
+    assert_eq!(h.state().playhead(), 11);
     drag(&mut h, egui::pos2(300.0, 250.0), egui::pos2(420.0, 200.0));
     let b = h.state().doc().timeline.light_deg.key_at(11).expect("the drag keyed frame 11").value;
     assert!(b[0] > 0.0 && b[1] > 0.0, "{b:?}");
@@ -568,15 +568,15 @@ fn the_timeline_keys_the_light_interpolates_plays_and_undo_covers_the_keys() {
     h.run_steps(2);
     std::thread::sleep(std::time::Duration::from_millis(300));
     h.step();
-    let playing_at = h.state().playhead;
+    let playing_at = h.state().playhead();
     assert!(playing_at > 1, "24 fps for 0.3 s: frame {playing_at}");
     h.get_by_label("Pause").click();
     h.run_steps(2);
     h.run();
-    let paused_at = h.state().playhead;
+    let paused_at = h.state().playhead();
     std::thread::sleep(std::time::Duration::from_millis(200));
     h.step();
-    assert_eq!(h.state().playhead, paused_at);
+    assert_eq!(h.state().playhead(), paused_at);
 }
 
 #[test]
@@ -947,17 +947,17 @@ fn the_depth_of_field_defocuses_the_plate_on_a_thread_as_the_command_line_does()
     let (shown, sharp) = (app.derived.plate.clone().unwrap(), app.derived.sharp_plate.clone().unwrap());
     assert_ne!(shown.pixels, sharp.pixels, "the plate is defocused");
     let flare = app.flare().unwrap();
-    let cli = flare_core::shot::plate::defocus(&app.doc(), flare, app.playhead, &sharp).unwrap();
+    let cli = flare_core::shot::plate::defocus(&app.doc(), flare, app.playhead(), &sharp).unwrap();
     assert_eq!(cli.pixels, shown.pixels, "the app's plate is the command line's");
     // Focus by click: the toggle, then a click in the view focuses on the depth there.
     h.get_by_label("focus by click").click();
     h.step();
     h.step();
-    assert!(h.state().focus_pick);
+    assert!(h.state().focus_pick());
     let rect = egui::Rect::from_min_size(egui::pos2(0.0, 0.0), egui::vec2(320.0, 180.0));
     h.state_mut().focus_from_pointer(egui::pos2(100.0, 90.0), rect);
     assert_eq!(h.state().doc().dof.focus_px, Some([100, 90]));
-    assert!(!h.state().focus_pick);
+    assert!(!h.state().focus_pick());
     step_until(&mut h, 60.0, |app| !app.dof_work.busy() && app.dof_work.status.contains("focus 5.00 m"));
     // A depth map of another size: said once, the sharp plate shown, nothing lost.
     let (_, small) = flare_core::dof::scene::street(160, 90);
@@ -989,7 +989,7 @@ fn the_depth_of_field_runs_on_the_apps_gpu_as_its_cpu_twin_does() {
     let cpu = flare_core::shot::plate::defocus(
         &app.doc(),
         app.flare().unwrap(),
-        app.playhead,
+        app.playhead(),
         app.derived.sharp_plate.as_ref().unwrap(),
     )
     .unwrap();

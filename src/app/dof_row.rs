@@ -45,13 +45,13 @@ impl FlareLabApp {
                 self.session.edit().dof.focus_m = focus;
                 self.session.edit().dof.focus_px = None;
             }
-            let picking = self.focus_pick;
+            let picking = self.view.focus_pick();
             if ui
                 .selectable_label(picking, "focus by click")
                 .on_hover_text("then click in the view: the lens focuses on the depth there")
                 .clicked()
             {
-                self.focus_pick = !picking;
+                self.view.set_focus_pick(!picking);
             }
             if let Some([x, y]) = self.session.doc().dof.focus_px {
                 ui.weak(format!("on pixel ({x}, {y})"));
@@ -94,14 +94,12 @@ impl FlareLabApp {
 
     /// Focus by click: the plate pixel under `pointer` in the view `rect`.
     pub fn focus_from_pointer(&mut self, pointer: egui::Pos2, rect: egui::Rect) {
-        self.focus_pick = false;
+        self.view.set_focus_pick(false);
         let Some(plate) = self.derived.sharp_plate.clone() else {
             self.session.say("focus by click needs a plate (File > Background plate)");
             return;
         };
-        let fx = ((pointer.x - rect.left()) / rect.width()).clamp(0.0, 0.9999);
-        let fy = ((pointer.y - rect.top()) / rect.height()).clamp(0.0, 0.9999);
-        let (x, y) = ((fx * plate.width as f32) as u32, (fy * plate.height as f32) as u32);
+        let [x, y] = super::view::image_pixel_at(rect, pointer, plate.width, plate.height);
         self.session.edit().dof.focus_px = Some([x, y]);
         self.session.say(format!("focus on the depth at plate pixel ({x}, {y})"));
     }

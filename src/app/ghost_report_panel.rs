@@ -3,7 +3,6 @@
 
 use eframe::egui;
 use flare_core::files::write_atomic;
-use flare_core::optics::sensor::light_slopes_for_frame_position;
 use flare_core::report::{GhostReport, GhostRow, to_csv};
 
 use super::FlareLabApp;
@@ -18,7 +17,7 @@ impl FlareLabApp {
             return;
         };
         let light = self.derived.light_deg(self.session.doc());
-        let u = light_slopes_for_frame_position(light[0], light[1]);
+        let u = super::view::light_slopes(light);
         let key = ReportKey::new(&flare, u);
         if self.report.step(key, &self.session.doc().lens, &flare, u) {
             ui.ctx().request_repaint_after(std::time::Duration::from_millis(100));

@@ -20,6 +20,7 @@
 //! (the app timing itself); [`crate::viewport`] is the bridge to the GPU, [`crate::history`] the undo.
 
 use session::Session;
+use view::View;
 
 mod auto_bake_step;
 pub mod autobake;
@@ -40,6 +41,7 @@ pub mod raygrid_view;
 pub mod session;
 pub mod shot;
 pub mod timeline;
+pub mod view;
 
 pub use shot::DEFAULT_EXPORT_PX;
 
@@ -61,7 +63,6 @@ use flare_core::lut::classify::GhostClass;
 use flare_core::lut::{GhostLut, LutKind};
 use flare_core::optics::formats::{LoadedLens, read_lens_file};
 use flare_core::preset::{Document, LutSource};
-use flare_core::render::sensor_to_pixel;
 
 const NO_DISPLAY: &str = "no display to open the app's window on (DISPLAY and WAYLAND_DISPLAY are unset). \
 The command line works without one: `flarelab lens list`, `flarelab lens info LENS`, \
@@ -71,8 +72,6 @@ The command line works without one: `flarelab lens list`, `flarelab lens info LE
 const STORAGE_KEY: &str = "flarelab_document";
 /// The key of the recent files (a JSON list of paths).
 const RECENT_KEY: &str = "flarelab_recent_files";
-/// Largest viewport render (pixels across); a larger window is upsampled.
-const MAX_VIEW_WIDTH: f32 = 1920.0;
 
 /// Opens the app window; without a display, explains how to use the command line instead.
 pub fn run() -> Result<()> {
@@ -196,20 +195,12 @@ pub struct FlareLabApp {
     coatings: CoatingsState,
     ray_diagram: RayDiagram,
     drag_bench: Option<DragBench>,
-    /// Drafts while the user drags (see [`draft`]).
-    draft: draft::DraftControl,
     /// The size File > Export image renders at.
     /// The size File > Export image and sequence draw at, when the user set one; `None`: the plate's size, else
     /// [`DEFAULT_EXPORT_PX`] (what the command line does without --size). See [`FlareLabApp::export_px`].
     export_size: Option<(u32, u32)>,
-    /// `FLARELAB_VIEW_PX`: the flare drawn at this size whatever the view's (read once, at start).
-    fixed_view_px: Option<(u32, u32)>,
-    /// Where the viewport was last laid out (points).
-    view_rect: Option<egui::Rect>,
-    /// The timeline frame shown (see [`timeline`]).
-    pub playhead: i64,
-    /// Playing since, from the frame then shown.
-    playing: Option<(std::time::Instant, i64)>,
+    /// The viewport's layout, the pointer <-> light mapping, the playhead, drafts (see [`view`]).
+    view: View,
     /// Finding the light in the plates, or exporting a sequence.
     pub shot_job: Option<shot::ShotJob>,
     /// File > Export image, drawing and writing on its thread (the file it writes, the job).
@@ -228,8 +219,6 @@ pub struct FlareLabApp {
     pub dof_work: dof::DofWork,
     /// The view's ray-grid mode (see [`raygrid_view`]).
     pub raygrid: raygrid_view::RayGridView,
-    /// The next click in the view focuses the depth of field there.
-    pub focus_pick: bool,
     /// The window's render pass clears it to the panels' colour ([`eframe::App::clear_color`]), so the panels
     /// are drawn unfilled; without it (the UI tests' harness clears to transparent) one rectangle paints the
     /// same colour under them.
@@ -244,6 +233,7 @@ impl FlareLabApp {
             ViewportResources::install(rs);
         }
         let doc = stored.unwrap_or_default();
+        let first_frame = doc.timeline.first_frame;
         let drag_bench = DragBench::from_env();
         let mut app = Self {
             session: Session::new(doc),
@@ -261,12 +251,8 @@ impl FlareLabApp {
             coatings: CoatingsState::default(),
             ray_diagram: RayDiagram::default(),
             drag_bench,
-            draft: draft::DraftControl::new(software),
             export_size: None,
-            fixed_view_px: std::env::var("FLARELAB_VIEW_PX").ok().and_then(|s| flare_core::frame::parse_size(&s).ok()),
-            view_rect: None,
-            playhead: 1,
-            playing: None,
+            view: View::new(software, first_frame),
             shot_job: None,
             export_job: None,
             shot_status: String::new(),
@@ -277,7 +263,6 @@ impl FlareLabApp {
             plate_path: String::new(),
             dof_work: dof::DofWork::default(),
             raygrid: raygrid_view::RayGridView::default(),
-            focus_pick: false,
             cleared_by_window: false,
         };
         // FLARELAB_RAYGRID=N starts the view in its ray-grid mode (the Xvfb test and screenshots).
@@ -285,7 +270,6 @@ impl FlareLabApp {
             .ok()
             .and_then(|s| s.parse().ok())
             .filter(|n| raygrid_view::GRIDS.contains(n));
-        app.playhead = app.session.doc().timeline.first_frame;
         app.plate_path = app.session.doc().background.clone().unwrap_or_default();
         app.sync();
         app
@@ -324,6 +308,16 @@ impl FlareLabApp {
         self.session.select(ghost);
     }
 
+    /// The timeline frame the view shows.
+    pub fn playhead(&self) -> i64 {
+        self.view.playhead()
+    }
+
+    /// Whether the next click in the viewport focuses the depth of field.
+    pub fn focus_pick(&self) -> bool {
+        self.view.focus_pick()
+    }
+
     /// The session (document, history, selection, tab, status line), to read.
     pub fn session(&self) -> &Session {
         &self.session
@@ -346,9 +340,9 @@ impl FlareLabApp {
 
     /// Re-derives what changed in the document (see the module documentation).
     pub fn sync(&mut self) {
-        self.playhead =
-            self.playhead.clamp(self.session.doc().timeline.first_frame, self.session.doc().timeline.last_frame);
-        self.derived.playhead = self.playhead;
+        let timeline = &self.session.doc().timeline;
+        self.view.clamp_playhead(timeline.first_frame, timeline.last_frame);
+        self.derived.playhead = self.view.playhead();
         let mut events = self.derived.sync(self.session.doc(), self.gpu.as_ref());
         self.dof_work.sync(&mut self.derived, self.session.doc(), self.gpu.as_ref(), &mut events);
         // A defocused plate that just arrived is a new plate for the frame.
@@ -635,7 +629,7 @@ impl FlareLabApp {
         let light = self.derived.light_deg(self.session.doc());
         ui.label(format!(
             "frame {} | light ({:.1}, {:.1}) deg | scene {:.2} ms, frame {:.1} ms at {}x{} | sprites drawn {}, culled {} dim / {} off sensor / {} empty entrance{}",
-            self.playhead,
+            self.view.playhead(),
             light[0],
             light[1],
             self.derived.scene_ms,
@@ -804,18 +798,7 @@ impl FlareLabApp {
         let avail = ui.available_size();
         let size = egui::vec2(avail.x, (avail.x * 9.0 / 16.0).min(avail.y));
         let (rect, response) = ui.allocate_exact_size(size, egui::Sense::click_and_drag());
-        self.view_rect = Some(rect);
-        let ppp = ui.ctx().pixels_per_point();
-        let scale = (MAX_VIEW_WIDTH / (rect.width() * ppp)).min(1.0);
-        let mut px = (
-            (rect.width() * ppp * scale).round().max(16.0) as u32,
-            (rect.height() * ppp * scale).round().max(16.0) as u32,
-        );
-        // FLARELAB_VIEW_PX=WxH (read once at start) renders the flare at a fixed size, whatever the widget's
-        // (the drag bench's frame times at 1280x720).
-        if let Some(fixed) = self.fixed_view_px {
-            px = fixed;
-        }
+        let px = self.view.layout(rect, ui.ctx().pixels_per_point());
         if px != self.derived.view_px {
             self.derived.view_px = px;
             self.sync_frame();
@@ -843,15 +826,15 @@ impl FlareLabApp {
         if response.dragged()
             && let Some(p) = response.interact_pointer_pos()
         {
-            self.light_from_pointer(p, rect);
+            self.light_from_pointer(p);
         }
         if response.clicked()
             && let Some(p) = response.interact_pointer_pos()
         {
-            if self.focus_pick {
+            if self.view.focus_pick() {
                 self.focus_from_pointer(p, rect);
             } else {
-                actions.push(Action::SelectGhost(self.ghost_at(p, rect)));
+                actions.push(Action::SelectGhost(self.ghost_at(p)));
             }
         }
         if response.hovered() || response.has_focus() {
@@ -877,65 +860,52 @@ impl FlareLabApp {
         self.overlay_ui(ui, rect);
     }
 
-    /// Where the light's image (the starburst's centre) is drawn in the viewport, in points.
-    pub fn light_on_screen(&self) -> Option<egui::Pos2> {
-        let flare = self.derived.flare.as_ref()?;
-        let light = self.derived.light_deg(self.session.doc());
-        let u = flare_core::render::light_slopes_for_frame_position(light[0], light[1]);
-        self.to_screen(flare.system.light_image_mm(u), self.view_rect?)
+    /// The one mapping between the viewport's points and the live optics (see [`view::LightMap`]).
+    fn light_map(&self) -> Option<view::LightMap<'_>> {
+        let flare = self.derived.flare.as_deref()?;
+        self.view.light_map(flare, self.derived.view_px, self.session.doc().sensor_width_mm)
     }
 
-    /// Sensor mm to a point of the viewport rect.
-    fn to_screen(&self, p_mm: [f64; 2], rect: egui::Rect) -> Option<egui::Pos2> {
-        self.derived.flare.as_ref()?;
-        let (w, h) = self.derived.view_px;
-        let p = sensor_to_pixel(p_mm, &self.view_sensor(), w, h);
-        Some(
-            rect.min
-                + egui::vec2((p[0] / f64::from(w)) as f32 * rect.width(), (p[1] / f64::from(h)) as f32 * rect.height()),
-        )
+    /// Where the light's image (the starburst's centre) is drawn in the viewport, in points.
+    pub fn light_on_screen(&self) -> Option<egui::Pos2> {
+        Some(self.light_map()?.light_on_screen(self.derived.light_deg(self.session.doc())))
+    }
+
+    /// A sprite's centre and radius in the viewport (points; at least 4 so that a tiny one can be clicked).
+    fn sprite_on_screen(map: &view::LightMap<'_>, s: &flare_core::ghost::Sprite) -> (egui::Pos2, f32) {
+        let c = map.to_screen(s.centre_mm);
+        let edge = map.to_screen([s.centre_mm[0] + s.half_size_mm.abs(), s.centre_mm[1]]);
+        (c, (edge.x - c.x).abs().max(4.0))
     }
 
     /// The light's marker and the selected ghost's ring.
     fn overlay_ui(&self, ui: &egui::Ui, rect: egui::Rect) {
         let painter = ui.painter().with_clip_rect(rect);
+        let Some(map) = self.light_map() else { return };
         let Some(flare) = &self.derived.flare else { return };
-        let light = self.derived.light_deg(self.session.doc());
-        let u = flare_core::render::light_slopes_for_frame_position(light[0], light[1]);
-        if let Some(p) = self.to_screen(flare.system.light_image_mm(u), rect) {
-            painter.circle_stroke(p, 7.0, egui::Stroke::new(1.5, egui::Color32::from_rgb(255, 230, 120)));
-        }
+        let p = map.light_on_screen(self.derived.light_deg(self.session.doc()));
+        painter.circle_stroke(p, 7.0, egui::Stroke::new(1.5, egui::Color32::from_rgb(255, 230, 120)));
         let Some(g) = self.session.selected() else { return };
         for s in self.derived.sprites.iter().filter(|s| s.ghost == g && s.wavelength == 1) {
-            if let (Some(c), Some(edge)) = (
-                self.to_screen(s.centre_mm, rect),
-                self.to_screen([s.centre_mm[0] + s.half_size_mm.abs(), s.centre_mm[1]], rect),
-            ) {
-                let r = (edge.x - c.x).abs().max(4.0);
-                painter.circle_stroke(c, r, egui::Stroke::new(2.0, egui::Color32::from_rgb(255, 60, 200)));
-                let m = flare.system.ghosts[g].clone();
-                painter.text(
-                    c + egui::vec2(r * 0.7, -r * 0.7),
-                    egui::Align2::LEFT_BOTTOM,
-                    format!("{}-{}", m.i, m.j),
-                    egui::FontId::proportional(14.0),
-                    egui::Color32::from_rgb(255, 60, 200),
-                );
-            }
+            let (c, r) = Self::sprite_on_screen(&map, s);
+            painter.circle_stroke(c, r, egui::Stroke::new(2.0, egui::Color32::from_rgb(255, 60, 200)));
+            let m = &flare.system.ghosts[g];
+            painter.text(
+                c + egui::vec2(r * 0.7, -r * 0.7),
+                egui::Align2::LEFT_BOTTOM,
+                format!("{}-{}", m.i, m.j),
+                egui::FontId::proportional(14.0),
+                egui::Color32::from_rgb(255, 60, 200),
+            );
         }
     }
 
     /// The brightest drawn ghost whose (green) sprite covers `p`, if any.
-    fn ghost_at(&self, p: egui::Pos2, rect: egui::Rect) -> Option<usize> {
+    fn ghost_at(&self, p: egui::Pos2) -> Option<usize> {
+        let map = self.light_map()?;
         let mut best: Option<(usize, f64)> = None;
         for s in self.derived.sprites.iter().filter(|s| s.culled.is_none() && s.wavelength == 1) {
-            let (Some(c), Some(edge)) = (
-                self.to_screen(s.centre_mm, rect),
-                self.to_screen([s.centre_mm[0] + s.half_size_mm.abs(), s.centre_mm[1]], rect),
-            ) else {
-                continue;
-            };
-            let r = (edge.x - c.x).abs().max(4.0);
+            let (c, r) = Self::sprite_on_screen(&map, s);
             let m = &self.derived.ghosts[s.ghost];
             let lum = m.intensity() * self.session.doc().ghost_gain(m.i, m.j);
             if c.distance(p) <= r && lum > 0.0 && best.is_none_or(|(_, b)| lum > b) {
@@ -947,21 +917,9 @@ impl FlareLabApp {
 
     /// Puts the light where the pointer is, through the lens's own mapping (it may leave the frame: its ghosts
     /// keep coming; past the lens's traced field the paraxial mapping continues it).
-    fn light_from_pointer(&mut self, pointer: egui::Pos2, rect: egui::Rect) {
-        let Some(flare) = self.derived.flare.clone() else { return };
-        let (w, h) = self.derived.view_px;
-        let px = [
-            f64::from((pointer.x - rect.left()) / rect.width()) * f64::from(w),
-            f64::from((pointer.y - rect.top()) / rect.height()) * f64::from(h),
-        ];
-        let sensor = self.view_sensor();
-        let deg = flare.system.mapping.light_deg_for_pixel(px, &sensor, w, h).or_else(|| {
-            let paraxial =
-                flare_core::optics::mapping::ImageMapping::paraxial(flare.system.mapping.paraxial_mm_per_slope);
-            paraxial.light_deg_for_pixel(px, &sensor, w, h)
-        });
-        if let Some(deg) = deg {
-            self.set_light(deg.map(|a| a.clamp(-85.0, 85.0)));
+    fn light_from_pointer(&mut self, pointer: egui::Pos2) {
+        if let Some(deg) = self.light_map().and_then(|map| map.light_deg_at(pointer)) {
+            self.set_light(deg);
         }
     }
 
@@ -1207,7 +1165,7 @@ impl FlareLabApp {
         });
         let sweeping = self.drag_bench.as_ref().is_some_and(DragBench::sweeping);
         let flare_gpu_ms = self.gpu_pass_times().map(|(_, t)| t.total_ms());
-        let draft = self.draft.step(dragging || arrows || sweeping, flare_gpu_ms, std::time::Instant::now());
+        let draft = self.view.draft_step(dragging || arrows || sweeping, flare_gpu_ms);
         if draft.is_some() && !sweeping {
             // Refine to the full frame once the pointer rests, even if nothing else repaints.
             ctx.request_repaint_after(std::time::Duration::from_secs_f32(draft::STILL_S));
@@ -1224,7 +1182,7 @@ impl FlareLabApp {
         let Some(bench) = &mut self.drag_bench else { return };
         match bench.step(
             self.session.edit(),
-            &mut self.playhead,
+            self.view.playhead_mut(),
             self.derived.scene_ms,
             self.derived.rebuilds,
             self.derived.view_px,
@@ -1318,7 +1276,7 @@ impl FlareLabApp {
         } else {
             ExportPlate::Defocus(
                 Box::new(self.derived.resolved(self.session.doc())),
-                self.playhead,
+                self.view.playhead(),
                 self.derived.sharp_plate.clone(),
             )
         };

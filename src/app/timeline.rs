@@ -12,8 +12,6 @@
 //! playhead (editing it when there is one); with no keys it moves the static light. Playback advances the
 //! playhead at the timeline's rate, looping over the range, and asks for a repaint only while it plays.
 
-use std::time::Instant;
-
 use eframe::egui;
 use flare_core::optics::sensor::Sensor;
 use flare_core::preset::ghost_key;
@@ -31,7 +29,7 @@ impl FlareLabApp {
     pub fn timeline_ui(&mut self, ui: &mut egui::Ui) {
         let (first, last) = (self.session.doc().timeline.first_frame, self.session.doc().timeline.last_frame);
         ui.horizontal(|ui| {
-            let playing = self.playing.is_some();
+            let playing = self.view.playing();
             if ui.button(if playing { "Pause" } else { "Play" }).clicked() {
                 self.toggle_play();
             }
@@ -39,18 +37,18 @@ impl FlareLabApp {
                 self.seek(first);
             }
             if ui.button("<").on_hover_text("previous frame").clicked() {
-                self.seek(self.playhead - 1);
+                self.seek(self.view.playhead() - 1);
             }
             if ui.button(">").on_hover_text("next frame").clicked() {
-                self.seek(self.playhead + 1);
+                self.seek(self.view.playhead() + 1);
             }
-            let mut frame = self.playhead;
+            let mut frame = self.view.playhead();
             let r = ui.add(egui::DragValue::new(&mut frame).range(first..=last).prefix("frame "));
             crate::panels::labelled_value(r, "frame", frame as f64);
-            if frame != self.playhead {
+            if frame != self.view.playhead() {
                 self.seek(frame);
             }
-            let keyed = self.session.doc().timeline.has_key_at(self.playhead);
+            let keyed = self.session.doc().timeline.has_key_at(self.view.playhead());
             if ui
                 .button(if keyed { "Update key" } else { "Set key" })
                 .on_hover_text("key the light's position and intensity (and the selected ghost's gain) at this frame")
@@ -59,17 +57,17 @@ impl FlareLabApp {
                 self.set_key();
             }
             if ui.add_enabled(keyed, egui::Button::new("Delete key")).clicked() {
-                self.session.edit().timeline.delete_keys_at(self.playhead);
+                self.session.edit().timeline.delete_keys_at(self.view.playhead());
             }
-            let mut ev = self.session.doc().timeline.sample(self.playhead as f64).light_ev;
+            let mut ev = self.session.doc().timeline.sample(self.view.playhead() as f64).light_ev;
             let r = ui.add(egui::DragValue::new(&mut ev).range(-64.0..=64.0).speed(0.05).suffix(" EV"));
             crate::panels::labelled_value(
                 r.on_hover_text("the light's intensity at this frame (sets a key)"),
                 "light intensity",
                 ev,
             );
-            if ev != self.session.doc().timeline.sample(self.playhead as f64).light_ev {
-                self.session.edit().timeline.light_ev.set(self.playhead, ev);
+            if ev != self.session.doc().timeline.sample(self.view.playhead() as f64).light_ev {
+                self.session.edit().timeline.light_ev.set(self.view.playhead(), ev);
             }
         });
         self.scrub_bar_ui(ui, first, last);
@@ -108,7 +106,7 @@ impl FlareLabApp {
                 .collect();
             painter.add(egui::Shape::line(points, (1.0, egui::Color32::from_rgb(140, 230, 140))));
         }
-        let x = x_of(self.playhead);
+        let x = x_of(self.view.playhead());
         painter.line_segment(
             [egui::pos2(x, rect.top()), egui::pos2(x, rect.bottom())],
             (2.0, egui::Color32::from_rgb(255, 80, 80)),
@@ -117,33 +115,25 @@ impl FlareLabApp {
 
     /// Moves the playhead to `frame` (clamped to the range).
     pub fn seek(&mut self, frame: i64) {
-        self.playhead = frame.clamp(self.session.doc().timeline.first_frame, self.session.doc().timeline.last_frame);
-        if let Some((_, start)) = &mut self.playing {
-            *start = self.playhead;
-        }
-        self.playing = self.playing.map(|(_, f)| (Instant::now(), f));
+        let timeline = &self.session.doc().timeline;
+        self.view.seek(frame, timeline.first_frame, timeline.last_frame);
     }
 
     pub fn toggle_play(&mut self) {
-        self.playing = match self.playing {
-            Some(_) => None,
-            None => Some((Instant::now(), self.playhead)),
-        };
+        self.view.toggle_play();
     }
 
     /// Advances the playhead while playing (looping over the range).
     pub fn step_playback(&mut self, ctx: &egui::Context) {
-        let Some((since, start)) = self.playing else { return };
-        let (first, last) = (self.session.doc().timeline.first_frame, self.session.doc().timeline.last_frame);
-        let advanced = (since.elapsed().as_secs_f64() * self.session.doc().timeline.fps).floor() as i64;
-        let length = last - first + 1;
-        self.playhead = first + (start - first + advanced).rem_euclid(length.max(1));
-        ctx.request_repaint();
+        let timeline = &self.session.doc().timeline;
+        if self.view.step_playback(timeline.first_frame, timeline.last_frame, timeline.fps) {
+            ctx.request_repaint();
+        }
     }
 
     /// Keys the light's position and intensity, and the selected ghost's gain, at the playhead.
     pub fn set_key(&mut self) {
-        let frame = self.playhead;
+        let frame = self.view.playhead();
         let light = self.derived.light_deg(self.session.doc());
         let sample = self.session.doc().timeline.sample(frame as f64);
         self.session.edit().timeline.light_deg.set(frame, light);
@@ -171,13 +161,8 @@ impl FlareLabApp {
         if self.session.doc().timeline.light_deg.is_empty() {
             self.session.edit().light_deg = deg;
         } else {
-            self.session.edit().timeline.light_deg.set(self.playhead, deg);
+            self.session.edit().timeline.light_deg.set(self.view.playhead(), deg);
         }
-    }
-
-    /// The sensor the shown frame spans.
-    pub fn view_sensor(&self) -> Sensor {
-        Sensor::for_frame(self.session.doc().sensor_width_mm, self.derived.view_px.0, self.derived.view_px.1)
     }
 
     /// The frame size a track's pixels refer to: the plate's, else the export size.
@@ -219,7 +204,7 @@ impl FlareLabApp {
                 self.session.edit().background = Some(pattern.text.clone());
                 self.session.edit().timeline.first_frame = frames[0];
                 self.session.edit().timeline.last_frame = frames[frames.len() - 1];
-                self.playhead = self.playhead.clamp(frames[0], frames[frames.len() - 1]);
+                self.view.clamp_playhead(frames[0], frames[frames.len() - 1]);
                 self.session.say(format!("plate sequence {} ({} frames)", pattern.text, frames.len()));
             }
             None => {
@@ -394,8 +379,8 @@ impl FlareLabApp {
             tl.light_ev.keys.clear();
             tl.ghost_gain.clear();
         }
-        self.playhead =
-            self.playhead.clamp(self.session.doc().timeline.first_frame, self.session.doc().timeline.last_frame);
+        let timeline = &self.session.doc().timeline;
+        self.view.clamp_playhead(timeline.first_frame, timeline.last_frame);
         ui.separator();
         ui.heading("Plate");
         ui.horizontal(|ui| {
