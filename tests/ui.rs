@@ -9,8 +9,8 @@ use flarelab::app::{FlareLabApp, Tab};
 /// The app with the automatic bake off and no disk cache: a test that is not about LUTs neither spends a
 /// core on a background bake nor writes to the user's cache.
 fn quiet(mut app: FlareLabApp) -> FlareLabApp {
-    app.autobake.enabled = false;
-    app.autobake.cache = None;
+    app.jobs_mut().autobake_mut().enabled = false;
+    app.jobs_mut().autobake_mut().cache = None;
     app
 }
 
@@ -202,11 +202,11 @@ fn the_image_export_runs_on_a_thread() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("flare.exr");
     h.state_mut().export_image_file(&path);
-    assert!(h.state().export_job.is_some());
+    assert!(h.state().jobs().exporting_image());
     h.state_mut().export_image_file(&dir.path().join("other.png"));
     assert!(h.state().message().is_some_and(|m| m.contains("an export is running")));
     let started = std::time::Instant::now();
-    while h.state().export_job.is_some() {
+    while h.state().jobs().exporting_image() {
         assert!(started.elapsed().as_secs() < 120, "the export did not finish");
         h.run();
         std::thread::sleep(std::time::Duration::from_millis(20));
@@ -610,16 +610,16 @@ fn a_plate_sequence_finds_the_light_and_exports_on_a_thread_as_render_frames_doe
     // Export on a thread: the UI keeps running while it works.
     let out = dir.path().join("app/f.####.png").display().to_string();
     h.state_mut().export_sequence(&out, false);
-    assert!(h.state().shot_job.is_some());
+    assert!(h.state().jobs().shot_running());
     let mut frames_while_exporting = 0;
-    while h.state().shot_job.is_some() {
+    while h.state().jobs().shot_running() {
         h.step();
         frames_while_exporting += 1;
         std::thread::sleep(std::time::Duration::from_millis(20));
     }
     assert!(frames_while_exporting > 1, "the window ran while the export worked");
-    let report = h.state().last_export.clone().expect("the export finished");
-    assert_eq!(report.rendered(), 4, "{}", h.state().shot_status);
+    let report = h.state().jobs().last_export().cloned().expect("the export finished");
+    assert_eq!(report.rendered(), 4, "{}", h.state().jobs().shot_status());
     // The same frames as `flarelab render --preset --frames`, byte for byte (both on the CPU twin).
     let cli = dir.path().join("cli/f.####.png").display().to_string();
     let result = std::process::Command::new(env!("CARGO_BIN_EXE_flarelab"))
@@ -637,11 +637,11 @@ fn a_plate_sequence_finds_the_light_and_exports_on_a_thread_as_render_frames_doe
     }
     // Cancel stops it; a pattern without a frame field is refused with the reason.
     h.state_mut().export_sequence(&dir.path().join("again/f.####.png").display().to_string(), false);
-    h.state().shot_job.as_ref().unwrap().job.cancel();
-    step_until(&mut h, 60.0, |app| app.shot_job.is_none());
-    assert!(h.state().shot_status.contains("cancel"), "{}", h.state().shot_status);
+    h.state().jobs().cancel_shot();
+    step_until(&mut h, 60.0, |app| !app.jobs().shot_running());
+    assert!(h.state().jobs().shot_status().contains("cancel"), "{}", h.state().jobs().shot_status());
     h.state_mut().export_sequence(&dir.path().join("still.png").display().to_string(), false);
-    assert!(h.state().shot_job.is_none());
+    assert!(!h.state().jobs().shot_running());
     assert!(h.state().message().is_some_and(|m| m.contains("frame field")), "{:?}", h.state().message());
 }
 
@@ -686,10 +686,10 @@ fn lut_ghosts_bake_by_themselves_and_undo_to_a_baked_lens_needs_no_bake() {
     let coarse = BakeSettings { res: 32, grid: 16, initial_steps: 2, tolerance: 0.5, ..BakeSettings::default() };
     let app_on = |doc| {
         let mut app = FlareLabApp::new(None, Some(doc));
-        app.autobake.cache = Some(LutCache::new(dir.path()));
-        app.autobake.settings = coarse.clone();
+        app.jobs_mut().autobake_mut().cache = Some(LutCache::new(dir.path()));
+        app.jobs_mut().autobake_mut().settings = coarse.clone();
         // Bakes start as soon as the optics change here (the settling has its own test).
-        app.autobake.settle = std::time::Duration::ZERO;
+        app.jobs_mut().autobake_mut().settle = std::time::Duration::ZERO;
         Harness::builder()
             .with_size(egui::vec2(1280.0, 800.0))
             .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), app)
@@ -697,7 +697,7 @@ fn lut_ghosts_bake_by_themselves_and_undo_to_a_baked_lens_needs_no_bake() {
     let mut h = app_on(heliar());
     h.run_steps(2);
     // The bake starts by itself; until it is done the paraxial flare shows, and the status bar says so.
-    assert_eq!(h.state().autobake.bakes_started, 1);
+    assert_eq!(h.state().jobs().autobake().bakes_started, 1);
     assert!(h.state().lut().is_none());
     assert!(h.query_by_label_contains("the paraxial flare until").is_some(), "the status bar says what shows");
     step_until(&mut h, 600.0, |app| app.lut().is_some());
@@ -708,7 +708,7 @@ fn lut_ghosts_bake_by_themselves_and_undo_to_a_baked_lens_needs_no_bake() {
     // Change the lens: its bake starts by itself, the old LUT is not drawn for it, and the new one is used.
     h.state_mut().edit().lens = flare_core::optics::library::builtin_lens("tessar").unwrap();
     h.run_steps(2);
-    assert_eq!(h.state().autobake.bakes_started, 2);
+    assert_eq!(h.state().jobs().autobake().bakes_started, 2);
     assert!(h.state().lut().is_none());
     step_until(&mut h, 600.0, |app| app.lut().is_some());
     assert_eq!(h.state().lut().unwrap().lens_id, "brendel_tessar_usp2854889");
@@ -717,11 +717,11 @@ fn lut_ghosts_bake_by_themselves_and_undo_to_a_baked_lens_needs_no_bake() {
     h.run();
     assert_eq!(h.state().doc().lens.id, "heliar_tronnier_us2645156");
     assert_eq!(h.state().lut().map(|l| l.lens_id.as_str()), Some("heliar_tronnier_us2645156"));
-    assert_eq!(h.state().autobake.bakes_started, 2, "no new bake");
+    assert_eq!(h.state().jobs().autobake().bakes_started, 2, "no new bake");
     // A new session finds both LUTs in the disk cache: no bake at all.
     let mut fresh = app_on(heliar());
     fresh.run_steps(2);
-    assert_eq!(fresh.state().autobake.bakes_started, 0);
+    assert_eq!(fresh.state().jobs().autobake().bakes_started, 0);
     assert_eq!(fresh.state().lut().map(|l| l.lens_id.as_str()), Some("heliar_tronnier_us2645156"));
     // A damaged cache entry is not trusted: it is reported and baked again.
     for entry in std::fs::read_dir(dir.path()).unwrap() {
@@ -733,7 +733,7 @@ fn lut_ghosts_bake_by_themselves_and_undo_to_a_baked_lens_needs_no_bake() {
     }
     let mut damaged = app_on(heliar());
     damaged.run_steps(2);
-    assert_eq!(damaged.state().autobake.bakes_started, 1);
+    assert_eq!(damaged.state().jobs().autobake().bakes_started, 1);
     assert!(damaged.state().message().is_some_and(|m| m.contains("ignored")), "{:?}", damaged.state().message());
 }
 
@@ -810,10 +810,13 @@ fn the_looks_panel_renders_thumbnails_on_a_worker_and_applies_a_look_as_one_undo
     // The panel repaints while its worker runs: step, do not wait for it to settle.
     h.state_mut().show_tab(Tab::Looks);
     h.run_steps(2);
-    step_until(&mut h, 300.0, |app| app.looks.ready());
+    step_until(&mut h, 300.0, |app| app.jobs().looks().ready());
     h.run_steps(2);
     let shipped = flare_core::preset::shipped();
-    assert!(h.state().looks.thumbnails.iter().all(|t| matches!(t, Some(Ok(_)))), "every look has its thumbnail");
+    assert!(
+        h.state().jobs().looks().thumbnails.iter().all(|t| matches!(t, Some(Ok(_)))),
+        "every look has its thumbnail"
+    );
     let before = h.state().doc().clone();
     let k = shipped.iter().position(|p| p.name == "vintage-uncoated").unwrap();
     h.get_by_label("vintage-uncoated").click();
@@ -831,17 +834,17 @@ fn the_report_tab_ranks_ghosts_on_a_worker_sorts_selects_and_exports() {
     h.state_mut().show_tab(Tab::Report);
     h.run_steps(2);
     let ready = |app: &FlareLabApp| {
-        matches!(&app.report.shown, Some((_, Ok(r))) if r.ghosts.len() == 28)
+        matches!(&app.jobs().report().shown, Some((_, Ok(r))) if r.ghosts.len() == 28)
             && app.derived.flare.as_ref().is_some_and(|f| {
                 let light = app.derived.light_deg(&app.doc());
                 let u = flare_core::optics::sensor::light_slopes_for_frame_position(light[0], light[1]);
-                !app.report.stale(flarelab::app::ghost_report::ReportKey::new(f, u))
+                !app.jobs().report().stale(flarelab::app::ghost_report::ReportKey::new(f, u))
             })
     };
     step_until(&mut h, 120.0, ready);
     h.run_steps(2);
     // Worst first by default; the peak header sorts by peak (highest first), a second click reverses it.
-    let report = match &h.state().report.shown {
+    let report = match &h.state().jobs().report().shown {
         Some((_, Ok(r))) => r.clone(),
         _ => unreachable!(),
     };
@@ -855,15 +858,15 @@ fn the_report_tab_ranks_ghosts_on_a_worker_sorts_selects_and_exports() {
     // The peak header sorts by peak, highest first; a second click reverses it.
     h.get_by_label("peak").click();
     h.run_steps(2);
-    assert_eq!(h.state().report.sort, (flarelab::app::ghost_report::ReportColumn::Peak, true));
+    assert_eq!(h.state().jobs().report().sort, (flarelab::app::ghost_report::ReportColumn::Peak, true));
     h.get_by_label("peak v").click();
     h.run_steps(2);
-    assert_eq!(h.state().report.sort, (flarelab::app::ghost_report::ReportColumn::Peak, false));
+    assert_eq!(h.state().jobs().report().sort, (flarelab::app::ghost_report::ReportColumn::Peak, false));
     // Moving the light recomputes the report for the new light.
     h.state_mut().edit().light_deg = [-4.0, 2.0];
     h.run_steps(2);
     step_until(&mut h, 120.0, ready);
-    let moved = match &h.state().report.shown {
+    let moved = match &h.state().jobs().report().shown {
         Some((_, Ok(r))) => r.clone(),
         _ => unreachable!(),
     };
@@ -942,7 +945,9 @@ fn the_depth_of_field_defocuses_the_plate_on_a_thread_as_the_command_line_does()
     h.step();
     h.step();
     assert!(h.state().doc().dof.enabled);
-    step_until(&mut h, 60.0, |app| !app.dof_work.busy() && app.dof_work.status.contains("live on the CPU twin"));
+    step_until(&mut h, 60.0, |app| {
+        !app.jobs().dof().busy() && app.jobs().dof().status.contains("live on the CPU twin")
+    });
     let app = h.state();
     let (shown, sharp) = (app.derived.plate.clone().unwrap(), app.derived.sharp_plate.clone().unwrap());
     assert_ne!(shown.pixels, sharp.pixels, "the plate is defocused");
@@ -958,13 +963,13 @@ fn the_depth_of_field_defocuses_the_plate_on_a_thread_as_the_command_line_does()
     h.state_mut().focus_from_pointer(egui::pos2(100.0, 90.0), rect);
     assert_eq!(h.state().doc().dof.focus_px, Some([100, 90]));
     assert!(!h.state().focus_pick());
-    step_until(&mut h, 60.0, |app| !app.dof_work.busy() && app.dof_work.status.contains("focus 5.00 m"));
+    step_until(&mut h, 60.0, |app| !app.jobs().dof().busy() && app.jobs().dof().status.contains("focus 5.00 m"));
     // A depth map of another size: said once, the sharp plate shown, nothing lost.
     let (_, small) = flare_core::dof::scene::street(160, 90);
     let wrong = dir.path().join("small_z.exr");
     flare_core::dof::depth::write_exr(&wrong, &small).unwrap();
     h.state_mut().edit().dof.depth = Some(wrong.display().to_string());
-    step_until(&mut h, 60.0, |app| !app.dof_work.busy() && app.dof_work.status.contains("same size"));
+    step_until(&mut h, 60.0, |app| !app.jobs().dof().busy() && app.jobs().dof().status.contains("same size"));
     let app = h.state();
     assert!(app.message().is_some_and(|m| m.contains("160x90") && m.contains("320x180")), "{:?}", app.message());
     assert_eq!(app.derived.plate.as_ref().unwrap().pixels, app.derived.sharp_plate.as_ref().unwrap().pixels);
@@ -979,11 +984,11 @@ fn the_depth_of_field_runs_on_the_apps_gpu_as_its_cpu_twin_does() {
     let doc = street_doc(dir.path(), 256, 144, true);
     let Some(mut h) = gpu_harness(Some(doc)) else { return };
     // The first frame may have started a job on the CPU twin already: a new focus starts one on the GPU.
-    h.state_mut().dof_work.gpu_on_software = true;
+    h.state_mut().jobs_mut().dof_mut().gpu_on_software = true;
     h.state_mut().edit().dof.focus_m = 1.0;
-    step_until(&mut h, 120.0, |app| !app.dof_work.busy() && app.dof_work.status.contains("focus 1.00 m"));
+    step_until(&mut h, 120.0, |app| !app.jobs().dof().busy() && app.jobs().dof().status.contains("focus 1.00 m"));
     let app = h.state();
-    let status = app.dof_work.status.clone();
+    let status = app.jobs().dof().status.clone();
     assert!(status.contains("live on") && !status.contains("CPU twin"), "{status}");
     let shown = app.derived.plate.clone().unwrap();
     let cpu = flare_core::shot::plate::defocus(
@@ -1004,13 +1009,13 @@ fn the_depth_of_field_runs_on_the_apps_gpu_as_its_cpu_twin_does() {
 fn the_ray_grid_view_traces_the_frame_shown_and_shows_it_in_the_viewport() {
     let Some(mut h) = gpu_harness(Some(heliar())) else { return };
     h.run();
-    h.state_mut().raygrid.grid = Some(16);
+    h.state_mut().jobs_mut().raygrid_mut().grid = Some(16);
     let traced = |app: &FlareLabApp| app.view_shows_traced();
     step_until(&mut h, 120.0, traced);
     let app = h.state();
-    assert!(app.raygrid.status.starts_with("ray grid 16 (CPU"), "{}", app.raygrid.status);
+    assert!(app.jobs().raygrid().status.starts_with("ray grid 16 (CPU"), "{}", app.jobs().raygrid().status);
     let (generation, frame) = app.derived.view_frame.clone().unwrap();
-    let shown = app.raygrid.traced(generation).unwrap().display.clone();
+    let shown = app.jobs().raygrid().traced(generation).unwrap().display.clone();
     // The same frame's ghosts traced again through the public pipeline give the same pixels.
     let flare = app.flare().unwrap();
     let scene = &frame.scene;
@@ -1039,22 +1044,26 @@ fn the_ray_grid_view_traces_the_frame_shown_and_shows_it_in_the_viewport() {
     h.state_mut().derived.lut_generation += 1;
     h.step();
     assert_ne!(h.state().derived.view_frame.as_ref().unwrap().0, generation);
-    assert!(h.state().view_shows_traced() && !h.state().raygrid.busy(), "{}", h.state().raygrid.status);
+    assert!(
+        h.state().view_shows_traced() && !h.state().jobs().raygrid().busy(),
+        "{}",
+        h.state().jobs().raygrid().status
+    );
     // A drag: paraxial drafts while it lasts, then the new frame is traced.
     drag(&mut h, egui::pos2(300.0, 250.0), egui::pos2(380.0, 220.0));
     assert!(!h.state().view_shows_traced(), "the frame changed: the traced image is not shown");
     step_until(&mut h, 120.0, traced);
     assert_ne!(h.state().derived.view_frame.as_ref().unwrap().0, generation);
     // Cancel stops the trace of a new frame; leaving the mode draws the look again.
-    h.state_mut().raygrid.grid = Some(32);
+    h.state_mut().jobs_mut().raygrid_mut().grid = Some(32);
     h.step();
-    assert!(h.state().raygrid.busy());
-    h.state_mut().raygrid.cancel();
+    assert!(h.state().jobs().raygrid().busy());
+    h.state_mut().jobs_mut().raygrid_mut().cancel();
     h.step();
-    assert!(!h.state().raygrid.busy() && h.state().raygrid.status.contains("cancelled"));
-    h.state_mut().raygrid.grid = None;
+    assert!(!h.state().jobs().raygrid().busy() && h.state().jobs().raygrid().status.contains("cancelled"));
+    h.state_mut().jobs_mut().raygrid_mut().grid = None;
     h.run();
-    assert!(!h.state().view_shows_traced() && h.state().raygrid.status.is_empty());
+    assert!(!h.state().view_shows_traced() && h.state().jobs().raygrid().status.is_empty());
 }
 
 /// Undo and redo walk through a refused edit and the automatic exposure and give back the document exactly, as
@@ -1151,13 +1160,14 @@ fn a_focus_finishes_while_a_bake_runs_in_the_background() {
     doc.lens = flare_core::preset::Document::default().lens;
     let mut h = harness_on(Some(doc));
     h.run();
-    step_until(&mut h, 120.0, |app| !app.dof_work.busy() && app.dof_work.status.contains("focus 5.00 m"));
+    step_until(&mut h, 120.0, |app| !app.jobs().dof().busy() && app.jobs().dof().status.contains("focus 5.00 m"));
     show(&mut h, Tab::Blend);
     h.get_by_label("Bake").click();
     h.run_steps(2);
     assert!(matches!(h.state().bake_status(), BakeStatus::Running { .. }), "{:?}", h.state().bake_status());
     h.state_mut().edit().dof.focus_m = 2.0;
-    let seconds = step_until(&mut h, 300.0, |app| !app.dof_work.busy() && app.dof_work.status.contains("focus 2.00 m"));
+    let seconds =
+        step_until(&mut h, 300.0, |app| !app.jobs().dof().busy() && app.jobs().dof().status.contains("focus 2.00 m"));
     let status = h.state().bake_status();
     println!("a focus while the zoom bakes: {seconds:.1} s ({status:?})");
     assert!(matches!(status, BakeStatus::Running { .. }), "the bake finished first: {status:?}");
@@ -1225,19 +1235,19 @@ fn an_exposure_tweak_does_not_restart_the_bake_and_quick_lens_edits_start_one() 
     use flarelab::panels::BakeStatus;
     let coarse = BakeSettings { res: 32, grid: 16, initial_steps: 2, tolerance: 0.5, ..BakeSettings::default() };
     let mut app = FlareLabApp::new(None, Some(flare_core::preset::Document::default()));
-    app.autobake.cache = None;
-    app.autobake.settings = coarse;
+    app.jobs_mut().autobake_mut().cache = None;
+    app.jobs_mut().autobake_mut().settings = coarse;
     let mut h = Harness::builder()
         .with_size(egui::vec2(1280.0, 800.0))
         .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), app);
     h.run_steps(2);
-    assert_eq!(h.state().autobake.bakes_started, 1, "the session's optics bake at once");
+    assert_eq!(h.state().jobs().autobake().bakes_started, 1, "the session's optics bake at once");
     assert!(matches!(h.state().bake_status(), BakeStatus::Running { .. }));
     for ev in [6.0, 9.0, 12.0] {
         h.get_by_role_and_label(egui::accesskit::Role::Slider, "flare exposure").set_value_accesskit(ev);
         h.run_steps(2);
     }
-    assert_eq!(h.state().autobake.bakes_started, 1, "the exposure is not the optics");
+    assert_eq!(h.state().jobs().autobake().bakes_started, 1, "the exposure is not the optics");
     assert!(matches!(h.state().bake_status(), BakeStatus::Running { .. }), "{:?}", h.state().bake_status());
     h.state_mut().show_tab(Tab::Lens);
     h.run_steps(2);
@@ -1246,11 +1256,11 @@ fn an_exposure_tweak_does_not_restart_the_bake_and_quick_lens_edits_start_one() 
         h.get_by_label("radius 0").set_value_accesskit(r * scale);
         h.run_steps(2);
     }
-    assert_eq!(h.state().autobake.bakes_started, 1, "nothing starts while the edits come");
-    step_until(&mut h, 60.0, |app| app.autobake.bakes_started == 2);
+    assert_eq!(h.state().jobs().autobake().bakes_started, 1, "nothing starts while the edits come");
+    step_until(&mut h, 60.0, |app| app.jobs().autobake().bakes_started == 2);
     std::thread::sleep(std::time::Duration::from_millis(1000));
     h.run_steps(2);
-    assert_eq!(h.state().autobake.bakes_started, 2, "one bake, for the last value");
+    assert_eq!(h.state().jobs().autobake().bakes_started, 2, "one bake, for the last value");
     h.state_mut().show_tab(Tab::Blend);
     h.run_steps(2);
     h.get_by_label("Cancel").click();

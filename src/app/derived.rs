@@ -243,6 +243,12 @@ impl Derived {
         Document { flare_ev: self.flare_ev(doc), ..doc.clone() }
     }
 
+    /// The light found in the plates for the live document (or none): the frame shows it from now on.
+    pub fn set_shot_plan(&mut self, plan: Option<ShotPlan>) {
+        self.shot_plan = plan.map(Arc::new);
+        self.frame_key = None;
+    }
+
     /// Forgets the optics' key, so the next sync rebuilds the flare (after something outside the document
     /// changed its optics: a glass catalogue added).
     pub fn invalidate_optics(&mut self) {

@@ -23,7 +23,7 @@ impl FlareLabApp {
                 None => ui.weak("no depth map"),
             };
             if self.session.doc().dof.enabled {
-                let busy = self.dof_work.busy();
+                let busy = self.jobs.dof().busy();
                 if busy {
                     ui.spinner();
                 }

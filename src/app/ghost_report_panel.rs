@@ -19,10 +19,10 @@ impl FlareLabApp {
         let light = self.derived.light_deg(self.session.doc());
         let u = super::view::light_slopes(light);
         let key = ReportKey::new(&flare, u);
-        if self.report.step(key, &self.session.doc().lens, &flare, u) {
+        if self.jobs.report_mut().step(key, &self.session.doc().lens, &flare, u) {
             ui.ctx().request_repaint_after(std::time::Duration::from_millis(100));
         }
-        let stale = self.report.stale(key);
+        let stale = self.jobs.report_mut().stale(key);
         ui.horizontal(|ui| {
             ui.label(format!(
                 "Light at ({:.1}, {:.1}) deg, f/{:.2}",
@@ -34,7 +34,7 @@ impl FlareLabApp {
                 ui.add(egui::Spinner::new());
                 ui.weak("computing…");
             }
-            let ready = matches!(&self.report.shown, Some((_, Ok(_))));
+            let ready = matches!(&self.jobs.report_mut().shown, Some((_, Ok(_))));
             if ui
                 .add_enabled(ready, egui::Button::new("Export…"))
                 .on_hover_text("the table as CSV, or all as JSON")
@@ -43,7 +43,7 @@ impl FlareLabApp {
                 self.pick_file(FileUse::ExportReport);
             }
         });
-        let Some((_, shown)) = &self.report.shown else { return };
+        let Some((_, shown)) = &self.jobs.report_mut().shown else { return };
         let report = match shown {
             Ok(r) => r.clone(),
             Err(e) => {
@@ -74,7 +74,7 @@ impl FlareLabApp {
     }
 
     fn report_table(&mut self, ui: &mut egui::Ui, report: &GhostReport, flare: &flare_core::flare::PreparedFlare) {
-        let (column, descending) = self.report.sort;
+        let (column, descending) = self.jobs.report_mut().sort;
         let mut rows: Vec<(usize, &GhostRow)> = report.ghosts.iter().enumerate().collect();
         let value = |r: &GhostRow, rank: usize| -> f64 {
             match column {
@@ -111,7 +111,8 @@ impl FlareLabApp {
                     ] {
                         let arrow = if c == column { if descending { " v" } else { " ^" } } else { "" };
                         if ui.button(format!("{title}{arrow}")).on_hover_text(hover).clicked() {
-                            self.report.sort = (c, if c == column { !descending } else { c != ReportColumn::Rank });
+                            self.jobs.report_mut().sort =
+                                (c, if c == column { !descending } else { c != ReportColumn::Rank });
                         }
                     }
                     ui.end_row();
@@ -144,7 +145,7 @@ impl FlareLabApp {
     /// Writes the report shown: CSV (the ghost table, the command line's `--report --csv`) or JSON (all of it),
     /// by the file name, through a temporary file and a rename.
     pub(super) fn export_report_to(&mut self, path: &std::path::Path) {
-        let Some((_, Ok(report))) = &self.report.shown else {
+        let Some((_, Ok(report))) = &self.jobs.report_mut().shown else {
             self.session.say("no ghost report to export yet (open the Report tab)");
             return;
         };

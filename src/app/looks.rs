@@ -15,7 +15,7 @@ use eframe::egui;
 use flare_core::image::DisplayImage;
 use flare_core::preset::shipped;
 
-use super::job::{Job, JobPoll};
+use super::job::{Job, JobPoll, Priority};
 
 /// Thumbnail size in pixels.
 pub const THUMB: (u32, u32) = (192, 108);
@@ -41,7 +41,7 @@ impl Looks {
         }
         self.thumbnails = vec![None; shipped().len()];
         let done = self.done.clone();
-        self.job = Some(Job::spawn("rendering the looks…", move |cancel, progress| {
+        self.job = Some(Job::spawn_with(Priority::Background, "rendering the looks…", move |cancel, progress| {
             // A pool of its own: a background bake keeps rayon's global pool busy for half a minute, and the
             // thumbnails should not wait for it.
             let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().ok();

@@ -9,10 +9,10 @@ use super::looks::THUMB;
 impl FlareLabApp {
     /// The Looks panel (see the module documentation).
     pub(super) fn looks_ui(&mut self, ui: &mut egui::Ui) {
-        self.looks.start();
-        if self.looks.poll(ui.ctx()) {
+        self.jobs.looks_mut().start();
+        if self.jobs.looks_mut().poll(ui.ctx()) {
             ui.ctx().request_repaint_after(std::time::Duration::from_millis(100));
-            if let Some(job) = &self.looks.job {
+            if let Some(job) = &self.jobs.looks_mut().job {
                 let (fraction, text) = job.progress();
                 ui.add(egui::ProgressBar::new(fraction).text(text));
             }
@@ -23,7 +23,7 @@ impl FlareLabApp {
             for (k, preset) in shipped().iter().enumerate() {
                 ui.vertical(|ui| {
                     let size = egui::vec2(THUMB.0 as f32, THUMB.1 as f32);
-                    let response = match self.looks.thumbnails.get(k).cloned().flatten() {
+                    let response = match self.jobs.looks_mut().thumbnails.get(k).cloned().flatten() {
                         Some(Ok(texture)) => {
                             ui.add(egui::Image::from_texture((texture.id(), size)).sense(egui::Sense::click()))
                         }

@@ -19,10 +19,10 @@
 //! from the document, its sync and its GPU uploads; the UI only reads it), [`bake`] (the bake thread, with progress and Cancel) and [`drag_bench`]
 //! (the app timing itself); [`crate::viewport`] is the bridge to the GPU, [`crate::history`] the undo.
 
+use jobs::{JobBoard, JobEvent, Live};
 use session::Session;
 use view::View;
 
-mod auto_bake_step;
 pub mod autobake;
 pub mod bake;
 pub mod derived;
@@ -35,6 +35,7 @@ pub mod files;
 pub mod ghost_report;
 mod ghost_report_panel;
 pub mod job;
+pub mod jobs;
 pub mod looks;
 mod looks_panel;
 pub mod raygrid_view;
@@ -51,7 +52,7 @@ use crate::panels::ray_diagram::RayDiagram;
 use crate::panels::{Action, BakeStatus, PanelContext};
 use crate::viewport::{FlareCallback, ViewportResources};
 use anyhow::{Result, bail};
-use bake::{BakeJob, BakePoll};
+
 use derived::{Derived, SyncEvent};
 use drag_bench::DragBench;
 use eframe::egui_wgpu::RenderState;
@@ -59,7 +60,6 @@ use eframe::{egui, wgpu};
 use files::FileUse;
 use flare_core::flare::PreparedFlare;
 use flare_core::frame::{Device, Frame, LayerChoice, Sources};
-use flare_core::lut::classify::GhostClass;
 use flare_core::lut::{GhostLut, LutKind};
 use flare_core::optics::formats::{LoadedLens, read_lens_file};
 use flare_core::preset::{Document, LutSource};
@@ -123,7 +123,7 @@ pub fn run() -> Result<()> {
             app.cleared_by_window = true;
             if std::env::var_os("FLARELAB_AUTO_BAKE").is_some_and(|v| v == "0") {
                 // For measurements: no background bake competing for the cores.
-                app.autobake.enabled = false;
+                app.jobs.autobake_mut().enabled = false;
             }
             if let Some(storage) = cc.storage {
                 app.files.recent = restore_recent(storage);
@@ -179,15 +179,6 @@ pub struct FlareLabApp {
     /// What loading the open lens file had to decide (clipped apertures, the system aperture), with the id of
     /// the lens it applies to: shown in the lens panel while that lens is open.
     pub lens_warnings: Option<(String, Vec<String>)>,
-    classes: Option<Vec<GhostClass>>,
-    bake: Option<BakeJob>,
-    bake_status: BakeStatus,
-    /// LUT ghosts without a click (see [`autobake`]).
-    pub autobake: autobake::AutoBake,
-    /// The Looks panel's thumbnails (see [`looks`]).
-    pub looks: looks::Looks,
-    /// The Report tab's ghost report (see [`ghost_report`]).
-    pub report: ghost_report::ReportState,
     /// File choosers and recent files (see [`files`]).
     pub files: files::Files,
     // Panels' own state.
@@ -201,24 +192,12 @@ pub struct FlareLabApp {
     export_size: Option<(u32, u32)>,
     /// The viewport's layout, the pointer <-> light mapping, the playhead, drafts (see [`view`]).
     view: View,
-    /// Finding the light in the plates, or exporting a sequence.
-    pub shot_job: Option<shot::ShotJob>,
-    /// File > Export image, drawing and writing on its thread (the file it writes, the job).
-    pub export_job: Option<(std::path::PathBuf, job::Job<Result<(), String>>)>,
-    /// What the last shot job said.
-    pub shot_status: String,
-    /// What the light found in the plates was (or is being) found for.
-    light_key: Option<u64>,
-    /// The last exported sequence's records.
-    pub last_export: Option<flare_core::shot::sequence::SequenceReport>,
+    /// Every job on a thread: one poll, one status area, one priority rule (see [`jobs`]).
+    jobs: JobBoard,
     /// The Shot panel's text fields.
     pub track_path: String,
     pub sequence_path: String,
     pub plate_path: String,
-    /// The plate's depth of field in progress and shown (see [`dof`]).
-    pub dof_work: dof::DofWork,
-    /// The view's ray-grid mode (see [`raygrid_view`]).
-    pub raygrid: raygrid_view::RayGridView,
     /// The window's render pass clears it to the panels' colour ([`eframe::App::clear_color`]), so the panels
     /// are drawn unfilled; without it (the UI tests' harness clears to transparent) one rectangle paints the
     /// same colour under them.
@@ -240,12 +219,6 @@ impl FlareLabApp {
             gpu,
             derived: Derived::new(software),
             lens_warnings: None,
-            classes: None,
-            bake: None,
-            bake_status: BakeStatus::Idle,
-            autobake: autobake::AutoBake::default(),
-            looks: looks::Looks::default(),
-            report: ghost_report::ReportState::default(),
             files: files::Files::default(),
             aperture_preview: AperturePreview::default(),
             coatings: CoatingsState::default(),
@@ -253,20 +226,15 @@ impl FlareLabApp {
             drag_bench,
             export_size: None,
             view: View::new(software, first_frame),
-            shot_job: None,
-            export_job: None,
-            shot_status: String::new(),
-            light_key: None,
-            last_export: None,
+            jobs: JobBoard::default(),
             track_path: String::new(),
             sequence_path: "flare.####.exr".into(),
             plate_path: String::new(),
-            dof_work: dof::DofWork::default(),
-            raygrid: raygrid_view::RayGridView::default(),
+
             cleared_by_window: false,
         };
         // FLARELAB_RAYGRID=N starts the view in its ray-grid mode (the Xvfb test and screenshots).
-        app.raygrid.grid = std::env::var("FLARELAB_RAYGRID")
+        app.jobs.raygrid_mut().grid = std::env::var("FLARELAB_RAYGRID")
             .ok()
             .and_then(|s| s.parse().ok())
             .filter(|n| raygrid_view::GRIDS.contains(n));
@@ -279,7 +247,7 @@ impl FlareLabApp {
     /// drawing).
     pub fn view_shows_traced(&self) -> bool {
         let Some((generation, _)) = &self.derived.view_frame else { return false };
-        self.raygrid.traced(*generation).is_some()
+        self.jobs.raygrid().traced(*generation).is_some()
             && self.gpu.as_ref().is_some_and(|rs| crate::viewport::ViewportResources::shows_image(rs, *generation))
     }
 
@@ -335,7 +303,17 @@ impl FlareLabApp {
 
     /// Where the bake stands (for the Blend panel and the tests).
     pub fn bake_status(&self) -> &BakeStatus {
-        &self.bake_status
+        self.jobs.bake_status()
+    }
+
+    /// The job board (see [`jobs`]), to read.
+    pub fn jobs(&self) -> &JobBoard {
+        &self.jobs
+    }
+
+    /// The job board, to steer its parts (the tests cancel a trace, make bakes coarse).
+    pub fn jobs_mut(&mut self) -> &mut JobBoard {
+        &mut self.jobs
     }
 
     /// Re-derives what changed in the document (see the module documentation).
@@ -344,24 +322,15 @@ impl FlareLabApp {
         self.view.clamp_playhead(timeline.first_frame, timeline.last_frame);
         self.derived.playhead = self.view.playhead();
         let mut events = self.derived.sync(self.session.doc(), self.gpu.as_ref());
-        self.dof_work.sync(&mut self.derived, self.session.doc(), self.gpu.as_ref(), &mut events);
+        self.jobs.dof_mut().sync(&mut self.derived, self.session.doc(), self.gpu.as_ref(), &mut events);
         // A defocused plate that just arrived is a new plate for the frame.
         self.derived.sync_frame(self.session.doc());
         for event in events {
             match event {
                 SyncEvent::Message(text) => self.session.say(text),
                 SyncEvent::LutDropped => {
-                    self.classes = None;
-                    self.autobake.shown = None;
-                    let said: String = if self.autobake.enabled {
-                        "the optics changed: the paraxial flare until their LUT ghosts are ready".into()
-                    } else {
-                        "the optics changed: bake again for LUT ghosts".into()
-                    };
-                    // Replaces what the status bar said (a landed bake's "LUT ghosts ... replace ..." is no longer
-                    // true).
-                    self.session.say(said.clone());
-                    self.bake_status = BakeStatus::Done(said);
+                    let said = self.jobs.lut_dropped();
+                    self.session.say(said);
                 }
             }
         }
@@ -408,11 +377,8 @@ impl FlareLabApp {
         self.step_playback(ui.ctx());
         self.sync();
         self.sync_shot_light();
-        self.poll_shot();
         self.keys(ui.ctx());
-        self.poll_bake();
-        self.poll_export();
-        self.auto_bake_step();
+        self.poll_jobs();
         self.files_step(ui.ctx());
         self.drag_bench_step(ui.ctx());
         self.draft_step(ui.ctx());
@@ -463,7 +429,7 @@ impl FlareLabApp {
             self.act(action);
         }
         self.sync();
-        self.raygrid.step(&self.derived, self.gpu.as_ref());
+        self.jobs.raygrid_mut().step(&self.derived, self.gpu.as_ref());
         // An edit in this frame made a new scene after the viewport was painted: paint once more.
         if self.derived.frame_pending && self.gpu.is_some() {
             ui.ctx().request_repaint();
@@ -472,12 +438,7 @@ impl FlareLabApp {
         if !ui.ctx().input(|i| i.pointer.any_down()) {
             self.session.commit();
         }
-        if self.bake.is_some()
-            || self.shot_job.is_some()
-            || self.export_job.is_some()
-            || self.dof_work.busy()
-            || self.raygrid.busy()
-        {
+        if self.jobs.busy() {
             ui.ctx().request_repaint_after(std::time::Duration::from_millis(100));
         }
     }
@@ -499,11 +460,11 @@ impl FlareLabApp {
                 _ => &[],
             },
             ghosts: &self.derived.ghosts,
-            classes: self.classes.as_deref(),
+            classes: self.jobs.classes(),
             lut: self.derived.lut.as_deref().map(|l| &l.lut),
             selected: self.session.selected(),
-            bake: &self.bake_status,
-            auto_bake: self.autobake.enabled,
+            bake: self.jobs.bake_status(),
+            auto_bake: self.jobs.autobake().enabled,
             lut_summary: None,
         };
         let summary = self.derived.lut.as_ref().map(|l| {
@@ -661,53 +622,7 @@ impl FlareLabApp {
             (None, None) => "no GPU".to_owned(),
         };
         ui.label(format!("{quality} | {gpu_time}"));
-        if !self.dof_work.status.is_empty() {
-            ui.label(&self.dof_work.status);
-        }
-        // The ray-grid view: what it shows or is tracing, with Cancel.
-        if !self.raygrid.status.is_empty() {
-            ui.horizontal(|ui| {
-                if let Some((fraction, text)) = self.raygrid.progress() {
-                    ui.add(egui::ProgressBar::new(fraction).text(text).desired_width(360.0));
-                    if ui.button("Cancel trace").clicked() {
-                        self.raygrid.cancel();
-                    }
-                } else {
-                    ui.label(&self.raygrid.status);
-                }
-            });
-        }
-        // The bake (started by itself or from the Blend panel) shows its progress and Cancel here too.
-        if let (Some(job), BakeStatus::Running { fraction, text }) = (&self.bake, &self.bake_status) {
-            ui.horizontal(|ui| {
-                ui.label(format!("baking LUT ghosts, the paraxial flare until then: {text}"));
-                ui.add(egui::ProgressBar::new(*fraction).desired_width(160.0));
-                if ui.button("Cancel bake").clicked() {
-                    job.cancel();
-                }
-            });
-        }
-        // An image export shows its progress and Cancel here.
-        if let Some((path, job)) = &self.export_job {
-            ui.horizontal(|ui| {
-                let (fraction, text) = job.progress();
-                ui.add(egui::ProgressBar::new(fraction).text(text).desired_width(360.0));
-                ui.label(format!("exporting {}", path.display()));
-                if ui.button("Cancel export").clicked() {
-                    job.cancel();
-                }
-            });
-        }
-        // A shot job shows its progress and Cancel here too, whichever panel is open.
-        if let Some(job) = &self.shot_job {
-            ui.horizontal(|ui| {
-                let (fraction, text) = job.job.progress();
-                ui.add(egui::ProgressBar::new(fraction).text(text).desired_width(360.0));
-                if ui.button("Cancel").clicked() {
-                    job.job.cancel();
-                }
-            });
-        }
+        self.jobs.status_ui(ui);
     }
 
     /// The display settings under the view, in two rows (a slider and its value never wrap apart): the
@@ -767,12 +682,12 @@ impl FlareLabApp {
                 Some(n) => format!("ray grid {n}"),
             };
             egui::ComboBox::from_label("ghosts")
-                .selected_text(ghosts_label(self.raygrid.grid))
+                .selected_text(ghosts_label(self.jobs.raygrid().grid))
                 .width(90.0)
                 .show_ui(ui, |ui| {
-                    ui.selectable_value(&mut self.raygrid.grid, None, "look (paraxial + LUT)");
+                    ui.selectable_value(&mut self.jobs.raygrid_mut().grid, None, "look (paraxial + LUT)");
                     for n in raygrid_view::GRIDS {
-                        ui.selectable_value(&mut self.raygrid.grid, Some(n), format!("ray grid {n} (exact)"));
+                        ui.selectable_value(&mut self.jobs.raygrid_mut().grid, Some(n), format!("ray grid {n} (exact)"));
                     }
                 })
                 .response
@@ -946,13 +861,12 @@ impl FlareLabApp {
                 self.session.show_tab(Tab::Coatings);
             }
             Action::OpenLensFile => self.pick_file(FileUse::OpenLens),
-            Action::Bake => self.start_bake(),
-            Action::SetAutoBake(on) => self.autobake.enabled = on,
-            Action::CancelBake => {
-                if let Some(job) = &self.bake {
-                    job.cancel();
-                }
+            Action::Bake => {
+                let live = Self::live(&self.session, &self.derived);
+                self.jobs.start_bake(&live);
             }
+            Action::SetAutoBake(on) => self.jobs.autobake_mut().enabled = on,
+            Action::CancelBake => self.jobs.cancel_bake(),
             Action::OpenLut => self.pick_file(FileUse::OpenLut),
             Action::ExportLut => {
                 if self.derived.lut.is_none() {
@@ -1095,7 +1009,7 @@ impl FlareLabApp {
     /// (a cancelled export writes nothing), and the window goes on meanwhile (a blended 1920x1080 frame takes
     /// seconds on the CPU).
     pub fn export_image_file(&mut self, path: &std::path::Path) {
-        if self.export_job.is_some() {
+        if self.jobs.exporting_image() {
             self.session.say("an export is running: wait for it or cancel it");
             return;
         }
@@ -1121,29 +1035,36 @@ impl FlareLabApp {
                 .map_err(|e| e.to_string())
         });
         self.session.say(format!("exporting {}", path.display()));
-        self.export_job = Some((path.to_path_buf(), job));
-    }
-
-    /// Takes a finished export's outcome into the status bar.
-    fn poll_export(&mut self) {
-        let Some((path, job)) = &self.export_job else { return };
-        if let job::JobPoll::Finished(outcome) = job.poll() {
-            self.session.say(match outcome {
-                Ok(()) => format!("wrote {}", path.display()),
-                Err(e) => format!("could not export {}: {e}", path.display()),
-            });
-            self.export_job = None;
+        if let Err(e) = self.jobs.start_export(path, job) {
+            self.session.say(e);
         }
     }
 
-    /// The Bake button: a bake of the live optics now (the automatic bake does the same by itself).
-    fn start_bake(&mut self) {
-        let Some(flare) = self.derived.flare.clone() else { return };
-        if self.bake.is_some() {
-            return;
+    /// What the job board needs of the live state.
+    fn live<'a>(session: &'a Session, derived: &'a Derived) -> Live<'a> {
+        Live {
+            doc: session.doc(),
+            flare: derived.flare.as_ref(),
+            optics_key: derived.optics_key,
+            lens_refused: derived.lens_problem.is_some(),
+            lut_shown: derived.lut.is_some(),
         }
-        let Some(key) = self.live_bake_key() else { return };
-        self.spawn_bake(flare, key);
+    }
+
+    /// Polls every job (see [`jobs`]) and takes what they hand back: a LUT to show (the document's LUT ghosts
+    /// are then the bake's, folded into the current undo step), the light found, what to say.
+    fn poll_jobs(&mut self) {
+        let live = Self::live(&self.session, &self.derived);
+        for event in self.jobs.poll(&live) {
+            match event {
+                JobEvent::Say(text) => self.session.say(text),
+                JobEvent::ShowLut(lut) => {
+                    self.set_lut(Some((*lut).clone()));
+                    self.session.adopt_baked_lut();
+                }
+                JobEvent::LightFound(plan) => self.derived.set_shot_plan(Some(plan)),
+            }
+        }
     }
 
     /// The adapter's name and the GPU pass times of the latest viewport frame whose timestamps came back.
@@ -1195,17 +1116,6 @@ impl FlareLabApp {
                 ctx.send_viewport_cmd(egui::ViewportCommand::Close);
             }
             None => ctx.request_repaint(),
-        }
-    }
-
-    fn poll_bake(&mut self) {
-        let Some(job) = &self.bake else { return };
-        match job.poll() {
-            BakePoll::Running(fraction, text) => self.bake_status = BakeStatus::Running { fraction, text },
-            BakePoll::Finished(outcome) => {
-                self.bake = None;
-                self.finish_bake(outcome);
-            }
         }
     }
 }
@@ -1271,7 +1181,7 @@ impl FlareLabApp {
         let frame = Frame::build(&flare, self.derived.lut.as_deref(), &request);
         // The plate the view shows, or the sharp one to defocus on the export's thread when the view's depth
         // of field is not done yet (an export never waits for the view, nor goes out without its DoF).
-        let plate = if self.dof_work.ready(&self.derived, self.session.doc()) {
+        let plate = if self.jobs.dof().ready(&self.derived, self.session.doc()) {
             ExportPlate::Ready(self.derived.plate.clone())
         } else {
             ExportPlate::Defocus(

@@ -21,8 +21,7 @@ use flare_core::shot::track::{read_track, to_keys};
 use flare_core::timeline::Interpolation;
 
 use super::FlareLabApp;
-use super::job::JobPoll;
-use super::shot::{ShotJob, ShotOutcome, light_key};
+use super::shot::ShotJob;
 
 impl FlareLabApp {
     /// The timeline strip (see the module documentation).
@@ -217,7 +216,7 @@ impl FlareLabApp {
 
     /// Starts exporting the timeline's range to the sequence `pattern` (on a thread, with progress and Cancel).
     pub fn export_sequence(&mut self, pattern: &str, gpu: bool) {
-        if self.shot_job.as_ref().is_some_and(|j| j.exporting) {
+        if self.jobs.exporting_sequence() {
             self.session.say("an export is already running");
             return;
         }
@@ -246,15 +245,8 @@ impl FlareLabApp {
             return;
         }
         // The light found in the plates serves the export when it was found for this very document.
-        let found = self.derived.shot_plan.clone().filter(|_| {
-            self.session.doc().auto_light.is_some()
-                && self.light_key == Some(light_key(self.session.doc()))
-                && self.shot_job.is_none()
-        });
-        if let Some(job) = self.shot_job.take() {
-            job.job.cancel();
-        }
-        self.shot_job = Some(ShotJob::export(
+        let found = self.derived.shot_plan.clone().filter(|_| self.jobs.light_found_for(self.session.doc()));
+        self.jobs.start_sequence(ShotJob::export(
             self.derived.resolved(self.session.doc()),
             flare,
             self.derived.lut.clone(),
@@ -263,7 +255,6 @@ impl FlareLabApp {
             self.export_size,
             gpu,
         ));
-        self.shot_status = "exporting…".into();
     }
 
     /// File > Export sequence…: the file chooser for the first file's name (a name without a frame field
@@ -286,67 +277,10 @@ impl FlareLabApp {
     /// Starts or replaces the job finding the light when what it depends on changed; drops the light found
     /// when the document no longer asks for it.
     pub fn sync_shot_light(&mut self) {
-        let wanted = self.session.doc().auto_light.is_some() && self.session.doc().background.is_some();
-        if !wanted {
-            self.derived.shot_plan = None;
-            self.light_key = None;
-            if self.shot_job.as_ref().is_some_and(|j| !j.exporting) {
-                self.shot_job = None;
-            }
-            return;
-        }
-        let key = light_key(self.session.doc());
-        if self.light_key == Some(key) || self.shot_job.as_ref().is_some_and(|j| j.exporting) {
-            return;
-        }
-        let Some(flare) = self.derived.flare.clone() else { return };
-        if let Some(job) = self.shot_job.take() {
-            job.job.cancel();
-        }
-        self.light_key = Some(key);
-        self.shot_job = Some(ShotJob::find_light(self.derived.resolved(self.session.doc()), flare));
-    }
-
-    /// Takes a finished job's outcome.
-    pub fn poll_shot(&mut self) {
-        let Some(job) = &self.shot_job else { return };
-        match job.job.poll() {
-            JobPoll::Running(_, text) => self.shot_status = text,
-            JobPoll::Finished(outcome) => {
-                let cancelled = job.job.cancelled();
-                self.shot_job = None;
-                match outcome {
-                    Ok(ShotOutcome::Light { plan, key }) => {
-                        let found = plan.frames.iter().filter(|f| f.visibility > 0.0).count();
-                        self.shot_status = format!("light found on {found} of {} frames", plan.frames.len());
-                        if self.light_key == Some(key) {
-                            self.derived.shot_plan = Some(std::sync::Arc::new(plan));
-                            self.derived.frame_key = None;
-                        }
-                    }
-                    Ok(ShotOutcome::Exported { report, pattern, device }) => {
-                        let median = report.median_ms();
-                        let failed: Vec<&str> = report.failures().into_iter().map(|(_, e)| e).collect();
-                        self.shot_status = format!(
-                            "{}{} frames written to {pattern} on {device} ({median:.0} ms a frame){}",
-                            if cancelled { "cancelled: " } else { "" },
-                            report.rendered(),
-                            if failed.is_empty() {
-                                String::new()
-                            } else {
-                                format!("; {} failed: {}", failed.len(), failed.join("; "))
-                            }
-                        );
-                        self.last_export = Some(report);
-                    }
-                    Err(e) => {
-                        if self.light_key.is_some() && !cancelled {
-                            self.session.say(e.clone());
-                        }
-                        self.shot_status = if cancelled { "cancelled".into() } else { e };
-                    }
-                }
-            }
+        let (session, derived) = (&self.session, &self.derived);
+        let wanted = self.jobs.sync_light(session.doc(), || derived.resolved(session.doc()), derived.flare.as_ref());
+        if !wanted && self.derived.shot_plan.is_some() {
+            self.derived.set_shot_plan(None);
         }
     }
 
@@ -442,16 +376,10 @@ impl FlareLabApp {
                 a.smooth_frames = (n.max(1) as usize) | 1;
             });
         }
-        if let Some(job) = &self.shot_job {
-            ui.horizontal(|ui| {
-                let (fraction, _) = job.job.progress();
-                ui.add(egui::ProgressBar::new(fraction).text(self.shot_status.clone()).desired_width(260.0));
-                if ui.button("Cancel").clicked() {
-                    job.job.cancel();
-                }
-            });
-        } else if !self.shot_status.is_empty() {
-            ui.label(&self.shot_status);
+        if self.jobs.shot_running() {
+            self.jobs.shot_progress_ui(ui);
+        } else if !self.jobs.shot_status().is_empty() {
+            ui.label(self.jobs.shot_status());
         }
         ui.horizontal(|ui| {
             ui.add(egui::TextEdit::singleline(&mut self.track_path).hint_text("track.csv")).on_hover_text(
@@ -470,7 +398,7 @@ impl FlareLabApp {
         ui.horizontal(|ui| {
             ui.add(egui::TextEdit::singleline(&mut self.sequence_path).hint_text("out/flare.####.exr"))
                 .on_hover_text("EXR: linear layers (composite, flare, starburst, plate); PNG: tonemapped");
-            let exporting = self.shot_job.as_ref().is_some_and(|j| j.exporting);
+            let exporting = self.jobs.exporting_sequence();
             if ui.add_enabled(!exporting, egui::Button::new("Export sequence")).clicked() {
                 let pattern = self.sequence_path.trim().to_string();
                 self.export_sequence(&pattern, true);
