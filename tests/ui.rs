@@ -546,7 +546,7 @@ fn the_timeline_keys_the_light_interpolates_plays_and_undo_covers_the_keys() {
     // Frame 6 is between the keys: two keys make a straight line, smooth or not.
     h.get_by_label("frame").set_value_accesskit(6.0);
     h.run();
-    let mid = h.state().derived.light_deg(&h.state().doc());
+    let mid = h.state().derived.light_deg(h.state().doc());
     for c in 0..2 {
         assert!((mid[c] - 0.5 * (a[c] + b2[c])).abs() < 1e-9, "{mid:?} between {a:?} and {b2:?}");
     }
@@ -605,7 +605,7 @@ fn a_plate_sequence_finds_the_light_and_exports_on_a_thread_as_render_frames_doe
     h.get_by_label("frame").set_value_accesskit(3.0);
     h.run();
     let found = h.state().derived.shot_plan.as_ref().unwrap().frames[2].clone();
-    assert_eq!(h.state().derived.light_deg(&h.state().doc()), found.light_deg);
+    assert_eq!(h.state().derived.light_deg(h.state().doc()), found.light_deg);
     assert!(found.light_px.is_some_and(|p| (p[0] - shot.sun_px(3)[0]).hypot(p[1] - shot.sun_px(3)[1]) < 0.5));
     // Export on a thread: the UI keeps running while it works.
     let out = dir.path().join("app/f.####.png").display().to_string();
@@ -836,7 +836,7 @@ fn the_report_tab_ranks_ghosts_on_a_worker_sorts_selects_and_exports() {
     let ready = |app: &FlareLabApp| {
         matches!(&app.jobs().report().shown, Some((_, Ok(r))) if r.ghosts.len() == 28)
             && app.derived.flare.as_ref().is_some_and(|f| {
-                let light = app.derived.light_deg(&app.doc());
+                let light = app.derived.light_deg(app.doc());
                 let u = flare_core::optics::sensor::light_slopes_for_frame_position(light[0], light[1]);
                 !app.jobs().report().stale(flarelab::app::ghost_report::ReportKey::new(f, u))
             })
@@ -952,7 +952,7 @@ fn the_depth_of_field_defocuses_the_plate_on_a_thread_as_the_command_line_does()
     let (shown, sharp) = (app.derived.plate.clone().unwrap(), app.derived.sharp_plate.clone().unwrap());
     assert_ne!(shown.pixels, sharp.pixels, "the plate is defocused");
     let flare = app.flare().unwrap();
-    let cli = flare_core::shot::plate::defocus(&app.doc(), flare, app.playhead(), &sharp).unwrap();
+    let cli = flare_core::shot::plate::defocus(app.doc(), flare, app.playhead(), &sharp).unwrap();
     assert_eq!(cli.pixels, shown.pixels, "the app's plate is the command line's");
     // Focus by click: the toggle, then a click in the view focuses on the depth there.
     h.get_by_label("focus by click").click();
@@ -992,7 +992,7 @@ fn the_depth_of_field_runs_on_the_apps_gpu_as_its_cpu_twin_does() {
     assert!(status.contains("live on") && !status.contains("CPU twin"), "{status}");
     let shown = app.derived.plate.clone().unwrap();
     let cpu = flare_core::shot::plate::defocus(
-        &app.doc(),
+        app.doc(),
         app.flare().unwrap(),
         app.playhead(),
         app.derived.sharp_plate.as_ref().unwrap(),
@@ -1075,7 +1075,7 @@ fn undo_and_redo_return_the_document_exactly_through_a_refused_edit_and_auto_exp
     let mut h = harness_on(Some(dgauss()));
     show(&mut h, Tab::Lens);
     let json = |h: &Harness<'static, FlareLabApp>| h.state().doc().to_json();
-    let shown_ev = |h: &Harness<'static, FlareLabApp>| h.state().derived.flare_ev(&h.state().doc());
+    let shown_ev = |h: &Harness<'static, FlareLabApp>| h.state().derived.flare_ev(h.state().doc());
     assert!(h.state().doc().exposure_auto);
     let (j0, ev0) = (json(&h), shown_ev(&h));
     h.get_by_label("radius 6").set_value_accesskit(-1.0);

@@ -478,19 +478,19 @@ impl FlareLabApp {
         });
         let ctx = PanelContext { lut_summary: summary.as_deref(), ..ctx };
         panel_scroll().show(ui, |ui| match self.session.tab() {
-            Tab::Lens => crate::panels::lens::lens_ui(ui, &mut self.session.edit(), &ctx, actions),
+            Tab::Lens => crate::panels::lens::lens_ui(ui, self.session.edit(), &ctx, actions),
             Tab::Aperture => {
                 crate::panels::aperture::aperture_ui(
                     ui,
-                    &mut self.session.edit(),
+                    self.session.edit(),
                     &ctx,
                     &mut self.aperture_preview,
                     actions,
                 );
             }
-            Tab::Coatings => crate::panels::coatings::coatings_ui(ui, &mut self.session.edit(), &mut self.coatings),
-            Tab::Ghosts => crate::panels::ghosts::ghosts_ui(ui, &mut self.session.edit(), &ctx, actions),
-            Tab::Blend => crate::panels::blend::blend_ui(ui, &mut self.session.edit(), &ctx, actions),
+            Tab::Coatings => crate::panels::coatings::coatings_ui(ui, self.session.edit(), &mut self.coatings),
+            Tab::Ghosts => crate::panels::ghosts::ghosts_ui(ui, self.session.edit(), &ctx, actions),
+            Tab::Blend => crate::panels::blend::blend_ui(ui, self.session.edit(), &ctx, actions),
             Tab::Shot | Tab::Looks | Tab::Report => {}
         });
     }
