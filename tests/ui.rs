@@ -76,14 +76,14 @@ fn editing_a_radius_marks_an_impossible_value_and_keeps_the_last_valid_lens() {
     h.run();
     let r = h.state().doc().lens.surfaces[1].radius_mm;
     assert!((r - before * 1.1).abs() < 1e-9, "radius {r}, wanted {}", before * 1.1);
-    assert!(h.state().derived.lens_problem.is_none());
+    assert!(h.state().derived().lens_problem().is_none());
     let flare_before = h.state().flare().unwrap().system.lens.clone();
     assert_eq!(flare_before.surfaces[1].radius_mm, r, "the flare follows a valid edit");
     // A radius smaller than the clear semi-aperture is no sphere: refused, its cell marked, the flare kept.
     let stop = h.state().doc().lens.stop_index();
     h.get_by_label(&format!("radius {stop}")).set_value_accesskit(2.0);
     h.run();
-    let problem = h.state().derived.lens_problem.clone().expect("an impossible radius is refused");
+    let problem = h.state().derived().lens_problem().clone().expect("an impossible radius is refused");
     assert_eq!((problem.surface, problem.field), (Some(stop), Some("radius")), "{problem:?}");
     assert!(problem.reason.contains("no sphere is that wide"), "{}", problem.reason);
     assert_eq!(h.state().flare().unwrap().system.lens, flare_before, "the viewport keeps the last valid lens");
@@ -92,7 +92,7 @@ fn editing_a_radius_marks_an_impossible_value_and_keeps_the_last_valid_lens() {
     h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
     h.run();
     assert_eq!(h.state().doc().lens.surfaces[stop].radius_mm, 0.0);
-    assert!(h.state().derived.lens_problem.is_none());
+    assert!(h.state().derived().lens_problem().is_none());
 }
 
 #[test]
@@ -109,7 +109,7 @@ fn blades_ghost_toggles_and_undo_redo_change_the_document() {
     );
     // The ghost list: the brightest ghost first; switch it off, then give another a gain.
     show(&mut h, Tab::Ghosts);
-    let mut rows = h.state().derived.ghosts.clone();
+    let mut rows = h.state().derived().ghosts().clone();
     rows.sort_by(|a, b| b.intensity().total_cmp(&a.intensity()));
     let (a, b) = (&rows[0], &rows[1]);
     assert!(a.culled.is_none(), "the brightest ghost is drawn");
@@ -335,7 +335,7 @@ fn snapshots_of_the_whole_window_with_the_flare() {
     h.state_mut().show_tab(Tab::Lens);
     snap(&mut h, "app_lens_panel");
     // The brightest drawn ghost selected: ringed in the viewport, traced in the ray diagram.
-    let mut rows = h.state().derived.ghosts.clone();
+    let mut rows = h.state().derived().ghosts().clone();
     rows.sort_by(|a, b| b.intensity().total_cmp(&a.intensity()));
     h.state_mut().show_tab(Tab::Ghosts);
     h.state_mut().select(rows.iter().find(|r| r.culled.is_none()).map(|r| r.ghost));
@@ -399,7 +399,7 @@ fn the_session_round_trips_through_eframes_storage() {
     assert_eq!(restored, *app.doc());
     // The recent files come back with it.
     assert!(flarelab::app::restore_recent(&storage).is_empty());
-    app.files.remember(std::path::Path::new("/tmp/a look.json"));
+    app.files_mut().remember(std::path::Path::new("/tmp/a look.json"));
     app.save(&mut storage);
     assert_eq!(flarelab::app::restore_recent(&storage), vec![std::path::PathBuf::from("/tmp/a look.json")]);
     // A damaged session is ignored, not a crash.
@@ -412,7 +412,7 @@ fn the_exposure_slider_rebuilds_no_optics_and_no_texture() {
     // On a GPU the viewport uploads textures: counted. Without one only the optics and frames are.
     let mut h = gpu_harness(None).unwrap_or_else(harness);
     show(&mut h, Tab::Ghosts);
-    let before = h.state().derived.rebuilds;
+    let before = h.state().derived().rebuilds();
     assert!(before.optics >= 1 && before.frames >= 1, "{before:?}");
     let mut frame_ms = Vec::new();
     for ev in [8.0, 9.5, 11.0, 12.5, 4.0, 10.5] {
@@ -422,7 +422,7 @@ fn the_exposure_slider_rebuilds_no_optics_and_no_texture() {
         frame_ms.push(started.elapsed().as_secs_f64() * 1e3);
         assert_eq!(h.state().doc().flare_ev, ev);
     }
-    let after = h.state().derived.rebuilds;
+    let after = h.state().derived().rebuilds();
     assert_eq!((after.optics, after.textures), (before.optics, before.textures), "{before:?} -> {after:?}");
     assert!(after.frames > before.frames, "each exposure is a new frame");
     frame_ms.sort_by(f64::total_cmp);
@@ -432,12 +432,12 @@ fn the_exposure_slider_rebuilds_no_optics_and_no_texture() {
     h.state_mut().edit().starburst = false;
     h.state_mut().edit().plate_ev = 2.0;
     h.run();
-    let display = h.state().derived.rebuilds;
+    let display = h.state().derived().rebuilds();
     assert_eq!((display.optics, display.textures), (before.optics, before.textures));
     // An optics edit does rebuild: the counter can see one.
     h.state_mut().edit().aperture.f_number = Some(8.0);
     h.run();
-    assert_eq!(h.state().derived.rebuilds.optics, before.optics + 1);
+    assert_eq!(h.state().derived().rebuilds().optics, before.optics + 1);
 }
 
 /// A look with most of the document off its defaults: ghost gains, exposures, tonemap, aperture, a plate.
@@ -546,7 +546,7 @@ fn the_timeline_keys_the_light_interpolates_plays_and_undo_covers_the_keys() {
     // Frame 6 is between the keys: two keys make a straight line, smooth or not.
     h.get_by_label("frame").set_value_accesskit(6.0);
     h.run();
-    let mid = h.state().derived.light_deg(h.state().doc());
+    let mid = h.state().derived().light_deg(h.state().doc());
     for c in 0..2 {
         assert!((mid[c] - 0.5 * (a[c] + b2[c])).abs() < 1e-9, "{mid:?} between {a:?} and {b2:?}");
     }
@@ -600,12 +600,12 @@ fn a_plate_sequence_finds_the_light_and_exports_on_a_thread_as_render_frames_doe
         .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), quiet(FlareLabApp::new(None, Some(doc))));
     h.state_mut().show_tab(Tab::Shot);
     h.run();
-    step_until(&mut h, 120.0, |app| app.derived.shot_plan.is_some());
+    step_until(&mut h, 120.0, |app| app.derived().shot_plan().is_some());
     // The frame shown has the light found in its plate.
     h.get_by_label("frame").set_value_accesskit(3.0);
     h.run();
-    let found = h.state().derived.shot_plan.as_ref().unwrap().frames[2].clone();
-    assert_eq!(h.state().derived.light_deg(h.state().doc()), found.light_deg);
+    let found = h.state().derived().shot_plan().as_ref().unwrap().frames[2].clone();
+    assert_eq!(h.state().derived().light_deg(h.state().doc()), found.light_deg);
     assert!(found.light_px.is_some_and(|p| (p[0] - shot.sun_px(3)[0]).hypot(p[1] - shot.sun_px(3)[1]) < 0.5));
     // Export on a thread: the UI keeps running while it works.
     let out = dir.path().join("app/f.####.png").display().to_string();
@@ -650,7 +650,7 @@ fn inserting_a_surface_splits_a_gap_and_changes_nothing_optically() {
     let mut h = harness_on(Some(heliar()));
     show(&mut h, Tab::Lens);
     let before = h.state().doc().lens.clone();
-    let fo = |app: &FlareLabApp| app.derived.first_order.clone().expect("a valid lens");
+    let fo = |app: &FlareLabApp| app.derived().first_order().clone().expect("a valid lens");
     let (efl, bfd) = (fo(h.state()).efl_mm, fo(h.state()).bfd_mm);
     // "+" on row 1 (inside glass) and on the last row.
     let plus: Vec<_> = h.get_all_by_label("+").collect();
@@ -662,7 +662,7 @@ fn inserting_a_surface_splits_a_gap_and_changes_nothing_optically() {
     h.run();
     let after = &h.state().doc().lens;
     assert_eq!(after.surfaces.len(), before.surfaces.len() + 2);
-    assert!(h.state().derived.lens_problem.is_none(), "{:?}", h.state().derived.lens_problem);
+    assert!(h.state().derived().lens_problem().is_none(), "{:?}", h.state().derived().lens_problem());
     assert_eq!(
         after.surfaces[1].thickness_mm.unwrap() + after.surfaces[2].thickness_mm.unwrap(),
         before.surfaces[1].thickness_mm.unwrap()
@@ -746,13 +746,13 @@ fn without_a_native_dialog_file_actions_use_the_in_app_browser_and_remember_rece
         .with_size(egui::vec2(1280.0, 800.0))
         .with_accessibility_check(false)
         .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), quiet(FlareLabApp::new(None, None)));
-    h.state_mut().files.native = false;
+    h.state_mut().files_mut().native = false;
     h.get_by_label("File").click();
     h.run();
     h.get_by_label("Save preset…").click();
     h.run();
     // FlareLab's own browser is open for that action (a window titled like the action).
-    assert_eq!(h.state().files.browsing(), Some(FileUse::SavePreset));
+    assert_eq!(h.state().files().browsing(), Some(FileUse::SavePreset));
     assert!(h.query_by_label("💾  Save preset").is_some(), "the browser window is titled by the action");
     // Why not the desktop's dialog is said, once.
     if !flarelab::app::files::native_dialog_available() {
@@ -769,7 +769,7 @@ fn without_a_native_dialog_file_actions_use_the_in_app_browser_and_remember_rece
     assert!(h.state().message().is_some_and(|m| m.contains("saved")), "{:?}", h.state().message());
     h.key_press(egui::Key::Escape);
     h.run();
-    assert_eq!(h.state().files.browsing(), None);
+    assert_eq!(h.state().files().browsing(), None);
     assert!(h.state().message().is_some_and(|m| m.contains("no file chosen")), "{:?}", h.state().message());
     // A failed action leaves its reason in the status bar, and the document as it was.
     let lens = h.state().doc().lens.clone();
@@ -782,7 +782,7 @@ fn without_a_native_dialog_file_actions_use_the_in_app_browser_and_remember_rece
     assert!(said.contains("bad.zmx"), "{said}");
     assert!(h.query_by_label_contains("bad.zmx").is_some(), "the reason is shown in the status bar");
     // Open recent opens a remembered preset again by what it is.
-    assert_eq!(h.state().files.recent.first().and_then(|p| p.file_name()), Some(bad.file_name().unwrap()));
+    assert_eq!(h.state().files().recent.first().and_then(|p| p.file_name()), Some(bad.file_name().unwrap()));
     h.state_mut().edit().light_deg = [1.0, 1.0];
     let saved = std::fs::canonicalize(&path).unwrap();
     h.state_mut().open_recent(&saved);
@@ -791,7 +791,7 @@ fn without_a_native_dialog_file_actions_use_the_in_app_browser_and_remember_rece
     h.state_mut().edit().light_deg = [2.0, 2.0];
     h.state_mut().pick_file(FileUse::OpenPreset);
     h.run();
-    assert_eq!(h.state().files.browsing(), Some(FileUse::OpenPreset));
+    assert_eq!(h.state().files().browsing(), Some(FileUse::OpenPreset));
     let name_field = h.get_all_by_role(egui::accesskit::Role::TextInput).last().unwrap();
     name_field.focus();
     h.run();
@@ -800,7 +800,7 @@ fn without_a_native_dialog_file_actions_use_the_in_app_browser_and_remember_rece
     h.run();
     h.get_by_label("Open").click();
     h.run();
-    assert_eq!(h.state().files.browsing(), None, "Open took the typed name");
+    assert_eq!(h.state().files().browsing(), None, "Open took the typed name");
     assert_ne!(h.state().doc().light_deg, [2.0, 2.0], "the typed preset is open");
 }
 
@@ -835,8 +835,8 @@ fn the_report_tab_ranks_ghosts_on_a_worker_sorts_selects_and_exports() {
     h.run_steps(2);
     let ready = |app: &FlareLabApp| {
         matches!(&app.jobs().report().shown, Some((_, Ok(r))) if r.ghosts.len() == 28)
-            && app.derived.flare.as_ref().is_some_and(|f| {
-                let light = app.derived.light_deg(app.doc());
+            && app.derived().flare().as_ref().is_some_and(|f| {
+                let light = app.derived().light_deg(app.doc());
                 let u = flare_core::optics::sensor::light_slopes_for_frame_position(light[0], light[1]);
                 !app.jobs().report().stale(flarelab::app::ghost_report::ReportKey::new(f, u))
             })
@@ -853,7 +853,7 @@ fn the_report_tab_ranks_ghosts_on_a_worker_sorts_selects_and_exports() {
     h.get_by_label(worst.as_str()).click();
     h.run_steps(2);
     let selected = h.state().session().selected().expect("a ghost is selected");
-    let g = &h.state().derived.flare.as_ref().unwrap().system.ghosts[selected];
+    let g = &h.state().derived().flare().as_ref().unwrap().system.ghosts[selected];
     assert_eq!((g.i, g.j), (report.ghosts[0].i, report.ghosts[0].j));
     // The peak header sorts by peak, highest first; a second click reverses it.
     h.get_by_label("peak").click();
@@ -949,7 +949,7 @@ fn the_depth_of_field_defocuses_the_plate_on_a_thread_as_the_command_line_does()
         !app.jobs().dof().busy() && app.jobs().dof().status.contains("live on the CPU twin")
     });
     let app = h.state();
-    let (shown, sharp) = (app.derived.plate.clone().unwrap(), app.derived.sharp_plate.clone().unwrap());
+    let (shown, sharp) = (app.derived().plate().clone().unwrap(), app.derived().sharp_plate().clone().unwrap());
     assert_ne!(shown.pixels, sharp.pixels, "the plate is defocused");
     let flare = app.flare().unwrap();
     let cli = flare_core::shot::plate::defocus(app.doc(), flare, app.playhead(), &sharp).unwrap();
@@ -972,7 +972,7 @@ fn the_depth_of_field_defocuses_the_plate_on_a_thread_as_the_command_line_does()
     step_until(&mut h, 60.0, |app| !app.jobs().dof().busy() && app.jobs().dof().status.contains("same size"));
     let app = h.state();
     assert!(app.message().is_some_and(|m| m.contains("160x90") && m.contains("320x180")), "{:?}", app.message());
-    assert_eq!(app.derived.plate.as_ref().unwrap().pixels, app.derived.sharp_plate.as_ref().unwrap().pixels);
+    assert_eq!(app.derived().plate().as_ref().unwrap().pixels, app.derived().sharp_plate().as_ref().unwrap().pixels);
     assert!(app.doc().dof.enabled && app.doc().background.is_some());
 }
 
@@ -990,12 +990,12 @@ fn the_depth_of_field_runs_on_the_apps_gpu_as_its_cpu_twin_does() {
     let app = h.state();
     let status = app.jobs().dof().status.clone();
     assert!(status.contains("live on") && !status.contains("CPU twin"), "{status}");
-    let shown = app.derived.plate.clone().unwrap();
+    let shown = app.derived().plate().clone().unwrap();
     let cpu = flare_core::shot::plate::defocus(
         app.doc(),
         app.flare().unwrap(),
         app.playhead(),
-        app.derived.sharp_plate.as_ref().unwrap(),
+        app.derived().sharp_plate().as_ref().unwrap(),
     )
     .unwrap();
     assert_eq!(shown.pixels, cpu.pixels, "{status}");
@@ -1014,7 +1014,7 @@ fn the_ray_grid_view_traces_the_frame_shown_and_shows_it_in_the_viewport() {
     step_until(&mut h, 120.0, traced);
     let app = h.state();
     assert!(app.jobs().raygrid().status.starts_with("ray grid 16 (CPU"), "{}", app.jobs().raygrid().status);
-    let (generation, frame) = app.derived.view_frame.clone().unwrap();
+    let (generation, frame) = app.derived().view_frame().clone().unwrap();
     let shown = app.jobs().raygrid().traced(generation).unwrap().display.clone();
     // The same frame's ghosts traced again through the public pipeline give the same pixels.
     let flare = app.flare().unwrap();
@@ -1041,9 +1041,9 @@ fn the_ray_grid_view_traces_the_frame_shown_and_shows_it_in_the_viewport() {
     let ratio = mean(&shown) / mean(&paraxial);
     assert!((0.5..2.0).contains(&ratio), "traced / paraxial brightness {ratio}");
     // A new frame that differs only in its LUT (a bake that finished) shows the same trace, not a new one.
-    h.state_mut().derived.lut_generation += 1;
+    h.state_mut().show_lut_again();
     h.step();
-    assert_ne!(h.state().derived.view_frame.as_ref().unwrap().0, generation);
+    assert_ne!(h.state().derived().view_frame().as_ref().unwrap().0, generation);
     assert!(
         h.state().view_shows_traced() && !h.state().jobs().raygrid().busy(),
         "{}",
@@ -1053,7 +1053,7 @@ fn the_ray_grid_view_traces_the_frame_shown_and_shows_it_in_the_viewport() {
     drag(&mut h, egui::pos2(300.0, 250.0), egui::pos2(380.0, 220.0));
     assert!(!h.state().view_shows_traced(), "the frame changed: the traced image is not shown");
     step_until(&mut h, 120.0, traced);
-    assert_ne!(h.state().derived.view_frame.as_ref().unwrap().0, generation);
+    assert_ne!(h.state().derived().view_frame().as_ref().unwrap().0, generation);
     // Cancel stops the trace of a new frame; leaving the mode draws the look again.
     h.state_mut().jobs_mut().raygrid_mut().grid = Some(32);
     h.step();
@@ -1075,16 +1075,16 @@ fn undo_and_redo_return_the_document_exactly_through_a_refused_edit_and_auto_exp
     let mut h = harness_on(Some(dgauss()));
     show(&mut h, Tab::Lens);
     let json = |h: &Harness<'static, FlareLabApp>| h.state().doc().to_json();
-    let shown_ev = |h: &Harness<'static, FlareLabApp>| h.state().derived.flare_ev(h.state().doc());
+    let shown_ev = |h: &Harness<'static, FlareLabApp>| h.state().derived().flare_ev(h.state().doc());
     assert!(h.state().doc().exposure_auto);
     let (j0, ev0) = (json(&h), shown_ev(&h));
     h.get_by_label("radius 6").set_value_accesskit(-1.0);
     h.run();
-    assert!(h.state().derived.lens_problem.is_some(), "-1 mm is refused");
+    assert!(h.state().derived().lens_problem().is_some(), "-1 mm is refused");
     let j1 = json(&h);
     h.get_by_label("radius 6").set_value_accesskit(-12.0);
     h.run();
-    assert!(h.state().derived.lens_problem.is_none(), "-12 mm is a valid radius");
+    assert!(h.state().derived().lens_problem().is_none(), "-12 mm is a valid radius");
     let (j2, ev2) = (json(&h), shown_ev(&h));
     assert!(j0 != j1 && j1 != j2);
     assert!(ev0 != ev2, "the automatic exposure follows the lens ({ev0} -> {ev2})");
@@ -1129,11 +1129,11 @@ fn plus_then_x_on_the_zooms_first_row_gives_back_the_lens() {
     let mut h = harness();
     show(&mut h, Tab::Lens);
     let before = h.state().doc().lens.clone();
-    let efl = |app: &FlareLabApp| app.derived.first_order.clone().expect("a valid lens").efl_mm;
+    let efl = |app: &FlareLabApp| app.derived().first_order().clone().expect("a valid lens").efl_mm;
     let efl0 = efl(h.state());
     h.get_all_by_label("+").next().unwrap().click();
     h.run();
-    assert!(h.state().derived.lens_problem.is_none(), "{:?}", h.state().derived.lens_problem);
+    assert!(h.state().derived().lens_problem().is_none(), "{:?}", h.state().derived().lens_problem());
     assert_eq!(h.state().doc().lens.surfaces.len(), before.surfaces.len() + 1);
     assert!((efl(h.state()) - efl0).abs() < 1e-9);
     let xs = h.get_all_by_label("x").count();
@@ -1305,13 +1305,13 @@ fn a_lens_cell_applies_a_typed_value_on_enter_and_escape_reverts() {
     h.event(egui::Event::Text("-1".into()));
     h.run();
     assert_eq!(h.state().doc().lens.surfaces[6].radius_mm, before, "nothing applies while typing");
-    assert!(h.state().derived.lens_problem.is_none(), "no refusal for a value not yet entered");
+    assert!(h.state().derived().lens_problem().is_none(), "no refusal for a value not yet entered");
     h.event(egui::Event::Text("2".into()));
     h.run();
     h.key_press(egui::Key::Enter);
     h.run();
     assert_eq!(h.state().doc().lens.surfaces[6].radius_mm, -12.0, "Enter applies the whole value");
-    assert!(h.state().derived.lens_problem.is_none());
+    assert!(h.state().derived().lens_problem().is_none());
     assert!(h.state().session().can_undo() && !steps);
     // Escape gives back the value the edit started from.
     h.get_by_label("radius 6").click();
@@ -1335,7 +1335,7 @@ fn a_refusal_does_not_move_the_lens_table() {
     let before = row(&h);
     h.get_by_label("radius 6").set_value_accesskit(-1.0);
     h.run();
-    assert!(h.state().derived.lens_problem.is_some());
+    assert!(h.state().derived().lens_problem().is_some());
     assert!(h.query_by_label_contains("the view shows the last valid lens").is_some(), "the reason is shown");
     assert_eq!(row(&h), before, "the table stayed where it was");
 }

@@ -128,47 +128,47 @@ pub enum SyncEvent {
 /// The state derived from the document (see the module documentation).
 pub struct Derived {
     /// The software adapter draws the viewport at half resolution.
-    pub software: bool,
-    pub optics_key: Option<u64>,
+    software: bool,
+    optics_key: Option<u64>,
     /// The auto exposure and what it was computed for (the flare's id, the sensor width's bits).
     auto_exposure: Option<((u64, u64), f64)>,
     /// The prepared flare in use (the last valid one).
-    pub flare: Option<Arc<PreparedFlare>>,
+    flare: Option<Arc<PreparedFlare>>,
     /// What was rebuilt so far.
-    pub rebuilds: RebuildCounts,
-    pub first_order: Option<FirstOrder>,
-    pub lens_problem: Option<LensProblem>,
-    pub frame_key: Option<FrameKey>,
+    rebuilds: RebuildCounts,
+    first_order: Option<FirstOrder>,
+    lens_problem: Option<LensProblem>,
+    frame_key: Option<FrameKey>,
     /// The viewport's size in pixels.
-    pub view_px: (u32, u32),
+    view_px: (u32, u32),
     /// The latest frame for the viewport, with its generation (see [`crate::viewport`]).
-    pub view_frame: Option<ViewFrame>,
+    view_frame: Option<ViewFrame>,
     /// The frame was rebuilt after the viewport was painted this UI frame.
-    pub frame_pending: bool,
-    pub ghosts: Vec<GhostRow>,
-    pub sprites: Vec<Sprite>,
-    pub stats: FrameStats,
-    pub scene_ms: f64,
+    frame_pending: bool,
+    ghosts: Vec<GhostRow>,
+    sprites: Vec<Sprite>,
+    stats: FrameStats,
+    scene_ms: f64,
     /// The plate file shown (the background, or its sequence's file of the playhead's frame).
-    pub background_key: Option<String>,
+    background_key: Option<String>,
     /// The background plate the view and exports use (defocused when the depth of field is on and done).
-    pub plate: Option<Arc<HdrImage>>,
+    plate: Option<Arc<HdrImage>>,
     /// The plate as read, and a count of its changes (what the depth of field defocuses, `crate::app::dof`).
-    pub sharp_plate: Option<Arc<HdrImage>>,
-    pub sharp_generation: u64,
+    sharp_plate: Option<Arc<HdrImage>>,
+    sharp_generation: u64,
     /// Plates read lately or ahead of the playhead ([`PlateCache`]).
     plate_cache: PlateCache,
     /// The timeline frame shown.
-    pub playhead: i64,
+    playhead: i64,
     /// The light found in the plates, when the document asks for it and it has been found.
-    pub shot_plan: Option<Arc<ShotPlan>>,
-    pub plate_generation: u64,
-    pub lut: Option<Arc<LiveLut>>,
-    pub lut_generation: u64,
+    shot_plan: Option<Arc<ShotPlan>>,
+    plate_generation: u64,
+    lut: Option<Arc<LiveLut>>,
+    lut_generation: u64,
     /// The viewport draws this draft instead of the full frame (see [`crate::app::draft`]).
-    pub draft: Option<Draft>,
+    draft: Option<Draft>,
     /// What the frame shown left out, when it is a draft.
-    pub draft_shown: Option<DraftOutcome>,
+    draft_shown: Option<DraftOutcome>,
 }
 
 impl Derived {
@@ -247,6 +247,138 @@ impl Derived {
     pub fn set_shot_plan(&mut self, plan: Option<ShotPlan>) {
         self.shot_plan = plan.map(Arc::new);
         self.frame_key = None;
+    }
+
+    // What the frame source derived, to read (its only writer is itself).
+
+    /// The prepared flare in use (the last valid one).
+    pub fn flare(&self) -> &Option<Arc<PreparedFlare>> {
+        &self.flare
+    }
+
+    /// Why the document's lens is refused (the viewport keeps the last valid flare).
+    pub fn lens_problem(&self) -> &Option<LensProblem> {
+        &self.lens_problem
+    }
+
+    /// The valid lens's first-order properties (d line).
+    pub fn first_order(&self) -> &Option<FirstOrder> {
+        &self.first_order
+    }
+
+    /// The optics fingerprint the flare was last derived for.
+    pub fn optics_key(&self) -> Option<u64> {
+        self.optics_key
+    }
+
+    /// The plate as read (what the depth of field defocuses).
+    pub fn sharp_plate(&self) -> &Option<Arc<HdrImage>> {
+        &self.sharp_plate
+    }
+
+    /// A count of the sharp plate's changes.
+    pub fn sharp_generation(&self) -> u64 {
+        self.sharp_generation
+    }
+
+    /// The plate the view and exports use (defocused when the depth of field is on and done).
+    pub fn plate(&self) -> &Option<Arc<HdrImage>> {
+        &self.plate
+    }
+
+    /// The LUT in use.
+    pub fn lut(&self) -> &Option<Arc<LiveLut>> {
+        &self.lut
+    }
+
+    /// A count of the LUT's changes.
+    pub fn lut_generation(&self) -> u64 {
+        self.lut_generation
+    }
+
+    /// The viewport's drawing size in pixels.
+    pub fn view_px(&self) -> (u32, u32) {
+        self.view_px
+    }
+
+    /// The latest frame for the viewport, with its generation.
+    pub fn view_frame(&self) -> &Option<ViewFrame> {
+        &self.view_frame
+    }
+
+    /// What the latest frame was built from.
+    pub fn frame_key(&self) -> &Option<FrameKey> {
+        &self.frame_key
+    }
+
+    /// The frame was rebuilt after the viewport was painted this UI frame.
+    pub fn frame_pending(&self) -> bool {
+        self.frame_pending
+    }
+
+    /// The light found in the plates, when the document asks for it and it has been found.
+    pub fn shot_plan(&self) -> &Option<Arc<ShotPlan>> {
+        &self.shot_plan
+    }
+
+    /// What was rebuilt so far.
+    pub fn rebuilds(&self) -> RebuildCounts {
+        self.rebuilds
+    }
+
+    /// What the latest frame drew and culled.
+    pub fn stats(&self) -> FrameStats {
+        self.stats
+    }
+
+    /// The latest frame's ghost list.
+    pub fn ghosts(&self) -> &Vec<GhostRow> {
+        &self.ghosts
+    }
+
+    /// The latest frame's sprites.
+    pub fn sprites(&self) -> &Vec<Sprite> {
+        &self.sprites
+    }
+
+    /// How long the latest frame took to build (ms).
+    pub fn scene_ms(&self) -> f64 {
+        self.scene_ms
+    }
+
+    /// The timeline frame the frame shows.
+    pub fn playhead(&self) -> i64 {
+        self.playhead
+    }
+
+    /// The draft the viewport draws instead of the full frame, while the user drags.
+    pub fn draft(&self) -> Option<Draft> {
+        self.draft
+    }
+
+    /// What the frame shown left out, when it is a draft.
+    pub fn draft_shown(&self) -> Option<DraftOutcome> {
+        self.draft_shown
+    }
+
+    /// The frame the view shows from now on (the view's playhead).
+    pub fn set_playhead(&mut self, frame: i64) {
+        self.playhead = frame;
+    }
+
+    /// The viewport's drawing size changed: the frame is built again at it.
+    pub fn set_view_px(&mut self, px: (u32, u32)) {
+        self.view_px = px;
+    }
+
+    /// Draw `draft` (or the full frame) from the next build on.
+    pub fn set_draft(&mut self, draft: Option<Draft>) {
+        self.draft = draft;
+    }
+
+    /// The viewport painted the latest frame.
+    pub fn painted(&mut self) {
+        self.frame_pending = false;
     }
 
     /// Forgets the optics' key, so the next sync rebuilds the flare (after something outside the document

@@ -65,15 +65,15 @@ impl DofWork {
     /// The key of what the defocused plate depends on now; `None` when the depth of field is off or there is
     /// nothing to defocus.
     fn key(derived: &Derived, doc: &Document) -> Option<DofKey> {
-        let flare = derived.flare.as_ref()?;
-        derived.sharp_plate.as_ref()?;
+        let flare = derived.flare().as_ref()?;
+        derived.sharp_plate().as_ref()?;
         doc.dof.enabled.then(|| {
             flare_core::fingerprint::of(&(
                 &doc.dof,
-                doc.depth_at(derived.playhead),
+                doc.depth_at(derived.playhead()),
                 flare.id,
                 doc.sensor_width_mm.to_bits(),
-                derived.sharp_generation,
+                derived.sharp_generation(),
             ))
         })
     }
@@ -99,10 +99,10 @@ impl DofWork {
                 job.cancel();
             }
             if self.shown.take().is_some() {
-                let sharp = derived.sharp_plate.clone();
+                let sharp = derived.sharp_plate().clone();
                 derived.show_plate(sharp, gpu);
             }
-            self.status = if doc.dof.enabled && derived.sharp_plate.is_none() {
+            self.status = if doc.dof.enabled && derived.sharp_plate().is_none() {
                 "depth of field: on, but there is no plate to defocus (File > Background plate)".into()
             } else {
                 String::new()
@@ -128,7 +128,7 @@ impl DofWork {
                                 // Said once; the sharp plate stays until something changes.
                                 self.status = format!("depth of field: {e}");
                                 events.push(SyncEvent::Message(format!("depth of field: {e}")));
-                                let sharp = derived.sharp_plate.clone();
+                                let sharp = derived.sharp_plate().clone();
                                 derived.show_plate(sharp, gpu);
                             }
                         }
@@ -144,8 +144,8 @@ impl DofWork {
 
     /// A job defocusing the sharp plate as `doc` says, on the app's device or the CPU.
     fn spawn(&self, derived: &Derived, doc: &Document, gpu: Option<&RenderState>) -> Job<DofOutcome> {
-        let (doc, flare, plate) = (doc.clone(), derived.flare.clone(), derived.sharp_plate.clone());
-        let frame = derived.playhead;
+        let (doc, flare, plate) = (doc.clone(), derived.flare().clone(), derived.sharp_plate().clone());
+        let frame = derived.playhead();
         let device: Option<AppDevice> = gpu.map(|rs| {
             let info = rs.adapter.get_info();
             let software = info.device_type == wgpu::DeviceType::Cpu && !self.gpu_on_software;

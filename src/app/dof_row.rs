@@ -95,7 +95,7 @@ impl FlareLabApp {
     /// Focus by click: the plate pixel under `pointer` in the view `rect`.
     pub fn focus_from_pointer(&mut self, pointer: egui::Pos2, rect: egui::Rect) {
         self.view.set_focus_pick(false);
-        let Some(plate) = self.derived.sharp_plate.clone() else {
+        let Some(plate) = self.derived.sharp_plate().clone() else {
             self.session.say("focus by click needs a plate (File > Background plate)");
             return;
         };

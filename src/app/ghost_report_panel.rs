@@ -12,7 +12,7 @@ use super::ghost_report::{ReportColumn, ReportKey};
 impl FlareLabApp {
     /// The Report tab (see the module documentation).
     pub(super) fn report_ui(&mut self, ui: &mut egui::Ui) {
-        let Some(flare) = self.derived.flare.clone() else {
+        let Some(flare) = self.derived.flare().clone() else {
             ui.label("No valid lens: the report needs one (see the Lens tab).");
             return;
         };

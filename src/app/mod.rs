@@ -174,19 +174,18 @@ pub struct FlareLabApp {
     /// The document, its history, the selection, the tab and the status line (see [`session`]).
     session: Session,
     gpu: Option<RenderState>,
-    /// What the app derives from the document (see [`derived`]).
-    pub derived: Derived,
+    /// The frame source: what the app derives from the document, and the frame (see [`derived`]).
+    derived: Derived,
     /// What loading the open lens file had to decide (clipped apertures, the system aperture), with the id of
     /// the lens it applies to: shown in the lens panel while that lens is open.
-    pub lens_warnings: Option<(String, Vec<String>)>,
+    lens_warnings: Option<(String, Vec<String>)>,
     /// File choosers and recent files (see [`files`]).
-    pub files: files::Files,
+    files: files::Files,
     // Panels' own state.
     aperture_preview: AperturePreview,
     coatings: CoatingsState,
     ray_diagram: RayDiagram,
     drag_bench: Option<DragBench>,
-    /// The size File > Export image renders at.
     /// The size File > Export image and sequence draw at, when the user set one; `None`: the plate's size, else
     /// [`DEFAULT_EXPORT_PX`] (what the command line does without --size). See [`FlareLabApp::export_px`].
     export_size: Option<(u32, u32)>,
@@ -195,13 +194,13 @@ pub struct FlareLabApp {
     /// Every job on a thread: one poll, one status area, one priority rule (see [`jobs`]).
     jobs: JobBoard,
     /// The Shot panel's text fields.
-    pub track_path: String,
-    pub sequence_path: String,
-    pub plate_path: String,
+    track_path: String,
+    sequence_path: String,
+    plate_path: String,
     /// The window's render pass clears it to the panels' colour ([`eframe::App::clear_color`]), so the panels
     /// are drawn unfilled; without it (the UI tests' harness clears to transparent) one rectangle paints the
     /// same colour under them.
-    pub cleared_by_window: bool,
+    cleared_by_window: bool,
 }
 
 impl FlareLabApp {
@@ -246,7 +245,7 @@ impl FlareLabApp {
     /// Whether the viewport shows the ray-grid view's traced image of the frame on screen (not its paraxial
     /// drawing).
     pub fn view_shows_traced(&self) -> bool {
-        let Some((generation, _)) = &self.derived.view_frame else { return false };
+        let Some((generation, _)) = &self.derived.view_frame() else { return false };
         self.jobs.raygrid().traced(*generation).is_some()
             && self.gpu.as_ref().is_some_and(|rs| crate::viewport::ViewportResources::shows_image(rs, *generation))
     }
@@ -293,17 +292,39 @@ impl FlareLabApp {
 
     /// The prepared flare in use (the last valid one).
     pub fn flare(&self) -> Option<&PreparedFlare> {
-        self.derived.flare.as_deref()
+        self.derived.flare().as_deref()
     }
 
     /// The LUT in use, if any.
     pub fn lut(&self) -> Option<&GhostLut> {
-        self.derived.lut.as_deref().map(|l| &l.lut)
+        self.derived.lut().as_deref().map(|l| &l.lut)
     }
 
     /// Where the bake stands (for the Blend panel and the tests).
     pub fn bake_status(&self) -> &BakeStatus {
         self.jobs.bake_status()
+    }
+
+    /// The frame source (see [`derived`]), to read.
+    pub fn derived(&self) -> &Derived {
+        &self.derived
+    }
+
+    /// Shows the LUT in use again as a new one (what a bake landing with the same ghosts does): a new frame
+    /// that differs only in its LUT generation.
+    pub fn show_lut_again(&mut self) {
+        let lut = self.lut().cloned();
+        self.set_lut(lut);
+    }
+
+    /// The file choosers and recent files (see [`files`]).
+    pub fn files(&self) -> &files::Files {
+        &self.files
+    }
+
+    /// The file choosers' settings (the tests turn the native dialog off).
+    pub fn files_mut(&mut self) -> &mut files::Files {
+        &mut self.files
     }
 
     /// The job board (see [`jobs`]), to read.
@@ -320,7 +341,7 @@ impl FlareLabApp {
     pub fn sync(&mut self) {
         let timeline = &self.session.doc().timeline;
         self.view.clamp_playhead(timeline.first_frame, timeline.last_frame);
-        self.derived.playhead = self.view.playhead();
+        self.derived.set_playhead(self.view.playhead());
         let mut events = self.derived.sync(self.session.doc(), self.gpu.as_ref());
         self.jobs.dof_mut().sync(&mut self.derived, self.session.doc(), self.gpu.as_ref(), &mut events);
         // A defocused plate that just arrived is a new plate for the frame.
@@ -414,13 +435,13 @@ impl FlareLabApp {
             let ghost = self
                 .session
                 .selected()
-                .and_then(|g| self.derived.flare.as_ref().map(|f| &f.system.ghosts[g]))
+                .and_then(|g| self.derived.flare().as_ref().map(|f| &f.system.ghosts[g]))
                 .map(|g| (g.i, g.j));
             crate::panels::ray_diagram::ray_diagram_ui(
                 ui,
                 &mut self.ray_diagram,
-                self.derived.flare.as_deref(),
-                self.derived.lens_problem.as_ref(),
+                self.derived.flare().as_deref(),
+                self.derived.lens_problem().as_ref(),
                 self.derived.light_deg(self.session.doc()),
                 ghost,
             );
@@ -431,7 +452,7 @@ impl FlareLabApp {
         self.sync();
         self.jobs.raygrid_mut().step(&self.derived, self.gpu.as_ref());
         // An edit in this frame made a new scene after the viewport was painted: paint once more.
-        if self.derived.frame_pending && self.gpu.is_some() {
+        if self.derived.frame_pending() && self.gpu.is_some() {
             ui.ctx().request_repaint();
         }
         // One undo step per gesture: commit when no button is held.
@@ -452,22 +473,22 @@ impl FlareLabApp {
             Tab::Lens | Tab::Aperture | Tab::Coatings | Tab::Ghosts | Tab::Blend => {}
         }
         let ctx = PanelContext {
-            flare: self.derived.flare.as_deref(),
-            first_order: self.derived.first_order.as_ref(),
-            lens_problem: self.derived.lens_problem.as_ref(),
+            flare: self.derived.flare().as_deref(),
+            first_order: self.derived.first_order().as_ref(),
+            lens_problem: self.derived.lens_problem().as_ref(),
             lens_warnings: match &self.lens_warnings {
                 Some((id, warnings)) if *id == self.session.doc().lens.id => warnings,
                 _ => &[],
             },
-            ghosts: &self.derived.ghosts,
+            ghosts: self.derived.ghosts(),
             classes: self.jobs.classes(),
-            lut: self.derived.lut.as_deref().map(|l| &l.lut),
+            lut: self.derived.lut().as_deref().map(|l| &l.lut),
             selected: self.session.selected(),
             bake: self.jobs.bake_status(),
             auto_bake: self.jobs.autobake().enabled,
             lut_summary: None,
         };
-        let summary = self.derived.lut.as_ref().map(|l| {
+        let summary = self.derived.lut().as_ref().map(|l| {
             format!(
                 "LUT: {} ghosts, {} entries, theta 0 to {:.1} deg ({})",
                 l.lut.ghosts.len(),
@@ -551,7 +572,7 @@ impl FlareLabApp {
                     if changed {
                         self.export_size = Some((w, h));
                     }
-                    if self.export_size.is_none() && self.derived.plate.is_some() {
+                    if self.export_size.is_none() && self.derived.plate().is_some() {
                         ui.label("(the plate's)");
                     }
                     if ui.button("Export image…").on_hover_text("PNG (tonemapped) or EXR (linear)").clicked() {
@@ -593,18 +614,18 @@ impl FlareLabApp {
             self.view.playhead(),
             light[0],
             light[1],
-            self.derived.scene_ms,
+            self.derived.scene_ms(),
             dt_ms,
-            self.derived.view_px.0,
-            self.derived.view_px.1,
-            self.derived.stats.drawn,
-            self.derived.stats.below_threshold,
-            self.derived.stats.off_sensor,
-            self.derived.stats.empty_entrance_region,
-            if self.derived.lut.is_some() { " | LUT ghosts on" } else { "" }
+            self.derived.view_px().0,
+            self.derived.view_px().1,
+            self.derived.stats().drawn,
+            self.derived.stats().below_threshold,
+            self.derived.stats().off_sensor,
+            self.derived.stats().empty_entrance_region,
+            if self.derived.lut().is_some() { " | LUT ghosts on" } else { "" }
         ));
         // One line, always there: whether the view shows a draft, and the GPU's own time of the flare's passes.
-        let quality = match self.derived.draft_shown {
+        let quality = match self.derived.draft_shown() {
             Some(d) => format!(
                 "draft while dragging: 1/{} resolution, the {} brightest of {} sprites (aiming at {:.0} ms a frame); full quality when you let go",
                 d.divisor,
@@ -714,8 +735,8 @@ impl FlareLabApp {
         let size = egui::vec2(avail.x, (avail.x * 9.0 / 16.0).min(avail.y));
         let (rect, response) = ui.allocate_exact_size(size, egui::Sense::click_and_drag());
         let px = self.view.layout(rect, ui.ctx().pixels_per_point());
-        if px != self.derived.view_px {
-            self.derived.view_px = px;
+        if px != self.derived.view_px() {
+            self.derived.set_view_px(px);
             self.sync_frame();
         }
         // Files dropped on the window: a background plate, a preset or a lens.
@@ -735,8 +756,8 @@ impl FlareLabApp {
                 egui::Color32::GRAY,
             );
         } else {
-            FlareCallback::paint(ui.painter(), rect, self.derived.view_frame.clone());
-            self.derived.frame_pending = false;
+            FlareCallback::paint(ui.painter(), rect, self.derived.view_frame().clone());
+            self.derived.painted();
         }
         if response.dragged()
             && let Some(p) = response.interact_pointer_pos()
@@ -777,8 +798,8 @@ impl FlareLabApp {
 
     /// The one mapping between the viewport's points and the live optics (see [`view::LightMap`]).
     fn light_map(&self) -> Option<view::LightMap<'_>> {
-        let flare = self.derived.flare.as_deref()?;
-        self.view.light_map(flare, self.derived.view_px, self.session.doc().sensor_width_mm)
+        let flare = self.derived.flare().as_deref()?;
+        self.view.light_map(flare, self.derived.view_px(), self.session.doc().sensor_width_mm)
     }
 
     /// Where the light's image (the starburst's centre) is drawn in the viewport, in points.
@@ -797,11 +818,11 @@ impl FlareLabApp {
     fn overlay_ui(&self, ui: &egui::Ui, rect: egui::Rect) {
         let painter = ui.painter().with_clip_rect(rect);
         let Some(map) = self.light_map() else { return };
-        let Some(flare) = &self.derived.flare else { return };
+        let Some(flare) = &self.derived.flare() else { return };
         let p = map.light_on_screen(self.derived.light_deg(self.session.doc()));
         painter.circle_stroke(p, 7.0, egui::Stroke::new(1.5, egui::Color32::from_rgb(255, 230, 120)));
         let Some(g) = self.session.selected() else { return };
-        for s in self.derived.sprites.iter().filter(|s| s.ghost == g && s.wavelength == 1) {
+        for s in self.derived.sprites().iter().filter(|s| s.ghost == g && s.wavelength == 1) {
             let (c, r) = Self::sprite_on_screen(&map, s);
             painter.circle_stroke(c, r, egui::Stroke::new(2.0, egui::Color32::from_rgb(255, 60, 200)));
             let m = &flare.system.ghosts[g];
@@ -819,9 +840,9 @@ impl FlareLabApp {
     fn ghost_at(&self, p: egui::Pos2) -> Option<usize> {
         let map = self.light_map()?;
         let mut best: Option<(usize, f64)> = None;
-        for s in self.derived.sprites.iter().filter(|s| s.culled.is_none() && s.wavelength == 1) {
+        for s in self.derived.sprites().iter().filter(|s| s.culled.is_none() && s.wavelength == 1) {
             let (c, r) = Self::sprite_on_screen(&map, s);
-            let m = &self.derived.ghosts[s.ghost];
+            let m = &self.derived.ghosts()[s.ghost];
             let lum = m.intensity() * self.session.doc().ghost_gain(m.i, m.j);
             if c.distance(p) <= r && lum > 0.0 && best.is_none_or(|(_, b)| lum > b) {
                 best = Some((s.ghost, lum));
@@ -869,7 +890,7 @@ impl FlareLabApp {
             Action::CancelBake => self.jobs.cancel_bake(),
             Action::OpenLut => self.pick_file(FileUse::OpenLut),
             Action::ExportLut => {
-                if self.derived.lut.is_none() {
+                if self.derived.lut().is_none() {
                     self.session.say("no LUT to export: bake one (Blend panel) or open one");
                     return;
                 }
@@ -921,7 +942,7 @@ impl FlareLabApp {
 
     /// Opens a `.flut`: a photo LUT for any lens, a ray-traced one only for the lens it was baked for.
     pub fn open_lut(&mut self, path: &std::path::Path) {
-        let Some(flare) = self.derived.flare.clone() else { return };
+        let Some(flare) = self.derived.flare().clone() else { return };
         match flare_core::lut::format::read_lut(path) {
             Ok(lut) => {
                 if lut.kind == LutKind::RayTraced
@@ -982,7 +1003,7 @@ impl FlareLabApp {
 
     /// Writes the LUT in use to `path`.
     fn export_lut_to(&mut self, path: &std::path::Path) {
-        let Some(live) = self.derived.lut.clone() else {
+        let Some(live) = self.derived.lut().clone() else {
             self.session.say("no LUT to export: bake one (Blend panel) or open one");
             return;
         };
@@ -1044,10 +1065,10 @@ impl FlareLabApp {
     fn live<'a>(session: &'a Session, derived: &'a Derived) -> Live<'a> {
         Live {
             doc: session.doc(),
-            flare: derived.flare.as_ref(),
-            optics_key: derived.optics_key,
-            lens_refused: derived.lens_problem.is_some(),
-            lut_shown: derived.lut.is_some(),
+            flare: derived.flare().as_ref(),
+            optics_key: derived.optics_key(),
+            lens_refused: derived.lens_problem().is_some(),
+            lut_shown: derived.lut().is_some(),
         }
     }
 
@@ -1091,8 +1112,8 @@ impl FlareLabApp {
             // Refine to the full frame once the pointer rests, even if nothing else repaints.
             ctx.request_repaint_after(std::time::Duration::from_secs_f32(draft::STILL_S));
         }
-        if draft != self.derived.draft {
-            self.derived.draft = draft;
+        if draft != self.derived.draft() {
+            self.derived.set_draft(draft);
             self.sync_frame();
         }
     }
@@ -1104,10 +1125,10 @@ impl FlareLabApp {
         match bench.step(
             self.session.edit(),
             self.view.playhead_mut(),
-            self.derived.scene_ms,
-            self.derived.rebuilds,
-            self.derived.view_px,
-            self.derived.draft_shown,
+            self.derived.scene_ms(),
+            self.derived.rebuilds(),
+            self.derived.view_px(),
+            self.derived.draft_shown(),
             flare_gpu,
         ) {
             Some(line) => {
@@ -1161,7 +1182,7 @@ impl FlareLabApp {
     /// The size an export draws at: the user's, else the plate's, else [`DEFAULT_EXPORT_PX`].
     pub fn export_px(&self) -> (u32, u32) {
         self.export_size
-            .or_else(|| self.derived.plate.as_ref().map(|p| (p.width, p.height)))
+            .or_else(|| self.derived.plate().as_ref().map(|p| (p.width, p.height)))
             .unwrap_or(DEFAULT_EXPORT_PX)
     }
 
@@ -1176,21 +1197,21 @@ impl FlareLabApp {
         Option<std::sync::Arc<flare_core::lut::blend::LiveLut>>,
         ExportPlate,
     )> {
-        let Some(flare) = self.derived.flare.clone() else { bail!("no valid lens") };
+        let Some(flare) = self.derived.flare().clone() else { bail!("no valid lens") };
         let request = self.derived.request_at(self.session.doc(), &flare, size.0, size.1, 1);
-        let frame = Frame::build(&flare, self.derived.lut.as_deref(), &request);
+        let frame = Frame::build(&flare, self.derived.lut().as_deref(), &request);
         // The plate the view shows, or the sharp one to defocus on the export's thread when the view's depth
         // of field is not done yet (an export never waits for the view, nor goes out without its DoF).
         let plate = if self.jobs.dof().ready(&self.derived, self.session.doc()) {
-            ExportPlate::Ready(self.derived.plate.clone())
+            ExportPlate::Ready(self.derived.plate().clone())
         } else {
             ExportPlate::Defocus(
                 Box::new(self.derived.resolved(self.session.doc())),
                 self.view.playhead(),
-                self.derived.sharp_plate.clone(),
+                self.derived.sharp_plate().clone(),
             )
         };
-        Ok((frame, flare, self.derived.lut.clone(), plate))
+        Ok((frame, flare, self.derived.lut().clone(), plate))
     }
 }
 

@@ -122,7 +122,7 @@ impl RayGridView {
             return;
         };
         let (Some((generation, frame)), Some(flare), Some(frame_key)) =
-            (derived.view_frame.clone(), derived.flare.clone(), derived.frame_key.as_ref())
+            (derived.view_frame().clone(), derived.flare().clone(), derived.frame_key().as_ref())
         else {
             return;
         };
@@ -147,7 +147,7 @@ impl RayGridView {
             self.job = None;
         }
         // Drafts while the user drags; the trace waits for the full frame.
-        if derived.draft.is_some() {
+        if derived.draft().is_some() {
             if let Some((_, job)) = self.job.take() {
                 job.cancel();
             }
@@ -175,7 +175,7 @@ impl RayGridView {
             Some((_, job)) => job.cancel(),
             None => {}
         }
-        let plate = derived.plate.clone();
+        let plate = derived.plate().clone();
         let device = self.device.clone();
         let job = Job::spawn(&format!("ray grid {grid}: tracing every ghost…"), move |cancel, report| {
             trace_frame(&flare, &frame, plate.as_deref(), grid, &device, cancel, report)

@@ -96,7 +96,7 @@ impl FlareLabApp {
             let x = x_of(f);
             painter.line_segment([egui::pos2(x, rect.top() + 3.0), egui::pos2(x, rect.bottom() - 3.0)], (2.0, colour));
         }
-        if let Some(plan) = &self.derived.shot_plan {
+        if let Some(plan) = &self.derived.shot_plan() {
             // The light's visibility found in the plate, as a curve along the bar.
             let points: Vec<egui::Pos2> = plan
                 .frames
@@ -138,7 +138,7 @@ impl FlareLabApp {
         self.session.edit().timeline.light_deg.set(frame, light);
         self.session.edit().timeline.light_ev.set(frame, sample.light_ev);
         if let Some(g) =
-            self.session.selected().and_then(|g| self.derived.flare.as_ref().map(|f| f.system.ghosts[g].clone()))
+            self.session.selected().and_then(|g| self.derived.flare().as_ref().map(|f| f.system.ghosts[g].clone()))
         {
             let key = ghost_key(g.i, g.j);
             let gain = sample
@@ -166,12 +166,12 @@ impl FlareLabApp {
 
     /// The frame size a track's pixels refer to: the plate's, else the export size.
     fn track_frame_size(&self) -> (u32, u32) {
-        self.derived.plate.as_ref().map_or(self.export_px(), |p| (p.width, p.height))
+        self.derived.plate().as_ref().map_or(self.export_px(), |p| (p.width, p.height))
     }
 
     /// Imports a tracker's CSV as light keys (replacing the light keys; intensity keys too when it has them).
     pub fn import_track(&mut self, path: &std::path::Path) {
-        let Some(flare) = self.derived.flare.clone() else {
+        let Some(flare) = self.derived.flare().clone() else {
             self.session.say("no valid lens to map the track through");
             return;
         };
@@ -220,7 +220,7 @@ impl FlareLabApp {
             self.session.say("an export is already running");
             return;
         }
-        let Some(flare) = self.derived.flare.clone() else {
+        let Some(flare) = self.derived.flare().clone() else {
             self.session.say("no valid lens to render");
             return;
         };
@@ -245,11 +245,11 @@ impl FlareLabApp {
             return;
         }
         // The light found in the plates serves the export when it was found for this very document.
-        let found = self.derived.shot_plan.clone().filter(|_| self.jobs.light_found_for(self.session.doc()));
+        let found = self.derived.shot_plan().clone().filter(|_| self.jobs.light_found_for(self.session.doc()));
         self.jobs.start_sequence(ShotJob::export(
             self.derived.resolved(self.session.doc()),
             flare,
-            self.derived.lut.clone(),
+            self.derived.lut().clone(),
             found,
             pattern,
             self.export_size,
@@ -278,8 +278,8 @@ impl FlareLabApp {
     /// when the document no longer asks for it.
     pub fn sync_shot_light(&mut self) {
         let (session, derived) = (&self.session, &self.derived);
-        let wanted = self.jobs.sync_light(session.doc(), || derived.resolved(session.doc()), derived.flare.as_ref());
-        if !wanted && self.derived.shot_plan.is_some() {
+        let wanted = self.jobs.sync_light(session.doc(), || derived.resolved(session.doc()), derived.flare().as_ref());
+        if !wanted && self.derived.shot_plan().is_some() {
             self.derived.set_shot_plan(None);
         }
     }
@@ -408,7 +408,7 @@ impl FlareLabApp {
             "frames {}-{}, {}",
             self.session.doc().timeline.first_frame,
             self.session.doc().timeline.last_frame,
-            match &self.derived.plate {
+            match &self.derived.plate() {
                 Some(p) if has_plate && self.export_size.is_none() => {
                     format!("{}x{} (the plate's size)", p.width, p.height)
                 }
