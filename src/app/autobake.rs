@@ -1,10 +1,10 @@
 //! LUT ghosts without a click: when the lens, its stop, coatings or spectrum change, the app looks for their
 //! LUT in memory, then in the on-disk cache ([`flare_core::lut::cache`]), and bakes it on a thread when
 //! neither has it, showing the paraxial flare (and saying so) until it is ready. This module holds the state;
-//! [`super::auto_bake_step`] the app's step.
+//! the job board ([`super::jobs`]) runs its step.
 //!
 //! # How it works
-//! Each frame the app's `auto_bake_step` computes the cache key of the prepared flare (once per optics
+//! Each frame the job board's poll computes the cache key of the prepared flare (once per optics
 //! change) and, unless the LUT on screen already has that key, takes the first of: a LUT kept in memory
 //! ([`MEMORY`] of them, so an undo to a lens baked in this session is instant), a checked cache file (a
 //! damaged one is removed, reported, and baked again), or a new bake. A bake for older optics is cancelled

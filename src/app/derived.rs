@@ -4,6 +4,15 @@
 //! threads while it plays), the LUT, and the frame (built again only when its request, the LUT or the plate changed),
 //! with their GPU uploads through [`crate::viewport`]; how often each was rebuilt ([`RebuildCounts`]); and the
 //! ghost list of a frame.
+//!
+//! # How it works
+//! This is the app's frame source: [`Derived::sync`] takes the document by shared reference (it never writes
+//! it: the automatic exposure is [`Derived::flare_ev`], an unreadable plate is shown as none with the reason)
+//! and rebuilds what changed in order: the optics, the automatic exposure, the plate, the frame. Its fields are
+//! private; the shell tells it only the view's inputs ([`Derived::set_playhead`], [`Derived::set_view_px`],
+//! [`Derived::set_draft`], [`Derived::painted`]) and what jobs made ([`Derived::set_lut`],
+//! [`Derived::set_shot_plan`], [`Derived::show_plate`] from the depth of field); everything else reads it
+//! through its getters.
 
 use std::sync::Arc;
 use std::time::Instant;

@@ -122,8 +122,9 @@ impl JobBoard {
             || self.looks.job.is_some()
     }
 
-    /// Every job's line in the status area: what it does, its progress and its Cancel.
-    pub fn status_ui(&mut self, ui: &mut egui::Ui) {
+    /// Every job's line in the status area: what it does, its progress and its Cancel; `lut_shown`: LUT ghosts
+    /// are on screen (a bake then says they stay until it lands, not that the paraxial flare stands in).
+    pub fn status_ui(&mut self, ui: &mut egui::Ui, lut_shown: bool) {
         if !self.dof.status.is_empty() {
             ui.label(&self.dof.status);
         }
@@ -143,7 +144,8 @@ impl JobBoard {
         // The bake (started by itself or from the Blend panel).
         if let (Some(job), BakeStatus::Running { fraction, text }) = (&self.bake, &self.bake_status) {
             ui.horizontal(|ui| {
-                ui.label(format!("baking LUT ghosts, the paraxial flare until then: {text}"));
+                let meanwhile = if lut_shown { "the LUT ghosts shown" } else { "the paraxial flare" };
+                ui.label(format!("baking LUT ghosts, {meanwhile} until then: {text}"));
                 ui.add(egui::ProgressBar::new(*fraction).desired_width(160.0));
                 if ui.button("Cancel bake").clicked() {
                     job.cancel();

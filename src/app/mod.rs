@@ -2,22 +2,25 @@
 //! that edit the document (lens, aperture, coatings, ghosts, blend), a ray diagram, presets, undo and redo.
 //!
 //! # How it works
-//! All the user edits is one [`Document`] (`flare_core::preset`, the same the command line renders); panels
-//! change it directly and [`History`] turns every frame's change (a whole drag at once) into an undo step.
-//! Each frame the app derives what the document implies, rebuilding only what changed: the prepared flare
-//! (ghost matrices, aperture mask, starburst, and their GPU textures) when
-//! [`Document::optics_fingerprint`] changes (an impossible lens keeps the last valid flare and marks the bad
-//! cell), the plate's texture when the plate file changes, then the frame ([`Frame::build`], the one frame
-//! pipeline) when its `FrameRequest` (light, gains, blend, exposures, tonemap, view size) or the LUT
-//! changed. Display settings never rebuild the optics or a texture ([`derived::RebuildCounts`] counts what was
-//! rebuilt). A new frame is handed to the viewport's paint callback ([`crate::viewport`]); otherwise the
-//! callback only re-draws the last texture, and the app never asks for a repaint unless something is under
-//! way (a bake, a drag bench), so an idle window costs nothing. Images are exported through the same frame
-//! pipeline and writer as `flarelab render`.
-//!
-//! The parts that stand on their own live beside this file: [`derived`] (all of the above: the state derived
-//! from the document, its sync and its GPU uploads; the UI only reads it), [`bake`] (the bake thread, with progress and Cancel) and [`drag_bench`]
-//! (the app timing itself); [`crate::viewport`] is the bridge to the GPU, [`crate::history`] the undo.
+//! `FlareLabApp` is a thin shell over four parts, each the only writer of its state (private fields): the
+//! [`session`] (the [`Document`] the panels edit, its undo [`crate::history::History`], the selection, the tab,
+//! the status line), the [`view`] (the viewport's layout and drawing size, the playhead, drafts, and
+//! [`view::LightMap`], the one conversion between the viewport's points and the light), the frame source
+//! [`derived`] (what the document implies, rebuilt only when it changes, and the frame; it reads the document
+//! and never writes it) and the [`jobs`] board (every thread: the bake and its automatic policy, exports, the
+//! shot's jobs, the depth of field, the ray grid, the looks, the report). Each UI frame the shell hands the frame
+//! source the view's playhead, size and draft and lets it sync: the prepared flare (ghost matrices, aperture
+//! mask, starburst, and their GPU textures) when [`Document::optics_fingerprint`] changes (an impossible lens
+//! keeps the last valid flare and marks the bad cell), the plate's texture when the plate file changes, then the
+//! frame ([`Frame::build`], the one frame pipeline) when its `FrameRequest` (light, gains, blend, exposures,
+//! tonemap, view size) or the LUT changed; display settings never rebuild the optics or a texture
+//! ([`derived::RebuildCounts`]). It polls the board once ([`jobs::JobBoard::poll`]) and routes what comes back
+//! (a LUT to show, the light found, a sentence) to the part that owns it; panels edit the document through
+//! [`session::Session::edit`], and the session turns every gesture (a whole drag at once) into one undo step.
+//! A new frame goes to the viewport's paint callback ([`crate::viewport`]); otherwise the callback re-draws the
+//! last texture, and the app asks for a repaint only while something is under way (a job, playback, a drag
+//! bench), so an idle window costs nothing. Images are exported through the same frame pipeline and writer as
+//! `flarelab render`. The README's "The app's house" says which part may call which.
 
 use jobs::{JobBoard, JobEvent, Live};
 use session::Session;
@@ -643,7 +646,7 @@ impl FlareLabApp {
             (None, None) => "no GPU".to_owned(),
         };
         ui.label(format!("{quality} | {gpu_time}"));
-        self.jobs.status_ui(ui);
+        self.jobs.status_ui(ui, self.derived.lut().is_some());
     }
 
     /// The display settings under the view, in two rows (a slider and its value never wrap apart): the

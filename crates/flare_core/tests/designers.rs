@@ -433,8 +433,8 @@ fn openlensflare_systems_read_by_extension_and_content() {
 
 /// "+" (`Lens::insert_dummy_after`, a surface with one medium on both sides) on every row of every shipped lens is optically inert: the lens stays
 /// valid with the same focal length and ghost count (and, but after the last row, the same back focal distance);
-/// "x" (`Lens::remove_surface`) on the new row gives back the lens's EFL, BFD and ghosts to 1e-9 and its vertices
-/// where they were.
+/// "x" (`Lens::remove_surface`) on the new row gives back exactly the lens (every field, so its EFL, BFD, ghosts
+/// and vertices).
 #[test]
 fn a_dummy_surface_inserted_and_removed_on_every_row_of_every_shipped_lens_changes_nothing() {
     let mut rows = 0;
@@ -469,6 +469,7 @@ fn a_dummy_surface_inserted_and_removed_on_every_row_of_every_shipped_lens_chang
                 assert!((a - b).abs() < 1e-9, "{id} row {k}: a vertex moved");
             }
             assert_eq!(plus.surfaces.len(), lens.surfaces.len());
+            assert!(plus == lens, "{id} row {k}: x gives back exactly the lens + was pressed on");
             rows += 1;
         }
     }

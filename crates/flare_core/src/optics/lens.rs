@@ -412,6 +412,14 @@ impl Lens {
             }
             (None, _) => (Some(lo.max(0.0) + 1.0), None),
         };
+        // The two parts of the split gap add up to it exactly, so removing the dummy gives back the very same
+        // number: `after` rounded, then `before` as `t - after`. By Sterbenz's lemma either `t - after` is exact
+        // (`after` at least half of `t`) or `after` itself was (`d` at least half of `t`, so `t - after` is `d`);
+        // either way `before + after` is `t` exactly.
+        let (before, after) = match (before, after, here.thickness_mm) {
+            (Some(_), Some(a), Some(t)) => (Some(t - a), Some(a)),
+            other => (other.0, other.1),
+        };
         dummy.thickness_mm = after;
         self.surfaces[k].thickness_mm = before;
         self.surfaces.insert(k + 1, dummy);
