@@ -115,17 +115,6 @@ impl History {
         !self.redo.is_empty()
     }
 
-    /// Takes the LUT source the app set by itself (a finished background bake) into the committed document
-    /// when that is the only difference, so it is no undo step of its own; with an edit pending it simply
-    /// joins that edit's step.
-    pub fn settle(&mut self, doc: &Document) {
-        let mut settled = self.committed.clone();
-        settled.blend.lut = doc.blend.lut.clone();
-        if settled == *doc {
-            self.committed = settled;
-        }
-    }
-
     /// Forgets everything (a new document was opened) and starts from `doc`.
     pub fn reset(&mut self, doc: &Document) {
         *self = Self::new(doc);

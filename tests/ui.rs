@@ -282,7 +282,11 @@ fn the_blend_panel_bakes_on_a_thread_cancels_and_shows_the_classification() {
     h.run_steps(2);
     let seconds = step_until(&mut h, 600.0, |app| app.lut().is_some());
     println!("the Heliar baked from the Blend panel in {seconds:.1} s");
-    assert!(matches!(h.state().doc().blend.lut, LutSource::Simulated { path: None }));
+    // The document is not written (undo gives back what was there); what the view draws and a saved preset
+    // say is "simulated".
+    assert_eq!(h.state().doc().blend.lut, LutSource::None);
+    let resolved = h.state().derived().resolved(h.state().doc());
+    assert!(matches!(resolved.blend.lut, LutSource::Simulated { path: None }));
     let baked = h.state().lut().unwrap().ghosts.len();
     assert!(baked > 0);
     show(&mut h, Tab::Ghosts);
@@ -702,7 +706,9 @@ fn lut_ghosts_bake_by_themselves_and_undo_to_a_baked_lens_needs_no_bake() {
     assert!(h.query_by_label_contains("the paraxial flare until").is_some(), "the status bar says what shows");
     step_until(&mut h, 600.0, |app| app.lut().is_some());
     assert_eq!(h.state().lut().unwrap().lens_id, "heliar_tronnier_us2645156");
-    assert_eq!(h.state().doc().blend.lut, LutSource::Simulated { path: None }, "a saved preset renders it blended");
+    let resolved = h.state().derived().resolved(h.state().doc());
+    assert_eq!(resolved.blend.lut, LutSource::Simulated { path: None }, "a saved preset renders it blended");
+    assert_eq!(h.state().doc().blend.lut, LutSource::None, "the bake writes nothing into the document");
     assert!(!h.state().session().can_undo(), "a bake is no edit to undo");
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1, "the LUT went into the cache");
     // Change the lens: its bake starts by itself, the old LUT is not drawn for it, and the new one is used.
@@ -718,6 +724,22 @@ fn lut_ghosts_bake_by_themselves_and_undo_to_a_baked_lens_needs_no_bake() {
     assert_eq!(h.state().doc().lens.id, "heliar_tronnier_us2645156");
     assert_eq!(h.state().lut().map(|l| l.lens_id.as_str()), Some("heliar_tronnier_us2645156"));
     assert_eq!(h.state().jobs().autobake().bakes_started, 2, "no new bake");
+    // Undo all the way, then redo: exactly the documents that were there (the bakes wrote nothing into them).
+    let heliar_json = h.state().doc().to_json();
+    assert!(heliar_json == heliar().to_json(), "back to the document the session opened");
+    h.state_mut().redo();
+    h.run();
+    assert_eq!(h.state().doc().lens.id, "brendel_tessar_usp2854889");
+    assert_eq!(h.state().doc().blend.lut, LutSource::None);
+    // "none" in the Blend panel: paraxial only, the automatic LUT leaves the screen; "simulated" brings it back.
+    show(&mut h, Tab::Blend);
+    h.get_by_label("none").click();
+    h.run();
+    assert!(h.state().lut().is_none() && !h.state().jobs().autobake().enabled);
+    assert_eq!(h.state().derived().resolved(h.state().doc()).blend.lut, LutSource::None, "a saved preset too");
+    h.get_by_label("simulated").click();
+    h.run_steps(3);
+    assert_eq!(h.state().lut().map(|l| l.lens_id.as_str()), Some("brendel_tessar_usp2854889"), "from memory");
     // A new session finds both LUTs in the disk cache: no bake at all.
     let mut fresh = app_on(heliar());
     fresh.run_steps(2);
@@ -823,9 +845,15 @@ fn the_looks_panel_renders_thumbnails_on_a_worker_and_applies_a_look_as_one_undo
     h.run_steps(2);
     assert_eq!(h.state().doc().lens.id, "pbrt_dgauss_50mm");
     assert_eq!(h.state().doc().aperture, shipped[k].document().unwrap().aperture);
+    let look = h.state().doc().to_json();
     h.state_mut().undo();
     h.run();
     assert_eq!(h.state().doc().lens, before.lens, "one undo step takes the look back");
+    assert!(h.state().doc().to_json() == before.to_json(), "the whole document, as saved, is what it was");
+    assert!(h.state().message().is_some_and(|m| m.starts_with("undid: ")), "{:?}", h.state().message());
+    h.state_mut().redo();
+    h.run();
+    assert!(h.state().doc().to_json() == look, "redo gives the look back exactly");
 }
 
 #[test]

@@ -13,9 +13,10 @@
 //! once the optics have stood for [`SETTLE`] (a drag through many values bakes the last one), and takes the
 //! ghosts it can from the latest LUT (`bake_with`'s `previous`: unchanged ghosts are not baked again); a setting
 //! outside the optics (exposure, tonemap, light, plate) never restarts it. When a bake lands, the status bar says
-//! that its LUT ghosts replace the paraxial ones. Showing a baked LUT
-//! sets the document's LUT source to "simulated" without an undo step of its own, so a preset saved then
-//! renders the same blended frame on the command line (which reads the same cache). Nothing happens while
+//! that its LUT ghosts replace the paraxial ones. A baked LUT is shown
+//! without writing the document (which may name no LUT: undo gives back exactly what was there); a preset saved
+//! then says "simulated" (`Derived::resolved`), so it renders the same blended frame on the command line (which
+//! reads the same cache). Nothing happens while
 //! the user has a LUT file or a photo LUT open, or has turned automatic baking off.
 
 use std::sync::Arc;

@@ -25,7 +25,7 @@ use flare_core::image::HdrImage;
 use flare_core::lut::blend::LiveLut;
 use flare_core::lut::{GhostLut, LutKind};
 use flare_core::optics::FirstOrder;
-use flare_core::preset::Document;
+use flare_core::preset::{Document, LutSource};
 use flare_core::shot::ShotPlan;
 use flare_core::shot::pattern::FramePattern;
 
@@ -174,6 +174,8 @@ pub struct Derived {
     plate_generation: u64,
     lut: Option<Arc<LiveLut>>,
     lut_generation: u64,
+    /// The LUT shown is the automatic bake's ([`Self::show_auto_lut`]).
+    lut_auto: bool,
     /// The viewport draws this draft instead of the full frame (see [`crate::app::draft`]).
     draft: Option<Draft>,
     /// What the frame shown left out, when it is a draft.
@@ -208,6 +210,7 @@ impl Derived {
             plate_generation: 0,
             lut: None,
             lut_generation: 0,
+            lut_auto: false,
             draft: None,
             draft_shown: None,
         }
@@ -249,7 +252,19 @@ impl Derived {
     /// A copy of `doc` for a job or a file, its exposure the one the view uses ([`Self::flare_ev`]): what the
     /// command line draws from it (it resolves an automatic exposure the same way).
     pub fn resolved(&self, doc: &Document) -> Document {
-        Document { flare_ev: self.flare_ev(doc), ..doc.clone() }
+        let mut resolved = Document { flare_ev: self.flare_ev(doc), ..doc.clone() };
+        if self.lut_is_auto(doc) {
+            // The LUT ghosts on screen are the automatic bake's: a file says "simulated", which the command
+            // line fetches from the same cache (or bakes).
+            resolved.blend.lut = LutSource::Simulated { path: None };
+        }
+        resolved
+    }
+
+    /// Whether the LUT on screen is the automatic bake's, drawn for a document that named none (a derived
+    /// use, never written into the document: undo gives back exactly what was there).
+    fn lut_is_auto(&self, doc: &Document) -> bool {
+        self.lut_auto && self.lut.is_some() && doc.blend.lut == LutSource::None
     }
 
     /// The light found in the plates for the live document (or none): the frame shows it from now on.
@@ -507,8 +522,27 @@ impl Derived {
         self.plate_generation += 1;
     }
 
-    /// Replaces the LUT in use (uploading its atlas).
+    /// Replaces the LUT in use (uploading its atlas): one the user opened or asked for.
     pub fn set_lut(&mut self, lut: Option<GhostLut>, gpu: Option<&RenderState>) {
+        self.replace_lut(lut, false, gpu);
+    }
+
+    /// Shows the automatic bake's LUT (from memory, the cache or a bake): blended even while the document names
+    /// no LUT (see [`Self::resolved`]).
+    pub fn show_auto_lut(&mut self, lut: GhostLut, gpu: Option<&RenderState>) {
+        self.replace_lut(Some(lut), true, gpu);
+    }
+
+    /// Takes the automatic bake's LUT off the screen (automatic baking was turned off); a LUT the user opened
+    /// stays.
+    pub fn drop_auto_lut(&mut self, gpu: Option<&RenderState>) {
+        if self.lut_auto && self.lut.is_some() {
+            self.replace_lut(None, false, gpu);
+        }
+    }
+
+    fn replace_lut(&mut self, lut: Option<GhostLut>, auto: bool, gpu: Option<&RenderState>) {
+        self.lut_auto = auto;
         let live = lut.map(|l| Arc::new(LiveLut::new(l)));
         if let Some(rs) = gpu {
             ViewportResources::with(rs, |res, device, queue| res.renderer.set_lut(device, queue, live.as_deref()));
@@ -535,6 +569,9 @@ impl Derived {
     ) -> FrameRequest {
         let mut request = doc.frame_request_at(&flare.system, self.playhead as f64, width, height, divisor);
         request.display.flare_ev = self.flare_ev(doc);
+        if self.lut_is_auto(doc) {
+            request.lut_use = flare_core::frame::LutUse::Blend;
+        }
         if let Some(planned) = self.shot_plan.as_ref().and_then(|p| p.frames.iter().find(|f| f.frame == self.playhead))
         {
             planned.apply_to(&mut request);

@@ -201,6 +201,15 @@ impl JobBoard {
         &mut self.autobake
     }
 
+    /// Turns the automatic bake on or off (the Blend panel); off, the LUT it showed leaves the screen (the app
+    /// drops it from the frame source) and comes back when it is turned on again.
+    pub fn set_auto_bake(&mut self, on: bool) {
+        self.autobake.enabled = on;
+        if !on {
+            self.autobake.shown = None;
+        }
+    }
+
     /// The Bake button: a bake of the live optics now (the automatic bake does the same by itself).
     pub fn start_bake(&mut self, live: &Live) {
         if self.bake.is_some() {

@@ -889,7 +889,12 @@ impl FlareLabApp {
                 let live = Self::live(&self.session, &self.derived);
                 self.jobs.start_bake(&live);
             }
-            Action::SetAutoBake(on) => self.jobs.autobake_mut().enabled = on,
+            Action::SetAutoBake(on) => {
+                self.jobs.set_auto_bake(on);
+                if !on {
+                    self.derived.drop_auto_lut(self.gpu.as_ref());
+                }
+            }
             Action::CancelBake => self.jobs.cancel_bake(),
             Action::OpenLut => self.pick_file(FileUse::OpenLut),
             Action::ExportLut => {
@@ -1082,10 +1087,7 @@ impl FlareLabApp {
         for event in self.jobs.poll(&live) {
             match event {
                 JobEvent::Say(text) => self.session.say(text),
-                JobEvent::ShowLut(lut) => {
-                    self.set_lut(Some((*lut).clone()));
-                    self.session.adopt_baked_lut();
-                }
+                JobEvent::ShowLut(lut) => self.derived.show_auto_lut((*lut).clone(), self.gpu.as_ref()),
                 JobEvent::LightFound(plan) => self.derived.set_shot_plan(Some(plan)),
             }
         }

@@ -7,12 +7,12 @@
 //! [`Session::commit`]), a new document arrives through [`Session::open`] (which starts a new history), and
 //! undo and redo walk the history through [`Session::walk`], which says what they undid. Nothing derived from
 //! the document is ever written into it (the frame source reads it; an automatic exposure stays derived), so
-//! an undo always gives back exactly the document that was there. The one exception is spelled out:
-//! [`Session::adopt_baked_lut`] records that the document's LUT ghosts are the background bake's, folded into
-//! the current step (a bake is no edit to undo). Every action that changes state says so through
+//! an undo always gives back exactly the document that was there (the automatic bake's LUT ghosts are
+//! drawn for a document that names no LUT without it saying so: `Derived::resolved` says it in files). Every
+//! action that changes state says so through
 //! [`Session::say`], which replaces what the status line said before.
 
-use flare_core::preset::{Document, LutSource};
+use flare_core::preset::Document;
 
 use super::Tab;
 use crate::history::History;
@@ -73,15 +73,6 @@ impl Session {
 
     pub fn can_redo(&self) -> bool {
         self.history.can_redo()
-    }
-
-    /// The document's LUT ghosts are the background bake's (when it named none): folded into the current
-    /// undo step, not one of its own.
-    pub fn adopt_baked_lut(&mut self) {
-        if self.doc.blend.lut == LutSource::None {
-            self.doc.blend.lut = LutSource::Simulated { path: None };
-            self.history.settle(&self.doc);
-        }
     }
 
     /// The ghost the panels, the viewport and the ray diagram show (an index into the live flare's ghosts).

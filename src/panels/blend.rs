@@ -35,24 +35,31 @@ pub fn blend_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, actio
     ui.add(egui::Slider::new(&mut doc.blend.gain, 0.0..=4.0).text("LUT gain"));
     ui.separator();
     ui.label("LUT source");
-    let mut source = match &doc.blend.lut {
+    // A document that names no LUT is served by the automatic bake while it is on: shown as "simulated".
+    let shown = match &doc.blend.lut {
+        LutSource::None if ctx.auto_bake => 1,
         LutSource::None => 0,
         LutSource::Simulated { .. } => 1,
         LutSource::Photo { .. } => 2,
     };
+    let mut source = shown;
     ui.horizontal(|ui| {
         ui.radio_value(&mut source, 0, "none");
         ui.radio_value(&mut source, 1, "simulated");
         ui.radio_value(&mut source, 2, "photo");
     });
-    match (source, &doc.blend.lut) {
-        (0, LutSource::None) | (1, LutSource::Simulated { .. }) | (2, LutSource::Photo { .. }) => {}
-        (0, _) => {
+    match source {
+        _ if source == shown => {}
+        0 => {
             // Paraxial only: the automatic bake would bring the LUT back.
             doc.blend.lut = LutSource::None;
             actions.push(Action::SetAutoBake(false));
         }
-        (1, _) => doc.blend.lut = LutSource::Simulated { path: None },
+        1 => {
+            // LUT ghosts for this lens: baked (or fetched) by themselves again.
+            doc.blend.lut = LutSource::Simulated { path: None };
+            actions.push(Action::SetAutoBake(true));
+        }
         _ => actions.push(Action::OpenLut),
     }
     let mut auto = ctx.auto_bake;
