@@ -144,8 +144,13 @@ impl JobBoard {
         // The bake (started by itself or from the Blend panel).
         if let (Some(job), BakeStatus::Running { fraction, text }) = (&self.bake, &self.bake_status) {
             ui.horizontal(|ui| {
-                let meanwhile = if lut_shown { "the LUT ghosts shown" } else { "the paraxial flare" };
-                ui.label(format!("baking LUT ghosts, {meanwhile} until then: {text}"));
+                if self.autobake.baking.is_some() && self.autobake.baking != self.autobake.live {
+                    // Optics the user left (an undo): the bake goes on, kept for a redo.
+                    ui.label(format!("baking LUT ghosts for earlier optics (kept for a redo): {text}"));
+                } else {
+                    let meanwhile = if lut_shown { "the LUT ghosts shown" } else { "the paraxial flare" };
+                    ui.label(format!("baking LUT ghosts, {meanwhile} until then: {text}"));
+                }
                 ui.add(egui::ProgressBar::new(*fraction).desired_width(160.0));
                 if ui.button("Cancel bake").clicked() {
                     job.cancel();
