@@ -158,11 +158,20 @@ impl Aperture {
         }
     }
 
-    /// Loads a grayscale aperture image (any format the `image` crate reads), resampled to `size`.
+    /// Loads a grayscale aperture image (PNG, EXR or HDR, 1 to [`crate::output::MAX_IMAGE_SIDE_PX`] pixels a
+    /// side), resampled to `size`. An image with no light in it (black everywhere) is refused: it would draw
+    /// no flare at all.
     pub fn image_shape_from_file(path: &std::path::Path, size: usize) -> Result<ApertureShape, ApertureError> {
-        let img = image::open(path).map_err(|e| ApertureError::Image(format!("{}: {e}", path.display())))?;
+        let img = crate::output::open_image(path, "aperture image").map_err(ApertureError::Image)?;
         let gray = img.resize_exact(size as u32, size as u32, image::imageops::FilterType::Triangle).to_luma32f();
-        let luminance = gray.into_raw().into_iter().map(|v| v.clamp(0.0, 1.0)).collect();
+        let luminance: Vec<f32> =
+            gray.into_raw().into_iter().map(|v| if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) }).collect();
+        if luminance.iter().all(|&v| v < 1.0 / 255.0) {
+            return Err(ApertureError::Image(format!(
+                "{}: the aperture image is black everywhere: no light would pass (white is open, black is blade)",
+                path.display()
+            )));
+        }
         Ok(ApertureShape::Image { size, luminance })
     }
 

@@ -1,10 +1,18 @@
-//! Files written whole: every file FlareLab writes (images, presets, lenses, LUTs) goes through
-//! [`write_atomic`].
+//! Files written whole and read within bounds: every file FlareLab writes (images, presets, lenses, LUTs) goes
+//! through [`write_atomic`], and every text file it reads (presets, tracks, glass catalogues, sidecars)
+//! through [`read_bounded`].
 //!
 //! # How it works
 //! The bytes go to a temporary file in the target's folder, are flushed to disk, and the temporary file is
 //! renamed over the target. A rename within one folder is atomic, so a reader (or a crash) sees the old file
 //! or the new one, never half of one; on an error the temporary file is removed and the target is untouched.
+//! A target that exists and is not a regular file (a FIFO, a device, a folder) is refused, never replaced; a
+//! symbolic link is written through (its target replaced, the link kept). Temporary files are named
+//! `.flarelab-tmp-*`, so what a killed process left behind is recognised and removed ([`remove_stale_temps`])
+//! by the next write into that folder once it is an hour old. A read takes at most `max_bytes + 1` bytes,
+//! whatever the file claims to be (an endless FIFO or `/dev/zero` ends there with an error), and
+//! [`shorten`] puts a token from a file into a message at most [`TOKEN_CHARS`] characters long, control
+//! characters escaped.
 
 use std::io::Write;
 use std::path::Path;
@@ -12,11 +20,34 @@ use std::path::Path;
 /// Writes `contents` to `path` through a temporary file in the same folder and a rename: readers see the
 /// old file or the new one, never half of one.
 pub fn write_atomic(path: &Path, contents: &[u8]) -> std::io::Result<()> {
+    // A link is written through: the file it names is replaced, the link stays.
+    let resolved;
+    let path = match std::fs::symlink_metadata(path) {
+        Ok(meta) if meta.file_type().is_symlink() => {
+            resolved = std::fs::canonicalize(path).or_else(|_| {
+                // A dangling link: the file it names, made where the link points.
+                let target = std::fs::read_link(path)?;
+                Ok::<_, std::io::Error>(path.parent().map_or(target.clone(), |dir| dir.join(&target)))
+            })?;
+            resolved.as_path()
+        }
+        _ => path,
+    };
+    if let Ok(meta) = std::fs::metadata(path)
+        && !meta.is_file()
+    {
+        return Err(std::io::Error::other(format!(
+            "{} exists and is not a regular file ({}): not replaced",
+            path.display(),
+            kind_of(&meta)
+        )));
+    }
     let dir = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
     };
-    let mut tmp = tempfile::NamedTempFile::new_in(dir)?;
+    remove_stale_temps(dir, std::time::Duration::from_secs(3600));
+    let mut tmp = tempfile::Builder::new().prefix(TEMP_PREFIX).tempfile_in(dir)?;
     tmp.write_all(contents)?;
     // The temporary file is private (0600); the result keeps the permissions of the file it replaces, or
     // gets the usual 0644 when it is new.
@@ -39,4 +70,149 @@ fn default_permissions(_file: &std::fs::File) -> std::io::Result<std::fs::Permis
 #[cfg(not(unix))]
 fn default_permissions(file: &std::fs::File) -> std::io::Result<std::fs::Permissions> {
     Ok(file.metadata()?.permissions())
+}
+
+/// The name every temporary file of [`write_atomic`] starts with.
+pub const TEMP_PREFIX: &str = ".flarelab-tmp-";
+
+/// What a non-regular file is, in words.
+fn kind_of(meta: &std::fs::Metadata) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        let t = meta.file_type();
+        if t.is_fifo() {
+            return "a FIFO";
+        }
+        if t.is_char_device() || t.is_block_device() {
+            return "a device";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+    }
+    if meta.is_dir() { "a folder" } else { "not a plain file" }
+}
+
+/// Removes our own temporary files in `dir` older than `age` (left by a process that was killed while
+/// writing); returns how many. Anything else in the folder is left alone, and a failure removes nothing more.
+pub fn remove_stale_temps(dir: &Path, age: std::time::Duration) -> usize {
+    let Ok(entries) = std::fs::read_dir(dir) else { return 0 };
+    let now = std::time::SystemTime::now();
+    let mut removed = 0;
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        if !name.to_string_lossy().starts_with(TEMP_PREFIX) {
+            continue;
+        }
+        let Ok(meta) = entry.metadata() else { continue };
+        let old = meta.modified().ok().and_then(|m| now.duration_since(m).ok()).is_some_and(|d| d >= age);
+        if meta.is_file() && old && std::fs::remove_file(entry.path()).is_ok() {
+            removed += 1;
+        }
+    }
+    removed
+}
+
+/// The most bytes a text input (a preset, a track, a glass catalogue, a sidecar) may have: 64 MiB, far above
+/// any real one (the largest shipped catalogue is under 1 MB).
+pub const MAX_TEXT_BYTES: u64 = 64 * 1024 * 1024;
+
+/// Reads `path` whole if it has at most `max_bytes`: at most `max_bytes + 1` bytes are ever read, whatever
+/// the file claims (a FIFO or a device reports no length). The error is one line with the path.
+pub fn read_bounded(path: &Path, max_bytes: u64) -> Result<Vec<u8>, String> {
+    use std::io::Read;
+    let fail = |e: std::io::Error| format!("cannot read {}: {e}", path.display());
+    let file = std::fs::File::open(path).map_err(fail)?;
+    let meta = file.metadata().map_err(fail)?;
+    if meta.is_dir() {
+        return Err(format!("{} is a folder, not a file", path.display()));
+    }
+    if meta.len() > max_bytes {
+        return Err(too_large(path, max_bytes));
+    }
+    let mut data = Vec::with_capacity(meta.len() as usize);
+    file.take(max_bytes + 1).read_to_end(&mut data).map_err(fail)?;
+    if data.len() as u64 > max_bytes {
+        return Err(too_large(path, max_bytes));
+    }
+    Ok(data)
+}
+
+/// [`read_bounded`] as UTF-8 text.
+pub fn read_text_bounded(path: &Path, max_bytes: u64) -> Result<String, String> {
+    let bytes = read_bounded(path, max_bytes)?;
+    String::from_utf8(bytes)
+        .map_err(|e| format!("{}: not UTF-8 text (at byte {})", path.display(), e.utf8_error().valid_up_to()))
+}
+
+fn too_large(path: &Path, max_bytes: u64) -> String {
+    format!("{} is larger than {} MiB, the most this file may be: not read", path.display(), max_bytes >> 20)
+}
+
+/// The most characters of a token from a file that a message quotes.
+pub const TOKEN_CHARS: usize = 40;
+
+/// `token` for a message: at most [`TOKEN_CHARS`] characters (longer ones cut, saying how long they were),
+/// control characters escaped, so a hostile file cannot flood or garble the terminal.
+pub fn shorten(token: &str) -> String {
+    let count = token.chars().count();
+    let mut out: String = token.chars().take(TOKEN_CHARS).flat_map(char::escape_default).collect();
+    if count > TOKEN_CHARS {
+        out.push_str(&format!("... ({count} characters)"));
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_long_token_is_cut_and_control_characters_escaped() {
+        let long = "9".repeat(100_000);
+        let s = shorten(&long);
+        assert!(s.len() < 80 && s.ends_with("(100000 characters)"), "{s}");
+        assert_eq!(shorten("a\u{1b}[2Jb"), "a\\u{1b}[2Jb");
+        assert_eq!(shorten("a\u{7}b"), "a\\u{7}b");
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn an_endless_file_is_read_to_the_bound_only() {
+        let err = read_bounded(Path::new("/dev/zero"), 1 << 20).unwrap_err();
+        assert!(err.contains("larger than 1 MiB"), "{err}");
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_fifo_is_refused_and_a_link_is_written_through() {
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("out.png");
+        assert!(std::process::Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+        let err = write_atomic(&fifo, b"x").unwrap_err().to_string();
+        assert!(err.contains("a FIFO") && err.contains("not replaced"), "{err}");
+        let meta = std::fs::symlink_metadata(&fifo).unwrap();
+        use std::os::unix::fs::FileTypeExt;
+        assert!(meta.file_type().is_fifo(), "the FIFO is still there");
+        let target = dir.path().join("real.json");
+        std::fs::write(&target, b"old").unwrap();
+        let link = dir.path().join("link.json");
+        std::os::unix::fs::symlink(&target, &link).unwrap();
+        write_atomic(&link, b"new").unwrap();
+        assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink(), "the link stays a link");
+        assert_eq!(std::fs::read(&target).unwrap(), b"new");
+    }
+
+    #[test]
+    fn stale_temporary_files_of_ours_are_removed_and_nothing_else() {
+        let dir = tempfile::tempdir().unwrap();
+        let ours = dir.path().join(format!("{TEMP_PREFIX}abc"));
+        let theirs = dir.path().join(".other-tmp");
+        std::fs::write(&ours, b"half").unwrap();
+        std::fs::write(&theirs, b"keep").unwrap();
+        assert_eq!(remove_stale_temps(dir.path(), std::time::Duration::from_secs(3600)), 0, "too young");
+        assert_eq!(remove_stale_temps(dir.path(), std::time::Duration::ZERO), 1);
+        assert!(!ours.exists() && theirs.exists());
+    }
 }

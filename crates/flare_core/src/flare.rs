@@ -199,6 +199,28 @@ impl crate::lut::GhostLut {
                 live,
             });
         }
+        // Every ghost it names must be one of this lens's, with the same two surfaces: the fingerprint covers
+        // the optics, not the indices a damaged or forged file carries (they index the live ghost list).
+        let pairs = lens.ghost_pairs();
+        for (entry, g) in self.ghosts.iter().enumerate() {
+            if g.ghost == crate::lut::PHOTO_GHOST {
+                continue;
+            }
+            let [i, j] = g.surfaces;
+            let reason = match pairs.get(g.ghost as usize) {
+                None => format!("it has {} ghosts", pairs.len()),
+                Some(&(a, b)) if (a as u32, b as u32) != (i, j) => format!("its ghost {} is {a}-{b}", g.ghost),
+                Some(_) => continue,
+            };
+            return Err(crate::lut::format::LutError::NoSuchGhost {
+                entry,
+                ghost: g.ghost,
+                i,
+                j,
+                lens: lens.id.clone(),
+                reason,
+            });
+        }
         Ok(())
     }
 }

@@ -110,10 +110,16 @@ impl HdrImage {
             .pixels
             .iter()
             .zip(&other.pixels)
-            .map(|(a, b)| [a[0] + b[0], a[1] + b[1], a[2] + b[2], a[3].max(b[3])])
+            // A sum past the largest float stays the largest (an overflow is the brightest value, not infinity).
+            .map(|(a, b)| [sum(a[0], b[0]), sum(a[1], b[1]), sum(a[2], b[2]), a[3].max(b[3])])
             .collect();
         Self { width: self.width, height: self.height, pixels }
     }
+}
+
+/// `a + b`, at most the largest finite float.
+fn sum(a: f32, b: f32) -> f32 {
+    (a + b).min(f32::MAX)
 }
 
 /// A display image: 8-bit sRGB RGBA.

@@ -7,10 +7,18 @@
 //! prefix before the dot: the default layer `R, G, B, A` is the composite (alpha 1), `flare.R/G/B` the flare
 //! alone (ghosts, LUT ghosts and starburst, to be added over a plate), `starburst.R/G/B` its starburst,
 //! `plate.R/G/B` the exposed plate when there is one, and `ghost_I_J.R/G/B` one layer per drawn ghost when
-//! asked for. Channels are 32-bit float, ZIP-compressed; a value that is not finite is written as 0 (none
-//! should reach here). Every file is written through [`crate::files::write_atomic`]: a temporary file in the
+//! asked for. Channels are 32-bit float, ZIP-compressed; a value that is not finite is written as the largest
+//! finite float of its sign (+infinity, an overflow, stays the brightest value instead of turning black), NaN as
+//! 0 (none should reach here). Every file is written through [`crate::files::write_atomic`]: a temporary file in the
 //! target's folder renamed over it, so a failed write leaves nothing half-written. Plates: PNG and JPEG are
 //! decoded from sRGB to linear, EXR and Radiance HDR are taken as linear.
+//!
+//! Every image FlareLab reads (plates, depth maps, aperture images, photo LUTs) goes through [`open_image`]
+//! (or, for a depth map's EXR, [`exr_size`]) first: the size is read from the header and refused past
+//! [`MAX_IMAGE_SIDE_PX`] a side (the frame's own limit, `--size`) before any pixel is decoded, and the decoder
+//! runs with limits to match, so no file can ask for more than about 1 GiB of pixels. A plate's values that
+//! are not finite or too large to expose are clamped to [`MAX_PLATE_VALUE`] (the flare is never lost from the
+//! composite), NaN and negative ones to 0, and [`read_plate_checked`] says how many it clamped.
 
 use std::io::Cursor;
 use std::path::Path;
@@ -30,6 +38,9 @@ pub enum ImageError {
     Decode { path: String, message: String },
     #[error("{path}: unknown image type (use .png or .exr)")]
     Extension { path: String },
+    /// A plate refused by [`open_image`] (its message names the file and the reason).
+    #[error("{0}")]
+    Plate(String),
 }
 
 /// Output image kinds, by extension.
@@ -97,7 +108,7 @@ pub fn write_png(path: &Path, image: &DisplayImage) -> Result<(), ImageError> {
 fn channels(prefix: &str, image: &HdrImage, alpha: bool) -> Vec<exr::prelude::AnyChannel<exr::prelude::FlatSamples>> {
     use exr::prelude::{AnyChannel, FlatSamples};
     let name = |c: &str| if prefix.is_empty() { c.to_owned() } else { format!("{prefix}.{c}") };
-    let finite = |v: f32| if v.is_finite() { v } else { 0.0 };
+    let finite = |v: f32| if v.is_nan() { 0.0 } else { v.clamp(-f32::MAX, f32::MAX) };
     let count = if alpha { 4 } else { 3 };
     (0..count)
         .map(|k| {
@@ -166,21 +177,95 @@ fn write_exr_channels(
     write_atomic(path, &bytes).map_err(|e| io(path, e))
 }
 
+/// The largest side of any image FlareLab reads (pixels): the frame's own limit (`--size`), so a plate never
+/// makes a frame the command line could not draw, and a header cannot ask for more than 8192 x 8192 pixels.
+pub const MAX_IMAGE_SIDE_PX: u32 = 8192;
+
+/// The largest plate value kept: a value above it (or +infinity) is clamped to it, so the plate exposed by up
+/// to +64 EV stays finite in f32 and the flare is never lost from the composite.
+pub const MAX_PLATE_VALUE: f32 = f32::MAX / 1.9e19;
+
+/// The size of the image in `path` from its header alone (no pixel decoded), refused past
+/// [`MAX_IMAGE_SIDE_PX`] a side or when empty. `what` names the image in the message ("plate", "depth map").
+pub fn image_size(path: &Path, what: &str) -> Result<(u32, u32), String> {
+    let reader = ::image::ImageReader::open(path)
+        .map_err(|e| format!("{}: cannot read the {what}: {e}", path.display()))?
+        .with_guessed_format()
+        .map_err(|e| format!("{}: cannot read the {what}: {e}", path.display()))?;
+    let (w, h) = reader.into_dimensions().map_err(|e| format!("{}: cannot read the {what}: {e}", path.display()))?;
+    check_side(path, what, w as u64, h as u64)?;
+    Ok((w, h))
+}
+
+/// The size of an EXR from its header alone, checked as [`image_size`] does (for readers that use the `exr`
+/// crate directly: a depth map's channel).
+pub fn exr_size(path: &Path, what: &str) -> Result<(usize, usize), String> {
+    let meta = exr::meta::MetaData::read_from_file(path, false)
+        .map_err(|e| format!("{}: cannot read the {what}: {e}", path.display()))?;
+    let header = meta.headers.first().ok_or_else(|| format!("{}: the {what} has no image in it", path.display()))?;
+    let (w, h) = (header.layer_size.width(), header.layer_size.height());
+    check_side(path, what, w as u64, h as u64)?;
+    Ok((w, h))
+}
+
+fn check_side(path: &Path, what: &str, w: u64, h: u64) -> Result<(), String> {
+    let max = u64::from(MAX_IMAGE_SIDE_PX);
+    if w == 0 || h == 0 || w > max || h > max {
+        return Err(format!(
+            "{}: the {what} is {w} x {h} pixels; FlareLab reads images of 1 to {max} pixels a side",
+            path.display()
+        ));
+    }
+    Ok(())
+}
+
+/// Decodes the image in `path` after checking its header ([`image_size`]), the decoder limited to the same
+/// size and to 1.5 GiB of allocations.
+pub fn open_image(path: &Path, what: &str) -> Result<::image::DynamicImage, String> {
+    image_size(path, what)?;
+    let mut reader = ::image::ImageReader::open(path)
+        .and_then(|r| r.with_guessed_format())
+        .map_err(|e| format!("{}: cannot read the {what}: {e}", path.display()))?;
+    let mut limits = ::image::Limits::default();
+    limits.max_image_width = Some(MAX_IMAGE_SIDE_PX);
+    limits.max_image_height = Some(MAX_IMAGE_SIDE_PX);
+    limits.max_alloc = Some(3 << 29);
+    reader.limits(limits);
+    reader.decode().map_err(|e| format!("{}: cannot read the {what}: {e}", path.display()))
+}
+
 /// Reads a background plate (PNG and JPEG are decoded from sRGB to linear; EXR and Radiance HDR are taken as
-/// linear), any size.
+/// linear), 1 to [`MAX_IMAGE_SIDE_PX`] pixels a side; values clamped as the module documentation says.
 pub fn read_plate(path: &Path) -> Result<HdrImage, ImageError> {
-    let decode = |message: String| ImageError::Decode { path: path.display().to_string(), message };
-    let img = ::image::open(path).map_err(|e| decode(e.to_string()))?;
+    read_plate_checked(path).map(|(plate, _)| plate)
+}
+
+/// [`read_plate`], with what it clamped in words (said once, by the caller), if anything.
+pub fn read_plate_checked(path: &Path) -> Result<(HdrImage, Option<String>), ImageError> {
+    let img = open_image(path, "plate").map_err(ImageError::Plate)?;
     let is_float = matches!(img, ::image::DynamicImage::ImageRgb32F(_) | ::image::DynamicImage::ImageRgba32F(_));
     let (width, height) = (img.width(), img.height());
-    if width == 0 || height == 0 || (width as u64) * (height as u64) > 16384 * 16384 {
-        return Err(decode(format!("{width} x {height} pixels is not a usable plate")));
-    }
     let rgba = img.to_rgba32f();
+    let clamped = std::sync::atomic::AtomicUsize::new(0);
     let linear = |v: f32| {
-        let v = if v.is_finite() { v.max(0.0) } else { 0.0 };
-        if is_float { v } else { srgb_decode(v) }
+        let v = if is_float { v } else { srgb_decode(v) };
+        if v.is_nan() || v <= 0.0 {
+            0.0
+        } else if v > MAX_PLATE_VALUE {
+            clamped.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            MAX_PLATE_VALUE
+        } else {
+            v
+        }
     };
-    let pixels = rgba.pixels().map(|p| [linear(p[0]), linear(p[1]), linear(p[2]), 1.0]).collect();
-    Ok(HdrImage { width, height, pixels })
+    let pixels: Vec<[f32; 4]> = rgba.pixels().map(|p| [linear(p[0]), linear(p[1]), linear(p[2]), 1.0]).collect();
+    let n = clamped.into_inner();
+    let warning = (n > 0).then(|| {
+        format!(
+            "{}: {n} plate values were infinite or above {MAX_PLATE_VALUE:.1e}, clamped to it (so exposing the \
+             plate cannot overflow)",
+            path.display()
+        )
+    });
+    Ok((HdrImage { width, height, pixels }, warning))
 }

@@ -49,6 +49,9 @@ pub const PRESET_VERSION: u32 = 3;
 pub enum PresetError {
     #[error("{0}")]
     Io(#[from] std::io::Error),
+    /// The file could not be read, or is larger than any preset ([`crate::files::MAX_TEXT_BYTES`]).
+    #[error("{0}")]
+    Read(String),
     #[error("not a FlareLab preset: at `{path}`: {reason}")]
     Json { path: String, reason: String },
     #[error("preset version {0} is newer than this FlareLab reads ({PRESET_VERSION}); update FlareLab")]
@@ -534,7 +537,8 @@ impl Document {
 
     /// Opens a preset file.
     pub fn open(path: &Path) -> Result<Self, PresetError> {
-        Self::from_json(&std::fs::read_to_string(path)?)
+        let text = crate::files::read_text_bounded(path, crate::files::MAX_TEXT_BYTES).map_err(PresetError::Read)?;
+        Self::from_json(&text)
     }
 
     /// Opens a preset file, or a shipped preset by name when no such file exists.

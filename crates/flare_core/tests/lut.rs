@@ -838,3 +838,55 @@ fn ghosts_of_an_aspheric_lens_bake_and_blend() {
         assert!(image.pixels.iter().flatten().all(|v| v.is_finite() && *v >= 0.0), "{theta} {alpha}");
     }
 }
+
+/// Issue 33's panic: a LUT whose checksums are valid but whose ghost index is past the lens's last ghost (or
+/// names other surfaces) is refused by `check_for` with the reason; in the disk cache it is rejected and
+/// removed like a damaged file (and baked again by the caller); drawn without the check, it draws nothing for
+/// that ghost instead of panicking.
+#[test]
+fn a_lut_naming_a_ghost_the_lens_lacks_is_refused_removed_from_the_cache_and_never_panics() {
+    use flare_core::lut::cache::{Lookup, LutCache};
+    let flare = flare("tessar");
+    let ghosts = flare.system.ghosts.len();
+    let settings = BakeSettings {
+        theta_max_deg: Some(8.0),
+        res: 16,
+        grid: 16,
+        initial_steps: 1,
+        phi_steps: 1,
+        ..small_settings()
+    };
+    let lut =
+        bake(&flare, &flare.ray_grid_renderer(), &[3], &settings, None, &|_| {}, &AtomicBool::new(false)).unwrap();
+    lut.check_for(&flare.system.lens, &flare.config).expect("the baked LUT is the lens's");
+    let mut past = lut.clone();
+    past.ghosts[0].ghost = ghosts as u32 + 1000;
+    let e = past.check_for(&flare.system.lens, &flare.config).unwrap_err();
+    assert!(
+        matches!(e, LutError::NoSuchGhost { .. }) && e.to_string().contains(&format!("it has {ghosts} ghosts")),
+        "{e}"
+    );
+    let mut swapped = lut.clone();
+    swapped.ghosts[0].surfaces = [0, 1];
+    assert!(matches!(swapped.check_for(&flare.system.lens, &flare.config), Err(LutError::NoSuchGhost { .. })));
+    // Written with valid checksums, read back: still refused (the checksums cover the bytes, not the lens).
+    let dir = tempfile::tempdir().unwrap();
+    let cache = LutCache::new(dir.path());
+    let file = cache.store(&flare.system.lens, &flare.config, &settings, &past).unwrap();
+    let read = flare_core::lut::format::read_lut(&file).unwrap();
+    assert_eq!(read.ghosts[0].ghost, ghosts as u32 + 1000);
+    match cache.load(&flare.system.lens, &flare.config, &settings) {
+        Lookup::Rejected(reason) => assert!(reason.contains("does not have") && reason.contains("removed"), "{reason}"),
+        Lookup::Hit(_) => panic!("a forged ghost index was trusted"),
+        Lookup::Miss => panic!("the file was not looked at"),
+    }
+    assert!(!file.exists(), "the rejected entry is removed, so the next lookup bakes again");
+    // Drawn anyway (a caller that skipped the check): no panic, the valid ghosts still drawn.
+    let live = LiveLut::new(past);
+    let light = light_position_deg(4.0, 30.0);
+    let frame = scenes(&live, &flare, light, 96, 64, &BlendSettings::default(), true);
+    let lut_scene = frame.lut.clone().unwrap_or_default();
+    assert!(lut_scene.paraxial_weights.iter().all(|(g, _)| (*g as usize) < ghosts));
+    let hdr = render_cpu(&flare, &live, &frame.scene, &lut_scene);
+    assert!(hdr.pixels.iter().all(|p| p.iter().all(|v| v.is_finite())));
+}

@@ -56,7 +56,12 @@ impl DepthMap {
 
     /// Reads an EXR (`Z`, else the first channel) or a 16-bit PNG with `png_range`.
     pub fn read(path: &Path, png_range: Option<PngRange>) -> Result<Self, DofError> {
-        let fail = |reason: String| DofError::DepthFile { path: path.display().to_string(), reason };
+        let shown = path.display().to_string();
+        // The image readers name the file themselves: said once.
+        let fail = |reason: String| DofError::DepthFile {
+            reason: reason.strip_prefix(&format!("{shown}: ")).map_or(reason.clone(), str::to_owned),
+            path: shown.clone(),
+        };
         let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
         match ext.as_str() {
             "exr" => read_exr(path).map_err(fail),
@@ -72,6 +77,8 @@ impl DepthMap {
 
 fn read_exr(path: &Path) -> Result<DepthMap, String> {
     use exr::prelude::{FlatSamples, ReadChannels, ReadLayers};
+    // The header first: a few hundred bytes must not be able to ask for gigabytes.
+    crate::output::exr_size(path, "depth map")?;
     let image = exr::prelude::read()
         .no_deep_data()
         .largest_resolution_level()
@@ -103,7 +110,7 @@ fn read_exr(path: &Path) -> Result<DepthMap, String> {
 }
 
 fn read_png(path: &Path, range: PngRange) -> Result<DepthMap, String> {
-    let img = image::open(path).map_err(|e| e.to_string())?;
+    let img = crate::output::open_image(path, "depth map")?;
     let (width, height) = (img.width(), img.height());
     let grey = match img {
         image::DynamicImage::ImageLuma16(g) => g,

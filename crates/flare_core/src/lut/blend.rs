@@ -266,6 +266,11 @@ impl LutScene {
         let mut scene = Self { alpha_over: blend.mode == BlendMode::Alpha, ..Self::default() };
         for (lg, ghost) in lut.ghosts.iter().enumerate() {
             let photo = lut.kind == LutKind::Photo || ghost.ghost == super::PHOTO_GHOST;
+            if !photo && ghost.ghost as usize >= system.ghosts.len() {
+                // A LUT is checked against its lens before it is used (`GhostLut::check_for`); one that was
+                // not draws nothing for a ghost the lens lacks instead of indexing past its list.
+                continue;
+            }
             let mode = if photo { blend.mode } else { blend.mode_of(ghost.ghost) };
             let w = mode.weight(theta);
             if !photo {

@@ -76,6 +76,10 @@ pub enum LutError {
         "this LUT (`{lut_lens}`) was baked by an older FlareLab whose lens fingerprint this one cannot compare: bake it again (`flarelab bake LENS`)"
     )]
     OldFingerprint { lut_lens: String },
+    #[error(
+        "LUT ghost {entry} names ghost {ghost} (surfaces {i}-{j}), which the lens `{lens}` does not have ({reason}): the file does not belong to this lens"
+    )]
+    NoSuchGhost { entry: usize, ghost: u32, i: u32, j: u32, lens: String, reason: String },
 }
 
 /// The JSON header.

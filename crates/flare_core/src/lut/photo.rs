@@ -59,7 +59,7 @@ pub fn angle_from_name(name: &str) -> Option<f64> {
 /// One image as linear RGB (PNG decoded from sRGB), downscaled to [`MAX_PHOTO_SIDE`].
 fn load_linear(path: &Path) -> Result<image::Rgb32FImage, PhotoError> {
     let err = |message: String| PhotoError::File { path: path.to_owned(), message };
-    let decoded = image::open(path).map_err(|e| err(e.to_string()))?;
+    let decoded = crate::output::open_image(path, "flare photo").map_err(err)?;
     let exr = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr"));
     let mut rgb = decoded.to_rgb32f();
     if !exr {
@@ -81,7 +81,8 @@ pub fn import_folder(folder: &Path) -> Result<GhostLut, PhotoError> {
     let err = |path: &Path, message: String| PhotoError::File { path: path.to_owned(), message };
     let sidecar_path = folder.join("flare.json");
     let (azimuth_deg, mut images): (f64, Vec<(f64, PathBuf)>) = if sidecar_path.exists() {
-        let text = std::fs::read_to_string(&sidecar_path).map_err(|e| err(&sidecar_path, e.to_string()))?;
+        let text = crate::files::read_text_bounded(&sidecar_path, crate::files::MAX_TEXT_BYTES)
+            .map_err(|e| err(&sidecar_path, e))?;
         let sidecar: Sidecar = serde_json::from_str(&text).map_err(|e| err(&sidecar_path, e.to_string()))?;
         if !sidecar.azimuth_deg.is_finite() {
             return Err(err(&sidecar_path, "azimuth_deg must be finite".into()));

@@ -28,8 +28,8 @@ pub struct TrackRow {
 /// Why a track cannot be used.
 #[derive(Debug, thiserror::Error)]
 pub enum TrackError {
-    #[error("{path}: {source}")]
-    Io { path: String, source: std::io::Error },
+    #[error("{0}")]
+    Read(String),
     #[error("line {line}: {reason}")]
     Line { line: usize, reason: String },
     #[error("the track has no rows (expected `frame,x_px,y_px[,intensity_ev]`)")]
@@ -38,14 +38,15 @@ pub enum TrackError {
 
 /// Reads and parses a track file.
 pub fn read_track(path: &std::path::Path) -> Result<Vec<TrackRow>, TrackError> {
-    let text =
-        std::fs::read_to_string(path).map_err(|source| TrackError::Io { path: path.display().to_string(), source })?;
+    let text = crate::files::read_text_bounded(path, crate::files::MAX_TEXT_BYTES).map_err(TrackError::Read)?;
     parse_track(&text)
 }
 
 /// Parses a track's text (see the module documentation); rows come back sorted by frame.
 pub fn parse_track(text: &str) -> Result<Vec<TrackRow>, TrackError> {
     let mut rows: Vec<TrackRow> = Vec::new();
+    // The line each frame was given on (a repeated frame is refused naming both): linear in the rows.
+    let mut given: std::collections::HashMap<i64, usize> = std::collections::HashMap::new();
     let mut seen_data = false;
     for (n, raw) in text.lines().enumerate() {
         let line = n + 1;
@@ -78,8 +79,8 @@ pub fn parse_track(text: &str) -> Result<Vec<TrackRow>, TrackError> {
         {
             return Err(bad(format!("intensity_ev {ev} is outside -64 to 64 stops")));
         }
-        if let Some(previous) = rows.iter().find(|r| r.frame == frame) {
-            return Err(bad(format!("frame {frame} was already given on line {}", previous.line)));
+        if let Some(previous) = given.insert(frame, line) {
+            return Err(bad(format!("frame {frame} was already given on line {previous}")));
         }
         rows.push(TrackRow { line, frame, x_px, y_px, intensity_ev });
     }

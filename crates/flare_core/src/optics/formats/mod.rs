@@ -184,6 +184,10 @@ pub fn read_lens_file(path: &Path) -> Result<LoadedLens, FormatError> {
     }
     let mut data = Vec::with_capacity(bytes as usize);
     file.take(MAX_FILE_BYTES + 1).read_to_end(&mut data).map_err(io)?;
+    if data.len() as u64 > MAX_FILE_BYTES {
+        // A FIFO or a device claims no length: what it gave is what counts.
+        return Err(FormatError::TooLarge { bytes: data.len() as u64 });
+    }
     read_lens_bytes(&data, path)
 }
 
@@ -201,7 +205,7 @@ pub fn to_json(lens: &Lens) -> String {
 /// found by name ([`crate::optics::glass::add_catalogue`]); the catalogue is named by the file stem in
 /// capitals (`ohara.agf` is OHARA). Returns how many glasses it holds; a broken file adds nothing.
 pub fn load_glass_catalogue(path: &Path) -> Result<usize, String> {
-    let bytes = std::fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let bytes = crate::files::read_bounded(path, crate::files::MAX_TEXT_BYTES)?;
     let text = decode_text(&bytes).map_err(|e| format!("{}: {e}", path.display()))?;
     let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("USER").to_ascii_uppercase();
     crate::optics::glass::add_catalogue(&text, &name).map_err(|e| format!("{}: {e}", path.display()))

@@ -38,7 +38,7 @@ pub enum FormatError {
     // its sources would say them twice.
     #[error("cannot read {path}: {error}")]
     Io { path: String, error: std::io::Error },
-    #[error("the file is {bytes} bytes; lens files are small (at most {MAX_FILE_BYTES})")]
+    #[error("the file is {bytes} bytes or more; lens files are small (at most {MAX_FILE_BYTES})")]
     TooLarge { bytes: u64 },
     #[error("the file is empty")]
     Empty,
