@@ -425,9 +425,10 @@ impl Document {
         Ok(crate::frame::draw_cpu(&frame, &sources).display)
     }
 
-    /// The preset's JSON text.
+    /// The preset's JSON text (without keys of ghosts the lens does not have: see [`Self::pruned_to_lens`]), which
+    /// [`Self::from_json`] reads back.
     pub fn to_json(&self) -> String {
-        let mut doc = self.clone();
+        let mut doc = self.pruned_to_lens();
         doc.version = PRESET_VERSION;
         serde_json::to_string_pretty(&doc).expect("a document always serialises")
     }
@@ -455,9 +456,19 @@ impl Document {
             // Before auto exposure, a preset's exposure was the one chosen: it stays locked.
             object.entry("exposure_auto").or_insert(serde_json::Value::Bool(false));
         }
-        let mut doc: Document = serde_path_to_error::deserialize(value)
+        let mut doc: Document = serde_path_to_error::deserialize(value.clone())
             .map_err(|e| PresetError::Json { path: e.path().to_string(), reason: e.inner().to_string() })?;
         doc.version = PRESET_VERSION;
+        // A key the document does not have (a misspelling, a field of another tool) is refused with its name:
+        // serde would drop it silently.
+        let known = serde_json::to_value(&doc).expect("a document always serialises");
+        if let Some((path, key, meant)) = unknown_key(&value, &known, "") {
+            let hint = meant.map_or(String::new(), |m| format!(" (did you mean `{m}`?)"));
+            return Err(PresetError::Json {
+                path,
+                reason: format!("unknown key `{}`{hint}", crate::files::shorten(&key)),
+            });
+        }
         doc.check()?;
         Ok(doc)
     }
@@ -503,10 +514,44 @@ impl Document {
         if !(self.blend.gain.is_finite() && self.blend.gain >= 0.0) {
             return bad("blend.gain", format!("{} must be 0 or more", self.blend.gain));
         }
-        for (key, g) in &self.ghosts {
-            if !(g.gain.is_finite() && g.gain >= 0.0) {
-                return bad(&format!("ghosts.{key}.gain"), format!("{} must be 0 or more", g.gain));
+        for (k, surface) in self.lens.surfaces.iter().enumerate() {
+            if let Some(key) = surface.extra.keys().next() {
+                let surface_keys = crate::optics::formats::json::SURFACE_KEYS;
+                let hint = crate::optics::formats::json::near_miss(key, surface_keys)
+                    .map_or(String::new(), |m| format!(" (did you mean `{m}`?)"));
+                return bad(
+                    &format!("lens.surfaces[{k}]"),
+                    format!("unknown surface key `{}`{hint}", crate::files::shorten(key)),
+                );
             }
+        }
+        for (key, g) in &self.ghosts {
+            if !(g.gain.is_finite() && (0.0..=MAX_GHOST_GAIN).contains(&g.gain)) {
+                return bad(&format!("ghosts.{key}.gain"), format!("{} must be from 0 to {MAX_GHOST_GAIN}", g.gain));
+            }
+        }
+        // Every ghost a key names must be one of the lens's (a gain or a solo for a ghost it lacks did nothing).
+        let pairs = self.lens.ghost_pairs();
+        let has = |key: &str| pairs.iter().any(|&(i, j)| ghost_key(i, j) == key);
+        let lacks = |key: &str| {
+            format!(
+                "the lens `{}` has no ghost `{}` (ghosts are named I-J by their two reflecting surfaces, from {} to {})",
+                self.lens.id,
+                crate::files::shorten(key),
+                pairs.first().map_or("-".into(), |&(i, j)| ghost_key(i, j)),
+                pairs.last().map_or("-".into(), |&(i, j)| ghost_key(i, j)),
+            )
+        };
+        if let Some(key) = self.ghosts.keys().find(|k| !has(k)) {
+            return bad(&format!("ghosts.{}", crate::files::shorten(key)), lacks(key));
+        }
+        if let Some(solo) = &self.solo
+            && !has(solo)
+        {
+            return bad("solo", lacks(solo));
+        }
+        if let Some(key) = self.timeline.ghost_gain.keys().find(|k| !has(k)) {
+            return bad(&format!("timeline.ghost_gain.{}", crate::files::shorten(key)), lacks(key));
         }
         if !(self.sensor_width_mm.is_finite() && (1.0..=200.0).contains(&self.sensor_width_mm)) {
             return bad("sensor_width_mm", format!("{} mm: a sensor from 1 to 200 mm wide", self.sensor_width_mm));
@@ -561,6 +606,52 @@ impl Document {
         write_atomic(path, self.to_json().as_bytes())?;
         Ok(())
     }
+
+    /// A copy without the gains, solo and keyed gains of ghosts the lens does not have (left from a lens
+    /// before this one): what [`Self::to_json`] and [`Self::save`] write, so a saved preset always reads back ([`Self::check`]
+    /// refuses such keys in a file).
+    pub fn pruned_to_lens(&self) -> Document {
+        let pairs = self.lens.ghost_pairs();
+        let has = |key: &str| pairs.iter().any(|&(i, j)| ghost_key(i, j) == key);
+        let mut doc = self.clone();
+        doc.ghosts.retain(|k, _| has(k));
+        doc.timeline.ghost_gain.retain(|k, _| has(k));
+        if doc.solo.as_deref().is_some_and(|s| !has(s)) {
+            doc.solo = None;
+        }
+        doc
+    }
+}
+
+/// The largest gain of one ghost (+60 dB): more is no look, and 1e308 overflowed to a ghost that vanished.
+pub const MAX_GHOST_GAIN: f64 = 1e6;
+
+/// The first key of `input` (a preset's JSON) that the document read from it does not have (`known`, the
+/// document written back), with its path and the known key it is a near miss of. The lens is checked by its
+/// own rules ([`Document::check`]); maps (ghost gains, keys) come back whole.
+fn unknown_key(
+    input: &serde_json::Value,
+    known: &serde_json::Value,
+    path: &str,
+) -> Option<(String, String, Option<String>)> {
+    let (serde_json::Value::Object(a), serde_json::Value::Object(b)) = (input, known) else { return None };
+    for (key, value) in a {
+        let here = if path.is_empty() { key.clone() } else { format!("{path}.{key}") };
+        match b.get(key) {
+            None => {
+                let names: Vec<&str> = b.keys().map(String::as_str).collect();
+                let meant = crate::optics::formats::json::near_miss(key, &names).map(str::to_owned);
+                return Some((crate::files::shorten(&here), key.clone(), meant));
+            }
+            Some(_) if here == "lens" => {}
+            Some(k) => {
+                if let Some(found) = unknown_key(value, k, &here) {
+                    return Some(found);
+                }
+            }
+        }
+    }
+    None
 }
 
 /// Version 1's linear `exposure` becomes `flare_ev = log2(exposure)`.
@@ -801,5 +892,46 @@ mod tests {
         Document::default().save(&path).unwrap();
         assert_eq!(Document::open(&path).unwrap(), Document::default());
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1, "no temporary file left behind");
+    }
+
+    /// Issue 33: a misspelled key, a gain, solo or keyed gain of a ghost the lens lacks, and an absurd gain are
+    /// refused naming the field (they were ignored: 0 sprites, exit 0; 1e308 made a ghost vanish); a document
+    /// carrying stale gains from another lens is written without them, so what is saved reads back.
+    #[test]
+    fn unknown_keys_and_ghosts_the_lens_lacks_are_refused_by_name() {
+        let text = Document::default().to_json();
+        let typo = text.replacen("\"flare_ev\"", "\"flare_evv\": 3.0,\n  \"flare_ev\"", 1);
+        let e = Document::from_json(&typo).unwrap_err().to_string();
+        assert!(e.contains("unknown key `flare_evv` (did you mean `flare_ev`?)"), "{e}");
+        let nested = text.replacen("\"blades\"", "\"bladez\": 5,\n    \"blades\"", 1);
+        let e = Document::from_json(&nested).unwrap_err().to_string();
+        assert!(e.contains("aperture.bladez") && e.contains("`blades`"), "{e}");
+        let pairs = Document::default().lens.ghost_pairs();
+        let (i, j) = pairs[0];
+        for (field, mut doc) in [
+            ("ghosts.98-99", Document { ..Document::default() }),
+            ("solo", Document { solo: Some("98-99".into()), ..Document::default() }),
+            ("timeline.ghost_gain.98-99", Document::default()),
+        ] {
+            match field {
+                "ghosts.98-99" => doc.ghost_mut(98, 99).gain = 2.0,
+                "timeline.ghost_gain.98-99" => {
+                    doc.timeline.ghost_gain.entry("98-99".into()).or_default().set(1, 2.0);
+                }
+                _ => {}
+            }
+            let e = doc.check().unwrap_err().to_string();
+            assert!(e.contains(field) && e.contains("has no ghost `98-99`"), "{field}: {e}");
+            // Saved, the stale keys are left out: the file reads back.
+            let back = Document::from_json(&doc.to_json()).unwrap();
+            assert!(back.ghosts.is_empty() && back.solo.is_none() && back.timeline.ghost_gain.is_empty());
+        }
+        let mut huge = Document::default();
+        huge.ghost_mut(i, j).gain = 1e308;
+        assert!(huge.check().unwrap_err().to_string().contains("must be from 0 to"), "an absurd gain is refused");
+        let mut fine = Document::default();
+        fine.ghost_mut(i, j).gain = 3.0;
+        fine.solo = Some(ghost_key(i, j));
+        assert_eq!(Document::from_json(&fine.to_json()).unwrap(), fine);
     }
 }

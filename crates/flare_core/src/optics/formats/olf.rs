@@ -57,9 +57,30 @@ impl Element {
     }
 }
 
+/// The line of a byte offset, counting only the newlines since the last offset asked for (the reader's
+/// offsets only grow): linear in the file, where counting from the start for every element was quadratic.
+struct Lines<'a> {
+    text: &'a str,
+    offset: usize,
+    line: usize,
+}
+
+impl Lines<'_> {
+    fn at(&mut self, offset: u64) -> usize {
+        let offset = (offset as usize).min(self.text.len());
+        if offset < self.offset {
+            (self.offset, self.line) = (0, 1);
+        }
+        self.line += self.text.as_bytes()[self.offset..offset].iter().filter(|&&b| b == b'\n').count();
+        self.offset = offset;
+        self.line
+    }
+}
+
 /// Parses and validates an OpenLensFlare optical system.
 pub fn parse(text: &str, id_hint: &str) -> Result<LoadedLens, FormatError> {
-    let line_of = |offset: u64| text[..(offset as usize).min(text.len())].matches('\n').count() + 1;
+    let mut lines = Lines { text, offset: 0, line: 1 };
+    let mut line_of = |offset: u64| lines.at(offset);
     let mut reader = Reader::from_str(text);
     let mut path: Vec<String> = Vec::new();
     let mut system: Vec<(String, String, usize)> = Vec::new();

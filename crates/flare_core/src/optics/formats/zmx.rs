@@ -74,11 +74,35 @@ pub fn parse(text: &str, id_hint: &str) -> Result<LoadedLens, FormatError> {
         .filter_map(|l| l.trim().strip_prefix("GCAT "))
         .flat_map(|rest| rest.split_whitespace().map(str::to_ascii_uppercase))
         .collect();
+    // The surface keywords given so far in the current SURF block, with their lines: a keyword that changes
+    // the optics given twice is refused (which one was meant cannot be known; the last silently won).
+    let mut given: Vec<(String, usize)> = Vec::new();
     for (index, raw) in text.lines().enumerate() {
         let line = index + 1;
         let mut tokens = raw.split_whitespace();
         let Some(keyword) = tokens.next() else { continue };
         let top_level = !raw.starts_with([' ', '\t']);
+        if keyword == "SURF" {
+            given.clear();
+        } else if !blocks.is_empty()
+            && matches!(keyword, "TYPE" | "CURV" | "CONI" | "PARM" | "DISZ" | "DIAM" | "STOP" | "GLAS")
+        {
+            let key = match keyword {
+                "PARM" => format!("PARM {}", raw.split_whitespace().nth(1).unwrap_or("")),
+                k => k.to_owned(),
+            };
+            if let Some((_, first)) = given.iter().find(|(k, _)| *k == key) {
+                return Err(line_error(
+                    line,
+                    format!(
+                        "{} repeated in SURF {} (first on line {first}): which value is meant is unclear",
+                        crate::files::shorten(&key),
+                        blocks.len() - 1
+                    ),
+                ));
+            }
+            given.push((key, line));
+        }
         match keyword {
             "MODE" => {
                 if let Some(mode) = tokens.next().filter(|m| *m != "SEQ") {
