@@ -869,12 +869,22 @@ fn render_a_sequence_with_the_light_found_in_the_plate_and_a_log() {
             assert!(channels.iter().any(|n| n == c), "{}: {c} in {channels:?}", file.display());
         }
     }
-    // Resume: only the missing frame is drawn again.
+    // Resume: only the missing frame and a truncated one (issue 33: it was trusted by its name) are drawn
+    // again; a stale temporary file of ours in the output folder is removed by the next write.
     std::fs::remove_file(dir.path().join("out/flare.0003.exr")).unwrap();
+    let five = dir.path().join("out/flare.0005.exr");
+    let whole = std::fs::read(&five).unwrap();
+    std::fs::write(&five, &whole[..whole.len() / 2]).unwrap();
+    let stale = dir.path().join("out/.flarelab-tmp-killed");
+    std::fs::write(&stale, b"half a frame").unwrap();
+    let old = std::time::SystemTime::now() - std::time::Duration::from_secs(7200);
+    std::fs::File::options().write(true).open(&stale).unwrap().set_modified(old).unwrap();
     let records = render(&["--skip-existing"]);
     let status: Vec<&str> = records.as_array().unwrap().iter().map(|r| r["status"].as_str().unwrap()).collect();
-    assert_eq!(status, ["skipped", "skipped", "rendered", "skipped", "skipped", "skipped"]);
+    assert_eq!(status, ["skipped", "skipped", "rendered", "skipped", "rendered", "skipped"]);
     assert!(dir.path().join("out/flare.0003.exr").exists());
+    assert_eq!(std::fs::read(&five).unwrap().len(), whole.len(), "the truncated frame is whole again");
+    assert!(!stale.exists(), "the killed write's temporary file is cleaned up");
     // A PNG sequence with a printf field, and a light off the plate has no pixel.
     let png = dir.path().join("png/f.%04d.png").display().to_string();
     let result = flarelab(&[

@@ -261,7 +261,7 @@ fn parse_frames(s: &str) -> Result<(i64, i64), String> {
     let split = s.char_indices().skip(1).find(|&(_, c)| c == '-').map(|(i, _)| i).ok_or_else(bad)?;
     let (a, b) = (s[..split].trim().parse::<i64>(), s[split + 1..].trim().parse::<i64>());
     match (a, b) {
-        (Ok(a), Ok(b)) if a <= b => Ok((a, b)),
+        (Ok(a), Ok(b)) if a <= b => flare_core::timeline::check_frame_count(a, b).map(|()| (a, b)),
         (Ok(a), Ok(b)) => Err(format!("`{s}`: the range runs backwards ({a} > {b})")),
         _ => Err(bad()),
     }

@@ -440,15 +440,42 @@ pub fn ghost_layers(
     device: &mut Device,
     frame: &Frame,
     sources: &Sources,
-) -> Result<Vec<(String, HdrImage)>, GpuError> {
+) -> Result<Vec<(String, HdrImage)>, FrameError> {
+    let mut ghosts = frame.drawn_ghosts(sources.lut);
+    ghosts.sort_unstable();
+    ghosts.dedup();
+    check_ghost_layers(ghosts.len(), frame.request.width, frame.request.height)?;
     let mut layers = Vec::new();
-    for g in frame.drawn_ghosts(sources.lut) {
+    for g in ghosts {
         let Some(model) = sources.flare.system.ghosts.get(g as usize) else { continue };
         let alone = frame.ghost_alone(g, sources.flare, sources.lut);
         let drawn = device.draw(&alone, &Sources { plate: None, ..*sources })?;
         layers.push((ghost_layer_name(model.i, model.j), cpu::flare_layer(&alone.scene, &drawn.hdr)));
     }
     Ok(layers)
+}
+
+/// The most memory the ghost layers of one file may take while it is written (bytes): 3 GiB (the zoom's 85
+/// ghosts at 1920x1080 take 2.8 GB).
+pub const MAX_GHOST_LAYER_BYTES: u64 = 3 << 30;
+
+/// What one ghost layer holds per pixel at the peak: its image (RGBA f32) until its EXR channels (RGB f32)
+/// are made from it and it is dropped ([`crate::output::write_exr_layers_owned`]).
+const GHOST_LAYER_BYTES_PER_PX: u64 = 16;
+
+/// Refuses `count` ghost layers of `width` x `height` when they need more than [`MAX_GHOST_LAYER_BYTES`],
+/// naming what they need and the ways out.
+pub fn check_ghost_layers(count: usize, width: u32, height: u32) -> Result<(), FrameError> {
+    let need = count as u64 * u64::from(width) * u64::from(height) * GHOST_LAYER_BYTES_PER_PX;
+    if need > MAX_GHOST_LAYER_BYTES {
+        return Err(FrameError::Request(format!(
+            "{count} ghost layers at {width}x{height} need about {:.1} GB while written, more than the {:.1} GB \
+             allowed: draw a smaller frame (--size) or fewer ghosts (--solo, or ghost gains of 0)",
+            need as f64 / 1e9,
+            MAX_GHOST_LAYER_BYTES as f64 / 1e9
+        )));
+    }
+    Ok(())
 }
 
 /// The EXR layer name of ghost (i, j): `ghost_I_J`.
@@ -515,15 +542,14 @@ pub fn write_drawn_with(
     path: &std::path::Path,
     ghost_layers: impl FnOnce() -> Result<Vec<(String, HdrImage)>, FrameError>,
 ) -> Result<(), FrameError> {
-    let layers = match crate::output::ImageKind::from_path(path)? {
-        crate::output::ImageKind::Png => None,
+    match crate::output::ImageKind::from_path(path)? {
+        crate::output::ImageKind::Png => crate::output::write_frame(path, &drawn.display, None)?,
         crate::output::ImageKind::Exr => {
             let mut layers = drawn.layers(frame, sources);
             layers.ghosts = ghost_layers()?;
-            Some(layers)
+            crate::output::write_exr_layers_owned(path, layers)?;
         }
-    };
-    crate::output::write_frame(path, &drawn.display, layers.as_ref())?;
+    }
     Ok(())
 }
 

@@ -248,6 +248,9 @@ impl Timeline {
                 format!("{} is before first_frame {}", self.last_frame, self.first_frame),
             ));
         }
+        if let Err(reason) = check_frame_count(self.first_frame, self.last_frame) {
+            return Err((field("last_frame"), reason));
+        }
         if !(self.fps.is_finite() && self.fps > 0.0) {
             return Err((field("fps"), format!("{} is not a positive frame rate", self.fps)));
         }
@@ -261,6 +264,20 @@ impl Timeline {
             in_field(track.check(ghost, |v| v.is_finite() && *v >= 0.0), "ghost_gain")?;
         }
         Ok(())
+    }
+}
+
+/// The most frames a timeline (and a rendered range) may span: 100,000, over an hour at 24 fps. A shot's plan
+/// holds a record per frame; a range of a hundred million frames asked for gigabytes before the first frame.
+pub const MAX_FRAMES: i64 = 100_000;
+
+/// Refuses a range `first..=last` longer than [`MAX_FRAMES`] (or whose length overflows).
+pub fn check_frame_count(first: i64, last: i64) -> Result<(), String> {
+    match last.checked_sub(first).and_then(|d| d.checked_add(1)) {
+        Some(n) if n <= MAX_FRAMES => Ok(()),
+        _ => Err(format!(
+            "frames {first} to {last} are more than {MAX_FRAMES} frames (over an hour at 24 fps): render the shot in parts"
+        )),
     }
 }
 

@@ -139,6 +139,7 @@ impl TracedGhosts {
             if traced.hdr.pixels.iter().all(|p| p[0] == 0.0 && p[1] == 0.0 && p[2] == 0.0) {
                 continue;
             }
+            frame::check_ghost_layers(layers.len() + 1, frame.request.width, frame.request.height)?;
             let hdr = frame::traced_accumulation(frame, &traced.hdr);
             layers
                 .push((frame::ghost_layer_name(model.i, model.j), crate::render::cpu::flare_layer(&frame.scene, &hdr)));

@@ -5,7 +5,8 @@
 //! # How it works
 //! Each planned frame ([`super::plan`]) becomes a [`FrameRequest`](crate::frame::FrameRequest), a
 //! [`Frame`] and a file, exactly as a still is made ([`crate::frame::render_to_file`]). A frame whose file
-//! exists is skipped when asked (`skip_existing`, to resume a stopped render); a frame that fails (its plate is
+//! exists and reads back whole (every pixel decoded: [`reads_back_whole`]) is skipped when asked (`skip_existing`,
+//! to resume a stopped render; a truncated or damaged file is drawn again); a frame that fails (its plate is
 //! missing or unreadable, the file cannot be written) is recorded with the reason and the others still render.
 //! On a GPU the frames are drawn one after another on the one device, while the previous frame's layers are
 //! encoded and written on a second thread (unless ghost layers are asked for: those are drawn on the same
@@ -190,7 +191,8 @@ pub fn render_sequence(
         on_frame(&r, done.fetch_add(1, Ordering::Relaxed) + 1, total);
         r
     };
-    let skip = |path: &Path| options.skip_existing && path.exists();
+    // A frame is skipped only when its file reads back whole: a truncated or damaged one is drawn again.
+    let skip = |path: &Path| options.skip_existing && path.exists() && reads_back_whole(path);
     let build = |plan: &FramePlan| {
         let request = sources.plan.request(sources.doc, &sources.flare.system, plan, options.divisor);
         Frame::build(sources.flare, sources.lut, &request)
@@ -310,4 +312,16 @@ pub fn render_sequence(
 pub fn write_log(path: &Path, report: &SequenceReport) -> std::io::Result<()> {
     let text = serde_json::to_string_pretty(&report.records).map_err(std::io::Error::other)?;
     crate::files::write_atomic(path, text.as_bytes())
+}
+
+/// Whether the image at `path` decodes completely (a PNG through `image`, an EXR every channel of every layer
+/// through `exr`): what `skip_existing` asks of a frame before it trusts it.
+pub fn reads_back_whole(path: &Path) -> bool {
+    match crate::output::ImageKind::from_path(path) {
+        Ok(crate::output::ImageKind::Png) => crate::output::open_image(path, "frame").is_ok(),
+        Ok(crate::output::ImageKind::Exr) => {
+            crate::output::exr_size(path, "frame").is_ok() && exr::prelude::read_all_data_from_file(path).is_ok()
+        }
+        Err(_) => false,
+    }
 }
