@@ -150,6 +150,35 @@ fn too_large(path: &Path, max_bytes: u64) -> String {
     format!("{} is larger than {} MiB, the most this file may be: not read", path.display(), max_bytes >> 20)
 }
 
+/// A message about a file made safe to print: every `backquoted` token [`shorten`]ed, control characters
+/// elsewhere escaped.
+pub fn clean(message: &str) -> String {
+    let mut out = String::with_capacity(message.len().min(1024));
+    for (k, part) in message.split('`').enumerate() {
+        if k > 0 {
+            out.push('`');
+        }
+        if k % 2 == 1 {
+            out.push_str(&shorten(part));
+        } else {
+            out.extend(
+                part.chars()
+                    .flat_map(|c| if c.is_control() { c.escape_default().collect::<Vec<_>>() } else { vec![c] }),
+            );
+        }
+    }
+    out
+}
+
+/// [`clean`], then at most 400 characters (a parser's own message may quote a whole value).
+pub fn one_line(message: &str) -> String {
+    let cleaned = clean(message);
+    match cleaned.char_indices().nth(400) {
+        Some((at, _)) => format!("{}...", &cleaned[..at]),
+        None => cleaned,
+    }
+}
+
 /// The most characters of a token from a file that a message quotes.
 pub const TOKEN_CHARS: usize = 40;
 

@@ -206,6 +206,11 @@ pub const MAX_PLATE_VALUE: f32 = f32::MAX / 1.9e19;
 /// The size of the image in `path` from its header alone (no pixel decoded), refused past
 /// [`MAX_IMAGE_SIDE_PX`] a side or when empty. `what` names the image in the message ("plate", "depth map").
 pub fn image_size(path: &Path, what: &str) -> Result<(u32, u32), String> {
+    if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr")) {
+        // The exr crate reads the header alone (the image crate checks the chunk table first).
+        let (w, h) = exr_size(path, what)?;
+        return Ok((w as u32, h as u32));
+    }
     let reader = ::image::ImageReader::open(path)
         .map_err(|e| format!("{}: cannot read the {what}: {e}", path.display()))?
         .with_guessed_format()

@@ -435,8 +435,10 @@ impl Document {
 
     /// Reads a preset (any version up to [`PRESET_VERSION`]) and checks it.
     pub fn from_json(text: &str) -> Result<Self, PresetError> {
-        let mut value: serde_json::Value = serde_json::from_str(text)
-            .map_err(|e| PresetError::Json { path: format!("line {}", e.line()), reason: e.to_string() })?;
+        let mut value: serde_json::Value = serde_json::from_str(text).map_err(|e| PresetError::Json {
+            path: format!("line {}", e.line()),
+            reason: crate::files::one_line(&e.to_string()),
+        })?;
         let version = value.get("version").and_then(serde_json::Value::as_u64).unwrap_or(0);
         if version > u64::from(PRESET_VERSION) {
             return Err(PresetError::Newer(version));
@@ -456,8 +458,10 @@ impl Document {
             // Before auto exposure, a preset's exposure was the one chosen: it stays locked.
             object.entry("exposure_auto").or_insert(serde_json::Value::Bool(false));
         }
-        let mut doc: Document = serde_path_to_error::deserialize(value.clone())
-            .map_err(|e| PresetError::Json { path: e.path().to_string(), reason: e.inner().to_string() })?;
+        let mut doc: Document = serde_path_to_error::deserialize(value.clone()).map_err(|e| PresetError::Json {
+            path: crate::files::one_line(&e.path().to_string()),
+            reason: crate::files::one_line(&e.inner().to_string()),
+        })?;
         doc.version = PRESET_VERSION;
         // A key the document does not have (a misspelling, a field of another tool) is refused with its name:
         // serde would drop it silently.

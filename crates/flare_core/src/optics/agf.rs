@@ -61,7 +61,11 @@ pub const MAX_FORMULA: u8 = 13;
 
 /// Reads an AGF text as catalogue `catalogue` (the vendor's name, by convention the file stem).
 pub fn parse_agf(text: &str, catalogue: &str) -> Result<Vec<CatalogueGlass>, AgfError> {
-    let error = |line: usize, message: String| AgfError { catalogue: catalogue.to_owned(), line, message };
+    let error = |line: usize, message: String| AgfError {
+        catalogue: catalogue.to_owned(),
+        line,
+        message: crate::files::clean(&message),
+    };
     let mut glasses: Vec<(usize, CatalogueGlass, bool)> = Vec::new();
     for (index, raw) in text.lines().enumerate() {
         let line = index + 1;

@@ -61,7 +61,7 @@ pub fn parse_track(text: &str) -> Result<Vec<TrackRow>, TrackError> {
             continue;
         }
         seen_data = true;
-        let bad = |reason: String| TrackError::Line { line, reason };
+        let bad = |reason: String| TrackError::Line { line, reason: crate::files::clean(&reason) };
         if !(3..=4).contains(&fields.len()) {
             return Err(bad(format!("{} fields; expected frame,x_px,y_px[,intensity_ev] (`{content}`)", fields.len())));
         }

@@ -121,7 +121,7 @@ fn json_error(e: &serde_json::Error, path: String) -> FormatError {
         Some(i) => full[..i].to_owned(),
         None => full,
     };
-    FormatError::Json { line: e.line(), column: e.column(), path, message }
+    FormatError::Json { line: e.line(), column: e.column(), path, message: crate::files::one_line(&message) }
 }
 
 /// The lens as pretty JSON that [`parse`] reads back to an identical lens.

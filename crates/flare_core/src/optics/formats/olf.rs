@@ -24,7 +24,7 @@ use crate::optics::paraxial::FirstOrder;
 const FORMAT: &str = "OpenLensFlare .xml";
 
 fn line_error(line: usize, message: impl Into<String>) -> FormatError {
-    FormatError::Line { format: FORMAT, line, message: message.into() }
+    FormatError::Line { format: FORMAT, line, message: crate::files::clean(&message.into()) }
 }
 
 /// True when `text` looks like an OpenLensFlare optical system.

@@ -46,7 +46,7 @@ pub fn parse(text: &str, id_hint: &str) -> Result<LoadedLens, FormatError> {
             v[i] = t.parse().ok().filter(|x: &f64| x.is_finite()).ok_or_else(|| FormatError::Line {
                 format: FORMAT,
                 line,
-                message: format!("field {} ({}) `{t}` is not a finite number", i + 1, FIELDS[i]),
+                message: crate::files::clean(&format!("field {} ({}) `{t}` is not a finite number", i + 1, FIELDS[i])),
             })?;
         }
         let [radius_mm, thickness_mm, index, aperture_mm] = v;

@@ -25,7 +25,7 @@ use crate::optics::paraxial::FirstOrder;
 const FORMAT: &str = "Zemax .zmx";
 
 fn line_error(line: usize, message: impl Into<String>) -> FormatError {
-    FormatError::Line { format: FORMAT, line, message: message.into() }
+    FormatError::Line { format: FORMAT, line, message: crate::files::clean(&message.into()) }
 }
 
 fn unsupported(line: usize, what: impl Into<String>) -> FormatError {

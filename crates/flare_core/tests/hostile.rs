@@ -1,0 +1,379 @@
+//! Hostile files (issue 33): each class of the fuzzing campaign's findings reproduced, and a fuzzing harness
+//! over every reader: generated and mutated inputs (proptest, stable Rust) for lens files in all five formats,
+//! presets, tracks, glass catalogues, LUTs, plates, depth maps and aperture images. A reader may refuse an
+//! input (one line, no panic) or accept it (then what it gives is finite and within its stated limits); it
+//! never panics, never allocates past the header's checked size, and never hangs. The case count is
+//! `PROPTEST_CASES` (64 a reader by default, bounded for CI); every case that ever failed is kept by proptest
+//! in `tests/hostile.proptest-regressions` and replayed first on every run.
+
+use std::path::{Path, PathBuf};
+
+use flare_core::dof::depth::DepthMap;
+use flare_core::optics::formats::{read_lens_bytes, read_lens_file};
+use flare_core::optics::library::builtin_lens;
+use flare_core::output::{MAX_IMAGE_SIDE_PX, MAX_PLATE_VALUE, read_plate, read_plate_checked};
+use flare_core::preset::Document;
+use flare_core::shot::track::parse_track;
+use proptest::prelude::*;
+
+/// The CRC-32 of PNG chunks (ISO 3309).
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut crc = 0xffff_ffffu32;
+    for &b in bytes {
+        crc ^= u32::from(b);
+        for _ in 0..8 {
+            crc = if crc & 1 != 0 { (crc >> 1) ^ 0xedb8_8320 } else { crc >> 1 };
+        }
+    }
+    !crc
+}
+
+/// A PNG of a few dozen bytes whose header claims `w` x `h` 8-bit grey pixels (its data would decompress to
+/// that size): a decompression bomb's header.
+fn png_claiming(w: u32, h: u32) -> Vec<u8> {
+    let mut out = b"\x89PNG\r\n\x1a\n".to_vec();
+    let mut chunk = |kind: &[u8], data: &[u8]| {
+        out.extend_from_slice(&(data.len() as u32).to_be_bytes());
+        let mut body = kind.to_vec();
+        body.extend_from_slice(data);
+        out.extend_from_slice(&body);
+        out.extend_from_slice(&crc32(&body).to_be_bytes());
+    };
+    let mut ihdr = Vec::new();
+    ihdr.extend_from_slice(&w.to_be_bytes());
+    ihdr.extend_from_slice(&h.to_be_bytes());
+    ihdr.extend_from_slice(&[8, 0, 0, 0, 0]);
+    chunk(b"IHDR", &ihdr);
+    chunk(b"IDAT", &[0x78, 0x9c, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01]);
+    chunk(b"IEND", &[]);
+    out
+}
+
+/// A one-channel EXR (`Z`) of 1 x 1 pixel whose data window is then rewritten to claim `w` x `h`.
+fn exr_claiming(dir: &Path, w: i32, h: i32) -> PathBuf {
+    let path = dir.join("claims.exr");
+    flare_core::output::write_exr_channel(&path, 1, 1, "Z", &[2.0]).unwrap();
+    let mut bytes = std::fs::read(&path).unwrap();
+    for name in [&b"dataWindow\0box2i\0"[..], &b"displayWindow\0box2i\0"[..]] {
+        let at = bytes.windows(name.len()).position(|s| s == name).expect("the attribute") + name.len() + 4;
+        bytes[at + 8..at + 12].copy_from_slice(&(w - 1).to_le_bytes());
+        bytes[at + 12..at + 16].copy_from_slice(&(h - 1).to_le_bytes());
+    }
+    std::fs::write(&path, bytes).unwrap();
+    path
+}
+
+/// Memory blow-ups before any size check: a few-dozen-byte PNG claiming 9000-16000 pixels a side (as a plate,
+/// an aperture image, a depth map) and a few-hundred-byte EXR claiming 100000 x 100000 (as a depth map and a
+/// plate) are refused from their headers, naming the size and the limit, before any pixel is decoded.
+#[test]
+fn image_headers_past_the_frame_limit_are_refused_before_decoding() {
+    let dir = tempfile::tempdir().unwrap();
+    for (w, h) in [(9000, 9000), (16000, 16000), (8193, 10), (10, 100_000)] {
+        let png = dir.path().join(format!("bomb_{w}x{h}.png"));
+        std::fs::write(&png, png_claiming(w, h)).unwrap();
+        let e = read_plate(&png).unwrap_err().to_string();
+        assert!(e.contains(&format!("{w} x {h} pixels")) && e.contains(&MAX_IMAGE_SIDE_PX.to_string()), "{e}");
+        assert!(e.contains("plate") && e.lines().count() == 1, "{e}");
+        let e = flare_core::aperture::Aperture::image_shape_from_file(&png, 64).unwrap_err().to_string();
+        assert!(e.contains("aperture image") && e.contains(&format!("{w} x {h}")), "{e}");
+        let range = Some(flare_core::dof::depth::PngRange { near_m: 0.5, far_m: 100.0 });
+        let e = DepthMap::read(&png, range).unwrap_err().to_string();
+        assert!(e.contains("depth map") && e.contains(&format!("{w} x {h}")), "{e}");
+        assert_eq!(e.matches(&png.display().to_string()).count(), 1, "the file named once: {e}");
+    }
+    let exr = exr_claiming(dir.path(), 100_000, 100_000);
+    assert!(std::fs::metadata(&exr).unwrap().len() < 1000);
+    let e = DepthMap::read(&exr, None).unwrap_err().to_string();
+    assert!(e.contains("100000 x 100000") && e.contains("depth map"), "{e}");
+    let e = read_plate(&exr).unwrap_err().to_string();
+    assert!(e.contains("100000 x 100000"), "{e}");
+    // At the limit itself a plate is fine.
+    let edge = dir.path().join("edge.png");
+    image::GrayImage::new(MAX_IMAGE_SIDE_PX, 2).save(&edge).unwrap();
+    assert_eq!(read_plate(&edge).unwrap().width, MAX_IMAGE_SIDE_PX);
+}
+
+/// Reads that never stop: every text input read from an endless file (`/dev/zero`) ends at its bound with a
+/// one-line error instead of reading forever.
+#[cfg(unix)]
+#[test]
+fn endless_files_are_read_to_their_bound_only() {
+    let zero = Path::new("/dev/zero");
+    let e = Document::open(zero).unwrap_err().to_string();
+    assert!(e.contains("larger than") && e.contains("/dev/zero"), "{e}");
+    let e = flare_core::shot::track::read_track(zero).unwrap_err().to_string();
+    assert!(e.contains("larger than"), "{e}");
+    let e = flare_core::optics::formats::load_glass_catalogue(zero).unwrap_err();
+    assert!(e.contains("larger than"), "{e}");
+    let e = read_lens_file(zero).unwrap_err().to_string();
+    assert!(e.contains("lens files are small"), "{e}");
+}
+
+/// Wrong output: a plate whose values overflow when exposed (3e38 at +1 EV) and a +Inf sun pixel are clamped
+/// to the largest kept value with one warning, so the composite stays finite and keeps the flare; the EXR
+/// writer keeps an overflow as the brightest float, not black.
+#[test]
+fn overflowing_and_infinite_plates_keep_the_flare_in_the_composite() {
+    use exr::prelude::{
+        AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, SmallVec, WritableImage,
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("sun.exr");
+    let values = [3e38f32, f32::INFINITY, 0.5, f32::NAN];
+    let channel = |name: &str| AnyChannel::new(name, FlatSamples::F32(values.to_vec()));
+    let layer = Layer::new(
+        (2, 2),
+        LayerAttributes::default(),
+        Encoding::UNCOMPRESSED,
+        AnyChannels::sort(SmallVec::from_vec(vec![channel("R"), channel("G"), channel("B")])),
+    );
+    Image::from_layer(layer).write().to_file(&path).unwrap();
+    let (plate, warning) = read_plate_checked(&path).unwrap();
+    let warning = warning.expect("the clamp is said");
+    assert!(warning.contains("6 plate values") && warning.contains("clamped"), "{warning}");
+    let red: Vec<f32> = plate.pixels.iter().map(|p| p[0]).collect();
+    assert_eq!(red, [MAX_PLATE_VALUE, MAX_PLATE_VALUE, 0.5, 0.0]);
+    // Exposed by +64 EV, the largest exposure a preset allows, it stays finite; the flare adds on top.
+    let exposed = plate.resampled(2, 2, flare_core::image::Sampling::Nearest, 2f32.powi(64));
+    assert!(exposed.pixels.iter().flatten().all(|v| v.is_finite()));
+    let flare = flare_core::image::HdrImage { width: 2, height: 2, pixels: vec![[1.0, 2.0, 3.0, 1.0]; 4] };
+    let composite = flare.plus(&plate);
+    assert!(composite.pixels.iter().flatten().all(|v| v.is_finite()));
+    assert_eq!(composite.pixels[2][1], 2.5, "the flare is in the composite");
+    // The writer: an infinite value is written as the largest float (bright), never 0.
+    let out = dir.path().join("out.exr");
+    let hot = flare_core::image::HdrImage { width: 1, height: 1, pixels: vec![[f32::INFINITY, 1.0, 0.0, 1.0]] };
+    flare_core::output::write_linear(&out, &hot).unwrap();
+    assert_eq!(read_plate(&out).unwrap().pixels[0][0], MAX_PLATE_VALUE, "bright, then clamped on reading");
+}
+
+/// Hangs: a 400,000-row track parses in one pass (a repeated frame is found through a map, not by scanning
+/// every row before it), and an OpenLensFlare file of 1.7 MB counts its lines once.
+#[test]
+fn large_tracks_and_xml_files_are_read_in_one_pass() {
+    let mut text = String::from("frame,x_px,y_px\n");
+    for f in 0..400_000 {
+        text.push_str(&format!("{f},{}.5,{}\n", f % 1920, f % 1080));
+    }
+    let rows = parse_track(&text).unwrap();
+    assert_eq!(rows.len(), 400_000);
+    text.push_str("17,1,1\n");
+    let e = parse_track(&text).unwrap_err().to_string();
+    assert!(e.contains("frame 17 was already given on line 19"), "{e}");
+    // 1.7 MB of OpenLensFlare: tags the reader skips, each an event that asks for its line.
+    let padding = "<comment>x</comment>\n".repeat(85_000);
+    let xml = format!(
+        "<?xml version=\"1.0\"?>\n<opticalSystem>\n<name>padded</name>\n{padding}<elements>\n<element><type>sensor</type><height>1</height></element>\n</elements>\n</opticalSystem>\n"
+    );
+    assert!(xml.len() > 1_700_000);
+    let e = read_lens_bytes(xml.as_bytes(), Path::new("padded.xml")).unwrap_err().to_string();
+    assert!(!e.is_empty() && e.lines().count() == 1, "{e}");
+}
+
+/// Garbage accepted silently: an all-black aperture image is refused (it drew nothing without a word).
+#[test]
+fn a_black_aperture_image_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let black = dir.path().join("black.png");
+    image::GrayImage::new(64, 64).save(&black).unwrap();
+    let e = flare_core::aperture::Aperture::image_shape_from_file(&black, 64).unwrap_err().to_string();
+    assert!(e.contains("black everywhere"), "{e}");
+}
+
+/// Messages: a 100,000-character token is quoted cut to a few dozen characters, control characters escaped.
+#[test]
+fn offending_tokens_are_shortened_and_escaped() {
+    let long = format!("{}\u{1b}[2J", "9".repeat(100_000));
+    let e = parse_track(&format!("frame,x,y\n1,{long},3\n")).unwrap_err().to_string();
+    assert!(e.len() < 200 && e.contains("(100004 characters)") && !e.contains('\u{1b}'), "{e}");
+    let doc = Document::default().to_json().replacen("\"flare_ev\"", &format!("\"{long}\": 1,\n\"flare_ev\""), 1);
+    let e = Document::from_json(&doc).unwrap_err().to_string();
+    assert!(e.len() < 300 && !e.contains('\u{1b}'), "{e}");
+}
+
+// The fuzzing harness.
+
+/// Valid files of every lens format, from the shipped lenses: what the mutations start from.
+fn lens_sources() -> Vec<(&'static str, Vec<u8>)> {
+    static SOURCES: std::sync::OnceLock<Vec<(&'static str, Vec<u8>)>> = std::sync::OnceLock::new();
+    SOURCES
+        .get_or_init(|| {
+            let lens = builtin_lens("pbrt_dgauss_50mm").unwrap();
+            let aspheric = builtin_lens("aspheric_zoom_us5793533").unwrap();
+            use flare_core::optics::formats::{flaresim, pbrt, zmx};
+            vec![
+                ("lens.json", flare_core::optics::formats::to_json(&aspheric).into_bytes()),
+                ("lens.zmx", zmx::write(&aspheric).into_bytes()),
+                ("lens.dat", pbrt::write(&lens).unwrap().into_bytes()),
+                ("lens.lens", flaresim::write(&lens).unwrap().into_bytes()),
+                ("lens.xml", OLF_SAMPLE.as_bytes().to_vec()),
+            ]
+        })
+        .clone()
+}
+
+const OLF_SAMPLE: &str = "<?xml version=\"1.0\"?>\n<opticalSystem>\n<name>t</name>\n<elements>\n\
+<element><type>lensSpherical</type><height>12</height><thickness>4</thickness><radius>30</radius><refractiveIndex>1.62</refractiveIndex><abbeNumber>60</abbeNumber></element>\n\
+<element><type>lensSpherical</type><height>12</height><thickness>5</thickness><radius>-200</radius></element>\n\
+<element><type>apertureStop</type><height>8</height><thickness>4</thickness></element>\n\
+<element><type>lensSpherical</type><height>9</height><thickness>40</thickness><radius>-60</radius><refractiveIndex>1.62</refractiveIndex><abbeNumber>36</abbeNumber></element>\n\
+<element><type>sensor</type><height>43</height></element>\n</elements>\n</opticalSystem>\n";
+
+/// `bytes` with `flips` applied (xor at positions modulo the length), `cut` bytes cut from the end, and
+/// `insert` spliced in at `at`.
+fn mutate(mut bytes: Vec<u8>, flips: &[(usize, u8)], cut: usize, at: usize, insert: &[u8]) -> Vec<u8> {
+    for &(k, v) in flips {
+        let n = bytes.len().max(1);
+        if let Some(b) = bytes.get_mut(k % n) {
+            *b ^= v;
+        }
+    }
+    let keep = bytes.len().saturating_sub(cut % (bytes.len() + 1));
+    bytes.truncate(keep);
+    let at = at % (bytes.len() + 1);
+    bytes.splice(at..at, insert.iter().copied());
+    bytes
+}
+
+/// Tokens a hostile file likes: huge, negative, non-finite and repeated numbers, and keywords out of place.
+fn nasty_token() -> impl Strategy<Value = Vec<u8>> {
+    prop_oneof![
+        Just(b"1e308".to_vec()),
+        Just(b"-1e308".to_vec()),
+        Just(b"NaN".to_vec()),
+        Just(b"inf".to_vec()),
+        Just(b"-0".to_vec()),
+        Just(b"99999999999999999999".to_vec()),
+        Just(b"\nCURV 5\nCURV 7\n".to_vec()),
+        Just(b"\nSURF 0\n".to_vec()),
+        Just(b"<element>".to_vec()),
+        Just(b"\"surfaces\": [],".to_vec()),
+        Just(vec![0xff, 0xfe, 0]),
+        proptest::collection::vec(any::<u8>(), 0..16),
+    ]
+}
+
+/// A value a reader gave back is finite, so nothing it accepted can put NaN into a frame.
+fn lens_is_finite(lens: &flare_core::optics::Lens) -> bool {
+    lens.surfaces.iter().all(|s| {
+        s.radius_mm.is_finite()
+            && s.semi_aperture_mm.is_finite()
+            && s.thickness_mm.is_none_or(f64::is_finite)
+            && s.medium.n_d.is_finite()
+    })
+}
+
+fn cases() -> u32 {
+    std::env::var("PROPTEST_CASES").ok().and_then(|s| s.parse().ok()).unwrap_or(64)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: cases(), ..ProptestConfig::default() })]
+
+    /// Every lens format: a mutated file is refused in one line or read into a valid, finite lens.
+    #[test]
+    fn fuzz_lens_files(
+        which in 0usize..5,
+        flips in proptest::collection::vec((any::<usize>(), any::<u8>()), 0..6),
+        cut in any::<usize>(),
+        at in any::<usize>(),
+        insert in nasty_token(),
+    ) {
+        let (name, source) = lens_sources()[which].clone();
+        let bytes = mutate(source, &flips, cut % 64, at, &insert);
+        match read_lens_bytes(&bytes, Path::new(name)) {
+            Ok(loaded) => {
+                prop_assert!(loaded.lens.validate().is_ok());
+                prop_assert!(lens_is_finite(&loaded.lens));
+            }
+            Err(e) => {
+                let message = e.to_string();
+                prop_assert!(!message.is_empty() && message.len() < 2000, "{}", message);
+            }
+        }
+    }
+
+    /// Presets: mutated JSON is refused naming the field, or reads back into a document that checks.
+    #[test]
+    fn fuzz_presets(
+        flips in proptest::collection::vec((any::<usize>(), any::<u8>()), 0..4),
+        at in any::<usize>(),
+        insert in nasty_token(),
+    ) {
+        let source = Document::default().to_json().into_bytes();
+        let bytes = mutate(source, &flips, 0, at, &insert);
+        let Ok(text) = String::from_utf8(bytes) else { return Ok(()) };
+        if let Ok(doc) = Document::from_json(&text) {
+            prop_assert!(doc.check().is_ok());
+            prop_assert!(Document::from_json(&doc.to_json()).is_ok(), "what is read is written back readably");
+        }
+    }
+
+    /// Tracks: any text is refused naming its line, or parsed into finite rows with distinct frames.
+    #[test]
+    fn fuzz_tracks(lines in proptest::collection::vec(
+        (any::<i64>(), prop_oneof![any::<f64>().prop_map(|v| v.to_string()), Just("nan".to_owned()), Just("".to_owned())],
+         any::<f64>(), proptest::option::of(any::<f64>())), 0..20)
+    ) {
+        let mut text = String::from("frame,x_px,y_px\n");
+        for (f, x, y, ev) in &lines {
+            text.push_str(&format!("{f},{x},{y}"));
+            if let Some(ev) = ev {
+                text.push_str(&format!(",{ev}"));
+            }
+            text.push('\n');
+        }
+        if let Ok(rows) = parse_track(&text) {
+            prop_assert!(rows.iter().all(|r| r.x_px.is_finite() && r.y_px.is_finite()));
+            prop_assert!(rows.windows(2).all(|w| w[0].frame < w[1].frame));
+        }
+    }
+
+    /// Glass catalogues: a mutated AGF is refused or gives finite glasses.
+    #[test]
+    fn fuzz_glass_catalogues(
+        flips in proptest::collection::vec((any::<usize>(), any::<u8>()), 0..6),
+        cut in any::<usize>(),
+        at in any::<usize>(),
+        insert in nasty_token(),
+    ) {
+        let source = include_bytes!("../../../assets/glass/flarelab-hoya.agf").to_vec();
+        let bytes = mutate(source, &flips, cut % 4096, at, &insert);
+        let Ok(text) = flare_core::optics::formats::decode_text(&bytes) else { return Ok(()) };
+        if let Ok(glasses) = flare_core::optics::agf::parse_agf(&text, "FUZZ") {
+            prop_assert!(glasses.iter().all(|g| g.n_d.is_finite() && g.v_d.is_finite()));
+        }
+    }
+
+    /// Images (plates, depth maps, aperture images): a mutated PNG or EXR, or a PNG claiming any size, is
+    /// refused or decoded within the limit, never a panic or an allocation past the header's size.
+    #[test]
+    fn fuzz_images(
+        exr in any::<bool>(),
+        flips in proptest::collection::vec((any::<usize>(), any::<u8>()), 0..6),
+        cut in any::<usize>(),
+        claim in (0u32..70_000, 0u32..70_000),
+    ) {
+        let dir = tempfile::tempdir().unwrap();
+        let source = dir.path().join(if exr { "s.exr" } else { "s.png" });
+        if exr {
+            flare_core::output::write_exr_channel(&source, 8, 4, "Z", &[1.5; 32]).unwrap();
+        } else if claim.0 % 3 == 0 {
+            std::fs::write(&source, png_claiming(claim.0, claim.1)).unwrap();
+        } else {
+            image::RgbImage::from_pixel(8, 4, image::Rgb([200, 10, 30])).save(&source).unwrap();
+        }
+        let bytes = mutate(std::fs::read(&source).unwrap(), &flips, cut % 64, 0, &[]);
+        std::fs::write(&source, &bytes).unwrap();
+        if let Ok(plate) = read_plate(&source) {
+            prop_assert!(plate.width <= MAX_IMAGE_SIDE_PX && plate.height <= MAX_IMAGE_SIDE_PX);
+            prop_assert!(plate.pixels.iter().flatten().all(|v| v.is_finite() && *v >= 0.0));
+        }
+        let range = Some(flare_core::dof::depth::PngRange { near_m: 0.5, far_m: 100.0 });
+        if let Ok(map) = DepthMap::read(&source, range) {
+            prop_assert!(map.width <= MAX_IMAGE_SIDE_PX && map.height <= MAX_IMAGE_SIDE_PX);
+        }
+        let _ = flare_core::aperture::Aperture::image_shape_from_file(&source, 32);
+    }
+}
