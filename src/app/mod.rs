@@ -24,6 +24,7 @@
 
 use jobs::{JobBoard, JobEvent, Live};
 use session::Session;
+pub use session::Tab;
 use view::View;
 
 pub mod autobake;
@@ -138,39 +139,6 @@ pub fn run() -> Result<()> {
         bail!("could not open the app's window ({e}). The command line works without one: see `flarelab --help`");
     }
     Ok(())
-}
-
-/// Which panel the right side shows.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Tab {
-    Looks,
-    Lens,
-    Aperture,
-    Coatings,
-    Ghosts,
-    Report,
-    Blend,
-    Shot,
-}
-
-impl Tab {
-    /// Every tab, in the order of the tab bar: the one list of them.
-    pub const ALL: [Tab; 8] =
-        [Tab::Looks, Tab::Lens, Tab::Aperture, Tab::Coatings, Tab::Ghosts, Tab::Report, Tab::Blend, Tab::Shot];
-
-    /// Its name on the tab bar.
-    pub fn name(self) -> &'static str {
-        match self {
-            Tab::Looks => "Looks",
-            Tab::Lens => "Lens",
-            Tab::Aperture => "Aperture",
-            Tab::Coatings => "Coatings",
-            Tab::Ghosts => "Ghosts",
-            Tab::Report => "Report",
-            Tab::Blend => "Blend",
-            Tab::Shot => "Shot",
-        }
-    }
 }
 
 pub struct FlareLabApp {

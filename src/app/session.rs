@@ -14,8 +14,40 @@
 
 use flare_core::preset::Document;
 
-use super::Tab;
 use crate::history::History;
+
+/// Which panel the right side shows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Tab {
+    Looks,
+    Lens,
+    Aperture,
+    Coatings,
+    Ghosts,
+    Report,
+    Blend,
+    Shot,
+}
+
+impl Tab {
+    /// Every tab, in the order of the tab bar: the one list of them.
+    pub const ALL: [Tab; 8] =
+        [Tab::Looks, Tab::Lens, Tab::Aperture, Tab::Coatings, Tab::Ghosts, Tab::Report, Tab::Blend, Tab::Shot];
+
+    /// Its name on the tab bar.
+    pub fn name(self) -> &'static str {
+        match self {
+            Tab::Looks => "Looks",
+            Tab::Lens => "Lens",
+            Tab::Aperture => "Aperture",
+            Tab::Coatings => "Coatings",
+            Tab::Ghosts => "Ghosts",
+            Tab::Report => "Report",
+            Tab::Blend => "Blend",
+            Tab::Shot => "Shot",
+        }
+    }
+}
 
 pub struct Session {
     doc: Document,

@@ -57,17 +57,21 @@ fn json_round_trip_is_lossless() {
     }
 }
 
+/// Coatings and unknown top-level keys come back as they were (with a warning naming the keys); an unknown
+/// surface key is refused (a misspelled optional key would otherwise be dropped silently).
 #[test]
 fn json_keeps_unknown_keys_and_coatings() {
     let mut value: serde_json::Value = serde_json::from_str(BUILTIN_LENSES[0].1).unwrap();
     value["surfaces"][0]["coating"] = serde_json::json!({"type": "quarter_wave", "design_wavelength_nm": 550.0});
     value["surfaces"][1]["coating"] = serde_json::json!({"type": "multilayer", "layers": [{"index": 1.38, "thickness_nm": 99.6}, {"index": 2.1, "thickness_nm": 65.0}]});
-    value["surfaces"][2]["vendor_note"] = serde_json::json!("kept");
     value["my_tool"] = serde_json::json!({"any": [1, 2, 3]});
     let text = serde_json::to_string(&value).unwrap();
     let lens = parse_lens(&text, None, "x").unwrap();
     let back: serde_json::Value = serde_json::from_str(&to_json(&lens)).unwrap();
     assert_eq!(back, value);
+    value["surfaces"][2]["vendor_note"] = serde_json::json!("not a surface key");
+    let e = parse_lens(&serde_json::to_string(&value).unwrap(), None, "x").unwrap_err().to_string();
+    assert!(e.contains("unknown surface key `vendor_note`") && e.contains("surfaces[2]"), "{e}");
 }
 
 #[test]
