@@ -312,10 +312,12 @@ pub fn bake_command(args: &BakeArgs) -> Result<()> {
         min_step_deg: args.min_step,
         ..BakeSettings::default()
     };
+    let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("{}.flut", lens.id)));
+    // Where the LUT goes is checked before the bake, not after it.
+    flare_core::files::check_target(&out).map_err(|e| anyhow::anyhow!("-o {e}"))?;
     let gpu = bake_gpu(args.device, false)?;
     let (lut, _, seconds) =
         bake_lut(&flare, &renderer, &args.choice, &settings, previous.as_ref(), gpu.as_ref(), false)?;
-    let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("{}.flut", lens.id)));
     let bytes = format::write_lut(&out, &lut).with_context(|| format!("writing {}", out.display()))?;
     for g in &lut.ghosts {
         println!(

@@ -36,9 +36,9 @@ pub fn write_atomic(path: &Path, contents: &[u8]) -> std::io::Result<()> {
     if let Ok(meta) = std::fs::metadata(path)
         && !meta.is_file()
     {
+        // The caller names the file.
         return Err(std::io::Error::other(format!(
-            "{} exists and is not a regular file ({}): not replaced",
-            path.display(),
+            "it exists and is not a regular file ({}): not replaced",
             kind_of(&meta)
         )));
     }
@@ -70,6 +70,24 @@ fn default_permissions(_file: &std::fs::File) -> std::io::Result<std::fs::Permis
 #[cfg(not(unix))]
 fn default_permissions(file: &std::fs::File) -> std::io::Result<std::fs::Permissions> {
     Ok(file.metadata()?.permissions())
+}
+
+/// Checks, before any work, that [`write_atomic`] could write `path`: its folder exists, and it is not there
+/// already as something other than a regular file (what the write would refuse at the end of a long job).
+pub fn check_target(path: &Path) -> Result<(), String> {
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    if !dir.is_dir() {
+        return Err(format!("{}: the folder {} does not exist", path.display(), dir.display()));
+    }
+    if let Ok(meta) = std::fs::metadata(path)
+        && !meta.is_file()
+    {
+        return Err(format!("{} exists and is not a regular file ({}): not replaced", path.display(), kind_of(&meta)));
+    }
+    Ok(())
 }
 
 /// The name every temporary file of [`write_atomic`] starts with.
@@ -220,7 +238,7 @@ mod tests {
         let fifo = dir.path().join("out.png");
         assert!(std::process::Command::new("mkfifo").arg(&fifo).status().unwrap().success());
         let err = write_atomic(&fifo, b"x").unwrap_err().to_string();
-        assert!(err.contains("a FIFO") && err.contains("not replaced"), "{err}");
+        assert!(err.contains("a FIFO") && err.contains("not replaced") && !err.contains("out.png"), "{err}");
         let meta = std::fs::symlink_metadata(&fifo).unwrap();
         use std::os::unix::fs::FileTypeExt;
         assert!(meta.file_type().is_fifo(), "the FIFO is still there");

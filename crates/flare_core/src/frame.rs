@@ -434,6 +434,10 @@ pub fn draw_cpu_hdr(frame: &Frame, sources: &Sources) -> HdrImage {
     hdr
 }
 
+/// Where ghost layers go as they are made: each layer's name and image, once (the writer keeps only its
+/// channels).
+pub type LayerSink<'a> = dyn FnMut(String, HdrImage) + 'a;
+
 /// One layer per ghost the frame draws (`ghost_I_J`, surfaces I < J), each drawn alone on `device` and
 /// multiplied by the flare's gain.
 pub fn ghost_layers(
@@ -441,27 +445,37 @@ pub fn ghost_layers(
     frame: &Frame,
     sources: &Sources,
 ) -> Result<Vec<(String, HdrImage)>, FrameError> {
-    let mut ghosts = frame.drawn_ghosts(sources.lut);
-    ghosts.sort_unstable();
-    ghosts.dedup();
-    check_ghost_layers(ghosts.len(), frame.request.width, frame.request.height)?;
     let mut layers = Vec::new();
+    ghost_layers_into(device, frame, sources, &mut |name, image| layers.push((name, image)))?;
+    Ok(layers)
+}
+
+/// [`ghost_layers`] handed to `sink` one at a time (refused first when they would not fit
+/// [`MAX_GHOST_LAYER_BYTES`]).
+pub fn ghost_layers_into(
+    device: &mut Device,
+    frame: &Frame,
+    sources: &Sources,
+    sink: &mut LayerSink,
+) -> Result<(), FrameError> {
+    let ghosts = frame.drawn_ghosts(sources.lut);
+    check_ghost_layers(ghosts.len(), frame.request.width, frame.request.height)?;
     for g in ghosts {
         let Some(model) = sources.flare.system.ghosts.get(g as usize) else { continue };
         let alone = frame.ghost_alone(g, sources.flare, sources.lut);
         let drawn = device.draw(&alone, &Sources { plate: None, ..*sources })?;
-        layers.push((ghost_layer_name(model.i, model.j), cpu::flare_layer(&alone.scene, &drawn.hdr)));
+        sink(ghost_layer_name(model.i, model.j), cpu::flare_layer(&alone.scene, &drawn.hdr));
     }
-    Ok(layers)
+    Ok(())
 }
 
-/// The most memory the ghost layers of one file may take while it is written (bytes): 3 GiB (the zoom's 85
-/// ghosts at 1920x1080 take 2.8 GB).
+/// The most memory the ghost layers of one file may take while it is written (bytes): 3 GiB (the default
+/// zoom's 254 ghost layers at 1920x1080 take 3.2 GB).
 pub const MAX_GHOST_LAYER_BYTES: u64 = 3 << 30;
 
-/// What one ghost layer holds per pixel at the peak: its image (RGBA f32) until its EXR channels (RGB f32)
-/// are made from it and it is dropped ([`crate::output::write_exr_layers_owned`]).
-const GHOST_LAYER_BYTES_PER_PX: u64 = 16;
+/// What one ghost layer keeps per pixel: its EXR channels (RGB f16), made as soon as it is drawn
+/// ([`crate::output::ExrLayers::add_ghost`]; only the layer being drawn has a float image).
+const GHOST_LAYER_BYTES_PER_PX: u64 = 6;
 
 /// Refuses `count` ghost layers of `width` x `height` when they need more than [`MAX_GHOST_LAYER_BYTES`],
 /// naming what they need and the ways out.
@@ -528,8 +542,8 @@ pub fn write_drawn(
     choice: LayerChoice,
     path: &std::path::Path,
 ) -> Result<(), FrameError> {
-    write_drawn_with(frame, sources, drawn, path, || {
-        if choice.ghosts { Ok(ghost_layers(device, frame, sources)?) } else { Ok(Vec::new()) }
+    write_drawn_with(frame, sources, drawn, path, |sink| {
+        if choice.ghosts { ghost_layers_into(device, frame, sources, sink) } else { Ok(()) }
     })
 }
 
@@ -540,14 +554,14 @@ pub fn write_drawn_with(
     sources: &Sources,
     drawn: &Drawn,
     path: &std::path::Path,
-    ghost_layers: impl FnOnce() -> Result<Vec<(String, HdrImage)>, FrameError>,
+    ghost_layers: impl FnOnce(&mut LayerSink) -> Result<(), FrameError>,
 ) -> Result<(), FrameError> {
     match crate::output::ImageKind::from_path(path)? {
         crate::output::ImageKind::Png => crate::output::write_frame(path, &drawn.display, None)?,
         crate::output::ImageKind::Exr => {
-            let mut layers = drawn.layers(frame, sources);
-            layers.ghosts = ghost_layers()?;
-            crate::output::write_exr_layers_owned(path, layers)?;
+            let mut exr = crate::output::ExrLayers::new(&drawn.layers(frame, sources));
+            ghost_layers(&mut |name, image| exr.add_ghost(&name, &image))?;
+            exr.write(path)?;
         }
     }
     Ok(())

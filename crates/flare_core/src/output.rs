@@ -7,7 +7,7 @@
 //! prefix before the dot: the default layer `R, G, B, A` is the composite (alpha 1), `flare.R/G/B` the flare
 //! alone (ghosts, LUT ghosts and starburst, to be added over a plate), `starburst.R/G/B` its starburst,
 //! `plate.R/G/B` the exposed plate when there is one, and `ghost_I_J.R/G/B` one layer per drawn ghost when
-//! asked for. Channels are 32-bit float, ZIP-compressed; a value that is not finite is written as the largest
+//! asked for (16-bit float, each made as its ghost is drawn: [`ExrLayers`]). The other channels are 32-bit float, ZIP-compressed; a value that is not finite is written as the largest
 //! finite float of its sign (+infinity, an overflow, stays the brightest value instead of turning black), NaN as
 //! 0 (none should reach here). Every file is written through [`crate::files::write_atomic`]: a temporary file in the
 //! target's folder renamed over it, so a failed write leaves nothing half-written. Plates: PNG and JPEG are
@@ -32,8 +32,10 @@ use crate::image::{DisplayImage, HdrImage};
 pub enum ImageError {
     #[error("{path}: {message}")]
     Encode { path: String, message: String },
-    #[error("{path}: {source}")]
-    Io { path: String, source: std::io::Error },
+    // The cause is part of the message and deliberately not a `source`: a chain printed with its sources
+    // would say it twice.
+    #[error("{path}: {error}")]
+    Io { path: String, error: std::io::Error },
     #[error("{path}: cannot read the image: {message}")]
     Decode { path: String, message: String },
     #[error("{path}: unknown image type (use .png or .exr)")]
@@ -79,8 +81,8 @@ fn encode(path: &Path, e: impl std::fmt::Display) -> ImageError {
     ImageError::Encode { path: path.display().to_string(), message: e.to_string() }
 }
 
-fn io(path: &Path, source: std::io::Error) -> ImageError {
-    ImageError::Io { path: path.display().to_string(), source }
+fn io(path: &Path, error: std::io::Error) -> ImageError {
+    ImageError::Io { path: path.display().to_string(), error }
 }
 
 /// Writes a frame: the display image to a PNG, or `layers` to an EXR (by the extension of `path`).
@@ -143,37 +145,50 @@ pub fn write_exr_channel(path: &Path, w: u32, h: u32, name: &str, values: &[f32]
     write_exr_channels(path, w, h, vec![AnyChannel::new(name, FlatSamples::F32(samples))])
 }
 
-/// [`write_exr_layers`] taking the layers: each ghost layer's image is dropped once its channels are made, so
-/// the ghost layers never need their image and their channels at once (16 bytes a pixel at the peak, not 28).
-pub fn write_exr_layers_owned(path: &Path, mut layers: FrameLayers) -> Result<(), ImageError> {
-    let (w, h) = (layers.composite.width, layers.composite.height);
-    let ghosts = std::mem::take(&mut layers.ghosts);
-    let mut list = channels("", &layers.composite, true);
-    list.extend(channels("flare", &layers.flare, false));
-    list.extend(channels("starburst", &layers.starburst, false));
-    if let Some(plate) = &layers.plate {
-        list.extend(channels("plate", plate, false));
+/// An EXR being put together a layer at a time ([`Self::add_ghost`] takes each ghost layer as it is drawn
+/// and keeps only its channels), then written whole ([`Self::write`]).
+pub struct ExrLayers {
+    width: u32,
+    height: u32,
+    list: Vec<exr::prelude::AnyChannel<exr::prelude::FlatSamples>>,
+}
+
+impl ExrLayers {
+    /// The frame's own layers (composite, flare, starburst, plate), 32-bit float.
+    pub fn new(layers: &FrameLayers) -> Self {
+        let mut list = channels("", &layers.composite, true);
+        list.extend(channels("flare", &layers.flare, false));
+        list.extend(channels("starburst", &layers.starburst, false));
+        if let Some(plate) = &layers.plate {
+            list.extend(channels("plate", plate, false));
+        }
+        Self { width: layers.composite.width, height: layers.composite.height, list }
     }
-    drop(layers);
-    for (name, image) in ghosts {
-        list.extend(channels(&name, &image, false));
+
+    /// A ghost layer `name.R/G/B` as 16-bit float (the usual depth of a compositor's passes, 3 significant
+    /// digits; 6 bytes a pixel, so the zoom's 254 ghost layers fit at 1920x1080); the image can be dropped.
+    pub fn add_ghost(&mut self, name: &str, image: &HdrImage) {
+        use exr::prelude::{AnyChannel, FlatSamples, f16};
+        for k in 0..3 {
+            let samples = image.pixels.iter().map(|p| f16::from_f32(if p[k].is_nan() { 0.0 } else { p[k] })).collect();
+            self.list
+                .push(AnyChannel::new(format!("{name}.{}", ["R", "G", "B"][k]).as_str(), FlatSamples::F16(samples)));
+        }
     }
-    write_exr_channels(path, w, h, list)
+
+    /// Writes the part through a temporary file (see the module documentation).
+    pub fn write(self, path: &Path) -> Result<(), ImageError> {
+        write_exr_channels(path, self.width, self.height, self.list)
+    }
 }
 
 /// Writes the layers as one EXR part (see the module documentation).
 pub fn write_exr_layers(path: &Path, layers: &FrameLayers) -> Result<(), ImageError> {
-    let (w, h) = (layers.composite.width, layers.composite.height);
-    let mut list = channels("", &layers.composite, true);
-    list.extend(channels("flare", &layers.flare, false));
-    list.extend(channels("starburst", &layers.starburst, false));
-    if let Some(plate) = &layers.plate {
-        list.extend(channels("plate", plate, false));
-    }
+    let mut exr = ExrLayers::new(layers);
     for (name, image) in &layers.ghosts {
-        list.extend(channels(name, image, false));
+        exr.add_ghost(name, image);
     }
-    write_exr_channels(path, w, h, list)
+    exr.write(path)
 }
 
 /// Writes `list` as one EXR part of `w` x `h` pixels, ZIP-compressed, through a temporary file.
@@ -268,7 +283,6 @@ pub fn read_plate_checked(path: &Path) -> Result<(HdrImage, Option<String>), Ima
     let img = open_image(path, "plate").map_err(ImageError::Plate)?;
     let is_float = matches!(img, ::image::DynamicImage::ImageRgb32F(_) | ::image::DynamicImage::ImageRgba32F(_));
     let (width, height) = (img.width(), img.height());
-    let rgba = img.to_rgba32f();
     let clamped = std::sync::atomic::AtomicUsize::new(0);
     let linear = |v: f32| {
         let v = if is_float { v } else { srgb_decode(v) };
@@ -281,7 +295,24 @@ pub fn read_plate_checked(path: &Path) -> Result<(HdrImage, Option<String>), Ima
             v
         }
     };
-    let pixels: Vec<[f32; 4]> = rgba.pixels().map(|p| [linear(p[0]), linear(p[1]), linear(p[2]), 1.0]).collect();
+    // Straight from the decoded pixels to the plate's (no RGBA float copy of the whole image in between: at
+    // 8192 x 8192 that copy alone was 1 GiB).
+    let to_plate = |c: [f32; 3]| [linear(c[0]), linear(c[1]), linear(c[2]), 1.0];
+    let byte = |v: u8| f32::from(v) / 255.0;
+    let word = |v: u16| f32::from(v) / 65535.0;
+    use ::image::DynamicImage as D;
+    let pixels: Vec<[f32; 4]> = match &img {
+        D::ImageRgb8(i) => i.pixels().map(|p| to_plate(p.0.map(byte))).collect(),
+        D::ImageRgba8(i) => i.pixels().map(|p| to_plate([byte(p[0]), byte(p[1]), byte(p[2])])).collect(),
+        D::ImageLuma8(i) => i.pixels().map(|p| to_plate([byte(p[0]); 3])).collect(),
+        D::ImageRgb16(i) => i.pixels().map(|p| to_plate(p.0.map(word))).collect(),
+        D::ImageRgba16(i) => i.pixels().map(|p| to_plate([word(p[0]), word(p[1]), word(p[2])])).collect(),
+        D::ImageLuma16(i) => i.pixels().map(|p| to_plate([word(p[0]); 3])).collect(),
+        D::ImageRgb32F(i) => i.pixels().map(|p| to_plate(p.0)).collect(),
+        D::ImageRgba32F(i) => i.pixels().map(|p| to_plate([p[0], p[1], p[2]])).collect(),
+        other => other.to_rgba32f().pixels().map(|p| to_plate([p[0], p[1], p[2]])).collect(),
+    };
+    drop(img);
     let n = clamped.into_inner();
     let warning = (n > 0).then(|| {
         format!(

@@ -126,8 +126,22 @@ impl TracedGhosts {
         frame: &Frame,
         sources: &Sources,
     ) -> Result<Vec<(String, HdrImage)>, FrameError> {
-        let gains = &frame.request.ghost_gains;
         let mut layers = Vec::new();
+        self.ghost_layers_into(device, frame, sources, &mut |name, image| layers.push((name, image)))?;
+        Ok(layers)
+    }
+
+    /// [`Self::ghost_layers`] handed to `sink` one at a time, refused once they would pass
+    /// [`frame::MAX_GHOST_LAYER_BYTES`].
+    pub fn ghost_layers_into(
+        &self,
+        device: &Device,
+        frame: &Frame,
+        sources: &Sources,
+        sink: &mut frame::LayerSink,
+    ) -> Result<(), FrameError> {
+        let gains = &frame.request.ghost_gains;
+        let mut made = 0;
         for (g, model) in sources.flare.system.ghosts.iter().enumerate() {
             let gain = gains.get(g).copied().unwrap_or(1.0);
             if !(gain > 0.0 && gain.is_finite()) {
@@ -139,12 +153,12 @@ impl TracedGhosts {
             if traced.hdr.pixels.iter().all(|p| p[0] == 0.0 && p[1] == 0.0 && p[2] == 0.0) {
                 continue;
             }
-            frame::check_ghost_layers(layers.len() + 1, frame.request.width, frame.request.height)?;
+            made += 1;
+            frame::check_ghost_layers(made, frame.request.width, frame.request.height)?;
             let hdr = frame::traced_accumulation(frame, &traced.hdr);
-            layers
-                .push((frame::ghost_layer_name(model.i, model.j), crate::render::cpu::flare_layer(&frame.scene, &hdr)));
+            sink(frame::ghost_layer_name(model.i, model.j), crate::render::cpu::flare_layer(&frame.scene, &hdr));
         }
-        Ok(layers)
+        Ok(())
     }
 
     /// Writes a frame drawn by [`Self::draw`] to `path` through the one writer; its ghost layers, when asked,
@@ -158,8 +172,8 @@ impl TracedGhosts {
         choice: LayerChoice,
         path: &std::path::Path,
     ) -> Result<(), FrameError> {
-        frame::write_drawn_with(frame, sources, drawn, path, || {
-            if choice.ghosts { self.ghost_layers(device, frame, sources) } else { Ok(Vec::new()) }
+        frame::write_drawn_with(frame, sources, drawn, path, |sink| {
+            if choice.ghosts { self.ghost_layers_into(device, frame, sources, sink) } else { Ok(()) }
         })
     }
 }

@@ -74,8 +74,8 @@ fn edits(a: &str, b: &str) -> usize {
     for (i, row) in d.iter_mut().enumerate() {
         row[0] = i;
     }
-    for j in 0..=b.len() {
-        d[0][j] = j;
+    for (j, cell) in d[0].iter_mut().enumerate() {
+        *cell = j;
     }
     for i in 1..=a.len() {
         for j in 1..=b.len() {
@@ -97,23 +97,6 @@ fn position_of(text: &str, key: &str) -> (usize, usize) {
     (line, at - before.rfind('\n').map_or(0, |n| n + 1) + 1)
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_misspelled_surface_key_is_refused_naming_the_key_meant() {
-        let text = crate::optics::formats::to_json(&crate::optics::library::builtin_lens("tessar").unwrap());
-        let bad = text.replacen("\"radius\"", "\"conci\": -0.5,\n      \"radius\"", 1);
-        let e = parse(&bad).unwrap_err().to_string();
-        assert!(e.contains("unknown surface key `conci` (did you mean `conic`?)") && e.contains("surfaces[0]"), "{e}");
-        assert!(e.starts_with("JSON line "), "{e}");
-        let extra = text.replacen("\"surfaces\"", "\"camera\": \"x\",\n  \"surfaces\"", 1);
-        let loaded = parse(&extra).unwrap();
-        assert!(loaded.warnings.iter().any(|w| w.contains("camera")), "{:?}", loaded.warnings);
-    }
-}
-
 fn json_error(e: &serde_json::Error, path: String) -> FormatError {
     let full = e.to_string();
     // serde_json appends " at line L column C"; the error names the position itself.
@@ -132,4 +115,21 @@ pub fn write(lens: &Lens) -> String {
     });
     text.push('\n');
     text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_misspelled_surface_key_is_refused_naming_the_key_meant() {
+        let text = crate::optics::formats::to_json(&crate::optics::library::builtin_lens("tessar").unwrap());
+        let bad = text.replacen("\"radius\"", "\"conci\": -0.5,\n      \"radius\"", 1);
+        let e = parse(&bad).unwrap_err().to_string();
+        assert!(e.contains("unknown surface key `conci` (did you mean `conic`?)") && e.contains("surfaces[0]"), "{e}");
+        assert!(e.starts_with("JSON line "), "{e}");
+        let extra = text.replacen("\"surfaces\"", "\"camera\": \"x\",\n  \"surfaces\"", 1);
+        let loaded = parse(&extra).unwrap();
+        assert!(loaded.warnings.iter().any(|w| w.contains("camera")), "{:?}", loaded.warnings);
+    }
 }
