@@ -61,8 +61,9 @@ pub fn open_lens_checked(name: &str) -> Result<LoadedLens> {
 }
 
 pub fn check_wavelength(nm: f64) -> Result<()> {
-    if !(200.0..=3000.0).contains(&nm) {
-        bail!("--wavelength-nm {nm}: outside 200-3000 nm");
+    use flare_core::spectrum::{MAX_WAVELENGTH_NM, MIN_WAVELENGTH_NM};
+    if !(MIN_WAVELENGTH_NM..=MAX_WAVELENGTH_NM).contains(&nm) {
+        bail!("--wavelength-nm {nm}: outside {MIN_WAVELENGTH_NM}-{MAX_WAVELENGTH_NM} nm");
     }
     Ok(())
 }
@@ -130,7 +131,7 @@ pub fn parse_aperture(spec: &str, f_number: Option<f64>) -> Result<ApertureDoc> 
             doc.rotation_deg = optional("rotation")?;
             doc.roundness = optional("roundness")?;
             if !(3..=32).contains(&doc.blades) {
-                bail!("--aperture {spec}: 3 to 32 blades");
+                bail!("--aperture {spec}: 3 to {} blades", flare_core::aperture::MAX_BLADES);
             }
         }
         "image" => {

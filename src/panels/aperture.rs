@@ -23,7 +23,7 @@ pub fn aperture_ui(
 ) {
     let a = &mut doc.aperture;
     let mut blades = a.blades;
-    ui.add(egui::Slider::new(&mut blades, 0..=16).text("blades"));
+    ui.add(egui::Slider::new(&mut blades, 0..=flare_core::aperture::MAX_BLADES).text("blades"));
 
     // 1 and 2 blades make no opening: step over them.
     a.blades = match blades {

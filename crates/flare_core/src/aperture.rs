@@ -1,7 +1,7 @@
 //! The aperture: the shape of the stop's opening, rasterised into the mask every ghost sprite is textured with.
 //!
 //! # How it works
-//! An [`Aperture`] is a circle, N blades (3 to 16) with a rotation and a roundness (0 = straight blades,
+//! An [`Aperture`] is a circle, N blades (3 to [`MAX_BLADES`]) with a rotation and a roundness (0 = straight blades,
 //! 1 = a circle; between, the blades bow outwards as curved blades do), or any grayscale image. Its size is
 //! set by the f-number: the lens's own (widest) f-number opens the stop fully, a larger one shrinks the stop
 //! radius in proportion (`scale = nominal / chosen`, never above 1).
@@ -12,6 +12,9 @@
 //! roundness mixes it towards the circle, `r = r_poly + roundness (1 - r_poly)`.
 
 use std::f64::consts::PI;
+
+/// The most blades a stop may have, for every command, file and panel alike.
+pub const MAX_BLADES: u32 = 32;
 
 /// Default mask resolution (texels across).
 pub const DEFAULT_MASK_SIZE: usize = 256;
@@ -49,7 +52,7 @@ impl Default for Aperture {
 /// Why an aperture is refused.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ApertureError {
-    #[error("{0} blades: between 3 and 16, please")]
+    #[error("{0} blades: between 3 and {MAX_BLADES}")]
     BladeCount(u32),
     #[error("roundness {0} is outside [0, 1]")]
     Roundness(f64),
@@ -124,7 +127,7 @@ impl Aperture {
         match &self.shape {
             ApertureShape::Circle => Ok(()),
             ApertureShape::Blades { count, rotation_deg, roundness } => {
-                if !(3..=16).contains(count) {
+                if !(3..=MAX_BLADES).contains(count) {
                     return Err(ApertureError::BladeCount(*count));
                 }
                 if !rotation_deg.is_finite() {

@@ -509,8 +509,8 @@ impl Document {
         if !(self.aperture.roundness.is_finite() && (0.0..=1.0).contains(&self.aperture.roundness)) {
             return bad("aperture.roundness", format!("{} must be from 0 to 1", self.aperture.roundness));
         }
-        if self.aperture.blades > 32 || !self.aperture.rotation_deg.is_finite() {
-            return bad("aperture", "at most 32 blades, a finite rotation".into());
+        if self.aperture.blades > crate::aperture::MAX_BLADES || !self.aperture.rotation_deg.is_finite() {
+            return bad("aperture", format!("at most {} blades, a finite rotation", crate::aperture::MAX_BLADES));
         }
         if let Err(e) = BlendMode::parse(&self.blend.mode) {
             return bad("blend.mode", e);

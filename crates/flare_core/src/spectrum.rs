@@ -29,9 +29,14 @@ pub struct Spectrum {
 pub enum SpectrumError {
     #[error("{0} wavelengths: a spectrum has 1 to {MAX_WAVELENGTHS} (1 for one wavelength, 3 for RGB)")]
     Count(usize),
-    #[error("wavelength {0} nm is outside 300-1000 nm")]
+    #[error("wavelength {0} nm is outside {MIN_WAVELENGTH_NM}-{MAX_WAVELENGTH_NM} nm")]
     Range(f64),
 }
+
+/// The wavelengths FlareLab traces and draws (nm), for every command and file alike: near UV to near IR, where
+/// the glass models hold.
+pub const MIN_WAVELENGTH_NM: f64 = 300.0;
+pub const MAX_WAVELENGTH_NM: f64 = 1000.0;
 
 impl Spectrum {
     /// 650 / 510 / 475 nm into R / G / B.
@@ -44,7 +49,7 @@ impl Spectrum {
 
     /// One wavelength drawn white (for inspecting a single wavelength).
     pub fn single(wavelength_nm: f64) -> Result<Self, SpectrumError> {
-        if !(300.0..=1000.0).contains(&wavelength_nm) {
+        if !(MIN_WAVELENGTH_NM..=MAX_WAVELENGTH_NM).contains(&wavelength_nm) {
             return Err(SpectrumError::Range(wavelength_nm));
         }
         Ok(Self { wavelengths_nm: vec![wavelength_nm], weights_rgb: vec![[1.0, 1.0, 1.0]] })
