@@ -207,6 +207,11 @@ impl FlareLabApp {
                 self.session.say(format!("plate sequence {} ({} frames)", pattern.text, frames.len()));
             }
             None => {
+                // A file that is no usable image (by its header) changes nothing: the plate before stays.
+                if let Err(e) = flare_core::output::image_size(path, "plate") {
+                    self.session.say(e);
+                    return;
+                }
                 self.session.edit().background = Some(path.display().to_string());
                 self.session.say(format!("background plate {}", path.display()));
             }
