@@ -1321,3 +1321,17 @@ fn render_with_a_preset_whose_depth_of_field_is_on() {
     let (a, b) = (image::open(p("seq.0001.png")).unwrap().to_rgb8(), image::open(p("seq.0002.png")).unwrap().to_rgb8());
     assert_eq!(a, b);
 }
+
+/// Negative frame numbers are values, not flags (issue 33: `--frames -2--1` said "unexpected argument").
+#[test]
+fn negative_frame_ranges_are_values() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("neg.####.png").display().to_string();
+    let result = flarelab(&["render", "tessar", "--size", "16x16", "--frames", "-2--1", "--device", "cpu", "-o", &out]);
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    // A negative frame keeps its sign inside the field's width.
+    assert!(dir.path().join("neg.-002.png").exists() && dir.path().join("neg.-001.png").exists());
+    let e = String::from_utf8_lossy(&flarelab(&["render", "tessar", "--frames", "1-100000000", "-o", &out]).stderr)
+        .to_string();
+    assert!(e.contains("more than 100000 frames") && e.lines().count() <= 2, "{e}");
+}

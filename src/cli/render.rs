@@ -100,7 +100,7 @@ pub struct RenderArgs {
     pub size: Option<(u32, u32)>,
     /// Render the frames A-B of the timeline (or one frame N) as a sequence; -o must have a frame field
     /// (`out/flare.####.exr` or `%04d`).
-    #[arg(long, value_parser = parse_frames)]
+    #[arg(long, allow_hyphen_values = true, value_parser = parse_frames)]
     pub frames: Option<(i64, i64)>,
     /// The timeline frame of a still (default: the timeline's first frame).
     #[arg(long, allow_negative_numbers = true, conflicts_with = "frames")]

@@ -47,17 +47,17 @@ pub fn write_atomic(path: &Path, contents: &[u8]) -> std::io::Result<()> {
         _ => Path::new("."),
     };
     remove_stale_temps(dir, std::time::Duration::from_secs(3600));
-    let mut tmp = tempfile::Builder::new().prefix(TEMP_PREFIX).tempfile_in(dir)?;
-    tmp.write_all(contents)?;
+    let mut tmp = tempfile::Builder::new().prefix(TEMP_PREFIX).tempfile_in(dir).map_err(plain)?;
+    tmp.write_all(contents).map_err(plain)?;
     // The temporary file is private (0600); the result keeps the permissions of the file it replaces, or
     // gets the usual 0644 when it is new.
     let permissions = match std::fs::metadata(path) {
         Ok(existing) => existing.permissions(),
         Err(_) => default_permissions(tmp.as_file())?,
     };
-    tmp.as_file().set_permissions(permissions)?;
-    tmp.as_file().sync_all()?;
-    tmp.persist(path).map_err(|e| e.error)?;
+    tmp.as_file().set_permissions(permissions).map_err(plain)?;
+    tmp.as_file().sync_all().map_err(plain)?;
+    tmp.persist(path).map_err(|e| plain(e.error))?;
     Ok(())
 }
 
@@ -88,6 +88,16 @@ pub fn check_target(path: &Path) -> Result<(), String> {
         return Err(format!("{} exists and is not a regular file ({}): not replaced", path.display(), kind_of(&meta)));
     }
     Ok(())
+}
+
+/// `e` without the temporary file's path the `tempfile` crate appends (the caller names the target: the
+/// temporary file is ours, not the user's, and named it twice).
+fn plain(e: std::io::Error) -> std::io::Error {
+    let text = e.to_string();
+    match text.find(" at path ") {
+        Some(at) => std::io::Error::new(e.kind(), text[..at].to_owned()),
+        None => e,
+    }
 }
 
 /// The name every temporary file of [`write_atomic`] starts with.

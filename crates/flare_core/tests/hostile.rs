@@ -377,3 +377,16 @@ proptest! {
         let _ = flare_core::aperture::Aperture::image_shape_from_file(&source, 32);
     }
 }
+
+/// JPEG plates, listed in the help, are read (they were refused), decoded from sRGB like PNG.
+#[test]
+fn a_jpeg_plate_is_read_like_a_png() {
+    let dir = tempfile::tempdir().unwrap();
+    let (jpg, png) = (dir.path().join("p.jpg"), dir.path().join("p.png"));
+    let image = image::RgbImage::from_pixel(16, 8, image::Rgb([128, 128, 128]));
+    image.save(&jpg).unwrap();
+    image.save(&png).unwrap();
+    let (a, b) = (read_plate(&jpg).unwrap(), read_plate(&png).unwrap());
+    assert_eq!((a.width, a.height), (16, 8));
+    assert!((a.pixels[0][1] - b.pixels[0][1]).abs() < 0.01, "{:?} against {:?}", a.pixels[0], b.pixels[0]);
+}
