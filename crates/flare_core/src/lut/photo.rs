@@ -49,6 +49,9 @@ struct SidecarImage {
     theta_deg: f64,
 }
 
+/// The most photos one photo LUT is made of (each is decoded; a sidecar may list any number).
+pub const MAX_PHOTOS: usize = 1024;
+
 /// The first decimal number in a file name (`flare_12.5deg.png` -> 12.5).
 pub fn angle_from_name(name: &str) -> Option<f64> {
     let start = name.find(|c: char| c.is_ascii_digit())?;
@@ -83,7 +86,8 @@ pub fn import_folder(folder: &Path) -> Result<GhostLut, PhotoError> {
     let (azimuth_deg, mut images): (f64, Vec<(f64, PathBuf)>) = if sidecar_path.exists() {
         let text = crate::files::read_text_bounded(&sidecar_path, crate::files::MAX_TEXT_BYTES)
             .map_err(|e| err(&sidecar_path, e))?;
-        let sidecar: Sidecar = serde_json::from_str(&text).map_err(|e| err(&sidecar_path, e.to_string()))?;
+        let sidecar: Sidecar =
+            serde_json::from_str(&text).map_err(|e| err(&sidecar_path, crate::files::one_line(&e.to_string())))?;
         if !sidecar.azimuth_deg.is_finite() {
             return Err(err(&sidecar_path, "azimuth_deg must be finite".into()));
         }
@@ -108,6 +112,12 @@ pub fn import_folder(folder: &Path) -> Result<GhostLut, PhotoError> {
     };
     if images.is_empty() {
         return Err(PhotoError::Empty(folder.to_owned()));
+    }
+    if images.len() > MAX_PHOTOS {
+        return Err(err(
+            folder,
+            format!("{} photos; a photo LUT takes at most {MAX_PHOTOS} (one a light angle)", images.len()),
+        ));
     }
     for (theta, path) in &images {
         if !(theta.is_finite() && (0.0..=89.0).contains(theta)) {
