@@ -1335,3 +1335,51 @@ fn negative_frame_ranges_are_values() {
         .to_string();
     assert!(e.contains("more than 100000 frames") && e.lines().count() <= 2, "{e}");
 }
+
+/// Issue 33's messages and targets from the command line: each refusal is one line that names its file once
+/// and blames what caused it, before any long work; limits agree between the core and the flags.
+#[test]
+fn hostile_targets_and_inputs_are_refused_in_one_line_blaming_their_cause() {
+    let dir = tempfile::tempdir().unwrap();
+    // A FIFO as -o: refused, not replaced; the cause said once.
+    let fifo = dir.path().join("out.png");
+    assert!(std::process::Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    let fifo_s = fifo.display().to_string();
+    let e = refusal(&["render", "tessar", "--size", "16x16", "--device", "cpu", "-o", &fifo_s]);
+    assert!(e.contains("a FIFO") && e.matches("not a regular file").count() == 1, "{e}");
+    assert_eq!(e.matches(&fifo_s).count(), 1, "the file named once: {e}");
+    use std::os::unix::fs::FileTypeExt;
+    assert!(std::fs::symlink_metadata(&fifo).unwrap().file_type().is_fifo());
+    // A bad depth map is the depth map's fault, not the plate's.
+    let plate = dir.path().join("plate.png");
+    image::RgbImage::from_pixel(32, 18, image::Rgb([90, 90, 90])).save(&plate).unwrap();
+    let depth = dir.path().join("z.exr");
+    std::fs::write(&depth, b"not an exr").unwrap();
+    let out = dir.path().join("dof.png").display().to_string();
+    let e = refusal(&[
+        "render",
+        "tessar",
+        "--size",
+        "32x18",
+        "--device",
+        "cpu",
+        "--background",
+        plate.to_str().unwrap(),
+        "--depth",
+        depth.to_str().unwrap(),
+        "-o",
+        &out,
+    ]);
+    assert!(e.contains("depth map") && e.contains("z.exr") && !e.contains("plate cannot be used"), "{e}");
+    // bake: a folder that does not exist is found before the bake, not after it.
+    let e = refusal(&["bake", "tessar", "-o", &dir.path().join("nope/x.flut").display().to_string()]);
+    assert!(e.contains("does not exist"), "{e}");
+    // One wavelength range and one blade range everywhere.
+    let e = refusal(&["trace", "heliar", "--field-deg", "1", "--pupil", "0,0", "--wavelength-nm", "1500"]);
+    assert!(e.contains("300-1000 nm"), "{e}");
+    let ok =
+        flarelab(&["render", "tessar", "--size", "16x16", "--device", "cpu", "--aperture", "blades:24", "-o", &out]);
+    assert!(ok.status.success(), "24 blades, as presets allow: {}", String::from_utf8_lossy(&ok.stderr));
+    let e = refusal(&["render", "tessar", "--aperture", "blades:40", "-o", &out]);
+    assert!(e.contains("3 to 32 blades"), "{e}");
+}

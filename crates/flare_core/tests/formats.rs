@@ -369,6 +369,9 @@ fn hostile_zmx_and_dat_files_name_the_line() {
         ("missing DIAM", sample.replace("  DIAM 0.4 1 0 0 1 \"\"\nSURF 4", "SURF 4"), &["line 32", "DIAM"]),
         ("no stop", sample.replace("  STOP\n", ""), &["no aperture stop"]),
         ("only the object", "VERS 1\nSURF 0\n  DISZ INFINITY\n".to_owned(), &["SURF blocks"]),
+        // Issue 33: the last of two values silently won (EFL 99 -> 49 mm).
+        ("curvature twice", sample.replace("CURV -0.2", "CURV -0.2\n  CURV -0.4"), &["CURV repeated", "first on line"]),
+        ("glass twice", sample.replace("GLAS N-BK7 0 0", "GLAS N-BK7 0 0\n  GLAS F5 0 0"), &["GLAS repeated"]),
     ];
     for (what, text, expect) in cases {
         let message = refusal("lens.zmx", text.as_bytes());

@@ -1,6 +1,6 @@
 //! Hostile files (issue 33): each class of the fuzzing campaign's findings reproduced, and a fuzzing harness
 //! over every reader: generated and mutated inputs (proptest, stable Rust) for lens files in all five formats,
-//! presets, tracks, glass catalogues, LUTs, plates, depth maps and aperture images. A reader may refuse an
+//! presets, tracks, glass catalogues, photo LUT sidecars, LUTs, plates, depth maps and aperture images. A reader may refuse an
 //! input (one line, no panic) or accept it (then what it gives is finite and within its stated limits); it
 //! never panics, never allocates past the header's checked size, and never hangs. The case count is
 //! `PROPTEST_CASES` (64 a reader by default, bounded for CI); every case that ever failed is kept by proptest
@@ -346,6 +346,26 @@ proptest! {
         }
     }
 
+    /// Photo LUT folders: a mutated sidecar (`flare.json`) over two real photos is refused or makes a LUT of
+    /// at most as many entries as photos, never a panic.
+    #[test]
+    fn fuzz_photo_lut_sidecars(
+        flips in proptest::collection::vec((any::<usize>(), any::<u8>()), 0..4),
+        at in any::<usize>(),
+        insert in nasty_token(),
+    ) {
+        let dir = tempfile::tempdir().unwrap();
+        for name in ["a.png", "b.png"] {
+            image::RgbImage::from_pixel(8, 8, image::Rgb([200, 100, 50])).save(dir.path().join(name)).unwrap();
+        }
+        let sidecar = br#"{"azimuth_deg": 0, "images": [{"file": "a.png", "theta_deg": 0}, {"file": "b.png", "theta_deg": 10}]}"#;
+        let bytes = mutate(sidecar.to_vec(), &flips, 0, at, &insert);
+        std::fs::write(dir.path().join("flare.json"), &bytes).unwrap();
+        if let Ok(lut) = flare_core::lut::photo::import_folder(dir.path()) {
+            prop_assert!(lut.ghosts.iter().map(|g| g.entries.len()).sum::<usize>() <= 2);
+        }
+    }
+
     /// Images (plates, depth maps, aperture images): a mutated PNG or EXR, or a PNG claiming any size, is
     /// refused or decoded within the limit, never a panic or an allocation past the header's size.
     #[test]
@@ -389,4 +409,15 @@ fn a_jpeg_plate_is_read_like_a_png() {
     let (a, b) = (read_plate(&jpg).unwrap(), read_plate(&png).unwrap());
     assert_eq!((a.width, a.height), (16, 8));
     assert!((a.pixels[0][1] - b.pixels[0][1]).abs() < 0.01, "{:?} against {:?}", a.pixels[0], b.pixels[0]);
+}
+
+/// `--layers ghosts` needed more than 6 GB at 1920x1080: ghost layers are now 16-bit channels made as each
+/// ghost is drawn, and what would pass the stated budget is refused before drawing, naming the memory.
+#[test]
+fn ghost_layers_past_the_memory_budget_are_refused_naming_the_memory() {
+    use flare_core::frame::{MAX_GHOST_LAYER_BYTES, check_ghost_layers};
+    assert!(check_ghost_layers(254, 1920, 1080).is_ok(), "the default zoom's layers at 1080p fit");
+    let e = check_ghost_layers(254, 3840, 2160).unwrap_err().to_string();
+    assert!(e.contains("254 ghost layers at 3840x2160 need about 12.6 GB") && e.contains("--size"), "{e}");
+    assert!(MAX_GHOST_LAYER_BYTES <= 4 << 30);
 }
