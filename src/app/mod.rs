@@ -1048,8 +1048,8 @@ impl FlareLabApp {
         }
     }
 
-    /// Polls every job (see [`jobs`]) and takes what they hand back: a LUT to show (the document's LUT ghosts
-    /// are then the bake's, folded into the current undo step), the light found, what to say.
+    /// Polls every job (see [`jobs`]) and takes what they hand back: a LUT to show (drawn by the frame source
+    /// without writing the document: [`Derived::show_auto_lut`]), the light found, what to say.
     fn poll_jobs(&mut self) {
         let live = Self::live(&self.session, &self.derived);
         for event in self.jobs.poll(&live) {
