@@ -875,12 +875,18 @@ fn a_lut_naming_a_ghost_the_lens_lacks_is_refused_removed_from_the_cache_and_nev
     let file = cache.store(&flare.system.lens, &flare.config, &settings, &past).unwrap();
     let read = flare_core::lut::format::read_lut(&file).unwrap();
     assert_eq!(read.ghosts[0].ghost, ghosts as u32 + 1000);
+    // A killed bake's temporary file in the cache (over an hour old) is cleaned up by the next lookup.
+    let stale = dir.path().join(".flarelab-tmp-killed");
+    std::fs::write(&stale, b"half a LUT").unwrap();
+    let old = std::time::SystemTime::now() - std::time::Duration::from_secs(7200);
+    std::fs::File::options().write(true).open(&stale).unwrap().set_modified(old).unwrap();
     match cache.load(&flare.system.lens, &flare.config, &settings) {
         Lookup::Rejected(reason) => assert!(reason.contains("does not have") && reason.contains("removed"), "{reason}"),
         Lookup::Hit(_) => panic!("a forged ghost index was trusted"),
         Lookup::Miss => panic!("the file was not looked at"),
     }
     assert!(!file.exists(), "the rejected entry is removed, so the next lookup bakes again");
+    assert!(!stale.exists(), "the stale temporary file is removed");
     // Drawn anyway (a caller that skipped the check): no panic, the valid ghosts still drawn.
     let live = LiveLut::new(past);
     let light = light_position_deg(4.0, 30.0);

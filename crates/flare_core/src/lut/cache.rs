@@ -67,6 +67,8 @@ impl LutCache {
 
     /// The cached LUT of `lens` with `config` baked with `settings`, checked (see the module documentation).
     pub fn load(&self, lens: &Lens, config: &FlareConfig, settings: &BakeSettings) -> Lookup {
+        // What a killed bake's write left behind (our temporary files, over an hour old) goes first.
+        crate::files::remove_stale_temps(&self.dir, std::time::Duration::from_secs(3600));
         let path = self.path(Self::key(lens, config, settings));
         if !path.exists() {
             return Lookup::Miss;
