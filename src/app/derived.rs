@@ -469,8 +469,12 @@ impl Derived {
         let plate = match &file {
             Some(path) => match self.plate_cache.get(path) {
                 Some(plate) => Some(plate),
-                None => match flare_core::output::read_plate(std::path::Path::new(path)) {
-                    Ok(p) => {
+                None => match flare_core::output::read_plate_checked(std::path::Path::new(path)) {
+                    Ok((p, warning)) => {
+                        if let Some(warning) = warning {
+                            // Said once: the plate is cached, not read again.
+                            events.push(SyncEvent::Message(warning));
+                        }
                         let p = Arc::new(p);
                         self.plate_cache.put(path.clone(), p.clone());
                         Some(p)

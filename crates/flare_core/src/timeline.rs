@@ -267,16 +267,16 @@ impl Timeline {
     }
 }
 
-/// The most frames a timeline (and a rendered range) may span: 100,000, over an hour at 24 fps. A shot's plan
+/// The most frames a timeline (and a rendered range) may span: 1,000,000, over 11 hours at 24 fps. A shot's plan
 /// holds a record per frame; a range of a hundred million frames asked for gigabytes before the first frame.
-pub const MAX_FRAMES: i64 = 100_000;
+pub const MAX_FRAMES: i64 = 1_000_000;
 
 /// Refuses a range `first..=last` longer than [`MAX_FRAMES`] (or whose length overflows).
 pub fn check_frame_count(first: i64, last: i64) -> Result<(), String> {
     match last.checked_sub(first).and_then(|d| d.checked_add(1)) {
         Some(n) if n <= MAX_FRAMES => Ok(()),
         _ => Err(format!(
-            "frames {first} to {last} are more than {MAX_FRAMES} frames (over an hour at 24 fps): render the shot in parts"
+            "frames {first} to {last} are more than {MAX_FRAMES} frames (over 11 hours at 24 fps): render the shot in parts"
         )),
     }
 }

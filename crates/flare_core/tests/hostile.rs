@@ -161,6 +161,9 @@ fn large_tracks_and_xml_files_are_read_in_one_pass() {
     text.push_str("17,1,1\n");
     let e = parse_track(&text).unwrap_err().to_string();
     assert!(e.contains("frame 17 was already given on line 19"), "{e}");
+    // A track spanning more frames than a timeline holds is refused (its frames become the timeline's).
+    let e = parse_track("frame,x,y\n1,1,1\n9000000000000,2,2\n").unwrap_err().to_string();
+    assert!(e.contains("line 3") && e.contains("more than 1000000 frames"), "{e}");
     // 1.7 MB of OpenLensFlare: tags the reader skips, each an event that asks for its line.
     let padding = "<comment>x</comment>\n".repeat(85_000);
     let xml = format!(

@@ -88,6 +88,11 @@ pub fn parse_track(text: &str) -> Result<Vec<TrackRow>, TrackError> {
         return Err(TrackError::Empty);
     }
     rows.sort_by_key(|r| r.frame);
+    // The frames it spans become the timeline's: no more than a timeline may hold.
+    let (first, last) = (&rows[0], &rows[rows.len() - 1]);
+    if let Err(reason) = crate::timeline::check_frame_count(first.frame, last.frame) {
+        return Err(TrackError::Line { line: last.line, reason });
+    }
     Ok(rows)
 }
 
