@@ -5,7 +5,6 @@
 
 use std::process::ExitCode;
 
-use clap::Parser;
 use flarelab::{app, cli};
 
 fn main() -> ExitCode {
@@ -23,7 +22,15 @@ fn main() -> ExitCode {
         let place = info.location().map(|l| format!(" at {}:{}", l.file(), l.line())).unwrap_or_default();
         eprintln!("flarelab: internal error (a bug; please report it): {}{place}", message.replace('\n', " "));
     }));
-    let cli = match cli::Cli::try_parse() {
+    // A negative number is a value on every command (`--f-number -2` is then refused by its own check, naming
+    // the flag, instead of clap's "unexpected argument").
+    fn allow_negatives(command: clap::Command) -> clap::Command {
+        command.allow_negative_numbers(true).mut_subcommands(allow_negatives)
+    }
+    use clap::{CommandFactory, FromArgMatches};
+    let parsed =
+        allow_negatives(cli::Cli::command()).try_get_matches().and_then(|matches| cli::Cli::from_arg_matches(&matches));
+    let cli = match parsed {
         Ok(cli) => cli,
         Err(e) => {
             use clap::error::ErrorKind;

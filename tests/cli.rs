@@ -1382,4 +1382,10 @@ fn hostile_targets_and_inputs_are_refused_in_one_line_blaming_their_cause() {
     assert!(ok.status.success(), "24 blades, as presets allow: {}", String::from_utf8_lossy(&ok.stderr));
     let e = refusal(&["render", "tessar", "--aperture", "blades:40", "-o", &out]);
     assert!(e.contains("3 to 32 blades"), "{e}");
+    // A negative number reaches the flag's own check (it was "unexpected argument '-2'").
+    let e = refusal(&["render", "tessar", "--f-number", "-2", "-o", &out]);
+    assert!(e.contains("--f-number -2") && e.contains("positive"), "{e}");
+    let e =
+        refusal(&["dof", plate.to_str().unwrap(), "--depth", depth.to_str().unwrap(), "--focus-m", "-3", "-o", &out]);
+    assert!(!e.contains("unexpected argument"), "{e}");
 }
