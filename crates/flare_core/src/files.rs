@@ -8,8 +8,8 @@
 //! or the new one, never half of one; on an error the temporary file is removed and the target is untouched.
 //! A target that exists and is not a regular file (a FIFO, a device, a folder) is refused, never replaced; a
 //! symbolic link is written through (its target replaced, the link kept). Temporary files are named
-//! `.flarelab-tmp-*`, so what a killed process left behind is recognised and removed ([`remove_stale_temps`])
-//! by the next write into that folder once it is an hour old. A read takes at most `max_bytes + 1` bytes,
+//! `.flarelab-tmp-PID-*`, so what a killed process left behind is recognised and removed ([`remove_stale_temps`])
+//! by the next write into that folder: at once when that process is gone, else once it is an hour old. A read takes at most `max_bytes + 1` bytes,
 //! whatever the file claims to be (an endless FIFO or `/dev/zero` ends there with an error), and
 //! [`shorten`] puts a token from a file into a message at most [`TOKEN_CHARS`] characters long, control
 //! characters escaped.
@@ -47,7 +47,8 @@ pub fn write_atomic(path: &Path, contents: &[u8]) -> std::io::Result<()> {
         _ => Path::new("."),
     };
     remove_stale_temps(dir, std::time::Duration::from_secs(3600));
-    let mut tmp = tempfile::Builder::new().prefix(TEMP_PREFIX).tempfile_in(dir).map_err(plain)?;
+    let prefix = format!("{TEMP_PREFIX}{}-", std::process::id());
+    let mut tmp = tempfile::Builder::new().prefix(&prefix).tempfile_in(dir).map_err(plain)?;
     tmp.write_all(contents).map_err(plain)?;
     // The temporary file is private (0600); the result keeps the permissions of the file it replaces, or
     // gets the usual 0644 when it is new.
@@ -122,8 +123,10 @@ fn kind_of(meta: &std::fs::Metadata) -> &'static str {
     if meta.is_dir() { "a folder" } else { "not a plain file" }
 }
 
-/// Removes our own temporary files in `dir` older than `age` (left by a process that was killed while
-/// writing); returns how many. Anything else in the folder is left alone, and a failure removes nothing more.
+/// Removes our own temporary files in `dir` left by a process that was killed while writing: at once when the
+/// process named in the file (`.flarelab-tmp-PID-...`) is no longer running (Linux: no `/proc/PID`), else once
+/// older than `age` (another system, or a process id used again). Returns how many. Anything else in the folder
+/// is left alone, and a failure removes nothing more.
 pub fn remove_stale_temps(dir: &Path, age: std::time::Duration) -> usize {
     let Ok(entries) = std::fs::read_dir(dir) else { return 0 };
     let now = std::time::SystemTime::now();
@@ -135,7 +138,10 @@ pub fn remove_stale_temps(dir: &Path, age: std::time::Duration) -> usize {
         }
         let Ok(meta) = entry.metadata() else { continue };
         let old = meta.modified().ok().and_then(|m| now.duration_since(m).ok()).is_some_and(|d| d >= age);
-        if meta.is_file() && old && std::fs::remove_file(entry.path()).is_ok() {
+        let writer = name.to_string_lossy()[TEMP_PREFIX.len()..].split('-').next().and_then(|p| p.parse::<u32>().ok());
+        let writer_gone = cfg!(target_os = "linux")
+            && writer.is_some_and(|pid| pid != std::process::id() && !Path::new(&format!("/proc/{pid}")).exists());
+        if meta.is_file() && (old || writer_gone) && std::fs::remove_file(entry.path()).is_ok() {
             removed += 1;
         }
     }
@@ -265,6 +271,17 @@ mod tests {
     fn stale_temporary_files_of_ours_are_removed_and_nothing_else() {
         let dir = tempfile::tempdir().unwrap();
         let ours = dir.path().join(format!("{TEMP_PREFIX}abc"));
+        // A writer that is gone (no such process): removed at once, however young.
+        let killed = dir.path().join(format!("{TEMP_PREFIX}4000000000-x"));
+        std::fs::write(&killed, b"half").unwrap();
+        let running = dir.path().join(format!("{TEMP_PREFIX}{}-y", std::process::id()));
+        std::fs::write(&running, b"mine").unwrap();
+        if cfg!(target_os = "linux") {
+            assert_eq!(remove_stale_temps(dir.path(), std::time::Duration::from_secs(3600)), 1);
+            assert!(!killed.exists() && running.exists(), "a live writer's file stays");
+        }
+        std::fs::remove_file(&running).unwrap();
+        let _ = std::fs::remove_file(&killed);
         let theirs = dir.path().join(".other-tmp");
         std::fs::write(&ours, b"half").unwrap();
         std::fs::write(&theirs, b"keep").unwrap();
