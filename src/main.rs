@@ -54,13 +54,13 @@ fn main() -> ExitCode {
                 .map(str::trim)
                 .collect();
             let first = if listed.is_empty() { first.to_owned() } else { format!("{first} {}", listed.join(", ")) };
-            eprintln!("flarelab: error: {first} (see `flarelab --help`)");
+            eprintln!("flarelab: error: {} (see `flarelab --help`)", printable(&first));
             return ExitCode::from(2);
         }
     };
     for path in &cli.catalogs {
         if let Err(e) = flare_core::optics::formats::load_glass_catalogue(path) {
-            eprintln!("flarelab: error: --catalog {e}");
+            eprintln!("flarelab: error: --catalog {}", printable(&e));
             return ExitCode::from(2);
         }
     }
@@ -71,8 +71,14 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("flarelab: error: {}", format!("{e:#}").replace('\n', " "));
+            eprintln!("flarelab: error: {}", printable(&format!("{e:#}").replace('\n', " ")));
             ExitCode::from(2)
         }
     }
+}
+
+/// An error for the terminal: control characters (from a file name or a file's contents) escaped, so no input
+/// can move the cursor, clear the screen or ring the bell.
+fn printable(text: &str) -> String {
+    text.chars().flat_map(|c| if c.is_control() { c.escape_default().collect::<Vec<_>>() } else { vec![c] }).collect()
 }

@@ -1382,6 +1382,9 @@ fn hostile_targets_and_inputs_are_refused_in_one_line_blaming_their_cause() {
     assert!(ok.status.success(), "24 blades, as presets allow: {}", String::from_utf8_lossy(&ok.stderr));
     let e = refusal(&["render", "tessar", "--aperture", "blades:40", "-o", &out]);
     assert!(e.contains("3 to 32 blades"), "{e}");
+    // Control characters in what is echoed (here a file name) are escaped, never sent to the terminal.
+    let e = refusal(&["lens", "info", "/tmp/a\u{1b}[2Jb.zmx"]);
+    assert!(!e.contains('\u{1b}') && e.contains("\\u{1b}[2J"), "{e}");
     // A negative number reaches the flag's own check (it was "unexpected argument '-2'").
     let e = refusal(&["render", "tessar", "--f-number", "-2", "-o", &out]);
     assert!(e.contains("--f-number -2") && e.contains("positive"), "{e}");
