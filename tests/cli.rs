@@ -1392,3 +1392,54 @@ fn hostile_targets_and_inputs_are_refused_in_one_line_blaming_their_cause() {
         refusal(&["dof", plate.to_str().unwrap(), "--depth", depth.to_str().unwrap(), "--focus-m", "-3", "-o", &out]);
     assert!(!e.contains("unexpected argument"), "{e}");
 }
+
+/// A plate sequence whose values overflow when exposed: clamped, said once for the whole sequence.
+#[test]
+fn an_overflowing_plate_sequence_is_clamped_with_one_warning() {
+    use exr::prelude::{
+        AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, SmallVec, WritableImage,
+    };
+    let dir = tempfile::tempdir().unwrap();
+    for frame in 1..=3 {
+        let values = vec![3e38f32, f32::INFINITY, 0.5, 0.25];
+        let channels = ["R", "G", "B"].map(|c| AnyChannel::new(c, FlatSamples::F32(values.clone())));
+        let layer = Layer::new(
+            (2, 2),
+            LayerAttributes::default(),
+            Encoding::UNCOMPRESSED,
+            AnyChannels::sort(SmallVec::from_vec(channels.to_vec())),
+        );
+        Image::from_layer(layer).write().to_file(dir.path().join(format!("sun.{frame:04}.exr"))).unwrap();
+    }
+    let plates = dir.path().join("sun.####.exr").display().to_string();
+    let out = dir.path().join("out/f.####.exr").display().to_string();
+    let result = flarelab(&[
+        "render",
+        "tessar",
+        "--background",
+        &plates,
+        "--frames",
+        "1-3",
+        "--plate-ev",
+        "1",
+        "--device",
+        "cpu",
+        "-o",
+        &out,
+    ]);
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(result.status.success(), "{stderr}");
+    assert_eq!(stderr.matches("warning:").count(), 1, "{stderr}");
+    assert!(stderr.contains("clamped"), "{stderr}");
+    let image = exr::prelude::read_all_flat_layers_from_file(dir.path().join("out/f.0002.exr")).unwrap();
+    let composite: Vec<f32> = image.layer_data[0]
+        .channel_data
+        .list
+        .iter()
+        .find(|c| c.name.to_string() == "R")
+        .unwrap()
+        .sample_data
+        .values_as_f32()
+        .collect();
+    assert!(composite.iter().all(|v| v.is_finite()) && composite[0] > 1e19, "bright, finite: {composite:?}");
+}

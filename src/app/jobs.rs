@@ -447,7 +447,11 @@ impl JobBoard {
                                 format!("; {} failed: {}", failed.len(), failed.join("; "))
                             }
                         );
-                        events.push(JobEvent::Say(self.shot_status.clone()));
+                        let said = match &report.plate_warning {
+                            Some(warning) => format!("{}; {warning}", self.shot_status),
+                            None => self.shot_status.clone(),
+                        };
+                        events.push(JobEvent::Say(said));
                         self.last_export = Some(report);
                     }
                     Err(e) => {

@@ -721,6 +721,9 @@ fn render_frames(
     if let Some(log) = &args.log {
         write_log(log, &report).with_context(|| format!("--log {}", log.display()))?;
     }
+    if let Some(warning) = &report.plate_warning {
+        eprintln!("warning: {warning}");
+    }
     let median = report.median_ms();
     eprintln!(
         "{} of {total} frames rendered ({} skipped, {} failed) in {:.1} s on {}, {}x{}: median {median:.0} ms a frame",

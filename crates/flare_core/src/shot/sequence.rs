@@ -79,6 +79,8 @@ pub struct FrameRecord {
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SequenceReport {
     pub records: Vec<FrameRecord>,
+    /// What clamping a plate's values said (the first plate that needed it), to be said once for the sequence.
+    pub plate_warning: Option<String>,
 }
 
 impl SequenceReport {
@@ -127,7 +129,12 @@ pub struct ShotSources<'a> {
 /// plate and depth files.
 type PlateCache = Option<((PathBuf, Option<PathBuf>), Arc<HdrImage>)>;
 
-fn plate_for(plan: &FramePlan, sources: &ShotSources, cache: &mut PlateCache) -> Result<Option<Arc<HdrImage>>, String> {
+fn plate_for(
+    plan: &FramePlan,
+    sources: &ShotSources,
+    cache: &mut PlateCache,
+    warned: &std::sync::Mutex<Option<String>>,
+) -> Result<Option<Arc<HdrImage>>, String> {
     let Some(path) = &plan.plate else { return Ok(None) };
     let key = (path.clone(), sources.doc.dof.enabled.then(|| sources.doc.depth_at(plan.frame)).flatten());
     if let Some((k, img)) = cache
@@ -138,10 +145,20 @@ fn plate_for(plan: &FramePlan, sources: &ShotSources, cache: &mut PlateCache) ->
     if !path.exists() {
         return Err(format!("frame {}: plate {} is missing", plan.frame, path.display()));
     }
-    let img = Arc::new(
-        super::plate::frame_plate(sources.doc, sources.flare, plan.frame, path)
-            .map_err(|e| format!("frame {}: plate {}: {e}", plan.frame, path.display()))?,
-    );
+    let (plate, warning) = crate::output::read_plate_checked(path)
+        .map_err(|e| format!("frame {}: plate {}: {e}", plan.frame, path.display()))?;
+    if let (Some(warning), Ok(mut first)) = (warning, warned.lock())
+        && first.is_none()
+    {
+        *first = Some(warning);
+    }
+    let plate = if sources.doc.dof.enabled {
+        super::plate::defocus(sources.doc, sources.flare, plan.frame, &plate)
+            .map_err(|e| format!("frame {}: {e}", plan.frame))?
+    } else {
+        plate
+    };
+    let img = Arc::new(plate);
     *cache = Some((key, img.clone()));
     Ok(Some(img))
 }
@@ -193,6 +210,7 @@ pub fn render_sequence(
     };
     // A frame is skipped only when its file reads back whole: a truncated or damaged one is drawn again.
     let skip = |path: &Path| options.skip_existing && path.exists() && reads_back_whole(path);
+    let warned = std::sync::Mutex::new(None);
     let build = |plan: &FramePlan| {
         let request = sources.plan.request(sources.doc, &sources.flare.system, plan, options.divisor);
         Frame::build(sources.flare, sources.lut, &request)
@@ -208,7 +226,7 @@ pub fn render_sequence(
                 if skip(&path) {
                     return Some(finish(record(plan, path, started, FrameOutcome::Skipped)));
                 }
-                let outcome = match plate_for(plan, sources, &mut None) {
+                let outcome = match plate_for(plan, sources, &mut None, &warned) {
                     Ok(plate) => {
                         let frame = build(plan);
                         let s = Sources { flare: sources.flare, lut: sources.lut, plate: plate.as_deref() };
@@ -262,7 +280,7 @@ pub fn render_sequence(
                         inline.push(finish(record(plan, path, started, FrameOutcome::Skipped)));
                         continue;
                     }
-                    let plate = match plate_for(plan, sources, &mut cache) {
+                    let plate = match plate_for(plan, sources, &mut cache, &warned) {
                         Ok(p) => p,
                         Err(e) => {
                             inline.push(finish(record(plan, path, started, FrameOutcome::Failed(e))));
@@ -305,7 +323,7 @@ pub fn render_sequence(
         }
     };
     records.sort_by_key(|r| r.frame);
-    SequenceReport { records }
+    SequenceReport { records, plate_warning: warned.into_inner().ok().flatten() }
 }
 
 /// Writes the log: a JSON array with one record per frame, through a temporary file and a rename.
