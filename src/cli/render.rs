@@ -610,25 +610,20 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let planned = &plan.frames[0];
     let (width, height) = (plan.width, plan.height);
     // The plate, then its depth of field: each error blamed on what caused it (a bad depth map is not the plate's).
-    let plate = planned
-        .plate
-        .as_deref()
-        .map(|p| flare_core::output::read_plate_checked(p).map_err(|e| anyhow::anyhow!("{e}")))
-        .transpose()
-        .with_context(|| format!("--background: frame {}: the plate cannot be used", planned.frame))?;
-    let plate = match plate {
-        Some((plate, warning)) => {
-            if let Some(warning) = warning {
-                eprintln!("warning: {warning}");
-            }
-            if doc.dof.enabled {
-                let defocused = shot::plate::defocus(&doc, &flare, planned.frame, &plate)
-                    .map_err(|e| anyhow::anyhow!("frame {}: {e}", planned.frame))?;
-                Some(defocused)
-            } else {
+    let plate = match planned.plate.as_deref() {
+        Some(p) => match shot::plate::frame_plate(&doc, &flare, planned.frame, p) {
+            Ok((plate, warning)) => {
+                if let Some(warning) = warning {
+                    eprintln!("warning: {warning}");
+                }
                 Some(plate)
             }
-        }
+            Err(shot::plate::FramePlateError::Plate(e)) => {
+                return Err(anyhow::anyhow!(e))
+                    .with_context(|| format!("--background: frame {}: the plate cannot be used", planned.frame));
+            }
+            Err(shot::plate::FramePlateError::DepthOfField(e)) => bail!("frame {}: {e}", planned.frame),
+        },
         None => None,
     };
     if doc.dof.enabled {

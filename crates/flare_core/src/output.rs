@@ -283,13 +283,13 @@ pub fn read_plate_checked(path: &Path) -> Result<(HdrImage, Option<String>), Ima
     let img = open_image(path, "plate").map_err(ImageError::Plate)?;
     let is_float = matches!(img, ::image::DynamicImage::ImageRgb32F(_) | ::image::DynamicImage::ImageRgba32F(_));
     let (width, height) = (img.width(), img.height());
-    let clamped = std::sync::atomic::AtomicUsize::new(0);
+    let clamped = std::cell::Cell::new(0usize);
     let linear = |v: f32| {
         let v = if is_float { v } else { srgb_decode(v) };
         if v.is_nan() || v <= 0.0 {
             0.0
         } else if v > MAX_PLATE_VALUE {
-            clamped.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            clamped.set(clamped.get() + 1);
             MAX_PLATE_VALUE
         } else {
             v

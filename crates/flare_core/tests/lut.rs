@@ -261,20 +261,19 @@ fn flare_core_fnv(bytes: &[u8]) -> u64 {
     h
 }
 
+/// The smallest bake worth a file: one light angle step up to 8 deg, 16 texels (the fuzzer's source and the
+/// forged-index test).
+fn tiny_settings() -> BakeSettings {
+    BakeSettings { theta_max_deg: Some(8.0), res: 16, grid: 16, initial_steps: 1, phi_steps: 1, ..small_settings() }
+}
+
 fn fuzz_source() -> Vec<u8> {
     static BYTES: std::sync::OnceLock<Vec<u8>> = std::sync::OnceLock::new();
     BYTES
         .get_or_init(|| {
             let flare = flare("tessar");
             let renderer = flare.ray_grid_renderer();
-            let settings = BakeSettings {
-                theta_max_deg: Some(8.0),
-                res: 16,
-                grid: 16,
-                initial_steps: 1,
-                phi_steps: 1,
-                ..small_settings()
-            };
+            let settings = tiny_settings();
             encode(&bake(&flare, &renderer, &[3], &settings, None, &|_| {}, &AtomicBool::new(false)).unwrap())
         })
         .clone()
@@ -848,14 +847,7 @@ fn a_lut_naming_a_ghost_the_lens_lacks_is_refused_removed_from_the_cache_and_nev
     use flare_core::lut::cache::{Lookup, LutCache};
     let flare = flare("tessar");
     let ghosts = flare.system.ghosts.len();
-    let settings = BakeSettings {
-        theta_max_deg: Some(8.0),
-        res: 16,
-        grid: 16,
-        initial_steps: 1,
-        phi_steps: 1,
-        ..small_settings()
-    };
+    let settings = tiny_settings();
     let lut =
         bake(&flare, &flare.ray_grid_renderer(), &[3], &settings, None, &|_| {}, &AtomicBool::new(false)).unwrap();
     lut.check_for(&flare.system.lens, &flare.config).expect("the baked LUT is the lens's");

@@ -2,7 +2,7 @@
 //! defocused through the flare's own lens and stop with that frame's depth map ([`crate::dof`]).
 //!
 //! # How it works
-//! [`frame_plate`] reads the plate file ([`crate::output::read_plate`]), and with the depth of field on reads
+//! [`frame_plate`] reads the plate file ([`crate::output::read_plate_checked`], with what it clamped), and with the depth of field on reads
 //! the frame's depth map ([`crate::preset::Document::depth_at`]: a file, or a sequence's file of the frame),
 //! checks it against the plate and defocuses the plate on the CPU by the document's method (the live method's
 //! CPU twin, or the reference). The command line's stills, sequences and the app all take their plate from
@@ -13,18 +13,32 @@ use std::path::Path;
 use crate::dof::{self, DofLens};
 use crate::flare::PreparedFlare;
 use crate::image::HdrImage;
-use crate::output::read_plate;
+use crate::output::read_plate_checked;
 use crate::preset::Document;
 
-/// The plate at `path` for `frame` of `doc`, defocused when the document's depth of field is on; the error
-/// says which file and why.
-pub fn frame_plate(doc: &Document, flare: &PreparedFlare, frame: i64, path: &Path) -> Result<HdrImage, String> {
-    let plate = read_plate(path).map_err(|e| e.to_string())?;
+/// Why a frame's plate could not be made: the plate file itself, or its depth of field (a bad depth map is
+/// not the plate's fault). Each message says which file and why.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FramePlateError {
+    Plate(String),
+    DepthOfField(String),
+}
+
+/// The plate at `path` for `frame` of `doc`, defocused when the document's depth of field is on, with what
+/// reading it clamped (to be said once).
+pub fn frame_plate(
+    doc: &Document,
+    flare: &PreparedFlare,
+    frame: i64,
+    path: &Path,
+) -> Result<(HdrImage, Option<String>), FramePlateError> {
+    let (plate, warning) = read_plate_checked(path).map_err(|e| FramePlateError::Plate(e.to_string()))?;
     // With the depth of field off the plate is handed on as read (no copy of a frame per frame).
     if !doc.dof.enabled {
-        return Ok(plate);
+        return Ok((plate, warning));
     }
-    defocus(doc, flare, frame, &plate)
+    let defocused = defocus(doc, flare, frame, &plate).map_err(FramePlateError::DepthOfField)?;
+    Ok((defocused, warning))
 }
 
 /// `plate` defocused as `doc`'s depth of field says for `frame` (unchanged when it is off).

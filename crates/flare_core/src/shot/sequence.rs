@@ -145,19 +145,16 @@ fn plate_for(
     if !path.exists() {
         return Err(format!("frame {}: plate {} is missing", plan.frame, path.display()));
     }
-    let (plate, warning) = crate::output::read_plate_checked(path)
-        .map_err(|e| format!("frame {}: plate {}: {e}", plan.frame, path.display()))?;
+    let (plate, warning) =
+        super::plate::frame_plate(sources.doc, sources.flare, plan.frame, path).map_err(|e| match e {
+            super::plate::FramePlateError::Plate(e) => format!("frame {}: plate {}: {e}", plan.frame, path.display()),
+            super::plate::FramePlateError::DepthOfField(e) => format!("frame {}: {e}", plan.frame),
+        })?;
     if let (Some(warning), Ok(mut first)) = (warning, warned.lock())
         && first.is_none()
     {
         *first = Some(warning);
     }
-    let plate = if sources.doc.dof.enabled {
-        super::plate::defocus(sources.doc, sources.flare, plan.frame, &plate)
-            .map_err(|e| format!("frame {}: {e}", plan.frame))?
-    } else {
-        plate
-    };
     let img = Arc::new(plate);
     *cache = Some((key, img.clone()));
     Ok(Some(img))
