@@ -122,9 +122,14 @@ pub struct RenderArgs {
     /// --light auto: the light's unoccluded power (sum of its luminance; default: the largest in the range).
     #[arg(long)]
     pub light_power: Option<f64>,
-    /// --light auto: length of the visibility filter in frames, odd (default 5; 1 turns it off).
+    /// --light auto: an optional denoise of the measured visibility over this many frames, odd (default 1:
+    /// none, the flare follows each frame's visibility).
     #[arg(long)]
     pub light_smooth: Option<usize>,
+    /// The shutter in degrees (default: the preset's, 0): a light that moves while it is open streaks its
+    /// ghosts (180: open half of each frame, the streak is half the light's motion per frame).
+    #[arg(long, allow_negative_numbers = true)]
+    pub shutter_deg: Option<f64>,
     /// A sequence: one JSON record per frame (frame, light_px, light_deg, visibility, ms, status).
     #[arg(long)]
     pub log: Option<PathBuf>,
@@ -310,6 +315,9 @@ pub fn document(args: &RenderArgs) -> Result<Document> {
     if let Some(w) = args.sensor_mm {
         doc.sensor_width_mm = w;
     }
+    if let Some(deg) = args.shutter_deg {
+        doc.timeline.shutter_deg = deg;
+    }
     if let Some(depth) = &args.depth {
         doc.dof.enabled = true;
         doc.dof.depth = Some(depth.clone());
@@ -396,6 +404,7 @@ fn flag_of(args: &RenderArgs, field: &str) -> Option<String> {
         "auto_light.threshold" => args.light_threshold.map(|t| format!("--light-threshold {t}")),
         "auto_light.reference_power" => args.light_power.map(|p| format!("--light-power {p}")),
         "auto_light.smooth_frames" => args.light_smooth.map(|n| format!("--light-smooth {n}")),
+        "timeline.shutter_deg" => args.shutter_deg.map(|d| format!("--shutter-deg {d}")),
         "background" => args.background.as_ref().map(|b| format!("--background {}", b.display())),
         "dof.depth" => args.depth.as_ref().map(|d| format!("--depth {d}")),
         "dof.focus_m" => args.focus_m.map(|f| format!("--focus-m {f}")),
@@ -516,6 +525,13 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     }
     if grid.is_some() && doc.auto_light.is_some() {
         bail!("--light auto applies to the paraxial, blended and photo methods");
+    }
+    if grid.is_some() && doc.timeline.shutter_deg > 0.0 {
+        bail!(
+            "--shutter-deg {}: motion blur applies to the paraxial, blended and photo methods (a ray-traced frame \
+             is traced at one instant); give --shutter-deg 0",
+            doc.timeline.shutter_deg
+        );
     }
     frame::check_output(&args.out, choice).map_err(|e| match e {
         frame::FrameError::Request(reason) => anyhow::anyhow!("--layers ghosts: {reason}"),

@@ -27,9 +27,11 @@ use crate::lut::LutKind;
 use crate::lut::blend::{BlendSettings, LiveLut, LutScene, lut_pass};
 pub use crate::output::FrameLayers;
 use crate::raytrace::Window;
+use crate::render::GhostInstance;
 use crate::render::cpu;
 use crate::render::gpu::{FlareRenderer, GpuContext, GpuError};
 use crate::render::{DisplaySettings, FlareScene};
+use crate::shutter::{LightPath, ShutterSamples};
 
 /// How the LUT ghosts of a frame are used.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -62,6 +64,9 @@ pub struct FrameRequest {
     pub lut_use: LutUse,
     /// Draw a draft instead (the app while the user drags; never an export or a command's frame).
     pub draft: Option<Draft>,
+    /// The light while the shutter is open ([`crate::shutter`]); `None` (a closed shutter or a still light):
+    /// the sharp frame at `light_deg`.
+    pub motion: Option<LightPath>,
 }
 
 impl FrameRequest {
@@ -114,6 +119,7 @@ impl Default for FrameRequest {
             blend: BlendSettings::default(),
             lut_use: LutUse::Off,
             draft: None,
+            motion: None,
         }
     }
 }
@@ -131,10 +137,14 @@ pub struct Frame {
     pub request: FrameRequest,
     /// When the request asked for a draft: what it left out.
     pub draft: Option<DraftOutcome>,
+    /// When the light moves while the shutter is open: how the shutter was sampled ([`crate::shutter`]).
+    pub shutter: Option<ShutterSamples>,
 }
 
 impl Frame {
-    /// Builds the frame `request` asks for from `flare` and, when LUT ghosts are used, `lut`.
+    /// Builds the frame `request` asks for from `flare` and, when LUT ghosts are used, `lut`. With a moving
+    /// light while the shutter is open, the frame is built at each time sample ([`crate::shutter`]) and their
+    /// instances, each weighted by 1 / samples, drawn together.
     pub fn build(flare: &PreparedFlare, lut: Option<&LiveLut>, request: &FrameRequest) -> Self {
         let (mut w, mut h) = (request.width.max(1), request.height.max(1));
         // A draft of divisor 2 or more is drawn at half the size (see [`Draft`]).
@@ -143,43 +153,57 @@ impl Frame {
             (w, h) = (w.div_ceil(2), h.div_ceil(2));
         }
         let lut = lut.filter(|_| request.lut_use != LutUse::Off);
-        let ghosts = flare.system.ghosts.len();
         // The light's gain scales every ghost and the starburst; a NaN or negative gain draws no flare.
         let light_gain = if request.light_gain.is_finite() { request.light_gain.max(0.0) as f32 } else { 0.0 };
-        let mut gains: Vec<f32> =
-            (0..ghosts).map(|g| request.ghost_gains.get(g).copied().unwrap_or(1.0).max(0.0) * light_gain).collect();
-        let sensor_width_mm = request.sensor_width();
-        let sensor = Sensor::for_frame(sensor_width_mm, w, h);
-        let lut_scene = lut.map(|live| {
-            let u = light_slopes_for_frame_position(request.light_deg[0], request.light_deg[1]);
-            let out = Window::for_sensor(sensor_width_mm, w, h);
-            let mut scene = LutScene::build(live, &flare.system, u, out, &request.blend, &gains);
-            // The LUT images too are culled where they cannot be seen at the frame's exposure.
-            scene.cull_faint(flare.config.threshold(request.display.flare_gain()), &live.footprints);
-            scene
-        });
-        if let Some(l) = &lut_scene {
-            // A photo LUT is the whole flare photographed: it is never drawn over paraxial sprites.
-            let alone = request.lut_use == LutUse::Alone || lut.is_some_and(|live| live.lut.kind == LutKind::Photo);
-            for (g, gain) in gains.iter_mut().enumerate() {
-                *gain = if alone { 0.0 } else { *gain * l.paraxial_weight(g as u32) };
-            }
-        }
-        let mut display = DisplaySettings {
-            starburst_intensity: request.display.starburst_intensity * light_gain,
-            ..request.display
-        };
+        let sensor = Sensor::for_frame(request.sensor_width(), w, h);
+        let mut display = request.display;
         if let Some(d) = draft_divisor {
             display.accumulation_divisor = if d >= 2 { d / 2 } else { 1 };
         }
-        let (mut scene, sprites) = flare.scene_with(request.light_deg, sensor, w, h, &display, &gains);
+        let path = request.motion.as_ref().filter(|p| p.moves());
+        let shutter = path.map(|p| crate::shutter::plan_samples(flare, p, sensor, w, h, display.flare_gain()));
+        let (mut scene, lut_scene, sprites) = match (path, shutter) {
+            (Some(path), Some(samples)) if samples.count > 1 => {
+                let weight = 1.0 / samples.count as f32;
+                let points = path.samples(samples.count);
+                // The frame's own time (the middle) gives the starburst, the uniforms and the sprite list.
+                let (mut scene, mut lut_scene, sprites) =
+                    sharp(flare, lut, request, (sensor, w, h), &display, request.light_deg, light_gain);
+                scene.instances.clear();
+                scene.instance_ghosts.clear();
+                scene.dropped_non_finite = 0;
+                if let Some(l) = &mut lut_scene {
+                    l.instances.clear();
+                    l.sources.clear();
+                    l.dropped_non_finite = 0;
+                }
+                for point in points {
+                    let gain = light_gain * point.gain as f32;
+                    let (s, l, _) = sharp(flare, lut, request, (sensor, w, h), &display, point.light_deg, gain);
+                    scene.instances.extend(s.instances.iter().map(|i| weighted(*i, weight)));
+                    scene.instance_ghosts.extend(s.instance_ghosts);
+                    scene.dropped_non_finite += s.dropped_non_finite;
+                    if let (Some(all), Some(l)) = (&mut lut_scene, l) {
+                        all.instances.extend(l.instances.iter().map(|i| {
+                            let mut i = *i;
+                            i.colour = i.colour.map(|c| c * weight);
+                            i
+                        }));
+                        all.sources.extend(l.sources);
+                        all.dropped_non_finite += l.dropped_non_finite;
+                    }
+                }
+                (scene, lut_scene, sprites)
+            }
+            _ => sharp(flare, lut, request, (sensor, w, h), &display, request.light_deg, light_gain),
+        };
         let draft = request.draft.map(|d| {
             let skipped = scene.keep_brightest(d.fragment_budget);
             let fragments = scene.instances.iter().map(|i| scene.fragments(i)).sum();
             let divisor = request.width.max(1).div_ceil(scene.hdr_width.max(1));
             DraftOutcome { divisor, drawn: scene.instances.len(), skipped, fragments }
         });
-        Self { scene, lut: lut_scene, sprites, request: request.clone(), draft }
+        Self { scene, lut: lut_scene, sprites, request: request.clone(), draft, shutter }
     }
 
     /// The frame's size in pixels.
@@ -207,6 +231,49 @@ impl Frame {
         let display = DisplaySettings { starburst: false, ..self.request.display };
         Frame::build(flare, lut, &FrameRequest { ghost_gains, display, draft: None, ..self.request.clone() })
     }
+}
+
+/// The frame of `request` with the light at `light_deg` and gain `light_gain` at one instant: the LUT
+/// instances first (they say how much of each non-linear ghost its paraxial sprite keeps), then the paraxial
+/// instances with the user's gain times that weight, and the starburst.
+fn sharp(
+    flare: &PreparedFlare,
+    lut: Option<&LiveLut>,
+    request: &FrameRequest,
+    (sensor, w, h): (Sensor, u32, u32),
+    display: &DisplaySettings,
+    light_deg: [f64; 2],
+    light_gain: f32,
+) -> (FlareScene, Option<LutScene>, GhostFrame) {
+    let ghosts = flare.system.ghosts.len();
+    let mut gains: Vec<f32> =
+        (0..ghosts).map(|g| request.ghost_gains.get(g).copied().unwrap_or(1.0).max(0.0) * light_gain).collect();
+    let lut_scene = lut.map(|live| {
+        let u = light_slopes_for_frame_position(light_deg[0], light_deg[1]);
+        let out = Window::for_sensor(sensor.width_mm, w, h);
+        let mut scene = LutScene::build(live, &flare.system, u, out, &request.blend, &gains);
+        // The LUT images too are culled where they cannot be seen at the frame's exposure.
+        scene.cull_faint(flare.config.threshold(request.display.flare_gain()), &live.footprints);
+        scene
+    });
+    if let Some(l) = &lut_scene {
+        // A photo LUT is the whole flare photographed: it is never drawn over paraxial sprites.
+        let alone = request.lut_use == LutUse::Alone || lut.is_some_and(|live| live.lut.kind == LutKind::Photo);
+        for (g, gain) in gains.iter_mut().enumerate() {
+            *gain = if alone { 0.0 } else { *gain * l.paraxial_weight(g as u32) };
+        }
+    }
+    let display = DisplaySettings { starburst_intensity: display.starburst_intensity * light_gain, ..*display };
+    let (scene, sprites) = flare.scene_with(light_deg, sensor, w, h, &display, &gains);
+    (scene, lut_scene, sprites)
+}
+
+/// `instance` with its colour times `weight` (one time sample of a shutter).
+fn weighted(mut instance: GhostInstance, weight: f32) -> GhostInstance {
+    for c in &mut instance.colour[..3] {
+        *c *= weight;
+    }
+    instance
 }
 
 /// What a frame reads besides itself: the prepared optics (aperture mask, starburst), the LUT and the plate.

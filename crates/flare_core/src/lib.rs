@@ -43,6 +43,7 @@ pub mod raytrace;
 pub mod render;
 pub mod report;
 pub mod shot;
+pub mod shutter;
 pub mod spectrum;
 pub mod starburst;
 pub mod timeline;

@@ -382,7 +382,22 @@ impl Document {
             blend: self.blend_settings(),
             lut_use: self.lut_use(),
             draft: None,
+            motion: self.light_path(frame),
         }
+    }
+
+    /// The light while the shutter is open at `frame` ([`crate::shutter`]): the timeline's light position and
+    /// intensity (relative to the frame's) as its keys interpolate; `None` when the shutter is closed or the
+    /// light stands still while it is open.
+    pub fn light_path(&self, frame: f64) -> Option<crate::shutter::LightPath> {
+        let (open, close) = crate::shutter::open_interval(frame, self.timeline.shutter_deg);
+        let ev_here = self.timeline.sample(frame).light_ev;
+        let how = self.timeline.interpolation;
+        let path = crate::shutter::LightPath::over(open, close, |t| {
+            let ev = self.timeline.light_ev.value_at(t, how).unwrap_or(0.0);
+            (self.light_at(t), f64::from(crate::color::gain_from_ev(ev - ev_here)))
+        })?;
+        path.moves().then_some(path)
     }
 
     /// Sets `flare_ev` from the optics of `system` when the exposure is automatic (see

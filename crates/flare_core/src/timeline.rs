@@ -166,6 +166,9 @@ pub struct Timeline {
     /// Ghost gains by the ghost's key `"I-J"` (they replace the ghost panel's gain; its on/off and solo still
     /// apply).
     pub ghost_gain: BTreeMap<String, Track<f64>>,
+    /// The shutter in degrees (0: none, the sharp frame; 180: open half of each frame): a light that moves
+    /// while it is open streaks its ghosts ([`crate::shutter`]).
+    pub shutter_deg: f64,
 }
 
 impl Default for Timeline {
@@ -178,6 +181,7 @@ impl Default for Timeline {
             light_deg: Track::default(),
             light_ev: Track::default(),
             ghost_gain: BTreeMap::new(),
+            shutter_deg: 0.0,
         }
     }
 }
@@ -254,6 +258,7 @@ impl Timeline {
         if !(self.fps.is_finite() && self.fps > 0.0) {
             return Err((field("fps"), format!("{} is not a positive frame rate", self.fps)));
         }
+        crate::shutter::check_shutter(self.shutter_deg).map_err(|reason| (field("shutter_deg"), reason))?;
         let in_field = |r: Result<(), String>, f: &str| r.map_err(|reason| (field(f), reason));
         in_field(
             self.light_deg.check("light_deg", |v| v.iter().all(|a| a.is_finite() && a.abs() < 90.0)),

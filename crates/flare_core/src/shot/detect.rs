@@ -16,10 +16,13 @@
 //!   there) is not covered, it is out of view: its visibility cannot be measured and is held from the nearest
 //!   frame where it could, so its ghosts keep coming from off-screen (a light that leaves the frame behind a
 //!   cloud stays dim);
-//! - a **temporal filter**, a centred triangular window of [`AutoLight::smooth_frames`] frames (default 5:
-//!   weights 1 2 3 2 1, renormalised at the ends of the range; 1 turns it off), smooths the visibility, so an
-//!   occluder crossing the light, or leaves flickering over it, becomes a fade and never a strobe; a light
-//!   covered for at least half the window's length on both sides of a frame is exactly 0 there;
+//! - the visibility is **per frame**: the plate already integrates its shutter, so a frame's measured power is
+//!   what the camera saw of the light while it was open, and the flare follows it frame by frame (a frame on
+//!   which the sun is fully visible again has the whole flare). An optional denoise, a centred triangular
+//!   window of [`AutoLight::smooth_frames`] frames (default 1: none; 5 gives weights 1 2 3 2 1, renormalised
+//!   at the ends of the range), is for noisy plates whose measured power flickers; it spreads an occluder's
+//!   edge over the window (a light covered for at least half the window on both sides of a frame is still
+//!   exactly 0 there);
 //! - **position**: a frame whose raw visibility is at least [`TRUSTED_VISIBILITY`] and whose region does not
 //!   touch the plate's border is trusted, and its centroid is the light's position (turned into an angle by
 //!   the lens's mapping). On the others (partly or fully covered, or leaving the frame: a partial centroid
@@ -44,13 +47,14 @@ pub struct AutoLight {
     pub threshold: f64,
     /// The light's unoccluded power (sum of luminance over its pixels); `None`: the largest found in the range.
     pub reference_power: Option<f64>,
-    /// Length of the visibility filter in frames (odd; 1: no filter).
+    /// Length of the visibility denoise in frames (odd; 1, the default: none, the flare follows each frame's
+    /// measured visibility).
     pub smooth_frames: usize,
 }
 
 impl Default for AutoLight {
     fn default() -> Self {
-        Self { threshold: 4.0, reference_power: None, smooth_frames: 5 }
+        Self { threshold: 4.0, reference_power: None, smooth_frames: 1 }
     }
 }
 

@@ -27,6 +27,7 @@ use crate::ghost::GhostSystem;
 use crate::optics::sensor::Sensor;
 use crate::output::read_plate;
 use crate::preset::Document;
+use crate::shutter::LightPath;
 
 /// The size of a frame with no plate and no size given.
 pub const DEFAULT_SIZE: (u32, u32) = (1280, 720);
@@ -44,6 +45,9 @@ pub struct FramePlan {
     pub visibility: f64,
     /// The plate file of the frame.
     pub plate: Option<PathBuf>,
+    /// With the light found in the plate and the shutter open: the light while it is open, its positions read
+    /// between the neighbouring frames' solved ones ([`track_path`]). `None`: the timeline's path stands.
+    pub motion: Option<LightPath>,
 }
 
 /// Every frame of a range, planned (see the module documentation).
@@ -61,6 +65,9 @@ impl FramePlan {
     pub fn apply_to(&self, request: &mut FrameRequest) {
         request.light_deg = self.light_deg;
         request.light_gain *= self.visibility;
+        if self.motion.is_some() {
+            request.motion = self.motion.clone();
+        }
     }
 }
 
@@ -71,6 +78,35 @@ impl ShotPlan {
         plan.apply_to(&mut request);
         request
     }
+}
+
+/// The light while the shutter is open on `frame`, the `i`th frame of a range whose solved positions are
+/// `positions` (one per frame, in order): read linearly between neighbouring frames, and past either end of
+/// the range at the speed of its last step; the intensity is the timeline's, relative to the frame's. `None`
+/// when the shutter is closed or the light stands still.
+pub fn track_path(doc: &Document, positions: &[[f64; 2]], i: usize, frame: i64) -> Option<LightPath> {
+    let n = positions.len();
+    if i >= n {
+        return None;
+    }
+    let position = |dt: f64| -> [f64; 2] {
+        if n == 1 {
+            return positions[0];
+        }
+        let x = i as f64 + dt;
+        let k = (x.floor().max(0.0) as usize).min(n - 2);
+        let t = x - k as f64;
+        let (a, b) = (positions[k], positions[k + 1]);
+        [a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t]
+    };
+    let timeline = &doc.timeline;
+    let ev = |t: f64| timeline.light_ev.value_at(t, timeline.interpolation).unwrap_or(0.0);
+    let here = frame as f64;
+    let (open, close) = crate::shutter::open_interval(here, timeline.shutter_deg);
+    let path = LightPath::over(open, close, |t| {
+        (position(t - here), f64::from(crate::color::gain_from_ev(ev(t) - ev(here))))
+    })?;
+    path.moves().then_some(path)
 }
 
 /// Why a shot cannot be planned.
@@ -190,6 +226,7 @@ pub fn plan(
             Some(detect::solve(&list, &scans, auto, to_deg, keyed, on_plate)?)
         }
     };
+    let positions: Option<Vec<[f64; 2]>> = solved.as_ref().map(|s| s.iter().map(|l| l.light_deg).collect());
     let frames = list
         .iter()
         .enumerate()
@@ -198,7 +235,15 @@ pub fn plan(
                 Some(s) => (s[i].light_deg, s[i].visibility),
                 None => (doc.light_at(frame as f64), 1.0),
             };
-            FramePlan { frame, light_deg, light_px: inside(light_deg, 0.0), visibility, plate: plates[i].clone() }
+            let motion = positions.as_deref().and_then(|p| track_path(doc, p, i, frame));
+            FramePlan {
+                frame,
+                light_deg,
+                light_px: inside(light_deg, 0.0),
+                visibility,
+                plate: plates[i].clone(),
+                motion,
+            }
         })
         .collect();
     Ok(ShotPlan { frames, width, height, sensor })
