@@ -584,6 +584,44 @@ fn the_timeline_keys_the_light_interpolates_plays_and_undo_covers_the_keys() {
 }
 
 #[test]
+fn the_shutter_control_blurs_a_moving_light_while_playing_and_undo_takes_it_back() {
+    let mut doc = flare_core::preset::Document::default();
+    doc.timeline.interpolation = flare_core::timeline::Interpolation::Linear;
+    doc.timeline.light_deg.keys = vec![
+        flare_core::timeline::Key { frame: 1, value: [-12.0, 4.0] },
+        flare_core::timeline::Key { frame: 100, value: [12.0, -4.0] },
+    ];
+    let mut h = harness_on(Some(doc));
+    show(&mut h, Tab::Shot);
+    let shutter = |h: &Harness<'static, FlareLabApp>| {
+        h.state().derived().view_frame().as_ref().and_then(|(_, f)| f.shutter.clone())
+    };
+    assert!(shutter(&h).is_none(), "0 degrees: the sharp frame");
+    h.get_by_label("shutter").set_value_accesskit(180.0);
+    h.run();
+    assert_eq!(h.state().doc().timeline.shutter_deg, 180.0);
+    let s = shutter(&h).expect("the light moves while the shutter is open");
+    assert!(s.count > 1 && s.max_gap_px <= 1.0, "{s:?}");
+    // Playing: every frame shown is blurred along the light's motion.
+    h.get_by_label("Play").click();
+    h.run_steps(2);
+    std::thread::sleep(std::time::Duration::from_millis(200));
+    h.step();
+    h.run_steps(2);
+    assert!(h.state().playhead() > 1);
+    let playing = h.state().derived().view_frame().as_ref().map(|(_, f)| f.request.clone()).unwrap();
+    assert!(playing.motion.is_some(), "the frame shown while playing carries the light's path");
+    assert!(shutter(&h).is_some_and(|s| s.count > 1));
+    h.get_by_label("Pause").click();
+    h.run_steps(2);
+    // Undo returns the shutter exactly as it was.
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
+    h.run();
+    assert_eq!(h.state().doc().timeline.shutter_deg, 0.0);
+    assert!(shutter(&h).is_none());
+}
+
+#[test]
 fn a_plate_sequence_finds_the_light_and_exports_on_a_thread_as_render_frames_does() {
     use flare_core::shot::synthetic::SyntheticShot;
     let dir = tempfile::tempdir().unwrap();

@@ -606,6 +606,17 @@ impl FlareLabApp {
             ),
             None => "full quality".to_owned(),
         };
+        let shutter = self.derived.view_frame().as_ref().and_then(|(_, f)| f.shutter.clone());
+        let quality = match shutter {
+            Some(s) => format!(
+                "{quality} | motion blur: up to {} time samples over the open shutter ({:.1} a ghost on average; the \
+                 fastest ghost moves {:.0} px)",
+                s.count,
+                s.mean_per_ghost(),
+                s.longest_px
+            ),
+            None => quality,
+        };
         let gpu_time = match (self.gpu.as_ref(), self.gpu_pass_times()) {
             (_, Some((adapter, times))) => format!("GPU time ({adapter}, timestamp queries): {}", times.summary()),
             (Some(_), None) => {

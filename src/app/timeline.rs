@@ -307,6 +307,23 @@ impl FlareLabApp {
             ui.selectable_value(&mut tl.interpolation, Interpolation::Linear, "linear");
             ui.selectable_value(&mut tl.interpolation, Interpolation::Smooth, "smooth");
         });
+        ui.horizontal(|ui| {
+            let r = ui.add(
+                egui::DragValue::new(&mut tl.shutter_deg)
+                    .range(0.0..=flare_core::shutter::MAX_SHUTTER_DEG)
+                    .speed(1.0)
+                    .prefix("shutter ")
+                    .suffix("°"),
+            );
+            crate::panels::labelled_value(
+                r.on_hover_text(
+                    "open this part of each frame (180°: half): a light that moves while it is open streaks its \
+                     ghosts; 0°: no motion blur",
+                ),
+                "shutter",
+                tl.shutter_deg,
+            );
+        });
         ui.label(format!(
             "{} light keys, {} intensity keys, {} ghost tracks",
             tl.light_deg.keys.len(),
@@ -374,7 +391,10 @@ impl FlareLabApp {
                 let mut n = a.smooth_frames as i64;
                 let r = ui.add(egui::DragValue::new(&mut n).range(1..=101).prefix("smooth ").suffix(" frames"));
                 crate::panels::labelled_value(
-                    r.on_hover_text("the visibility filter's length (odd; 1: off)"),
+                    r.on_hover_text(
+                        "an optional denoise of the measured visibility over this many frames (odd; 1: off, the \
+                         flare follows each frame)",
+                    ),
                     "smooth frames",
                     n as f64,
                 );

@@ -162,10 +162,8 @@ impl Frame {
         }
         let path = request.motion.as_ref().filter(|p| p.moves());
         let shutter = path.map(|p| crate::shutter::plan_samples(flare, p, sensor, w, h, display.flare_gain()));
-        let (mut scene, lut_scene, sprites) = match (path, shutter) {
+        let (mut scene, lut_scene, sprites) = match (path, &shutter) {
             (Some(path), Some(samples)) if samples.count > 1 => {
-                let weight = 1.0 / samples.count as f32;
-                let points = path.samples(samples.count);
                 // The frame's own time (the middle) gives the starburst, the uniforms and the sprite list.
                 let (mut scene, mut lut_scene, sprites) =
                     sharp(flare, lut, request, (sensor, w, h), &display, request.light_deg, light_gain);
@@ -177,19 +175,26 @@ impl Frame {
                     l.sources.clear();
                     l.dropped_non_finite = 0;
                 }
-                for point in points {
+                for (k, point) in path.samples(samples.count).into_iter().enumerate() {
                     let gain = light_gain * point.gain as f32;
                     let (s, l, _) = sharp(flare, lut, request, (sensor, w, h), &display, point.light_deg, gain);
-                    scene.instances.extend(s.instances.iter().map(|i| weighted(*i, weight)));
-                    scene.instance_ghosts.extend(s.instance_ghosts);
+                    for (instance, &ghost) in s.instances.iter().zip(&s.instance_ghosts) {
+                        if let Some(weight) = samples.weight(ghost as usize, k) {
+                            scene.instances.push(weighted(*instance, weight));
+                            scene.instance_ghosts.push(ghost);
+                        }
+                    }
                     scene.dropped_non_finite += s.dropped_non_finite;
-                    if let (Some(all), Some(l)) = (&mut lut_scene, l) {
-                        all.instances.extend(l.instances.iter().map(|i| {
-                            let mut i = *i;
-                            i.colour = i.colour.map(|c| c * weight);
-                            i
-                        }));
-                        all.sources.extend(l.sources);
+                    if let (Some(all), Some(l), Some(live)) = (&mut lut_scene, l, lut) {
+                        for (instance, &(lg, entry)) in l.instances.iter().zip(&l.sources) {
+                            let ghost = live.lut.ghosts.get(lg as usize).map_or(usize::MAX, |g| g.ghost as usize);
+                            if let Some(weight) = samples.weight(ghost, k) {
+                                let mut i = *instance;
+                                i.colour = i.colour.map(|c| c * weight);
+                                all.instances.push(i);
+                                all.sources.push((lg, entry));
+                            }
+                        }
                         all.dropped_non_finite += l.dropped_non_finite;
                     }
                 }

@@ -10,15 +10,20 @@
 //! timeline's keys as they interpolate, or from a track of positions found in the plate), read between points
 //! linearly ([`LightPath::at`]).
 //!
-//! [`plan_samples`] chooses how many time samples the frame needs: every paraxial sprite of the frame is laid
-//! out at each path point (the same culling as the frame), and the longest distance any sprite travels (in
-//! pixels, summed along the path) decides: `ceil(longest) + 1` samples, evenly spaced from opening to closing
-//! inclusive, put no two consecutive images of the fastest ghost more than a pixel apart. The samples are at
-//! most [`MAX_SAMPLES`]; a path longer than that leaves gaps, and [`ShutterSamples::max_gap_px`] says how
-//! large. [`crate::frame::Frame::build`] then builds the frame at each sample with the light's gain times the
-//! path's intensity there, weights every sprite and LUT instance by 1 / samples and draws them all in one
-//! frame: the accumulation is additive, so the drawn frame is the time average (the same on the GPU and its CPU
-//! twin, in the app, `render`, sequences and per-ghost layers). A streak therefore holds the energy of the
+//! [`plan_samples`] chooses how many time samples each ghost needs: every paraxial sprite of the frame is laid
+//! out at each path point (the same culling as the frame), and the distance a ghost's sprites travel (in
+//! pixels, summed along the path, the longest of its wavelengths) gives it the smallest `2^j + 1` samples at
+//! least `ceil(length) + 1`, evenly spaced from opening to closing inclusive: no two consecutive images of it
+//! are more than a pixel apart. A ghost that moves less than half a pixel is drawn once, at the frame's time
+//! (unless the light's intensity changes while the shutter is open: then every ghost gets at least
+//! [`PATH_POINTS`] samples). The frame is built at the most any ghost needs (at most [`MAX_SAMPLES`]; a
+//! longer path leaves gaps, and [`ShutterSamples::max_gap_px`] says how large), and since the sample counts
+//! are all `2^j + 1`, each ghost's samples are every `2^(m - j)`th of the frame's: a slow ghost costs a few
+//! sprites, not as many as the fastest. [`crate::frame::Frame::build`] builds the frame at each sample with
+//! the light's gain times the path's intensity there, keeps of each ghost the sprites and LUT instances of its
+//! own samples weighted by 1 / its samples, and draws them all in one frame: the accumulation is additive, so
+//! the drawn frame is the time average (the same on the GPU and its CPU twin, in the app, `render`, sequences
+//! and per-ghost layers). A streak therefore holds the energy of the
 //! sharp frame (up to the change of the ghosts' brightness along the path). The starburst (the light's own
 //! image) stays at the frame's time: it is not streaked. LUT ghosts composited over the flare through alpha
 //! (`blend.mode` alpha) are averaged as if added, which is exact only where the samples do not overlap.
@@ -30,8 +35,8 @@ use crate::ghost::{Sensor, light_slopes_for_frame_position, sensor_to_pixel};
 pub const MAX_SHUTTER_DEG: f64 = 360.0;
 /// Points of a [`LightPath`] from the shutter's opening to its closing.
 pub const PATH_POINTS: usize = 9;
-/// The most time samples one frame is drawn with.
-pub const MAX_SAMPLES: usize = 256;
+/// The most time samples one frame is built at (`2^8 + 1`).
+pub const MAX_SAMPLES: usize = 257;
 
 /// Frames (as fractional frame numbers) during which a shutter of `shutter_deg` is open at `frame`: centred
 /// on it (see the module documentation). A shutter that is not finite or not positive is closed (0 degrees).
@@ -122,19 +127,56 @@ impl LightPath {
 }
 
 /// How a frame's shutter is sampled (see [`plan_samples`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct ShutterSamples {
-    /// Time samples drawn (1: the light did not move far enough to streak).
+    /// Time samples the frame is built at (`2^m + 1`, evenly spaced from opening to closing; 1: the light did
+    /// not move far enough to streak).
     pub count: usize,
+    /// Per lens ghost, how many of those samples it is drawn at (`2^j + 1`, every `(count - 1) / (n - 1)`th;
+    /// 1: the middle one alone, for a ghost that does not move).
+    pub per_ghost: Vec<usize>,
     /// The longest path of any sprite while the shutter is open (pixels of the frame).
     pub longest_px: f64,
-    /// The largest step between two consecutive images of that sprite (at most 1 pixel unless the samples
-    /// were capped at [`MAX_SAMPLES`]).
+    /// The largest step between two consecutive images of any ghost (at most 1 pixel unless the samples were
+    /// capped at [`MAX_SAMPLES`]).
     pub max_gap_px: f64,
 }
 
+impl ShutterSamples {
+    /// Whether lens ghost `ghost` is drawn at sample `k` of [`Self::count`], and with what weight (1 / its
+    /// samples). A ghost the plan does not know (a photographed LUT's whole flare) is drawn at every sample.
+    pub fn weight(&self, ghost: usize, k: usize) -> Option<f32> {
+        let n = self.per_ghost.get(ghost).copied().unwrap_or(self.count).clamp(1, self.count.max(1));
+        if n == 1 {
+            return (k == (self.count - 1) / 2).then_some(1.0);
+        }
+        let stride = (self.count - 1) / (n - 1);
+        (k % stride == 0).then_some(1.0 / n as f32)
+    }
+
+    /// The instances a frame draws for each one of a still frame: the mean of the ghosts' samples.
+    pub fn mean_per_ghost(&self) -> f64 {
+        if self.per_ghost.is_empty() {
+            return 1.0;
+        }
+        self.per_ghost.iter().sum::<usize>() as f64 / self.per_ghost.len() as f64
+    }
+}
+
+/// The smallest `2^j + 1` samples that put no more than a pixel between consecutive images along a path of
+/// `length_px`, capped at [`MAX_SAMPLES`]; at least `least`.
+fn samples_for(length_px: f64, least: usize) -> usize {
+    let need = if length_px.is_finite() { length_px.ceil().max(0.0) as usize + 1 } else { MAX_SAMPLES };
+    let mut n = 2;
+    while n < need.max(least) && n < MAX_SAMPLES {
+        n = 2 * n - 1;
+    }
+    n
+}
+
 /// How many samples `path` needs in a `width` x `height` frame on `sensor` at the flare's gain `flare_gain`
-/// (see the module documentation).
+/// (see the module documentation): per lens ghost, from the longest path of its sprites, and for the frame the
+/// most any ghost needs.
 pub fn plan_samples(
     flare: &PreparedFlare,
     path: &LightPath,
@@ -144,7 +186,7 @@ pub fn plan_samples(
     flare_gain: f32,
 ) -> ShutterSamples {
     let settings = flare.frame_settings_on(sensor, width, flare_gain);
-    let centres: Vec<Vec<Option<[f64; 2]>>> = path
+    let frames: Vec<Vec<(usize, Option<[f64; 2]>)>> = path
         .points
         .iter()
         .map(|p| {
@@ -153,30 +195,41 @@ pub fn plan_samples(
             frame
                 .sprites
                 .iter()
-                .map(|s| s.culled.is_none().then(|| sensor_to_pixel(s.centre_mm, &sensor, width, height)))
+                .map(|s| (s.ghost, s.culled.is_none().then(|| sensor_to_pixel(s.centre_mm, &sensor, width, height))))
                 .collect()
         })
         .collect();
-    let sprites = centres.iter().map(Vec::len).min().unwrap_or(0);
-    let mut longest_px = 0.0f64;
+    let ghosts = flare.system.ghosts.len();
+    let sprites = frames.iter().map(Vec::len).min().unwrap_or(0);
+    let mut ghost_length = vec![0.0f64; ghosts];
     for i in 0..sprites {
         let mut length = 0.0;
-        for pair in centres.windows(2) {
-            // A sprite culled at either end of a step (too faint there) still moves: its step counts when it is
-            // drawn at one end.
-            let (a, b) = (pair[0][i], pair[1][i]);
-            if let (Some(a), Some(b)) = (a, b) {
+        for pair in frames.windows(2) {
+            // A sprite culled at either end of a step (too faint there) is not drawn there: the step is not seen.
+            if let (Some(a), Some(b)) = (pair[0][i].1, pair[1][i].1) {
                 let step = (b[0] - a[0]).hypot(b[1] - a[1]);
                 if step.is_finite() {
                     length += step;
                 }
             }
         }
-        longest_px = longest_px.max(length);
+        if let Some(g) = ghost_length.get_mut(frames[0][i].0) {
+            *g = g.max(length);
+        }
     }
-    let count = if path.moves() { ((longest_px.ceil() as usize) + 1).clamp(2, MAX_SAMPLES) } else { 1 };
-    let max_gap_px = if count > 1 { longest_px / (count - 1) as f64 } else { 0.0 };
-    ShutterSamples { count, longest_px, max_gap_px }
+    // A light whose intensity changes while the shutter is open needs every ghost sampled along the path.
+    let first_gain = path.points.first().map_or(1.0, |p| p.gain);
+    let least = if path.points.iter().any(|p| p.gain != first_gain) { PATH_POINTS } else { 1 };
+    let per_ghost: Vec<usize> =
+        ghost_length.iter().map(|&l| if l < 0.5 && least == 1 { 1 } else { samples_for(l, least) }).collect();
+    let longest_px = ghost_length.iter().copied().fold(0.0, f64::max);
+    let count = if path.moves() { per_ghost.iter().copied().max().unwrap_or(1) } else { 1 };
+    let max_gap_px = ghost_length
+        .iter()
+        .zip(&per_ghost)
+        .map(|(&l, &n)| if n > 1 { l / (n - 1) as f64 } else { l })
+        .fold(0.0, f64::max);
+    ShutterSamples { count, per_ghost, longest_px, max_gap_px }
 }
 
 #[cfg(test)]
@@ -191,6 +244,27 @@ mod tests {
         assert_eq!(open_interval(10.0, 720.0), (9.5, 10.5));
         assert!(LightPath::over(10.0, 10.0, |_| ([0.0, 0.0], 1.0)).is_none());
         assert!(check_shutter(360.0).is_ok() && check_shutter(-1.0).is_err() && check_shutter(f64::NAN).is_err());
+    }
+
+    #[test]
+    fn sample_counts_nest_and_weights_sum_to_one() {
+        assert_eq!(samples_for(0.0, 1), 2);
+        assert_eq!(samples_for(1.0, 1), 2);
+        assert_eq!(samples_for(1.5, 1), 3);
+        assert_eq!(samples_for(7.9, 1), 9);
+        assert_eq!(samples_for(8.1, 1), 17);
+        assert_eq!(samples_for(1e9, 1), MAX_SAMPLES);
+        assert_eq!(samples_for(f64::NAN, 1), MAX_SAMPLES);
+        assert_eq!(samples_for(0.0, PATH_POINTS), PATH_POINTS);
+        let s = ShutterSamples { count: 17, per_ghost: vec![1, 2, 3, 5, 9, 17], longest_px: 16.0, max_gap_px: 1.0 };
+        for g in 0..7 {
+            let weights: Vec<f32> = (0..17).filter_map(|k| s.weight(g, k)).collect();
+            let n = s.per_ghost.get(g).copied().unwrap_or(17);
+            assert_eq!(weights.len(), n, "ghost {g}");
+            assert!((weights.iter().sum::<f32>() - 1.0).abs() < 1e-6);
+        }
+        assert_eq!(s.weight(0, 8), Some(1.0), "a still ghost is drawn at the middle sample");
+        assert_eq!(s.weight(1, 0).and(s.weight(1, 16)), Some(0.5), "two samples: the opening and the closing");
     }
 
     #[test]

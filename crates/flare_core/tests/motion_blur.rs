@@ -111,7 +111,7 @@ fn a_180_degree_shutter_streaks_each_ghost_by_half_its_motion_with_the_same_ener
 
     let (blurred, blurred_hdr) = draw(&flare, &blur_doc, at, None);
     let (_, sharp_hdr) = draw(&flare, &sharp_doc, at, None);
-    let samples = blurred.shutter.expect("the light moves while the shutter is open");
+    let samples = blurred.shutter.clone().expect("the light moves while the shutter is open");
     assert!(samples.count > 2 && samples.max_gap_px <= 1.0, "{samples:?}");
     let ratio = energy(&blurred_hdr) / energy(&sharp_hdr);
     println!("light {light_px_per_frame:.1} px/frame, {samples:?}, energy blurred / sharp {ratio:.5}");
@@ -170,7 +170,7 @@ fn the_gpu_draws_the_blurred_frame_as_its_cpu_twin() {
     let flare = prepared(&doc);
     let request = doc.frame_request_at(&flare.system, 6.0, 160, 100, 1);
     let built = Frame::build(&flare, None, &request);
-    assert!(built.shutter.is_some_and(|s| s.count > 1));
+    assert!(built.shutter.as_ref().is_some_and(|s| s.count > 1));
     let sources = Sources { flare: &flare, lut: None, plate: None };
     let cpu = frame::draw_cpu(&built, &sources);
     let mut device = Device::Gpu(Box::new(GpuDrawer::on(ctx)));
@@ -183,6 +183,6 @@ fn the_gpu_draws_the_blurred_frame_as_its_cpu_twin() {
         .flat_map(|(a, b)| (0..3).map(move |c| a[c].abs_diff(b[c])))
         .max()
         .unwrap();
-    println!("blurred frame: {} samples, GPU vs CPU twin worst {worst}/255", built.shutter.unwrap().count);
+    println!("blurred frame: {} samples, GPU vs CPU twin worst {worst}/255", built.shutter.as_ref().unwrap().count);
     assert!(worst <= 2, "worst display difference {worst}/255");
 }
