@@ -114,7 +114,13 @@ fn a_180_degree_shutter_streaks_each_ghost_by_half_its_motion_with_the_same_ener
     let samples = blurred.shutter.clone().expect("the light moves while the shutter is open");
     assert!(samples.count > 2 && samples.max_gap_px <= 1.0, "{samples:?}");
     let ratio = energy(&blurred_hdr) / energy(&sharp_hdr);
-    println!("light {light_px_per_frame:.1} px/frame, {samples:?}, energy blurred / sharp {ratio:.5}");
+    println!(
+        "light {light_px_per_frame:.1} px/frame: {} samples, {:.1} a ghost, longest {:.1} px, largest gap {:.2} px, energy blurred / sharp {ratio:.5}",
+        samples.count,
+        samples.mean_per_ghost(),
+        samples.longest_px,
+        samples.max_gap_px
+    );
     assert!((ratio - 1.0).abs() < 0.01, "energy ratio {ratio}");
 
     // Each ghost alone, measured along the motion (x): its motion per frame is the move of its centroid from
@@ -144,7 +150,7 @@ fn a_180_degree_shutter_streaks_each_ghost_by_half_its_motion_with_the_same_ener
             continue;
         }
         let (_, blurred) = draw(&flare, &blur_doc, at, Some(alone));
-        let n = samples.count as f64;
+        let n = samples.per_ghost[g] as f64;
         let added = moments_x(&blurred).1 - moments_x(&sharp).1;
         let streak = (12.0 * added.max(0.0) * (n - 1.0) / (n + 1.0)).sqrt();
         let e = energy(&blurred) / energy(&sharp);
