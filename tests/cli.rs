@@ -787,13 +787,8 @@ fn render_writes_compositing_layers_with_the_plate_apart() {
             &out.display().to_string(),
         ]);
         assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
-        let image = exr::prelude::read_all_flat_layers_from_file(&out).unwrap();
-        let channels: std::collections::BTreeMap<String, Vec<f32>> = image.layer_data[0]
-            .channel_data
-            .list
-            .iter()
-            .map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect()))
-            .collect();
+        // Every part: the ghost layers are parts of their own, placed at their data windows.
+        let channels = flare_core::output::read_exr_channels(&out).unwrap().channels;
         channels
     };
     let (a, b) = (render("1", "a.exr"), render("-1", "b.exr"));
@@ -828,8 +823,7 @@ fn synth_shot(dir: &Path, frames: &str, occluder: bool) -> (String, PathBuf) {
 }
 
 fn exr_channels(path: &Path) -> Vec<String> {
-    let image = exr::prelude::read_all_flat_layers_from_file(path).unwrap();
-    image.layer_data[0].channel_data.list.iter().map(|c| c.name.to_string()).collect()
+    flare_core::output::read_exr_channels(path).unwrap().channels.into_keys().collect()
 }
 
 #[test]
@@ -1442,4 +1436,57 @@ fn an_overflowing_plate_sequence_is_clamped_with_one_warning() {
         .values_as_f32()
         .collect();
     assert!(composite.iter().all(|v| v.is_finite()) && composite[0] > 1e19, "bright, finite: {composite:?}");
+}
+
+/// `--exr-type` and `--exr-compression`: the default still with its ghost layers, each layer read back (by the
+/// exr crate always, and by OpenImageIO's `oiiotool --info -v` where it is installed), the working space named.
+#[test]
+fn exr_type_and_compression_flags_write_every_layer_for_compositors() {
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, extra: &[&str]| {
+        let out = dir.path().join(name);
+        let mut args = vec!["render", "--size", "240x160", "--layers", "ghosts", "--device", "cpu"];
+        args.extend_from_slice(extra);
+        args.extend(["-o", out.to_str().unwrap()]);
+        let result = flarelab(&args);
+        assert!(result.status.success(), "{args:?}: {}", String::from_utf8_lossy(&result.stderr));
+        (out.clone(), std::fs::metadata(&out).unwrap().len())
+    };
+    let (float, float_bytes) = write("float.exr", &["--exr-type", "float"]);
+    let (auto, auto_bytes) = write("auto.exr", &[]);
+    let (half, half_bytes) = write("half.exr", &["--exr-type", "half"]);
+    let (piz, piz_bytes) = write("piz.exr", &["--exr-type", "half", "--exr-compression", "piz"]);
+    println!(
+        "default still 240x160 with ghost layers, zip: float {float_bytes} B, auto {auto_bytes} B, half {half_bytes} B; \
+         half with piz {piz_bytes} B"
+    );
+    assert!(half_bytes <= auto_bytes && auto_bytes < float_bytes);
+    let (f, a) =
+        (flare_core::output::read_exr_channels(&float).unwrap(), flare_core::output::read_exr_channels(&auto).unwrap());
+    assert_eq!(f.channels.keys().collect::<Vec<_>>(), a.channels.keys().collect::<Vec<_>>(), "the same layers");
+    let ghosts = a.parts.iter().filter(|p| p.name.as_deref().is_some_and(|n| n.starts_with("ghost_"))).count();
+    assert!(ghosts > 10, "{ghosts} ghost parts");
+    let (h, p) =
+        (flare_core::output::read_exr_channels(&half).unwrap(), flare_core::output::read_exr_channels(&piz).unwrap());
+    assert_eq!(h.channels, p.channels, "piz is lossless");
+    // DWAA is refused with the reason, and nothing is written.
+    let result = flarelab(&["render", "--exr-compression", "dwaa", "-o", dir.path().join("d.exr").to_str().unwrap()]);
+    assert!(!result.status.success());
+    assert!(String::from_utf8_lossy(&result.stderr).contains("cannot be written"));
+    assert!(!dir.path().join("d.exr").exists());
+    // A preset carries the settings: the same file from `exr` in the document.
+    let preset = dir.path().join("p.json");
+    std::fs::write(&preset, r#"{"version": 3, "exr": {"pixel_type": "half", "compression": "piz"}}"#).unwrap();
+    let (from_preset, bytes) = write("preset.exr", &["--preset", preset.to_str().unwrap()]);
+    assert_eq!(bytes, piz_bytes, "{}", from_preset.display());
+    // OpenImageIO sees every part with its layer and the working space, where it is installed.
+    match Command::new("oiiotool").args(["--info", "-v", auto.to_str().unwrap()]).output() {
+        Ok(info) if info.status.success() => {
+            let text = String::from_utf8_lossy(&info.stdout);
+            assert!(text.contains(&format!("{} subimages", ghosts + 1)), "{text}");
+            assert!(text.contains("colorspace: \"Linear Rec.709 (sRGB)\""), "{text}");
+            assert!(text.contains("chromaticities: 0.64, 0.33"), "{text}");
+        }
+        _ => println!("oiiotool is not installed (Debian openimageio-tools): the exr crate's reading stands alone"),
+    }
 }

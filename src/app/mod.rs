@@ -63,7 +63,7 @@ use eframe::egui_wgpu::RenderState;
 use eframe::{egui, wgpu};
 use files::FileUse;
 use flare_core::flare::PreparedFlare;
-use flare_core::frame::{Device, Frame, LayerChoice, Sources};
+use flare_core::frame::{Device, Frame, Sources};
 use flare_core::lut::{GhostLut, LutKind};
 use flare_core::optics::formats::{LoadedLens, read_lens_file};
 use flare_core::preset::{Document, LutSource};
@@ -550,6 +550,7 @@ impl FlareLabApp {
                         self.pick_file(FileUse::ExportImage);
                     }
                 });
+                self.exr_settings_ui(ui);
                 if ui.button("Export sequence…").on_hover_text("the timeline's frames, on a thread").clicked() {
                     self.export_sequence_dialog();
                 }
@@ -566,6 +567,35 @@ impl FlareLabApp {
                 }
             });
         });
+    }
+
+    /// How EXR files are written (the document's `exr`, as `--exr-type` and `--exr-compression` set it).
+    fn exr_settings_ui(&mut self, ui: &mut egui::Ui) {
+        use flare_core::output::{ExrCompression, ExrPixel};
+        let exr = self.session.doc().exr;
+        let (mut pixel, mut compression) = (exr.pixel_type, exr.compression);
+        ui.horizontal(|ui| {
+            ui.label("EXR");
+            egui::ComboBox::from_id_salt("exr values")
+                .selected_text(pixel.name())
+                .show_ui(ui, |ui| {
+                    for p in ExrPixel::ALL {
+                        ui.selectable_value(&mut pixel, p, p.name());
+                    }
+                })
+                .response
+                .on_hover_text("auto: half where a layer's values fit (the ghost layers), float for the light's core");
+            egui::ComboBox::from_id_salt("exr compression").selected_text(compression.name()).show_ui(ui, |ui| {
+                for c in ExrCompression::ALL {
+                    ui.selectable_value(&mut compression, c, c.name());
+                }
+            });
+        });
+        if (pixel, compression) != (exr.pixel_type, exr.compression) {
+            let e = &mut self.session.edit().exr;
+            e.pixel_type = pixel;
+            e.compression = compression;
+        }
     }
 
     fn status_ui(&mut self, ui: &mut egui::Ui) {
@@ -1029,6 +1059,7 @@ impl FlareLabApp {
             }
         };
         let target = path.to_path_buf();
+        let choice = self.session.doc().layer_choice(false);
         let job = job::Job::spawn("drawing the frame on the CPU", move |cancel, report| {
             let (frame, flare, lut, plate) = prepared;
             let plate = plate.resolve(&flare, report)?;
@@ -1039,7 +1070,7 @@ impl FlareLabApp {
                 return Err("cancelled: nothing written".into());
             }
             report(0.5, format!("writing {}", target.display()));
-            flare_core::frame::write_drawn(&mut device, &frame, &sources, &drawn, LayerChoice::default(), &target)
+            flare_core::frame::write_drawn(&mut device, &frame, &sources, &drawn, choice, &target)
                 .map_err(|e| e.to_string())
         });
         self.session.say(format!("exporting {}", path.display()));
@@ -1159,7 +1190,8 @@ impl FlareLabApp {
         let (frame, flare, lut, plate) = self.export_frame(size)?;
         let plate = plate.resolve(&flare, &|_, _| {}).map_err(|e| anyhow::anyhow!(e))?;
         let sources = Sources { flare: &flare, lut: lut.as_deref(), plate: plate.as_deref() };
-        flare_core::frame::render_to_file(&mut Device::Cpu, &frame, &sources, LayerChoice::default(), path)?;
+        let choice = self.session.doc().layer_choice(false);
+        flare_core::frame::render_to_file(&mut Device::Cpu, &frame, &sources, choice, path)?;
         Ok(())
     }
 

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use super::job::Job;
 
 use flare_core::flare::PreparedFlare;
-use flare_core::frame::{Device, LayerChoice};
+use flare_core::frame::Device;
 use flare_core::lut::blend::LiveLut;
 use flare_core::preset::Document;
 use flare_core::shot::pattern::FramePattern;
@@ -91,7 +91,7 @@ impl ShotJob {
             }
             let options = SequenceOptions {
                 out: pattern.clone(),
-                layers: LayerChoice::default(),
+                layers: doc.layer_choice(false),
                 skip_existing: false,
                 divisor: 1,
                 parallel_frames: true,

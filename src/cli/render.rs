@@ -13,7 +13,7 @@ use anyhow::{Context, Result, bail};
 use clap::ValueEnum;
 use flare_core::color::Tonemap;
 use flare_core::flare::PreparedFlare;
-use flare_core::frame::{self, Device, Frame, LayerChoice, Sources};
+use flare_core::frame::{self, Device, Frame, Sources};
 use flare_core::lut::blend::{BlendMode, LiveLut};
 use flare_core::lut::format;
 use flare_core::lut::{GhostLut, LutKind};
@@ -126,6 +126,13 @@ pub struct RenderArgs {
     /// none, the flare follows each frame's visibility).
     #[arg(long)]
     pub light_smooth: Option<usize>,
+    /// EXR values: auto (half where a layer's values fit, as the ghost layers do; float for the layers holding
+    /// the light's core), half (values beyond 65504 clamped) or float. Default: the preset's, auto.
+    #[arg(long, value_enum)]
+    pub exr_type: Option<ExrTypeArg>,
+    /// EXR compression: none, rle, zips, zip (default), piz, pxr24, b44, b44a (DWAA/DWAB cannot be written).
+    #[arg(long, value_parser = parse_exr_compression)]
+    pub exr_compression: Option<flare_core::output::ExrCompression>,
     /// The shutter in degrees (default: the preset's, 0): a light that moves while it is open streaks its
     /// ghosts (180: open half of each frame, the streak is half the light's motion per frame).
     #[arg(long, allow_negative_numbers = true)]
@@ -315,6 +322,12 @@ pub fn document(args: &RenderArgs) -> Result<Document> {
     if let Some(w) = args.sensor_mm {
         doc.sensor_width_mm = w;
     }
+    if let Some(t) = args.exr_type {
+        doc.exr.pixel_type = t.into();
+    }
+    if let Some(c) = args.exr_compression {
+        doc.exr.compression = c;
+    }
     if let Some(deg) = args.shutter_deg {
         doc.timeline.shutter_deg = deg;
     }
@@ -413,6 +426,28 @@ fn flag_of(args: &RenderArgs, field: &str) -> Option<String> {
     }
 }
 
+/// `--exr-type`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ExrTypeArg {
+    Auto,
+    Half,
+    Float,
+}
+
+impl From<ExrTypeArg> for flare_core::output::ExrPixel {
+    fn from(t: ExrTypeArg) -> Self {
+        match t {
+            ExrTypeArg::Auto => Self::Auto,
+            ExrTypeArg::Half => Self::Half,
+            ExrTypeArg::Float => Self::Float,
+        }
+    }
+}
+
+fn parse_exr_compression(s: &str) -> Result<flare_core::output::ExrCompression, String> {
+    flare_core::output::ExrCompression::parse(s)
+}
+
 /// The method: the flag, else what the document's LUT source implies.
 fn method_of(args: &RenderArgs, doc: &Document) -> Method {
     args.method.unwrap_or(match doc.blend.lut {
@@ -506,7 +541,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     if ![1, 2, 4].contains(&args.accumulation_divisor) {
         bail!("--accumulation-divisor {}: use 1, 2 or 4", args.accumulation_divisor);
     }
-    let choice = LayerChoice { ghosts: args.layers == Some(Layers::Ghosts) };
+    let choice = doc.layer_choice(args.layers == Some(Layers::Ghosts));
     // Everything that can be refused is checked before any work: the output's name and type, the range, the
     // plate, the track.
     let out_text = args.out.display().to_string();

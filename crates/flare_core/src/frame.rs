@@ -25,6 +25,7 @@ use crate::ghost::{GhostFrame, Sensor, light_slopes_for_frame_position};
 use crate::image::{DisplayImage, HdrImage};
 use crate::lut::LutKind;
 use crate::lut::blend::{BlendSettings, LiveLut, LutScene, lut_pass};
+use crate::output::ExrPixel;
 pub use crate::output::FrameLayers;
 use crate::raytrace::Window;
 use crate::render::GhostInstance;
@@ -518,20 +519,21 @@ pub fn ghost_layers(
     sources: &Sources,
 ) -> Result<Vec<(String, HdrImage)>, FrameError> {
     let mut layers = Vec::new();
-    ghost_layers_into(device, frame, sources, &mut |name, image| layers.push((name, image)))?;
+    ghost_layers_into(device, frame, sources, ExrPixel::Auto, &mut |name, image| layers.push((name, image)))?;
     Ok(layers)
 }
 
 /// [`ghost_layers`] handed to `sink` one at a time (refused first when they would not fit
-/// [`MAX_GHOST_LAYER_BYTES`]).
+/// [`MAX_GHOST_LAYER_BYTES`] stored as `pixel` says).
 pub fn ghost_layers_into(
     device: &mut Device,
     frame: &Frame,
     sources: &Sources,
+    pixel: ExrPixel,
     sink: &mut LayerSink,
 ) -> Result<(), FrameError> {
     let ghosts = frame.drawn_ghosts(sources.lut);
-    check_ghost_layers(ghosts.len(), frame.request.width, frame.request.height)?;
+    check_ghost_layers(ghosts.len(), frame.request.width, frame.request.height, pixel)?;
     for g in ghosts {
         let Some(model) = sources.flare.system.ghosts.get(g as usize) else { continue };
         let alone = frame.ghost_alone(g, sources.flare, sources.lut);
@@ -545,14 +547,18 @@ pub fn ghost_layers_into(
 /// zoom's 254 ghost layers at 1920x1080 take 3.2 GB).
 pub const MAX_GHOST_LAYER_BYTES: u64 = 3 << 30;
 
-/// What one ghost layer keeps per pixel: its EXR channels (RGB f16), made as soon as it is drawn
-/// ([`crate::output::ExrLayers::add_ghost`]; only the layer being drawn has a float image).
-const GHOST_LAYER_BYTES_PER_PX: u64 = 6;
+/// What one ghost layer keeps per pixel at most: its EXR channels (RGB, 6 bytes in half, 12 in float), made
+/// as soon as it is drawn ([`crate::output::ExrLayers::add_ghost`], cropped to its lit pixels, which is
+/// usually far less; only the layer being drawn has a float image). [`ExrPixel::Auto`] counts half: a ghost
+/// layer has values beyond half's range only at exposures that turn the frame white.
+pub fn ghost_layer_bytes_per_px(pixel: ExrPixel) -> u64 {
+    if pixel == ExrPixel::Float { 12 } else { 6 }
+}
 
-/// Refuses `count` ghost layers of `width` x `height` when they need more than [`MAX_GHOST_LAYER_BYTES`],
-/// naming what they need and the ways out.
-pub fn check_ghost_layers(count: usize, width: u32, height: u32) -> Result<(), FrameError> {
-    let need = count as u64 * u64::from(width) * u64::from(height) * GHOST_LAYER_BYTES_PER_PX;
+/// Refuses `count` ghost layers of `width` x `height` stored as `pixel` when they could need more than
+/// [`MAX_GHOST_LAYER_BYTES`], naming what they need and the ways out.
+pub fn check_ghost_layers(count: usize, width: u32, height: u32, pixel: ExrPixel) -> Result<(), FrameError> {
+    let need = count as u64 * u64::from(width) * u64::from(height) * ghost_layer_bytes_per_px(pixel);
     if need > MAX_GHOST_LAYER_BYTES {
         return Err(FrameError::Request(format!(
             "{count} ghost layers at {width}x{height} need about {:.1} GB while written, more than the {:.1} GB \
@@ -569,11 +575,13 @@ pub fn ghost_layer_name(i: usize, j: usize) -> String {
     format!("ghost_{i}_{j}")
 }
 
-/// Which layers a file gets.
+/// Which layers a file gets, and how an EXR stores them.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct LayerChoice {
     /// One layer per drawn ghost (EXR only).
     pub ghosts: bool,
+    /// The EXR's value type and compression (a document's `exr`).
+    pub exr: crate::output::ExrSettings,
 }
 
 /// The kind of image `path` names, when it can hold the layers `choice` asks for (a PNG holds one tonemapped
@@ -614,8 +622,8 @@ pub fn write_drawn(
     choice: LayerChoice,
     path: &std::path::Path,
 ) -> Result<(), FrameError> {
-    write_drawn_with(frame, sources, drawn, path, |sink| {
-        if choice.ghosts { ghost_layers_into(device, frame, sources, sink) } else { Ok(()) }
+    write_drawn_with(frame, sources, drawn, path, choice.exr, |sink| {
+        if choice.ghosts { ghost_layers_into(device, frame, sources, choice.exr.pixel_type, sink) } else { Ok(()) }
     })
 }
 
@@ -626,14 +634,15 @@ pub fn write_drawn_with(
     sources: &Sources,
     drawn: &Drawn,
     path: &std::path::Path,
+    exr: crate::output::ExrSettings,
     ghost_layers: impl FnOnce(&mut LayerSink) -> Result<(), FrameError>,
 ) -> Result<(), FrameError> {
     match crate::output::ImageKind::from_path(path)? {
         crate::output::ImageKind::Png => crate::output::write_frame(path, &drawn.display, None)?,
         crate::output::ImageKind::Exr => {
-            let mut exr = crate::output::ExrLayers::new(&drawn.layers(frame, sources));
-            ghost_layers(&mut |name, image| exr.add_ghost(&name, &image))?;
-            exr.write(path)?;
+            let mut file = crate::output::ExrLayers::new(&drawn.layers(frame, sources), exr);
+            ghost_layers(&mut |name, image| file.add_ghost(&name, &image))?;
+            file.write(path)?;
         }
     }
     Ok(())

@@ -90,7 +90,7 @@ pub fn write_frame(path: &Path, display: &DisplayImage, layers: Option<&FrameLay
     match ImageKind::from_path(path)? {
         ImageKind::Png => write_png(path, display),
         ImageKind::Exr => match layers {
-            Some(layers) => write_exr_layers(path, layers),
+            Some(layers) => write_exr_layers(path, layers, ExrSettings::default()),
             None => Err(encode(path, "an EXR needs the frame's linear layers")),
         },
     }
@@ -106,22 +106,183 @@ pub fn write_png(path: &Path, image: &DisplayImage) -> Result<(), ImageError> {
     write_atomic(path, &bytes).map_err(|e| io(path, e))
 }
 
-/// The EXR channels of one layer (`prefix` empty: the default layer), RGB, optionally alpha.
-fn channels(prefix: &str, image: &HdrImage, alpha: bool) -> Vec<exr::prelude::AnyChannel<exr::prelude::FlatSamples>> {
-    use exr::prelude::{AnyChannel, FlatSamples};
-    let name = |c: &str| if prefix.is_empty() { c.to_owned() } else { format!("{prefix}.{c}") };
-    let finite = |v: f32| if v.is_nan() { 0.0 } else { v.clamp(-f32::MAX, f32::MAX) };
-    let count = if alpha { 4 } else { 3 };
-    (0..count)
-        .map(|k| {
-            let samples = image.pixels.iter().map(|p| finite(p[k])).collect();
-            AnyChannel::new(name(["R", "G", "B", "A"][k]).as_str(), FlatSamples::F32(samples))
+/// How an EXR stores its values (`--exr-type`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ExrPixel {
+    /// Each layer 16-bit float when all its values fit half's range (at most [`HALF_MAX`]), else 32-bit: the
+    /// ghost layers (and a plate) are half, the composite, flare and starburst that hold the light's core
+    /// (millions at the default exposure) stay float.
+    #[default]
+    Auto,
+    /// Every layer 16-bit float; values beyond [`HALF_MAX`] (the light's core) are clamped to it.
+    Half,
+    /// Every layer 32-bit float.
+    Float,
+}
+
+impl ExrPixel {
+    pub const ALL: [Self; 3] = [Self::Auto, Self::Half, Self::Float];
+
+    /// The name on the command line and in presets.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Auto => "auto",
+            Self::Half => "half",
+            Self::Float => "float",
+        }
+    }
+}
+
+/// The largest finite 16-bit float.
+pub const HALF_MAX: f32 = 65504.0;
+
+/// How an EXR's pixels are compressed (`--exr-compression`): the methods the `exr` crate writes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ExrCompression {
+    None,
+    Rle,
+    /// ZIP, one scan line a block.
+    Zips,
+    /// ZIP, 16 scan lines a block (lossless; the default).
+    #[default]
+    Zip,
+    /// Wavelet (lossless), good on noisy plates.
+    Piz,
+    /// Lossy for 32-bit floats (24 bits kept), lossless for half.
+    Pxr24,
+    /// Lossy 4x4 blocks of half floats (32-bit channels stored uncompressed).
+    B44,
+    /// B44 with flat blocks stored smaller.
+    B44a,
+}
+
+impl ExrCompression {
+    pub const ALL: [Self; 8] =
+        [Self::None, Self::Rle, Self::Zips, Self::Zip, Self::Piz, Self::Pxr24, Self::B44, Self::B44a];
+
+    /// The name on the command line and in presets.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::Rle => "rle",
+            Self::Zips => "zips",
+            Self::Zip => "zip",
+            Self::Piz => "piz",
+            Self::Pxr24 => "pxr24",
+            Self::B44 => "b44",
+            Self::B44a => "b44a",
+        }
+    }
+
+    /// The compression called `name`; DWAA and DWAB are refused with the reason (the `exr` crate reads them
+    /// but cannot write them).
+    pub fn parse(name: &str) -> Result<Self, String> {
+        let key = name.trim().to_ascii_lowercase();
+        if key == "dwaa" || key == "dwab" {
+            return Err(format!(
+                "`{key}`: DWA compression cannot be written here (the exr crate reads it but has no encoder); use \
+                 zip or piz (lossless) or b44a or pxr24 (lossy)"
+            ));
+        }
+        Self::ALL.into_iter().find(|c| c.name() == key).ok_or_else(|| {
+            format!(
+                "`{}`: not an EXR compression ({})",
+                crate::files::shorten(name),
+                Self::ALL.map(Self::name).join(", ")
+            )
+        })
+    }
+
+    fn exr(self) -> exr::prelude::Compression {
+        use exr::prelude::Compression as C;
+        match self {
+            Self::None => C::Uncompressed,
+            Self::Rle => C::RLE,
+            Self::Zips => C::ZIP1,
+            Self::Zip => C::ZIP16,
+            Self::Piz => C::PIZ,
+            Self::Pxr24 => C::PXR24,
+            Self::B44 => C::B44,
+            Self::B44a => C::B44A,
+        }
+    }
+}
+
+/// How EXR files are written: the value type and the compression (a document's `exr`, shared by the app
+/// and the command line).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct ExrSettings {
+    pub pixel_type: ExrPixel,
+    pub compression: ExrCompression,
+}
+
+/// The colour space every linear layer is in: FlareLab's working space (its OCIO name, as OpenImageIO
+/// writes it in a `colorspace` attribute), with its primaries and white in the `chromaticities` attribute.
+pub const WORKING_SPACE: &str = "Linear Rec.709 (sRGB)";
+
+/// The Rec. 709 primaries and D65 white of [`WORKING_SPACE`].
+fn rec709() -> exr::meta::attribute::Chromaticities {
+    use exr::math::Vec2;
+    exr::meta::attribute::Chromaticities {
+        red: Vec2(0.64, 0.33),
+        green: Vec2(0.30, 0.60),
+        blue: Vec2(0.15, 0.06),
+        white: Vec2(0.3127, 0.3290),
+    }
+}
+
+/// A value for a file: NaN is 0, an infinity the largest finite value of its sign.
+fn finite(v: f32) -> f32 {
+    if v.is_nan() { 0.0 } else { v.clamp(-f32::MAX, f32::MAX) }
+}
+
+/// The channels `names` of `values` (one per channel, each `width x height` in rows) at `pixel`: half where
+/// `pixel` says so or, for [`ExrPixel::Auto`], when every value fits half's range.
+fn typed_channels(
+    names: &[String],
+    values: Vec<Vec<f32>>,
+    pixel: ExrPixel,
+) -> Vec<exr::prelude::AnyChannel<exr::prelude::FlatSamples>> {
+    use exr::prelude::{AnyChannel, FlatSamples, f16};
+    let fits = values.iter().flatten().all(|v| v.abs() <= HALF_MAX);
+    let half = match pixel {
+        ExrPixel::Half => true,
+        ExrPixel::Float => false,
+        ExrPixel::Auto => fits,
+    };
+    names
+        .iter()
+        .zip(values)
+        .map(|(name, v)| {
+            let samples = if half {
+                FlatSamples::F16(v.into_iter().map(|x| f16::from_f32(x.clamp(-HALF_MAX, HALF_MAX))).collect())
+            } else {
+                FlatSamples::F32(v)
+            };
+            AnyChannel::new(name.as_str(), samples)
         })
         .collect()
 }
 
-/// Writes one linear image with no tonemap: an EXR's default layer `R, G, B, A`, or an 8-bit sRGB PNG of the
-/// values clamped to [0, 1] (a plate written as it was read: `flarelab dof`'s output).
+/// The EXR channels of one layer (`prefix` empty: the default layer), RGB, optionally alpha.
+fn channels(
+    prefix: &str,
+    image: &HdrImage,
+    alpha: bool,
+    pixel: ExrPixel,
+) -> Vec<exr::prelude::AnyChannel<exr::prelude::FlatSamples>> {
+    let name = |c: &str| if prefix.is_empty() { c.to_owned() } else { format!("{prefix}.{c}") };
+    let count = if alpha { 4 } else { 3 };
+    let names: Vec<String> = (0..count).map(|k| name(["R", "G", "B", "A"][k])).collect();
+    let values = (0..count).map(|k| image.pixels.iter().map(|p| finite(p[k])).collect()).collect();
+    typed_channels(&names, values, pixel)
+}
+
+/// Writes one linear image with no tonemap: an EXR's default layer `R, G, B, A` (32-bit), or an 8-bit sRGB
+/// PNG of the values clamped to [0, 1] (a plate written as it was read: `flarelab dof`'s output).
 pub fn write_linear(path: &Path, image: &HdrImage) -> Result<(), ImageError> {
     match ImageKind::from_path(path)? {
         ImageKind::Png => {
@@ -131,83 +292,220 @@ pub fn write_linear(path: &Path, image: &HdrImage) -> Result<(), ImageError> {
             let pixels = image.pixels.iter().map(|p| [encode8(p[0]), encode8(p[1]), encode8(p[2]), 255]).collect();
             write_png(path, &DisplayImage { width: image.width, height: image.height, pixels })
         }
-        ImageKind::Exr => write_exr_channels(path, image.width, image.height, channels("", image, true)),
+        ImageKind::Exr => {
+            let list = channels("", image, true, ExrPixel::Float);
+            write_exr_parts(path, (image.width, image.height), ExrSettings::default(), list, Vec::new())
+        }
     }
 }
 
 /// Writes one float channel named `name` as an EXR (a depth map's `Z`, in metres).
 pub fn write_exr_channel(path: &Path, w: u32, h: u32, name: &str, values: &[f32]) -> Result<(), ImageError> {
-    use exr::prelude::{AnyChannel, FlatSamples};
     if values.len() != w as usize * h as usize {
         return Err(encode(path, format!("{} values for {w}x{h} pixels", values.len())));
     }
     let samples = values.iter().map(|&v| if v.is_nan() { 0.0 } else { v }).collect();
-    write_exr_channels(path, w, h, vec![AnyChannel::new(name, FlatSamples::F32(samples))])
+    let list = typed_channels(&[name.to_owned()], vec![samples], ExrPixel::Float);
+    write_exr_parts(path, (w, h), ExrSettings::default(), list, Vec::new())
 }
 
-/// An EXR being put together a layer at a time ([`Self::add_ghost`] takes each ghost layer as it is drawn
-/// and keeps only its channels), then written whole ([`Self::write`]).
-pub struct ExrLayers {
-    width: u32,
-    height: u32,
+/// One ghost layer of an EXR: its own part, whose data window covers only its lit pixels.
+struct GhostPart {
+    name: String,
+    origin: (u32, u32),
+    size: (u32, u32),
     list: Vec<exr::prelude::AnyChannel<exr::prelude::FlatSamples>>,
 }
 
+/// An EXR being put together a layer at a time ([`Self::add_ghost`] takes each ghost layer as it is drawn
+/// and keeps only its channels, cropped to its lit pixels), then written whole ([`Self::write`]).
+pub struct ExrLayers {
+    width: u32,
+    height: u32,
+    settings: ExrSettings,
+    list: Vec<exr::prelude::AnyChannel<exr::prelude::FlatSamples>>,
+    ghosts: Vec<GhostPart>,
+}
+
 impl ExrLayers {
-    /// The frame's own layers (composite, flare, starburst, plate), 32-bit float.
-    pub fn new(layers: &FrameLayers) -> Self {
-        let mut list = channels("", &layers.composite, true);
-        list.extend(channels("flare", &layers.flare, false));
-        list.extend(channels("starburst", &layers.starburst, false));
+    /// The frame's own layers (composite, flare, starburst, plate) at `settings`.
+    pub fn new(layers: &FrameLayers, settings: ExrSettings) -> Self {
+        let pixel = settings.pixel_type;
+        let mut list = channels("", &layers.composite, true, pixel);
+        list.extend(channels("flare", &layers.flare, false, pixel));
+        list.extend(channels("starburst", &layers.starburst, false, pixel));
         if let Some(plate) = &layers.plate {
-            list.extend(channels("plate", plate, false));
+            list.extend(channels("plate", plate, false, pixel));
         }
-        Self { width: layers.composite.width, height: layers.composite.height, list }
+        Self { width: layers.composite.width, height: layers.composite.height, settings, list, ghosts: Vec::new() }
     }
 
-    /// A ghost layer `name.R/G/B` as 16-bit float (the usual depth of a compositor's passes, 3 significant
-    /// digits; 6 bytes a pixel, so the zoom's 254 ghost layers fit at 1920x1080); the image can be dropped.
+    /// A ghost layer `name.R/G/B` in a part of its own whose data window is the smallest rectangle holding
+    /// every pixel it lights (a pixel at the top-left corner when it lights none); the image can be dropped.
     pub fn add_ghost(&mut self, name: &str, image: &HdrImage) {
-        use exr::prelude::{AnyChannel, FlatSamples, f16};
-        for k in 0..3 {
-            let samples = image.pixels.iter().map(|p| f16::from_f32(if p[k].is_nan() { 0.0 } else { p[k] })).collect();
-            self.list
-                .push(AnyChannel::new(format!("{name}.{}", ["R", "G", "B"][k]).as_str(), FlatSamples::F16(samples)));
+        let (w, h) = (image.width, image.height);
+        let lit = |p: &[f32; 4]| p[..3].iter().any(|&v| finite(v) != 0.0);
+        let (mut x0, mut y0, mut x1, mut y1) = (w, h, 0, 0);
+        for y in 0..h {
+            for x in 0..w {
+                if lit(&image.pixels[(y * w + x) as usize]) {
+                    (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x + 1), y1.max(y + 1));
+                }
+            }
         }
+        if x0 >= x1 || y0 >= y1 {
+            (x0, y0, x1, y1) = (0, 0, 1.min(w), 1.min(h));
+        }
+        let names: Vec<String> = ["R", "G", "B"].iter().map(|c| format!("{name}.{c}")).collect();
+        let values = (0..3)
+            .map(|k| {
+                (y0..y1)
+                    .flat_map(|y| (x0..x1).map(move |x| (x, y)))
+                    .map(|(x, y)| finite(image.pixels[(y * w + x) as usize][k]))
+                    .collect()
+            })
+            .collect();
+        let list = typed_channels(&names, values, self.settings.pixel_type);
+        self.ghosts.push(GhostPart { name: name.to_owned(), origin: (x0, y0), size: (x1 - x0, y1 - y0), list });
     }
 
-    /// Writes the part through a temporary file (see the module documentation).
+    /// Writes the file through a temporary file: one part without ghost layers, else the frame's part
+    /// (`rgba`) and one part per ghost layer (see the module documentation).
     pub fn write(self, path: &Path) -> Result<(), ImageError> {
-        write_exr_channels(path, self.width, self.height, self.list)
+        write_exr_parts(path, (self.width, self.height), self.settings, self.list, self.ghosts)
     }
 }
 
-/// Writes the layers as one EXR part (see the module documentation).
-pub fn write_exr_layers(path: &Path, layers: &FrameLayers) -> Result<(), ImageError> {
-    let mut exr = ExrLayers::new(layers);
+/// Writes the layers as an EXR (see the module documentation).
+pub fn write_exr_layers(path: &Path, layers: &FrameLayers, settings: ExrSettings) -> Result<(), ImageError> {
+    let mut exr = ExrLayers::new(layers, settings);
     for (name, image) in &layers.ghosts {
         exr.add_ghost(name, image);
     }
     exr.write(path)
 }
 
-/// Writes `list` as one EXR part of `w` x `h` pixels, ZIP-compressed, through a temporary file.
-fn write_exr_channels(
+/// Writes `list` as an EXR part of `w` x `h` pixels, and each of `ghosts` as a part of its own (a multi-part
+/// file then), compressed as `settings` says, the working space named in the header, through a temporary file.
+fn write_exr_parts(
     path: &Path,
-    w: u32,
-    h: u32,
+    (w, h): (u32, u32),
+    settings: ExrSettings,
     list: Vec<exr::prelude::AnyChannel<exr::prelude::FlatSamples>>,
+    ghosts: Vec<GhostPart>,
 ) -> Result<(), ImageError> {
-    use exr::prelude::{AnyChannels, Encoding, Image, Layer, LayerAttributes, SmallVec, WritableImage};
-    let layer = Layer::new(
+    use exr::math::Vec2;
+    use exr::meta::attribute::{AttributeValue, Text};
+    use exr::prelude::{
+        AnyChannels, Blocks, Encoding, Image, ImageAttributes, Layer, LayerAttributes, LineOrder, SmallVec,
+        WritableImage,
+    };
+    let encoding = Encoding {
+        compression: settings.compression.exr(),
+        blocks: Blocks::ScanLines,
+        line_order: LineOrder::Increasing,
+    };
+    let mut attributes = ImageAttributes::with_size((w as usize, h as usize));
+    attributes.chromaticities = Some(rec709());
+    for key in ["colorspace", "oiio:ColorSpace"] {
+        attributes.other.insert(Text::from(key), AttributeValue::Text(Text::from(WORKING_SPACE)));
+    }
+    let main_attributes = if ghosts.is_empty() { LayerAttributes::default() } else { LayerAttributes::named("rgba") };
+    let mut parts = vec![Layer::new(
         (w as usize, h as usize),
-        LayerAttributes::default(),
-        Encoding::SMALL_LOSSLESS,
+        main_attributes,
+        encoding,
         AnyChannels::sort(SmallVec::from_vec(list)),
-    );
+    )];
+    for ghost in ghosts {
+        let mut attributes = LayerAttributes::named(ghost.name.as_str());
+        attributes.layer_position = Vec2(ghost.origin.0 as i32, ghost.origin.1 as i32);
+        parts.push(Layer::new(
+            (ghost.size.0 as usize, ghost.size.1 as usize),
+            attributes,
+            encoding,
+            AnyChannels::sort(SmallVec::from_vec(ghost.list)),
+        ));
+    }
     let mut bytes = Vec::new();
-    Image::from_layer(layer).write().to_buffered(Cursor::new(&mut bytes)).map_err(|e| encode(path, e))?;
+    Image::from_layers(attributes, parts).write().to_buffered(Cursor::new(&mut bytes)).map_err(|e| encode(path, e))?;
     write_atomic(path, &bytes).map_err(|e| io(path, e))
+}
+
+/// Every channel of an EXR written by FlareLab (or any scan-line EXR), read from every part and placed in
+/// the file's display window at its part's data window (zero outside it): what a compositor sees.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ExrChannels {
+    pub width: u32,
+    pub height: u32,
+    /// Channel name (`flare.R`, `ghost_2_5.G`, ...) to its values, row by row.
+    pub channels: std::collections::BTreeMap<String, Vec<f32>>,
+    /// Per part: its name (if any), data window origin and size, and its channels' sample types (16 or 32).
+    pub parts: Vec<ExrPart>,
+}
+
+/// One part of an EXR as read back.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ExrPart {
+    pub name: Option<String>,
+    pub origin: (i32, i32),
+    pub size: (usize, usize),
+    pub bits: Vec<(String, u32)>,
+}
+
+/// The most bytes [`read_exr_channels`] spends on the channels it places at the display window's size.
+pub const MAX_READ_CHANNEL_BYTES: u64 = 2 << 30;
+
+/// Reads every channel of every part of `path` (see [`ExrChannels`]); refused, before any pixel is read,
+/// past [`MAX_IMAGE_SIDE_PX`] a side (the display window or any part) or when its channels at the display
+/// window's size would take more than [`MAX_READ_CHANNEL_BYTES`].
+pub fn read_exr_channels(path: &Path) -> Result<ExrChannels, ImageError> {
+    use exr::prelude::{FlatSamples, read_all_flat_layers_from_file};
+    let refuse = |reason: String| ImageError::Plate(format!("{}: {reason}", path.display()));
+    let meta =
+        exr::meta::MetaData::read_from_file(path, false).map_err(|e| refuse(format!("cannot read the EXR: {e}")))?;
+    let first = meta.headers.first().ok_or_else(|| refuse("the EXR has no image in it".into()))?;
+    let display = first.shared_attributes.display_window;
+    check_side(path, "EXR", display.size.0 as u64, display.size.1 as u64).map_err(ImageError::Plate)?;
+    let mut count = 0u64;
+    for header in &meta.headers {
+        check_side(path, "EXR part", header.layer_size.width() as u64, header.layer_size.height() as u64)
+            .map_err(ImageError::Plate)?;
+        count += header.channels.list.len() as u64;
+    }
+    let (w, h) = (display.size.0, display.size.1);
+    let need = count * w as u64 * h as u64 * 4;
+    if need > MAX_READ_CHANNEL_BYTES {
+        return Err(refuse(format!(
+            "{count} channels at {w}x{h} need {:.1} GB, more than the {:.1} GB allowed",
+            need as f64 / 1e9,
+            MAX_READ_CHANNEL_BYTES as f64 / 1e9
+        )));
+    }
+    let image = read_all_flat_layers_from_file(path)
+        .map_err(|e| ImageError::Decode { path: path.display().to_string(), message: e.to_string() })?;
+    let display = image.attributes.display_window;
+    let (dx, dy) = (display.position.0, display.position.1);
+    let mut channels = std::collections::BTreeMap::new();
+    let mut parts = Vec::new();
+    for layer in &image.layer_data {
+        let origin = (layer.attributes.layer_position.0, layer.attributes.layer_position.1);
+        let size = (layer.size.0, layer.size.1);
+        let mut bits = Vec::new();
+        for channel in &layer.channel_data.list {
+            let name = channel.name.to_string();
+            bits.push((name.clone(), if matches!(channel.sample_data, FlatSamples::F16(_)) { 16 } else { 32 }));
+            let full = channels.entry(name).or_insert_with(|| vec![0.0f32; w * h]);
+            for (k, v) in channel.sample_data.values_as_f32().enumerate() {
+                let (x, y) = (origin.0 - dx + (k % size.0) as i32, origin.1 - dy + (k / size.0) as i32);
+                if x >= 0 && y >= 0 && (x as usize) < w && (y as usize) < h {
+                    full[y as usize * w + x as usize] = v;
+                }
+            }
+        }
+        parts.push(ExrPart { name: layer.attributes.layer_name.as_ref().map(|n| n.to_string()), origin, size, bits });
+    }
+    Ok(ExrChannels { width: w as u32, height: h as u32, channels, parts })
 }
 
 /// The largest side of any image FlareLab reads (pixels): the frame's own limit (`--size`), so a plate never

@@ -173,6 +173,8 @@ pub struct Document {
     pub auto_light: Option<AutoLight>,
     /// Depth of field of the plate through the same lens and stop ([`crate::dof`]).
     pub dof: crate::dof::DofDoc,
+    /// How EXR files are written: value type and compression ([`crate::output::ExrSettings`]).
+    pub exr: crate::output::ExrSettings,
 }
 
 impl Default for Document {
@@ -200,6 +202,7 @@ impl Default for Document {
             timeline: Timeline::default(),
             auto_light: None,
             dof: crate::dof::DofDoc::default(),
+            exr: crate::output::ExrSettings::default(),
         }
     }
 }
@@ -384,6 +387,11 @@ impl Document {
             draft: None,
             motion: self.light_path(frame),
         }
+    }
+
+    /// The layers a file of this document gets: the ghost layers when `ghosts`, and the document's EXR settings.
+    pub fn layer_choice(&self, ghosts: bool) -> crate::frame::LayerChoice {
+        crate::frame::LayerChoice { ghosts, exr: self.exr }
     }
 
     /// The light while the shutter is open at `frame` ([`crate::shutter`]): the timeline's light position and

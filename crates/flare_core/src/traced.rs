@@ -127,7 +127,8 @@ impl TracedGhosts {
         sources: &Sources,
     ) -> Result<Vec<(String, HdrImage)>, FrameError> {
         let mut layers = Vec::new();
-        self.ghost_layers_into(device, frame, sources, &mut |name, image| layers.push((name, image)))?;
+        let pixel = crate::output::ExrPixel::Auto;
+        self.ghost_layers_into(device, frame, sources, pixel, &mut |name, image| layers.push((name, image)))?;
         Ok(layers)
     }
 
@@ -138,6 +139,7 @@ impl TracedGhosts {
         device: &Device,
         frame: &Frame,
         sources: &Sources,
+        pixel: crate::output::ExrPixel,
         sink: &mut frame::LayerSink,
     ) -> Result<(), FrameError> {
         let gains = &frame.request.ghost_gains;
@@ -154,7 +156,7 @@ impl TracedGhosts {
                 continue;
             }
             made += 1;
-            frame::check_ghost_layers(made, frame.request.width, frame.request.height)?;
+            frame::check_ghost_layers(made, frame.request.width, frame.request.height, pixel)?;
             let hdr = frame::traced_accumulation(frame, &traced.hdr);
             sink(frame::ghost_layer_name(model.i, model.j), crate::render::cpu::flare_layer(&frame.scene, &hdr));
         }
@@ -172,8 +174,12 @@ impl TracedGhosts {
         choice: LayerChoice,
         path: &std::path::Path,
     ) -> Result<(), FrameError> {
-        frame::write_drawn_with(frame, sources, drawn, path, |sink| {
-            if choice.ghosts { self.ghost_layers_into(device, frame, sources, sink) } else { Ok(()) }
+        frame::write_drawn_with(frame, sources, drawn, path, choice.exr, |sink| {
+            if choice.ghosts {
+                self.ghost_layers_into(device, frame, sources, choice.exr.pixel_type, sink)
+            } else {
+                Ok(())
+            }
         })
     }
 }

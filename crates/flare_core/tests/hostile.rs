@@ -419,7 +419,10 @@ fn a_jpeg_plate_is_read_like_a_png() {
 #[test]
 fn ghost_layers_past_the_memory_budget_are_refused_naming_the_memory() {
     use flare_core::frame::check_ghost_layers;
-    assert!(check_ghost_layers(254, 1920, 1080).is_ok(), "the default zoom's layers at 1080p fit");
-    let e = check_ghost_layers(254, 3840, 2160).unwrap_err().to_string();
+    assert!(
+        check_ghost_layers(254, 1920, 1080, flare_core::output::ExrPixel::Auto).is_ok(),
+        "the default zoom's layers at 1080p fit"
+    );
+    let e = check_ghost_layers(254, 3840, 2160, flare_core::output::ExrPixel::Auto).unwrap_err().to_string();
     assert!(e.contains("254 ghost layers at 3840x2160 need about 12.6 GB") && e.contains("--size"), "{e}");
 }

@@ -261,9 +261,7 @@ fn gpu_matches_its_cpu_twin() {
 }
 
 fn read_exr(path: &Path) -> std::collections::BTreeMap<String, Vec<f32>> {
-    let image = exr::prelude::read_all_flat_layers_from_file(path).unwrap();
-    let layer = &image.layer_data[0];
-    layer.channel_data.list.iter().map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect())).collect()
+    output::read_exr_channels(path).unwrap().channels
 }
 
 #[test]
@@ -285,7 +283,10 @@ fn a_frame_is_written_as_png_and_as_a_layered_exr() {
         let frame = Frame::build(&flare, None, &req);
         let sources = Sources { flare: &flare, lut: None, plate };
         let path = dir.path().join(name);
-        let drawn = frame::render_to_file(&mut Device::Cpu, &frame, &sources, LayerChoice { ghosts }, &path).unwrap();
+        // 32-bit floats: the layers' sums below are exact.
+        let exr = output::ExrSettings { pixel_type: output::ExrPixel::Float, ..Default::default() };
+        let drawn =
+            frame::render_to_file(&mut Device::Cpu, &frame, &sources, LayerChoice { ghosts, exr }, &path).unwrap();
         (path, drawn, frame)
     };
     // PNG: the tonemapped composite, byte for byte.
@@ -337,15 +338,14 @@ fn a_frame_is_written_as_png_and_as_a_layered_exr() {
     let ghost_sum: f64 = ghosts.iter().flat_map(|k| a[*k].iter()).map(|&v| f64::from(v)).sum();
     let flare_sum: f64 = a["flare.R"].iter().map(|&v| f64::from(v)).sum();
     let starburst_sum: f64 = a["starburst.R"].iter().map(|&v| f64::from(v)).sum();
-    // Ghost layers are 16-bit floats (3 significant digits; the flare and starburst layers are 32-bit): they add
-    // up to the flare to that precision.
+    // Ghost layers add up to the flare.
     assert!(
         ((ghost_sum + starburst_sum) / flare_sum - 1.0).abs() < 1e-3,
         "ghosts {ghost_sum} + starburst {starburst_sum} = flare {flare_sum}"
     );
-    let exr = exr::prelude::read_all_flat_layers_from_file(&exr1).unwrap();
-    let ghost_channel = exr.layer_data[0].channel_data.list.iter().find(|c| c.name.to_string().starts_with("ghost_"));
-    assert!(matches!(ghost_channel.map(|c| &c.sample_data), Some(exr::prelude::FlatSamples::F16(_))), "half floats");
+    let exr = output::read_exr_channels(&exr1).unwrap();
+    let ghost_bits = exr.parts.iter().flat_map(|p| &p.bits).find(|(name, _)| name.starts_with("ghost_")).map(|b| b.1);
+    assert_eq!(ghost_bits, Some(32), "--exr-type float: ghost layers in 32-bit floats");
     // Bad output: no folder, or a PNG asked for ghost layers; nothing is left behind.
     let frame = Frame::build(&flare, None, &request([8.0, 3.0], w, h, 1));
     let sources = Sources { flare: &flare, lut: None, plate: None };
@@ -355,7 +355,7 @@ fn a_frame_is_written_as_png_and_as_a_layered_exr() {
         &mut Device::Cpu,
         &frame,
         &sources,
-        LayerChoice { ghosts: true },
+        LayerChoice { ghosts: true, ..Default::default() },
         &dir.path().join("x.png"),
     )
     .unwrap_err();
@@ -378,4 +378,100 @@ fn tonemaps_and_exposures_reach_the_display_image() {
     let base = DisplaySettings { flare_ev: 8.0, tonemap: Tonemap::Reinhard, ..DisplaySettings::default() };
     assert!(mean(DisplaySettings { flare_ev: 9.0, ..base }) > mean(base), "a stop more is brighter");
     assert!(mean(DisplaySettings { tonemap: Tonemap::None, ..base }) != mean(base));
+}
+
+#[test]
+fn exr_value_types_compressions_and_ghost_data_windows() {
+    let flare = flare("tessar");
+    let (w, h) = (120u32, 80u32);
+    let mut req = request([12.0, 7.0], w, h, 1);
+    req.display.flare_ev = 22.0;
+    let frame = Frame::build(&flare, None, &req);
+    let sources = Sources { flare: &flare, lut: None, plate: None };
+    let dir = tempfile::tempdir().unwrap();
+    let write = |pixel_type, compression, name: &str| {
+        let exr = output::ExrSettings { pixel_type, compression };
+        let path = dir.path().join(name);
+        frame::render_to_file(&mut Device::Cpu, &frame, &sources, LayerChoice { ghosts: true, exr }, &path).unwrap();
+        (output::read_exr_channels(&path).unwrap(), std::fs::metadata(&path).unwrap().len())
+    };
+    let (float, float_bytes) = write(output::ExrPixel::Float, output::ExrCompression::Zip, "float.exr");
+    // The starburst's core is far beyond half's range: auto keeps the layers that hold it in 32 bits and writes
+    // the ghost layers (and any layer that fits) in 16.
+    let core = float.channels["flare.G"].iter().copied().fold(0.0f32, f32::max);
+    assert!(core > output::HALF_MAX, "the light's core: {core}");
+    let (auto, auto_bytes) = write(output::ExrPixel::Auto, output::ExrCompression::Zip, "auto.exr");
+    let bits =
+        |c: &output::ExrChannels, name: &str| c.parts.iter().flat_map(|p| &p.bits).find(|b| b.0 == name).unwrap().1;
+    assert_eq!(bits(&auto, "flare.G"), 32);
+    let ghost_names: Vec<String> =
+        auto.channels.keys().filter(|k| k.starts_with("ghost_") && k.ends_with(".G")).cloned().collect();
+    assert!(ghost_names.len() > 3, "{ghost_names:?}");
+    // Every ghost layer is its own part, named after it, whose data window holds every lit pixel and no
+    // more than the frame; the values placed back equal the float file's within half's precision.
+    let fits = |name: &str| float.channels[name].iter().all(|v| v.abs() <= output::HALF_MAX);
+    assert!(ghost_names.iter().any(|n| fits(n)), "some ghost layer fits half");
+    for name in &ghost_names {
+        let layer_fits = ["R", "G", "B"].iter().all(|c| fits(&name.replace(".G", &format!(".{c}"))));
+        assert_eq!(bits(&auto, name), if layer_fits { 16 } else { 32 }, "{name}");
+        let layer = name.trim_end_matches(".G");
+        let part = auto.parts.iter().find(|p| p.name.as_deref() == Some(layer)).expect(layer);
+        assert!(part.size.0 <= w as usize && part.size.1 <= h as usize);
+        let (f, a) = (&float.channels[name], &auto.channels[name]);
+        for k in 0..f.len() {
+            assert!((f[k] - a[k]).abs() <= f[k].abs() * 1e-3 + 1e-3, "{name} at {k}: {} vs {}", f[k], a[k]);
+        }
+    }
+    assert!(
+        auto.parts.iter().any(|p| p.name.as_deref().is_some_and(|n| n.starts_with("ghost_"))
+            && p.size.0 * p.size.1 < (w * h / 4) as usize),
+        "some ghost covers less than a quarter of the frame and its part is that small"
+    );
+    assert_eq!(auto.parts[0].name.as_deref(), Some("rgba"));
+    assert!(auto_bytes < float_bytes, "auto {auto_bytes} B, float {float_bytes} B");
+    // Half: every layer 16 bits, the core clamped to half's largest value.
+    let (half, half_bytes) = write(output::ExrPixel::Half, output::ExrCompression::Zip, "half.exr");
+    assert_eq!(bits(&half, "flare.G"), 16);
+    assert_eq!(half.channels["flare.G"].iter().copied().fold(0.0f32, f32::max), output::HALF_MAX);
+    assert!(half_bytes < auto_bytes);
+    // Every compression the crate writes reads back (the lossless ones exactly).
+    for c in output::ExrCompression::ALL {
+        let (back, bytes) = write(output::ExrPixel::Float, c, &format!("{}.exr", c.name()));
+        let lossless = matches!(
+            c,
+            output::ExrCompression::None
+                | output::ExrCompression::Rle
+                | output::ExrCompression::Zips
+                | output::ExrCompression::Zip
+                | output::ExrCompression::Piz
+        );
+        if lossless {
+            assert_eq!(back.channels, float.channels, "{} is lossless", c.name());
+        } else {
+            let (a, b) = (&back.channels["R"], &float.channels["R"]);
+            let worst = a.iter().zip(b).map(|(x, y)| ((x - y) / y.abs().max(1e-3)).abs()).fold(0.0f32, f32::max);
+            assert!(worst < 1e-2, "{}: worst relative error {worst}", c.name());
+        }
+        println!("{}: {bytes} bytes", c.name());
+    }
+    assert!(output::ExrCompression::parse("DWAA").unwrap_err().contains("cannot be written"));
+    assert!(output::ExrCompression::parse("zip").is_ok());
+}
+
+#[test]
+fn an_exr_names_its_working_space_and_primaries() {
+    let flare = flare("tessar");
+    let frame = Frame::build(&flare, None, &request([12.0, 7.0], 64, 40, 1));
+    let sources = Sources { flare: &flare, lut: None, plate: None };
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("f.exr");
+    frame::render_to_file(&mut Device::Cpu, &frame, &sources, LayerChoice::default(), &path).unwrap();
+    let meta = exr::meta::MetaData::read_from_file(&path, false).unwrap();
+    let attributes = &meta.headers[0].shared_attributes;
+    let c = attributes.chromaticities.expect("chromaticities");
+    assert_eq!((c.red.0, c.green.1, c.white.0), (0.64, 0.60, 0.3127));
+    let key = exr::meta::attribute::Text::from("colorspace");
+    let own = &meta.headers[0].own_attributes.other;
+    let name = attributes.other.get(&key).or_else(|| own.get(&key)).expect("colorspace");
+    assert_eq!(format!("{name:?}").contains(output::WORKING_SPACE), true, "{name:?}");
 }

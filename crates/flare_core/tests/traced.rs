@@ -75,7 +75,7 @@ fn a_traced_sequence_writes_the_stills_of_its_frames() {
         let traced = Arc::new(TracedGhosts::new(&flare, Grid::Fixed(16), 0, &device));
         let options = SequenceOptions {
             out: FramePattern::parse(&text).unwrap().unwrap(),
-            layers: LayerChoice { ghosts: true },
+            layers: LayerChoice { ghosts: true, ..Default::default() },
             skip_existing: false,
             divisor: 1,
             parallel_frames: true,
@@ -91,7 +91,7 @@ fn a_traced_sequence_writes_the_stills_of_its_frames() {
         let s = Sources { flare: &flare, lut: None, plate: None };
         let (drawn, _) = traced.draw(&device, &frame, &s).unwrap();
         let still = dir.path().join("still.exr");
-        traced.write(&device, &frame, &s, &drawn, LayerChoice { ghosts: true }, &still).unwrap();
+        traced.write(&device, &frame, &s, &drawn, LayerChoice { ghosts: true, ..Default::default() }, &still).unwrap();
         let read = |p: &std::path::Path| {
             exr::prelude::read_all_flat_layers_from_file(p)
                 .unwrap()
