@@ -43,6 +43,9 @@ type NamedPlate = (String, Arc<HdrImage>);
 struct PlateCache {
     plates: Arc<std::sync::Mutex<Vec<NamedPlate>>>,
     loading: Arc<std::sync::Mutex<std::collections::BTreeSet<String>>>,
+    /// How the cached plates were read into the working space (the document's colour settings when it names
+    /// an input space); another way empties the cache.
+    color: Option<flare_core::view_transform::ColorDoc>,
 }
 
 impl PlateCache {
@@ -60,6 +63,18 @@ impl PlateCache {
         }
     }
 
+    /// Empties the cache when the plates are now read another way (`color`: see the field).
+    fn read_as(&mut self, color: Option<flare_core::view_transform::ColorDoc>) -> bool {
+        if self.color == color {
+            return false;
+        }
+        self.color = color;
+        if let Ok(mut plates) = self.plates.lock() {
+            plates.clear();
+        }
+        true
+    }
+
     fn prefetch(&self, paths: &[String]) {
         for path in paths {
             let fresh = self.get(path).is_none() && self.loading.lock().is_ok_and(|mut l| l.insert(path.clone()));
@@ -67,9 +82,11 @@ impl PlateCache {
                 continue;
             }
             let (plates, loading, path) = (self.plates.clone(), self.loading.clone(), path.clone());
+            let color = self.color.clone();
             rayon::spawn(move || {
-                if let Ok(plate) = flare_core::output::read_plate(std::path::Path::new(&path)) {
-                    PlateCache { plates, loading: loading.clone() }.put(path.clone(), Arc::new(plate));
+                let read = flare_core::shot::plate::read_plate_in(&color.clone().unwrap_or_default(), std::path::Path::new(&path));
+                if let Ok((plate, _)) = read {
+                    PlateCache { plates, loading: loading.clone(), color }.put(path.clone(), Arc::new(plate));
                 }
                 if let Ok(mut l) = loading.lock() {
                     l.remove(&path);
@@ -461,7 +478,8 @@ impl Derived {
 
     fn sync_background(&mut self, doc: &Document, gpu: Option<&RenderState>, events: &mut Vec<SyncEvent>) {
         let file = doc.plate_at(self.playhead).map(|p| p.display().to_string());
-        if self.background_key == file {
+        let reread = self.plate_cache.read_as(doc.color.input_space.is_some().then(|| doc.color.clone()));
+        if self.background_key == file && !reread {
             return;
         }
         self.background_key = file.clone();
@@ -469,7 +487,7 @@ impl Derived {
         let plate = match &file {
             Some(path) => match self.plate_cache.get(path) {
                 Some(plate) => Some(plate),
-                None => match flare_core::output::read_plate_checked(std::path::Path::new(path)) {
+                None => match flare_core::shot::plate::read_plate_in(&doc.color, std::path::Path::new(path)) {
                     Ok((p, warning)) => {
                         if let Some(warning) = warning {
                             // Said once: the plate is cached, not read again.

@@ -64,6 +64,8 @@ pub enum LightArg {
 /// Tonemap operators by name.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum TonemapArg {
+    /// The OCIO display and view (--display, --view; the default).
+    View,
     None,
     Reinhard,
     Aces,
@@ -72,6 +74,7 @@ pub enum TonemapArg {
 impl From<TonemapArg> for Tonemap {
     fn from(t: TonemapArg) -> Self {
         match t {
+            TonemapArg::View => Tonemap::View,
             TonemapArg::None => Tonemap::None,
             TonemapArg::Reinhard => Tonemap::Reinhard,
             TonemapArg::Aces => Tonemap::Aces,
@@ -180,9 +183,29 @@ pub struct RenderArgs {
     /// Replaced by --exposure-ev (stops); refused with the conversion.
     #[arg(long, hide = true, allow_negative_numbers = true)]
     pub exposure: Option<f64>,
-    /// Tonemapping operator.
+    /// How the frame is displayed: view, the OCIO display and view (default), or one of FlareLab's own curves
+    /// followed by the sRGB encoding (none, reinhard, aces: Narkowicz's fit), which bypass the view and looks.
     #[arg(long, value_enum)]
     pub tonemap: Option<TonemapArg>,
+    /// OCIO config: a .ocio/.ocioz file or a built-in ocio://NAME (default: ocio://studio-config-latest).
+    #[arg(long)]
+    pub ocio_config: Option<String>,
+    /// OCIO display (default: the config's).
+    #[arg(long)]
+    pub display: Option<String>,
+    /// OCIO view of the display (default: the display's).
+    #[arg(long)]
+    pub view: Option<String>,
+    /// OCIO looks applied before the view, comma-separated.
+    #[arg(long)]
+    pub look: Option<String>,
+    /// A .cube (or other LUT file OCIO reads) applied as a look, in the config's color_timing space.
+    #[arg(long)]
+    pub cube: Option<PathBuf>,
+    /// The colour space of plate files (an OCIO colour space, or `display` for the inverse of the display and
+    /// view: a plate at 0 EV with no flare then comes out as shot). Default: by file type.
+    #[arg(long)]
+    pub input_space: Option<String>,
     /// Leave out the starburst at the light.
     #[arg(long)]
     pub no_starburst: bool,
@@ -322,6 +345,25 @@ pub fn document(args: &RenderArgs) -> Result<Document> {
     if let Some(w) = args.sensor_mm {
         doc.sensor_width_mm = w;
     }
+    let color = &mut doc.color;
+    for (value, field) in [
+        (&args.ocio_config, &mut color.config),
+        (&args.display, &mut color.display),
+        (&args.view, &mut color.view),
+        (&args.look, &mut color.looks),
+        (&args.input_space, &mut color.input_space),
+    ] {
+        if let Some(v) = value {
+            *field = Some(v.clone());
+        }
+    }
+    if args.display.is_some() && args.view.is_none() {
+        // Another display: its own default view, unless one is given.
+        color.view = None;
+    }
+    if let Some(cube) = &args.cube {
+        color.cube = Some(cube.display().to_string());
+    }
     if let Some(t) = args.exr_type {
         doc.exr.pixel_type = t.into();
     }
@@ -418,6 +460,12 @@ fn flag_of(args: &RenderArgs, field: &str) -> Option<String> {
         "auto_light.reference_power" => args.light_power.map(|p| format!("--light-power {p}")),
         "auto_light.smooth_frames" => args.light_smooth.map(|n| format!("--light-smooth {n}")),
         "timeline.shutter_deg" => args.shutter_deg.map(|d| format!("--shutter-deg {d}")),
+        "color.config" => args.ocio_config.as_ref().map(|c| format!("--ocio-config {c}")),
+        "color.display" => args.display.as_ref().map(|d| format!("--display {d}")),
+        "color.view" => args.view.as_ref().map(|v| format!("--view {v}")),
+        "color.looks" => args.look.as_ref().map(|l| format!("--look {l}")),
+        "color.cube" => args.cube.as_ref().map(|c| format!("--cube {}", c.display())),
+        "color.input_space" => args.input_space.as_ref().map(|i| format!("--input-space {i}")),
         "background" => args.background.as_ref().map(|b| format!("--background {}", b.display())),
         "dof.depth" => args.depth.as_ref().map(|d| format!("--depth {d}")),
         "dof.focus_m" => args.focus_m.map(|f| format!("--focus-m {f}")),

@@ -1,9 +1,11 @@
 //! Colour: luminance, the sRGB transfer curve, the tonemap operators and exposures in stops, in one place.
 //!
 //! # How it works
-//! Every image FlareLab holds is linear Rec. 709 RGB. Exposures are in stops (EV): a gain of `2^ev`
-//! ([`gain_from_ev`]). A display value is made by [`display_value`]: the linear value times its gain, the
-//! tonemap operator ([`Tonemap`]: clamp only, Reinhard `c / (1 + c)`, or Narkowicz's fit of the ACES filmic
+//! Every image FlareLab holds is linear Rec. 709 RGB (the OCIO working space
+//! [`crate::view_transform::WORKING_SPACE`]). Exposures are in stops (EV): a gain of `2^ev` ([`gain_from_ev`]).
+//! A display value is made by the document's [`Tonemap`]: by default the OCIO display and view
+//! ([`crate::view_transform`]); else one of FlareLab's own curves in [`display_value`]: the linear value
+//! times its gain, the operator (clamp only, Reinhard `c / (1 + c)`, or Narkowicz's fit of the ACES filmic
 //! curve), a clamp to [0, 1] and, for 8-bit targets, the sRGB encoding. `shaders/tonemap.wgsl` does the same
 //! steps; [`crate::render::cpu::tonemap_pass`] is its CPU twin and calls these functions.
 
@@ -34,22 +36,25 @@ pub fn aces(x: f32) -> f32 {
     ((x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14)).clamp(0.0, 1.0)
 }
 
-/// Tonemapping operator.
+/// How the linear frame becomes display values: the OCIO display and view (the default), or one of
+/// FlareLab's own tone curves followed by the sRGB encoding (see [`crate::view_transform`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Tonemap {
-    /// Clamp only.
-    None,
-    /// `c / (1 + c)` per channel.
-    Reinhard,
-    /// Narkowicz's fit of the ACES filmic curve.
+    /// The document's OCIO display and view ([`crate::view_transform::ViewTransform`]), with its looks.
     #[default]
+    View,
+    /// Clamp only, then sRGB.
+    None,
+    /// `c / (1 + c)` per channel, then sRGB.
+    Reinhard,
+    /// Narkowicz's fit of the ACES filmic curve, then sRGB.
     Aces,
 }
 
 impl Tonemap {
     /// Every operator, in menu order.
-    pub const ALL: [Self; 3] = [Self::None, Self::Reinhard, Self::Aces];
+    pub const ALL: [Self; 4] = [Self::View, Self::None, Self::Reinhard, Self::Aces];
 
     /// The code the tonemap shader reads (`Globals.tonemap.y`).
     pub fn code(self) -> f32 {
@@ -57,12 +62,15 @@ impl Tonemap {
             Self::None => 0.0,
             Self::Reinhard => 1.0,
             Self::Aces => 2.0,
+            Self::View => 3.0,
         }
     }
 
     /// The operator of a shader code (the nearest; unknown codes clamp only).
     pub fn from_code(code: f32) -> Self {
-        if code > 1.5 {
+        if code > 2.5 {
+            Self::View
+        } else if code > 1.5 {
             Self::Aces
         } else if code > 0.5 {
             Self::Reinhard
@@ -74,6 +82,7 @@ impl Tonemap {
     /// The name used in files and on the command line.
     pub fn name(self) -> &'static str {
         match self {
+            Self::View => "view",
             Self::None => "none",
             Self::Reinhard => "reinhard",
             Self::Aces => "aces",
@@ -81,14 +90,15 @@ impl Tonemap {
     }
 }
 
-/// One linear, already exposed value to display: the operator, a clamp to [0, 1], and the sRGB encoding
-/// when `encode` is set.
+/// One linear, already exposed value to display by one of FlareLab's own curves: the operator, a clamp to
+/// [0, 1], and the sRGB encoding when `encode` is set. [`Tonemap::View`] works on whole colours
+/// ([`crate::render::cpu::tonemap_pixel`]); here it clamps only.
 pub fn display_value(v: f32, tonemap: Tonemap, encode: bool) -> f32 {
     let mut v = if v.is_finite() { v.max(0.0) } else { 0.0 };
     v = match tonemap {
         Tonemap::Aces => aces(v),
         Tonemap::Reinhard => v / (1.0 + v),
-        Tonemap::None => v,
+        Tonemap::None | Tonemap::View => v,
     };
     v = v.clamp(0.0, 1.0);
     if encode { srgb_encode(v) } else { v }

@@ -68,6 +68,8 @@ pub struct FrameRequest {
     /// The light while the shutter is open ([`crate::shutter`]); `None` (a closed shutter or a still light):
     /// the sharp frame at `light_deg`.
     pub motion: Option<LightPath>,
+    /// The OCIO display transform of [`crate::color::Tonemap::View`] (`None`: the built-in default).
+    pub view: Option<std::sync::Arc<crate::view_transform::ViewTransform>>,
 }
 
 impl FrameRequest {
@@ -121,6 +123,7 @@ impl Default for FrameRequest {
             lut_use: LutUse::Off,
             draft: None,
             motion: None,
+            view: None,
         }
     }
 }
@@ -203,6 +206,7 @@ impl Frame {
             }
             _ => sharp(flare, lut, request, (sensor, w, h), &display, request.light_deg, light_gain),
         };
+        scene.view = request.view.clone();
         let draft = request.draft.map(|d| {
             let skipped = scene.keep_brightest(d.fragment_budget);
             let fragments = scene.instances.iter().map(|i| scene.fragments(i)).sum();

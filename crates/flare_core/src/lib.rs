@@ -48,6 +48,7 @@ pub mod spectrum;
 pub mod starburst;
 pub mod timeline;
 pub mod traced;
+pub mod view_transform;
 
 // What callers need most, at the crate root: the document, the prepared optics, the frame pipeline and the
 // writer. Everything else is reached through its module.

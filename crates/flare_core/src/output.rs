@@ -578,8 +578,16 @@ pub fn read_plate(path: &Path) -> Result<HdrImage, ImageError> {
 
 /// [`read_plate`], with what it clamped in words (said once, by the caller), if anything.
 pub fn read_plate_checked(path: &Path) -> Result<(HdrImage, Option<String>), ImageError> {
+    read_plate_values(path, true)
+}
+
+/// A plate's pixels: with `decode`, PNG and JPEG decoded from sRGB (EXR and HDR as stored), else every file's
+/// values as stored (a PNG's encoded ones in [0, 1], for an OCIO input space to convert); clamped as
+/// [`read_plate`] says, with what it clamped in words.
+pub fn read_plate_values(path: &Path, decode: bool) -> Result<(HdrImage, Option<String>), ImageError> {
     let img = open_image(path, "plate").map_err(ImageError::Plate)?;
-    let is_float = matches!(img, ::image::DynamicImage::ImageRgb32F(_) | ::image::DynamicImage::ImageRgba32F(_));
+    let is_float =
+        !decode || matches!(img, ::image::DynamicImage::ImageRgb32F(_) | ::image::DynamicImage::ImageRgba32F(_));
     let (width, height) = (img.width(), img.height());
     let clamped = std::cell::Cell::new(0usize);
     let linear = |v: f32| {

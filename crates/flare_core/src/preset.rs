@@ -175,6 +175,9 @@ pub struct Document {
     pub dof: crate::dof::DofDoc,
     /// How EXR files are written: value type and compression ([`crate::output::ExrSettings`]).
     pub exr: crate::output::ExrSettings,
+    /// Colour management: the OCIO config, display, view, looks, `.cube` and plates' input space
+    /// ([`crate::view_transform`]).
+    pub color: crate::view_transform::ColorDoc,
 }
 
 impl Default for Document {
@@ -194,7 +197,7 @@ impl Default for Document {
             flare_ev: DEFAULT_FLARE_EV,
             exposure_auto: true,
             plate_ev: 0.0,
-            tonemap: Tonemap::Aces,
+            tonemap: Tonemap::View,
             starburst: true,
             starburst_ev: 0.0,
             background: None,
@@ -203,6 +206,7 @@ impl Default for Document {
             auto_light: None,
             dof: crate::dof::DofDoc::default(),
             exr: crate::output::ExrSettings::default(),
+            color: crate::view_transform::ColorDoc::default(),
         }
     }
 }
@@ -386,7 +390,15 @@ impl Document {
             lut_use: self.lut_use(),
             draft: None,
             motion: self.light_path(frame),
+            view: self.view_transform().ok(),
         }
+    }
+
+    /// The document's colour management resolved ([`crate::view_transform::ViewTransform::cached`]).
+    pub fn view_transform(
+        &self,
+    ) -> Result<std::sync::Arc<crate::view_transform::ViewTransform>, crate::view_transform::ViewError> {
+        crate::view_transform::ViewTransform::cached(&self.color)
     }
 
     /// The layers a file of this document gets: the ghost layers when `ghosts`, and the document's EXR settings.
@@ -582,6 +594,9 @@ impl Document {
         }
         if !(self.sensor_width_mm.is_finite() && (1.0..=200.0).contains(&self.sensor_width_mm)) {
             return bad("sensor_width_mm", format!("{} mm: a sensor from 1 to 200 mm wide", self.sensor_width_mm));
+        }
+        if let Err(e) = self.view_transform() {
+            return bad(&format!("color.{}", e.field), e.reason);
         }
         if let Err((field, reason)) = self.timeline.check() {
             return bad(&field, reason);

@@ -38,8 +38,8 @@ fn display_difference(frame: &Frame, a: &HdrImage, b: &HdrImage) -> (f32, f64, f
     let (mut worst, mut sum, mut lit) = (0.0f32, 0.0f64, 0usize);
     for (p, q) in a.pixels.iter().zip(&b.pixels) {
         let (dp, dq) = (
-            tonemap_pixel([p[0], p[1], p[2]].map(|v| v * gain), &frame.scene.globals),
-            tonemap_pixel([q[0], q[1], q[2]].map(|v| v * gain), &frame.scene.globals),
+            tonemap_pixel([p[0], p[1], p[2]].map(|v| v * gain), &frame.scene),
+            tonemap_pixel([q[0], q[1], q[2]].map(|v| v * gain), &frame.scene),
         );
         for c in 0..3 {
             let d = (dp[c] - dq[c]).abs() * 255.0;

@@ -469,8 +469,8 @@ fn the_gpu_draws_lut_ghosts_as_its_cpu_twin_does() {
             .zip(&gpu.pixels)
             .map(|(a, b)| {
                 let (da, db) = (
-                    flare_core::render::cpu::tonemap_pixel([a[0], a[1], a[2]].map(|v| v * gain), &scene.globals),
-                    flare_core::render::cpu::tonemap_pixel([b[0], b[1], b[2]].map(|v| v * gain), &scene.globals),
+                    flare_core::render::cpu::tonemap_pixel([a[0], a[1], a[2]].map(|v| v * gain), &scene),
+                    flare_core::render::cpu::tonemap_pixel([b[0], b[1], b[2]].map(|v| v * gain), &scene),
                 );
                 (0..3).map(|c| (da[c] - db[c]).abs() * 255.0).fold(0.0f32, f32::max)
             })

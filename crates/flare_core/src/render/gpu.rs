@@ -34,7 +34,7 @@ use wgpu_profiler::{GpuProfiler, GpuProfilerSettings, GpuTimerQueryResult};
 pub use super::buffers::{HDR_FORMAT, texture_2d};
 use super::gpu_ghosts::ComputeGhosts;
 use super::gpu_lut::{ComputeLut, TILE};
-use super::shaders::{GHOSTS_WGSL, LUT_GHOSTS_WGSL, STARBURST_WGSL, TONEMAP_WGSL};
+use super::shaders::{GHOSTS_WGSL, LUT_GHOSTS_WGSL, STARBURST_WGSL};
 use super::{FlareScene, GhostInstance, Globals};
 use crate::aperture::ApertureMask;
 use crate::image::{DisplayImage, HdrImage};
@@ -275,7 +275,8 @@ fn vertex_buffer<T>(device: &wgpu::Device, label: &str, capacity: usize) -> wgpu
 pub struct FlareRenderer {
     ghost_pipeline: wgpu::RenderPipeline,
     starburst_pipeline: wgpu::RenderPipeline,
-    tonemap_pipeline: wgpu::RenderPipeline,
+    /// The tonemap pass of the last frame's OCIO view (made again when a frame's view differs).
+    view_pass: super::gpu_view::ViewPass,
     ghost_layout: wgpu::BindGroupLayout,
     tonemap_layout: wgpu::BindGroupLayout,
     globals: wgpu::Buffer,
@@ -375,7 +376,6 @@ impl FlareRenderer {
             })
         };
         let ghost_pl = layout(&ghost_layout);
-        let tonemap_pl = layout(&tonemap_layout);
         let additive = wgpu::BlendState {
             color: wgpu::BlendComponent {
                 src_factor: wgpu::BlendFactor::One,
@@ -396,7 +396,6 @@ impl FlareRenderer {
         };
         let ghosts = module("ghosts.wgsl", GHOSTS_WGSL);
         let starburst_module = module("starburst.wgsl", STARBURST_WGSL);
-        let tonemap = module("tonemap.wgsl", TONEMAP_WGSL);
         let instance_attributes = wgpu::vertex_attr_array![0 => Float32x4, 1 => Float32x4, 2 => Float32x4, 3 => Float32x4, 4 => Float32x4, 5 => Float32x4];
         let instance_buffer_layout = wgpu::VertexBufferLayout {
             array_stride: std::mem::size_of::<GhostInstance>() as u64,
@@ -434,7 +433,13 @@ impl FlareRenderer {
         let ghost_pipeline =
             pipeline("ghosts", &ghost_pl, &ghosts, &[Some(instance_buffer_layout)], HDR_FORMAT, Some(additive));
         let starburst_pipeline = pipeline("starburst", &ghost_pl, &starburst_module, &[], HDR_FORMAT, Some(additive));
-        let tonemap_pipeline = pipeline("tonemap", &tonemap_pl, &tonemap, &[], target_format, None);
+        let view_pass = super::gpu_view::ViewPass::new(
+            device,
+            queue,
+            &tonemap_layout,
+            target_format,
+            &crate::view_transform::ViewTransform::builtin(),
+        );
         let lut_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("lut ghosts"),
             entries: &[
@@ -525,7 +530,7 @@ impl FlareRenderer {
             pass_times: None,
             ghost_pipeline,
             starburst_pipeline,
-            tonemap_pipeline,
+            view_pass,
             ghost_layout,
             tonemap_layout,
             globals,
@@ -696,6 +701,11 @@ impl FlareRenderer {
             self.hdr = Some((texture_2d(device, "hdr", w, h, HDR_FORMAT, usage), w, h));
             self.groups = None;
         }
+        let view = scene.view_transform();
+        if view.key != self.view_pass.key {
+            self.view_pass =
+                super::gpu_view::ViewPass::new(device, queue, &self.tonemap_layout, self.target_format, &view);
+        }
         let mut globals = scene.globals;
         globals.tonemap[2] = if self.target_format.is_srgb() { 0.0 } else { 1.0 };
         globals.plate[1] = if self.has_background { 1.0 } else { 0.0 };
@@ -812,8 +822,9 @@ impl FlareRenderer {
                     ..Default::default()
                 },
             );
-            pass.set_pipeline(&self.tonemap_pipeline);
+            pass.set_pipeline(&self.view_pass.pipeline);
             pass.set_bind_group(0, &groups.tonemap, &[]);
+            pass.set_bind_group(1, &self.view_pass.group, &[]);
             pass.draw(0..3, 0..1);
         }
         self.profiler.resolve_queries(encoder);

@@ -23,6 +23,7 @@ pub mod dof_gpu;
 pub mod gpu;
 mod gpu_ghosts;
 mod gpu_lut;
+mod gpu_view;
 pub mod raygrid;
 pub mod shaders;
 
@@ -64,7 +65,7 @@ impl Default for DisplaySettings {
         Self {
             flare_ev: DEFAULT_FLARE_EV,
             plate_ev: 0.0,
-            tonemap: Tonemap::Aces,
+            tonemap: Tonemap::View,
             starburst: true,
             starburst_intensity: 1.0,
             accumulation_divisor: 1,
@@ -157,9 +158,17 @@ pub struct FlareScene {
     pub instance_ghosts: Vec<u32>,
     /// Sprites dropped because a value was not finite (expected: always 0).
     pub dropped_non_finite: usize,
+    /// The OCIO display transform of [`Tonemap::View`] (`None`: the built-in default,
+    /// [`crate::view_transform::ViewTransform::builtin`]).
+    pub view: Option<std::sync::Arc<crate::view_transform::ViewTransform>>,
 }
 
 impl FlareScene {
+    /// The OCIO display transform the tonemap pass runs for [`Tonemap::View`].
+    pub fn view_transform(&self) -> std::sync::Arc<crate::view_transform::ViewTransform> {
+        self.view.clone().unwrap_or_else(crate::view_transform::ViewTransform::builtin)
+    }
+
     /// The instances and uniforms for light slopes `u`, with the frame already computed by the caller
     /// (so the app can reuse it for its ghost list). `gains[g]` multiplies every sprite of lens ghost `g`
     /// (missing entries are 1); a ghost at gain 0 (off, or not the solo one) makes no instance.
@@ -217,7 +226,7 @@ impl FlareScene {
             starburst_far: [0.0; 4],
             starburst_core: [0.0; 4],
         };
-        Self { width, height, hdr_width, hdr_height, globals, instances, instance_ghosts, dropped_non_finite }
+        Self { width, height, hdr_width, hdr_height, globals, instances, instance_ghosts, dropped_non_finite, view: None }
     }
 
     /// The accumulation fragments `inst` covers: its quad clipped to the accumulation (what a sprite costs a

@@ -7,7 +7,9 @@
 //! `raygrid_common.wgsl` (the ray-grid structs) for the GPU ray grids' passes, and `fixed64.wgsl` (64-bit fixed
 //! point in two u32 words) for the passes that sum light with integer atomics, and `mask_texels.wgsl` (the mask
 //! looked up in a storage buffer) for the compute passes that read the aperture. A test parses every shader with
-//! naga and checks that the WGSL `Globals` has the Rust struct's size and member offsets.
+//! naga and checks that the WGSL `Globals` has the Rust struct's size and member offsets. The tonemap pass is
+//! the one shader put together at run time: [`tonemap_wgsl`] puts the OCIO display transform's WGSL (made for
+//! the document's display and view) before `tonemap.wgsl`.
 
 /// The shared uniforms (prepended to the shaders below).
 pub const COMMON_WGSL: &str = include_str!("../../../../shaders/common.wgsl");
@@ -26,9 +28,19 @@ pub const GHOSTS_COMPUTE_WGSL: &str = concat!(
 /// The starburst quad.
 pub const STARBURST_WGSL: &str =
     concat!(include_str!("../../../../shaders/common.wgsl"), include_str!("../../../../shaders/starburst.wgsl"));
-/// Flare and plate exposures, tonemap, sRGB.
-pub const TONEMAP_WGSL: &str =
-    concat!(include_str!("../../../../shaders/common.wgsl"), include_str!("../../../../shaders/tonemap.wgsl"));
+/// Flare and plate exposures, tonemap, sRGB, with the identity in place of the OCIO display transform (what
+/// the validation reads; the renderer builds [`tonemap_wgsl`] of the document's view).
+pub const TONEMAP_WGSL: &str = concat!(
+    include_str!("../../../../shaders/common.wgsl"),
+    include_str!("../../../../shaders/ocio_identity.wgsl"),
+    include_str!("../../../../shaders/tonemap.wgsl")
+);
+
+/// The tonemap shader with `ocio`, the WGSL OCIO generated for a display and view
+/// ([`crate::view_transform::WgslShader`]), as its `ocio_display`.
+pub fn tonemap_wgsl(ocio: &str) -> String {
+    [COMMON_WGSL, ocio, include_str!("../../../../shaders/tonemap.wgsl")].join("\n")
+}
 /// LUT ghosts from the atlas.
 pub const LUT_GHOSTS_WGSL: &str =
     concat!(include_str!("../../../../shaders/common.wgsl"), include_str!("../../../../shaders/lut_ghosts.wgsl"));

@@ -25,7 +25,6 @@ use super::pattern::FramePattern;
 use crate::frame::FrameRequest;
 use crate::ghost::GhostSystem;
 use crate::optics::sensor::Sensor;
-use crate::output::read_plate;
 use crate::preset::Document;
 use crate::shutter::LightPath;
 
@@ -200,7 +199,7 @@ pub fn plan(
                         return None;
                     }
                     // A plate that cannot be read is a frame with no light here; drawing it reports why.
-                    let scan = path.as_deref().and_then(|p| read_plate(p).ok()).map(|plate| {
+                    let scan = path.as_deref().and_then(|p| super::plate::read_plate_in(&doc.color, p).ok()).map(|(plate, _)| {
                         let scan = detect::detect(&plate, auto.threshold);
                         // The scan's pixels are the plate's; the frame may be drawn at another size.
                         let (sx, sy) =

@@ -436,8 +436,8 @@ mod tests {
             let (mut worst, mut lit) = (0.0f32, 0);
             for (a, b) in fast.pixels.iter().zip(&direct.pixels) {
                 let (da, db) = (
-                    tonemap_pixel([a[0], a[1], a[2]].map(|v| v * gain), &scene.globals),
-                    tonemap_pixel([b[0], b[1], b[2]].map(|v| v * gain), &scene.globals),
+                    tonemap_pixel([a[0], a[1], a[2]].map(|v| v * gain), &scene),
+                    tonemap_pixel([b[0], b[1], b[2]].map(|v| v * gain), &scene),
                 );
                 for c in 0..3 {
                     worst = worst.max((da[c] - db[c]).abs());

@@ -1,0 +1,161 @@
+//! The tonemap pass's pipeline for one OCIO display transform: the shader [`super::shaders::tonemap_wgsl`] of
+//! the view's WGSL, and bind group [`WGSL_GROUP`] with the view's LUT textures (and its uniforms, when it has
+//! any), uploaded once. The renderer makes a new one when a frame's view differs from the one it has (by
+//! [`ViewTransform::key`]).
+
+use crate::view_transform::{ViewTransform, WGSL_GROUP};
+
+/// The tonemap pipeline of one view and the resources its shader reads.
+pub(super) struct ViewPass {
+    pub key: u64,
+    pub pipeline: wgpu::RenderPipeline,
+    pub group: wgpu::BindGroup,
+}
+
+impl ViewPass {
+    /// The pass of `view`, drawing into `target_format`; group 0 is `tonemap_layout` (the frame's resources).
+    pub fn new(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        tonemap_layout: &wgpu::BindGroupLayout,
+        target_format: wgpu::TextureFormat,
+        view: &ViewTransform,
+    ) -> Self {
+        debug_assert_eq!(WGSL_GROUP, 1, "the tonemap pipeline's layout puts the view at group 1");
+        let shader = &view.shader;
+        let mut entries = Vec::new();
+        if shader.uniforms.is_some() {
+            entries.push(wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            });
+        }
+        let dimension = |d: u32| match d {
+            1 => (wgpu::TextureDimension::D1, wgpu::TextureViewDimension::D1),
+            2 => (wgpu::TextureDimension::D2, wgpu::TextureViewDimension::D2),
+            _ => (wgpu::TextureDimension::D3, wgpu::TextureViewDimension::D3),
+        };
+        for t in &shader.textures {
+            entries.push(wgpu::BindGroupLayoutEntry {
+                binding: t.binding,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                    view_dimension: dimension(t.dimensions).1,
+                    multisampled: false,
+                },
+                count: None,
+            });
+        }
+        let layout =
+            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("ocio view"), entries: &entries });
+        let textures: Vec<(u32, wgpu::Texture, wgpu::TextureViewDimension)> = shader
+            .textures
+            .iter()
+            .map(|t| {
+                let (dim, view_dim) = dimension(t.dimensions);
+                let format = if t.rgba { wgpu::TextureFormat::Rgba32Float } else { wgpu::TextureFormat::R32Float };
+                let size = wgpu::Extent3d {
+                    width: t.size[0].max(1),
+                    height: t.size[1].max(1),
+                    depth_or_array_layers: t.size[2].max(1),
+                };
+                let texture = device.create_texture(&wgpu::TextureDescriptor {
+                    label: Some("ocio lut"),
+                    size,
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: dim,
+                    format,
+                    usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                    view_formats: &[],
+                });
+                let bytes_per_texel = if t.rgba { 16 } else { 4 };
+                queue.write_texture(
+                    wgpu::TexelCopyTextureInfo {
+                        texture: &texture,
+                        mip_level: 0,
+                        origin: wgpu::Origin3d::ZERO,
+                        aspect: wgpu::TextureAspect::All,
+                    },
+                    &t.bytes,
+                    wgpu::TexelCopyBufferLayout {
+                        offset: 0,
+                        bytes_per_row: Some(size.width * bytes_per_texel),
+                        rows_per_image: Some(size.height),
+                    },
+                    size,
+                );
+                (t.binding, texture, view_dim)
+            })
+            .collect();
+        let uniform = shader.uniforms.as_ref().map(|bytes| {
+            let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("ocio uniforms"),
+                size: (bytes.len() as u64).max(16).next_multiple_of(16),
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            queue.write_buffer(&buffer, 0, bytes);
+            buffer
+        });
+        let views: Vec<(u32, wgpu::TextureView)> = textures
+            .iter()
+            .map(|(binding, texture, dim)| {
+                (*binding, texture.create_view(&wgpu::TextureViewDescriptor { dimension: Some(*dim), ..Default::default() }))
+            })
+            .collect();
+        let mut group_entries: Vec<wgpu::BindGroupEntry> =
+            views.iter().map(|(binding, v)| wgpu::BindGroupEntry { binding: *binding, resource: wgpu::BindingResource::TextureView(v) }).collect();
+        if let Some(buffer) = &uniform {
+            group_entries.push(wgpu::BindGroupEntry { binding: 0, resource: buffer.as_entire_binding() });
+        }
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("ocio view"),
+            layout: &layout,
+            entries: &group_entries,
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("tonemap"),
+            bind_group_layouts: &[Some(tonemap_layout), Some(&layout)],
+            immediate_size: 0,
+        });
+        let source = super::shaders::tonemap_wgsl(&shader.text);
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("tonemap.wgsl with the OCIO view"),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        });
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("tonemap"),
+            layout: Some(&pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            primitive: wgpu::PrimitiveState::default(),
+            depth_stencil: None,
+            multisample: wgpu::MultisampleState::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: target_format,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        Self { key: view.key, pipeline, group }
+    }
+}
