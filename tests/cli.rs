@@ -1490,3 +1490,154 @@ fn exr_type_and_compression_flags_write_every_layer_for_compositors() {
         _ => println!("oiiotool is not installed (Debian openimageio-tools): the exr crate's reading stands alone"),
     }
 }
+
+/// Writes a 9^3 `.cube` that warms the picture (red up, blue down).
+fn warm_cube(path: &Path) {
+    let n = 9;
+    let mut text = String::from("LUT_3D_SIZE 9\n");
+    for b in 0..n {
+        for g in 0..n {
+            for r in 0..n {
+                let f = |k: usize| k as f32 / (n - 1) as f32;
+                text += &format!("{:.6} {:.6} {:.6}\n", (f(r) * 1.1).min(1.0), f(g) * 0.95, f(b) * 0.8);
+            }
+        }
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+/// A gradient plate PNG (every 8-bit level of red and green, saturated corners).
+fn gradient_plate(path: &Path) {
+    let (w, h) = (160u32, 90u32);
+    let img = image::RgbImage::from_fn(w, h, |x, y| {
+        image::Rgb([(x * 255 / (w - 1)) as u8, (y * 255 / (h - 1)) as u8, ((x + y) * 7 % 256) as u8])
+    });
+    img.save(path).unwrap();
+}
+
+/// The PNG of a frame is PyOpenColorIO's display of the EXR's composite (same config, display, view and
+/// looks) within 1/255, for the built-in config's default view, another display and a `.cube` look; runs
+/// where Python has PyOpenColorIO and OpenEXR (`pip install opencolorio==2.6.0 OpenEXR`; .ci/run installs
+/// them), and says so where it does not.
+#[test]
+fn the_png_is_pyopencolorios_display_of_the_exr_composite() {
+    let dir = tempfile::tempdir().unwrap();
+    let plate = dir.path().join("plate.png");
+    gradient_plate(&plate);
+    let cube = dir.path().join("warm.cube");
+    warm_cube(&cube);
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/ocio_reference.py");
+    let cases: [(&str, Vec<&str>); 3] = [
+        ("default", vec![]),
+        ("p3", vec!["--display", "Display P3 - Display"]),
+        ("cube", vec!["--cube", cube.to_str().unwrap()]),
+    ];
+    let mut pngs = Vec::new();
+    for (name, extra) in &cases {
+        let (png, exr) = (dir.path().join(format!("{name}.png")), dir.path().join(format!("{name}.exr")));
+        for out in [&png, &exr] {
+            let mut args =
+                vec!["render", "--size", "160x90", "--background", plate.to_str().unwrap(), "--device", "cpu"];
+            args.extend(["--exr-type", "float", "-o", out.to_str().unwrap()]);
+            args.extend(extra.iter().copied());
+            let result = flarelab(&args);
+            assert!(result.status.success(), "{args:?}: {}", String::from_utf8_lossy(&result.stderr));
+        }
+        pngs.push(std::fs::read(&png).unwrap());
+        let mut args = vec![script.to_str().unwrap().to_owned(), exr.display().to_string(), png.display().to_string()];
+        args.extend(extra.iter().map(|s| {
+            // The script names the display as OCIO does and the cube as --cube.
+            s.to_string()
+        }));
+        let Ok(check) = Command::new("python3").args(&args).output() else {
+            println!(
+                "no python3: the PyOpenColorIO check is skipped (crates/flare_core/tests/colour.rs holds its values)"
+            );
+            return;
+        };
+        let said = String::from_utf8_lossy(&check.stdout);
+        match check.status.code() {
+            Some(0) => println!("{name}: {said}"),
+            Some(2) => {
+                println!(
+                    "PyOpenColorIO or OpenEXR is not installed ({said}): skipped; crates/flare_core/tests/colour.rs holds its values"
+                );
+                return;
+            }
+            _ => panic!(
+                "{name}: the PNG is not PyOpenColorIO's display of the composite: {said}{}",
+                String::from_utf8_lossy(&check.stderr)
+            ),
+        }
+    }
+    assert_ne!(pngs[0], pngs[2], "the cube changed the picture");
+}
+
+/// A plate read through the inverse of the display and view comes out as shot at 0 EV with no flare, on
+/// the CPU twin and on the GPU.
+#[test]
+fn a_plate_through_the_inverse_view_comes_out_as_shot() {
+    let dir = tempfile::tempdir().unwrap();
+    let plate = dir.path().join("plate.png");
+    gradient_plate(&plate);
+    let original = image::open(&plate).unwrap().to_rgb8();
+    for device in ["cpu", "gpu"] {
+        let out = dir.path().join(format!("{device}.png"));
+        let result = flarelab(&[
+            "render",
+            "--background",
+            plate.to_str().unwrap(),
+            "--input-space",
+            "display",
+            "--exposure-ev",
+            "-40",
+            "--no-starburst",
+            "--device",
+            device,
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        let stderr = String::from_utf8_lossy(&result.stderr);
+        if device == "gpu" && !result.status.success() && stderr.contains("no GPU") {
+            flare_core::render::gpu::skip_without_gpu(&stderr);
+            continue;
+        }
+        assert!(result.status.success(), "{stderr}");
+        let back = image::open(&out).unwrap().to_rgb8();
+        let worst =
+            original.pixels().zip(back.pixels()).flat_map(|(a, b)| (0..3).map(move |c| a[c].abs_diff(b[c]))).max();
+        println!("{device}: worst {worst:?}/255");
+        assert!(worst.unwrap() <= 1, "{device}: the plate differs by {worst:?}/255");
+    }
+    // Without the input space, the plate comes in as sRGB and goes out through the ACES view: not as shot.
+    let out = dir.path().join("aces.png");
+    let result = flarelab(&[
+        "render",
+        "--background",
+        plate.to_str().unwrap(),
+        "--exposure-ev",
+        "-40",
+        "--device",
+        "cpu",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(result.status.success());
+    let back = image::open(&out).unwrap().to_rgb8();
+    assert!(original.pixels().zip(back.pixels()).any(|(a, b)| (0..3).any(|c| a[c].abs_diff(b[c]) > 10)));
+    // An unknown input space is refused naming the flag.
+    let result = flarelab(&[
+        "render",
+        "--background",
+        plate.to_str().unwrap(),
+        "--input-space",
+        "Nope",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        String::from_utf8_lossy(&result.stderr).contains("--input-space Nope"),
+        "{}",
+        String::from_utf8_lossy(&result.stderr)
+    );
+}

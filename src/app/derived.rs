@@ -84,7 +84,10 @@ impl PlateCache {
             let (plates, loading, path) = (self.plates.clone(), self.loading.clone(), path.clone());
             let color = self.color.clone();
             rayon::spawn(move || {
-                let read = flare_core::shot::plate::read_plate_in(&color.clone().unwrap_or_default(), std::path::Path::new(&path));
+                let read = flare_core::shot::plate::read_plate_in(
+                    &color.clone().unwrap_or_default(),
+                    std::path::Path::new(&path),
+                );
                 if let Ok((plate, _)) = read {
                     PlateCache { plates, loading: loading.clone(), color }.put(path.clone(), Arc::new(plate));
                 }

@@ -167,26 +167,36 @@ impl ViewTransform {
         let displays: Vec<String> = (0..config.num_displays()).map(|i| config.display(i)).collect();
         let display = doc.display.clone().unwrap_or_else(|| config.default_display());
         if !displays.contains(&display) {
-            return Err(refuse("display", format!("`{display}` is not a display of {config_name} ({})", displays.join(", "))));
+            return Err(refuse(
+                "display",
+                format!("`{display}` is not a display of {config_name} ({})", displays.join(", ")),
+            ));
         }
         let views: Vec<String> = (0..config.num_views(&display)).map(|i| config.view(&display, i)).collect();
         let view = doc.view.clone().unwrap_or_else(|| config.default_view(&display));
         if !views.contains(&view) {
             return Err(refuse("view", format!("`{view}` is not a view of {display} ({})", views.join(", "))));
         }
-        let looks_list: Vec<String> = (0..config.num_looks()).map(|i| config.look_name_by_index(i).to_owned()).collect();
+        let looks_list: Vec<String> =
+            (0..config.num_looks()).map(|i| config.look_name_by_index(i).to_owned()).collect();
         let mut looks: Vec<String> = Vec::new();
         if let Some(l) = &doc.looks {
             for name in l.split(',').map(str::trim).filter(|n| !n.is_empty()) {
                 if !looks_list.iter().any(|k| k == name) {
-                    return Err(refuse("looks", format!("`{name}` is not a look of {config_name} ({})", looks_list.join(", "))));
+                    return Err(refuse(
+                        "looks",
+                        format!("`{name}` is not a look of {config_name} ({})", looks_list.join(", ")),
+                    ));
                 }
                 looks.push(name.to_owned());
             }
         }
         if let Some(cube) = &doc.cube {
+            // OCIO keeps files it read by path: a cube edited on disk is read again when the settings are.
+            ocio::clear_all_caches();
             let path = std::path::Path::new(cube);
-            crate::files::read_bounded(path, crate::files::MAX_TEXT_BYTES).map_err(|e| refuse("cube", format!("{cube}: {e}")))?;
+            crate::files::read_bounded(path, crate::files::MAX_TEXT_BYTES)
+                .map_err(|e| refuse("cube", format!("{cube}: {e}")))?;
             let absolute = std::fs::canonicalize(path).map_err(|e| refuse("cube", format!("{cube}: {e}")))?;
             let process_space = if config.has_role("color_timing") { "color_timing" } else { "scene_linear" };
             let mut look = ocio::config::look::Look::new();
@@ -238,7 +248,8 @@ impl ViewTransform {
                 )
             }
         };
-        let shader = wgsl(&processor).map_err(|e| refuse(field, format!("no GPU shader for {display} / {view}: {e}")))?;
+        let shader =
+            wgsl(&processor).map_err(|e| refuse(field, format!("no GPU shader for {display} / {view}: {e}")))?;
         let spaces = (0..config.num_color_spaces()).map(|i| config.color_space_name_by_index(i).to_owned()).collect();
         let key = crate::fingerprint::of(&(doc, &config_name, &display, &view, &looks));
         Ok(Self {

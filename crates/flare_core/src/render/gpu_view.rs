@@ -53,8 +53,8 @@ impl ViewPass {
                 count: None,
             });
         }
-        let layout =
-            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("ocio view"), entries: &entries });
+        let layout = device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("ocio view"), entries: &entries });
         let textures: Vec<(u32, wgpu::Texture, wgpu::TextureViewDimension)> = shader
             .textures
             .iter()
@@ -108,11 +108,19 @@ impl ViewPass {
         let views: Vec<(u32, wgpu::TextureView)> = textures
             .iter()
             .map(|(binding, texture, dim)| {
-                (*binding, texture.create_view(&wgpu::TextureViewDescriptor { dimension: Some(*dim), ..Default::default() }))
+                (
+                    *binding,
+                    texture.create_view(&wgpu::TextureViewDescriptor { dimension: Some(*dim), ..Default::default() }),
+                )
             })
             .collect();
-        let mut group_entries: Vec<wgpu::BindGroupEntry> =
-            views.iter().map(|(binding, v)| wgpu::BindGroupEntry { binding: *binding, resource: wgpu::BindingResource::TextureView(v) }).collect();
+        let mut group_entries: Vec<wgpu::BindGroupEntry> = views
+            .iter()
+            .map(|(binding, v)| wgpu::BindGroupEntry {
+                binding: *binding,
+                resource: wgpu::BindingResource::TextureView(v),
+            })
+            .collect();
         if let Some(buffer) = &uniform {
             group_entries.push(wgpu::BindGroupEntry { binding: 0, resource: buffer.as_entire_binding() });
         }

@@ -226,7 +226,17 @@ impl FlareScene {
             starburst_far: [0.0; 4],
             starburst_core: [0.0; 4],
         };
-        Self { width, height, hdr_width, hdr_height, globals, instances, instance_ghosts, dropped_non_finite, view: None }
+        Self {
+            width,
+            height,
+            hdr_width,
+            hdr_height,
+            globals,
+            instances,
+            instance_ghosts,
+            dropped_non_finite,
+            view: None,
+        }
     }
 
     /// The accumulation fragments `inst` covers: its quad clipped to the accumulation (what a sprite costs a

@@ -199,19 +199,23 @@ pub fn plan(
                         return None;
                     }
                     // A plate that cannot be read is a frame with no light here; drawing it reports why.
-                    let scan = path.as_deref().and_then(|p| super::plate::read_plate_in(&doc.color, p).ok()).map(|(plate, _)| {
-                        let scan = detect::detect(&plate, auto.threshold);
-                        // The scan's pixels are the plate's; the frame may be drawn at another size.
-                        let (sx, sy) =
-                            (f64::from(width) / f64::from(plate.width), f64::from(height) / f64::from(plate.height));
-                        Scan {
-                            detection: scan.detection.map(|d| detect::Detection {
-                                centroid_px: [d.centroid_px[0] * sx, d.centroid_px[1] * sy],
-                                ..d
-                            }),
-                            ..scan
-                        }
-                    });
+                    let scan = path.as_deref().and_then(|p| super::plate::read_plate_in(&doc.color, p).ok()).map(
+                        |(plate, _)| {
+                            let scan = detect::detect(&plate, auto.threshold);
+                            // The scan's pixels are the plate's; the frame may be drawn at another size.
+                            let (sx, sy) = (
+                                f64::from(width) / f64::from(plate.width),
+                                f64::from(height) / f64::from(plate.height),
+                            );
+                            Scan {
+                                detection: scan.detection.map(|d| detect::Detection {
+                                    centroid_px: [d.centroid_px[0] * sx, d.centroid_px[1] * sy],
+                                    ..d
+                                }),
+                                ..scan
+                            }
+                        },
+                    );
                     progress(done.fetch_add(1, Ordering::Relaxed) + 1, plates.len());
                     scan
                 })

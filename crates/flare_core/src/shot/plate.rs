@@ -16,8 +16,8 @@ use crate::dof::{self, DofLens};
 use crate::flare::PreparedFlare;
 use crate::image::HdrImage;
 use crate::output::{read_plate_checked, read_plate_values};
-use crate::view_transform::{ColorDoc, ViewTransform};
 use crate::preset::Document;
+use crate::view_transform::{ColorDoc, ViewTransform};
 
 /// Why a frame's plate could not be made: the plate file itself, or its depth of field (a bad depth map is
 /// not the plate's fault). Each message says which file and why.

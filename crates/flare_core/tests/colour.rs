@@ -1,0 +1,118 @@
+//! Colour management by OCIO: the built-in view against values PyOpenColorIO 2.6 gave for the same config,
+//! display and view (stored here, so this runs everywhere), a `.cube` look applied where OCIO applies looks,
+//! and the GPU's tonemap pass (OCIO's WGSL) against its CPU twin (OCIO's CPU processor).
+
+use flare_core::flare::{FlareConfig, PreparedFlare};
+use flare_core::frame::{self, Device, Frame, FrameRequest, GpuDrawer, Sources};
+use flare_core::image::HdrImage;
+use flare_core::render::gpu::test_context;
+use flare_core::view_transform::{ColorDoc, ViewTransform};
+
+/// `(linear Rec. 709, display values)` from PyOpenColorIO 2.6.0: `ocio://studio-config-latest`, its default
+/// display and view ("sRGB - Display", "ACES 2.0 - SDR 100 nits (Rec.709)"), CPU processor.
+const PYOPENCOLORIO: [([f32; 3], [f32; 3]); 9] = [
+    ([0.0, 0.0, 0.0], [0.0, 0.0, 0.0]),
+    ([0.001, 0.002, 0.003], [0.000_107_790_7, 0.000_245_272_2, 0.000_385_763_2]),
+    ([0.18, 0.18, 0.18], [0.349_187_6, 0.349_188_1, 0.349_187_9]),
+    ([0.5, 0.25, 0.1], [0.575_917_4, 0.420_354_3, 0.272_580_8]),
+    ([1.0, 1.0, 1.0], [0.706_683, 0.706_683_6, 0.706_683_3]),
+    ([4.0, 2.0, 1.0], [0.924_156_5, 0.826_801_6, 0.758_402_6]),
+    ([0.05, 0.6, 0.9], [0.292_624_7, 0.605_127_5, 0.707_070_5]),
+    ([20.0, 20.0, 20.0], [0.980_346_6, 0.980_346_6, 0.980_346_5]),
+    ([1000.0, 10.0, 0.1], [1.000_007, 1.000_007, 1.000_007]),
+];
+
+#[test]
+fn the_builtin_view_matches_pyopencolorio() {
+    let view = ViewTransform::builtin();
+    assert_eq!((view.display.as_str(), view.view.as_str()), ("sRGB - Display", "ACES 2.0 - SDR 100 nits (Rec.709)"));
+    for (linear, expected) in PYOPENCOLORIO {
+        let got = view.apply(linear);
+        for c in 0..3 {
+            assert!((got[c] - expected[c]).abs() <= 1e-5, "{linear:?}: {got:?} vs PyOpenColorIO {expected:?}");
+        }
+    }
+}
+
+/// A 9^3 `.cube` that warms and darkens: red up, blue down.
+pub fn warm_cube(path: &std::path::Path) {
+    let n = 9;
+    let mut text = String::from("TITLE \"warm\"\nLUT_3D_SIZE 9\n");
+    for b in 0..n {
+        for g in 0..n {
+            for r in 0..n {
+                let f = |k: usize| k as f32 / (n - 1) as f32;
+                let (r, g, b) = (f(r), f(g), f(b));
+                text += &format!("{:.6} {:.6} {:.6}\n", (r * 1.1).min(1.0), g * 0.95, b * 0.8);
+            }
+        }
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+fn frame_of(view: Option<std::sync::Arc<ViewTransform>>) -> (PreparedFlare, Frame, HdrImage) {
+    let flare =
+        PreparedFlare::new(&flare_core::optics::library::builtin_lens("tessar").unwrap(), &FlareConfig::default())
+            .unwrap();
+    let mut request = FrameRequest { light_deg: [8.0, 5.0], width: 160, height: 100, view, ..FrameRequest::default() };
+    request.display.flare_ev = 12.0;
+    let frame = Frame::build(&flare, None, &request);
+    let mut plate = HdrImage::black(160, 100);
+    for (k, p) in plate.pixels.iter_mut().enumerate() {
+        let t = (k % 160) as f32 / 160.0;
+        *p = [0.02 + 2.0 * t, 0.3 * t, 0.1 + 0.5 * (1.0 - t), 1.0];
+    }
+    (flare, frame, plate)
+}
+
+#[test]
+fn a_cube_is_applied_as_a_look_and_changes_the_display() {
+    let dir = tempfile::tempdir().unwrap();
+    let cube = dir.path().join("warm.cube");
+    warm_cube(&cube);
+    let plain = ViewTransform::builtin();
+    let warm = ViewTransform::new(&ColorDoc { cube: Some(cube.display().to_string()), ..Default::default() }).unwrap();
+    assert_eq!(warm.looks, flare_core::view_transform::CUBE_LOOK);
+    let (a, b) = (plain.apply([0.3, 0.3, 0.3]), warm.apply([0.3, 0.3, 0.3]));
+    assert!(b[0] > a[0] && b[2] < a[2], "warmer: {a:?} -> {b:?}");
+    // A broken cube is refused naming the field.
+    let broken = dir.path().join("broken.cube");
+    std::fs::write(&broken, "LUT_3D_SIZE 9\n0 0 0\n").unwrap();
+    let e = ViewTransform::new(&ColorDoc { cube: Some(broken.display().to_string()), ..Default::default() })
+        .expect_err("a cube with one entry of 729");
+    assert_eq!(e.field, "cube", "{e}");
+}
+
+#[test]
+fn the_gpu_runs_the_views_wgsl_as_its_cpu_twin_runs_the_processor() {
+    let Some(ctx) = test_context() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let cube = dir.path().join("warm.cube");
+    warm_cube(&cube);
+    let mut device = Device::Gpu(Box::new(GpuDrawer::on(ctx)));
+    let views = [
+        ColorDoc::default(),
+        ColorDoc { view: Some("Video (colorimetric)".into()), ..Default::default() },
+        ColorDoc { display: Some("Display P3 - Display".into()), ..Default::default() },
+        ColorDoc { cube: Some(cube.display().to_string()), ..Default::default() },
+    ];
+    // One device for every view, as the app keeps one: each view's pipeline is made when a frame asks for it.
+    for doc in views {
+        let view = ViewTransform::cached(&doc).unwrap();
+        let (flare, frame, plate) = frame_of(Some(view.clone()));
+        let sources = Sources { flare: &flare, lut: None, plate: Some(&plate) };
+        let cpu = frame::draw_cpu(&frame, &sources);
+        let gpu = device.draw(&frame, &sources).unwrap();
+        assert!(matches!(device, Device::Gpu(_)), "the GPU drew it");
+        let worst = cpu
+            .display
+            .pixels
+            .iter()
+            .zip(&gpu.display.pixels)
+            .flat_map(|(a, b)| (0..3).map(move |c| a[c].abs_diff(b[c])))
+            .max()
+            .unwrap();
+        println!("{} / {} [{}]: GPU vs CPU twin worst {worst}/255", view.display, view.view, view.looks);
+        assert!(worst <= 1, "{view:?}: worst display difference {worst}/255");
+    }
+}
