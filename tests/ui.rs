@@ -622,6 +622,37 @@ fn the_shutter_control_blurs_a_moving_light_while_playing_and_undo_takes_it_back
 }
 
 #[test]
+fn the_colour_row_sets_the_view_refuses_what_does_not_resolve_and_undo_returns_it() {
+    use flare_core::view_transform::ColorDoc;
+    let mut h = harness();
+    h.run();
+    let shown = |h: &Harness<'static, FlareLabApp>| {
+        let frame = h.state().derived().view_frame().as_ref().map(|(_, f)| f.clone()).unwrap();
+        let view = frame.scene.view_transform();
+        (view.display.clone(), view.view.clone())
+    };
+    assert_eq!(shown(&h), ("sRGB - Display".to_owned(), "ACES 2.0 - SDR 100 nits (Rec.709)".to_owned()));
+    // The view menu lists the display's views; choosing one changes the frame's view.
+    h.get_by_label("view").click();
+    h.run();
+    h.get_by_label("Video (colorimetric)").click();
+    h.run();
+    assert_eq!(h.state().doc().color.view.as_deref(), Some("Video (colorimetric)"));
+    assert_eq!(shown(&h).1, "Video (colorimetric)");
+    // A config that cannot be read is said and the document keeps its settings.
+    let before = h.state().doc().color.clone();
+    h.state_mut().set_color(ColorDoc { config: Some("/no/such/config.ocio".into()), ..before.clone() });
+    h.run();
+    assert_eq!(h.state().doc().color, before);
+    assert!(h.state().message().is_some_and(|m| m.contains("config")), "{:?}", h.state().message());
+    // Undo returns exactly the default.
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
+    h.run();
+    assert_eq!(h.state().doc().color, ColorDoc::default());
+    assert_eq!(shown(&h).1, "ACES 2.0 - SDR 100 nits (Rec.709)");
+}
+
+#[test]
 fn a_plate_sequence_finds_the_light_and_exports_on_a_thread_as_render_frames_does() {
     use flare_core::shot::synthetic::SyntheticShot;
     let dir = tempfile::tempdir().unwrap();

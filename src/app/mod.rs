@@ -29,6 +29,7 @@ use view::View;
 
 pub mod autobake;
 pub mod bake;
+mod colour;
 pub mod derived;
 pub mod dof;
 mod dof_row;
@@ -168,6 +169,8 @@ pub struct FlareLabApp {
     track_path: String,
     sequence_path: String,
     plate_path: String,
+    /// The colour row's text fields.
+    colour_text: colour::ColourText,
     /// The window's render pass clears it to the panels' colour ([`eframe::App::clear_color`]), so the panels
     /// are drawn unfilled; without it (the UI tests' harness clears to transparent) one rectangle paints the
     /// same colour under them.
@@ -200,6 +203,7 @@ impl FlareLabApp {
             track_path: String::new(),
             sequence_path: "flare.####.exr".into(),
             plate_path: String::new(),
+            colour_text: colour::ColourText::default(),
 
             cleared_by_window: false,
         };
@@ -402,6 +406,7 @@ impl FlareLabApp {
             ui.allocate_ui(egui::vec2(ui.available_width(), height * 0.6), |ui| self.viewport_ui(ui, &mut actions));
             self.timeline_ui(ui);
             self.display_ui(ui);
+            self.colour_ui(ui);
             self.dof_ui(ui);
             let ghost = self
                 .session
@@ -585,7 +590,7 @@ impl FlareLabApp {
                 })
                 .response
                 .on_hover_text("auto: half where a layer's values fit (the ghost layers), float for the light's core");
-            egui::ComboBox::from_id_salt("exr compression").selected_text(compression.name()).show_ui(ui, |ui| {
+            egui::ComboBox::from_label("EXR compression").selected_text(compression.name()).show_ui(ui, |ui| {
                 for c in ExrCompression::ALL {
                     ui.selectable_value(&mut compression, c, c.name());
                 }
@@ -705,11 +710,6 @@ impl FlareLabApp {
             }
         });
         ui.horizontal(|ui| {
-            egui::ComboBox::from_label("tonemap").selected_text(self.session.doc().tonemap.name()).show_ui(ui, |ui| {
-                for t in flare_core::color::Tonemap::ALL {
-                    ui.selectable_value(&mut self.session.edit().tonemap, t, t.name());
-                }
-            });
             let ghosts_label = |grid: Option<usize>| match grid {
                 None => "look".to_owned(),
                 Some(n) => format!("ray grid {n}"),

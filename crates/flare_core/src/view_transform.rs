@@ -295,16 +295,31 @@ impl ViewTransform {
         [p[0], p[1], p[2]].map(|v| if v.is_finite() { v } else { 0.0 })
     }
 
-    /// Display values of many colours at once (RGBA, in place; alpha untouched).
+    /// Display values of many colours at once (RGBA, in place; alpha untouched). The processor runs on every
+    /// core, in chunks; a run of equal colours (a black background, a flat plate) is computed once: the ACES
+    /// 2.0 views cost about 0.3 us a pixel on one core.
     pub fn apply_rgba(&self, pixels: &mut [[f32; 4]]) {
-        self.forward.apply_rgba_slice(bytemuck::cast_slice_mut(pixels));
-        for p in pixels {
-            for v in &mut p[..3] {
-                if !v.is_finite() {
-                    *v = 0.0;
+        use rayon::prelude::*;
+        pixels.par_chunks_mut(4096).for_each(|chunk| {
+            let mut start = 0;
+            while start < chunk.len() {
+                let mut end = start + 1;
+                while end < chunk.len() && chunk[end][..3] == chunk[start][..3] {
+                    end += 1;
                 }
+                let mut p = chunk[start];
+                self.forward.apply_rgba(&mut p);
+                for v in &mut p[..3] {
+                    if !v.is_finite() {
+                        *v = 0.0;
+                    }
+                }
+                for q in &mut chunk[start..end] {
+                    q[..3].copy_from_slice(&p[..3]);
+                }
+                start = end;
             }
-        }
+        });
     }
 
     /// True when plates are converted by an input space (else they come in by file type).
