@@ -9,13 +9,6 @@ use flare_core::view_transform::{ColorDoc, DISPLAY_INPUT, ViewTransform};
 
 use super::FlareLabApp;
 
-/// The colour row's text fields (a config file and a `.cube`), applied with their buttons.
-#[derive(Default)]
-pub struct ColourText {
-    pub config: String,
-    pub cube: String,
-}
-
 impl FlareLabApp {
     /// Writes `color` into the document when it resolves; else says why and keeps the document as it is.
     pub fn set_color(&mut self, color: ColorDoc) {
@@ -100,13 +93,13 @@ impl FlareLabApp {
                 .response
                 .on_hover_text("the colour space of the plate files");
             next.input_space = input;
-            ui.add(egui::TextEdit::singleline(&mut self.colour_text.cube).hint_text("look.cube").desired_width(100.0));
+            ui.add(egui::TextEdit::singleline(&mut self.colour_cube).hint_text("look.cube").desired_width(100.0));
             if ui.button("Apply cube").clicked() {
-                let cube = self.colour_text.cube.trim();
+                let cube = self.colour_cube.trim();
                 next.cube = (!cube.is_empty()).then(|| cube.to_owned());
             }
             ui.add(
-                egui::TextEdit::singleline(&mut self.colour_text.config)
+                egui::TextEdit::singleline(&mut self.colour_config)
                     .hint_text(flare_core::view_transform::DEFAULT_CONFIG)
                     .desired_width(150.0),
             );
@@ -115,7 +108,7 @@ impl FlareLabApp {
                 .on_hover_text("an .ocio/.ocioz file or ocio://NAME; empty: the built-in")
                 .clicked()
             {
-                let config = self.colour_text.config.trim();
+                let config = self.colour_config.trim();
                 next.config = (!config.is_empty()).then(|| config.to_owned());
                 next.display = None;
                 next.view = None;

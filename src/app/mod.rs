@@ -169,8 +169,9 @@ pub struct FlareLabApp {
     track_path: String,
     sequence_path: String,
     plate_path: String,
-    /// The colour row's text fields.
-    colour_text: colour::ColourText,
+    /// The colour row's text fields: a config file and a `.cube`, applied with their buttons.
+    colour_config: String,
+    colour_cube: String,
     /// The window's render pass clears it to the panels' colour ([`eframe::App::clear_color`]), so the panels
     /// are drawn unfilled; without it (the UI tests' harness clears to transparent) one rectangle paints the
     /// same colour under them.
@@ -203,7 +204,8 @@ impl FlareLabApp {
             track_path: String::new(),
             sequence_path: "flare.####.exr".into(),
             plate_path: String::new(),
-            colour_text: colour::ColourText::default(),
+            colour_config: String::new(),
+            colour_cube: String::new(),
 
             cleared_by_window: false,
         };
