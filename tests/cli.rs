@@ -783,8 +783,7 @@ fn render_writes_compositing_layers_with_the_plate_apart() {
         ]);
         assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
         // Every part: the ghost layers are parts of their own, placed at their data windows.
-        let channels = flare_core::output::read_exr_channels(&out).unwrap().channels;
-        channels
+        flare_core::output::read_exr_channels(&out).unwrap().channels
     };
     let (a, b) = (render("1", "a.exr"), render("-1", "b.exr"));
     assert!(a.keys().any(|k| k.starts_with("ghost_") && k.ends_with(".G")), "ghost layers: {:?}", a.keys());

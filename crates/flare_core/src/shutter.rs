@@ -76,7 +76,7 @@ impl LightPath {
     /// when the shutter is closed (`open == close`) or no position along it is finite. A position that is not
     /// finite is the first finite one of the path, a gain that is not finite is 1 and a negative one 0.
     pub fn over(open: f64, close: f64, at: impl Fn(f64) -> ([f64; 2], f64)) -> Option<Self> {
-        if !(close > open) {
+        if close.partial_cmp(&open) != Some(std::cmp::Ordering::Greater) {
             return None;
         }
         let raw: Vec<([f64; 2], f64)> =
@@ -151,7 +151,7 @@ impl ShutterSamples {
             return (k == (self.count - 1) / 2).then_some(1.0);
         }
         let stride = (self.count - 1) / (n - 1);
-        (k % stride == 0).then_some(1.0 / n as f32)
+        k.is_multiple_of(stride).then_some(1.0 / n as f32)
     }
 
     /// The instances a frame draws for each one of a still frame: the mean of the ghosts' samples.
