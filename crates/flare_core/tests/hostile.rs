@@ -267,6 +267,33 @@ fn lens_is_finite(lens: &flare_core::optics::Lens) -> bool {
     })
 }
 
+/// A 3^3 `.cube` (identity but for a warmer red).
+fn small_cube() -> String {
+    let mut text = String::from("TITLE \"t\"\nLUT_3D_SIZE 3\n");
+    for b in 0..3 {
+        for g in 0..3 {
+            for r in 0..3 {
+                text += &format!("{} {} {}\n", (r as f32 * 0.55).min(1.0), g as f32 * 0.5, b as f32 * 0.5);
+            }
+        }
+    }
+    text
+}
+
+/// The smallest OCIO config with FlareLab's working space, one display and one view.
+const MINIMAL_CONFIG: &str = r#"ocio_profile_version: 2
+roles:
+  default: Linear Rec.709 (sRGB)
+  scene_linear: Linear Rec.709 (sRGB)
+displays:
+  sRGB:
+    - !<View> {name: Raw, colorspace: Linear Rec.709 (sRGB)}
+colorspaces:
+  - !<ColorSpace>
+    name: Linear Rec.709 (sRGB)
+    encoding: scene-linear
+"#;
+
 fn cases() -> u32 {
     std::env::var("PROPTEST_CASES").ok().and_then(|s| s.parse().ok()).unwrap_or(64)
 }
@@ -369,6 +396,34 @@ proptest! {
         }
     }
 
+    /// Colour files: a mutated `.cube` or OCIO config is refused (naming `cube` or `config`) or makes a view whose
+    /// display values are finite, never a panic.
+    #[test]
+    fn fuzz_colour_files(
+        config in any::<bool>(),
+        flips in proptest::collection::vec((any::<usize>(), any::<u8>()), 0..6),
+        cut in any::<usize>(),
+        at in any::<usize>(),
+        insert in nasty_token(),
+    ) {
+        use flare_core::view_transform::{ColorDoc, ViewTransform};
+        let dir = tempfile::tempdir().unwrap();
+        let (name, source) = if config { ("c.ocio", MINIMAL_CONFIG.to_owned()) } else { ("l.cube", small_cube()) };
+        let bytes = mutate(source.into_bytes(), &flips, cut % 64, at, &insert);
+        let path = dir.path().join(name);
+        std::fs::write(&path, &bytes).unwrap();
+        let file = Some(path.display().to_string());
+        let doc = if config { ColorDoc { config: file, ..Default::default() } } else { ColorDoc { cube: file, ..Default::default() } };
+        match ViewTransform::new(&doc) {
+            Ok(view) => {
+                for c in [[0.0, 0.0, 0.0], [0.18, 0.5, 2.0], [1e4, 1e-4, 1.0]] {
+                    prop_assert!(view.apply(c).iter().all(|v| v.is_finite()));
+                }
+            }
+            Err(e) => prop_assert!(e.field == "cube" || e.field == "config" || e.field == "display" || e.field == "view", "{e}"),
+        }
+    }
+
     /// Images (plates, depth maps, aperture images): a mutated PNG or EXR, or a PNG claiming any size, is
     /// refused or decoded within the limit, never a panic or an allocation past the header's size.
     #[test]
@@ -443,4 +498,19 @@ fn ghost_layers_past_the_memory_budget_are_refused_naming_the_memory() {
     );
     let e = check_ghost_layers(254, 3840, 2160, flare_core::output::ExrPixel::Auto).unwrap_err().to_string();
     assert!(e.contains("254 ghost layers at 3840x2160 need about 12.6 GB") && e.contains("--size"), "{e}");
+}
+
+/// The sources the colour fuzzing mutates are valid as they are (the fuzzing starts from files that load).
+#[test]
+fn the_colour_fuzzings_sources_load() {
+    use flare_core::view_transform::{ColorDoc, ViewTransform};
+    let dir = tempfile::tempdir().unwrap();
+    let (config, cube) = (dir.path().join("c.ocio"), dir.path().join("l.cube"));
+    std::fs::write(&config, MINIMAL_CONFIG).unwrap();
+    std::fs::write(&cube, small_cube()).unwrap();
+    let view =
+        ViewTransform::new(&ColorDoc { config: Some(config.display().to_string()), ..Default::default() }).unwrap();
+    assert_eq!((view.display.as_str(), view.view.as_str()), ("sRGB", "Raw"));
+    assert_eq!(view.apply([0.25, 0.5, 2.0]), [0.25, 0.5, 2.0], "Raw is the identity");
+    ViewTransform::new(&ColorDoc { cube: Some(cube.display().to_string()), ..Default::default() }).unwrap();
 }
