@@ -754,6 +754,23 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         }
     }
     eprintln!("{}", exposure_line(&doc));
+    if let Some(s) = &frame.shutter {
+        eprintln!(
+            "motion blur ({} degree shutter): up to {} time samples, {:.1} a ghost on average; the fastest ghost moves \
+             {:.1} px while it is open, at most {:.2} px between samples",
+            doc.timeline.shutter_deg,
+            s.count,
+            s.mean_per_ghost(),
+            s.longest_px,
+            s.max_gap_px
+        );
+    }
+    if doc.tonemap == flare_core::color::Tonemap::View
+        && let Some(view) = &frame.request.view
+    {
+        let looks = if view.looks.is_empty() { String::new() } else { format!(", looks {}", view.looks) };
+        eprintln!("display: {} / {}{looks} ({})", view.display, view.view, view.config);
+    }
     let st = frame.sprites.stats;
     eprintln!(
         "wrote {} ({width}x{height}): {} ghosts x {} wavelengths, {} sprites drawn, culled {} dim / {} off sensor / {} empty entrance{}",
