@@ -1635,3 +1635,37 @@ fn a_plate_through_the_inverse_view_comes_out_as_shot() {
         String::from_utf8_lossy(&result.stderr)
     );
 }
+
+/// A sequence with an open shutter draws each frame as the still of that frame does (one frame, one truth),
+/// blurred: a 0-degree shutter gives other pixels.
+#[test]
+fn a_sequence_with_a_shutter_is_its_stills_blurred() {
+    let dir = tempfile::tempdir().unwrap();
+    let preset = dir.path().join("moving.json");
+    std::fs::write(
+        &preset,
+        r#"{"version": 3, "timeline": {"interpolation": "linear", "shutter_deg": 180,
+            "light_deg": [{"frame": 1, "value": [-8.0, 3.0]}, {"frame": 11, "value": [8.0, -3.0]}]}}"#,
+    )
+    .unwrap();
+    let p = |name: &str| dir.path().join(name).display().to_string();
+    let render = |extra: &[&str], out: &str| {
+        let mut args = vec!["render", "--preset", preset.to_str().unwrap(), "--size", "160x90", "--device", "cpu"];
+        args.extend_from_slice(extra);
+        args.extend(["-o", out]);
+        let result = flarelab(&args);
+        assert!(result.status.success(), "{args:?}: {}", String::from_utf8_lossy(&result.stderr));
+        String::from_utf8_lossy(&result.stderr).into_owned()
+    };
+    let said = render(&["--frame", "5"], &p("still.png"));
+    assert!(said.contains("motion blur (180 degree shutter)"), "{said}");
+    render(&["--frames", "4-6"], &p("seq.####.png"));
+    render(&["--frame", "5", "--shutter-deg", "0"], &p("sharp.png"));
+    let (still, frame, sharp) = (
+        image::open(p("still.png")).unwrap().to_rgb8(),
+        image::open(p("seq.0005.png")).unwrap().to_rgb8(),
+        image::open(p("sharp.png")).unwrap().to_rgb8(),
+    );
+    assert_eq!(still, frame, "the sequence's frame 5 is the still of frame 5");
+    assert_ne!(still, sharp, "the shutter blurs it");
+}
