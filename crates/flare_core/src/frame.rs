@@ -9,7 +9,9 @@
 //! and solo already folded in, see [`crate::preset::Document::ghost_gains`]) and how LUT ghosts are used.
 //! [`Frame::build`] makes the drawable frame in one pass: the LUT instances first (they say how much of each
 //! non-linear ghost its paraxial sprite keeps), then the paraxial instances with the user's gain times that
-//! weight applied as they are built, and the starburst's placement. Nothing edits a built frame afterwards: a
+//! weight applied as they are built, and the starburst's placement. With a moving light while the shutter is
+//! open ([`FrameRequest::motion`], [`crate::shutter`]) it does so at each time sample and keeps each ghost's
+//! own samples, weighted, in the one frame. Nothing edits a built frame afterwards: a
 //! ghost's own layer is a frame built again with the other ghosts at gain 0 ([`Frame::ghost_alone`]).
 //!
 //! [`Device::draw`] draws a frame into an HDR accumulation (linear relative irradiance, before any gain) and
@@ -18,7 +20,7 @@
 //! [`crate::lut::blend::lut_pass`]. [`Drawn::layers`] turns that into what a compositor gets, every layer at
 //! the frame's size and linear: `flare` (accumulation x `2^flare_ev`), `starburst` (its share of the flare),
 //! `plate` (the plate x `2^plate_ev`) and the composite `flare + plate`, which is what the display image
-//! shows tonemapped; [`ghost_layers`] adds one layer per drawn ghost, each drawn alone on the same device.
+//! shows through the request's display transform ([`FrameRequest::view`], the OCIO view, or a tonemap curve); [`ghost_layers`] adds one layer per drawn ghost, each drawn alone on the same device.
 
 use crate::flare::PreparedFlare;
 use crate::ghost::{GhostFrame, Sensor, light_slopes_for_frame_position};

@@ -1,17 +1,23 @@
-//! Image files: the one writer of every frame FlareLab writes ([`write_frame`]: PNG, 8-bit sRGB tonemapped;
-//! OpenEXR, linear float with named layers), and the reader of background plates ([`read_plate`]).
+//! Image files: the one writer of every frame FlareLab writes ([`write_frame`]: PNG, 8-bit display values;
+//! OpenEXR, linear with named layers), and the reader of background plates ([`read_plate`]).
 //!
 //! # How it works
-//! A PNG holds the display image: the composite `plate x 2^plate_ev + flare x 2^flare_ev`, tonemapped and
-//! sRGB-encoded. An EXR holds the same frame linear, in one part whose channels compositors group by the
-//! prefix before the dot: the default layer `R, G, B, A` is the composite (alpha 1), `flare.R/G/B` the flare
-//! alone (ghosts, LUT ghosts and starburst, to be added over a plate), `starburst.R/G/B` its starburst,
-//! `plate.R/G/B` the exposed plate when there is one, and `ghost_I_J.R/G/B` one layer per drawn ghost when
-//! asked for (16-bit float, each made as its ghost is drawn: [`ExrLayers`]). The other channels are 32-bit float, ZIP-compressed; a value that is not finite is written as the largest
-//! finite float of its sign (+infinity, an overflow, stays the brightest value instead of turning black), NaN as
-//! 0 (none should reach here). Every file is written through [`crate::files::write_atomic`]: a temporary file in the
-//! target's folder renamed over it, so a failed write leaves nothing half-written. Plates: PNG and JPEG are
-//! decoded from sRGB to linear, EXR and Radiance HDR are taken as linear.
+//! A PNG holds the display image: the composite `plate x 2^plate_ev + flare x 2^flare_ev` through the
+//! document's display transform ([`crate::view_transform`]). An EXR holds the same frame linear, in the working
+//! space [`WORKING_SPACE`] (named in a `colorspace` and an `oiio:ColorSpace` attribute, its primaries in
+//! `chromaticities`): the default layer `R, G, B, A` is the composite (alpha 1), `flare.R/G/B` the flare alone
+//! (ghosts, LUT ghosts and starburst, to be added over a plate), `starburst.R/G/B` its starburst,
+//! `plate.R/G/B` the exposed plate when there is one; with ghost layers ([`ExrLayers`], each made as its
+//! ghost is drawn) the file has several parts: those layers in the part `rgba`, and one part `ghost_I_J` per
+//! ghost whose data window is the smallest rectangle holding its lit pixels. Values are 16- or 32-bit floats as
+//! [`ExrSettings::pixel_type`] says ([`ExrPixel::Auto`]: half for a layer whose values all fit half's range,
+//! else float), compressed as [`ExrSettings::compression`] says (ZIP by default). A value that is not finite is
+//! written as the largest finite value of its sign (+infinity, an overflow, stays the brightest value instead
+//! of turning black), NaN as 0 (none should reach here). Every file is written through
+//! [`crate::files::write_atomic`]: a temporary file in the target's folder renamed over it, so a failed write
+//! leaves nothing half-written. [`read_exr_channels`] reads every part of an EXR back, placed in its display
+//! window. Plates: PNG and JPEG are decoded from sRGB to linear, EXR and HDR are taken as linear
+//! ([`read_plate_values`] also gives a file's own values, for an OCIO input space to convert).
 //!
 //! Every image FlareLab reads (plates, depth maps, aperture images, photo LUTs) goes through [`open_image`]
 //! (or, for a depth map's EXR, [`exr_size`]) first: the size is read from the header and refused past

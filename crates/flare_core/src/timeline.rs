@@ -9,7 +9,9 @@
 //! only neighbour), so the motion has no corners at the keys. A smooth curve can overshoot between keys
 //! whose values turn back; a gain evaluated below 0 is taken as 0. A track with no keys has no value: the
 //! document's static value is used ([`crate::preset::Document::light_at`]). Frames are whole numbers; a
-//! fractional frame (the app's playback between frames) interpolates the same way.
+//! fractional frame (the app's playback between frames, an instant while the shutter is open) interpolates
+//! the same way. [`Timeline::shutter_deg`] is the camera's shutter: each frame averages the light over that
+//! share of the frame ([`crate::shutter`]).
 
 use std::collections::BTreeMap;
 
