@@ -1669,3 +1669,60 @@ fn a_sequence_with_a_shutter_is_its_stills_blurred() {
     assert_eq!(still, frame, "the sequence's frame 5 is the still of frame 5");
     assert_ne!(still, sharp, "the shutter blurs it");
 }
+
+/// `trace --start X,Y,Z --dir L,M,N`: any ray by a point and a direction. The pupil form's own rays, given by
+/// a point moved along them (in front of the lens, or the pupil point itself) and a direction of any length,
+/// land where the pupil form lands, image and ghost paths; bad rays are refused with the reason.
+#[test]
+fn trace_from_any_point_lands_where_the_pupil_form_does() {
+    let file = repo("lenses/pbrt_dgauss_50mm.json");
+    let lens = flare_core::optics::formats::load_lens_file(Path::new(&file)).unwrap();
+    let fo = FirstOrder::d_line(&lens).unwrap();
+    let mut checked = 0;
+    for ghost in [None, Some("2,4"), Some("0,9")] {
+        for (theta_deg, py) in [(0.0, 0.5), (10.0, -0.8), (-15.0, 0.25), (5.0, 0.0)] {
+            let ray = pupil_ray(&fo.entrance_pupil(), f64::to_radians(theta_deg), 0.0, py);
+            let mut base = vec![
+                "trace".to_owned(),
+                file.clone(),
+                "--field-deg".into(),
+                theta_deg.to_string(),
+                "--pupil".into(),
+                format!("0,{py}"),
+                "--json".into(),
+            ];
+            if let Some(g) = ghost {
+                base.extend(["--ghost".into(), g.into()]);
+            }
+            let args: Vec<&str> = base.iter().map(String::as_str).collect();
+            let expected = json_of(&flarelab(&args));
+            for (k, scale) in [(0.0, 1.0), (-30.0, 3.0), (-100.0, 0.25)] {
+                let p = ray.origin_mm + ray.direction * k;
+                let d = ray.direction * scale;
+                let start = format!("{:e},{:e},{:e}", p.x, p.y, p.z);
+                let dir = format!("{:e},{:e},{:e}", d.x, d.y, d.z);
+                let mut args = vec!["trace", &file, "--start", &start, "--dir", &dir, "--json"];
+                if let Some(g) = ghost {
+                    args.extend(["--ghost", g]);
+                }
+                let out = json_of(&flarelab(&args));
+                assert_eq!(out["status"], expected["status"], "{args:?}");
+                if expected["status"] == "ok" {
+                    for key in ["x_mm", "y_mm"] {
+                        let (a, b) = (out[key].as_f64().unwrap(), expected[key].as_f64().unwrap());
+                        assert!((a - b).abs() < 1e-9, "{args:?}: {key} {a} vs {b}");
+                    }
+                    checked += 1;
+                }
+            }
+        }
+    }
+    assert!(checked >= 20, "{checked} landings compared");
+    for (dir, why) in [("0,1,-1", "towards the lens"), ("0,0,0", "needs a length")] {
+        let result = flarelab(&["trace", &file, "--start", "0,0,0", "--dir", dir]);
+        assert!(!result.status.success());
+        assert!(String::from_utf8_lossy(&result.stderr).contains(why), "{}", String::from_utf8_lossy(&result.stderr));
+    }
+    let result = flarelab(&["trace", &file, "--field-deg", "3", "--start", "0,0,0", "--dir", "0,0,1"]);
+    assert!(!result.status.success(), "the two forms do not mix");
+}
