@@ -130,6 +130,19 @@ pub struct DisplayImage {
     pub pixels: Vec<[u8; 4]>,
 }
 
+impl DisplayImage {
+    /// The largest difference of any R, G or B value from `other`'s, in 8-bit steps (how a GPU image is
+    /// compared with its CPU twin); images of different sizes differ by 255.
+    pub fn worst_difference(&self, other: &Self) -> u8 {
+        if (self.width, self.height) != (other.width, other.height) {
+            return u8::MAX;
+        }
+        let channels =
+            self.pixels.iter().zip(&other.pixels).flat_map(|(a, b)| (0..3).map(move |c| a[c].abs_diff(b[c])));
+        channels.max().unwrap_or(0)
+    }
+}
+
 /// Luminance-weighted energy of one ghost in the frame and its first moments (pixel coordinates).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct GhostMoments {

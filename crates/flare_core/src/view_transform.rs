@@ -307,24 +307,14 @@ impl ViewTransform {
                 while end < chunk.len() && chunk[end][..3] == chunk[start][..3] {
                     end += 1;
                 }
-                let mut p = chunk[start];
-                self.forward.apply_rgba(&mut p);
-                for v in &mut p[..3] {
-                    if !v.is_finite() {
-                        *v = 0.0;
-                    }
-                }
+                let c = chunk[start];
+                let p = self.apply([c[0], c[1], c[2]]);
                 for q in &mut chunk[start..end] {
-                    q[..3].copy_from_slice(&p[..3]);
+                    q[..3].copy_from_slice(&p);
                 }
                 start = end;
             }
         });
-    }
-
-    /// True when plates are converted by an input space (else they come in by file type).
-    pub fn converts_plates(&self) -> bool {
-        self.input.is_some()
     }
 
     /// A plate's own values (a PNG's encoded ones, an EXR's stored ones) converted to the working space by

@@ -104,14 +104,7 @@ fn the_gpu_runs_the_views_wgsl_as_its_cpu_twin_runs_the_processor() {
         let cpu = frame::draw_cpu(&frame, &sources);
         let gpu = device.draw(&frame, &sources).unwrap();
         assert!(matches!(device, Device::Gpu(_)), "the GPU drew it");
-        let worst = cpu
-            .display
-            .pixels
-            .iter()
-            .zip(&gpu.display.pixels)
-            .flat_map(|(a, b)| (0..3).map(move |c| a[c].abs_diff(b[c])))
-            .max()
-            .unwrap();
+        let worst = cpu.display.worst_difference(&gpu.display);
         println!("{} / {} [{}]: GPU vs CPU twin worst {worst}/255", view.display, view.view, view.looks);
         assert!(worst <= 1, "{view:?}: worst display difference {worst}/255");
     }

@@ -181,14 +181,7 @@ fn the_gpu_draws_the_blurred_frame_as_its_cpu_twin() {
     let cpu = frame::draw_cpu(&built, &sources);
     let mut device = Device::Gpu(Box::new(GpuDrawer::on(ctx)));
     let gpu = device.draw(&built, &sources).unwrap();
-    let worst = cpu
-        .display
-        .pixels
-        .iter()
-        .zip(&gpu.display.pixels)
-        .flat_map(|(a, b)| (0..3).map(move |c| a[c].abs_diff(b[c])))
-        .max()
-        .unwrap();
+    let worst = cpu.display.worst_difference(&gpu.display);
     println!("blurred frame: {} samples, GPU vs CPU twin worst {worst}/255", built.shutter.as_ref().unwrap().count);
     assert!(worst <= 2, "worst display difference {worst}/255");
 }

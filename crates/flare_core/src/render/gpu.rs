@@ -271,6 +271,40 @@ fn vertex_buffer<T>(device: &wgpu::Device, label: &str, capacity: usize) -> wgpu
     })
 }
 
+/// A render pipeline of `module`'s `vs_main` and `fs_main` drawing into one target of `format` (every pass
+/// of the renderer: ghosts, starburst, LUT ghosts and the tonemap of [`super::gpu_view`]).
+pub(super) fn render_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    layout: &wgpu::PipelineLayout,
+    module: &wgpu::ShaderModule,
+    buffers: &[Option<wgpu::VertexBufferLayout>],
+    format: wgpu::TextureFormat,
+    blend: Option<wgpu::BlendState>,
+) -> wgpu::RenderPipeline {
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(label),
+        layout: Some(layout),
+        vertex: wgpu::VertexState {
+            module,
+            entry_point: Some("vs_main"),
+            compilation_options: Default::default(),
+            buffers,
+        },
+        primitive: wgpu::PrimitiveState::default(),
+        depth_stencil: None,
+        multisample: wgpu::MultisampleState::default(),
+        fragment: Some(wgpu::FragmentState {
+            module,
+            entry_point: Some("fs_main"),
+            compilation_options: Default::default(),
+            targets: &[Some(wgpu::ColorTargetState { format, blend, write_mask: wgpu::ColorWrites::ALL })],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
+}
+
 /// The GPU flare renderer.
 pub struct FlareRenderer {
     ghost_pipeline: wgpu::RenderPipeline,
@@ -402,37 +436,17 @@ impl FlareRenderer {
             step_mode: wgpu::VertexStepMode::Instance,
             attributes: &instance_attributes,
         };
-        let pipeline = |label,
-                        layout: &wgpu::PipelineLayout,
-                        module: &wgpu::ShaderModule,
-                        buffers: &[Option<wgpu::VertexBufferLayout>],
-                        format,
-                        blend| {
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(label),
-                layout: Some(layout),
-                vertex: wgpu::VertexState {
-                    module,
-                    entry_point: Some("vs_main"),
-                    compilation_options: Default::default(),
-                    buffers,
-                },
-                primitive: wgpu::PrimitiveState::default(),
-                depth_stencil: None,
-                multisample: wgpu::MultisampleState::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module,
-                    entry_point: Some("fs_main"),
-                    compilation_options: Default::default(),
-                    targets: &[Some(wgpu::ColorTargetState { format, blend, write_mask: wgpu::ColorWrites::ALL })],
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
-        };
-        let ghost_pipeline =
-            pipeline("ghosts", &ghost_pl, &ghosts, &[Some(instance_buffer_layout)], HDR_FORMAT, Some(additive));
-        let starburst_pipeline = pipeline("starburst", &ghost_pl, &starburst_module, &[], HDR_FORMAT, Some(additive));
+        let ghost_pipeline = render_pipeline(
+            device,
+            "ghosts",
+            &ghost_pl,
+            &ghosts,
+            &[Some(instance_buffer_layout)],
+            HDR_FORMAT,
+            Some(additive),
+        );
+        let starburst_pipeline =
+            render_pipeline(device, "starburst", &ghost_pl, &starburst_module, &[], HDR_FORMAT, Some(additive));
         let view_pass = super::gpu_view::ViewPass::new(
             device,
             queue,
@@ -475,7 +489,8 @@ impl FlareRenderer {
                 operation: wgpu::BlendOperation::Add,
             },
         };
-        let lut_add_pipeline = pipeline(
+        let lut_add_pipeline = render_pipeline(
+            device,
             "lut ghosts",
             &lut_pl,
             &lut_module,
@@ -483,8 +498,15 @@ impl FlareRenderer {
             HDR_FORMAT,
             Some(additive),
         );
-        let lut_over_pipeline =
-            pipeline("lut ghosts over", &lut_pl, &lut_module, &[Some(lut_buffer_layout)], HDR_FORMAT, Some(over));
+        let lut_over_pipeline = render_pipeline(
+            device,
+            "lut ghosts over",
+            &lut_pl,
+            &lut_module,
+            &[Some(lut_buffer_layout)],
+            HDR_FORMAT,
+            Some(over),
+        );
         let globals = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("globals"),
             size: std::mem::size_of::<Globals>() as u64,
