@@ -4,7 +4,42 @@
 //! [`storage`] creates a buffer and writes its contents through the queue rather than mapping it at creation:
 //! on a lost device that is an error the device records (and the frame pipeline reports), never a panic. The
 //! renderer's passes, the ray grids and the depth of field all upload through it. [`compute_pipeline`] makes
-//! a compute pipeline with the layout its entry point implies (its bind groups are made from that layout).
+//! a compute pipeline with the layout its entry point implies (its bind groups are made from that layout), and
+//! [`render_pipeline`] a full render pipeline of a shader's `vs_main` and `fs_main` into one target.
+
+/// A render pipeline of `module`'s `vs_main` and `fs_main` drawing into one target of `format` (every pass
+/// of the renderer: ghosts, starburst, LUT ghosts and the tonemap of `gpu_view`).
+pub(crate) fn render_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    layout: &wgpu::PipelineLayout,
+    module: &wgpu::ShaderModule,
+    buffers: &[Option<wgpu::VertexBufferLayout>],
+    format: wgpu::TextureFormat,
+    blend: Option<wgpu::BlendState>,
+) -> wgpu::RenderPipeline {
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(label),
+        layout: Some(layout),
+        vertex: wgpu::VertexState {
+            module,
+            entry_point: Some("vs_main"),
+            compilation_options: Default::default(),
+            buffers,
+        },
+        primitive: wgpu::PrimitiveState::default(),
+        depth_stencil: None,
+        multisample: wgpu::MultisampleState::default(),
+        fragment: Some(wgpu::FragmentState {
+            module,
+            entry_point: Some("fs_main"),
+            compilation_options: Default::default(),
+            targets: &[Some(wgpu::ColorTargetState { format, blend, write_mask: wgpu::ColorWrites::ALL })],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
+}
 
 /// A buffer of `usage` holding `contents`, written through the queue (on a lost device this is an error the
 /// device records, not a panic as a buffer mapped at creation would be).

@@ -31,6 +31,7 @@
 
 use wgpu_profiler::{GpuProfiler, GpuProfilerSettings, GpuTimerQueryResult};
 
+use super::buffers::render_pipeline;
 pub use super::buffers::{HDR_FORMAT, texture_2d};
 use super::gpu_ghosts::ComputeGhosts;
 use super::gpu_lut::{ComputeLut, TILE};
@@ -268,40 +269,6 @@ fn vertex_buffer<T>(device: &wgpu::Device, label: &str, capacity: usize) -> wgpu
         size: (capacity * std::mem::size_of::<T>()) as u64,
         usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
-    })
-}
-
-/// A render pipeline of `module`'s `vs_main` and `fs_main` drawing into one target of `format` (every pass
-/// of the renderer: ghosts, starburst, LUT ghosts and the tonemap of [`super::gpu_view`]).
-pub(super) fn render_pipeline(
-    device: &wgpu::Device,
-    label: &str,
-    layout: &wgpu::PipelineLayout,
-    module: &wgpu::ShaderModule,
-    buffers: &[Option<wgpu::VertexBufferLayout>],
-    format: wgpu::TextureFormat,
-    blend: Option<wgpu::BlendState>,
-) -> wgpu::RenderPipeline {
-    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some(label),
-        layout: Some(layout),
-        vertex: wgpu::VertexState {
-            module,
-            entry_point: Some("vs_main"),
-            compilation_options: Default::default(),
-            buffers,
-        },
-        primitive: wgpu::PrimitiveState::default(),
-        depth_stencil: None,
-        multisample: wgpu::MultisampleState::default(),
-        fragment: Some(wgpu::FragmentState {
-            module,
-            entry_point: Some("fs_main"),
-            compilation_options: Default::default(),
-            targets: &[Some(wgpu::ColorTargetState { format, blend, write_mask: wgpu::ColorWrites::ALL })],
-        }),
-        multiview_mask: None,
-        cache: None,
     })
 }
 

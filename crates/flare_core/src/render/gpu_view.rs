@@ -140,7 +140,7 @@ impl ViewPass {
             source: wgpu::ShaderSource::Wgsl(source.into()),
         });
         let pipeline =
-            super::gpu::render_pipeline(device, "tonemap", &pipeline_layout, &module, &[], target_format, None);
+            super::buffers::render_pipeline(device, "tonemap", &pipeline_layout, &module, &[], target_format, None);
         Self { key: view.key, pipeline, group }
     }
 }
