@@ -80,6 +80,7 @@ fn lens_info(file: &str, as_json: bool, wavelength_nm: f64) -> Result<()> {
                     "nd": s.medium.n_d, "vd": s.medium.v_d, "glass": s.medium.glass,
                     "semi_aperture_mm": s.semi_aperture_mm, "stop": s.stop,
                     "conic": s.conic, "aspheric_r2": s.aspheric_r2, "aspheric": s.aspheric,
+                    "radius_x_mm": s.radius_x_mm,
                     "dispersion": s.medium.dispersion().describe(),
                 })
             })
@@ -96,6 +97,9 @@ fn lens_info(file: &str, as_json: bool, wavelength_nm: f64) -> Result<()> {
             "dispersion_assumed_surfaces": assumed,
             "surface_table": table,
             "warnings": warnings,
+            "sections": fo.sections.as_ref().map(|both| json!({
+                "x": section_json(&both[0]), "y": section_json(&both[1]),
+            })),
         });
         println!("{}", serde_json::to_string_pretty(&out)?);
         return Ok(());
@@ -117,6 +121,25 @@ fn lens_info(file: &str, as_json: bool, wavelength_nm: f64) -> Result<()> {
     );
     println!("    exit pupil                {:>12.6} mm from the last vertex", fo.exit_pupil_z_mm);
     println!("    total track (to sensor)   {:>12.6} mm", fo.total_track_mm);
+    if let Some(both) = &fo.sections {
+        println!("  anamorphic: each section focuses on its own (the sensor sits half way, the plane of least confusion)");
+        for (word, s) in [("x", &both[0]), ("y", &both[1])] {
+            println!(
+                "    {word} section: EFL {:>11.6} mm, focus {:.6} mm behind the first vertex ({:+.6} mm from the \
+                 sensor), entrance pupil {:.6} mm at {:.6} mm, f/{:.4}",
+                s.efl_mm,
+                s.total_track_mm,
+                s.total_track_mm - fo.total_track_mm,
+                s.entrance_pupil_diameter_mm,
+                s.entrance_pupil_z_mm,
+                s.f_number
+            );
+        }
+        println!(
+            "    squeeze (EFL y / EFL x): {:.6}",
+            both[1].efl_mm / both[0].efl_mm
+        );
+    }
     println!();
     println!(
         "  {:>3} {:>12} {:>10} {:>8} {:>6} {:>8} {:>9}  dispersion",
@@ -133,7 +156,10 @@ fn lens_info(file: &str, as_json: bool, wavelength_nm: f64) -> Result<()> {
             s.semi_aperture_mm,
             s.medium.dispersion().describe(),
             if s.stop { "  (stop)" } else { "" },
-            if s.is_spherical() {
+            if let Some(r_x) = s.radius_x_mm {
+                let r_x = if r_x == 0.0 { "flat".to_owned() } else { format!("{r_x:.4}") };
+                format!("  (toroid: x-z radius {r_x}; y-z profile k {}, r^4.. {:?})", s.conic, s.aspheric)
+            } else if s.is_spherical() {
                 String::new()
             } else {
                 format!("  (asphere: k {}, r^2 {:e}, r^4.. {:?})", s.conic, s.aspheric_r2, s.aspheric)
@@ -148,6 +174,15 @@ fn lens_info(file: &str, as_json: bool, wavelength_nm: f64) -> Result<()> {
         println!("  warning: {warning}");
     }
     Ok(())
+}
+
+/// One section's first-order data in `lens info --json`.
+fn section_json(fo: &FirstOrder) -> serde_json::Value {
+    json!({
+        "efl_mm": fo.efl_mm, "focus_z_mm": fo.total_track_mm, "bfd_mm": fo.bfd_mm,
+        "entrance_pupil_z_mm": fo.entrance_pupil_z_mm, "entrance_pupil_diameter_mm": fo.entrance_pupil_diameter_mm,
+        "f_number": fo.f_number,
+    })
 }
 
 fn lens_list(as_json: bool) -> Result<()> {

@@ -19,6 +19,14 @@
 //!   `PARM 1`) and the even terms `A4, A6, ...` (`aspheric`, from r^4 up). The sag is defined where the
 //!   square root is real; [`Surface::sag_limit_mm`] says how far, and validation refuses a clear aperture
 //!   beyond it. Paraxial optics sees the vertex curvature `c + 2 A2` ([`Surface::vertex_curvature_per_mm`]).
+//! - An anamorphic (toroidal) surface, Zemax's `TOROIDAL`, is the curve above drawn in the y-z section
+//!   (`radius_mm`, `conic`, the aspheric terms: its sag `z_y(y)`) and swept about an axis parallel to y that
+//!   crosses the optical axis at `radius_x_mm` from the vertex (the radius of the x-z section):
+//!   `z(x, y) = z_y + c_x x^2 / (w + sqrt(w^2 - c_x^2 x^2))`, `w = 1 - c_x z_y`, `c_x = 1 / radius_x_mm`.
+//!   `radius_x_mm = 0` is flat in x (a cylinder with power in y, its axis along x); `radius_mm = 0` with a
+//!   `radius_x_mm` is a cylinder with power in x (axis along y). A surface without `radius_x_mm` is a surface
+//!   of revolution, as everywhere above. The sag is defined where `w > 0` and `w^2 >= c_x^2 x^2`
+//!   (the vertex side of the torus); validation refuses a clear aperture beyond that.
 //! - The medium of a surface is the one *after* it (on its +z side); the object space before surface 0 is
 //!   air, and so is the image space after the last surface (the sensor sits in air).
 //! - Heights x, y are measured from the axis, y in the meridional (y-z) plane; angles in radians unless a
@@ -151,6 +159,10 @@ pub struct Surface {
     /// The even aspheric terms A4, A6, A8, ... (from r^4 up; A_2i in mm^(1-2i)).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub aspheric: Vec<f64>,
+    /// Radius of the x-z section of a toroidal surface (Zemax `TOROIDAL`'s radius of rotation; 0 = flat in
+    /// x): `None` for a surface of revolution. See the sign convention above.
+    #[serde(rename = "radius_x", default, skip_serializing_if = "Option::is_none")]
+    pub radius_x_mm: Option<f64>,
     /// Clear semi-aperture (half the clear diameter).
     #[serde(rename = "semi_aperture")]
     pub semi_aperture_mm: f64,
@@ -188,6 +200,7 @@ impl Surface {
             conic: 0.0,
             aspheric_r2: 0.0,
             aspheric: Vec::new(),
+            radius_x_mm: None,
             semi_aperture_mm,
             stop: false,
             coating: Coating::Uncoated,
@@ -204,9 +217,35 @@ impl Surface {
         self.radius_mm == 0.0
     }
 
-    /// True for a sphere or plane: no conic constant and no aspheric term.
+    /// True for a sphere or plane: no conic constant, no aspheric term, not toroidal.
     pub fn is_spherical(&self) -> bool {
-        self.conic == 0.0 && self.aspheric_r2 == 0.0 && self.aspheric.iter().all(|&a| a == 0.0)
+        self.conic == 0.0
+            && self.aspheric_r2 == 0.0
+            && self.aspheric.iter().all(|&a| a == 0.0)
+            && self.radius_x_mm.is_none()
+    }
+
+    /// True for a toroidal (anamorphic) surface: one with a radius of its own in the x-z section.
+    pub fn is_toroidal(&self) -> bool {
+        self.radius_x_mm.is_some()
+    }
+
+    /// Curvature of the x-z section at the vertex, 1/mm: `1 / radius_x_mm` for a toroid (0 when flat in
+    /// x), the vertex curvature of the surface of revolution otherwise.
+    pub fn vertex_curvature_x_per_mm(&self) -> f64 {
+        match self.radius_x_mm {
+            Some(r) if r == 0.0 => 0.0,
+            Some(r) => 1.0 / r,
+            None => self.vertex_curvature_per_mm(),
+        }
+    }
+
+    /// The vertex curvature paraxial optics sees in `section` (the y-z section: [`Self::vertex_curvature_per_mm`]).
+    pub fn section_curvature_per_mm(&self, section: Section) -> f64 {
+        match section {
+            Section::Y => self.vertex_curvature_per_mm(),
+            Section::X => self.vertex_curvature_x_per_mm(),
+        }
     }
 
     /// The curvature paraxial optics sees at the vertex: `c + 2 A2` (the conic and the terms from r^4 up
@@ -220,10 +259,16 @@ impl Surface {
         SurfaceShape::of(self)
     }
 
-    /// Sag (z offset from the vertex) at height `h_mm`, or `None` where it is not defined (beyond
-    /// [`Self::sag_limit_mm`], or not finite).
+    /// Sag (z offset from the vertex) at height `h_mm` in the y-z section, or `None` where it is not defined
+    /// (beyond [`Self::sag_limit_mm`], or not finite). For a surface of revolution, the sag at any point at
+    /// that distance from the axis.
     pub fn sag_mm(&self, h_mm: f64) -> Option<f64> {
         self.shape().sag_mm(h_mm * h_mm)
+    }
+
+    /// Sag at the point (`x_mm`, `y_mm`) of the surface, toroidal or not; `None` where it is not defined.
+    pub fn sag_xy_mm(&self, x_mm: f64, y_mm: f64) -> Option<f64> {
+        self.shape().sag_xy_mm(x_mm, y_mm)
     }
 
     /// The largest height at which the sag is defined: `1 / (|c| sqrt(1 + k))` when `(1 + k) c^2 > 0`
@@ -243,8 +288,14 @@ pub struct SurfaceShape {
     pub a2: f64,
     /// A4, A6, ... A16.
     pub terms: [f64; MAX_ASPHERIC_TERMS],
-    /// True when the conic and every term are 0 (the tracer then uses the exact sphere formulas alone).
+    /// True when the conic and every term are 0 and the surface is not toroidal (the tracer then uses the
+    /// exact sphere formulas alone).
     pub spherical: bool,
+    /// True for a toroid: the y-z profile above swept with the x-z curvature `curvature_x_per_mm`.
+    pub toroidal: bool,
+    /// Curvature of a toroid's x-z section at the vertex (1 / radius of rotation; 0: flat in x). Unused (0)
+    /// on a surface of revolution.
+    pub curvature_x_per_mm: f64,
 }
 
 impl SurfaceShape {
@@ -259,7 +310,46 @@ impl SurfaceShape {
             a2: s.aspheric_r2,
             terms,
             spherical: s.is_spherical(),
+            toroidal: s.is_toroidal(),
+            curvature_x_per_mm: if s.is_toroidal() { s.vertex_curvature_x_per_mm() } else { 0.0 },
         }
+    }
+
+    /// Sag at the point (x, y), on the vertex side of a toroid (see the module's notes); `None` where it is not
+    /// defined. A surface of revolution gives [`Self::sag_mm`] at `x^2 + y^2`.
+    pub fn sag_xy_mm(&self, x: f64, y: f64) -> Option<f64> {
+        if !self.toroidal {
+            return self.sag_mm(x * x + y * y);
+        }
+        let z_y = self.sag_mm(y * y)?;
+        let c_x = self.curvature_x_per_mm;
+        let w = 1.0 - c_x * z_y;
+        let root = w * w - c_x * c_x * x * x;
+        if w <= 0.0 || root < 0.0 {
+            return None;
+        }
+        let z = z_y + c_x * x * x / (w + root.sqrt());
+        z.is_finite().then_some(z)
+    }
+
+    /// The slopes (dz/dx, dz/dy) at (x, y); `None` where the sag is not defined or the slope is infinite. On a
+    /// toroid, from the torus `(1 - c_x z)^2 + c_x^2 x^2 = (1 - c_x z_y)^2`: `dz/dx = c_x x / (1 - c_x z)` and
+    /// `dz/dy = (1 - c_x z_y) z_y' / (1 - c_x z)`.
+    pub fn sag_gradient(&self, x: f64, y: f64) -> Option<[f64; 2]> {
+        if !self.toroidal {
+            let m = self.slope_over_r(x * x + y * y)?;
+            return Some([m * x, m * y]);
+        }
+        let z_y = self.sag_mm(y * y)?;
+        let dz_y = y * self.slope_over_r(y * y)?;
+        let z = self.sag_xy_mm(x, y)?;
+        let c_x = self.curvature_x_per_mm;
+        let w = 1.0 - c_x * z;
+        if w <= 0.0 {
+            return None;
+        }
+        let g = [c_x * x / w, (1.0 - c_x * z_y) * dz_y / w];
+        (g[0].is_finite() && g[1].is_finite()).then_some(g)
     }
 
     /// The conic part's square-root argument `1 - (1 + k) c^2 r^2` at `r2 = r^2`.
@@ -305,6 +395,29 @@ impl SurfaceShape {
     }
 }
 
+/// One of the two principal sections of a lens whose toroidal surfaces are aligned with x and y: near the
+/// axis such a lens acts on x and on y separately, each by the 2x2 matrices of the surfaces of revolution
+/// with that section's vertex curvatures ([`Lens::section`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Section {
+    /// The x-z section (horizontal on the sensor).
+    X,
+    /// The y-z section (vertical; the meridional plane of the reference figures).
+    Y,
+}
+
+impl Section {
+    pub const BOTH: [Section; 2] = [Section::X, Section::Y];
+
+    pub fn word(self) -> &'static str {
+        match self {
+            Section::X => "x",
+            Section::Y => "y",
+        }
+    }
+}
+
 /// A lens prescription. Unknown top-level keys of a JSON file are kept in `extra` and written back.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Lens {
@@ -345,6 +458,29 @@ impl Lens {
     /// Number of interfaces, the stop included.
     pub fn number_of_surfaces(&self) -> usize {
         self.surfaces.len()
+    }
+
+    /// True when any surface is toroidal: the lens is not rotationally symmetric, and acts on x and y apart.
+    pub fn is_anamorphic(&self) -> bool {
+        self.surfaces.iter().any(Surface::is_toroidal)
+    }
+
+    /// The lens of revolution that `section` of this lens sees paraxially: each toroid becomes the sphere of
+    /// that section's vertex curvature (in the y-z section, the profile itself with its conic and aspheric
+    /// terms, which paraxial optics reads only through the vertex curvature). A lens of revolution is its own
+    /// section, unchanged.
+    pub fn section(&self, section: Section) -> Lens {
+        let mut lens = self.clone();
+        for s in lens.surfaces.iter_mut().filter(|s| s.is_toroidal()) {
+            if section == Section::X {
+                let c = s.vertex_curvature_x_per_mm();
+                s.radius_mm = if c == 0.0 { 0.0 } else { 1.0 / c };
+                (s.conic, s.aspheric_r2) = (0.0, 0.0);
+                s.aspheric.clear();
+            }
+            s.radius_x_mm = None;
+        }
+        lens
     }
 
     /// Index of the aperture stop. Valid lenses have exactly one.
@@ -576,29 +712,43 @@ impl Lens {
             let (a, b) = (&self.surfaces[k], &self.surfaces[k + 1]);
             let h_max = a.semi_aperture_mm.min(b.semi_aperture_mm);
             let t = a.thickness_mm.unwrap_or(0.0);
-            let gap = |h: f64| match (a.sag_mm(h), b.sag_mm(h)) {
-                (Some(sag_a), Some(sag_b)) => t + sag_b - sag_a,
-                _ => f64::INFINITY,
-            };
-            let crosses = |h: f64| gap(h) < -EDGE_OVERLAP_TOLERANCE_MM;
-            let samples = 512;
-            let Some(i) = (1..=samples).find(|&i| crosses(h_max * i as f64 / samples as f64)) else { continue };
-            // The meeting point lies between the last height that does not cross and the first that does.
-            let (mut lo, mut hi) = (h_max * (i - 1) as f64 / samples as f64, h_max * i as f64 / samples as f64);
-            while hi - lo > 1e-9 {
-                let mid = 0.5 * (lo + hi);
-                if gap(mid) < 0.0 { hi = mid } else { lo = mid }
+            // The y-z section; the x-z section too where a toroid makes it differ.
+            let sections: &[Section] =
+                if a.is_toroidal() || b.is_toroidal() { &[Section::Y, Section::X] } else { &[Section::Y] };
+            for &section in sections {
+                let sag = |s: &Surface, h: f64| match section {
+                    Section::Y => s.sag_mm(h),
+                    Section::X => s.sag_xy_mm(h, 0.0),
+                };
+                let gap = |h: f64| match (sag(a, h), sag(b, h)) {
+                    (Some(sag_a), Some(sag_b)) => t + sag_b - sag_a,
+                    _ => f64::INFINITY,
+                };
+                if let Some(crossing) = first_crossing(k, gap, h_max, [a.semi_aperture_mm, b.semi_aperture_mm]) {
+                    out.push(crossing);
+                    break;
+                }
             }
-            out.push(EdgeCrossing {
-                surface: k,
-                meet_height_mm: lo,
-                semi_apertures_mm: [a.semi_aperture_mm, b.semi_aperture_mm],
-                gap_at_edge_mm: gap(h_max),
-            });
         }
         out
     }
 }
+
+/// Where the edge gap `gap(h)` first drops below `-EDGE_OVERLAP_TOLERANCE_MM` over `0..=h_max` (sampled,
+/// then bisected to 1e-9 mm), as the crossing of surfaces `k` and `k + 1`.
+fn first_crossing(k: usize, gap: impl Fn(f64) -> f64, h_max: f64, semi_apertures_mm: [f64; 2]) -> Option<EdgeCrossing> {
+    let crosses = |h: f64| gap(h) < -EDGE_OVERLAP_TOLERANCE_MM;
+    let samples = 512;
+    let i = (1..=samples).find(|&i| crosses(h_max * i as f64 / samples as f64))?;
+    // The meeting point lies between the last height that does not cross and the first that does.
+    let (mut lo, mut hi) = (h_max * (i - 1) as f64 / samples as f64, h_max * i as f64 / samples as f64);
+    while hi - lo > 1e-9 {
+        let mid = 0.5 * (lo + hi);
+        if gap(mid) < 0.0 { hi = mid } else { lo = mid }
+    }
+    Some(EdgeCrossing { surface: k, meet_height_mm: lo, semi_apertures_mm, gap_at_edge_mm: gap(h_max) })
+}
+
 
 /// Two neighbouring surfaces, `surface` and `surface + 1`, that cross inside their clear apertures.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -704,6 +854,18 @@ fn validate_shape(k: usize, s: &Surface, r: f64, h: f64) -> Result<(), LensError
         };
         return Err(LensError::field(k, if conic == 0.0 { "radius" } else { "conic" }, reason));
     }
+    if let Some(r_x) = s.radius_x_mm {
+        finite(k, "radius_x", r_x)?;
+        if s.stop {
+            return Err(LensError::field(
+                k,
+                "radius_x",
+                "the aperture stop must be a surface of revolution (the iris is round); put the stop on a flat \
+                 surface of its own",
+            ));
+        }
+        return validate_toroid(k, s, h);
+    }
     if !s.is_spherical() {
         let shape = s.shape();
         for i in 0..=SAG_SAMPLES {
@@ -716,6 +878,34 @@ fn validate_shape(k: usize, s: &Surface, r: f64, h: f64) -> Result<(), LensError
                     format!(
                         "the sag is not finite at a height of {} mm, inside the clear semi-aperture {} mm",
                         round(height),
+                        round(h)
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// A toroid's sag and slopes must be defined over the whole clear disc `x^2 + y^2 <= h^2`: sampled on
+/// [`SAG_SAMPLES`] rings of 64 azimuths (the torus's own limit `w^2 >= c_x^2 x^2` is widest at the rim).
+fn validate_toroid(k: usize, s: &Surface, h: f64) -> Result<(), LensError> {
+    let shape = s.shape();
+    let azimuths = 64;
+    for i in 0..=SAG_SAMPLES {
+        let r = h * i as f64 / SAG_SAMPLES as f64;
+        for a in 0..azimuths {
+            let phi = std::f64::consts::TAU * f64::from(a) / f64::from(azimuths);
+            let (x, y) = (r * phi.cos(), r * phi.sin());
+            if shape.sag_xy_mm(x, y).is_none() || shape.sag_gradient(x, y).is_none() {
+                let field = if shape.sag_mm(y * y).is_none() { "radius" } else { "radius_x" };
+                return Err(LensError::field(
+                    k,
+                    field,
+                    format!(
+                        "the toroid is not defined at (x, y) = ({}, {}) mm, inside the clear semi-aperture {} mm",
+                        round(x),
+                        round(y),
                         round(h)
                     ),
                 ));

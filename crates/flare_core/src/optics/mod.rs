@@ -23,7 +23,7 @@ pub mod tolerance;
 pub mod trace;
 
 pub use glass::D_LINE_NM;
-pub use lens::{Coating, CoatingLayer, Lens, LensError, Medium, Surface};
+pub use lens::{Coating, CoatingLayer, Lens, LensError, Medium, Section, Surface};
 pub use paraxial::{EntrancePupil, FirstOrder, Mat2, ParaxialError, PathMatrices};
 pub use path::{Interaction, LightPath, PathKind, Step};
 #[cfg(target_arch = "x86_64")]

@@ -17,6 +17,10 @@
 //! space) to the sensor. From the image path come the first-order data ([`FirstOrder`]); for a ghost the
 //! matrix is split where the path crosses the stop: `M_f = M_s M_a` ([`PathMatrices`]).
 //!
+//! An anamorphic lens (toroidal surfaces aligned with x and y) acts near the axis on x and y apart, each by
+//! these matrices with that section's vertex curvatures: [`Lens::section`] gives the lens of revolution of
+//! each section, and [`FirstOrder`] keeps both sections' data.
+//!
 //! Singular cases: a lens whose system matrix has C = 0 is afocal (no focus) and one whose entrance-to-stop
 //! matrix has A = 0 has its entrance pupil at infinity; both are refused by [`FirstOrder::compute`] with
 //! the reason, so no division by zero ever happens downstream.
@@ -24,7 +28,7 @@
 use serde::Serialize;
 
 use super::glass::D_LINE_NM;
-use super::lens::Lens;
+use super::lens::{Lens, Section};
 use super::path::{Interaction, LightPath};
 
 /// A 2x2 ray-transfer matrix acting on (y, u): `[[a, b], [c, d]]`.
@@ -207,6 +211,13 @@ pub struct FirstOrder {
     pub total_track_mm: f64,
     /// The system matrix, entrance plane to last vertex.
     pub system: Mat2,
+    /// For an anamorphic lens, the first-order data of each section (x, y), each the lens of revolution
+    /// [`Lens::section`] gives; `None` for a lens of revolution. An anamorphic lens's own fields are its y-z
+    /// section's, but for the sensor plane: `total_track_mm` (and `bfd_mm` with it) is half way between the
+    /// two sections' paraxial foci, the plane of least confusion (both sections focus there when the lens is
+    /// designed to, as an anamorphic camera lens is).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sections: Option<Box<[FirstOrder; 2]>>,
 }
 
 impl FirstOrder {
@@ -216,6 +227,31 @@ impl FirstOrder {
     }
 
     pub fn compute(lens: &Lens, wavelength_nm: f64) -> Result<Self, ParaxialError> {
+        if !lens.is_anamorphic() {
+            return Self::of_revolution(lens, wavelength_nm);
+        }
+        let x = Self::of_revolution(&lens.section(Section::X), wavelength_nm)?;
+        let y = Self::of_revolution(&lens.section(Section::Y), wavelength_nm)?;
+        let z_last = y.total_track_mm - y.bfd_mm;
+        let total_track_mm = 0.5 * (x.total_track_mm + y.total_track_mm);
+        Ok(Self {
+            total_track_mm,
+            bfd_mm: total_track_mm - z_last,
+            sections: Some(Box::new([x, y.clone()])),
+            ..y
+        })
+    }
+
+    /// The first-order data of `section` (the lens's own for a lens of revolution).
+    pub fn section(&self, section: Section) -> &FirstOrder {
+        match (&self.sections, section) {
+            (Some(both), Section::X) => &both[0],
+            (Some(both), Section::Y) => &both[1],
+            (None, _) => self,
+        }
+    }
+
+    fn of_revolution(lens: &Lens, wavelength_nm: f64) -> Result<Self, ParaxialError> {
         let image = LightPath::image(lens);
         let z = lens.vertex_z_mm();
         let z_last = *z.last().unwrap_or(&0.0);
@@ -252,6 +288,7 @@ impl FirstOrder {
             stop_surface: stop,
             total_track_mm: z_last + bfd_mm,
             system,
+            sections: None,
         })
     }
 

@@ -1,4 +1,5 @@
-//! Exact sequential ray tracing in 3D, in f64, through spherical, flat, conic and even-aspheric interfaces.
+//! Exact sequential ray tracing in 3D, in f64, through spherical, flat, conic, even-aspheric and toroidal
+//! (anamorphic) interfaces.
 //!
 //! # How it works
 //! A [`Tracer`] is made once per (lens, light path, wavelength): it resolves each [`Step`] of the
@@ -12,8 +13,10 @@
 //! `c (x^2 + y^2 + (1 + k) z^2) - 2 z = 0` (or from the vertex plane where the line misses the quadric) and
 //! then solves `z(s) - sag(r(s)) = 0` by Newton's method, at most [`MAX_NEWTON_STEPS`] steps, until a step is
 //! below 1e-13 of the distance; a line that leaves the region where the sag is defined, or does not
-//! converge, missed the surface. So a sphere is met as a whole sphere (the reference figures' convention, even
-//! off the hemisphere the sag describes), while a conic or asphere is met only on the branch its sag describes. Its normal is `(-m x, -m y, 1) / sqrt(1 + m^2 r^2)` with `m = (dz/dr) / r`.
+//! converge, missed the surface. A toroid (no rotational symmetry) starts Newton's method on
+//! `z(s) - sag(x(s), y(s))` from the vertex plane, its normal from the two slopes of its sag. So a sphere is met
+//! as a whole sphere (the reference figures' convention, even off the hemisphere the sag describes), while a
+//! conic, asphere or toroid is met only on the branch its sag describes. Its normal is `(-m x, -m y, 1) / sqrt(1 + m^2 r^2)` with `m = (dz/dr) / r`.
 //! Then it refracts by
 //! the vector form of Snell's law, `n2 d' = n1 d + (n2 cos t - n1 cos i) N`, or reflects,
 //! `d' = d - 2 (d.N) N`, and finally meets the sensor plane.
@@ -820,6 +823,9 @@ pub fn intersect_shape(p: DVec3, d: DVec3, shape: &SurfaceShape, z_dir: f64) -> 
     if shape.spherical {
         return intersect(p, d, shape.curvature_per_mm, z_dir);
     }
+    if shape.toroidal {
+        return intersect_toroid(p, d, shape);
+    }
     let c = shape.curvature_per_mm;
     let q = 1.0 + shape.conic;
     // The quadric alone, by the same stable root as the sphere: a s^2 + 2 b s + g0 = 0.
@@ -853,11 +859,44 @@ pub fn intersect_shape(p: DVec3, d: DVec3, shape: &SurfaceShape, z_dir: f64) -> 
     None
 }
 
+/// A toroid (see [`crate::optics::lens`]): Newton's method on `z(s) - sag(x(s), y(s)) = 0` from where the line
+/// meets the vertex plane, with the same stopping rule as the aspheres; `None` when the line runs parallel to
+/// the vertex plane, leaves the region where the sag is defined, or does not converge.
+fn intersect_toroid(p: DVec3, d: DVec3, shape: &SurfaceShape) -> Option<f64> {
+    if d.z == 0.0 {
+        return None;
+    }
+    let mut s = -p.z / d.z;
+    for _ in 0..MAX_NEWTON_STEPS {
+        let at = p + s * d;
+        let f = at.z - shape.sag_xy_mm(at.x, at.y)?;
+        let [gx, gy] = shape.sag_gradient(at.x, at.y)?;
+        let derivative = d.z - gx * d.x - gy * d.y;
+        if derivative == 0.0 {
+            return None;
+        }
+        let step = f / derivative;
+        s -= step;
+        if !s.is_finite() {
+            return None;
+        }
+        if step.abs() <= 1e-13 * (1.0 + s.abs()) {
+            return Some(s);
+        }
+    }
+    None
+}
+
 /// Unit normal of `shape` at the point `p` (relative to the vertex, on the surface), pointing to +z at the
 /// vertex; `None` where the slope is infinite (the rim of a sphere or ellipsoid met edge-on).
 pub fn shape_normal(p: DVec3, shape: &SurfaceShape) -> Option<DVec3> {
     if shape.spherical {
         return Some(surface_normal(p, shape.curvature_per_mm));
+    }
+    if shape.toroidal {
+        let [gx, gy] = shape.sag_gradient(p.x, p.y)?;
+        let n = DVec3::new(-gx, -gy, 1.0);
+        return Some(n / n.length());
     }
     let m = shape.slope_over_r(p.x * p.x + p.y * p.y)?;
     let n = DVec3::new(-m * p.x, -m * p.y, 1.0);
