@@ -218,7 +218,7 @@ fn lens_convert(file: &str, to: OutputFormat, output: &Path) -> Result<()> {
     let lens = open_lens(file)?;
     let text = match to {
         OutputFormat::Json => to_json(&lens),
-        OutputFormat::Zmx => zmx::write(&lens),
+        OutputFormat::Zmx => zmx::write(&lens)?,
         OutputFormat::Dat => pbrt::write(&lens)?,
         OutputFormat::Lens => flaresim::write(&lens)?,
     };

@@ -18,7 +18,8 @@ pub struct TraceArgs {
     /// Field angle of the light in the y-z plane, degrees (|T| < 90); with --pupil.
     #[arg(long, allow_negative_numbers = true, required_unless_present = "start", conflicts_with_all = ["start", "dir"])]
     field_deg: Option<f64>,
-    /// Point of the entrance pupil in units of its radius, e.g. 0,0.5; with --field-deg.
+    /// Point of the entrance pupil in units of its radius, e.g. 0,0.5; with --field-deg (an anamorphic lens's pupil is
+    /// taken as its y-z section's, a circle: --start and --dir aim anywhere).
     #[arg(long, allow_hyphen_values = true, value_parser = parse_pair_f64, requires = "field_deg")]
     pupil: Option<(f64, f64)>,
     /// A point of the incoming ray in lens coordinates (mm; z along the axis, 0 at the first vertex, the
@@ -104,7 +105,8 @@ pub fn run(args: &TraceArgs) -> Result<()> {
             "status": out.status.word(),
             "surface": out.status.surface(),
             "x_mm": landing.map(|p| p.x),
-            "y_mm": landing.map(|p| p.y),
+            "sensor_z_mm": fo.sensor_z_mm(),
+            "section_focus_z_mm": fo.sections.as_ref().map(|b| json!({"x": b[0].sensor_z_mm(), "y": b[1].sensor_z_mm()})),
             "sensor_z_mm": fo.sensor_z_mm(),
             "direction": out.sensor_direction.map(|d| [d.x, d.y, d.z]),
             "clipped_at": out.clipped_at,
@@ -117,6 +119,16 @@ pub fn run(args: &TraceArgs) -> Result<()> {
         });
         println!("{}", serde_json::to_string_pretty(&out)?);
         return Ok(());
+    }
+    if let Some(both) = &fo.sections {
+        println!(
+            "anamorphic lens: the sensor sits at z = {:.6} mm, half way between the x-z focus ({:.6} mm) and the y-z \
+             focus ({:.6} mm){}",
+            fo.sensor_z_mm(),
+            both[0].sensor_z_mm(),
+            both[1].sensor_z_mm(),
+            if args.pupil.is_some() { "; the pupil is the y-z section's" } else { "" }
+        );
     }
     match out.status {
         TraceStatus::Landed => {

@@ -289,6 +289,18 @@ pub enum GhostError {
     Paraxial(#[from] ParaxialError),
     #[error("stop scale {0} must be in (0, 1]")]
     StopScale(f64),
+    #[error(
+        "the lens is anamorphic (toroidal surfaces {surfaces:?}): its ghosts are ellipses with a focus per axis, \
+         which the flare renderers do not draw yet; `flarelab trace` and `flarelab lens info` handle it exactly"
+    )]
+    Anamorphic { surfaces: Vec<usize> },
+}
+
+impl GhostError {
+    /// The refusal of an anamorphic lens, naming its toroidal surfaces.
+    pub fn anamorphic(lens: &Lens) -> Self {
+        Self::Anamorphic { surfaces: (0..lens.surfaces.len()).filter(|&k| lens.surfaces[k].is_toroidal()).collect() }
+    }
 }
 
 /// One ghost's paraxial sprites reduced to a frame: centre and half-size on the sensor (mm) and energy
@@ -332,6 +344,9 @@ impl GhostSystem {
     pub fn build(lens: &Lens, settings: &GhostSettings) -> Result<Self, GhostError> {
         if !(settings.stop_scale > 0.0 && settings.stop_scale <= 1.0) {
             return Err(GhostError::StopScale(settings.stop_scale));
+        }
+        if lens.is_anamorphic() {
+            return Err(GhostError::anamorphic(lens));
         }
         let first_order = FirstOrder::d_line(lens)?;
         let sensor_z = first_order.sensor_z_mm();

@@ -173,3 +173,101 @@ fn the_json_format_keeps_radius_x() {
     assert_eq!(back, lens);
     assert_eq!(back.surfaces.iter().filter(|s| s.is_toroidal()).count(), 4);
 }
+
+#[test]
+fn zemax_toroidal_surfaces_read_and_write_back() {
+    use flare_core::optics::formats::{LensFormat, parse_lens, zmx};
+    let lens = test_lens();
+    let text = zmx::write(&lens).unwrap();
+    assert_eq!(text.matches("TYPE TOROIDAL").count(), 4, "{text}");
+    let back = parse_lens(&text, Some(LensFormat::Zmx), "toroidal_test_lens").unwrap();
+    for (k, (a, b)) in lens.surfaces.iter().zip(&back.surfaces).enumerate() {
+        assert_eq!(a.radius_x_mm, b.radius_x_mm, "surface {k}");
+        assert_eq!((a.conic, a.aspheric_r2, &a.aspheric), (b.conic, b.aspheric_r2, &b.aspheric), "surface {k}");
+        assert!((a.radius_mm - b.radius_mm).abs() <= 1e-12 * a.radius_mm.abs(), "surface {k}");
+    }
+    // A file in inches: PARM 1 (the radius of rotation) is a length, PARM 2 (y^2) is 1/length, PARM 3 (y^4)
+    // 1/length^3; XDAT all 0 (no Zernike terms) is a plain toroid.
+    let inches = "MODE SEQ\nUNIT IN\nSURF 0\n  DISZ INFINITY\nSURF 1\n  TYPE TOROIDAL\n  CURV 0.5\n  CONI -0.25\n  \
+                  PARM 1 -3\n  PARM 2 0.01\n  PARM 3 0.002\n  XDAT 1 0 0 0 0 0 0 \"\"\n  XDAT 2 0 0 0 0 0 0 \"\"\n  \
+                  DISZ 0.2\n  GLAS N-BK7 0 0 1.5168 64.17\n  DIAM 0.4 1 0 0 1 \"\"\nSURF 2\n  STOP\n  CURV 0\n  DISZ 1.5\n  \
+                  DIAM 0.4 1 0 0 1 \"\"\nSURF 3\n";
+    let lens = parse_lens(inches, Some(LensFormat::Zmx), "inches").unwrap();
+    let s = &lens.surfaces[0];
+    let inch = 25.4;
+    assert_eq!(s.radius_x_mm, Some(-3.0 * inch));
+    assert!((s.radius_mm - 2.0 * inch).abs() < 1e-12);
+    assert_eq!(s.conic, -0.25);
+    assert!((s.aspheric_r2 - 0.01 / inch).abs() < 1e-18 && (s.aspheric[0] - 0.002 / inch.powi(3)).abs() < 1e-20);
+    // Zernike terms on the toroid change the surface: refused by line.
+    let zernike = inches.replace("XDAT 2 0 0", "XDAT 2 0.5 0");
+    let e = parse_lens(&zernike, Some(LensFormat::Zmx), "z").unwrap_err().to_string();
+    assert!(e.contains("line 13") && e.contains("XDAT"), "{e}");
+    // A y^16 term cannot be written as a TOROIDAL.
+    let mut long = test_lens();
+    long.surfaces[0].aspheric = vec![1e-7; 7];
+    let e = zmx::write(&long).unwrap_err().to_string();
+    assert!(e.contains("surface 0") && e.contains("y^14"), "{e}");
+    // The formats with spheres only refuse the toroid by name.
+    for e in [
+        flare_core::optics::formats::pbrt::write(&test_lens()).unwrap_err().to_string(),
+        flare_core::optics::formats::flaresim::write(&test_lens()).unwrap_err().to_string(),
+    ] {
+        assert!(e.contains("surface 0"), "{e}");
+    }
+}
+
+/// Random toroids (any radius of rotation of either sign, flat, or barely wider than the clear aperture) on
+/// the test lens, and rays from anywhere in front of it up to grazing: every trace is an outcome, never a NaN,
+/// and a landing is finite; paraxial rays land where each section's paraxial focus says.
+mod stress {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+        #[test]
+        fn toroids_never_give_nan(
+            radii in proptest::collection::vec(prop_oneof![Just(0.0), -400.0..-12.0f64, 12.0..400.0f64], 4),
+            start in (-12.0..12.0f64, -12.0..12.0f64, -40.0..-0.5f64),
+            dir in (-3.0..3.0f64, -3.0..3.0f64, 0.001..1.0f64),
+        ) {
+            let mut lens = test_lens();
+            for (k, r) in [0, 2, 6, 7].into_iter().zip(&radii) {
+                lens.surfaces[k].radius_x_mm = Some(*r);
+            }
+            prop_assume!(lens.validate().is_ok());
+            let Ok(fo) = FirstOrder::d_line(&lens) else { return Ok(()) };
+            let ray = Ray { origin_mm: DVec3::new(start.0, start.1, start.2), direction: DVec3::new(dir.0, dir.1, dir.2) };
+            let mut paths = vec![LightPath::image(&lens)];
+            paths.extend(lens.ghost_pairs().iter().step_by(7).map(|&(i, j)| LightPath::ghost(&lens, i, j).unwrap()));
+            for path in &paths {
+                let out = Tracer::new(&lens, path, D_LINE_NM, fo.sensor_z_mm()).trace(&ray, TraceOptions::default());
+                if out.status == TraceStatus::Landed {
+                    prop_assert!(out.sensor_point_mm.unwrap().is_finite() && out.sensor_direction.unwrap().is_finite());
+                } else {
+                    prop_assert!(out.sensor_point_mm.is_none());
+                }
+            }
+        }
+    }
+
+    /// A ray parallel to the axis, close to it, crosses the axis at each section's own paraxial focus: in x
+    /// at the x-z focus, in y at the y-z focus (the error shrinks like h^2).
+    #[test]
+    fn near_axis_rays_focus_per_section() {
+        let lens = test_lens();
+        let fo = FirstOrder::d_line(&lens).unwrap();
+        for (section, axis) in [(Section::X, DVec3::X), (Section::Y, DVec3::Y)] {
+            let focus = fo.section(section).sensor_z_mm();
+            let tracer = Tracer::new(&lens, &LightPath::image(&lens), D_LINE_NM, focus);
+            let mut errors = Vec::new();
+            for h in [0.02, 0.01] {
+                let ray = Ray { origin_mm: axis * h + DVec3::new(0.0, 0.0, -5.0), direction: DVec3::Z };
+                let landing = tracer.trace(&ray, TraceOptions::default()).sensor_point_mm.unwrap();
+                errors.push(landing.x.hypot(landing.y) / h);
+            }
+            assert!(errors[0] < 1e-3 && errors[1] < errors[0] / 3.0, "{section:?}: {errors:?}");
+        }
+    }
+}

@@ -81,7 +81,7 @@ fn an_even_asphere_reads_with_its_units_and_writes_back() {
     assert!((s.vertex_curvature_per_mm() - (1.0 / (2.0 * inch) + 2.0 * 0.01 / inch)).abs() < 1e-15);
 
     // Written as a .zmx (EVENASPH, CONI, PARM 1..8) and as JSON, it reads back to the same surface.
-    let zmx = flare_core::optics::formats::zmx::write(&loaded.lens);
+    let zmx = flare_core::optics::formats::zmx::write(&loaded.lens).unwrap();
     assert!(zmx.contains("TYPE EVENASPH") && zmx.contains("CONI -0.6") && zmx.contains("PARM 1 "), "{zmx}");
     let again = read_zmx(&zmx).unwrap().lens;
     assert_eq!(again.surfaces[1].conic, s.conic);

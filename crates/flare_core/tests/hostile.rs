@@ -207,7 +207,7 @@ fn lens_sources() -> Vec<(&'static str, Vec<u8>)> {
             use flare_core::optics::formats::{flaresim, pbrt, zmx};
             vec![
                 ("lens.json", flare_core::optics::formats::to_json(&aspheric).into_bytes()),
-                ("lens.zmx", zmx::write(&aspheric).into_bytes()),
+                ("lens.zmx", zmx::write(&aspheric).unwrap().into_bytes()),
                 ("lens.dat", pbrt::write(&lens).unwrap().into_bytes()),
                 ("lens.lens", flaresim::write(&lens).unwrap().into_bytes()),
                 ("lens.xml", OLF_SAMPLE.as_bytes().to_vec()),

@@ -87,6 +87,10 @@ struct LensData {
 }
 
 fn lens_data(lens: &Lens) -> Result<LensData, DofError> {
+    if lens.is_anamorphic() {
+        // Its bokeh is an oval with a focus per axis; the round model would silently be wrong.
+        return Err(DofError::Lens(crate::ghost::GhostError::anamorphic(lens).to_string()));
+    }
     let fo = crate::optics::FirstOrder::d_line(lens).map_err(|e| DofError::Lens(e.to_string()))?;
     let z_last = lens.vertex_z_mm().last().copied().unwrap_or(0.0);
     let m = PathMatrices::compute(lens, &LightPath::image(lens), D_LINE_NM, z_last);

@@ -2,9 +2,12 @@
 //!
 //! # How it works
 //! A `.zmx` file is a list of keyword lines. `SURF n` opens surface n; surface 0 is the object and the last
-//! is the image, the ones between are the lens. Inside a surface FlareLab reads `TYPE` (`STANDARD` or
-//! `EVENASPH`), `CURV` (curvature, 1/length; 0 = flat), `CONI` (conic constant), `PARM n` of an even asphere
-//! (`PARM 1` the r^2 term, `PARM 2..8` the r^4..r^16 terms, scaled by the unit), `DISZ` (thickness to the
+//! is the image, the ones between are the lens. Inside a surface FlareLab reads `TYPE` (`STANDARD`,
+//! `EVENASPH` or `TOROIDAL`), `CURV` (curvature, 1/length; 0 = flat), `CONI` (conic constant), `PARM n` of an
+//! even asphere (`PARM 1` the r^2 term, `PARM 2..8` the r^4..r^16 terms, scaled by the unit) or of a toroid
+//! (`PARM 1` the radius of rotation, 0 for flat in x, `PARM 2` the y^2 term, `PARM 3..8` the y^4..y^14 terms:
+//! `CURV`, `CONI` and these make the y-z profile), `XDAT` of a toroid only where it is 0 (its Zernike terms
+//! are not modelled and are refused by line), `DISZ` (thickness to the
 //! next surface), `GLAS` (name, then two flags, then n_d and V_d of the model or catalogue glass; the name is
 //! looked up in the file's `GCAT` catalogues first, in their order, so `GCAT CDGM` makes `F5` CDGM's), `DIAM` (the
 //! *semi*-diameter) and `STOP`. `UNIT` scales lengths to millimetres and `NAME` names the lens. The system
@@ -49,6 +52,7 @@ struct Block {
     semi_diameter: Option<f64>,
     stop: bool,
     even_asphere: bool,
+    toroidal: bool,
     conic: f64,
     /// PARM 1..8 as read (unscaled), with their lines.
     parms: [(usize, f64); 8],
@@ -145,6 +149,7 @@ pub fn parse(text: &str, id_hint: &str) -> Result<LoadedLens, FormatError> {
             "TYPE" => match tokens.next() {
                 Some("STANDARD") => {}
                 Some("EVENASPH") => blocks.last_mut().unwrap().even_asphere = true,
+                Some("TOROIDAL") => blocks.last_mut().unwrap().toroidal = true,
                 other => return Err(unsupported(line, format!("surface TYPE {}", other.unwrap_or("(none)")))),
             },
             "CURV" => blocks.last_mut().unwrap().curvature = number(line, "CURV", tokens.next())? / scale_to_mm,
@@ -178,7 +183,19 @@ pub fn parse(text: &str, id_hint: &str) -> Result<LoadedLens, FormatError> {
             "SQAP" | "ELAP" | "OBSC" | "OBDC" | "SPID" => {
                 return Err(unsupported(line, format!("aperture {keyword} (only circular clear apertures)")));
             }
-            "XDAT" => return Err(unsupported(line, "extra data XDAT (aspheric or special surface)")),
+            "XDAT" => {
+                // A toroid's extra data are its Zernike terms (their count, the normalisation radius, the
+                // coefficients): all 0 is a plain toroid; anything else changes the surface and is refused.
+                let _index = tokens.next();
+                let value = tokens.next().and_then(|t| t.parse::<f64>().ok());
+                let plain_toroid = blocks.last().is_some_and(|b| b.toroidal) && value == Some(0.0);
+                if !plain_toroid {
+                    return Err(unsupported(
+                        line,
+                        "extra data XDAT (Zernike terms of a TOROIDAL surface, or a special surface's data)",
+                    ));
+                }
+            }
             _ => {}
         }
     }
@@ -257,7 +274,17 @@ fn build(
         let mut surface = Surface::new(radius_mm, Some(b.thickness.unwrap_or(0.0)), medium, semi_aperture_mm);
         surface.stop = b.stop;
         surface.conic = b.conic;
-        if b.even_asphere {
+        if b.toroidal {
+            // PARM 1 is the radius of rotation (a length); PARM n >= 2 multiplies y^(2n - 2), length^(3-2n).
+            let scale = |n: usize| scale_to_mm.powi(3 - 2 * n as i32);
+            surface.radius_x_mm = Some(b.parms[0].1 * scale_to_mm);
+            surface.aspheric_r2 = b.parms[1].1 * scale(2);
+            let mut terms: Vec<f64> = (3..=8).map(|n| b.parms[n - 1].1 * scale(n)).collect();
+            while terms.last() == Some(&0.0) {
+                terms.pop();
+            }
+            surface.aspheric = terms;
+        } else if b.even_asphere {
             // PARM n multiplies r^(2n): in file units it is length^(1-2n).
             let scale = |n: usize| scale_to_mm.powi(1 - 2 * n as i32);
             surface.aspheric_r2 = b.parms[0].1 * scale(1);
@@ -270,7 +297,7 @@ fn build(
         } else if let Some((n, (line, v))) = b.parms.iter().enumerate().find(|(_, (_, v))| *v != 0.0) {
             return Err(unsupported(
                 *line,
-                format!("PARM {} = {v} on a STANDARD surface (only TYPE EVENASPH has them)", n + 1),
+                format!("PARM {} = {v} on a STANDARD surface (only TYPE EVENASPH and TOROIDAL have them)", n + 1),
             ));
         }
         surfaces.push(surface);
@@ -347,9 +374,16 @@ fn size_stop(
     Ok(())
 }
 
-/// The lens as a sequential `.zmx` text (UTF-8, millimetres, STANDARD or EVENASPH surfaces), which [`parse`] reads back
-/// to the same prescription (curvature is stored as 1/R, so radii round-trip to the last bit or one ulp).
-pub fn write(lens: &Lens) -> String {
+/// The lens as a sequential `.zmx` text (UTF-8, millimetres, STANDARD, EVENASPH or TOROIDAL surfaces), which [`parse`]
+/// reads back to the same prescription (curvature is stored as 1/R, so radii round-trip to the last bit or one
+/// ulp). A toroid with an r^16 term is refused: Zemax's TOROIDAL stops at y^14.
+pub fn write(lens: &Lens) -> Result<String, FormatError> {
+    if let Some(k) = lens.surfaces.iter().position(|s| s.is_toroidal() && s.aspheric.len() > MAX_ASPHERIC_TERMS - 1) {
+        return Err(FormatError::Structure {
+            format: FORMAT,
+            message: format!("surface {k} is a toroid with a y^16 term, which Zemax's TOROIDAL (y^2 to y^14) cannot hold"),
+        });
+    }
     let mut out = String::new();
     let mut push = |s: String| {
         out.push_str(&s);
@@ -382,7 +416,9 @@ pub fn write(lens: &Lens) -> String {
         if s.stop {
             push("  STOP".to_owned());
         }
-        if s.is_spherical() {
+        if s.is_toroidal() {
+            push("  TYPE TOROIDAL".to_owned());
+        } else if s.is_spherical() {
             push("  TYPE STANDARD".to_owned());
         } else {
             push("  TYPE EVENASPH".to_owned());
@@ -391,7 +427,13 @@ pub fn write(lens: &Lens) -> String {
         if s.conic != 0.0 {
             push(format!("  CONI {}", exact(s.conic)));
         }
-        if !s.is_spherical() {
+        if let Some(r_x) = s.radius_x_mm {
+            push(format!("  PARM 1 {}", exact(r_x)));
+            push(format!("  PARM 2 {}", exact(s.aspheric_r2)));
+            for n in 3..=8 {
+                push(format!("  PARM {n} {}", exact(s.aspheric.get(n - 3).copied().unwrap_or(0.0))));
+            }
+        } else if !s.is_spherical() {
             push(format!("  PARM 1 {}", exact(s.aspheric_r2)));
             for n in 2..=8 {
                 push(format!("  PARM {n} {}", exact(s.aspheric.get(n - 2).copied().unwrap_or(0.0))));
@@ -413,5 +455,5 @@ pub fn write(lens: &Lens) -> String {
     push("  TYPE STANDARD".to_owned());
     push("  CURV 0.0".to_owned());
     push("  DISZ 0".to_owned());
-    out
+    Ok(out)
 }
