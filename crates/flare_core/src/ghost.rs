@@ -342,13 +342,19 @@ impl GhostSystem {
     /// reflection i < j. Each ghost then costs a few 2x2 products (a test checks the result against
     /// [`PathMatrices::walk`] of the full path).
     pub fn build(lens: &Lens, settings: &GhostSettings) -> Result<Self, GhostError> {
-        if !(settings.stop_scale > 0.0 && settings.stop_scale <= 1.0) {
-            return Err(GhostError::StopScale(settings.stop_scale));
-        }
         if lens.is_anamorphic() {
             return Err(GhostError::anamorphic(lens));
         }
         let first_order = FirstOrder::d_line(lens)?;
+        Self::build_with(lens, settings, first_order)
+    }
+
+    /// [`Self::build`] of the lens of revolution `lens` with the first-order data `first_order` (whose sensor
+    /// plane every path ends on).
+    fn build_with(lens: &Lens, settings: &GhostSettings, first_order: FirstOrder) -> Result<Self, GhostError> {
+        if !(settings.stop_scale > 0.0 && settings.stop_scale <= 1.0) {
+            return Err(GhostError::StopScale(settings.stop_scale));
+        }
         let sensor_z = first_order.sensor_z_mm();
         let z = lens.vertex_z_mm();
         let stop = lens.stop_index();
@@ -690,6 +696,49 @@ impl GhostSystem {
             stop_count: co.stop_count as usize,
             front_map: map(co.front_scale, co.front_offset_per_slope),
         }
+    }
+}
+
+/// The paraxial ghosts of an anamorphic lens, one section at a time: near the axis a lens whose toroids are
+/// aligned with x and y acts on x by the 2x2 matrices of its x-z section and on y by those of its y-z section
+/// (Lee & Eisemann's method holds axis by axis), so each ghost's image of the stop is an ellipse whose x
+/// centre and semi-axis come from the x-z section's ghost system and whose y ones from the y-z section's,
+/// both ending on the anamorphic lens's own sensor plane (half way between the two foci). The sections
+/// reflect at the same surfaces, so their ghosts come in the same order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AnamorphicGhosts {
+    /// The ghosts of the x-z section ([`Lens::section`]).
+    pub x: GhostSystem,
+    /// The ghosts of the y-z section.
+    pub y: GhostSystem,
+}
+
+impl AnamorphicGhosts {
+    /// Both sections' ghost systems of `lens` (anamorphic or not: a lens of revolution gives two equal
+    /// systems), on the lens's sensor plane.
+    pub fn build(lens: &Lens, settings: &GhostSettings) -> Result<Self, GhostError> {
+        let first_order = FirstOrder::d_line(lens)?;
+        let section = |s: crate::optics::Section| {
+            // The section's own first-order data, with the lens's sensor plane.
+            let own = first_order.section(s);
+            let z_last = own.total_track_mm - own.bfd_mm;
+            let at_sensor = FirstOrder {
+                total_track_mm: first_order.total_track_mm,
+                bfd_mm: first_order.total_track_mm - z_last,
+                sections: None,
+                ..own.clone()
+            };
+            GhostSystem::build_with(&lens.section(s), settings, at_sensor)
+        };
+        Ok(Self { x: section(crate::optics::Section::X)?, y: section(crate::optics::Section::Y)? })
+    }
+
+    /// Ghost `g`'s image of the stop at wavelength `w` for light slope `u`: its centre and its semi-axes along
+    /// x and y (mm on the sensor). `None` when a section's stop image is at infinity.
+    pub fn stop_image_ellipse(&self, g: usize, w: usize, u: [f64; 2]) -> Option<([f64; 2], [f64; 2])> {
+        let (cx, rx) = self.x.stop_image_sprite(g, w, u)?;
+        let (cy, ry) = self.y.stop_image_sprite(g, w, u)?;
+        Some(([cx[0], cy[1]], [rx, ry]))
     }
 }
 

@@ -271,3 +271,54 @@ mod stress {
         }
     }
 }
+
+/// The paraxial ghosts of the anamorphic lens, section by section: each ghost's image of the stop is an ellipse
+/// whose centre and semi-axes agree with the independent script's own paraxial trace (slopes along +z, another
+/// convention than FlareLab's) to 1e-9 mm (relative 1e-12 for the huge near-afocal ghosts); and the exact
+/// tracer agrees with the ghost matrices of each section near the axis (the error shrinks like h^2).
+#[test]
+fn ghost_ellipses_match_the_independent_paraxial_trace_and_the_exact_tracer() {
+    use flare_core::ghost::{AnamorphicGhosts, GhostSettings};
+    use flare_core::spectrum::Spectrum;
+    let lens = test_lens();
+    let settings = GhostSettings { spectrum: Spectrum::single(D_LINE_NM).unwrap(), ..Default::default() };
+    let ghosts = AnamorphicGhosts::build(&lens, &settings).unwrap();
+    assert_eq!(ghosts.x.ghosts.len(), 45);
+    let r = figures();
+    let u = [0.03, -0.05];
+    let mut elongated = 0;
+    for e in r["ghost_ellipses"].as_array().unwrap() {
+        let (i, j) = (e["i"].as_u64().unwrap() as usize, e["j"].as_u64().unwrap() as usize);
+        let g = ghosts.x.ghosts.iter().position(|m| (m.i, m.j) == (i, j)).unwrap();
+        assert_eq!((ghosts.y.ghosts[g].i, ghosts.y.ghosts[g].j), (i, j), "both sections list the ghosts alike");
+        let (centre, semi) = ghosts.stop_image_ellipse(g, 0, u).unwrap();
+        let expect = |s: &str, field: &str| e[s][field].as_f64().unwrap();
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 + 1e-12 * b.abs();
+        let what = format!("ghost ({i}, {j})");
+        assert!(close(centre[0], expect("x", "centre_per_slope") * u[0]), "{what}: x centre {}", centre[0]);
+        assert!(close(centre[1], expect("y", "centre_per_slope") * u[1]), "{what}: y centre {}", centre[1]);
+        assert!(close(semi[0], expect("x", "semi_axis_mm")), "{what}: x semi-axis {} vs {}", semi[0], e["x"]);
+        assert!(close(semi[1], expect("y", "semi_axis_mm")), "{what}: y semi-axis {} vs {}", semi[1], e["y"]);
+        elongated += usize::from((semi[0] / semi[1] - 1.0).abs() > 0.05);
+    }
+    assert!(elongated >= 20, "most ghosts of the test lens are ovals: {elongated}");
+    // Exact ghost rays parallel to the axis at height h in one section land at A_f h (the section's ghost
+    // matrix) up to O(h^3).
+    let sensor_z = FirstOrder::d_line(&lens).unwrap().sensor_z_mm();
+    for (g, &(i, j)) in lens.ghost_pairs().iter().enumerate().step_by(4) {
+        let path = LightPath::ghost(&lens, i, j).unwrap();
+        let tracer = Tracer::new(&lens, &path, D_LINE_NM, sensor_z);
+        for (system, axis) in [(&ghosts.x, DVec3::X), (&ghosts.y, DVec3::Y)] {
+            let a_f = system.ghosts[g].per_wavelength[0].matrices.sensor_from_entrance.a;
+            let mut errors = Vec::new();
+            for h in [0.02, 0.01] {
+                let ray = Ray { origin_mm: axis * h + DVec3::new(0.0, 0.0, -5.0), direction: DVec3::Z };
+                let landing = tracer.trace(&ray, TraceOptions::default()).sensor_point_mm.unwrap();
+                errors.push((landing.dot(axis) - a_f * h).abs() / h);
+                assert!(landing.dot(axis.cross(DVec3::Z)).abs() < 1e-12, "({i}, {j}): stays in its section");
+            }
+            assert!(errors[1] <= errors[0] / 3.0 + 1e-9, "({i}, {j}) {axis}: {errors:?} (A_f {a_f})");
+            assert!(errors[0] < 1e-2 * (1.0 + a_f.abs()), "({i}, {j}) {axis}: {errors:?} (A_f {a_f})");
+        }
+    }
+}

@@ -204,8 +204,15 @@ fn lens_sources() -> Vec<(&'static str, Vec<u8>)> {
         .get_or_init(|| {
             let lens = builtin_lens("pbrt_dgauss_50mm").unwrap();
             let aspheric = builtin_lens("aspheric_zoom_us5793533").unwrap();
+            let toroidal = flare_core::optics::formats::load_lens_file(
+                &std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+                    .join("../../tests/data/reference/toroidal/toroidal_test_lens.json"),
+            )
+            .unwrap();
             use flare_core::optics::formats::{flaresim, pbrt, zmx};
             vec![
+                ("toroidal.json", flare_core::optics::formats::to_json(&toroidal).into_bytes()),
+                ("toroidal.zmx", zmx::write(&toroidal).unwrap().into_bytes()),
                 ("lens.json", flare_core::optics::formats::to_json(&aspheric).into_bytes()),
                 ("lens.zmx", zmx::write(&aspheric).unwrap().into_bytes()),
                 ("lens.dat", pbrt::write(&lens).unwrap().into_bytes()),
@@ -263,6 +270,7 @@ fn lens_is_finite(lens: &flare_core::optics::Lens) -> bool {
         s.radius_mm.is_finite()
             && s.semi_aperture_mm.is_finite()
             && s.thickness_mm.is_none_or(f64::is_finite)
+            && s.radius_x_mm.is_none_or(f64::is_finite)
             && s.medium.n_d.is_finite()
     })
 }
@@ -304,7 +312,7 @@ proptest! {
     /// Every lens format: a mutated file is refused in one line or read into a valid, finite lens.
     #[test]
     fn fuzz_lens_files(
-        which in 0usize..5,
+        which in 0usize..7,
         flips in proptest::collection::vec((any::<usize>(), any::<u8>()), 0..6),
         cut in any::<usize>(),
         at in any::<usize>(),

@@ -201,12 +201,45 @@ def section_focus(lens, section):
     return efl, lens["z"][-1] + bfd
 
 
+def ghost_ellipse(lens, path, section):
+    """The stop's image through a ghost path in one section, from this script's own paraxial trace: heights y and
+    slopes u = dy/dz measured along +z whatever the direction of travel, so that a translation is y += (z' - z) u
+    (signed), a refraction n2 u' = n1 u - (n2 - n1) c y and a reflection u' = -u - 2 c y (c the section's vertex
+    curvature). Returns (centre per unit slope, semi-axis) on the sensor: the ray through the stop's centre at its
+    first crossing, and the ray through its rim."""
+    surfaces = lens["surfaces"]
+    stop = next(k for k, s in enumerate(surfaces) if s.stop)
+
+    def run(y0, u0):
+        y, u, z = y0, u0, mp.mpf(0)
+        at_stop = None
+        for k, kind, travel, n1, n2 in steps_of(lens, path):
+            s = surfaces[k]
+            y = y + (lens["z"][k] - z) * u
+            z = lens["z"][k]
+            c = s.cx if (section == "x" and s.toroid) else s.c
+            if kind == "reflect":
+                u = -u - 2 * c * y
+            else:
+                u = (n1 * u - (n2 - n1) * c * y) / n2
+            if k == stop and at_stop is None:
+                at_stop = y
+        return y + (lens["sensor_z"] - z) * u, at_stop
+
+    # Heights are linear in (y0, u): read the matrices off unit rays.
+    f_a, a_a = run(mp.mpf(1), mp.mpf(0))
+    f_b, a_b = run(mp.mpf(0), mp.mpf(1))
+    k = f_b - f_a * a_b / a_a
+    return k, abs(f_a / a_a) * surfaces[stop].semi
+
+
 def main():
     lens = load()
     N = len(lens["surfaces"])
     efl_x, focus_x = section_focus(lens, "x")
     efl_y, focus_y = section_focus(lens, "y")
     sensor_z = (focus_x + focus_y) / 2
+    lens["sensor_z"] = sensor_z
     starts = [(0.0, 0.0), (3.0, 0.0), (0.0, 3.0), (-4.0, 2.5), (5.5, -5.0), (2.0, 7.0), (-7.5, -1.5), (6.0, 6.0)]
     dirs = [(0.0, 0.0, 1.0), (0.08, 0.0, 1.0), (0.0, -0.1, 1.0), (0.05, 0.12, 1.0), (-0.15, 0.07, 1.0)]
     rays = []
@@ -221,7 +254,15 @@ def main():
             r = trace(lens, steps, sensor_z, start, d)
             r.update({"path": path, "start_mm": start, "dir": list(d)})
             rays.append(r)
+    ellipses = []
+    for path in paths[1:]:
+        e = {"i": path[0], "j": path[1]}
+        for section in ("x", "y"):
+            k, r = ghost_ellipse(lens, path, section)
+            e[section] = {"centre_per_slope": float(k), "semi_axis_mm": float(r)}
+        ellipses.append(e)
     out = {
+        "ghost_ellipses": ellipses,
         "about": "made by make_reference.py (mpmath, 50 digits, implicit toroid); see its docstring",
         "lens": "toroidal_test_lens.json",
         "wavelength_nm": 587.5618,
