@@ -10,6 +10,7 @@ struct GhostInstance {
     @location(3) stop1: vec4<f32>,
     @location(4) stop2: vec4<f32>,
     @location(5) front: vec4<f32>,       // front-lens disc map: scale, offset x, offset y, anti-alias width
+    @location(6) scale_y: vec4<f32>,     // the y scales of stop0..2 and front (.x above: x; equal when round)
 };
 
 struct VertexOut {
@@ -20,6 +21,7 @@ struct VertexOut {
     @location(3) stop1: vec4<f32>,
     @location(4) stop2: vec4<f32>,
     @location(5) front: vec4<f32>,
+    @location(6) scale_y: vec4<f32>,
 };
 
 @group(0) @binding(0) var<uniform> globals: Globals;
@@ -44,29 +46,31 @@ fn vs_main(@builtin(vertex_index) vertex: u32, instance: GhostInstance) -> Verte
     out.stop1 = instance.stop1;
     out.stop2 = instance.stop2;
     out.front = instance.front;
+    out.scale_y = instance.scale_y;
     return out;
 }
 
-fn stop_mask(map: vec4<f32>, q: vec2<f32>) -> f32 {
+fn stop_mask(map: vec4<f32>, scale_y: f32, q: vec2<f32>) -> f32 {
     if (map.w == 0.0) {
         return 1.0;
     }
-    return aperture_at(map.x * q + map.yz);
+    return aperture_at(vec2<f32>(map.x, scale_y) * q + map.yz);
 }
 
 // Anti-aliased unit disc: coverage of the front lens's clear aperture.
-fn front_mask(map: vec4<f32>, q: vec2<f32>) -> f32 {
-    let r = length(map.x * q + map.yz);
+fn front_mask(map: vec4<f32>, scale_y: f32, q: vec2<f32>) -> f32 {
+    let r = length(vec2<f32>(map.x, scale_y) * q + map.yz);
     return clamp(0.5 + (1.0 - r) / map.w, 0.0, 1.0);
 }
 
 @fragment
 fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     // The front disc first: outside it nothing passes, and the aperture lookups are skipped.
-    let front = front_mask(in.front, in.q);
+    let front = front_mask(in.front, in.scale_y.w, in.q);
     if (front <= 0.0) {
         return vec4<f32>(0.0);
     }
-    let mask = front * stop_mask(in.stop0, in.q) * stop_mask(in.stop1, in.q) * stop_mask(in.stop2, in.q);
+    let mask = front * stop_mask(in.stop0, in.scale_y.x, in.q) * stop_mask(in.stop1, in.scale_y.y, in.q)
+        * stop_mask(in.stop2, in.scale_y.z, in.q);
     return vec4<f32>(in.colour.rgb * mask, 0.0);
 }

@@ -21,6 +21,7 @@ struct GhostInstance {
     stop1: vec4<f32>,
     stop2: vec4<f32>,
     front: vec4<f32>,       // front-lens disc map: scale, offset x, offset y, anti-alias width
+    scale_y: vec4<f32>,     // the y scales of stop0..2 and front (.x above is the x scale; equal when round)
 };
 
 struct ComputeStrip {
@@ -80,16 +81,16 @@ fn mask_band(v: f32) -> i32 {
 
 // ---- one fragment (ghosts.wgsl's fs_main) ----
 
-fn stop_mask(map: vec4<f32>, q: vec2<f32>) -> f32 {
+fn stop_mask(map: vec4<f32>, scale_y: f32, q: vec2<f32>) -> f32 {
     if (map.w == 0.0) {
         return 1.0;
     }
-    return mask_sample(map.x * q.x + map.y, map.x * q.y + map.z);
+    return mask_sample(map.x * q.x + map.y, scale_y * q.y + map.z);
 }
 
-fn front_mask(map: vec4<f32>, q: vec2<f32>) -> f32 {
+fn front_mask(map: vec4<f32>, scale_y: f32, q: vec2<f32>) -> f32 {
     let x = map.x * q.x + map.y;
-    let y = map.x * q.y + map.z;
+    let y = scale_y * q.y + map.z;
     let r = sqrt(x * x + y * y);
     return clamp(0.5 + (1.0 - r) / map.w, 0.0, 1.0);
 }
@@ -100,20 +101,20 @@ fn mask_product(inst: GhostInstance, front_open: bool, q: vec2<f32>) -> f32 {
     }
     var m = 1.0;
     if (!front_open) {
-        m = front_mask(inst.front, q);
+        m = front_mask(inst.front, inst.scale_y.w, q);
     }
     if (m <= 0.0) {
         return 0.0;
     }
-    m = m * stop_mask(inst.stop0, q);
+    m = m * stop_mask(inst.stop0, inst.scale_y.x, q);
     if (m <= 0.0) {
         return 0.0;
     }
-    m = m * stop_mask(inst.stop1, q);
+    m = m * stop_mask(inst.stop1, inst.scale_y.y, q);
     if (m <= 0.0) {
         return 0.0;
     }
-    return m * stop_mask(inst.stop2, q);
+    return m * stop_mask(inst.stop2, inst.scale_y.z, q);
 }
 
 // ---- intervals of the quad coordinate q_x along a row ----
@@ -207,7 +208,8 @@ fn spans(@builtin(global_invocation_id) gid: vec3<u32>) {
     let sx = strip.scale_x;
     let sy = strip.scale_y;
     let f = inst.front;
-    let front_open = length(vec2<f32>(abs(f.y) + abs(f.x), abs(f.z) + abs(f.x))) <= 1.0 - 0.5 * f.w;
+    let fsy = inst.scale_y.w;
+    let front_open = length(vec2<f32>(abs(f.y) + abs(f.x), abs(f.z) + abs(fsy))) <= 1.0 - 0.5 * f.w;
     let q_y = ((f32(y) + 0.5) * sy - cy) / hy;
     // row_support: where in this row the masks can be non-zero.
     if (abs(q_y) > 1.0) {
@@ -215,13 +217,13 @@ fn spans(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     var support = vec2<f32>(-1.0, 1.0);
     let reach = 1.0 + 0.5 * f.w;
-    let fy = f.x * q_y + f.z;
+    let fy = fsy * q_y + f.z;
     if (abs(fy) > reach || !clip_reach(&support, f.x, f.y, sqrt(max(reach * reach - fy * fy, 0.0)))) {
         return;
     }
     for (var k = 0u; k < 3u; k = k + 1u) {
         let s = stop_of(inst, k);
-        if (s.w != 0.0 && (abs(s.x * q_y + s.z) > 1.0 || !clip_reach(&support, s.x, s.y, 1.0))) {
+        if (s.w != 0.0 && (abs(inst.scale_y[k] * q_y + s.z) > 1.0 || !clip_reach(&support, s.x, s.y, 1.0))) {
             return;
         }
     }
@@ -244,7 +246,7 @@ fn spans(@builtin(global_invocation_id) gid: vec3<u32>) {
         if (s.w == 0.0) {
             continue;
         }
-        let band = mask_band(s.x * q_y + s.z);
+        let band = mask_band(inst.scale_y[k] * q_y + s.z);
         if (band < 0) {
             return;
         }

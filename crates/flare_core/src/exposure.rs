@@ -60,7 +60,7 @@ pub fn ghost_levels(system: &GhostSystem, sensor_width_mm: f64) -> GhostLevels {
     let mut frame_rgb = [0.0f64; 3];
     for s in &frame.sprites {
         // The sprite's share of the frame: its square (the aperture fills most of it), at most the frame.
-        let share = ((2.0 * s.half_size_mm).powi(2) / frame_area).min(1.0);
+        let share = (4.0 * (s.half_size_mm[0] * s.half_size_mm[1]).abs() / frame_area).min(1.0);
         for c in 0..3 {
             per_ghost[s.ghost][c] += s.rgb[c];
             frame_rgb[c] += s.rgb[c] * share;

@@ -190,6 +190,12 @@ impl crate::lut::GhostLut {
         if self.fingerprint_scheme != crate::fingerprint::SCHEME {
             return Err(crate::lut::format::LutError::OldFingerprint { lut_lens: self.lens_id.clone() });
         }
+        if lens.is_anamorphic() {
+            return Err(crate::lut::format::LutError::Header(
+                crate::ghost::GhostError::anamorphic(lens, "a ray-traced LUT (its ghosts are turned with the light)")
+                    .to_string(),
+            ));
+        }
         let live = lut_fingerprint(lens, config);
         if live != self.lens_fingerprint {
             return Err(crate::lut::format::LutError::OtherLens {
@@ -250,7 +256,8 @@ pub fn ray_grid_setup(system: &GhostSystem) -> crate::raytrace::RayGridSetup {
     let entrance_hint: crate::raytrace::EntranceHint = std::sync::Arc::new(move |g, w, u| {
         let front = hint_system.sprite_masks(g * wavelengths + w, u).front_map;
         let radius_mm = hint_system.front_radius_mm;
-        Some((front.offset.map(|o| o * radius_mm), front.scale.abs() * radius_mm))
+        // The entrance region's bounding disc (an anamorphic lens's box has two half-sizes: the larger).
+        Some((front.offset.map(|o| o * radius_mm), front.scale[0].abs().max(front.scale[1].abs()) * radius_mm))
     });
     crate::raytrace::RayGridSetup {
         lens: system.lens.clone(),

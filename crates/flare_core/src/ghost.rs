@@ -38,7 +38,7 @@
 use crate::coating::InterfaceTables;
 use crate::optics::mapping::ImageMapping;
 pub use crate::optics::sensor::{Sensor, light_slopes_for_frame_position, sensor_to_pixel};
-use crate::optics::{Coating, FirstOrder, Lens, Mat2, ParaxialError, PathMatrices};
+use crate::optics::{Coating, FirstOrder, Lens, Mat2, ParaxialError, PathMatrices, Section};
 use crate::spectrum::Spectrum;
 
 /// Samples of each reflectance table over sin^2(i) in [0, 1].
@@ -226,11 +226,19 @@ impl CullReason {
     }
 }
 
-/// An affine map from sprite quad coordinates q to a mask's coordinates: `uv = scale q + offset`.
+/// An affine map from sprite quad coordinates q to a mask's coordinates, axis by axis:
+/// `uv = scale * q + offset` (the two scales are equal for a lens of revolution).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MaskMap {
-    pub scale: f64,
+    pub scale: [f64; 2],
     pub offset: [f64; 2],
+}
+
+impl MaskMap {
+    /// The mask coordinates of quad coordinate `q`.
+    pub fn at(&self, q: [f64; 2]) -> [f64; 2] {
+        [self.scale[0] * q[0] + self.offset[0], self.scale[1] * q[1] + self.offset[1]]
+    }
 }
 
 /// One ghost at one wavelength in one frame.
@@ -240,8 +248,9 @@ pub struct Sprite {
     pub wavelength: usize,
     /// Sprite centre on the sensor (sensor coordinates, the image is not yet flipped for display).
     pub centre_mm: [f64; 2],
-    /// Signed half-size: negative when the ghost is an inverted image of the aperture.
-    pub half_size_mm: f64,
+    /// Signed half-size along x and y: negative when the ghost is an inverted image of the aperture along that
+    /// axis. Equal for a lens of revolution; an anamorphic lens's ghosts are ellipses.
+    pub half_size_mm: [f64; 2],
     /// Irradiance relative to the incoming light (cos theta R_i R_j T / A_f^2, bounded).
     pub irradiance: f64,
     /// irradiance x the wavelength's weight, clamped at 0.
@@ -290,16 +299,19 @@ pub enum GhostError {
     #[error("stop scale {0} must be in (0, 1]")]
     StopScale(f64),
     #[error(
-        "the lens is anamorphic (toroidal surfaces {surfaces:?}): its ghosts are ellipses with a focus per axis, \
-         which the flare renderers do not draw yet; `flarelab trace` and `flarelab lens info` handle it exactly"
+        "the lens is anamorphic (toroidal surfaces {surfaces:?}): {what} assumes a lens of revolution and does not \
+         handle it yet; the paraxial flare, `flarelab trace` and `flarelab lens info` do"
     )]
-    Anamorphic { surfaces: Vec<usize> },
+    Anamorphic { surfaces: Vec<usize>, what: &'static str },
 }
 
 impl GhostError {
-    /// The refusal of an anamorphic lens, naming its toroidal surfaces.
-    pub fn anamorphic(lens: &Lens) -> Self {
-        Self::Anamorphic { surfaces: (0..lens.surfaces.len()).filter(|&k| lens.surfaces[k].is_toroidal()).collect() }
+    /// The refusal of an anamorphic lens by `what` (a method or a part), naming the lens's toroidal surfaces.
+    pub fn anamorphic(lens: &Lens, what: &'static str) -> Self {
+        Self::Anamorphic {
+            surfaces: (0..lens.surfaces.len()).filter(|&k| lens.surfaces[k].is_toroidal()).collect(),
+            what,
+        }
     }
 }
 
@@ -331,6 +343,10 @@ pub struct GhostSystem {
     tables: InterfaceTables,
     /// Per (ghost, wavelength), ghost-major: the frame's coefficients.
     coefficients: Vec<FrameCoefficients>,
+    /// For an anamorphic lens, the ghosts of its x-z section ([`Lens::section`]) on the lens's sensor plane:
+    /// every x quantity of a sprite comes from it, every y quantity from this system (whose matrices are then
+    /// the y-z section's). `None` for a lens of revolution.
+    pub x_section: Option<Box<GhostSystem>>,
 }
 
 impl GhostSystem {
@@ -342,11 +358,48 @@ impl GhostSystem {
     /// reflection i < j. Each ghost then costs a few 2x2 products (a test checks the result against
     /// [`PathMatrices::walk`] of the full path).
     pub fn build(lens: &Lens, settings: &GhostSettings) -> Result<Self, GhostError> {
-        if lens.is_anamorphic() {
-            return Err(GhostError::anamorphic(lens));
-        }
         let first_order = FirstOrder::d_line(lens)?;
-        Self::build_with(lens, settings, first_order)
+        if !lens.is_anamorphic() {
+            return Self::build_with(lens, settings, first_order);
+        }
+        // Axis by axis: each section is a lens of revolution, its ghosts ending on this lens's sensor plane.
+        let section = |s: Section| {
+            let own = first_order.section(s);
+            let z_last = own.total_track_mm - own.bfd_mm;
+            let at_sensor = FirstOrder {
+                total_track_mm: first_order.total_track_mm,
+                bfd_mm: first_order.total_track_mm - z_last,
+                sections: None,
+                ..own.clone()
+            };
+            Self::build_with(&lens.section(s), settings, at_sensor)
+        };
+        let x = section(Section::X)?;
+        let mut y = section(Section::Y)?;
+        debug_assert!(x.ghosts.iter().zip(&y.ghosts).all(|(a, b)| (a.i, a.j) == (b.i, b.j)));
+        y.lens = lens.clone();
+        y.first_order = first_order;
+        y.x_section = Some(Box::new(x));
+        Ok(y)
+    }
+
+    /// True for the ghosts of an anamorphic lens (elliptical sprites, a system per section).
+    pub fn is_anamorphic(&self) -> bool {
+        self.x_section.is_some()
+    }
+
+    /// The system that gives the x quantities of the sprites: the x-z section's for an anamorphic lens, this
+    /// one otherwise.
+    pub fn x_system(&self) -> &GhostSystem {
+        self.x_section.as_deref().unwrap_or(self)
+    }
+
+    /// Ghost `g`'s image of the stop at wavelength `w` for light slope `u`: its centre and its semi-axes along x
+    /// and y (mm on the sensor; equal for a lens of revolution). `None` when the stop's image is at infinity.
+    pub fn stop_image_ellipse(&self, g: usize, w: usize, u: [f64; 2]) -> Option<([f64; 2], [f64; 2])> {
+        let (cx, rx) = self.x_system().stop_image_sprite(g, w, u)?;
+        let (cy, ry) = self.stop_image_sprite(g, w, u)?;
+        Some(([cx[0], cy[1]], [rx, ry]))
     }
 
     /// [`Self::build`] of the lens of revolution `lens` with the first-order data `first_order` (whose sensor
@@ -504,6 +557,7 @@ impl GhostSystem {
             mapping,
             tables,
             coefficients,
+            x_section: None,
         })
     }
 
@@ -511,7 +565,12 @@ impl GhostSystem {
     /// spectrum's middle wavelength: the lens's own mapping by exact chief rays ([`ImageMapping`]), which near
     /// the axis is the paraxial `k u`.
     pub fn light_image_mm(&self, u: [f64; 2]) -> [f64; 2] {
-        self.mapping.image_mm(u)
+        match &self.x_section {
+            None => self.mapping.image_mm(u),
+            // Each section's mapping along its own axis (exact on the axes; the sections' lenses of revolution
+            // off them).
+            Some(x) => [x.mapping.image_mm(u)[0], self.mapping.image_mm(u)[1]],
+        }
     }
 
     /// Lee & Eisemann's sprite of ghost `g` at wavelength `w`: the stop's opening imaged through the ghost
@@ -533,13 +592,14 @@ impl GhostSystem {
     pub fn flare_quad_mm(&self, k: usize, u: [f64; 2]) -> [[f64; 2]; 4] {
         let sprite_ghost = self.coefficients[k].ghost as usize;
         let sprite_wavelength = self.coefficients[k].wavelength as usize;
-        let f = self.ghosts[sprite_ghost].per_wavelength[sprite_wavelength].matrices.sensor_from_entrance;
+        let f_of = |s: &GhostSystem| s.ghosts[sprite_ghost].per_wavelength[sprite_wavelength].matrices.sensor_from_entrance;
+        let (fx, fy) = (f_of(self.x_system()), f_of(self));
         let front = self.sprite_masks(k, u).front_map;
-        let rho = front.scale * self.front_radius_mm;
+        let rho = front.scale.map(|s| s * self.front_radius_mm);
         let e = front.offset.map(|o| o * self.front_radius_mm);
         [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]].map(|q| {
-            let x0 = [e[0] + rho * q[0], e[1] + rho * q[1]];
-            [f.a * x0[0] + f.b * u[0], f.a * x0[1] + f.b * u[1]]
+            let x0 = [e[0] + rho[0] * q[0], e[1] + rho[1] * q[1]];
+            [fx.a * x0[0] + fx.b * u[0], fy.a * x0[1] + fy.b * u[1]]
         })
     }
 
@@ -563,28 +623,56 @@ impl GhostSystem {
         let (half_w, half_h) = (0.5 * settings.sensor.width_mm, 0.5 * settings.sensor.height_mm);
         let mut stats = FrameStats { sprites: self.coefficients.len(), ..FrameStats::default() };
         let weights = &self.settings.spectrum.weights_rgb;
-        for co in &self.coefficients {
-            let centre = [co.centre_per_slope * u[0], co.centre_per_slope * u[1]];
-            let (half_size, area_ratio) = if co.half_size_mm.abs() < settings.min_half_size_mm {
-                let clamped =
-                    settings.min_half_size_mm.copysign(if co.half_size_mm == 0.0 { 1.0 } else { co.half_size_mm });
-                (clamped, co.rho_squared / (clamped * clamped))
+        let clamp = |h: f64| {
+            if h.abs() < settings.min_half_size_mm {
+                settings.min_half_size_mm.copysign(if h == 0.0 { 1.0 } else { h })
             } else {
-                (co.half_size_mm, co.area_ratio)
+                h
+            }
+        };
+        for (k, co) in self.coefficients.iter().enumerate() {
+            let (centre, half_size, empty, irradiance) = match &self.x_section {
+                None => {
+                    let centre = [co.centre_per_slope * u[0], co.centre_per_slope * u[1]];
+                    let (half_size, area_ratio) = if co.half_size_mm.abs() < settings.min_half_size_mm {
+                        let clamped = clamp(co.half_size_mm);
+                        (clamped, co.rho_squared / (clamped * clamped))
+                    } else {
+                        (co.half_size_mm, co.area_ratio)
+                    };
+                    let empty = u_len >= co.empty_from_slope;
+                    let irradiance = if empty { 0.0 } else { self.irradiance(co, u2, cos_theta) * area_ratio };
+                    (centre, [half_size; 2], empty, irradiance)
+                }
+                Some(x) => {
+                    // Axis by axis: x from the x-z section, y from the y-z section. The entrance region is the
+                    // box of the two sections' bounding intervals (rho_x, rho_y), mapped to the half-sizes
+                    // (S_x, S_y): irradiance cos(theta) R_i R_j T rho_x rho_y / (S_x S_y), energy conserved. It is
+                    // empty when either section's discs part (a box test: it never culls a lit ghost).
+                    let cx = &x.coefficients[k];
+                    let centre = [cx.centre_per_slope * u[0], co.centre_per_slope * u[1]];
+                    let half_size = [clamp(cx.half_size_mm), clamp(co.half_size_mm)];
+                    let empty = u[0].abs() >= cx.empty_from_slope || u[1].abs() >= co.empty_from_slope;
+                    let area_ratio = (cx.rho_squared * co.rho_squared).sqrt() / (half_size[0] * half_size[1]).abs();
+                    let irradiance = if empty {
+                        0.0
+                    } else {
+                        self.irradiance_per_axis([cx, co], u, cos_theta) * area_ratio
+                    };
+                    (centre, half_size, empty, irradiance)
+                }
             };
-            let empty = u_len >= co.empty_from_slope;
-            let irradiance = if empty { 0.0 } else { self.irradiance(co, u2, cos_theta) * area_ratio };
             let weight = weights[co.wavelength as usize];
             let rgb = [
                 (weight[0] * irradiance).max(0.0),
                 (weight[1] * irradiance).max(0.0),
                 (weight[2] * irradiance).max(0.0),
             ];
-            let extent = half_size.abs() * std::f64::consts::SQRT_2;
+            let extent = half_size.map(|h| h.abs() * std::f64::consts::SQRT_2);
             let culled = if empty {
                 stats.empty_entrance_region += 1;
                 Some(CullReason::EmptyEntranceRegion)
-            } else if centre[0].abs() - extent > half_w || centre[1].abs() - extent > half_h {
+            } else if centre[0].abs() - extent[0] > half_w || centre[1].abs() - extent[1] > half_h {
                 stats.off_sensor += 1;
                 Some(CullReason::OffSensor)
             } else {
@@ -636,6 +724,18 @@ impl GhostSystem {
         frame.stats = stats;
     }
 
+    /// [`Self::irradiance`] of an anamorphic lens's sprite: each reflection's paraxial angle of incidence has an
+    /// x part from the x-z section (`co[0]`) and a y part from the y-z section (`co[1]`), their squares added.
+    fn irradiance_per_axis(&self, co: [&FrameCoefficients; 2], u: [f64; 2], cos_theta: f64) -> f64 {
+        let sin2_of = |per_axis: [f64; 2]| {
+            let t2 = per_axis[0] * u[0] * u[0] + per_axis[1] * u[1] * u[1];
+            t2 / (1.0 + t2)
+        };
+        let r_j = self.tables.table(co[1].reflectance_j as usize).at(sin2_of([co[0].incidence2_j, co[1].incidence2_j]));
+        let r_i = self.tables.table(co[1].reflectance_i as usize).at(sin2_of([co[0].incidence2_i, co[1].incidence2_i]));
+        cos_theta * r_i * r_j * co[1].transmission
+    }
+
     /// A sprite's irradiance before its area ratio: cos(theta) x R_i x R_j x T at the paraxial angles of
     /// incidence for `u2` = |u|^2.
     fn irradiance(&self, co: &FrameCoefficients, u2: f64, cos_theta: f64) -> f64 {
@@ -685,60 +785,15 @@ impl GhostSystem {
     /// The masks of the `k`-th sprite of a frame (sprites come ghost by ghost, wavelength by wavelength) for
     /// light slope `u`: computed only for the sprites that are drawn.
     pub fn sprite_masks(&self, k: usize, u: [f64; 2]) -> SpriteMasks {
-        let co = &self.coefficients[k];
-        let map = |scale: f64, per_slope: f64| MaskMap { scale, offset: [per_slope * u[0], per_slope * u[1]] };
+        // x from the x-z section's coefficients (the same ones for a lens of revolution), y from these.
+        let (cx, co) = (&self.x_system().coefficients[k], &self.coefficients[k]);
+        let map = |scale: [f64; 2], per_slope: [f64; 2]| MaskMap { scale, offset: [per_slope[0] * u[0], per_slope[1] * u[1]] };
+        let stop = |i: usize| map([cx.stop_scale[i], co.stop_scale[i]], [cx.stop_offset_per_slope[i], co.stop_offset_per_slope[i]]);
         SpriteMasks {
-            stop_maps: [
-                map(co.stop_scale[0], co.stop_offset_per_slope[0]),
-                map(co.stop_scale[1], co.stop_offset_per_slope[1]),
-                map(co.stop_scale[2], co.stop_offset_per_slope[2]),
-            ],
+            stop_maps: [stop(0), stop(1), stop(2)],
             stop_count: co.stop_count as usize,
-            front_map: map(co.front_scale, co.front_offset_per_slope),
+            front_map: map([cx.front_scale, co.front_scale], [cx.front_offset_per_slope, co.front_offset_per_slope]),
         }
-    }
-}
-
-/// The paraxial ghosts of an anamorphic lens, one section at a time: near the axis a lens whose toroids are
-/// aligned with x and y acts on x by the 2x2 matrices of its x-z section and on y by those of its y-z section
-/// (Lee & Eisemann's method holds axis by axis), so each ghost's image of the stop is an ellipse whose x
-/// centre and semi-axis come from the x-z section's ghost system and whose y ones from the y-z section's,
-/// both ending on the anamorphic lens's own sensor plane (half way between the two foci). The sections
-/// reflect at the same surfaces, so their ghosts come in the same order.
-#[derive(Clone, Debug, PartialEq)]
-pub struct AnamorphicGhosts {
-    /// The ghosts of the x-z section ([`Lens::section`]).
-    pub x: GhostSystem,
-    /// The ghosts of the y-z section.
-    pub y: GhostSystem,
-}
-
-impl AnamorphicGhosts {
-    /// Both sections' ghost systems of `lens` (anamorphic or not: a lens of revolution gives two equal
-    /// systems), on the lens's sensor plane.
-    pub fn build(lens: &Lens, settings: &GhostSettings) -> Result<Self, GhostError> {
-        let first_order = FirstOrder::d_line(lens)?;
-        let section = |s: crate::optics::Section| {
-            // The section's own first-order data, with the lens's sensor plane.
-            let own = first_order.section(s);
-            let z_last = own.total_track_mm - own.bfd_mm;
-            let at_sensor = FirstOrder {
-                total_track_mm: first_order.total_track_mm,
-                bfd_mm: first_order.total_track_mm - z_last,
-                sections: None,
-                ..own.clone()
-            };
-            GhostSystem::build_with(&lens.section(s), settings, at_sensor)
-        };
-        Ok(Self { x: section(crate::optics::Section::X)?, y: section(crate::optics::Section::Y)? })
-    }
-
-    /// Ghost `g`'s image of the stop at wavelength `w` for light slope `u`: its centre and its semi-axes along
-    /// x and y (mm on the sensor). `None` when a section's stop image is at infinity.
-    pub fn stop_image_ellipse(&self, g: usize, w: usize, u: [f64; 2]) -> Option<([f64; 2], [f64; 2])> {
-        let (cx, rx) = self.x.stop_image_sprite(g, w, u)?;
-        let (cy, ry) = self.y.stop_image_sprite(g, w, u)?;
-        Some(([cx[0], cy[1]], [rx, ry]))
     }
 }
 
@@ -799,7 +854,7 @@ mod tests {
             let ghost = &s.ghosts[sprite.ghost];
             assert_eq!(s.sprite_masks(k, [0.0, 0.1]).stops().len(), if ghost.straddles_stop { 3 } else { 1 });
             assert!(sprite.irradiance.is_finite() && sprite.irradiance >= 0.0);
-            assert!(sprite.half_size_mm.is_finite() && sprite.half_size_mm != 0.0);
+            assert!(sprite.half_size_mm[0].is_finite() && sprite.half_size_mm[0] != 0.0);
         }
     }
 
@@ -811,19 +866,19 @@ mod tests {
         let frame = s.frame(u, &settings);
         let mut checked = 0;
         for (k, sprite) in
-            frame.sprites.iter().enumerate().filter(|(_, s)| s.half_size_mm.abs() > settings.min_half_size_mm)
+            frame.sprites.iter().enumerate().filter(|(_, s)| s.half_size_mm[0].abs() > settings.min_half_size_mm)
         {
             let quad = s.flare_quad_mm(k, u);
             for (k, q) in [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]].iter().enumerate() {
                 let expected = [
-                    sprite.centre_mm[0] + sprite.half_size_mm * q[0],
-                    sprite.centre_mm[1] + sprite.half_size_mm * q[1],
+                    sprite.centre_mm[0] + sprite.half_size_mm[0] * q[0],
+                    sprite.centre_mm[1] + sprite.half_size_mm[0] * q[1],
                 ];
                 assert!((quad[k][0] - expected[0]).abs() < 1e-9 && (quad[k][1] - expected[1]).abs() < 1e-9);
             }
             // Centre and rim: two rays give the same circle.
             let rim = [(quad[1][0] + quad[2][0]) / 2.0, (quad[1][1] + quad[2][1]) / 2.0];
-            assert!(((rim[0] - sprite.centre_mm[0]).abs() - sprite.half_size_mm.abs()).abs() < 1e-9);
+            assert!(((rim[0] - sprite.centre_mm[0]).abs() - sprite.half_size_mm[0].abs()).abs() < 1e-9);
             checked += 1;
         }
         assert!(checked > 100, "{checked}");
@@ -835,9 +890,9 @@ mod tests {
         let settings = FrameSettings::default();
         for u in [[0.0, 0.0], [0.3, 0.0], [0.0, -0.6], [2.0, 2.0]] {
             for (k, sprite) in s.frame(u, &settings).sprites.into_iter().enumerate() {
-                assert!(sprite.half_size_mm.abs() >= settings.min_half_size_mm);
-                let rho = s.sprite_masks(k, u).front_map.scale * s.front_radius_mm;
-                let energy = sprite.irradiance * sprite.half_size_mm.powi(2);
+                assert!(sprite.half_size_mm[0].abs() >= settings.min_half_size_mm);
+                let rho = s.sprite_masks(k, u).front_map.scale[0] * s.front_radius_mm;
+                let energy = sprite.irradiance * sprite.half_size_mm[0].powi(2);
                 assert!(energy <= rho * rho * 1.0001, "energy never exceeds what enters: {energy} vs {}", rho * rho);
                 assert!(sprite.rgb.iter().all(|c| c.is_finite() && *c >= 0.0));
             }

@@ -209,7 +209,7 @@ fn measure(system: &GhostSystem, mask: &ApertureMask, u: [f64; 2], n: usize) -> 
     let source_peak = power_in * std::f64::consts::PI / (4.0 * lambda_mm * lambda_mm * f_number * f_number);
     let mut per_ghost: Vec<Vec<usize>> = vec![Vec::new(); system.ghosts.len()];
     for (k, s) in frame.sprites.iter().enumerate() {
-        if s.half_size_mm.is_finite() && s.half_size_mm != 0.0 && s.irradiance.is_finite() && s.irradiance > 0.0 {
+        if s.half_size_mm.iter().all(|h| h.is_finite() && *h != 0.0) && s.irradiance.is_finite() && s.irradiance > 0.0 {
             per_ghost[s.ghost].push(k);
         }
     }
@@ -222,8 +222,8 @@ fn measure(system: &GhostSystem, mask: &ApertureMask, u: [f64; 2], n: usize) -> 
             let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
             for &k in sprites {
                 let s = &frame.sprites[k];
-                let h = s.half_size_mm.abs();
                 for a in 0..2 {
+                    let h = s.half_size_mm[a].abs();
                     lo[a] = lo[a].min(s.centre_mm[a] - h);
                     hi[a] = hi[a].max(s.centre_mm[a] + h);
                 }
@@ -234,7 +234,7 @@ fn measure(system: &GhostSystem, mask: &ApertureMask, u: [f64; 2], n: usize) -> 
                 let mut value = 0.0;
                 for (&k, m) in sprites.iter().zip(&masks) {
                     let s = &frame.sprites[k];
-                    let q = [(p[0] - s.centre_mm[0]) / s.half_size_mm, (p[1] - s.centre_mm[1]) / s.half_size_mm];
+                    let q = [(p[0] - s.centre_mm[0]) / s.half_size_mm[0], (p[1] - s.centre_mm[1]) / s.half_size_mm[1]];
                     if q[0].abs() > 1.0 || q[1].abs() > 1.0 {
                         continue;
                     }
@@ -274,7 +274,7 @@ fn measure(system: &GhostSystem, mask: &ApertureMask, u: [f64; 2], n: usize) -> 
 /// The frame's mask product at sprite point `q`: the front element's disc, then the aperture at each stop
 /// crossing (the CPU twin's `shade_instance`, in f64 with a hard front edge).
 fn mask_product(mask: &ApertureMask, front: MaskMap, stops: &[MaskMap], q: [f64; 2]) -> f64 {
-    let at = |m: &MaskMap| [m.scale * q[0] + m.offset[0], m.scale * q[1] + m.offset[1]];
+    let at = |m: &MaskMap| m.at(q);
     let f = at(&front);
     if f[0].hypot(f[1]) > 1.0 {
         return 0.0;

@@ -34,7 +34,7 @@ fn the_default_frame_shows_at_least_five_distinct_ghosts_and_no_wash() {
             e.0[k] += s.rgb[k];
         }
         e.1 = [e.1[0] + c[0], e.1[1] + c[1]];
-        e.2 += s.half_size_mm.abs() * f64::from(width) / sensor.width_mm;
+        e.2 += s.half_size_mm[0].abs() * f64::from(width) / sensor.width_mm;
         e.3 += 1;
     }
     // Visible: at least 5 % of white at the frame's exposure; distinct: smaller than half the frame's height,

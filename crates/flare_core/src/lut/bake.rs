@@ -133,6 +133,9 @@ pub enum BakeError {
     Setting { field: &'static str, reason: String },
     #[error("ghost {0} does not exist (the lens has {1} ghosts)")]
     NoGhost(usize, usize),
+    /// A LUT ghost is baked along one meridian and turned with the light: that needs a lens of revolution.
+    #[error("{0}")]
+    Anamorphic(String),
 }
 
 /// Progress of a bake.
@@ -402,6 +405,16 @@ pub fn bake_with(
     cancel: &AtomicBool,
 ) -> Result<GhostLut, BakeError> {
     settings.validate()?;
+    if flare.system.lens.is_anamorphic() {
+        return Err(BakeError::Anamorphic(
+            crate::ghost::GhostError::anamorphic(
+                &flare.system.lens,
+                "the LUT bake (each ghost is baked along one meridian and turned with the light; an anamorphic lens \
+                 would need a table over both field angles, the light's azimuth too)",
+            )
+            .to_string(),
+        ));
+    }
     let total = flare.system.ghosts.len();
     if let Some(&bad) = ghosts.iter().find(|&&g| g >= total) {
         return Err(BakeError::NoGhost(bad, total));

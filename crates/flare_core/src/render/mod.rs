@@ -134,8 +134,11 @@ pub struct GhostInstance {
     pub stops: [[f32; 4]; 3],
     /// Front-lens disc map: scale, offset x, offset y, anti-alias width (in its units per pixel).
     pub front: [f32; 4],
+    /// The y scales of the three stop maps and of the front map (`stops[k][0]` and `front[0]` are the x
+    /// scales): equal to them for a lens of revolution, the y-z section's for an anamorphic lens.
+    pub scale_y: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<GhostInstance>() == 96);
+const _: () = assert!(std::mem::size_of::<GhostInstance>() == 112);
 
 impl GhostInstance {
     /// True when every field is finite (the only instances ever uploaded).
@@ -197,19 +200,24 @@ impl FlareScene {
             }
             let masks = system.sprite_masks(index, u);
             let c = sensor_to_pixel(sprite.centre_mm, sensor, width, height);
-            let half_px = sprite.half_size_mm * k;
+            let half_px = sprite.half_size_mm.map(|h| h * k);
             let mut stops = [[0.0f32; 4]; 3];
-            for (slot, map) in stops.iter_mut().zip(masks.stops()) {
-                *slot = [map.scale as f32, map.offset[0] as f32, map.offset[1] as f32, 1.0];
+            let mut scale_y = [0.0f32; 4];
+            for ((slot, y), map) in stops.iter_mut().zip(&mut scale_y).zip(masks.stops()) {
+                *slot = [map.scale[0] as f32, map.offset[0] as f32, map.offset[1] as f32, 1.0];
+                *y = map.scale[1] as f32;
             }
-            // The front disc's coordinate changes by |scale| / |half_px| per pixel: the anti-alias width.
+            // The front disc's coordinate changes by |scale| / |half_px| per pixel: the anti-alias width (the
+            // faster of the two axes).
             let front = masks.front_map;
-            let aa = (front.scale.abs() / half_px.abs()).max(1e-6);
+            scale_y[3] = front.scale[1] as f32;
+            let aa = (front.scale[0].abs() / half_px[0].abs()).max(front.scale[1].abs() / half_px[1].abs()).max(1e-6);
             let instance = GhostInstance {
-                centre_half: [c[0] as f32, c[1] as f32, -half_px as f32, half_px as f32],
+                centre_half: [c[0] as f32, c[1] as f32, -half_px[0] as f32, half_px[1] as f32],
                 colour: [sprite.rgb[0] as f32 * gain, sprite.rgb[1] as f32 * gain, sprite.rgb[2] as f32 * gain, 0.0],
                 stops,
-                front: [front.scale as f32, front.offset[0] as f32, front.offset[1] as f32, aa as f32],
+                front: [front.scale[0] as f32, front.offset[0] as f32, front.offset[1] as f32, aa as f32],
+                scale_y,
             };
             if instance.is_finite() {
                 instances.push(instance);

@@ -9,15 +9,16 @@ use crate::color::luminance;
 use crate::image::{GhostMoments, HdrImage};
 use crate::render::{FlareScene, GhostInstance};
 
-fn stop_mask(mask: &ApertureMask, map: [f32; 4], q: [f32; 2]) -> f32 {
+/// A stop map `[x scale, offset x, offset y, enabled]` with its y scale `scale_y`.
+fn stop_mask(mask: &ApertureMask, map: [f32; 4], scale_y: f32, q: [f32; 2]) -> f32 {
     if map[3] == 0.0 {
         return 1.0;
     }
-    mask.sample(map[0] * q[0] + map[1], map[0] * q[1] + map[2])
+    mask.sample(map[0] * q[0] + map[1], scale_y * q[1] + map[2])
 }
 
-fn front_mask(map: [f32; 4], q: [f32; 2]) -> f32 {
-    let (x, y) = (map[0] * q[0] + map[1], map[0] * q[1] + map[2]);
+fn front_mask(map: [f32; 4], scale_y: f32, q: [f32; 2]) -> f32 {
+    let (x, y) = (map[0] * q[0] + map[1], scale_y * q[1] + map[2]);
     let r = (x * x + y * y).sqrt();
     (0.5 + (1.0 - r) / map[3]).clamp(0.0, 1.0)
 }
@@ -29,12 +30,12 @@ fn mask_product(inst: &GhostInstance, mask: &ApertureMask, front_open: bool, q: 
     if q[0].abs() > 1.0 || q[1].abs() > 1.0 {
         return 0.0;
     }
-    let mut m = if front_open { 1.0 } else { front_mask(inst.front, q) };
-    for stop in &inst.stops {
+    let mut m = if front_open { 1.0 } else { front_mask(inst.front, inst.scale_y[3], q) };
+    for (stop, &scale_y) in inst.stops.iter().zip(&inst.scale_y) {
         if m <= 0.0 {
             return 0.0;
         }
-        m *= stop_mask(mask, *stop, q);
+        m *= stop_mask(mask, *stop, scale_y, q);
     }
     m
 }
@@ -52,14 +53,8 @@ fn shade_instance(
 ) {
     let [cx, cy, hx, hy] = inst.centre_half;
     // A mask whose whole quad maps inside its fully open disc is 1 everywhere (a speed-up only): skip it.
-    let reach = |map: [f32; 4]| (map[1].abs() + map[0].abs()).hypot(map[2].abs() + map[0].abs());
-    let mut inst = *inst;
-    for stop in &mut inst.stops {
-        if stop[3] != 0.0 && reach(*stop) <= open_radius {
-            stop[3] = 0.0;
-        }
-    }
-    let front_open = reach(inst.front) <= 1.0 - 0.5 * inst.front[3];
+    let inst = without_open_stops(inst, open_radius);
+    let front_open = reach(inst.front, inst.scale_y[3]) <= 1.0 - 0.5 * inst.front[3];
     let inst = &inst;
     let (sx, sy) = scale;
     let covered_rows = covered(cy, hy, sy, size.1);
@@ -103,12 +98,12 @@ fn row_support(inst: &GhostInstance, q_y: f32) -> Option<(f32, f32)> {
     };
     let [scale, ox, oy, aa] = inst.front;
     let reach = 1.0 + 0.5 * aa;
-    let fy = scale * q_y + oy;
+    let fy = inst.scale_y[3] * q_y + oy;
     if fy.abs() > reach || !clip(scale, ox, (reach * reach - fy * fy).max(0.0).sqrt()) {
         return None;
     }
-    for [scale, ox, oy, enabled] in inst.stops {
-        if enabled != 0.0 && ((scale * q_y + oy).abs() > 1.0 || !clip(scale, ox, 1.0)) {
+    for ([scale, ox, oy, enabled], scale_y) in inst.stops.into_iter().zip(inst.scale_y) {
+        if enabled != 0.0 && ((scale_y * q_y + oy).abs() > 1.0 || !clip(scale, ox, 1.0)) {
             return None;
         }
     }
@@ -203,14 +198,19 @@ pub fn ghost_pass(scene: &FlareScene, mask: &ApertureMask) -> HdrImage {
 /// The instance with every stop crossing whose whole quad maps inside the mask's fully open disc disabled (its
 /// mask is 1 wherever the quad is).
 pub(crate) fn without_open_stops(inst: &GhostInstance, open_radius: f32) -> GhostInstance {
-    let reach = |map: [f32; 4]| (map[1].abs() + map[0].abs()).hypot(map[2].abs() + map[0].abs());
     let mut inst = *inst;
-    for stop in &mut inst.stops {
-        if stop[3] != 0.0 && reach(*stop) <= open_radius {
+    for (stop, &scale_y) in inst.stops.iter_mut().zip(&inst.scale_y) {
+        if stop[3] != 0.0 && reach(*stop, scale_y) <= open_radius {
             stop[3] = 0.0;
         }
     }
     inst
+}
+
+/// How far from its centre a map `[x scale, offset x, offset y, _]` with y scale `scale_y` reaches over the
+/// quad [-1, 1]^2.
+fn reach(map: [f32; 4], scale_y: f32) -> f32 {
+    (map[1].abs() + map[0].abs()).hypot(map[2].abs() + scale_y.abs())
 }
 
 /// Per band of the mask's rows (the two texel rows a bilinear sample at one v reads): the interval of u where
@@ -301,10 +301,7 @@ fn sweep_instance(
     let (sx, sy) = scale;
     let covered_rows = covered(cy, hy, sy, size.1);
     let columns = covered(cx, hx, sx, size.0);
-    let front_open = {
-        let reach = (inst.front[1].abs() + inst.front[0].abs()).hypot(inst.front[2].abs() + inst.front[0].abs());
-        reach <= 1.0 - 0.5 * inst.front[3]
-    };
+    let front_open = reach(inst.front, inst.scale_y[3]) <= 1.0 - 0.5 * inst.front[3];
     let to_column = |q: f32| (cx + q * hx) / sx - 0.5;
     for y in covered_rows.start.max(rows.start)..covered_rows.end.min(rows.end) {
         let q_y = ((y as f32 + 0.5) * sy - cy) / hy;
@@ -329,7 +326,7 @@ fn sweep_instance(
         // The front disc: fully open within radius 1 - aa / 2 of its centre.
         if !front_open {
             let [scale, ox, oy, aa] = inst.front;
-            let (inner, fy) = (1.0 - 0.5 * aa, scale * q_y + oy);
+            let (inner, fy) = (1.0 - 0.5 * aa, inst.scale_y[3] * q_y + oy);
             if inner <= fy.abs() {
                 o_lo = 1.0;
                 o_hi = -1.0;
@@ -339,11 +336,11 @@ fn sweep_instance(
             }
         }
         let mut lit = true;
-        for [scale, ox, oy, enabled] in inst.stops {
+        for ([scale, ox, oy, enabled], scale_y) in inst.stops.into_iter().zip(inst.scale_y) {
             if enabled == 0.0 {
                 continue;
             }
-            let Some((open, support)) = rows_of_mask.at(scale * q_y + oy) else {
+            let Some((open, support)) = rows_of_mask.at(scale_y * q_y + oy) else {
                 lit = false;
                 break;
             };
