@@ -824,7 +824,8 @@ impl FlareLabApp {
     /// A sprite's centre and radius in the viewport (points; at least 4 so that a tiny one can be clicked).
     fn sprite_on_screen(map: &view::LightMap<'_>, s: &flare_core::ghost::Sprite) -> (egui::Pos2, f32) {
         let c = map.to_screen(s.centre_mm);
-        let edge = map.to_screen([s.centre_mm[0] + s.half_size_mm[0].abs().max(s.half_size_mm[1].abs()), s.centre_mm[1]]);
+        let edge =
+            map.to_screen([s.centre_mm[0] + s.half_size_mm[0].abs().max(s.half_size_mm[1].abs()), s.centre_mm[1]]);
         (c, (edge.x - c.x).abs().max(4.0))
     }
 

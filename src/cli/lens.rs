@@ -122,7 +122,9 @@ fn lens_info(file: &str, as_json: bool, wavelength_nm: f64) -> Result<()> {
     println!("    exit pupil                {:>12.6} mm from the last vertex", fo.exit_pupil_z_mm);
     println!("    total track (to sensor)   {:>12.6} mm", fo.total_track_mm);
     if let Some(both) = &fo.sections {
-        println!("  anamorphic: each section focuses on its own (the sensor sits half way, the plane of least confusion)");
+        println!(
+            "  anamorphic: each section focuses on its own (the sensor sits half way, the plane of least confusion)"
+        );
         for (word, s) in [("x", &both[0]), ("y", &both[1])] {
             println!(
                 "    {word} section: EFL {:>11.6} mm, focus {:.6} mm behind the first vertex ({:+.6} mm from the \
@@ -135,10 +137,7 @@ fn lens_info(file: &str, as_json: bool, wavelength_nm: f64) -> Result<()> {
                 s.f_number
             );
         }
-        println!(
-            "    squeeze (EFL y / EFL x): {:.6}",
-            both[1].efl_mm / both[0].efl_mm
-        );
+        println!("    squeeze (EFL y / EFL x): {:.6}", both[1].efl_mm / both[0].efl_mm);
     }
     println!();
     println!(

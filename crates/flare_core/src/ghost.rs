@@ -592,7 +592,8 @@ impl GhostSystem {
     pub fn flare_quad_mm(&self, k: usize, u: [f64; 2]) -> [[f64; 2]; 4] {
         let sprite_ghost = self.coefficients[k].ghost as usize;
         let sprite_wavelength = self.coefficients[k].wavelength as usize;
-        let f_of = |s: &GhostSystem| s.ghosts[sprite_ghost].per_wavelength[sprite_wavelength].matrices.sensor_from_entrance;
+        let f_of =
+            |s: &GhostSystem| s.ghosts[sprite_ghost].per_wavelength[sprite_wavelength].matrices.sensor_from_entrance;
         let (fx, fy) = (f_of(self.x_system()), f_of(self));
         let front = self.sprite_masks(k, u).front_map;
         let rho = front.scale.map(|s| s * self.front_radius_mm);
@@ -654,11 +655,8 @@ impl GhostSystem {
                     let half_size = [clamp(cx.half_size_mm), clamp(co.half_size_mm)];
                     let empty = u[0].abs() >= cx.empty_from_slope || u[1].abs() >= co.empty_from_slope;
                     let area_ratio = (cx.rho_squared * co.rho_squared).sqrt() / (half_size[0] * half_size[1]).abs();
-                    let irradiance = if empty {
-                        0.0
-                    } else {
-                        self.irradiance_per_axis([cx, co], u, cos_theta) * area_ratio
-                    };
+                    let irradiance =
+                        if empty { 0.0 } else { self.irradiance_per_axis([cx, co], u, cos_theta) * area_ratio };
                     (centre, half_size, empty, irradiance)
                 }
             };
@@ -787,8 +785,13 @@ impl GhostSystem {
     pub fn sprite_masks(&self, k: usize, u: [f64; 2]) -> SpriteMasks {
         // x from the x-z section's coefficients (the same ones for a lens of revolution), y from these.
         let (cx, co) = (&self.x_system().coefficients[k], &self.coefficients[k]);
-        let map = |scale: [f64; 2], per_slope: [f64; 2]| MaskMap { scale, offset: [per_slope[0] * u[0], per_slope[1] * u[1]] };
-        let stop = |i: usize| map([cx.stop_scale[i], co.stop_scale[i]], [cx.stop_offset_per_slope[i], co.stop_offset_per_slope[i]]);
+        let map = |scale: [f64; 2], per_slope: [f64; 2]| MaskMap {
+            scale,
+            offset: [per_slope[0] * u[0], per_slope[1] * u[1]],
+        };
+        let stop = |i: usize| {
+            map([cx.stop_scale[i], co.stop_scale[i]], [cx.stop_offset_per_slope[i], co.stop_offset_per_slope[i]])
+        };
         SpriteMasks {
             stop_maps: [stop(0), stop(1), stop(2)],
             stop_count: co.stop_count as usize,

@@ -9,9 +9,7 @@
 use std::path::PathBuf;
 
 use flare_core::optics::formats::load_lens_file;
-use flare_core::optics::{
-    D_LINE_NM, FirstOrder, Lens, LightPath, Ray, Section, TraceOptions, TraceStatus, Tracer,
-};
+use flare_core::optics::{D_LINE_NM, FirstOrder, Lens, LightPath, Ray, Section, TraceOptions, TraceStatus, Tracer};
 use glam::DVec3;
 use serde_json::Value;
 
@@ -24,8 +22,7 @@ fn test_lens() -> Lens {
 }
 
 fn figures() -> Value {
-    serde_json::from_str(&std::fs::read_to_string(folder().join("toroidal_test_lens_reference.json")).unwrap())
-        .unwrap()
+    serde_json::from_str(&std::fs::read_to_string(folder().join("toroidal_test_lens_reference.json")).unwrap()).unwrap()
 }
 
 fn vec3(v: &Value) -> DVec3 {
@@ -43,7 +40,11 @@ fn each_section_focuses_where_the_independent_paraxial_trace_says() {
         let efl = r["sections"][word]["efl_mm"].as_f64().unwrap();
         let focus = r["sections"][word]["focus_z_mm"].as_f64().unwrap();
         assert!((s.efl_mm - efl).abs() <= 1e-9 * efl.abs(), "{word}: EFL {} vs {efl}", s.efl_mm);
-        assert!((s.total_track_mm - focus).abs() <= 1e-9 * focus.abs(), "{word}: focus {} vs {focus}", s.total_track_mm);
+        assert!(
+            (s.total_track_mm - focus).abs() <= 1e-9 * focus.abs(),
+            "{word}: focus {} vs {focus}",
+            s.total_track_mm
+        );
     }
     let sensor = r["sensor_z_mm"].as_f64().unwrap();
     assert!((fo.sensor_z_mm() - sensor).abs() <= 1e-9 * sensor, "sensor {} vs {sensor}", fo.sensor_z_mm());
@@ -122,7 +123,10 @@ fn a_toroid_with_equal_sections_is_the_sphere_and_sections_of_a_round_lens_are_t
     assert!(torus.is_anamorphic() && !sphere.is_anamorphic());
     let z = FirstOrder::d_line(&sphere).unwrap().sensor_z_mm();
     assert_eq!(FirstOrder::d_line(&torus).unwrap().sensor_z_mm(), z, "equal sections focus together");
-    let (a, b) = (Tracer::new(&sphere, &LightPath::image(&sphere), D_LINE_NM, z), Tracer::new(&torus, &LightPath::image(&torus), D_LINE_NM, z));
+    let (a, b) = (
+        Tracer::new(&sphere, &LightPath::image(&sphere), D_LINE_NM, z),
+        Tracer::new(&torus, &LightPath::image(&torus), D_LINE_NM, z),
+    );
     for (x, y, l, m) in [(0.0, 0.0, 0.0, 0.0), (2.0, -3.0, 0.05, 0.02), (-5.0, 4.0, -0.1, 0.08)] {
         let ray = Ray { origin_mm: DVec3::new(x, y, -10.0), direction: DVec3::new(l, m, 1.0) };
         let (p, q) = (a.trace(&ray, TraceOptions::default()), b.trace(&ray, TraceOptions::default()));
@@ -327,4 +331,133 @@ fn ghost_ellipses_match_the_independent_paraxial_trace_and_the_exact_tracer() {
             assert!(errors[0] < 1e-2 * (1.0 + a_f.abs()), "({i}, {j}) {axis}: {errors:?} (A_f {a_f})");
         }
     }
+}
+
+/// The anamorphic flare by the paraxial method against the ray-traced reference (the f64 tracer through the
+/// real toroids) where the paraxial method is exact: at f/22 with the light near the axis, on the ghosts whose
+/// entrance region the stop bounds in both sections (the method's premise: it clips by the stop and the front
+/// element only). Measured as the round lenses are: centroids within half a pixel (median), PSNR above 35 dB,
+/// and each visible ghost's energy within 5 % wherever the paraxial method meets that on both sections' lenses
+/// of revolution (this test lens is aggressive: a few ghosts that run through its strongly curved rear group
+/// miss it on the round sections too, by the paraxial method's own limits, and are reported). Each of the
+/// brightest ghosts, drawn alone, has the same ellipse in both methods: its spread along x and along y (second
+/// moments) within 5 %; and most of them are ovals, not circles.
+#[test]
+fn the_paraxial_ellipses_agree_with_the_ray_traced_reference() {
+    let anamorphic = measure_against_reference(&test_lens());
+    let c = &anamorphic.comparison;
+    assert!(c.centroid_px < 0.5 && c.psnr_db > 35.0, "{c:?}");
+    let round: Vec<Measured> =
+        [Section::X, Section::Y].iter().map(|&s| measure_against_reference(&test_lens().section(s))).collect();
+    let exact_on_sections = |g: usize| round.iter().all(|m| m.ratio[g].is_some_and(|r| (r - 1.0).abs() < 0.05));
+    let (mut checked, mut left) = (0, Vec::new());
+    for (g, ratio) in anamorphic.ratio.iter().enumerate() {
+        let Some(ratio) = ratio else { continue };
+        if exact_on_sections(g) {
+            assert!((ratio - 1.0).abs() < 0.05, "ghost {g}: energy paraxial / reference {ratio}");
+            checked += 1;
+        } else {
+            left.push((g, *ratio));
+        }
+    }
+    eprintln!("{checked} visible ghosts within 5 %; left out (the round sections miss too): {left:.3?}");
+    assert!(checked >= 15, "{checked}");
+    let mut ovals = 0;
+    for (g, ours, theirs) in &anamorphic.spreads {
+        for axis in 0..2 {
+            assert!((ours[axis] / theirs[axis] - 1.0).abs() < 0.05, "ghost {g} axis {axis}: {ours:?} vs {theirs:?}");
+        }
+        ovals += usize::from((ours[0] / ours[1] - 1.0).abs() > 0.1);
+    }
+    assert!(anamorphic.spreads.len() >= 3 && ovals >= 2, "the brightest ghosts are ovals: {ovals}");
+}
+
+/// What [`measure_against_reference`] finds.
+struct Measured {
+    comparison: flare_core::metrics::Comparison,
+    /// Per ghost, paraxial over traced energy in the frame, for the visible stop-bounded ghosts.
+    ratio: Vec<Option<f64>>,
+    /// Up to four of the brightest, a few pixels wide or more: ghost, spread (x, y) paraxial, spread traced (px).
+    spreads: Vec<(usize, [f64; 2], [f64; 2])>,
+}
+
+/// `lens` at f/22, the light at (1.5, 1) degrees, 240 x 160, its stop-bounded ghosts by both methods.
+fn measure_against_reference(lens: &Lens) -> Measured {
+    use flare_core::aperture::Aperture;
+    use flare_core::flare::{FlareConfig, PreparedFlare};
+    use flare_core::image::{GhostMoments, HdrImage};
+    use flare_core::metrics;
+    use flare_core::optics::sensor::Sensor;
+    use flare_core::raytrace::{Ghosts, Grid, RayGridRequest};
+    use flare_core::render::{DisplaySettings, cpu};
+    let (w, h) = (240, 160);
+    let light = [1.5, 1.0];
+    let config = FlareConfig {
+        aperture: Aperture { f_number: Some(22.0), ..Aperture::default() },
+        intensity_threshold: Some(0.0),
+        ..FlareConfig::default()
+    };
+    let flare = PreparedFlare::new(lens, &config).unwrap();
+    let system = &flare.system;
+    assert_eq!(system.is_anamorphic(), lens.is_anamorphic());
+    // The stop bounds a ghost's entrance region when its disc (r_a / |A|, per section) is well inside the front
+    // element's.
+    let stop_bounded = |g: usize| {
+        [system.x_system(), system].iter().all(|s| {
+            let a = s.ghosts[g].per_wavelength[0].matrices.stop_from_entrance[0].a;
+            s.stop_radius_mm / a.abs() < 0.5 * s.front_radius_mm
+        })
+    };
+    let gains: Vec<f32> = (0..system.ghosts.len()).map(|g| if stop_bounded(g) { 1.0 } else { 0.0 }).collect();
+    let sensor = Sensor::full_frame_for(w, h);
+    let renderer = flare.ray_grid_renderer();
+    let render = |gains: &[f32]| {
+        let (scene, _) = flare.scene_with(light, sensor, w, h, &DisplaySettings::default(), gains);
+        let request = RayGridRequest {
+            ghosts: Ghosts::Weighted(gains),
+            ..RayGridRequest::frame(light, w, h, Grid::Adaptive(256))
+        };
+        let traced = renderer.render_request(&request).unwrap().remove(0);
+        let paraxial = cpu::ghost_pass(&scene, &flare.mask);
+        let moments = cpu::ghost_moments(&scene, &flare.mask, system.ghosts.len());
+        (paraxial, moments, traced)
+    };
+    let (paraxial, moments, traced) = render(&gains);
+    let comparison = metrics::compare(&paraxial, &moments, &traced.hdr, &traced.moments);
+    eprintln!("{}: {} stop-bounded ghosts, {comparison:?}", lens.id, gains.iter().filter(|&&g| g > 0.0).count());
+    let energy = |m: &[GhostMoments]| m.iter().map(|g| g.energy).collect::<Vec<_>>();
+    let (a, b) = (energy(&moments), energy(&traced.moments));
+    let brightest = b.iter().cloned().fold(0.0, f64::max);
+    let visible = |g: usize| gains[g] > 0.0 && b[g] > 0.05 * brightest;
+    let ratio: Vec<Option<f64>> = (0..b.len()).map(|g| visible(g).then(|| a[g] / b[g])).collect();
+    // The spread of one ghost along x and y: the square roots of its second moments about its centroid.
+    let spread = |img: &HdrImage| {
+        let (mut e, mut sx, mut sy, mut sxx, mut syy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for (k, p) in img.pixels.iter().enumerate() {
+            let v = f64::from(p[0] + p[1] + p[2]);
+            let (x, y) = ((k % img.width as usize) as f64, (k / img.width as usize) as f64);
+            (e, sx, sy, sxx, syy) = (e + v, sx + v * x, sy + v * y, sxx + v * x * x, syy + v * y * y);
+        }
+        let (mx, my) = (sx / e, sy / e);
+        [(sxx / e - mx * mx).sqrt(), (syy / e - my * my).sqrt()]
+    };
+    let mut order: Vec<usize> = (0..b.len()).filter(|&g| visible(g)).collect();
+    order.sort_by(|&p, &q| b[q].total_cmp(&b[p]));
+    // The brightest whose spreads span a few pixels (a ghost a pixel wide is measured by its pixels, not its
+    // shape), at most four of the ten brightest.
+    let mut spreads = Vec::new();
+    for &g in order.iter().take(if lens.is_anamorphic() { 10 } else { 0 }) {
+        let mut solo = vec![0.0f32; system.ghosts.len()];
+        solo[g] = 1.0;
+        let (paraxial, _, traced) = render(&solo);
+        let (ours, theirs) = (spread(&paraxial), spread(&traced.hdr));
+        eprintln!("ghost {g}: spread x, y {ours:.2?} px paraxial, {theirs:.2?} px traced");
+        if ours.iter().all(|&s| s >= 2.5) {
+            spreads.push((g, ours, theirs));
+        }
+        if spreads.len() == 4 {
+            break;
+        }
+    }
+    Measured { comparison, ratio, spreads }
 }

@@ -89,7 +89,10 @@ struct LensData {
 fn lens_data(lens: &Lens) -> Result<LensData, DofError> {
     if lens.is_anamorphic() {
         // Its bokeh is an oval with a focus per axis; the round model would silently be wrong.
-        return Err(DofError::Lens(crate::ghost::GhostError::anamorphic(lens, "depth of field (the bokeh of a squeezed aperture is an oval)").to_string()));
+        return Err(DofError::Lens(
+            crate::ghost::GhostError::anamorphic(lens, "depth of field (the bokeh of a squeezed aperture is an oval)")
+                .to_string(),
+        ));
     }
     let fo = crate::optics::FirstOrder::d_line(lens).map_err(|e| DofError::Lens(e.to_string()))?;
     let z_last = lens.vertex_z_mm().last().copied().unwrap_or(0.0);

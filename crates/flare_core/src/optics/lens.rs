@@ -749,7 +749,6 @@ fn first_crossing(k: usize, gap: impl Fn(f64) -> f64, h_max: f64, semi_apertures
     Some(EdgeCrossing { surface: k, meet_height_mm: lo, semi_apertures_mm, gap_at_edge_mm: gap(h_max) })
 }
 
-
 /// Two neighbouring surfaces, `surface` and `surface + 1`, that cross inside their clear apertures.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct EdgeCrossing {

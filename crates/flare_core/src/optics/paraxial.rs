@@ -234,12 +234,7 @@ impl FirstOrder {
         let y = Self::of_revolution(&lens.section(Section::Y), wavelength_nm)?;
         let z_last = y.total_track_mm - y.bfd_mm;
         let total_track_mm = 0.5 * (x.total_track_mm + y.total_track_mm);
-        Ok(Self {
-            total_track_mm,
-            bfd_mm: total_track_mm - z_last,
-            sections: Some(Box::new([x, y.clone()])),
-            ..y
-        })
+        Ok(Self { total_track_mm, bfd_mm: total_track_mm - z_last, sections: Some(Box::new([x, y.clone()])), ..y })
     }
 
     /// The first-order data of `section` (the lens's own for a lens of revolution).

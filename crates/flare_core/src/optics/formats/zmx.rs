@@ -381,7 +381,9 @@ pub fn write(lens: &Lens) -> Result<String, FormatError> {
     if let Some(k) = lens.surfaces.iter().position(|s| s.is_toroidal() && s.aspheric.len() > MAX_ASPHERIC_TERMS - 1) {
         return Err(FormatError::Structure {
             format: FORMAT,
-            message: format!("surface {k} is a toroid with a y^16 term, which Zemax's TOROIDAL (y^2 to y^14) cannot hold"),
+            message: format!(
+                "surface {k} is a toroid with a y^16 term, which Zemax's TOROIDAL (y^2 to y^14) cannot hold"
+            ),
         });
     }
     let mut out = String::new();
