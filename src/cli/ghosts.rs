@@ -4,7 +4,7 @@
 use anyhow::{Context, Result, bail};
 use flare_core::flare::{FlareConfig, PreparedFlare};
 use flare_core::ghost::{FrameSettings, GhostSettings, GhostSystem};
-use flare_core::optics::{D_LINE_NM, LightPath, PathMatrices};
+use flare_core::optics::{D_LINE_NM, LightPath, PathMatrices, Section};
 use flare_core::report::{ghost_report, to_csv};
 use flare_core::spectrum::Spectrum;
 use serde_json::json;
@@ -79,13 +79,21 @@ pub fn run(args: &GhostsArgs) -> Result<()> {
                 json!({"wavelength_nm": spectrum.wavelengths_nm[w], "center_mm": s.map(|s| s.0.map(|v| v + 0.0)), "radius_mm": s.map(|s| s.1)})
             })
             .collect();
-        // Where this ghost's rays from the light focus at the d-line, from the image plane (None: afocal).
-        let focus_mm = LightPath::ghost(&lens, ghost.i, ghost.j).ok().and_then(|p| {
-            PathMatrices::compute(&lens, &p, D_LINE_NM, system.first_order.sensor_z_mm()).focus_after_sensor_mm()
-        });
+        // Where this ghost's rays from the light focus at the d-line, from the image plane (None: afocal), in
+        // the y-z section and in the x-z section (the same for a lens of revolution).
+        let focus = |lens: &flare_core::optics::Lens| {
+            LightPath::ghost(lens, ghost.i, ghost.j).ok().and_then(|p| {
+                PathMatrices::compute(lens, &p, D_LINE_NM, system.first_order.sensor_z_mm()).focus_after_sensor_mm()
+            })
+        };
+        let focus_mm = focus(&lens.section(Section::Y));
+        let focus_x_mm = focus(&lens.section(Section::X));
+        let ellipse = system.stop_image_ellipse(g, reported, u);
         rows.push(json!({
             "i": ghost.i, "j": ghost.j,
             "focus_mm": focus_mm,
+            "focus_x_mm": focus_x_mm,
+            "semi_axes_mm": ellipse.map(|e| e.1),
             "center_mm": sprite.map(|s| s.0.map(|v| v + 0.0)), "radius_mm": sprite.map(|s| s.1),
             "intensity": intensity, "rgb": rgb,
             "straddles_stop": ghost.straddles_stop,
@@ -117,7 +125,19 @@ pub fn run(args: &GhostsArgs) -> Result<()> {
         st.off_sensor,
         st.empty_entrance_region
     );
-    println!("  {:>3} {:>3}  {:>10} {:>9}  {:>10}  {:<8} culled", "i", "j", "centre y", "radius", "intensity", "stop");
+    let anamorphic = system.is_anamorphic();
+    if anamorphic {
+        println!("  anamorphic: each ghost is an ellipse, its semi-axes along x and y (radius x, radius y)");
+        println!(
+            "  {:>3} {:>3}  {:>10} {:>9} {:>9}  {:>10}  {:<8} culled",
+            "i", "j", "centre y", "radius x", "radius y", "intensity", "stop"
+        );
+    } else {
+        println!(
+            "  {:>3} {:>3}  {:>10} {:>9}  {:>10}  {:<8} culled",
+            "i", "j", "centre y", "radius", "intensity", "stop"
+        );
+    }
     let mut order: Vec<usize> = (0..rows.len()).collect();
     order.sort_by(|&a, &b| {
         rows[b]["intensity"].as_f64().partial_cmp(&rows[a]["intensity"].as_f64()).unwrap_or(std::cmp::Ordering::Equal)
@@ -125,7 +145,12 @@ pub fn run(args: &GhostsArgs) -> Result<()> {
     for k in order {
         let r = &rows[k];
         let centre = r["center_mm"][1].as_f64().map(|v| format!("{v:.3}")).unwrap_or_else(|| "-".into());
-        let radius = r["radius_mm"].as_f64().map(|v| format!("{v:.3}")).unwrap_or_else(|| "-".into());
+        let mut radius = r["radius_mm"].as_f64().map(|v| format!("{v:.3}")).unwrap_or_else(|| "-".into());
+        if anamorphic {
+            let axis =
+                |k: usize| r["semi_axes_mm"][k].as_f64().map(|v| format!("{v:.3}")).unwrap_or_else(|| "-".into());
+            radius = format!("{:>9} {:>9}", axis(0), axis(1));
+        }
         println!(
             "  {:>3} {:>3}  {centre:>10} {radius:>9}  {:>10.3e}  {:<8} {}",
             r["i"],
@@ -171,14 +196,27 @@ fn report(
         r.ghosts.len(),
         r.total_energy_fraction
     );
+    let anamorphic = flare.system.is_anamorphic();
+    if anamorphic {
+        println!("  anamorphic: focus and size in the y-z section, then in the x-z section (focus x, width)");
+    }
     println!(
-        "  {:>4} {:>3} {:>3} {:>10} {:>9} {:>8} {:>10} {:>10} {:>7}  stop",
-        "rank", "i", "j", "focus mm", "size mm", "f/#", "peak/src", "mean/src", "share"
+        "  {:>4} {:>3} {:>3} {:>10} {:>9} {:>8} {:>10} {:>10} {:>7}  stop{}",
+        "rank",
+        "i",
+        "j",
+        "focus mm",
+        "size mm",
+        "f/#",
+        "peak/src",
+        "mean/src",
+        "share",
+        if anamorphic { "       focus x   width mm" } else { "" }
     );
     let opt = |v: Option<f64>, p: usize| v.map(|v| format!("{v:.p$}")).unwrap_or_else(|| "afocal".into());
     for (rank, g) in r.ghosts.iter().enumerate() {
         println!(
-            "  {:>4} {:>3} {:>3} {:>10} {:>9.3} {:>8} {:>10.2e} {:>10.2e} {:>6.2}%  {}",
+            "  {:>4} {:>3} {:>3} {:>10} {:>9.3} {:>8} {:>10.2e} {:>10.2e} {:>6.2}%  {}{}",
             rank + 1,
             g.i,
             g.j,
@@ -188,7 +226,12 @@ fn report(
             g.peak_vs_source,
             g.mean_vs_source,
             100.0 * g.energy_share,
-            if g.stop_crossings == 1 { "once".to_owned() } else { format!("{} times", g.stop_crossings) }
+            if g.stop_crossings == 1 { "once".to_owned() } else { format!("{} times", g.stop_crossings) },
+            if anamorphic {
+                format!("  {:>12} {:>10.3}", opt(g.focus_x_mm, 2), g.image_width_mm)
+            } else {
+                String::new()
+            }
         );
     }
     println!();

@@ -18,6 +18,10 @@
 //!   for the power P through the pupil). The map's integral is the ghost's **energy** as a fraction of the
 //!   light entering the pupil, and its **share** of all the ghosts' energy.
 //! - `straddles_stop` and `stop_crossings` say whether its reflections lie on both sides of the stop.
+//! - An anamorphic lens focuses each ghost twice, once per section: `focus_mm`, `f_number` and
+//!   `image_diameter_mm` are then its y-z section's (the image's height), and `focus_x_mm` and
+//!   `image_width_mm` its x-z section's (for a lens of revolution they repeat `focus_mm` and
+//!   `image_diameter_mm`).
 //!
 //! Ghosts are ranked worst first by peak irradiance (a small bright ghost shows more than a wide faint
 //! one). The **coating sensitivity** answers "which surface to coat first": it rebuilds the system with every
@@ -47,7 +51,12 @@ pub struct GhostRow {
     pub i: usize,
     pub j: usize,
     /// Paraxial focus of the ghost's rays from the light, from the image plane (+ image side); `None`: afocal.
+    /// An anamorphic lens's y-z section.
     pub focus_mm: Option<f64>,
+    /// The same in the x-z section (equal to `focus_mm` for a lens of revolution).
+    pub focus_x_mm: Option<f64>,
+    /// The ghost image's width along x (equal to `image_diameter_mm` for a lens of revolution).
+    pub image_width_mm: f64,
     /// Diameter of the ghost's image on the sensor (the stop's image through the ghost path).
     pub image_diameter_mm: f64,
     /// Working f-number of the ghost's cone; `None`: afocal.
@@ -107,17 +116,29 @@ pub fn ghost_report(
         .iter()
         .enumerate()
         .map(|(g, ghost)| {
-            let d_line = LightPath::ghost(lens, ghost.i, ghost.j)
-                .ok()
-                .map(|p| PathMatrices::compute(lens, &p, D_LINE_NM, sensor_z).sensor_from_entrance);
+            // The y-z section (the lens itself when it is of revolution), then the x-z section's lens of
+            // revolution.
+            let flare_matrix = |lens: &Lens| {
+                LightPath::ghost(lens, ghost.i, ghost.j)
+                    .ok()
+                    .map(|p| PathMatrices::compute(lens, &p, D_LINE_NM, sensor_z).sensor_from_entrance)
+            };
+            let focus = |m: Option<crate::optics::Mat2>| {
+                m.and_then(|m| (m.c != 0.0).then(|| -m.a / m.c)).filter(|v| v.is_finite())
+            };
+            let d_line = flare_matrix(&lens.section(crate::optics::Section::Y));
+            let d_line_x = flare_matrix(&system.x_system().lens.section(crate::optics::Section::X));
             let c = d_line.map_or(0.0, |m| m.c);
-            let sprite = system.stop_image_sprite(g, middle, u);
+            let ellipse = system.stop_image_ellipse(g, middle, u);
+            let sprite = ellipse.map(|(centre, semi)| (centre, semi[1]));
             let m = &measured[g];
             GhostRow {
                 i: ghost.i,
                 j: ghost.j,
-                focus_mm: d_line.and_then(|m| (m.c != 0.0).then(|| -m.a / m.c)).filter(|v| v.is_finite()),
+                focus_mm: focus(d_line),
+                focus_x_mm: focus(d_line_x),
                 image_diameter_mm: sprite.map_or(0.0, |s| 2.0 * s.1).min(f64::MAX),
+                image_width_mm: ellipse.map_or(0.0, |s| 2.0 * s.1[0]).min(f64::MAX),
                 f_number: (c != 0.0 && epd > 0.0).then(|| (1.0 / c).abs() / epd).filter(|v| v.is_finite()),
                 peak_vs_source: m.peak_vs_source,
                 mean_vs_source: m.mean_vs_source,
@@ -143,7 +164,7 @@ pub fn ghost_report(
 
 /// The CSV columns of [`to_csv`], in order.
 pub const CSV_HEADER: &str = "rank,i,j,focus_mm,image_diameter_mm,f_number,peak_vs_source,mean_vs_source,\
-energy_fraction,energy_share,straddles_stop,stop_crossings,centre_x_mm,centre_y_mm";
+energy_fraction,energy_share,straddles_stop,stop_crossings,centre_x_mm,centre_y_mm,focus_x_mm,image_width_mm";
 
 /// The ghost table as CSV (one header line, one row per ghost, worst first; empty cells for afocal ghosts'
 /// focus and f-number): what `flarelab ghosts --report --csv` prints and the app exports.
@@ -153,7 +174,7 @@ pub fn to_csv(report: &GhostReport) -> String {
     out.push('\n');
     for (rank, g) in report.ghosts.iter().enumerate() {
         out.push_str(&format!(
-            "{},{},{},{},{},{},{:e},{:e},{:e},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{:e},{:e},{:e},{},{},{},{},{},{},{}\n",
             rank + 1,
             g.i,
             g.j,
@@ -167,7 +188,9 @@ pub fn to_csv(report: &GhostReport) -> String {
             g.straddles_stop,
             g.stop_crossings,
             g.centre_mm[0],
-            g.centre_mm[1]
+            g.centre_mm[1],
+            opt(g.focus_x_mm),
+            g.image_width_mm
         ));
     }
     out

@@ -461,3 +461,34 @@ fn measure_against_reference(lens: &Lens) -> Measured {
     }
     Measured { comparison, ratio, spreads }
 }
+
+/// The anamorphic streak, from the optics: surfaces 7 (a cylinder with power in y only) and 8 (flat) are flat
+/// in the x-z section, so the ghost that reflects between them is, along x, a double reflection off two plane
+/// mirrors: it adds no power, and the ghost focuses along x where the lens focuses x (1.05 mm behind the sensor,
+/// half the distance between the two sections' foci), a thin line a fraction of a millimetre wide; along y the
+/// cylinder's power throws it far out of focus, 11 mm tall. A ghost between surfaces curved in both sections is
+/// an ordinary oval. The report says both foci, and the sprites have those extents.
+#[test]
+fn a_ghost_between_surfaces_flat_in_x_is_a_streak_along_y() {
+    use flare_core::flare::{FlareConfig, PreparedFlare};
+    use flare_core::report::ghost_report;
+    let lens = test_lens();
+    let flare = PreparedFlare::new(&lens, &FlareConfig::default()).unwrap();
+    let u = [0.0, 3f64.to_radians().tan()];
+    let report = ghost_report(&lens, &flare.system, &flare.mask, u).unwrap();
+    let row = |i: usize, j: usize| report.ghosts.iter().find(|g| (g.i, g.j) == (i, j)).unwrap();
+    let fo = FirstOrder::d_line(&lens).unwrap();
+    let x_focus_behind_sensor = fo.section(Section::X).sensor_z_mm() - fo.sensor_z_mm();
+    let streak = row(7, 8);
+    assert!((streak.focus_x_mm.unwrap() - x_focus_behind_sensor).abs() < 0.1, "{streak:?} vs {x_focus_behind_sensor}");
+    assert!(streak.image_width_mm < 0.05 * streak.image_diameter_mm, "{streak:?}");
+    assert!(streak.focus_mm.unwrap().abs() > 10.0, "{streak:?}");
+    let oval = row(3, 5);
+    assert!(oval.image_width_mm > 0.3 * oval.image_diameter_mm && oval.image_width_mm < 3.0 * oval.image_diameter_mm);
+    // For a lens of revolution the two foci and sizes are one.
+    let round = flare_core::optics::library::builtin_lens("pbrt_dgauss_50mm").unwrap();
+    let flare = PreparedFlare::new(&round, &FlareConfig::default()).unwrap();
+    for g in ghost_report(&round, &flare.system, &flare.mask, u).unwrap().ghosts {
+        assert_eq!((g.focus_x_mm, g.image_width_mm), (g.focus_mm, g.image_diameter_mm));
+    }
+}

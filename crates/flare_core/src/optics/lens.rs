@@ -234,7 +234,7 @@ impl Surface {
     /// x), the vertex curvature of the surface of revolution otherwise.
     pub fn vertex_curvature_x_per_mm(&self) -> f64 {
         match self.radius_x_mm {
-            Some(r) if r == 0.0 => 0.0,
+            Some(0.0) => 0.0,
             Some(r) => 1.0 / r,
             None => self.vertex_curvature_per_mm(),
         }
