@@ -14,12 +14,16 @@
 //! so its recorded points are: the start, the hits on surfaces `0..=j` (the last one is the first
 //! reflection), then on `j-1` down to `i` (the second reflection, where the backward leg ends), then on to
 //! the sensor.
+//!
+//! An anamorphic lens has two sections: a choice above the plot draws the y-z section (the light's y angle,
+//! surfaces by their y-z profile) or the x-z section (rays in the x-z plane at the light's x angle across the
+//! x section's paraxial entrance pupil, surfaces by their x-z sag), both through the real 3D lens.
 
 use eframe::egui;
 use egui_plot::{Arrows, Legend, Line, Plot, PlotPoints, Points};
 use flare_core::flare::PreparedFlare;
 use flare_core::optics::glass::D_LINE_NM;
-use flare_core::optics::{EntrancePupil, Lens, LightPath, TraceOptions, TraceStatus, Tracer, pupil_ray};
+use flare_core::optics::{EntrancePupil, Lens, LightPath, Ray, Section, TraceOptions, TraceStatus, Tracer, pupil_ray};
 
 use super::LensProblem;
 
@@ -30,8 +34,8 @@ const FAN: usize = 11;
 /// reflections among the points.
 type TracedRay = (Vec<[f64; 2]>, TraceStatus, Option<(usize, usize)>);
 
-/// What a fan is traced for: the prepared flare's identity, the field angle's bits and the ghost.
-type FanKey = (u64, u64, Option<(usize, usize)>);
+/// What a fan is traced for: the prepared flare's identity, the field angle's bits, the ghost and the section.
+type FanKey = (u64, u64, Option<(usize, usize)>, Section);
 
 /// The traced fan and the lens it was traced through, cached while the prepared flare, the light and the ghost
 /// are unchanged.
@@ -45,13 +49,15 @@ pub struct RayDiagram {
     /// reflection among the points.
     rays: Vec<TracedRay>,
     reflections: Vec<[f64; 2]>,
+    /// The section drawn (an anamorphic lens has two; a lens of revolution's y-z section stands for all).
+    section: Option<Section>,
 }
 
 impl RayDiagram {
     /// Traces the fan again when the flare (its lens, stop or f-number), the field or the ghost changed; the
     /// flare's identity stands for all of its optics, so nothing is hashed or copied on an unchanged frame.
-    fn update(&mut self, flare: &PreparedFlare, field_deg: f64, ghost: Option<(usize, usize)>) {
-        let key = (flare.id, field_deg.to_bits(), ghost);
+    fn update(&mut self, flare: &PreparedFlare, field_deg: f64, ghost: Option<(usize, usize)>, section: Section) {
+        let key = (flare.id, field_deg.to_bits(), ghost, section);
         if self.key == Some(key) {
             return;
         }
@@ -61,6 +67,8 @@ impl RayDiagram {
         self.reflections.clear();
         let fo = &flare.system.first_order;
         let stop_scale = flare.system.settings.stop_scale;
+        // A section's coordinate across the axis: y, or x in the x-z section.
+        let across = |p: glam::DVec3| if section == Section::X { p.x } else { p.y };
         let path = match ghost {
             Some((i, j)) => match LightPath::ghost(lens, i, j) {
                 Ok(p) => p,
@@ -70,13 +78,21 @@ impl RayDiagram {
         };
         let tracer = Tracer::new(lens, &path, D_LINE_NM, fo.sensor_z_mm());
         let theta = field_deg.to_radians();
-        let full = fo.entrance_pupil();
+        let full = fo.section(section).entrance_pupil();
         let pupil = EntrancePupil { z_mm: full.z_mm, radius_mm: full.radius_mm * stop_scale };
         for k in 0..FAN {
             let py = -1.0 + 2.0 * k as f64 / (FAN - 1) as f64;
-            let out = tracer
-                .trace(&pupil_ray(&pupil, theta, 0.0, py), TraceOptions { apply_apertures: true, record_points: true });
-            let mut points: Vec<[f64; 2]> = out.points_mm.iter().map(|p| [p.z, p.y]).collect();
+            let ray = match section {
+                Section::Y => pupil_ray(&pupil, theta, 0.0, py),
+                // The same fan turned into the x-z plane.
+                Section::X => {
+                    let r = pupil_ray(&pupil, theta, 0.0, py);
+                    let swap = |v: glam::DVec3| glam::DVec3::new(v.y, v.x, v.z);
+                    Ray { origin_mm: swap(r.origin_mm), direction: swap(r.direction) }
+                }
+            };
+            let out = tracer.trace(&ray, TraceOptions { apply_apertures: true, record_points: true });
+            let mut points: Vec<[f64; 2]> = out.points_mm.iter().map(|p| [p.z, across(*p)]).collect();
             // Start the drawn ray in front of the lens, not at the (often virtual) entrance pupil.
             if let Some(second) = points.get(1).copied() {
                 let z0 = -0.15 * fo.total_track_mm;
@@ -139,8 +155,23 @@ pub fn ray_diagram_ui(
     };
     let fo = &flare.system.first_order;
     let stop_scale = flare.system.settings.stop_scale;
-    let field_deg = light_deg[0].hypot(light_deg[1]);
-    diagram.update(flare, field_deg, ghost);
+    let anamorphic = flare.system.lens.is_anamorphic();
+    let mut section = diagram.section.filter(|_| anamorphic).unwrap_or(Section::Y);
+    if anamorphic {
+        ui.horizontal(|ui| {
+            ui.label("anamorphic lens, section:");
+            ui.selectable_value(&mut section, Section::Y, "y-z (vertical)");
+            ui.selectable_value(&mut section, Section::X, "x-z (horizontal)");
+        });
+        diagram.section = Some(section);
+    }
+    // The light's angle in the section drawn; a lens of revolution turns the light into its meridional plane.
+    let field_deg = match (anamorphic, section) {
+        (false, _) => light_deg[0].hypot(light_deg[1]),
+        (true, Section::X) => light_deg[0],
+        (true, Section::Y) => light_deg[1],
+    };
+    diagram.update(flare, field_deg, ghost, section);
     let Some(lens) = diagram.lens.as_ref() else { return };
     let z = lens.vertex_z_mm();
     let h_max = flare.system.lens.surfaces.iter().map(|s| s.semi_aperture_mm).fold(1.0, f64::max);
@@ -164,7 +195,7 @@ pub fn ray_diagram_ui(
         .data_aspect(1.0)
         .legend(Legend::default().position(egui_plot::Corner::LeftTop))
         .x_axis_label("z (mm)")
-        .y_axis_label("y (mm)")
+        .y_axis_label(if section == Section::X { "x (mm)" } else { "y (mm)" })
         .show(ui, |plot| {
             let glass = egui::Color32::from_rgb(150, 200, 255);
             for (k, s) in lens.surfaces.iter().enumerate() {
@@ -184,7 +215,8 @@ pub fn ray_diagram_ui(
                 let pts: Vec<[f64; 2]> = (0..=40)
                     .map(|n| {
                         let h = s.semi_aperture_mm * (n as f64 / 20.0 - 1.0);
-                        [z[k] + s.sag_mm(h).unwrap_or(0.0), h]
+                        let sag = if section == Section::X { s.sag_xy_mm(h, 0.0) } else { s.sag_mm(h) };
+                        [z[k] + sag.unwrap_or(0.0), h]
                     })
                     .collect();
                 plot.line(Line::new("surfaces", PlotPoints::from(pts)).color(glass).width(1.5));
