@@ -8,5 +8,5 @@ struct Globals {
     tonemap: vec4<f32>,    // flare gain (2^flare_ev), operator (0 none, 1 Reinhard, 2 ACES), encode sRGB (0/1), unused
     plate: vec4<f32>,      // plate gain (2^plate_ev), plate present (0/1), unused, unused
     starburst_far: vec4<f32>,  // far field K per channel (I = K c(phi) / r_mm^3), mm per pixel
-    starburst_core: vec4<f32>, // core relative irradiance per channel, unused
+    starburst_core: vec4<f32>, // core relative irradiance per channel, the far field's x stretch N_x / N_y
 };

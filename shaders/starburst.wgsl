@@ -23,7 +23,7 @@ fn vs_main(@builtin(vertex_index) vertex: u32) -> VertexOut {
         vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
     );
     let q = corners[vertex];
-    let pixel = globals.starburst.xy + globals.starburst.z * q;
+    let pixel = globals.starburst.xy + globals.starburst.z * vec2<f32>(max(stretch(), 1.0), 1.0) * q;
     var out: VertexOut;
     out.position = vec4<f32>(pixel.x * globals.viewport.z * 2.0 - 1.0, 1.0 - pixel.y * globals.viewport.w * 2.0, 0.0, 1.0);
     out.pixel = pixel;
@@ -45,9 +45,16 @@ fn profile_at(d: vec2<f32>) -> f32 {
     return a * (1.0 - f) + b * f;
 }
 
+// An anamorphic lens's far field is stretched along x by N_x / N_y (1 for a lens of revolution).
+fn stretch() -> f32 {
+    return select(1.0, globals.starburst_core.w, globals.starburst_core.w > 0.0);
+}
+
 @fragment
 fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
-    let d = in.pixel - globals.starburst.xy;
+    // The far field's own coordinates, in which it is the round pattern.
+    let s = stretch();
+    let d = (in.pixel - globals.starburst.xy) / vec2<f32>(s, 1.0);
     let r_px = length(d);
     if (r_px > globals.starburst.z) {
         return vec4<f32>(0.0);
@@ -57,7 +64,7 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
         c = globals.starburst_core.rgb;
     } else {
         let r_mm = r_px * globals.starburst_far.w;
-        c = globals.starburst_far.rgb * (profile_at(d) / (r_mm * r_mm * r_mm));
+        c = globals.starburst_far.rgb * (profile_at(d) / (r_mm * r_mm * r_mm) / s);
     }
     return vec4<f32>(min(c, vec3<f32>(STARBURST_MAX)), 0.0);
 }

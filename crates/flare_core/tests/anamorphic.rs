@@ -492,3 +492,48 @@ fn a_ghost_between_surfaces_flat_in_x_is_a_streak_along_y() {
         assert_eq!((g.focus_x_mm, g.image_width_mm), (g.focus_mm, g.image_diameter_mm));
     }
 }
+
+/// The starburst of an anamorphic lens: diffraction scales with the working f-number, which differs per
+/// section, so the far field is the round pattern stretched along x by N_x / N_y, its energy kept (divided by
+/// the stretch, the Jacobian). Checked on the CPU twin with the light's image on a pixel centre and a stretch of
+/// 2: the pixel 2k to the right holds half of what the round pattern has k to the right, exactly; the pixel k
+/// below, half of the round one's. The test lens's stretch is its sections' f-numbers' ratio; a lens of
+/// revolution's uniform keeps 0 (today's frame).
+#[test]
+fn the_starburst_stretches_with_the_sections_f_numbers() {
+    use flare_core::flare::{FlareConfig, PreparedFlare};
+    use flare_core::image::HdrImage;
+    use flare_core::render::cpu;
+    let lens = test_lens();
+    let flare = PreparedFlare::new(&lens, &FlareConfig::default()).unwrap();
+    let (scene, _) = flare.scene([3.0, 2.0], 200, 160);
+    let fo = FirstOrder::d_line(&lens).unwrap();
+    let expected = fo.section(Section::X).f_number / fo.section(Section::Y).f_number;
+    assert!((f64::from(scene.globals.starburst_core[3]) - expected).abs() < 1e-6 && (expected - 1.0).abs() > 0.05);
+    let round = PreparedFlare::new(&flare_core::optics::library::builtin_lens("pbrt_dgauss_50mm").unwrap(), &FlareConfig::default()).unwrap();
+    assert_eq!(round.scene([3.0, 2.0], 200, 160).0.globals.starburst_core[3], 0.0);
+    let draw = |stretch: f32| {
+        let mut s = scene.clone();
+        s.globals.starburst[0] = 100.5;
+        s.globals.starburst[1] = 80.5;
+        s.globals.starburst[2] = 60.0;
+        s.globals.starburst_core[3] = stretch;
+        let mut hdr = HdrImage::black(s.hdr_width, s.hdr_height);
+        cpu::starburst_pass(&s, &flare.starburst_texture, &mut hdr);
+        hdr
+    };
+    assert_eq!((scene.hdr_width, scene.hdr_height), (200, 160));
+    let (plain, stretched) = (draw(0.0), draw(2.0));
+    let at = |img: &HdrImage, x: usize, y: usize| img.pixels[y * 200 + x];
+    let mut compared = 0;
+    for k in 2..25 {
+        let (wide, round) = (at(&stretched, 100 + 2 * k, 80), at(&plain, 100 + k, 80));
+        let (below, round_below) = (at(&stretched, 100, 80 + k), at(&plain, 100, 80 + k));
+        for c in 0..3 {
+            assert_eq!(wide[c], round[c] / 2.0, "k {k}");
+            assert_eq!(below[c], round_below[c] / 2.0, "k {k}");
+        }
+        compared += usize::from(round[0] > 0.0);
+    }
+    assert!(compared > 10);
+}

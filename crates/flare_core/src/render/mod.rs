@@ -100,7 +100,8 @@ pub struct Globals {
     pub plate: [f32; 4],
     /// The starburst's far field: `K` per channel (`I = K c(phi) / r_mm^3`), mm per pixel.
     pub starburst_far: [f32; 4],
-    /// The starburst's core: relative irradiance per channel inside the core radius, unused.
+    /// The starburst's core: relative irradiance per channel inside the core radius; then the far field's stretch
+    /// along x, `N_x / N_y` of an anamorphic lens (0 stands for 1: a lens of revolution).
     pub starburst_core: [f32; 4],
 }
 const _: () = assert!(std::mem::size_of::<Globals>() == 96);
@@ -334,7 +335,13 @@ impl FlareScene {
         g.starburst = [finite(light[0]), finite(light[1]), finite(reach_px), STARBURST_CORE_PX as f32];
         g.starburst_far = [finite(far[0]), finite(far[1]), finite(far[2]), finite(mm_per_px)];
         let core = core.map(|v| v.min(STARBURST_MAX));
-        g.starburst_core = [finite(core[0]), finite(core[1]), finite(core[2]), 0.0];
+        // An anamorphic lens diffracts with a working f-number per section: the far field (scaled by lambda N)
+        // is stretched along x by N_x / N_y, its energy kept (the uniform 0 means 1, a lens of revolution).
+        let stretch = match &fo.sections {
+            Some(both) => (both[0].f_number / both[1].f_number).abs(),
+            None => 0.0,
+        };
+        g.starburst_core = [finite(core[0]), finite(core[1]), finite(core[2]), finite(stretch)];
     }
 }
 

@@ -26,10 +26,14 @@ pub fn starburst_pass(scene: &FlareScene, texture: &StarburstTexture, hdr: &mut 
     let [kr, kg, kb, mm_per_px] = scene.globals.starburst_far;
     let core = scene.globals.starburst_core;
     let (w, h) = (hdr.width as usize, hdr.height as usize);
+    // An anamorphic lens's far field is stretched along x by N_x / N_y (1 for a lens of revolution).
+    let stretch = if core[3] > 0.0 { core[3] } else { 1.0 };
     let (sx, sy) = accumulation_scale(scene);
     for y in covered(cy, reach, sy, h) {
-        for x in covered(cx, reach, sx, w) {
-            let (dx, dy) = ((x as f32 + 0.5) * sx - cx, (y as f32 + 0.5) * sy - cy);
+        for x in covered(cx, reach * stretch.max(1.0), sx, w) {
+            let (px, py) = ((x as f32 + 0.5) * sx - cx, (y as f32 + 0.5) * sy - cy);
+            // The far field's own coordinates, in which it is the round pattern.
+            let (dx, dy) = (px / stretch, py);
             let r_px = dx.hypot(dy);
             if r_px > reach {
                 continue;
@@ -38,7 +42,7 @@ pub fn starburst_pass(scene: &FlareScene, texture: &StarburstTexture, hdr: &mut 
                 [core[0], core[1], core[2]]
             } else {
                 let r_mm = r_px * mm_per_px;
-                let p = Starburst::profile_at(&texture.profile, dx, dy) / (r_mm * r_mm * r_mm);
+                let p = Starburst::profile_at(&texture.profile, dx, dy) / (r_mm * r_mm * r_mm) / stretch;
                 [kr * p, kg * p, kb * p]
             };
             let px = &mut hdr.pixels[y * w + x];
