@@ -11,7 +11,8 @@ struct Step {
     terms_lo: vec4<f32>,   // A4, A6, A8, A10
     terms_hi: vec4<f32>,   // A12, A14, A16, spherical (1: the sphere formulas alone)
     optics: vec4<f32>,     // eta = n_in / n_out, reflect (0/1), arriving direction (+1/-1), 1 / semi-aperture^2 (0 at the stop)
-    table: vec4<u32>,      // offset of the reflectance table in `tables`, is the stop (0/1), unused, unused
+    table: vec4<u32>,      // offset of the reflectance table in `tables`, is the stop (0/1), a toroid's x-z
+                           // curvature (f32 bits), is a toroid (0/1)
 };
 
 struct Job {

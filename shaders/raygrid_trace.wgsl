@@ -51,6 +51,73 @@ fn sag(s: Step, r2: f32) -> Sag {
     return out;
 }
 
+// A toroid (optics/lens.rs): the profile above at y^2 swept with the x-z curvature c_x; its sag at (x, y) and
+// its two slopes, from (1 - c_x z)^2 + c_x^2 x^2 = (1 - c_x z_y)^2.
+struct Toroid {
+    z: f32,
+    gx: f32,
+    gy: f32,
+    ok: bool,
+};
+
+fn is_toroid(st: Step) -> bool {
+    return st.table.w == 1u;
+}
+
+fn toroid_sag(st: Step, x: f32, y: f32) -> Toroid {
+    var out: Toroid;
+    out.ok = false;
+    let profile = sag(st, y * y);
+    if (!profile.ok) {
+        return out;
+    }
+    let cx = bitcast<f32>(st.table.z);
+    let w = 1.0 - cx * profile.z;
+    let root = w * w - cx * cx * x * x;
+    if (w <= 0.0 || root < 0.0) {
+        return out;
+    }
+    let z = profile.z + cx * x * x / (w + sqrt(root));
+    let wz = 1.0 - cx * z;
+    if (wz <= 0.0) {
+        return out;
+    }
+    out.z = z;
+    out.gx = cx * x / wz;
+    out.gy = w * y * profile.slope_over_r / wz;
+    out.ok = true;
+    return out;
+}
+
+// A toroid met by Newton's method from the vertex plane (the CPU tracer's `intersect_toroid`).
+fn intersect_toroid(p: vec3<f32>, d: vec3<f32>, st: Step) -> Hit {
+    var out: Hit;
+    out.hit = false;
+    if (d.z == 0.0) {
+        return out;
+    }
+    var s = -p.z / d.z;
+    for (var i = 0u; i < MAX_NEWTON_STEPS; i = i + 1u) {
+        let at = p + s * d;
+        let t = toroid_sag(st, at.x, at.y);
+        if (!t.ok) {
+            return out;
+        }
+        let derivative = d.z - t.gx * d.x - t.gy * d.y;
+        if (derivative == 0.0) {
+            return out;
+        }
+        let step = (at.z - t.z) / derivative;
+        s = s - step;
+        if (abs(step) <= 1e-6 * (1.0 + abs(s))) {
+            out.s = s;
+            out.hit = true;
+            return out;
+        }
+    }
+    return out;
+}
+
 // Distance along d from p (relative to the vertex) to the step's surface; negative infinity-free: `hit` says.
 struct Hit {
     s: f32,
@@ -58,6 +125,9 @@ struct Hit {
 };
 
 fn intersect(p: vec3<f32>, d: vec3<f32>, st: Step) -> Hit {
+    if (is_toroid(st)) {
+        return intersect_toroid(p, d, st);
+    }
     var out: Hit;
     out.hit = false;
     let c = st.geometry.y;
@@ -112,6 +182,13 @@ fn intersect(p: vec3<f32>, d: vec3<f32>, st: Step) -> Hit {
 }
 
 fn normal_at(p: vec3<f32>, st: Step) -> vec4<f32> {
+    if (is_toroid(st)) {
+        let t = toroid_sag(st, p.x, p.y);
+        if (!t.ok) {
+            return vec4<f32>(0.0);
+        }
+        return vec4<f32>(normalize(vec3<f32>(-t.gx, -t.gy, 1.0)), 1.0);
+    }
     let c = st.geometry.y;
     if (st.terms_hi.w > 0.5) {
         return vec4<f32>(normalize(vec3<f32>(-c * p.x, -c * p.y, 1.0 - c * p.z)), 1.0);

@@ -510,7 +510,11 @@ fn the_starburst_stretches_with_the_sections_f_numbers() {
     let fo = FirstOrder::d_line(&lens).unwrap();
     let expected = fo.section(Section::X).f_number / fo.section(Section::Y).f_number;
     assert!((f64::from(scene.globals.starburst_core[3]) - expected).abs() < 1e-6 && (expected - 1.0).abs() > 0.05);
-    let round = PreparedFlare::new(&flare_core::optics::library::builtin_lens("pbrt_dgauss_50mm").unwrap(), &FlareConfig::default()).unwrap();
+    let round = PreparedFlare::new(
+        &flare_core::optics::library::builtin_lens("pbrt_dgauss_50mm").unwrap(),
+        &FlareConfig::default(),
+    )
+    .unwrap();
     assert_eq!(round.scene([3.0, 2.0], 200, 160).0.globals.starburst_core[3], 0.0);
     let draw = |stretch: f32| {
         let mut s = scene.clone();

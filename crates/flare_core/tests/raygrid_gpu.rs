@@ -1,5 +1,6 @@
 //! GPU ray grids (`render::raygrid`, `shaders/raygrid_*.wgsl`) against their f64 CPU twin: landings of the same
-//! grid rays (the f32 drift, per lens) and whole images at the same grid.
+//! grid rays (the f32 drift, per lens, the anamorphic test lens's toroids included) and whole images at the same
+//! grid.
 
 use flare_core::flare::{FlareConfig, PreparedFlare};
 use flare_core::metrics;
@@ -8,8 +9,18 @@ use flare_core::raytrace::{Grid, RayGridRequest, Window};
 use flare_core::render::gpu::test_context;
 use flare_core::render::raygrid::{GpuRayGrid, GpuRayGridError, SUPERSAMPLE};
 
+/// A built-in lens by id, or `toroidal`: the anamorphic test lens of `tests/data/reference/toroidal/`.
 fn prepared(id: &str) -> PreparedFlare {
-    PreparedFlare::new(&builtin_lens(id).unwrap(), &FlareConfig::default()).unwrap()
+    let lens = if id == "toroidal" {
+        flare_core::optics::formats::load_lens_file(
+            &std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+                .join("../../tests/data/reference/toroidal/toroidal_test_lens.json"),
+        )
+        .unwrap()
+    } else {
+        builtin_lens(id).unwrap()
+    };
+    PreparedFlare::new(&lens, &FlareConfig::default()).unwrap()
 }
 
 /// Every traced vertex of the first jobs lands where the f64 tracer puts the same ray, to a few micrometres;
@@ -25,6 +36,7 @@ fn gpu_landings_follow_the_f64_tracer() {
         ("zeiss_master_prime", [5.0, 3.0]),
         ("aspheric_zoom", [8.0, 2.0]),
         ("nikon_zoom_28_75mm", [8.0, 5.0]),
+        ("toroidal", [8.0, 5.0]),
     ] {
         let flare = prepared(id);
         let renderer = flare.ray_grid_renderer();
@@ -81,9 +93,12 @@ fn gpu_ray_grids_draw_the_cpu_ray_grid_image() {
     let Some(ctx) = test_context() else { return };
     let raygrid = GpuRayGrid::new(&ctx.device);
     let (w, h) = (240, 160);
-    for (id, light, cells) in
-        [("pbrt_dgauss_50mm", [6.0, 3.0], 64), ("heliar", [10.0, -4.0], 64), ("zeiss_master_prime", [5.0, 3.0], 48)]
-    {
+    for (id, light, cells) in [
+        ("pbrt_dgauss_50mm", [6.0, 3.0], 64),
+        ("heliar", [10.0, -4.0], 64),
+        ("zeiss_master_prime", [5.0, 3.0], 48),
+        ("toroidal", [8.0, 5.0], 48),
+    ] {
         let flare = prepared(id);
         let renderer = flare.ray_grid_renderer();
         let cpu = renderer.render(light, w, h, Grid::Fixed(cells)).unwrap();

@@ -137,19 +137,6 @@ pub enum GpuRayGridError {
     Limit { cells: usize, what: &'static str, needed: u64, limit: u64, name: &'static str },
     #[error(transparent)]
     Gpu(#[from] GpuError),
-    #[error(
-        "surface {0} is toroidal: the GPU ray grid's tracer knows surfaces of revolution only; the f64 CPU tracer \
-         traces anamorphic lenses (--device cpu, or --method reference)"
-    )]
-    Toroidal(usize),
-}
-
-/// Refuses jobs that cross a toroidal surface, which `raygrid.wgsl` does not trace.
-fn refuse_toroids(planned: &[&PlannedJob]) -> Result<(), GpuRayGridError> {
-    match planned.iter().flat_map(|j| j.tracer.steps()).find(|s| s.shape.toroidal) {
-        Some(step) => Err(GpuRayGridError::Toroidal(step.surface)),
-        None => Ok(()),
-    }
 }
 
 /// What one GPU ray-grid render made.
@@ -323,7 +310,6 @@ impl GpuRayGrid {
         if let Some(reason) = ctx.failure() {
             return Err(GpuError::Lost(reason).into());
         }
-        refuse_toroids(planned)?;
         if supersample == BOX_FILTER {
             return self.draw_box(ctx, renderer, planned, view, profiler);
         }
@@ -656,7 +642,6 @@ impl GpuRayGrid {
     ) -> Result<(Vec<PlannedJob<'r>>, Vec<GpuVertex>), GpuRayGridError> {
         let mut planned = renderer.plan_fixed(light_deg, window, cells, &[])?;
         planned.truncate(jobs);
-        refuse_toroids(&planned.iter().collect::<Vec<_>>())?;
         let (device, queue) = (&ctx.device, &ctx.queue);
         let size = ((cells + 1) * (cells + 1) * planned.len() * std::mem::size_of::<GpuVertex>()) as u64;
         let readback = device.create_buffer(&wgpu::BufferDescriptor {
@@ -760,7 +745,13 @@ fn upload(renderer: &RayGridRenderer, jobs: &[&PlannedJob], window: Window, turn
                     job.inverse_semi_aperture2[k],
                 ]
                 .map(finite),
-                table: [offset, u32::from(step.surface == stop), 0, 0],
+                // A toroid's x-z curvature as f32 bits and its flag (0, 0 for a surface of revolution).
+                table: [
+                    offset,
+                    u32::from(step.surface == stop),
+                    finite(shape.curvature_x_per_mm).to_bits(),
+                    u32::from(shape.toroidal),
+                ],
             });
         }
         let b = job.bounds;
