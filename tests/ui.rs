@@ -1440,3 +1440,36 @@ fn a_refusal_does_not_move_the_lens_table() {
     assert!(h.query_by_label_contains("the view shows the last valid lens").is_some(), "the reason is shown");
     assert_eq!(row(&h), before, "the table stayed where it was");
 }
+
+/// An anamorphic lens in the Lens panel: each toroid's x-z radius is a cell of its own (a surface of revolution
+/// shows `=`), editing it reaches the document and the flare (the ghosts are ellipses per section), an
+/// impossible one is refused on its cell with the reason, and undo gives back exactly what was there.
+#[test]
+fn a_toroids_x_radius_is_edited_in_the_lens_table() {
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/reference/toroidal/toroidal_test_lens.json");
+    let lens = flare_core::optics::formats::load_lens_file(&path).unwrap();
+    let doc = flare_core::preset::Document { lens, ..flare_core::preset::Document::default() };
+    let mut h = harness_on(Some(doc));
+    show(&mut h, Tab::Lens);
+    assert!(h.query_by_label_contains("squeeze").is_some(), "the summary gives the squeeze");
+    assert!(h.query_by_label("radius x 1").is_none(), "surface 1 is a surface of revolution");
+    let before = h.state().doc().lens.clone();
+    h.get_by_label("radius x 0").set_value_accesskit(44.0);
+    h.run();
+    assert_eq!(h.state().doc().lens.surfaces[0].radius_x_mm, Some(44.0));
+    assert!(h.state().derived().lens_problem().is_none());
+    let flare = h.state().flare().unwrap();
+    assert!(flare.system.is_anamorphic() && flare.system.lens.surfaces[0].radius_x_mm == Some(44.0));
+    // A radius of rotation narrower than the clear aperture: refused on its cell, the flare kept.
+    h.get_by_label("radius x 0").set_value_accesskit(5.0);
+    h.run();
+    let problem = h.state().derived().lens_problem().clone().expect("refused");
+    assert_eq!((problem.surface, problem.field), (Some(0), Some("radius_x")), "{problem:?}");
+    assert_eq!(h.state().flare().unwrap().system.lens.surfaces[0].radius_x_mm, Some(44.0));
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
+    h.run();
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
+    h.run();
+    assert_eq!(h.state().doc().lens, before, "undo gives back exactly what was there");
+}

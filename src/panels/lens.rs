@@ -1,6 +1,6 @@
 //! Lens panel: the built-in library, opening a lens file (and what loading it decided), first-order data, and the
-//! interface table (radius, conic with the aspheric terms on hover, thickness, n_d / V_d, semi-aperture, stop)
-//! with rows added, removed and reordered. A cell whose value
+//! interface table (radius, conic with the aspheric terms on hover, thickness, n_d / V_d, semi-aperture, stop;
+//! for an anamorphic lens also each toroid's x-z radius) with rows added, removed and reordered. A cell whose value
 //! makes the lens impossible is marked with the reason; the viewport keeps the last valid lens meanwhile.
 
 use eframe::egui;
@@ -56,8 +56,13 @@ pub fn lens_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, action
             ui.add(egui::Label::new(egui::RichText::new(&text).color(BAD)).truncate()).on_hover_text(&text);
         }
         (None, Some(fo)) => {
+            // An anamorphic lens: the y-z section's focal length, then the x-z section's and the squeeze (one line,
+            // so the table below does not move).
+            let sections = fo.sections.as_ref().map_or(String::new(), |both| {
+                format!(", f_x = {:.2} mm (squeeze {:.3})", both[0].efl_mm, both[1].efl_mm / both[0].efl_mm)
+            });
             ui.label(format!(
-                "f = {:.2} mm, f/{:.2}, BFD {:.2} mm, {} surfaces, {} ghosts",
+                "f = {:.2} mm{sections}, f/{:.2}, BFD {:.2} mm, {} surfaces, {} ghosts",
                 fo.efl_mm,
                 fo.f_number,
                 fo.bfd_mm,
@@ -80,10 +85,15 @@ fn surface_table_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, a
     let mut edit: Option<RowEdit> = None;
     // The table takes the panel's height below the summary (the panel itself scrolls sideways if narrow).
     let height = ui.available_height().max(200.0);
+    // An anamorphic lens shows its toroids' x-z radii (Zemax's radius of rotation) beside the profile's radius.
+    let anamorphic = doc.lens.is_anamorphic();
     egui::ScrollArea::vertical().id_salt("surfaces").max_height(height).show(ui, |ui| {
-        egui::Grid::new("surface_table").num_columns(10).striped(true).spacing([4.0, 2.0]).show(ui, |ui| {
-            for h in ["#", "radius", "conic", "thickness", "nd", "Vd", "semi-ap", "stop", "coating", ""] {
-                ui.strong(h);
+        let columns = 10 + usize::from(anamorphic);
+        egui::Grid::new("surface_table").num_columns(columns).striped(true).spacing([4.0, 2.0]).show(ui, |ui| {
+            for h in ["#", "radius", "radius x", "conic", "thickness", "nd", "Vd", "semi-ap", "stop", "coating", ""] {
+                if h != "radius x" || anamorphic {
+                    ui.strong(h);
+                }
             }
             ui.end_row();
             let count = doc.lens.surfaces.len();
@@ -127,6 +137,19 @@ fn surface_table_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, a
                     }
                 };
                 cell(ui, &mut s.radius_mm, "radius", "radius", 0.1);
+                if anamorphic {
+                    match &mut s.radius_x_mm {
+                        Some(r) => {
+                            let response = ui.scope(|ui| cell(ui, r, "radius_x", "radius x", 0.1)).response;
+                            response.on_hover_text(
+                                "the toroid's x-z radius (0: flat in x); the radius and conic are its y-z profile",
+                            );
+                        }
+                        None => {
+                            ui.label("=").on_hover_text("a surface of revolution: the same radius in x");
+                        }
+                    }
+                }
                 // The conic constant; the even aspheric terms (read from the file) on hover.
                 let terms = if s.aspheric_r2 == 0.0 && s.aspheric.is_empty() {
                     "no aspheric terms".to_owned()

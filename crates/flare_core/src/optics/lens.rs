@@ -538,8 +538,8 @@ impl Lens {
                 } else {
                     (next, t - 0.5 * gap)
                 };
-                (dummy.radius_mm, dummy.conic, dummy.aspheric_r2, dummy.aspheric) =
-                    (shape.radius_mm, shape.conic, shape.aspheric_r2, shape.aspheric.clone());
+                (dummy.radius_mm, dummy.conic, dummy.aspheric_r2, dummy.aspheric, dummy.radius_x_mm) =
+                    (shape.radius_mm, shape.conic, shape.aspheric_r2, shape.aspheric.clone(), shape.radius_x_mm);
                 (Some(d), Some(t - d))
             }
             (Some(t), None) => {
