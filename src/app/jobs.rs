@@ -257,6 +257,17 @@ impl JobBoard {
 
     /// Starts a bake of `flare` (cache key `key`) on its thread, at the background priority.
     fn spawn_bake(&mut self, flare: Arc<PreparedFlare>, key: u64) {
+        if flare.system.lens.is_anamorphic() {
+            // No LUT ghosts for an anamorphic lens yet: said once, and not tried again for these optics (as a
+            // cancelled bake is not), the paraxial flare stays.
+            self.autobake.declined = Some(key);
+            self.bake_status = BakeStatus::Failed(
+                "no LUT ghosts for an anamorphic lens yet (a LUT ghost is turned with the light, which needs a lens \
+                 of revolution): the paraxial flare, with its elliptical ghosts, is shown"
+                    .into(),
+            );
+            return;
+        }
         let previous = self.autobake.latest();
         let (settings, cache) = (self.autobake.settings.clone(), self.autobake.cache.clone());
         self.bake = Some(bake::start_bake(flare, previous, settings, cache));
