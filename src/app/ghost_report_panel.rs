@@ -124,8 +124,16 @@ impl FlareLabApp {
                         if ui.selectable_label(selected, format!("{}-{}", r.i, r.j)).clicked() {
                             self.session.select(if selected { None } else { g });
                         }
-                        ui.label(opt(r.focus_mm, 2));
-                        ui.label(format!("{:.3}", r.image_diameter_mm));
+                        if flare.system.is_anamorphic() {
+                            // Each section focuses on its own: y-z / x-z, and the ellipse's height x width.
+                            ui.label(format!("{} / {}", opt(r.focus_mm, 2), opt(r.focus_x_mm, 2)))
+                                .on_hover_text("y-z section / x-z section");
+                            ui.label(format!("{:.3} x {:.3}", r.image_diameter_mm, r.image_width_mm))
+                                .on_hover_text("height (y) x width (x)");
+                        } else {
+                            ui.label(opt(r.focus_mm, 2));
+                            ui.label(format!("{:.3}", r.image_diameter_mm));
+                        }
                         ui.label(opt(r.f_number, 1));
                         ui.label(format!("{:.2e}", r.peak_vs_source));
                         ui.label(format!("{:.2e}", r.mean_vs_source));
