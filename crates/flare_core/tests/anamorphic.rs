@@ -166,6 +166,15 @@ fn impossible_toroids_are_refused_with_the_reason() {
     crossing.surfaces[0].thickness_mm = Some(3.0);
     let e = crossing.validate().unwrap_err().to_string();
     assert!(e.contains("surfaces 0 and 1 meet"), "{e}");
+    // A lone cylinder (power in x only) has no focus in y: no sensor plane, refused naming the section.
+    let text = r#"{"id": "cyl", "surfaces": [
+        {"radius": 0, "radius_x": 50, "thickness": 4, "nd": 1.5, "vd": 60, "semi_aperture": 10},
+        {"radius": 0, "thickness": 5, "nd": 1.0, "semi_aperture": 10},
+        {"radius": 0, "thickness": 40, "nd": 1.0, "semi_aperture": 5, "stop": true}]}"#;
+    let cylinder: Lens = serde_json::from_str(text).unwrap();
+    cylinder.validate().unwrap();
+    let e = FirstOrder::d_line(&cylinder).unwrap_err().to_string();
+    assert!(e.contains("y-z section") && e.contains("afocal"), "{e}");
 }
 
 #[test]

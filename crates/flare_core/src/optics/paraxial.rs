@@ -189,6 +189,10 @@ pub enum ParaxialError {
     PupilAtInfinity,
     #[error("the paraxial focus lies {bfd_mm:.3} mm in front of the last surface: no real image plane")]
     VirtualFocus { bfd_mm: f64 },
+    /// One section of an anamorphic lens has no first-order data (a lone cylinder has no power in its other
+    /// section: it is afocal there).
+    #[error("in its {section}-z section (the lens is anamorphic), {error}")]
+    Section { section: &'static str, error: Box<ParaxialError> },
 }
 
 /// First-order (Gaussian) data of a lens at one wavelength, in the conventions of `tests/data/reference`.
@@ -230,8 +234,11 @@ impl FirstOrder {
         if !lens.is_anamorphic() {
             return Self::of_revolution(lens, wavelength_nm);
         }
-        let x = Self::of_revolution(&lens.section(Section::X), wavelength_nm)?;
-        let y = Self::of_revolution(&lens.section(Section::Y), wavelength_nm)?;
+        let of = |s: Section| {
+            Self::of_revolution(&lens.section(s), wavelength_nm)
+                .map_err(|e| ParaxialError::Section { section: s.word(), error: Box::new(e) })
+        };
+        let (x, y) = (of(Section::X)?, of(Section::Y)?);
         let z_last = y.total_track_mm - y.bfd_mm;
         let total_track_mm = 0.5 * (x.total_track_mm + y.total_track_mm);
         Ok(Self { total_track_mm, bfd_mm: total_track_mm - z_last, sections: Some(Box::new([x, y.clone()])), ..y })
