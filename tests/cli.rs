@@ -1726,3 +1726,76 @@ fn trace_from_any_point_lands_where_the_pupil_form_does() {
     let result = flarelab(&["trace", &file, "--field-deg", "3", "--start", "0,0,0", "--dir", "0,0,1"]);
     assert!(!result.status.success(), "the two forms do not mix");
 }
+
+/// An anamorphic lens on the command line: `lens info --json` gives both sections, `trace --start` lands where
+/// the independent mpmath figures say, `ghosts --json` gives each ghost's semi-axes, `lens convert` writes a
+/// `.zmx` TOROIDAL that reads back, the paraxial and reference renders write images, and the methods that need a
+/// lens of revolution (LUT ghosts, depth of field) refuse it in one line with the reason.
+#[test]
+fn anamorphic_lenses_on_the_command_line() {
+    let file = repo("tests/data/reference/toroidal/toroidal_test_lens.json");
+    let info = json_of(&flarelab(&["lens", "info", &file, "--json"]));
+    let sections = &info["sections"];
+    let figures: Value = serde_json::from_str(
+        &std::fs::read_to_string(repo("tests/data/reference/toroidal/toroidal_test_lens_reference.json")).unwrap(),
+    )
+    .unwrap();
+    for s in ["x", "y"] {
+        let (ours, theirs) =
+            (sections[s]["efl_mm"].as_f64().unwrap(), figures["sections"][s]["efl_mm"].as_f64().unwrap());
+        assert!((ours - theirs).abs() < 1e-9 * theirs.abs(), "{s}: {ours} vs {theirs}");
+    }
+    assert!(info["surface_table"][0]["radius_x_mm"].as_f64() == Some(40.0));
+    // One skew ghost ray and one image ray of the figures, traced from their start points.
+    let mut traced = 0;
+    for ray in figures["rays"].as_array().unwrap().iter().filter(|r| r["status"] == "ok").step_by(50) {
+        let v = |key: &str| {
+            ray[key]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|x| format!("{:e}", x.as_f64().unwrap()))
+                .collect::<Vec<_>>()
+                .join(",")
+        };
+        let (start, dir) = (v("start_mm"), v("dir"));
+        let mut args =
+            vec!["trace".to_owned(), file.clone(), "--start".into(), start, "--dir".into(), dir, "--json".into()];
+        if let Some(p) = ray["path"].as_array() {
+            args.extend(["--ghost".into(), format!("{},{}", p[0], p[1])]);
+        }
+        let out = json_of(&flarelab(&args.iter().map(String::as_str).collect::<Vec<_>>()));
+        let point = ray["point_mm"].as_array().unwrap();
+        for (key, k) in [("x_mm", 0), ("y_mm", 1)] {
+            let (a, b) = (out[key].as_f64().unwrap(), point[k].as_f64().unwrap());
+            assert!((a - b).abs() < 1e-9, "{args:?}: {key} {a} vs {b}");
+        }
+        assert!(out["section_focus_z_mm"]["x"].as_f64().is_some());
+        traced += 1;
+    }
+    assert!(traced >= 5, "{traced}");
+    let ghosts = json_of(&flarelab(&["ghosts", &file, "--field-deg", "3", "--json"]));
+    let streak = ghosts["ghosts"].as_array().unwrap().iter().find(|g| g["i"] == 7 && g["j"] == 8).unwrap();
+    let axes = [streak["semi_axes_mm"][0].as_f64().unwrap(), streak["semi_axes_mm"][1].as_f64().unwrap()];
+    assert!(axes[0] < 0.05 * axes[1], "ghost 7-8 is a streak along y: {axes:?}");
+    let dir = std::env::temp_dir().join(format!("flarelab-anamorphic-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let zmx = dir.join("toroidal.zmx").display().to_string();
+    assert!(flarelab(&["lens", "convert", &file, "--to", "zmx", "-o", &zmx]).status.success());
+    let back = json_of(&flarelab(&["lens", "info", &zmx, "--json"]));
+    assert!(
+        (back["sections"]["x"]["efl_mm"].as_f64().unwrap() - sections["x"]["efl_mm"].as_f64().unwrap()).abs() < 1e-9
+    );
+    for method in ["paraxial", "reference"] {
+        let out = dir.join(format!("{method}.png")).display().to_string();
+        let run =
+            flarelab(&["render", &file, "--method", method, "--size", "96x64", "--light-deg", "6,3", "--out", &out]);
+        assert!(run.status.success(), "{method}: {}", String::from_utf8_lossy(&run.stderr));
+        let img = image::open(&out).unwrap().to_rgb8();
+        assert!(img.pixels().any(|p| p.0.iter().any(|&c| c > 40)), "{method}: the flare shows");
+    }
+    let blended = dir.join("blended.png").display().to_string();
+    let e = refusal(&["render", &file, "--method", "blended", "--size", "96x64", "--out", &blended]);
+    assert!(e.contains("anamorphic") && e.contains("LUT"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

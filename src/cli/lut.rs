@@ -181,6 +181,16 @@ pub fn bake_lut(
     quiet: bool,
 ) -> Result<(GhostLut, Vec<GhostClass>, f64)> {
     let started = Instant::now();
+    if flare.system.lens.is_anamorphic() {
+        // Refused before the classification (the bake itself would refuse it after).
+        bail!(
+            "{}",
+            flare_core::ghost::GhostError::anamorphic(
+                &flare.system.lens,
+                "the LUT bake (a LUT ghost is baked along one meridian and turned with the light)"
+            )
+        );
+    }
     let classes = classify_ghosts(flare, renderer, choice)?;
     let chosen: Vec<usize> = classes.iter().filter(|c| c.nonlinear()).map(|c| c.ghost).collect();
     if !quiet {

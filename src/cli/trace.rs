@@ -105,7 +105,7 @@ pub fn run(args: &TraceArgs) -> Result<()> {
             "status": out.status.word(),
             "surface": out.status.surface(),
             "x_mm": landing.map(|p| p.x),
-            "sensor_z_mm": fo.sensor_z_mm(),
+            "y_mm": landing.map(|p| p.y),
             "section_focus_z_mm": fo.sections.as_ref().map(|b| json!({"x": b[0].sensor_z_mm(), "y": b[1].sensor_z_mm()})),
             "sensor_z_mm": fo.sensor_z_mm(),
             "direction": out.sensor_direction.map(|d| [d.x, d.y, d.z]),
