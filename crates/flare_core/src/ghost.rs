@@ -33,6 +33,17 @@
 //!   that what is culled adds at most the threshold to any pixel, however many faint ghosts overlap), with
 //!   the reason counted in [`FrameStats`].
 //!
+//! - **Anamorphic lenses** (toroids aligned with x and y): near the axis the lens acts on x by its x-z
+//!   section's matrices and on y by its y-z section's ([`Lens::section`]), so the method holds axis by axis.
+//!   [`GhostSystem::build`] builds a system per section, both ending on the lens's own sensor plane (half way
+//!   between the sections' foci), and keeps the x-z one in [`GhostSystem::x_section`]: every x quantity of a
+//!   sprite (centre, half-size, mask scales and offsets, the x part of each reflection's angle of incidence)
+//!   comes from it, every y quantity from the y-z system. The entrance region is then the box of the two
+//!   sections' bounding intervals, mapped to the half-sizes `(S_x, S_y)`; the irradiance is
+//!   `cos(theta) R_i R_j T rho_x rho_y / (S_x S_y)` (energy conserved), the angles of incidence add their
+//!   squares, and the region is empty when either section's discs part (a box test: never a lit ghost culled).
+//!   A lens of revolution takes the first branch of every such choice, unchanged.
+//!
 //! What changes per frame is only `u`: [`GhostSystem::frame`] is all the per-frame CPU work.
 
 use crate::coating::InterfaceTables;

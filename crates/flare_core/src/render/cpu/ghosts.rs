@@ -1,5 +1,7 @@
 //! `ghosts.wgsl` on the CPU: the instanced ghost sprites into the HDR accumulation, and the per-ghost moments
-//! of the same fragments.
+//! of the same fragments. Each mask map is affine per axis, `(scale_x q_x, scale_y q_y) + offset`: the x scale
+//! in the map, the y scale in `GhostInstance::scale_y` (the same number for a lens of revolution; an
+//! anamorphic lens's sprites are ellipses).
 
 use rayon::prelude::*;
 
