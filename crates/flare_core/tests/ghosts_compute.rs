@@ -18,7 +18,17 @@ fn prepared(lens: &str, blades: u32) -> PreparedFlare {
         ApertureShape::Blades { count: blades, rotation_deg: 10.0, roundness: 0.0 }
     };
     let config = FlareConfig { aperture: Aperture { shape, f_number: None }, ..FlareConfig::default() };
-    PreparedFlare::new(&builtin_lens(lens).unwrap(), &config).unwrap()
+    // `toroidal`: the anamorphic test lens of tests/data/reference/toroidal (elliptical sprites).
+    let lens = if lens == "toroidal" {
+        flare_core::optics::formats::load_lens_file(
+            &std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+                .join("../../tests/data/reference/toroidal/toroidal_test_lens.json"),
+        )
+        .unwrap()
+    } else {
+        builtin_lens(lens).unwrap()
+    };
+    PreparedFlare::new(&lens, &config).unwrap()
 }
 
 fn request(light_deg: [f64; 2], width: u32, height: u32, divisor: u32) -> FrameRequest {
@@ -64,6 +74,7 @@ fn the_compute_pass_draws_the_cpu_twins_image() {
         ("pbrt_dgauss_50mm", 5, [-8.0, 4.0], 1),
         ("heliar", 0, [12.0, -3.0], 2),
         ("pbrt_dgauss_50mm", 7, [30.0, 25.0], 1),
+        ("toroidal", 6, [8.0, 5.0], 1),
     ] {
         let flare = prepared(lens, blades);
         let frame = Frame::build(&flare, None, &request(light, 320, 200, divisor));
@@ -128,4 +139,35 @@ fn the_raster_pass_stays_in_step() {
     );
     assert!(mean_raster < 0.5 && worst_raster < 4.0, "raster {mean_raster} / {worst_raster}");
     assert!(worst_compute < 0.5 && mean_compute <= mean_raster, "compute {mean_compute} / {worst_compute}");
+}
+
+/// An anamorphic lens's frame (elliptical sprites: a y scale per mask apart from the x one; the starburst
+/// stretched by N_x / N_y) on the GPU, raster and compute, against the CPU twin, the starburst on.
+#[test]
+fn an_anamorphic_frame_draws_the_cpu_twins_image() {
+    let Some(ctx) = test_context() else { return };
+    let flare = prepared("toroidal", 5);
+    assert!(flare.system.is_anamorphic());
+    let mut req = request([7.0, -4.0], 300, 180, 1);
+    req.display.starburst = true;
+    let frame = Frame::build(&flare, None, &req);
+    assert!(frame.scene.instances.iter().any(|i| (i.scale_y[3] / i.front[0] - 1.0).abs() > 0.1), "ellipses");
+    assert!(frame.scene.globals.starburst_core[3] > 1.0, "a stretched starburst");
+    let sources = Sources { flare: &flare, lut: None, plate: None };
+    let cpu = frame::draw_cpu(&frame, &sources);
+    let computed = GpuDrawer::on(ctx).draw(&frame, &sources).unwrap();
+    let (worst_compute, mean_compute, lit) = display_difference(&frame, &computed.hdr, &cpu.hdr);
+    let Some(ctx) = test_context() else { return };
+    let mut raster = GpuDrawer::on(ctx);
+    raster.renderer.force_raster_ghosts();
+    let rastered = raster.draw(&frame, &sources).unwrap();
+    let (worst_raster, mean_raster, _) = display_difference(&frame, &rastered.hdr, &cpu.hdr);
+    eprintln!(
+        "anamorphic: compute worst {worst_compute:.3}/255 mean {mean_compute:.5}/255; raster worst {worst_raster:.3}/255 \
+         mean {mean_raster:.5}/255; {:.0}% lit",
+        100.0 * lit
+    );
+    assert!(lit > 0.05);
+    assert!(worst_compute < 0.5, "compute {worst_compute}");
+    assert!(mean_raster < 0.5 && worst_raster < 4.0, "raster {mean_raster} / {worst_raster}");
 }
