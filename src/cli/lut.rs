@@ -138,6 +138,17 @@ pub fn classify_ghosts(
     if !(choice.threshold.is_finite() && (0.0..=1.0).contains(&choice.threshold)) {
         bail!("--threshold {}: 0 to 1", choice.threshold);
     }
+    if flare.system.lens.is_anamorphic() {
+        // The classification measures each ghost along one meridian for the LUT bake, which an anamorphic lens
+        // cannot have yet: refused before any tracing.
+        bail!(
+            "{}",
+            flare_core::ghost::GhostError::anamorphic(
+                &flare.system.lens,
+                "the LUT classification and bake (a LUT ghost is baked along one meridian and turned with the light)"
+            )
+        );
+    }
     let mut forced: Vec<(usize, bool)> =
         ghost_indices(flare, &choice.force_nonlinear)?.into_iter().map(|g| (g, true)).collect();
     forced.extend(ghost_indices(flare, &choice.force_linear)?.into_iter().map(|g| (g, false)));
@@ -181,16 +192,6 @@ pub fn bake_lut(
     quiet: bool,
 ) -> Result<(GhostLut, Vec<GhostClass>, f64)> {
     let started = Instant::now();
-    if flare.system.lens.is_anamorphic() {
-        // Refused before the classification (the bake itself would refuse it after).
-        bail!(
-            "{}",
-            flare_core::ghost::GhostError::anamorphic(
-                &flare.system.lens,
-                "the LUT bake (a LUT ghost is baked along one meridian and turned with the light)"
-            )
-        );
-    }
     let classes = classify_ghosts(flare, renderer, choice)?;
     let chosen: Vec<usize> = classes.iter().filter(|c| c.nonlinear()).map(|c| c.ghost).collect();
     if !quiet {

@@ -311,7 +311,8 @@ pub enum GhostError {
     StopScale(f64),
     #[error(
         "the lens is anamorphic (toroidal surfaces {surfaces:?}): {what} assumes a lens of revolution and does not \
-         handle it yet; the paraxial flare, `flarelab trace` and `flarelab lens info` do"
+         handle it yet; the paraxial flare, the ray-traced reference and ray grids, `flarelab trace` and \
+         `flarelab lens info` do"
     )]
     Anamorphic { surfaces: Vec<usize>, what: &'static str },
 }
