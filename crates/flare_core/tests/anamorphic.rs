@@ -251,7 +251,8 @@ mod stress {
             }
             prop_assume!(lens.validate().is_ok());
             let Ok(fo) = FirstOrder::d_line(&lens) else { return Ok(()) };
-            let ray = Ray { origin_mm: DVec3::new(start.0, start.1, start.2), direction: DVec3::new(dir.0, dir.1, dir.2) };
+            let (origin_mm, direction) = (DVec3::new(start.0, start.1, start.2), DVec3::new(dir.0, dir.1, dir.2));
+            let ray = Ray { origin_mm, direction };
             let mut paths = vec![LightPath::image(&lens)];
             paths.extend(lens.ghost_pairs().iter().step_by(7).map(|&(i, j)| LightPath::ghost(&lens, i, j).unwrap()));
             for path in &paths {

@@ -16,7 +16,8 @@
 //! converge, missed the surface. A toroid (no rotational symmetry) starts Newton's method on
 //! `z(s) - sag(x(s), y(s))` from the vertex plane, its normal from the two slopes of its sag. So a sphere is met
 //! as a whole sphere (the reference figures' convention, even off the hemisphere the sag describes), while a
-//! conic, asphere or toroid is met only on the branch its sag describes. Its normal is `(-m x, -m y, 1) / sqrt(1 + m^2 r^2)` with `m = (dz/dr) / r`.
+//! conic, asphere or toroid is met only on the branch its sag describes. Its normal is
+//! `(-m x, -m y, 1) / sqrt(1 + m^2 r^2)` with `m = (dz/dr) / r` (a toroid's, `(-dz/dx, -dz/dy, 1)` normalised).
 //! Then it refracts by
 //! the vector form of Snell's law, `n2 d' = n1 d + (n2 cos t - n1 cos i) N`, or reflects,
 //! `d' = d - 2 (d.N) N`, and finally meets the sensor plane.
