@@ -257,15 +257,11 @@ impl JobBoard {
 
     /// Starts a bake of `flare` (cache key `key`) on its thread, at the background priority.
     fn spawn_bake(&mut self, flare: Arc<PreparedFlare>, key: u64) {
-        if flare.system.lens.is_anamorphic() {
-            // No LUT ghosts for an anamorphic lens yet: said once, and not tried again for these optics (as a
-            // cancelled bake is not), the paraxial flare stays.
+        if let Err(why) = flare_core::lut::Symmetry::of(&flare.system.lens, &flare.config.aperture) {
+            // An anamorphic lens whose blades break its mirror symmetry: said once, and not tried again for these
+            // optics (as a cancelled bake is not); the paraxial flare stays.
             self.autobake.declined = Some(key);
-            self.bake_status = BakeStatus::Failed(
-                "no LUT ghosts for an anamorphic lens yet (a LUT ghost is turned with the light, which needs a lens \
-                 of revolution): the paraxial flare, with its elliptical ghosts, is shown"
-                    .into(),
-            );
+            self.bake_status = BakeStatus::Failed(format!("no LUT ghosts: {why}; the paraxial flare is shown"));
             return;
         }
         let previous = self.autobake.latest();

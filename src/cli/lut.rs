@@ -138,16 +138,9 @@ pub fn classify_ghosts(
     if !(choice.threshold.is_finite() && (0.0..=1.0).contains(&choice.threshold)) {
         bail!("--threshold {}: 0 to 1", choice.threshold);
     }
-    if flare.system.lens.is_anamorphic() {
-        // The classification measures each ghost along one meridian for the LUT bake, which an anamorphic lens
-        // cannot have yet: refused before any tracing.
-        bail!(
-            "{}",
-            flare_core::ghost::GhostError::anamorphic(
-                &flare.system.lens,
-                "the LUT classification and bake (a LUT ghost is baked along one meridian and turned with the light)"
-            )
-        );
+    if let Err(why) = flare_core::lut::Symmetry::of(&flare.system.lens, &flare.config.aperture) {
+        // Refused before any tracing (the bake would refuse it after).
+        bail!("no LUT ghosts: {why}");
     }
     let mut forced: Vec<(usize, bool)> =
         ghost_indices(flare, &choice.force_nonlinear)?.into_iter().map(|g| (g, true)).collect();

@@ -524,15 +524,9 @@ fn lut_for(doc: &Document, flare: &PreparedFlare, method: Method) -> Result<Ghos
         }
         None if method == Method::Photo => bail!("--method photo needs --lut F.flut (made by `flarelab photo-lut`)"),
         None => {
-            if doc.lens.is_anamorphic() {
+            if let Err(why) = flare_core::lut::Symmetry::of(&doc.lens, &flare.config.aperture) {
                 // Said before any classification or device probing: the bake would refuse it after.
-                bail!(
-                    "{}",
-                    flare_core::ghost::GhostError::anamorphic(
-                        &doc.lens,
-                        "--method blended (LUT ghosts are turned with the light, which needs a lens of revolution)"
-                    )
-                );
+                bail!("--method blended: no LUT ghosts: {why}");
             }
             // The LUT baked for this lens and these settings: the app's and this command's shared cache, else
             // baked now (and cached for next time).

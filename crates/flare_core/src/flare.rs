@@ -190,12 +190,6 @@ impl crate::lut::GhostLut {
         if self.fingerprint_scheme != crate::fingerprint::SCHEME {
             return Err(crate::lut::format::LutError::OldFingerprint { lut_lens: self.lens_id.clone() });
         }
-        if lens.is_anamorphic() {
-            return Err(crate::lut::format::LutError::Header(
-                crate::ghost::GhostError::anamorphic(lens, "a ray-traced LUT (its ghosts are turned with the light)")
-                    .to_string(),
-            ));
-        }
         let live = lut_fingerprint(lens, config);
         if live != self.lens_fingerprint {
             return Err(crate::lut::format::LutError::OtherLens {

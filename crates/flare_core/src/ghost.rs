@@ -772,11 +772,28 @@ impl GhostSystem {
         for (w, co) in self.coefficients[g * nw..(g + 1) * nw].iter().enumerate() {
             let luma = crate::metrics::luminance(self.settings.spectrum.weights_rgb[w]);
             weight_sum += luma;
-            centre = [centre[0] + luma * co.centre_per_slope * u[0], centre[1] + luma * co.centre_per_slope * u[1]];
-            half += luma * co.half_size_mm.abs();
-            if u2.sqrt() < co.empty_from_slope {
-                // irradiance x (2 half)^2 = irradiance per unit area ratio x 4 rho^2.
-                energy += luma * self.irradiance(co, u2, cos_theta) * 4.0 * co.rho_squared;
+            match &self.x_section {
+                None => {
+                    centre =
+                        [centre[0] + luma * co.centre_per_slope * u[0], centre[1] + luma * co.centre_per_slope * u[1]];
+                    half += luma * co.half_size_mm.abs();
+                    if u2.sqrt() < co.empty_from_slope {
+                        // irradiance x (2 half)^2 = irradiance per unit area ratio x 4 rho^2.
+                        energy += luma * self.irradiance(co, u2, cos_theta) * 4.0 * co.rho_squared;
+                    }
+                }
+                Some(x) => {
+                    // An anamorphic ghost: its centre per axis, the larger semi-axis (the square a LUT entry
+                    // is fitted in holds the ellipse), the energy through the box of the two sections.
+                    let cx = &x.coefficients[g * nw + w];
+                    centre =
+                        [centre[0] + luma * cx.centre_per_slope * u[0], centre[1] + luma * co.centre_per_slope * u[1]];
+                    half += luma * cx.half_size_mm.abs().max(co.half_size_mm.abs());
+                    if u[0].abs() < cx.empty_from_slope && u[1].abs() < co.empty_from_slope {
+                        let rho_area = (cx.rho_squared * co.rho_squared).sqrt();
+                        energy += luma * self.irradiance_per_axis([cx, co], u, cos_theta) * 4.0 * rho_area;
+                    }
+                }
             }
         }
         let weight_sum = weight_sum.max(1e-300);

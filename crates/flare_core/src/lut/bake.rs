@@ -133,7 +133,7 @@ pub enum BakeError {
     Setting { field: &'static str, reason: String },
     #[error("ghost {0} does not exist (the lens has {1} ghosts)")]
     NoGhost(usize, usize),
-    /// A LUT ghost is baked along one meridian and turned with the light: that needs a lens of revolution.
+    /// An anamorphic lens whose stop breaks its mirror symmetry (the reason).
     #[error("{0}")]
     Anamorphic(String),
 }
@@ -239,6 +239,14 @@ pub fn render_column(
     symmetry: &Symmetry,
     settings: &BakeSettings,
 ) -> Vec<LutEntry> {
+    if flare.system.lens.is_anamorphic() && phis_deg.len() > 1 {
+        // No rotation turns an anamorphic lens's ghost into its ghost at another azimuth: each azimuth is traced
+        // on its own (what a lens of revolution saves, an anamorphic bake pays: a trace per azimuth).
+        return phis_deg
+            .iter()
+            .flat_map(|&phi| render_column(flare, renderer, tracing, g, theta_deg, &[phi], symmetry, settings))
+            .collect();
+    }
     // Traced for the light at the first azimuth; each entry's view turns it on to its own.
     let base_deg = phis_deg.first().copied().unwrap_or(0.0);
     let base = light_position_deg(theta_deg, symmetry.axis_deg + base_deg);
@@ -405,25 +413,22 @@ pub fn bake_with(
     cancel: &AtomicBool,
 ) -> Result<GhostLut, BakeError> {
     settings.validate()?;
-    if flare.system.lens.is_anamorphic() {
-        return Err(BakeError::Anamorphic(
-            crate::ghost::GhostError::anamorphic(
-                &flare.system.lens,
-                "the LUT bake (each ghost is baked along one meridian and turned with the light; an anamorphic lens \
-                 would need a table over both field angles, the light's azimuth too)",
-            )
-            .to_string(),
-        ));
-    }
     let total = flare.system.ghosts.len();
     if let Some(&bad) = ghosts.iter().find(|&&g| g >= total) {
         return Err(BakeError::NoGhost(bad, total));
     }
     let lens = &flare.system.lens;
     let fingerprint = crate::flare::lut_fingerprint(lens, &flare.config);
-    let symmetry = Symmetry::of_aperture(&flare.config.aperture);
+    let symmetry = Symmetry::of(lens, &flare.config.aperture).map_err(BakeError::Anamorphic)?;
     let theta_max = settings.theta_max_deg.unwrap_or_else(|| useful_field_deg(flare));
-    let phis = symmetry.phi_samples(settings.phi_steps);
+    // An anamorphic lens's ghosts change shape with the light's azimuth (no rotation turns one into another):
+    // its quadrant is sampled every 15 degrees at the least.
+    let phi_steps = if lens.is_anamorphic() {
+        settings.phi_steps.max((symmetry.wedge_deg() / 15.0).ceil() as u32)
+    } else {
+        settings.phi_steps
+    };
+    let phis = symmetry.phi_samples(phi_steps);
     let entries_done = AtomicUsize::new(0);
     let ghosts_done = AtomicUsize::new(0);
     let kept = AtomicUsize::new(0);

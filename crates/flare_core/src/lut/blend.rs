@@ -306,7 +306,10 @@ impl LutScene {
             let turned: Vec<_> = picks
                 .iter()
                 .map(|&(k, weight)| {
-                    let transform = mat_mul(base, rotation(beta - ghost.entries[k].phi_deg));
+                    // The entry turned from its azimuth to the light's: a lens of revolution's ghost turns with
+                    // the light; an anamorphic lens's does not (its azimuths are interpolated, not turned).
+                    let residual = if system.is_anamorphic() { 0.0 } else { beta - ghost.entries[k].phi_deg };
+                    let transform = mat_mul(base, rotation(residual));
                     (if fitted { live_lut.shapes[lg][k] } else { None }, transform, weight)
                 })
                 .collect();

@@ -161,7 +161,9 @@ pub fn classify(
     settings: &ClassifySettings,
     forced: &[(usize, bool)],
 ) -> Vec<GhostClass> {
-    let axis = super::Symmetry::of_aperture(&flare.config.aperture).axis_deg;
+    let axis = super::Symmetry::of(&flare.system.lens, &flare.config.aperture)
+        .unwrap_or_else(|_| super::Symmetry::of_aperture(&flare.config.aperture))
+        .axis_deg;
     let angles: Vec<f64> = (0..settings.angles.max(1))
         .map(|k| settings.theta_max_deg * k as f64 / (settings.angles.max(2) - 1) as f64)
         .collect();

@@ -86,6 +86,40 @@ pub fn mat_apply(m: Mat2, v: [f64; 2]) -> [f64; 2] {
 }
 
 impl Symmetry {
+    /// The symmetry a LUT of `lens` with this stop may use: the aperture's ([`Self::of_aperture`]) for a lens of
+    /// revolution; for an anamorphic lens (toroids aligned with x and y: mirror-symmetric about both axes, the
+    /// dihedral group of order 2) what the two have in common, when this type can say it: order 2 about the x
+    /// axis (a round stop, or an even number of blades with a mirror line on an axis), order 1 about the x or y
+    /// axis (an odd number of blades with a mirror line there). Otherwise (blades turned off the axes) the
+    /// reason, for the bake to refuse.
+    pub fn of(lens: &crate::optics::Lens, aperture: &Aperture) -> Result<Self, String> {
+        let own = Self::of_aperture(aperture);
+        if !lens.is_anamorphic() {
+            return Ok(own);
+        }
+        if own.order == 0 {
+            return Ok(Self { order: 2, axis_deg: 0.0 });
+        }
+        // The aperture's mirror lines lie every 180 / order degrees from its axis.
+        let spacing = 180.0 / f64::from(own.order);
+        let on = |angle: f64| {
+            let r = (own.axis_deg - angle).rem_euclid(spacing);
+            r.min(spacing - r) < 1e-9
+        };
+        match (own.order % 2 == 0, on(0.0), on(90.0)) {
+            (true, true, _) => Ok(Self { order: 2, axis_deg: 0.0 }),
+            (false, true, _) => Ok(Self { order: 1, axis_deg: 0.0 }),
+            (false, false, true) => Ok(Self { order: 1, axis_deg: 90.0 }),
+            _ => Err(format!(
+                "the {} blades turned {} degrees break the anamorphic lens's mirror symmetry about its axes, which a \
+                 LUT needs: turn them by a multiple of {} degrees",
+                own.order,
+                own.axis_deg,
+                crate::optics::lens::round(spacing)
+            )),
+        }
+    }
+
     /// The symmetry of a lens with this stop: N-fold dihedral for N straight or bowed blades, full for a circle
     /// (or fully rounded blades), and full, as an approximation, for an image stop.
     pub fn of_aperture(aperture: &Aperture) -> Self {
