@@ -106,7 +106,7 @@ impl Symmetry {
             let r = (own.axis_deg - angle).rem_euclid(spacing);
             r.min(spacing - r) < 1e-9
         };
-        match (own.order % 2 == 0, on(0.0), on(90.0)) {
+        match (own.order.is_multiple_of(2), on(0.0), on(90.0)) {
             (true, true, _) => Ok(Self { order: 2, axis_deg: 0.0 }),
             (false, true, _) => Ok(Self { order: 1, axis_deg: 0.0 }),
             (false, false, true) => Ok(Self { order: 1, axis_deg: 90.0 }),
