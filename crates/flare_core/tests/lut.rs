@@ -946,3 +946,30 @@ fn an_anamorphic_lenss_lut_ghosts_are_interpolated_over_the_quadrant() {
         assert!(l1_turned > l1, "{l1_turned} vs {l1}");
     }
 }
+
+/// The symmetry a LUT may use: the aperture's for a lens of revolution; for an anamorphic lens what its two
+/// mirror lines (the axes) and the aperture's have in common, refused when the blades break them.
+#[test]
+fn an_anamorphic_lenss_lut_symmetry_is_what_it_shares_with_the_stop() {
+    use flare_core::aperture::{Aperture, ApertureShape};
+    use flare_core::lut::Symmetry;
+    let toroidal = flare_core::optics::formats::load_lens_file(
+        &std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("../../tests/data/reference/toroidal/toroidal_test_lens.json"),
+    )
+    .unwrap();
+    let round = builtin_lens("tessar").unwrap();
+    let blades = |count: u32, rotation_deg: f64| Aperture {
+        shape: ApertureShape::Blades { count, rotation_deg, roundness: 0.0 },
+        f_number: None,
+    };
+    let of = |lens: &flare_core::optics::Lens, a: &Aperture| Symmetry::of(lens, a).map(|s| (s.order, s.axis_deg));
+    assert_eq!(of(&round, &blades(6, 10.0)), Ok((6, 10.0)), "a lens of revolution keeps the aperture's");
+    assert_eq!(of(&toroidal, &Aperture::default()), Ok((2, 0.0)));
+    assert_eq!(of(&toroidal, &blades(6, 0.0)), Ok((2, 0.0)));
+    assert_eq!(of(&toroidal, &blades(6, 60.0)), Ok((2, 0.0)));
+    assert_eq!(of(&toroidal, &blades(5, 0.0)), Ok((1, 0.0)));
+    assert_eq!(of(&toroidal, &blades(5, 18.0)), Ok((1, 90.0)));
+    let e = of(&toroidal, &blades(6, 10.0)).unwrap_err();
+    assert!(e.contains("mirror symmetry") && e.contains("30"), "{e}");
+}
