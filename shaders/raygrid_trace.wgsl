@@ -89,25 +89,28 @@ fn toroid_sag(st: Step, x: f32, y: f32) -> Toroid {
     return out;
 }
 
-// A toroid met by Newton's method from the vertex plane (the CPU tracer's `intersect_toroid`).
-fn intersect_toroid(p: vec3<f32>, d: vec3<f32>, st: Step) -> Hit {
+// `z - sag` at the point `at` of the line along d and its derivative along the line (x, y), and whether the
+// sag is defined there (z 1) or not (z 0): an asphere's or a toroid's.
+fn residual(st: Step, at: vec3<f32>, d: vec3<f32>) -> vec3<f32> {
+    if (is_toroid(st)) {
+        let t = toroid_sag(st, at.x, at.y);
+        return vec3<f32>(at.z - t.z, d.z - t.gx * d.x - t.gy * d.y, select(0.0, 1.0, t.ok));
+    }
+    let sg = sag(st, at.x * at.x + at.y * at.y);
+    return vec3<f32>(at.z - sg.z, d.z - sg.slope_over_r * (at.x * d.x + at.y * d.y), select(0.0, 1.0, sg.ok));
+}
+
+// Newton's method along p + s d from s (the CPU tracer's `newton`).
+fn newton(p: vec3<f32>, d: vec3<f32>, start: f32, st: Step) -> Hit {
     var out: Hit;
     out.hit = false;
-    if (d.z == 0.0) {
-        return out;
-    }
-    var s = -p.z / d.z;
+    var s = start;
     for (var i = 0u; i < MAX_NEWTON_STEPS; i = i + 1u) {
-        let at = p + s * d;
-        let t = toroid_sag(st, at.x, at.y);
-        if (!t.ok) {
+        let r = residual(st, p + s * d, d);
+        if (r.z == 0.0 || r.y == 0.0) {
             return out;
         }
-        let derivative = d.z - t.gx * d.x - t.gy * d.y;
-        if (derivative == 0.0) {
-            return out;
-        }
-        let step = (at.z - t.z) / derivative;
+        let step = r.x / r.y;
         s = s - step;
         if (abs(step) <= 1e-6 * (1.0 + abs(s))) {
             out.s = s;
@@ -125,11 +128,15 @@ struct Hit {
 };
 
 fn intersect(p: vec3<f32>, d: vec3<f32>, st: Step) -> Hit {
-    if (is_toroid(st)) {
-        return intersect_toroid(p, d, st);
-    }
     var out: Hit;
     out.hit = false;
+    if (is_toroid(st)) {
+        // From the vertex plane (the CPU tracer's `intersect_toroid`).
+        if (d.z == 0.0) {
+            return out;
+        }
+        return newton(p, d, -p.z / d.z, st);
+    }
     let c = st.geometry.y;
     let z_dir = st.optics.z;
     let q = select(1.0 + st.geometry.z, 1.0, st.terms_hi.w > 0.5);
@@ -158,27 +165,7 @@ fn intersect(p: vec3<f32>, d: vec3<f32>, st: Step) -> Hit {
         }
         s = -p.z / d.z;
     }
-    for (var i = 0u; i < MAX_NEWTON_STEPS; i = i + 1u) {
-        let at = p + s * d;
-        let r2 = at.x * at.x + at.y * at.y;
-        let sg = sag(st, r2);
-        if (!sg.ok) {
-            return out;
-        }
-        let f = at.z - sg.z;
-        let derivative = d.z - sg.slope_over_r * (at.x * d.x + at.y * d.y);
-        if (derivative == 0.0) {
-            return out;
-        }
-        let step = f / derivative;
-        s = s - step;
-        if (abs(step) <= 1e-6 * (1.0 + abs(s))) {
-            out.s = s;
-            out.hit = true;
-            return out;
-        }
-    }
-    return out;
+    return newton(p, d, s, st);
 }
 
 fn normal_at(p: vec3<f32>, st: Step) -> vec4<f32> {

@@ -58,6 +58,7 @@ pub fn run(args: &GhostsArgs) -> Result<()> {
     let frame = system.frame(u, &frame_settings);
     let reported = spectrum.len() / 2; // the single wavelength, or G of RGB
     let mut rows = Vec::with_capacity(system.ghosts.len());
+    let sections = (lens.section(Section::Y), lens.section(Section::X));
     for (g, ghost) in system.ghosts.iter().enumerate() {
         let sprites: Vec<_> = frame.sprites.iter().filter(|s| s.ghost == g).collect();
         let mut rgb = [0.0; 3];
@@ -86,8 +87,7 @@ pub fn run(args: &GhostsArgs) -> Result<()> {
                 PathMatrices::compute(lens, &p, D_LINE_NM, system.first_order.sensor_z_mm()).focus_after_sensor_mm()
             })
         };
-        let focus_mm = focus(&lens.section(Section::Y));
-        let focus_x_mm = focus(&lens.section(Section::X));
+        let (focus_mm, focus_x_mm) = (focus(&sections.0), focus(&sections.1));
         let ellipse = system.stop_image_ellipse(g, reported, u);
         rows.push(json!({
             "i": ghost.i, "j": ghost.j,

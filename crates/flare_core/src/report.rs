@@ -111,13 +111,13 @@ pub fn ghost_report(
     let sensor_z = system.first_order.sensor_z_mm();
     let epd = system.first_order.entrance_pupil_diameter_mm * system.settings.stop_scale;
     let middle = system.settings.spectrum.len() / 2;
+    // The y-z section (the lens itself when it is of revolution) and the x-z section's lens of revolution.
+    let (section_y, section_x) = (lens.section(crate::optics::Section::Y), lens.section(crate::optics::Section::X));
     let mut ghosts: Vec<GhostRow> = system
         .ghosts
         .iter()
         .enumerate()
         .map(|(g, ghost)| {
-            // The y-z section (the lens itself when it is of revolution), then the x-z section's lens of
-            // revolution.
             let flare_matrix = |lens: &Lens| {
                 LightPath::ghost(lens, ghost.i, ghost.j)
                     .ok()
@@ -126,8 +126,7 @@ pub fn ghost_report(
             let focus = |m: Option<crate::optics::Mat2>| {
                 m.and_then(|m| (m.c != 0.0).then(|| -m.a / m.c)).filter(|v| v.is_finite())
             };
-            let d_line = flare_matrix(&lens.section(crate::optics::Section::Y));
-            let d_line_x = flare_matrix(&system.x_system().lens.section(crate::optics::Section::X));
+            let (d_line, d_line_x) = (flare_matrix(&section_y), flare_matrix(&section_x));
             let c = d_line.map_or(0.0, |m| m.c);
             let ellipse = system.stop_image_ellipse(g, middle, u);
             let sprite = ellipse.map(|(centre, semi)| (centre, semi[1]));

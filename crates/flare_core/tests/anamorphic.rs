@@ -8,7 +8,6 @@
 
 use std::path::PathBuf;
 
-use flare_core::optics::formats::load_lens_file;
 use flare_core::optics::{D_LINE_NM, FirstOrder, Lens, LightPath, Ray, Section, TraceOptions, TraceStatus, Tracer};
 use glam::DVec3;
 use serde_json::Value;
@@ -17,9 +16,8 @@ fn folder() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/reference/toroidal")
 }
 
-fn test_lens() -> Lens {
-    load_lens_file(&folder().join("toroidal_test_lens.json")).unwrap()
-}
+mod common;
+use common::toroidal_test_lens as test_lens;
 
 fn figures() -> Value {
     serde_json::from_str(&std::fs::read_to_string(folder().join("toroidal_test_lens_reference.json")).unwrap()).unwrap()

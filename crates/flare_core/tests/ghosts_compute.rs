@@ -11,6 +11,8 @@ use flare_core::render::cpu::tonemap_pixel;
 use flare_core::render::gpu::test_context;
 use flare_core::render::{DisplaySettings, HdrImage};
 
+mod common;
+
 fn prepared(lens: &str, blades: u32) -> PreparedFlare {
     let shape = if blades == 0 {
         ApertureShape::Circle
@@ -19,15 +21,7 @@ fn prepared(lens: &str, blades: u32) -> PreparedFlare {
     };
     let config = FlareConfig { aperture: Aperture { shape, f_number: None }, ..FlareConfig::default() };
     // `toroidal`: the anamorphic test lens of tests/data/reference/toroidal (elliptical sprites).
-    let lens = if lens == "toroidal" {
-        flare_core::optics::formats::load_lens_file(
-            &std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-                .join("../../tests/data/reference/toroidal/toroidal_test_lens.json"),
-        )
-        .unwrap()
-    } else {
-        builtin_lens(lens).unwrap()
-    };
+    let lens = if lens == "toroidal" { common::toroidal_test_lens() } else { builtin_lens(lens).unwrap() };
     PreparedFlare::new(&lens, &config).unwrap()
 }
 

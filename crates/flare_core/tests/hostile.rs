@@ -16,6 +16,8 @@ use flare_core::preset::Document;
 use flare_core::shot::track::parse_track;
 use proptest::prelude::*;
 
+mod common;
+
 /// The CRC-32 of PNG chunks (ISO 3309).
 fn crc32(bytes: &[u8]) -> u32 {
     let mut crc = 0xffff_ffffu32;
@@ -204,11 +206,7 @@ fn lens_sources() -> Vec<(&'static str, Vec<u8>)> {
         .get_or_init(|| {
             let lens = builtin_lens("pbrt_dgauss_50mm").unwrap();
             let aspheric = builtin_lens("aspheric_zoom_us5793533").unwrap();
-            let toroidal = flare_core::optics::formats::load_lens_file(
-                &std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-                    .join("../../tests/data/reference/toroidal/toroidal_test_lens.json"),
-            )
-            .unwrap();
+            let toroidal = common::toroidal_test_lens();
             use flare_core::optics::formats::{flaresim, pbrt, zmx};
             vec![
                 ("toroidal.json", flare_core::optics::formats::to_json(&toroidal).into_bytes()),

@@ -14,6 +14,8 @@ use flare_core::raytrace::{Grid, RayGridImage, RayGridRenderer, RayGridRequest, 
 use flare_core::render::{DisplaySettings, FlareScene, HdrImage, light_slopes_for_frame_position};
 use proptest::prelude::*;
 
+mod common;
+
 fn flare(id: &str) -> PreparedFlare {
     PreparedFlare::new(&builtin_lens(id).unwrap(), &FlareConfig::default()).unwrap()
 }
@@ -49,6 +51,15 @@ fn scenes(
         ..FrameRequest::default()
     };
     Frame::build(flare, Some(live), &request)
+}
+
+/// The LUT images alone of `live` at `light` in a `width` x `height` frame (the CPU twin's LUT pass on black).
+fn lut_alone(live: &LiveLut, flare: &PreparedFlare, light: [f64; 2], width: u32, height: u32) -> HdrImage {
+    let frame = scenes(live, flare, light, width, height, &BlendSettings::default(), false);
+    let lut_scene = frame.lut.clone().unwrap_or_default();
+    let mut image = HdrImage { width, height, pixels: vec![[0.0; 4]; (width * height) as usize] };
+    lut_pass((frame.scene.width, frame.scene.height), &lut_scene, live, &mut image);
+    image
 }
 
 /// The CPU twin's accumulation of a scene and its LUT instances (ghost pass, then LUT pass).
@@ -135,10 +146,7 @@ fn a_blended_lut_ghost_matches_the_ray_traced_ghost_between_samples() {
         let mut one = live.lut.clone();
         one.ghosts.truncate(1);
         let single = LiveLut::new(one);
-        let frame = scenes(&single, &flare, light, w, h, &BlendSettings::default(), false);
-        let (scene, lut_scene) = (frame.scene.clone(), frame.lut.clone().unwrap_or_default());
-        let mut image = HdrImage { width: w, height: h, pixels: vec![[0.0; 4]; (w * h) as usize] };
-        lut_pass((scene.width, scene.height), &lut_scene, &single, &mut image);
+        let image = lut_alone(&single, &flare, light, w, h);
         let truth = ray_traced(&renderer, light, w, h, g);
         let e_lut: f64 = image.pixels.iter().map(|p| f64::from(p[1])).sum();
         let e_ref: f64 = truth.hdr.pixels.iter().map(|p| f64::from(p[1])).sum();
@@ -148,10 +156,7 @@ fn a_blended_lut_ghost_matches_the_ray_traced_ghost_between_samples() {
         assert!(l1 < 0.35, "relative L1 {l1} at ({theta}, {alpha})");
         // The same ghost placed by the paraxial frame of the wrong azimuth would be far off: the test can fail.
         let wrong = light_position_deg(theta, alpha + 90.0);
-        let frame = scenes(&single, &flare, wrong, w, h, &BlendSettings::default(), false);
-        let (scene2, lut_scene2) = (frame.scene.clone(), frame.lut.clone().unwrap_or_default());
-        let mut image2 = HdrImage { width: w, height: h, pixels: vec![[0.0; 4]; (w * h) as usize] };
-        lut_pass((scene2.width, scene2.height), &lut_scene2, &single, &mut image2);
+        let image2 = lut_alone(&single, &flare, wrong, w, h);
         let l1_wrong = metrics::relative_l1(&image2, &truth.hdr);
         eprintln!(
             "({theta}, {alpha}): relative L1 {l1:.3}, energy ratio {:.3}; placed for the wrong azimuth {l1_wrong:.3}",
@@ -778,10 +783,7 @@ fn a_ghost_that_vanishes_within_an_interval_is_refined_not_cross_faded() {
     // into the small ellipse the ghost has become). At 7.5 deg the edge sweeps faster than the finest step.
     for (theta, bound) in [(6.95, 0.2), (7.5, 0.6), (8.0, 0.2)] {
         let light = light_position_deg(theta, 30.0);
-        let frame = scenes(&live, &flare, light, w, h, &BlendSettings::default(), false);
-        let (scene, lut_scene) = (frame.scene.clone(), frame.lut.clone().unwrap_or_default());
-        let mut image = HdrImage { width: w, height: h, pixels: vec![[0.0; 4]; (w * h) as usize] };
-        lut_pass((scene.width, scene.height), &lut_scene, &live, &mut image);
+        let image = lut_alone(&live, &flare, light, w, h);
         let truth = ray_traced(&renderer, light, w, h, g).hdr;
         let luma = |p: &[f32; 4]| metrics::luminance([p[0], p[1], p[2]].map(f64::from));
         let energy: f64 = truth.pixels.iter().map(luma).sum();
@@ -897,11 +899,7 @@ fn a_lut_naming_a_ghost_the_lens_lacks_is_refused_removed_from_the_cache_and_nev
 /// revolution's are (what the bake of a lens of revolution would do) are further off.
 #[test]
 fn an_anamorphic_lenss_lut_ghosts_are_interpolated_over_the_quadrant() {
-    let lens = flare_core::optics::formats::load_lens_file(
-        &std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-            .join("../../tests/data/reference/toroidal/toroidal_test_lens.json"),
-    )
-    .unwrap();
+    let lens = common::toroidal_test_lens();
     let flare = PreparedFlare::new(&lens, &FlareConfig::default()).unwrap();
     let g = flare.system.ghosts.iter().position(|m| (m.i, m.j) == (2, 3)).unwrap();
     let renderer = flare.ray_grid_renderer();
@@ -913,10 +911,7 @@ fn an_anamorphic_lenss_lut_ghosts_are_interpolated_over_the_quadrant() {
     let (w, h) = (240, 160);
     for (theta, alpha) in [(7.0, 200.0), (10.0, -52.0), (5.0, 97.0)] {
         let light = light_position_deg(theta, alpha);
-        let frame = scenes(&live, &flare, light, w, h, &BlendSettings::default(), false);
-        let (scene, lut_scene) = (frame.scene.clone(), frame.lut.clone().unwrap_or_default());
-        let mut image = HdrImage { width: w, height: h, pixels: vec![[0.0; 4]; (w * h) as usize] };
-        lut_pass((scene.width, scene.height), &lut_scene, &live, &mut image);
+        let image = lut_alone(&live, &flare, light, w, h);
         let truth = ray_traced(&renderer, light, w, h, g);
         let e_lut: f64 = image.pixels.iter().map(|p| f64::from(p[1])).sum();
         let e_ref: f64 = truth.hdr.pixels.iter().map(|p| f64::from(p[1])).sum();
@@ -932,10 +927,7 @@ fn an_anamorphic_lenss_lut_ghosts_are_interpolated_over_the_quadrant() {
         ghost.phis_deg = vec![0.0];
         ghost.fitted = vec![false; ghost.thetas_deg.len()];
         let turned = LiveLut::new(turned);
-        let frame = scenes(&turned, &flare, light, w, h, &BlendSettings::default(), false);
-        let (scene2, lut_scene2) = (frame.scene.clone(), frame.lut.clone().unwrap_or_default());
-        let mut image2 = HdrImage { width: w, height: h, pixels: vec![[0.0; 4]; (w * h) as usize] };
-        lut_pass((scene2.width, scene2.height), &lut_scene2, &turned, &mut image2);
+        let image2 = lut_alone(&turned, &flare, light, w, h);
         let l1_turned = metrics::relative_l1(&image2, &truth.hdr);
         eprintln!(
             "({theta}, {alpha}): relative L1 {l1:.3}, energy ratio {:.3}; turned as a lens of revolution's {l1_turned:.3}",
@@ -953,11 +945,7 @@ fn an_anamorphic_lenss_lut_ghosts_are_interpolated_over_the_quadrant() {
 fn an_anamorphic_lenss_lut_symmetry_is_what_it_shares_with_the_stop() {
     use flare_core::aperture::{Aperture, ApertureShape};
     use flare_core::lut::Symmetry;
-    let toroidal = flare_core::optics::formats::load_lens_file(
-        &std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-            .join("../../tests/data/reference/toroidal/toroidal_test_lens.json"),
-    )
-    .unwrap();
+    let toroidal = common::toroidal_test_lens();
     let round = builtin_lens("tessar").unwrap();
     let blades = |count: u32, rotation_deg: f64| Aperture {
         shape: ApertureShape::Blades { count, rotation_deg, roundness: 0.0 },

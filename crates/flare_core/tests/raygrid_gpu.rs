@@ -9,17 +9,11 @@ use flare_core::raytrace::{Grid, RayGridRequest, Window};
 use flare_core::render::gpu::test_context;
 use flare_core::render::raygrid::{GpuRayGrid, GpuRayGridError, SUPERSAMPLE};
 
+mod common;
+
 /// A built-in lens by id, or `toroidal`: the anamorphic test lens of `tests/data/reference/toroidal/`.
 fn prepared(id: &str) -> PreparedFlare {
-    let lens = if id == "toroidal" {
-        flare_core::optics::formats::load_lens_file(
-            &std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-                .join("../../tests/data/reference/toroidal/toroidal_test_lens.json"),
-        )
-        .unwrap()
-    } else {
-        builtin_lens(id).unwrap()
-    };
+    let lens = if id == "toroidal" { common::toroidal_test_lens() } else { builtin_lens(id).unwrap() };
     PreparedFlare::new(&lens, &FlareConfig::default()).unwrap()
 }
 

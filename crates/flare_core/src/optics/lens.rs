@@ -340,16 +340,27 @@ impl SurfaceShape {
             let m = self.slope_over_r(x * x + y * y)?;
             return Some([m * x, m * y]);
         }
+        self.toroid_sag_and_gradient(x, y).map(|(_, g)| g)
+    }
+
+    /// A toroid's sag ([`Self::sag_xy_mm`]) and slopes ([`Self::sag_gradient`]) at (x, y) from one evaluation of
+    /// its profile: what each Newton step of the tracer needs.
+    pub fn toroid_sag_and_gradient(&self, x: f64, y: f64) -> Option<(f64, [f64; 2])> {
         let z_y = self.sag_mm(y * y)?;
         let dz_y = y * self.slope_over_r(y * y)?;
-        let z = self.sag_xy_mm(x, y)?;
         let c_x = self.curvature_x_per_mm;
-        let w = 1.0 - c_x * z;
-        if w <= 0.0 {
+        let w = 1.0 - c_x * z_y;
+        let root = w * w - c_x * c_x * x * x;
+        if w <= 0.0 || root < 0.0 {
             return None;
         }
-        let g = [c_x * x / w, (1.0 - c_x * z_y) * dz_y / w];
-        (g[0].is_finite() && g[1].is_finite()).then_some(g)
+        let z = z_y + c_x * x * x / (w + root.sqrt());
+        let w_z = 1.0 - c_x * z;
+        if !z.is_finite() || w_z <= 0.0 {
+            return None;
+        }
+        let g = [c_x * x / w_z, w * dz_y / w_z];
+        (g[0].is_finite() && g[1].is_finite()).then_some((z, g))
     }
 
     /// The conic part's square-root argument `1 - (1 + k) c^2 r^2` at `r2 = r^2`.

@@ -835,16 +835,24 @@ pub fn intersect_shape(p: DVec3, d: DVec3, shape: &SurfaceShape, z_dir: f64) -> 
     let b = c * (p.x * d.x + p.y * d.y + q * p.z * d.z) - d.z;
     let disc = b * b - a * g0;
     let quadric = (disc >= 0.0).then(|| g0 / (z_dir * disc.sqrt() - b)).filter(|s| s.is_finite());
-    let mut s = match quadric {
+    let s = match quadric {
         Some(s) => s,
         None if d.z != 0.0 => -p.z / d.z,
         None => return None,
     };
-    for _ in 0..MAX_NEWTON_STEPS {
-        let at = p + s * d;
+    newton(p, d, s, |at| {
         let r2 = at.x * at.x + at.y * at.y;
         let f = at.z - shape.sag_mm(r2)?;
-        let derivative = d.z - shape.slope_over_r(r2)? * (at.x * d.x + at.y * d.y);
+        Some((f, d.z - shape.slope_over_r(r2)? * (at.x * d.x + at.y * d.y)))
+    })
+}
+
+/// Newton's method along the line `p + s d` from `s`: `residual(point)` gives `z - sag` there and its derivative
+/// along the line, `None` where the sag is not defined. At most [`MAX_NEWTON_STEPS`] steps, until a step is
+/// below 1e-13 of the distance; `None` on a zero derivative, a non-finite distance or no convergence.
+fn newton(p: DVec3, d: DVec3, mut s: f64, residual: impl Fn(DVec3) -> Option<(f64, f64)>) -> Option<f64> {
+    for _ in 0..MAX_NEWTON_STEPS {
+        let (f, derivative) = residual(p + s * d)?;
         if derivative == 0.0 {
             return None;
         }
@@ -867,25 +875,10 @@ fn intersect_toroid(p: DVec3, d: DVec3, shape: &SurfaceShape) -> Option<f64> {
     if d.z == 0.0 {
         return None;
     }
-    let mut s = -p.z / d.z;
-    for _ in 0..MAX_NEWTON_STEPS {
-        let at = p + s * d;
-        let f = at.z - shape.sag_xy_mm(at.x, at.y)?;
-        let [gx, gy] = shape.sag_gradient(at.x, at.y)?;
-        let derivative = d.z - gx * d.x - gy * d.y;
-        if derivative == 0.0 {
-            return None;
-        }
-        let step = f / derivative;
-        s -= step;
-        if !s.is_finite() {
-            return None;
-        }
-        if step.abs() <= 1e-13 * (1.0 + s.abs()) {
-            return Some(s);
-        }
-    }
-    None
+    newton(p, d, -p.z / d.z, |at| {
+        let (z, [gx, gy]) = shape.toroid_sag_and_gradient(at.x, at.y)?;
+        Some((at.z - z, d.z - gx * d.x - gy * d.y))
+    })
 }
 
 /// Unit normal of `shape` at the point `p` (relative to the vertex, on the surface), pointing to +z at the

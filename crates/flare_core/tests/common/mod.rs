@@ -125,3 +125,11 @@ pub fn focusing_lens_strategy(min: usize, max: usize) -> impl Strategy<Value = L
     lens_strategy(min, max)
         .prop_filter("the lens forms a real image", |lens| flare_core::optics::FirstOrder::d_line(lens).is_ok())
 }
+
+/// The anamorphic test lens of `tests/data/reference/toroidal/` (toroids, cylinders along x and y, a spherical
+/// group), with its independent figures beside it.
+pub fn toroidal_test_lens() -> Lens {
+    let path = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../tests/data/reference/toroidal/toroidal_test_lens.json");
+    flare_core::optics::formats::load_lens_file(&path).unwrap()
+}
