@@ -9,4 +9,10 @@ struct Globals {
     plate: vec4<f32>,      // plate gain (2^plate_ev), plate present (0/1), unused, unused
     starburst_far: vec4<f32>,  // far field K per channel (I = K c(phi) / r_mm^3), mm per pixel
     starburst_core: vec4<f32>, // core relative irradiance per channel, the far field's x stretch N_x / N_y
+    dirt_light: vec4<f32>,     // the front dirt's glow: the light's image (pixels), its slopes u_s
+    dirt_geom: vec4<f32>,      // slopes per image pixel about the light, row-major 2x2
+    dirt_footprint: vec4<f32>, // the footprint's centre in map texels per unit slope, row-major 2x2
+    dirt_centre: vec4<f32>,    // the footprint's centre for the light (texels x, y), unused, unused
+    dirt_lobe: vec4<f32>,      // Henyey-Greenstein g, |det A| (mm^-2), 1 / sqrt(1 + |u_s|^2), unused
+    dirt_colour: vec4<f32>,    // the glow's power per channel (0: none), (1 - g^2) / (4 pi)
 };

@@ -461,8 +461,9 @@ impl Derived {
                     ViewportResources::with(rs, |res, device, queue| {
                         res.renderer.set_aperture(device, queue, &flare.mask);
                         res.renderer.set_starburst(device, queue, &flare.starburst);
+                        res.renderer.set_dirt(device, queue, flare.dirt.as_ref());
                     });
-                    self.rebuilds.textures += 2;
+                    self.rebuilds.textures += 3;
                 }
                 // A ray-traced LUT is for one lens and its settings: refuse it for any other.
                 if let Some(lut) = &self.lut

@@ -103,6 +103,7 @@ impl FlareLabApp {
                 self.import_track(path);
             }
             FileUse::ApertureImage => self.use_aperture_image(path),
+            FileUse::DirtImage => self.use_dirt_image(path),
             FileUse::ExportSequence => self.export_sequence_named(path),
             FileUse::ExportReport => self.export_report_to(path),
             FileUse::GlassCatalogue => self.add_glass_catalogue(path),

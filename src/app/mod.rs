@@ -917,6 +917,7 @@ impl FlareLabApp {
                 self.pick_file(FileUse::ExportLut);
             }
             Action::OpenApertureImage => self.pick_file(FileUse::ApertureImage),
+            Action::OpenDirtImage => self.pick_file(FileUse::DirtImage),
         }
     }
 
@@ -1040,6 +1041,20 @@ impl FlareLabApp {
             Ok(_) => {
                 self.session.edit().aperture.image = Some(path.display().to_string());
                 self.session.say(format!("aperture image {}", path.display()));
+            }
+            Err(e) => self.session.say(e.to_string()),
+        }
+    }
+
+    /// Uses the grey image at `path` as the front element's dirt (read first: a bad file is refused with the
+    /// reason and the document keeps its dirt).
+    fn use_dirt_image(&mut self, path: &std::path::Path) {
+        match flare_core::dirt::DirtPattern::image_from_file(path) {
+            Ok(_) => {
+                let dirt = &mut self.session.edit().dirt;
+                dirt.pattern = flare_core::dirt::DirtKind::Image;
+                dirt.image = Some(path.display().to_string());
+                self.session.say(format!("dirt image {}", path.display()));
             }
             Err(e) => self.session.say(e.to_string()),
         }

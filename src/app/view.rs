@@ -181,7 +181,8 @@ impl LightMap<'_> {
         ];
         let mapping = &self.flare.system.mapping;
         let deg = mapping.light_deg_for_pixel(px, &self.sensor, w, h).or_else(|| {
-            ImageMapping::paraxial(mapping.paraxial_mm_per_slope).light_deg_for_pixel(px, &self.sensor, w, h)
+            ImageMapping::paraxial(mapping.paraxial_mm_per_slope, mapping.paraxial_entrance_per_slope)
+                .light_deg_for_pixel(px, &self.sensor, w, h)
         })?;
         Some(deg.map(|a| a.clamp(-85.0, 85.0)))
     }

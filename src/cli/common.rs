@@ -115,6 +115,31 @@ pub fn parse_coating(spec: &str) -> Result<Coating> {
     Ok(coating)
 }
 
+/// Parses a dirt pattern into `dirt`: `none`, `dust[:SEED]`, `smudges[:SEED]`, `haze` or `image:PATH` (the
+/// amount and spread are kept).
+pub fn parse_dirt(spec: &str, dirt: &mut flare_core::dirt::DirtDoc) -> Result<()> {
+    use flare_core::dirt::DirtKind;
+    let (kind, rest) = spec.split_once(':').map_or((spec, None), |(k, r)| (k, Some(r)));
+    let seed = |rest: Option<&str>| -> Result<u64> {
+        rest.map_or(Ok(dirt.seed), |r| r.parse().with_context(|| format!("--dirt {spec}: the seed is a whole number")))
+    };
+    match kind {
+        "none" => dirt.pattern = DirtKind::None,
+        "dust" => (dirt.pattern, dirt.seed) = (DirtKind::Dust, seed(rest)?),
+        "smudges" => (dirt.pattern, dirt.seed) = (DirtKind::Smudges, seed(rest)?),
+        "haze" => dirt.pattern = DirtKind::Haze,
+        "image" => {
+            let path = rest.filter(|p| !p.is_empty()).with_context(|| format!("--dirt {spec}: image:PATH"))?;
+            if !std::path::Path::new(path).is_file() {
+                bail!("--dirt {spec}: no such image file");
+            }
+            (dirt.pattern, dirt.image) = (DirtKind::Image, Some(path.to_owned()));
+        }
+        other => bail!("--dirt {other}: use none, dust[:SEED], smudges[:SEED], haze or image:PATH"),
+    }
+    Ok(())
+}
+
 /// Parses an aperture: `circle`, `blades:N[:ROTATION_DEG[:ROUNDNESS]]`, `image:PATH` (the f-number is kept).
 pub fn parse_aperture(spec: &str, f_number: Option<f64>) -> Result<ApertureDoc> {
     let mut parts = spec.split(':');

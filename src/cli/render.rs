@@ -212,6 +212,16 @@ pub struct RenderArgs {
     /// The starburst's brightness in stops relative to the physical one (default: the preset's, 0).
     #[arg(long, allow_negative_numbers = true)]
     pub starburst_ev: Option<f64>,
+    /// Dirt on the front element: none, dust[:SEED], smudges[:SEED], haze, or image:PATH (grey, white is dirt);
+    /// it scatters a share of the light into a glow (default: the preset's, none).
+    #[arg(long)]
+    pub dirt: Option<String>,
+    /// The share of the light the dirt scatters where it is densest, 0 to 1 (default: the preset's, 0.01).
+    #[arg(long)]
+    pub dirt_amount: Option<f64>,
+    /// The dirt's scattering lobe, its half width at half peak in degrees (0.5 to 60; default 8).
+    #[arg(long)]
+    pub dirt_spread_deg: Option<f64>,
     /// Background plate (PNG is taken as sRGB, EXR and HDR as linear), shown under the flare at --plate-ev; a
     /// sequence when it has a frame field (`plates/shot.####.exr` or `%04d`).
     #[arg(long)]
@@ -339,6 +349,15 @@ pub fn document(args: &RenderArgs) -> Result<Document> {
     if let Some(ev) = args.starburst_ev {
         doc.starburst_ev = ev;
     }
+    if let Some(spec) = &args.dirt {
+        super::common::parse_dirt(spec, &mut doc.dirt)?;
+    }
+    if let Some(amount) = args.dirt_amount {
+        doc.dirt.amount = amount;
+    }
+    if let Some(spread) = args.dirt_spread_deg {
+        doc.dirt.spread_deg = spread;
+    }
     if let Some(plate) = &args.background {
         doc.background = Some(plate.display().to_string());
     }
@@ -450,6 +469,9 @@ fn flag_of(args: &RenderArgs, field: &str) -> Option<String> {
         },
         "plate_ev" => given(args.plate_ev.is_some(), "--plate-ev", format!("{}", args.plate_ev?)),
         "starburst_ev" => args.starburst_ev.map(|ev| format!("--starburst-ev {ev}")),
+        "dirt.amount" => args.dirt_amount.map(|a| format!("--dirt-amount {a}")),
+        "dirt.spread_deg" => args.dirt_spread_deg.map(|d| format!("--dirt-spread-deg {d}")),
+        "dirt.image" => args.dirt.as_ref().map(|d| format!("--dirt {d}")),
         "aperture.f_number" => {
             given(args.optics.f_number.is_some(), "--f-number", format!("{}", args.optics.f_number?))
         }

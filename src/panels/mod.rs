@@ -84,6 +84,7 @@ pub enum Action {
     OpenLut,
     ExportLut,
     OpenApertureImage,
+    OpenDirtImage,
     /// Show surface `k`'s coating in the Coatings panel.
     EditCoating(usize),
     /// Say something in the status bar (an edit a panel refused, with the reason).

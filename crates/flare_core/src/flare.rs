@@ -4,13 +4,14 @@
 //! [`FlareConfig`] is everything besides the lens that changes the optics: aperture (shape, f-number), spectrum,
 //! coating override and the culling threshold. [`PreparedFlare::new`] does the work that depends on those and on
 //! the lens (ghost matrices and reflectance tables, the aperture mask, the starburst's FFT, the last two kept per
-//! stop shape so a lens edit does not redo them); it is redone only when one of them changes, never for a display
+//! stop shape so a lens edit does not redo them, and the front dirt's map seen through the stop); it is redone only when one of them changes, never for a display
 //! setting (exposure, tonemap, plate, starburst gain, view size). [`PreparedFlare::scene_with`] is the per-frame
 //! part: ghost sprites for the light's position and the GPU-ready [`FlareScene`], with the display settings and
 //! per-ghost gains of that frame. [`crate::frame`] builds every frame of the app, the command line and the
 //! benchmarks through it.
 
 use crate::aperture::{Aperture, ApertureError, ApertureMask, DEFAULT_MASK_SIZE};
+use crate::dirt::{DirtPattern, PreparedDirt};
 use crate::ghost::light_slopes_for_frame_position;
 use crate::ghost::{FrameSettings, GhostError, GhostFrame, GhostSettings, GhostSystem, Sensor};
 use crate::optics::{Coating, Lens};
@@ -30,6 +31,9 @@ pub struct FlareConfig {
     /// the level that would show as a quarter of one 8-bit step at that frame's flare exposure (invisible):
     /// "skip what the scene does not need". Culling is per frame, so an exposure change rebuilds nothing.
     pub intensity_threshold: Option<f64>,
+    /// The front element's dirt ([`crate::dirt`]; `None`: a clean lens). Its amount and spread are display
+    /// settings ([`DisplaySettings::dirt_amount`]).
+    pub dirt: Option<DirtPattern>,
 }
 
 impl FlareConfig {
@@ -47,6 +51,7 @@ impl Default for FlareConfig {
             spectrum: Spectrum::rgb(),
             coating_override: None,
             intensity_threshold: None,
+            dirt: None,
         }
     }
 }
@@ -69,6 +74,8 @@ pub struct PreparedFlare {
     pub starburst: Starburst,
     /// The starburst as the GPU holds it (half floats), for the CPU twin.
     pub starburst_texture: StarburstTexture,
+    /// The front dirt seen through this stop (`None`: a clean lens).
+    pub dirt: Option<PreparedDirt>,
     /// This flare's identity ([`crate::fingerprint::unique_id`]; a clone keeps it): what a GPU drawer checks
     /// before uploading the mask and the starburst again.
     pub id: u64,
@@ -112,8 +119,9 @@ impl PreparedFlare {
         let system = GhostSystem::build(lens, &settings)?;
         let (mask, starburst) = stop_images(&config.aperture);
         let starburst_texture = StarburstTexture::from_starburst(&starburst);
+        let dirt = config.dirt.as_ref().map(|pattern| PreparedDirt::new(&system, &mask, pattern));
         let id = crate::fingerprint::unique_id();
-        Ok(Self { config: config.clone(), system, mask, starburst, starburst_texture, id })
+        Ok(Self { config: config.clone(), system, mask, starburst, starburst_texture, dirt, id })
     }
 
     /// Frame settings for an image of `width` x `height` pixels on the full-frame sensor drawn at the flare gain
@@ -153,6 +161,7 @@ impl PreparedFlare {
         let frame = self.system.frame(u, &frame_settings);
         let mut scene = FlareScene::build(&self.system, &frame, u, &frame_settings, display, width, height, gains);
         scene.place_starburst(&self.system, &self.starburst, u, &sensor, display);
+        scene.place_dirt(&self.system, self.dirt.as_ref(), u, &sensor, display);
         (scene, frame)
     }
 }

@@ -19,6 +19,7 @@
 //! viewport makes), or on the CPU through the twin passes of [`crate::render::cpu`] and
 //! [`crate::lut::blend::lut_pass`]. [`Drawn::layers`] turns that into what a compositor gets, every layer at
 //! the frame's size and linear: `flare` (accumulation x `2^flare_ev`), `starburst` (its share of the flare),
+//! `dirt` (the front dirt's glow, its share of the flare, only for a dirty lens: [`crate::dirt`]),
 //! `plate` (the plate x `2^plate_ev`) and the composite `flare + plate`, which is what the display image
 //! shows through the request's display transform ([`FrameRequest::view`], the OCIO view, or a tonemap curve); [`ghost_layers`] adds one layer per drawn ghost, each drawn alone on the same device.
 
@@ -145,6 +146,9 @@ pub struct Frame {
     pub draft: Option<DraftOutcome>,
     /// When the light moves while the shutter is open: how the shutter was sampled ([`crate::shutter`]).
     pub shutter: Option<ShutterSamples>,
+    /// The share of the light the front dirt takes at the frame's own time ([`dirt_share`]; 0: a clean lens):
+    /// what a ray-traced method's ghosts are dimmed by, as the sprites are.
+    pub dirt_taken: f64,
 }
 
 impl Frame {
@@ -215,7 +219,9 @@ impl Frame {
             let divisor = request.width.max(1).div_ceil(scene.hdr_width.max(1));
             DraftOutcome { divisor, drawn: scene.instances.len(), skipped, fragments }
         });
-        Self { scene, lut: lut_scene, sprites, request: request.clone(), draft, shutter }
+        let dirt_taken =
+            dirt_share(flare, light_slopes_for_frame_position(request.light_deg[0], request.light_deg[1]), &display);
+        Self { scene, lut: lut_scene, sprites, request: request.clone(), draft, shutter, dirt_taken }
     }
 
     /// The frame's size in pixels.
@@ -258,10 +264,14 @@ fn sharp(
     light_gain: f32,
 ) -> (FlareScene, Option<LutScene>, GhostFrame) {
     let ghosts = flare.system.ghosts.len();
+    let u = light_slopes_for_frame_position(light_deg[0], light_deg[1]);
+    // The front dirt takes its share of the light before any ghost forms; the glow is where it goes. A clean
+    // lens multiplies nothing (the frame it always drew, bit for bit).
+    let taken = dirt_share(flare, u, display);
+    let direct_gain = if taken > 0.0 { light_gain * (1.0 - taken) as f32 } else { light_gain };
     let mut gains: Vec<f32> =
-        (0..ghosts).map(|g| request.ghost_gains.get(g).copied().unwrap_or(1.0).max(0.0) * light_gain).collect();
+        (0..ghosts).map(|g| request.ghost_gains.get(g).copied().unwrap_or(1.0).max(0.0) * direct_gain).collect();
     let lut_scene = lut.map(|live| {
-        let u = light_slopes_for_frame_position(light_deg[0], light_deg[1]);
         let out = Window::for_sensor(sensor.width_mm, w, h);
         let mut scene = LutScene::build(live, &flare.system, u, out, &request.blend, &gains);
         // The LUT images too are culled where they cannot be seen at the frame's exposure.
@@ -275,9 +285,19 @@ fn sharp(
             *gain = if alone { 0.0 } else { *gain * l.paraxial_weight(g as u32) };
         }
     }
-    let display = DisplaySettings { starburst_intensity: display.starburst_intensity * light_gain, ..*display };
+    let display = DisplaySettings {
+        starburst_intensity: display.starburst_intensity * direct_gain,
+        dirt_amount: display.dirt_amount * f64::from(light_gain),
+        ..*display
+    };
     let (scene, sprites) = flare.scene_with(light_deg, sensor, w, h, &display, &gains);
     (scene, lut_scene, sprites)
+}
+
+/// The share of the light of slopes `u` that the front dirt takes from the image and every ghost (0 for a clean
+/// lens or an amount of 0).
+pub fn dirt_share(flare: &PreparedFlare, u: [f64; 2], display: &DisplaySettings) -> f64 {
+    flare.dirt.as_ref().map_or(0.0, |d| d.taken_share(&flare.system, u, display.dirt_amount))
 }
 
 /// `instance` with its colour times `weight` (one time sample of a shutter).
@@ -312,6 +332,11 @@ impl Drawn {
         let mut starburst = HdrImage::black(scene.hdr_width, scene.hdr_height);
         cpu::starburst_pass(scene, &sources.flare.starburst_texture, &mut starburst);
         let starburst = cpu::flare_layer(scene, &starburst);
+        let dirt = sources.flare.dirt.as_ref().filter(|_| scene.has_dirt_glow()).map(|d| {
+            let mut glow = HdrImage::black(scene.hdr_width, scene.hdr_height);
+            cpu::dirt_pass(scene, Some(d), &mut glow);
+            cpu::flare_layer(scene, &glow)
+        });
         let plate = sources.plate.map(|p| cpu::plate_layer(scene, p));
         let mut composite = match &plate {
             Some(p) => flare.plus(p),
@@ -320,7 +345,7 @@ impl Drawn {
         for p in &mut composite.pixels {
             p[3] = 1.0;
         }
-        FrameLayers { composite, flare, starburst, plate, ghosts: Vec::new() }
+        FrameLayers { composite, flare, starburst, dirt, plate, ghosts: Vec::new() }
     }
 }
 
@@ -364,6 +389,7 @@ impl GpuDrawer {
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
         self.renderer.set_aperture(device, queue, &sources.flare.mask);
         self.renderer.set_starburst(device, queue, &sources.flare.starburst);
+        self.renderer.set_dirt(device, queue, sources.flare.dirt.as_ref());
         self.renderer.set_background(device, queue, sources.plate);
         self.renderer.set_lut(device, queue, sources.lut);
         self.uploaded = Some(key);
@@ -489,20 +515,26 @@ pub fn drawn_with_traced_ghosts(frame: &Frame, sources: &Sources, ghosts: HdrIma
     let scene = &frame.scene;
     let mut hdr = traced_accumulation(frame, &ghosts);
     cpu::starburst_pass(scene, &sources.flare.starburst_texture, &mut hdr);
+    cpu::dirt_pass(scene, sources.flare.dirt.as_ref(), &mut hdr);
     let display = cpu::tonemap_pass(scene, &hdr, sources.plate);
     Drawn { hdr, display }
 }
 
 /// Ray-traced ghosts (linear, before the light's gain, any size) as the frame's accumulation: at its size,
-/// times the light's gain (a changing light's intensity on a shot).
+/// times the light's gain (a changing light's intensity on a shot) and what the front dirt leaves of the light
+/// ([`Frame::dirt_taken`]; a clean lens multiplies nothing).
 pub fn traced_accumulation(frame: &Frame, ghosts: &HdrImage) -> HdrImage {
     let scene = &frame.scene;
-    let light_gain = if frame.request.light_gain.is_finite() { frame.request.light_gain.max(0.0) as f32 } else { 0.0 };
+    let mut light_gain =
+        if frame.request.light_gain.is_finite() { frame.request.light_gain.max(0.0) as f32 } else { 0.0 };
+    if frame.dirt_taken > 0.0 {
+        light_gain *= (1.0 - frame.dirt_taken) as f32;
+    }
     // At its own size, bilinear resampling reads every pixel exactly: only the gain is applied then.
     ghosts.resampled(scene.hdr_width, scene.hdr_height, crate::image::Sampling::Bilinear, light_gain)
 }
 
-/// The accumulation passes of the CPU twin: ghosts, LUT ghosts, starburst.
+/// The accumulation passes of the CPU twin: ghosts, LUT ghosts, starburst, the front dirt's glow.
 pub fn draw_cpu_hdr(frame: &Frame, sources: &Sources) -> HdrImage {
     let scene = &frame.scene;
     let mut hdr = cpu::ghost_pass(scene, &sources.flare.mask);
@@ -510,6 +542,7 @@ pub fn draw_cpu_hdr(frame: &Frame, sources: &Sources) -> HdrImage {
         lut_pass(frame.size(), l, live, &mut hdr);
     }
     cpu::starburst_pass(scene, &sources.flare.starburst_texture, &mut hdr);
+    cpu::dirt_pass(scene, sources.flare.dirt.as_ref(), &mut hdr);
     hdr
 }
 

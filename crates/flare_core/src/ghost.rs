@@ -349,6 +349,12 @@ pub struct GhostSystem {
     pub ghosts: Vec<GhostModel>,
     /// Image path per wavelength: landing of the ray through the stop centre per unit light slope.
     image_centre_per_slope: Vec<f64>,
+    /// Image path per wavelength: the product of the transmittances (1 - R at normal incidence) of every
+    /// refraction, what reaches the sensor of the light that enters (the front dirt's glow is dimmed by it).
+    pub image_transmission: Vec<f64>,
+    /// Image path at the spectrum's middle wavelength: `A` of the entrance-to-stop matrix, the stop's height
+    /// per entrance height (its sign says whether the entrance pupil is the stop upright or turned over).
+    pub image_stop_a: f64,
     /// Where the light itself images, by exact chief rays at the spectrum's middle wavelength.
     pub mapping: ImageMapping,
     /// Reflectance tables per (surface, arriving side, wavelength), shared by the ghosts.
@@ -453,6 +459,8 @@ impl GhostSystem {
             .collect();
         let ghost_index = |i: usize, j: usize| pairs.binary_search(&(i, j)).ok();
         let mut image_centre_per_slope = Vec::with_capacity(n_w);
+        let mut image_transmission = Vec::with_capacity(n_w);
+        let mut image_stop_a = Vec::with_capacity(n_w);
         for (w, &wavelength_nm) in spectrum.wavelengths_nm.iter().enumerate() {
             let n = &indices[w];
             let transmittance = |k: usize, backward: bool| 1.0 - tables.table(tables.index(k, backward, w)).at(0.0);
@@ -487,6 +495,8 @@ impl GhostSystem {
             let image_f = to_sensor[last].mul(&forward_refraction(last)).mul(&arrive[last]);
             let image_a = arrive[stop];
             image_centre_per_slope.push(image_f.b - image_f.a * image_a.b / image_a.a);
+            image_transmission.push((0..n_surfaces).map(|m| transmittance(m, false)).product::<f64>());
+            image_stop_a.push(image_a.a);
 
             for j in 0..n_surfaces {
                 if !reflecting[j] {
@@ -566,6 +576,8 @@ impl GhostSystem {
             front_radius_mm,
             ghosts,
             image_centre_per_slope,
+            image_transmission,
+            image_stop_a: image_stop_a[middle],
             mapping,
             tables,
             coefficients,
@@ -582,6 +594,15 @@ impl GhostSystem {
             // Each section's mapping along its own axis (exact on the axes; the sections' lenses of revolution
             // off them).
             Some(x) => [x.mapping.image_mm(u)[0], self.mapping.image_mm(u)[1]],
+        }
+    }
+
+    /// Where the light's own beam crosses the entrance plane (the first vertex) for light slope `u`: its chief
+    /// ray's crossing ([`ImageMapping::entrance_mm`]), each section's along its own axis for an anamorphic lens.
+    pub fn light_entrance_mm(&self, u: [f64; 2]) -> [f64; 2] {
+        match &self.x_section {
+            None => self.mapping.entrance_mm(u),
+            Some(x) => [x.mapping.entrance_mm(u)[0], self.mapping.entrance_mm(u)[1]],
         }
     }
 

@@ -26,6 +26,7 @@
 pub mod aperture;
 pub mod coating;
 pub mod color;
+pub mod dirt;
 pub mod dof;
 pub mod exposure;
 pub mod files;

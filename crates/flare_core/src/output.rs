@@ -6,7 +6,8 @@
 //! document's display transform ([`crate::view_transform`]). An EXR holds the same frame linear, in the working
 //! space [`WORKING_SPACE`] (named in a `colorspace` and an `oiio:ColorSpace` attribute, its primaries in
 //! `chromaticities`): the default layer `R, G, B, A` is the composite (alpha 1), `flare.R/G/B` the flare alone
-//! (ghosts, LUT ghosts and starburst, to be added over a plate), `starburst.R/G/B` its starburst,
+//! (ghosts, LUT ghosts, starburst and the front dirt's glow, to be added over a plate), `starburst.R/G/B` its
+//! starburst, `dirt.R/G/B` its dirt glow (a dirty lens only),
 //! `plate.R/G/B` the exposed plate when there is one; with ghost layers ([`ExrLayers`], each made as its
 //! ghost is drawn) the file has several parts: those layers in the part `rgba`, and one part `ghost_I_J` per
 //! ghost whose data window is the smallest rectangle holding its lit pixels. Values are 16- or 32-bit floats as
@@ -77,6 +78,8 @@ pub struct FrameLayers {
     pub flare: HdrImage,
     /// The starburst's share of the flare.
     pub starburst: HdrImage,
+    /// The front dirt's glow, its share of the flare (`None` for a clean lens: no layer).
+    pub dirt: Option<HdrImage>,
     /// The plate x `2^plate_ev`, when there is one.
     pub plate: Option<HdrImage>,
     /// Per drawn ghost, `ghost_I_J` and its share of the flare (only when asked for).
@@ -340,6 +343,9 @@ impl ExrLayers {
         let mut list = channels("", &layers.composite, true, pixel);
         list.extend(channels("flare", &layers.flare, false, pixel));
         list.extend(channels("starburst", &layers.starburst, false, pixel));
+        if let Some(dirt) = &layers.dirt {
+            list.extend(channels("dirt", dirt, false, pixel));
+        }
         if let Some(plate) = &layers.plate {
             list.extend(channels("plate", plate, false, pixel));
         }

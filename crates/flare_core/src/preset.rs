@@ -178,6 +178,8 @@ pub struct Document {
     /// Colour management: the OCIO config, display, view, looks, `.cube` and plates' input space
     /// ([`crate::view_transform`]).
     pub color: crate::view_transform::ColorDoc,
+    /// The front element's dirt ([`crate::dirt`]): the pattern (none: a clean lens), its amount and spread.
+    pub dirt: crate::dirt::DirtDoc,
 }
 
 impl Default for Document {
@@ -207,6 +209,7 @@ impl Default for Document {
             dof: crate::dof::DofDoc::default(),
             exr: crate::output::ExrSettings::default(),
             color: crate::view_transform::ColorDoc::default(),
+            dirt: crate::dirt::DirtDoc::default(),
         }
     }
 }
@@ -224,6 +227,9 @@ struct OpticsPart<'a> {
     coating_override: &'a Option<Coating>,
     wavelengths: usize,
     cull_threshold: Option<f64>,
+    /// The dirt's pattern, seed and image (left out for a clean lens: the fingerprint it had before dirt).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    dirt: Option<(crate::dirt::DirtKind, u64, &'a Option<String>)>,
 }
 
 impl Document {
@@ -253,6 +259,10 @@ impl Document {
             spectrum,
             coating_override: self.coating_override.clone(),
             intensity_threshold: self.cull_threshold,
+            dirt: self
+                .dirt
+                .pattern()
+                .map_err(|e| PresetError::Value { field: "dirt.image".into(), reason: e.to_string() })?,
         })
     }
 
@@ -265,6 +275,11 @@ impl Document {
             coating_override: &self.coating_override,
             wavelengths: self.wavelengths,
             cull_threshold: self.cull_threshold,
+            dirt: (self.dirt.pattern != crate::dirt::DirtKind::None).then_some((
+                self.dirt.pattern,
+                self.dirt.seed,
+                &self.dirt.image,
+            )),
         })
     }
 
@@ -277,6 +292,8 @@ impl Document {
             starburst: self.starburst,
             starburst_intensity: crate::color::gain_from_ev(self.starburst_ev),
             accumulation_divisor: divisor,
+            dirt_amount: if self.dirt.pattern == crate::dirt::DirtKind::None { 0.0 } else { self.dirt.amount },
+            dirt_spread_deg: self.dirt.spread_deg,
         }
     }
 
@@ -546,6 +563,9 @@ impl Document {
         }
         if self.aperture.blades > crate::aperture::MAX_BLADES || !self.aperture.rotation_deg.is_finite() {
             return bad("aperture", format!("at most {} blades, a finite rotation", crate::aperture::MAX_BLADES));
+        }
+        if let Err((field, reason)) = self.dirt.check() {
+            return bad(field, reason);
         }
         if let Err(e) = BlendMode::parse(&self.blend.mode) {
             return bad("blend.mode", e);

@@ -450,6 +450,7 @@ proptest! {
                 composite: image(0.5),
                 flare: image(0.25),
                 starburst: image(0.0),
+                dirt: None,
                 plate: None,
                 ghosts: vec![("ghost_1_2".into(), ghost)],
             };

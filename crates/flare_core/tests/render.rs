@@ -51,6 +51,12 @@ fn the_one_wgsl_globals_has_the_rust_layout() {
         plate: [0.0; 4],
         starburst_far: [0.0; 4],
         starburst_core: [0.0; 4],
+        dirt_light: [0.0; 4],
+        dirt_geom: [0.0; 4],
+        dirt_footprint: [0.0; 4],
+        dirt_centre: [0.0; 4],
+        dirt_lobe: [0.0; 4],
+        dirt_colour: [0.0; 4],
     };
     let base = &g as *const Globals as usize;
     let rust = [
@@ -60,6 +66,12 @@ fn the_one_wgsl_globals_has_the_rust_layout() {
         ("plate", &g.plate as *const _ as usize - base),
         ("starburst_far", &g.starburst_far as *const _ as usize - base),
         ("starburst_core", &g.starburst_core as *const _ as usize - base),
+        ("dirt_light", &g.dirt_light as *const _ as usize - base),
+        ("dirt_geom", &g.dirt_geom as *const _ as usize - base),
+        ("dirt_footprint", &g.dirt_footprint as *const _ as usize - base),
+        ("dirt_centre", &g.dirt_centre as *const _ as usize - base),
+        ("dirt_lobe", &g.dirt_lobe as *const _ as usize - base),
+        ("dirt_colour", &g.dirt_colour as *const _ as usize - base),
     ];
     assert_eq!(members.len(), rust.len());
     for (member, (name, offset)) in members.iter().zip(rust) {

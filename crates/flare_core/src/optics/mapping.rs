@@ -38,6 +38,11 @@ pub struct ImageMapping {
     /// (tan theta, landing height in mm), from theta = 0 up; the heights have the sign of
     /// `paraxial_mm_per_slope` and grow in size.
     table: Vec<(f64, f64)>,
+    /// The paraxial chief ray's height on the entrance plane (the first vertex) per unit slope: `-z_EP`.
+    pub paraxial_entrance_per_slope: f64,
+    /// Per entry of `table`, the traced chief ray's height on the entrance plane (mm, signed along the slope):
+    /// where the beam that images at that height crosses the front element.
+    entrance: Vec<f64>,
 }
 
 impl ImageMapping {
@@ -56,6 +61,7 @@ impl ImageMapping {
         let stop_radius_mm = lens.surfaces.get(stop).map_or(1.0, |s| s.semi_aperture_mm.max(1e-6));
         let sign = if paraxial_mm_per_slope < 0.0 { -1.0 } else { 1.0 };
         let mut table = Vec::new();
+        let mut entrance = Vec::new();
         let (mut py, mut py_before) = (0.0, 0.0);
         let steps = (MAX_DEG / STEP_DEG).round() as usize;
         for n in 0..=steps {
@@ -73,17 +79,47 @@ impl ImageMapping {
                 break;
             }
             table.push((theta.tan(), if n == 0 { 0.0 } else { h }));
+            // The pupil ray starts at (0, py r, z_EP) with slope tan(theta): at z = 0 it is at py r - z_EP tan.
+            entrance.push(if n == 0 { 0.0 } else { aimed * pupil.radius_mm - pupil.z_mm * theta.tan() });
             (py_before, py) = (py, aimed);
         }
         if table.len() < 2 {
             table.clear();
+            entrance.clear();
         }
-        Self { paraxial_mm_per_slope, table }
+        Self { paraxial_mm_per_slope, table, paraxial_entrance_per_slope: -pupil.z_mm, entrance }
     }
 
-    /// The pure paraxial mapping `k u` (what a lens without a traced table uses).
-    pub fn paraxial(paraxial_mm_per_slope: f64) -> Self {
-        Self { paraxial_mm_per_slope, table: Vec::new() }
+    /// The pure paraxial mapping `k u` (what a lens without a traced table uses), its chief rays crossing the
+    /// entrance plane at `entrance_per_slope u`.
+    pub fn paraxial(paraxial_mm_per_slope: f64, entrance_per_slope: f64) -> Self {
+        Self {
+            paraxial_mm_per_slope,
+            table: Vec::new(),
+            paraxial_entrance_per_slope: entrance_per_slope,
+            entrance: Vec::new(),
+        }
+    }
+
+    /// Where the chief ray of a light of slopes `u` crosses the entrance plane (the first vertex), mm: the
+    /// traced table's, interpolated in tan(theta) as the heights are; beyond it the paraxial rate continues
+    /// from its last entry; without a table the paraxial `-z_EP u`.
+    pub fn entrance_mm(&self, u: [f64; 2]) -> [f64; 2] {
+        let t = u[0].hypot(u[1]);
+        if t == 0.0 || !t.is_finite() {
+            return [0.0, 0.0];
+        }
+        let rate = self.paraxial_entrance_per_slope;
+        let e = match (self.table.last(), self.entrance.last()) {
+            (Some(&(t_last, _)), Some(&e_last)) if t >= t_last => e_last + rate * (t - t_last),
+            (Some(_), Some(_)) => {
+                let i = self.table.partition_point(|&(tt, _)| tt <= t).max(1);
+                let (t0, t1) = (self.table[i - 1].0, self.table[i].0);
+                self.entrance[i - 1] + (self.entrance[i] - self.entrance[i - 1]) * (t - t0) / (t1 - t0)
+            }
+            _ => rate * t,
+        };
+        [e * u[0] / t, e * u[1] / t]
     }
 
     /// The largest angle the table reaches (degrees; 0 when only the paraxial mapping is known).

@@ -13,7 +13,8 @@
 //!    [`FlareRenderer::rasterise_ghosts`] asks, `ghosts.wgsl` (clearing the target; one instanced quad per
 //!    ghost sprite, additive) and `lut_ghosts.wgsl` (LUT images from the atlas, a 2D array of [`ATLAS_PAGE`]-texel
 //!    Rgba16Float pages, added or composited over through alpha) rasterise them. Then `starburst.wgsl` (the
-//!    diffraction texture at the light's image, additive);
+//!    diffraction texture at the light's image, additive) and, for a dirty front element, `dirt.wgsl` (its glow
+//!    over the whole frame from the map of [`FlareRenderer::set_dirt`], additive; never drawn for a clean lens);
 //! 2. `tonemap.wgsl`: the composite `hdr x 2^flare_ev + plate x 2^plate_ev`, the tonemap and (for non-sRGB
 //!    targets) the sRGB encoding into the caller's view.
 //!
@@ -35,9 +36,10 @@ use super::buffers::render_pipeline;
 pub use super::buffers::{HDR_FORMAT, texture_2d};
 use super::gpu_ghosts::ComputeGhosts;
 use super::gpu_lut::{ComputeLut, TILE};
-use super::shaders::{GHOSTS_WGSL, LUT_GHOSTS_WGSL, STARBURST_WGSL};
+use super::shaders::{DIRT_WGSL, GHOSTS_WGSL, LUT_GHOSTS_WGSL, STARBURST_WGSL};
 use super::{FlareScene, GhostInstance, Globals};
 use crate::aperture::ApertureMask;
+use crate::dirt::PreparedDirt;
 use crate::image::{DisplayImage, HdrImage};
 use crate::lut::blend::{ATLAS_PAGE, LiveLut, LutInstance, LutScene};
 use crate::lut::blend::{Footprint, bin_instances};
@@ -276,6 +278,7 @@ fn vertex_buffer<T>(device: &wgpu::Device, label: &str, capacity: usize) -> wgpu
 pub struct FlareRenderer {
     ghost_pipeline: wgpu::RenderPipeline,
     starburst_pipeline: wgpu::RenderPipeline,
+    dirt_pipeline: wgpu::RenderPipeline,
     /// The tonemap pass of the last frame's OCIO view (made again when a frame's view differs).
     view_pass: super::gpu_view::ViewPass,
     ghost_layout: wgpu::BindGroupLayout,
@@ -284,6 +287,8 @@ pub struct FlareRenderer {
     sampler: wgpu::Sampler,
     aperture: wgpu::Texture,
     starburst: wgpu::Texture,
+    /// The front dirt's map D (Rgba16Float, D in red; 1 x 1 black for a clean lens).
+    dirt: wgpu::Texture,
     background: wgpu::Texture,
     has_background: bool,
     hdr: Option<(wgpu::Texture, u32, u32)>,
@@ -323,6 +328,7 @@ pub struct FlareRenderer {
 struct BindGroups {
     ghosts: wgpu::BindGroup,
     starburst: wgpu::BindGroup,
+    dirt: wgpu::BindGroup,
     lut: wgpu::BindGroup,
     tonemap: wgpu::BindGroup,
 }
@@ -414,6 +420,8 @@ impl FlareRenderer {
         );
         let starburst_pipeline =
             render_pipeline(device, "starburst", &ghost_pl, &starburst_module, &[], HDR_FORMAT, Some(additive));
+        let dirt_module = module("dirt.wgsl", DIRT_WGSL);
+        let dirt_pipeline = render_pipeline(device, "dirt", &ghost_pl, &dirt_module, &[], HDR_FORMAT, Some(additive));
         let view_pass = super::gpu_view::ViewPass::new(
             device,
             queue,
@@ -491,6 +499,8 @@ impl FlareRenderer {
         upload(queue, &aperture, &[255], 1);
         let starburst = texture_2d(device, "starburst", 1, 1, HDR_FORMAT, sampled);
         upload(queue, &starburst, &half_floats(&[[0.0; 4]]), 8);
+        let dirt = texture_2d(device, "dirt", 1, 1, HDR_FORMAT, sampled);
+        upload(queue, &dirt, &half_floats(&[[0.0; 4]]), 8);
         let background = texture_2d(device, "background", 1, 1, HDR_FORMAT, sampled);
         upload(queue, &background, &half_floats(&[[0.0; 4]]), 8);
         let instance_capacity = 256;
@@ -519,6 +529,7 @@ impl FlareRenderer {
             pass_times: None,
             ghost_pipeline,
             starburst_pipeline,
+            dirt_pipeline,
             view_pass,
             ghost_layout,
             tonemap_layout,
@@ -526,6 +537,7 @@ impl FlareRenderer {
             sampler,
             aperture,
             starburst,
+            dirt,
             background,
             has_background: false,
             hdr: None,
@@ -597,6 +609,19 @@ impl FlareRenderer {
         upload(queue, &self.starburst, &half_floats(&texels), 8);
     }
 
+    /// Replaces the front dirt's map (`None`: a clean lens, a 1 x 1 black texture; the pass is drawn only for a
+    /// frame that places a glow).
+    pub fn set_dirt(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, dirt: Option<&PreparedDirt>) {
+        self.groups = None;
+        let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
+        let (side, texels): (u32, Vec<[f32; 4]>) = match dirt {
+            Some(d) => (d.size as u32, d.map.iter().map(|&v| [v, v, v, 1.0]).collect()),
+            None => (1, vec![[0.0; 4]]),
+        };
+        self.dirt = texture_2d(device, "dirt", side, side, HDR_FORMAT, usage);
+        upload(queue, &self.dirt, &half_floats(&texels), 8);
+    }
+
     /// Sets or clears the background plate (linear).
     pub fn set_background(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, plate: Option<&HdrImage>) {
         self.groups = None;
@@ -634,6 +659,7 @@ impl FlareRenderer {
     fn bind_groups(&self, device: &wgpu::Device, hdr_view: &wgpu::TextureView) -> BindGroups {
         let aperture_view = self.aperture.create_view(&wgpu::TextureViewDescriptor::default());
         let starburst_view = self.starburst.create_view(&wgpu::TextureViewDescriptor::default());
+        let dirt_view = self.dirt.create_view(&wgpu::TextureViewDescriptor::default());
         let background_view = self.background.create_view(&wgpu::TextureViewDescriptor::default());
         let atlas_view = self.lut_atlas.create_view(&wgpu::TextureViewDescriptor {
             dimension: Some(wgpu::TextureViewDimension::D2Array),
@@ -655,6 +681,7 @@ impl FlareRenderer {
         BindGroups {
             ghosts: bind("ghosts", &self.ghost_layout, &aperture_view, vec![sampler()]),
             starburst: bind("starburst", &self.ghost_layout, &starburst_view, vec![sampler()]),
+            dirt: bind("dirt", &self.ghost_layout, &dirt_view, vec![sampler()]),
             lut: bind("lut ghosts", &self.lut_layout, &atlas_view, vec![sampler()]),
             tonemap: bind(
                 "tonemap",
@@ -794,6 +821,12 @@ impl FlareRenderer {
                 pass.set_pipeline(&self.starburst_pipeline);
                 pass.set_bind_group(0, &groups.starburst, &[]);
                 pass.draw(0..6, 0..1);
+            }
+            if scene.has_dirt_glow() {
+                let mut pass = frame.scoped_render_pass("dirt", accumulate(&load));
+                pass.set_pipeline(&self.dirt_pipeline);
+                pass.set_bind_group(0, &groups.dirt, &[]);
+                pass.draw(0..3, 0..1);
             }
             let mut pass = frame.scoped_render_pass(
                 "tonemap",

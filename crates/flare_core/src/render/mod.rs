@@ -31,6 +31,7 @@ use bytemuck::{Pod, Zeroable};
 
 pub use crate::color::Tonemap;
 use crate::color::gain_from_ev;
+use crate::dirt::{PreparedDirt, henyey_greenstein, henyey_greenstein_g};
 use crate::ghost::{FrameSettings, GhostFrame, GhostSystem};
 pub use crate::ghost::{light_slopes_for_frame_position, sensor_to_pixel};
 pub use crate::image::{DisplayImage, HdrImage};
@@ -55,6 +56,11 @@ pub struct DisplaySettings {
     /// bilinearly: 4x or 16x fewer fragments for a little softness. Worth it on software adapters, where
     /// frame-filling ghosts cost the most.
     pub accumulation_divisor: u32,
+    /// The front dirt's share where it is densest ([`crate::dirt`]; 0: a clean lens), the light's gain folded in
+    /// per frame for the glow.
+    pub dirt_amount: f64,
+    /// The dirt's scattering lobe, half width at half peak (degrees).
+    pub dirt_spread_deg: f64,
 }
 
 /// The default flare exposure (stops): a quarter-wave coated lens's ghosts (about 1e-4 of the light) show.
@@ -69,6 +75,8 @@ impl Default for DisplaySettings {
             starburst: true,
             starburst_intensity: 1.0,
             accumulation_divisor: 1,
+            dirt_amount: 0.0,
+            dirt_spread_deg: crate::dirt::DEFAULT_DIRT_SPREAD_DEG,
         }
     }
 }
@@ -103,8 +111,24 @@ pub struct Globals {
     /// The starburst's core: relative irradiance per channel inside the core radius; then the far field's stretch
     /// along x, `N_x / N_y` of an anamorphic lens (0 stands for 1: a lens of revolution).
     pub starburst_core: [f32; 4],
+    /// The front dirt's glow ([`crate::dirt`]): the light's image (pixels), its slopes `u_s`.
+    pub dirt_light: [f32; 4],
+    /// The slopes per image pixel about the light, row-major 2x2 (`u = u_s + A (pixel - light)`): the inverse of
+    /// the lens's own mapping's derivative there.
+    pub dirt_geom: [f32; 4],
+    /// The footprint's centre, in map texels, per unit slope about the light, row-major 2x2 (the derivative of
+    /// the chief ray's entrance point there).
+    pub dirt_footprint: [f32; 4],
+    /// The footprint's centre for the light itself, in map texels (x, y); unused; unused.
+    pub dirt_centre: [f32; 4],
+    /// The glow's lobe: `g`, `|det A|` in mm^-2 per unit slope^2 (`1 / |det dx/du|`), `1 / sqrt(1 + |u_s|^2)`,
+    /// unused.
+    pub dirt_lobe: [f32; 4],
+    /// The glow's power per channel (`amount A_EP cos(theta_s) T` x the light's gain; 0: no glow), then
+    /// `(1 - g^2) / (4 pi)`.
+    pub dirt_colour: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<Globals>() == 96);
+const _: () = assert!(std::mem::size_of::<Globals>() == 192);
 
 impl Globals {
     /// The flare's linear gain.
@@ -234,6 +258,12 @@ impl FlareScene {
             plate: [display.plate_gain(), 0.0, 0.0, 0.0],
             starburst_far: [0.0; 4],
             starburst_core: [0.0; 4],
+            dirt_light: [0.0; 4],
+            dirt_geom: [0.0; 4],
+            dirt_footprint: [0.0; 4],
+            dirt_centre: [0.0; 4],
+            dirt_lobe: [0.0; 4],
+            dirt_colour: [0.0; 4],
         };
         Self {
             width,
@@ -342,6 +372,88 @@ impl FlareScene {
             None => 0.0,
         };
         g.starburst_core = [finite(core[0]), finite(core[1]), finite(core[2]), finite(stretch)];
+    }
+}
+
+impl FlareScene {
+    /// Places the glow of the front dirt `dirt` for a light of slopes `u` (see [`crate::dirt`]), at
+    /// `display.dirt_amount` (the light's gain folded in) and `display.dirt_spread_deg`. Nothing (every dirt
+    /// uniform 0) for a clean lens, an amount of 0, a light without finite slopes, or a glow whose brightest
+    /// pixel would fall below a quarter of an 8-bit step at the flare's exposure.
+    pub fn place_dirt(
+        &mut self,
+        system: &GhostSystem,
+        dirt: Option<&PreparedDirt>,
+        u: [f64; 2],
+        sensor: &Sensor,
+        display: &DisplaySettings,
+    ) {
+        let (width, height) = (self.width, self.height);
+        let g = &mut self.globals;
+        for v in [&mut g.dirt_light, &mut g.dirt_geom, &mut g.dirt_footprint, &mut g.dirt_centre] {
+            *v = [0.0; 4];
+        }
+        (g.dirt_lobe, g.dirt_colour) = ([0.0; 4], [0.0; 4]);
+        let amount = display.dirt_amount;
+        let Some(dirt) = dirt.filter(|_| amount.is_finite() && amount > 0.0 && u.iter().all(|v| v.is_finite())) else {
+            return;
+        };
+        // The lens's own mapping and the chief ray's entrance point, linearised about the light: exact at the
+        // light, where the lobe puts the glow.
+        let step = 1e-4 * (1.0 + u[0].hypot(u[1]));
+        let derivative = |f: &dyn Fn([f64; 2]) -> [f64; 2]| -> [[f64; 2]; 2] {
+            let (x0, x1) = (f([u[0] - step, u[1]]), f([u[0] + step, u[1]]));
+            let (y0, y1) = (f([u[0], u[1] - step]), f([u[0], u[1] + step]));
+            let d = 2.0 * step;
+            [[(x1[0] - x0[0]) / d, (y1[0] - y0[0]) / d], [(x1[1] - x0[1]) / d, (y1[1] - y0[1]) / d]]
+        };
+        let m = derivative(&|v| system.light_image_mm(v));
+        let det = m[0][0] * m[1][1] - m[0][1] * m[1][0];
+        if !(det.is_finite() && det.abs() > 1e-12) {
+            return;
+        }
+        // Pixels: x right is sensor -x, y down is sensor +y ([`sensor_to_pixel`]), k pixels per mm.
+        let k = f64::from(width.max(1)) / sensor.width_mm;
+        let inverse = [[m[1][1] / det, -m[0][1] / det], [-m[1][0] / det, m[0][0] / det]];
+        let per_pixel = [[-inverse[0][0] / k, inverse[0][1] / k], [-inverse[1][0] / k, inverse[1][1] / k]];
+        let texels_per_mm = dirt.size as f64 / (2.0 * dirt.half_extent_mm);
+        let middle = 0.5 * dirt.size as f64 - 0.5;
+        let c = system.light_entrance_mm(u);
+        let j = derivative(&|v| system.light_entrance_mm(v));
+        let n_s = (1.0 + u[0] * u[0] + u[1] * u[1]).sqrt();
+        let colour = dirt.colour_rgb.map(|c| amount * c * dirt.pupil_area_mm2 / n_s);
+        let spread = henyey_greenstein_g(display.dirt_spread_deg);
+        let per_mm2 = 1.0 / det.abs();
+        let brightest = colour.iter().copied().fold(0.0, f64::max)
+            * henyey_greenstein(spread, 1.0)
+            * per_mm2
+            * f64::from(dirt.map.iter().copied().fold(0.0, f32::max));
+        let level = 0.25 / 255.0 / f64::from(display.flare_gain()).max(1e-30);
+        if !(brightest.is_finite() && brightest > level) {
+            return;
+        }
+        let light = sensor_to_pixel(system.light_image_mm(u), sensor, width, height);
+        let t = texels_per_mm;
+        let values = [
+            [light[0], light[1], u[0], u[1]],
+            [per_pixel[0][0], per_pixel[0][1], per_pixel[1][0], per_pixel[1][1]],
+            // Texel rows run down the map: -y.
+            [t * j[0][0], t * j[0][1], -t * j[1][0], -t * j[1][1]],
+            [c[0] * t + middle, -c[1] * t + middle, 0.0, 0.0],
+            [spread, per_mm2, 1.0 / n_s, 0.0],
+            [colour[0], colour[1], colour[2], (1.0 - spread * spread) / (4.0 * std::f64::consts::PI)],
+        ];
+        if !values.iter().flatten().all(|v| v.is_finite() && v.abs() < 1e30) {
+            return;
+        }
+        let f = |v: [f64; 4]| v.map(|x| x as f32);
+        (g.dirt_light, g.dirt_geom, g.dirt_footprint) = (f(values[0]), f(values[1]), f(values[2]));
+        (g.dirt_centre, g.dirt_lobe, g.dirt_colour) = (f(values[3]), f(values[4]), f(values[5]));
+    }
+
+    /// True when the frame draws a dirt glow.
+    pub fn has_dirt_glow(&self) -> bool {
+        self.globals.dirt_colour[..3].iter().any(|&c| c > 0.0)
     }
 }
 

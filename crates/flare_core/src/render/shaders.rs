@@ -28,6 +28,9 @@ pub const GHOSTS_COMPUTE_WGSL: &str = concat!(
 /// The starburst quad.
 pub const STARBURST_WGSL: &str =
     concat!(include_str!("../../../../shaders/common.wgsl"), include_str!("../../../../shaders/starburst.wgsl"));
+/// The front dirt's glow over the whole accumulation.
+pub const DIRT_WGSL: &str =
+    concat!(include_str!("../../../../shaders/common.wgsl"), include_str!("../../../../shaders/dirt.wgsl"));
 /// Flare and plate exposures, tonemap, sRGB, with the identity in place of the OCIO display transform (what
 /// the validation reads; the renderer builds [`tonemap_wgsl`] of the document's view).
 pub const TONEMAP_WGSL: &str = concat!(
@@ -75,6 +78,7 @@ pub const ALL: &[(&str, &str)] = &[
     ("ghosts.wgsl", GHOSTS_WGSL),
     ("ghosts_compute.wgsl", GHOSTS_COMPUTE_WGSL),
     ("starburst.wgsl", STARBURST_WGSL),
+    ("dirt.wgsl", DIRT_WGSL),
     ("tonemap.wgsl", TONEMAP_WGSL),
     ("lut_ghosts.wgsl", LUT_GHOSTS_WGSL),
     ("lut_compute.wgsl", LUT_COMPUTE_WGSL),

@@ -8,7 +8,7 @@
 //! [`ghosts::ghost_pass`] draws the same image for a fraction of the work (what every caller uses): per row of
 //! a sprite, the span where every mask is exactly 1 is added in O(1) to a difference buffer and only its
 //! edges are shaded as above (a test holds the two within 0.2/255). [`ghosts::ghost_moments`] walks the
-//! direct pass's fragments to measure each ghost's energy and centroid for the metrics. [`starburst::starburst_pass`] is `starburst.wgsl` and [`tonemap::tonemap_pass`] is `tonemap.wgsl`
+//! direct pass's fragments to measure each ghost's energy and centroid for the metrics. [`starburst::starburst_pass`] is `starburst.wgsl`, [`dirt::dirt_pass`] is `dirt.wgsl` (the front dirt's glow) and [`tonemap::tonemap_pass`] is `tonemap.wgsl`
 //! (the composite of the exposed flare and plate, the tonemap, sRGB). [`ghosts::ghost_pass`] is also the twin of
 //! the compute pass `ghosts_compute.wgsl` (its `spans` is [`ghosts::ghost_pass`]'s sweep of one sprite's row,
 //! its `resolve` the per-row sum). `lut_ghosts.wgsl`'s and `lut_compute.wgsl`'s twin,
@@ -16,11 +16,13 @@
 //! and the CPU in f32; the comparison tests bound the difference. The twin also renders on machines with no GPU
 //! adapter at all (`flarelab render --device cpu`).
 
+pub mod dirt;
 pub mod ghosts;
 pub(crate) mod quads;
 pub mod starburst;
 pub mod tonemap;
 
+pub use dirt::dirt_pass;
 pub use ghosts::{ghost_moments, ghost_pass, ghost_pass_direct};
 pub use starburst::{StarburstTexture, starburst_pass};
 pub use tonemap::{composite, display_of, flare_layer, plate_layer, tonemap_pass, tonemap_pixel};
