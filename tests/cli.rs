@@ -1811,3 +1811,59 @@ fn anamorphic_lenses_on_the_command_line() {
     assert!(e.contains("mirror symmetry") && e.contains("blades"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `render --dirt`: each pattern and a dirt image give a `dirt` layer that the flare layer holds; a clean lens
+/// writes none; bad dirt flags are refused with the reason, naming the flag or the preset's field.
+#[test]
+fn render_with_front_dirt_writes_its_layer() {
+    let dir = tempfile::tempdir().unwrap();
+    let speck = dir.path().join("speck.png");
+    image::GrayImage::from_fn(64, 64, |x, y| image::Luma([if (x / 8 + y / 8) % 3 == 0 { 255 } else { 0 }]))
+        .save(&speck)
+        .unwrap();
+    let image_spec = format!("image:{}", speck.display());
+    for (spec, expect_layer) in
+        [("none", false), ("dust:3", true), ("smudges", true), ("haze", true), (&image_spec, true)]
+    {
+        let out = dir.path().join("d.exr");
+        let args = [
+            "render",
+            "--size",
+            "96x54",
+            "--device",
+            "cpu",
+            "--f-number",
+            "11",
+            "--dirt",
+            spec,
+            "--dirt-amount",
+            "0.05",
+            "--exr-type",
+            "float",
+            "-o",
+            &out.display().to_string(),
+        ];
+        let result = flarelab(&args);
+        assert!(result.status.success(), "{spec}: {}", String::from_utf8_lossy(&result.stderr));
+        let channels = flare_core::output::read_exr_channels(&out).unwrap().channels;
+        assert_eq!(channels.contains_key("dirt.G"), expect_layer, "{spec}: {:?}", channels.keys());
+        if expect_layer {
+            let (dirt, flare) = (&channels["dirt.G"], &channels["flare.G"]);
+            assert!(dirt.iter().any(|&v| v > 0.0), "{spec}: a glow");
+            assert!(dirt.iter().zip(flare).all(|(d, f)| *d <= *f * (1.0 + 1e-6) + 1e-6), "{spec}: the flare holds it");
+        }
+    }
+    assert!(refusal(&["render", "--dirt", "mud", "-o", "x.png"]).contains("--dirt mud"));
+    assert!(refusal(&["render", "--dirt", "image:/no/such.png", "-o", "x.png"]).contains("no such image"));
+    assert!(
+        refusal(&["render", "--dirt", "dust", "--dirt-amount", "2", "-o", "x.png"])
+            .contains("--dirt-amount 2: 2 must be from 0 to 1")
+    );
+    assert!(
+        refusal(&["render", "--dirt", "dust", "--dirt-spread-deg", "0", "-o", "x.png"]).contains("--dirt-spread-deg 0")
+    );
+    let black = dir.path().join("black.png");
+    image::GrayImage::new(8, 8).save(&black).unwrap();
+    let why = refusal(&["render", "--dirt", &format!("image:{}", black.display()), "-o", "x.png"]);
+    assert!(why.contains("black everywhere"), "{why}");
+}

@@ -362,3 +362,42 @@ fn the_reference_method_and_the_exr_carry_the_dirt() {
         assert!(values.iter().any(|&v| v > 0.0), "{c} holds the glow");
     }
 }
+
+/// The preset's `dirt`: saved and read back whole; a clean lens keeps the optics fingerprint it had before dirt
+/// (a preset without the field is that); a dirt pattern changes it (the map is prepared again) but the amount and
+/// spread do not (display settings); bad values are refused naming the field.
+#[test]
+fn a_preset_keeps_its_dirt_and_refuses_bad_dirt() {
+    use flare_core::dirt::{DirtDoc, DirtKind};
+    use flare_core::preset::Document;
+    let clean = Document::default();
+    let mut dusty = clean.clone();
+    dusty.dirt = DirtDoc { pattern: DirtKind::Dust, seed: 7, amount: 0.02, spread_deg: 5.0, image: None };
+    let back = Document::from_json(&dusty.to_json()).unwrap();
+    assert_eq!(back.dirt, dusty.dirt);
+    let mut json: serde_json::Value = serde_json::from_str(&clean.to_json()).unwrap();
+    json.as_object_mut().unwrap().remove("dirt");
+    let old = Document::from_json(&json.to_string()).unwrap();
+    assert_eq!(old.dirt.pattern, DirtKind::None);
+    assert_eq!(old.optics_fingerprint(), clean.optics_fingerprint());
+    assert_ne!(dusty.optics_fingerprint(), clean.optics_fingerprint());
+    let mut brighter = dusty.clone();
+    brighter.dirt.amount = 0.2;
+    brighter.dirt.spread_deg = 20.0;
+    assert_eq!(brighter.optics_fingerprint(), dusty.optics_fingerprint());
+    assert!(dusty.flare_config().unwrap().dirt.is_some() && clean.flare_config().unwrap().dirt.is_none());
+    assert_eq!(dusty.display(1).dirt_amount, 0.02);
+    assert_eq!(clean.display(1).dirt_amount, 0.0, "no pattern: no glow whatever the amount");
+    for (field, value, expect) in [
+        ("amount", serde_json::json!(1.5), "dirt.amount"),
+        ("amount", serde_json::json!(-0.1), "dirt.amount"),
+        ("spread_deg", serde_json::json!(90.0), "dirt.spread_deg"),
+        ("pattern", serde_json::json!("mud"), "dirt.pattern"),
+        ("pattern", serde_json::json!("image"), "dirt.image"),
+    ] {
+        let mut json: serde_json::Value = serde_json::from_str(&dusty.to_json()).unwrap();
+        json["dirt"][field] = value;
+        let why = Document::from_json(&json.to_string()).unwrap_err().to_string();
+        assert!(why.contains(expect), "{field}: {why}");
+    }
+}

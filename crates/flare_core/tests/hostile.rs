@@ -473,6 +473,12 @@ proptest! {
             prop_assert!(map.width <= MAX_IMAGE_SIDE_PX && map.height <= MAX_IMAGE_SIDE_PX);
         }
         let _ = flare_core::aperture::Aperture::image_shape_from_file(&source, 32);
+        if let Ok(flare_core::dirt::DirtPattern::Image { size, luminance }) =
+            flare_core::dirt::DirtPattern::image_from_file(&source)
+        {
+            prop_assert_eq!(luminance.len(), size * size);
+            prop_assert!(luminance.iter().all(|v| (0.0..=1.0).contains(v)));
+        }
         if let Ok(read) = flare_core::output::read_exr_channels(&source) {
             prop_assert!(read.width <= MAX_IMAGE_SIDE_PX && read.height <= MAX_IMAGE_SIDE_PX);
             let size = read.width as usize * read.height as usize;
