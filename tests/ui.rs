@@ -1473,3 +1473,36 @@ fn a_toroids_x_radius_is_edited_in_the_lens_table() {
     h.run();
     assert_eq!(h.state().doc().lens, before, "undo gives back exactly what was there");
 }
+
+/// The aperture panel's dirt: choosing a pattern prepares its map and the view's frame draws a glow; the amount
+/// slider changes only the display (no optics rebuilt); undo returns exactly the clean lens.
+#[test]
+fn the_dirt_control_dirties_the_front_element_and_undo_cleans_it() {
+    use flare_core::dirt::DirtKind;
+    let mut h = harness();
+    show(&mut h, Tab::Aperture);
+    h.run();
+    let before = h.state().doc().dirt.clone();
+    assert!(h.query_by_label_contains("a clean lens").is_some());
+    h.get_by_label("dirt").click();
+    h.run();
+    h.get_by_label("dust").click();
+    h.run();
+    step_until(&mut h, 30.0, |app| app.flare().is_some_and(|f| f.dirt.is_some()));
+    assert_eq!(h.state().doc().dirt.pattern, DirtKind::Dust);
+    assert!(h.state().flare().unwrap().dirt.is_some(), "the map is prepared");
+    step_until(&mut h, 30.0, |app| app.derived().view_frame().as_ref().is_some_and(|(_, f)| f.scene.has_dirt_glow()));
+    let frame = h.state().derived().view_frame().as_ref().map(|(_, f)| f.clone()).unwrap();
+    assert!(frame.scene.has_dirt_glow() && frame.dirt_taken > 0.0, "the view draws the glow");
+    assert!(h.query_by_label_contains("of the light at its position into the glow").is_some());
+    let optics = h.state().derived().rebuilds().optics;
+    h.get_by_role_and_label(egui::accesskit::Role::Slider, "dirt amount").set_value_accesskit(5.0);
+    h.run();
+    assert!((h.state().doc().dirt.amount - 0.05).abs() < 1e-12, "{}", h.state().doc().dirt.amount);
+    assert_eq!(h.state().derived().rebuilds().optics, optics, "the amount rebuilds no optics");
+    for _ in 0..2 {
+        h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
+        h.run();
+    }
+    assert_eq!(h.state().doc().dirt, before, "undo gives back exactly the clean lens");
+}

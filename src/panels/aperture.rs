@@ -155,7 +155,7 @@ fn dirt_ui(
     // Edited as a percentage; written back only when the slider moved (undo returns exactly what was there).
     let mut percent = dirt.amount * 100.0;
     let moved = ui
-        .add(egui::Slider::new(&mut percent, 0.001..=100.0).logarithmic(true).suffix(" %").text("amount"))
+        .add(egui::Slider::new(&mut percent, 0.001..=100.0).logarithmic(true).suffix(" %").text("dirt amount"))
         .on_hover_text("the share of the light scattered where the dirt is densest")
         .changed();
     if moved {
@@ -165,7 +165,7 @@ fn dirt_ui(
         egui::Slider::new(&mut dirt.spread_deg, SPREAD_RANGE_DEG.0..=SPREAD_RANGE_DEG.1)
             .logarithmic(true)
             .suffix(" deg")
-            .text("spread"),
+            .text("dirt spread"),
     )
     .on_hover_text("the scattering lobe's half width at half peak: how far from the light the dirt lights up");
     if let Some(prepared) = &flare.dirt {
