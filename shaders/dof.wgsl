@@ -20,7 +20,8 @@ struct Layer {
     cat: vec4<f32>,
     // cat's eye radius, soft edge, on (1/0), unused
     cat_more: vec4<f32>,
-    // pupil radii per pixel of offset (signed), unused x 3
+    // pupil radii per pixel of offset along x and along y (2 / sigma of each axis, signed), the cat's eye's x
+    // scale (an anamorphic pupil's x semi-axis over its y one; 1 for a round one), unused
     pupil: vec4<f32>,
 }
 
@@ -88,7 +89,8 @@ fn cat_factor(q: vec2<f32>, x: f32, y: f32) -> f32 {
         return 1.0;
     }
     let c = vec2<f32>(layer.cat.x + layer.cat.y * x, layer.cat.z + layer.cat.w * y);
-    let d = sqrt((q.x - c.x) * (q.x - c.x) + (q.y - c.y) * (q.y - c.y));
+    let qx = q.x * layer.pupil.z;
+    let d = sqrt((qx - c.x) * (qx - c.x) + (q.y - c.y) * (q.y - c.y));
     return clamp(0.5 + (layer.cat_more.x - d) / layer.cat_more.y, 0.0, 1.0);
 }
 
@@ -122,7 +124,8 @@ fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
     let y = i32(id.y);
     let lo = vec4<i32>(layer.low);
     let f = f32(layer.taps.z);
-    let k = layer.pupil.x * f;
+    let kx = layer.pupil.x * f;
+    let ky = layer.pupil.y * f;
     var acc = vec4<f32>(0.0);
     for (var t = 0u; t < layer.taps.y; t++) {
         let tap = taps[layer.taps.x + t];
@@ -137,7 +140,7 @@ fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
         let px = (f32(sx) + 0.5) * f;
         let py = (f32(sy) + 0.5) * f;
-        let q = vec2<f32>(tap.x * k, -tap.y * k);
+        let q = vec2<f32>(tap.x * kx, -tap.y * ky);
         let wgt = tap.z * cat_factor(q, px, py) * norm_at(px, py);
         acc = vec4<f32>(acc.x + src.x * wgt, acc.y + src.y * wgt, acc.z + src.z * wgt, acc.w + src.w * wgt);
     }

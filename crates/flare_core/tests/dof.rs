@@ -285,8 +285,11 @@ fn the_gpu_live_method_matches_its_cpu_twin() {
             *d = 1500.0 + (k % 7) as f64 * 2000.0;
         }
     }
-    for cat_eye in [false, true] {
-        let m = DofModel::new(&builtin_lens("heliar").unwrap(), 1.0, 0.8, 36.0, (W, H), cat_eye).unwrap();
+    // The heliar, then the toroidal test lens (an oval kernel per layer, the cat's eye in its elliptical pupil).
+    let cases = [(builtin_lens("heliar").unwrap(), 0.8, 36.0), (common::toroidal_test_lens(), 0.8, 8.0)];
+    for (lens, cat_eye) in cases.iter().flat_map(|c| [(c, false), (c, true)]) {
+        let (lens, focus_m, sensor_mm) = lens;
+        let m = DofModel::new(lens, 1.0, *focus_m, *sensor_mm, (W, H), cat_eye).unwrap();
         let plan = LivePlan::new(&depth, &m, &hex).unwrap();
         let cpu = plan.render_cpu(&plate);
         let out = gpu.render(&ctx, &plan, &plate).unwrap();
@@ -297,7 +300,8 @@ fn the_gpu_live_method_matches_its_cpu_twin() {
             .map(|(a, b)| (0..3).map(|c| (a[c] - b[c]).abs() / (1.0 + a[c].abs())).fold(0.0f32, f32::max))
             .fold(0.0f32, f32::max);
         eprintln!(
-            "cat's eye {cat_eye}: {} layers, worst relative difference {worst:.2e}, GPU {:?} ms",
+            "{}: cat's eye {cat_eye}: {} layers, worst relative difference {worst:.2e}, GPU {:?} ms",
+            lens.id,
             plan.layers.len(),
             out.gpu_ms
         );
@@ -339,6 +343,96 @@ fn with_axial_colour_each_channel_blurs_to_its_own_wavelength() {
                 (diameter - expected).abs() <= (0.05 * expected).max(1.0),
                 "{method:?} channel {k}: {diameter:.2} px, model {expected:.2}"
             );
+        }
+    }
+}
+
+#[path = "common/mod.rs"]
+mod common;
+
+/// An anamorphic lens's bokeh is an oval: the toroidal test lens (focused at 5 m, the sensor half way between
+/// where its two sections image that plane) blurs an axial point at 0.6 m to a spot whose width and height the
+/// exact tracer finds through the real toroids (rays from the point over the stop, to the model's sensor plane)
+/// and the model gives per section; both methods draw a spot of those widths (a disc's 4 standard deviations).
+#[test]
+fn an_anamorphic_lens_blurs_a_point_into_an_oval() {
+    use flare_core::optics::{D_LINE_NM, LightPath, Ray, Tracer};
+    let lens = common::toroidal_test_lens();
+    let (w, h) = (160u32, 120u32);
+    let sensor_width_mm = 6.0;
+    let stop_scale = 0.25;
+    let model = DofModel::new(&lens, stop_scale, 5.0, sensor_width_mm, (w, h), false).unwrap();
+    let sections = model.sections.as_ref().expect("two sections");
+    let depth_mm = 300.0;
+    let [sx, sy] = model.defocus_xy_px(depth_mm);
+    assert_eq!(sy, model.defocus_px(depth_mm));
+    // The exact spot: rays from the axial point at depth_mm (from the y pupil) through the stop's opening.
+    let z_last = *lens.vertex_z_mm().last().unwrap();
+    let tracer = Tracer::new(&lens, &LightPath::image(&lens), D_LINE_NM, z_last + sections[0].sensor_mm);
+    let stop = lens.stop_index();
+    let stop_radius = lens.surfaces[stop].semi_aperture_mm * stop_scale;
+    let origin = glam::DVec3::new(0.0, 0.0, model.pupil_z_mm - depth_mm);
+    let (mut x_range, mut y_range) = ((f64::MAX, f64::MIN), (f64::MAX, f64::MIN));
+    let reach = 2.0 * sections[0].pupil_radius_mm.max(sections[1].pupil_radius_mm);
+    let n = 121;
+    let mut landed = 0;
+    for j in 0..n {
+        for i in 0..n {
+            let target = glam::DVec3::new(
+                reach * (2.0 * i as f64 / (n - 1) as f64 - 1.0),
+                reach * (2.0 * j as f64 / (n - 1) as f64 - 1.0),
+                0.0,
+            );
+            let ray = Ray { origin_mm: origin, direction: (target - origin).normalize() };
+            let mut through = true;
+            let result = tracer.trace_visit(&ray, |hit| {
+                if hit.surface == stop {
+                    through = hit.point_mm.x.hypot(hit.point_mm.y) <= stop_radius;
+                }
+                through && hit.point_mm.x.hypot(hit.point_mm.y) <= hit.semi_aperture_mm
+            });
+            if let (Ok(l), true) = (result, through) {
+                landed += 1;
+                x_range = (x_range.0.min(l.point_mm.x), x_range.1.max(l.point_mm.x));
+                y_range = (y_range.0.min(l.point_mm.y), y_range.1.max(l.point_mm.y));
+            }
+        }
+    }
+    assert!(landed > 500, "{landed} rays through the stop");
+    let px = model.pixel_mm;
+    let exact = [(x_range.1 - x_range.0) / px, (y_range.1 - y_range.0) / px];
+    println!(
+        "anamorphic bokeh at {depth_mm} mm: model {:.2} x {:.2} px, exact trace {:.2} x {:.2} px ({landed} rays)",
+        sx.abs(),
+        sy.abs(),
+        exact[0],
+        exact[1]
+    );
+    for k in 0..2 {
+        let model_px = [sx, sy][k].abs();
+        assert!((model_px / exact[k] - 1.0).abs() < 0.1, "axis {k}: model {model_px} exact {}", exact[k]);
+    }
+    assert!((sx.abs() / sy.abs() - 1.0).abs() > 0.2, "an oval, not a circle: {sx} x {sy}");
+    let why = model.at_wavelength(&lens, 650.0).unwrap_err().to_string();
+    assert!(why.contains("axial colour"), "{why}");
+    // Both methods draw the oval: its widths at half its peak along the row and the column through its centre.
+    let (cx, cy) = (w / 2, h / 2);
+    let mut plate = HdrImage::black(w, h);
+    let mut depth = vec![f64::INFINITY; (w * h) as usize];
+    plate.pixels[(cy * w + cx) as usize] = [100.0, 100.0, 100.0, 1.0];
+    depth[(cy * w + cx) as usize] = depth_mm;
+    for method in [DofMethod::Reference, DofMethod::Live] {
+        let out = dof::apply(&plate, &depth, &model, &mask(ApertureShape::Circle), method).unwrap();
+        let at = |x: u32, y: u32| out.pixels[(y * w + x) as usize][0];
+        let peak = out.pixels.iter().map(|p| p[0]).fold(0.0f32, f32::max);
+        let row = (0..w).filter(|&x| at(x, cy) > 0.5 * peak).count() as f64;
+        let column = (0..h).filter(|&y| at(cx, y) > 0.5 * peak).count() as f64;
+        println!("{}: the spot is {row} x {column} px at half its peak", method.word());
+        for (k, width) in [row, column].into_iter().enumerate() {
+            let model_px = [sx, sy][k].abs();
+            // As a round lens's points are held (test `points_blur_to_the_model_diameter_and_keep_their_energy`).
+            let tolerance = (0.05 * model_px).max(1.0) + 1.0;
+            assert!((width - model_px).abs() <= tolerance, "{}: axis {k}: {width} vs {model_px}", method.word());
         }
     }
 }

@@ -8,7 +8,8 @@
 //! `mask_sign q` (the stop imaged into the pupil) times, with the cat's eye, the coverage of the front aperture's
 //! circle in pupil units ([`super::DofModel::cat_eye_at`]) with a soft edge `edge` wide (the sampling step, so
 //! that the cut is antialiased like the mask). [`raster`] integrates it over each target pixel (s x s samples)
-//! for the reference; [`super::live`] samples it per tap.
+//! for the reference; [`super::live`] samples it per tap. An anamorphic lens's kernel has a defocus per axis
+//! ([`pupil_point_xy`], [`raster_xy`]): the pupil point is `2 o_x / sigma_x` along x and `2 o_y / sigma_y` along y.
 
 use crate::aperture::ApertureMask;
 
@@ -19,13 +20,21 @@ pub fn pupil_point(o: [f64; 2], sigma: f64) -> [f64; 2] {
     [o[0] * k, o[1] * k]
 }
 
-/// The coverage of the circle `cat` (centre, radius in pupil radii) at `q`, with a soft edge `edge` wide.
+/// The pupil point of the frame offset `o` for the signed defocus `sigma` along x and along y (an anamorphic
+/// lens's oval; [`pupil_point`] on each axis).
 #[inline]
-pub fn cat_eye_coverage(q: [f64; 2], cat: Option<([f64; 2], f64)>, edge: f64) -> f64 {
+pub fn pupil_point_xy(o: [f64; 2], sigma: [f64; 2]) -> [f64; 2] {
+    [o[0] * (2.0 / sigma[0]), o[1] * (2.0 / sigma[1])]
+}
+
+/// The coverage of the circle `cat` (centre, radius in pupil radii) at `q`, with a soft edge `edge` wide; `q`'s
+/// x is first scaled by `x_scale` (an anamorphic pupil's x semi-axis over its y one; 1 for a round pupil).
+#[inline]
+pub fn cat_eye_coverage(q: [f64; 2], cat: Option<([f64; 2], f64)>, edge: f64, x_scale: f64) -> f64 {
     match cat {
         None => 1.0,
         Some((c, r)) => {
-            let d = (q[0] - c[0]).hypot(q[1] - c[1]);
+            let d = (q[0] * x_scale - c[0]).hypot(q[1] - c[1]);
             (0.5 + (r - d) / edge.max(1e-9)).clamp(0.0, 1.0)
         }
     }
@@ -33,9 +42,16 @@ pub fn cat_eye_coverage(q: [f64; 2], cat: Option<([f64; 2], f64)>, edge: f64) ->
 
 /// The kernel's weight at the pupil point `q` (before normalisation).
 #[inline]
-pub fn weight(mask: &ApertureMask, mask_sign: f64, q: [f64; 2], cat: Option<([f64; 2], f64)>, edge: f64) -> f64 {
+pub fn weight(
+    mask: &ApertureMask,
+    mask_sign: f64,
+    q: [f64; 2],
+    cat: Option<([f64; 2], f64)>,
+    edge: f64,
+    x_scale: f64,
+) -> f64 {
     let open = f64::from(mask.sample((mask_sign * q[0]) as f32, (mask_sign * q[1]) as f32));
-    if open == 0.0 { 0.0 } else { open * cat_eye_coverage(q, cat, edge) }
+    if open == 0.0 { 0.0 } else { open * cat_eye_coverage(q, cat, edge, x_scale) }
 }
 
 /// A kernel rasterised on the pixel grid around its source: `(2 radius + 1)^2` weights, row by row from the top
@@ -62,12 +78,25 @@ pub fn samples_per_pixel(diameter_px: f64) -> usize {
 /// ([`samples_per_pixel`]), normalised to 1; the identity when no sample falls inside (a blur below the sample
 /// spacing, or a cat's eye that closes the pupil: then the pixel keeps its own light).
 pub fn raster(mask: &ApertureMask, mask_sign: f64, sigma: f64, cat: Option<([f64; 2], f64)>) -> RasterKernel {
-    let half = 0.5 * sigma.abs();
-    if !(half.is_finite() && half > 1e-6) {
+    raster_xy(mask, mask_sign, [sigma; 2], cat, 1.0)
+}
+
+/// [`raster`] of an oval: the defocus `sigma` along x and along y (an anamorphic lens's), the cat's eye comparing
+/// pupil points with their x scaled by `x_scale`.
+pub fn raster_xy(
+    mask: &ApertureMask,
+    mask_sign: f64,
+    sigma: [f64; 2],
+    cat: Option<([f64; 2], f64)>,
+    x_scale: f64,
+) -> RasterKernel {
+    let widest = sigma[0].abs().max(sigma[1].abs());
+    let half = 0.5 * widest;
+    if !(half.is_finite() && half > 1e-6 && sigma.iter().all(|s| s.abs() > 1e-9)) {
         return RasterKernel::identity();
     }
     let radius = (half + 1.0).ceil() as i32;
-    let s = samples_per_pixel(sigma.abs());
+    let s = samples_per_pixel(widest);
     let step = 1.0 / s as f64;
     let edge = step / half;
     let side = (2 * radius + 1) as usize;
@@ -80,7 +109,7 @@ pub fn raster(mask: &ApertureMask, mask_sign: f64, sigma: f64, cat: Option<([f64
                 // The sample's frame offset (X right, Y up) from the source's centre.
                 let ox = f64::from(i) - 0.5 + (sx as f64 + 0.5) * step;
                 let oy = -(f64::from(j) - 0.5 + (sy as f64 + 0.5) * step);
-                sum += weight(mask, mask_sign, pupil_point([ox, oy], sigma), cat, edge);
+                sum += weight(mask, mask_sign, pupil_point_xy([ox, oy], sigma), cat, edge, x_scale);
             }
         }
         *w = sum;

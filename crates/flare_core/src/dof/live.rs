@@ -25,7 +25,7 @@
 
 use rayon::prelude::*;
 
-use super::kernel::{pupil_point, weight};
+use super::kernel::{pupil_point_xy, weight};
 use super::model::{DofError, DofModel, defocus_map, over, resolve};
 use crate::aperture::ApertureMask;
 use crate::image::HdrImage;
@@ -70,7 +70,9 @@ pub struct LiveLayer {
     pub cat: [f32; 4],
     /// The cat's eye radius, its soft edge (pupil radii), 1 when the cat's eye is on, 2 / |sigma_k|.
     pub cat_more: [f32; 4],
-    /// 2 / |sigma_k| sign(sigma_k) (pupil radii per pixel of offset, reflected in front of the focus), unused x 3.
+    /// Pupil radii per pixel of offset along x and along y, `2 / sigma` of each axis (signed: reflected in front of
+    /// its focus; equal for a lens of revolution), the pupil's x semi-axis over its y one (the cat's eye's x
+    /// scale, 1 for a lens of revolution), unused.
     pub pupil: [f32; 4],
 }
 const _: () = assert!(std::mem::size_of::<LiveLayer>() == 144);
@@ -108,15 +110,16 @@ fn cat_factor(layer: &LiveLayer, q: [f32; 2], x: f32, y: f32) -> f32 {
         return 1.0;
     }
     let c = [layer.cat[0] + layer.cat[1] * x, layer.cat[2] + layer.cat[3] * y];
-    let d = ((q[0] - c[0]) * (q[0] - c[0]) + (q[1] - c[1]) * (q[1] - c[1])).sqrt();
+    let qx = q[0] * layer.pupil[2];
+    let d = ((qx - c[0]) * (qx - c[0]) + (q[1] - c[1]) * (q[1] - c[1])).sqrt();
     (0.5 + (layer.cat_more[0] - d) / layer.cat_more[1]).clamp(0.0, 1.0)
 }
 
 /// The pupil point of tap offset `t` (texels, Y down) in `layer`.
 #[inline]
 fn tap_pupil(layer: &LiveLayer, t: [f32; 2]) -> [f32; 2] {
-    let k = layer.pupil[0] * layer.taps[2] as f32;
-    [t[0] * k, -t[1] * k]
+    let f = layer.taps[2] as f32;
+    [t[0] * (layer.pupil[0] * f), -t[1] * (layer.pupil[1] * f)]
 }
 
 /// The normalisation at pixel (`x`, `y`), bilinear in the layer's table.
@@ -200,13 +203,15 @@ impl LivePlan {
         mask: &ApertureMask,
         taps_across: f64,
     ) {
-        let diameter = centre.abs();
+        // An anamorphic lens's layer blurs along x by the x blur of the layer's depth (the y blur is `centre`).
+        let sigma = [model.defocus_x_for(centre), centre];
+        let diameter = sigma[0].abs().max(sigma[1].abs());
         // At most `taps_across` texels across the kernel (so at most ~0.8 taps_across^2 taps).
         let factor = (diameter / taps_across).ceil().max(1.0) as u32;
         let (lw, lh) = (self.width.div_ceil(factor), self.height.div_ceil(factor));
         let f = f64::from(factor);
         let small = diameter < 1e-3;
-        let pupil_per_px = if small { 0.0 } else { 2.0 / centre };
+        let pupil_per_px = sigma.map(|s| if small || s.abs() < 1e-9 { 0.0 } else { 2.0 / s });
         // The cat's eye at the layer's depth: linear in the pixel position.
         let depth_mm = depth_of(model, centre);
         let cat = model.cat_eye_at(0.0, 0.0, depth_mm).zip(model.cat_eye_at(1.0, 1.0, depth_mm));
@@ -238,7 +243,7 @@ impl LivePlan {
             shape: [centre as f32, spacing as f32, lo as f32, hi as f32],
             cat: cat_coeffs.map(|v| v as f32),
             cat_more: [cat_radius as f32, cell_pupil as f32, if cat.is_some() { 1.0 } else { 0.0 }, 0.0],
-            pupil: [pupil_per_px as f32, 0.0, 0.0, 0.0],
+            pupil: [pupil_per_px[0] as f32, pupil_per_px[1] as f32, model.cat_x_scale() as f32, 0.0],
         };
         // Taps: the kernel averaged over 3 x 3 points of each texel cell (no cat's eye: that is per source).
         let reach = reach as i32;
@@ -250,7 +255,7 @@ impl LivePlan {
                     for sx in 0..3 {
                         let ox = (f64::from(tx) + (f64::from(sx) - 1.0) / 3.0) * f;
                         let oy = -(f64::from(ty) + (f64::from(sy) - 1.0) / 3.0) * f;
-                        sum += weight(mask, model.mask_sign, pupil_point([ox, oy], centre), None, 1.0);
+                        sum += weight(mask, model.mask_sign, pupil_point_xy([ox, oy], sigma), None, 1.0, 1.0);
                     }
                 }
                 if sum > 0.0 {
@@ -424,14 +429,9 @@ pub fn sample_bilinear(layer: &LiveLayer, image: &[[f32; 4]], x: f32, y: f32) ->
     out
 }
 
-/// The depth (mm from the pupil) whose defocus is `sigma` pixels: `S_f / (1 - sigma / sigma_far)`, infinite at
-/// and beyond the far field's.
+/// The depth (mm from the pupil) whose defocus is `sigma` pixels ([`super::model::depth_of_defocus`]).
 pub fn depth_of(model: &DofModel, sigma: f64) -> f64 {
-    let far = model.far_defocus_px();
-    if far <= 0.0 || sigma >= far {
-        return f64::INFINITY;
-    }
-    model.focus_mm / (1.0 - sigma / far)
+    super::model::depth_of_defocus(model, sigma)
 }
 
 #[cfg(test)]

@@ -37,6 +37,19 @@
 //! [`live`] the fast one (a few layers, each gathered at a resolution that keeps its kernel a dozen texels across)
 //! that `render::dof_gpu` runs on the GPU, its CPU twin beside it.
 //!
+//! **An anamorphic lens** (toroids aligned with x and y) is modelled section by section ([`model::SectionDefocus`]):
+//! each section, a lens of revolution ([`crate::optics::Lens::section`]), images the focus plane at its own
+//! distance; the sensor sits half way between the two (the plane of least confusion, as the first-order data
+//! place it at infinity), and an object at S blurs along x by the cone through the x section's pupil onto that
+//! plane, `-2 r_x (n0 d + n1) / (d + z_x)` with `[n0, n1]` the section's entrance-to-sensor row, along y by the
+//! y section's. The kernel is the stop's shape stretched to those two widths: an oval bokeh, each axis
+//! point-reflected in front of its own focus, whose aspect changes with depth where the sections focus apart.
+//! Layers are keyed by the y blur (monotonic in depth); each layer and each reference kernel takes the x blur of
+//! the same depth ([`DofModel::defocus_x_for`]). The cat's eye compares pupil points in y pupil radii, their x
+//! scaled by `r_x / r_y`, each axis's centre from its own section. A test traces an axial point through the
+//! real toroids and finds the spot's width and height within 4 % of the model's; both methods draw them.
+//! Axial colour is refused for an anamorphic lens, with the reason.
+//!
 //! **Inputs** ([`depth`]): a depth map in metres (EXR: channel `Z`, else the first; a 16-bit PNG with a near/far
 //! range), the focus distance or a pixel to focus on. Refused with the reason: a depth map of another size than
 //! the plate, a depth that is negative, zero, NaN or inside the lens, a focus distance inside the lens or closer

@@ -75,6 +75,46 @@ pub struct DofModel {
     pub cat_eye: bool,
     /// The wavelength this model's light has (the d-line unless axial colour is drawn per channel).
     pub wavelength_nm: f64,
+    /// An anamorphic lens's two sections (`None` for a lens of revolution): the model's own pupil, focus
+    /// magnification and mask orientation are then the y-z section's, with the sensor half way between where
+    /// the two sections image the focus plane (the plane of least confusion).
+    pub sections: Option<Box<[SectionDefocus; 2]>>,
+}
+
+/// One section (x-z or y-z) of an anamorphic lens, for the defocus along its axis.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SectionDefocus {
+    /// `[A + b C, B + b D]`: the section's entrance plane to the sensor plane (`b` behind the last vertex), so a
+    /// ray of entrance height `y0` and slope `u` lands at `to_sensor[0] y0 + to_sensor[1] u`.
+    pub to_sensor: [f64; 2],
+    /// The sensor plane's distance behind the last vertex (the same for both sections).
+    pub sensor_mm: f64,
+    /// The section's entrance pupil: distance behind the first vertex, radius at the chosen f-number (mm).
+    pub pupil_z_mm: f64,
+    pub pupil_radius_mm: f64,
+}
+
+impl SectionDefocus {
+    /// The signed blur diameter (mm) along this section's axis of an object `d_mm` in front of the first vertex
+    /// (infinite: the far field): the cone from the object through the pupil's rim, `-2 r (n0 d + n1) / (d +
+    /// z_EP)`, positive behind the plane this section focuses on the sensor (for an inverting section).
+    fn blur_mm(&self, d_mm: f64) -> f64 {
+        let [n0, n1] = self.to_sensor;
+        if d_mm.is_infinite() {
+            return -2.0 * self.pupil_radius_mm * n0;
+        }
+        -2.0 * self.pupil_radius_mm * (n0 * d_mm + n1) / (d_mm + self.pupil_z_mm)
+    }
+
+    /// The object distance in front of the first vertex whose blur is `blur_mm` (the inverse of [`Self::blur_mm`],
+    /// a Moebius map, monotonic); infinite at and beyond the far field's.
+    fn distance_for(&self, blur_mm: f64) -> f64 {
+        let [n0, n1] = self.to_sensor;
+        let r2 = 2.0 * self.pupil_radius_mm;
+        let denominator = blur_mm + r2 * n0;
+        let d = -(r2 * n1 + blur_mm * self.pupil_z_mm) / denominator;
+        if denominator == 0.0 || !d.is_finite() || d <= 0.0 { f64::INFINITY } else { d }
+    }
 }
 
 /// The lens's paraxial data a model needs, from the d-line image path.
@@ -88,10 +128,9 @@ struct LensData {
 
 fn lens_data(lens: &Lens) -> Result<LensData, DofError> {
     if lens.is_anamorphic() {
-        // Its bokeh is an oval with a focus per axis; the round model would silently be wrong.
+        // An anamorphic lens is modelled section by section ([`DofModel::new`]), never as one round lens.
         return Err(DofError::Lens(
-            crate::ghost::GhostError::anamorphic(lens, "depth of field (the bokeh of a squeezed aperture is an oval)")
-                .to_string(),
+            crate::ghost::GhostError::anamorphic(lens, "axial colour in the depth of field").to_string(),
         ));
     }
     let fo = crate::optics::FirstOrder::d_line(lens).map_err(|e| DofError::Lens(e.to_string()))?;
@@ -137,6 +176,9 @@ impl DofModel {
         if !(sensor_width_mm.is_finite() && sensor_width_mm > 0.0) {
             return Err(DofError::Sensor(sensor_width_mm));
         }
+        if lens.is_anamorphic() {
+            return Self::anamorphic(lens, stop_scale, focus_m, sensor_width_mm, (width, height), cat_eye);
+        }
         let data = lens_data(lens)?;
         let focus_mm = focus_m * 1000.0;
         let d_mm = focus_mm - data.pupil_z_mm;
@@ -157,7 +199,90 @@ impl DofModel {
             height,
             cat_eye,
             wavelength_nm: D_LINE_NM,
+            sections: None,
         })
+    }
+
+    /// [`Self::new`] of an anamorphic lens: each section (a lens of revolution, [`Lens::section`]) images the
+    /// focus plane at its own distance behind the last vertex; the sensor sits half way between (the plane of
+    /// least confusion, as [`crate::optics::FirstOrder`] places it at infinity), and each section blurs along
+    /// its axis by its own pupil and its own defocus there: the stop's shape stretched per axis, an oval bokeh
+    /// whose aspect changes with depth when the sections focus apart.
+    fn anamorphic(
+        lens: &Lens,
+        stop_scale: f64,
+        focus_m: f64,
+        sensor_width_mm: f64,
+        (width, height): (u32, u32),
+        cat_eye: bool,
+    ) -> Result<Self, DofError> {
+        let sections = [crate::optics::Section::X, crate::optics::Section::Y].map(|s| lens_data(&lens.section(s)));
+        let [x, y] = sections;
+        let (x, y) = (x?, y?);
+        let focus_mm = focus_m * 1000.0;
+        let d_mm = focus_mm - y.pupil_z_mm;
+        if d_mm <= 0.0 || focus_mm - x.pupil_z_mm <= 0.0 {
+            return Err(DofError::FocusInsideLens { focus_m, front_m: y.pupil_z_mm.max(x.pupil_z_mm) / 1000.0 });
+        }
+        let too_close = |efl_mm| DofError::TooClose { focus_m, efl_mm };
+        let (image_x, _) = conjugate(x.system, d_mm).ok_or(too_close(x.efl_mm))?;
+        let (image_y, _) = conjugate(y.system, d_mm).ok_or(too_close(y.efl_mm))?;
+        let b = 0.5 * (image_x + image_y);
+        let section = |data: &LensData| {
+            let [a, bb, c, d] = data.system;
+            SectionDefocus {
+                to_sensor: [a + b * c, bb + b * d],
+                sensor_mm: b,
+                pupil_z_mm: data.pupil_z_mm,
+                pupil_radius_mm: data.pupil_radius_mm * stop_scale.clamp(1e-3, 1.0),
+            }
+        };
+        let (sx, sy) = (section(&x), section(&y));
+        Ok(Self {
+            pupil_z_mm: y.pupil_z_mm,
+            pupil_radius_mm: sy.pupil_radius_mm,
+            focus_mm,
+            focus_magnification: sy.to_sensor[0],
+            front_radius_mm: lens.surfaces.first().map_or(f64::INFINITY, |s| s.semi_aperture_mm),
+            mask_sign: y.mask_sign,
+            pixel_mm: sensor_width_mm / f64::from(width.max(1)),
+            width,
+            height,
+            cat_eye,
+            wavelength_nm: D_LINE_NM,
+            sections: Some(Box::new([sx, sy])),
+        })
+    }
+
+    /// The signed blur diameters in pixels along x and along y of an object `depth_mm` from the entrance pupil
+    /// (equal for a lens of revolution: [`Self::defocus_px`] twice).
+    pub fn defocus_xy_px(&self, depth_mm: f64) -> [f64; 2] {
+        match &self.sections {
+            None => [self.defocus_px(depth_mm); 2],
+            Some(s) => {
+                let d = depth_mm - self.pupil_z_mm;
+                [s[0].blur_mm(d) / self.pixel_mm, s[1].blur_mm(d) / self.pixel_mm]
+            }
+        }
+    }
+
+    /// The blur along x (pixels, signed) of the depth whose blur along y is `sigma_y`: `sigma_y` itself for a lens
+    /// of revolution; for an anamorphic lens through the depth ([`depth_of_defocus`]), so that layers and kernels
+    /// keyed by the y blur carry the x blur of the same depth.
+    pub fn defocus_x_for(&self, sigma_y: f64) -> f64 {
+        match &self.sections {
+            None => sigma_y,
+            Some(_) => self.defocus_xy_px(depth_of_defocus(self, sigma_y))[0],
+        }
+    }
+
+    /// The pupil's x semi-axis over its y one (1 for a lens of revolution): the cat's eye compares pupil points in
+    /// y pupil radii.
+    pub fn cat_x_scale(&self) -> f64 {
+        match &self.sections {
+            None => 1.0,
+            Some(s) => s[0].pupil_radius_mm / s[1].pupil_radius_mm,
+        }
     }
 
     /// Axial colour: the model for light of `wavelength_nm`, the sensor staying where the d-line focuses
@@ -166,6 +291,7 @@ impl DofModel {
     /// the magnification `A + b C`: the lens is in focus at another distance for each colour, and every blur
     /// follows from there. Refused (as too close) when no real object plane is imaged there.
     pub fn at_wavelength(&self, lens: &Lens, wavelength_nm: f64) -> Result<Self, DofError> {
+        // An anamorphic lens: refused with the reason (its sections' colours are not modelled).
         let d_line = lens_data(lens)?;
         let d_mm = self.focus_mm - d_line.pupil_z_mm;
         let too_close = DofError::TooClose { focus_m: self.focus_mm / 1000.0, efl_mm: d_line.efl_mm };
@@ -202,6 +328,9 @@ impl DofModel {
     /// The signed blur diameter in pixels of an object `depth_mm` from the entrance pupil: positive behind the
     /// focus plane, negative in front of it; its magnitude is `D_ep |S - S_f| / S |m_f|` (module documentation).
     pub fn defocus_px(&self, depth_mm: f64) -> f64 {
+        if let Some(s) = &self.sections {
+            return s[1].blur_mm(depth_mm - self.pupil_z_mm) / self.pixel_mm;
+        }
         let factor = if depth_mm.is_infinite() { 1.0 } else { (depth_mm - self.focus_mm) / depth_mm };
         2.0 * self.pupil_radius_mm * factor * self.focus_magnification.abs() / self.pixel_mm
     }
@@ -229,13 +358,31 @@ impl DofModel {
         // plane at P (1 - z_ep / S) - u z_ep: in pupil radii, |q - c| <= rho with c = u z_ep / (r_ep shrink).
         let frame_mm =
             [(x - 0.5 * f64::from(self.width)) * self.pixel_mm, (0.5 * f64::from(self.height) - y) * self.pixel_mm];
-        let per = 1.0 / (self.focus_magnification * self.focus_mm);
-        let slope = [frame_mm[0] * per, frame_mm[1] * per];
+        // An anamorphic lens: each axis by its own section's magnification and pupil position; the circle in y
+        // pupil radii (a pupil point's x is scaled by [`Self::cat_x_scale`] before it is compared).
+        let (m, z) = match &self.sections {
+            None => ([self.focus_magnification; 2], [self.pupil_z_mm; 2]),
+            Some(s) => ([s[0].to_sensor[0], s[1].to_sensor[0]], [s[0].pupil_z_mm, s[1].pupil_z_mm]),
+        };
+        let slope = [frame_mm[0] / (m[0] * self.focus_mm), frame_mm[1] / (m[1] * self.focus_mm)];
         let shrink = if depth_mm.is_infinite() { 1.0 } else { 1.0 - self.pupil_z_mm / depth_mm };
         let shrink = shrink.max(1e-6);
-        let k = self.pupil_z_mm / (self.pupil_radius_mm * shrink);
-        Some(([slope[0] * k, slope[1] * k], self.front_radius_mm / (self.pupil_radius_mm * shrink)))
+        let unit = self.pupil_radius_mm * shrink;
+        Some(([slope[0] * z[0] / unit, slope[1] * z[1] / unit], self.front_radius_mm / unit))
     }
+}
+
+/// The depth (mm from the pupil) whose defocus (along y for an anamorphic lens) is `sigma` pixels: for a lens of
+/// revolution `S_f / (1 - sigma / sigma_far)`; infinite at and beyond the far field's.
+pub fn depth_of_defocus(model: &DofModel, sigma: f64) -> f64 {
+    if let Some(s) = &model.sections {
+        return s[1].distance_for(sigma * model.pixel_mm) + model.pupil_z_mm;
+    }
+    let far = model.far_defocus_px();
+    if far <= 0.0 || sigma >= far {
+        return f64::INFINITY;
+    }
+    model.focus_mm / (1.0 - sigma / far)
 }
 
 /// The defocus of every pixel (signed diameter, pixels) of a depth map in mm, checking each depth.

@@ -15,7 +15,7 @@ use std::collections::HashMap;
 
 use rayon::prelude::*;
 
-use super::kernel::{RasterKernel, raster};
+use super::kernel::{RasterKernel, raster_xy};
 use super::model::{DofError, DofModel, defocus_map, over, resolve};
 use crate::aperture::ApertureMask;
 use crate::image::HdrImage;
@@ -39,7 +39,7 @@ fn key(model: &DofModel, sigma: f64, x: f64, y: f64, depth_mm: f64) -> Key {
 fn kernel_of(key: Key, model: &DofModel, mask: &ApertureMask) -> RasterKernel {
     let sigma = key.0 as f64 / 16.0;
     let cat = model.cat_eye.then(|| ([key.1 as f64 / 32.0, key.2 as f64 / 32.0], key.3 as f64 / 32.0));
-    raster(mask, model.mask_sign, sigma, cat)
+    raster_xy(mask, model.mask_sign, [model.defocus_x_for(sigma), sigma], cat, model.cat_x_scale())
 }
 
 /// The plate defocused by the reference method (see the module documentation); `depth_mm` per pixel from the
