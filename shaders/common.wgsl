@@ -6,7 +6,7 @@ struct Globals {
     viewport: vec4<f32>,   // width, height, 1/width, 1/height (pixels)
     starburst: vec4<f32>,  // centre x, centre y, reach (pixels; 0: none), core radius (pixels)
     tonemap: vec4<f32>,    // flare gain (2^flare_ev), operator (0 none, 1 Reinhard, 2 ACES), encode sRGB (0/1), unused
-    plate: vec4<f32>,      // plate gain (2^plate_ev), plate present (0/1), unused, unused
+    plate: vec4<f32>,      // plate gain (2^plate_ev), plate present (0/1), 1 / width, 1 / height of the delivered image
     starburst_far: vec4<f32>,  // far field K per channel (I = K c(phi) / r_mm^3), mm per pixel
     starburst_core: vec4<f32>, // core relative irradiance per channel, the far field's x stretch N_x / N_y
     dirt_light: vec4<f32>,     // the front dirt's glow: the light's image (pixels), its slopes u_s

@@ -265,7 +265,7 @@ impl CallbackTrait for FlareCallback {
         res.drawn = *generation;
         res.shows_image = false;
         let (scene, lut) = (&frame.scene, &frame.lut);
-        let size = (scene.width.max(1), scene.height.max(1));
+        let size = (scene.output_size.0.max(1), scene.output_size.1.max(1));
         if size != res.size {
             (res.target, res.bind_group) =
                 ViewportResources::target(device, &res.layout, &res.sampler, &res.params, size);

@@ -1867,3 +1867,36 @@ fn render_with_front_dirt_writes_its_layer() {
     let why = refusal(&["render", "--dirt", &format!("image:{}", black.display()), "-o", "x.png"]);
     assert!(why.contains("black everywhere"), "{why}");
 }
+
+/// `render --desqueeze`: the file has the asked size, the flare averaged from the sensor's rows; `auto` takes an
+/// anamorphic lens's squeeze and is refused, with the reason, for a lens of revolution.
+#[test]
+fn render_desqueezes_to_the_asked_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let lens = repo("tests/data/reference/toroidal/toroidal_test_lens.json");
+    for (spec, name) in [("2", "a.exr"), ("auto", "b.png")] {
+        let out = dir.path().join(name);
+        let args = [
+            "render",
+            &lens,
+            "--desqueeze",
+            spec,
+            "--size",
+            "96x54",
+            "--device",
+            "cpu",
+            "-o",
+            &out.display().to_string(),
+        ];
+        let result = flarelab(&args);
+        assert!(result.status.success(), "{spec}: {}", String::from_utf8_lossy(&result.stderr));
+        if name.ends_with(".png") {
+            assert_eq!(image::open(&out).unwrap().into_rgba8().dimensions(), (96, 54));
+        } else {
+            let read = flare_core::output::read_exr_channels(&out).unwrap();
+            assert_eq!((read.width, read.height), (96, 54));
+        }
+    }
+    assert!(refusal(&["render", "--desqueeze", "auto", "-o", "x.png"]).contains("not anamorphic"));
+    assert!(refusal(&["render", "--desqueeze", "9", "-o", "x.png"]).contains("--desqueeze 9"));
+}

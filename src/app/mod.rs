@@ -813,7 +813,8 @@ impl FlareLabApp {
     /// The one mapping between the viewport's points and the live optics (see [`view::LightMap`]).
     fn light_map(&self) -> Option<view::LightMap<'_>> {
         let flare = self.derived.flare().as_deref()?;
-        self.view.light_map(flare, self.derived.view_px(), self.session.doc().sensor_width_mm)
+        let doc = self.session.doc();
+        self.view.light_map(flare, self.derived.view_px(), doc.sensor_width_mm, doc.desqueeze)
     }
 
     /// Where the light's image (the starburst's centre) is drawn in the viewport, in points.

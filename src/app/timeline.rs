@@ -13,7 +13,6 @@
 //! playhead at the timeline's rate, looping over the range, and asks for a repaint only while it plays.
 
 use eframe::egui;
-use flare_core::optics::sensor::Sensor;
 use flare_core::preset::ghost_key;
 use flare_core::shot::detect::AutoLight;
 use flare_core::shot::pattern::{FramePattern, sequence_of};
@@ -176,8 +175,10 @@ impl FlareLabApp {
             return;
         };
         let (w, h) = self.track_frame_size();
-        let sensor = Sensor::for_frame(self.session.doc().sensor_width_mm, w, h);
-        let keys = read_track(path).and_then(|rows| to_keys(&rows, &flare.system.mapping, &sensor, w, h));
+        let doc = self.session.doc();
+        let (sensor_mm, desqueeze) = (doc.sensor_width_mm, doc.desqueeze);
+        let keys =
+            read_track(path).and_then(|rows| to_keys(&rows, &flare.system.mapping, sensor_mm, (w, h), desqueeze));
         match keys {
             Ok((position, intensity)) => {
                 let (a, b) = (position.keys[0].frame, position.keys[position.keys.len() - 1].frame);
@@ -364,6 +365,31 @@ impl FlareLabApp {
             "sensor width",
             self.session.doc().sensor_width_mm,
         );
+        let squeeze = self.derived.first_order().as_ref().and_then(|fo| fo.squeeze());
+        if squeeze.is_some() || self.session.doc().desqueeze != 1.0 {
+            ui.horizontal(|ui| {
+                let max = flare_core::frame::MAX_DESQUEEZE;
+                let r = ui.add(
+                    egui::DragValue::new(&mut self.session.edit().desqueeze)
+                        .range(1.0 / max..=max)
+                        .speed(0.01)
+                        .prefix("x"),
+                );
+                crate::panels::labelled_value(
+                    r.on_hover_text(
+                        "the delivered frame shows the sensor stretched along x by this factor (an anamorphic lens's \
+                         squeeze undone, for desqueezed plates); 1: the sensor as it is",
+                    ),
+                    "desqueeze",
+                    self.session.doc().desqueeze,
+                );
+                if let Some(s) = squeeze.filter(|s| (1.0 / max..=max).contains(s))
+                    && ui.button(format!("the lens's x{s:.3}")).clicked()
+                {
+                    self.session.edit().desqueeze = s;
+                }
+            });
+        }
         ui.separator();
         ui.heading("Light");
         let has_plate = self.session.doc().background.is_some();

@@ -78,14 +78,17 @@ impl View {
         )
     }
 
-    /// The mapping between the viewport laid out last and the optics of `flare`, for a frame drawn at `px`
-    /// on a sensor `sensor_width_mm` wide; none before the first layout.
+    /// The mapping between the viewport laid out last and the optics of `flare`, for a frame delivered at `px`
+    /// on a sensor `sensor_width_mm` wide, desqueezed by `desqueeze` (the sensor's rows are
+    /// [`flare_core::frame::sensor_pixels`] of the delivered ones); none before the first layout.
     pub fn light_map<'a>(
         &self,
         flare: &'a PreparedFlare,
         px: (u32, u32),
         sensor_width_mm: f64,
+        desqueeze: f64,
     ) -> Option<LightMap<'a>> {
+        let px = flare_core::frame::sensor_pixels(px.0, px.1, desqueeze);
         Some(LightMap { rect: self.rect?, px, sensor: Sensor::for_frame(sensor_width_mm, px.0, px.1), flare })
     }
 
@@ -148,6 +151,7 @@ impl View {
 /// The one mapping between the viewport's points and the optics (see the module documentation).
 pub struct LightMap<'a> {
     rect: egui::Rect,
+    /// The sensor's pixels across the viewport (a desqueezed frame has more than it delivers).
     px: (u32, u32),
     sensor: Sensor,
     flare: &'a PreparedFlare,
@@ -217,17 +221,26 @@ mod tests {
         let mut view = View::new(false, 1);
         let px = view.layout(egui::Rect::from_min_size(egui::pos2(10.0, 20.0), egui::vec2(960.0, 540.0)), 1.0);
         assert_eq!(px, (960, 540));
-        let map = view.light_map(&flare, px, 36.0).unwrap();
-        for light in [[0.0, 0.0], [8.0, -3.5], [-15.0, 6.0]] {
-            let p = map.light_on_screen(light);
-            let back = map.light_deg_at(p).unwrap();
-            for k in 0..2 {
-                assert!((back[k] - light[k]).abs() < 1e-3, "{light:?} drawn at {p:?} reads back as {back:?}");
+        for desqueeze in [1.0, 2.0] {
+            let map = view.light_map(&flare, px, 36.0, desqueeze).unwrap();
+            for light in [[0.0, 0.0], [8.0, -3.5], [-15.0, 6.0]] {
+                let p = map.light_on_screen(light);
+                let back = map.light_deg_at(p).unwrap();
+                for k in 0..2 {
+                    assert!((back[k] - light[k]).abs() < 1e-3, "{light:?} drawn at {p:?} reads back as {back:?}");
+                }
+            }
+            // The centre of the view is the optical axis.
+            let centre = map.light_deg_at(egui::pos2(10.0 + 480.0, 20.0 + 270.0)).unwrap();
+            assert!(centre[0].abs() < 1e-9 && centre[1].abs() < 1e-9, "{centre:?}");
+            // Desqueezed by 2, the view shows twice the sensor's height: a light up the frame sits half as high.
+            if desqueeze == 2.0 {
+                let plain = view.light_map(&flare, px, 36.0, 1.0).unwrap();
+                let (a, b) = (map.light_on_screen([0.0, 6.0]), plain.light_on_screen([0.0, 6.0]));
+                let (ya, yb) = (a.y - (20.0 + 270.0), b.y - (20.0 + 270.0));
+                assert!((ya / yb - 0.5).abs() < 1e-3, "{ya} {yb}");
             }
         }
-        // The centre of the view is the optical axis.
-        let centre = map.light_deg_at(egui::pos2(10.0 + 480.0, 20.0 + 270.0)).unwrap();
-        assert!(centre[0].abs() < 1e-9 && centre[1].abs() < 1e-9, "{centre:?}");
     }
 
     #[test]

@@ -22,7 +22,7 @@ use flare_core::preset::{Document, LutSource};
 use flare_core::raytrace::{self};
 
 use flare_core::frame::parse_size;
-use flare_core::optics::sensor::{FULL_FRAME_WIDTH_MM, Sensor};
+use flare_core::optics::sensor::FULL_FRAME_WIDTH_MM;
 use flare_core::shot::{
     self,
     pattern::FramePattern,
@@ -212,6 +212,11 @@ pub struct RenderArgs {
     /// The starburst's brightness in stops relative to the physical one (default: the preset's, 0).
     #[arg(long, allow_negative_numbers = true)]
     pub starburst_ev: Option<f64>,
+    /// Deliver the frame desqueezed: the sensor stretched along x by X (1/4 to 4; the frame is drawn on the
+    /// sensor at X times --size's rows, or 1/X times its columns below 1, then averaged down), or `auto` for an
+    /// anamorphic lens's own squeeze EFL_y / EFL_x (default: the preset's, 1).
+    #[arg(long)]
+    pub desqueeze: Option<String>,
     /// Dirt on the front element: none, dust[:SEED], smudges[:SEED], haze, or image:PATH (grey, white is dirt);
     /// it scatters a share of the light into a glow (default: the preset's, none).
     #[arg(long)]
@@ -349,6 +354,17 @@ pub fn document(args: &RenderArgs) -> Result<Document> {
     if let Some(ev) = args.starburst_ev {
         doc.starburst_ev = ev;
     }
+    if let Some(spec) = &args.desqueeze {
+        doc.desqueeze = match spec.as_str() {
+            "auto" => flare_core::optics::FirstOrder::d_line(&doc.lens)
+                .ok()
+                .and_then(|fo| fo.squeeze())
+                .with_context(|| format!("--desqueeze auto: {} is not anamorphic (no squeeze to undo)", doc.lens.id))?,
+            number => {
+                number.parse().with_context(|| format!("--desqueeze {spec}: a number from 0.25 to 4, or auto"))?
+            }
+        };
+    }
     if let Some(spec) = &args.dirt {
         super::common::parse_dirt(spec, &mut doc.dirt)?;
     }
@@ -469,6 +485,7 @@ fn flag_of(args: &RenderArgs, field: &str) -> Option<String> {
         },
         "plate_ev" => given(args.plate_ev.is_some(), "--plate-ev", format!("{}", args.plate_ev?)),
         "starburst_ev" => args.starburst_ev.map(|ev| format!("--starburst-ev {ev}")),
+        "desqueeze" => args.desqueeze.as_ref().map(|d| format!("--desqueeze {d}")),
         "dirt.amount" => args.dirt_amount.map(|a| format!("--dirt-amount {a}")),
         "dirt.spread_deg" => args.dirt_spread_deg.map(|d| format!("--dirt-spread-deg {d}")),
         "dirt.image" => args.dirt.as_ref().map(|d| format!("--dirt {d}")),
@@ -672,9 +689,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     doc.resolve_exposure(&flare.system);
     if let (Some(rows), Some(path)) = (&track, &args.track) {
         let (width, height) = shot::plan::frame_size(&doc, &range, args.size)?;
-        let sensor = Sensor::for_frame(doc.sensor_width_mm, width, height);
-        let (position, intensity) = shot::track::to_keys(rows, &flare.system.mapping, &sensor, width, height)
-            .map_err(|e| anyhow::anyhow!("--track {}: {e}", path.display()))?;
+        let (position, intensity) =
+            shot::track::to_keys(rows, &flare.system.mapping, doc.sensor_width_mm, (width, height), doc.desqueeze)
+                .map_err(|e| anyhow::anyhow!("--track {}: {e}", path.display()))?;
         doc.timeline.light_deg = position;
         if !intensity.is_empty() {
             doc.timeline.light_ev = intensity;

@@ -73,6 +73,26 @@ pub struct FrameRequest {
     pub motion: Option<LightPath>,
     /// The OCIO display transform of [`crate::color::Tonemap::View`] (`None`: the built-in default).
     pub view: Option<std::sync::Arc<crate::view_transform::ViewTransform>>,
+    /// The desqueeze: the delivered `width` x `height` image shows the sensor stretched along x by this factor
+    /// (an anamorphic lens's squeeze `EFL_y / EFL_x` undone; 1: none; below 1 the sensor is compressed along
+    /// x). The frame is drawn on the sensor at [`sensor_pixels`] (square pixels, never fewer than delivered)
+    /// and averaged down to `width` x `height` as it is tonemapped and written.
+    pub desqueeze: f64,
+}
+
+/// The most a frame is desqueezed (and `1 / MAX_DESQUEEZE` the least).
+pub const MAX_DESQUEEZE: f64 = 4.0;
+
+/// The square sensor pixels a frame delivered at `width` x `height` and desqueezed by `desqueeze` is drawn at:
+/// `height x desqueeze` rows for a desqueeze above 1, `width / desqueeze` columns below 1, rounded (the
+/// delivered size itself for 1, or a desqueeze that is not finite; clamped to [1/4, 4]).
+pub fn sensor_pixels(width: u32, height: u32, desqueeze: f64) -> (u32, u32) {
+    if !desqueeze.is_finite() || desqueeze == 1.0 {
+        return (width, height);
+    }
+    let d = desqueeze.clamp(1.0 / MAX_DESQUEEZE, MAX_DESQUEEZE);
+    let scale = |n: u32, by: f64| (f64::from(n) * by).round().max(1.0) as u32;
+    if d > 1.0 { (width, scale(height, d)) } else { (scale(width, 1.0 / d), height) }
 }
 
 impl FrameRequest {
@@ -84,6 +104,11 @@ impl FrameRequest {
         } else {
             crate::optics::sensor::FULL_FRAME_WIDTH_MM
         }
+    }
+
+    /// The size the frame is drawn at on the sensor (square pixels): [`sensor_pixels`].
+    pub fn sensor_size(&self) -> (u32, u32) {
+        sensor_pixels(self.width, self.height, self.desqueeze)
     }
 }
 
@@ -127,6 +152,7 @@ impl Default for FrameRequest {
             draft: None,
             motion: None,
             view: None,
+            desqueeze: 1.0,
         }
     }
 }
@@ -156,11 +182,14 @@ impl Frame {
     /// light while the shutter is open, the frame is built at each time sample ([`crate::shutter`]) and their
     /// instances, each weighted by 1 / samples, drawn together.
     pub fn build(flare: &PreparedFlare, lut: Option<&LiveLut>, request: &FrameRequest) -> Self {
-        let (mut w, mut h) = (request.width.max(1), request.height.max(1));
+        let (sensor_w, sensor_h) = request.sensor_size();
+        let (mut w, mut h) = (sensor_w.max(1), sensor_h.max(1));
+        let mut output = (request.width.max(1), request.height.max(1));
         // A draft of divisor 2 or more is drawn at half the size (see [`Draft`]).
         let draft_divisor = request.draft.map(|d| d.divisor.max(request.display.accumulation_divisor).clamp(1, 4));
         if draft_divisor.is_some_and(|d| d >= 2) {
             (w, h) = (w.div_ceil(2), h.div_ceil(2));
+            output = (output.0.div_ceil(2), output.1.div_ceil(2));
         }
         let lut = lut.filter(|_| request.lut_use != LutUse::Off);
         // The light's gain scales every ghost and the starburst; a NaN or negative gain draws no flare.
@@ -213,6 +242,10 @@ impl Frame {
             _ => sharp(flare, lut, request, (sensor, w, h), &display, request.light_deg, light_gain),
         };
         scene.view = request.view.clone();
+        if output != (scene.width, scene.height) {
+            // Desqueezed: the tonemap and the layers average the sensor's rows down to the delivered ones.
+            scene.set_output_size(output);
+        }
         let draft = request.draft.map(|d| {
             let skipped = scene.keep_brightest(d.fragment_budget);
             let fragments = scene.instances.iter().map(|i| scene.fragments(i)).sum();
@@ -224,9 +257,9 @@ impl Frame {
         Self { scene, lut: lut_scene, sprites, request: request.clone(), draft, shutter, dirt_taken }
     }
 
-    /// The frame's size in pixels.
+    /// The frame's size in pixels as delivered (desqueezed; the sensor's are `scene.width` x `scene.height`).
     pub fn size(&self) -> (u32, u32) {
-        (self.scene.width, self.scene.height)
+        self.scene.output_size
     }
 
     /// The lens ghosts this frame draws (paraxial or LUT instances), in index order.
@@ -403,7 +436,7 @@ impl GpuDrawer {
         }
         // Refused before anything is made: a texture beyond the adapter's limit would be a validation error.
         let max = self.ctx.device.limits().max_texture_dimension_2d;
-        let (width, height) = frame.size();
+        let (width, height) = (frame.scene.width.max(frame.size().0), frame.scene.height.max(frame.size().1));
         if width > max || height > max {
             return Err(GpuError::TooLarge { width, height, max });
         }
@@ -539,7 +572,7 @@ pub fn draw_cpu_hdr(frame: &Frame, sources: &Sources) -> HdrImage {
     let scene = &frame.scene;
     let mut hdr = cpu::ghost_pass(scene, &sources.flare.mask);
     if let (Some(l), Some(live)) = (&frame.lut, sources.lut) {
-        lut_pass(frame.size(), l, live, &mut hdr);
+        lut_pass((scene.width, scene.height), l, live, &mut hdr);
     }
     cpu::starburst_pass(scene, &sources.flare.starburst_texture, &mut hdr);
     cpu::dirt_pass(scene, sources.flare.dirt.as_ref(), &mut hdr);

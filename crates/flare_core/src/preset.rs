@@ -180,6 +180,9 @@ pub struct Document {
     pub color: crate::view_transform::ColorDoc,
     /// The front element's dirt ([`crate::dirt`]): the pattern (none: a clean lens), its amount and spread.
     pub dirt: crate::dirt::DirtDoc,
+    /// The delivered frame shows the sensor stretched along x by this factor, 1/4 to 4 (an anamorphic lens's
+    /// squeeze undone, for desqueezed plates; 1: the sensor as it is): [`FrameRequest::desqueeze`].
+    pub desqueeze: f64,
 }
 
 impl Default for Document {
@@ -210,6 +213,7 @@ impl Default for Document {
             exr: crate::output::ExrSettings::default(),
             color: crate::view_transform::ColorDoc::default(),
             dirt: crate::dirt::DirtDoc::default(),
+            desqueeze: 1.0,
         }
     }
 }
@@ -408,6 +412,7 @@ impl Document {
             draft: None,
             motion: self.light_path(frame),
             view: self.view_transform().ok(),
+            desqueeze: self.desqueeze,
         }
     }
 
@@ -566,6 +571,12 @@ impl Document {
         }
         if let Err((field, reason)) = self.dirt.check() {
             return bad(field, reason);
+        }
+        let most = crate::frame::MAX_DESQUEEZE;
+        if !(self.desqueeze.is_finite() && (1.0 / most..=most).contains(&self.desqueeze)) {
+            let reason =
+                format!("{}: from {} to {most} (the sensor stretched along x; 1: none)", self.desqueeze, 1.0 / most);
+            return bad("desqueeze", reason);
         }
         if let Err(e) = BlendMode::parse(&self.blend.mode) {
             return bad("blend.mode", e);

@@ -63,7 +63,8 @@ impl TracedGhosts {
 
     fn trace_gains(&self, device: &Device, frame: &Frame, gains: &[f32]) -> Result<Traced, FrameError> {
         let started = std::time::Instant::now();
-        let (light, (width, height)) = (frame.request.light_deg, (frame.request.width, frame.request.height));
+        // On the sensor: a desqueezed frame's rows are the sensor's, averaged down when it is written.
+        let (light, (width, height)) = (frame.request.light_deg, (frame.scene.width, frame.scene.height));
         let mut fallback = String::new();
         if let (Some(gpu), Device::Gpu(drawer), Grid::Fixed(cells)) = (&self.gpu, device, self.grid) {
             let window = Window::frame(width, height);

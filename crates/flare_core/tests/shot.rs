@@ -156,8 +156,8 @@ fn a_track_csv_and_the_light_found_in_the_plate_give_the_same_flare() {
     let auto_plan = plan_of(&auto_doc, &flare, &shot);
     // The same shot with the tracker's CSV instead.
     let rows = parse_track(&std::fs::read_to_string(dir.path().join("track.csv")).unwrap()).unwrap();
-    let sensor = auto_plan.sensor;
-    let (position, _) = to_keys(&rows, &flare.system.mapping, &sensor, shot.width, shot.height).unwrap();
+    let sensor_mm = auto_plan.sensor.width_mm;
+    let (position, _) = to_keys(&rows, &flare.system.mapping, sensor_mm, (shot.width, shot.height), 1.0).unwrap();
     let mut keyed_doc = Document { auto_light: None, ..auto_doc.clone() };
     keyed_doc.timeline.light_deg = position;
     let keyed_plan = plan_of(&keyed_doc, &flare, &shot);

@@ -245,6 +245,12 @@ impl FirstOrder {
     }
 
     /// The first-order data of `section` (the lens's own for a lens of revolution).
+    /// An anamorphic lens's squeeze, `EFL_y / EFL_x` (how much wider the x field is: what a desqueeze of the
+    /// frame undoes); `None` for a lens of revolution.
+    pub fn squeeze(&self) -> Option<f64> {
+        self.sections.as_ref().map(|both| both[1].efl_mm / both[0].efl_mm).filter(|s| s.is_finite())
+    }
+
     pub fn section(&self, section: Section) -> &FirstOrder {
         match (&self.sections, section) {
             (Some(both), Section::X) => &both[0],

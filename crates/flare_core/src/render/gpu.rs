@@ -972,11 +972,12 @@ pub fn render_display_with_lut(
     scene: &FlareScene,
     lut: Option<&LutScene>,
 ) -> Result<DisplayImage, GpuError> {
+    let (width, height) = scene.output_size;
     let target = texture_2d(
         &ctx.device,
         "display",
-        scene.width,
-        scene.height,
+        width,
+        height,
         renderer.target_format(),
         wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
     );
@@ -986,7 +987,7 @@ pub fn render_display_with_lut(
     ctx.queue.submit(Some(encoder.finish()));
     let bytes = read_texture(ctx, &target, 4)?;
     let pixels = bytes.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect();
-    Ok(DisplayImage { width: scene.width, height: scene.height, pixels })
+    Ok(DisplayImage { width, height, pixels })
 }
 
 /// Reads the HDR accumulation of the last render (linear, before exposure).

@@ -104,7 +104,8 @@ pub struct Globals {
     pub starburst: [f32; 4],
     /// flare gain (`2^flare_ev`), operator ([`Tonemap::code`]), encode sRGB (0/1, set by the renderer), unused.
     pub tonemap: [f32; 4],
-    /// plate gain (`2^plate_ev`), plate present (0/1, set by the renderer), unused, unused.
+    /// plate gain (`2^plate_ev`), plate present (0/1, set by the renderer), then 1 / width and 1 / height of the
+    /// delivered image (the tonemap's pixels: the frame's own, or a desqueezed frame's fewer rows).
     pub plate: [f32; 4],
     /// The starburst's far field: `K` per channel (`I = K c(phi) / r_mm^3`), mm per pixel.
     pub starburst_far: [f32; 4],
@@ -189,6 +190,10 @@ pub struct FlareScene {
     /// The OCIO display transform of [`Tonemap::View`] (`None`: the built-in default,
     /// [`crate::view_transform::ViewTransform::builtin`]).
     pub view: Option<std::sync::Arc<crate::view_transform::ViewTransform>>,
+    /// The size of the image the tonemap and the layers deliver: `(width, height)`, or fewer rows for a
+    /// desqueezed frame ([`crate::frame::FrameRequest::desqueeze`]), each the mean of the sensor's rows it
+    /// covers (bilinear: exactly two rows for a desqueeze of 2).
+    pub output_size: (u32, u32),
 }
 
 impl FlareScene {
@@ -255,7 +260,7 @@ impl FlareScene {
             viewport: [width as f32, height as f32, 1.0 / width as f32, 1.0 / height as f32],
             starburst: [0.0; 4],
             tonemap: [display.flare_gain(), display.tonemap.code(), 1.0, 0.0],
-            plate: [display.plate_gain(), 0.0, 0.0, 0.0],
+            plate: [display.plate_gain(), 0.0, 1.0 / width as f32, 1.0 / height as f32],
             starburst_far: [0.0; 4],
             starburst_core: [0.0; 4],
             dirt_light: [0.0; 4],
@@ -275,7 +280,16 @@ impl FlareScene {
             instance_ghosts,
             dropped_non_finite,
             view: None,
+            output_size: (width, height),
         }
+    }
+
+    /// Delivers the frame at `size` (a desqueezed frame's fewer rows): the tonemap samples the accumulation at
+    /// the delivered pixels ([`Globals::plate`]'s last two).
+    pub fn set_output_size(&mut self, size: (u32, u32)) {
+        self.output_size = (size.0.max(1), size.1.max(1));
+        self.globals.plate[2] = 1.0 / self.output_size.0 as f32;
+        self.globals.plate[3] = 1.0 / self.output_size.1 as f32;
     }
 
     /// The accumulation fragments `inst` covers: its quad clipped to the accumulation (what a sprite costs a

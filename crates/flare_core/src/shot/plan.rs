@@ -177,11 +177,16 @@ pub fn plan(
     let list: Vec<i64> = frames.clone().collect();
     let plates: Vec<Option<PathBuf>> = list.iter().map(|&f| doc.plate_at(f)).collect();
     let (width, height) = frame_size(doc, &frames, size)?;
-    let sensor = Sensor::for_frame(doc.sensor_width_mm, width, height);
+    // The light is found and placed on the sensor's pixels: a desqueezed frame has more of them than the
+    // delivered frame (and its plates).
+    let (columns, rows) = crate::frame::sensor_pixels(width, height, doc.desqueeze);
+    let sensor = Sensor::for_frame(doc.sensor_width_mm, columns, rows);
     let mapping = &system.mapping;
-    // Where a light images, when that lands at least `margin` pixels inside the frame.
+    let to_delivered = [f64::from(width) / f64::from(columns), f64::from(height) / f64::from(rows)];
+    // Where a light images (delivered pixels), when that lands at least `margin` pixels inside the frame.
     let inside = |deg: [f64; 2], margin: f64| {
-        let p = mapping.pixel_for_light_deg(deg, &sensor, width, height);
+        let p = mapping.pixel_for_light_deg(deg, &sensor, columns, rows);
+        let p = [p[0] * to_delivered[0], p[1] * to_delivered[1]];
         let within = |v: f64, size: u32| v.is_finite() && v >= margin && v <= f64::from(size) - margin;
         (within(p[0], width) && within(p[1], height)).then_some(p)
     };
@@ -204,8 +209,8 @@ pub fn plan(
                             let scan = detect::detect(&plate, auto.threshold);
                             // The scan's pixels are the plate's; the frame may be drawn at another size.
                             let (sx, sy) = (
-                                f64::from(width) / f64::from(plate.width),
-                                f64::from(height) / f64::from(plate.height),
+                                f64::from(columns) / f64::from(plate.width),
+                                f64::from(rows) / f64::from(plate.height),
                             );
                             Scan {
                                 detection: scan.detection.map(|d| detect::Detection {
@@ -224,7 +229,7 @@ pub fn plan(
                 return Err(ShotError::Cancelled);
             }
             let keyed = |f: i64| (!doc.timeline.light_deg.is_empty()).then(|| doc.light_at(f as f64));
-            let to_deg = |px: [f64; 2]| mapping.light_deg_for_pixel(px, &sensor, width, height);
+            let to_deg = |px: [f64; 2]| mapping.light_deg_for_pixel(px, &sensor, columns, rows);
             let on_plate = |deg: [f64; 2], margin: f64| inside(deg, margin).is_some();
             Some(detect::solve(&list, &scans, auto, to_deg, keyed, on_plate)?)
         }

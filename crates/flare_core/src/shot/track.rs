@@ -96,30 +96,34 @@ pub fn parse_track(text: &str) -> Result<Vec<TrackRow>, TrackError> {
     Ok(rows)
 }
 
-/// The light keys of `rows` for a `width` x `height` frame spanning `sensor` through the lens's `mapping`:
-/// a position key per row and an intensity key per row that has one.
+/// The light keys of `rows` (pixels of the delivered `width` x `height` frame) for a frame spanning
+/// `sensor_width_mm` desqueezed by `desqueeze` ([`crate::frame::FrameRequest::desqueeze`]: a row's pixel is
+/// taken to the sensor's pixels, [`crate::frame::sensor_pixels`]) through the lens's `mapping`: a position key per row and an
+/// intensity key per row that has one.
 pub fn to_keys(
     rows: &[TrackRow],
     mapping: &ImageMapping,
-    sensor: &Sensor,
-    width: u32,
-    height: u32,
+    sensor_width_mm: f64,
+    (width, height): (u32, u32),
+    desqueeze: f64,
 ) -> Result<(Track<[f64; 2]>, Track<f64>), TrackError> {
+    let (columns, sensor_rows) = crate::frame::sensor_pixels(width, height, desqueeze);
+    let sensor = &Sensor::for_frame(sensor_width_mm, columns, sensor_rows);
+    let to_sensor = [f64::from(columns) / f64::from(width.max(1)), f64::from(sensor_rows) / f64::from(height.max(1))];
     let mut position = Track::default();
     let mut intensity = Track::default();
     for row in rows {
-        let deg = mapping.light_deg_for_pixel([row.x_px, row.y_px], sensor, width, height).ok_or_else(|| {
-            TrackError::Line {
-                line: row.line,
-                reason: format!(
-                    "pixel ({}, {}) lies outside the lens's traced field (chief rays reach {:.1} deg) on a {:.1} mm \
+        let px = [row.x_px * to_sensor[0], row.y_px * to_sensor[1]];
+        let deg = mapping.light_deg_for_pixel(px, sensor, columns, sensor_rows).ok_or_else(|| TrackError::Line {
+            line: row.line,
+            reason: format!(
+                "pixel ({}, {}) lies outside the lens's traced field (chief rays reach {:.1} deg) on a {:.1} mm \
                      sensor of {width}x{height} pixels",
-                    row.x_px,
-                    row.y_px,
-                    mapping.traced_max_deg(),
-                    sensor.width_mm
-                ),
-            }
+                row.x_px,
+                row.y_px,
+                mapping.traced_max_deg(),
+                sensor.width_mm
+            ),
         })?;
         position.set(row.frame, deg);
         if let Some(ev) = row.intensity_ev {

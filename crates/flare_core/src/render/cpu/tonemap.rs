@@ -36,12 +36,14 @@ pub fn composite(scene: &FlareScene, hdr: &HdrImage, plate: Option<&HdrImage>) -
 
 /// The flare alone at the image size, times its gain (what the EXR's `flare` layer holds).
 pub fn flare_layer(scene: &FlareScene, hdr: &HdrImage) -> HdrImage {
-    hdr.resampled(scene.width, scene.height, Sampling::Bilinear, scene.globals.flare_gain())
+    let (w, h) = scene.output_size;
+    hdr.resampled(w, h, Sampling::Bilinear, scene.globals.flare_gain())
 }
 
 /// The plate at the image size, times its gain (what the EXR's `plate` layer holds).
 pub fn plate_layer(scene: &FlareScene, plate: &HdrImage) -> HdrImage {
-    let mut layer = plate.resampled(scene.width, scene.height, Sampling::Nearest, scene.globals.plate_gain());
+    let (w, h) = scene.output_size;
+    let mut layer = plate.resampled(w, h, Sampling::Nearest, scene.globals.plate_gain());
     for p in &mut layer.pixels {
         p[3] = 1.0;
     }
@@ -83,5 +85,5 @@ pub fn display_of(scene: &FlareScene, composite: &HdrImage) -> DisplayImage {
             })
             .collect()
     };
-    DisplayImage { width: scene.width, height: scene.height, pixels }
+    DisplayImage { width: composite.width, height: composite.height, pixels }
 }
