@@ -14,6 +14,10 @@
 //! own samples, weighted, in the one frame. Nothing edits a built frame afterwards: a
 //! ghost's own layer is a frame built again with the other ghosts at gain 0 ([`Frame::ghost_alone`]).
 //!
+//! A desqueezed request ([`FrameRequest::desqueeze`], an anamorphic lens's squeeze undone) is built on the
+//! sensor's square pixels ([`sensor_pixels`]: more rows, or more columns) and delivered at the request's size:
+//! the tonemap and the layers sample the accumulation at the delivered pixels ([`crate::render::FlareScene::output_size`]).
+//!
 //! [`Device::draw`] draws a frame into an HDR accumulation (linear relative irradiance, before any gain) and
 //! an 8-bit display image: on the GPU through [`FlareRenderer::render_with_lut`] (the same call the app's
 //! viewport makes), or on the CPU through the twin passes of [`crate::render::cpu`] and
