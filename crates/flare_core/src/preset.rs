@@ -778,11 +778,6 @@ pub fn shipped() -> &'static [ShippedPreset] {
             json: include_str!("../../../assets/presets/zoom-stopped-down.json"),
         },
         ShippedPreset {
-            name: "zoom-dusty-front",
-            title: "The Nikon zoom at f/11 with dust on its front element: hexagonal specks lit around the light (3% scattered)",
-            json: include_str!("../../../assets/presets/zoom-dusty-front.json"),
-        },
-        ShippedPreset {
             name: "zoom-sun-sweep",
             title: "The Nikon zoom with the sun sweeping across the frame over two seconds (timeline keys)",
             json: include_str!("../../../assets/presets/zoom-sun-sweep.json"),
@@ -836,6 +831,11 @@ pub fn shipped() -> &'static [ShippedPreset] {
             name: "wide-22-uncoated-night",
             title: "Wide angle 22 mm at f/2.8, bare glass, a street light low in the frame: strong ghosts for night",
             json: include_str!("../../../assets/presets/wide-22-uncoated-night.json"),
+        },
+        ShippedPreset {
+            name: "zoom-dusty-front",
+            title: "The Nikon zoom at f/11 with dust on its front element: hexagonal specks lit around the light (3% scattered)",
+            json: include_str!("../../../assets/presets/zoom-dusty-front.json"),
         },
     ];
     PRESETS
