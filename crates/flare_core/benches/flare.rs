@@ -1,5 +1,7 @@
 //! Speed of the paraxial flare (criterion): the per-frame CPU cost of every ghost with matrices cached, the
-//! full rebuild after a lens edit, and a whole 1280x720 GPU frame (lavapipe where there is no GPU).
+//! full rebuild after a lens edit, a whole 1280x720 GPU frame (lavapipe where there is no GPU), with and
+//! without a dusty front element, and the front dirt's own costs (its map prepared once per lens and stop,
+//! its glow per frame on the CPU twin).
 //! Targets (issue 3): frame under 20 us and rebuild under 1 ms for a lens of 25+ surfaces.
 //! Run: `cargo bench -p flare_core --bench flare`.
 
@@ -72,10 +74,19 @@ fn gpu_frame(c: &mut Criterion) {
         wgpu::TextureUsages::RENDER_ATTACHMENT,
     );
     let view = target.create_view(&wgpu::TextureViewDescriptor::default());
-    let cases = [("heliar_9", 1), ("heliar_9_half_res", 2), ("synthetic_26", 1), ("synthetic_26_half_res", 2)];
+    let cases = [
+        ("heliar_9", 1),
+        ("heliar_9_half_res", 2),
+        ("heliar_9_dusty", 1),
+        ("synthetic_26", 1),
+        ("synthetic_26_half_res", 2),
+    ];
     for (name, divisor) in cases {
         let lens = if name.starts_with("heliar") { builtin_lens("heliar").unwrap() } else { synthetic_lens(26) };
-        let flare = PreparedFlare::new(&lens, &FlareConfig::default()).unwrap();
+        let dusty = name.ends_with("dusty");
+        let dirt = dusty.then_some(flare_core::dirt::DirtPattern::Dust { seed: 1 });
+        let flare = PreparedFlare::new(&lens, &FlareConfig { dirt, ..FlareConfig::default() }).unwrap();
+        let dirt_amount = if dusty { 0.01 } else { 0.0 };
         let sources = Sources { flare: &flare, lut: None, plate: None };
         let mut k = 0u32;
         group.bench_function(name, |b| {
@@ -84,7 +95,11 @@ fn gpu_frame(c: &mut Criterion) {
                 let t = (k % 50) as f64 * 0.1;
                 let request = FrameRequest {
                     light_deg: [4.0 + t, 3.0 - t],
-                    display: DisplaySettings { accumulation_divisor: divisor, ..DisplaySettings::default() },
+                    display: DisplaySettings {
+                        accumulation_divisor: divisor,
+                        dirt_amount,
+                        ..DisplaySettings::default()
+                    },
                     ..FrameRequest::default()
                 };
                 let frame = Frame::build(&flare, None, &request);
@@ -95,5 +110,27 @@ fn gpu_frame(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, ghost_frame, ghost_rebuild, gpu_frame);
+fn dirt(c: &mut Criterion) {
+    let mut group = c.benchmark_group("dirt");
+    group.sample_size(10);
+    let lens = builtin_lens("heliar").unwrap();
+    let flare = PreparedFlare::new(&lens, &FlareConfig::default()).unwrap();
+    let pattern = flare_core::dirt::DirtPattern::Dust { seed: 1 };
+    group.bench_function("prepare_map_320", |b| {
+        b.iter(|| flare_core::dirt::PreparedDirt::new(&flare.system, &flare.mask, black_box(&pattern)))
+    });
+    let dusty = PreparedFlare::new(&lens, &FlareConfig { dirt: Some(pattern), ..FlareConfig::default() }).unwrap();
+    let request = FrameRequest {
+        display: DisplaySettings { dirt_amount: 0.01, ..DisplaySettings::default() },
+        ..FrameRequest::default()
+    };
+    let frame = Frame::build(&dusty, None, &request);
+    let mut image = flare_core::image::HdrImage::black(frame.scene.hdr_width, frame.scene.hdr_height);
+    group.bench_function("cpu_glow_1280x720", |b| {
+        b.iter(|| flare_core::render::cpu::dirt_pass(&frame.scene, dusty.dirt.as_ref(), black_box(&mut image)))
+    });
+    group.finish();
+}
+
+criterion_group!(benches, ghost_frame, ghost_rebuild, gpu_frame, dirt);
 criterion_main!(benches);
