@@ -165,10 +165,7 @@ impl Aperture {
     /// side), resampled to `size`. An image with no light in it (black everywhere) is refused: it would draw
     /// no flare at all.
     pub fn image_shape_from_file(path: &std::path::Path, size: usize) -> Result<ApertureShape, ApertureError> {
-        let img = crate::output::open_image(path, "aperture image").map_err(ApertureError::Image)?;
-        let gray = img.resize_exact(size as u32, size as u32, image::imageops::FilterType::Triangle).to_luma32f();
-        let luminance: Vec<f32> =
-            gray.into_raw().into_iter().map(|v| if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) }).collect();
+        let luminance = crate::output::read_grey_square(path, "aperture image", size).map_err(ApertureError::Image)?;
         if luminance.iter().all(|&v| v < 1.0 / 255.0) {
             return Err(ApertureError::Image(format!(
                 "{}: the aperture image is black everywhere: no light would pass (white is open, black is blade)",

@@ -54,6 +54,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::aperture::ApertureMask;
 use crate::ghost::GhostSystem;
+use crate::starburst::fft_2d;
 
 /// Texels across the dirt map's side.
 pub const DIRT_MAP_SIZE: usize = 320;
@@ -85,14 +86,11 @@ pub enum DirtError {
 
 impl DirtPattern {
     /// Loads a grey dirt image (PNG, JPEG, EXR or HDR, 1 to [`crate::output::MAX_IMAGE_SIDE_PX`] pixels a side,
-    /// read through [`crate::output::open_image`]) resampled to [`DIRT_IMAGE_SIZE`]^2. An image that is black
+    /// read through [`crate::output::read_grey_square`]) resampled to [`DIRT_IMAGE_SIZE`]^2. An image that is black
     /// everywhere is refused: it holds no dirt.
     pub fn image_from_file(path: &Path) -> Result<Self, DirtError> {
-        let img = crate::output::open_image(path, "dirt image").map_err(DirtError::Image)?;
-        let side = DIRT_IMAGE_SIZE as u32;
-        let gray = img.resize_exact(side, side, image::imageops::FilterType::Triangle).to_luma32f();
-        let luminance: Vec<f32> =
-            gray.into_raw().into_iter().map(|v| if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) }).collect();
+        let luminance =
+            crate::output::read_grey_square(path, "dirt image", DIRT_IMAGE_SIZE).map_err(DirtError::Image)?;
         if luminance.iter().all(|&v| v < 1.0 / 255.0) {
             return Err(DirtError::Image(format!(
                 "{}: the dirt image is black everywhere: it holds no dirt (white is dirt, black is clean glass)",
@@ -262,6 +260,8 @@ pub struct PreparedDirt {
     pub share: Vec<f32>,
     /// `D`: the mean share over the footprint centred at each texel, in half floats as the GPU holds them.
     pub map: Vec<f32>,
+    /// The largest `D` (what a frame's glow can reach at most, for culling a glow no pixel would show).
+    pub map_peak: f32,
     /// The entrance pupil's semi-axes at the stop's f-number, per axis.
     pub pupil_radius_mm: [f64; 2],
     /// The entrance pupil's open area (the stop's shape).
@@ -291,7 +291,8 @@ impl PreparedDirt {
             // The convolution's kernel is the footprint reflected: D(c) = sum_q s(c + q) K(q).
             mask.sample((-flip * qx / pupil_radius_mm[0]) as f32, (-flip * qy / pupil_radius_mm[1]) as f32)
         });
-        let map = map.into_iter().map(|v| half::f16::from_f32(v.clamp(0.0, 1.0)).to_f32()).collect();
+        let map: Vec<f32> = map.into_iter().map(|v| half::f16::from_f32(v.clamp(0.0, 1.0)).to_f32()).collect();
+        let map_peak = map.iter().copied().fold(0.0, f32::max);
         let pupil_area_mm2 = mask.open_fraction() * 4.0 * pupil_radius_mm[0] * pupil_radius_mm[1];
         let spectrum = &system.settings.spectrum;
         let mut colour_rgb = [0.0; 3];
@@ -301,7 +302,17 @@ impl PreparedDirt {
                 colour_rgb[c] += weight[c] * t;
             }
         }
-        Self { size: n, half_extent_mm, share, map, pupil_radius_mm, pupil_area_mm2, colour_rgb, front_radius_mm }
+        Self {
+            size: n,
+            half_extent_mm,
+            share,
+            map,
+            map_peak,
+            pupil_radius_mm,
+            pupil_area_mm2,
+            colour_rgb,
+            front_radius_mm,
+        }
     }
 
     /// The footprint's centre on the entrance plane for light slopes `u`: where the chief ray crosses it
@@ -403,23 +414,6 @@ fn convolve_footprint(share: &[f32], n: usize, texel_mm: f64, kernel: impl Fn(f6
     }
     fft_2d(&mut s, m, inverse.as_ref());
     (0..n * n).map(|q| s[(q / n) * m + q % n].re.max(0.0)).collect()
-}
-
-/// A 2D FFT in place of an `m` x `m` grid: rows, then columns.
-fn fft_2d(grid: &mut [Complex32], m: usize, fft: &dyn rustfft::Fft<f32>) {
-    for row in grid.chunks_mut(m) {
-        fft.process(row);
-    }
-    let mut column = vec![Complex32::new(0.0, 0.0); m];
-    for i in 0..m {
-        for j in 0..m {
-            column[j] = grid[j * m + i];
-        }
-        fft.process(&mut column);
-        for j in 0..m {
-            grid[j * m + i] = column[j];
-        }
-    }
 }
 
 /// The document's dirt (the preset's `dirt`): which pattern, and the display's amount and spread.

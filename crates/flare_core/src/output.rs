@@ -567,6 +567,14 @@ fn check_side(path: &Path, what: &str, w: u64, h: u64) -> Result<(), String> {
     Ok(())
 }
 
+/// The grey values of the image in `path` ([`open_image`]) resampled to `size` x `size` (triangle filter), row
+/// by row from the top, in [0, 1] (NaN as 0): what aperture and dirt images are read as.
+pub fn read_grey_square(path: &Path, what: &str, size: usize) -> Result<Vec<f32>, String> {
+    let img = open_image(path, what)?;
+    let gray = img.resize_exact(size as u32, size as u32, ::image::imageops::FilterType::Triangle).to_luma32f();
+    Ok(gray.into_raw().into_iter().map(|v| if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) }).collect())
+}
+
 /// Decodes the image in `path` after checking its header ([`image_size`]), the decoder limited to the same
 /// size and to 1.5 GiB of allocations.
 pub fn open_image(path: &Path, what: &str) -> Result<::image::DynamicImage, String> {

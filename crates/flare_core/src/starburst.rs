@@ -53,6 +53,24 @@ pub struct Starburst {
     pub far_total: f64,
 }
 
+/// A 2D FFT in place of an `m` x `m` grid (row by row): rows, then columns. The starburst's far field and the
+/// front dirt's footprint convolution ([`crate::dirt`]) both use it.
+pub(crate) fn fft_2d(grid: &mut [Complex32], m: usize, fft: &dyn rustfft::Fft<f32>) {
+    for row in grid.chunks_mut(m) {
+        fft.process(row);
+    }
+    let mut column = vec![Complex32::new(0.0, 0.0); m];
+    for i in 0..m {
+        for j in 0..m {
+            column[j] = grid[j * m + i];
+        }
+        fft.process(&mut column);
+        for j in 0..m {
+            grid[j * m + i] = column[j];
+        }
+    }
+}
+
 impl Starburst {
     /// The far-field profile of `mask` (its texels across the aperture's diameter; see
     /// [`STARBURST_MASK_SIZE`]).
@@ -68,19 +86,7 @@ impl Starburst {
             }
         }
         let fft = FftPlanner::<f32>::new().plan_fft_forward(n);
-        for row in grid.chunks_mut(n) {
-            fft.process(row);
-        }
-        let mut column = vec![Complex32::new(0.0, 0.0); n];
-        for i in 0..n {
-            for j in 0..n {
-                column[j] = grid[j * n + i];
-            }
-            fft.process(&mut column);
-            for j in 0..n {
-                grid[j * n + i] = column[j];
-            }
-        }
+        fft_2d(&mut grid, n, fft.as_ref());
         let total: f64 = grid.iter().map(|c| f64::from(c.norm_sqr())).sum();
         if !(total.is_finite() && total > 0.0) {
             // A closed stop lets no light through: no starburst.

@@ -441,7 +441,7 @@ impl FlareScene {
         let brightest = colour.iter().copied().fold(0.0, f64::max)
             * henyey_greenstein(spread, 1.0)
             * per_mm2
-            * f64::from(dirt.map.iter().copied().fold(0.0, f32::max));
+            * f64::from(dirt.map_peak);
         let level = 0.25 / 255.0 / f64::from(display.flare_gain()).max(1e-30);
         if !(brightest.is_finite() && brightest > level) {
             return;
