@@ -37,7 +37,7 @@ fn decode_srgb(c: vec3<f32>) -> vec3<f32> {
 @fragment
 fn fs_main(@builtin(position) position: vec4<f32>) -> @location(0) vec4<f32> {
     // The accumulation may be smaller than the image: sample it bilinearly (exact texels when it is not).
-    // A desqueezed frame delivers fewer rows than the sensor's: `plate.zw` is the delivered image's 1 / size.
+    // A desqueezed frame delivers fewer rows (or columns) than the sensor's: `plate.zw` is the delivered image's 1 / size.
     var c = textureSampleLevel(hdr_texture, hdr_sampler, position.xy * globals.plate.zw, 0.0).rgb * globals.tonemap.x;
     if (globals.plate.y > 0.5) {
         let size = vec2<f32>(textureDimensions(background_texture));

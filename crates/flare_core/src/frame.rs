@@ -247,7 +247,7 @@ impl Frame {
         };
         scene.view = request.view.clone();
         if output != (scene.width, scene.height) {
-            // Desqueezed: the tonemap and the layers average the sensor's rows down to the delivered ones.
+            // Desqueezed: the tonemap and the layers average the sensor's pixels down to the delivered ones.
             scene.set_output_size(output);
         }
         let draft = request.draft.map(|d| {

@@ -105,7 +105,7 @@ pub struct Globals {
     /// flare gain (`2^flare_ev`), operator ([`Tonemap::code`]), encode sRGB (0/1, set by the renderer), unused.
     pub tonemap: [f32; 4],
     /// plate gain (`2^plate_ev`), plate present (0/1, set by the renderer), then 1 / width and 1 / height of the
-    /// delivered image (the tonemap's pixels: the frame's own, or a desqueezed frame's fewer rows).
+    /// delivered image (the tonemap's pixels: the frame's own, or a desqueezed frame's fewer rows or columns).
     pub plate: [f32; 4],
     /// The starburst's far field: `K` per channel (`I = K c(phi) / r_mm^3`), mm per pixel.
     pub starburst_far: [f32; 4],
@@ -190,9 +190,9 @@ pub struct FlareScene {
     /// The OCIO display transform of [`Tonemap::View`] (`None`: the built-in default,
     /// [`crate::view_transform::ViewTransform::builtin`]).
     pub view: Option<std::sync::Arc<crate::view_transform::ViewTransform>>,
-    /// The size of the image the tonemap and the layers deliver: `(width, height)`, or fewer rows for a
-    /// desqueezed frame ([`crate::frame::FrameRequest::desqueeze`]), each the mean of the sensor's rows it
-    /// covers (bilinear: exactly two rows for a desqueeze of 2).
+    /// The size of the image the tonemap and the layers deliver: `(width, height)`, or fewer rows (columns
+    /// below 1) for a desqueezed frame ([`crate::frame::FrameRequest::desqueeze`]), sampled bilinearly from the
+    /// sensor's pixels (exactly the mean of two for a desqueeze of 2 or 1/2).
     pub output_size: (u32, u32),
 }
 
@@ -284,7 +284,7 @@ impl FlareScene {
         }
     }
 
-    /// Delivers the frame at `size` (a desqueezed frame's fewer rows): the tonemap samples the accumulation at
+    /// Delivers the frame at `size` (a desqueezed frame's fewer rows or columns): the tonemap samples the accumulation at
     /// the delivered pixels ([`Globals::plate`]'s last two).
     pub fn set_output_size(&mut self, size: (u32, u32)) {
         self.output_size = (size.0.max(1), size.1.max(1));
