@@ -3,12 +3,19 @@
 // triangle's irradiance x the area it covers of the pixel, shaded at the centroid of that part; the pixels a row
 // covers whole are shaded at their centres. The CPU cuts polygons; here each part's area and centroid come in
 // closed form from the triangle's edges (`pixel_part`), which gives the same numbers without per-invocation
-// arrays or data-dependent loops over vertices (4.4x faster on lavapipe than the cutting it replaced). No
-// supersampling: the box filter is exact. Energy goes into a per-pixel 64-bit fixed-point sum (two u32 words
-// added with carry by atomics), so the image does not depend on the order in which triangles land: the same
-// bytes on every run. `resolve_box` turns the sums into floats and clears them. The declarations come from
-// raygrid_common.wgsl, the fixed-point helpers from fixed64.wgsl, the mask lookup (a storage buffer, filtered
-// as `ApertureMask::sample` does) from mask_texels.wgsl. Must be kept in sync with `BoxParams` in
+// arrays or data-dependent loops over vertices. No supersampling: the box filter is exact.
+// Per row, the span where the shading can be non-zero and the span where it is surely the weight alone (not
+// vignetted, every stop crossing where the mask is fully open) come in closed form (`row_spans`): pixels outside
+// the first get nothing and no work; in the second no mask is looked up, and a run of whole pixels there, whose
+// shading is linear in x, goes in as four second differences per channel (`add_linear`) whatever its length.
+// Energy goes into per-pixel 64-bit fixed-point sums (two u32 words added with carry by atomics), direct and
+// second differences apart, so the image does not depend on the order in which triangles land: the same bytes
+// on every run. `resolve_box` sums each row's second differences twice, adds the direct sums, turns them into
+// floats and clears them. Optional work is written as loops of zero or more passes rather than branches
+// (`shade_with`, `add`, `add_linear`, `row_spans`): a software rasteriser (lavapipe) runs both sides of every
+// branch for all lanes, but skips a loop that no lane enters. The declarations come from raygrid_common.wgsl,
+// the fixed-point helpers from fixed64.wgsl, the mask lookup (a storage buffer, filtered as
+// `ApertureMask::sample` does) from mask_texels.wgsl. Must be kept in sync with `BoxParams` in
 // crates/flare_core/src/render/raygrid.rs.
 
 struct BoxParams {
@@ -23,7 +30,7 @@ struct BoxParams {
     fixed_per_unit: f32,  // fixed-point units per unit of irradiance, and its inverse
     unit_per_fixed: f32,
     open_radius2: f32,    // the square of the radius (stop radii) within which the mask is fully open
-    unused2: f32,
+    support_radius2: f32, // the square of the radius beyond which the mask is 0
 };
 
 @group(0) @binding(0) var<storage, read> grid: array<Vertex>;
@@ -31,7 +38,8 @@ struct BoxParams {
 // The aperture mask's texels (u8, four to a word, row 0 at v = +1).
 @group(0) @binding(2) var<storage, read> mask_texels: array<u32>;
 @group(0) @binding(3) var<uniform> box_params: BoxParams;
-// Per pixel of the strip, R, G, B as 64-bit sums (low word, high word); all zero between strips.
+// Per pixel of the strip, 12 words: R, G, B as 64-bit sums (low word, high word), then R, G, B as 64-bit second
+// differences along the row (the linear runs); all zero between strips.
 @group(0) @binding(4) var<storage, read_write> sums: array<atomic<u32>>;
 @group(0) @binding(5) var resolved: texture_storage_2d<rgba32float, write>;
 
@@ -68,24 +76,34 @@ fn mask_at(u: f32, v: f32) -> f32 {
     return mask_bilinear(u, v, box_params.mask_size);
 }
 
-fn shade(s: Shader, p: vec2<f32>) -> f32 {
+// The stop point of crossing k at the pixel position p.
+fn stop_at(s: Shader, k: u32, p: vec2<f32>) -> vec2<f32> {
+    if (k == 1u) {
+        return vec2<f32>(at_plane(s.s1u, p), at_plane(s.s1v, p));
+    }
+    if (k == 2u) {
+        return vec2<f32>(at_plane(s.s2u, p), at_plane(s.s2v, p));
+    }
+    return vec2<f32>(at_plane(s.s0u, p), at_plane(s.s0v, p));
+}
+
+// Weight x the masks of the first `masks` stop crossings at the pixel position p; 0 where vignetted. The masks
+// are a loop, not a branch: a software rasteriser runs both sides of a branch but leaves a loop as soon as no
+// lane is in it, so pixels that need no lookup (open triangles, sure spans) skip them.
+fn shade_with(s: Shader, p: vec2<f32>, masks: u32) -> f32 {
     if (at_plane(s.ratio, p) > 1.0) {
         return 0.0;
     }
     var m = max(at_plane(s.weight, p), 0.0);
-    if (s.open) {
-        return m;
-    }
-    if (m > 0.0) {
-        m = m * mask_at(at_plane(s.s0u, p), at_plane(s.s0v, p));
-    }
-    if (s.crossings > 1u && m > 0.0) {
-        m = m * mask_at(at_plane(s.s1u, p), at_plane(s.s1v, p));
-    }
-    if (s.crossings > 2u && m > 0.0) {
-        m = m * mask_at(at_plane(s.s2u, p), at_plane(s.s2v, p));
+    for (var k = 0u; k < masks && m > 0.0; k = k + 1u) {
+        let uv = stop_at(s, k, p);
+        m = m * mask_at(uv.x, uv.y);
     }
     return m;
+}
+
+fn shade(s: Shader, p: vec2<f32>) -> f32 {
+    return shade_with(s, p, select(s.crossings, 0u, s.open));
 }
 
 // ---- the part of a triangle in one pixel, in closed form ----
@@ -157,19 +175,22 @@ fn section(a: vec2<f32>, b: vec2<f32>, c: vec2<f32>, h: f32) -> vec2<f32> {
 
 fn atomic_add64(word: u32, v: vec2<u32>) {
     let old = atomicAdd(&sums[word], v.x);
-    atomicAdd(&sums[word + 1u], v.y + select(0u, 1u, old + v.x < old));
+    // The high word only when it changes: most values fit the low word and carry nothing.
+    let high = v.y + select(0u, 1u, old + v.x < old);
+    if (high != 0u) {
+        atomicAdd(&sums[word + 1u], high);
+    }
 }
 
 // Adds `energy` (irradiance x pixel area, before the colour) at pixel (x, y) when it lies in the frame.
 // Only the strip's rows are kept: a frame whose sums do not fit one buffer is drawn a strip at a time.
+// (The channels are a loop of 0 or 3, not a branch: see `shade_with`.)
 fn add(x: f32, y: f32, energy: f32, rgb: vec3<f32>) {
     let first = f32(box_params.first_row);
-    if (x < 0.0 || y < first || x >= f32(box_params.width) || y >= first + f32(box_params.rows) || !(energy > 0.0)) {
-        return;
-    }
-    let word = ((u32(y) - box_params.first_row) * box_params.width + u32(x)) * 6u;
+    let inside = x >= 0.0 && y >= first && x < f32(box_params.width) && y < first + f32(box_params.rows) && energy > 0.0;
+    let word = select(0u, ((u32(max(y, first)) - box_params.first_row) * box_params.width + u32(max(x, 0.0))) * WORDS_PER_PIXEL, inside);
     let value = rgb * (energy * box_params.fixed_per_unit);
-    for (var c = 0u; c < 3u; c = c + 1u) {
+    for (var c = 0u; c < select(0u, 3u, inside); c = c + 1u) {
         let f = fixed(value[c]);
         if (f.x != 0u || f.y != 0u) {
             atomic_add64(word + 2u * c, f);
@@ -177,13 +198,178 @@ fn add(x: f32, y: f32, energy: f32, rgb: vec3<f32>) {
     }
 }
 
+// Words a pixel of the strip holds: the direct sums (6), then the second differences (6).
+const WORDS_PER_PIXEL: u32 = 12u;
+// Beyond any pixel coordinate: the ends of an unbounded interval.
+const FAR: f32 = 1.0e30;
+
+// v x n modulo 2^64, for 0 <= n < 2^16 (two's complement: right for negative v too).
+fn mul64_small(v: vec2<u32>, n: u32) -> vec2<u32> {
+    let p0 = (v.x & 0xffffu) * n;
+    let p1 = (v.x >> 16u) * n;
+    let lo = p0 + (p1 << 16u);
+    return vec2<u32>(lo, v.y * n + (p1 >> 16u) + select(0u, 1u, lo < p0));
+}
+
+fn neg64(v: vec2<u32>) -> vec2<u32> {
+    return sub64(vec2<u32>(0u), v);
+}
+
+// Adds the 64-bit `v` to the second differences of channel `c` at pixel `x` of row `y`, when `x` is in the row.
+fn add_difference(x: u32, y: f32, c: u32, v: vec2<u32>) {
+    if (x >= box_params.width || (v.x == 0u && v.y == 0u)) {
+        return;
+    }
+    atomic_add64(((u32(y) - box_params.first_row) * box_params.width + x) * WORDS_PER_PIXEL + 6u + 2u * c, v);
+}
+
+// The pixels x .. x + n - 1 of row y get energy + slope x (x - first) each (before the colour), as four second
+// differences per channel: the same sums, whatever the run's length, as adding the pixels one by one (up to the
+// rounding of the slope to the fixed-point unit). Nothing when `n` is 0.
+fn add_linear(x: f32, n: u32, y: f32, energy: f32, slope: f32, rgb: vec3<f32>) {
+    let first = u32(x);
+    let value = rgb * (energy * box_params.fixed_per_unit);
+    let step = rgb * (slope * box_params.fixed_per_unit);
+    for (var c = 0u; c < select(3u, 0u, n == 0u); c = c + 1u) {
+        let f = fixed(value[c]);
+        let b = select(fixed(step[c]), neg64(fixed(-step[c])), step[c] < 0.0);
+        let g = add64(f, mul64_small(b, n - 1u));
+        add_difference(first, y, c, f);
+        add_difference(first + 1u, y, c, sub64(b, f));
+        add_difference(first + n, y, c, neg64(add64(g, b)));
+        add_difference(first + n + 1u, y, c, g);
+    }
+}
+
+// The interval of pixel-centre x (relative to `xm`) where `c0 + cx t < 0`; (FAR, -FAR) when empty.
+fn below_zero(c0: f32, cx: f32) -> vec2<f32> {
+    if (cx == 0.0) {
+        return select(vec2<f32>(FAR, -FAR), vec2<f32>(-FAR, FAR), c0 < 0.0);
+    }
+    let t = -c0 / cx;
+    return select(vec2<f32>(t, FAR), vec2<f32>(-FAR, t), cx > 0.0);
+}
+
+// The interval of t where the stop point (u0 + ux t, v0 + vx t) lies within radius^2 `r2`; (FAR, -FAR) when
+// empty. The stable root pair of the quadratic.
+fn within_radius(u0: f32, ux: f32, v0: f32, vx: f32, r2: f32) -> vec2<f32> {
+    let a = ux * ux + vx * vx;
+    let b = u0 * ux + v0 * vx;
+    let c = u0 * u0 + v0 * v0 - r2;
+    if (a < 1.0e-30) {
+        return select(vec2<f32>(FAR, -FAR), vec2<f32>(-FAR, FAR), c < 0.0);
+    }
+    let d = b * b - a * c;
+    if (d < 0.0) {
+        return vec2<f32>(FAR, -FAR);
+    }
+    let q = -(b + select(-1.0, 1.0, b >= 0.0) * sqrt(d));
+    let t0 = q / a;
+    let t1 = select(-t0, c / q, q != 0.0);
+    return vec2<f32>(min(t0, t1), max(t0, t1));
+}
+
+fn meet(a: vec2<f32>, b: vec2<f32>) -> vec2<f32> {
+    return vec2<f32>(max(a.x, b.x), min(a.y, b.y));
+}
+
+// The stop point of crossing k along the row: its value at t = 0 (the centre `xm`, height `yc`) and its rate.
+fn stop_line(s: Shader, k: u32, xm: f32, yc: f32) -> vec4<f32> {
+    var u = s.s0u;
+    var v = s.s0v;
+    if (k == 1u) {
+        u = s.s1u;
+        v = s.s1v;
+    } else if (k == 2u) {
+        u = s.s2u;
+        v = s.s2v;
+    }
+    return vec4<f32>(u.a0 + u.ax * xm + u.ay * yc, u.ax, v.a0 + v.ax * xm + v.ay * yc, v.ax);
+}
+
+// Where along row y the triangle's shading can be non-zero (`maybe`) and where it is surely the weight alone
+// (`sure`: not vignetted, weighted, every stop crossing in the disc where the mask is fully open), as pixel
+// ranges [lo, hi) within [x_first, x_end): (maybe lo, maybe hi, sure lo, sure hi). Each holds for every point of
+// a pixel's square, not only its centre (a linear function moves by at most half its two rates there, a stop
+// point by half the lengths of its two rates), so they serve the cut pixels as well as the whole ones; and
+// each is kept a pixel inside (sure) or outside (maybe) its closed-form ends, so that a rounding of theirs never
+// changes which pixels get light.
+fn row_spans(s: Shader, x_first: f32, x_end: f32, y: f32) -> vec4<f32> {
+    let yc = y + 0.5;
+    let xm = 0.5 * (x_first + x_end); // pixel x has its centre at t = x + 0.5 - xm
+    let centre = vec2<f32>(xm, yc);
+    let ratio = at_plane(s.ratio, centre) - 1.0;
+    let ratio_reach = 0.5 * (abs(s.ratio.ax) + abs(s.ratio.ay));
+    let weight = at_plane(s.weight, centre);
+    let weight_reach = 0.5 * (abs(s.weight.ax) + abs(s.weight.ay));
+    var maybe = meet(below_zero(ratio - ratio_reach, s.ratio.ax), below_zero(-weight - weight_reach, -s.weight.ax));
+    var sure = meet(below_zero(ratio + ratio_reach, s.ratio.ax), below_zero(weight_reach - weight, -s.weight.ax));
+    for (var k = 0u; k < select(s.crossings, 0u, s.open); k = k + 1u) {
+        let l = stop_line(s, k, xm, yc);
+        let reach = 0.5 * (length(vec2<f32>(l.y, l.w)) + length(stop_rate_y(s, k)));
+        let open = sqrt(box_params.open_radius2) - reach;
+        let support = sqrt(box_params.support_radius2) + reach;
+        sure = meet(sure, select(vec2<f32>(FAR, -FAR), within_radius(l.x, l.y, l.z, l.w, open * open), open > 0.0));
+        maybe = meet(maybe, within_radius(l.x, l.y, l.z, l.w, support * support));
+    }
+    let offset = xm - 0.5;
+    let m_lo = clamp(floor(maybe.x + offset) - 1.0, x_first, x_end);
+    let m_hi = clamp(ceil(maybe.y + offset) + 2.0, m_lo, x_end);
+    let s_lo = clamp(ceil(sure.x + offset) + 1.0, m_lo, m_hi);
+    let s_hi = clamp(floor(sure.y + offset) - 1.0, s_lo, m_hi);
+    return vec4<f32>(m_lo, m_hi, s_lo, s_hi);
+}
+
+// The stop point of crossing k: its rate along y.
+fn stop_rate_y(s: Shader, k: u32) -> vec2<f32> {
+    if (k == 1u) {
+        return vec2<f32>(s.s1u.ay, s.s1v.ay);
+    }
+    if (k == 2u) {
+        return vec2<f32>(s.s2u.ay, s.s2v.ay);
+    }
+    return vec2<f32>(s.s0u.ay, s.s0v.ay);
+}
+
+// `shade`, or the weight alone where the pixel is in the row's sure span.
+fn shade_in(s: Shader, p: vec2<f32>, sure: bool) -> f32 {
+    return shade_with(s, p, select(s.crossings, 0u, s.open || sure));
+}
+
+// The cut pixels x_first .. x_end - 1 of row y: each gets the triangle's irradiance x the area it covers of the
+// pixel, shaded at the centroid of that part.
+fn add_cut(a: vec2<f32>, b: vec2<f32>, c: vec2<f32>, sign: f32, s: Shader, x_first: f32, x_end: f32, y: f32,
+    spans: vec4<f32>, irradiance: f32, rgb: vec3<f32>) {
+    for (var x = max(x_first, spans.x); x < min(x_end, spans.y); x = x + 1.0) {
+        let part = pixel_part(a, b, c, x, y, sign);
+        add(x, y, irradiance * part.x * shade_in(s, part.yz, x >= spans.z && x < spans.w), rgb);
+    }
+}
+
+// The pixels x_first .. x_end - 1 of row y that the triangle covers whole, each shaded at its centre: nothing
+// outside the row's maybe span; in its sure span the shading is the weight alone, linear in x, and a run of
+// four pixels or more goes in as second differences (O(1) however long it is); the rest pixel by pixel.
+fn add_whole(s: Shader, x_first: f32, x_end: f32, y: f32, spans: vec4<f32>, irradiance: f32, rgb: vec3<f32>) {
+    let yc = y + 0.5;
+    let lo = max(x_first, spans.x);
+    let hi = min(x_end, spans.y);
+    let r_lo = clamp(spans.z, lo, hi);
+    let r_hi = clamp(spans.w, r_lo, hi);
+    let run = r_hi - r_lo >= 4.0 && r_hi - r_lo < 65536.0; // `mul64_small`'s range
+    let e = irradiance * at_plane(s.weight, vec2<f32>(r_lo + 0.5, yc));
+    add_linear(r_lo, select(0u, u32(r_hi - r_lo), run), y, e, irradiance * s.weight.ax, rgb);
+    for (var x = select(hi, r_hi, run); x < hi; x = x + 1.0) {
+        add(x, y, irradiance * shade(s, vec2<f32>(x + 0.5, yc)), rgb);
+    }
+    for (var x = lo; x < select(hi, r_lo, run); x = x + 1.0) {
+        add(x, y, irradiance * shade_in(s, vec2<f32>(x + 0.5, yc), x >= spans.z && x < spans.w), rgb);
+    }
+}
+
 fn plane_of(l0: Plane, l1: Plane, l2: Plane, f: vec3<f32>) -> Plane {
     return Plane(l0.a0 * f.x + l1.a0 * f.y + l2.a0 * f.z, l0.ax * f.x + l1.ax * f.y + l2.ax * f.z, l0.ay * f.x + l1.ay * f.y + l2.ay * f.z);
 }
 
-fn mean_plane(f: vec3<f32>) -> Plane {
-    return Plane((f.x + f.y + f.z) / 3.0, 0.0, 0.0);
-}
 
 fn inside_open(v: Vertex, crossings: u32) -> bool {
     var inside = dot(v.stop0, v.stop0) < box_params.open_radius2;
@@ -259,23 +445,14 @@ fn splat_box(@builtin(global_invocation_id) gid: vec3<u32>) {
     var s: Shader;
     s.open = open;
     s.crossings = crossings;
-    if (area2 == 0.0) {
-        // Collapsed to a line or a point (a ghost focused there): all of its energy in the pixel of its centroid.
-        s.ratio = mean_plane(vec3<f32>(a.ratio, b.ratio, c.ratio));
-        s.weight = mean_plane(vec3<f32>(a.weight, b.weight, c.weight));
-        s.s0u = mean_plane(vec3<f32>(a.stop0.x, b.stop0.x, c.stop0.x));
-        s.s0v = mean_plane(vec3<f32>(a.stop0.y, b.stop0.y, c.stop0.y));
-        s.s1u = mean_plane(vec3<f32>(a.stop1.x, b.stop1.x, c.stop1.x));
-        s.s1v = mean_plane(vec3<f32>(a.stop1.y, b.stop1.y, c.stop1.y));
-        s.s2u = mean_plane(vec3<f32>(a.stop2.x, b.stop2.x, c.stop2.x));
-        s.s2v = mean_plane(vec3<f32>(a.stop2.y, b.stop2.y, c.stop2.y));
-        add(floor(centre.x), floor(centre.y), flux * shade(s, centre), rgb);
-        return;
-    }
-    // Barycentric planes: l_i is the edge function of the opposite edge over twice the area.
-    let l0 = Plane((b.pixel.x * c.pixel.y - b.pixel.y * c.pixel.x) / area2, (b.pixel.y - c.pixel.y) / area2, (c.pixel.x - b.pixel.x) / area2);
-    let l1 = Plane((c.pixel.x * a.pixel.y - c.pixel.y * a.pixel.x) / area2, (c.pixel.y - a.pixel.y) / area2, (a.pixel.x - c.pixel.x) / area2);
-    let l2 = Plane((a.pixel.x * b.pixel.y - a.pixel.y * b.pixel.x) / area2, (a.pixel.y - b.pixel.y) / area2, (b.pixel.x - a.pixel.x) / area2);
+    // Barycentric planes: l_i is the edge function of the opposite edge over twice the area; for a triangle
+    // collapsed to a line or a point (a ghost focused there) the corners' mean.
+    let collapsed = area2 == 0.0;
+    let inv = select(1.0 / area2, 0.0, collapsed);
+    let mean = select(0.0, 1.0 / 3.0, collapsed);
+    let l0 = Plane((b.pixel.x * c.pixel.y - b.pixel.y * c.pixel.x) * inv + mean, (b.pixel.y - c.pixel.y) * inv, (c.pixel.x - b.pixel.x) * inv);
+    let l1 = Plane((c.pixel.x * a.pixel.y - c.pixel.y * a.pixel.x) * inv + mean, (c.pixel.y - a.pixel.y) * inv, (a.pixel.x - c.pixel.x) * inv);
+    let l2 = Plane((a.pixel.x * b.pixel.y - a.pixel.y * b.pixel.x) * inv + mean, (a.pixel.y - b.pixel.y) * inv, (b.pixel.x - a.pixel.x) * inv);
     s.ratio = plane_of(l0, l1, l2, vec3<f32>(a.ratio, b.ratio, c.ratio));
     s.weight = plane_of(l0, l1, l2, vec3<f32>(a.weight, b.weight, c.weight));
     s.s0u = plane_of(l0, l1, l2, vec3<f32>(a.stop0.x, b.stop0.x, c.stop0.x));
@@ -284,6 +461,11 @@ fn splat_box(@builtin(global_invocation_id) gid: vec3<u32>) {
     s.s1v = plane_of(l0, l1, l2, vec3<f32>(a.stop1.y, b.stop1.y, c.stop1.y));
     s.s2u = plane_of(l0, l1, l2, vec3<f32>(a.stop2.x, b.stop2.x, c.stop2.x));
     s.s2v = plane_of(l0, l1, l2, vec3<f32>(a.stop2.y, b.stop2.y, c.stop2.y));
+    if (collapsed || (hi.x < floor(lo.x) + 1.0 && hi.y < floor(lo.y) + 1.0)) {
+        // Collapsed, or inside one pixel: all of its energy in the pixel of its centroid.
+        add(floor(centre.x), floor(centre.y), flux * shade(s, centre), rgb);
+        return;
+    }
     let irradiance = flux / (0.5 * abs(area2));
     let sign = select(1.0, -1.0, area2 < 0.0); // the edge sum has the sign of area2
     // Irradiance (the triangle's flux over its footprint) x the area it covers of each pixel, shaded at the
@@ -309,34 +491,41 @@ fn splat_box(@builtin(global_invocation_id) gid: vec3<u32>) {
         let spans = lo.y <= y && hi.y >= y + 1.0;
         let full_lo = clamp(select(x_end, ceil(max(top.x, bottom.x)), spans), x_first, x_end);
         let full_hi = clamp(select(x_end, floor(min(top.y, bottom.y)), spans), full_lo, x_end);
-        for (var x = x_first; x < full_lo; x = x + 1.0) {
-            let part = pixel_part(a.pixel, b.pixel, c.pixel, x, y, sign);
-            add(x, y, irradiance * part.x * shade(s, part.yz), rgb);
+        if (x_end <= x_first) {
+            continue;
         }
-        for (var x = full_lo; x < full_hi; x = x + 1.0) {
-            add(x, y, irradiance * shade(s, vec2<f32>(x + 0.5, y + 0.5)), rgb);
-        }
-        for (var x = full_hi; x < x_end; x = x + 1.0) {
-            let part = pixel_part(a.pixel, b.pixel, c.pixel, x, y, sign);
-            add(x, y, irradiance * part.x * shade(s, part.yz), rgb);
-        }
+        let lit = row_spans(s, x_first, x_end, y);
+        add_cut(a.pixel, b.pixel, c.pixel, sign, s, x_first, full_lo, y, lit, irradiance, rgb);
+        add_whole(s, full_lo, full_hi, y, lit, irradiance, rgb);
+        add_cut(a.pixel, b.pixel, c.pixel, sign, s, full_hi, x_end, y, lit, irradiance, rgb);
     }
 }
 
+// One invocation per row of the strip: the second differences summed twice along the row (the linear runs),
+// plus the direct sums, as floats; both cleared for the next strip.
 @compute @workgroup_size(64)
 fn resolve_box(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let pixel = gid.y * box_params.groups_x * 64u + gid.x;
-    if (pixel >= box_params.width * box_params.rows) {
+    let row = gid.y * box_params.groups_x * 64u + gid.x;
+    if (row >= box_params.rows) {
         return;
     }
-    var out = vec4<f32>(0.0, 0.0, 0.0, 1.0);
-    for (var c = 0u; c < 3u; c = c + 1u) {
-        let word = pixel * 6u + 2u * c;
-        let lo = atomicLoad(&sums[word]);
-        let hi = atomicLoad(&sums[word + 1u]);
-        out[c] = max(float64(vec2<u32>(lo, hi)) * box_params.unit_per_fixed, 0.0);
-        atomicStore(&sums[word], 0u);
-        atomicStore(&sums[word + 1u], 0u);
+    var slope = array<vec2<u32>, 3>(vec2<u32>(0u), vec2<u32>(0u), vec2<u32>(0u));
+    var level = array<vec2<u32>, 3>(vec2<u32>(0u), vec2<u32>(0u), vec2<u32>(0u));
+    for (var x = 0u; x < box_params.width; x = x + 1u) {
+        let base = (row * box_params.width + x) * WORDS_PER_PIXEL;
+        var out = vec4<f32>(0.0, 0.0, 0.0, 1.0);
+        for (var c = 0u; c < 3u; c = c + 1u) {
+            let word = base + 2u * c;
+            let direct = vec2<u32>(atomicLoad(&sums[word]), atomicLoad(&sums[word + 1u]));
+            let second = vec2<u32>(atomicLoad(&sums[word + 6u]), atomicLoad(&sums[word + 7u]));
+            slope[c] = add64(slope[c], second);
+            level[c] = add64(level[c], slope[c]);
+            out[c] = max(float64(add64(level[c], direct)) * box_params.unit_per_fixed, 0.0);
+            atomicStore(&sums[word], 0u);
+            atomicStore(&sums[word + 1u], 0u);
+            atomicStore(&sums[word + 6u], 0u);
+            atomicStore(&sums[word + 7u], 0u);
+        }
+        textureStore(resolved, vec2<u32>(x, box_params.first_row + row), out);
     }
-    textureStore(resolved, vec2<u32>(pixel % box_params.width, box_params.first_row + pixel / box_params.width), out);
 }

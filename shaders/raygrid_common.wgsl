@@ -22,6 +22,8 @@ struct Job {
     view: vec4<f32>,       // window centre x, y (sensor mm), pixels per mm, stop radius (mm)
     frame: vec4<f32>,      // width, height (pixels), stop crossings looked at, irradiance per unit area ratio
     rgb: vec4<f32>,        // the wavelength's RGB weight, the view's turn about the axis (radians, counter-clockwise)
+    lit: vec4<f32>,        // the pre-pass grid whose lit cells are traced: corner x, y (mm), cell size x, y (mm)
+    lit_cells: vec4<u32>,  // its first entry of lit bits in the tables, cells across (0: no pre-pass, trace every ray), unused x2
 };
 
 struct Vertex {

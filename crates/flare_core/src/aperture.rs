@@ -111,6 +111,21 @@ impl ApertureMask {
         (nearest.min(1.0) - 2.0 * std::f32::consts::SQRT_2 / n).max(0.0)
     }
 
+    /// The radius beyond which [`Self::sample`] is 0 (every texel it can read is 0): the farthest centre of a
+    /// texel above 0, plus the reach of a bilinear sample (the texel diagonal). 0 for a closed mask.
+    pub fn support_radius(&self) -> f32 {
+        let n = self.size as f32;
+        let mut farthest = f32::NEG_INFINITY;
+        for (k, &t) in self.texels.iter().enumerate() {
+            if t > 0 {
+                let (i, j) = ((k % self.size) as f32, (k / self.size) as f32);
+                let (u, v) = ((i + 0.5) / n * 2.0 - 1.0, 1.0 - (j + 0.5) / n * 2.0);
+                farthest = farthest.max(u.hypot(v));
+            }
+        }
+        if farthest < 0.0 { 0.0 } else { farthest + 2.0 * std::f32::consts::SQRT_2 / n }
+    }
+
     /// Fraction of the [-1, 1]^2 square that is open (a unit circle is pi / 4).
     pub fn open_fraction(&self) -> f64 {
         self.texels.iter().map(|&t| t as f64 / 255.0).sum::<f64>() / self.texels.len() as f64

@@ -132,8 +132,8 @@ fn gpu_ray_grids_are_deterministic_and_draw_in_strips() {
     let first = render(&raygrid);
     assert!(first.pixels.iter().any(|p| p[0] > 0.0));
     assert!(render(&raygrid) == first, "two runs differ");
-    // 7 rows a strip (24 bytes a pixel): 19 strips, each tracing the jobs again.
-    raygrid.box_strip_bytes = 7 * u64::from(w) * 24;
+    // 7 rows a strip: 19 strips, each tracing the jobs again.
+    raygrid.box_strip_bytes = 7 * u64::from(w) * flare_core::render::raygrid::BOX_BYTES_PER_PIXEL;
     let strips = raygrid.render(&ctx, &renderer, [7.0, -2.0], Window::frame(w, h), 32, SUPERSAMPLE, &[]).unwrap();
     assert!(strips.batches >= 19, "{} dispatches", strips.batches);
     assert!(strips.hdr == first, "drawn in strips, the frame differs");

@@ -335,9 +335,10 @@ impl RayGridRenderer {
                 if gain <= 0.0 {
                     return None;
                 }
-                let b = self.front_pre_pass(job, u, d, grid, &views).0?.bounds;
-                let mut planned = self.planned(index, b, cells, d);
+                let pre = self.front_pre_pass(job, u, d, grid, &views).0?;
+                let mut planned = self.planned(index, pre.bounds, cells, d);
                 planned.rgb = planned.rgb.map(|w| w * gain);
+                planned.lit = pre.lit;
                 Some(planned)
             })
             .collect())
@@ -346,8 +347,7 @@ impl RayGridRenderer {
     /// The jobs of a scouted render ([`Ghosts::Scouted`] seen in `views`) as [`Self::render_request`] lays
     /// them out, for a twin that traces them elsewhere (the GPU bake): per wavelength of the scouted ghost with
     /// light, where its grid lies (the scout's grid as the pre-pass) and how many cells it has (`grid` for the
-    /// ghost's extent in the views). The CPU traces only the lit cells inside that square; a twin that traces
-    /// all of it gets the same light plus what the lit cells' margin left out (measured by the bake's test).
+    /// ghost's extent in the views) and which of the scout's cells it traces (the lit ones).
     pub fn plan_scouted(&self, scout: &Scout, views: &[View], grid: Grid) -> Result<Vec<PlannedJob<'_>>, RayGridError> {
         validate(scout.light_deg, views, grid)?;
         let u = light_slopes_for_frame_position(scout.light_deg[0], scout.light_deg[1]);
@@ -360,7 +360,9 @@ impl RayGridRenderer {
             .filter_map(|(index, job)| {
                 let traced = scout.grids.get(job.wavelength)?.as_ref()?;
                 let pre = self.pre_pass(job, u, traced, views)?;
-                Some(self.planned(index, pre.bounds, grid.for_extent(pre.extent_px), d))
+                let mut planned = self.planned(index, pre.bounds, grid.for_extent(pre.extent_px), d);
+                planned.lit = pre.lit;
+                Some(planned)
             })
             .collect())
     }
@@ -380,6 +382,7 @@ impl RayGridRenderer {
             triangle_flux: triangle_flux(d, bounds, cells),
             stop_count: self.stop_count(job),
             rgb: self.spectrum.weights_rgb[job.wavelength],
+            lit: None,
         }
     }
 
@@ -788,6 +791,9 @@ pub struct PlannedJob<'a> {
     pub stop_count: usize,
     /// The wavelength's RGB weight.
     pub rgb: [f64; 3],
+    /// The cells of the pre-pass whose rays the dense grid traces (the CPU leaves the others untraced, and so
+    /// does a twin); `None`: all of `bounds`.
+    pub lit: Option<LitCells>,
 }
 
 /// Ghost `g`'s gain in `gains` (missing: 1; not finite or negative: 0).
@@ -846,11 +852,14 @@ struct PrePass {
 /// The cells of a pre-pass where some corner ray passes everything and lands in some view's frame, grown by
 /// one cell each way (so that the dense triangles at the rim, half lit, are traced too). A dense ray outside
 /// them is not traced: inside the bounding box, a ghost's light is often a disc, a crescent or a ring.
-struct LitCells {
-    origin: [f64; 2],
-    step: [f64; 2],
-    cells: usize,
-    lit: Vec<bool>,
+#[derive(Clone, Debug)]
+pub struct LitCells {
+    /// The pre-pass grid's corner on the entrance plane (mm), its cell size (mm) and cells across.
+    pub origin: [f64; 2],
+    pub step: [f64; 2],
+    pub cells: usize,
+    /// Per cell, row by row: lit (or next to a lit cell).
+    pub lit: Vec<bool>,
 }
 impl LitCells {
     fn grown(region: [f64; 4], step: [f64; 2], cells: usize, lit: &[bool]) -> Self {

@@ -6,7 +6,8 @@
 //! and wavelength, a coarse pre-pass over the front lens says where the dense grid of `cells` x `cells` cells
 //! lies), then uploads per job its path ([`GpuStep`]: vertex, curvature, conic and aspheric terms, n_in / n_out,
 //! reflect or refract, the clear aperture, which reflectance table) and the grid ([`GpuJob`]), and every dense
-//! reflectance table (1025 samples over sin^2 i, the CPU renderer's own). Two passes follow:
+//! reflectance table (1025 samples over sin^2 i, the CPU renderer's own), and the pre-pass's lit cells (a ray
+//! outside them is not traced, on the CPU as here). Two passes follow:
 //! 1. `raygrid_trace.wgsl` (compute, one invocation per grid vertex, workgroup row = job): each ray traced
 //!    exactly in f32 through every surface kind the CPU tracer has (spheres by the stable root, conics and even
 //!    aspheres by the quadric's root then bounded Newton steps), its weight the reflectance at both reflections
@@ -27,7 +28,11 @@
 //! The CPU twin box-filters its triangles (cuts each into the pixels it covers). The default GPU path does the
 //! same in a compute pass (`raygrid_box.wgsl`): each pixel a triangle touches gets the area and centroid of the
 //! triangle's part in it, in closed form from the three edges (Green's theorem; no polygon is cut), and a
-//! triangle collapsed to a line or a point puts its light in one pixel as on the CPU. The raster path
+//! triangle collapsed to a line or a point puts its light in one pixel as on the CPU. Per row the pass also
+//! finds, in closed form, where the shading can be non-zero and where it is the weight alone (no mask to look
+//! up): nothing is done outside the first, and a run of whole pixels in the second is added as second
+//! differences (O(1) a run), which the resolve sums along the row. The tracer is compiled once per kind of
+//! surface a lens has ([`TraceShapes`]). The raster path
 //! (`--gpu-samples 1..8`) samples pixel centres and drops collapsed triangles. Tests compare landings (the f32
 //! drift, per lens) and images.
 //! **Limits**: a grid whose dispatch, vertex buffer or supersampled target exceeds the adapter's limits is
@@ -76,8 +81,13 @@ pub struct GpuJob {
     pub frame: [f32; 4],
     /// The wavelength's RGB weight, the view's turn about the axis (radians, counter-clockwise).
     pub rgb: [f32; 4],
+    /// The pre-pass grid whose lit cells are traced: corner x, y (mm), cell size x, y (mm).
+    pub lit: [f32; 4],
+    /// Its first entry of lit bits in the tables buffer (16 bits an entry), cells across (0: no pre-pass, every
+    /// ray traced), unused, unused.
+    pub lit_cells: [u32; 4],
 }
-const _: () = assert!(std::mem::size_of::<GpuJob>() == 96);
+const _: () = assert!(std::mem::size_of::<GpuJob>() == 128);
 
 /// One traced grid vertex. Must be kept in sync with `struct Vertex` in `shaders/raygrid_common.wgsl`.
 #[repr(C)]
@@ -116,11 +126,12 @@ struct BoxParams {
     fixed_per_unit: f32,
     unit_per_fixed: f32,
     open_radius2: f32,
-    unused2: f32,
+    support_radius2: f32,
 }
 const _: () = assert!(std::mem::size_of::<BoxParams>() == 48);
-/// Bytes of one pixel's sums: R, G, B of 64 bits.
-const BOX_BYTES_PER_PIXEL: u64 = 24;
+/// Bytes of one pixel's sums: R, G, B of 64 bits added directly, and R, G, B of 64 bits as second differences
+/// along the row (the runs of whole pixels the shader adds in O(1)).
+pub const BOX_BYTES_PER_PIXEL: u64 = 48;
 /// Uniform offsets between dispatches (the largest alignment an adapter may ask for).
 const BOX_STRIDE: u64 = 256;
 /// Samples per dense reflectance table (the CPU renderer's).
@@ -156,12 +167,15 @@ pub struct GpuRayGridImage {
 struct Upload {
     steps: Vec<GpuStep>,
     jobs: Vec<GpuJob>,
+    /// The reflectance tables, then the jobs' lit cells, 16 bits an entry ([`GpuJob::lit_cells`]).
     tables: Vec<f32>,
 }
 
 /// The GPU ray-grid renderer: its two pipelines, made once per device.
 pub struct GpuRayGrid {
-    trace_pipeline: wgpu::ComputePipeline,
+    trace_module: wgpu::ShaderModule,
+    /// The tracer compiled for each [`TraceShapes`], made when first asked for.
+    trace_pipelines: [std::sync::OnceLock<wgpu::ComputePipeline>; 3],
     splat_pipeline: wgpu::RenderPipeline,
     box_pipeline: wgpu::ComputePipeline,
     resolve_pipeline: wgpu::ComputePipeline,
@@ -182,14 +196,6 @@ impl GpuRayGrid {
         let splat_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("raygrid_splat.wgsl"),
             source: wgpu::ShaderSource::Wgsl(RAYGRID_SPLAT_WGSL.into()),
-        });
-        let trace_pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("raygrid trace"),
-            layout: None,
-            module: &trace_module,
-            entry_point: Some("trace_main"),
-            compilation_options: Default::default(),
-            cache: None,
         });
         let target_format = if device.features().contains(wgpu::Features::FLOAT32_BLENDABLE) {
             wgpu::TextureFormat::Rgba32Float
@@ -241,7 +247,8 @@ impl GpuRayGrid {
         let compute = |entry: &str| compute_pipeline(device, &box_module, entry);
         let limits = device.limits();
         Self {
-            trace_pipeline,
+            trace_module,
+            trace_pipelines: Default::default(),
             splat_pipeline,
             box_pipeline: compute("splat_box"),
             resolve_pipeline: compute("resolve_box"),
@@ -499,6 +506,7 @@ impl GpuRayGrid {
             mapped_at_creation: false,
         });
         let open_radius2 = mask.open_radius().powi(2);
+        let support_radius2 = mask.support_radius().powi(2);
         // Jobs of one grid size together, in batches whose vertices fit one storage binding (at most 256 MB,
         // and at most 65535 jobs, the dispatch's y).
         let batches = batches_of(planned, &limits);
@@ -511,9 +519,9 @@ impl GpuRayGrid {
             uniforms[at..at + std::mem::size_of::<BoxParams>()].copy_from_slice(bytemuck::bytes_of(&params));
         };
         for (s, &first_row) in strips.iter().enumerate() {
+            // The resolve: one invocation per row of the strip.
             let rows = strip_rows.min(window.height - first_row);
-            let pixels = window.width * rows;
-            let groups = u64::from(pixels.div_ceil(WORKGROUP));
+            let groups = u64::from(rows.div_ceil(WORKGROUP));
             let groups_x = groups.min(max_groups).max(1) as u32;
             let base = BoxParams {
                 width: window.width,
@@ -524,6 +532,7 @@ impl GpuRayGrid {
                 fixed_per_unit,
                 unit_per_fixed,
                 open_radius2,
+                support_radius2,
                 mask_size: mask.size as u32,
                 ..BoxParams::default()
             };
@@ -590,7 +599,7 @@ impl GpuRayGrid {
                 ));
             }
             let rows = strip_rows.min(window.height - first_row);
-            let groups = (window.width * rows).div_ceil(WORKGROUP);
+            let groups = rows.div_ceil(WORKGROUP);
             let groups_x = groups.min(max_groups as u32).max(1);
             let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("raygrid resolve"),
@@ -642,6 +651,10 @@ impl GpuRayGrid {
     ) -> Result<(Vec<PlannedJob<'r>>, Vec<GpuVertex>), GpuRayGridError> {
         let mut planned = renderer.plan_fixed(light_deg, window, cells, &[])?;
         planned.truncate(jobs);
+        // Every ray of each grid, lit cells or not: all of them are compared.
+        for job in &mut planned {
+            job.lit = None;
+        }
         let (device, queue) = (&ctx.device, &ctx.queue);
         let size = ((cells + 1) * (cells + 1) * planned.len() * std::mem::size_of::<GpuVertex>()) as u64;
         let readback = device.create_buffer(&wgpu::BufferDescriptor {
@@ -665,6 +678,23 @@ impl GpuRayGrid {
     /// Uploads `jobs` (of one grid size, seen in `window` with the light turned by `turn_deg`) and records the
     /// tracer's dispatch into `encoder`: every grid vertex of every job, `(cells + 1)^2` a job in job order.
     /// Returns the jobs buffer and the vertex buffer.
+    /// The tracer compiled for `shapes`.
+    fn trace_pipeline(&self, device: &wgpu::Device, shapes: TraceShapes) -> &wgpu::ComputePipeline {
+        self.trace_pipelines[shapes as usize].get_or_init(|| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some("raygrid trace"),
+                layout: None,
+                module: &self.trace_module,
+                entry_point: Some("trace_main"),
+                compilation_options: wgpu::PipelineCompilationOptions {
+                    constants: &[("SHAPES", f64::from(shapes as u8))],
+                    ..Default::default()
+                },
+                cache: None,
+            })
+        })
+    }
+
     #[allow(clippy::too_many_arguments)]
     fn trace(
         &self,
@@ -678,6 +708,7 @@ impl GpuRayGrid {
         timestamp_writes: Option<wgpu::ComputePassTimestampWrites>,
     ) -> (wgpu::Buffer, wgpu::Buffer) {
         let upload = upload(renderer, jobs, window, turn_deg);
+        let pipeline = self.trace_pipeline(device, TraceShapes::of(&upload.steps));
         let per_job = jobs.first().map_or(1, |j| (j.cells + 1) * (j.cells + 1)) as u64;
         let buffer = |label, contents: &[u8]| storage(device, queue, label, contents, wgpu::BufferUsages::STORAGE);
         let steps = buffer("raygrid steps", bytemuck::cast_slice(&upload.steps));
@@ -691,7 +722,7 @@ impl GpuRayGrid {
         });
         let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("raygrid trace"),
-            layout: &self.trace_pipeline.get_bind_group_layout(0),
+            layout: &pipeline.get_bind_group_layout(0),
             entries: &[
                 wgpu::BindGroupEntry { binding: 0, resource: steps.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 1, resource: jobs_buffer.as_entire_binding() },
@@ -701,11 +732,36 @@ impl GpuRayGrid {
         });
         let mut pass =
             encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("raygrid trace"), timestamp_writes });
-        pass.set_pipeline(&self.trace_pipeline);
+        pass.set_pipeline(pipeline);
         pass.set_bind_group(0, &group, &[]);
         pass.dispatch_workgroups((per_job as u32).div_ceil(WORKGROUP), jobs.len().max(1) as u32, 1);
         drop(pass);
         (jobs_buffer, vertices)
+    }
+}
+
+/// The surface kinds a batch's steps hold, which picks the tracer compiled for them (`override SHAPES` in
+/// `raygrid_trace.wgsl`): a software rasteriser runs both sides of every branch, so what a lens lacks is left
+/// out of its tracer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum TraceShapes {
+    /// Spheres and planes only.
+    Spheres = 0,
+    /// Also conics and aspheres.
+    Aspheres = 1,
+    /// Also toroids.
+    Toroids = 2,
+}
+
+impl TraceShapes {
+    fn of(steps: &[GpuStep]) -> Self {
+        if steps.iter().any(|s| s.table[3] == 1) {
+            Self::Toroids
+        } else if steps.iter().any(|s| s.terms_hi[3] == 0.0) {
+            Self::Aspheres
+        } else {
+            Self::Spheres
+        }
     }
 }
 
@@ -715,6 +771,7 @@ fn upload(renderer: &RayGridRenderer, jobs: &[&PlannedJob], window: Window, turn
     let tables = renderer.tables();
     let (stop, stop_radius_mm) = renderer.stop();
     let mut out = Upload { steps: Vec::new(), jobs: Vec::new(), tables: Vec::new() };
+    let mut lit_bits = Vec::new();
     // Each table the jobs use, once, at its offset.
     let mut offsets = std::collections::HashMap::new();
     let px_per_mm = window.px_per_mm();
@@ -757,6 +814,21 @@ fn upload(renderer: &RayGridRenderer, jobs: &[&PlannedJob], window: Window, turn
         let b = job.bounds;
         let n = job.cells as f64;
         let d = job.direction;
+        // The lit cells as bits; a pre-pass whose numbers are not finite traces every ray.
+        let (lit, lit_cells) = match &job.lit {
+            Some(l) if l.cells > 0 && l.origin.iter().chain(&l.step).all(|v| v.is_finite() && v.abs() < 1e30) => {
+                // Offsets into `lit_bits` for now: the tables go before them once all are known.
+                let first = lit_bits.len() as u32;
+                let mut words = vec![0u16; l.lit.len().div_ceil(16)];
+                for (k, _) in l.lit.iter().enumerate().filter(|(_, lit)| **lit) {
+                    words[k / 16] |= 1 << (k % 16);
+                }
+                lit_bits.extend(words);
+                let region = [l.origin[0], l.origin[1], l.step[0], l.step[1]].map(|v| v as f32);
+                (region, [first, l.cells as u32, 0, 0])
+            }
+            _ => ([0.0; 4], [0; 4]),
+        };
         out.jobs.push(GpuJob {
             steps: [first, out.steps.len() as u32 - first, vertex, job.cells as u32],
             region: [b[0], b[1], (b[2] - b[0]) / n, (b[3] - b[1]) / n].map(finite),
@@ -770,9 +842,16 @@ fn upload(renderer: &RayGridRenderer, jobs: &[&PlannedJob], window: Window, turn
             ]
             .map(finite),
             rgb: [job.rgb[0], job.rgb[1], job.rgb[2], turn_deg.to_radians()].map(finite),
+            lit,
+            lit_cells,
         });
         vertex += ((job.cells + 1) * (job.cells + 1)) as u32;
     }
+    let tables_len = out.tables.len() as u32;
+    for job in out.jobs.iter_mut().filter(|j| j.lit_cells[1] > 0) {
+        job.lit_cells[0] += tables_len;
+    }
+    out.tables.extend(lit_bits.into_iter().map(f32::from));
     out
 }
 
