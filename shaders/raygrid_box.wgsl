@@ -2,7 +2,7 @@
 // (`splat_triangle` in crates/flare_core/src/raytrace/splat.rs): each pixel the triangle touches gets the
 // triangle's irradiance x the area it covers of the pixel, shaded at the centroid of that part; the pixels a row
 // covers whole are shaded at their centres. The CPU cuts polygons; here each part's area and centroid come in
-// closed form from the triangle's edges (`pixel_part`), which gives the same numbers without per-invocation
+// closed form from the triangle's edges (`band_part`), which gives the same numbers without per-invocation
 // arrays or data-dependent loops over vertices. No supersampling: the box filter is exact.
 // Per row, the span where the shading can be non-zero and the span where it is surely the weight alone (not
 // vignetted, every stop crossing where the mask is fully open) come in closed form (`row_spans`): pixels outside
@@ -114,45 +114,68 @@ fn shade(s: Shader, p: vec2<f32>) -> f32 {
 //   area         = sum over edges of  integral G(x_e(y)) dy
 //   area x cx    = sum over edges of  integral G(x_e(y))^2 / 2 dy
 //   area x cy    = sum over edges of  integral y G(x_e(y)) dy
-// each integral over the edge's y clamped to [0, 1], signed by its direction (the sum is the signed area). On an
-// edge, G is linear in y between the points where x crosses 0 and 1, so each integral is three trapezoids. The
-// code has no loop and no array, and takes the same steps in every pixel: what a SIMD software rasteriser
-// (lavapipe) and a GPU both run well.
+// each integral over the edge's y clamped to the row, signed by its direction (the sum is the signed area). On
+// an edge, G is linear in y between the points where x crosses 0 and 1, so each integral is three trapezoids.
+// The three edges go side by side in vec3s; what does not depend on the pixel (the edges cut to the row) is
+// done once a row (`band_of`), the rest per pixel (`band_part`). No loop and no array, the same steps in every
+// pixel: what a SIMD software rasteriser (lavapipe) and a GPU both run well.
 
-// The three integrals of the directed edge p -> q, both relative to the pixel's corner.
-fn edge_moments(p: vec2<f32>, q: vec2<f32>) -> vec3<f32> {
-    let dy = q.y - p.y;
-    let k = select(0.0, (q.x - p.x) / dy, dy != 0.0);
-    let ya = clamp(p.y, 0.0, 1.0);
-    let yb = clamp(q.y, 0.0, 1.0);
-    let xa = p.x + (ya - p.y) * k;
-    let xb = p.x + (yb - p.y) * k;
-    let dx = xb - xa;
-    let inv = select(0.0, 1.0 / dx, dx != 0.0);
-    let t0 = clamp(-xa * inv, 0.0, 1.0);
-    let t1 = clamp((1.0 - xa) * inv, 0.0, 1.0);
-    let t = vec4<f32>(0.0, min(t0, t1), max(t0, t1), 1.0);
-    let y = ya + t * (yb - ya);
-    let g = clamp(vec4<f32>(xa) + t * dx, vec4<f32>(0.0), vec4<f32>(1.0));
-    var m = vec3<f32>(0.0);
-    for (var i = 0u; i < 3u; i = i + 1u) {
-        let d = y[i + 1u] - y[i];
-        let g0 = g[i];
-        let g1 = g[i + 1u];
-        m = m + d * vec3<f32>(0.5 * (g0 + g1), (g0 * g0 + g0 * g1 + g1 * g1) / 6.0,
-            (y[i] * (2.0 * g0 + g1) + y[i + 1u] * (g0 + 2.0 * g1)) / 6.0);
-    }
-    return m;
+// The triangle's three edges cut to the band of rows [y, y + 1] (edge i in component i): the ends' heights
+// relative to the row (clamped to [0, 1]), the x at the first end (frame pixels), the x run to the second and
+// its inverse (0 for a vertical part).
+struct Band {
+    ya: vec3<f32>,
+    yb: vec3<f32>,
+    xa: vec3<f32>,
+    dx: vec3<f32>,
+    inv: vec3<f32>,
+};
+
+fn band_of(a: vec2<f32>, b: vec2<f32>, c: vec2<f32>, y: f32) -> Band {
+    let px = vec3<f32>(a.x, b.x, c.x);
+    let py = vec3<f32>(a.y, b.y, c.y) - y;
+    let qx = vec3<f32>(b.x, c.x, a.x);
+    let qy = vec3<f32>(b.y, c.y, a.y) - y;
+    let dy = qy - py;
+    let k = select((qx - px) / dy, vec3<f32>(0.0), dy == vec3<f32>(0.0));
+    var band: Band;
+    band.ya = clamp(py, vec3<f32>(0.0), vec3<f32>(1.0));
+    band.yb = clamp(qy, vec3<f32>(0.0), vec3<f32>(1.0));
+    band.xa = px + (band.ya - py) * k;
+    band.dx = px + (band.yb - py) * k - band.xa;
+    band.inv = select(1.0 / band.dx, vec3<f32>(0.0), band.dx == vec3<f32>(0.0));
+    return band;
 }
 
-// Area (px^2) in x and the centroid (frame pixels) in yz of the triangle's part in pixel (x, y); `sign` makes the
-// area positive for the triangle's winding.
-fn pixel_part(a: vec2<f32>, b: vec2<f32>, c: vec2<f32>, x: f32, y: f32, sign: f32) -> vec3<f32> {
-    let o = vec2<f32>(x, y);
-    let m = sign * (edge_moments(a - o, b - o) + edge_moments(b - o, c - o) + edge_moments(c - o, a - o));
+// Area (px^2) in x and the centroid (frame pixels) in yz of the triangle's part in pixel (x, y) of the band's
+// row; `sign` makes the area positive for the triangle's winding.
+fn band_part(band: Band, x: f32, y: f32, sign: f32) -> vec3<f32> {
+    let zero = vec3<f32>(0.0);
+    let one = vec3<f32>(1.0);
+    let xa = band.xa - x;
+    let t0 = clamp(-xa * band.inv, zero, one);
+    let t1 = clamp((one - xa) * band.inv, zero, one);
+    let tl = min(t0, t1);
+    let th = max(t0, t1);
+    let y1 = band.ya + tl * (band.yb - band.ya);
+    let y2 = band.ya + th * (band.yb - band.ya);
+    let g0 = clamp(xa, zero, one);
+    let g1 = clamp(xa + tl * band.dx, zero, one);
+    let g2 = clamp(xa + th * band.dx, zero, one);
+    let g3 = clamp(xa + band.dx, zero, one);
+    // Per edge, its three segments (y_i, g_i) -> (y_i+1, g_i+1) at t = 0, tl, th, 1, each a trapezoid.
+    let d0 = y1 - band.ya;
+    let d1 = y2 - y1;
+    let d2 = band.yb - y2;
+    let area = d0 * (g0 + g1) + d1 * (g1 + g2) + d2 * (g2 + g3);
+    let mx = d0 * (g0 * g0 + g0 * g1 + g1 * g1) + d1 * (g1 * g1 + g1 * g2 + g2 * g2) + d2 * (g2 * g2 + g2 * g3 + g3 * g3);
+    let my = d0 * (band.ya * (2.0 * g0 + g1) + y1 * (g0 + 2.0 * g1)) + d1 * (y1 * (2.0 * g1 + g2) + y2 * (g1 + 2.0 * g2))
+        + d2 * (y2 * (2.0 * g2 + g3) + band.yb * (g2 + 2.0 * g3));
+    let m = sign * vec3<f32>(0.5 * dot(area, one), dot(mx, one) / 6.0, dot(my, one) / 6.0);
     if (!(m.x > 0.0)) {
         return vec3<f32>(0.0);
     }
+    let o = vec2<f32>(x, y);
     return vec3<f32>(m.x, o + m.yz / m.x);
 }
 
@@ -336,12 +359,20 @@ fn shade_in(s: Shader, p: vec2<f32>, sure: bool) -> f32 {
     return shade_with(s, p, select(s.crossings, 0u, s.open || sure));
 }
 
-// The cut pixels x_first .. x_end - 1 of row y: each gets the triangle's irradiance x the area it covers of the
-// pixel, shaded at the centroid of that part.
-fn add_cut(a: vec2<f32>, b: vec2<f32>, c: vec2<f32>, sign: f32, s: Shader, x_first: f32, x_end: f32, y: f32,
+// The cut pixels of row y, x_first .. x_end - 1 but for the whole ones full_lo .. full_hi - 1 (one loop for both
+// sides: lanes whose sides differ in length wait less): each gets the triangle's irradiance x the area it covers
+// of the pixel, shaded at the centroid of that part.
+fn add_cut(band: Band, sign: f32, s: Shader, x_first: f32, x_end: f32, full_lo: f32, full_hi: f32, y: f32,
     spans: vec4<f32>, irradiance: f32, rgb: vec3<f32>) {
-    for (var x = max(x_first, spans.x); x < min(x_end, spans.y); x = x + 1.0) {
-        let part = pixel_part(a, b, c, x, y, sign);
+    let lo = max(x_first, spans.x);
+    let hi = min(x_end, spans.y);
+    // Left of the whole pixels: [lo, left_end); right of them: [right_first, hi).
+    let left_end = clamp(full_lo, lo, hi);
+    let right_first = clamp(full_hi, left_end, hi);
+    let count = (left_end - lo) + (hi - right_first);
+    for (var i = 0.0; i < count; i = i + 1.0) {
+        let x = select(right_first + (i - (left_end - lo)), lo + i, lo + i < left_end);
+        let part = band_part(band, x, y, sign);
         add(x, y, irradiance * part.x * shade_in(s, part.yz, x >= spans.z && x < spans.w), rgb);
     }
 }
@@ -358,10 +389,12 @@ fn add_whole(s: Shader, x_first: f32, x_end: f32, y: f32, spans: vec4<f32>, irra
     let run = r_hi - r_lo >= 4.0 && r_hi - r_lo < 65536.0; // `mul64_small`'s range
     let e = irradiance * at_plane(s.weight, vec2<f32>(r_lo + 0.5, yc));
     add_linear(r_lo, select(0u, u32(r_hi - r_lo), run), y, e, irradiance * s.weight.ax, rgb);
-    for (var x = select(hi, r_hi, run); x < hi; x = x + 1.0) {
-        add(x, y, irradiance * shade(s, vec2<f32>(x + 0.5, yc)), rgb);
-    }
-    for (var x = lo; x < select(hi, r_lo, run); x = x + 1.0) {
+    // The rest, left and right of the run, in one loop.
+    let left_end = select(hi, r_lo, run);
+    let right_first = select(hi, r_hi, run);
+    let count = (left_end - lo) + (hi - right_first);
+    for (var i = 0.0; i < count; i = i + 1.0) {
+        let x = select(right_first + (i - (left_end - lo)), lo + i, lo + i < left_end);
         add(x, y, irradiance * shade_in(s, vec2<f32>(x + 0.5, yc), x >= spans.z && x < spans.w), rgb);
     }
 }
@@ -495,9 +528,9 @@ fn splat_box(@builtin(global_invocation_id) gid: vec3<u32>) {
             continue;
         }
         let lit = row_spans(s, x_first, x_end, y);
-        add_cut(a.pixel, b.pixel, c.pixel, sign, s, x_first, full_lo, y, lit, irradiance, rgb);
+        let band = band_of(a.pixel, b.pixel, c.pixel, y);
+        add_cut(band, sign, s, x_first, x_end, full_lo, full_hi, y, lit, irradiance, rgb);
         add_whole(s, full_lo, full_hi, y, lit, irradiance, rgb);
-        add_cut(a.pixel, b.pixel, c.pixel, sign, s, full_hi, x_end, y, lit, irradiance, rgb);
     }
 }
 

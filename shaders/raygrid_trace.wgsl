@@ -11,6 +11,9 @@ const TABLE_SAMPLES: u32 = 1025u;
 // crates/flare_core/src/render/raygrid.rs.
 override SHAPES: u32 = 2u;
 const MAX_NEWTON_STEPS: u32 = 40u;
+// Steps of a path held in workgroup memory (80 bytes each: 15 KB, within the 16 KB every adapter offers). Must
+// be kept in sync with `MAX_PATH_STEPS` in crates/flare_core/src/render/raygrid.rs, which refuses longer paths.
+const MAX_PATH_STEPS: u32 = 192u;
 
 @group(0) @binding(0) var<storage, read> steps: array<Step>;
 @group(0) @binding(1) var<storage, read> jobs: array<Job>;
@@ -213,9 +216,18 @@ fn normal_at(p: vec3<f32>, st: Step) -> vec4<f32> {
     return n;
 }
 
+// The job's path, read once per workgroup (every invocation of a workgroup traces the same job): a software
+// rasteriser otherwise gathers each step lane by lane at every surface.
+var<workgroup> path: array<Step, MAX_PATH_STEPS>;
+
 @compute @workgroup_size(64)
-fn trace_main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(workgroup_id) group: vec3<u32>) {
+fn trace_main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(workgroup_id) group: vec3<u32>,
+    @builtin(local_invocation_index) local: u32) {
     let job = jobs[group.y];
+    for (var i = local; i < min(job.steps.y, MAX_PATH_STEPS); i = i + 64u) {
+        path[i] = steps[job.steps.x + i];
+    }
+    workgroupBarrier();
     let n = job.steps.w;
     let k = id.x;
     if (k >= (n + 1u) * (n + 1u)) {
@@ -232,7 +244,7 @@ fn trace_main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(workgroup_i
     var alive = lit_at(job, p.xy);
     let stop_radius = job.view.w;
     for (var i = 0u; i < job.steps.y && alive; i = i + 1u) {
-        let st = steps[job.steps.x + i];
+        let st = path[i];
         let vertex = vec3<f32>(0.0, 0.0, st.geometry.x);
         let h = intersect(p - vertex, d, st);
         if (!h.hit) {

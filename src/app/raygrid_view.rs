@@ -218,6 +218,7 @@ fn trace_frame(
                 ghosts = Some(image.hdr);
             }
             Err(GpuRayGridError::Gpu(e)) => note = format!("CPU: the GPU failed ({e})"),
+            Err(e @ GpuRayGridError::Path { .. }) => note = format!("CPU: {e}"),
             Err(e) => return Err(e.to_string()),
         }
     }

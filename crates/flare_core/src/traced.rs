@@ -89,6 +89,9 @@ impl TracedGhosts {
                 Err(GpuRayGridError::Gpu(e)) => {
                     fallback = format!("ray grids on the GPU failed ({e}): traced on the CPU instead; ");
                 }
+                Err(e @ GpuRayGridError::Path { .. }) => {
+                    fallback = format!("{e}: traced on the CPU instead; ");
+                }
                 Err(e) => return Err(FrameError::Request(e.to_string())),
             }
         }

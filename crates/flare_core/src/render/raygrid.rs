@@ -32,9 +32,10 @@
 //! finds, in closed form, where the shading can be non-zero and where it is the weight alone (no mask to look
 //! up): nothing is done outside the first, and a run of whole pixels in the second is added as second
 //! differences (O(1) a run), which the resolve sums along the row. The tracer is compiled once per kind of
-//! surface a lens has ([`TraceShapes`]). The raster path
-//! (`--gpu-samples 1..8`) samples pixel centres and drops collapsed triangles. Tests compare landings (the f32
-//! drift, per lens) and images.
+//! surface a lens has ([`TraceShapes`]) and reads each job's path once per workgroup; a path longer than it
+//! holds (192 steps: every ghost of a lens of up to 64 surfaces) is [`GpuRayGridError::Path`], and the callers
+//! trace on the CPU. The raster path (`--gpu-samples 1..8`) samples pixel centres and drops collapsed
+//! triangles. Tests compare landings (the f32 drift, per lens) and images.
 //! **Limits**: a grid whose dispatch, vertex buffer or supersampled target exceeds the adapter's limits is
 //! refused with the limit named, before anything is dispatched; a frame's jobs are traced and drawn in batches
 //! that fit the largest storage buffer the adapter binds. A device lost on the way is
@@ -146,6 +147,9 @@ pub enum GpuRayGridError {
     Plan(#[from] RayGridError),
     #[error("grid {cells}: {what} would need {needed}, beyond this adapter's limit {limit} ({name})")]
     Limit { cells: usize, what: &'static str, needed: u64, limit: u64, name: &'static str },
+    /// A lens whose ghost paths are longer than the GPU tracer holds: traced on the CPU instead.
+    #[error("a ghost's path has {steps} steps, beyond the {limit} the GPU tracer holds")]
+    Path { steps: usize, limit: usize },
     #[error(transparent)]
     Gpu(#[from] GpuError),
 }
@@ -316,6 +320,9 @@ impl GpuRayGrid {
     ) -> Result<GpuRayGridImage, GpuRayGridError> {
         if let Some(reason) = ctx.failure() {
             return Err(GpuError::Lost(reason).into());
+        }
+        if let Some(e) = path_limit(planned) {
+            return Err(e);
         }
         if supersample == BOX_FILTER {
             return self.draw_box(ctx, renderer, planned, view, profiler);
@@ -655,6 +662,9 @@ impl GpuRayGrid {
         for job in &mut planned {
             job.lit = None;
         }
+        if let Some(e) = path_limit(&planned.iter().collect::<Vec<_>>()) {
+            return Err(e);
+        }
         let (device, queue) = (&ctx.device, &ctx.queue);
         let size = ((cells + 1) * (cells + 1) * planned.len() * std::mem::size_of::<GpuVertex>()) as u64;
         let readback = device.create_buffer(&wgpu::BufferDescriptor {
@@ -879,6 +889,16 @@ fn shared_limits(limits: &wgpu::Limits, cells: usize, side: u64, what_side: &'st
         limit("bytes of vertices for one ghost", vertex_bytes(cells), binding, "max_storage_buffer_binding_size")
     })
     .or_else(|| limit(what_side, side, u64::from(limits.max_texture_dimension_2d), "max_texture_dimension_2d"))
+}
+
+/// Steps of one ghost's path the tracer holds in workgroup memory (`MAX_PATH_STEPS` in `raygrid_trace.wgsl`;
+/// 80 bytes each, within the 16 KB every adapter offers): a lens of up to 64 surfaces.
+const MAX_PATH_STEPS: usize = 192;
+
+/// A path longer than the tracer holds (the command line and the app then trace on the CPU).
+fn path_limit(planned: &[&PlannedJob]) -> Option<GpuRayGridError> {
+    let steps = planned.iter().map(|j| j.tracer.steps().len()).max()?;
+    (steps > MAX_PATH_STEPS).then_some(GpuRayGridError::Path { steps, limit: MAX_PATH_STEPS })
 }
 
 /// `planned` in batches of one grid size whose vertices fit one storage binding (at most 256 MB, and at most
