@@ -76,15 +76,26 @@ fn mask_at(u: f32, v: f32) -> f32 {
     return mask_bilinear(u, v, box_params.mask_size);
 }
 
-// The stop point of crossing k at the pixel position p.
-fn stop_at(s: Shader, k: u32, p: vec2<f32>) -> vec2<f32> {
+// The planes of crossing k's stop point: u in the first, v in the second.
+struct StopPlanes {
+    u: Plane,
+    v: Plane,
+};
+
+fn stop_planes(s: Shader, k: u32) -> StopPlanes {
     if (k == 1u) {
-        return vec2<f32>(at_plane(s.s1u, p), at_plane(s.s1v, p));
+        return StopPlanes(s.s1u, s.s1v);
     }
     if (k == 2u) {
-        return vec2<f32>(at_plane(s.s2u, p), at_plane(s.s2v, p));
+        return StopPlanes(s.s2u, s.s2v);
     }
-    return vec2<f32>(at_plane(s.s0u, p), at_plane(s.s0v, p));
+    return StopPlanes(s.s0u, s.s0v);
+}
+
+// The stop point of crossing k at the pixel position p.
+fn stop_at(s: Shader, k: u32, p: vec2<f32>) -> vec2<f32> {
+    let st = stop_planes(s, k);
+    return vec2<f32>(at_plane(st.u, p), at_plane(st.v, p));
 }
 
 // Weight x the masks of the first `masks` stop crossings at the pixel position p; 0 where vignetted. The masks
@@ -296,19 +307,6 @@ fn meet(a: vec2<f32>, b: vec2<f32>) -> vec2<f32> {
     return vec2<f32>(max(a.x, b.x), min(a.y, b.y));
 }
 
-// The stop point of crossing k along the row: its value at t = 0 (the centre `xm`, height `yc`) and its rate.
-fn stop_line(s: Shader, k: u32, xm: f32, yc: f32) -> vec4<f32> {
-    var u = s.s0u;
-    var v = s.s0v;
-    if (k == 1u) {
-        u = s.s1u;
-        v = s.s1v;
-    } else if (k == 2u) {
-        u = s.s2u;
-        v = s.s2v;
-    }
-    return vec4<f32>(u.a0 + u.ax * xm + u.ay * yc, u.ax, v.a0 + v.ax * xm + v.ay * yc, v.ax);
-}
 
 // Where along row y the triangle's shading can be non-zero (`maybe`) and where it is surely the weight alone
 // (`sure`: not vignetted, weighted, every stop crossing in the disc where the mask is fully open), as pixel
@@ -328,8 +326,10 @@ fn row_spans(s: Shader, x_first: f32, x_end: f32, y: f32) -> vec4<f32> {
     var maybe = meet(below_zero(ratio - ratio_reach, s.ratio.ax), below_zero(-weight - weight_reach, -s.weight.ax));
     var sure = meet(below_zero(ratio + ratio_reach, s.ratio.ax), below_zero(weight_reach - weight, -s.weight.ax));
     for (var k = 0u; k < select(s.crossings, 0u, s.open); k = k + 1u) {
-        let l = stop_line(s, k, xm, yc);
-        let reach = 0.5 * (length(vec2<f32>(l.y, l.w)) + length(stop_rate_y(s, k)));
+        // The stop point along the row: at t = 0 (the centre) and its rate in x, u then v.
+        let st = stop_planes(s, k);
+        let l = vec4<f32>(at_plane(st.u, centre), st.u.ax, at_plane(st.v, centre), st.v.ax);
+        let reach = 0.5 * (length(vec2<f32>(st.u.ax, st.v.ax)) + length(vec2<f32>(st.u.ay, st.v.ay)));
         let open = sqrt(box_params.open_radius2) - reach;
         let support = sqrt(box_params.support_radius2) + reach;
         sure = meet(sure, select(vec2<f32>(FAR, -FAR), within_radius(l.x, l.y, l.z, l.w, open * open), open > 0.0));
@@ -343,15 +343,10 @@ fn row_spans(s: Shader, x_first: f32, x_end: f32, y: f32) -> vec4<f32> {
     return vec4<f32>(m_lo, m_hi, s_lo, s_hi);
 }
 
-// The stop point of crossing k: its rate along y.
-fn stop_rate_y(s: Shader, k: u32) -> vec2<f32> {
-    if (k == 1u) {
-        return vec2<f32>(s.s1u.ay, s.s1v.ay);
-    }
-    if (k == 2u) {
-        return vec2<f32>(s.s2u.ay, s.s2v.ay);
-    }
-    return vec2<f32>(s.s0u.ay, s.s0v.ay);
+// The i-th pixel of [lo, left_end) then [right_first, hi): both sides of a row's middle in one loop (lanes whose
+// sides differ in length wait less than in two loops).
+fn beside_middle(lo: f32, left_end: f32, right_first: f32, i: f32) -> f32 {
+    return select(right_first + (i - (left_end - lo)), lo + i, lo + i < left_end);
 }
 
 // `shade`, or the weight alone where the pixel is in the row's sure span.
@@ -359,8 +354,8 @@ fn shade_in(s: Shader, p: vec2<f32>, sure: bool) -> f32 {
     return shade_with(s, p, select(s.crossings, 0u, s.open || sure));
 }
 
-// The cut pixels of row y, x_first .. x_end - 1 but for the whole ones full_lo .. full_hi - 1 (one loop for both
-// sides: lanes whose sides differ in length wait less): each gets the triangle's irradiance x the area it covers
+// The cut pixels of row y, x_first .. x_end - 1 but for the whole ones full_lo .. full_hi - 1 (both sides in one
+// loop, `beside_middle`): each gets the triangle's irradiance x the area it covers
 // of the pixel, shaded at the centroid of that part.
 fn add_cut(band: Band, sign: f32, s: Shader, x_first: f32, x_end: f32, full_lo: f32, full_hi: f32, y: f32,
     spans: vec4<f32>, irradiance: f32, rgb: vec3<f32>) {
@@ -371,7 +366,7 @@ fn add_cut(band: Band, sign: f32, s: Shader, x_first: f32, x_end: f32, full_lo: 
     let right_first = clamp(full_hi, left_end, hi);
     let count = (left_end - lo) + (hi - right_first);
     for (var i = 0.0; i < count; i = i + 1.0) {
-        let x = select(right_first + (i - (left_end - lo)), lo + i, lo + i < left_end);
+        let x = beside_middle(lo, left_end, right_first, i);
         let part = band_part(band, x, y, sign);
         add(x, y, irradiance * part.x * shade_in(s, part.yz, x >= spans.z && x < spans.w), rgb);
     }
@@ -394,7 +389,7 @@ fn add_whole(s: Shader, x_first: f32, x_end: f32, y: f32, spans: vec4<f32>, irra
     let right_first = select(hi, r_hi, run);
     let count = (left_end - lo) + (hi - right_first);
     for (var i = 0.0; i < count; i = i + 1.0) {
-        let x = select(right_first + (i - (left_end - lo)), lo + i, lo + i < left_end);
+        let x = beside_middle(lo, left_end, right_first, i);
         add(x, y, irradiance * shade_in(s, vec2<f32>(x + 0.5, yc), x >= spans.z && x < spans.w), rgb);
     }
 }

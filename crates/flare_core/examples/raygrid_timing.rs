@@ -6,15 +6,11 @@
 use std::time::Instant;
 
 use flare_core::flare::{FlareConfig, PreparedFlare};
+use flare_core::metrics::median;
 use flare_core::optics::library::builtin_lens;
 use flare_core::raytrace::{Grid, Window};
 use flare_core::render::gpu::GpuContext;
 use flare_core::render::raygrid::{GpuRayGrid, SUPERSAMPLE};
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
-}
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
@@ -53,7 +49,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         (0..3).map(|_| time(&mut || drop(tracer.plan_fixed(light, window, grid, &[]).unwrap()))).collect();
     let (cpu_image, gpu_image) = (cpu_image.unwrap(), gpu_image.unwrap());
     let twin = flare_core::metrics::compare(&gpu_image.hdr, &[], &cpu_image.hdr, &[]);
-    let (cpu, gpu, plan) = (median(cpu), median(gpu), median(plan));
+    let (cpu, gpu, plan) = (median(&cpu), median(&gpu), median(&plan));
     println!(
         "{} {w}x{h} grid {grid} at {theta} deg on {}: CPU {cpu:.1} ms, GPU {gpu:.1} ms ({:.2}x; plan {plan:.1} ms), {} jobs, GPU vs CPU {:.1} dB",
         args[1],

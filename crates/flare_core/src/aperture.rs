@@ -95,35 +95,34 @@ impl ApertureMask {
         (top * (1.0 - fy) + bottom * fy) / 255.0
     }
 
+    /// Each texel's value and the radius of its centre (in [-1, 1]^2 coordinates).
+    fn texel_radii(&self) -> impl Iterator<Item = (u8, f32)> + '_ {
+        let n = self.size as f32;
+        self.texels.iter().enumerate().map(move |(k, &t)| {
+            let (i, j) = ((k % self.size) as f32, (k / self.size) as f32);
+            let (u, v) = ((i + 0.5) / n * 2.0 - 1.0, 1.0 - (j + 0.5) / n * 2.0);
+            (t, u.hypot(v))
+        })
+    }
+
+    /// How far a bilinear sample reads: the texel diagonal, in [-1, 1]^2 coordinates.
+    fn sample_reach(&self) -> f32 {
+        2.0 * std::f32::consts::SQRT_2 / self.size as f32
+    }
+
     /// The radius within which [`Self::sample`] is fully open (every texel it can read is 255): the nearest
     /// centre of a texel below 255, less the reach of a bilinear sample (the texel diagonal). 0 when none.
     pub fn open_radius(&self) -> f32 {
-        let n = self.size as f32;
-        let mut nearest = f32::INFINITY;
-        for (k, &t) in self.texels.iter().enumerate() {
-            if t < 255 {
-                let (i, j) = ((k % self.size) as f32, (k / self.size) as f32);
-                let (u, v) = ((i + 0.5) / n * 2.0 - 1.0, 1.0 - (j + 0.5) / n * 2.0);
-                nearest = nearest.min(u.hypot(v));
-            }
-        }
+        let nearest = self.texel_radii().filter(|&(t, _)| t < 255).map(|(_, r)| r).fold(f32::INFINITY, f32::min);
         // Beyond [-1, 1]^2 the mask is 0: the open disc never reaches past radius 1.
-        (nearest.min(1.0) - 2.0 * std::f32::consts::SQRT_2 / n).max(0.0)
+        (nearest.min(1.0) - self.sample_reach()).max(0.0)
     }
 
     /// The radius beyond which [`Self::sample`] is 0 (every texel it can read is 0): the farthest centre of a
     /// texel above 0, plus the reach of a bilinear sample (the texel diagonal). 0 for a closed mask.
     pub fn support_radius(&self) -> f32 {
-        let n = self.size as f32;
-        let mut farthest = f32::NEG_INFINITY;
-        for (k, &t) in self.texels.iter().enumerate() {
-            if t > 0 {
-                let (i, j) = ((k % self.size) as f32, (k / self.size) as f32);
-                let (u, v) = ((i + 0.5) / n * 2.0 - 1.0, 1.0 - (j + 0.5) / n * 2.0);
-                farthest = farthest.max(u.hypot(v));
-            }
-        }
-        if farthest < 0.0 { 0.0 } else { farthest + 2.0 * std::f32::consts::SQRT_2 / n }
+        let farthest = self.texel_radii().filter(|&(t, _)| t > 0).map(|(_, r)| r).fold(f32::NEG_INFINITY, f32::max);
+        if farthest < 0.0 { 0.0 } else { farthest + self.sample_reach() }
     }
 
     /// Fraction of the [-1, 1]^2 square that is open (a unit circle is pi / 4).

@@ -662,9 +662,6 @@ impl GpuRayGrid {
         for job in &mut planned {
             job.lit = None;
         }
-        if let Some(e) = path_limit(&planned.iter().collect::<Vec<_>>()) {
-            return Err(e);
-        }
         let (device, queue) = (&ctx.device, &ctx.queue);
         let size = ((cells + 1) * (cells + 1) * planned.len() * std::mem::size_of::<GpuVertex>()) as u64;
         let readback = device.create_buffer(&wgpu::BufferDescriptor {
@@ -675,6 +672,9 @@ impl GpuRayGrid {
         });
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("trace") });
         let jobs: Vec<&PlannedJob> = planned.iter().collect();
+        if let Some(e) = path_limit(&jobs) {
+            return Err(e);
+        }
         let (_, vertices) = self.trace(device, queue, &mut encoder, renderer, &jobs, window, 0.0, None);
         encoder.copy_buffer_to_buffer(&vertices, 0, &readback, 0, size);
         queue.submit(Some(encoder.finish()));
@@ -685,9 +685,6 @@ impl GpuRayGrid {
 }
 
 impl GpuRayGrid {
-    /// Uploads `jobs` (of one grid size, seen in `window` with the light turned by `turn_deg`) and records the
-    /// tracer's dispatch into `encoder`: every grid vertex of every job, `(cells + 1)^2` a job in job order.
-    /// Returns the jobs buffer and the vertex buffer.
     /// The tracer compiled for `shapes`.
     fn trace_pipeline(&self, device: &wgpu::Device, shapes: TraceShapes) -> &wgpu::ComputePipeline {
         self.trace_pipelines[shapes as usize].get_or_init(|| {
@@ -705,6 +702,9 @@ impl GpuRayGrid {
         })
     }
 
+    /// Uploads `jobs` (of one grid size, seen in `window` with the light turned by `turn_deg`) and records the
+    /// tracer's dispatch into `encoder`: every grid vertex of every job, `(cells + 1)^2` a job in job order.
+    /// Returns the jobs buffer and the vertex buffer.
     #[allow(clippy::too_many_arguments)]
     fn trace(
         &self,
