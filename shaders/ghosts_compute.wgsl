@@ -9,10 +9,11 @@
 // and shades only the pixels outside it, as the fragment shader would. The row's values F(x) (0 outside the
 // sprite, the colour in the open span, colour x mask at an edge pixel) go into a per-row difference buffer as
 // F(x) - F(x - 1), wherever that is not 0: a frame-filling sprite costs its edges, not its area. `resolve` sums
-// each row once (a prefix sum) into the HDR texture, applying the LUT layer where the frame has one. The differences are fixed-point integers of 64 bits (two
+// each row once (a prefix sum, one workgroup a row scanning 64 columns at a time) into the HDR texture,
+// applying the LUT layer where the frame has one. The differences are fixed-point integers of 64 bits (two
 // u32 words, added with carry by atomics): integer addition does not depend on the order in which sprites
-// arrive, so the image is the same bytes on every run. The fixed-point unit is chosen per frame from the sum of
-// every sprite's brightest channel (no pixel can exceed it), 2^52 units for that sum.
+// arrive, so the image is the same bytes on every run. The fixed-point unit is chosen per frame from the
+// brightest sprite (2^30 units for its brightest channel, at most 2^62 for the sum of every sprite's).
 
 struct GhostInstance {
     centre_half: vec4<f32>, // centre x, y (image pixels); half-size x, y (signed: q -> pixel)
@@ -161,7 +162,12 @@ fn stop_of(inst: GhostInstance, k: u32) -> vec4<f32> {
 
 fn atomic_add64(word: u32, v: vec2<u32>) {
     let old = atomicAdd(&diff[word], v.x);
-    atomicAdd(&diff[word + 1u], v.y + select(0u, 1u, old + v.x < old));
+    // The high word only when it changes: with the frame's unit most steps fit the low word, and a negative
+    // one's all-ones high word plus its carry is 0.
+    let high = v.y + select(0u, 1u, old + v.x < old);
+    if (high != 0u) {
+        atomicAdd(&diff[word + 1u], high);
+    }
 }
 
 // Adds F(x) - F(x - 1) for the three channels at column x of strip row `row`.
@@ -301,8 +307,6 @@ fn spans(@builtin(global_invocation_id) gid: vec3<u32>) {
     put(row, last, zero, before);
 }
 
-var<workgroup> partial: array<vec2<u32>, 192>;
-
 fn load64(word: u32) -> vec2<u32> {
     return vec2<u32>(atomicLoad(&diff[word]), atomicLoad(&diff[word + 1u]));
 }
@@ -311,10 +315,59 @@ fn to_float(v: vec2<u32>) -> f32 {
     return float64(v) * strip.unit_per_fixed;
 }
 
-// One workgroup per strip row: each invocation sums its run of columns, the runs' sums are added up in order,
-// and each invocation writes its run's running sums.
+// One workgroup per strip row, walking it in chunks of 64 columns, one column an invocation (neighbouring
+// invocations read neighbouring words): each chunk's differences are summed by `scan64` (scan64.wgsl) and
+// added to the sum of the chunks before it; each invocation writes its pixel and
+// clears its column's words.
 @compute @workgroup_size(64)
 fn resolve(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) t: u32) {
+    let row = wid.x;
+    let base = row * (strip.width + 1u) * 6u;
+    let zero = vec2<u32>(0u);
+    // The sum of every column left of the chunk.
+    var before = array<vec2<u32>, 3>(zero, zero, zero);
+    for (var x0 = 0u; x0 < strip.width; x0 = x0 + 64u) {
+        let x = x0 + t;
+        let inside = x < strip.width;
+        var v = array<vec2<u32>, 3>(zero, zero, zero);
+        if (inside) {
+            for (var c = 0u; c < 3u; c = c + 1u) {
+                v[c] = load64(base + x * 6u + 2u * c);
+            }
+        }
+        let sums = scan64(t, v);
+        if (inside) {
+            var acc = array<vec2<u32>, 3>(zero, zero, zero);
+            for (var c = 0u; c < 3u; c = c + 1u) {
+                acc[c] = add64(before[c], sums[c]);
+            }
+            var value = vec4<f32>(to_float(acc[0]), to_float(acc[1]), to_float(acc[2]), 0.0);
+            if (strip.lut == 1u) {
+                let layer = textureLoad(lut_layer, vec2<u32>(x, strip.first_row + row), 0);
+                value = vec4<f32>(layer.rgb + layer.a * value.rgb, 0.0);
+            }
+            textureStore(hdr, vec2<u32>(x, strip.first_row + row), value);
+            // Leave the buffer all zero for the next strip.
+            for (var word = base + x * 6u; word < base + x * 6u + 6u; word = word + 1u) {
+                atomicStore(&diff[word], 0u);
+            }
+        }
+        for (var c = 0u; c < 3u; c = c + 1u) {
+            before[c] = add64(before[c], scan_chunk[63u * 3u + c]);
+        }
+        workgroupBarrier();
+    }
+    // The row's last column (written by `spans` at a sprite's right end, never read).
+    if (t < 6u) {
+        atomicStore(&diff[base + strip.width * 6u + t], 0u);
+    }
+}
+
+// `resolve` for a software rasteriser (lavapipe), where a workgroup barrier costs more than a scattered
+// read: one workgroup per strip row, each invocation sums its run of columns, the runs' sums are added up in
+// order, and each invocation writes its run's running sums. The same sums as `resolve`.
+@compute @workgroup_size(64)
+fn resolve_runs(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) t: u32) {
     let row = wid.x;
     let run = (strip.width + 63u) / 64u;
     let x0 = min(t * run, strip.width);
@@ -327,13 +380,13 @@ fn resolve(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_inde
         }
     }
     for (var c = 0u; c < 3u; c = c + 1u) {
-        partial[t * 3u + c] = sum[c];
+        scan_chunk[t * 3u + c] = sum[c];
     }
     workgroupBarrier();
     var acc = array<vec2<u32>, 3>(vec2<u32>(0u), vec2<u32>(0u), vec2<u32>(0u));
     for (var s = 0u; s < t; s = s + 1u) {
         for (var c = 0u; c < 3u; c = c + 1u) {
-            acc[c] = add64(acc[c], partial[s * 3u + c]);
+            acc[c] = add64(acc[c], scan_chunk[s * 3u + c]);
         }
     }
     for (var x = x0; x < x1; x = x + 1u) {

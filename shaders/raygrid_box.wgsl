@@ -420,6 +420,10 @@ fn stop_of(v: Vertex, k: u32) -> vec2<f32> {
     return v.stop2;
 }
 
+// Invocations per triangle: each draws every ROW_SPLIT-th of its rows, from row `part` on (1 on a software
+// rasteriser; more on a GPU, where one invocation walking a large triangle's rows alone holds up its warp).
+override ROW_SPLIT: u32 = 1u;
+
 @compute @workgroup_size(64)
 fn splat_box(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (gid.y >= box_params.jobs) {
@@ -427,17 +431,19 @@ fn splat_box(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let job = box_jobs[gid.y];
     let n = job.steps.w;
-    if (gid.x >= 2u * n * n) {
+    let triangle = gid.x / ROW_SPLIT;
+    let part = gid.x % ROW_SPLIT;
+    if (triangle >= 2u * n * n) {
         return;
     }
-    let cell = gid.x / 2u;
+    let cell = triangle / 2u;
     let ix = cell % n;
     let iy = cell / n;
     let v00 = job.steps.z + iy * (n + 1u) + ix;
     // The CPU's triangles: (v00, v10, v11) and (v00, v11, v01).
     var second = v00 + 1u;
     var third = v00 + n + 2u;
-    if (gid.x % 2u == 1u) {
+    if (triangle % 2u == 1u) {
         second = v00 + n + 2u;
         third = v00 + n + 1u;
     }
@@ -490,8 +496,10 @@ fn splat_box(@builtin(global_invocation_id) gid: vec3<u32>) {
     s.s2u = plane_of(l0, l1, l2, vec3<f32>(a.stop2.x, b.stop2.x, c.stop2.x));
     s.s2v = plane_of(l0, l1, l2, vec3<f32>(a.stop2.y, b.stop2.y, c.stop2.y));
     if (collapsed || (hi.x < floor(lo.x) + 1.0 && hi.y < floor(lo.y) + 1.0)) {
-        // Collapsed, or inside one pixel: all of its energy in the pixel of its centroid.
-        add(floor(centre.x), floor(centre.y), flux * shade(s, centre), rgb);
+        // Collapsed, or inside one pixel: all of its energy in the pixel of its centroid (added once).
+        if (part == 0u) {
+            add(floor(centre.x), floor(centre.y), flux * shade(s, centre), rgb);
+        }
         return;
     }
     let irradiance = flux / (0.5 * abs(area2));
@@ -501,7 +509,7 @@ fn splat_box(@builtin(global_invocation_id) gid: vec3<u32>) {
     let first = f32(box_params.first_row);
     let y_first = max(floor(lo.y), first);
     let y_last = min(floor(hi.y), min(h, first + f32(box_params.rows)) - 1.0);
-    for (var y = y_first; y <= y_last; y = y + 1.0) {
+    for (var y = y_first + f32(part); y <= y_last; y = y + f32(ROW_SPLIT)) {
         // The columns the row touches, and those it covers whole (the triangle spans the row and both of its
         // sections lie beyond the pixel on either side: a convex section's extent is extreme at the band's ends).
         let top = section(a.pixel, b.pixel, c.pixel, y);
@@ -555,5 +563,54 @@ fn resolve_box(@builtin(global_invocation_id) gid: vec3<u32>) {
             atomicStore(&sums[word + 7u], 0u);
         }
         textureStore(resolved, vec2<u32>(x, box_params.first_row + row), out);
+    }
+}
+
+// `resolve_box` on a GPU: one workgroup per row of the strip, 64 columns at a time, one column an invocation
+// (neighbouring invocations read neighbouring words; one invocation walking a whole row leaves a GPU idle):
+// the second differences scanned into slopes, the slopes into levels, plus the direct sums. The same sums.
+@compute @workgroup_size(64)
+fn resolve_box_scan(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) t: u32) {
+    let row = wid.y * box_params.groups_x + wid.x;
+    if (row >= box_params.rows) {
+        return;
+    }
+    let zero = vec2<u32>(0u);
+    var slope_before = array<vec2<u32>, 3>(zero, zero, zero);
+    var level_before = array<vec2<u32>, 3>(zero, zero, zero);
+    for (var x0 = 0u; x0 < box_params.width; x0 = x0 + 64u) {
+        let x = x0 + t;
+        let inside = x < box_params.width;
+        let base = (row * box_params.width + min(x, box_params.width - 1u)) * WORDS_PER_PIXEL;
+        var direct = array<vec2<u32>, 3>(zero, zero, zero);
+        var second = array<vec2<u32>, 3>(zero, zero, zero);
+        if (inside) {
+            for (var c = 0u; c < 3u; c = c + 1u) {
+                let word = base + 2u * c;
+                direct[c] = vec2<u32>(atomicLoad(&sums[word]), atomicLoad(&sums[word + 1u]));
+                second[c] = vec2<u32>(atomicLoad(&sums[word + 6u]), atomicLoad(&sums[word + 7u]));
+            }
+        }
+        let slope_in = scan64(t, second);
+        var slope = array<vec2<u32>, 3>(zero, zero, zero);
+        for (var c = 0u; c < 3u; c = c + 1u) {
+            slope[c] = add64(slope_before[c], slope_in[c]);
+            slope_before[c] = add64(slope_before[c], scan_chunk[63u * 3u + c]);
+        }
+        workgroupBarrier();
+        let level_in = scan64(t, slope);
+        var out = vec4<f32>(0.0, 0.0, 0.0, 1.0);
+        for (var c = 0u; c < 3u; c = c + 1u) {
+            let level = add64(level_before[c], level_in[c]);
+            level_before[c] = add64(level_before[c], scan_chunk[63u * 3u + c]);
+            out[c] = max(float64(add64(level, direct[c])) * box_params.unit_per_fixed, 0.0);
+        }
+        if (inside) {
+            textureStore(resolved, vec2<u32>(x, box_params.first_row + row), out);
+            for (var word = base; word < base + WORDS_PER_PIXEL; word = word + 1u) {
+                atomicStore(&sums[word], 0u);
+            }
+        }
+        workgroupBarrier();
     }
 }

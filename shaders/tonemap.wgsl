@@ -3,6 +3,9 @@
 // time; tonemap code 3) or one of FlareLab's curves (none / Reinhard / ACES filmic) and the sRGB encoding.
 // CPU twin: crates/flare_core/src/render/cpu/tonemap.rs, `tonemap_pass` and `tonemap_pixel`.
 // The uniforms `Globals` come from common.wgsl, prepended when the shader is embedded.
+// Two entry points compute the same `display_at`: `cs_main`, one invocation per pixel into a storage texture
+// (where the target allows one: a data-centre GPU shades fragments on a few units only), and `fs_main`, one
+// fragment per pixel of a screen-covering triangle (any other target).
 
 @group(0) @binding(0) var<uniform> globals: Globals;
 @group(0) @binding(1) var hdr_texture: texture_2d<f32>;
@@ -34,14 +37,14 @@ fn decode_srgb(c: vec3<f32>) -> vec3<f32> {
     return select(high, low, c <= vec3<f32>(0.04045));
 }
 
-@fragment
-fn fs_main(@builtin(position) position: vec4<f32>) -> @location(0) vec4<f32> {
+// The display value of the target pixel whose centre is at `position` (pixels from the top-left corner).
+fn display_at(position: vec2<f32>) -> vec4<f32> {
     // The accumulation may be smaller than the image: sample it bilinearly (exact texels when it is not).
     // A desqueezed frame delivers fewer rows (or columns) than the sensor's: `plate.zw` is the delivered image's 1 / size.
-    var c = textureSampleLevel(hdr_texture, hdr_sampler, position.xy * globals.plate.zw, 0.0).rgb * globals.tonemap.x;
+    var c = textureSampleLevel(hdr_texture, hdr_sampler, position * globals.plate.zw, 0.0).rgb * globals.tonemap.x;
     if (globals.plate.y > 0.5) {
         let size = vec2<f32>(textureDimensions(background_texture));
-        let at = vec2<i32>(position.xy * size * globals.plate.zw);
+        let at = vec2<i32>(position * size * globals.plate.zw);
         c = c + textureLoad(background_texture, at, 0).rgb * globals.plate.x;
     }
     if (globals.tonemap.y > 2.5) {
@@ -64,4 +67,22 @@ fn fs_main(@builtin(position) position: vec4<f32>) -> @location(0) vec4<f32> {
         c = encode_srgb(c);
     }
     return vec4<f32>(c, 1.0);
+}
+
+@fragment
+fn fs_main(@builtin(position) position: vec4<f32>) -> @location(0) vec4<f32> {
+    return display_at(position.xy);
+}
+
+// The compute form's target: an rgba8unorm texture the size of the delivered image (values encoded by
+// `display_at`, `tonemap.z` being 1 for it).
+@group(2) @binding(0) var display_out: texture_storage_2d<rgba8unorm, write>;
+
+@compute @workgroup_size(8, 8)
+fn cs_main(@builtin(global_invocation_id) id: vec3<u32>) {
+    let size = textureDimensions(display_out);
+    if (id.x >= size.x || id.y >= size.y) {
+        return;
+    }
+    textureStore(display_out, id.xy, display_at(vec2<f32>(id.xy) + vec2<f32>(0.5)));
 }

@@ -20,10 +20,12 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use eframe::egui_wgpu::{self, CallbackResources, CallbackTrait, RenderState, ScreenDescriptor};
 use eframe::{egui, wgpu};
 use flare_core::frame::Frame;
-use flare_core::render::gpu::{FlareRenderer, texture_2d};
+use flare_core::render::gpu::FlareRenderer;
 use flare_core::render::shaders::VIEWPORT_WGSL;
 
-/// The offscreen texture's format: sRGB, so that sampling it gives linear values.
+/// The offscreen texture's format as sampled: sRGB, so that sampling it gives linear values. The flare draws
+/// into it as `Rgba8Unorm` (the sRGB-encoded bytes the tonemap writes) where the device runs compute and can view
+/// a texture in its sRGB form: its tonemap is then a compute pass ([`FlareRenderer::target_usage`]).
 const VIEW_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 
 static MISSING_LOGGED: AtomicBool = AtomicBool::new(false);
@@ -51,7 +53,14 @@ impl ViewportResources {
     /// Creates the resources in egui's device and registers them with egui-wgpu.
     pub fn install(render_state: &RenderState) {
         let device = &render_state.device;
-        let renderer = FlareRenderer::new(device, &render_state.queue, VIEW_FORMAT);
+        let srgb_views =
+            render_state.adapter.get_downlevel_capabilities().flags.contains(wgpu::DownlevelFlags::VIEW_FORMATS);
+        let draw_format = if srgb_views && FlareRenderer::supports_compute(device) {
+            wgpu::TextureFormat::Rgba8Unorm
+        } else {
+            VIEW_FORMAT
+        };
+        let renderer = FlareRenderer::new(device, &render_state.queue, draw_format);
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("viewport"),
             entries: &[
@@ -131,7 +140,7 @@ impl ViewportResources {
             mapped_at_creation: false,
         });
         render_state.queue.write_buffer(&params, 0, bytemuck::cast_slice(&[encode, 0.0, 0.0, 0.0]));
-        let (target, bind_group) = Self::target(device, &layout, &sampler, &params, (16, 16));
+        let (target, bind_group) = Self::target(device, &renderer, &layout, &sampler, &params, (16, 16));
         let resources = Self {
             renderer,
             target,
@@ -148,18 +157,33 @@ impl ViewportResources {
         render_state.renderer.write().callback_resources.insert(resources);
     }
 
+    /// The offscreen texture `renderer` draws into (its format and usages), sampled through its sRGB view.
     fn target(
         device: &wgpu::Device,
+        renderer: &FlareRenderer,
         layout: &wgpu::BindGroupLayout,
         sampler: &wgpu::Sampler,
         params: &wgpu::Buffer,
         size: (u32, u32),
     ) -> (wgpu::Texture, wgpu::BindGroup) {
-        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT
-            | wgpu::TextureUsages::TEXTURE_BINDING
-            | wgpu::TextureUsages::COPY_DST;
-        let texture = texture_2d(device, "viewport flare", size.0, size.1, VIEW_FORMAT, usage);
-        let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+        let format = renderer.target_format();
+        let usage = renderer.target_usage() | wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
+        let texture = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("viewport flare"),
+            size: wgpu::Extent3d { width: size.0, height: size.1, depth_or_array_layers: 1 },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage,
+            view_formats: if format == VIEW_FORMAT { &[] } else { &[VIEW_FORMAT] },
+        });
+        // Sampled only: its sRGB form cannot be a storage binding, which the texture's own form is.
+        let view = texture.create_view(&wgpu::TextureViewDescriptor {
+            format: Some(VIEW_FORMAT),
+            usage: Some(wgpu::TextureUsages::TEXTURE_BINDING),
+            ..Default::default()
+        });
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("viewport"),
             layout,
@@ -196,7 +220,7 @@ impl ViewportResources {
         let size = (image.width.max(1), image.height.max(1));
         if size != res.size {
             (res.target, res.bind_group) =
-                Self::target(&render_state.device, &res.layout, &res.sampler, &res.params, size);
+                Self::target(&render_state.device, &res.renderer, &res.layout, &res.sampler, &res.params, size);
             res.size = size;
         }
         if image.pixels.len() == (image.width * image.height) as usize && image.width > 0 && image.height > 0 {
@@ -268,7 +292,7 @@ impl CallbackTrait for FlareCallback {
         let size = (scene.output_size.0.max(1), scene.output_size.1.max(1));
         if size != res.size {
             (res.target, res.bind_group) =
-                ViewportResources::target(device, &res.layout, &res.sampler, &res.params, size);
+                ViewportResources::target(device, &res.renderer, &res.layout, &res.sampler, &res.params, size);
             res.size = size;
         }
         let view = res.target.create_view(&wgpu::TextureViewDescriptor::default());

@@ -70,8 +70,8 @@ fn gpu_frame(c: &mut Criterion) {
         "bench target",
         1280,
         720,
-        wgpu::TextureFormat::Rgba8Unorm,
-        wgpu::TextureUsages::RENDER_ATTACHMENT,
+        drawer.renderer.target_format(),
+        drawer.renderer.target_usage(),
     );
     let view = target.create_view(&wgpu::TextureViewDescriptor::default());
     let cases = [

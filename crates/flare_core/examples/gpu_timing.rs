@@ -1,8 +1,9 @@
 //! The paraxial (or, given a `.flut`, blended) frame of a built-in lens on the CPU twin and on the GPU, with the
-//! ghosts drawn by the compute passes and by the raster passes: medians of 5 frames, each waited for (no
-//! read-back), and the GPU's own time of the passes by timestamps. What the README's lavapipe table came from.
+//! ghosts drawn by the compute passes and by the raster passes (the tonemap too): medians of 9 frames, each
+//! waited for (no read-back), and the GPU's own time of the passes by timestamps. What the README's lavapipe
+//! and real-GPU tables came from. The starburst is left out unless the last argument is `starburst`.
 //!
-//! `cargo run --release -p flare_core --example gpu_timing -- LENS WIDTH HEIGHT [LUT.flut]`
+//! `cargo run --release -p flare_core --example gpu_timing -- LENS WIDTH HEIGHT [LUT.flut] [starburst]`
 
 use std::time::Instant;
 
@@ -19,7 +20,9 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
-    let usage = "usage: gpu_timing LENS WIDTH HEIGHT [LUT.flut]";
+    let usage = "usage: gpu_timing LENS WIDTH HEIGHT [LUT.flut] [starburst]";
+    let starburst = args.last().is_some_and(|a| a == "starburst");
+    let args: Vec<String> = args.into_iter().filter(|a| a != "starburst").collect();
     let lens = builtin_lens(args.get(1).ok_or(usage)?)?;
     let (w, h): (u32, u32) = (args.get(2).ok_or(usage)?.parse()?, args.get(3).ok_or(usage)?.parse()?);
     let flare = PreparedFlare::new(&lens, &FlareConfig::default())?;
@@ -31,12 +34,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         light_deg: [9.0, 5.0],
         width: w,
         height: h,
-        display: DisplaySettings { starburst: false, ..DisplaySettings::default() },
+        display: DisplaySettings { starburst, ..DisplaySettings::default() },
         lut_use: if live.is_some() { LutUse::Blend } else { LutUse::Off },
         ..FrameRequest::default()
     };
     let sources = Sources { flare: &flare, lut: live.as_ref(), plate: None };
-    let cpu: Vec<f64> = (0..5)
+    let cpu: Vec<f64> = (0..9)
         .map(|_| {
             let start = Instant::now();
             let f = Frame::build(&flare, live.as_ref(), &request);
@@ -50,26 +53,29 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         if raster {
             drawer.renderer.force_raster_ghosts();
         }
-        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT;
-        let target =
-            flare_core::render::gpu::texture_2d(&drawer.ctx.device, "t", w, h, wgpu::TextureFormat::Rgba8Unorm, usage);
+        // The raster row is the earlier path whole: its tonemap a fragment pass too (no storage binding).
+        let usage = if raster { wgpu::TextureUsages::RENDER_ATTACHMENT } else { drawer.renderer.target_usage() };
+        let format = drawer.renderer.target_format();
+        let target = flare_core::render::gpu::texture_2d(&drawer.ctx.device, "t", w, h, format, usage);
         let view = target.create_view(&Default::default());
-        let (mut wall, mut gpu) = (Vec::new(), Vec::new());
-        for _ in 0..5 {
+        let (mut wall, mut gpu, mut last) = (Vec::new(), Vec::new(), None);
+        for _ in 0..9 {
             let start = Instant::now();
             let f = Frame::build(&flare, live.as_ref(), &request);
             drawer.render_into(&f, &sources, &view)?;
             wall.push(start.elapsed().as_secs_f64() * 1e3);
             if let Some(t) = drawer.renderer.wait_pass_times(&drawer.ctx.device, &drawer.ctx.queue) {
                 gpu.push(t.total_ms());
+                last = Some(t.summary());
             }
         }
         println!(
-            "GPU ({}, {} passes): wall {:.1} ms, GPU time by timestamps {:.1} ms",
+            "GPU ({}, {} passes): wall {:.1} ms, GPU time by timestamps {:.2} ms (last frame: {})",
             drawer.ctx.adapter.name,
             if raster { "raster" } else { "compute" },
             median(wall),
-            median(gpu)
+            median(gpu),
+            last.unwrap_or_else(|| "no timestamp queries".to_owned())
         );
     }
     Ok(())

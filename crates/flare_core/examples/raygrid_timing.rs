@@ -1,5 +1,6 @@
 //! Ray grids on the CPU and on the GPU at one grid: wall-clock medians of 3 runs each, whole renders (plan,
-//! trace, box filter, read-back), and the GPU image against the CPU's. What the issue-31 ratio is judged by.
+//! trace, box filter, read-back), the GPU's own time of its passes by timestamps, and the GPU image against the
+//! CPU's. What the issue-31 ratio is judged by.
 //!
 //! `cargo run --release -p flare_core --example raygrid_timing -- LENS WIDTH HEIGHT GRID FIELD_DEG`
 
@@ -38,10 +39,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let window = Window::frame(w, h);
     let mut gpu_image = None;
     let _ = gpu_grid.render(&ctx, &tracer, light, window, grid, SUPERSAMPLE, &[])?;
+    let mut gpu_ms = Vec::new();
     let gpu: Vec<f64> = (0..3)
         .map(|_| {
             time(&mut || {
-                gpu_image = Some(gpu_grid.render(&ctx, &tracer, light, window, grid, SUPERSAMPLE, &[]).unwrap())
+                let image = gpu_grid.render(&ctx, &tracer, light, window, grid, SUPERSAMPLE, &[]).unwrap();
+                gpu_ms.extend(image.gpu_times.as_ref().map(|t| t.total_ms()));
+                gpu_image = Some(image)
             })
         })
         .collect();
@@ -58,6 +62,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         gpu_image.jobs,
         twin.psnr_db
     );
+    match &gpu_image.gpu_times {
+        Some(t) => {
+            println!("GPU time by timestamps: median {:.2} ms of 3 (last run: {})", median(&gpu_ms), t.summary())
+        }
+        None => println!("GPU time by timestamps: none (the adapter has no timestamp queries)"),
+    }
     let dense = gpu_image.jobs as u64 * ((grid + 1) * (grid + 1)) as u64;
     println!(
         "CPU: {} rays (the pre-pass's too), {} triangles; GPU: {dense} grid vertices (those outside the lit cells are not traced)",

@@ -63,22 +63,24 @@ fn the_compute_pass_draws_the_cpu_twins_image() {
     let Some(ctx) = test_context() else { return };
     let mut drawer = GpuDrawer::on(ctx);
     assert!(drawer.renderer.ghosts_as_compute(), "lavapipe runs the compute pass");
-    for (lens, blades, light, divisor) in [
-        ("nikon_zoom_28_75mm", 6, [9.0, 5.0], 1),
-        ("pbrt_dgauss_50mm", 5, [-8.0, 4.0], 1),
-        ("heliar", 0, [12.0, -3.0], 2),
-        ("pbrt_dgauss_50mm", 7, [30.0, 25.0], 1),
-        ("toroidal", 6, [8.0, 5.0], 1),
+    for (lens, blades, light, divisor, (w, h)) in [
+        // Large: a stop's texel spans several pixels, and an edge many.
+        ("nikon_zoom_28_75mm", 6, [9.0, 5.0], 1, (1600, 900)),
+        ("nikon_zoom_28_75mm", 6, [9.0, 5.0], 1, (320, 200)),
+        ("pbrt_dgauss_50mm", 5, [-8.0, 4.0], 1, (320, 200)),
+        ("heliar", 0, [12.0, -3.0], 2, (320, 200)),
+        ("pbrt_dgauss_50mm", 7, [30.0, 25.0], 1, (320, 200)),
+        ("toroidal", 6, [8.0, 5.0], 1, (320, 200)),
     ] {
         let flare = prepared(lens, blades);
-        let frame = Frame::build(&flare, None, &request(light, 320, 200, divisor));
+        let frame = Frame::build(&flare, None, &request(light, w, h, divisor));
         assert!(frame.scene.instances.len() > 10, "{lens}: {} sprites", frame.scene.instances.len());
         let sources = Sources { flare: &flare, lut: None, plate: None };
         let gpu = drawer.draw(&frame, &sources).unwrap();
         let cpu = frame::draw_cpu(&frame, &sources);
         let (worst, mean, lit) = display_difference(&frame, &gpu.hdr, &cpu.hdr);
         eprintln!(
-            "{lens} ({blades} blades, 1/{divisor}): {} sprites, display worst {worst:.3}/255, mean {mean:.5}/255, {:.0}% lit",
+            "{lens} {w}x{h} ({blades} blades, 1/{divisor}): {} sprites, display worst {worst:.3}/255, mean {mean:.5}/255, {:.0}% lit",
             frame.scene.instances.len(),
             100.0 * lit
         );
@@ -101,6 +103,14 @@ fn the_compute_pass_is_deterministic_and_draws_in_strips() {
     let again = drawer.draw(&frame, &sources).unwrap();
     assert!(first.hdr.pixels.iter().any(|p| p[0] > 0.0));
     assert!(first == again, "two runs differ");
+    // The other form of the per-row sum (a hardware GPU's scan where lavapipe sums runs, or the reverse):
+    // the same bytes, in one piece and in strips.
+    drawer.renderer.resolve_ghosts_by_scan(true);
+    assert!(drawer.draw(&frame, &sources).unwrap() == first, "the scan's frame differs");
+    drawer.renderer.limit_ghost_strip_bytes(5 * 301 * 24);
+    assert!(drawer.draw(&frame, &sources).unwrap() == first, "the scan's frame in strips differs");
+    drawer.renderer.resolve_ghosts_by_scan(false);
+    assert!(drawer.draw(&frame, &sources).unwrap() == first, "the runs' frame in strips differs");
     // Strips of 3 rows (the buffer holds (width + 1) x 24 bytes a row): 57 strips.
     drawer.renderer.limit_ghost_strip_bytes(3 * 301 * 24);
     let strips = drawer.draw(&frame, &sources).unwrap();

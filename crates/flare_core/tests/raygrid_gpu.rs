@@ -137,6 +137,13 @@ fn gpu_ray_grids_are_deterministic_and_draw_in_strips() {
     let strips = raygrid.render(&ctx, &renderer, [7.0, -2.0], Window::frame(w, h), 32, SUPERSAMPLE, &[]).unwrap();
     assert!(strips.batches >= 19, "{} dispatches", strips.batches);
     assert!(strips.hdr == first, "drawn in strips, the frame differs");
+    // The other forms (a GPU's: each triangle's rows split over 8 invocations, each row resolved by a
+    // workgroup's scan; lavapipe's: an invocation per triangle and per row), in strips and whole: the same bytes.
+    let other = if raygrid.row_split() > 1 { 1 } else { 8 };
+    raygrid.set_row_split(&ctx.device, other);
+    assert!(render(&raygrid) == first, "row split {other}: drawn in strips, the frame differs");
+    raygrid.box_strip_bytes = u64::MAX;
+    assert!(render(&raygrid) == first, "row split {other}: the frame differs");
 }
 
 /// Per-ghost gains (a preset's gains, `enabled` and `solo`, as a frame request carries them) reach the ray

@@ -434,8 +434,8 @@ impl GpuBench {
             "bench target",
             width,
             height,
-            wgpu::TextureFormat::Rgba8Unorm,
-            wgpu::TextureUsages::RENDER_ATTACHMENT,
+            drawer.renderer.target_format(),
+            drawer.renderer.target_usage(),
         );
         let view = target.create_view(&wgpu::TextureViewDescriptor::default());
         let raygrid = flare_core::render::raygrid::GpuRayGrid::new(&drawer.ctx.device);

@@ -12,8 +12,10 @@
 //!
 //! **Deterministic**: the differences are 64-bit fixed-point integers (two u32 words added with carry by
 //! atomics), so the order in which sprites land does not matter: the same frame gives the same bytes on every
-//! run. The unit is chosen per frame as `2^-52` of the sum over sprites of their brightest channel (no pixel
-//! can exceed that sum), so each sprite keeps f32's relative precision and no sum can overflow.
+//! run. The unit is chosen per frame as `2^-30` of the brightest sprite's brightest channel (and at most `2^-62`
+//! of the sum over sprites of their brightest channel, which no pixel can exceed, so no sum can overflow):
+//! each sprite is rounded far below what a half float keeps, and most steps from one pixel to the next fit the
+//! low word, whose carry alone then decides whether the high word needs an atomic of its own.
 //!
 //! **Limits**: the difference buffer holds `(width + 1) x rows x 24` bytes. A frame whose buffer would pass the
 //! adapter's `max_storage_buffer_binding_size` (or `max_buffer_size`) is drawn in strips of rows, one after
@@ -36,8 +38,12 @@ use crate::aperture::ApertureMask;
 const WORKGROUP: u32 = 64;
 /// Bytes of one accumulation column's difference: three channels of 64 bits.
 const BYTES_PER_COLUMN: u64 = 24;
-/// Fixed-point units for the sum over sprites of their brightest channel.
-const FIXED_UNITS: f64 = 4_503_599_627_370_496.0; // 2^52
+/// Fixed-point units for the brightest sprite's brightest channel: 2^-30 of it is far below what a display
+/// or a half float resolves, and a pixel's step from its neighbour then mostly fits the low word, so that the
+/// high word's atomic is mostly skipped (see `atomic_add64` in the shader).
+const SPRITE_UNITS: f64 = 1_073_741_824.0; // 2^30
+/// The most units the sum over sprites of their brightest channel may take (no 64-bit sum can overflow).
+const SUM_UNITS: f64 = 4_611_686_018_427_387_904.0; // 2^62
 /// Uniform offsets between strips (the largest alignment an adapter may ask for).
 const STRIP_STRIDE: u64 = 256;
 
@@ -84,9 +90,12 @@ pub(crate) fn plan_strips(
     let (w, h) = (scene.hdr_width.max(1), scene.hdr_height.max(1));
     let (sx, sy) = accumulation_scale(scene);
     // No pixel exceeds the sum of every sprite's brightest channel (each mask is at most 1).
-    let bound: f64 = instances.iter().map(|i| f64::from(i.colour[0].max(i.colour[1]).max(i.colour[2]).max(0.0))).sum();
-    let (fixed_per_unit, unit_per_fixed) = if bound > 0.0 && bound.is_finite() {
-        ((FIXED_UNITS / bound) as f32, (bound / FIXED_UNITS) as f32)
+    let brightest = |i: &GhostInstance| f64::from(i.colour[0].max(i.colour[1]).max(i.colour[2]).max(0.0));
+    let bound: f64 = instances.iter().map(brightest).sum();
+    let peak = instances.iter().map(brightest).fold(0.0, f64::max);
+    let fixed_per_unit = (SPRITE_UNITS / peak).min(SUM_UNITS / bound);
+    let (fixed_per_unit, unit_per_fixed) = if bound > 0.0 && fixed_per_unit.is_finite() && fixed_per_unit > 0.0 {
+        (fixed_per_unit as f32, (1.0 / fixed_per_unit) as f32)
     } else {
         (0.0, 0.0)
     };
@@ -145,7 +154,12 @@ fn mask_words(mask: &ApertureMask) -> Vec<u32> {
 /// The pass's pipelines and buffers (see the module documentation).
 pub(crate) struct ComputeGhosts {
     spans: wgpu::ComputePipeline,
-    resolve: wgpu::ComputePipeline,
+    /// The two forms of the per-row sum (`resolve`, a scan of 64 columns at a time; `resolve_runs`, a run of
+    /// columns an invocation) and which one draws: the runs on a software rasteriser (lavapipe, where a
+    /// workgroup barrier costs more than a scattered read: 16 ms against 4 ms at 480x270), the scan elsewhere.
+    resolve_scan: wgpu::ComputePipeline,
+    resolve_runs: wgpu::ComputePipeline,
+    pub(crate) scan: bool,
     mask: wgpu::Buffer,
     mask_size: u32,
     open_radius: f32,
@@ -180,7 +194,9 @@ impl ComputeGhosts {
         let limits = device.limits();
         let mut this = Self {
             spans: pipeline("spans"),
-            resolve: pipeline("resolve"),
+            resolve_scan: pipeline("resolve"),
+            resolve_runs: pipeline("resolve_runs"),
+            scan: device.adapter_info().device_type != wgpu::DeviceType::Cpu,
             mask: storage(device, queue, "ghost mask", &[0; 16], wgpu::BufferUsages::STORAGE),
             mask_size: 1,
             open_radius: 0.0,
@@ -208,7 +224,7 @@ impl ComputeGhosts {
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
-        pass: &mut wgpu::ComputePass,
+        pass: &mut wgpu_profiler::OwningScope<'_, wgpu::ComputePass<'_>>,
         scene: &FlareScene,
         hdr: &wgpu::TextureView,
         lut_layer: Option<&wgpu::TextureView>,
@@ -244,6 +260,7 @@ impl ComputeGhosts {
             uniforms[at..at + std::mem::size_of::<ComputeStrip>()].copy_from_slice(bytemuck::bytes_of(&s.params));
         }
         let uniform_buffer = storage(device, queue, "ghost strips", &uniforms, wgpu::BufferUsages::UNIFORM);
+        let resolve = if self.scan { &self.resolve_scan } else { &self.resolve_runs };
         for (k, s) in strips.iter().enumerate() {
             let items =
                 storage(device, queue, "ghost items", bytemuck::cast_slice(&s.items), wgpu::BufferUsages::STORAGE);
@@ -264,13 +281,15 @@ impl ComputeGhosts {
                         wgpu::BindGroupEntry { binding: 4, resource: diff.as_entire_binding() },
                     ],
                 });
+                // Timed apart where the device has timestamps inside passes ("ghosts" otherwise).
+                let mut pass = pass.scope("ghost spans");
                 pass.set_pipeline(&self.spans);
                 pass.set_bind_group(0, &group, &[]);
                 pass.dispatch_workgroups(s.groups.0, s.groups.1, 1);
             }
             let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("ghost resolve"),
-                layout: &self.resolve.get_bind_group_layout(0),
+                layout: &resolve.get_bind_group_layout(0),
                 entries: &[
                     wgpu::BindGroupEntry { binding: 0, resource: params },
                     wgpu::BindGroupEntry { binding: 4, resource: diff.as_entire_binding() },
@@ -281,7 +300,8 @@ impl ComputeGhosts {
                     },
                 ],
             });
-            pass.set_pipeline(&self.resolve);
+            let mut pass = pass.scope("ghost resolve");
+            pass.set_pipeline(resolve);
             pass.set_bind_group(0, &group, &[]);
             pass.dispatch_workgroups(s.params.rows, 1, 1);
         }

@@ -1,7 +1,9 @@
 //! The tonemap pass's pipeline for one OCIO display transform: the shader [`super::shaders::tonemap_wgsl`] of
 //! the view's WGSL, and bind group [`WGSL_GROUP`] with the view's LUT textures (and its uniforms, when it has
 //! any), uploaded once. The renderer makes a new one when a frame's view differs from the one it has (by
-//! [`ViewTransform::key`]).
+//! [`ViewTransform::key`]). Where the device runs compute shaders it also gets the pass as compute (`cs_main`,
+//! writing an `rgba8unorm` storage texture: what the renderer uses when the target allows it), beside the
+//! fragment pipeline (`fs_main`) every other target gets.
 
 use crate::view_transform::{ViewTransform, WGSL_GROUP};
 
@@ -10,24 +12,30 @@ pub(super) struct ViewPass {
     pub key: u64,
     pub pipeline: wgpu::RenderPipeline,
     pub group: wgpu::BindGroup,
+    /// The compute form and the layout of its group 2 (the target as a storage texture), where the device
+    /// runs compute.
+    pub compute: Option<(wgpu::ComputePipeline, wgpu::BindGroupLayout)>,
 }
 
 impl ViewPass {
-    /// The pass of `view`, drawing into `target_format`; group 0 is `tonemap_layout` (the frame's resources).
+    /// The pass of `view`, drawing into `target_format` (and, with `compute`, into `rgba8unorm` storage
+    /// textures); group 0 is `tonemap_layout` (the frame's resources).
     pub fn new(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         tonemap_layout: &wgpu::BindGroupLayout,
         target_format: wgpu::TextureFormat,
         view: &ViewTransform,
+        compute: bool,
     ) -> Self {
+        let stages = wgpu::ShaderStages::FRAGMENT | wgpu::ShaderStages::COMPUTE;
         debug_assert_eq!(WGSL_GROUP, 1, "the tonemap pipeline's layout puts the view at group 1");
         let shader = &view.shader;
         let mut entries = Vec::new();
         if shader.uniforms.is_some() {
             entries.push(wgpu::BindGroupLayoutEntry {
                 binding: 0,
-                visibility: wgpu::ShaderStages::FRAGMENT,
+                visibility: stages,
                 ty: wgpu::BindingType::Buffer {
                     ty: wgpu::BufferBindingType::Uniform,
                     has_dynamic_offset: false,
@@ -44,7 +52,7 @@ impl ViewPass {
         for t in &shader.textures {
             entries.push(wgpu::BindGroupLayoutEntry {
                 binding: t.binding,
-                visibility: wgpu::ShaderStages::FRAGMENT,
+                visibility: stages,
                 ty: wgpu::BindingType::Texture {
                     sample_type: wgpu::TextureSampleType::Float { filterable: false },
                     view_dimension: dimension(t.dimensions).1,
@@ -141,6 +149,35 @@ impl ViewPass {
         });
         let pipeline =
             super::buffers::render_pipeline(device, "tonemap", &pipeline_layout, &module, &[], target_format, None);
-        Self { key: view.key, pipeline, group }
+        let compute = compute.then(|| {
+            let output = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("tonemap target"),
+                entries: &[wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::StorageTexture {
+                        access: wgpu::StorageTextureAccess::WriteOnly,
+                        format: wgpu::TextureFormat::Rgba8Unorm,
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                    },
+                    count: None,
+                }],
+            });
+            let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("tonemap compute"),
+                bind_group_layouts: &[Some(tonemap_layout), Some(&layout), Some(&output)],
+                immediate_size: 0,
+            });
+            let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some("tonemap compute"),
+                layout: Some(&layout),
+                module: &module,
+                entry_point: Some("cs_main"),
+                compilation_options: Default::default(),
+                cache: None,
+            });
+            (pipeline, output)
+        });
+        Self { key: view.key, pipeline, group, compute }
     }
 }
