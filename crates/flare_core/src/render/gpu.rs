@@ -728,7 +728,9 @@ impl FlareRenderer {
 
     /// Records the frame into `encoder`, drawing into `target` (of the renderer's target format, the scene's
     /// size): the paraxial ghosts, the LUT instances of `lut` (the atlas from [`Self::set_lut`]), the
-    /// starburst, then the tonemap pass.
+    /// starburst, then the tonemap pass. A target whose texture has a storage binding
+    /// ([`Self::target_usage`]) must be viewed whole, in the texture's own format: the tonemap then writes it
+    /// as a storage texture.
     pub fn render_with_lut(
         &mut self,
         device: &wgpu::Device,
