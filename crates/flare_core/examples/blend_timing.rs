@@ -9,13 +9,9 @@ use std::time::Instant;
 use flare_core::flare::{FlareConfig, PreparedFlare};
 use flare_core::frame::{self, Frame, FrameRequest, LutUse, Sources};
 use flare_core::lut::blend::LiveLut;
+use flare_core::metrics::median;
 use flare_core::optics::library::builtin_lens;
 use flare_core::render::DisplaySettings;
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
-}
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
@@ -52,7 +48,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             blended_ms.push(start.elapsed().as_secs_f64() * 1e3);
             instances = f.lut.as_ref().map_or(0, |l| l.instances.len());
         }
-        let (p, b) = (median(paraxial_ms), median(blended_ms));
+        let (p, b) = (median(&paraxial_ms), median(&blended_ms));
         println!("light {light:?}: paraxial {p:.1} ms, blended {b:.1} ms ({:.2}x), {instances} LUT instances", b / p);
     }
     Ok(())

@@ -10,13 +10,9 @@ use std::time::Instant;
 use flare_core::flare::{FlareConfig, PreparedFlare};
 use flare_core::frame::{self, Frame, FrameRequest, GpuDrawer, LutUse, Sources};
 use flare_core::lut::blend::LiveLut;
+use flare_core::metrics::median;
 use flare_core::optics::library::builtin_lens;
 use flare_core::render::DisplaySettings;
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
-}
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
@@ -47,7 +43,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             start.elapsed().as_secs_f64() * 1e3
         })
         .collect();
-    println!("CPU twin: {:.1} ms", median(cpu));
+    println!("CPU twin: {:.1} ms", median(&cpu));
     for raster in [false, true] {
         let mut drawer = GpuDrawer::new(true)?;
         if raster {
@@ -73,8 +69,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "GPU ({}, {} passes): wall {:.1} ms, GPU time by timestamps {:.2} ms (last frame: {})",
             drawer.ctx.adapter.name,
             if raster { "raster" } else { "compute" },
-            median(wall),
-            median(gpu),
+            median(&wall),
+            median(&gpu),
             last.unwrap_or_else(|| "no timestamp queries".to_owned())
         );
     }

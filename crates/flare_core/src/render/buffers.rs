@@ -77,6 +77,13 @@ pub(crate) fn compute_pipeline(
     })
 }
 
+/// Whether `device` is a software rasteriser's (lavapipe): there a workgroup barrier costs more than a
+/// scattered read and a workgroup's invocations run one SIMD batch after another, so the compute passes keep
+/// one invocation per row (and per triangle) where a GPU splits the work finer.
+pub(crate) fn software_device(device: &wgpu::Device) -> bool {
+    device.adapter_info().device_type == wgpu::DeviceType::Cpu
+}
+
 /// The HDR accumulation format.
 pub const HDR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 

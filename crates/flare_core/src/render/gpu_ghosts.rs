@@ -27,7 +27,7 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::buffers::{HDR_FORMAT, compute_pipeline, storage, texture_2d};
+use super::buffers::{HDR_FORMAT, compute_pipeline, software_device, storage, texture_2d};
 use super::cpu::ghosts::{MaskRows, without_open_stops};
 use super::cpu::quads::{accumulation_scale, covered};
 use super::shaders::GHOSTS_COMPUTE_WGSL;
@@ -196,7 +196,7 @@ impl ComputeGhosts {
             spans: pipeline("spans"),
             resolve_scan: pipeline("resolve"),
             resolve_runs: pipeline("resolve_runs"),
-            scan: device.adapter_info().device_type != wgpu::DeviceType::Cpu,
+            scan: !software_device(device),
             mask: storage(device, queue, "ghost mask", &[0; 16], wgpu::BufferUsages::STORAGE),
             mask_size: 1,
             open_radius: 0.0,

@@ -44,7 +44,7 @@
 //! that fit the largest storage buffer the adapter binds. A device lost on the way is
 //! [`GpuError::Lost`] (the command line then traces on the CPU).
 
-use super::buffers::{compute_pipeline, storage};
+use super::buffers::{compute_pipeline, software_device, storage};
 use super::gpu::{GpuContext, GpuError, PassTimes, map_read, read_texture, texture_2d};
 use super::shaders::{RAYGRID_BOX_WGSL, RAYGRID_SPLAT_WGSL, RAYGRID_TRACE_WGSL};
 use crate::image::HdrImage;
@@ -257,9 +257,7 @@ impl GpuRayGrid {
         });
         let limits = device.limits();
         let row_split = row_split(device);
-        let box_pipeline = box_pipeline(device, &box_module, row_split);
-        let resolve_entry = if row_split > 1 { "resolve_box_scan" } else { "resolve_box" };
-        let resolve_pipeline = compute_pipeline(device, &box_module, resolve_entry);
+        let (box_pipeline, resolve_pipeline) = box_pipelines(device, &box_module, row_split);
         Self {
             trace_module,
             trace_pipelines: Default::default(),
@@ -285,9 +283,13 @@ impl GpuRayGrid {
     /// ([`row_split`]): the same image (tests draw both on lavapipe).
     pub fn set_row_split(&mut self, device: &wgpu::Device, n: u32) {
         self.row_split = n.clamp(1, 64);
-        self.box_pipeline = box_pipeline(device, &self.box_module, self.row_split);
-        let entry = if self.row_split > 1 { "resolve_box_scan" } else { "resolve_box" };
-        self.resolve_pipeline = compute_pipeline(device, &self.box_module, entry);
+        (self.box_pipeline, self.resolve_pipeline) = box_pipelines(device, &self.box_module, self.row_split);
+    }
+
+    /// Workgroups of the resolve for a strip of `rows`: one invocation per row, or with the rows split (a GPU)
+    /// one workgroup per row (`resolve_box_scan`).
+    fn resolve_groups(&self, rows: u32) -> u32 {
+        if self.row_split > 1 { rows } else { rows.div_ceil(WORKGROUP) }
     }
 
     /// The ghosts of `renderer` for a light at the frame position `light_deg`, seen in `window`, a `cells` x
@@ -553,9 +555,8 @@ impl GpuRayGrid {
             uniforms[at..at + std::mem::size_of::<BoxParams>()].copy_from_slice(bytemuck::bytes_of(&params));
         };
         for (s, &first_row) in strips.iter().enumerate() {
-            // The resolve: one invocation per row of the strip, or one workgroup per row (the scan).
             let rows = strip_rows.min(window.height - first_row);
-            let groups = u64::from(if self.row_split > 1 { rows } else { rows.div_ceil(WORKGROUP) });
+            let groups = u64::from(self.resolve_groups(rows));
             let groups_x = groups.min(max_groups).max(1) as u32;
             let base = BoxParams {
                 width: window.width,
@@ -633,7 +634,7 @@ impl GpuRayGrid {
                 ));
             }
             let rows = strip_rows.min(window.height - first_row);
-            let groups = if self.row_split > 1 { rows } else { rows.div_ceil(WORKGROUP) };
+            let groups = self.resolve_groups(rows);
             let groups_x = groups.min(max_groups as u32).max(1);
             let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("raygrid resolve"),
@@ -897,9 +898,14 @@ fn vertex_bytes(cells: usize) -> u64 {
     ((cells + 1) * (cells + 1)) as u64 * std::mem::size_of::<GpuVertex>() as u64
 }
 
-/// `splat_box` with `row_split` invocations per triangle.
-fn box_pipeline(device: &wgpu::Device, module: &wgpu::ShaderModule, row_split: u32) -> wgpu::ComputePipeline {
-    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+/// `splat_box` with `row_split` invocations per triangle, and the resolve that goes with it: a workgroup's
+/// scan per row where the rows are split (a GPU), else an invocation per row.
+fn box_pipelines(
+    device: &wgpu::Device,
+    module: &wgpu::ShaderModule,
+    row_split: u32,
+) -> (wgpu::ComputePipeline, wgpu::ComputePipeline) {
+    let splat = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
         label: Some("splat_box"),
         layout: None,
         module,
@@ -909,7 +915,9 @@ fn box_pipeline(device: &wgpu::Device, module: &wgpu::ShaderModule, row_split: u
             ..Default::default()
         },
         cache: None,
-    })
+    });
+    let resolve = compute_pipeline(device, module, if row_split > 1 { "resolve_box_scan" } else { "resolve_box" });
+    (splat, resolve)
 }
 
 /// Invocations of `splat_box` per triangle (its `ROW_SPLIT`, each taking every n-th row): 1 on a software
@@ -917,7 +925,7 @@ fn box_pipeline(device: &wgpu::Device, module: &wgpu::ShaderModule, row_split: u
 /// invocation walking a large triangle's rows alone keeps its warp waiting (NVIDIA H200, the Nikon at
 /// 1920x1080: the splat took 59 ms at grid 64 and 114 ms at grid 32, whose triangles are four times larger).
 fn row_split(device: &wgpu::Device) -> u32 {
-    if device.adapter_info().device_type == wgpu::DeviceType::Cpu { 1 } else { 8 }
+    if software_device(device) { 1 } else { 8 }
 }
 
 /// The limits every GPU ray-grid render checks before anything is dispatched: the tracer's workgroups, one
