@@ -16,6 +16,9 @@
 // upsample; here each pixel samples the instance at the four coarse pixel centres around it (indices clamped at
 // the edges as the CPU's `add_upsampled` does) and interpolates them with the same weights. Levels above 0 are
 // only used when the instances are added.
+//
+// An instance's `rect` is the atlas rectangle of the mip level it is drawn from (`LutScene::choose_mips`): the
+// same window of the sensor at the level's texels, so nothing here depends on the level.
 
 struct LutInstance {
     centre_axis_x: vec4<f32>, // quad centre (image pixels); pixels per unit q.x

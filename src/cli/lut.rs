@@ -61,11 +61,15 @@ pub struct BakeArgs {
     /// Most texels across an entry of a ghost small on the sensor.
     #[arg(long, default_value_t = BakeSettings::default().res)]
     pub res: u32,
-    /// Texels across the sensor's diagonal at the least (e.g. 512): large ghosts get finer entries (up to 1024
-    /// texels across) so that they show no stair steps when stretched over a large frame, at a cost in memory
-    /// and frame time (README); 0, the default, turns it off.
+    /// Texels across the sensor's diagonal for the entries of ghosts large on the sensor whose detail needs them
+    /// (--detail-tolerance): up to 2040 texels across, so that they show no stair steps when stretched over a
+    /// large frame (README); 0 turns it off.
     #[arg(long, default_value_t = BakeSettings::default().diagonal_texels)]
     pub diagonal_texels: u32,
+    /// A large ghost's entry is baked finer (--diagonal-texels) where halving it loses more than this share of
+    /// its light's placement (relative L1): sharp rims and caustics, not smooth blurs. 0: every large ghost.
+    #[arg(long, default_value_t = BakeSettings::default().detail_tolerance)]
+    pub detail_tolerance: f64,
     /// Most ray-grid cells across a ghost's entrance region.
     #[arg(long, default_value_t = BakeSettings::default().grid)]
     pub grid: usize,
@@ -310,6 +314,7 @@ pub fn bake_command(args: &BakeArgs) -> Result<()> {
     let settings = BakeSettings {
         res: args.res,
         diagonal_texels: args.diagonal_texels,
+        detail_tolerance: args.detail_tolerance,
         grid: args.grid,
         phi_steps: args.phi_steps,
         tolerance: args.tolerance,

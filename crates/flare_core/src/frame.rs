@@ -229,13 +229,13 @@ impl Frame {
                     }
                     scene.dropped_non_finite += s.dropped_non_finite;
                     if let (Some(all), Some(l), Some(live)) = (&mut lut_scene, l, lut) {
-                        for (instance, &(lg, entry)) in l.instances.iter().zip(&l.sources) {
+                        for (instance, &(lg, entry, mip)) in l.instances.iter().zip(&l.sources) {
                             let ghost = live.lut.ghosts.get(lg as usize).map_or(usize::MAX, |g| g.ghost as usize);
                             if let Some(weight) = samples.weight(ghost, k) {
                                 let mut i = *instance;
                                 i.colour = i.colour.map(|c| c * weight);
                                 all.instances.push(i);
-                                all.sources.push((lg, entry));
+                                all.sources.push((lg, entry, mip));
                             }
                         }
                         all.dropped_non_finite += l.dropped_non_finite;
@@ -270,7 +270,7 @@ impl Frame {
     pub fn drawn_ghosts(&self, lut: Option<&LiveLut>) -> Vec<u32> {
         let mut ghosts: Vec<u32> = self.scene.instance_ghosts.clone();
         if let (Some(l), Some(live)) = (&self.lut, lut) {
-            ghosts.extend(l.sources.iter().map(|&(lg, _)| live.lut.ghosts[lg as usize].ghost));
+            ghosts.extend(l.sources.iter().map(|&(lg, _, _)| live.lut.ghosts[lg as usize].ghost));
         }
         ghosts.sort_unstable();
         ghosts.dedup();
@@ -311,6 +311,7 @@ fn sharp(
     let lut_scene = lut.map(|live| {
         let out = Window::for_sensor(sensor.width_mm, w, h);
         let mut scene = LutScene::build(live, &flare.system, u, out, &request.blend, &gains);
+        scene.choose_mips(live, display.accumulation_divisor);
         // The LUT images too are culled where they cannot be seen at the frame's exposure.
         scene.cull_faint(flare.config.threshold(request.display.flare_gain()), &live.footprints);
         scene

@@ -75,19 +75,30 @@ fn small_lut(flare: &PreparedFlare) -> GhostLut {
     bake(flare, &renderer, &[3, 7], &settings, None, &|_| {}, &AtomicBool::new(false)).unwrap()
 }
 
-/// `diagonal_texels` makes the entries of a ghost large on the sensor finer than `res` alone would (each texel at
-/// most the sensor diagonal over it, up to 1024 texels across) and leaves small ghosts' entries as they were;
-/// an out-of-range value is refused naming the field.
+/// [`small_lut`] with every large ghost's entries baked finer (`detail_tolerance` 0): entries with mip levels.
+fn fine_lut(flare: &PreparedFlare) -> GhostLut {
+    let renderer = flare.ray_grid_renderer();
+    let settings = BakeSettings { theta_max_deg: Some(16.0), detail_tolerance: 0.0, ..small_settings() };
+    bake(flare, &renderer, &[3, 7], &settings, None, &|_| {}, &AtomicBool::new(false)).unwrap()
+}
+
+/// `diagonal_texels` bakes the entries of a ghost large on the sensor finer than `res` alone would, by a power
+/// of two (up to 1024 texels across), where their detail needs it (`detail_tolerance`): with a tolerance of 0
+/// every large ghost's entry is finer, with one no entry loses, every entry is the `res` bake's, byte for byte.
+/// Out-of-range values are refused naming the field.
 #[test]
-fn large_ghosts_get_finer_entries_with_diagonal_texels() {
+fn large_ghosts_with_detail_get_finer_entries() {
     let flare = flare("tessar");
     let renderer = flare.ray_grid_renderer();
-    let base = BakeSettings { theta_max_deg: Some(8.0), initial_steps: 1, ..small_settings() };
-    let fine = BakeSettings { diagonal_texels: 256, ..base.clone() };
+    let base = BakeSettings { theta_max_deg: Some(8.0), initial_steps: 1, diagonal_texels: 0, ..small_settings() };
     let never = AtomicBool::new(false);
-    let coarse_lut = bake(&flare, &renderer, &[3, 7], &base, None, &|_| {}, &never).unwrap();
-    let fine_lut = bake(&flare, &renderer, &[3, 7], &fine, None, &|_| {}, &never).unwrap();
-    let limit_mm = 2.0 * flare_core::lut::SENSOR_HALF_DIAGONAL_MM / 256.0;
+    let baked = |settings: &BakeSettings| bake(&flare, &renderer, &[3, 7], settings, None, &|_| {}, &never).unwrap();
+    let coarse_lut = baked(&base);
+    let fine_lut = baked(&BakeSettings { diagonal_texels: 256, detail_tolerance: 0.0, ..base.clone() });
+    let smooth_lut = baked(&BakeSettings { diagonal_texels: 256, detail_tolerance: 100.0, ..base.clone() });
+    assert_eq!(smooth_lut.ghosts.iter().map(|g| &g.entries).collect::<Vec<_>>(), {
+        coarse_lut.ghosts.iter().map(|g| &g.entries).collect::<Vec<_>>()
+    });
     let mut finer = 0;
     for (a, b) in coarse_lut.ghosts.iter().flat_map(|g| &g.entries).zip(fine_lut.ghosts.iter().flat_map(|g| &g.entries))
     {
@@ -95,22 +106,115 @@ fn large_ghosts_get_finer_entries_with_diagonal_texels() {
         if a.width == 0 || a.theta_deg != b.theta_deg || a.phi_deg != b.phi_deg {
             continue;
         }
-        assert!(b.texel_mm <= a.texel_mm + 1e-12 && b.texel_mm <= limit_mm.max(a.texel_mm) + 1e-12);
-        assert!(
-            b.width <= flare_core::lut::bake::MAX_ENTRY_TEXELS + 4
-                && b.height <= flare_core::lut::bake::MAX_ENTRY_TEXELS + 4
-        );
-        if b.texel_mm < a.texel_mm {
+        let halvings = (a.texel_mm / b.texel_mm).log2();
+        assert!((halvings - halvings.round()).abs() < 1e-9 && halvings >= -1e-9, "{} -> {}", a.texel_mm, b.texel_mm);
+        let max = flare_core::lut::bake::MAX_ENTRY_TEXELS.max(a.width.max(a.height));
+        assert!(b.width <= max && b.height <= max, "{}x{} texels", b.width, b.height);
+        if halvings.round() > 0.0 {
             finer += 1;
             assert!(b.width > a.width, "{} -> {} texels", a.width, b.width);
+            // Rendered over the same box: the energy agrees to the grids' difference.
+            let ratio = b.energy() / a.energy();
+            assert!((ratio - 1.0).abs() < 0.05, "energy {} -> {}", a.energy(), b.energy());
         } else {
             assert_eq!((a.width, a.height), (b.width, b.height));
         }
     }
     assert!(finer > 0, "no entry of the Tessar's ghosts 3 and 7 is large enough to be made finer");
-    let bad = BakeSettings { diagonal_texels: 5000, ..base };
-    let err = bake(&flare, &renderer, &[3], &bad, None, &|_| {}, &never).unwrap_err().to_string();
-    assert!(err.contains("diagonal_texels"), "{err}");
+    for (bad, field) in [
+        (BakeSettings { diagonal_texels: 5000, ..base.clone() }, "diagonal_texels"),
+        (BakeSettings { detail_tolerance: -1.0, ..base.clone() }, "detail_tolerance"),
+        (BakeSettings { detail_tolerance: f64::NAN, ..base }, "detail_tolerance"),
+    ] {
+        let err = bake(&flare, &renderer, &[3], &bad, None, &|_| {}, &never).unwrap_err().to_string();
+        assert!(err.contains(field), "{err}");
+    }
+}
+
+/// An entry of `width` x `height` texels of 0.1 mm centred at (1, 2) mm, its texels `value(x, y)` (grey).
+fn synthetic_entry(width: u32, height: u32, value: impl Fn(f64, f64) -> f64) -> flare_core::lut::LutEntry {
+    let paraxial = flare_core::ghost::ParaxialFrame { centre_mm: [1.0, 2.0], half_mm: 5.0, energy: 1.0 };
+    let mut e = flare_core::lut::LutEntry::empty(0.0, 0.0, paraxial);
+    (e.centre_mm, e.texel_mm, e.width, e.height) = ([1.0, 2.0], 0.1, width, height);
+    e.texels = flare_core::lut::texels_with_coverage((0..height).flat_map(|y| (0..width).map(move |x| (x, y))).map(
+        |(x, y)| {
+            let v = value(f64::from(x), f64::from(y)) as f32;
+            [v, v, v]
+        },
+    ));
+    e
+}
+
+/// Halving an entry (a mip level, the bake's reduction) keeps its energy and where its light lies (odd sizes
+/// padded), and `detail_lost` tells a thin ring, which halving smears, from a smooth blob, which it keeps.
+#[test]
+fn halving_keeps_energy_and_place_and_detail_lost_tells_a_ring_from_a_blob() {
+    let blob = synthetic_entry(301, 199, |x, y| (-((x - 170.0).powi(2) + (y - 90.0).powi(2)) / 2000.0).exp());
+    let ring = synthetic_entry(301, 199, |x, y| {
+        let r = (x - 150.0).hypot(y - 99.0);
+        if (r - 80.0).abs() < 0.7 { 1.0 } else { 0.0 }
+    });
+    for e in [&blob, &ring] {
+        let h = e.halved();
+        assert_eq!((h.width, h.height), (151, 100));
+        assert!((h.texel_mm - 0.2).abs() < 1e-15);
+        assert!((h.energy() / e.energy() - 1.0).abs() < 2e-3, "{} -> {}", e.energy(), h.energy());
+        let (a, b) = (e.shape().unwrap(), h.shape().unwrap());
+        for axis in 0..2 {
+            // Normalised by the half-size 5 mm: within a twentieth of a fine texel (0.1 mm).
+            assert!((a.mean[axis] - b.mean[axis]).abs() * 5.0 < 0.005, "{:?} -> {:?}", a.mean, b.mean);
+        }
+    }
+    let (smooth, sharp) = (blob.detail_lost(&blob.halved()), ring.detail_lost(&ring.halved()));
+    eprintln!("detail lost by halving: blob {smooth:.4}, ring {sharp:.4}");
+    assert!(smooth < 0.01 && sharp > 0.3, "blob {smooth}, ring {sharp}");
+    let empty = flare_core::lut::LutEntry::empty(0.0, 0.0, blob.paraxial);
+    assert!(empty.halved().is_empty() && empty.detail_lost(&empty) == 0.0);
+}
+
+/// A LUT whose entries were baked finer than the default draws each instance from the mip level its texels on
+/// the frame need (`LutScene::choose_mips`): the coarser levels on a small frame, level 0 on a large one; a
+/// small frame drawn from them keeps the energy of the finest level drawn everywhere and stays close to it.
+#[test]
+fn fine_entries_are_drawn_from_the_mip_level_the_frame_needs() {
+    let flare = flare("tessar");
+    let live = LiveLut::new(fine_lut(&flare));
+    let with_mips = live.mips.iter().flatten().filter(|m| !m.is_empty()).count();
+    assert!(with_mips > 0, "no entry is fine enough to have mip levels");
+    for (m, level) in live.mips.iter().flatten().flat_map(|l| l.iter().enumerate()) {
+        assert!(level.width.max(level.height) >= flare_core::lut::blend::MIP_FLOOR_TEXELS, "level {m}");
+    }
+    let light = light_position_deg(9.0, 140.0);
+    let mip_of = |w: u32, h: u32| {
+        let frame = scenes(&live, &flare, light, w, h, &BlendSettings::default(), true);
+        frame.lut.unwrap_or_default().sources.iter().map(|s| s.2).max().unwrap_or(0)
+    };
+    let (small, large) = (mip_of(240, 160), mip_of(3840, 2560));
+    eprintln!("mip levels drawn: {small} at 240x160, {large} at 3840x2560");
+    assert!(small > 0 && large < small, "{small} {large}");
+    let frame = scenes(&live, &flare, light, 240, 160, &BlendSettings::default(), true);
+    let chosen = frame.lut.clone().unwrap_or_default();
+    let mut finest = chosen.clone();
+    let layout = &live.layout;
+    for (inst, source) in finest.instances.iter_mut().zip(finest.sources.iter_mut()) {
+        // Back to level 0: its atlas rectangle, as `LutScene::build` placed it.
+        let (g, k) = (source.0 as usize, source.1 as usize);
+        let (page, x0, y0) = layout.slots[g][k][0];
+        let e = &live.lut.ghosts[g].entries[k];
+        let side = flare_core::lut::blend::ATLAS_PAGE as f32;
+        inst.rect = [x0 as f32 / side, y0 as f32 / side, (x0 + e.width) as f32 / side, (y0 + e.height) as f32 / side];
+        inst.axis_y_page[2] = page as f32;
+        source.2 = 0;
+    }
+    let acc = (frame.scene.hdr_width, frame.scene.hdr_height);
+    let (mut a, mut b) = (HdrImage::black(acc.0, acc.1), HdrImage::black(acc.0, acc.1));
+    flare_core::lut::blend::lut_pass((240, 160), &chosen, &live, &mut a);
+    flare_core::lut::blend::lut_pass((240, 160), &finest, &live, &mut b);
+    let energy = |img: &HdrImage| img.pixels.iter().map(|p| f64::from(p[0] + p[1] + p[2])).sum::<f64>();
+    let c = flare_core::metrics::compare(&a, &[], &b, &[]);
+    let ratio = energy(&a) / energy(&b);
+    eprintln!("mips against level 0 at 240x160: PSNR {:.1} dB, energy {ratio:.4}", c.psnr_db);
+    assert!(c.psnr_db > 35.0 && (ratio - 1.0).abs() < 0.01, "{c:?}, energy {ratio}");
 }
 
 #[test]
@@ -426,13 +530,16 @@ fn coarsely_sampled_lut_images_match_every_pixel_sampling() {
 fn the_gpu_draws_lut_ghosts_as_its_cpu_twin_does() {
     let Some(ctx) = flare_core::render::gpu::test_context() else { return };
     let flare = flare("tessar");
-    let live = LiveLut::new(small_lut(&flare));
+    // The small LUT's additive frames sample magnified instances coarsely; the fine LUT's draw some instances
+    // from their mip levels.
+    let (small, fine) = (LiveLut::new(small_lut(&flare)), LiveLut::new(fine_lut(&flare)));
     let light = light_position_deg(9.0, 140.0);
     // raster: 0 compute passes, 1 raster passes, 2 compute ghosts with the LUT images rasterised over them (a
     // frame whose LUT bins pass the adapter's storage binding limit).
-    for (mode, raster) in [0, 1, 2].into_iter().flat_map(|r| [(BlendMode::Additive, r), (BlendMode::Alpha, r)]) {
+    let cases = [0, 1, 2].into_iter().flat_map(|r| [(BlendMode::Additive, r), (BlendMode::Alpha, r)]);
+    for ((mode, raster), (name, live)) in cases.flat_map(|c| [(c, ("small", &small)), (c, ("fine", &fine))]) {
         let blend = BlendSettings { mode, ..BlendSettings::default() };
-        let frame = scenes(&live, &flare, light, 160, 120, &blend, true);
+        let frame = scenes(live, &flare, light, 160, 120, &blend, true);
         let (mut scene, lut_scene) = (frame.scene.clone(), frame.lut.clone().unwrap_or_default());
         scene.globals.starburst = [0.0; 4];
         assert!(!lut_scene.instances.is_empty());
@@ -444,9 +551,14 @@ fn the_gpu_draws_lut_ghosts_as_its_cpu_twin_does() {
             &lut_scene,
             &live.footprints,
         );
-        eprintln!("{mode:?}: sampling levels {levels:?}");
-        assert_eq!(levels.iter().any(|&l| l > 0), mode == BlendMode::Additive, "{levels:?}");
-        let cpu = render_cpu(&flare, &live, &scene, &lut_scene);
+        let mips: Vec<u32> = lut_scene.sources.iter().map(|s| s.2).collect();
+        eprintln!("{name} {mode:?}: sampling levels {levels:?}, mip levels {mips:?}");
+        let additive = mode == BlendMode::Additive;
+        match name {
+            "small" => assert_eq!(levels.iter().any(|&l| l > 0), additive, "{levels:?}"),
+            _ => assert_eq!(mips.iter().any(|&m| m > 0), additive, "{mips:?}"),
+        }
+        let cpu = render_cpu(&flare, live, &scene, &lut_scene);
         let mut renderer =
             flare_core::render::gpu::FlareRenderer::new(&ctx.device, &ctx.queue, wgpu::TextureFormat::Rgba8Unorm);
         match raster {
@@ -456,7 +568,7 @@ fn the_gpu_draws_lut_ghosts_as_its_cpu_twin_does() {
         }
         assert_eq!(renderer.ghosts_as_compute(), raster != 1);
         renderer.set_aperture(&ctx.device, &ctx.queue, &flare.mask);
-        renderer.set_lut(&ctx.device, &ctx.queue, Some(&live));
+        renderer.set_lut(&ctx.device, &ctx.queue, Some(live));
         flare_core::render::gpu::render_display_with_lut(&ctx, &mut renderer, &scene, Some(&lut_scene)).unwrap();
         let gpu = flare_core::render::gpu::read_hdr(&ctx, &renderer).unwrap();
         let mean = |img: &HdrImage| img.pixels.iter().map(|p| f64::from(p[0] + p[1] + p[2])).sum::<f64>();
@@ -481,7 +593,7 @@ fn the_gpu_draws_lut_ghosts_as_its_cpu_twin_does() {
             })
             .fold(0.0f32, f32::max);
         eprintln!(
-            "{mode:?} ({}): {:.4} of the energy apart, display worst {worst:.3}/255",
+            "{name} {mode:?} ({}): {:.4} of the energy apart, display worst {worst:.3}/255",
             ["compute", "raster", "compute ghosts, raster LUT"][raster],
             diff / mean(&cpu)
         );

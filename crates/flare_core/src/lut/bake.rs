@@ -12,6 +12,14 @@
 //!    (never finer than [`super::MIN_TEXEL_MM`]), and the ghost alone is rendered into it by the reference
 //!    renderer ([`Grid::Adaptive`], up to [`BakeSettings::grid`] cells, over only the region the scout saw
 //!    light pass: [`crate::raytrace::Ghosts::Scouted`]). Alpha is the coverage ([`super::texels_with_coverage`]).
+//!    **Detail**: where the ghost is large on the sensor (`res` texels coarser than
+//!    [`BakeSettings::diagonal_texels`] across the sensor's diagonal) and an entry loses more than
+//!    [`BakeSettings::detail_tolerance`] of its light's placement when halved ([`super::LutEntry::detail_lost`]: a
+//!    sharp rim or caustic reaches its texels), the column is drawn again with texels `res`'s halved the number
+//!    of times that comes nearest, and each entry is halved back while that loses no more than the tolerance. A
+//!    smooth ghost keeps its `res` entries, byte for byte; a sharp one is drawn finer and stored as fine as its
+//!    detail needs (the run time's mip levels, [`super::blend::LiveLut`], draw it on small frames for the cost
+//!    of the `res` entry).
 //! 2. **Thetas where the pattern changes**: the angles start at `initial_steps` even steps from 0 to the
 //!    useful field (the light angle whose image reaches the corner of the 36 x 24 mm sensor). Every interval
 //!    wider than twice [`BakeSettings::min_step_deg`] gets its middle rendered and kept; while the run time's
@@ -87,14 +95,21 @@ pub struct BakeSettings {
     pub theta_max_deg: Option<f64>,
     /// Most texels across an entry of a ghost small on the sensor.
     pub res: u32,
-    /// Texels across the sensor's diagonal at the least: a ghost large on the sensor gets entries finer than
-    /// `res` texels across (up to [`MAX_ENTRY_TEXELS`]), so that stretched over the frame it does not show its
-    /// texels as stair steps. 0 (the default): `res` alone. Measured (README, "LUT images without stair
-    /// steps"): at 512 the Heliar's large ghost at 1536x1024 goes from 31.5 to 33.8 dB against the reference
-    /// with no visible steps (LUT 0.45 -> 5.4 MB), but the Nikon zoom's LUT from 45 M to 228 M texels and its
-    /// blended frame at 480x320 from 1.1-1.5x to 2.6-4.8x the paraxial frame: too dear to be the default before
-    /// the entries have a mip pyramid.
+    /// Texels across the sensor's diagonal that an entry of a ghost large on the sensor is baked at when its
+    /// detail needs them ([`Self::detail_tolerance`]): its texels are those of `res` halved the number of times
+    /// that comes nearest (up to [`MAX_ENTRY_TEXELS`] across), so that stretched over the frame it does not show
+    /// its texels as stair steps. 0: `res` alone. The run time draws such an entry from a mip pyramid
+    /// ([`super::blend::LiveLut`]), so a small frame samples it about as often as the `res` entry. Measured
+    /// (README, "LUT images without stair steps"): the Heliar's rim ghost at 1536x1024 goes from 31.5 dB at `res`
+    /// alone to 33.8 dB at 512 (the default: 4-pixel beading left along the rim) and 35.0 dB at 1024 (no steps
+    /// seen), the Nikon zoom's LUT from 45 M texels to 58 M and 95 M.
     pub diagonal_texels: u32,
+    /// An entry of a large ghost is baked finer ([`Self::diagonal_texels`]) where halving it at `res` loses more
+    /// than this share of its light's placement ([`super::LutEntry::detail_lost`]: relative L1 of luminance
+    /// against the halved image's bilinear upsample): a sharp rim or caustic, not a smooth blur; the finer entry
+    /// is then halved back while that loses no more than this. On the Heliar the rim ghost loses 0.16-0.24 at
+    /// `res`, the smooth one 0.010-0.015; on the Nikon zoom 99 of 1031 large entries lose more than 0.05.
+    pub detail_tolerance: f64,
     /// Most ray-grid cells across a ghost's entrance region (the reference renderer's adaptive grid). 64 by
     /// default: over the scouted region that is about one cell per two texels; 32 costs the double Gauss
     /// 0.002-0.004 SSIM at 0 and 13 deg (how the default was chosen: CHANGELOG.md).
@@ -114,7 +129,8 @@ impl Default for BakeSettings {
         Self {
             theta_max_deg: None,
             res: 128,
-            diagonal_texels: 0,
+            diagonal_texels: 512,
+            detail_tolerance: 0.05,
             grid: 64,
             phi_steps: 2,
             initial_steps: 4,
@@ -171,6 +187,9 @@ impl BakeSettings {
         if self.diagonal_texels > 4096 {
             return bad("diagonal_texels", "use 0 (off) to 4096 texels");
         }
+        if !(self.detail_tolerance.is_finite() && self.detail_tolerance >= 0.0) {
+            return bad("detail_tolerance", "must be 0 or more");
+        }
         if !(4..=crate::raytrace::REFERENCE_GRID * 2).contains(&self.grid) {
             return bad("grid", "use 4 to 512 cells");
         }
@@ -210,8 +229,9 @@ pub fn refinement_done(error: f64, parent_error: f64, tolerance: f64) -> bool {
 
 /// An entry's window reaches this many times the sensor's half-diagonal from the axis, at most.
 pub const VISIBLE_MARGIN: f64 = 1.15;
-/// The most texels across an entry (a large ghost's, [`BakeSettings::diagonal_texels`]).
-pub const MAX_ENTRY_TEXELS: u32 = 1024;
+/// The most texels across an entry (a large ghost's, [`BakeSettings::diagonal_texels`]): an atlas page
+/// ([`super::blend::ATLAS_PAGE`]) less the zero border, with room to spare.
+pub const MAX_ENTRY_TEXELS: u32 = 2040;
 
 /// Renders one entry: ghost `g` with the light at `theta_deg` and the azimuth `axis + phi_deg`.
 pub fn render_entry(
@@ -252,53 +272,124 @@ pub fn render_column(
     let base = light_position_deg(theta_deg, symmetry.axis_deg + base_deg);
     let turns: Vec<f64> = phis_deg.iter().map(|p| p - base_deg).collect();
     let scout = renderer.scout(g, base, 48, &turns);
-    let mut entries: Vec<LutEntry> = Vec::with_capacity(phis_deg.len());
+    // Only what can reach the frame: the sensor's corners at any azimuth, with a margin for the frames that
+    // interpolation and fitting move an entry by.
+    let reach = VISIBLE_MARGIN * super::SENSOR_HALF_DIAGONAL_MM;
+    let boxes: Vec<Option<[f64; 4]>> = scout
+        .footprints_mm
+        .iter()
+        .map(|f| {
+            f.map(|b| [b[0].max(-reach), b[1].max(-reach), b[2].min(reach), b[3].min(reach)])
+                .filter(|b| b[0] < b[2] && b[1] < b[3])
+        })
+        .collect();
+    let empty: Vec<LutEntry> = phis_deg
+        .iter()
+        .map(|&phi_deg| {
+            let light = light_position_deg(theta_deg, symmetry.axis_deg + phi_deg);
+            let u = light_slopes_for_frame_position(light[0], light[1]);
+            LutEntry::empty(theta_deg, phi_deg, flare.system.paraxial_frame(g, u, MIN_TEXEL_MM))
+        })
+        .collect();
+    // The column at `res` texels across (halvings 0), then, where a ghost is large on the sensor and an entry
+    // loses more than `detail_tolerance` of its light's placement when halved (its detail reaches its texels),
+    // again with texels 2^halvings finer, each entry then halved back while that loses no more.
+    let mut entries = draw_column(renderer, tracing, &scout, &boxes, &empty, base_deg, settings, 0);
+    let finest = boxes.iter().flatten().map(|b| finer_halvings(b, settings)).max().unwrap_or(0);
+    let detailed = |e: &LutEntry| !e.is_empty() && e.detail_lost(&e.halved()) > settings.detail_tolerance;
+    if finest > 0 && entries.iter().any(detailed) {
+        let fine = draw_column(renderer, tracing, &scout, &boxes, &empty, base_deg, settings, finest);
+        entries = fine
+            .into_iter()
+            .zip(entries)
+            .map(|(mut e, coarse)| {
+                if e.is_empty() {
+                    return coarse;
+                }
+                while e.texel_mm < 0.75 * coarse.texel_mm {
+                    let halved = e.halved();
+                    if e.detail_lost(&halved) > settings.detail_tolerance {
+                        break;
+                    }
+                    e = halved;
+                }
+                super::set_coverage(&mut e.texels);
+                e
+            })
+            .collect();
+    }
+    entries
+}
+
+/// The texel (mm) of an entry whose ghost lands on `b` (x0, y0, x1, y1 in mm) at `res` texels across.
+fn res_texel_mm(b: &[f64; 4], settings: &BakeSettings) -> f64 {
+    ((b[2] - b[0]).max(b[3] - b[1]) / f64::from(settings.res - 2)).max(MIN_TEXEL_MM)
+}
+
+/// How many halvings of [`res_texel_mm`] come nearest [`BakeSettings::diagonal_texels`] across the sensor's
+/// diagonal for a ghost landing on `b`, no finer than [`MIN_TEXEL_MM`] and at most [`MAX_ENTRY_TEXELS`] across
+/// with the margin: 0 when the ghost is small on the sensor (or the setting is off).
+fn finer_halvings(b: &[f64; 4], settings: &BakeSettings) -> u32 {
+    if settings.diagonal_texels == 0 {
+        return 0;
+    }
+    let coarse = res_texel_mm(b, settings);
+    let target = 2.0 * super::SENSOR_HALF_DIAGONAL_MM / f64::from(settings.diagonal_texels);
+    let extent_mm = (b[2] - b[0]).max(b[3] - b[1]);
+    let mut k = (coarse / target).log2().round().clamp(0.0, 16.0) as u32;
+    while k > 0 && {
+        let texel = coarse / f64::from(1u32 << k);
+        texel < MIN_TEXEL_MM || (extent_mm / texel).ceil() + f64::from(4u32 << k) > f64::from(MAX_ENTRY_TEXELS)
+    } {
+        k -= 1;
+    }
+    k
+}
+
+/// The column's entries (`empty`'s lights and paraxial frames) drawn with texels `2^-halvings` of
+/// [`res_texel_mm`] into windows around `boxes` (the scouted footprints; `None`: the entry stays empty).
+#[allow(clippy::too_many_arguments)]
+fn draw_column(
+    renderer: &RayGridRenderer,
+    tracing: &dyn ColumnTracer,
+    scout: &Scout,
+    boxes: &[Option<[f64; 4]>],
+    empty: &[LutEntry],
+    base_deg: f64,
+    settings: &BakeSettings,
+    halvings: u32,
+) -> Vec<LutEntry> {
+    let mut entries = empty.to_vec();
     let mut views = Vec::new();
-    for (&phi_deg, footprint) in phis_deg.iter().zip(&scout.footprints_mm) {
-        let light = light_position_deg(theta_deg, symmetry.axis_deg + phi_deg);
-        let u = light_slopes_for_frame_position(light[0], light[1]);
-        let paraxial = flare.system.paraxial_frame(g, u, MIN_TEXEL_MM);
-        let mut entry = LutEntry::empty(theta_deg, phi_deg, paraxial);
-        // Only what can reach the frame: the sensor's corners at any azimuth, with a margin for the frames
-        // that interpolation and fitting move an entry by.
-        let reach = VISIBLE_MARGIN * super::SENSOR_HALF_DIAGONAL_MM;
-        let footprint = footprint
-            .map(|b| [b[0].max(-reach), b[1].max(-reach), b[2].min(reach), b[3].min(reach)])
-            .filter(|b| b[0] < b[2] && b[1] < b[3]);
-        if let Some(b) = footprint {
-            let (w_mm, h_mm) = ((b[2] - b[0]).max(0.0), (b[3] - b[1]).max(0.0));
-            let mut texel_mm = w_mm.max(h_mm) / f64::from(settings.res - 2);
-            if settings.diagonal_texels > 0 {
-                // A large ghost: finer, up to 1024 texels across.
-                let fine_mm = 2.0 * super::SENSOR_HALF_DIAGONAL_MM / f64::from(settings.diagonal_texels);
-                texel_mm = texel_mm.min(fine_mm.max(w_mm.max(h_mm) / f64::from(MAX_ENTRY_TEXELS - 4)));
-            }
-            let texel_mm = texel_mm.max(MIN_TEXEL_MM);
-            // Two texels of margin each side: the bilinear splats of the rim's triangles land there.
-            let (width, height) = ((w_mm / texel_mm).ceil() as u32 + 4, (h_mm / texel_mm).ceil() as u32 + 4);
-            let window = Window {
-                centre_mm: [0.5 * (b[0] + b[2]), 0.5 * (b[1] + b[3])],
-                width_mm: texel_mm * f64::from(width),
-                width,
-                height,
-            };
-            (entry.centre_mm, entry.texel_mm, entry.width, entry.height) = (window.centre_mm, texel_mm, width, height);
-            views.push((entries.len(), View { window, turn_deg: phi_deg - base_deg }));
-        }
-        entries.push(entry);
+    for (k, (entry, b)) in entries.iter_mut().zip(boxes).enumerate() {
+        let Some(b) = b else { continue };
+        let (w_mm, h_mm) = (b[2] - b[0], b[3] - b[1]);
+        let texel_mm = res_texel_mm(b, settings) / f64::from(1u32 << halvings);
+        // Two `res` texels of margin each side: the bilinear splats of the rim's triangles land there, and the
+        // light the scout's coarse cells did not see reaches there (a finer entry keeps the margin in mm).
+        let margin = 4 << halvings;
+        let (width, height) = ((w_mm / texel_mm).ceil() as u32 + margin, (h_mm / texel_mm).ceil() as u32 + margin);
+        let window = Window {
+            centre_mm: [0.5 * (b[0] + b[2]), 0.5 * (b[1] + b[3])],
+            width_mm: texel_mm * f64::from(width),
+            width,
+            height,
+        };
+        (entry.centre_mm, entry.texel_mm, entry.width, entry.height) = (window.centre_mm, texel_mm, width, height);
+        views.push((k, View { window, turn_deg: entry.phi_deg - base_deg }));
     }
     if views.is_empty() {
         return entries;
     }
     let only: Vec<View> = views.iter().map(|v| v.1).collect();
-    let Some(images) = tracing.trace_column(renderer, &scout, only, Grid::Adaptive(settings.grid)) else {
-        return entries.into_iter().map(|e| LutEntry::empty(e.theta_deg, e.phi_deg, e.paraxial)).collect();
+    let Some(images) = tracing.trace_column(renderer, scout, only, Grid::Adaptive(settings.grid)) else {
+        return empty.to_vec();
     };
     for ((k, _), image) in views.into_iter().zip(images) {
         let entry = &mut entries[k];
         let peak = image.pixels.iter().map(|p| luminance([p[0], p[1], p[2]].map(f64::from))).fold(0.0, f64::max);
         if peak <= 0.0 {
-            *entry = LutEntry::empty(entry.theta_deg, entry.phi_deg, entry.paraxial);
+            *entry = empty[k].clone();
             continue;
         }
         entry.texels = texels_with_coverage(image.pixels.iter().map(|p| [p[0], p[1], p[2]]));
@@ -377,7 +468,7 @@ pub fn interpolation_error(a: &LutEntry, b: &LutEntry, t: f64, target: &LutEntry
 
 /// Revision of how entries are chosen and rendered, part of every ghost's key: a LUT baked by an older
 /// revision is re-baked, not kept, by `--update` (what each revision changed: CHANGELOG.md).
-const BAKE_REVISION: u32 = 3;
+const BAKE_REVISION: u32 = 4;
 
 /// The key of ghost `g` for these settings (see the module documentation): a [`crate::fingerprint::of`] of
 /// the bake revision, the lens's fingerprint, the ghost and the settings.

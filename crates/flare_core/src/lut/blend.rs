@@ -28,6 +28,14 @@
 //! cannot be seen at the frame's exposure. An added instance magnified so that a texel spans a pixel or more
 //! is sampled every 2 or 4 pixels and its samples bilinearly upsampled ([`instance_levels`]), in the twin and
 //! the compute pass alike.
+//!
+//! An entry of twice [`MIP_FLOOR_TEXELS`] or more across (one baked finer than the default for its detail,
+//! `bake::BakeSettings::diagonal_texels`, or with a larger `res`) gets mip levels on load ([`LiveLut::mips`],
+//! each [`super::LutEntry::halved`] from the one before, while they keep [`MIP_FLOOR_TEXELS`] across), each a
+//! slot of its own in the atlas. [`LutScene::choose_mips`] draws each instance from the finest level whose
+//! texels span at least [`MIP_TEXEL_PX`] accumulation pixels: the instance keeps its quad and takes the level's
+//! atlas rectangle (the same window), so the shaders need nothing new, and a small frame samples a fine entry
+//! about as often as the default one.
 
 use bytemuck::{Pod, Zeroable};
 use rayon::prelude::*;
@@ -122,37 +130,38 @@ impl BlendSettings {
     }
 }
 
-/// Where every entry lies in the atlas: per LUT ghost and entry, `(page, x, y)` of its top-left texel (inside
-/// its one-texel zero border).
+/// Where every entry's image (and each of its mip levels) lies in the atlas: per LUT ghost, entry and level,
+/// `(page, x, y)` of its top-left texel (inside its one-texel zero border).
 #[derive(Clone, Debug, PartialEq)]
 pub struct AtlasLayout {
     pub pages: u32,
-    /// `slots[lut_ghost][entry]`; `None` for an empty entry.
-    pub slots: Vec<Vec<Option<(u32, u32, u32)>>>,
+    /// `slots[lut_ghost][entry][level]`; empty for an empty entry.
+    pub slots: Vec<Vec<Vec<(u32, u32, u32)>>>,
 }
 
 impl AtlasLayout {
-    /// Shelf packing, tallest entries first, into as many [`ATLAS_PAGE`] pages as needed.
-    pub fn new(lut: &GhostLut) -> Self {
-        let mut order: Vec<(usize, usize, u32, u32)> = lut
-            .ghosts
+    /// Shelf packing, tallest images first, into as many [`ATLAS_PAGE`] pages as needed: every level of
+    /// `levels` (per LUT ghost and entry, its images finest first).
+    pub fn new(levels: &[Vec<Vec<&LutEntry>>]) -> Self {
+        let mut order: Vec<(usize, usize, usize, u32, u32)> = levels
             .iter()
             .enumerate()
             .flat_map(|(g, ghost)| {
-                ghost
-                    .entries
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, e)| !e.is_empty())
-                    .map(move |(k, e)| (g, k, e.width, e.height))
+                ghost.iter().enumerate().flat_map(move |(k, entry)| {
+                    entry
+                        .iter()
+                        .enumerate()
+                        .filter(|(_, e)| !e.is_empty())
+                        .map(move |(m, e)| (g, k, m, e.width, e.height))
+                })
             })
             .collect();
-        order.sort_by_key(|&(g, k, _, h)| (std::cmp::Reverse(h), g, k));
-        let mut slots: Vec<Vec<Option<(u32, u32, u32)>>> =
-            lut.ghosts.iter().map(|g| vec![None; g.entries.len()]).collect();
+        order.sort_by_key(|&(g, k, m, _, h)| (std::cmp::Reverse(h), g, k, m));
+        let mut slots: Vec<Vec<Vec<(u32, u32, u32)>>> =
+            levels.iter().map(|g| g.iter().map(|e| vec![(0, 0, 0); e.len()]).collect()).collect();
         let (mut page, mut x, mut y, mut shelf) = (0u32, 0u32, 0u32, 0u32);
         let mut used = false;
-        for (g, k, w, h) in order {
+        for (g, k, m, w, h) in order {
             let (w, h) = ((w + 2).min(ATLAS_PAGE), (h + 2).min(ATLAS_PAGE));
             if x + w > ATLAS_PAGE {
                 (x, y) = (0, y + shelf);
@@ -161,21 +170,29 @@ impl AtlasLayout {
             if y + h > ATLAS_PAGE {
                 (page, x, y, shelf) = (page + 1, 0, 0, 0);
             }
-            slots[g][k] = Some((page, x + 1, y + 1));
+            slots[g][k][m] = (page, x + 1, y + 1);
             used = true;
             x += w;
             shelf = shelf.max(h);
         }
+        // Empty entries keep no slot.
+        for (g, ghost) in levels.iter().enumerate() {
+            for (k, entry) in ghost.iter().enumerate() {
+                if entry.first().is_none_or(|e| e.is_empty()) {
+                    slots[g][k].clear();
+                }
+            }
+        }
         Self { pages: if used { page + 1 } else { 0 }, slots }
     }
 
-    /// The atlas pages as RGBA half-float texels (page-major, rows from the top), zero between entries.
-    pub fn pages_f16(&self, lut: &GhostLut) -> Vec<[half::f16; 4]> {
+    /// The atlas pages as RGBA half-float texels (page-major, rows from the top), zero between images.
+    pub fn pages_f16(&self, levels: &[Vec<Vec<&LutEntry>>]) -> Vec<[half::f16; 4]> {
         let side = ATLAS_PAGE as usize;
         let mut texels = vec![[half::f16::ZERO; 4]; side * side * self.pages as usize];
-        for (g, ghost) in lut.ghosts.iter().enumerate() {
-            for (k, e) in ghost.entries.iter().enumerate() {
-                let Some((page, x0, y0)) = self.slots[g][k] else { continue };
+        for (g, ghost) in levels.iter().enumerate() {
+            for (k, (m, e)) in ghost.iter().enumerate().flat_map(|(k, l)| l.iter().enumerate().map(move |i| (k, i))) {
+                let Some(&(page, x0, y0)) = self.slots[g][k].get(m) else { continue };
                 let (w, h) = ((e.width as usize).min(side - 2), (e.height as usize).min(side - 2));
                 for y in 0..h {
                     let start = page as usize * side * side + (y0 as usize + y) * side + x0 as usize;
@@ -223,8 +240,8 @@ impl LutInstance {
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct LutScene {
     pub instances: Vec<LutInstance>,
-    /// Per instance: (LUT ghost, entry) it draws.
-    pub sources: Vec<(u32, u32)>,
+    /// Per instance: (LUT ghost, entry, mip level) it draws ([`LiveLut::level`]).
+    pub sources: Vec<(u32, u32, u32)>,
     /// Composite over the linear flare through alpha (else add).
     pub alpha_over: bool,
     /// Per lens ghost with a LUT image: the weight its paraxial sprites keep (1 - w).
@@ -315,7 +332,7 @@ impl LutScene {
                 .collect();
             for ((k, weight), fit) in picks.into_iter().zip(fit_picks(&turned)) {
                 let entry = &ghost.entries[k];
-                let Some((page, x0, y0)) = layout.slots[lg][k] else { continue };
+                let Some(&(page, x0, y0)) = layout.slots[lg][k].first() else { continue };
                 let instance = place(
                     entry,
                     &entry.paraxial,
@@ -328,7 +345,7 @@ impl LutScene {
                 );
                 if instance.is_finite() {
                     scene.instances.push(instance);
-                    scene.sources.push((lg as u32, k as u32));
+                    scene.sources.push((lg as u32, k as u32, 0));
                 } else {
                     scene.dropped_non_finite += 1;
                 }
@@ -342,13 +359,12 @@ impl LutScene {
     /// adds at most `threshold` to any pixel, however many overlap, as the paraxial sprites are culled
     /// ([`crate::ghost::GhostSystem::frame_into`]). Returns how many were left out. In the alpha mode nothing
     /// is left out (a faint image still covers what lies beneath it).
-    pub fn cull_faint(&mut self, threshold: f64, footprints: &[Vec<Footprint>]) -> usize {
+    pub fn cull_faint(&mut self, threshold: f64, footprints: &[Vec<Vec<Footprint>>]) -> usize {
         if self.alpha_over || threshold.is_nan() || threshold <= 0.0 {
             return 0;
         }
         let peak = |k: usize| -> f64 {
-            let (g, e) = self.sources[k];
-            let texel = footprints.get(g as usize).and_then(|f| f.get(e as usize)).map_or(f32::MAX, |f| f.peak);
+            let texel = footprint_of(footprints, self.sources[k]).map_or(f32::MAX, |f| f.peak);
             let c = self.instances[k].colour;
             f64::from(texel) * f64::from(c[0].max(c[1]).max(c[2]).max(0.0))
         };
@@ -376,6 +392,39 @@ impl LutScene {
             });
         }
         count
+    }
+
+    /// Draws each instance from the finest mip level of its entry ([`LiveLut::level`]) whose texels span at
+    /// least [`MIP_TEXEL_PX`] accumulation pixels of `divisor` frame pixels each, or from its coarsest level when
+    /// none does (an entry without finer-than-needed texels has one level: nothing changes). The instance's quad is
+    /// kept; its atlas rectangle becomes the level's, which covers the same window (a level's extent in its own
+    /// texels is the entry's halved, the zero padding of an odd edge outside the quad). Alpha-composited
+    /// instances keep level 0.
+    pub fn choose_mips(&mut self, live: &LiveLut, divisor: u32) {
+        if self.alpha_over {
+            return;
+        }
+        let scale = divisor.max(1) as f32;
+        for (inst, source) in self.instances.iter_mut().zip(self.sources.iter_mut()) {
+            let (g, k) = (source.0 as usize, source.1 as usize);
+            let Some(levels) = live.footprints.get(g).and_then(|f| f.get(k)).filter(|l| l.len() > 1) else {
+                continue;
+            };
+            let Some(map) = TexelMap::new(inst, levels[0], (scale, scale)) else { continue };
+            // Texels of level 0 per accumulation pixel, the largest along either axis of the pixel grid.
+            let step = map.d_di[0].hypot(map.d_di[1]).max(map.d_dj[0].hypot(map.d_dj[1]));
+            let mut m = 0;
+            while m + 1 < levels.len() && step * MIP_TEXEL_PX > (1u32 << m) as f32 {
+                m += 1;
+            }
+            let Some(&(page, x0, y0)) = live.layout.slots[g][k].get(m) else { continue };
+            let [ew, eh] = levels[m].extent;
+            let page_side = ATLAS_PAGE as f32;
+            let (u0, v0) = (x0 as f32 / page_side, y0 as f32 / page_side);
+            inst.rect = [u0, v0, u0 + ew / page_side, v0 + eh / page_side];
+            inst.axis_y_page[2] = page as f32;
+            source.2 = m as u32;
+        }
     }
 
     /// The weight the paraxial sprites of lens ghost `g` keep (1 for a ghost the LUT does not hold).
@@ -430,6 +479,9 @@ const BAND_ROWS: usize = 16;
 pub struct Footprint {
     pub width: u32,
     pub height: u32,
+    /// The entry's window in this image's texels: its size at level 0, halved per mip level (a level's
+    /// padded edge lies outside it). What placing maps the quad onto.
+    pub extent: [f32; 2],
     pub lit: [u32; 4],
     /// The largest value of any channel of any texel (a sample never exceeds it).
     pub peak: f32,
@@ -467,7 +519,7 @@ impl TexelMap {
         }
         // texel = (q * 0.5 + 0.5) * size - 0.5 at p = ((i + 0.5) sx, (j + 0.5) sy): affine in (i, j).
         let q_of = inst.inverse()?;
-        let (w, h) = (footprint.width as f32, footprint.height as f32);
+        let [w, h] = footprint.extent;
         let (sx, sy) = scale;
         let texel = |q: [f32; 2]| [(q[0] * 0.5 + 0.5) * w - 0.5, (q[1] * 0.5 + 0.5) * h - 0.5];
         let origin = texel(q_of([0.5 * sx, 0.5 * sy]));
@@ -555,7 +607,7 @@ pub fn bin_instances(
     frame_size: (u32, u32),
     acc_size: (u32, u32),
     lut_scene: &LutScene,
-    footprints: &[Vec<Footprint>],
+    footprints: &[Vec<Vec<Footprint>>],
     tile: u32,
 ) -> LutBins {
     let (w, h) = (acc_size.0.max(1), acc_size.1.max(1));
@@ -569,8 +621,8 @@ pub fn bin_instances(
         .iter()
         .zip(&lut_scene.sources)
         .zip(&levels)
-        .map(|((inst, &(g, k)), &level)| {
-            let footprint = *footprints.get(g as usize)?.get(k as usize)?;
+        .map(|((inst, &source), &level)| {
+            let footprint = footprint_of(footprints, source)?;
             let [bx, by] = TexelMap::new(inst, footprint, scale)?.pixel_bounds()?;
             // Sampled every 2^level pixels and upsampled, an instance reaches that much further.
             let reach = 1.0 + (1u32 << level) as f32;
@@ -613,35 +665,44 @@ pub fn bin_instances(
     LutBins { tile, tiles_x, tiles_y, starts, list, levels }
 }
 
-/// Per LUT ghost and entry, its [`Footprint`].
-fn footprints(lut: &GhostLut) -> Vec<Vec<Footprint>> {
-    lut.ghosts
+/// The footprint of `(LUT ghost, entry, level)`.
+fn footprint_of(footprints: &[Vec<Vec<Footprint>>], (g, k, m): (u32, u32, u32)) -> Option<Footprint> {
+    footprints.get(g as usize)?.get(k as usize)?.get(m as usize).copied()
+}
+
+/// Per LUT ghost, entry and mip level, its [`Footprint`].
+fn footprints(levels: &[Vec<Vec<&LutEntry>>]) -> Vec<Vec<Vec<Footprint>>> {
+    levels
         .par_iter()
         .map(|ghost| {
             ghost
-                .entries
                 .iter()
-                .map(|e| {
-                    let mut b = [u32::MAX, 0, u32::MAX, 0];
-                    let mut peak = 0.0f32;
-                    for (k, t) in e.texels.iter().enumerate() {
-                        peak = peak.max(t[0].to_f32()).max(t[1].to_f32()).max(t[2].to_f32());
-                        if t.iter().any(|v| v.to_bits() & 0x7fff != 0) {
-                            let (x, y) = ((k % e.width as usize) as u32, (k / e.width as usize) as u32);
-                            b = [b[0].min(x), b[1].max(x), b[2].min(y), b[3].max(y)];
-                        }
-                    }
-                    let lit = if b[0] == u32::MAX { [1, 0, 1, 0] } else { b };
-                    Footprint {
-                        width: e.width,
-                        height: e.height,
-                        lit,
-                        peak: if peak.is_finite() { peak } else { f32::MAX },
-                    }
+                .map(|entry| {
+                    let extent = entry.first().map_or([0.0; 2], |e| [e.width as f32, e.height as f32]);
+                    entry
+                        .iter()
+                        .enumerate()
+                        .map(|(m, e)| footprint(e, extent.map(|v| v / (1u32 << m) as f32)))
+                        .collect()
                 })
                 .collect()
         })
         .collect()
+}
+
+/// One image's [`Footprint`], its window `extent` texels.
+fn footprint(e: &LutEntry, extent: [f32; 2]) -> Footprint {
+    let mut b = [u32::MAX, 0, u32::MAX, 0];
+    let mut peak = 0.0f32;
+    for (k, t) in e.texels.iter().enumerate() {
+        peak = peak.max(t[0].to_f32()).max(t[1].to_f32()).max(t[2].to_f32());
+        if t.iter().any(|v| v.to_bits() & 0x7fff != 0) {
+            let (x, y) = ((k % e.width as usize) as u32, (k / e.width as usize) as u32);
+            b = [b[0].min(x), b[1].max(x), b[2].min(y), b[3].max(y)];
+        }
+    }
+    let lit = if b[0] == u32::MAX { [1, 0, 1, 0] } else { b };
+    Footprint { width: e.width, height: e.height, extent, lit, peak: if peak.is_finite() { peak } else { f32::MAX } }
 }
 
 /// `lut_compute.wgsl` and `lut_ghosts.wgsl`: every LUT instance onto the HDR accumulation `hdr` of a
@@ -690,12 +751,9 @@ fn lut_pass_on(
     // Per level (1, 2, 4 accumulation pixels a sample), the instances drawn at it, in the frame's order.
     let mut levels: [Vec<Prepared>; LUT_LEVELS] = Default::default();
     let of = instance_levels(frame_size, (w, h), lut_scene, &live.footprints);
-    for ((inst, &(g, k)), &level) in lut_scene.instances.iter().zip(&lut_scene.sources).zip(&of) {
+    for ((inst, &source), &level) in lut_scene.instances.iter().zip(&lut_scene.sources).zip(&of) {
         let level = if coarse { level } else { 0 };
-        let (Some(entry), Some(&footprint)) = (
-            live.lut.ghosts.get(g as usize).and_then(|l| l.entries.get(k as usize)),
-            live.footprints.get(g as usize).and_then(|f| f.get(k as usize)),
-        ) else {
+        let (Some(entry), Some(footprint)) = (live.level(source), footprint_of(&live.footprints, source)) else {
             continue;
         };
         let k = (1u32 << level) as f32;
@@ -733,16 +791,17 @@ pub fn instance_levels(
     frame_size: (u32, u32),
     acc_size: (u32, u32),
     lut_scene: &LutScene,
-    footprints: &[Vec<Footprint>],
+    footprints: &[Vec<Vec<Footprint>>],
 ) -> Vec<u8> {
     let scale = (frame_size.0 as f32 / acc_size.0.max(1) as f32, frame_size.1 as f32 / acc_size.1.max(1) as f32);
     lut_scene
         .instances
         .iter()
         .zip(&lut_scene.sources)
-        .map(|(inst, &(g, k))| {
-            let footprint = footprints.get(g as usize).and_then(|f| f.get(k as usize));
-            let Some(map) = footprint.and_then(|&f| TexelMap::new(inst, f, scale)) else { return 0 };
+        .map(|(inst, &source)| {
+            let Some(map) = footprint_of(footprints, source).and_then(|f| TexelMap::new(inst, f, scale)) else {
+                return 0;
+            };
             if lut_scene.alpha_over {
                 return 0;
             }
@@ -895,25 +954,80 @@ fn lut_band(
     }
 }
 
-/// A LUT ready to draw: the LUT and where its entries lie in the atlas.
+/// Mip levels are made of an entry while halving it leaves at least this many texels across (the default bake
+/// `res`): an entry baked finer than that for its detail ([`super::bake::BakeSettings::diagonal_texels`]) can be
+/// drawn at the default's resolution where its texels would be smaller than the frame needs.
+pub const MIP_FLOOR_TEXELS: u32 = 128;
+/// [`LutScene::choose_mips`] draws an instance from the finest level whose texels span at least this many
+/// accumulation pixels: finer texels would be sampled at every pixel ([`instance_levels`] samples every 2 pixels
+/// from 2 on) for detail a bilinear sample between them cannot show. Measured on the Heliar's rim ghost (README,
+/// "LUT images without stair steps"): 3 left the 480x320 frame at the default's 31.8 dB where 2 gives 33.3 dB,
+/// and the Nikon zoom's blended frame at 480x320 costs the same with either.
+pub const MIP_TEXEL_PX: f32 = 2.0;
+
+/// A LUT ready to draw: the LUT, the mip levels of its fine entries and where they all lie in the atlas.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LiveLut {
     pub lut: GhostLut,
+    /// Per LUT ghost and entry, its mip levels beyond the entry itself (each [`LutEntry::halved`] from the one
+    /// before) while they keep [`MIP_FLOOR_TEXELS`] texels across; none for a photo LUT.
+    pub mips: Vec<Vec<Vec<LutEntry>>>,
     pub layout: AtlasLayout,
     /// Per LUT ghost and entry, its shape for [`super::fit_picks`] (measured once, on load).
     pub shapes: Vec<Vec<Option<EntryShape>>>,
     /// This LUT's identity ([`crate::fingerprint::unique_id`]; a clone keeps it), for upload caches.
     pub id: u64,
-    /// Per LUT ghost and entry, its size and lit texels (measured once, on load): what [`lut_pass`] samples and
-    /// [`bin_instances`] bins.
-    pub footprints: Vec<Vec<Footprint>>,
+    /// Per LUT ghost, entry and level, its size and lit texels (measured once, on load): what [`lut_pass`]
+    /// samples and [`bin_instances`] bins.
+    pub footprints: Vec<Vec<Vec<Footprint>>>,
 }
 
 impl LiveLut {
     pub fn new(lut: GhostLut) -> Self {
-        let layout = AtlasLayout::new(&lut);
+        let photo = lut.kind == LutKind::Photo;
+        let mips: Vec<Vec<Vec<LutEntry>>> = lut
+            .ghosts
+            .par_iter()
+            .map(|g| {
+                g.entries
+                    .iter()
+                    .map(|e| {
+                        let mut levels: Vec<LutEntry> = Vec::new();
+                        loop {
+                            let last = levels.last().unwrap_or(e);
+                            if photo || last.is_empty() || last.width.max(last.height) / 2 < MIP_FLOOR_TEXELS {
+                                break levels;
+                            }
+                            levels.push(last.halved());
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        let levels = all_levels(&lut, &mips);
+        let layout = AtlasLayout::new(&levels);
         let shapes = lut.ghosts.par_iter().map(|g| g.entries.iter().map(LutEntry::shape).collect()).collect();
-        let footprints = footprints(&lut);
-        Self { lut, layout, shapes, id: crate::fingerprint::unique_id(), footprints }
+        let footprints = footprints(&levels);
+        Self { lut, mips, layout, shapes, id: crate::fingerprint::unique_id(), footprints }
     }
+
+    /// Image `m` of entry `k` of LUT ghost `g` (0: the entry, then its [`Self::mips`]).
+    pub fn level(&self, (g, k, m): (u32, u32, u32)) -> Option<&LutEntry> {
+        let entry = self.lut.ghosts.get(g as usize)?.entries.get(k as usize)?;
+        if m == 0 { Some(entry) } else { self.mips.get(g as usize)?.get(k as usize)?.get(m as usize - 1) }
+    }
+
+    /// The atlas pages ([`AtlasLayout::pages_f16`]) of every level.
+    pub fn atlas_pages(&self) -> Vec<[half::f16; 4]> {
+        self.layout.pages_f16(&all_levels(&self.lut, &self.mips))
+    }
+}
+
+/// Per LUT ghost and entry, its images finest first: the entry, then its mip levels.
+fn all_levels<'a>(lut: &'a GhostLut, mips: &'a [Vec<Vec<LutEntry>>]) -> Vec<Vec<Vec<&'a LutEntry>>> {
+    lut.ghosts
+        .iter()
+        .zip(mips)
+        .map(|(g, m)| g.entries.iter().zip(m).map(|(e, l)| std::iter::once(e).chain(l).collect()).collect())
+        .collect()
 }

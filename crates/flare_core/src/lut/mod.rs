@@ -272,6 +272,71 @@ impl LutEntry {
     }
 }
 
+impl LutEntry {
+    /// The entry at half its resolution: each texel the mean of a 2 x 2 block (all four channels; a block past
+    /// an odd edge is padded with zeros, so the image grows by at most one fine texel at its high-index sides),
+    /// texels twice as large on the sensor. The same energy; what a mip level and the bake's
+    /// [`bake::BakeSettings::detail_tolerance`] test are made of. An empty entry stays empty.
+    pub fn halved(&self) -> Self {
+        if self.is_empty() {
+            return self.clone();
+        }
+        let (w, h) = (self.width as usize, self.height as usize);
+        let (cw, ch) = (w.div_ceil(2), h.div_ceil(2));
+        let mut texels = Vec::with_capacity(cw * ch);
+        for y in 0..ch {
+            for x in 0..cw {
+                let mut sum = [0.0f32; 4];
+                for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                    let (i, j) = (2 * x + dx, 2 * y + dy);
+                    if i < w && j < h {
+                        let t = self.texels[j * w + i];
+                        for c in 0..4 {
+                            sum[c] += t[c].to_f32();
+                        }
+                    }
+                }
+                texels.push(sum.map(|v| f16::from_f32(0.25 * v)));
+            }
+        }
+        // The padded image's centre, in the fine image's texel coordinates, is (cw, ch).
+        let centre_mm = self.window().to_mm([cw as f64, ch as f64]);
+        Self {
+            theta_deg: self.theta_deg,
+            phi_deg: self.phi_deg,
+            paraxial: self.paraxial,
+            centre_mm,
+            texel_mm: 2.0 * self.texel_mm,
+            width: cw as u32,
+            height: ch as u32,
+            texels,
+        }
+    }
+
+    /// How far [`Self::halved`] loses this entry's detail: `coarse`'s bilinear sample at each of this entry's
+    /// texel centres against the texel, as the relative L1 distance of luminance (the sum of differences over
+    /// the sum of the texels; 0 for an unlit entry). `coarse` must be this entry halved (its texel coordinates
+    /// are half of this entry's).
+    pub fn detail_lost(&self, coarse: &Self) -> f64 {
+        let luma = |t: [f32; 4]| crate::metrics::luminance([t[0], t[1], t[2]].map(f64::from));
+        let decoded = coarse.decoded();
+        let (mut total, mut lost) = (0.0, 0.0);
+        for y in 0..self.height {
+            for x in 0..self.width {
+                let fine = luma(self.texels[(y * self.width + x) as usize].map(f16::to_f32));
+                // The fine texel centre x + 0.5 is at coarse coordinate (x + 0.5) / 2, its texel coordinate
+                // (less half a texel) at x / 2 - 0.25.
+                let (u, v) = (0.5 * x as f32 - 0.25, 0.5 * y as f32 - 0.25);
+                let (u0, v0) = (u.floor(), v.floor());
+                let s = coarse.bilinear_at([u0 as i64, v0 as i64], [u - u0, v - v0], |k| decoded[k]);
+                total += fine;
+                lost += (fine - luma(s)).abs();
+            }
+        }
+        if total > 0.0 { lost / total } else { 0.0 }
+    }
+}
+
 /// Where an entry's light lies in its own normalised paraxial frame (`n = (p - centre) / half`): the
 /// luminance-weighted mean and covariance of its texels (each texel's own spread, 1/12 of a texel squared,
 /// included, so a single-texel image still has a positive covariance).

@@ -323,7 +323,7 @@ pub struct FlareRenderer {
     /// The LUT ghosts as compute ([`super::gpu_lut`]), with the ghosts'.
     compute_lut: Option<ComputeLut>,
     /// The uploaded LUT's entry sizes and lit texels, to bin its instances ([`bin_instances`]).
-    lut_footprints: Vec<Vec<Footprint>>,
+    lut_footprints: Vec<Vec<Vec<Footprint>>>,
     /// Draw the next frames by the raster passes even where the compute passes could ([`Self::rasterise_ghosts`]).
     rasterise: bool,
     /// The most bytes a frame's LUT bins may take ([`Self::limit_lut_bin_bytes`]; the adapter's limits).
@@ -681,7 +681,7 @@ impl FlareRenderer {
         match lut.filter(|l| l.layout.pages > 0) {
             Some(live) => {
                 self.lut_atlas = atlas_texture(device, ATLAS_PAGE, live.layout.pages);
-                let texels = live.layout.pages_f16(&live.lut);
+                let texels = live.atlas_pages();
                 upload(queue, &self.lut_atlas, bytemuck::cast_slice(&texels), 8);
             }
             None => self.lut_atlas = empty_atlas(device, queue),
