@@ -353,6 +353,17 @@ fn the_loader_refuses_bad_files_with_clear_errors() {
     forged.extend_from_slice(huge.as_bytes());
     forged.extend_from_slice(&bytes[28 + header_len..]);
     assert!(matches!(load(&forged), Err(LutError::Header(_))));
+    // An entry wider than an atlas page holds is refused naming its size and the limit (the GPU would cut it).
+    let at = json.find("\"width\":").unwrap() + "\"width\":".len();
+    let end = at + json[at..].find(|c: char| !c.is_ascii_digit()).unwrap();
+    let wide = format!("{}2047{}", &json[..at], &json[end..]);
+    let mut forged = bytes[..12].to_vec();
+    forged.extend_from_slice(&(wide.len() as u64).to_le_bytes());
+    forged.extend_from_slice(&flare_core_fnv(wide.as_bytes()).to_le_bytes());
+    forged.extend_from_slice(wide.as_bytes());
+    forged.extend_from_slice(&bytes[28 + header_len..]);
+    let e = load(&forged).unwrap_err().to_string();
+    assert!(e.contains("2047 x") && e.contains(&flare_core::lut::format::MAX_SIDE.to_string()), "{e}");
     // A LUT for another lens is refused with both names.
     let other = builtin_lens("pbrt_dgauss_50mm").unwrap();
     let e = lut.check_for(&other, &FlareConfig::default()).unwrap_err().to_string();

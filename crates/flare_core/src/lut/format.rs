@@ -50,8 +50,9 @@ pub const OLDEST_VERSION: u32 = 1;
 pub const MAX_HEADER_BYTES: u64 = 64 << 20;
 /// Most texels accepted over all entries (2 GiB of half floats).
 pub const MAX_TEXELS: u64 = 1 << 28;
-/// Most texels across an entry.
-pub const MAX_SIDE: u32 = 8192;
+/// Most texels across an entry: what an atlas page holds inside its zero border ([`super::blend::ATLAS_PAGE`]),
+/// so the GPU draws every texel the CPU twin draws (a bake makes at most [`super::bake::MAX_ENTRY_TEXELS`]).
+pub const MAX_SIDE: u32 = super::blend::ATLAS_PAGE - 2;
 
 /// Why a LUT file is refused.
 #[derive(Debug, thiserror::Error)]
@@ -450,7 +451,10 @@ fn check_header(h: &Header, data_len: u64) -> Result<(), LutError> {
                 return entry_bad("its light direction does not match the ghost's thetas and azimuths");
             }
             if e.width > MAX_SIDE || e.height > MAX_SIDE || (e.width == 0) != (e.height == 0) {
-                return entry_bad("its size is out of range (0 x 0 for no light, else 1 to 8192 texels a side)");
+                return entry_bad(&format!(
+                    "its size {} x {} is out of range (0 x 0 for no light, else 1 to {MAX_SIDE} texels a side)",
+                    e.width, e.height
+                ));
             }
             let geometry = [e.paraxial_centre_mm[0], e.paraxial_centre_mm[1], e.centre_mm[0], e.centre_mm[1]];
             if !geometry.iter().all(|v| finite_in(*v, -1e4, 1e4))
