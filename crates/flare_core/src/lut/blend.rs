@@ -417,11 +417,9 @@ impl LutScene {
             while m + 1 < levels.len() && step * MIP_TEXEL_PX > (1u32 << m) as f32 {
                 m += 1;
             }
-            let Some(&(page, x0, y0)) = live.layout.slots[g][k].get(m) else { continue };
-            let [ew, eh] = levels[m].extent;
-            let page_side = ATLAS_PAGE as f32;
-            let (u0, v0) = (x0 as f32 / page_side, y0 as f32 / page_side);
-            inst.rect = [u0, v0, u0 + ew / page_side, v0 + eh / page_side];
+            // Level 0 is where `build` placed it.
+            let Some(&(page, x0, y0)) = live.layout.slots[g][k].get(m).filter(|_| m > 0) else { continue };
+            inst.rect = atlas_rect([x0, y0], levels[m].extent.map(f64::from));
             inst.axis_y_page[2] = page as f32;
             source.2 = m as u32;
         }
@@ -459,14 +457,20 @@ fn place(
     // Irradiance falls as the area grows: energy is kept when the frame is scaled (and fitted).
     let area = scale * scale * super::mat_det(fit.linear).abs();
     let (c, x1, y1) = (to_pixel([0.0, 0.0]), to_pixel([1.0, 0.0]), to_pixel([0.0, 1.0]));
-    let page_side = f64::from(ATLAS_PAGE);
-    let (u0, v0) = (f64::from(origin[0]) / page_side, f64::from(origin[1]) / page_side);
     LutInstance {
         centre_axis_x: [c[0] as f32, c[1] as f32, (x1[0] - c[0]) as f32, (x1[1] - c[1]) as f32],
         axis_y_page: [(y1[0] - c[0]) as f32, (y1[1] - c[1]) as f32, page as f32, 0.0],
-        rect: [u0 as f32, v0 as f32, (u0 + w / page_side) as f32, (v0 + h / page_side) as f32],
+        rect: atlas_rect(origin, [w, h]),
         colour: [gain / area as f32, gain / area as f32, gain / area as f32, gain],
     }
+}
+
+/// The texture coordinates (u0, v0, u1, v1) of an image whose top-left texel is at `origin` in its atlas page
+/// and whose window spans `extent` of its texels (for a mip level, the entry's size halved per level).
+fn atlas_rect(origin: [u32; 2], extent: [f64; 2]) -> [f32; 4] {
+    let page_side = f64::from(ATLAS_PAGE);
+    let (u0, v0) = (f64::from(origin[0]) / page_side, f64::from(origin[1]) / page_side);
+    [u0 as f32, v0 as f32, (u0 + extent[0] / page_side) as f32, (v0 + extent[1] / page_side) as f32]
 }
 
 /// Rows per parallel band of the CPU pass.
