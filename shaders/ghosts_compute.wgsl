@@ -4,16 +4,23 @@
 // lookup from mask_texels.wgsl. Must be kept in sync with `GhostInstance` in crates/flare_core/src/render/mod.rs
 // and `ComputeStrip` in crates/flare_core/src/render/gpu_ghosts.rs.
 //
-// How it works. One invocation of `spans` per (sprite, accumulation row) the sprite covers: it finds the row's
-// open span (where the front disc and every stop crossing's mask are exactly 1, from the mask's per-row table)
-// and shades only the pixels outside it, as the fragment shader would. The row's values F(x) (0 outside the
+// How it works. Each (sprite, accumulation row) the sprite covers is an item: `spans` finds the row's open
+// span (where the front disc and every stop crossing's mask are exactly 1, from the mask's per-row table) and
+// shades only the pixels outside it, as the fragment shader would. The row's values F(x) (0 outside the
 // sprite, the colour in the open span, colour x mask at an edge pixel) go into a per-row difference buffer as
-// F(x) - F(x - 1), wherever that is not 0: a frame-filling sprite costs its edges, not its area. `resolve` sums
-// each row once (a prefix sum, one workgroup a row scanning 64 columns at a time) into the HDR texture,
-// applying the LUT layer where the frame has one. The differences are fixed-point integers of 64 bits (two
-// u32 words, added with carry by atomics): integer addition does not depend on the order in which sprites
-// arrive, so the image is the same bytes on every run. The fixed-point unit is chosen per frame from the
-// brightest sprite (2^30 units for its brightest channel, at most 2^62 for the sum of every sprite's).
+// F(x) - F(x - 1), wherever that is not 0: a frame-filling sprite costs its edges, not its area. An item's walk
+// (its edge pixels, the open span's first pixel, the end) is split between `pieces` invocations, each taking
+// one run of it and shading the pixel before its run once more: a long edge does not hold up its warp. A stop
+// mask lookup reads its four texels from the storage buffer, or, where `mask_texture` is 1 (hardware GPUs), by
+// one `textureGather`: the same texels and arithmetic either way. `resolve` sums each row once (a prefix sum,
+// one workgroup a row scanning 64 columns at a time) into the HDR texture, applying the LUT layer where the
+// frame has one. The differences are integers: each step d (at most 2^30 units) is added as two 32-bit parts,
+// hi = round(d / 2^k) and lo = d - hi 2^k, to two words by atomics whose results are not read (no invocation
+// waits on one), and `resolve` rebuilds the 64-bit sum high 2^k + low. Integer addition does not depend on the
+// order in which sprites arrive, so the image is the same bytes on every run, whatever `pieces` is. The
+// unit and k are chosen per frame (gpu_ghosts.rs, `split_units`): 2^30 units for the brightest sprite's
+// brightest channel (fewer past about 32 000 sprites), at most 2^62 for the sum of every sprite's, and k such
+// that neither word's sum can wrap with one step per sprite and column.
 
 struct GhostInstance {
     centre_half: vec4<f32>, // centre x, y (image pixels); half-size x, y (signed: q -> pixel)
@@ -39,9 +46,9 @@ struct ComputeStrip {
     fixed_per_unit: f32, // fixed-point units per unit of irradiance, and its inverse
     unit_per_fixed: f32,
     lut: u32,            // 1: apply the LUT layer (lut_compute.wgsl's (A, K)) as each pixel is written
-    unused0: u32,
-    unused1: u32,
-    unused2: u32,
+    split_bits: u32,     // k: a step d is added as hi = round(d / 2^k) and lo = d - hi 2^k, each to its own word
+    pieces: u32,         // invocations a (sprite, row) item's walk is split between
+    mask_texture: u32,   // 1: the stop masks' texels gathered from `mask_texture` (one fetch a lookup)
 };
 
 @group(0) @binding(0) var<uniform> strip: ComputeStrip;
@@ -55,6 +62,11 @@ struct ComputeStrip {
 // Per strip row, per column 0..=width, per channel R, G, B: a 64-bit difference as (low word, high word).
 // All zero between strips: `resolve` clears what it read.
 @group(0) @binding(4) var<storage, read_write> diff: array<atomic<u32>>;
+// The same buffer as `resolve` reads and clears it, after `spans` (bound apart: a pass boundary between).
+@group(0) @binding(7) var<storage, read_write> columns: array<u32>;
+// The same mask as a texture (R8Unorm) and a sampler clamped to the edge, for `textureGather`.
+@group(0) @binding(8) var mask_texture: texture_2d<f32>;
+@group(0) @binding(9) var mask_sampler: sampler;
 @group(0) @binding(5) var hdr: texture_storage_2d<rgba16float, write>;
 // The LUT layer of this frame, (A, K): the pixel becomes A + K x the ghosts (a 1 x 1 texture when `lut` is 0).
 @group(0) @binding(6) var lut_layer: texture_2d<f32>;
@@ -67,7 +79,31 @@ fn mask_word(w: u32) -> u32 {
 }
 
 fn mask_sample(u: f32, v: f32) -> f32 {
+    if (strip.mask_texture == 1u) {
+        return mask_gathered(u, v);
+    }
     return mask_bilinear(u, v, strip.mask_size);
+}
+
+// `mask_bilinear` with the four texels fetched by one gather from the texture: the same texels (asked for at
+// the corner they share, where the hardware's choice of footprint is unambiguous), turned back into 0..255,
+// and the same arithmetic, so the same value.
+fn mask_gathered(u: f32, v: f32) -> f32 {
+    if (!(abs(u) <= 1.0 && abs(v) <= 1.0)) {
+        return 0.0;
+    }
+    let n = f32(strip.mask_size);
+    let x = (u * 0.5 + 0.5) * n - 0.5;
+    let y = (0.5 - v * 0.5) * n - 0.5;
+    let x0 = i32(x + 1.0) - 1;
+    let y0 = i32(y + 1.0) - 1;
+    let fx = x - f32(x0);
+    let fy = y - f32(y0);
+    // Components: x (x0, y0 + 1), y (x0 + 1, y0 + 1), z (x0 + 1, y0), w (x0, y0).
+    let g = round(textureGather(0, mask_texture, mask_sampler, vec2<f32>(f32(x0) + 1.0, f32(y0) + 1.0) / n) * 255.0);
+    let top = g.w * (1.0 - fx) + g.z * fx;
+    let bottom = g.x * (1.0 - fx) + g.y * fx;
+    return (top * (1.0 - fy) + bottom * fy) / 255.0;
 }
 
 // The band of mask rows a sample at v reads (MaskRows::at); -1 outside [-1, 1].
@@ -158,42 +194,96 @@ fn stop_of(inst: GhostInstance, k: u32) -> vec4<f32> {
     return inst.stop2;
 }
 
-// ---- 64-bit fixed point (fixed64.wgsl): the atomic sum ----
+// ---- the atomic sum: two 32-bit words a channel, neither waiting for the other ----
 
-fn atomic_add64(word: u32, v: vec2<u32>) {
-    let old = atomicAdd(&diff[word], v.x);
-    // The high word only when it changes: with the frame's unit most steps fit the low word, and a negative
-    // one's all-ones high word plus its carry is 0.
-    let high = v.y + select(0u, 1u, old + v.x < old);
-    if (high != 0u) {
-        atomicAdd(&diff[word + 1u], high);
+// A step d (|d| <= 2^30 units: no sprite exceeds that) goes in as d = hi 2^k + lo with lo in [-2^(k-1), 2^(k-1)):
+// lo to the low word, hi (0 for most steps) to the high word, each by an atomic whose result is not read, so
+// no invocation waits on one. Integer sums do not depend on order, and the CPU side picks k and the unit so
+// that neither word's sum can wrap (at most one step per sprite and column in a strip): `resolve` rebuilds the
+// exact 64-bit sum as high 2^k + low.
+fn atomic_add_split(word: u32, d: i32) {
+    let k = strip.split_bits;
+    let hi = (d + (1i << (k - 1u))) >> k;
+    let lo = d - (hi << k);
+    if (lo != 0i) {
+        atomicAdd(&diff[word], bitcast<u32>(lo));
+    }
+    if (hi != 0i) {
+        atomicAdd(&diff[word + 1u], bitcast<u32>(hi));
     }
 }
 
 // Adds F(x) - F(x - 1) for the three channels at column x of strip row `row`.
-fn put(row: u32, x: u32, now: array<vec2<u32>, 3>, before: array<vec2<u32>, 3>) {
+fn put(row: u32, x: u32, now: vec3<i32>, before: vec3<i32>) {
     let word = (row * (strip.width + 1u) + x) * 6u;
+    let d = now - before;
     for (var c = 0u; c < 3u; c = c + 1u) {
-        let d = sub64(now[c], before[c]);
-        if (d.x != 0u || d.y != 0u) {
-            atomic_add64(word + 2u * c, d);
+        if (d[c] != 0i) {
+            atomic_add_split(word + 2u * c, d[c]);
         }
     }
 }
 
-fn fixed_colour(colour: vec4<f32>, m: f32) -> array<vec2<u32>, 3> {
-    let k = strip.fixed_per_unit;
-    return array<vec2<u32>, 3>(fixed(colour.x * m * k), fixed(colour.y * m * k), fixed(colour.z * m * k));
+// The sprite's colour x m in fixed-point units, rounded (at most 2^30: the unit is chosen so).
+fn fixed_colour(colour: vec4<f32>, m: f32) -> vec3<i32> {
+    return vec3<i32>(round(colour.xyz * (m * strip.fixed_per_unit)));
 }
 
 // ---- the passes ----
 
+// One (sprite, row) item's walk: the pixels `first..` up to the open span (`n_left` of them), the open span's
+// first pixel (the sprite's colour), the pixels after it up to `last`, and `last` itself (0): `n` positions.
+struct Walk {
+    first: u32,
+    last: u32,
+    n_left: u32,
+    n: u32,
+    open_first: u32,
+    right_first: u32,
+    has_open: bool,
+    front_open: bool,
+    q_y: f32,
+};
+
+// The column of position i of the walk.
+fn walk_x(w: Walk, i: u32) -> u32 {
+    if (i < w.n_left) {
+        return w.first + i;
+    }
+    if (i == w.n - 1u) {
+        return w.last;
+    }
+    if (i == w.n_left) {
+        return w.open_first;
+    }
+    return w.right_first + (i - w.n_left - 1u);
+}
+
+// F at position i of the walk: the sprite's colour x its masks, in fixed-point units.
+fn walk_value(inst: GhostInstance, w: Walk, i: u32) -> vec3<i32> {
+    if (i == w.n - 1u) {
+        return vec3<i32>(0i);
+    }
+    if (w.has_open && i == w.n_left) {
+        return fixed_colour(inst.colour, 1.0);
+    }
+    let x = walk_x(w, i);
+    let q = vec2<f32>(((f32(x) + 0.5) * strip.scale_x - inst.centre_half.x) / inst.centre_half.z, w.q_y);
+    let m = mask_product(inst, w.front_open, q);
+    if (m > 0.0) {
+        return fixed_colour(inst.colour, m);
+    }
+    return vec3<i32>(0i);
+}
+
 @compute @workgroup_size(64)
 fn spans(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let item = gid.y * strip.groups_x * 64u + gid.x;
-    if (item >= strip.items) {
+    let invocation = gid.y * strip.groups_x * 64u + gid.x;
+    if (invocation >= strip.items * strip.pieces) {
         return;
     }
+    let item = invocation / strip.pieces;
+    let piece = invocation % strip.pieces;
     // The sprite whose items hold this one: the last k with items[k].x <= item.
     var lo = 0u;
     var hi = strip.instances;
@@ -283,48 +373,77 @@ fn spans(@builtin(global_invocation_id) gid: vec3<u32>) {
             open_last = u32(o_hi);
         }
     }
-    let row = y - strip.first_row;
-    let zero = array<vec2<u32>, 3>(vec2<u32>(0u), vec2<u32>(0u), vec2<u32>(0u));
-    var before = zero;
-    var x = first;
-    while (x < last) {
-        if (x == open_first) {
-            let now = fixed_colour(inst.colour, 1.0);
-            put(row, x, now, before);
-            before = now;
-            x = open_last + 1u;
-            continue;
-        }
-        let m = mask_product(inst, front_open, vec2<f32>(((f32(x) + 0.5) * sx - cx) / hx, q_y));
-        var now = zero;
-        if (m > 0.0) {
-            now = fixed_colour(inst.colour, m);
-        }
-        put(row, x, now, before);
-        before = now;
-        x = x + 1u;
+    if (first >= last) {
+        return;
     }
-    put(row, last, zero, before);
+    var walk: Walk;
+    walk.first = first;
+    walk.last = last;
+    walk.has_open = open_first <= open_last;
+    walk.open_first = open_first;
+    walk.right_first = open_last + 1u;
+    walk.n_left = select(last, open_first, walk.has_open) - first;
+    walk.n = walk.n_left + select(0u, 1u + last - walk.right_first, walk.has_open) + 1u;
+    walk.q_y = q_y;
+    walk.front_open = front_open;
+    // This invocation's piece of the walk, and the value just before it.
+    let per = (walk.n + strip.pieces - 1u) / strip.pieces;
+    let start = piece * per;
+    let end = min(start + per, walk.n);
+    if (start >= end) {
+        return;
+    }
+    let row = y - strip.first_row;
+    var before = vec3<i32>(0i);
+    if (start > 0u) {
+        before = walk_value(inst, walk, start - 1u);
+    }
+    for (var i = start; i < end; i = i + 1u) {
+        let now = walk_value(inst, walk, i);
+        put(row, walk_x(walk, i), now, before);
+        before = now;
+    }
 }
 
+// A column's sum of steps, high 2^k + low, as 64 bits.
 fn load64(word: u32) -> vec2<u32> {
-    return vec2<u32>(atomicLoad(&diff[word]), atomicLoad(&diff[word + 1u]));
+    return join64(columns[word], columns[word + 1u]);
 }
 
 fn to_float(v: vec2<u32>) -> f32 {
     return float64(v) * strip.unit_per_fixed;
 }
 
+// Writes the sum `acc` of row `row`'s columns up to x into the HDR texture (the LUT layer applied where the
+// frame has one).
+fn write_pixel(row: u32, x: u32, acc: array<vec2<u32>, 3>) {
+    var value = vec4<f32>(to_float(acc[0]), to_float(acc[1]), to_float(acc[2]), 0.0);
+    if (strip.lut == 1u) {
+        let layer = textureLoad(lut_layer, vec2<u32>(x, strip.first_row + row), 0);
+        value = vec4<f32>(layer.rgb + layer.a * value.rgb, 0.0);
+    }
+    textureStore(hdr, vec2<u32>(x, strip.first_row + row), value);
+}
+
+// A column's sum from its two words (low, high) as `load64` rebuilds it.
+fn join64(lo_word: u32, hi_word: u32) -> vec2<u32> {
+    let lo = bitcast<i32>(lo_word);
+    let hi = bitcast<i32>(hi_word);
+    let k = strip.split_bits;
+    let shifted = vec2<u32>(bitcast<u32>(hi) << k, bitcast<u32>(hi >> (32u - k)));
+    return add64(shifted, vec2<u32>(bitcast<u32>(lo), select(0u, 0xffffffffu, lo < 0i)));
+}
+
 // One workgroup per strip row, walking it in chunks of 64 columns, one column an invocation (neighbouring
-// invocations read neighbouring words): each chunk's differences are summed by `scan64` (scan64.wgsl) and
-// added to the sum of the chunks before it; each invocation writes its pixel and
-// clears its column's words.
+// invocations read neighbouring words): each chunk's sums are scanned by `scan64` (scan64.wgsl) and added to
+// the sum of the chunks before it; each invocation writes its pixel and clears its column's words for the next
+// strip. Plain loads and stores: the atomics of `spans` are done (a pass boundary lies between). (Four columns
+// an invocation, a chunk of 256 read through workgroup memory, took 4.5 times as long on an H200.)
 @compute @workgroup_size(64)
 fn resolve(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) t: u32) {
     let row = wid.x;
     let base = row * (strip.width + 1u) * 6u;
     let zero = vec2<u32>(0u);
-    // The sum of every column left of the chunk.
     var before = array<vec2<u32>, 3>(zero, zero, zero);
     for (var x0 = 0u; x0 < strip.width; x0 = x0 + 64u) {
         let x = x0 + t;
@@ -341,15 +460,9 @@ fn resolve(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_inde
             for (var c = 0u; c < 3u; c = c + 1u) {
                 acc[c] = add64(before[c], sums[c]);
             }
-            var value = vec4<f32>(to_float(acc[0]), to_float(acc[1]), to_float(acc[2]), 0.0);
-            if (strip.lut == 1u) {
-                let layer = textureLoad(lut_layer, vec2<u32>(x, strip.first_row + row), 0);
-                value = vec4<f32>(layer.rgb + layer.a * value.rgb, 0.0);
-            }
-            textureStore(hdr, vec2<u32>(x, strip.first_row + row), value);
-            // Leave the buffer all zero for the next strip.
-            for (var word = base + x * 6u; word < base + x * 6u + 6u; word = word + 1u) {
-                atomicStore(&diff[word], 0u);
+            write_pixel(row, x, acc);
+            for (var w = base + x * 6u; w < base + x * 6u + 6u; w = w + 1u) {
+                columns[w] = 0u;
             }
         }
         for (var c = 0u; c < 3u; c = c + 1u) {
@@ -357,9 +470,8 @@ fn resolve(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_inde
         }
         workgroupBarrier();
     }
-    // The row's last column (written by `spans` at a sprite's right end, never read).
     if (t < 6u) {
-        atomicStore(&diff[base + strip.width * 6u + t], 0u);
+        columns[base + strip.width * 6u + t] = 0u;
     }
 }
 
@@ -393,21 +505,16 @@ fn resolve_runs(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation
         for (var c = 0u; c < 3u; c = c + 1u) {
             acc[c] = add64(acc[c], load64(base + x * 6u + 2u * c));
         }
-        var value = vec4<f32>(to_float(acc[0]), to_float(acc[1]), to_float(acc[2]), 0.0);
-        if (strip.lut == 1u) {
-            let layer = textureLoad(lut_layer, vec2<u32>(x, strip.first_row + row), 0);
-            value = vec4<f32>(layer.rgb + layer.a * value.rgb, 0.0);
-        }
-        textureStore(hdr, vec2<u32>(x, strip.first_row + row), value);
+        write_pixel(row, x, acc);
     }
     // Leave the buffer all zero for the next strip: this run's words, and the row's last column (written by
     // `spans` at a sprite's right end, never read).
-    for (var word = base + x0 * 6u; word < base + x1 * 6u; word = word + 1u) {
-        atomicStore(&diff[word], 0u);
+    for (var w = base + x0 * 6u; w < base + x1 * 6u; w = w + 1u) {
+        columns[w] = 0u;
     }
     if (t == 63u) {
         for (var word = base + strip.width * 6u; word < base + strip.width * 6u + 6u; word = word + 1u) {
-            atomicStore(&diff[word], 0u);
+            columns[word] = 0u;
         }
     }
 }

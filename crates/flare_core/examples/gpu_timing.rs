@@ -3,7 +3,8 @@
 //! waited for (no read-back), and the GPU's own time of the passes by timestamps. What the README's lavapipe
 //! and real-GPU tables came from. The starburst is left out unless the last argument is `starburst`.
 //!
-//! `cargo run --release -p flare_core --example gpu_timing -- LENS WIDTH HEIGHT [LUT.flut] [starburst]`
+//! `cargo run --release -p flare_core --example gpu_timing -- LENS WIDTH HEIGHT [LUT.flut] [starburst] [compute]`
+//! (`compute`: the GPU compute passes only, no CPU twin and no raster passes).
 
 use std::time::Instant;
 
@@ -17,8 +18,9 @@ use flare_core::render::DisplaySettings;
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     let usage = "usage: gpu_timing LENS WIDTH HEIGHT [LUT.flut] [starburst]";
-    let starburst = args.last().is_some_and(|a| a == "starburst");
-    let args: Vec<String> = args.into_iter().filter(|a| a != "starburst").collect();
+    let starburst = args.iter().any(|a| a == "starburst");
+    let compute_only = args.iter().any(|a| a == "compute");
+    let args: Vec<String> = args.into_iter().filter(|a| a != "starburst" && a != "compute").collect();
     let lens = builtin_lens(args.get(1).ok_or(usage)?)?;
     let (w, h): (u32, u32) = (args.get(2).ok_or(usage)?.parse()?, args.get(3).ok_or(usage)?.parse()?);
     let flare = PreparedFlare::new(&lens, &FlareConfig::default())?;
@@ -35,7 +37,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ..FrameRequest::default()
     };
     let sources = Sources { flare: &flare, lut: live.as_ref(), plate: None };
-    let cpu: Vec<f64> = (0..9)
+    let cpu: Vec<f64> = (0..if compute_only { 0 } else { 9 })
         .map(|_| {
             let start = Instant::now();
             let f = Frame::build(&flare, live.as_ref(), &request);
@@ -43,8 +45,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             start.elapsed().as_secs_f64() * 1e3
         })
         .collect();
-    println!("CPU twin: {:.1} ms", median(&cpu));
-    for raster in [false, true] {
+    if !compute_only {
+        println!("CPU twin: {:.1} ms", median(&cpu));
+    }
+    for raster in [false, true].into_iter().take(if compute_only { 1 } else { 2 }) {
         let mut drawer = GpuDrawer::new(true)?;
         if raster {
             drawer.renderer.force_raster_ghosts();

@@ -9,6 +9,7 @@ use flare_core::frame::{self, Frame, FrameRequest, GpuDrawer, Sources};
 use flare_core::optics::library::builtin_lens;
 use flare_core::render::cpu::tonemap_pixel;
 use flare_core::render::gpu::test_context;
+use flare_core::render::gpu_ghosts::ComputeForm;
 use flare_core::render::{DisplaySettings, HdrImage};
 
 mod common;
@@ -103,14 +104,25 @@ fn the_compute_pass_is_deterministic_and_draws_in_strips() {
     let again = drawer.draw(&frame, &sources).unwrap();
     assert!(first.hdr.pixels.iter().any(|p| p[0] > 0.0));
     assert!(first == again, "two runs differ");
-    // The other form of the per-row sum (a hardware GPU's scan where lavapipe sums runs, or the reverse):
-    // the same bytes, in one piece and in strips.
-    drawer.renderer.resolve_ghosts_by_scan(true);
-    assert!(drawer.draw(&frame, &sources).unwrap() == first, "the scan's frame differs");
-    drawer.renderer.limit_ghost_strip_bytes(5 * 301 * 24);
-    assert!(drawer.draw(&frame, &sources).unwrap() == first, "the scan's frame in strips differs");
-    drawer.renderer.resolve_ghosts_by_scan(false);
-    assert!(drawer.draw(&frame, &sources).unwrap() == first, "the runs' frame in strips differs");
+    // Every form of the pass (a hardware GPU's where lavapipe draws its own, and the reverse: the per-row
+    // scan or runs, the masks gathered from the texture or read from the buffer, each item's walk in one
+    // piece or split between invocations): the same bytes, in one piece and in strips.
+    let own = drawer.renderer.ghost_compute_form().expect("lavapipe draws the ghosts by compute");
+    for strips in [false, true] {
+        if strips {
+            drawer.renderer.limit_ghost_strip_bytes(5 * 301 * 24);
+        }
+        for scan in [false, true] {
+            for gather_masks in [false, true] {
+                for pieces in [Some(1), Some(3), Some(8), None] {
+                    let form = ComputeForm { scan, gather_masks, pieces };
+                    drawer.renderer.set_ghost_compute_form(form);
+                    assert!(drawer.draw(&frame, &sources).unwrap() == first, "{form:?} (strips: {strips}) differs");
+                }
+            }
+        }
+    }
+    drawer.renderer.set_ghost_compute_form(own);
     // Strips of 3 rows (the buffer holds (width + 1) x 24 bytes a row): 57 strips.
     drawer.renderer.limit_ghost_strip_bytes(3 * 301 * 24);
     let strips = drawer.draw(&frame, &sources).unwrap();

@@ -5,7 +5,8 @@
 //! on a lost device that is an error the device records (and the frame pipeline reports), never a panic. The
 //! renderer's passes, the ray grids and the depth of field all upload through it. [`compute_pipeline`] makes
 //! a compute pipeline with the layout its entry point implies (its bind groups are made from that layout), and
-//! [`render_pipeline`] a full render pipeline of a shader's `vs_main` and `fs_main` into one target.
+//! [`render_pipeline`] a full render pipeline of a shader's `vs_main` and `fs_main` into one target, and
+//! [`upload`] writes a texture's texels (the renderer's textures and the compute ghosts' mask).
 
 /// A render pipeline of `module`'s `vs_main` and `fs_main` drawing into one target of `format` (every pass
 /// of the renderer: ghosts, starburst, LUT ghosts and the tonemap of `gpu_view`).
@@ -106,4 +107,24 @@ pub fn texture_2d(
         usage,
         view_formats: &[],
     })
+}
+
+/// Writes `bytes` (rows of `bytes_per_pixel` bytes a texel, no padding) into the whole of `texture`'s first level.
+pub(crate) fn upload(queue: &wgpu::Queue, texture: &wgpu::Texture, bytes: &[u8], bytes_per_pixel: u32) {
+    let size = texture.size();
+    queue.write_texture(
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::All,
+        },
+        bytes,
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(size.width * bytes_per_pixel),
+            rows_per_image: Some(size.height),
+        },
+        size,
+    );
 }

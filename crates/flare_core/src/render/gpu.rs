@@ -34,8 +34,8 @@
 
 use wgpu_profiler::{GpuProfiler, GpuProfilerSettings, GpuTimerQueryResult};
 
-use super::buffers::render_pipeline;
 pub use super::buffers::{HDR_FORMAT, texture_2d};
+use super::buffers::{render_pipeline, upload};
 use super::gpu_ghosts::ComputeGhosts;
 use super::gpu_lut::{ComputeLut, TILE};
 use super::shaders::{DIRT_WGSL, GHOSTS_WGSL, LUT_GHOSTS_WGSL, STARBURST_WGSL};
@@ -222,25 +222,6 @@ pub fn test_context() -> Option<GpuContext> {
             None
         }
     }
-}
-
-fn upload(queue: &wgpu::Queue, texture: &wgpu::Texture, bytes: &[u8], bytes_per_pixel: u32) {
-    let size = texture.size();
-    queue.write_texture(
-        wgpu::TexelCopyTextureInfo {
-            texture,
-            mip_level: 0,
-            origin: wgpu::Origin3d::ZERO,
-            aspect: wgpu::TextureAspect::All,
-        },
-        bytes,
-        wgpu::TexelCopyBufferLayout {
-            offset: 0,
-            bytes_per_row: Some(size.width * bytes_per_pixel),
-            rows_per_image: Some(size.height),
-        },
-        size,
-    );
 }
 
 fn half_floats(rgba: &[[f32; 4]]) -> Vec<u8> {
@@ -595,12 +576,16 @@ impl FlareRenderer {
         self.compute.is_some()
     }
 
-    /// Picks the compute ghost pass's per-row sum: the scan a hardware GPU uses (`true`) or the runs a
-    /// software rasteriser uses (`false`); each device gets its own by default. The same image either way
-    /// (tests draw both on lavapipe).
-    pub fn resolve_ghosts_by_scan(&mut self, scan: bool) {
+    /// How the compute ghost pass draws on this device (`None` where the ghosts are rasterised).
+    pub fn ghost_compute_form(&self) -> Option<super::gpu_ghosts::ComputeForm> {
+        self.compute.as_ref().map(|c| c.form)
+    }
+
+    /// Picks how the compute ghost pass draws (each device gets its own by default, [`super::gpu_ghosts::ComputeForm`]):
+    /// the same image, to the byte, in every form (tests draw each on lavapipe).
+    pub fn set_ghost_compute_form(&mut self, form: super::gpu_ghosts::ComputeForm) {
         if let Some(compute) = &mut self.compute {
-            compute.scan = scan;
+            compute.form = form;
         }
     }
 

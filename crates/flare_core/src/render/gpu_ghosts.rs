@@ -4,44 +4,49 @@
 //! # How it works
 //! A wide-open lens's sprites are often larger than the frame; rasterised, each one shades every pixel it
 //! covers (about 1.4 G fragments for a 28-surface zoom at 1920x1080), and a data-centre GPU rasterises on a few
-//! units only. Here one invocation of `spans` handles one (sprite, accumulation row) item: it finds the row's
-//! open span (every mask exactly 1, from the aperture's per-row table, [`super::cpu::ghosts`]'s `MaskRows`),
-//! shades only the pixels outside it as the fragment shader does, and adds the row's values as differences
+//! units only. Here each (sprite, accumulation row) is an item of `spans`: the row's open span (every mask
+//! exactly 1, from the aperture's per-row table, [`super::cpu::ghosts`]'s `MaskRows`) is added in O(1), only
+//! the pixels outside it are shaded as the fragment shader does, and the row's values go in as differences
 //! `F(x) - F(x - 1)` to a per-row buffer; `resolve` then sums each row once into the HDR texture. The cost
-//! follows rows x sprites plus edge pixels, not covered area.
+//! follows rows x sprites plus edge pixels, not covered area. On a hardware GPU ([`ComputeForm`]) an item's
+//! walk is split between several invocations (`default_pieces`: at 4K one invocation walking a long edge held
+//! its warp up) and each mask lookup gathers its four texels from a texture in one fetch.
 //!
-//! **Deterministic**: the differences are 64-bit fixed-point integers (two u32 words added with carry by
-//! atomics), so the order in which sprites land does not matter: the same frame gives the same bytes on every
-//! run. The unit is chosen per frame as `2^-30` of the brightest sprite's brightest channel (and at most `2^-62`
-//! of the sum over sprites of their brightest channel, which no pixel can exceed, so no sum can overflow):
-//! each sprite is rounded far below what a half float keeps, and most steps from one pixel to the next fit the
-//! low word, whose carry alone then decides whether the high word needs an atomic of its own.
+//! **Deterministic**: the differences are integers, so the order in which sprites land does not matter: the
+//! same frame gives the same bytes on every run and in every [`ComputeForm`]. Each step is at most `2^30`
+//! units (the unit is chosen per frame from the brightest sprite's brightest channel, and so that the sum over
+//! sprites of their brightest channel, which no pixel can exceed, stays within `2^62`); it is added as two
+//! 32-bit parts, `hi = round(d / 2^k)` and `lo = d - hi 2^k`, to a column's two words by atomics whose results
+//! are not read, so no invocation waits on an atomic's round trip. `split_units` picks k so that neither
+//! word's sum can wrap (at most one step per sprite and column in a strip), and `resolve` rebuilds the exact
+//! 64-bit sum `high 2^k + low`.
 //!
 //! **Limits**: the difference buffer holds `(width + 1) x rows x 24` bytes. A frame whose buffer would pass the
 //! adapter's `max_storage_buffer_binding_size` (or `max_buffer_size`) is drawn in strips of rows, one after
 //! another into the same buffer (`resolve` leaves it zeroed); a strip's items beyond
-//! `max_compute_workgroups_per_dimension` workgroups go in a second dimension. [`ComputeGhosts::supported`]
+//! `max_compute_workgroups_per_dimension` workgroups go in a second dimension. `ComputeGhosts::supported`
 //! says whether a device can run the pass at all (compute shaders, four storage buffers, a storage texture);
 //! where it cannot (a WebGL-class adapter), `FlareRenderer` keeps the raster pass
 //! (`ghosts.wgsl`).
 
 use bytemuck::{Pod, Zeroable};
 
-use super::buffers::{HDR_FORMAT, compute_pipeline, software_device, storage, texture_2d};
+use super::buffers::{HDR_FORMAT, compute_pipeline, software_device, storage, texture_2d, upload};
 use super::cpu::ghosts::{MaskRows, without_open_stops};
 use super::cpu::quads::{accumulation_scale, covered};
 use super::shaders::GHOSTS_COMPUTE_WGSL;
 use super::{FlareScene, GhostInstance};
 use crate::aperture::ApertureMask;
 
+/// The mask texture's format (the texels as they are).
+const R8: wgpu::TextureFormat = wgpu::TextureFormat::R8Unorm;
 /// Invocations per workgroup of both entry points.
 const WORKGROUP: u32 = 64;
 /// Bytes of one accumulation column's difference: three channels of 64 bits.
 const BYTES_PER_COLUMN: u64 = 24;
-/// Fixed-point units for the brightest sprite's brightest channel: 2^-30 of it is far below what a display
-/// or a half float resolves, and a pixel's step from its neighbour then mostly fits the low word, so that the
-/// high word's atomic is mostly skipped (see `atomic_add64` in the shader).
-const SPRITE_UNITS: f64 = 1_073_741_824.0; // 2^30
+/// The most fixed-point units for the brightest sprite's brightest channel: 2^-30 of it is far below what a
+/// display or a half float resolves ([`split_units`] takes fewer only for more than about 32 000 sprites).
+const MAX_SPRITE_BITS: u32 = 30;
 /// The most units the sum over sprites of their brightest channel may take (no 64-bit sum can overflow).
 const SUM_UNITS: f64 = 4_611_686_018_427_387_904.0; // 2^62
 /// Uniform offsets between strips (the largest alignment an adapter may ask for).
@@ -65,9 +70,74 @@ pub(crate) struct ComputeStrip {
     pub unit_per_fixed: f32,
     /// 1: `resolve` applies the LUT layer as it writes each pixel.
     pub lut: u32,
-    pub unused: [u32; 3],
+    /// k: each step goes in as a high part (units of 2^k) and a low part, each to its own word.
+    pub split_bits: u32,
+    /// Invocations that share one (sprite, row) item's walk, each a piece of it.
+    pub pieces: u32,
+    /// 1: the stop masks' texels are gathered from the mask texture (one fetch a lookup).
+    pub mask_texture: u32,
 }
 const _: () = assert!(std::mem::size_of::<ComputeStrip>() == 64);
+
+/// How the shader's steps are split between a column's two words (see `atomic_add_split` in the shader).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct SplitUnits {
+    /// k: a step d goes in as `hi = round(d / 2^k)` to the high word and `lo = d - hi 2^k` to the low word.
+    pub bits: u32,
+    /// Units for the brightest sprite's brightest channel (a power of two): no step exceeds it.
+    pub sprite_units: f64,
+}
+
+/// The split and the sprite unit for `sprites` sprites, each adding at most one step to a word in a strip,
+/// such that neither word's 32-bit sum can wrap: the low word gains at most `2^(k-1)` a step, the high word at
+/// most `round(units / 2^k)`. The largest k the low word allows, then the most units the high word allows (2^30
+/// up to about 32 000 sprites; fewer beyond, down to 2 units for a billion).
+pub(crate) fn split_units(sprites: usize) -> SplitUnits {
+    const MAX: u64 = i32::MAX as u64;
+    let n = sprites.max(1) as u64;
+    let mut bits = 1;
+    while bits < 30 && n << bits <= MAX {
+        bits += 1;
+    }
+    // A sprite's rounded value may pass its unit by a few f32 steps: allow 2^-10 of it.
+    let high_step = |units: u64| (units + (units >> 10) + (1 << (bits - 1))) >> bits;
+    let mut sprite_bits = MAX_SPRITE_BITS;
+    while sprite_bits > 1 && n.saturating_mul(high_step(1 << sprite_bits)) > MAX {
+        sprite_bits -= 1;
+    }
+    SplitUnits { bits, sprite_units: (1u64 << sprite_bits) as f64 }
+}
+
+/// How a device draws the pass: the same image, to the byte, in every form (tests draw each on lavapipe).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ComputeForm {
+    /// The per-row sum as a workgroup scan of 64 columns at a time (a hardware GPU), or as a run of columns an
+    /// invocation (a software rasteriser, where a workgroup barrier costs more than a scattered read: 16 ms
+    /// against 4 ms at 480x270 on lavapipe).
+    pub scan: bool,
+    /// The stop masks' four texels a lookup by one `textureGather` (a hardware GPU: the spans pass took 1.76
+    /// against 1.98 ms at 4K on an H200) rather than four reads of the storage buffer (a software rasteriser,
+    /// where a texture fetch is several times slower).
+    pub gather_masks: bool,
+    /// Invocations that share each (sprite, row) item's walk; `None`: `default_pieces` of the frame's width.
+    pub pieces: Option<u32>,
+}
+
+impl ComputeForm {
+    /// The form for `device`: on a software rasteriser the runs, the buffer and one invocation an item.
+    pub(crate) fn for_device(device: &wgpu::Device) -> Self {
+        let hardware = !software_device(device);
+        Self { scan: hardware, gather_masks: hardware, pieces: if hardware { None } else { Some(1) } }
+    }
+}
+
+/// Invocations that share an item's walk on a hardware GPU, for an accumulation `width` pixels wide: one per
+/// 240 columns, at most 8. An edge's pixels grow with the width; an item walked by one invocation held its warp
+/// up (the spans pass at 4K on an H200: 4.13 ms in one piece, 1.52 ms in 8, 1.75 ms in 16, 2.50 ms in 32; at
+/// 1920x1080 0.51 ms in 8, 0.67 ms in 16).
+pub(crate) fn default_pieces(width: u32) -> u32 {
+    width.div_ceil(240).clamp(1, 8)
+}
 
 /// What one strip draws: its parameters, per sprite its first item and first row (then the item count), and
 /// its `spans` dispatch.
@@ -86,6 +156,7 @@ pub(crate) fn plan_strips(
     mask_size: u32,
     strip_rows: u32,
     max_groups: u32,
+    pieces: u32,
 ) -> Vec<StripPlan> {
     let (w, h) = (scene.hdr_width.max(1), scene.hdr_height.max(1));
     let (sx, sy) = accumulation_scale(scene);
@@ -93,7 +164,8 @@ pub(crate) fn plan_strips(
     let brightest = |i: &GhostInstance| f64::from(i.colour[0].max(i.colour[1]).max(i.colour[2]).max(0.0));
     let bound: f64 = instances.iter().map(brightest).sum();
     let peak = instances.iter().map(brightest).fold(0.0, f64::max);
-    let fixed_per_unit = (SPRITE_UNITS / peak).min(SUM_UNITS / bound);
+    let split = split_units(instances.len());
+    let fixed_per_unit = (split.sprite_units / peak).min(SUM_UNITS / bound);
     let (fixed_per_unit, unit_per_fixed) = if bound > 0.0 && fixed_per_unit.is_finite() && fixed_per_unit > 0.0 {
         (fixed_per_unit as f32, (1.0 / fixed_per_unit) as f32)
     } else {
@@ -115,7 +187,9 @@ pub(crate) fn plan_strips(
                 total += hi.saturating_sub(lo) as u32;
             }
             items.push([total, 0]);
-            let workgroups = total.div_ceil(WORKGROUP);
+            // The shader counts invocations in a u32.
+            let pieces = pieces.clamp(1, (u32::MAX / total.max(1)).max(1));
+            let workgroups = (total * pieces).div_ceil(WORKGROUP);
             let groups_x = workgroups.clamp(1, max_groups.max(1));
             let groups = (groups_x, workgroups.div_ceil(groups_x));
             let params = ComputeStrip {
@@ -132,7 +206,9 @@ pub(crate) fn plan_strips(
                 fixed_per_unit,
                 unit_per_fixed,
                 lut: 0,
-                unused: [0; 3],
+                split_bits: split.bits,
+                pieces,
+                mask_texture: 0,
             };
             StripPlan { params, items, groups }
         })
@@ -155,12 +231,16 @@ fn mask_words(mask: &ApertureMask) -> Vec<u32> {
 pub(crate) struct ComputeGhosts {
     spans: wgpu::ComputePipeline,
     /// The two forms of the per-row sum (`resolve`, a scan of 64 columns at a time; `resolve_runs`, a run of
-    /// columns an invocation) and which one draws: the runs on a software rasteriser (lavapipe, where a
-    /// workgroup barrier costs more than a scattered read: 16 ms against 4 ms at 480x270), the scan elsewhere.
+    /// columns an invocation).
     resolve_scan: wgpu::ComputePipeline,
     resolve_runs: wgpu::ComputePipeline,
-    pub(crate) scan: bool,
+    /// How this device draws the pass (see [`ComputeForm`]).
+    pub(crate) form: ComputeForm,
+    /// The mask's per-band table and packed texels (one storage buffer).
     mask: wgpu::Buffer,
+    /// The mask as a texture, and the sampler `textureGather` reads it with.
+    mask_texture: wgpu::TextureView,
+    mask_sampler: wgpu::Sampler,
     mask_size: u32,
     open_radius: f32,
     /// The difference buffer and its size in bytes (all zero between strips).
@@ -196,8 +276,12 @@ impl ComputeGhosts {
             spans: pipeline("spans"),
             resolve_scan: pipeline("resolve"),
             resolve_runs: pipeline("resolve_runs"),
-            scan: !software_device(device),
+            form: ComputeForm::for_device(device),
             mask: storage(device, queue, "ghost mask", &[0; 16], wgpu::BufferUsages::STORAGE),
+            mask_texture: texture_2d(device, "ghost mask", 1, 1, R8, wgpu::TextureUsages::TEXTURE_BINDING)
+                .create_view(&wgpu::TextureViewDescriptor::default()),
+            mask_sampler: device
+                .create_sampler(&wgpu::SamplerDescriptor { label: Some("ghost mask"), ..Default::default() }),
             mask_size: 1,
             open_radius: 0.0,
             diff: None,
@@ -215,6 +299,11 @@ impl ComputeGhosts {
         self.mask = storage(device, queue, "ghost mask", bytemuck::cast_slice(&words), wgpu::BufferUsages::STORAGE);
         self.mask_size = mask.size as u32;
         self.open_radius = mask.open_radius();
+        let size = mask.size as u32;
+        let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
+        let texture = texture_2d(device, "ghost mask", size, size, R8, usage);
+        upload(queue, &texture, &mask.texels, 1);
+        self.mask_texture = texture.create_view(&wgpu::TextureViewDescriptor::default());
     }
 
     /// Records the pass into `pass`: every sprite of `scene` into `hdr` (the accumulation, a storage texture of
@@ -235,9 +324,11 @@ impl ComputeGhosts {
         let row_bytes = (width + 1) * BYTES_PER_COLUMN;
         let strip_rows = (self.strip_bytes / row_bytes).clamp(1, u64::from(scene.hdr_height.max(1))) as u32;
         let max_groups = device.limits().max_compute_workgroups_per_dimension;
-        let mut strips = plan_strips(scene, &instances, self.mask_size, strip_rows, max_groups);
+        let pieces = self.form.pieces.unwrap_or_else(|| default_pieces(scene.hdr_width));
+        let mut strips = plan_strips(scene, &instances, self.mask_size, strip_rows, max_groups, pieces);
         for s in &mut strips {
             s.params.lut = u32::from(lut_layer.is_some());
+            s.params.mask_texture = u32::from(self.form.gather_masks);
         }
         let needed = row_bytes * u64::from(strip_rows);
         if !matches!(&self.diff, Some((_, size)) if *size >= needed) {
@@ -260,7 +351,7 @@ impl ComputeGhosts {
             uniforms[at..at + std::mem::size_of::<ComputeStrip>()].copy_from_slice(bytemuck::bytes_of(&s.params));
         }
         let uniform_buffer = storage(device, queue, "ghost strips", &uniforms, wgpu::BufferUsages::UNIFORM);
-        let resolve = if self.scan { &self.resolve_scan } else { &self.resolve_runs };
+        let resolve = if self.form.scan { &self.resolve_scan } else { &self.resolve_runs };
         for (k, s) in strips.iter().enumerate() {
             let items =
                 storage(device, queue, "ghost items", bytemuck::cast_slice(&s.items), wgpu::BufferUsages::STORAGE);
@@ -279,6 +370,14 @@ impl ComputeGhosts {
                         wgpu::BindGroupEntry { binding: 2, resource: items.as_entire_binding() },
                         wgpu::BindGroupEntry { binding: 3, resource: self.mask.as_entire_binding() },
                         wgpu::BindGroupEntry { binding: 4, resource: diff.as_entire_binding() },
+                        wgpu::BindGroupEntry {
+                            binding: 8,
+                            resource: wgpu::BindingResource::TextureView(&self.mask_texture),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 9,
+                            resource: wgpu::BindingResource::Sampler(&self.mask_sampler),
+                        },
                     ],
                 });
                 // Timed apart where the device has timestamps inside passes ("ghosts" otherwise).
@@ -292,7 +391,7 @@ impl ComputeGhosts {
                 layout: &resolve.get_bind_group_layout(0),
                 entries: &[
                     wgpu::BindGroupEntry { binding: 0, resource: params },
-                    wgpu::BindGroupEntry { binding: 4, resource: diff.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 7, resource: diff.as_entire_binding() },
                     wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::TextureView(hdr) },
                     wgpu::BindGroupEntry {
                         binding: 6,
@@ -314,18 +413,41 @@ mod tests {
     use crate::flare::{FlareConfig, PreparedFlare};
     use crate::optics::library::builtin_lens;
 
+    /// Neither word of a column can wrap: for any number of sprites, the low word's worst sum (every sprite's
+    /// step at `2^(k-1)`) and the high word's (every sprite's step at its unit and a little over, rounded to
+    /// units of `2^k`) stay within an i32, and the split is as fine as that allows.
+    #[test]
+    fn split_words_never_wrap() {
+        let limit = i64::from(i32::MAX);
+        for n in [1usize, 2, 3, 68, 876, 1023, 1024, 1025, 32_767, 32_768, 100_000, 1 << 20, 1 << 30, 2_000_000_000] {
+            let SplitUnits { bits, sprite_units } = split_units(n);
+            let n = n as i64;
+            assert!((1..=30).contains(&bits), "{n}: k = {bits}");
+            assert!(n * (1i64 << (bits - 1)) <= limit, "{n}: low word sum with k = {bits}");
+            assert!(bits == 30 || n * (1i64 << bits) > limit, "{n}: k = {bits} could be larger");
+            let step = sprite_units as i64 + (sprite_units as i64 >> 10);
+            // The shader's hi = (d + 2^(k-1)) >> k, d + 2^(k-1) itself within an i32.
+            assert!(step + (1i64 << (bits - 1)) <= limit, "{n}: d + 2^(k-1) with k = {bits}");
+            let high = (step + (1i64 << (bits - 1))) >> bits;
+            assert!(n * high <= limit, "{n}: high word sum {} with units {sprite_units}", n * high);
+            assert!((2.0..=1073741824.0).contains(&sprite_units), "{n}: units {sprite_units}");
+        }
+        assert_eq!(split_units(876), SplitUnits { bits: 22, sprite_units: 1073741824.0 });
+        assert_eq!(split_units(32_768).sprite_units, 1073741824.0);
+    }
+
     /// Strips cover every row once, each sprite's items are its covered rows within the strip, and a strip of
     /// more workgroups than a dimension allows spills into the second.
     #[test]
     fn strips_cover_every_row_and_item_once() {
         let flare = PreparedFlare::new(&builtin_lens("heliar").unwrap(), &FlareConfig::default()).unwrap();
         let (scene, _) = flare.scene([6.0, 3.0], 200, 120);
-        let one = plan_strips(&scene, &scene.instances, 64, 1000, 65535);
+        let one = plan_strips(&scene, &scene.instances, 64, 1000, 65535, 1);
         assert_eq!(one.len(), 1);
         let total = one[0].params.items;
         assert!(total > 100, "{total} items");
         for rows in [1, 7, 50] {
-            let strips = plan_strips(&scene, &scene.instances, 64, rows, 3);
+            let strips = plan_strips(&scene, &scene.instances, 64, rows, 3, 1);
             assert_eq!(strips.iter().map(|s| s.params.rows).sum::<u32>(), 120);
             assert_eq!(strips.iter().map(|s| s.params.items).sum::<u32>(), total);
             for s in &strips {

@@ -21,7 +21,7 @@ mod buffers;
 pub mod cpu;
 pub mod dof_gpu;
 pub mod gpu;
-mod gpu_ghosts;
+pub mod gpu_ghosts;
 mod gpu_lut;
 mod gpu_view;
 pub mod raygrid;
