@@ -87,23 +87,16 @@ fn mask_sample(u: f32, v: f32) -> f32 {
 
 // `mask_bilinear` with the four texels fetched by one gather from the texture: the same texels (asked for at
 // the corner they share, where the hardware's choice of footprint is unambiguous), turned back into 0..255,
-// and the same arithmetic, so the same value.
+// and the same `mask_spot` and `mask_mix` (mask_texels.wgsl), so the same value.
 fn mask_gathered(u: f32, v: f32) -> f32 {
     if (!(abs(u) <= 1.0 && abs(v) <= 1.0)) {
         return 0.0;
     }
-    let n = f32(strip.mask_size);
-    let x = (u * 0.5 + 0.5) * n - 0.5;
-    let y = (0.5 - v * 0.5) * n - 0.5;
-    let x0 = i32(x + 1.0) - 1;
-    let y0 = i32(y + 1.0) - 1;
-    let fx = x - f32(x0);
-    let fy = y - f32(y0);
+    let s = mask_spot(u, v, strip.mask_size);
+    let corner = vec2<f32>(f32(s.x0) + 1.0, f32(s.y0) + 1.0) / f32(strip.mask_size);
     // Components: x (x0, y0 + 1), y (x0 + 1, y0 + 1), z (x0 + 1, y0), w (x0, y0).
-    let g = round(textureGather(0, mask_texture, mask_sampler, vec2<f32>(f32(x0) + 1.0, f32(y0) + 1.0) / n) * 255.0);
-    let top = g.w * (1.0 - fx) + g.z * fx;
-    let bottom = g.x * (1.0 - fx) + g.y * fx;
-    return (top * (1.0 - fy) + bottom * fy) / 255.0;
+    let g = round(textureGather(0, mask_texture, mask_sampler, corner) * 255.0);
+    return mask_mix(vec4<f32>(g.w, g.z, g.x, g.y), s);
 }
 
 // The band of mask rows a sample at v reads (MaskRows::at); -1 outside [-1, 1].

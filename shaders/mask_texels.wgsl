@@ -11,20 +11,43 @@ fn mask_texel(i: i32, j: i32, size: u32) -> f32 {
     return f32((mask_word(k >> 2u) >> ((k & 3u) * 8u)) & 255u);
 }
 
-// The mask at (u, v) in [-1, 1]^2, 0 outside (and for a NaN): bilinear between texel centres.
-fn mask_bilinear(u: f32, v: f32, size: u32) -> f32 {
-    if (!(abs(u) <= 1.0 && abs(v) <= 1.0)) {
-        return 0.0;
-    }
+// Where a sample at (u, v) in [-1, 1]^2 falls between texel centres: the top-left texel of its four and the
+// fractions towards the next column and row.
+struct MaskSpot {
+    x0: i32,
+    y0: i32,
+    fx: f32,
+    fy: f32,
+};
+
+fn mask_spot(u: f32, v: f32, size: u32) -> MaskSpot {
     let n = f32(size);
     let x = (u * 0.5 + 0.5) * n - 0.5;
     let y = (0.5 - v * 0.5) * n - 0.5;
     // x, y >= -0.5: truncating x + 1 floors x.
     let x0 = i32(x + 1.0) - 1;
     let y0 = i32(y + 1.0) - 1;
-    let fx = x - f32(x0);
-    let fy = y - f32(y0);
-    let top = mask_texel(x0, y0, size) * (1.0 - fx) + mask_texel(x0 + 1, y0, size) * fx;
-    let bottom = mask_texel(x0, y0 + 1, size) * (1.0 - fx) + mask_texel(x0 + 1, y0 + 1, size) * fx;
-    return (top * (1.0 - fy) + bottom * fy) / 255.0;
+    return MaskSpot(x0, y0, x - f32(x0), y - f32(y0));
+}
+
+// The bilinear mix at `s` of the four texels (0 to 255) top-left, top-right, bottom-left, bottom-right, 0 to 1.
+fn mask_mix(t: vec4<f32>, s: MaskSpot) -> f32 {
+    let top = t.x * (1.0 - s.fx) + t.y * s.fx;
+    let bottom = t.z * (1.0 - s.fx) + t.w * s.fx;
+    return (top * (1.0 - s.fy) + bottom * s.fy) / 255.0;
+}
+
+// The mask at (u, v) in [-1, 1]^2, 0 outside (and for a NaN): bilinear between texel centres.
+fn mask_bilinear(u: f32, v: f32, size: u32) -> f32 {
+    if (!(abs(u) <= 1.0 && abs(v) <= 1.0)) {
+        return 0.0;
+    }
+    let s = mask_spot(u, v, size);
+    let t = vec4<f32>(
+        mask_texel(s.x0, s.y0, size),
+        mask_texel(s.x0 + 1, s.y0, size),
+        mask_texel(s.x0, s.y0 + 1, size),
+        mask_texel(s.x0 + 1, s.y0 + 1, size),
+    );
+    return mask_mix(t, s);
 }

@@ -17,7 +17,7 @@ use flare_core::render::DisplaySettings;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
-    let usage = "usage: gpu_timing LENS WIDTH HEIGHT [LUT.flut] [starburst]";
+    let usage = "usage: gpu_timing LENS WIDTH HEIGHT [LUT.flut] [starburst] [compute]";
     let starburst = args.iter().any(|a| a == "starburst");
     let compute_only = args.iter().any(|a| a == "compute");
     let args: Vec<String> = args.into_iter().filter(|a| a != "starburst" && a != "compute").collect();
