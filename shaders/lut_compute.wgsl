@@ -13,9 +13,14 @@
 //
 // An instance magnified enough is sampled coarsely (`lut::blend::instance_levels`, its level in
 // `axis_y_page.w`): the CPU draws it every 2^level pixels into a smaller image and adds that image's bilinear
-// upsample; here each pixel samples the instance at the four coarse pixel centres around it (indices clamped at
-// the edges as the CPU's `add_upsampled` does) and interpolates them with the same weights. Levels above 0 are
-// only used when the instances are added.
+// upsample, and so does the GPU where it can bind those images (`coarse_images` 1): `lut_coarse` draws each
+// coarse level's instances, in the frame's order, at the centres of that level's pixels (one invocation a
+// coarse pixel, the list of the tile holding its centre) into `coarse`, and `lut_tiles` adds each level's
+// bilinear upsample (indices clamped at the edges, the weights of the CPU's `add_upsampled`). At 4K the default
+// bake's instances are mostly level 2, about 22 of them over a pixel: one sample a coarse pixel instead of four a
+// pixel. Where the images cannot be bound (`coarse_images` 0), each pixel samples each coarse instance at the
+// four coarse pixel centres around it and interpolates them with the same weights. Levels above 0 are only
+// used when the instances are added.
 //
 // An instance's `rect` is the atlas rectangle of the mip level it is drawn from (`LutScene::choose_mips`): the
 // same window of the sensor at the level's texels, so nothing here depends on the level.
@@ -35,16 +40,54 @@ struct LutTiles {
     scale_x: f32,     // image pixels per accumulation pixel
     scale_y: f32,
     alpha_over: u32,  // 1: composited over through alpha
-    unused: u32,
+    coarse_images: u32, // bit L (1, 2): level L's instances are drawn into `coarse` and upsampled from it
 };
 
 @group(0) @binding(0) var<uniform> tiles: LutTiles;
 @group(0) @binding(1) var<storage, read> instances: array<LutInstance>;
-// Per tile, where its list starts; then the list's length. Then the lists.
+// Per tile, where its list starts; then the lists' total length. Then the lists (per tile its instances of
+// level 0, then level 1, then level 2, each in the frame's order). Then per tile where its level 1 and its
+// level 2 instances start.
 @group(0) @binding(2) var<storage, read> bins: array<u32>;
 @group(0) @binding(3) var atlas: texture_2d_array<f32>;
 @group(0) @binding(4) var atlas_sampler: sampler;
 @group(0) @binding(5) var layer: texture_storage_2d<rgba16float, write>;
+// The coarse levels' images (RGB, the fourth float unused), level 1 then level 2, rows from the top: level L is
+// ceil(width / 2^L) x ceil(height / 2^L) pixels.
+@group(0) @binding(6) var<storage, read_write> coarse: array<vec4<f32>>;
+
+// Tile t's run of list entries [x, y) of instances of sampling level `level` (0, 1, 2), or of every level.
+fn tile_run(t: u32, level: u32) -> vec2<u32> {
+    let tiles_total = (tiles.width + tiles.tile - 1u) / tiles.tile * ((tiles.height + tiles.tile - 1u) / tiles.tile);
+    let lists = tiles_total + 1u;
+    let splits = lists + bins[tiles_total] + 2u * t;
+    let first = bins[t];
+    let end = bins[t + 1u];
+    if (level == 0u) {
+        return vec2<u32>(first, bins[splits]);
+    }
+    if (level == 1u) {
+        return vec2<u32>(bins[splits], bins[splits + 1u]);
+    }
+    if (level == 2u) {
+        return vec2<u32>(bins[splits + 1u], end);
+    }
+    return vec2<u32>(first, end);
+}
+
+// The size of coarse level `level` and where its pixels start in `coarse`.
+fn coarse_size(level: u32) -> vec2<u32> {
+    let step = 1u << level;
+    return vec2<u32>((tiles.width + step - 1u) / step, (tiles.height + step - 1u) / step);
+}
+
+fn coarse_start(level: u32) -> u32 {
+    if (level == 1u) {
+        return 0u;
+    }
+    let one = coarse_size(1u);
+    return one.x * one.y;
+}
 
 // The instance's texel at the image pixel position p (RGBA, before its colour), and whether p is in its quad.
 fn sample_instance(inst: LutInstance, p: vec2<f32>) -> vec4<f32> {
@@ -70,6 +113,45 @@ fn coarse_at(x: u32, k: f32, n: u32) -> vec3<f32> {
     return vec3<f32>(clamp(i, 0.0, last), clamp(i + 1.0, 0.0, last), u - i);
 }
 
+// One pixel of coarse level gid.z + 1: the level's instances on its tile's list (the tile holding the pixel's
+// centre), sampled at that centre, in the frame's order (the CPU's `draw_level` into the smaller image).
+@compute @workgroup_size(8, 8)
+fn lut_coarse(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let level = gid.z + 1u;
+    let size = coarse_size(level);
+    if ((tiles.coarse_images & (1u << level)) == 0u || gid.x >= size.x || gid.y >= size.y) {
+        return;
+    }
+    let step = 1u << level;
+    let kf = f32(step);
+    let scale = vec2<f32>(tiles.scale_x, tiles.scale_y);
+    let centre = min(gid.xy * step + vec2<u32>(step / 2u), vec2<u32>(tiles.width - 1u, tiles.height - 1u));
+    let t = (centre.y / tiles.tile) * tiles.tiles_x + centre.x / tiles.tile;
+    let lists = (tiles.width + tiles.tile - 1u) / tiles.tile * ((tiles.height + tiles.tile - 1u) / tiles.tile) + 1u;
+    let p = (vec2<f32>(gid.xy) + 0.5) * kf * scale;
+    var add = vec3<f32>(0.0);
+    let run = tile_run(t, level);
+    for (var k = run.x; k < run.y; k = k + 1u) {
+        let inst = instances[bins[lists + k]];
+        add = add + sample_instance(inst, p).rgb * inst.colour.rgb;
+    }
+    coarse[coarse_start(level) + gid.y * size.x + gid.x] = vec4<f32>(add, 0.0);
+}
+
+// Coarse level `level`'s image, bilinearly upsampled at accumulation pixel `at` (`add_upsampled`).
+fn upsampled(level: u32, at: vec2<u32>) -> vec3<f32> {
+    let size = coarse_size(level);
+    let start = coarse_start(level);
+    let kf = f32(1u << level);
+    let cx = coarse_at(at.x, kf, size.x);
+    let cy = coarse_at(at.y, kf, size.y);
+    let top_row = start + u32(cy.x) * size.x;
+    let bottom_row = start + u32(cy.y) * size.x;
+    let top = coarse[top_row + u32(cx.x)].rgb * (1.0 - cx.z) + coarse[top_row + u32(cx.y)].rgb * cx.z;
+    let bottom = coarse[bottom_row + u32(cx.x)].rgb * (1.0 - cx.z) + coarse[bottom_row + u32(cx.y)].rgb * cx.z;
+    return top * (1.0 - cy.z) + bottom * cy.z;
+}
+
 @compute @workgroup_size(8, 8)
 fn lut_tiles(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (gid.x >= tiles.width || gid.y >= tiles.height) {
@@ -81,7 +163,10 @@ fn lut_tiles(@builtin(global_invocation_id) gid: vec3<u32>) {
     let p = (vec2<f32>(gid.xy) + 0.5) * scale;
     var add = vec3<f32>(0.0);
     var keep = 1.0;
-    for (var k = bins[t]; k < bins[t + 1u]; k = k + 1u) {
+    // With the coarse images, the tile's level 0 instances alone (the others are drawn by `lut_coarse` and
+    // added below); else every instance of the tile.
+    let run = tile_run(t, select(3u, 0u, tiles.coarse_images != 0u));
+    for (var k = run.x; k < run.y; k = k + 1u) {
         let inst = instances[bins[lists + k]];
         let level = u32(inst.axis_y_page.w);
         if (level > 0u) {
@@ -107,6 +192,11 @@ fn lut_tiles(@builtin(global_invocation_id) gid: vec3<u32>) {
             keep = keep * through;
         } else {
             add = add + rgb;
+        }
+    }
+    for (var level = 1u; level <= 2u; level = level + 1u) {
+        if ((tiles.coarse_images & (1u << level)) != 0u) {
+            add = add + upsampled(level, gid.xy);
         }
     }
     textureStore(layer, vec2<u32>(gid.x, gid.y), vec4<f32>(add, keep));

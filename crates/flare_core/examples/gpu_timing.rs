@@ -3,8 +3,11 @@
 //! waited for (no read-back), and the GPU's own time of the passes by timestamps. What the README's lavapipe
 //! and real-GPU tables came from. The starburst is left out unless the last argument is `starburst`.
 //!
-//! `cargo run --release -p flare_core --example gpu_timing -- LENS WIDTH HEIGHT [LUT.flut] [starburst] [compute]`
-//! (`compute`: the GPU compute passes only, no CPU twin and no raster passes).
+//! `cargo run --release -p flare_core --example gpu_timing -- LENS WIDTH HEIGHT [LUT.flut] [starburst] [compute]
+//! [resolve=runs|scan] [pieces=N] [buffer] [inline]` (`compute`: the GPU compute passes only, no
+//! CPU twin and no raster passes; the rest pick the ghost pass's form, `render::gpu_ghosts::ComputeForm`, from
+//! the device's own: `buffer` reads the stop masks from the storage buffer; `inline`: the LUT pass samples its
+//! coarse instances at every pixel instead of into coarse images).
 
 use std::time::Instant;
 
@@ -17,10 +20,15 @@ use flare_core::render::DisplaySettings;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
-    let usage = "usage: gpu_timing LENS WIDTH HEIGHT [LUT.flut] [starburst] [compute]";
-    let starburst = args.iter().any(|a| a == "starburst");
-    let compute_only = args.iter().any(|a| a == "compute");
-    let args: Vec<String> = args.into_iter().filter(|a| a != "starburst" && a != "compute").collect();
+    let usage = "usage: gpu_timing LENS WIDTH HEIGHT [LUT.flut] [starburst] [compute] [resolve=runs|scan] [pieces=N] \
+                 [buffer] [inline]";
+    let flag = |name: &str| args.iter().any(|a| a == name);
+    let value = |key: &str| args.iter().find_map(|a| a.strip_prefix(key).map(str::to_owned));
+    let (starburst, compute_only) = (flag("starburst"), flag("compute"));
+    let form_args = (value("resolve="), value("pieces="), flag("buffer"));
+    let options = ["starburst", "compute", "buffer", "inline"];
+    let args: Vec<String> =
+        args.iter().filter(|a| !options.contains(&a.as_str()) && !a.contains('=')).cloned().collect();
     let lens = builtin_lens(args.get(1).ok_or(usage)?)?;
     let (w, h): (u32, u32) = (args.get(2).ok_or(usage)?.parse()?, args.get(3).ok_or(usage)?.parse()?);
     let flare = PreparedFlare::new(&lens, &FlareConfig::default())?;
@@ -50,8 +58,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     for raster in [false, true].into_iter().take(if compute_only { 1 } else { 2 }) {
         let mut drawer = GpuDrawer::new(true)?;
+        drawer.renderer.set_lut_coarse_images(!flag("inline"));
         if raster {
             drawer.renderer.force_raster_ghosts();
+        } else if let Some(mut form) = drawer.renderer.ghost_compute_form() {
+            let (resolve, pieces, buffer) = &form_args;
+            if let Some(r) = resolve {
+                form.scan = match r.as_str() {
+                    "runs" => false,
+                    "scan" => true,
+                    _ => return Err(usage.into()),
+                };
+            }
+            if let Some(p) = pieces {
+                form.pieces = Some(p.parse()?);
+            }
+            form.gather_masks &= !*buffer;
+            drawer.renderer.set_ghost_compute_form(form);
+            println!("form: {form:?}");
         }
         // The raster row is the earlier path whole: its tonemap a fragment pass too (no storage binding).
         let usage = if raster { wgpu::TextureUsages::RENDER_ATTACHMENT } else { drawer.renderer.target_usage() };

@@ -591,7 +591,8 @@ impl TexelMap {
 }
 
 /// The LUT instances of a frame binned into square tiles of the accumulation (what `lut_compute.wgsl` reads):
-/// per tile, in the frame's order, the instances whose lit texels can reach it.
+/// per tile, the instances whose lit texels can reach it, those of sampling level 0 first, then level 1, then
+/// level 2 ([`instance_levels`]), each level in the frame's order (a pass over one level reads its own run).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct LutBins {
     /// Accumulation pixels a side of a tile.
@@ -602,6 +603,9 @@ pub struct LutBins {
     pub starts: Vec<u32>,
     /// Instance indices.
     pub list: Vec<u32>,
+    /// Per tile, where its instances of level 1 and of level 2 start in `list` (each run ends where the next
+    /// level's, or the next tile's list, starts).
+    pub splits: Vec<[u32; 2]>,
     /// Per instance, its sampling level ([`instance_levels`]).
     pub levels: Vec<u8>,
 }
@@ -666,7 +670,16 @@ pub fn bin_instances(
             }
         }
     }
-    LutBins { tile, tiles_x, tiles_y, starts, list, levels }
+    // Each tile's list by level, the frame's order kept within a level (a stable sort).
+    let splits = (0..tiles)
+        .map(|t| {
+            let (start, end) = (starts[t] as usize, starts[t + 1] as usize);
+            list[start..end].sort_by_key(|&i| levels[i as usize]);
+            let first_of = |level: u8| start + list[start..end].partition_point(|&i| levels[i as usize] < level);
+            [first_of(1) as u32, first_of(2) as u32]
+        })
+        .collect();
+    LutBins { tile, tiles_x, tiles_y, starts, list, splits, levels }
 }
 
 /// The footprint of `(LUT ghost, entry, level)`.

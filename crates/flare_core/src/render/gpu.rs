@@ -611,6 +611,23 @@ impl FlareRenderer {
         self.lut_bin_bytes = bytes.min(self.lut_bin_bytes);
     }
 
+    /// Whether the compute LUT pass draws its coarse instances into images of their level's size and upsamples
+    /// them (each device has its own default: a hardware GPU yes, a software rasteriser no), or samples them at
+    /// every pixel: the same values up to the order of the sums.
+    pub fn set_lut_coarse_images(&mut self, yes: bool) {
+        if let Some(lut) = &mut self.compute_lut {
+            lut.coarse_images = yes;
+        }
+    }
+
+    /// Caps the bytes of the LUT pass's coarse images (a test's way to reach the form of a frame whose coarse
+    /// images pass the adapter's storage binding limit: each pixel samples the coarse instances itself).
+    pub fn limit_lut_coarse_bytes(&mut self, bytes: u64) {
+        if let Some(lut) = &mut self.compute_lut {
+            lut.coarse_limit = bytes.min(lut.coarse_limit);
+        }
+    }
+
     /// Caps the bytes of the compute pass's difference buffer (a test's way to draw a frame in many strips, as
     /// one beyond the adapter's storage binding limit is drawn).
     pub fn limit_ghost_strip_bytes(&mut self, bytes: u64) {
@@ -762,7 +779,7 @@ impl FlareRenderer {
         // are rasterised over the computed ghosts instead.
         let bins = lut.filter(|_| use_compute && self.compute_lut.is_some()).and_then(|lut| {
             let bins = bin_instances((scene.width, scene.height), (w, h), lut, &self.lut_footprints, TILE);
-            let bytes = 4 * (bins.starts.len() + bins.list.len()) as u64;
+            let bytes = 4 * (bins.starts.len() + bins.list.len() + 2 * bins.splits.len()) as u64;
             (bytes <= self.lut_bin_bytes).then_some(bins)
         });
         let raster_lut = bins.is_none();

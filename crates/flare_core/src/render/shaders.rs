@@ -6,7 +6,8 @@
 //! sync. Likewise `aperture.wgsl` (the mask lookup) for the two passes that read the aperture, and
 //! `raygrid_common.wgsl` (the ray-grid structs) for the GPU ray grids' passes, and `fixed64.wgsl` (64-bit fixed
 //! point in two u32 words) for the passes that sum light with integer atomics, `scan64.wgsl` (a workgroup's scan
-//! of those sums) for the resolves that sum a row 64 columns at a time, and `mask_texels.wgsl` (the mask
+//! of those sums) for the ray grids' resolve, which sums a row 64 columns at a time, and the ghosts' runs form,
+//! and `mask_texels.wgsl` (the mask
 //! looked up in a storage buffer) for the compute passes that read the aperture. A test parses every shader with
 //! naga and checks that the WGSL `Globals` has the Rust struct's size and member offsets. The tonemap pass is
 //! the one shader put together at run time: [`tonemap_wgsl`] puts the OCIO display transform's WGSL (made for
