@@ -4,9 +4,9 @@
 //! and real-GPU tables came from. The starburst is left out unless the last argument is `starburst`.
 //!
 //! `cargo run --release -p flare_core --example gpu_timing -- LENS WIDTH HEIGHT [LUT.flut] [starburst] [compute]
-//! [resolve=runs|scan] [pieces=N] [buffer] [inline]` (`compute`: the GPU compute passes only, no
+//! [resolve=runs|scan] [pieces=N] [buffer] [once] [inline]` (`compute`: the GPU compute passes only, no
 //! CPU twin and no raster passes; the rest pick the ghost pass's form, `render::gpu_ghosts::ComputeForm`, from
-//! the device's own: `buffer` reads the stop masks from the storage buffer; `inline`: the LUT pass samples its
+//! the device's own: `buffer` reads the stop masks from the storage buffer, `once` works each item out once; `inline`: the LUT pass samples its
 //! coarse instances at every pixel instead of into coarse images).
 
 use std::time::Instant;
@@ -21,12 +21,12 @@ use flare_core::render::DisplaySettings;
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     let usage = "usage: gpu_timing LENS WIDTH HEIGHT [LUT.flut] [starburst] [compute] [resolve=runs|scan] [pieces=N] \
-                 [buffer] [inline]";
+                 [buffer] [once] [inline]";
     let flag = |name: &str| args.iter().any(|a| a == name);
     let value = |key: &str| args.iter().find_map(|a| a.strip_prefix(key).map(str::to_owned));
     let (starburst, compute_only) = (flag("starburst"), flag("compute"));
-    let form_args = (value("resolve="), value("pieces="), flag("buffer"));
-    let options = ["starburst", "compute", "buffer", "inline"];
+    let form_args = (value("resolve="), value("pieces="), flag("buffer"), flag("once"));
+    let options = ["starburst", "compute", "buffer", "inline", "once"];
     let args: Vec<String> =
         args.iter().filter(|a| !options.contains(&a.as_str()) && !a.contains('=')).cloned().collect();
     let lens = builtin_lens(args.get(1).ok_or(usage)?)?;
@@ -62,7 +62,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         if raster {
             drawer.renderer.force_raster_ghosts();
         } else if let Some(mut form) = drawer.renderer.ghost_compute_form() {
-            let (resolve, pieces, buffer) = &form_args;
+            let (resolve, pieces, buffer, once) = &form_args;
             if let Some(r) = resolve {
                 form.scan = match r.as_str() {
                     "runs" => false,
@@ -74,6 +74,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 form.pieces = Some(p.parse()?);
             }
             form.gather_masks &= !*buffer;
+            form.setup_once |= *once;
             drawer.renderer.set_ghost_compute_form(form);
             println!("form: {form:?}");
         }

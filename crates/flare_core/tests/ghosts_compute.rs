@@ -106,7 +106,8 @@ fn the_compute_pass_is_deterministic_and_draws_in_strips() {
     assert!(first == again, "two runs differ");
     // Every form of the pass (a hardware GPU's where lavapipe draws its own, and the reverse: the per-row
     // scan or runs, the masks gathered from the texture or read from the buffer, each item's walk in one
-    // piece or split between invocations): the same bytes, in one piece and in strips.
+    // piece or split between invocations, each item worked out by its pieces or once into a buffer): the same
+    // bytes, in one piece and in strips.
     let own = drawer.renderer.ghost_compute_form().expect("lavapipe draws the ghosts by compute");
     for strips in [false, true] {
         if strips {
@@ -115,9 +116,12 @@ fn the_compute_pass_is_deterministic_and_draws_in_strips() {
         for scan in [false, true] {
             for gather_masks in [false, true] {
                 for pieces in [Some(1), Some(3), Some(8), None] {
-                    let form = ComputeForm { scan, gather_masks, pieces };
-                    drawer.renderer.set_ghost_compute_form(form);
-                    assert!(drawer.draw(&frame, &sources).unwrap() == first, "{form:?} (strips: {strips}) differs");
+                    for setup_once in [false, true] {
+                        let form = ComputeForm { scan, gather_masks, pieces, setup_once };
+                        drawer.renderer.set_ghost_compute_form(form);
+                        let drawn = drawer.draw(&frame, &sources).unwrap();
+                        assert!(drawn == first, "{form:?} (strips: {strips}) differs");
+                    }
                 }
             }
         }
