@@ -62,6 +62,21 @@ pub(crate) fn storage(
     buffer
 }
 
+/// Makes `slot` hold a storage buffer of at least `bytes` (at least 16): the one there, or a new one (zeroed
+/// by wgpu) where there is none or it is smaller. Buffers a pass reuses from frame to frame grow this way.
+pub(crate) fn grow_storage(device: &wgpu::Device, slot: &mut Option<(wgpu::Buffer, u64)>, label: &str, bytes: u64) {
+    let bytes = bytes.max(16);
+    if !matches!(slot, Some((_, size)) if *size >= bytes) {
+        let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: bytes,
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        });
+        *slot = Some((buffer, bytes));
+    }
+}
+
 /// The compute pipeline of `module`'s `entry` point, its layout the one the entry point implies.
 pub(crate) fn compute_pipeline(
     device: &wgpu::Device,

@@ -32,7 +32,7 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::buffers::{HDR_FORMAT, compute_pipeline, software_device, storage, texture_2d, upload};
+use super::buffers::{HDR_FORMAT, compute_pipeline, grow_storage, software_device, storage, texture_2d, upload};
 use super::cpu::ghosts::{MaskRows, without_open_stops};
 use super::cpu::quads::{accumulation_scale, covered};
 use super::shaders::GHOSTS_COMPUTE_WGSL;
@@ -356,28 +356,13 @@ impl ComputeGhosts {
             s.params.lut = u32::from(lut_layer.is_some());
             s.params.mask_texture = u32::from(self.form.gather_masks);
         }
-        let needed = row_bytes * u64::from(strip_rows);
-        if !matches!(&self.diff, Some((_, size)) if *size >= needed) {
-            // New buffers are zeroed by wgpu.
-            let buffer = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("ghost differences"),
-                size: needed,
-                usage: wgpu::BufferUsages::STORAGE,
-                mapped_at_creation: false,
-            });
-            self.diff = Some((buffer, needed));
-        }
+        // The difference buffer is zeroed when new (wgpu) and left zeroed by `resolve`.
+        grow_storage(device, &mut self.diff, "ghost differences", row_bytes * u64::from(strip_rows));
         // The walks' buffer, where the form asks for it and the largest strip's walks fit one binding.
         let walk_bytes = strips.iter().map(|s| u64::from(s.params.items) * BYTES_PER_WALK).max().unwrap_or(0);
         let setup_once = self.form.setup_once && walk_bytes > 0 && walk_bytes <= self.strip_bytes;
-        if setup_once && !matches!(&self.walks, Some((_, size)) if *size >= walk_bytes) {
-            let buffer = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("ghost walks"),
-                size: walk_bytes,
-                usage: wgpu::BufferUsages::STORAGE,
-                mapped_at_creation: false,
-            });
-            self.walks = Some((buffer, walk_bytes));
+        if setup_once {
+            grow_storage(device, &mut self.walks, "ghost walks", walk_bytes);
         }
         let walks = self.walks.as_ref().map(|(b, _)| b).filter(|_| setup_once);
         let spans = if walks.is_some() { &self.spans_walks } else { &self.spans };

@@ -17,7 +17,7 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::buffers::{HDR_FORMAT, compute_pipeline, software_device, storage, texture_2d};
+use super::buffers::{HDR_FORMAT, compute_pipeline, grow_storage, software_device, storage, texture_2d};
 use super::shaders::LUT_COMPUTE_WGSL;
 use crate::lut::blend::{LutBins, LutInstance, LutScene};
 
@@ -57,7 +57,7 @@ pub(crate) struct ComputeLut {
     pipeline: wgpu::ComputePipeline,
     coarse_pipeline: wgpu::ComputePipeline,
     /// The coarse levels' images and their size in bytes (a 16-byte stand-in while no frame needs them).
-    coarse: (wgpu::Buffer, u64),
+    coarse: Option<(wgpu::Buffer, u64)>,
     /// Whether coarse instances are drawn into the coarse images (a hardware GPU) or sampled at every pixel (a
     /// software rasteriser: lavapipe drew the zoom's blended 1920x1080 frame in 9.6 s with the images against
     /// 7.9 s without, for reasons not found; at 4K the images took an H200's LUT pass from 1.38 to 0.20 ms).
@@ -78,7 +78,7 @@ impl ComputeLut {
         Self {
             pipeline: compute_pipeline(device, &module, "lut_tiles"),
             coarse_pipeline: compute_pipeline(device, &module, "lut_coarse"),
-            coarse: (coarse_buffer(device, COARSE_PIXEL_BYTES), COARSE_PIXEL_BYTES),
+            coarse: None,
             coarse_images: !software_device(device),
             coarse_limit: limits.max_storage_buffer_binding_size.min(limits.max_buffer_size),
             layer: None,
@@ -112,9 +112,10 @@ impl ComputeLut {
         let needed = coarse_bytes(w, h);
         if !self.coarse_images || needed > self.coarse_limit {
             coarse_images = 0;
-        } else if coarse_images != 0 && self.coarse.1 < needed {
-            self.coarse = (coarse_buffer(device, needed), needed);
         }
+        let bytes = if coarse_images != 0 { needed } else { COARSE_PIXEL_BYTES };
+        grow_storage(device, &mut self.coarse, "lut coarse images", bytes);
+        let Some((coarse, _)) = &self.coarse else { unreachable!("made above") };
         let params = LutTiles {
             width: w,
             height: h,
@@ -148,7 +149,7 @@ impl ComputeLut {
             wgpu::BindGroupEntry { binding: 2, resource: bin_buffer.as_entire_binding() },
             wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(atlas) },
             wgpu::BindGroupEntry { binding: 4, resource: wgpu::BindingResource::Sampler(sampler) },
-            wgpu::BindGroupEntry { binding: 6, resource: self.coarse.0.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 6, resource: coarse.as_entire_binding() },
         ];
         if coarse_images != 0 {
             let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -173,14 +174,4 @@ impl ComputeLut {
         pass.dispatch_workgroups(w.div_ceil(WORKGROUP), h.div_ceil(WORKGROUP), 1);
         view
     }
-}
-
-/// A storage buffer for the coarse images, `bytes` long.
-fn coarse_buffer(device: &wgpu::Device, bytes: u64) -> wgpu::Buffer {
-    device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("lut coarse images"),
-        size: bytes,
-        usage: wgpu::BufferUsages::STORAGE,
-        mapped_at_creation: false,
-    })
 }
