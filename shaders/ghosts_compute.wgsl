@@ -12,14 +12,16 @@
 // (its edge pixels, the open span's first pixel, the end) is split between `pieces` invocations, each taking
 // one run of it and shading the pixel before its run once more: a long edge does not hold up its warp. Each
 // of them works the item out (`spans`), or one invocation an item does so into `walks` first (`walks_setup`,
-// then `spans_walks`: hardware GPUs, where the repeats cost 0.26 ms of a 4K frame). A stop
-// mask lookup reads its four texels from the storage buffer, or, where `mask_texture` is 1 (hardware GPUs), by
-// one `textureGather`, every mask of the pixel fetched before any is tested: the same texels and arithmetic
-// either way. `resolve` sums each row once (a prefix sum, one workgroup a row scanning 256 columns at a time;
-// `resolve_runs` on a software rasteriser) into the HDR texture, applying the LUT layer where the
-// frame has one. The differences are integers: each step d (at most 2^30 units) is added as two 32-bit parts,
-// hi = round(d / 2^k) and lo = d - hi 2^k, to two words by atomics whose results are not read (no invocation
-// waits on one), and `resolve` rebuilds the 64-bit sum high 2^k + low. Integer addition does not depend on the
+// then `spans_walks`: hardware GPUs, where the repeats cost 0.26 ms of a 4K frame). A stop mask lookup reads
+// its four texels as one word of the storage buffer (a software rasteriser loads a storage word lane by lane),
+// or, where GATHER_MASKS (hardware GPUs), by one `textureGather`, every mask of the pixel fetched before any is
+// tested: the same texels and arithmetic either way. On a software rasteriser each sprite is instead one
+// workgroup whose invocations take its rows (`spans_sprites`). `resolve` sums each row once (a prefix sum, one
+// workgroup a row scanning 256 columns at a time; `resolve_rows`, one invocation a row, on a software
+// rasteriser) into the HDR texture, applying the LUT layer where the frame has one. The differences are
+// integers: each step d (at most 2^30 units) is added as two 32-bit parts, hi = round(d / 2^k) and
+// lo = d - hi 2^k, to two words by atomics whose results are not read (no invocation waits on one), and
+// `resolve` rebuilds the 64-bit sum high 2^k + low. Integer addition does not depend on the
 // order in which sprites arrive, so the image is the same bytes on every run, whatever `pieces` is. The
 // unit and k are chosen per frame (gpu_ghosts.rs, `split_units`): 2^30 units for the brightest sprite's
 // brightest channel (fewer past about 32 000 sprites), at most 2^62 for the sum of every sprite's, and k such
@@ -51,9 +53,13 @@ struct ComputeStrip {
     lut: u32,            // 1: apply the LUT layer (lut_compute.wgsl's (A, K)) as each pixel is written
     split_bits: u32,     // k: a step d is added as hi = round(d / 2^k) and lo = d - hi 2^k, each to its own word
     pieces: u32,         // invocations a (sprite, row) item's walk is split between
-    mask_texture: u32,   // 1: the stop masks' texels gathered from `mask_texture` (one fetch a lookup), and
-                         // every mask of a pixel looked up before any is tested
+    padding: u32,
 };
+
+// True (hardware GPUs): the stop masks' texels gathered from `mask_texture` (one fetch a lookup), every mask of a
+// pixel looked up before any is tested. A pipeline constant, not a uniform: a software rasteriser runs the code
+// of both sides of a branch, masked, so the gather would run beside every buffer lookup.
+override GATHER_MASKS: bool = false;
 
 @group(0) @binding(0) var<uniform> strip: ComputeStrip;
 @group(0) @binding(1) var<storage, read> instances: array<GhostInstance>;
@@ -61,7 +67,7 @@ struct ComputeStrip {
 @group(0) @binding(2) var<storage, read> items: array<vec2<u32>>;
 // The aperture mask (one buffer: four storage buffers are all a downlevel adapter has): first, per band of mask
 // rows (mask_size + 1 of them), u where the bilinear sample is exactly 1 (lo, hi) and u outside which it is 0
-// (lo, hi), as f32 bits; then the mask's 8-bit texels, four to a word, rows from the top.
+// (lo, hi), as f32 bits; then each bilinear footprint's four 8-bit texels in one word (mask_texels.wgsl).
 @group(0) @binding(3) var<storage, read> mask: array<u32>;
 // Per strip row, per column 0..=width, per channel R, G, B: a 64-bit difference as (low word, high word).
 // All zero between strips: `resolve` clears what it read.
@@ -77,13 +83,14 @@ struct ComputeStrip {
 
 // ---- the aperture mask (ApertureMask::sample) ----
 
-// The packed texels follow the mask's row table (`mask_size + 1` rows of four words) in `mask`.
-fn mask_word(w: u32) -> u32 {
+// The footprints' words (`ApertureMask::quad_words`) follow the mask's row table (`mask_size + 1` rows of four
+// words) in `mask`.
+fn mask_quad(w: u32) -> u32 {
     return mask[(strip.mask_size + 1u) * 4u + w];
 }
 
 fn mask_sample(u: f32, v: f32) -> f32 {
-    if (strip.mask_texture == 1u) {
+    if (GATHER_MASKS) {
         return mask_gathered(u, v);
     }
     return mask_bilinear(u, v, strip.mask_size);
@@ -133,7 +140,7 @@ fn mask_product(inst: GhostInstance, front_open: bool, q: vec2<f32>) -> f32 {
     if (abs(q.x) > 1.0 || abs(q.y) > 1.0) {
         return 0.0;
     }
-    if (strip.mask_texture == 1u) {
+    if (GATHER_MASKS) {
         // Every lookup issued at once (a GPU waits on one fetch at a time otherwise); each factor is in
         // [0, 1], so a factor of 0 gives the 0 the early returns below give, and the products are taken in
         // their order: the same value.
@@ -293,8 +300,6 @@ fn walk_value(inst: GhostInstance, w: Walk, i: u32) -> vec3<i32> {
 
 // The walk of (sprite, row) item `item` of this strip (n = 0 where it draws nothing).
 fn item_walk(item: u32) -> Walk {
-    var walk: Walk;
-    walk.n = 0u;
     // The sprite whose items hold this one: the last k with items[k].x <= item.
     var lo = 0u;
     var hi = strip.instances;
@@ -306,8 +311,14 @@ fn item_walk(item: u32) -> Walk {
             hi = mid;
         }
     }
-    let inst = instances[lo];
-    let y = items[lo].y + (item - items[lo].x);
+    return sprite_walk(instances[lo], lo, items[lo], item);
+}
+
+// The walk of item `item` of sprite `sprite` (`inst`), whose first item and first row are `start`.
+fn sprite_walk(inst: GhostInstance, sprite: u32, start: vec2<u32>, item: u32) -> Walk {
+    var walk: Walk;
+    walk.n = 0u;
+    let y = start.y + (item - start.x);
     let cx = inst.centre_half.x;
     let cy = inst.centre_half.y;
     let hx = inst.centre_half.z;
@@ -397,21 +408,20 @@ fn item_walk(item: u32) -> Walk {
     walk.n = walk.n_left + select(0u, 1u + last - walk.right_first, has_open) + 1u;
     walk.q_y = q_y;
     walk.front_open = select(0u, 1u, front_open);
-    walk.sprite = lo;
+    walk.sprite = sprite;
     walk.row = y - strip.first_row;
     return walk;
 }
 
 // Piece `piece` (of `strip.pieces`) of `walk`: its positions' steps put as F(i) - F(i - 1), F before the walk's
 // first position being 0 (the value just before the piece is worked out once more).
-fn walk_piece(walk: Walk, piece: u32) {
+fn walk_piece(inst: GhostInstance, walk: Walk, piece: u32) {
     let per = (walk.n + strip.pieces - 1u) / strip.pieces;
     let start = piece * per;
     let end = min(start + per, walk.n);
     if (start >= end) {
         return;
     }
-    let inst = instances[walk.sprite];
     var before = vec3<i32>(0i);
     if (start > 0u) {
         before = walk_value(inst, walk, start - 1u);
@@ -428,7 +438,28 @@ fn walk_piece(walk: Walk, piece: u32) {
 fn spans(@builtin(global_invocation_id) gid: vec3<u32>) {
     let invocation = gid.y * strip.groups_x * 64u + gid.x;
     if (invocation < strip.items * strip.pieces) {
-        walk_piece(item_walk(invocation / strip.pieces), invocation % strip.pieces);
+        let walk = item_walk(invocation / strip.pieces);
+        walk_piece(instances[walk.sprite], walk, invocation % strip.pieces);
+    }
+}
+
+// One workgroup a sprite, its invocations taking the sprite's items (rows) in turn, one invocation an item, in
+// one piece (a software rasteriser: `ComputeForm::sprite_groups`). The sprite is read at the top, before any
+// branch, from an index that is the same for the whole workgroup: lavapipe then loads each word once for its
+// SIMD batch, where `spans` loads it lane by lane (and searches for the sprite first).
+@compute @workgroup_size(64)
+fn spans_sprites(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) t: u32,
+) {
+    let sprite = wid.y * groups.x + wid.x;
+    let k = min(sprite, max(strip.instances, 1u) - 1u);
+    let inst = instances[k];
+    let first = items[k];
+    let end = select(first.x, items[k + 1u].x, sprite < strip.instances);
+    for (var item = first.x + t; item < end; item = item + 64u) {
+        walk_piece(inst, sprite_walk(inst, k, first, item), 0u);
     }
 }
 
@@ -446,7 +477,8 @@ fn walks_setup(@builtin(global_invocation_id) gid: vec3<u32>) {
 fn spans_walks(@builtin(global_invocation_id) gid: vec3<u32>) {
     let invocation = gid.y * strip.groups_x * 64u + gid.x;
     if (invocation < strip.items * strip.pieces) {
-        walk_piece(walks[invocation / strip.pieces], invocation % strip.pieces);
+        let walk = walks[invocation / strip.pieces];
+        walk_piece(instances[walk.sprite], walk, invocation % strip.pieces);
     }
 }
 
@@ -480,47 +512,33 @@ fn join64(lo_word: u32, hi_word: u32) -> vec2<u32> {
     return add64(shifted, vec2<u32>(bitcast<u32>(lo), select(0u, 0xffffffffu, lo < 0i)));
 }
 
-// `resolve` for a software rasteriser (lavapipe), where a workgroup barrier costs more than a scattered
-// read: one workgroup per strip row, each invocation sums its run of columns, the runs' sums are added up in
-// order, and each invocation writes its run's running sums. The same sums as `resolve`.
-@compute @workgroup_size(64)
-fn resolve_runs(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) t: u32) {
-    let row = wid.x;
-    let run = (strip.width + 63u) / 64u;
-    let x0 = min(t * run, strip.width);
-    let x1 = min(x0 + run, strip.width);
+// `resolve` for a software rasteriser (lavapipe): one invocation a strip row, summing it column by column,
+// each column's words read once (and cleared for the next strip), no workgroup barrier. Neighbouring
+// invocations are neighbouring rows; lavapipe loads a storage word lane by lane anyway. On lavapipe at 480x320
+// (the Nikon zoom) the pass took 7 ms by timestamps against 28 ms for a workgroup a row, each invocation a run
+// of columns (each column read twice: its run's sum, then the running sums; a barrier between), and the whole
+// frame 155 against 180 ms. The same sums as `resolve`.
+@compute @workgroup_size(8)
+fn resolve_rows(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let row = gid.x;
+    if (row >= strip.rows) {
+        return;
+    }
     let base = row * (strip.width + 1u) * 6u;
-    var sum = array<vec2<u32>, 3>(vec2<u32>(0u), vec2<u32>(0u), vec2<u32>(0u));
-    for (var x = x0; x < x1; x = x + 1u) {
-        for (var c = 0u; c < 3u; c = c + 1u) {
-            sum[c] = add64(sum[c], load64(base + x * 6u + 2u * c));
-        }
-    }
-    for (var c = 0u; c < 3u; c = c + 1u) {
-        scan_chunk[t * 3u + c] = sum[c];
-    }
-    workgroupBarrier();
     var acc = array<vec2<u32>, 3>(vec2<u32>(0u), vec2<u32>(0u), vec2<u32>(0u));
-    for (var s = 0u; s < t; s = s + 1u) {
+    for (var x = 0u; x < strip.width; x = x + 1u) {
+        let at = base + x * 6u;
         for (var c = 0u; c < 3u; c = c + 1u) {
-            acc[c] = add64(acc[c], scan_chunk[s * 3u + c]);
-        }
-    }
-    for (var x = x0; x < x1; x = x + 1u) {
-        for (var c = 0u; c < 3u; c = c + 1u) {
-            acc[c] = add64(acc[c], load64(base + x * 6u + 2u * c));
+            acc[c] = add64(acc[c], load64(at + 2u * c));
         }
         write_pixel(row, x, acc);
-    }
-    // Leave the buffer all zero for the next strip: this run's words, and the row's last column (written by
-    // `spans` at a sprite's right end, never read).
-    for (var w = base + x0 * 6u; w < base + x1 * 6u; w = w + 1u) {
-        columns[w] = 0u;
-    }
-    if (t == 63u) {
-        for (var word = base + strip.width * 6u; word < base + strip.width * 6u + 6u; word = word + 1u) {
-            columns[word] = 0u;
+        for (var w = at; w < at + 6u; w = w + 1u) {
+            columns[w] = 0u;
         }
+    }
+    // The row's last column (written by `spans` at a sprite's right end, never read).
+    for (var w = base + strip.width * 6u; w < base + strip.width * 6u + 6u; w = w + 1u) {
+        columns[w] = 0u;
     }
 }
 

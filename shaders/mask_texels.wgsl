@@ -1,15 +1,9 @@
 // The aperture mask read from a storage buffer (a software rasteriser samples a texture several times slower),
 // shared by the compute passes that look it up (prepended to ghosts_compute.wgsl and raygrid_box.wgsl when they
 // are embedded). CPU twin: `ApertureMask::sample` in crates/flare_core/src/aperture.rs, the same steps. The
-// mask's u8 texels are packed four to a u32 word, row 0 at v = +1; the including shader defines
-// `mask_word(w: u32) -> u32`, the w-th word of its packed texels.
-
-// Texel (i, j) of a `size` x `size` mask, clamped to its edge, 0 to 255.
-fn mask_texel(i: i32, j: i32, size: u32) -> f32 {
-    let last = i32(size) - 1;
-    let k = u32(clamp(j, 0, last)) * size + u32(clamp(i, 0, last));
-    return f32((mask_word(k >> 2u) >> ((k & 3u) * 8u)) & 255u);
-}
+// buffer holds `ApertureMask::quad_words`: each bilinear footprint's four u8 texels (clamped to the edge, row 0
+// at v = +1) in one word, so that a lookup is one load (lavapipe loads a storage word lane by lane); the
+// including shader defines `mask_quad(w: u32) -> u32`, the w-th of those words.
 
 // Where a sample at (u, v) in [-1, 1]^2 falls between texel centres: the top-left texel of its four and the
 // fractions towards the next column and row.
@@ -43,11 +37,10 @@ fn mask_bilinear(u: f32, v: f32, size: u32) -> f32 {
         return 0.0;
     }
     let s = mask_spot(u, v, size);
-    let t = vec4<f32>(
-        mask_texel(s.x0, s.y0, size),
-        mask_texel(s.x0 + 1, s.y0, size),
-        mask_texel(s.x0, s.y0 + 1, size),
-        mask_texel(s.x0 + 1, s.y0 + 1, size),
-    );
+    // |u|, |v| <= 1 keeps x0 and y0 in -1..size; clamped all the same, as the CPU clamps each texel.
+    let x = u32(clamp(s.x0, -1, i32(size) - 1) + 1);
+    let y = u32(clamp(s.y0, -1, i32(size) - 1) + 1);
+    let q = mask_quad(y * (size + 1u) + x);
+    let t = vec4<f32>(vec4<u32>(q & 255u, (q >> 8u) & 255u, (q >> 16u) & 255u, q >> 24u));
     return mask_mix(t, s);
 }

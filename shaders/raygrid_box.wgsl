@@ -35,7 +35,7 @@ struct BoxParams {
 
 @group(0) @binding(0) var<storage, read> grid: array<Vertex>;
 @group(0) @binding(1) var<storage, read> box_jobs: array<Job>;
-// The aperture mask's texels (u8, four to a word, row 0 at v = +1).
+// The aperture mask's bilinear footprints, four u8 texels a word (`ApertureMask::quad_words`, mask_texels.wgsl).
 @group(0) @binding(2) var<storage, read> mask_texels: array<u32>;
 @group(0) @binding(3) var<uniform> box_params: BoxParams;
 // Per pixel of the strip, 12 words: R, G, B as 64-bit sums (low word, high word), then R, G, B as 64-bit second
@@ -68,7 +68,7 @@ struct Shader {
     crossings: u32,
 };
 
-fn mask_word(w: u32) -> u32 {
+fn mask_quad(w: u32) -> u32 {
     return mask_texels[w];
 }
 

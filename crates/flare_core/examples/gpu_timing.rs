@@ -6,8 +6,9 @@
 //! `cargo run --release -p flare_core --example gpu_timing -- LENS WIDTH HEIGHT [LUT.flut] [starburst] [compute]
 //! [resolve=runs|scan] [pieces=N] [buffer] [once] [inline]` (`compute`: the GPU compute passes only, no
 //! CPU twin and no raster passes; the rest pick the ghost pass's form, `render::gpu_ghosts::ComputeForm`, from
-//! the device's own: `buffer` reads the stop masks from the storage buffer, `once` works each item out once; `inline`: the LUT pass samples its
-//! coarse instances at every pixel instead of into coarse images).
+//! the device's own: `buffer` reads the stop masks from the storage buffer, `once` works each item out once,
+//! `pieces=N` or `once` spread the items over invocations rather than a workgroup a sprite; `inline`: the LUT
+//! pass samples its coarse instances at every pixel instead of into coarse images).
 
 use std::time::Instant;
 
@@ -75,6 +76,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
             form.gather_masks &= !*buffer;
             form.setup_once |= *once;
+            // Pieces or a walks buffer ask for the items spread over invocations (not a workgroup a sprite).
+            form.sprite_groups &= !(*once || pieces.is_some());
             drawer.renderer.set_ghost_compute_form(form);
             println!("form: {form:?}");
         }
@@ -93,6 +96,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 gpu.push(t.total_ms());
                 last = Some(t.summary());
             }
+        }
+        // An error wgpu reported on its own (a pipeline that did not build) leaves nothing drawn: say so.
+        if let Some(failure) = drawer.ctx.failure() {
+            return Err(format!("the GPU reported: {failure}").into());
         }
         println!(
             "GPU ({}, {} passes): wall {:.1} ms, GPU time by timestamps {:.2} ms (last frame: {})",

@@ -95,6 +95,24 @@ impl ApertureMask {
         (top * (1.0 - fy) + bottom * fy) / 255.0
     }
 
+    /// Each bilinear footprint's four texels in one word, for the GPU passes that read the mask from a storage
+    /// buffer (a software rasteriser loads a storage word lane by lane, so one load a lookup instead of four
+    /// took the Nikon zoom's 480x320 paraxial frame on lavapipe from 300 to ~200 ms): the word of the footprint
+    /// whose top-left texel is (x0, y0), for x0 and y0 in -1..size, is at `(y0 + 1) (size + 1) + x0 + 1` and holds
+    /// texels (x0, y0), (x0 + 1, y0), (x0, y0 + 1), (x0 + 1, y0 + 1), clamped to the edge as [`Self::sample`]
+    /// clamps them, in its bytes from the lowest.
+    pub fn quad_words(&self) -> Vec<u32> {
+        let (n, last) = (self.size as i32, self.size as i32 - 1);
+        let texel = |i: i32, j: i32| self.texels[(j.clamp(0, last) * n + i.clamp(0, last)) as usize];
+        (-1..n)
+            .flat_map(|y0| {
+                (-1..n).map(move |x0| {
+                    u32::from_le_bytes([texel(x0, y0), texel(x0 + 1, y0), texel(x0, y0 + 1), texel(x0 + 1, y0 + 1)])
+                })
+            })
+            .collect()
+    }
+
     /// Each texel's value and the radius of its centre (in [-1, 1]^2 coordinates).
     fn texel_radii(&self) -> impl Iterator<Item = (u8, f32)> + '_ {
         let n = self.size as f32;
@@ -260,6 +278,38 @@ mod tests {
         assert_eq!(mask.sample(0.0, 0.99), 0.0, "a hexagon with a vertex on +x has a flat top at 0.866");
         assert!(mask.sample(0.95, 0.0) > 0.99, "vertex direction is open to the circumradius");
         assert_eq!(mask.sample(1.2, 0.0), 0.0);
+    }
+
+    /// The GPU passes' lookup from `quad_words` (mask_texels.wgsl's steps, here in Rust) gives `sample`'s value
+    /// to the bit everywhere: inside, on the edges and at the corners, where the texels are clamped.
+    #[test]
+    fn the_quad_words_give_the_samples() {
+        let uneven = ApertureMask { size: 5, texels: (0..25u32).map(|k| (k * 37 % 256) as u8).collect() };
+        for mask in [uneven, Aperture::default().rasterise(64)] {
+            let quads = mask.quad_words();
+            let n = mask.size as i32;
+            assert_eq!(quads.len(), ((n + 1) * (n + 1)) as usize);
+            let lookup = |u: f32, v: f32| {
+                if !(-1.0..=1.0).contains(&u) || !(-1.0..=1.0).contains(&v) {
+                    return 0.0;
+                }
+                let x = (u * 0.5 + 0.5) * n as f32 - 0.5;
+                let y = (0.5 - v * 0.5) * n as f32 - 0.5;
+                let (x0, y0) = ((x + 1.0) as i32 - 1, (y + 1.0) as i32 - 1);
+                let (fx, fy) = (x - x0 as f32, y - y0 as f32);
+                let at = (y0.clamp(-1, n - 1) + 1) * (n + 1) + x0.clamp(-1, n - 1) + 1;
+                let t = quads[at as usize].to_le_bytes().map(f32::from);
+                let top = t[0] * (1.0 - fx) + t[1] * fx;
+                let bottom = t[2] * (1.0 - fx) + t[3] * fx;
+                (top * (1.0 - fy) + bottom * fy) / 255.0
+            };
+            for j in 0..=300 {
+                for i in 0..=300 {
+                    let (u, v) = (i as f32 / 150.0 - 1.0, 1.0 - j as f32 / 150.0);
+                    assert_eq!(lookup(u, v).to_bits(), mask.sample(u, v).to_bits(), "size {n} at ({u}, {v})");
+                }
+            }
+        }
     }
 
     #[test]

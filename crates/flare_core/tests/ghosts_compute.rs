@@ -106,8 +106,8 @@ fn the_compute_pass_is_deterministic_and_draws_in_strips() {
     assert!(first == again, "two runs differ");
     // Every form of the pass (a hardware GPU's where lavapipe draws its own, and the reverse: the per-row
     // scan or runs, the masks gathered from the texture or read from the buffer, each item's walk in one
-    // piece or split between invocations, each item worked out by its pieces or once into a buffer): the same
-    // bytes, in one piece and in strips.
+    // piece or split between invocations, each item worked out by its pieces or once into a buffer, or a
+    // workgroup a sprite): the same bytes, in one piece and in strips.
     let own = drawer.renderer.ghost_compute_form().expect("lavapipe draws the ghosts by compute");
     for strips in [false, true] {
         if strips {
@@ -115,13 +115,14 @@ fn the_compute_pass_is_deterministic_and_draws_in_strips() {
         }
         for scan in [false, true] {
             for gather_masks in [false, true] {
-                for pieces in [Some(1), Some(3), Some(8), None] {
-                    for setup_once in [false, true] {
-                        let form = ComputeForm { scan, gather_masks, pieces, setup_once };
-                        drawer.renderer.set_ghost_compute_form(form);
-                        let drawn = drawer.draw(&frame, &sources).unwrap();
-                        assert!(drawn == first, "{form:?} (strips: {strips}) differs");
-                    }
+                let spread = [Some(1), Some(3), Some(8), None]
+                    .into_iter()
+                    .flat_map(|pieces| [false, true].map(|setup_once| (pieces, setup_once, false)));
+                for (pieces, setup_once, sprite_groups) in spread.chain([(Some(1), false, true)]) {
+                    let form = ComputeForm { scan, gather_masks, pieces, setup_once, sprite_groups };
+                    drawer.renderer.set_ghost_compute_form(form);
+                    let drawn = drawer.draw(&frame, &sources).unwrap();
+                    assert!(drawn == first, "{form:?} (strips: {strips}) differs");
                 }
             }
         }

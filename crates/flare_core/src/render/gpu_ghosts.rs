@@ -11,7 +11,11 @@
 //! follows rows x sprites plus edge pixels, not covered area. On a hardware GPU ([`ComputeForm`]) an item's
 //! walk is split between several invocations (`default_pieces`: at 4K one invocation walking a long edge held
 //! its warp up), each item is worked out once into a buffer those invocations read (`walks_setup`), and each
-//! mask lookup gathers its four texels from a texture in one fetch.
+//! mask lookup gathers its four texels from a texture in one fetch. A software rasteriser (lavapipe) loads a
+//! storage word lane by lane, so there the form keeps such loads few: each sprite is one workgroup whose
+//! invocations take its rows (`spans_sprites`: the sprite is read once from a workgroup-uniform index), a mask
+//! lookup reads one word holding its footprint's four texels (`ApertureMask::quad_words`), and one invocation
+//! sums a row, each column read once (`resolve_rows`).
 //!
 //! **Deterministic**: the differences are integers, so the order in which sprites land does not matter: the
 //! same frame gives the same bytes on every run and in every [`ComputeForm`]. Each step is at most `2^30`
@@ -29,6 +33,8 @@
 //! says whether a device can run the pass at all (compute shaders, four storage buffers, a storage texture);
 //! where it cannot (a WebGL-class adapter), `FlareRenderer` keeps the raster pass
 //! (`ghosts.wgsl`).
+
+use std::sync::OnceLock;
 
 use bytemuck::{Pod, Zeroable};
 
@@ -57,6 +63,11 @@ const SUM_UNITS: f64 = 4_611_686_018_427_387_904.0; // 2^62
 /// Uniform offsets between strips (the largest alignment an adapter may ask for).
 const STRIP_STRIDE: u64 = 256;
 
+/// The shader's entries that walk items: items spread over invocations (each searching for its sprite), the
+/// same reading each item's walk from `walks`, and a workgroup a sprite (`ComputeForm::sprite_groups`).
+const SPANS_ENTRIES: [&str; 3] = ["spans", "spans_walks", "spans_sprites"];
+const SPANS_SPRITES: usize = 2;
+
 /// One strip's parameters. Must be kept in sync with `struct ComputeStrip` in `shaders/ghosts_compute.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
@@ -79,10 +90,8 @@ pub(crate) struct ComputeStrip {
     pub split_bits: u32,
     /// Invocations that share one (sprite, row) item's walk, each a piece of it.
     pub pieces: u32,
-    /// 1: the stop masks' texels are gathered from the mask texture (one fetch a lookup), and every mask of a
-    /// pixel is looked up before any is tested (a GPU then waits on the fetches together: the spans pass at 4K
-    /// on an H200 took 1.49 against 1.53 ms; the same product).
-    pub mask_texture: u32,
+    /// Keeps the size a multiple of 16 bytes (a uniform's rule); not read.
+    pub padding: u32,
 }
 const _: () = assert!(std::mem::size_of::<ComputeStrip>() == 64);
 
@@ -118,13 +127,15 @@ pub(crate) fn split_units(sprites: usize) -> SplitUnits {
 /// How a device draws the pass: the same image, to the byte, in every form (tests draw each on lavapipe).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ComputeForm {
-    /// The per-row sum as a workgroup scan of 256 columns at a time (a hardware GPU), or as a run of columns an
-    /// invocation (a software rasteriser, where a workgroup barrier costs more than a scattered read: 16 ms
-    /// against 4 ms at 480x270 on lavapipe).
+    /// The per-row sum as a workgroup scan of 256 columns at a time (a hardware GPU), or one invocation a row
+    /// summing it column by column (`resolve_rows`: a software rasteriser, where a workgroup barrier costs more
+    /// than a scattered read and a row's columns read once cost least: 7 ms against 28 ms for a run of columns
+    /// an invocation at 480x320 on lavapipe).
     pub scan: bool,
     /// The stop masks' four texels a lookup by one `textureGather` (a hardware GPU: the spans pass took 1.76
-    /// against 1.98 ms at 4K on an H200) rather than four reads of the storage buffer (a software rasteriser,
-    /// where a texture fetch is several times slower).
+    /// against 1.98 ms at 4K on an H200) rather than one word of the storage buffer holding all four
+    /// (`ApertureMask::quad_words`: a software rasteriser, where a texture fetch is several times slower). Fixed
+    /// when the pass's pipeline is built (`override GATHER_MASKS`).
     pub gather_masks: bool,
     /// Invocations that share each (sprite, row) item's walk; `None`: `default_pieces` of the frame's width.
     pub pieces: Option<u32>,
@@ -133,10 +144,15 @@ pub struct ComputeForm {
     /// by each of its pieces (`spans`: a software rasteriser, whose one piece an item gains nothing). A frame
     /// whose buffer (44 bytes an item) would pass the adapter's storage binding limit is drawn without it.
     pub setup_once: bool,
+    /// One workgroup a sprite, whose invocations take its items in turn, each in one piece (`spans_sprites`: a
+    /// software rasteriser, which then loads the sprite once for a SIMD batch rather than lane by lane, and
+    /// needs no search for it), rather than items spread evenly over invocations. Where set, `pieces` and
+    /// `setup_once` are not used.
+    pub sprite_groups: bool,
 }
 
 impl ComputeForm {
-    /// The form for `device`: on a software rasteriser the runs, the buffer and one invocation an item.
+    /// The form for `device`: on a software rasteriser the runs, the buffer and a workgroup a sprite.
     pub(crate) fn for_device(device: &wgpu::Device) -> Self {
         let hardware = !software_device(device);
         Self {
@@ -144,6 +160,7 @@ impl ComputeForm {
             gather_masks: hardware,
             pieces: if hardware { None } else { Some(1) },
             setup_once: hardware,
+            sprite_groups: !hardware,
         }
     }
 }
@@ -226,37 +243,36 @@ pub(crate) fn plan_strips(
                 lut: 0,
                 split_bits: split.bits,
                 pieces,
-                mask_texture: 0,
+                padding: 0,
             };
             StripPlan { params, items, groups }
         })
         .collect()
 }
 
-/// The mask as `ghosts_compute.wgsl` reads it: the per-band table (f32 bits), then the texels four to a word.
+/// The mask as `ghosts_compute.wgsl` reads it: the per-band table (f32 bits), then each bilinear footprint's
+/// four texels in one word (`ApertureMask::quad_words`).
 fn mask_words(mask: &ApertureMask) -> Vec<u32> {
     let rows = MaskRows::new(mask);
     let mut words: Vec<u32> = rows.table().iter().flat_map(|b| b.map(f32::to_bits)).collect();
-    words.extend(mask.texels.chunks(4).map(|c| {
-        let mut word = [0u8; 4];
-        word[..c.len()].copy_from_slice(c);
-        u32::from_le_bytes(word)
-    }));
+    words.extend(mask.quad_words());
     words
 }
 
 /// The pass's pipelines and buffers (see the module documentation).
 pub(crate) struct ComputeGhosts {
-    spans: wgpu::ComputePipeline,
-    /// `ComputeForm::setup_once`: each item's walk worked out once, then the pieces walking it.
+    module: wgpu::ShaderModule,
+    /// The entries that walk items (`SPANS_ENTRIES`), each with the stop masks read from the buffer, then
+    /// gathered from the texture (built on first use, see `spans_pipeline`).
+    spans: [[OnceLock<wgpu::ComputePipeline>; 2]; 3],
+    /// `ComputeForm::setup_once`: each item's walk worked out once (then `spans_walks` walks it).
     walks_setup: wgpu::ComputePipeline,
-    spans_walks: wgpu::ComputePipeline,
     /// The items' walks and the buffer's size in bytes.
     walks: Option<(wgpu::Buffer, u64)>,
-    /// The two forms of the per-row sum (`resolve`, a scan of 256 columns at a time; `resolve_runs`, a run of
-    /// columns an invocation).
+    /// The two forms of the per-row sum (`resolve`, a scan of 256 columns at a time; `resolve_rows`, a row an
+    /// invocation).
     resolve_scan: wgpu::ComputePipeline,
-    resolve_runs: wgpu::ComputePipeline,
+    resolve_rows: wgpu::ComputePipeline,
     /// How this device draws the pass (see [`ComputeForm`]).
     pub(crate) form: ComputeForm,
     /// The mask's per-band table and packed texels (one storage buffer).
@@ -296,12 +312,11 @@ impl ComputeGhosts {
         let open = ApertureMask { size: 1, texels: vec![255] };
         let limits = device.limits();
         let mut this = Self {
-            spans: pipeline("spans"),
+            spans: Default::default(),
             walks_setup: pipeline("walks_setup"),
-            spans_walks: pipeline("spans_walks"),
             walks: None,
             resolve_scan: pipeline("resolve"),
-            resolve_runs: pipeline("resolve_runs"),
+            resolve_rows: pipeline("resolve_rows"),
             form: ComputeForm::for_device(device),
             mask: storage(device, queue, "ghost mask", &[0; 16], wgpu::BufferUsages::STORAGE),
             mask_texture: texture_2d(device, "ghost mask", 1, 1, R8, wgpu::TextureUsages::TEXTURE_BINDING)
@@ -314,9 +329,30 @@ impl ComputeGhosts {
             strip_bytes: limits.max_storage_buffer_binding_size.min(limits.max_buffer_size),
             no_layer: texture_2d(device, "no lut layer", 1, 1, HDR_FORMAT, wgpu::TextureUsages::TEXTURE_BINDING)
                 .create_view(&wgpu::TextureViewDescriptor::default()),
+            module,
         };
         this.set_aperture(device, queue, &open);
         this
+    }
+
+    /// Entry `SPANS_ENTRIES[entry]` compiled for the form's mask lookups (`override GATHER_MASKS`): fixed when
+    /// the pipeline is built rather than read from a uniform, because a software rasteriser runs both sides of a
+    /// branch: lavapipe ran the texture gather, masked off, beside every buffer lookup. Built on first use.
+    fn spans_pipeline(&self, device: &wgpu::Device, entry: usize) -> &wgpu::ComputePipeline {
+        let gather = self.form.gather_masks;
+        self.spans[entry][usize::from(gather)].get_or_init(|| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(SPANS_ENTRIES[entry]),
+                layout: None,
+                module: &self.module,
+                entry_point: Some(SPANS_ENTRIES[entry]),
+                compilation_options: wgpu::PipelineCompilationOptions {
+                    constants: &[("GATHER_MASKS", f64::from(u8::from(gather)))],
+                    ..Default::default()
+                },
+                cache: None,
+            })
+        })
     }
 
     /// Uploads the aperture mask and its per-row table.
@@ -350,22 +386,24 @@ impl ComputeGhosts {
         let row_bytes = (width + 1) * BYTES_PER_COLUMN;
         let strip_rows = (self.strip_bytes / row_bytes).clamp(1, u64::from(scene.hdr_height.max(1))) as u32;
         let max_groups = device.limits().max_compute_workgroups_per_dimension;
-        let pieces = self.form.pieces.unwrap_or_else(|| default_pieces(scene.hdr_width));
+        let sprite_groups = self.form.sprite_groups;
+        let pieces =
+            if sprite_groups { 1 } else { self.form.pieces.unwrap_or_else(|| default_pieces(scene.hdr_width)) };
         let mut strips = plan_strips(scene, &instances, self.mask_size, strip_rows, max_groups, pieces);
         for s in &mut strips {
             s.params.lut = u32::from(lut_layer.is_some());
-            s.params.mask_texture = u32::from(self.form.gather_masks);
         }
         // The difference buffer is zeroed when new (wgpu) and left zeroed by `resolve`.
         grow_storage(device, &mut self.diff, "ghost differences", row_bytes * u64::from(strip_rows));
         // The walks' buffer, where the form asks for it and the largest strip's walks fit one binding.
         let walk_bytes = strips.iter().map(|s| u64::from(s.params.items) * BYTES_PER_WALK).max().unwrap_or(0);
-        let setup_once = self.form.setup_once && walk_bytes > 0 && walk_bytes <= self.strip_bytes;
+        let setup_once = self.form.setup_once && !sprite_groups && walk_bytes > 0 && walk_bytes <= self.strip_bytes;
         if setup_once {
             grow_storage(device, &mut self.walks, "ghost walks", walk_bytes);
         }
         let walks = self.walks.as_ref().map(|(b, _)| b).filter(|_| setup_once);
-        let spans = if walks.is_some() { &self.spans_walks } else { &self.spans };
+        let entry = if sprite_groups { SPANS_SPRITES } else { usize::from(walks.is_some()) };
+        let spans = self.spans_pipeline(device, entry);
         let Some((diff, _)) = &self.diff else { return };
         let instance_bytes: &[u8] =
             if instances.is_empty() { bytemuck::bytes_of(&[0.0f32; 24]) } else { bytemuck::cast_slice(&instances) };
@@ -376,7 +414,7 @@ impl ComputeGhosts {
             uniforms[at..at + std::mem::size_of::<ComputeStrip>()].copy_from_slice(bytemuck::bytes_of(&s.params));
         }
         let uniform_buffer = storage(device, queue, "ghost strips", &uniforms, wgpu::BufferUsages::UNIFORM);
-        let resolve = if self.form.scan { &self.resolve_scan } else { &self.resolve_runs };
+        let resolve = if self.form.scan { &self.resolve_scan } else { &self.resolve_rows };
         for (k, s) in strips.iter().enumerate() {
             let items =
                 storage(device, queue, "ghost items", bytemuck::cast_slice(&s.items), wgpu::BufferUsages::STORAGE);
@@ -429,7 +467,13 @@ impl ComputeGhosts {
                 });
                 pass.set_pipeline(spans);
                 pass.set_bind_group(0, &group, &[]);
-                pass.dispatch_workgroups(s.groups.0, s.groups.1, 1);
+                if sprite_groups {
+                    // One workgroup a sprite (rows of `max_groups`; the shader counts them by `num_workgroups`).
+                    let n = s.params.instances;
+                    pass.dispatch_workgroups(n.min(max_groups), n.div_ceil(max_groups), 1);
+                } else {
+                    pass.dispatch_workgroups(s.groups.0, s.groups.1, 1);
+                }
             }
             let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("ghost resolve"),
@@ -447,7 +491,8 @@ impl ComputeGhosts {
             let mut pass = pass.scope("ghost resolve");
             pass.set_pipeline(resolve);
             pass.set_bind_group(0, &group, &[]);
-            pass.dispatch_workgroups(s.params.rows, 1, 1);
+            // `resolve`: a workgroup a row; `resolve_rows`: an invocation a row, eight to a workgroup.
+            pass.dispatch_workgroups(if self.form.scan { s.params.rows } else { s.params.rows.div_ceil(8) }, 1, 1);
         }
     }
 }

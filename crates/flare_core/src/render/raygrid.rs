@@ -513,11 +513,12 @@ impl GpuRayGrid {
         );
         let target_view = target.create_view(&wgpu::TextureViewDescriptor::default());
         let mask = renderer.mask();
-        // The mask's texels, four to a word, looked up and filtered in the shader as `ApertureMask::sample` does
-        // (a storage buffer: a software rasteriser samples a texture several times slower).
-        let mut packed = mask.texels.clone();
-        packed.resize(mask.texels.len().div_ceil(4).max(1) * 4, 0);
-        let mask_texels = storage(device, queue, "raygrid mask", &packed, wgpu::BufferUsages::STORAGE);
+        // The mask's bilinear footprints, one word each, looked up and filtered in the shader as
+        // `ApertureMask::sample` does (a storage buffer: a software rasteriser samples a texture several times
+        // slower).
+        let quads = mask.quad_words();
+        let mask_texels =
+            storage(device, queue, "raygrid mask", bytemuck::cast_slice(&quads), wgpu::BufferUsages::STORAGE);
         // No pixel can gather more than every triangle's flux (weights and masks are at most 1).
         let pixel_area_mm2 = window.px_per_mm().powi(-2);
         let bound: f64 = planned

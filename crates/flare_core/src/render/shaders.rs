@@ -6,9 +6,9 @@
 //! sync. Likewise `aperture.wgsl` (the mask lookup) for the two passes that read the aperture, and
 //! `raygrid_common.wgsl` (the ray-grid structs) for the GPU ray grids' passes, and `fixed64.wgsl` (64-bit fixed
 //! point in two u32 words) for the passes that sum light with integer atomics, `scan64.wgsl` (a workgroup's scan
-//! of those sums) for the ray grids' resolve, which sums a row 64 columns at a time, and the ghosts' runs form,
-//! and `mask_texels.wgsl` (the mask
-//! looked up in a storage buffer) for the compute passes that read the aperture. A test parses every shader with
+//! of those sums) for the ray grids' resolve, which sums a row 64 columns at a time, and `mask_texels.wgsl` (the
+//! mask looked up in a storage buffer, one word a bilinear footprint) for the compute passes that read the
+//! aperture. A test parses every shader with
 //! naga and checks that the WGSL `Globals` has the Rust struct's size and member offsets. The tonemap pass is
 //! the one shader put together at run time: [`tonemap_wgsl`] puts the OCIO display transform's WGSL (made for
 //! the document's display and view) before `tonemap.wgsl`.
@@ -24,7 +24,6 @@ pub const GHOSTS_WGSL: &str = concat!(
 /// Ghost sprites as compute: open spans and edges into per-row differences, then one sum per row.
 pub const GHOSTS_COMPUTE_WGSL: &str = concat!(
     include_str!("../../../../shaders/fixed64.wgsl"),
-    include_str!("../../../../shaders/scan64.wgsl"),
     include_str!("../../../../shaders/mask_texels.wgsl"),
     include_str!("../../../../shaders/ghosts_compute.wgsl")
 );
