@@ -152,7 +152,8 @@ pub struct ComputeForm {
 }
 
 impl ComputeForm {
-    /// The form for `device`: on a software rasteriser the runs, the buffer and a workgroup a sprite.
+    /// The form for `device`: on a software rasteriser a row an invocation in the per-row sum, the masks'
+    /// footprint words from the buffer and a workgroup a sprite.
     pub(crate) fn for_device(device: &wgpu::Device) -> Self {
         let hardware = !software_device(device);
         Self {
@@ -275,7 +276,7 @@ pub(crate) struct ComputeGhosts {
     resolve_rows: wgpu::ComputePipeline,
     /// How this device draws the pass (see [`ComputeForm`]).
     pub(crate) form: ComputeForm,
-    /// The mask's per-band table and packed texels (one storage buffer).
+    /// The mask's per-band table and its footprints' words (one storage buffer).
     mask: wgpu::Buffer,
     /// The mask as a texture, and the sampler `textureGather` reads it with.
     mask_texture: wgpu::TextureView,
@@ -332,6 +333,9 @@ impl ComputeGhosts {
             module,
         };
         this.set_aperture(device, queue, &open);
+        // The device's own form's entry now, so that its first frame does not wait for the compiler.
+        let form = this.form;
+        this.spans_pipeline(device, if form.sprite_groups { SPANS_SPRITES } else { usize::from(form.setup_once) });
         this
     }
 
