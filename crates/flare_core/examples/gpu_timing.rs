@@ -4,7 +4,7 @@
 //! and real-GPU tables came from. The starburst is left out unless the last argument is `starburst`.
 //!
 //! `cargo run --release -p flare_core --example gpu_timing -- LENS WIDTH HEIGHT [LUT.flut] [starburst] [compute]
-//! [resolve=runs|scan] [pieces=N] [buffer] [once] [inline]` (`compute`: the GPU compute passes only, no
+//! [resolve=rows|scan] [pieces=N] [buffer] [once] [inline]` (`compute`: the GPU compute passes only, no
 //! CPU twin and no raster passes; the rest pick the ghost pass's form, `render::gpu_ghosts::ComputeForm`, from
 //! the device's own: `buffer` reads the stop masks from the storage buffer, `once` works each item out once,
 //! `pieces=N` or `once` spread the items over invocations rather than a workgroup a sprite; `inline`: the LUT
@@ -21,7 +21,7 @@ use flare_core::render::DisplaySettings;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
-    let usage = "usage: gpu_timing LENS WIDTH HEIGHT [LUT.flut] [starburst] [compute] [resolve=runs|scan] [pieces=N] \
+    let usage = "usage: gpu_timing LENS WIDTH HEIGHT [LUT.flut] [starburst] [compute] [resolve=rows|scan] [pieces=N] \
                  [buffer] [once] [inline]";
     let flag = |name: &str| args.iter().any(|a| a == name);
     let value = |key: &str| args.iter().find_map(|a| a.strip_prefix(key).map(str::to_owned));
@@ -66,7 +66,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let (resolve, pieces, buffer, once) = &form_args;
             if let Some(r) = resolve {
                 form.scan = match r.as_str() {
-                    "runs" => false,
+                    "rows" => false,
                     "scan" => true,
                     _ => return Err(usage.into()),
                 };

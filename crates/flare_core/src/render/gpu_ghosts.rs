@@ -38,7 +38,9 @@ use std::sync::OnceLock;
 
 use bytemuck::{Pod, Zeroable};
 
-use super::buffers::{HDR_FORMAT, compute_pipeline, grow_storage, software_device, storage, texture_2d, upload};
+use super::buffers::{
+    HDR_FORMAT, compute_pipeline, compute_pipeline_with, grow_storage, software_device, storage, texture_2d, upload,
+};
 use super::cpu::ghosts::{MaskRows, without_open_stops};
 use super::cpu::quads::{accumulation_scale, covered};
 use super::shaders::GHOSTS_COMPUTE_WGSL;
@@ -345,17 +347,8 @@ impl ComputeGhosts {
     fn spans_pipeline(&self, device: &wgpu::Device, entry: usize) -> &wgpu::ComputePipeline {
         let gather = self.form.gather_masks;
         self.spans[entry][usize::from(gather)].get_or_init(|| {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(SPANS_ENTRIES[entry]),
-                layout: None,
-                module: &self.module,
-                entry_point: Some(SPANS_ENTRIES[entry]),
-                compilation_options: wgpu::PipelineCompilationOptions {
-                    constants: &[("GATHER_MASKS", f64::from(u8::from(gather)))],
-                    ..Default::default()
-                },
-                cache: None,
-            })
+            let constants = [("GATHER_MASKS", f64::from(u8::from(gather)))];
+            compute_pipeline_with(device, &self.module, SPANS_ENTRIES[entry], &constants)
         })
     }
 

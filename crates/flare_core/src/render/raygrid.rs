@@ -44,7 +44,7 @@
 //! that fit the largest storage buffer the adapter binds. A device lost on the way is
 //! [`GpuError::Lost`] (the command line then traces on the CPU).
 
-use super::buffers::{compute_pipeline, software_device, storage};
+use super::buffers::{compute_pipeline, compute_pipeline_with, software_device, storage};
 use super::gpu::{GpuContext, GpuError, PassTimes, map_read, read_texture, texture_2d};
 use super::shaders::{RAYGRID_BOX_WGSL, RAYGRID_SPLAT_WGSL, RAYGRID_TRACE_WGSL};
 use crate::image::HdrImage;
@@ -717,17 +717,7 @@ impl GpuRayGrid {
     /// The tracer compiled for `shapes`.
     fn trace_pipeline(&self, device: &wgpu::Device, shapes: TraceShapes) -> &wgpu::ComputePipeline {
         self.trace_pipelines[shapes as usize].get_or_init(|| {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("raygrid trace"),
-                layout: None,
-                module: &self.trace_module,
-                entry_point: Some("trace_main"),
-                compilation_options: wgpu::PipelineCompilationOptions {
-                    constants: &[("SHAPES", f64::from(shapes as u8))],
-                    ..Default::default()
-                },
-                cache: None,
-            })
+            compute_pipeline_with(device, &self.trace_module, "trace_main", &[("SHAPES", f64::from(shapes as u8))])
         })
     }
 
@@ -906,17 +896,7 @@ fn box_pipelines(
     module: &wgpu::ShaderModule,
     row_split: u32,
 ) -> (wgpu::ComputePipeline, wgpu::ComputePipeline) {
-    let splat = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some("splat_box"),
-        layout: None,
-        module,
-        entry_point: Some("splat_box"),
-        compilation_options: wgpu::PipelineCompilationOptions {
-            constants: &[("ROW_SPLIT", f64::from(row_split))],
-            ..Default::default()
-        },
-        cache: None,
-    });
+    let splat = compute_pipeline_with(device, module, "splat_box", &[("ROW_SPLIT", f64::from(row_split))]);
     let resolve = compute_pipeline(device, module, if row_split > 1 { "resolve_box_scan" } else { "resolve_box" });
     (splat, resolve)
 }
