@@ -483,27 +483,38 @@ fn spans_walks(@builtin(global_invocation_id) gid: vec3<u32>) {
 }
 
 
-// A column's sum of steps, high 2^k + low, as 64 bits.
-fn load64(word: u32) -> vec2<u32> {
-    return join64(columns[word], columns[word + 1u]);
+// ---- the per-row sum ----
+
+// The three channels' 64-bit sums of a column (or of a run of columns) as vectors: the low words and the high
+// words. Vectors rather than an array of three (low, high) pairs: the compiler keeps them in registers, where an
+// array indexed in a loop may go to memory; on an H200 the per-row sum took 0.78 ms of a 4K frame with arrays.
+struct Sums {
+    lo: vec3<u32>,
+    hi: vec3<u32>,
+};
+
+fn no_sums() -> Sums {
+    return Sums(vec3<u32>(0u), vec3<u32>(0u));
 }
 
-fn to_float(v: vec2<u32>) -> f32 {
-    return float64(v) * strip.unit_per_fixed;
+// a + b modulo 2^64 per channel (`add64` of fixed64.wgsl, three at a time).
+fn add_sums(a: Sums, b: Sums) -> Sums {
+    let lo = a.lo + b.lo;
+    return Sums(lo, a.hi + b.hi + select(vec3<u32>(0u), vec3<u32>(1u), lo < a.lo));
 }
 
-// Writes the sum `acc` of row `row`'s columns up to x into the HDR texture (the LUT layer applied where the
-// frame has one).
-fn write_pixel(row: u32, x: u32, acc: array<vec2<u32>, 3>) {
-    var value = vec4<f32>(to_float(acc[0]), to_float(acc[1]), to_float(acc[2]), 0.0);
-    if (strip.lut == 1u) {
-        let layer = textureLoad(lut_layer, vec2<u32>(x, strip.first_row + row), 0);
-        value = vec4<f32>(layer.rgb + layer.a * value.rgb, 0.0);
-    }
-    textureStore(hdr, vec2<u32>(x, strip.first_row + row), value);
+// The sums of steps in a column's six words (per channel: low, high), each high 2^k + low.
+fn load_column(at: u32) -> Sums {
+    let lo = bitcast<vec3<i32>>(vec3<u32>(columns[at], columns[at + 2u], columns[at + 4u]));
+    let hi = bitcast<vec3<i32>>(vec3<u32>(columns[at + 1u], columns[at + 3u], columns[at + 5u]));
+    let k = strip.split_bits;
+    let shifted = Sums(bitcast<vec3<u32>>(hi) << vec3<u32>(k), bitcast<vec3<u32>>(hi >> vec3<u32>(32u - k)));
+    let low = Sums(bitcast<vec3<u32>>(lo), select(vec3<u32>(0u), vec3<u32>(0xffffffffu), lo < vec3<i32>(0i)));
+    return add_sums(shifted, low);
 }
 
-// A column's sum from its two words (low, high) as `load64` rebuilds it.
+// A channel's sum of steps from its two words (low, high), high 2^k + low: `load_column` for one channel
+// (`resolve_rows`).
 fn join64(lo_word: u32, hi_word: u32) -> vec2<u32> {
     let lo = bitcast<i32>(lo_word);
     let hi = bitcast<i32>(hi_word);
@@ -512,12 +523,37 @@ fn join64(lo_word: u32, hi_word: u32) -> vec2<u32> {
     return add64(shifted, vec2<u32>(bitcast<u32>(lo), select(0u, 0xffffffffu, lo < 0i)));
 }
 
+// Zeroes a column's six words for the next strip.
+fn clear_column(at: u32) {
+    for (var w = at; w < at + 6u; w = w + 1u) {
+        columns[w] = 0u;
+    }
+}
+
+// Writes the sums `acc` of row `row`'s columns up to x into the HDR texture (`float64` of fixed64.wgsl per
+// channel, times the unit; the LUT layer applied where the frame has one).
+fn write_pixel(row: u32, x: u32, acc: Sums) {
+    let sums = vec3<f32>(bitcast<vec3<i32>>(acc.hi)) * 4294967296.0 + vec3<f32>(acc.lo);
+    store_pixel(row, x, sums * strip.unit_per_fixed);
+}
+
+// Writes the irradiance `rgb` at pixel x of strip row `row` (the LUT layer applied where the frame has one).
+fn store_pixel(row: u32, x: u32, rgb: vec3<f32>) {
+    var value = vec4<f32>(rgb, 0.0);
+    if (strip.lut == 1u) {
+        let layer = textureLoad(lut_layer, vec2<u32>(x, strip.first_row + row), 0);
+        value = vec4<f32>(layer.rgb + layer.a * value.rgb, 0.0);
+    }
+    textureStore(hdr, vec2<u32>(x, strip.first_row + row), value);
+}
+
 // `resolve` for a software rasteriser (lavapipe): one invocation a strip row, summing it column by column,
 // each column's words read once (and cleared for the next strip), no workgroup barrier. Neighbouring
 // invocations are neighbouring rows; lavapipe loads a storage word lane by lane anyway. On lavapipe at 480x320
 // (the Nikon zoom) the pass took 7 ms by timestamps against 28 ms for a workgroup a row, each invocation a run
 // of columns (each column read twice: its run's sum, then the running sums; a barrier between), and the whole
-// frame 155 against 180 ms. The same sums as `resolve`.
+// frame 155 against 180 ms. The same sums as `resolve`, kept as a (low, high) pair a channel: with `Sums` and
+// `load_column` the pass took 9.2-10.5 ms against 6.8-7.9 ms on lavapipe (three runs each, this machine).
 @compute @workgroup_size(8)
 fn resolve_rows(@builtin(global_invocation_id) gid: vec3<u32>) {
     let row = gid.x;
@@ -529,99 +565,70 @@ fn resolve_rows(@builtin(global_invocation_id) gid: vec3<u32>) {
     for (var x = 0u; x < strip.width; x = x + 1u) {
         let at = base + x * 6u;
         for (var c = 0u; c < 3u; c = c + 1u) {
-            acc[c] = add64(acc[c], load64(at + 2u * c));
+            acc[c] = add64(acc[c], join64(columns[at + 2u * c], columns[at + 2u * c + 1u]));
         }
-        write_pixel(row, x, acc);
-        for (var w = at; w < at + 6u; w = w + 1u) {
-            columns[w] = 0u;
-        }
+        let u = strip.unit_per_fixed;
+        store_pixel(row, x, vec3<f32>(float64(acc[0]) * u, float64(acc[1]) * u, float64(acc[2]) * u));
+        clear_column(at);
     }
     // The row's last column (written by `spans` at a sprite's right end, never read).
-    for (var w = base + strip.width * 6u; w < base + strip.width * 6u + 6u; w = w + 1u) {
-        columns[w] = 0u;
-    }
+    clear_column(base + strip.width * 6u);
 }
 
 // ---- the per-row sum in chunks of 256 columns (hardware GPUs) ----
 
 // Columns of a chunk, one an invocation.
 const CHUNK: u32 = 256u;
-// A chunk's values, channel-major: [c * CHUNK + t].
-var<workgroup> wide: array<vec2<u32>, 768>;
+// A chunk's running sums, one an invocation.
+var<workgroup> chunk: array<Sums, 256>;
 
-// Column x's three 64-bit sums of steps (0 past the row's end).
-fn column_values(base: u32, x: u32) -> array<vec2<u32>, 3> {
-    var v = array<vec2<u32>, 3>(vec2<u32>(0u), vec2<u32>(0u), vec2<u32>(0u));
-    if (x < strip.width) {
-        for (var c = 0u; c < 3u; c = c + 1u) {
-            v[c] = load64(base + x * 6u + 2u * c);
-        }
-    }
-    return v;
-}
-
-// The inclusive scan over the workgroup's 256 invocations of `v` (Hillis-Steele, 8 steps); the chunk's total
-// is left in `wide[c * CHUNK + 255]` until the next barrier. Called from uniform control flow.
-fn scan256(t: u32, v: array<vec2<u32>, 3>) -> array<vec2<u32>, 3> {
-    for (var c = 0u; c < 3u; c = c + 1u) {
-        wide[c * CHUNK + t] = v[c];
-    }
+// The inclusive scan over the workgroup's 256 invocations of `v` (Hillis-Steele, 8 steps, each invocation's
+// running sum kept in a register); the chunk's total is left in `chunk[255]` until the next barrier. Called
+// from uniform control flow.
+fn scan_chunk(t: u32, v: Sums) -> Sums {
+    var sum = v;
+    chunk[t] = sum;
     workgroupBarrier();
     for (var step = 1u; step < CHUNK; step = step * 2u) {
-        var add = array<vec2<u32>, 3>(vec2<u32>(0u), vec2<u32>(0u), vec2<u32>(0u));
+        var add = no_sums();
         if (t >= step) {
-            for (var c = 0u; c < 3u; c = c + 1u) {
-                add[c] = wide[c * CHUNK + t - step];
-            }
+            add = chunk[t - step];
         }
         workgroupBarrier();
-        if (t >= step) {
-            for (var c = 0u; c < 3u; c = c + 1u) {
-                wide[c * CHUNK + t] = add64(wide[c * CHUNK + t], add[c]);
-            }
-        }
+        sum = add_sums(sum, add);
+        chunk[t] = sum;
         workgroupBarrier();
     }
-    var out = array<vec2<u32>, 3>(vec2<u32>(0u), vec2<u32>(0u), vec2<u32>(0u));
-    for (var c = 0u; c < 3u; c = c + 1u) {
-        out[c] = wide[c * CHUNK + t];
-    }
-    return out;
-}
-
-// Writes pixel x of strip row `row` (the running sum `acc`) and clears its column's words for the next strip.
-fn finish_column(row: u32, base: u32, x: u32, acc: array<vec2<u32>, 3>) {
-    write_pixel(row, x, acc);
-    for (var w = base + x * 6u; w < base + x * 6u + 6u; w = w + 1u) {
-        columns[w] = 0u;
-    }
+    return sum;
 }
 
 // One workgroup of 256 per strip row, walking it in chunks of 256 columns, one column an invocation
-// (neighbouring invocations read neighbouring words): each chunk's sums are scanned by `scan256` and added to
-// the sum of the chunks before it; each invocation writes its pixel and clears its column's words for the next
-// strip. Plain loads and stores: the atomics of `spans` are done (a pass boundary lies between). On an H200 at
-// 4K: 0.78 ms, against 0.85 ms for workgroups of 64 and 1.13 ms for every chunk of every row at once (the
-// chunks' totals summed first, then each chunk scanned again); four columns an invocation, a chunk of 256 read
-// through workgroup memory, took 3.8 ms.
+// (neighbouring invocations read neighbouring words): each chunk's sums are scanned by `scan_chunk` and added
+// to the sum of the chunks before it; each invocation writes its pixel and clears its column's words for the
+// next strip. Plain loads and stores: the atomics of `spans` are done (a pass boundary lies between). On an
+// H200 at 4K: 0.44 ms (0.12 ms at 1920x1080). The same scan with the sums as arrays of three (low, high) pairs
+// took 0.78 ms, and without its loads, clears and texture stores still 0.68 ms (a development build; with
+// nothing in it 0.01 ms): the arrays, not the memory, were the cost. Tried and not kept: two columns an
+// invocation (0.65 ms); the scan by subgroup operations, two barriers a chunk (0.92 ms; with the chunk staged
+// through workgroup memory 2.38 ms); a subgroup a row, no barrier (1.03 ms); every chunk of every row at once
+// (1.13 ms, arrays); workgroups of 64 (0.85 ms, arrays).
 @compute @workgroup_size(256)
 fn resolve(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) t: u32) {
     let row = wid.x;
     let base = row * (strip.width + 1u) * 6u;
-    var before = array<vec2<u32>, 3>(vec2<u32>(0u), vec2<u32>(0u), vec2<u32>(0u));
+    var before = no_sums();
     for (var x0 = 0u; x0 < strip.width; x0 = x0 + CHUNK) {
         let x = x0 + t;
-        let sums = scan256(t, column_values(base, x));
+        var column = no_sums();
         if (x < strip.width) {
-            var acc = sums;
-            for (var c = 0u; c < 3u; c = c + 1u) {
-                acc[c] = add64(before[c], sums[c]);
-            }
-            finish_column(row, base, x, acc);
+            column = load_column(base + x * 6u);
         }
-        for (var c = 0u; c < 3u; c = c + 1u) {
-            before[c] = add64(before[c], wide[c * CHUNK + CHUNK - 1u]);
+        let acc = add_sums(before, scan_chunk(t, column));
+        if (x < strip.width) {
+            write_pixel(row, x, acc);
+            clear_column(base + x * 6u);
         }
+        before = add_sums(before, chunk[CHUNK - 1u]);
         workgroupBarrier();
     }
     if (t < 6u) {

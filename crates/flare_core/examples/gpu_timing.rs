@@ -7,7 +7,8 @@
 //! [resolve=rows|scan] [pieces=N] [buffer] [once] [inline]` (`compute`: the GPU compute passes only, no
 //! CPU twin and no raster passes; the rest pick the ghost pass's form, `render::gpu_ghosts::ComputeForm`, from
 //! the device's own: `buffer` reads the stop masks from the storage buffer, `once` works each item out once,
-//! `pieces=N` or `once` spread the items over invocations rather than a workgroup a sprite; `inline`: the LUT
+//! `pieces=N` or `once` spread the items over invocations rather than a workgroup a sprite, `resolve=` picks the
+//! per-row sum; `frames=N`: N frames rather than 9, their medians; `inline`: the LUT
 //! pass samples its coarse instances at every pixel instead of into coarse images).
 
 use std::time::Instant;
@@ -26,6 +27,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let flag = |name: &str| args.iter().any(|a| a == name);
     let value = |key: &str| args.iter().find_map(|a| a.strip_prefix(key).map(str::to_owned));
     let (starburst, compute_only) = (flag("starburst"), flag("compute"));
+    let frames: usize = value("frames=").map_or(Ok(9), |n| n.parse())?;
     let form_args = (value("resolve="), value("pieces="), flag("buffer"), flag("once"));
     let options = ["starburst", "compute", "buffer", "inline", "once"];
     let args: Vec<String> =
@@ -87,7 +89,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let target = flare_core::render::gpu::texture_2d(&drawer.ctx.device, "t", w, h, format, usage);
         let view = target.create_view(&Default::default());
         let (mut wall, mut gpu, mut last) = (Vec::new(), Vec::new(), None);
-        for _ in 0..9 {
+        for _ in 0..frames {
             let start = Instant::now();
             let f = Frame::build(&flare, live.as_ref(), &request);
             drawer.render_into(&f, &sources, &view)?;

@@ -302,7 +302,7 @@ impl ComputeGhosts {
             && l.max_compute_workgroup_size_x >= CHUNK
             && l.max_storage_buffers_per_shader_stage >= 4
             && l.max_storage_textures_per_shader_stage >= 1
-            && l.max_compute_workgroup_storage_size >= 3 * 8 * CHUNK
+            && l.max_compute_workgroup_storage_size >= 32 * CHUNK
             && l.max_storage_buffer_binding_size >= 16385 * BYTES_PER_COLUMN
     }
 
