@@ -507,17 +507,25 @@ impl Lens {
     /// with the larger clear aperture, moved towards the other by half the narrowest gap between the two, so that
     /// it crosses neither and every ray meets the surfaces in their order. After the last surface it is flat, 1 mm behind that surface's deepest sag
     /// (at most half of its distance to the image, if it has one). Returns the new surface's index, or why there
-    /// is no room. [`Self::remove_surface`] on it gives back the lens.
+    /// is no room. Sags and gaps are sampled along both sections' axes (a toroid's differ).
+    /// [`Self::remove_surface`] on it gives back the lens.
     pub fn insert_dummy_after(&mut self, k: usize) -> Result<usize, String> {
         let Some(here) = self.surfaces.get(k) else {
             return Err(format!("there is no surface {k} (the lens has {})", self.surfaces.len()));
         };
         let samples = 256;
-        let heights = |semi: f64| (0..=samples).map(move |i| semi * f64::from(i) / f64::from(samples));
+        // Points along both sections' axes out to `semi`: a toroid's sag differs between them (and a difference
+        // of two toroids' sags, a quadratic form near the axis, is extreme on one of them).
+        let points = |semi: f64| {
+            (0..=samples).flat_map(move |i| {
+                let h = semi * f64::from(i) / f64::from(samples);
+                [(0.0, h), (h, 0.0)]
+            })
+        };
         // The extreme sag of a surface over its clear aperture: the largest (`deepest`) or the smallest.
         let extreme = |s: &Surface, deepest: bool| -> f64 {
-            heights(s.semi_aperture_mm)
-                .filter_map(|h| s.sag_mm(h))
+            points(s.semi_aperture_mm)
+                .filter_map(|(x, y)| s.sag_xy_mm(x, y))
                 .fold(0.0, |m: f64, z| if deepest { m.max(z) } else { m.min(z) })
         };
         let lo = extreme(here, true);
@@ -532,8 +540,8 @@ impl Lens {
             (Some(t), Some(next)) => {
                 // The shape of the neighbour with the larger clear aperture (defined over all of the dummy's),
                 // moved towards the other by half the narrowest gap between the two.
-                let gap = heights(here.semi_aperture_mm.min(next.semi_aperture_mm))
-                    .map(|h| match (here.sag_mm(h), next.sag_mm(h)) {
+                let gap = points(here.semi_aperture_mm.min(next.semi_aperture_mm))
+                    .map(|(x, y)| match (here.sag_xy_mm(x, y), next.sag_xy_mm(x, y)) {
                         (Some(a), Some(b)) => t + b - a,
                         _ => f64::NEG_INFINITY,
                     })

@@ -1,4 +1,4 @@
-//! The built-in lens library: the twenty prescriptions of `lenses/`, embedded in the binary so that the app
+//! The built-in lens library: the twenty-one prescriptions of `lenses/`, embedded in the binary so that the app
 //! and the command line work from any folder.
 //!
 //! # How it works
@@ -31,6 +31,10 @@ pub const BUILTIN_LENSES: &[(&str, &str)] = &[
     ("kodak_petzval_us2500046", include_str!("../../../../lenses/kodak_petzval_us2500046.json")),
     ("sigma_21mm_f1_4_art", include_str!("../../../../lenses/sigma_21mm_f1_4_art.json")),
     ("aspherical_fish_eye_jp", include_str!("../../../../lenses/aspherical_fish_eye_jp.json")),
+    (
+        "panavision_anamorphic_us20060050403",
+        include_str!("../../../../lenses/panavision_anamorphic_us20060050403.json"),
+    ),
 ];
 
 /// `lens` with its iris removed and the stop moved onto the lens surface in front of it (the habit of many
