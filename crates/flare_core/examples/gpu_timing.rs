@@ -23,7 +23,7 @@ use flare_core::render::DisplaySettings;
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     let usage = "usage: gpu_timing LENS WIDTH HEIGHT [LUT.flut] [starburst] [compute] [resolve=rows|scan] [pieces=N] \
-                 [buffer] [once] [inline]";
+                 [buffer] [once] [inline] [frames=N]";
     let flag = |name: &str| args.iter().any(|a| a == name);
     let value = |key: &str| args.iter().find_map(|a| a.strip_prefix(key).map(str::to_owned));
     let (starburst, compute_only) = (flag("starburst"), flag("compute"));
