@@ -33,10 +33,12 @@ struct BoxParams {
     support_radius2: f32, // the square of the radius beyond which the mask is 0
 };
 
-@group(0) @binding(0) var<storage, read> grid: array<Vertex>;
-@group(0) @binding(1) var<storage, read> box_jobs: array<Job>;
-// The aperture mask's bilinear footprints, four u8 texels a word (`ApertureMask::quad_words`, mask_texels.wgsl).
-@group(0) @binding(2) var<storage, read> mask_texels: array<u32>;
+// The traced vertices and the jobs as texels (`vertex_at`, `job_at`).
+@group(0) @binding(0) var grid: texture_2d<u32>;
+@group(0) @binding(1) var box_jobs: texture_2d<u32>;
+// The aperture mask's bilinear footprints, four u8 texels a word (`ApertureMask::quad_words`, mask_texels.wgsl),
+// as texels of four words (`texel_at`).
+@group(0) @binding(2) var mask_texels: texture_2d<u32>;
 @group(0) @binding(3) var<uniform> box_params: BoxParams;
 // Per pixel of the strip, 12 words: R, G, B as 64-bit sums (low word, high word), then R, G, B as 64-bit second
 // differences along the row (the linear runs); all zero between strips.
@@ -69,7 +71,7 @@ struct Shader {
 };
 
 fn mask_quad(w: u32) -> u32 {
-    return mask_texels[w];
+    return texel_at(mask_texels, w / 4u)[w % 4u];
 }
 
 fn mask_at(u: f32, v: f32) -> f32 {
@@ -429,7 +431,7 @@ fn splat_box(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (gid.y >= box_params.jobs) {
         return;
     }
-    let job = box_jobs[gid.y];
+    let job = job_at(box_jobs, gid.y);
     let n = job.steps.w;
     let triangle = gid.x / ROW_SPLIT;
     let part = gid.x % ROW_SPLIT;
@@ -447,9 +449,9 @@ fn splat_box(@builtin(global_invocation_id) gid: vec3<u32>) {
         second = v00 + n + 2u;
         third = v00 + n + 1u;
     }
-    let a = grid[v00];
-    let b = grid[second];
-    let c = grid[third];
+    let a = vertex_at(grid, v00);
+    let b = vertex_at(grid, second);
+    let c = vertex_at(grid, third);
     if (a.valid < 0.5 || b.valid < 0.5 || c.valid < 0.5 || (a.ratio > 1.0 && b.ratio > 1.0 && c.ratio > 1.0)) {
         return;
     }

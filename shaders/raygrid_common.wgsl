@@ -37,3 +37,30 @@ struct Vertex {
     pad: f32,
 };
 
+
+// The jobs, and the traced vertices for the box filter, are also laid out as rows of Rgba32Uint texels (four
+// words a texel, TEXELS_PER_ROW texels a row, in buffer order): a software rasteriser (lavapipe) fetches a
+// texel for all its lanes with gathers, where it loads a storage buffer's words lane by lane through the stack
+// whenever the lanes' indices may differ. Must be kept in sync with `TEXELS_PER_ROW` in
+// crates/flare_core/src/render/raygrid.rs.
+const TEXELS_PER_ROW: u32 = 2048u;
+
+fn texel_at(words: texture_2d<u32>, i: u32) -> vec4<u32> {
+    return textureLoad(words, vec2<u32>(i % TEXELS_PER_ROW, i / TEXELS_PER_ROW), 0);
+}
+
+// Job j of a texture of jobs (8 texels each).
+fn job_at(words: texture_2d<u32>, j: u32) -> Job {
+    let t = 8u * j;
+    return Job(texel_at(words, t), bitcast<vec4<f32>>(texel_at(words, t + 1u)), bitcast<vec4<f32>>(texel_at(words, t + 2u)),
+        bitcast<vec4<f32>>(texel_at(words, t + 3u)), bitcast<vec4<f32>>(texel_at(words, t + 4u)),
+        bitcast<vec4<f32>>(texel_at(words, t + 5u)), bitcast<vec4<f32>>(texel_at(words, t + 6u)), texel_at(words, t + 7u));
+}
+
+// Vertex i of a texture of traced vertices (3 texels each).
+fn vertex_at(words: texture_2d<u32>, i: u32) -> Vertex {
+    let a = bitcast<vec4<f32>>(texel_at(words, 3u * i));
+    let b = bitcast<vec4<f32>>(texel_at(words, 3u * i + 1u));
+    let c = bitcast<vec4<f32>>(texel_at(words, 3u * i + 2u));
+    return Vertex(a.xy, a.z, a.w, b.xy, b.zw, c.xy, c.z, c.w);
+}

@@ -16,15 +16,20 @@ const MAX_NEWTON_STEPS: u32 = 40u;
 const MAX_PATH_STEPS: u32 = 192u;
 
 @group(0) @binding(0) var<storage, read> steps: array<Step>;
-@group(0) @binding(1) var<storage, read> jobs: array<Job>;
-// The reflectance tables, then per job with a pre-pass its lit cells as bits (row by row, 16 to an entry, each
-// entry an integer 0 to 65535 as a float; from `Job.lit_cells.x`): an adapter may bind only four storage buffers.
-@group(0) @binding(2) var<storage, read> tables: array<f32>;
+// The jobs as texels (`job_at`).
+@group(0) @binding(1) var jobs: texture_2d<u32>;
+// The reflectance tables (f32 bits), then per job with a pre-pass its lit cells as bits (row by row, 16 to an
+// entry; from `Job.lit_cells.x`), as one run of words in texels (`texel_at`).
+@group(0) @binding(2) var tables: texture_2d<u32>;
 @group(0) @binding(3) var<storage, read_write> vertices: array<Vertex>;
 
 // Whether the entrance point x0 lies in (or within a thousandth of a cell of) a lit cell of the job's pre-pass:
 // the CPU's `LitCells::contains`, with a margin so that a point the CPU finds on a cell boundary is not lost to
 // f32 rounding (a twin may trace a ray more, never one less).
+fn table_word(i: u32) -> u32 {
+    return texel_at(tables, i / 4u)[i % 4u];
+}
+
 fn lit_at(job: Job, x0: vec2<f32>) -> bool {
     let n = job.lit_cells.y;
     if (n == 0u) {
@@ -37,7 +42,7 @@ fn lit_at(job: Job, x0: vec2<f32>) -> bool {
     let cells = vec4<u32>(lo.y * n + lo.x, lo.y * n + hi.x, hi.y * n + lo.x, hi.y * n + hi.x);
     var any = 0u;
     for (var i = 0u; i < 4u; i = i + 1u) {
-        any = any | (u32(tables[job.lit_cells.x + cells[i] / 16u]) >> (cells[i] % 16u));
+        any = any | (table_word(job.lit_cells.x + cells[i] / 16u) >> (cells[i] % 16u));
     }
     return (any & 1u) == 1u;
 }
@@ -46,7 +51,7 @@ fn table_at(offset: u32, sin2: f32) -> f32 {
     let x = clamp(sin2, 0.0, 1.0) * f32(TABLE_SAMPLES - 1u);
     let k = min(u32(x), TABLE_SAMPLES - 2u);
     let f = x - f32(k);
-    return tables[offset + k] * (1.0 - f) + tables[offset + k + 1u] * f;
+    return bitcast<f32>(table_word(offset + k)) * (1.0 - f) + bitcast<f32>(table_word(offset + k + 1u)) * f;
 }
 
 // The sag and its slope over r of an aspheric step at r^2; a negative `ok` where it is undefined.
@@ -216,15 +221,41 @@ fn normal_at(p: vec3<f32>, st: Step) -> vec4<f32> {
     return n;
 }
 
-// The job's path, read once per workgroup (every invocation of a workgroup traces the same job): a software
-// rasteriser otherwise gathers each step lane by lane at every surface.
+// Where the steps of a job's path are read from: the form is set when the pipeline is made. Must be kept in
+// sync with `GpuRayGrid::chunked_paths` in crates/flare_core/src/render/raygrid.rs.
+// - false (a GPU): one dispatch for every job; each workgroup copies its job's path into workgroup memory once
+//   (every invocation of a workgroup traces the same job) and reads it there.
+// - true (a software rasteriser): one dispatch per chunk of consecutive jobs whose paths fit one uniform binding
+//   (`PathChunk`). lavapipe loads a storage or workgroup word whose address it cannot prove the same in every
+//   lane one lane at a time, through the stack (a store-to-load stall a lane and component: three quarters of
+//   the tracer's time); a uniform buffer it gathers with plain loads.
+override CHUNKED_PATHS: bool = false;
+// Steps a chunk holds: 16 + 204 x 80 = 16336 bytes, within the 16 KiB uniform binding every adapter offers. Must
+// be kept in sync with `CHUNK_STEPS` in crates/flare_core/src/render/raygrid.rs.
+const CHUNK_STEPS: u32 = 204u;
+
+struct PathChunk {
+    first: vec4<u32>,      // the chunk's first job, and the first step it holds (indices into the whole batch)
+    steps: array<Step, CHUNK_STEPS>,
+};
+
+@group(0) @binding(4) var<uniform> chunk: PathChunk;
+
 var<workgroup> path: array<Step, MAX_PATH_STEPS>;
+
+// Step i of `job`'s path, from wherever this form keeps it.
+fn step_of(job: Job, i: u32) -> Step {
+    if (CHUNKED_PATHS) {
+        return chunk.steps[job.steps.x - chunk.first.y + i];
+    }
+    return path[i];
+}
 
 @compute @workgroup_size(64)
 fn trace_main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(workgroup_id) group: vec3<u32>,
     @builtin(local_invocation_index) local: u32) {
-    let job = jobs[group.y];
-    for (var i = local; i < min(job.steps.y, MAX_PATH_STEPS); i = i + 64u) {
+    let job = job_at(jobs, group.y + select(0u, chunk.first.x, CHUNKED_PATHS));
+    for (var i = select(local, MAX_PATH_STEPS, CHUNKED_PATHS); i < min(job.steps.y, MAX_PATH_STEPS); i = i + 64u) {
         path[i] = steps[job.steps.x + i];
     }
     workgroupBarrier();
@@ -244,7 +275,7 @@ fn trace_main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(workgroup_i
     var alive = lit_at(job, p.xy);
     let stop_radius = job.view.w;
     for (var i = 0u; i < job.steps.y && alive; i = i + 1u) {
-        let st = path[i];
+        let st = step_of(job, i);
         let vertex = vec3<f32>(0.0, 0.0, st.geometry.x);
         let h = intersect(p - vertex, d, st);
         if (!h.hit) {

@@ -18,11 +18,13 @@ fn prepared(id: &str) -> PreparedFlare {
 }
 
 /// Every traced vertex of the first jobs lands where the f64 tracer puts the same ray, to a few micrometres;
-/// rays one says miss, the other says miss (but for a handful at grazing incidence).
+/// rays one says miss, the other says miss (but for a handful at grazing incidence). The tracer's two forms
+/// (paths in workgroup memory, or in uniform chunks) give the same vertices to the bit.
 #[test]
 fn gpu_landings_follow_the_f64_tracer() {
     let Some(ctx) = test_context() else { return };
     let raygrid = GpuRayGrid::new(&ctx.device);
+    let mut other_form = GpuRayGrid::new(&ctx.device);
     let window = Window::frame(480, 320);
     for (id, light) in [
         ("pbrt_dgauss_50mm", [6.0, 3.0]),
@@ -36,6 +38,13 @@ fn gpu_landings_follow_the_f64_tracer() {
         let renderer = flare.ray_grid_renderer();
         let (jobs, vertices) = raygrid.trace_vertices(&ctx, &renderer, light, window, 16, 60).unwrap();
         assert!(!jobs.is_empty(), "{id}: no job has light");
+        // The tracer's other form reads the paths from elsewhere and traces the same rays to the same bits.
+        other_form.set_chunked_paths(!raygrid.chunked_paths());
+        let (_, again) = other_form.trace_vertices(&ctx, &renderer, light, window, 16, 60).unwrap();
+        assert!(
+            bytemuck::cast_slice::<_, u8>(&again) == bytemuck::cast_slice::<_, u8>(&vertices),
+            "{id}: the tracer's two forms differ"
+        );
         let (mut worst_mm, mut compared, mut disagree) = (0.0f64, 0usize, 0usize);
         let mut drifts = Vec::new();
         let per_job = 17 * 17;
@@ -144,6 +153,11 @@ fn gpu_ray_grids_are_deterministic_and_draw_in_strips() {
     assert!(render(&raygrid) == first, "row split {other}: drawn in strips, the frame differs");
     raygrid.box_strip_bytes = u64::MAX;
     assert!(render(&raygrid) == first, "row split {other}: the frame differs");
+    // The tracer's other form (a GPU's: each job's path in workgroup memory, one dispatch; lavapipe's: paths in
+    // uniform chunks, a dispatch a chunk): the same bytes.
+    let chunked = !raygrid.chunked_paths();
+    raygrid.set_chunked_paths(chunked);
+    assert!(render(&raygrid) == first, "paths chunked {chunked}: the frame differs");
 }
 
 /// Per-ghost gains (a preset's gains, `enabled` and `solo`, as a frame request carries them) reach the ray

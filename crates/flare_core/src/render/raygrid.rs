@@ -35,16 +35,21 @@
 //! splatted by [`row_split`] invocations, each taking every n-th of its rows, and each row is resolved by a
 //! workgroup's scan (`resolve_box_scan`); a software adapter keeps one invocation per triangle and one per row
 //! (`resolve_box`), the same sums. The tracer is compiled once per kind of
-//! surface a lens has ([`TraceShapes`]) and reads each job's path once per workgroup; a path longer than it
-//! holds (192 steps: every ghost of a lens of up to 64 surfaces) is [`GpuRayGridError::Path`], and the callers
-//! trace on the CPU. The raster path (`--gpu-samples 1..8`) samples pixel centres and drops collapsed
+//! surface a lens has ([`TraceShapes`]). On a GPU it reads each job's path once per workgroup into workgroup
+//! memory, all jobs in one dispatch; on a software adapter from uniform chunks of paths, a dispatch a chunk
+//! ([`GpuRayGrid::set_chunked_paths`]). A path longer than either holds (192 steps: every ghost of a lens of up
+//! to 64 surfaces) is [`GpuRayGridError::Path`], and the callers trace on the CPU. The jobs, the reflectance
+//! tables, the mask and (copied after the trace) the vertices are read as rows of Rgba32Uint texels of four
+//! words (`texel_at` in `raygrid_common.wgsl`): lavapipe, which loads a storage buffer's words lane by lane
+//! wherever the lanes' indices may differ, fetches texels with gathers (on this 2-core machine the GPU ray grid
+//! of the Nikon zoom at grid 64 went from 20 s to 10 s). The raster path (`--gpu-samples 1..8`) samples pixel centres and drops collapsed
 //! triangles. Tests compare landings (the f32 drift, per lens) and images.
 //! **Limits**: a grid whose dispatch, vertex buffer or supersampled target exceeds the adapter's limits is
 //! refused with the limit named, before anything is dispatched; a frame's jobs are traced and drawn in batches
-//! that fit the largest storage buffer the adapter binds. A device lost on the way is
+//! that fit the largest storage buffer the adapter binds and its largest 2D texture ([`batches_of`]). A device lost on the way is
 //! [`GpuError::Lost`] (the command line then traces on the CPU).
 
-use super::buffers::{compute_pipeline, compute_pipeline_with, software_device, storage};
+use super::buffers::{compute_pipeline, compute_pipeline_with, software_device, storage, upload as upload_texture};
 use super::gpu::{GpuContext, GpuError, PassTimes, map_read, read_texture, texture_2d};
 use super::shaders::{RAYGRID_BOX_WGSL, RAYGRID_SPLAT_WGSL, RAYGRID_TRACE_WGSL};
 use crate::image::HdrImage;
@@ -140,6 +145,71 @@ pub const BOX_BYTES_PER_PIXEL: u64 = 48;
 const BOX_STRIDE: u64 = 256;
 /// Samples per dense reflectance table (the CPU renderer's).
 const TABLE_SAMPLES: usize = DENSE_TABLE_SAMPLES;
+/// Texels a row of the textures that hold words (`TEXELS_PER_ROW` in `raygrid_common.wgsl`; the 2D size every
+/// adapter offers), four 32-bit words a texel, and a row's bytes.
+const TEXELS_PER_ROW: u64 = 2048;
+const TEXEL_ROW_BYTES: u64 = TEXELS_PER_ROW * 16;
+/// Texels of one traced vertex (`vertex_at` in `raygrid_common.wgsl`).
+const VERTEX_TEXELS: u64 = (std::mem::size_of::<GpuVertex>() / 16) as u64;
+
+/// What [`GpuRayGrid::trace`] leaves: the jobs as a buffer (the raster splat's) and as texels (the tracer's and
+/// the box filter's), and the traced vertices, `vertex_count` of them.
+struct Traced {
+    jobs: wgpu::Buffer,
+    job_texels: wgpu::TextureView,
+    vertices: wgpu::Buffer,
+    vertex_count: u64,
+}
+
+/// `words` (whole texels: a multiple of 16 bytes) as rows of Rgba32Uint texels, [`TEXELS_PER_ROW`] a row, the
+/// last row padded with zeros (`texel_at` in `raygrid_common.wgsl`).
+fn word_texels(device: &wgpu::Device, queue: &wgpu::Queue, label: &str, words: &[u8]) -> wgpu::TextureView {
+    let rows = (words.len() as u64).div_ceil(TEXEL_ROW_BYTES).max(1);
+    let mut padded = words.to_vec();
+    padded.resize((rows * TEXEL_ROW_BYTES) as usize, 0);
+    let texture = texture_2d(
+        device,
+        label,
+        TEXELS_PER_ROW as u32,
+        rows as u32,
+        wgpu::TextureFormat::Rgba32Uint,
+        wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+    );
+    upload_texture(queue, &texture, &padded, 16);
+    texture.create_view(&wgpu::TextureViewDescriptor::default())
+}
+
+/// The traced `vertices` (`count` of them, their buffer whole rows of texels) copied by `encoder` into rows of
+/// Rgba32Uint texels for the box filter (`vertex_at` in `raygrid_common.wgsl`).
+fn vertex_texels(
+    device: &wgpu::Device,
+    encoder: &mut wgpu::CommandEncoder,
+    vertices: &wgpu::Buffer,
+    count: u64,
+) -> wgpu::TextureView {
+    let rows = (count * VERTEX_TEXELS).div_ceil(TEXELS_PER_ROW).max(1) as u32;
+    let texture = texture_2d(
+        device,
+        "raygrid vertex texels",
+        TEXELS_PER_ROW as u32,
+        rows,
+        wgpu::TextureFormat::Rgba32Uint,
+        wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+    );
+    encoder.copy_buffer_to_texture(
+        wgpu::TexelCopyBufferInfo {
+            buffer: vertices,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(TEXEL_ROW_BYTES as u32),
+                rows_per_image: Some(rows),
+            },
+        },
+        texture.as_image_copy(),
+        wgpu::Extent3d { width: TEXELS_PER_ROW as u32, height: rows, depth_or_array_layers: 1 },
+    );
+    texture.create_view(&wgpu::TextureViewDescriptor::default())
+}
 /// Invocations per workgroup of the tracer (`@workgroup_size` in `raygrid_trace.wgsl`).
 const WORKGROUP: u32 = 64;
 
@@ -174,8 +244,8 @@ pub struct GpuRayGridImage {
 struct Upload {
     steps: Vec<GpuStep>,
     jobs: Vec<GpuJob>,
-    /// The reflectance tables, then the jobs' lit cells, 16 bits an entry ([`GpuJob::lit_cells`]).
-    tables: Vec<f32>,
+    /// The reflectance tables (f32 bits), then the jobs' lit cells, 16 bits an entry ([`GpuJob::lit_cells`]).
+    tables: Vec<u32>,
 }
 
 /// The GPU ray-grid renderer: its two pipelines, made once per device.
@@ -190,6 +260,9 @@ pub struct GpuRayGrid {
     /// `resolve_box_scan` (a workgroup per row), else `resolve_box` (an invocation per row).
     row_split: u32,
     resolve_pipeline: wgpu::ComputePipeline,
+    /// Whether the tracer reads each job's path from uniform chunks, a dispatch a chunk (a software adapter),
+    /// or from workgroup memory, one dispatch for all jobs (a GPU); see [`Self::set_chunked_paths`].
+    chunked_paths: bool,
     /// The most bytes the box filter's sums may take (the adapter's limits; tests lower it to draw in strips).
     pub box_strip_bytes: u64,
     sampler: wgpu::Sampler,
@@ -266,6 +339,7 @@ impl GpuRayGrid {
             box_module,
             row_split,
             resolve_pipeline,
+            chunked_paths: software_device(device),
             box_strip_bytes: limits.max_storage_buffer_binding_size.min(limits.max_buffer_size),
             sampler,
             target_format,
@@ -284,6 +358,20 @@ impl GpuRayGrid {
     pub fn set_row_split(&mut self, device: &wgpu::Device, n: u32) {
         self.row_split = n.clamp(1, 64);
         (self.box_pipeline, self.resolve_pipeline) = box_pipelines(device, &self.box_module, self.row_split);
+    }
+
+    /// Whether the tracer reads paths from uniform chunks (see [`Self::set_chunked_paths`]).
+    pub fn chunked_paths(&self) -> bool {
+        self.chunked_paths
+    }
+
+    /// Traces with each job's path read from uniform chunks, one dispatch per chunk of jobs (`true`: what a
+    /// software adapter does, whose loads from storage or workgroup memory at an index it cannot prove uniform
+    /// go lane by lane), or from workgroup memory in one dispatch (`false`: a GPU's), instead of the device's
+    /// own choice: the same vertices (tests trace both on lavapipe).
+    pub fn set_chunked_paths(&mut self, chunked: bool) {
+        self.chunked_paths = chunked;
+        self.trace_pipelines = Default::default();
     }
 
     /// Workgroups of the resolve for a strip of `rows`: one invocation per row, or with the rows split (a GPU)
@@ -401,7 +489,7 @@ impl GpuRayGrid {
                 let batch = batch.as_slice();
                 let query = profiler.as_deref().map(|p| p.begin_pass_query("trace", &mut encoder));
                 let writes = query.as_ref().and_then(|q| q.compute_pass_timestamp_writes());
-                let (jobs, vertices) =
+                let Traced { jobs, vertices, .. } =
                     self.trace(device, queue, &mut encoder, renderer, batch, fine, view.turn_deg, writes);
                 if let (Some(p), Some(q)) = (profiler.as_deref(), query) {
                     p.end_query(&mut encoder, q);
@@ -496,6 +584,11 @@ impl GpuRayGrid {
                 limit("workgroups per dispatch", groups, max_groups, "max_compute_workgroups_per_dimension")
             })
             .or_else(|| limit("bytes of sums for one row", row_bytes, binding, "max_storage_buffer_binding_size"))
+            .or_else(|| {
+                let rows = vertex_bytes(cells).div_ceil(TEXEL_ROW_BYTES);
+                let max = u64::from(limits.max_texture_dimension_2d);
+                limit("texel rows of vertices for one ghost", rows, max, "max_texture_dimension_2d")
+            })
         {
             return Err(e);
         }
@@ -517,8 +610,7 @@ impl GpuRayGrid {
         // `ApertureMask::sample` does (a storage buffer: a software rasteriser samples a texture several times
         // slower).
         let quads = mask.quad_words();
-        let mask_texels =
-            storage(device, queue, "raygrid mask", bytemuck::cast_slice(&quads), wgpu::BufferUsages::STORAGE);
+        let mask_texels = word_texels(device, queue, "raygrid mask", bytemuck::cast_slice(&quads));
         // No pixel can gather more than every triangle's flux (weights and masks are at most 1).
         let pixel_area_mm2 = window.px_per_mm().powi(-2);
         let bound: f64 = planned
@@ -592,18 +684,21 @@ impl GpuRayGrid {
                 let cells = batch[0].cells;
                 let query = profiler.as_deref().map(|p| p.begin_pass_query("trace", &mut encoder));
                 let writes = query.as_ref().and_then(|q| q.compute_pass_timestamp_writes());
-                let (jobs, vertices) =
-                    self.trace(device, queue, &mut encoder, renderer, batch, window, view.turn_deg, writes);
+                let traced = self.trace(device, queue, &mut encoder, renderer, batch, window, view.turn_deg, writes);
                 if let (Some(p), Some(q)) = (profiler.as_deref(), query) {
                     p.end_query(&mut encoder, q);
                 }
+                let grid = vertex_texels(device, &mut encoder, &traced.vertices, traced.vertex_count);
                 let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("raygrid box"),
                     layout: &self.box_pipeline.get_bind_group_layout(0),
                     entries: &[
-                        wgpu::BindGroupEntry { binding: 0, resource: vertices.as_entire_binding() },
-                        wgpu::BindGroupEntry { binding: 1, resource: jobs.as_entire_binding() },
-                        wgpu::BindGroupEntry { binding: 2, resource: mask_texels.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 0, resource: wgpu::BindingResource::TextureView(&grid) },
+                        wgpu::BindGroupEntry {
+                            binding: 1,
+                            resource: wgpu::BindingResource::TextureView(&traced.job_texels),
+                        },
+                        wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&mask_texels) },
                         wgpu::BindGroupEntry { binding: 4, resource: sums.as_entire_binding() },
                         wgpu::BindGroupEntry { binding: 3, resource: params(s * (batches.len() + 1) + b) },
                     ],
@@ -704,7 +799,7 @@ impl GpuRayGrid {
         if let Some(e) = path_limit(&jobs) {
             return Err(e);
         }
-        let (_, vertices) = self.trace(device, queue, &mut encoder, renderer, &jobs, window, 0.0, None);
+        let Traced { vertices, .. } = self.trace(device, queue, &mut encoder, renderer, &jobs, window, 0.0, None);
         encoder.copy_buffer_to_buffer(&vertices, 0, &readback, 0, size);
         queue.submit(Some(encoder.finish()));
         let view = map_read(device, &readback, size)?;
@@ -717,13 +812,15 @@ impl GpuRayGrid {
     /// The tracer compiled for `shapes`.
     fn trace_pipeline(&self, device: &wgpu::Device, shapes: TraceShapes) -> &wgpu::ComputePipeline {
         self.trace_pipelines[shapes as usize].get_or_init(|| {
-            compute_pipeline_with(device, &self.trace_module, "trace_main", &[("SHAPES", f64::from(shapes as u8))])
+            let constants =
+                [("SHAPES", f64::from(shapes as u8)), ("CHUNKED_PATHS", f64::from(u8::from(self.chunked_paths)))];
+            compute_pipeline_with(device, &self.trace_module, "trace_main", &constants)
         })
     }
 
     /// Uploads `jobs` (of one grid size, seen in `window` with the light turned by `turn_deg`) and records the
     /// tracer's dispatch into `encoder`: every grid vertex of every job, `(cells + 1)^2` a job in job order.
-    /// Returns the jobs buffer and the vertex buffer.
+    /// Returns the jobs (as a buffer and as texels) and the vertex buffer.
     #[allow(clippy::too_many_arguments)]
     fn trace(
         &self,
@@ -735,37 +832,74 @@ impl GpuRayGrid {
         window: Window,
         turn_deg: f64,
         timestamp_writes: Option<wgpu::ComputePassTimestampWrites>,
-    ) -> (wgpu::Buffer, wgpu::Buffer) {
+    ) -> Traced {
         let upload = upload(renderer, jobs, window, turn_deg);
         let pipeline = self.trace_pipeline(device, TraceShapes::of(&upload.steps));
         let per_job = jobs.first().map_or(1, |j| (j.cells + 1) * (j.cells + 1)) as u64;
         let buffer = |label, contents: &[u8]| storage(device, queue, label, contents, wgpu::BufferUsages::STORAGE);
         let steps = buffer("raygrid steps", bytemuck::cast_slice(&upload.steps));
         let jobs_buffer = buffer("raygrid jobs", bytemuck::cast_slice(&upload.jobs));
-        let tables = buffer("raygrid tables", bytemuck::cast_slice(&upload.tables));
+        let tables = word_texels(device, queue, "raygrid tables", bytemuck::cast_slice(&upload.tables));
+        let job_texels = word_texels(device, queue, "raygrid job texels", bytemuck::cast_slice(&upload.jobs));
+        let vertex_count = per_job * jobs.len() as u64;
         let vertices = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("raygrid vertices"),
-            size: (per_job * jobs.len() as u64 * std::mem::size_of::<GpuVertex>() as u64).max(16),
+            // Whole rows of texels, which `vertex_texels` copies.
+            size: (vertex_count * VERTEX_TEXELS).div_ceil(TEXELS_PER_ROW).max(1) * TEXEL_ROW_BYTES,
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: false,
         });
-        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("raygrid trace"),
-            layout: &pipeline.get_bind_group_layout(0),
-            entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: steps.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: jobs_buffer.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 2, resource: tables.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 3, resource: vertices.as_entire_binding() },
-            ],
-        });
+        // The chunks of paths (`PathChunk` in the shader), each at an offset the adapter can bind; without
+        // chunked paths one chunk of zeros, which that form never reads.
+        let chunks = if self.chunked_paths { path_chunks(&upload.jobs) } else { vec![(0, 0)] };
+        let align = u64::from(device.limits().min_uniform_buffer_offset_alignment).max(16);
+        let mut chunk_bytes = Vec::new();
+        let mut offsets = Vec::with_capacity(chunks.len());
+        for &(first_job, end_job) in &chunks {
+            let at = chunk_bytes.len().next_multiple_of(align as usize);
+            offsets.push(at as u64);
+            let (from, to) = match (upload.jobs.get(first_job), end_job.checked_sub(1).and_then(|j| upload.jobs.get(j)))
+            {
+                (Some(first), Some(last)) if end_job > first_job => {
+                    (first.steps[0] as usize, (last.steps[0] + last.steps[1]) as usize)
+                }
+                _ => (0, 0),
+            };
+            chunk_bytes.resize(at, 0);
+            chunk_bytes.extend(bytemuck::cast_slice::<u32, u8>(&[first_job as u32, from as u32, 0, 0]));
+            chunk_bytes.extend(bytemuck::cast_slice::<GpuStep, u8>(&upload.steps[from..to]));
+        }
+        // The last chunk's binding reaches CHUNK_BYTES past its offset (the others overlap the next: read only).
+        chunk_bytes.resize(offsets.last().map_or(0, |&o| o as usize) + CHUNK_BYTES as usize, 0);
+        let chunk_buffer = storage(device, queue, "raygrid path chunks", &chunk_bytes, wgpu::BufferUsages::UNIFORM);
         let mut pass =
             encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("raygrid trace"), timestamp_writes });
         pass.set_pipeline(pipeline);
-        pass.set_bind_group(0, &group, &[]);
-        pass.dispatch_workgroups((per_job as u32).div_ceil(WORKGROUP), jobs.len().max(1) as u32, 1);
+        for (&(first_job, end_job), &offset) in chunks.iter().zip(&offsets) {
+            let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("raygrid trace"),
+                layout: &pipeline.get_bind_group_layout(0),
+                entries: &[
+                    wgpu::BindGroupEntry { binding: 0, resource: steps.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&job_texels) },
+                    wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&tables) },
+                    wgpu::BindGroupEntry { binding: 3, resource: vertices.as_entire_binding() },
+                    wgpu::BindGroupEntry {
+                        binding: 4,
+                        resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                            buffer: &chunk_buffer,
+                            offset,
+                            size: wgpu::BufferSize::new(CHUNK_BYTES),
+                        }),
+                    },
+                ],
+            });
+            pass.set_bind_group(0, &group, &[]);
+            let count = if self.chunked_paths { end_job - first_job } else { jobs.len().max(1) };
+            pass.dispatch_workgroups((per_job as u32).div_ceil(WORKGROUP), count as u32, 1);
+        }
         drop(pass);
-        (jobs_buffer, vertices)
+        Traced { jobs: jobs_buffer, job_texels, vertices, vertex_count }
     }
 }
 
@@ -814,7 +948,8 @@ fn upload(renderer: &RayGridRenderer, jobs: &[&PlannedJob], window: Window, turn
                 let at = out.tables.len() as u32;
                 // Tables are resampled to the shader's fixed size (they already have it; a zero table has 2).
                 out.tables.extend(
-                    (0..TABLE_SAMPLES).map(|i| finite(tables.table(table).at(i as f64 / (TABLE_SAMPLES - 1) as f64))),
+                    (0..TABLE_SAMPLES)
+                        .map(|i| finite(tables.table(table).at(i as f64 / (TABLE_SAMPLES - 1) as f64)).to_bits()),
                 );
                 at
             });
@@ -880,7 +1015,7 @@ fn upload(renderer: &RayGridRenderer, jobs: &[&PlannedJob], window: Window, turn
     for job in out.jobs.iter_mut().filter(|j| j.lit_cells[1] > 0) {
         job.lit_cells[0] += tables_len;
     }
-    out.tables.extend(lit_bits.into_iter().map(f32::from));
+    out.tables.extend(lit_bits.into_iter().map(u32::from));
     out
 }
 
@@ -934,26 +1069,75 @@ fn shared_limits(limits: &wgpu::Limits, cells: usize, side: u64, what_side: &'st
 /// 80 bytes each, within the 16 KB every adapter offers): a lens of up to 64 surfaces.
 const MAX_PATH_STEPS: usize = 192;
 
+/// Steps one uniform chunk of paths holds (`CHUNK_STEPS` in `raygrid_trace.wgsl`), and the chunk's bytes: a
+/// header of 16 bytes, then the steps; 16336 bytes, within the 16 KiB uniform binding of every adapter.
+const CHUNK_STEPS: usize = 204;
+const CHUNK_BYTES: u64 = 16 + CHUNK_STEPS as u64 * std::mem::size_of::<GpuStep>() as u64;
+const _: () = assert!(CHUNK_BYTES <= 16 << 10 && MAX_PATH_STEPS <= CHUNK_STEPS);
+
+/// Consecutive runs of `jobs` (first, end) whose paths together fit one chunk of [`CHUNK_STEPS`] (every path
+/// does alone: [`path_limit`] refuses longer ones first).
+fn path_chunks(jobs: &[GpuJob]) -> Vec<(usize, usize)> {
+    let mut chunks = Vec::new();
+    let (mut first, mut held) = (0, 0);
+    for (j, job) in jobs.iter().enumerate() {
+        let steps = job.steps[1] as usize;
+        if held + steps > CHUNK_STEPS && j > first {
+            chunks.push((first, j));
+            (first, held) = (j, 0);
+        }
+        held += steps;
+    }
+    if first < jobs.len() {
+        chunks.push((first, jobs.len()));
+    }
+    chunks
+}
+
 /// A path longer than the tracer holds (the command line and the app then trace on the CPU).
 fn path_limit(planned: &[&PlannedJob]) -> Option<GpuRayGridError> {
     let steps = planned.iter().map(|j| j.tracer.steps().len()).max()?;
     (steps > MAX_PATH_STEPS).then_some(GpuRayGridError::Path { steps, limit: MAX_PATH_STEPS })
 }
 
-/// `planned` in batches of one grid size whose vertices fit one storage binding (at most 256 MB, and at most
-/// the dispatch's y of jobs).
+/// `planned` in batches of one grid size whose vertices fit one storage binding (at most 256 MB) and one texture
+/// of texels, at most the dispatch's y of jobs, and whose tables and lit bits fit one texture of words.
 fn batches_of<'a, 'p>(planned: &[&'a PlannedJob<'p>], limits: &wgpu::Limits) -> Vec<Vec<&'a PlannedJob<'p>>> {
     let binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+    let table_words = table_capacity(limits);
     let mut order = planned.to_vec();
     order.sort_by_key(|j| j.cells);
-    let mut batches = Vec::new();
+    let mut batches: Vec<Vec<&PlannedJob>> = Vec::new();
     for same in order.chunk_by(|a, b| a.cells == b.cells) {
-        let per_batch = (binding.min(256 << 20) / vertex_bytes(same[0].cells).max(1))
+        // Vertices in one storage binding (at most 256 MB) and, as texels, in one texture.
+        let bytes = binding.min(256 << 20).min(TEXEL_ROW_BYTES * u64::from(limits.max_texture_dimension_2d));
+        let per_batch = (bytes / vertex_bytes(same[0].cells).max(1))
             .min(u64::from(limits.max_compute_workgroups_per_dimension))
             .max(1) as usize;
-        batches.extend(same.chunks(per_batch).map(<[_]>::to_vec));
+        // The tables' words of a batch: each reflectance table its jobs use, once, and each job's lit bits.
+        let (mut tables, mut lit_words) = (std::collections::HashSet::new(), 0u64);
+        let mut batch = Vec::new();
+        for &job in same {
+            let job_lit = job.lit.as_ref().map_or(0, |l| l.lit.len().div_ceil(16)) as u64;
+            let new_tables = job.step_tables.iter().filter(|t| !tables.contains(*t)).count() as u64;
+            let words = (tables.len() as u64 + new_tables) * TABLE_SAMPLES as u64 + lit_words + job_lit;
+            if !batch.is_empty() && (batch.len() == per_batch || words > table_words) {
+                batches.push(std::mem::take(&mut batch));
+                (tables, lit_words) = (std::collections::HashSet::new(), 0);
+            }
+            tables.extend(job.step_tables.iter().copied());
+            lit_words += job_lit;
+            batch.push(job);
+        }
+        batches.push(batch);
     }
     batches
+}
+
+/// Words a texture of words holds (the tables, `tables` in `raygrid_trace.wgsl`): [`TEXELS_PER_ROW`] texels of
+/// four a row, as many rows as the adapter's 2D textures hold.
+fn table_capacity(limits: &wgpu::Limits) -> u64 {
+    4 * TEXELS_PER_ROW * u64::from(limits.max_texture_dimension_2d)
 }
 
 /// The aperture mask as an R8 texture's view, for the splat passes' `aperture_at`.
