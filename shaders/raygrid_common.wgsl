@@ -7,13 +7,20 @@
 // Must be kept in sync with `GpuStep`, `GpuJob` and `GpuVertex` in crates/flare_core/src/render/raygrid.rs.
 
 struct Step {
-    geometry: vec4<f32>,   // vertex z (mm), curvature (1/mm), conic, r^2 term
-    terms_lo: vec4<f32>,   // A4, A6, A8, A10
-    terms_hi: vec4<f32>,   // A12, A14, A16, spherical (1: the sphere formulas alone)
-    optics: vec4<f32>,     // eta = n_in / n_out, reflect (0/1), arriving direction (+1/-1), 1 / semi-aperture^2 (0 at the stop)
-    table: vec4<u32>,      // offset of the reflectance table in `tables`, is the stop (0/1), a toroid's x-z
-                           // curvature (f32 bits), is a toroid (0/1)
+    surface: vec4<f32>,    // vertex z (mm), curvature (1/mm), conic, 1 / semi-aperture^2 (0 at the stop)
+    optics: vec4<u32>,     // eta = n_in / n_out (f32 bits), offset of the reflectance table in `tables`, flags
+                           // (STEP_*), a toroid's x-z curvature (f32 bits)
+    terms_lo: vec4<f32>,   // r^2 term, A4, A6, A8 (aspheres and toroids only)
+    terms_hi: vec4<f32>,   // A10, A12, A14, A16
 };
+
+// `Step.optics.z`: a reflection (else a refraction), the stop, the sphere formulas alone (a sphere or a plane),
+// a toroid, arriving backwards (towards -z).
+const STEP_REFLECT: u32 = 1u;
+const STEP_STOP: u32 = 2u;
+const STEP_SPHERE: u32 = 4u;
+const STEP_TOROID: u32 = 8u;
+const STEP_BACKWARD: u32 = 16u;
 
 struct Job {
     steps: vec4<u32>,      // first step, step count, first vertex, cells across (n)

@@ -11,9 +11,10 @@ const TABLE_SAMPLES: u32 = 1025u;
 // crates/flare_core/src/render/raygrid.rs.
 override SHAPES: u32 = 2u;
 const MAX_NEWTON_STEPS: u32 = 40u;
-// Steps of a path held in workgroup memory (80 bytes each: 15 KB, within the 16 KB every adapter offers). Must
-// be kept in sync with `MAX_PATH_STEPS` in crates/flare_core/src/render/raygrid.rs, which refuses longer paths.
-const MAX_PATH_STEPS: u32 = 192u;
+// Steps of a path held in workgroup memory (64 bytes each: 16320 bytes, within the 16352 every adapter offers).
+// Must be kept in sync with `MAX_PATH_STEPS` in crates/flare_core/src/render/raygrid.rs, which refuses longer
+// paths.
+const MAX_PATH_STEPS: u32 = 255u;
 
 @group(0) @binding(0) var<storage, read> steps: array<Step>;
 // The jobs as texels (`job_at`).
@@ -61,18 +62,34 @@ struct Sag {
     ok: bool,
 };
 
-fn sag(s: Step, r2: f32) -> Sag {
+// What every step needs (the first half of `Step`), and the aspheric terms (the second), read apart: a spherical
+// step never reads its terms.
+struct Surface {
+    surface: vec4<f32>,
+    optics: vec4<u32>,
+};
+
+struct Terms {
+    lo: vec4<f32>,
+    hi: vec4<f32>,
+};
+
+fn has(st: Surface, flag: u32) -> bool {
+    return (st.optics.z & flag) != 0u;
+}
+
+fn sag(st: Surface, t: Terms, r2: f32) -> Sag {
     var out: Sag;
-    let c = s.geometry.y;
-    let root = 1.0 - (1.0 + s.geometry.z) * c * c * r2;
+    let c = st.surface.y;
+    let root = 1.0 - (1.0 + st.surface.z) * c * c * r2;
     if (root <= 0.0) {
         out.ok = false;
         return out;
     }
     let sq = sqrt(root);
-    var z = c * r2 / (1.0 + sq) + s.geometry.w * r2;
-    var m = c / sq + 2.0 * s.geometry.w;
-    var terms = array<f32, 7>(s.terms_lo.x, s.terms_lo.y, s.terms_lo.z, s.terms_lo.w, s.terms_hi.x, s.terms_hi.y, s.terms_hi.z);
+    var z = c * r2 / (1.0 + sq) + t.lo.x * r2;
+    var m = c / sq + 2.0 * t.lo.x;
+    var terms = array<f32, 7>(t.lo.y, t.lo.z, t.lo.w, t.hi.x, t.hi.y, t.hi.z, t.hi.w);
     var power = r2 * r2;
     var slope_power = r2;
     for (var i = 0u; i < 7u; i = i + 1u) {
@@ -96,23 +113,23 @@ struct Toroid {
     ok: bool,
 };
 
-fn is_toroid(st: Step) -> bool {
-    return SHAPES == 2u && st.table.w == 1u;
+fn is_toroid(st: Surface) -> bool {
+    return SHAPES == 2u && has(st, STEP_TOROID);
 }
 
 // The sphere formulas alone (a sphere or a plane).
-fn is_sphere(st: Step) -> bool {
-    return SHAPES == 0u || st.terms_hi.w > 0.5;
+fn is_sphere(st: Surface) -> bool {
+    return SHAPES == 0u || has(st, STEP_SPHERE);
 }
 
-fn toroid_sag(st: Step, x: f32, y: f32) -> Toroid {
+fn toroid_sag(st: Surface, t: Terms, x: f32, y: f32) -> Toroid {
     var out: Toroid;
     out.ok = false;
-    let profile = sag(st, y * y);
+    let profile = sag(st, t, y * y);
     if (!profile.ok) {
         return out;
     }
-    let cx = bitcast<f32>(st.table.z);
+    let cx = bitcast<f32>(st.optics.w);
     let w = 1.0 - cx * profile.z;
     let root = w * w - cx * cx * x * x;
     if (w <= 0.0 || root < 0.0) {
@@ -132,22 +149,22 @@ fn toroid_sag(st: Step, x: f32, y: f32) -> Toroid {
 
 // `z - sag` at the point `at` of the line along d and its derivative along the line (x, y), and whether the
 // sag is defined there (z 1) or not (z 0): an asphere's or a toroid's.
-fn residual(st: Step, at: vec3<f32>, d: vec3<f32>) -> vec3<f32> {
+fn residual(st: Surface, terms: Terms, at: vec3<f32>, d: vec3<f32>) -> vec3<f32> {
     if (is_toroid(st)) {
-        let t = toroid_sag(st, at.x, at.y);
+        let t = toroid_sag(st, terms, at.x, at.y);
         return vec3<f32>(at.z - t.z, d.z - t.gx * d.x - t.gy * d.y, select(0.0, 1.0, t.ok));
     }
-    let sg = sag(st, at.x * at.x + at.y * at.y);
+    let sg = sag(st, terms, at.x * at.x + at.y * at.y);
     return vec3<f32>(at.z - sg.z, d.z - sg.slope_over_r * (at.x * d.x + at.y * d.y), select(0.0, 1.0, sg.ok));
 }
 
 // Newton's method along p + s d from s (the CPU tracer's `newton`).
-fn newton(p: vec3<f32>, d: vec3<f32>, start: f32, st: Step) -> Hit {
+fn newton(p: vec3<f32>, d: vec3<f32>, start: f32, st: Surface, terms: Terms) -> Hit {
     var out: Hit;
     out.hit = false;
     var s = start;
     for (var i = 0u; i < MAX_NEWTON_STEPS; i = i + 1u) {
-        let r = residual(st, p + s * d, d);
+        let r = residual(st, terms, p + s * d, d);
         if (r.z == 0.0 || r.y == 0.0) {
             return out;
         }
@@ -171,14 +188,15 @@ struct Hit {
 // The surface kinds beyond the sphere are each evaluated in a loop of at most one pass, not behind a branch: a
 // software rasteriser runs both sides of every branch, but skips a loop that no lane enters, so a lens's
 // spherical steps do not pay for the aspheric and toroidal formulas (and the Newton iterations) of the others.
-fn aspheric(st: Step) -> bool {
+fn aspheric(st: Surface) -> bool {
     return !is_sphere(st) && !is_toroid(st);
 }
 
-fn intersect(p: vec3<f32>, d: vec3<f32>, st: Step) -> Hit {
-    let c = st.geometry.y;
-    let z_dir = st.optics.z;
-    let q = select(1.0 + st.geometry.z, 1.0, is_sphere(st));
+// Step i of `job`'s path is `st`: its terms are read only where an asphere or a toroid needs them.
+fn intersect(p: vec3<f32>, d: vec3<f32>, st: Surface, job: Job, i: u32) -> Hit {
+    let c = st.surface.y;
+    let z_dir = select(1.0, -1.0, has(st, STEP_BACKWARD));
+    let q = select(1.0 + st.surface.z, 1.0, is_sphere(st));
     // The quadric (the sphere when spherical) by the stable root: a s^2 + 2 b s + g0 = 0.
     let g0 = c * (p.x * p.x + p.y * p.y + q * p.z * p.z) - 2.0 * p.z;
     let a = c * (d.x * d.x + d.y * d.y + q * d.z * d.z);
@@ -193,29 +211,29 @@ fn intersect(p: vec3<f32>, d: vec3<f32>, st: Step) -> Hit {
         let start = select(-p.z / d.z, out.s, out.hit);
         out.hit = out.hit || d.z != 0.0;
         if (out.hit) {
-            out = newton(p, d, start, st);
+            out = newton(p, d, start, st, terms_of(job, i));
         }
     }
     // A toroid: from the vertex plane (the CPU tracer's `intersect_toroid`).
     for (var once = is_toroid(st); once; once = false) {
         out.hit = d.z != 0.0;
         if (out.hit) {
-            out = newton(p, d, -p.z / d.z, st);
+            out = newton(p, d, -p.z / d.z, st, terms_of(job, i));
         }
     }
     return out;
 }
 
 // The unit normal at p (relative to the vertex) in xyz, w 1; w 0 where the surface is undefined.
-fn normal_at(p: vec3<f32>, st: Step) -> vec4<f32> {
-    let c = st.geometry.y;
+fn normal_at(p: vec3<f32>, st: Surface, job: Job, i: u32) -> vec4<f32> {
+    let c = st.surface.y;
     var n = vec4<f32>(normalize(vec3<f32>(-c * p.x, -c * p.y, 1.0 - c * p.z)), 1.0);
     for (var once = aspheric(st); once; once = false) {
-        let sg = sag(st, p.x * p.x + p.y * p.y);
+        let sg = sag(st, terms_of(job, i), p.x * p.x + p.y * p.y);
         n = select(vec4<f32>(0.0), vec4<f32>(normalize(vec3<f32>(-sg.slope_over_r * p.x, -sg.slope_over_r * p.y, 1.0)), 1.0), sg.ok);
     }
     for (var once = is_toroid(st); once; once = false) {
-        let t = toroid_sag(st, p.x, p.y);
+        let t = toroid_sag(st, terms_of(job, i), p.x, p.y);
         n = select(vec4<f32>(0.0), vec4<f32>(normalize(vec3<f32>(-t.gx, -t.gy, 1.0)), 1.0), t.ok);
     }
     return n;
@@ -230,9 +248,9 @@ fn normal_at(p: vec3<f32>, st: Step) -> vec4<f32> {
 //   lane one lane at a time, through the stack (a store-to-load stall a lane and component: three quarters of
 //   the tracer's time); a uniform buffer it gathers with plain loads.
 override CHUNKED_PATHS: bool = false;
-// Steps a chunk holds: 16 + 204 x 80 = 16336 bytes, within the 16 KiB uniform binding every adapter offers. Must
+// Steps a chunk holds: 16 + 255 x 64 = 16336 bytes, within the 16 KiB uniform binding every adapter offers. Must
 // be kept in sync with `CHUNK_STEPS` in crates/flare_core/src/render/raygrid.rs.
-const CHUNK_STEPS: u32 = 204u;
+const CHUNK_STEPS: u32 = 255u;
 
 struct PathChunk {
     first: vec4<u32>,      // the chunk's first job, and the first step it holds (indices into the whole batch)
@@ -243,12 +261,21 @@ struct PathChunk {
 
 var<workgroup> path: array<Step, MAX_PATH_STEPS>;
 
-// Step i of `job`'s path, from wherever this form keeps it.
-fn step_of(job: Job, i: u32) -> Step {
+// Step i of `job`'s path, from wherever this form keeps it: what every step needs, and the aspheric terms.
+fn step_of(job: Job, i: u32) -> Surface {
     if (CHUNKED_PATHS) {
-        return chunk.steps[job.steps.x - chunk.first.y + i];
+        let k = job.steps.x - chunk.first.y + i;
+        return Surface(chunk.steps[k].surface, chunk.steps[k].optics);
     }
-    return path[i];
+    return Surface(path[i].surface, path[i].optics);
+}
+
+fn terms_of(job: Job, i: u32) -> Terms {
+    if (CHUNKED_PATHS) {
+        let k = job.steps.x - chunk.first.y + i;
+        return Terms(chunk.steps[k].terms_lo, chunk.steps[k].terms_hi);
+    }
+    return Terms(path[i].terms_lo, path[i].terms_hi);
 }
 
 @compute @workgroup_size(64)
@@ -276,14 +303,14 @@ fn trace_main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(workgroup_i
     let stop_radius = job.view.w;
     for (var i = 0u; i < job.steps.y && alive; i = i + 1u) {
         let st = step_of(job, i);
-        let vertex = vec3<f32>(0.0, 0.0, st.geometry.x);
-        let h = intersect(p - vertex, d, st);
+        let vertex = vec3<f32>(0.0, 0.0, st.surface.x);
+        let h = intersect(p - vertex, d, st, job, i);
         if (!h.hit) {
             alive = false;
             break;
         }
         p = p + h.s * d;
-        let nn = normal_at(p - vertex, st);
+        let nn = normal_at(p - vertex, st, job, i);
         if (nn.w == 0.0) {
             alive = false;
             break;
@@ -291,13 +318,14 @@ fn trace_main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(workgroup_i
         let normal = nn.xyz;
         let cos_i = dot(d, normal);
         let c = min(abs(cos_i), 1.0);
-        let r = table_at(st.table.x, 1.0 - c * c);
-        if (st.optics.y > 0.5) {
+        let r = table_at(st.optics.y, 1.0 - c * c);
+        let reflect = has(st, STEP_REFLECT);
+        if (reflect) {
             v.weight = v.weight * r;
         } else {
             v.weight = v.weight * (1.0 - r);
         }
-        if (st.table.y == 1u) {
+        if (has(st, STEP_STOP)) {
             let q = p.xy / stop_radius;
             if (crossings == 0u) {
                 v.stop0 = q;
@@ -308,12 +336,12 @@ fn trace_main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(workgroup_i
             }
             crossings = crossings + 1u;
         } else {
-            ratio2 = max(ratio2, dot(p.xy, p.xy) * st.optics.w);
+            ratio2 = max(ratio2, dot(p.xy, p.xy) * st.surface.w);
         }
-        if (st.optics.y > 0.5) {
+        let eta = bitcast<f32>(st.optics.x);
+        if (reflect) {
             d = d - 2.0 * cos_i * normal;
-        } else if (st.optics.x != 1.0) {
-            let eta = st.optics.x;
+        } else if (eta != 1.0) {
             let root = 1.0 - eta * eta * max(1.0 - cos_i * cos_i, 0.0);
             if (root < 0.0) {
                 alive = false;

@@ -37,8 +37,8 @@
 //! (`resolve_box`), the same sums. The tracer is compiled once per kind of
 //! surface a lens has ([`TraceShapes`]). On a GPU it reads each job's path once per workgroup into workgroup
 //! memory, all jobs in one dispatch; on a software adapter from uniform chunks of paths, a dispatch a chunk
-//! ([`GpuRayGrid::set_chunked_paths`]). A path longer than either holds (192 steps: every ghost of a lens of up
-//! to 64 surfaces) is [`GpuRayGridError::Path`], and the callers trace on the CPU. The jobs, the reflectance
+//! ([`GpuRayGrid::set_chunked_paths`]). A path longer than either holds (255 steps: every ghost of a lens of up
+//! to 85 surfaces) is [`GpuRayGridError::Path`], and the callers trace on the CPU. The jobs, the reflectance
 //! tables, the mask and (copied after the trace) the vertices are read as rows of Rgba32Uint texels of four
 //! words (`texel_at` in `raygrid_common.wgsl`): lavapipe, which loads a storage buffer's words lane by lane
 //! wherever the lanes' indices may differ, fetches texels with gathers (on this 2-core machine the GPU ray grid
@@ -61,18 +61,25 @@ use wgpu_profiler::{GpuProfiler, GpuProfilerSettings};
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct GpuStep {
-    /// vertex z (mm), curvature (1/mm), conic, r^2 term.
-    pub geometry: [f32; 4],
-    /// A4, A6, A8, A10.
+    /// vertex z (mm), curvature (1/mm), conic, 1 / semi-aperture^2 (0 at the stop).
+    pub surface: [f32; 4],
+    /// n_in / n_out (f32 bits), offset of the reflectance table in the tables, flags ([`STEP_REFLECT`] ...), a
+    /// toroid's x-z curvature (f32 bits).
+    pub optics: [u32; 4],
+    /// r^2 term, A4, A6, A8.
     pub terms_lo: [f32; 4],
-    /// A12, A14, A16, spherical (1: the sphere formulas alone).
+    /// A10, A12, A14, A16.
     pub terms_hi: [f32; 4],
-    /// n_in / n_out, reflect (0/1), arriving direction (+1/-1), 1 / semi-aperture^2 (0 at the stop).
-    pub optics: [f32; 4],
-    /// Offset of the reflectance table in the tables buffer, is the stop (0/1), unused, unused.
-    pub table: [u32; 4],
 }
-const _: () = assert!(std::mem::size_of::<GpuStep>() == 80);
+const _: () = assert!(std::mem::size_of::<GpuStep>() == 64);
+
+/// [`GpuStep::optics`]'s flags (`STEP_*` in `shaders/raygrid_common.wgsl`): a reflection, the stop, the sphere
+/// formulas alone, a toroid, arriving towards -z.
+pub const STEP_REFLECT: u32 = 1;
+pub const STEP_STOP: u32 = 2;
+pub const STEP_SPHERE: u32 = 4;
+pub const STEP_TOROID: u32 = 8;
+pub const STEP_BACKWARD: u32 = 16;
 
 /// One ghost at one wavelength. Must be kept in sync with `struct Job` in `shaders/raygrid_common.wgsl`.
 #[repr(C)]
@@ -918,9 +925,9 @@ enum TraceShapes {
 
 impl TraceShapes {
     fn of(steps: &[GpuStep]) -> Self {
-        if steps.iter().any(|s| s.table[3] == 1) {
+        if steps.iter().any(|s| s.optics[2] & STEP_TOROID != 0) {
             Self::Toroids
-        } else if steps.iter().any(|s| s.terms_hi[3] == 0.0) {
+        } else if steps.iter().any(|s| s.optics[2] & STEP_SPHERE == 0) {
             Self::Aspheres
         } else {
             Self::Spheres
@@ -955,24 +962,23 @@ fn upload(renderer: &RayGridRenderer, jobs: &[&PlannedJob], window: Window, turn
             });
             let shape = &step.shape;
             let t = shape.terms;
+            let flags = [
+                (step.reflect, STEP_REFLECT),
+                (step.surface == stop, STEP_STOP),
+                (shape.spherical, STEP_SPHERE),
+                (shape.toroidal, STEP_TOROID),
+                (step.arriving_direction < 0.0, STEP_BACKWARD),
+            ]
+            .iter()
+            .filter(|(on, _)| *on)
+            .fold(0, |all, (_, flag)| all | flag);
             out.steps.push(GpuStep {
-                geometry: [step.vertex_z_mm, shape.curvature_per_mm, shape.conic, shape.a2].map(finite),
-                terms_lo: [t[0], t[1], t[2], t[3]].map(finite),
-                terms_hi: [t[4], t[5], t[6], if shape.spherical { 1.0 } else { 0.0 }].map(finite),
-                optics: [
-                    step.eta,
-                    if step.reflect { 1.0 } else { 0.0 },
-                    step.arriving_direction,
-                    job.inverse_semi_aperture2[k],
-                ]
-                .map(finite),
-                // A toroid's x-z curvature as f32 bits and its flag (0, 0 for a surface of revolution).
-                table: [
-                    offset,
-                    u32::from(step.surface == stop),
-                    finite(shape.curvature_x_per_mm).to_bits(),
-                    u32::from(shape.toroidal),
-                ],
+                surface: [step.vertex_z_mm, shape.curvature_per_mm, shape.conic, job.inverse_semi_aperture2[k]]
+                    .map(finite),
+                // A toroid's x-z curvature as f32 bits (0 for a surface of revolution).
+                optics: [finite(step.eta).to_bits(), offset, flags, finite(shape.curvature_x_per_mm).to_bits()],
+                terms_lo: [shape.a2, t[0], t[1], t[2]].map(finite),
+                terms_hi: [t[3], t[4], t[5], t[6]].map(finite),
             });
         }
         let b = job.bounds;
@@ -1066,12 +1072,12 @@ fn shared_limits(limits: &wgpu::Limits, cells: usize, side: u64, what_side: &'st
 }
 
 /// Steps of one ghost's path the tracer holds in workgroup memory (`MAX_PATH_STEPS` in `raygrid_trace.wgsl`;
-/// 80 bytes each, within the 16 KB every adapter offers): a lens of up to 64 surfaces.
-const MAX_PATH_STEPS: usize = 192;
+/// 64 bytes each, within the 16352 bytes every adapter offers): every ghost of a lens of up to 85 surfaces.
+const MAX_PATH_STEPS: usize = 255;
 
 /// Steps one uniform chunk of paths holds (`CHUNK_STEPS` in `raygrid_trace.wgsl`), and the chunk's bytes: a
 /// header of 16 bytes, then the steps; 16336 bytes, within the 16 KiB uniform binding of every adapter.
-const CHUNK_STEPS: usize = 204;
+const CHUNK_STEPS: usize = 255;
 const CHUNK_BYTES: u64 = 16 + CHUNK_STEPS as u64 * std::mem::size_of::<GpuStep>() as u64;
 const _: () = assert!(CHUNK_BYTES <= 16 << 10 && MAX_PATH_STEPS <= CHUNK_STEPS);
 
