@@ -138,7 +138,7 @@ struct BoxParams {
     rows: u32,
     groups_x: u32,
     mask_size: u32,
-    unused: u32,
+    job_stride: u32,
     fixed_per_unit: f32,
     unit_per_fixed: f32,
     open_radius2: f32,
@@ -672,7 +672,8 @@ impl GpuRayGrid {
                 ..BoxParams::default()
             };
             for (b, batch) in batches.iter().enumerate() {
-                block(s * (batches.len() + 1) + b, BoxParams { jobs: batch.len() as u32, ..base });
+                let jobs = batch.len() as u32;
+                block(s * (batches.len() + 1) + b, BoxParams { jobs, job_stride: spread_jobs(jobs), ..base });
             }
             block(s * (batches.len() + 1) + batches.len(), base);
         }
@@ -718,8 +719,8 @@ impl GpuRayGrid {
                 pass.set_pipeline(&self.box_pipeline);
                 pass.set_bind_group(0, &group, &[]);
                 pass.dispatch_workgroups(
-                    (2 * cells * cells * self.row_split as usize).div_ceil(WORKGROUP as usize) as u32,
                     batch.len() as u32,
+                    (2 * cells * cells * self.row_split as usize).div_ceil(WORKGROUP as usize) as u32,
                     1,
                 );
                 drop(pass);
@@ -1138,6 +1139,20 @@ fn batches_of<'a, 'p>(planned: &[&'a PlannedJob<'p>], limits: &wgpu::Limits) -> 
         batches.push(batch);
     }
     batches
+}
+
+/// The stride with which `splat_box`'s workgroups visit a batch's `jobs` (workgroup x draws job x * stride mod
+/// jobs): coprime with `jobs`, so every job is drawn once, and near `jobs` / golden ratio, so that neighbouring
+/// workgroups take jobs from all over the batch (see `splat_box` for why the order matters on lavapipe).
+fn spread_jobs(jobs: u32) -> u32 {
+    let gcd = |mut a: u32, mut b: u32| {
+        while b != 0 {
+            (a, b) = (b, a % b);
+        }
+        a
+    };
+    let start = (f64::from(jobs) * 0.618_033_988_75).round() as u32;
+    (start.max(1)..jobs.max(2)).find(|&s| gcd(s, jobs) == 1).unwrap_or(1)
 }
 
 /// Words a texture of words holds (the tables, `tables` in `raygrid_trace.wgsl`): [`TEXELS_PER_ROW`] texels of
