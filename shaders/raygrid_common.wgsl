@@ -59,9 +59,16 @@ fn texel_at(words: texture_2d<u32>, i: u32) -> vec4<u32> {
 // Job j of a texture of jobs (8 texels each).
 fn job_at(words: texture_2d<u32>, j: u32) -> Job {
     let t = 8u * j;
-    return Job(texel_at(words, t), bitcast<vec4<f32>>(texel_at(words, t + 1u)), bitcast<vec4<f32>>(texel_at(words, t + 2u)),
-        bitcast<vec4<f32>>(texel_at(words, t + 3u)), bitcast<vec4<f32>>(texel_at(words, t + 4u)),
-        bitcast<vec4<f32>>(texel_at(words, t + 5u)), bitcast<vec4<f32>>(texel_at(words, t + 6u)), texel_at(words, t + 7u));
+    return Job(
+        texel_at(words, t),
+        bitcast<vec4<f32>>(texel_at(words, t + 1u)),
+        bitcast<vec4<f32>>(texel_at(words, t + 2u)),
+        bitcast<vec4<f32>>(texel_at(words, t + 3u)),
+        bitcast<vec4<f32>>(texel_at(words, t + 4u)),
+        bitcast<vec4<f32>>(texel_at(words, t + 5u)),
+        bitcast<vec4<f32>>(texel_at(words, t + 6u)),
+        texel_at(words, t + 7u),
+    );
 }
 
 // Vertex i of a texture of traced vertices (3 texels each).

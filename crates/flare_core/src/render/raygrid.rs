@@ -42,12 +42,12 @@
 //! tables, the mask and (copied after the trace) the vertices are read as rows of Rgba32Uint texels of four
 //! words (`texel_at` in `raygrid_common.wgsl`): lavapipe, which loads a storage buffer's words lane by lane
 //! wherever the lanes' indices may differ, fetches texels with gathers (on this 2-core machine the GPU ray grid
-//! of the Nikon zoom at grid 64 went from 20 s to 10 s). The raster path (`--gpu-samples 1..8`) samples pixel centres and drops collapsed
-//! triangles. Tests compare landings (the f32 drift, per lens) and images.
+//! of the Nikon zoom at grid 64 went from 20 s to 10 s). The raster path (`--gpu-samples 1..8`) samples pixel
+//! centres and drops collapsed triangles. Tests compare landings (the f32 drift, per lens) and images.
 //! **Limits**: a grid whose dispatch, vertex buffer or supersampled target exceeds the adapter's limits is
 //! refused with the limit named, before anything is dispatched; a frame's jobs are traced and drawn in batches
-//! that fit the largest storage buffer the adapter binds and its largest 2D texture ([`batches_of`]). A device lost on the way is
-//! [`GpuError::Lost`] (the command line then traces on the CPU).
+//! that fit the largest storage buffer the adapter binds and its largest 2D texture ([`batches_of`]). A device
+//! lost on the way is [`GpuError::Lost`] (the command line then traces on the CPU).
 
 use super::buffers::{compute_pipeline, compute_pipeline_with, software_device, storage, upload as upload_texture};
 use super::gpu::{GpuContext, GpuError, PassTimes, map_read, read_texture, texture_2d};
@@ -168,20 +168,24 @@ struct Traced {
     vertex_count: u64,
 }
 
-/// `words` (whole texels: a multiple of 16 bytes) as rows of Rgba32Uint texels, [`TEXELS_PER_ROW`] a row, the
-/// last row padded with zeros (`texel_at` in `raygrid_common.wgsl`).
+/// A texture of `rows` rows of Rgba32Uint texels, [`TEXELS_PER_ROW`] a row (`texel_at` in `raygrid_common.wgsl`).
+fn texel_texture(device: &wgpu::Device, label: &str, rows: u32) -> wgpu::Texture {
+    texture_2d(
+        device,
+        label,
+        TEXELS_PER_ROW as u32,
+        rows,
+        wgpu::TextureFormat::Rgba32Uint,
+        wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+    )
+}
+
+/// `words` as rows of Rgba32Uint texels, the last row padded with zeros.
 fn word_texels(device: &wgpu::Device, queue: &wgpu::Queue, label: &str, words: &[u8]) -> wgpu::TextureView {
     let rows = (words.len() as u64).div_ceil(TEXEL_ROW_BYTES).max(1);
     let mut padded = words.to_vec();
     padded.resize((rows * TEXEL_ROW_BYTES) as usize, 0);
-    let texture = texture_2d(
-        device,
-        label,
-        TEXELS_PER_ROW as u32,
-        rows as u32,
-        wgpu::TextureFormat::Rgba32Uint,
-        wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-    );
+    let texture = texel_texture(device, label, rows as u32);
     upload_texture(queue, &texture, &padded, 16);
     texture.create_view(&wgpu::TextureViewDescriptor::default())
 }
@@ -195,14 +199,7 @@ fn vertex_texels(
     count: u64,
 ) -> wgpu::TextureView {
     let rows = (count * VERTEX_TEXELS).div_ceil(TEXELS_PER_ROW).max(1) as u32;
-    let texture = texture_2d(
-        device,
-        "raygrid vertex texels",
-        TEXELS_PER_ROW as u32,
-        rows,
-        wgpu::TextureFormat::Rgba32Uint,
-        wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-    );
+    let texture = texel_texture(device, "raygrid vertex texels", rows);
     encoder.copy_buffer_to_texture(
         wgpu::TexelCopyBufferInfo {
             buffer: vertices,
@@ -613,9 +610,8 @@ impl GpuRayGrid {
         );
         let target_view = target.create_view(&wgpu::TextureViewDescriptor::default());
         let mask = renderer.mask();
-        // The mask's bilinear footprints, one word each, looked up and filtered in the shader as
-        // `ApertureMask::sample` does (a storage buffer: a software rasteriser samples a texture several times
-        // slower).
+        // The mask's bilinear footprints, one word each, fetched as texels and filtered in the shader as
+        // `ApertureMask::sample` does (no sampler: a software rasteriser samples a texture several times slower).
         let quads = mask.quad_words();
         let mask_texels = word_texels(device, queue, "raygrid mask", bytemuck::cast_slice(&quads));
         // No pixel can gather more than every triangle's flux (weights and masks are at most 1).
@@ -866,12 +862,12 @@ impl GpuRayGrid {
         for &(first_job, end_job) in &chunks {
             let at = chunk_bytes.len().next_multiple_of(align as usize);
             offsets.push(at as u64);
-            let (from, to) = match (upload.jobs.get(first_job), end_job.checked_sub(1).and_then(|j| upload.jobs.get(j)))
-            {
-                (Some(first), Some(last)) if end_job > first_job => {
+            // The steps of jobs first_job .. end_job (none for the empty chunk).
+            let (from, to) = match &upload.jobs[first_job..end_job] {
+                [first, .., last] | [first @ last] => {
                     (first.steps[0] as usize, (last.steps[0] + last.steps[1]) as usize)
                 }
-                _ => (0, 0),
+                [] => (0, 0),
             };
             chunk_bytes.resize(at, 0);
             chunk_bytes.extend(bytemuck::cast_slice::<u32, u8>(&[first_job as u32, from as u32, 0, 0]));
