@@ -13,10 +13,12 @@
 // one run of it and shading the pixel before its run once more: a long edge does not hold up its warp. Each
 // of them works the item out (`spans`), or one invocation an item does so into `walks` first (`walks_setup`,
 // then `spans_walks`: hardware GPUs, where the repeats cost 0.26 ms of a 4K frame). A stop mask lookup reads
-// its four texels as one word of the storage buffer (a software rasteriser loads a storage word lane by lane),
-// or, where GATHER_MASKS (hardware GPUs), by one `textureGather`, every mask of the pixel fetched before any is
-// tested: the same texels and arithmetic either way. On a software rasteriser each sprite is instead one
-// workgroup whose invocations take its rows (`spans_sprites`). `resolve` sums each row once (a prefix sum, one
+// its four texels as one word (`ApertureMask::quad_words`) of a texture of words, as does a row of the mask's
+// table (`mask_texels`: a software rasteriser gathers a texel fetch for its lanes, where it loads a storage
+// word lane by lane), or, where GATHER_MASKS (hardware GPUs), by one `textureGather`, every mask of the pixel
+// fetched before any is tested, the table from the storage buffer: the same texels and arithmetic either way.
+// On a software rasteriser each sprite is instead one workgroup whose invocations take its rows
+// (`spans_sprites`, the sprites in a spread order). `resolve` sums each row once (a prefix sum, one
 // workgroup a row scanning 256 columns at a time; `resolve_rows`, one invocation a row, on a software
 // rasteriser) into the HDR texture, applying the LUT layer where the frame has one. The differences are
 // integers: each step d (at most 2^30 units) is added as two 32-bit parts, hi = round(d / 2^k) and
@@ -53,7 +55,7 @@ struct ComputeStrip {
     lut: u32,            // 1: apply the LUT layer (lut_compute.wgsl's (A, K)) as each pixel is written
     split_bits: u32,     // k: a step d is added as hi = round(d / 2^k) and lo = d - hi 2^k, each to its own word
     pieces: u32,         // invocations a (sprite, row) item's walk is split between
-    padding: u32,
+    spread: u32,         // `spans_sprites`: workgroup x draws sprite x * spread mod sprites
 };
 
 // True (hardware GPUs): the stop masks' texels gathered from `mask_texture` (one fetch a lookup), every mask of a
@@ -74,6 +76,8 @@ override GATHER_MASKS: bool = false;
 @group(0) @binding(4) var<storage, read_write> diff: array<atomic<u32>>;
 // The same buffer as `resolve` reads and clears it, after `spans` (bound apart: a pass boundary between).
 @group(0) @binding(7) var<storage, read_write> columns: array<u32>;
+// The same words as `mask` as rows of texels (word_texels.wgsl), read where GATHER_MASKS is false.
+@group(0) @binding(10) var mask_texels: texture_2d<u32>;
 // The same mask as a texture (R8Unorm) and a sampler clamped to the edge, for `textureGather`.
 @group(0) @binding(8) var mask_texture: texture_2d<f32>;
 @group(0) @binding(9) var mask_sampler: sampler;
@@ -84,9 +88,24 @@ override GATHER_MASKS: bool = false;
 // ---- the aperture mask (ApertureMask::sample) ----
 
 // The footprints' words (`ApertureMask::quad_words`) follow the mask's row table (`mask_size + 1` rows of four
-// words) in `mask`.
+// words) in `mask`, and in `mask_texels`, which a software rasteriser reads (word_texels.wgsl): there a row of
+// the table is one texel.
 fn mask_quad(w: u32) -> u32 {
-    return mask[(strip.mask_size + 1u) * 4u + w];
+    let at = (strip.mask_size + 1u) * 4u + w;
+    if (GATHER_MASKS) {
+        return mask[at];
+    }
+    return texel_at(mask_texels, at / 4u)[at % 4u];
+}
+
+// Band `band`'s row of the table: (lo, hi) of u where the bilinear sample is exactly 1, and of u outside which
+// it is 0.
+fn mask_row(band: u32) -> vec4<f32> {
+    if (GATHER_MASKS) {
+        let at = band * 4u;
+        return bitcast<vec4<f32>>(vec4<u32>(mask[at], mask[at + 1u], mask[at + 2u], mask[at + 3u]));
+    }
+    return bitcast<vec4<f32>>(texel_at(mask_texels, band));
 }
 
 fn mask_sample(u: f32, v: f32) -> f32 {
@@ -368,8 +387,7 @@ fn sprite_walk(inst: GhostInstance, sprite: u32, start: vec2<u32>, item: u32) ->
         if (band < 0) {
             return walk;
         }
-        let at = u32(band) * 4u;
-        let rows = bitcast<vec4<f32>>(vec4<u32>(mask[at], mask[at + 1u], mask[at + 2u], mask[at + 3u]));
+        let rows = mask_row(u32(band));
         clip_to(&open, s.x, s.y, rows.xy);
         clip_to(&support, s.x, s.y, rows.zw);
     }
@@ -446,14 +464,18 @@ fn spans(@builtin(global_invocation_id) gid: vec3<u32>) {
 // One workgroup a sprite, its invocations taking the sprite's items (rows) in turn, one invocation an item, in
 // one piece (a software rasteriser: `ComputeForm::sprite_groups`). The sprite is read at the top, before any
 // branch, from an index that is the same for the whole workgroup: lavapipe then loads each word once for its
-// SIMD batch, where `spans` loads it lane by lane (and searches for the sprite first).
+// SIMD batch, where `spans` loads it lane by lane (and searches for the sprite first). Workgroup x draws sprite
+// x * `spread` mod sprites (`spread` coprime with the sprites): lavapipe hands each thread a contiguous run of
+// workgroups, and in the sprites' own order (ghost by ghost, the large ones together) one thread worked 30%
+// longer than the other.
 @compute @workgroup_size(64)
 fn spans_sprites(
     @builtin(workgroup_id) wid: vec3<u32>,
     @builtin(num_workgroups) groups: vec3<u32>,
     @builtin(local_invocation_index) t: u32,
 ) {
-    let sprite = wid.y * groups.x + wid.x;
+    let raw = wid.y * groups.x + wid.x;
+    let sprite = select(raw, (raw * strip.spread) % max(strip.instances, 1u), raw < strip.instances);
     let k = min(sprite, max(strip.instances, 1u) - 1u);
     let inst = instances[k];
     let first = items[k];

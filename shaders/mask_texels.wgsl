@@ -1,9 +1,10 @@
-// The aperture mask read from a storage buffer (a software rasteriser samples a texture several times slower),
-// shared by the compute passes that look it up (prepended to ghosts_compute.wgsl and raygrid_box.wgsl when they
-// are embedded). CPU twin: `ApertureMask::sample` in crates/flare_core/src/aperture.rs, the same steps. The
-// buffer holds `ApertureMask::quad_words`: each bilinear footprint's four u8 texels (clamped to the edge, row 0
-// at v = +1) in one word, so that a lookup is one load (lavapipe loads a storage word lane by lane); the
-// including shader defines `mask_quad(w: u32) -> u32`, the w-th of those words.
+// The aperture mask looked up one word a bilinear footprint (a software rasteriser samples a texture several
+// times slower), shared by the compute passes that look it up (prepended to ghosts_compute.wgsl and
+// raygrid_box.wgsl when they are embedded). CPU twin: `ApertureMask::sample` in
+// crates/flare_core/src/aperture.rs, the same steps. The words are `ApertureMask::quad_words`: each bilinear
+// footprint's four u8 texels (clamped to the edge, row 0 at v = +1) in one word, so that a lookup is one load;
+// the including shader defines `mask_quad(w: u32) -> u32`, the w-th of those words (from a storage buffer or a
+// texture of words, word_texels.wgsl).
 
 // Where a sample at (u, v) in [-1, 1]^2 falls between texel centres: the top-left texel of its four and the
 // fractions towards the next column and row.

@@ -26,7 +26,7 @@ struct BoxParams {
     rows: u32,
     groups_x: u32,        // workgroups along x of `resolve_box`
     mask_size: u32,       // texels across the aperture mask
-    job_stride: u32,      // workgroup x draws job (x * job_stride) mod jobs (`spread_jobs` in raygrid.rs)
+    job_stride: u32,      // workgroup x draws job (x * job_stride) mod jobs (`spread_stride` in buffers.rs)
     fixed_per_unit: f32,  // fixed-point units per unit of irradiance, and its inverse
     unit_per_fixed: f32,
     open_radius2: f32,    // the square of the radius (stop radii) within which the mask is fully open

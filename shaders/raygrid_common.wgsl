@@ -45,16 +45,8 @@ struct Vertex {
 };
 
 
-// The jobs, and the traced vertices for the box filter, are also laid out as rows of Rgba32Uint texels (four
-// words a texel, TEXELS_PER_ROW texels a row, in buffer order): a software rasteriser (lavapipe) fetches a
-// texel for all its lanes with gathers, where it loads a storage buffer's words lane by lane through the stack
-// whenever the lanes' indices may differ. Must be kept in sync with `TEXELS_PER_ROW` in
-// crates/flare_core/src/render/raygrid.rs.
-const TEXELS_PER_ROW: u32 = 2048u;
-
-fn texel_at(words: texture_2d<u32>, i: u32) -> vec4<u32> {
-    return textureLoad(words, vec2<u32>(i % TEXELS_PER_ROW, i / TEXELS_PER_ROW), 0);
-}
+// The jobs, and the traced vertices for the box filter, are also laid out as rows of Rgba32Uint texels
+// (word_texels.wgsl's `texel_at`).
 
 // Job j of a texture of jobs (8 texels each).
 fn job_at(words: texture_2d<u32>, j: u32) -> Job {

@@ -36,8 +36,9 @@ pub struct DragBench {
     /// The GPU's own time of the flare's passes (timestamp queries), per frame where known.
     gpu_ms: Vec<f64>,
     divisor: u32,
-    /// The adapter that measured `gpu_ms`.
+    /// The adapter that measured `gpu_ms`, and the last draft's time by pass.
     adapter: String,
+    last_passes: String,
     /// When the sweep let go, and the line waiting for the full frame.
     released: Option<(Instant, String)>,
 }
@@ -63,6 +64,7 @@ impl DragBench {
             gpu_ms: Vec::new(),
             divisor: 1,
             adapter: String::new(),
+            last_passes: String::new(),
             released: None,
         })
     }
@@ -83,7 +85,7 @@ impl DragBench {
         rebuilds: RebuildCounts,
         view_px: (u32, u32),
         draft: Option<DraftOutcome>,
-        flare_gpu: Option<(String, f64)>,
+        flare_gpu: Option<(String, f64, String)>,
     ) -> Option<String> {
         let now = Instant::now();
         if let Some((at, line)) = &self.released {
@@ -96,9 +98,10 @@ impl DragBench {
         if let Some(last) = self.last {
             self.intervals_ms.push(now.duration_since(last).as_secs_f64() * 1e3);
             self.scene_ms.push(scene_ms);
-            if let Some((adapter, ms)) = &flare_gpu {
-                self.gpu_ms.push(*ms);
-                self.adapter = adapter.clone();
+            if let Some((adapter, ms, passes)) = flare_gpu {
+                self.gpu_ms.push(ms);
+                self.adapter = adapter;
+                self.last_passes = passes;
             }
             if let Some(d) = draft {
                 self.drawn.push(d.drawn as f64);
@@ -138,9 +141,10 @@ impl DragBench {
             "no GPU timestamps".to_owned()
         } else {
             format!(
-                "the flare's passes took a median {:.1} ms of GPU time ({})",
+                "the flare's passes took a median {:.1} ms of GPU time ({}; the last draft: {})",
                 median(&mut self.gpu_ms),
-                self.adapter
+                self.adapter,
+                self.last_passes
             )
         };
         let start = self.rebuilds_at_start.unwrap_or(rebuilds);

@@ -1154,7 +1154,7 @@ impl FlareLabApp {
 
     /// One frame of the drag bench (see [`DragBench`]); closes the window when it is done.
     fn drag_bench_step(&mut self, ctx: &egui::Context) {
-        let flare_gpu = self.gpu_pass_times().map(|(adapter, t)| (adapter, t.total_ms()));
+        let flare_gpu = self.gpu_pass_times().map(|(adapter, t)| (adapter, t.total_ms(), t.summary()));
         let Some(bench) = &mut self.drag_bench else { return };
         match bench.step(
             self.session.edit(),

@@ -4,9 +4,10 @@
 //! and real-GPU tables came from. The starburst is left out unless the last argument is `starburst`.
 //!
 //! `cargo run --release -p flare_core --example gpu_timing -- LENS WIDTH HEIGHT [LUT.flut] [starburst] [compute]
-//! [resolve=rows|scan] [pieces=N] [buffer] [once] [inline]` (`compute`: the GPU compute passes only, no
-//! CPU twin and no raster passes; the rest pick the ghost pass's form, `render::gpu_ghosts::ComputeForm`, from
-//! the device's own: `buffer` reads the stop masks from the storage buffer, `once` works each item out once,
+//! [resolve=rows|scan] [pieces=N] [buffer] [gather] [once] [inline]` (`compute`: the GPU compute passes only,
+//! no CPU twin and no raster passes; the rest pick the ghost pass's form, `render::gpu_ghosts::ComputeForm`,
+//! from the device's own: `buffer` and `gather` look the stop masks up as words (the texture of words) or by
+//! `textureGather`, `once` works each item out once,
 //! `pieces=N` or `once` spread the items over invocations rather than a workgroup a sprite, `resolve=` picks the
 //! per-row sum; `frames=N`: N frames rather than 9, their medians; `inline`: the LUT
 //! pass samples its coarse instances at every pixel instead of into coarse images).
@@ -23,13 +24,13 @@ use flare_core::render::DisplaySettings;
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     let usage = "usage: gpu_timing LENS WIDTH HEIGHT [LUT.flut] [starburst] [compute] [resolve=rows|scan] [pieces=N] \
-                 [buffer] [once] [inline] [frames=N]";
+                 [buffer] [gather] [once] [inline] [frames=N]";
     let flag = |name: &str| args.iter().any(|a| a == name);
     let value = |key: &str| args.iter().find_map(|a| a.strip_prefix(key).map(str::to_owned));
     let (starburst, compute_only) = (flag("starburst"), flag("compute"));
     let frames: usize = value("frames=").map_or(Ok(9), |n| n.parse())?;
     let form_args = (value("resolve="), value("pieces="), flag("buffer"), flag("once"));
-    let options = ["starburst", "compute", "buffer", "inline", "once"];
+    let options = ["starburst", "compute", "buffer", "inline", "once", "gather"];
     let args: Vec<String> =
         args.iter().filter(|a| !options.contains(&a.as_str()) && !a.contains('=')).cloned().collect();
     let lens = builtin_lens(args.get(1).ok_or(usage)?)?;
@@ -76,7 +77,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             if let Some(p) = pieces {
                 form.pieces = Some(p.parse()?);
             }
-            form.gather_masks &= !*buffer;
+            form.gather_masks = (form.gather_masks || flag("gather")) && !*buffer;
             form.setup_once |= *once;
             // Pieces or a walks buffer ask for the items spread over invocations (not a workgroup a sprite).
             form.sprite_groups &= !(*once || pieces.is_some());

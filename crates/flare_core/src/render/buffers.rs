@@ -153,3 +153,80 @@ pub(crate) fn upload(queue: &wgpu::Queue, texture: &wgpu::Texture, bytes: &[u8],
         size,
     );
 }
+
+/// Texels a row of the textures that hold words (`TEXELS_PER_ROW` in `word_texels.wgsl`; the 2D size every
+/// adapter offers), four 32-bit words a texel, and a row's bytes.
+pub(crate) const TEXELS_PER_ROW: u64 = 2048;
+pub(crate) const TEXEL_ROW_BYTES: u64 = TEXELS_PER_ROW * 16;
+
+/// A texture of `rows` rows of Rgba32Uint texels, [`TEXELS_PER_ROW`] a row (`texel_at` in `word_texels.wgsl`).
+pub(crate) fn texel_texture(device: &wgpu::Device, label: &str, rows: u32) -> wgpu::Texture {
+    texture_2d(
+        device,
+        label,
+        TEXELS_PER_ROW as u32,
+        rows,
+        wgpu::TextureFormat::Rgba32Uint,
+        wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+    )
+}
+
+/// `words` as rows of Rgba32Uint texels, the last row padded with zeros.
+pub(crate) fn word_texels(device: &wgpu::Device, queue: &wgpu::Queue, label: &str, words: &[u8]) -> wgpu::TextureView {
+    let rows = (words.len() as u64).div_ceil(TEXEL_ROW_BYTES).max(1);
+    let mut padded = words.to_vec();
+    padded.resize((rows * TEXEL_ROW_BYTES) as usize, 0);
+    let texture = texel_texture(device, label, rows as u32);
+    upload(queue, &texture, &padded, 16);
+    texture.create_view(&wgpu::TextureViewDescriptor::default())
+}
+
+/// A stride with which `n` workgroups visit `n` pieces of work (workgroup x takes piece x * stride mod n):
+/// coprime with `n`, so every piece is taken once, and near `n` / golden ratio, so that neighbouring workgroups
+/// take pieces from all over. lavapipe hands each of its threads a contiguous run of a dispatch's workgroups;
+/// in the pieces' own order one thread can get all the heavy ones (the ray grids' `splat_box`, the ghosts'
+/// `spans_sprites`). `x * stride` stays within a u32: past 65 536 pieces the stride is 1 (their own order).
+pub(crate) fn spread_stride(n: u32) -> u32 {
+    if n > 1 << 16 {
+        return 1;
+    }
+    let gcd = |mut a: u32, mut b: u32| {
+        while b != 0 {
+            (a, b) = (b, a % b);
+        }
+        a
+    };
+    let start = (f64::from(n) * 0.618_033_988_75).round() as u32;
+    (start.max(1)..n.max(2)).find(|&s| gcd(s, n) == 1).unwrap_or(1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::spread_stride;
+
+    /// Workgroup x taking piece x * stride mod n visits every piece once, with no u32 product passing 2^32,
+    /// and from 30 pieces on neighbouring workgroups take pieces at least 30% of them apart.
+    #[test]
+    fn the_spread_visits_every_piece_once() {
+        for n in (0..=300).chain([686, 1031, 4096, 65_535, 65_536, 65_537, 1 << 20]) {
+            let stride = spread_stride(n);
+            assert!(stride >= 1 && (n <= 1 || stride < n), "n {n}: stride {stride}");
+            let n64 = u64::from(n);
+            assert!(n64.saturating_sub(1) * u64::from(stride) <= u64::from(u32::MAX), "n {n}: stride {stride}");
+            if n > 1 << 16 {
+                assert_eq!(stride, 1, "n {n}");
+                continue;
+            }
+            let mut seen = vec![false; n as usize];
+            for x in 0..n {
+                let piece = (x * stride % n) as usize;
+                assert!(!seen[piece], "n {n}: piece {piece} twice");
+                seen[piece] = true;
+            }
+            if n >= 30 {
+                let gap = (stride.min(n - stride)) as f64 / f64::from(n);
+                assert!(gap > 0.3, "n {n}: stride {stride} keeps neighbours {gap} of the pieces apart");
+            }
+        }
+    }
+}

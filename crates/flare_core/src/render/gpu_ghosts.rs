@@ -13,9 +13,11 @@
 //! its warp up), each item is worked out once into a buffer those invocations read (`walks_setup`), and each
 //! mask lookup gathers its four texels from a texture in one fetch. A software rasteriser (lavapipe) loads a
 //! storage word lane by lane, so there the form keeps such loads few: each sprite is one workgroup whose
-//! invocations take its rows (`spans_sprites`: the sprite is read once from a workgroup-uniform index), a mask
-//! lookup reads one word holding its footprint's four texels (`ApertureMask::quad_words`), and one invocation
-//! sums a row, each column read once (`resolve_rows`).
+//! invocations take its rows (`spans_sprites`: the sprite is read once from a workgroup-uniform index; the
+//! workgroups take the sprites in a spread order, [`spread_stride`], so that lavapipe's threads share the large
+//! ones), a mask lookup reads one word holding its footprint's four texels (`ApertureMask::quad_words`) from a
+//! texture of words (lavapipe gathers a texel fetch for all its lanes at once), and one invocation sums a row,
+//! each column read once (`resolve_rows`).
 //!
 //! **Deterministic**: the differences are integers, so the order in which sprites land does not matter: the
 //! same frame gives the same bytes on every run and in every [`ComputeForm`]. Each step is at most `2^30`
@@ -39,7 +41,8 @@ use std::sync::OnceLock;
 use bytemuck::{Pod, Zeroable};
 
 use super::buffers::{
-    HDR_FORMAT, compute_pipeline, compute_pipeline_with, grow_storage, software_device, storage, texture_2d, upload,
+    HDR_FORMAT, compute_pipeline, compute_pipeline_with, grow_storage, software_device, spread_stride, storage,
+    texture_2d, upload, word_texels,
 };
 use super::cpu::ghosts::{MaskRows, without_open_stops};
 use super::cpu::quads::{accumulation_scale, covered};
@@ -92,8 +95,8 @@ pub(crate) struct ComputeStrip {
     pub split_bits: u32,
     /// Invocations that share one (sprite, row) item's walk, each a piece of it.
     pub pieces: u32,
-    /// Keeps the size a multiple of 16 bytes (a uniform's rule); not read.
-    pub padding: u32,
+    /// `spans_sprites`: workgroup x draws sprite x * spread mod sprites (a [`spread_stride`]).
+    pub spread: u32,
 }
 const _: () = assert!(std::mem::size_of::<ComputeStrip>() == 64);
 
@@ -135,9 +138,11 @@ pub struct ComputeForm {
     /// an invocation at 480x320 on lavapipe).
     pub scan: bool,
     /// The stop masks' four texels a lookup by one `textureGather` (a hardware GPU: the spans pass took 1.76
-    /// against 1.98 ms at 4K on an H200) rather than one word of the storage buffer holding all four
-    /// (`ApertureMask::quad_words`: a software rasteriser, where a texture fetch is several times slower). Fixed
-    /// when the pass's pipeline is built (`override GATHER_MASKS`).
+    /// against 1.98 ms at 4K on an H200; the mask's row table from the storage buffer) rather than one word
+    /// holding all four (`ApertureMask::quad_words`) from a texture of words (`mask_texels`: a software
+    /// rasteriser, whose gather and sampler are slower, and which loads a storage buffer's words lane by lane;
+    /// lavapipe drew the Nikon zoom at 480x320 in 150 ms so against 159 ms from the buffer, and 168 ms
+    /// gathered). Fixed when the pass's pipeline is built (`override GATHER_MASKS`).
     pub gather_masks: bool,
     /// Invocations that share each (sprite, row) item's walk; `None`: `default_pieces` of the frame's width.
     pub pieces: Option<u32>,
@@ -166,6 +171,11 @@ impl ComputeForm {
             sprite_groups: !hardware,
         }
     }
+}
+
+/// The spans entry (`SPANS_ENTRIES`) that draws in `form`, `walks`: where the items' walks are worked out once.
+fn spans_entry(form: ComputeForm, walks: bool) -> usize {
+    if form.sprite_groups { SPANS_SPRITES } else { usize::from(walks) }
 }
 
 /// Invocations that share an item's walk on a hardware GPU, for an accumulation `width` pixels wide: one per
@@ -246,7 +256,7 @@ pub(crate) fn plan_strips(
                 lut: 0,
                 split_bits: split.bits,
                 pieces,
-                padding: 0,
+                spread: spread_stride(instances.len().try_into().unwrap_or(u32::MAX)),
             };
             StripPlan { params, items, groups }
         })
@@ -280,6 +290,8 @@ pub(crate) struct ComputeGhosts {
     pub(crate) form: ComputeForm,
     /// The mask's per-band table and its footprints' words (one storage buffer).
     mask: wgpu::Buffer,
+    /// The same words as rows of texels (a software rasteriser's lookups, `mask_texels` in the shader).
+    mask_texels: wgpu::TextureView,
     /// The mask as a texture, and the sampler `textureGather` reads it with.
     mask_texture: wgpu::TextureView,
     mask_sampler: wgpu::Sampler,
@@ -314,14 +326,18 @@ impl ComputeGhosts {
         let pipeline = |entry: &str| compute_pipeline(device, &module, entry);
         let open = ApertureMask { size: 1, texels: vec![255] };
         let limits = device.limits();
+        let form = ComputeForm::for_device(device);
+        // The walks' setup reads only the mask's row table, from where the device's own form reads it.
+        let gather = [("GATHER_MASKS", f64::from(u8::from(form.gather_masks)))];
         let mut this = Self {
             spans: Default::default(),
-            walks_setup: pipeline("walks_setup"),
+            walks_setup: compute_pipeline_with(device, &module, "walks_setup", &gather),
             walks: None,
             resolve_scan: pipeline("resolve"),
             resolve_rows: pipeline("resolve_rows"),
-            form: ComputeForm::for_device(device),
+            form,
             mask: storage(device, queue, "ghost mask", &[0; 16], wgpu::BufferUsages::STORAGE),
+            mask_texels: word_texels(device, queue, "ghost mask texels", &[0; 16]),
             mask_texture: texture_2d(device, "ghost mask", 1, 1, R8, wgpu::TextureUsages::TEXTURE_BINDING)
                 .create_view(&wgpu::TextureViewDescriptor::default()),
             mask_sampler: device
@@ -336,8 +352,7 @@ impl ComputeGhosts {
         };
         this.set_aperture(device, queue, &open);
         // The device's own form's entry now, so that its first frame does not wait for the compiler.
-        let form = this.form;
-        this.spans_pipeline(device, if form.sprite_groups { SPANS_SPRITES } else { usize::from(form.setup_once) });
+        this.spans_pipeline(device, spans_entry(form, form.setup_once));
         this
     }
 
@@ -356,6 +371,7 @@ impl ComputeGhosts {
     pub(crate) fn set_aperture(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, mask: &ApertureMask) {
         let words = mask_words(mask);
         self.mask = storage(device, queue, "ghost mask", bytemuck::cast_slice(&words), wgpu::BufferUsages::STORAGE);
+        self.mask_texels = word_texels(device, queue, "ghost mask texels", bytemuck::cast_slice(&words));
         self.mask_size = mask.size as u32;
         self.open_radius = mask.open_radius();
         let size = mask.size as u32;
@@ -399,8 +415,7 @@ impl ComputeGhosts {
             grow_storage(device, &mut self.walks, "ghost walks", walk_bytes);
         }
         let walks = self.walks.as_ref().map(|(b, _)| b).filter(|_| setup_once);
-        let entry = if sprite_groups { SPANS_SPRITES } else { usize::from(walks.is_some()) };
-        let spans = self.spans_pipeline(device, entry);
+        let spans = self.spans_pipeline(device, spans_entry(self.form, walks.is_some()));
         let Some((diff, _)) = &self.diff else { return };
         let instance_bytes: &[u8] =
             if instances.is_empty() { bytemuck::bytes_of(&[0.0f32; 24]) } else { bytemuck::cast_slice(&instances) };
@@ -432,6 +447,10 @@ impl ComputeGhosts {
                             wgpu::BindGroupEntry { binding: 1, resource: instance_buffer.as_entire_binding() },
                             wgpu::BindGroupEntry { binding: 2, resource: items.as_entire_binding() },
                             wgpu::BindGroupEntry { binding: 3, resource: self.mask.as_entire_binding() },
+                            wgpu::BindGroupEntry {
+                                binding: 10,
+                                resource: wgpu::BindingResource::TextureView(&self.mask_texels),
+                            },
                             wgpu::BindGroupEntry { binding: 11, resource: walks.as_entire_binding() },
                         ],
                     });
@@ -452,6 +471,10 @@ impl ComputeGhosts {
                         resource: wgpu::BindingResource::TextureView(&self.mask_texture),
                     },
                     wgpu::BindGroupEntry { binding: 9, resource: wgpu::BindingResource::Sampler(&self.mask_sampler) },
+                    wgpu::BindGroupEntry {
+                        binding: 10,
+                        resource: wgpu::BindingResource::TextureView(&self.mask_texels),
+                    },
                 ];
                 entries.push(match walks {
                     Some(walks) => wgpu::BindGroupEntry { binding: 11, resource: walks.as_entire_binding() },

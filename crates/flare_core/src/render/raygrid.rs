@@ -49,7 +49,10 @@
 //! that fit the largest storage buffer the adapter binds and its largest 2D texture ([`batches_of`]). A device
 //! lost on the way is [`GpuError::Lost`] (the command line then traces on the CPU).
 
-use super::buffers::{compute_pipeline, compute_pipeline_with, software_device, storage, upload as upload_texture};
+use super::buffers::{
+    TEXEL_ROW_BYTES, TEXELS_PER_ROW, compute_pipeline, compute_pipeline_with, software_device, spread_stride, storage,
+    texel_texture, word_texels,
+};
 use super::gpu::{GpuContext, GpuError, PassTimes, map_read, read_texture, texture_2d};
 use super::shaders::{RAYGRID_BOX_WGSL, RAYGRID_SPLAT_WGSL, RAYGRID_TRACE_WGSL};
 use crate::image::HdrImage;
@@ -152,10 +155,6 @@ pub const BOX_BYTES_PER_PIXEL: u64 = 48;
 const BOX_STRIDE: u64 = 256;
 /// Samples per dense reflectance table (the CPU renderer's).
 const TABLE_SAMPLES: usize = DENSE_TABLE_SAMPLES;
-/// Texels a row of the textures that hold words (`TEXELS_PER_ROW` in `raygrid_common.wgsl`; the 2D size every
-/// adapter offers), four 32-bit words a texel, and a row's bytes.
-const TEXELS_PER_ROW: u64 = 2048;
-const TEXEL_ROW_BYTES: u64 = TEXELS_PER_ROW * 16;
 /// Texels of one traced vertex (`vertex_at` in `raygrid_common.wgsl`).
 const VERTEX_TEXELS: u64 = (std::mem::size_of::<GpuVertex>() / 16) as u64;
 
@@ -166,28 +165,6 @@ struct Traced {
     job_texels: wgpu::TextureView,
     vertices: wgpu::Buffer,
     vertex_count: u64,
-}
-
-/// A texture of `rows` rows of Rgba32Uint texels, [`TEXELS_PER_ROW`] a row (`texel_at` in `raygrid_common.wgsl`).
-fn texel_texture(device: &wgpu::Device, label: &str, rows: u32) -> wgpu::Texture {
-    texture_2d(
-        device,
-        label,
-        TEXELS_PER_ROW as u32,
-        rows,
-        wgpu::TextureFormat::Rgba32Uint,
-        wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-    )
-}
-
-/// `words` as rows of Rgba32Uint texels, the last row padded with zeros.
-fn word_texels(device: &wgpu::Device, queue: &wgpu::Queue, label: &str, words: &[u8]) -> wgpu::TextureView {
-    let rows = (words.len() as u64).div_ceil(TEXEL_ROW_BYTES).max(1);
-    let mut padded = words.to_vec();
-    padded.resize((rows * TEXEL_ROW_BYTES) as usize, 0);
-    let texture = texel_texture(device, label, rows as u32);
-    upload_texture(queue, &texture, &padded, 16);
-    texture.create_view(&wgpu::TextureViewDescriptor::default())
 }
 
 /// The traced `vertices` (`count` of them, their buffer whole rows of texels) copied by `encoder` into rows of
@@ -669,7 +646,7 @@ impl GpuRayGrid {
             };
             for (b, batch) in batches.iter().enumerate() {
                 let jobs = batch.len() as u32;
-                block(s * (batches.len() + 1) + b, BoxParams { jobs, job_stride: spread_jobs(jobs), ..base });
+                block(s * (batches.len() + 1) + b, BoxParams { jobs, job_stride: spread_stride(jobs), ..base });
             }
             block(s * (batches.len() + 1) + batches.len(), base);
         }
@@ -1135,20 +1112,6 @@ fn batches_of<'a, 'p>(planned: &[&'a PlannedJob<'p>], limits: &wgpu::Limits) -> 
         batches.push(batch);
     }
     batches
-}
-
-/// The stride with which `splat_box`'s workgroups visit a batch's `jobs` (workgroup x draws job x * stride mod
-/// jobs): coprime with `jobs`, so every job is drawn once, and near `jobs` / golden ratio, so that neighbouring
-/// workgroups take jobs from all over the batch (see `splat_box` for why the order matters on lavapipe).
-fn spread_jobs(jobs: u32) -> u32 {
-    let gcd = |mut a: u32, mut b: u32| {
-        while b != 0 {
-            (a, b) = (b, a % b);
-        }
-        a
-    };
-    let start = (f64::from(jobs) * 0.618_033_988_75).round() as u32;
-    (start.max(1)..jobs.max(2)).find(|&s| gcd(s, jobs) == 1).unwrap_or(1)
 }
 
 /// Words a texture of words holds (the tables, `tables` in `raygrid_trace.wgsl`): [`TEXELS_PER_ROW`] texels of

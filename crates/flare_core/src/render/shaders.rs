@@ -6,9 +6,10 @@
 //! sync. Likewise `aperture.wgsl` (the mask lookup) for the two passes that read the aperture, and
 //! `raygrid_common.wgsl` (the ray-grid structs) for the GPU ray grids' passes, and `fixed64.wgsl` (64-bit fixed
 //! point in two u32 words) for the passes that sum light with integer atomics, `scan64.wgsl` (a workgroup's scan
-//! of those sums) for the ray grids' resolve, which sums a row 64 columns at a time, and `mask_texels.wgsl` (the
-//! mask looked up in a storage buffer, one word a bilinear footprint) for the compute passes that read the
-//! aperture. A test parses every shader with
+//! of those sums) for the ray grids' resolve, which sums a row 64 columns at a time, `mask_texels.wgsl` (the
+//! mask looked up one word a bilinear footprint) for the compute passes that read the aperture, and
+//! `word_texels.wgsl` (words read as rows of Rgba32Uint texels) for the compute passes that read words a
+//! software rasteriser would load lane by lane. A test parses every shader with
 //! naga and checks that the WGSL `Globals` has the Rust struct's size and member offsets. The tonemap pass is
 //! the one shader put together at run time: [`tonemap_wgsl`] puts the OCIO display transform's WGSL (made for
 //! the document's display and view) before `tonemap.wgsl`.
@@ -23,6 +24,7 @@ pub const GHOSTS_WGSL: &str = concat!(
 );
 /// Ghost sprites as compute: open spans and edges into per-row differences, then one sum per row.
 pub const GHOSTS_COMPUTE_WGSL: &str = concat!(
+    include_str!("../../../../shaders/word_texels.wgsl"),
     include_str!("../../../../shaders/fixed64.wgsl"),
     include_str!("../../../../shaders/mask_texels.wgsl"),
     include_str!("../../../../shaders/ghosts_compute.wgsl")
@@ -53,17 +55,20 @@ pub const LUT_GHOSTS_WGSL: &str =
 pub const LUT_COMPUTE_WGSL: &str = include_str!("../../../../shaders/lut_compute.wgsl");
 /// Ray grids on the GPU, pass 1: the compute tracer (with the declarations both passes share).
 pub const RAYGRID_TRACE_WGSL: &str = concat!(
+    include_str!("../../../../shaders/word_texels.wgsl"),
     include_str!("../../../../shaders/raygrid_common.wgsl"),
     include_str!("../../../../shaders/raygrid_trace.wgsl")
 );
 /// Ray grids on the GPU, pass 2: the triangles splatted, energy conserved.
 pub const RAYGRID_SPLAT_WGSL: &str = concat!(
+    include_str!("../../../../shaders/word_texels.wgsl"),
     include_str!("../../../../shaders/raygrid_common.wgsl"),
     include_str!("../../../../shaders/aperture.wgsl"),
     include_str!("../../../../shaders/raygrid_splat.wgsl")
 );
 /// Ray grids on the GPU, pass 2 as compute: each triangle box-filtered as the CPU twin does.
 pub const RAYGRID_BOX_WGSL: &str = concat!(
+    include_str!("../../../../shaders/word_texels.wgsl"),
     include_str!("../../../../shaders/raygrid_common.wgsl"),
     include_str!("../../../../shaders/fixed64.wgsl"),
     include_str!("../../../../shaders/scan64.wgsl"),
