@@ -40,7 +40,7 @@
 //! ([`GpuRayGrid::set_chunked_paths`]). A path longer than either holds (255 steps: every ghost of a lens of up
 //! to 85 surfaces) is [`GpuRayGridError::Path`], and the callers trace on the CPU. The jobs, the reflectance
 //! tables, the mask and (copied after the trace) the vertices are read as rows of Rgba32Uint texels of four
-//! words (`texel_at` in `raygrid_common.wgsl`): lavapipe, which loads a storage buffer's words lane by lane
+//! words (`texel_at` in `word_texels.wgsl`): lavapipe, which loads a storage buffer's words lane by lane
 //! wherever the lanes' indices may differ, fetches texels with gathers (on this 2-core machine the GPU ray grid
 //! of the Nikon zoom at grid 64 went from 20 s to 10 s). The raster path (`--gpu-samples 1..8`) samples pixel
 //! centres and drops collapsed triangles. Tests compare landings (the f32 drift, per lens) and images.
