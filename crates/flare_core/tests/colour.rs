@@ -2,9 +2,11 @@
 //! display and view (stored here, so this runs everywhere), a `.cube` look applied where OCIO applies looks,
 //! and the GPU's tonemap pass (OCIO's WGSL) against its CPU twin (OCIO's CPU processor).
 
+use flare_core::color::Tonemap;
 use flare_core::flare::{FlareConfig, PreparedFlare};
 use flare_core::frame::{self, Device, Frame, FrameRequest, GpuDrawer, Sources};
 use flare_core::image::HdrImage;
+use flare_core::render::DisplaySettings;
 use flare_core::render::gpu::test_context;
 use flare_core::view_transform::{ColorDoc, ViewTransform};
 
@@ -48,6 +50,34 @@ pub fn warm_cube(path: &std::path::Path) {
         }
     }
     std::fs::write(path, text).unwrap();
+}
+
+/// One device drawing the view, then each of FlareLab's curves (its tonemap pass then holds no view's code,
+/// `gpu_view::ViewPass::curves`), then the view again: every frame within 1/255 of its CPU twin, and a curve's
+/// frame differs from the view's (the pass was not left behind).
+#[test]
+fn the_gpu_switches_between_the_view_and_the_curves() {
+    let Some(ctx) = test_context() else { return };
+    let mut device = Device::Gpu(Box::new(GpuDrawer::on(ctx)));
+    let view = ViewTransform::cached(&ColorDoc::default()).unwrap();
+    let tonemaps = [Tonemap::View, Tonemap::Aces, Tonemap::Reinhard, Tonemap::None, Tonemap::View];
+    let mut displays = Vec::new();
+    for tonemap in tonemaps {
+        let (flare, mut frame, plate) = frame_of(Some(view.clone()));
+        let request = FrameRequest { display: DisplaySettings { tonemap, ..frame.request.display }, ..frame.request };
+        frame = Frame::build(&flare, None, &request);
+        let sources = Sources { flare: &flare, lut: None, plate: Some(&plate) };
+        let cpu = frame::draw_cpu(&frame, &sources);
+        let gpu = device.draw(&frame, &sources).unwrap();
+        assert!(matches!(device, Device::Gpu(_)), "the GPU drew it");
+        let worst = cpu.display.worst_difference(&gpu.display);
+        assert!(worst <= 1, "{tonemap:?}: worst display difference {worst}/255");
+        displays.push(gpu.display);
+    }
+    assert_eq!(displays[0].worst_difference(&displays[4]), 0, "the view, drawn again, is the same");
+    for (k, curve) in displays[1..4].iter().enumerate() {
+        assert!(displays[0].worst_difference(curve) > 8, "curve {k} drew the view's image");
+    }
 }
 
 fn frame_of(view: Option<std::sync::Arc<ViewTransform>>) -> (PreparedFlare, Frame, HdrImage) {

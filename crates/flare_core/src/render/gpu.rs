@@ -266,7 +266,8 @@ pub struct FlareRenderer {
     ghost_pipeline: wgpu::RenderPipeline,
     starburst_pipeline: wgpu::RenderPipeline,
     dirt_pipeline: wgpu::RenderPipeline,
-    /// The tonemap pass of the last frame's OCIO view (made again when a frame's view differs).
+    /// The tonemap pass of the last frame's OCIO view, or of FlareLab's curves when the frame's tonemap is one of
+    /// them (made again when a frame's view, or its choice of the view, differs).
     view_pass: super::gpu_view::ViewPass,
     ghost_layout: wgpu::BindGroupLayout,
     tonemap_layout: wgpu::BindGroupLayout,
@@ -755,11 +756,16 @@ impl FlareRenderer {
             self.hdr = Some((texture_2d(device, "hdr", w, h, HDR_FORMAT, usage), w, h));
             self.groups = None;
         }
-        let view = scene.view_transform();
-        if view.key != self.view_pass.key {
+        // The view's pass where the frame's tonemap is the view, else the pass without the view's code (see
+        // `gpu_view`).
+        let view = (scene.globals.operator() == crate::color::Tonemap::View).then(|| scene.view_transform());
+        if view.as_ref().map(|v| v.key) != self.view_pass.key {
             let compute = self.view_pass.compute.is_some();
-            self.view_pass =
-                super::gpu_view::ViewPass::new(device, queue, &self.tonemap_layout, self.target_format, &view, compute);
+            let (layout, format) = (&self.tonemap_layout, self.target_format);
+            self.view_pass = match &view {
+                Some(view) => super::gpu_view::ViewPass::new(device, queue, layout, format, view, compute),
+                None => super::gpu_view::ViewPass::curves(device, queue, layout, format, compute),
+            };
         }
         let mut globals = scene.globals;
         globals.tonemap[2] = if self.target_format.is_srgb() { 0.0 } else { 1.0 };

@@ -14,7 +14,7 @@
 //! mask lookup gathers its four texels from a texture in one fetch. A software rasteriser (lavapipe) loads a
 //! storage word lane by lane, so there the form keeps such loads few: each sprite is one workgroup whose
 //! invocations take its rows (`spans_sprites`: the sprite is read once from a workgroup-uniform index; the
-//! workgroups take the sprites in a spread order, [`spread_stride`], so that lavapipe's threads share the large
+//! workgroups take the sprites in a spread order, `buffers::spread_stride`, so that lavapipe's threads share the large
 //! ones), a mask lookup reads one word holding its footprint's four texels (`ApertureMask::quad_words`) from a
 //! texture of words (lavapipe gathers a texel fetch for all its lanes at once), and one invocation sums a row,
 //! each column read once (`resolve_rows`).
@@ -95,7 +95,7 @@ pub(crate) struct ComputeStrip {
     pub split_bits: u32,
     /// Invocations that share one (sprite, row) item's walk, each a piece of it.
     pub pieces: u32,
-    /// `spans_sprites`: workgroup x draws sprite x * spread mod sprites (a [`spread_stride`]).
+    /// `spans_sprites`: workgroup x draws sprite x * spread mod sprites (a `buffers::spread_stride`).
     pub spread: u32,
 }
 const _: () = assert!(std::mem::size_of::<ComputeStrip>() == 64);

@@ -1,15 +1,19 @@
 //! The tonemap pass's pipeline for one OCIO display transform: the shader [`super::shaders::tonemap_wgsl`] of
 //! the view's WGSL, and bind group [`WGSL_GROUP`] with the view's LUT textures (and its uniforms, when it has
 //! any), uploaded once. The renderer makes a new one when a frame's view differs from the one it has (by
-//! [`ViewTransform::key`]). Where the device runs compute shaders it also gets the pass as compute (`cs_main`,
+//! [`ViewTransform::key`]). A frame whose tonemap is one of FlareLab's curves gets the pass of no view
+//! ([`ViewPass::curves`]: the shader's `ocio_display` the identity, never called): a software rasteriser runs
+//! every side of a branch, masked, so a shader that holds the view's code costs it at every pixel whatever
+//! tonemap the frame picks. Where the device runs compute shaders it also gets the pass as compute (`cs_main`,
 //! writing an `rgba8unorm` storage texture: what the renderer uses when the target allows it), beside the
 //! fragment pipeline (`fs_main`) every other target gets.
 
-use crate::view_transform::{ViewTransform, WGSL_GROUP};
+use crate::view_transform::{ViewTransform, WGSL_GROUP, WgslShader};
 
 /// The tonemap pipeline of one view and the resources its shader reads.
 pub(super) struct ViewPass {
-    pub key: u64,
+    /// The view's key; `None`: the pass of FlareLab's curves, without the view's code.
+    pub key: Option<u64>,
     pub pipeline: wgpu::RenderPipeline,
     pub group: wgpu::BindGroup,
     /// The compute form and the layout of its group 2 (the target as a storage texture), where the device
@@ -28,9 +32,33 @@ impl ViewPass {
         view: &ViewTransform,
         compute: bool,
     ) -> Self {
+        Self::with_shader(device, queue, tonemap_layout, target_format, &view.shader, Some(view.key), compute)
+    }
+
+    /// The pass for frames drawn through one of FlareLab's curves: no view's code in the shader.
+    pub fn curves(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        tonemap_layout: &wgpu::BindGroupLayout,
+        target_format: wgpu::TextureFormat,
+        compute: bool,
+    ) -> Self {
+        let identity =
+            WgslShader { text: super::shaders::OCIO_IDENTITY_WGSL.to_owned(), textures: Vec::new(), uniforms: None };
+        Self::with_shader(device, queue, tonemap_layout, target_format, &identity, None, compute)
+    }
+
+    fn with_shader(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        tonemap_layout: &wgpu::BindGroupLayout,
+        target_format: wgpu::TextureFormat,
+        shader: &WgslShader,
+        key: Option<u64>,
+        compute: bool,
+    ) -> Self {
         let stages = wgpu::ShaderStages::FRAGMENT | wgpu::ShaderStages::COMPUTE;
         debug_assert_eq!(WGSL_GROUP, 1, "the tonemap pipeline's layout puts the view at group 1");
-        let shader = &view.shader;
         let mut entries = Vec::new();
         if shader.uniforms.is_some() {
             entries.push(wgpu::BindGroupLayoutEntry {
@@ -178,6 +206,6 @@ impl ViewPass {
             });
             (pipeline, output)
         });
-        Self { key: view.key, pipeline, group, compute }
+        Self { key, pipeline, group, compute }
     }
 }

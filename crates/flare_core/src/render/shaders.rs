@@ -43,6 +43,10 @@ pub const TONEMAP_WGSL: &str = concat!(
     include_str!("../../../../shaders/tonemap.wgsl")
 );
 
+/// The identity in place of the OCIO display transform: the tonemap pass of frames drawn through FlareLab's own
+/// curves, which never call it (`render::gpu_view::ViewPass::curves`).
+pub const OCIO_IDENTITY_WGSL: &str = include_str!("../../../../shaders/ocio_identity.wgsl");
+
 /// The tonemap shader with `ocio`, the WGSL OCIO generated for a display and view
 /// ([`crate::view_transform::WgslShader`]), as its `ocio_display`.
 pub fn tonemap_wgsl(ocio: &str) -> String {
