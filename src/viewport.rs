@@ -45,7 +45,8 @@ pub struct ViewportResources {
     /// The texture holds an image handed over by [`Self::show_image`] (the ray-grid view), not a drawn frame.
     shows_image: bool,
     /// The adapter is a software rasteriser (lavapipe): drafts are drawn by the raster passes there
-    /// ([`FlareRenderer::rasterise_ghosts`]).
+    /// ([`FlareRenderer::rasterise_ghosts`]) and tonemapped through the view's cube
+    /// ([`FlareRenderer::sample_view_from_cube`]).
     software: bool,
 }
 
@@ -297,6 +298,7 @@ impl CallbackTrait for FlareCallback {
         }
         let view = res.target.create_view(&wgpu::TextureViewDescriptor::default());
         res.renderer.rasterise_ghosts(res.software && frame.draft.is_some());
+        res.renderer.sample_view_from_cube(res.software && frame.draft.is_some());
         res.renderer.render_with_lut(device, queue, encoder, &view, scene, lut.as_ref());
         Vec::new()
     }

@@ -30,7 +30,7 @@ pub const MIN_GHOST_FRACTION: f64 = 0.02;
 const MAX_CANONICAL_DEG: f64 = 20.0;
 
 /// The canonical light's field angle (degrees on the diagonal) for `system` on a sensor `sensor_width_mm`
-/// wide (3:2): half the lens's half-diagonal field, at most [`MAX_CANONICAL_DEG`].
+/// wide (3:2): half the lens's half-diagonal field, at most 20 degrees (`MAX_CANONICAL_DEG`).
 pub fn canonical_light_deg(system: &GhostSystem, sensor_width_mm: f64) -> f64 {
     let half_diagonal_mm = 0.5 * sensor_width_mm * (1.0f64 + (2.0f64 / 3.0).powi(2)).sqrt();
     let efl = system.first_order.efl_mm.abs().max(1e-3);

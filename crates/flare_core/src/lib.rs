@@ -15,7 +15,9 @@
 //! a shot of it: plate sequences, tracks, the light found in the plate, and sequences rendered frame by frame
 //! through [`frame`]. [`dof`] defocuses the plate through the same lens and aperture from a depth map (an
 //! exact layered reference and a live layered method that `render` also runs on the GPU) before the flare is
-//! drawn over it. [`color`], [`image`], [`files`] and [`fingerprint`] are the small
+//! drawn over it. [`view_transform`] is the colour management (an OCIO config's display and view, its CPU
+//! processor the twin of its shader) and [`view_lut`] that view baked into a cube for a software adapter's
+//! drafts. [`color`], [`image`], [`files`] and [`fingerprint`] are the small
 //! shared pieces (tonemaps and exposures in stops, images, atomic writes, stable hashes).
 //!
 //! All numerics are f64 on the CPU; every singular case (total internal reflection, a ray missing a surface,
@@ -49,6 +51,7 @@ pub mod spectrum;
 pub mod starburst;
 pub mod timeline;
 pub mod traced;
+pub mod view_lut;
 pub mod view_transform;
 
 // What callers need most, at the crate root: the document, the prepared optics, the frame pipeline and the

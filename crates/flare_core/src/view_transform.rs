@@ -12,7 +12,11 @@
 //! the working space to the display and view with those looks. Its CPU processor is the CPU twin
 //! ([`ViewTransform::apply`]); its WGSL shader ([`WgslShader`], function `ocio_display`, its LUTs as textures
 //! of bind group [`WGSL_GROUP`]) is what the tonemap pass of the GPU renderer runs when the document's tonemap
-//! is [`crate::color::Tonemap::View`] (the default): the same numbers to within OCIO's 1e-3.
+//! is [`crate::color::Tonemap::View`] (the default): the same numbers to within OCIO's 1e-3. OCIO writes
+//! some tables into that shader as `var<private>` arrays (the ACES 2.0 views' 363 hues), which each
+//! invocation would copy into its own memory before reading two entries (a third of a lavapipe draft's time);
+//! `wgsl` makes each one a texture of the group, read with the same clamped index, and keeps OCIO's text
+//! when one is of another form.
 //!
 //! FlareLab's own curves (clamp, Reinhard, Narkowicz's ACES fit, [`crate::color::Tonemap`]) are kept as the
 //! other tonemaps: each is a tone curve followed by the sRGB encoding, as if on the "sRGB - Display" with the
@@ -371,7 +375,83 @@ fn wgsl(processor: &ocio::Processor) -> Result<WgslShader, ocio::Error> {
         Some(_) => Some(bindings.uniform_buffer(&desc)?),
         None => None,
     };
-    Ok(WgslShader { text: desc.shader_text().to_owned(), textures, uniforms })
+    // OCIO keeps some tables (the ACES 2.0 views' hues) as `var<private>` arrays: every invocation would
+    // copy them into its own memory before reading a few entries. They become textures, as its others are.
+    let mut text = desc.shader_text().to_owned();
+    let free = textures.iter().map(|t| t.binding).max().unwrap_or(0) + 1;
+    if let Some((rewritten, tables)) = private_arrays_as_textures(&text, free) {
+        text = rewritten;
+        textures.extend(tables);
+    }
+    Ok(WgslShader { text, textures, uniforms })
+}
+
+/// `text` with each module-scope `var<private> NAME: array<f32, N> = array<f32, N>(...)` made a 1D `R32Float`
+/// texture (bindings from `first_binding` in [`WGSL_GROUP`]) read by `NAME_at(i)`, the index clamped to the
+/// array as WGSL clamps an array's index; every `NAME[expr]` becomes `NAME_at(i32(expr))`. `None` (the text
+/// kept as OCIO made it) when there is no such array or one declaration is not of that form.
+fn private_arrays_as_textures(text: &str, first_binding: u32) -> Option<(String, Vec<WgslTexture>)> {
+    const PRIVATE: &str = "var<private> ";
+    let mut out = text.to_owned();
+    let mut textures = Vec::new();
+    while let Some(start) = out.find(PRIVATE) {
+        let rest = &out[start + PRIVATE.len()..];
+        let (name, declared) = rest.split_once(':')?;
+        let name = name.trim().to_owned();
+        let declared = declared.trim_start();
+        let values_start = declared.find('(')?;
+        let values_end = declared.find(')')?;
+        let head = &declared[..values_start];
+        // `array<f32, N> = array<f32, N>`, nothing else.
+        let (ty, init) = head.split_once('=')?;
+        if !ty.trim().starts_with("array<f32,") || !init.trim().starts_with("array<f32,") {
+            return None;
+        }
+        let values: Vec<f32> = declared[values_start + 1..values_end]
+            .split(',')
+            .map(|v| v.trim().trim_end_matches('f').parse::<f32>())
+            .collect::<Result<_, _>>()
+            .ok()?;
+        if values.is_empty() || !values.iter().all(|v| v.is_finite()) || !declared[values_end..].starts_with(");") {
+            return None;
+        }
+        let end = start + PRIVATE.len() + (rest.len() - declared.len()) + values_end + 2;
+        let binding = first_binding + textures.len() as u32;
+        let last = values.len() - 1;
+        let declaration = format!(
+            "@group({WGSL_GROUP}) @binding({binding}) var {name}_texture: texture_1d<f32>;\n\
+             fn {name}_at(i: i32) -> f32 {{\n    return textureLoad({name}_texture, clamp(i, 0, {last}), 0).x;\n}}"
+        );
+        out.replace_range(start..end, &declaration);
+        let index = format!("{name}[");
+        while let Some(at) = out.find(&index) {
+            let open = at + index.len() - 1;
+            let mut depth = 0usize;
+            let close = out[open..].char_indices().find_map(|(k, c)| {
+                match c {
+                    '[' => depth += 1,
+                    ']' => {
+                        depth -= 1;
+                        if depth == 0 {
+                            return Some(open + k);
+                        }
+                    }
+                    _ => {}
+                }
+                None
+            })?;
+            let expr = out[open + 1..close].to_owned();
+            out.replace_range(at..=close, &format!("{name}_at(i32({expr}))"));
+        }
+        textures.push(WgslTexture {
+            binding,
+            dimensions: 1,
+            size: [values.len() as u32, 1, 1],
+            rgba: false,
+            bytes: bytemuck::cast_slice(&values).to_vec(),
+        });
+    }
+    (!textures.is_empty()).then_some((out, textures))
 }
 
 #[cfg(test)]
@@ -387,6 +467,29 @@ mod tests {
         assert!(grey.iter().all(|v| (0.2..0.6).contains(v)), "{grey:?}");
         assert_eq!(t.apply([f32::NAN, 0.0, 0.0])[0], 0.0);
         assert!(t.shader.text.contains("fn ocio_display("));
+    }
+
+    #[test]
+    fn private_tables_become_textures_read_with_the_same_index() {
+        let text = "var<private> t_hues: array<f32, 3> = array<f32, 3>(-1.5f, 0.0f, 2.25f);\n\
+                    fn f(i: i32) -> f32 { return t_hues[i] + t_hues[min(i + 1, 2)] * t_hues[a[i]]; }";
+        let (out, tables) = private_arrays_as_textures(text, 3).expect("one table");
+        assert!(!out.contains("var<private>") && !out.contains("t_hues["), "{out}");
+        assert!(out.contains("@group(1) @binding(3) var t_hues_texture: texture_1d<f32>;"), "{out}");
+        assert!(out.contains("clamp(i, 0, 2)"), "{out}");
+        assert!(out.contains("t_hues_at(i32(i)) + t_hues_at(i32(min(i + 1, 2))) * t_hues_at(i32(a[i]))"), "{out}");
+        assert_eq!(tables.len(), 1);
+        assert_eq!((tables[0].binding, tables[0].dimensions, tables[0].size, tables[0].rgba), (3, 1, [3, 1, 1], false));
+        assert_eq!(bytemuck::cast_slice::<u8, f32>(&tables[0].bytes), &[-1.5, 0.0, 2.25]);
+        // What is not a table of f32 is left as OCIO wrote it.
+        assert!(private_arrays_as_textures("var<private> n: i32 = 3;", 1).is_none());
+        assert!(private_arrays_as_textures("var<private> v: array<f32, 2> = array<f32, 2>(1.0f, x);", 1).is_none());
+        assert!(private_arrays_as_textures("fn f() {}", 1).is_none());
+        // The built-in ACES 2.0 view's hue table is one.
+        let shader = &ViewTransform::builtin().shader;
+        assert!(!shader.text.contains("var<private>"));
+        let hues = shader.textures.iter().find(|t| t.binding == 3).expect("the hue table at binding 3");
+        assert_eq!(hues.size, [363, 1, 1]);
     }
 
     #[test]

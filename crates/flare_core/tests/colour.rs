@@ -8,6 +8,7 @@ use flare_core::frame::{self, Device, Frame, FrameRequest, GpuDrawer, Sources};
 use flare_core::image::HdrImage;
 use flare_core::render::DisplaySettings;
 use flare_core::render::gpu::test_context;
+use flare_core::view_lut::ViewLut;
 use flare_core::view_transform::{ColorDoc, ViewTransform};
 
 /// `(linear Rec. 709, display values)` from PyOpenColorIO 2.6.0: `ocio://studio-config-latest`, its default
@@ -137,5 +138,113 @@ fn the_gpu_runs_the_views_wgsl_as_its_cpu_twin_runs_the_processor() {
         let worst = cpu.display.worst_difference(&gpu.display);
         println!("{} / {} [{}]: GPU vs CPU twin worst {worst}/255", view.display, view.view, view.looks);
         assert!(worst <= 1, "{view:?}: worst display difference {worst}/255");
+    }
+}
+
+/// The display code values (0-255) of `rgb` through `f`, clamped as the tonemap clamps.
+fn codes(f: impl Fn([f32; 3]) -> [f32; 3], rgb: [f32; 3]) -> [u8; 3] {
+    f(rgb).map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
+}
+
+#[test]
+fn the_views_cube_is_within_two_codes_of_the_view_on_a_frame() {
+    // How far the drafts' cube is from the exact view (the CPU processor), in display code values: over every
+    // pixel of a frame with a plate, and over colours spread over 26 stops with any hue.
+    let view = ViewTransform::builtin();
+    let cube = ViewLut::cached(&view);
+    let (flare, frame, plate) = frame_of(Some(view.clone()));
+    let sources = Sources { flare: &flare, lut: None, plate: Some(&plate) };
+    let composite =
+        flare_core::render::cpu::composite(&frame.scene, &frame::draw_cpu(&frame, &sources).hdr, Some(&plate));
+    let mut seed = 12345u64;
+    let mut random = || {
+        seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+        (seed >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let spread: Vec<[f32; 3]> = (0..20_000)
+        .map(|_| {
+            let scale = (random() * 26.0 - 14.0).exp2();
+            [random() * scale, random() * scale, random() * scale]
+        })
+        .collect();
+    let differences = |colours: &mut dyn Iterator<Item = [f32; 3]>| -> Vec<u8> {
+        let mut d: Vec<u8> = colours
+            .map(|c| {
+                let (a, b) = (codes(|c| cube.apply(c), c), codes(|c| view.apply(c), c));
+                (0..3).map(|k| a[k].abs_diff(b[k])).max().unwrap_or(0)
+            })
+            .collect();
+        d.sort_unstable();
+        d
+    };
+    let on_frame = differences(&mut composite.pixels.iter().map(|p| [p[0], p[1], p[2]]));
+    let spread = differences(&mut spread.into_iter());
+    let quantile = |d: &[u8], q: f64| d[((d.len() - 1) as f64 * q) as usize];
+    println!(
+        "the cube ({} nodes a side) against the view: frame worst {}, 99.9% {}; spread worst {}, 99.9% {}, 99% {}",
+        cube.size,
+        quantile(&on_frame, 1.0),
+        quantile(&on_frame, 0.999),
+        quantile(&spread, 1.0),
+        quantile(&spread, 0.999),
+        quantile(&spread, 0.99)
+    );
+    assert!(quantile(&on_frame, 1.0) <= 2, "the frame");
+    assert!(quantile(&spread, 0.99) <= 1 && quantile(&spread, 0.999) <= 3, "the spread");
+    // The most saturated colours, where ACES 2.0 compresses the gamut, are the farthest.
+    assert!(quantile(&spread, 1.0) <= 10, "the spread's worst");
+}
+
+#[test]
+fn a_draft_through_the_cube_is_its_cpu_twin_and_the_full_frame_the_exact_view() {
+    let Some(ctx) = test_context() else { return };
+    let view = ViewTransform::builtin();
+    let cube = ViewLut::cached(&view);
+    let mut drawer = GpuDrawer::on(ctx);
+    let (flare, frame, plate) = frame_of(Some(view.clone()));
+    let sources = Sources { flare: &flare, lut: None, plate: Some(&plate) };
+    let exact = drawer.draw(&frame, &sources).unwrap();
+    drawer.renderer.sample_view_from_cube(true);
+    let drafted = drawer.draw(&frame, &sources).unwrap();
+    // The CPU twin: the same accumulation composited, looked up in the cube by `ViewLut::apply`.
+    let composite = flare_core::render::cpu::composite(&frame.scene, &drafted.hdr, Some(&plate));
+    let twin: Vec<[u8; 3]> = composite.pixels.iter().map(|p| codes(|c| cube.apply(c), [p[0], p[1], p[2]])).collect();
+    let worst_twin = drafted
+        .display
+        .pixels
+        .iter()
+        .zip(&twin)
+        .flat_map(|(a, b)| (0..3).map(move |k| a[k].abs_diff(b[k])))
+        .max()
+        .unwrap();
+    let worst_exact = drafted.display.worst_difference(&exact.display);
+    println!("the draft through the cube: {worst_twin}/255 from its CPU twin, {worst_exact}/255 from the exact view");
+    assert!(worst_twin <= 1, "GPU cube vs its CPU twin: {worst_twin}/255");
+    assert!((1..=2).contains(&worst_exact), "the draft vs the exact view: {worst_exact}/255");
+    // Letting go: the exact view again, to the byte; frames through a curve ignore the cube.
+    drawer.renderer.sample_view_from_cube(false);
+    assert_eq!(drawer.draw(&frame, &sources).unwrap().display.worst_difference(&exact.display), 0);
+    let request = FrameRequest {
+        display: DisplaySettings { tonemap: Tonemap::Aces, ..frame.request.display },
+        ..frame.request.clone()
+    };
+    let aces = Frame::build(&flare, None, &request);
+    let curve = drawer.draw(&aces, &sources).unwrap().display;
+    drawer.renderer.sample_view_from_cube(true);
+    assert_eq!(drawer.draw(&aces, &sources).unwrap().display.worst_difference(&curve), 0);
+}
+
+#[test]
+fn the_tonemap_validates_with_the_views_shader_and_with_its_cube() {
+    // The tonemap is the one shader put together at run time: validated here with both `ocio_display`s.
+    let view = ViewTransform::builtin();
+    let cube = ViewLut::bake(&view, 3);
+    for (name, ocio) in [("the view", view.shader.text.clone()), ("the cube", cube.shader().text)] {
+        let source = flare_core::render::shaders::tonemap_wgsl(&ocio);
+        let module =
+            naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(&source)));
+        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all())
+            .validate(&module)
+            .unwrap_or_else(|e| panic!("{name}: {e:?}"));
     }
 }

@@ -33,7 +33,7 @@
 //! cone by its blurred coverage, so an in-focus edge occludes sharply and a blurred foreground covers what is
 //! behind it partly, as a lens does. What a 2.5D plate hides behind a foreground is unknown; the composite is
 //! divided by its accumulated coverage, which fills such holes with the mean of the visible neighbours instead of
-//! darkening them. [`reference`] is the exact method (every pixel's own kernel, layers 1/2 px of defocus thin),
+//! darkening them. [`reference`](mod@reference) is the exact method (every pixel's own kernel, layers 1/2 px of defocus thin),
 //! [`live`] the fast one (a few layers, each gathered at a resolution that keeps its kernel a dozen texels across)
 //! that `render::dof_gpu` runs on the GPU, its CPU twin beside it.
 //!

@@ -37,7 +37,7 @@ pub enum DofError {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, Default)]
 #[serde(rename_all = "lowercase")]
 pub enum DofMethod {
-    /// The layered gather ([`live`]): the app's and the default.
+    /// The layered gather ([`live`](super::live)): the app's and the default.
     #[default]
     Live,
     /// Every pixel's own kernel scattered into thin layers ([`reference`]): slow and exact.

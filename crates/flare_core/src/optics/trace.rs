@@ -227,7 +227,7 @@ impl Tracer {
     /// [`Self::trace_visit`] for `L` independent rays at once, step by step in lockstep: `visit(lane, hit)`.
     /// Each lane does exactly the arithmetic of a lone ray (the results are identical, bit for bit). The rays
     /// are held as columns (x of every lane, then y, ...): at a spherical or flat surface the intersection,
-    /// normal and refraction of all lanes are one branch-free loop ([`sphere_step`]) that the compiler turns
+    /// normal and refraction of all lanes are one branch-free loop (`sphere_step`) that the compiler turns
     /// into vector instructions (AVX2 or AVX-512 where the processor has them, chosen at run time), and only the
     /// visit and the failures are looked at lane by lane; a conic or aspheric surface steps each lane alone
     /// (Newton's method).

@@ -18,7 +18,9 @@
 //! 2. `tonemap.wgsl`: the composite `hdr x 2^flare_ev + plate x 2^plate_ev`, the tonemap and (for non-sRGB
 //!    targets) the sRGB encoding into the caller's view: as compute (`cs_main`) where the target is an
 //!    `Rgba8Unorm` texture with a storage binding ([`FlareRenderer::target_usage`]) on a device that runs
-//!    compute, else as a screen-covering triangle (`fs_main`), the same arithmetic.
+//!    compute, else as a screen-covering triangle (`fs_main`), the same arithmetic. The OCIO view is OCIO's
+//!    own shader, or, for the frames [`FlareRenderer::sample_view_from_cube`] asks it for (the app's drafts on
+//!    a software adapter), the view baked into a cube (`ocio_lut.wgsl`, [`crate::view_lut`]).
 //!
 //! **GPU time, measured by the GPU**: every pass is a scope of a `wgpu_profiler::GpuProfiler`, which writes
 //! timestamp queries at its start and end when the device has `TIMESTAMP_QUERY` (devices made here and the
@@ -38,6 +40,7 @@ pub use super::buffers::{HDR_FORMAT, texture_2d};
 use super::buffers::{render_pipeline, upload};
 use super::gpu_ghosts::ComputeGhosts;
 use super::gpu_lut::{ComputeLut, TILE};
+use super::gpu_view::{PassKey, ViewPass};
 use super::shaders::{DIRT_WGSL, GHOSTS_WGSL, LUT_GHOSTS_WGSL, STARBURST_WGSL};
 use super::{FlareScene, GhostInstance, Globals};
 use crate::aperture::ApertureMask;
@@ -268,7 +271,12 @@ pub struct FlareRenderer {
     dirt_pipeline: wgpu::RenderPipeline,
     /// The tonemap pass of the last frame's OCIO view, or of FlareLab's curves when the frame's tonemap is one of
     /// them (made again when a frame's view, or its choice of the view, differs).
-    view_pass: super::gpu_view::ViewPass,
+    view_pass: ViewPass,
+    /// The tonemap pass of a view baked into a cube, for the frames [`Self::sample_view_from_cube`] asks it for
+    /// (made when such a frame's view differs from its own; kept while frames go through `view_pass`).
+    cube_pass: Option<ViewPass>,
+    /// Tonemap the next frames whose tonemap is the view through the view's cube ([`Self::sample_view_from_cube`]).
+    view_from_cube: bool,
     ghost_layout: wgpu::BindGroupLayout,
     tonemap_layout: wgpu::BindGroupLayout,
     globals: wgpu::Buffer,
@@ -413,7 +421,7 @@ impl FlareRenderer {
             render_pipeline(device, "starburst", &ghost_pl, &starburst_module, &[], HDR_FORMAT, Some(additive));
         let dirt_module = module("dirt.wgsl", DIRT_WGSL);
         let dirt_pipeline = render_pipeline(device, "dirt", &ghost_pl, &dirt_module, &[], HDR_FORMAT, Some(additive));
-        let view_pass = super::gpu_view::ViewPass::new(
+        let view_pass = ViewPass::new(
             device,
             queue,
             &tonemap_layout,
@@ -523,6 +531,8 @@ impl FlareRenderer {
             starburst_pipeline,
             dirt_pipeline,
             view_pass,
+            cube_pass: None,
+            view_from_cube: false,
             ghost_layout,
             tonemap_layout,
             globals,
@@ -604,6 +614,16 @@ impl FlareRenderer {
     /// the GPU's time, which its raster passes report truly.
     pub fn rasterise_ghosts(&mut self, yes: bool) {
         self.rasterise = yes;
+    }
+
+    /// Tonemaps the frames that follow, while `yes`, through their view baked into a cube
+    /// ([`crate::view_lut`]) instead of the view's own code (frames through one of FlareLab's curves are not
+    /// changed; until the view's cube is baked, on a thread of its own started by the first such frame, they
+    /// go through the exact view). The app does this for its drafts on a software adapter, which would spend about a third of a
+    /// draft's time in an ACES 2.0 view's shader; its full frames, and every frame on a hardware GPU, go
+    /// through the exact view.
+    pub fn sample_view_from_cube(&mut self, yes: bool) {
+        self.view_from_cube = yes;
     }
 
     /// Caps the bytes of a frame's LUT bins (a test's way to reach the fallback of a frame whose bins pass the
@@ -756,16 +776,27 @@ impl FlareRenderer {
             self.hdr = Some((texture_2d(device, "hdr", w, h, HDR_FORMAT, usage), w, h));
             self.groups = None;
         }
-        // The view's pass where the frame's tonemap is the view, else the pass without the view's code (see
-        // `gpu_view`).
+        // The view's pass where the frame's tonemap is the view (or its cube's, where asked), else the pass
+        // without the view's code (see `gpu_view`).
         let view = (scene.globals.operator() == crate::color::Tonemap::View).then(|| scene.view_transform());
-        if view.as_ref().map(|v| v.key) != self.view_pass.key {
-            let compute = self.view_pass.compute.is_some();
-            let (layout, format) = (&self.tonemap_layout, self.target_format);
-            self.view_pass = match &view {
-                Some(view) => super::gpu_view::ViewPass::new(device, queue, layout, format, view, compute),
-                None => super::gpu_view::ViewPass::curves(device, queue, layout, format, compute),
-            };
+        let compute = self.view_pass.compute.is_some();
+        let (layout, format) = (&self.tonemap_layout, self.target_format);
+        // The cube is baked on a thread of its own the first time a frame asks for it: until it is, frames go
+        // through the exact view.
+        let cube = view.as_ref().filter(|_| self.view_from_cube).and_then(crate::view_lut::ViewLut::ready_or_bake);
+        let through_cube = cube.is_some();
+        if let Some(cube) = cube {
+            if self.cube_pass.as_ref().map(|p| p.key) != Some(PassKey::Cube(cube.key)) {
+                self.cube_pass = Some(ViewPass::cube(device, queue, layout, format, &cube, compute));
+            }
+        } else {
+            let key = view.as_ref().map_or(PassKey::Curves, |v| PassKey::View(v.key));
+            if key != self.view_pass.key {
+                self.view_pass = match &view {
+                    Some(view) => ViewPass::new(device, queue, layout, format, view, compute),
+                    None => ViewPass::curves(device, queue, layout, format, compute),
+                };
+            }
         }
         let mut globals = scene.globals;
         globals.tonemap[2] = if self.target_format.is_srgb() { 0.0 } else { 1.0 };
@@ -873,10 +904,14 @@ impl FlareRenderer {
                 pass.set_bind_group(0, &groups.dirt, &[]);
                 pass.draw(0..3, 0..1);
             }
+            let tonemap = match &self.cube_pass {
+                Some(cube) if through_cube => cube,
+                _ => &self.view_pass,
+            };
             // The tonemap as compute where the target is an rgba8unorm storage texture (see `target_usage`).
             let storage_target = (target.texture().format() == wgpu::TextureFormat::Rgba8Unorm
                 && target.texture().usage().contains(wgpu::TextureUsages::STORAGE_BINDING))
-            .then_some(self.view_pass.compute.as_ref())
+            .then_some(tonemap.compute.as_ref())
             .flatten();
             if let Some((pipeline, output_layout)) = storage_target {
                 let output = device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -891,7 +926,7 @@ impl FlareRenderer {
                 let mut pass = frame.scoped_compute_pass("tonemap");
                 pass.set_pipeline(pipeline);
                 pass.set_bind_group(0, &groups.tonemap, &[]);
-                pass.set_bind_group(1, &self.view_pass.group, &[]);
+                pass.set_bind_group(1, &tonemap.group, &[]);
                 pass.set_bind_group(2, &output, &[]);
                 pass.dispatch_workgroups(size.width.div_ceil(8), size.height.div_ceil(8), 1);
             } else {
@@ -911,9 +946,9 @@ impl FlareRenderer {
                         ..Default::default()
                     },
                 );
-                pass.set_pipeline(&self.view_pass.pipeline);
+                pass.set_pipeline(&tonemap.pipeline);
                 pass.set_bind_group(0, &groups.tonemap, &[]);
-                pass.set_bind_group(1, &self.view_pass.group, &[]);
+                pass.set_bind_group(1, &tonemap.group, &[]);
                 pass.draw(0..3, 0..1);
             }
         }

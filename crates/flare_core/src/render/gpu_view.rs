@@ -4,16 +4,30 @@
 //! [`ViewTransform::key`]). A frame whose tonemap is one of FlareLab's curves gets the pass of no view
 //! ([`ViewPass::curves`]: the shader's `ocio_display` the identity, never called): a software rasteriser runs
 //! every side of a branch, masked, so a shader that holds the view's code costs it at every pixel whatever
-//! tonemap the frame picks. Where the device runs compute shaders it also gets the pass as compute (`cs_main`,
-//! writing an `rgba8unorm` storage texture: what the renderer uses when the target allows it), beside the
-//! fragment pipeline (`fs_main`) every other target gets.
+//! tonemap the frame picks. For the same reason a software adapter's drafts get the pass of the view baked
+//! into a cube ([`ViewPass::cube`], [`crate::view_lut`]), kept beside the exact view's so that neither is
+//! made again when the drafts stop. Where the device runs compute shaders it also gets the pass as compute
+//! (`cs_main`, writing an `rgba8unorm` storage texture: what the renderer uses when the target allows it),
+//! beside the fragment pipeline (`fs_main`) every other target gets.
 
+use crate::view_lut::ViewLut;
 use crate::view_transform::{ViewTransform, WGSL_GROUP, WgslShader};
+
+/// What a tonemap pass draws through.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum PassKey {
+    /// FlareLab's curves: no view's code.
+    Curves,
+    /// The exact view of this key ([`ViewTransform::key`]).
+    View(u64),
+    /// The cube baked from the view of this key.
+    Cube(u64),
+}
 
 /// The tonemap pipeline of one view and the resources its shader reads.
 pub(super) struct ViewPass {
-    /// The view's key; `None`: the pass of FlareLab's curves, without the view's code.
-    pub key: Option<u64>,
+    /// What it draws through.
+    pub key: PassKey,
     pub pipeline: wgpu::RenderPipeline,
     pub group: wgpu::BindGroup,
     /// The compute form and the layout of its group 2 (the target as a storage texture), where the device
@@ -32,7 +46,20 @@ impl ViewPass {
         view: &ViewTransform,
         compute: bool,
     ) -> Self {
-        Self::with_shader(device, queue, tonemap_layout, target_format, &view.shader, Some(view.key), compute)
+        Self::with_shader(device, queue, tonemap_layout, target_format, &view.shader, PassKey::View(view.key), compute)
+    }
+
+    /// The pass of the view baked into `cube` (a software adapter's drafts).
+    pub fn cube(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        tonemap_layout: &wgpu::BindGroupLayout,
+        target_format: wgpu::TextureFormat,
+        cube: &ViewLut,
+        compute: bool,
+    ) -> Self {
+        let shader = cube.shader();
+        Self::with_shader(device, queue, tonemap_layout, target_format, &shader, PassKey::Cube(cube.key), compute)
     }
 
     /// The pass for frames drawn through one of FlareLab's curves: no view's code in the shader.
@@ -45,7 +72,7 @@ impl ViewPass {
     ) -> Self {
         let identity =
             WgslShader { text: super::shaders::OCIO_IDENTITY_WGSL.to_owned(), textures: Vec::new(), uniforms: None };
-        Self::with_shader(device, queue, tonemap_layout, target_format, &identity, None, compute)
+        Self::with_shader(device, queue, tonemap_layout, target_format, &identity, PassKey::Curves, compute)
     }
 
     fn with_shader(
@@ -54,7 +81,7 @@ impl ViewPass {
         tonemap_layout: &wgpu::BindGroupLayout,
         target_format: wgpu::TextureFormat,
         shader: &WgslShader,
-        key: Option<u64>,
+        key: PassKey,
         compute: bool,
     ) -> Self {
         let stages = wgpu::ShaderStages::FRAGMENT | wgpu::ShaderStages::COMPUTE;

@@ -32,10 +32,10 @@
 //! finds, in closed form, where the shading can be non-zero and where it is the weight alone (no mask to look
 //! up): nothing is done outside the first, and a run of whole pixels in the second is added as second
 //! differences (O(1) a run), which the resolve sums along the row. On a hardware GPU each triangle is
-//! splatted by [`row_split`] invocations, each taking every n-th of its rows, and each row is resolved by a
+//! splatted by `row_split` invocations, each taking every n-th of its rows, and each row is resolved by a
 //! workgroup's scan (`resolve_box_scan`); a software adapter keeps one invocation per triangle and one per row
 //! (`resolve_box`), the same sums. The tracer is compiled once per kind of
-//! surface a lens has ([`TraceShapes`]). On a GPU it reads each job's path once per workgroup into workgroup
+//! surface a lens has (`TraceShapes`). On a GPU it reads each job's path once per workgroup into workgroup
 //! memory, all jobs in one dispatch; on a software adapter from uniform chunks of paths, a dispatch a chunk
 //! ([`GpuRayGrid::set_chunked_paths`]). A path longer than either holds (255 steps: every ghost of a lens of up
 //! to 85 surfaces) is [`GpuRayGridError::Path`], and the callers trace on the CPU. The jobs, the reflectance
@@ -46,7 +46,7 @@
 //! centres and drops collapsed triangles. Tests compare landings (the f32 drift, per lens) and images.
 //! **Limits**: a grid whose dispatch, vertex buffer or supersampled target exceeds the adapter's limits is
 //! refused with the limit named, before anything is dispatched; a frame's jobs are traced and drawn in batches
-//! that fit the largest storage buffer the adapter binds and its largest 2D texture ([`batches_of`]). A device
+//! that fit the largest storage buffer the adapter binds and its largest 2D texture (`batches_of`). A device
 //! lost on the way is [`GpuError::Lost`] (the command line then traces on the CPU).
 
 use super::buffers::{
@@ -335,7 +335,7 @@ impl GpuRayGrid {
 
     /// Splats each triangle with `n` invocations (1 to 64), each drawing every n-th of its rows, and resolves
     /// the rows by a workgroup's scan where `n` is above 1, instead of the device's own choice
-    /// ([`row_split`]): the same image (tests draw both on lavapipe).
+    /// (`row_split`): the same image (tests draw both on lavapipe).
     pub fn set_row_split(&mut self, device: &wgpu::Device, n: u32) {
         self.row_split = n.clamp(1, 64);
         (self.box_pipeline, self.resolve_pipeline) = box_pipelines(device, &self.box_module, self.row_split);

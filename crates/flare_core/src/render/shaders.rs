@@ -12,7 +12,8 @@
 //! software rasteriser would load lane by lane. A test parses every shader with
 //! naga and checks that the WGSL `Globals` has the Rust struct's size and member offsets. The tonemap pass is
 //! the one shader put together at run time: [`tonemap_wgsl`] puts the OCIO display transform's WGSL (made for
-//! the document's display and view) before `tonemap.wgsl`.
+//! the document's display and view, or `ocio_lut.wgsl` after its constants for the view's cube,
+//! [`crate::view_lut`]) before `tonemap.wgsl`; a test in `tests/colour.rs` validates it with the cube.
 
 /// The shared uniforms (prepended to the shaders below).
 pub const COMMON_WGSL: &str = include_str!("../../../../shaders/common.wgsl");
@@ -42,6 +43,10 @@ pub const TONEMAP_WGSL: &str = concat!(
     include_str!("../../../../shaders/ocio_identity.wgsl"),
     include_str!("../../../../shaders/tonemap.wgsl")
 );
+
+/// The OCIO view baked into a cube ([`crate::view_lut`], which puts the shaper's constants before it): the
+/// tonemap's `ocio_display` for a software adapter's drafts.
+pub const OCIO_LUT_WGSL: &str = include_str!("../../../../shaders/ocio_lut.wgsl");
 
 /// The identity in place of the OCIO display transform: the tonemap pass of frames drawn through FlareLab's own
 /// curves, which never call it (`render::gpu_view::ViewPass::curves`).
