@@ -15,10 +15,13 @@
 //! [`MAX`] with a linear toe below [`OFFSET`]: a stop of light covers about the same number of nodes from
 //! the darkest shadow to the brightest flare core. A channel below 0 (a plate colour outside the working
 //! gamut) is looked up as 0, one above [`MAX`] as [`MAX`]. The lookup is trilinear between the 8 nodes
-//! around the shaped colour, read by `textureLoad` (no filtering sampler, so no format or feature
-//! the adapter may lack); [`ViewLut::apply`] is its CPU twin, step for step in f32. The cube's texel of node
-//! (r, g, b) is at index `r + size * (g + size * b)`, the order of a 3D texture's x, y and z. How far the
-//! cube is from the exact view is measured by the tests (in display code values, see `tests/colour.rs`).
+//! around the shaped colour: on the GPU one `textureSampleLevel` of an `Rgba16Float` 3D texture through a
+//! linear sampler (filterable on every adapter; lavapipe samples it in a third less time than 8
+//! `textureLoad`s of `Rgba32Float`), so the cube's texels are rounded to 16-bit floats when baked (at most
+//! 1/2048 of a display value). [`ViewLut::apply`] is its CPU twin, in f32: the same texels and weights (a
+//! GPU's sampler may round the weights to 8 bits of a cell; the tests bound the difference). The texel of
+//! node (r, g, b) is at index `r + size * (g + size * b)`, the order of a 3D texture's x, y and z. How far
+//! the cube is from the exact view is measured by the tests (in display code values, see `tests/colour.rs`).
 
 use std::sync::{Arc, Mutex};
 
@@ -32,6 +35,8 @@ pub const OFFSET: f32 = 1.0 / 4096.0;
 pub const MAX: f32 = 65504.0;
 /// The cube's binding in the tonemap's view group ([`crate::view_transform::WGSL_GROUP`]).
 pub const BINDING: u32 = 1;
+/// Its sampler's binding (linear, clamped to the edge).
+pub const SAMPLER_BINDING: u32 = 2;
 
 /// `log2(OFFSET)` and `1 / (log2(MAX + OFFSET) - log2(OFFSET))`: the shaper's two constants.
 fn shaper_constants() -> (f32, f32) {
@@ -88,7 +93,7 @@ pub struct ViewLut {
     pub key: u64,
     /// Nodes per side (at least 2).
     pub size: usize,
-    /// `size`^3 display values (display-encoded, not clamped), red fastest.
+    /// `size`^3 display values (display-encoded, not clamped, rounded to 16-bit floats), red fastest.
     pub texels: Vec<[f32; 4]>,
 }
 
@@ -107,7 +112,9 @@ impl ViewLut {
         }
         view.apply_rgba(&mut texels);
         for t in &mut texels {
-            // `apply` gives 0 for what is not finite: every texel is finite.
+            // `apply` gives 0 for what is not finite, and a display value is far below f16's largest: every
+            // texel is finite, and what the GPU's texture holds.
+            *t = t.map(|v| half::f16::from_f32(v).to_f32());
             t[3] = 1.0;
         }
         Self { key: view.key, size, texels }
@@ -142,7 +149,7 @@ impl ViewLut {
     }
 
     /// The display value of one working-space colour looked up in the cube: the CPU twin of `ocio_display`
-    /// in `shaders/ocio_lut.wgsl` (the same shaper, the same trilinear weights, in f32).
+    /// in `shaders/ocio_lut.wgsl` (the same shaper, and the trilinear filter its sampler applies, in f32).
     pub fn apply(&self, rgb: [f32; 3]) -> [f32; 3] {
         let last = (self.size - 1) as f32;
         let mut base = [0usize; 3];
@@ -165,7 +172,7 @@ impl ViewLut {
     }
 
     /// The cube as the tonemap's `ocio_display`: `shaders/ocio_lut.wgsl` after its shaper's constants, the
-    /// cube an `Rgba32Float` 3D texture at [`BINDING`].
+    /// cube a filtered (`Rgba16Float`) 3D texture at [`BINDING`], its sampler at [`SAMPLER_BINDING`].
     pub fn shader(&self) -> WgslShader {
         let (low, inverse_range) = shaper_constants();
         let text = format!(
@@ -182,8 +189,10 @@ impl ViewLut {
                 size: [side; 3],
                 rgba: true,
                 bytes: bytemuck::cast_slice(&self.texels).to_vec(),
+                filtered: true,
             }],
             uniforms: None,
+            sampler: Some(SAMPLER_BINDING),
         }
     }
 }

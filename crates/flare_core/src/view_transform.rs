@@ -87,7 +87,11 @@ pub struct WgslTexture {
     pub size: [u32; 3],
     /// `Rgba32Float` when true, else `R32Float`.
     pub rgba: bool,
+    /// The texels as f32 values.
     pub bytes: Vec<u8>,
+    /// Uploaded as 16-bit floats (`Rgba16Float`, `R16Float`) and filterable, for the shader's sampler
+    /// ([`WgslShader::sampler`]); else 32-bit and read by `textureLoad` (OCIO's own).
+    pub filtered: bool,
 }
 
 /// The OCIO display transform as WGSL: `fn ocio_display(inPixel: vec4<f32>) -> vec4<f32>`, its textures and
@@ -97,6 +101,9 @@ pub struct WgslShader {
     pub text: String,
     pub textures: Vec<WgslTexture>,
     pub uniforms: Option<Vec<u8>>,
+    /// The binding of a linear, clamped sampler in [`WGSL_GROUP`], where the shader samples its filtered
+    /// textures (OCIO's shaders have none).
+    pub sampler: Option<u32>,
 }
 
 /// What the app's menus offer for a config.
@@ -362,6 +369,7 @@ fn wgsl(processor: &ocio::Processor) -> Result<WgslShader, ocio::Error> {
             size: [t.width, t.height, t.depth],
             rgba: t.format == ocio::gpu::wgsl::WgslTextureFormat::Rgba32Float,
             bytes: t.texel_data(values)?,
+            filtered: false,
         });
         Ok(())
     };
@@ -383,7 +391,7 @@ fn wgsl(processor: &ocio::Processor) -> Result<WgslShader, ocio::Error> {
         text = rewritten;
         textures.extend(tables);
     }
-    Ok(WgslShader { text, textures, uniforms })
+    Ok(WgslShader { text, textures, uniforms, sampler: None })
 }
 
 /// `text` with each module-scope `var<private> NAME: array<f32, N> = array<f32, N>(...)` made a 1D `R32Float`
@@ -449,6 +457,7 @@ fn private_arrays_as_textures(text: &str, first_binding: u32) -> Option<(String,
             size: [values.len() as u32, 1, 1],
             rgba: false,
             bytes: bytemuck::cast_slice(&values).to_vec(),
+            filtered: false,
         });
     }
     (!textures.is_empty()).then_some((out, textures))

@@ -70,8 +70,12 @@ impl ViewPass {
         target_format: wgpu::TextureFormat,
         compute: bool,
     ) -> Self {
-        let identity =
-            WgslShader { text: super::shaders::OCIO_IDENTITY_WGSL.to_owned(), textures: Vec::new(), uniforms: None };
+        let identity = WgslShader {
+            text: super::shaders::OCIO_IDENTITY_WGSL.to_owned(),
+            textures: Vec::new(),
+            uniforms: None,
+            sampler: None,
+        };
         Self::with_shader(device, queue, tonemap_layout, target_format, &identity, PassKey::Curves, compute)
     }
 
@@ -109,10 +113,18 @@ impl ViewPass {
                 binding: t.binding,
                 visibility: stages,
                 ty: wgpu::BindingType::Texture {
-                    sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                    sample_type: wgpu::TextureSampleType::Float { filterable: t.filtered },
                     view_dimension: dimension(t.dimensions).1,
                     multisampled: false,
                 },
+                count: None,
+            });
+        }
+        if let Some(binding) = shader.sampler {
+            entries.push(wgpu::BindGroupLayoutEntry {
+                binding,
+                visibility: stages,
+                ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
                 count: None,
             });
         }
@@ -123,7 +135,18 @@ impl ViewPass {
             .iter()
             .map(|t| {
                 let (dim, view_dim) = dimension(t.dimensions);
-                let format = if t.rgba { wgpu::TextureFormat::Rgba32Float } else { wgpu::TextureFormat::R32Float };
+                // A filtered texture's f32 texels go up as 16-bit floats (filterable without a feature).
+                let (format, bytes_per_texel, bytes) = match (t.filtered, t.rgba) {
+                    (false, true) => (wgpu::TextureFormat::Rgba32Float, 16, t.bytes.clone()),
+                    (false, false) => (wgpu::TextureFormat::R32Float, 4, t.bytes.clone()),
+                    (true, rgba) => {
+                        let values: Vec<f32> = bytemuck::pod_collect_to_vec(&t.bytes);
+                        let halves: Vec<half::f16> = values.iter().map(|v| half::f16::from_f32(*v)).collect();
+                        let format =
+                            if rgba { wgpu::TextureFormat::Rgba16Float } else { wgpu::TextureFormat::R16Float };
+                        (format, if rgba { 8 } else { 2 }, bytemuck::cast_slice(&halves).to_vec())
+                    }
+                };
                 let size = wgpu::Extent3d {
                     width: t.size[0].max(1),
                     height: t.size[1].max(1),
@@ -139,7 +162,6 @@ impl ViewPass {
                     usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
                     view_formats: &[],
                 });
-                let bytes_per_texel = if t.rgba { 16 } else { 4 };
                 queue.write_texture(
                     wgpu::TexelCopyTextureInfo {
                         texture: &texture,
@@ -147,7 +169,7 @@ impl ViewPass {
                         origin: wgpu::Origin3d::ZERO,
                         aspect: wgpu::TextureAspect::All,
                     },
-                    &t.bytes,
+                    &bytes,
                     wgpu::TexelCopyBufferLayout {
                         offset: 0,
                         bytes_per_row: Some(size.width * bytes_per_texel),
@@ -184,6 +206,19 @@ impl ViewPass {
                 resource: wgpu::BindingResource::TextureView(v),
             })
             .collect();
+        let sampler = shader.sampler.map(|binding| {
+            let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+                label: Some("ocio view"),
+                mag_filter: wgpu::FilterMode::Linear,
+                min_filter: wgpu::FilterMode::Linear,
+                ..Default::default()
+            });
+            (binding, sampler)
+        });
+        if let Some((binding, sampler)) = &sampler {
+            group_entries
+                .push(wgpu::BindGroupEntry { binding: *binding, resource: wgpu::BindingResource::Sampler(sampler) });
+        }
         if let Some(buffer) = &uniform {
             group_entries.push(wgpu::BindGroupEntry { binding: 0, resource: buffer.as_entire_binding() });
         }
