@@ -501,6 +501,33 @@ mod tests {
         assert_eq!(hues.size, [363, 1, 1]);
     }
 
+    proptest::proptest! {
+        /// Whatever text OCIO writes, the rewrite never panics, and a table it makes holds only finite values.
+        #[test]
+        fn the_rewrite_of_any_text_never_panics(
+            head in "[a-z_ ]{0,6}",
+            values in proptest::collection::vec(-1e6f32..1e6, 0..5),
+            tail in "[\\[\\]();:=,<>a-z0-9 ]{0,40}",
+            mangle in 0usize..60,
+        ) {
+            let list: Vec<String> = values.iter().map(|v| format!("{v:?}f")).collect();
+            let mut text = format!(
+                "{head}var<private> t: array<f32, {n}> = array<f32, {n}>({});\nfn f(i: i32) -> f32 {{ return t[i]; }}{tail}",
+                list.join(", "),
+                n = values.len()
+            );
+            // Cut off the end (the text is ASCII): a declaration broken off is kept as OCIO wrote it.
+            text.truncate(text.len().saturating_sub(mangle));
+            if let Some((out, tables)) = private_arrays_as_textures(&text, 1) {
+                proptest::prop_assert!(!out.contains("var<private>"));
+                for t in tables {
+                    let v: Vec<f32> = bytemuck::pod_collect_to_vec(&t.bytes);
+                    proptest::prop_assert!(v.iter().all(|x| x.is_finite()));
+                }
+            }
+        }
+    }
+
     #[test]
     fn unknown_names_are_refused_naming_the_field() {
         let bad = |doc: ColorDoc| ViewTransform::new(&doc).unwrap_err().field;
