@@ -7,7 +7,14 @@
 //! accumulation drawn at a fraction of the frame is brought to the frame's size ([`HdrImage::resampled`]) and
 //! how a background plate of any size is laid under the frame. [`DisplayImage`] is what a PNG holds: 8-bit
 //! sRGB. [`GhostMoments`] is one ghost's luminance-weighted energy and first moments, gathered by the
-//! renderers and compared by [`crate::metrics`].
+//! renderers and compared by [`crate::metrics`]. [`finite_half`] is how every value bound for a 16-bit GPU
+//! texture is made one.
+
+/// `v` as a 16-bit float a GPU texture may hold: what is not finite becomes 0, and what lies beyond f16's range
+/// its largest value of that sign (never an infinity).
+pub fn finite_half(v: f32) -> half::f16 {
+    if v.is_finite() { half::f16::from_f32(v.clamp(-65504.0, 65504.0)) } else { half::f16::ZERO }
+}
 
 /// A linear HDR image: `width` x `height` RGBA f32, row-major from the top.
 #[derive(Clone, Debug, PartialEq)]
@@ -174,6 +181,15 @@ impl GhostMoments {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_half_for_the_gpu_is_always_finite() {
+        assert_eq!(finite_half(1.5).to_f32(), 1.5);
+        assert_eq!(finite_half(1e9).to_f32(), 65504.0);
+        assert_eq!(finite_half(-1e9).to_f32(), -65504.0);
+        assert_eq!(finite_half(f32::INFINITY).to_f32(), 0.0);
+        assert_eq!(finite_half(f32::NAN).to_f32(), 0.0);
+    }
 
     #[test]
     fn resampling_at_the_same_size_is_exact_and_scales_rgb_only() {

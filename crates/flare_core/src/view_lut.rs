@@ -112,9 +112,9 @@ impl ViewLut {
         }
         view.apply_rgba(&mut texels);
         for t in &mut texels {
-            // `apply` gives 0 for what is not finite; a value beyond f16's range (a view of some config that
-            // leaves light unbounded) is clamped to it: every texel is finite, and what the GPU's texture holds.
-            *t = t.map(|v| half::f16::from_f32(v.clamp(-65504.0, 65504.0)).to_f32());
+            // What the GPU's texture holds: a 16-bit float, finite (a value beyond f16's range, from a view of
+            // some config that leaves light unbounded, clamped to it).
+            *t = t.map(|v| crate::image::finite_half(v).to_f32());
             t[3] = 1.0;
         }
         Self { key: view.key, size, texels }

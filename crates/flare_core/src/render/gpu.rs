@@ -228,8 +228,7 @@ pub fn test_context() -> Option<GpuContext> {
 }
 
 fn half_floats(rgba: &[[f32; 4]]) -> Vec<u8> {
-    let halves: Vec<half::f16> =
-        rgba.iter().flat_map(|t| t.map(|v| half::f16::from_f32(if v.is_finite() { v } else { 0.0 }))).collect();
+    let halves: Vec<half::f16> = rgba.iter().flat_map(|t| t.map(crate::image::finite_half)).collect();
     bytemuck::cast_slice(&halves).to_vec()
 }
 

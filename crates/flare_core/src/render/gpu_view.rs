@@ -141,16 +141,7 @@ impl ViewPass {
                     (false, false) => (wgpu::TextureFormat::R32Float, 4, t.bytes.clone()),
                     (true, rgba) => {
                         let values: Vec<f32> = bytemuck::pod_collect_to_vec(&t.bytes);
-                        let halves: Vec<half::f16> = values
-                            .iter()
-                            .map(|v| {
-                                if v.is_finite() {
-                                    half::f16::from_f32(v.clamp(-65504.0, 65504.0))
-                                } else {
-                                    half::f16::ZERO
-                                }
-                            })
-                            .collect();
+                        let halves: Vec<half::f16> = values.into_iter().map(crate::image::finite_half).collect();
                         let format =
                             if rgba { wgpu::TextureFormat::Rgba16Float } else { wgpu::TextureFormat::R16Float };
                         (format, if rgba { 8 } else { 2 }, bytemuck::cast_slice(&halves).to_vec())
