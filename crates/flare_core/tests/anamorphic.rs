@@ -241,7 +241,7 @@ mod stress {
     use proptest::prelude::*;
 
     proptest! {
-        #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+        #![proptest_config(ProptestConfig { cases: common::cases_or(64), ..ProptestConfig::default() })]
         #[test]
         fn toroids_never_give_nan(
             radii in proptest::collection::vec(prop_oneof![Just(0.0), -400.0..-12.0f64, 12.0..400.0f64], 4),

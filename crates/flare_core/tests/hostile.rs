@@ -300,12 +300,8 @@ colorspaces:
     encoding: scene-linear
 "#;
 
-fn cases() -> u32 {
-    std::env::var("PROPTEST_CASES").ok().and_then(|s| s.parse().ok()).unwrap_or(64)
-}
-
 proptest! {
-    #![proptest_config(ProptestConfig { cases: cases(), ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: common::cases_or(64), ..ProptestConfig::default() })]
 
     /// Every lens format: a mutated file is refused in one line or read into a valid, finite lens.
     #[test]

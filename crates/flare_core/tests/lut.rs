@@ -400,7 +400,7 @@ fn fuzz_source() -> Vec<u8> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 256, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: common::cases_or(256), ..ProptestConfig::default() })]
     /// Any truncation or corruption of a valid file is an error or (where it hits nothing checked) a valid LUT,
     /// never a panic or a huge allocation.
     #[test]

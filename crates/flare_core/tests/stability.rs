@@ -91,7 +91,7 @@ fn quarter_wave() -> Coating {
 proptest! {
     // PROPTEST_CASES=N runs more cases (the closing note reports a run of 1000).
     #![proptest_config(ProptestConfig {
-        cases: std::env::var("PROPTEST_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(32),
+        cases: common::cases_or(32),
         ..ProptestConfig::default()
     })]
 
@@ -120,7 +120,7 @@ proptest! {
 
 /// Cases a counted property runs (`PROPTEST_CASES=N` for more; the closing note reports a run of 1000).
 fn cases() -> u32 {
-    std::env::var("PROPTEST_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(32)
+    common::cases_or(32)
 }
 
 /// Runs `property` on `cases()` values of `strategy`; the property says whether the case was really exercised

@@ -5,6 +5,12 @@
 use flare_core::optics::{Lens, Medium, Surface};
 use proptest::prelude::*;
 
+/// The number of cases a property test runs: `PROPTEST_CASES` when set (a sweep for rare failures, e.g.
+/// `PROPTEST_CASES=5000`), else the suite's own `default`. Every property test of the suites reads it.
+pub fn cases_or(default: u32) -> u32 {
+    std::env::var("PROPTEST_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(default)
+}
+
 pub fn surface(radius_mm: f64, thickness_mm: f64, medium: Medium, semi_aperture_mm: f64) -> Surface {
     Surface::new(radius_mm, Some(thickness_mm), medium, semi_aperture_mm)
 }
