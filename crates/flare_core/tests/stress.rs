@@ -35,7 +35,11 @@ fn check_finite(result: &flare_core::optics::TraceResult, n: usize) {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: common::cases_or(48), max_global_rejects: 100 * common::cases_or(48), ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig {
+        cases: common::cases_or(48),
+        max_global_rejects: 100 * common::cases_or(48),
+        ..ProptestConfig::default()
+    })]
 
     /// Random lenses, angles up to 89 degrees, pupil points beyond the rim: no panic, no NaN or infinity.
     #[test]
