@@ -91,7 +91,7 @@ fn quarter_wave() -> Coating {
 proptest! {
     // PROPTEST_CASES=N runs more cases (the closing note reports a run of 1000).
     #![proptest_config(ProptestConfig {
-        cases: common::cases_or(32),
+        cases: cases(),
         ..ProptestConfig::default()
     })]
 
