@@ -1,9 +1,9 @@
 // Ray grids on the GPU, pass 2 as compute: each grid triangle box-filtered as the CPU twin does it
 // (`splat_triangle` in crates/flare_core/src/raytrace/splat.rs): each pixel the triangle touches gets the
 // triangle's irradiance x the area it covers of the pixel, shaded at the centroid of that part; the pixels a row
-// covers whole are shaded at their centres. The CPU cuts polygons; here each part's area and centroid come in
-// closed form from the triangle's edges (`band_part`), which gives the same numbers without per-invocation
-// arrays or data-dependent loops over vertices. No supersampling: the box filter is exact.
+// covers whole are shaded at their centres. Each part's area and centroid come in closed form from the
+// triangle's edges (`band_part`; the CPU's `Band::part`, the same steps in f64), without per-invocation arrays
+// or data-dependent loops over vertices. No supersampling: the box filter is exact.
 // Per row, the span where the shading can be non-zero and the span where it is surely the weight alone (not
 // vignetted, every stop crossing where the mask is fully open) come in closed form (`row_spans`): pixels outside
 // the first get nothing and no work; in the second no mask is looked up, and a run of whole pixels there, whose
@@ -121,9 +121,8 @@ fn shade(s: Shader, p: vec2<f32>) -> f32 {
 
 // ---- the part of a triangle in one pixel, in closed form ----
 //
-// The CPU twin cuts the triangle into rows and each row into pixels (Sutherland-Hodgman) and takes each piece's
-// area and centroid. Here the same area and centroid come from the triangle's three edges by Green's theorem,
-// without cutting: with G(x) = clamp(x, 0, 1) in the pixel's own unit square,
+// The area and centroid of the triangle's part in a pixel come from its three edges by Green's theorem, without
+// cutting (the CPU twin's `Band` in splat.rs, in f64): with G(x) = clamp(x, 0, 1) in the pixel's own unit square,
 //   area         = sum over edges of  integral G(x_e(y)) dy
 //   area x cx    = sum over edges of  integral G(x_e(y))^2 / 2 dy
 //   area x cy    = sum over edges of  integral y G(x_e(y)) dy

@@ -787,9 +787,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     match &traced {
         Some(t) => {
             // Ray-traced ghosts replace the paraxial accumulation; starburst, tonemap and writer are the same.
-            let (drawn, how) = t.draw(&device, &frame, &sources)?;
-            eprintln!("{how}");
-            t.write(&device, &frame, &sources, &drawn, choice, &args.out)?;
+            eprintln!("{}", t.render_to_file(&device, &frame, &sources, choice, &args.out)?);
         }
         None => {
             frame::render_to_file(&mut device, &frame, &sources, choice, &args.out)?;

@@ -26,6 +26,9 @@
 //! `dirt` (the front dirt's glow, its share of the flare, only for a dirty lens: [`crate::dirt`]),
 //! `plate` (the plate x `2^plate_ev`) and the composite `flare + plate`, which is what the display image
 //! shows through the request's display transform ([`FrameRequest::view`], the OCIO view, or a tonemap curve); [`ghost_layers`] adds one layer per drawn ghost, each drawn alone on the same device.
+//! A file of linear layers only (an EXR) is written from the accumulation alone ([`render_to_file`] through
+//! [`Device::draw_linear`] and [`write_linear_with`]): the CPU twin then makes no display image, whose OCIO
+//! view was most of an EXR's time (the layers are the same bytes either way).
 
 use crate::flare::PreparedFlare;
 use crate::ghost::{GhostFrame, Sensor, light_slopes_for_frame_position};
@@ -365,26 +368,32 @@ pub struct Drawn {
 impl Drawn {
     /// The frame's linear layers (no ghost layers; see [`ghost_layers`]).
     pub fn layers(&self, frame: &Frame, sources: &Sources) -> FrameLayers {
-        let scene = &frame.scene;
-        let flare = cpu::flare_layer(scene, &self.hdr);
-        let mut starburst = HdrImage::black(scene.hdr_width, scene.hdr_height);
-        cpu::starburst_pass(scene, &sources.flare.starburst_texture, &mut starburst);
-        let starburst = cpu::flare_layer(scene, &starburst);
-        let dirt = sources.flare.dirt.as_ref().filter(|_| scene.has_dirt_glow()).map(|d| {
-            let mut glow = HdrImage::black(scene.hdr_width, scene.hdr_height);
-            cpu::dirt_pass(scene, Some(d), &mut glow);
-            cpu::flare_layer(scene, &glow)
-        });
-        let plate = sources.plate.map(|p| cpu::plate_layer(scene, p));
-        let mut composite = match &plate {
-            Some(p) => flare.plus(p),
-            None => flare.clone(),
-        };
-        for p in &mut composite.pixels {
-            p[3] = 1.0;
-        }
-        FrameLayers { composite, flare, starburst, dirt, plate, ghosts: Vec::new() }
+        linear_layers(frame, sources, &self.hdr)
     }
+}
+
+/// The linear layers of a frame whose accumulation is `hdr` (no ghost layers; see [`ghost_layers`]): what an
+/// EXR holds, and all it needs of a drawn frame.
+pub fn linear_layers(frame: &Frame, sources: &Sources, hdr: &HdrImage) -> FrameLayers {
+    let scene = &frame.scene;
+    let flare = cpu::flare_layer(scene, hdr);
+    let mut starburst = HdrImage::black(scene.hdr_width, scene.hdr_height);
+    cpu::starburst_pass(scene, &sources.flare.starburst_texture, &mut starburst);
+    let starburst = cpu::flare_layer(scene, &starburst);
+    let dirt = sources.flare.dirt.as_ref().filter(|_| scene.has_dirt_glow()).map(|d| {
+        let mut glow = HdrImage::black(scene.hdr_width, scene.hdr_height);
+        cpu::dirt_pass(scene, Some(d), &mut glow);
+        cpu::flare_layer(scene, &glow)
+    });
+    let plate = sources.plate.map(|p| cpu::plate_layer(scene, p));
+    let mut composite = match &plate {
+        Some(p) => flare.plus(p),
+        None => flare.clone(),
+    };
+    for p in &mut composite.pixels {
+        p[3] = 1.0;
+    }
+    FrameLayers { composite, flare, starburst, dirt, plate, ghosts: Vec::new() }
 }
 
 /// Why a frame could not be drawn or written.
@@ -523,15 +532,34 @@ impl Device {
     /// Draws `frame` (see the module documentation). A GPU whose device is lost (before or during the draw)
     /// is dropped for the CPU twin, which draws this frame and the next ones; [`Self::name`] says why.
     pub fn draw(&mut self, frame: &Frame, sources: &Sources) -> Result<Drawn, GpuError> {
+        self.draw_as(frame, sources, Ok, || draw_cpu(frame, sources))
+    }
+
+    /// The frame's accumulation alone, as [`Self::draw`] makes it, for a file that holds only linear layers
+    /// (an EXR): the CPU twin leaves out its tonemap pass, whose display transform (the OCIO view, every pixel
+    /// through it) is most of a CPU frame's time and none of an EXR's; a GPU draws as ever (its tonemap is a
+    /// pass of its own, a small share of the frame).
+    pub fn draw_linear(&mut self, frame: &Frame, sources: &Sources) -> Result<HdrImage, GpuError> {
+        self.draw_as(frame, sources, |drawn| Ok(drawn.hdr), || draw_cpu_hdr(frame, sources))
+    }
+
+    /// A GPU's drawing through `on_gpu`, or the CPU twin's (`on_cpu`); a lost GPU is dropped for the twin.
+    fn draw_as<T>(
+        &mut self,
+        frame: &Frame,
+        sources: &Sources,
+        on_gpu: impl FnOnce(Drawn) -> Result<T, GpuError>,
+        on_cpu: impl FnOnce() -> T,
+    ) -> Result<T, GpuError> {
         match self {
             Self::Gpu(g) => match g.draw(frame, sources) {
                 Err(GpuError::Lost(reason)) => {
                     *self = Self::LostGpu(reason);
-                    Ok(draw_cpu(frame, sources))
+                    Ok(on_cpu())
                 }
-                drawn => drawn,
+                drawn => drawn.and_then(on_gpu),
             },
-            Self::Cpu | Self::LostGpu(_) => Ok(draw_cpu(frame, sources)),
+            Self::Cpu | Self::LostGpu(_) => Ok(on_cpu()),
         }
     }
 }
@@ -550,12 +578,18 @@ pub fn draw_cpu(frame: &Frame, sources: &Sources) -> Drawn {
 /// [`draw_cpu`] adds them. Per-ghost gains are the trace's to apply (a ray-traced image holds its ghosts summed):
 /// callers trace with the request's `ghost_gains` ([`crate::raytrace::Ghosts::Weighted`]).
 pub fn drawn_with_traced_ghosts(frame: &Frame, sources: &Sources, ghosts: HdrImage) -> Drawn {
+    let hdr = linear_with_traced_ghosts(frame, sources, ghosts);
+    let display = cpu::tonemap_pass(&frame.scene, &hdr, sources.plate);
+    Drawn { hdr, display }
+}
+
+/// [`drawn_with_traced_ghosts`]'s accumulation alone (no tonemap pass): what an EXR of it is written from.
+pub fn linear_with_traced_ghosts(frame: &Frame, sources: &Sources, ghosts: HdrImage) -> HdrImage {
     let scene = &frame.scene;
     let mut hdr = traced_accumulation(frame, &ghosts);
     cpu::starburst_pass(scene, &sources.flare.starburst_texture, &mut hdr);
     cpu::dirt_pass(scene, sources.flare.dirt.as_ref(), &mut hdr);
-    let display = cpu::tonemap_pass(scene, &hdr, sources.plate);
-    Drawn { hdr, display }
+    hdr
 }
 
 /// Ray-traced ghosts (linear, before the light's gain, any size) as the frame's accumulation: at its size,
@@ -674,19 +708,29 @@ pub fn check_output(path: &std::path::Path, choice: LayerChoice) -> Result<crate
     Ok(kind)
 }
 
-/// Draws `frame` on `device` and writes it to `path` through [`crate::output::write_frame`] (PNG: the
-/// tonemapped composite; EXR: the layers). Returns what was drawn.
+/// Draws `frame` on `device` and writes it to `path` through the one writer (PNG: the tonemapped composite,
+/// [`crate::output::write_frame`]; EXR: the linear layers, [`write_linear_with`], from the accumulation alone:
+/// [`Device::draw_linear`], no display image made that the file would not hold).
 pub fn render_to_file(
     device: &mut Device,
     frame: &Frame,
     sources: &Sources,
     choice: LayerChoice,
     path: &std::path::Path,
-) -> Result<Drawn, FrameError> {
-    check_output(path, choice)?;
-    let drawn = device.draw(frame, sources)?;
-    write_drawn(device, frame, sources, &drawn, choice, path)?;
-    Ok(drawn)
+) -> Result<(), FrameError> {
+    match check_output(path, choice)? {
+        crate::output::ImageKind::Png => {
+            let drawn = device.draw(frame, sources)?;
+            crate::output::write_frame(path, &drawn.display, None)?;
+        }
+        crate::output::ImageKind::Exr => {
+            let hdr = device.draw_linear(frame, sources)?;
+            write_linear_with(frame, sources, &hdr, path, choice.exr, |sink| {
+                asked_ghost_layers(device, frame, sources, choice, sink)
+            })?;
+        }
+    }
+    Ok(())
 }
 
 /// Writes a frame already drawn (by [`Device::draw`], or by a ray-traced method into the same kind of
@@ -700,8 +744,19 @@ pub fn write_drawn(
     path: &std::path::Path,
 ) -> Result<(), FrameError> {
     write_drawn_with(frame, sources, drawn, path, choice.exr, |sink| {
-        if choice.ghosts { ghost_layers_into(device, frame, sources, choice.exr.pixel_type, sink) } else { Ok(()) }
+        asked_ghost_layers(device, frame, sources, choice, sink)
     })
+}
+
+/// The ghost layers `choice` asks for ([`ghost_layers_into`]), none unless it asks.
+fn asked_ghost_layers(
+    device: &mut Device,
+    frame: &Frame,
+    sources: &Sources,
+    choice: LayerChoice,
+    sink: &mut LayerSink,
+) -> Result<(), FrameError> {
+    if choice.ghosts { ghost_layers_into(device, frame, sources, choice.exr.pixel_type, sink) } else { Ok(()) }
 }
 
 /// [`write_drawn`] with the ghost layers from `ghost_layers` (called only for an EXR file): the drawn ghosts
@@ -716,12 +771,25 @@ pub fn write_drawn_with(
 ) -> Result<(), FrameError> {
     match crate::output::ImageKind::from_path(path)? {
         crate::output::ImageKind::Png => crate::output::write_frame(path, &drawn.display, None)?,
-        crate::output::ImageKind::Exr => {
-            let mut file = crate::output::ExrLayers::new(&drawn.layers(frame, sources), exr);
-            ghost_layers(&mut |name, image| file.add_ghost(&name, &image))?;
-            file.write(path)?;
-        }
+        crate::output::ImageKind::Exr => write_linear_with(frame, sources, &drawn.hdr, path, exr, ghost_layers)?,
     }
+    Ok(())
+}
+
+/// Writes the EXR of a frame whose accumulation is `hdr` ([`linear_layers`], then the ghost layers from
+/// `ghost_layers`): what [`write_drawn_with`] does for an EXR, for a frame drawn without its display image
+/// ([`Device::draw_linear`], [`linear_with_traced_ghosts`]).
+pub fn write_linear_with(
+    frame: &Frame,
+    sources: &Sources,
+    hdr: &HdrImage,
+    path: &std::path::Path,
+    exr: crate::output::ExrSettings,
+    ghost_layers: impl FnOnce(&mut LayerSink) -> Result<(), FrameError>,
+) -> Result<(), FrameError> {
+    let mut file = crate::output::ExrLayers::new(&linear_layers(frame, sources, hdr), exr);
+    ghost_layers(&mut |name, image| file.add_ghost(&name, &image))?;
+    file.write(path)?;
     Ok(())
 }
 

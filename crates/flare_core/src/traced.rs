@@ -167,6 +167,47 @@ impl TracedGhosts {
         Ok(())
     }
 
+    /// `frame` with its ghosts traced, written to `path` through the one writer (what `render` and a CPU
+    /// sequence do), and the tracing's line. For an EXR the frame is made without its display image
+    /// ([`frame::linear_with_traced_ghosts`]: the file holds linear layers only), as
+    /// [`frame::render_to_file`] does for drawn ghosts.
+    pub fn render_to_file(
+        &self,
+        device: &Device,
+        frame: &Frame,
+        sources: &Sources,
+        choice: LayerChoice,
+        path: &std::path::Path,
+    ) -> Result<String, FrameError> {
+        match frame::check_output(path, choice)? {
+            crate::output::ImageKind::Png => {
+                let (drawn, how) = self.draw(device, frame, sources)?;
+                self.write(device, frame, sources, &drawn, choice, path)?;
+                Ok(how)
+            }
+            crate::output::ImageKind::Exr => {
+                let traced = self.trace(device, frame)?;
+                let hdr = frame::linear_with_traced_ghosts(frame, sources, traced.hdr);
+                frame::write_linear_with(frame, sources, &hdr, path, choice.exr, |sink| {
+                    self.ghost_sink(device, frame, sources, choice, sink)
+                })?;
+                Ok(traced.how)
+            }
+        }
+    }
+
+    /// The ghost layers `choice` asks for, into `sink` (none unless it asks).
+    fn ghost_sink(
+        &self,
+        device: &Device,
+        frame: &Frame,
+        sources: &Sources,
+        choice: LayerChoice,
+        sink: &mut frame::LayerSink,
+    ) -> Result<(), FrameError> {
+        if choice.ghosts { self.ghost_layers_into(device, frame, sources, choice.exr.pixel_type, sink) } else { Ok(()) }
+    }
+
     /// Writes a frame drawn by [`Self::draw`] to `path` through the one writer; its ghost layers, when asked,
     /// traced ([`Self::ghost_layers`]).
     pub fn write(
@@ -179,11 +220,7 @@ impl TracedGhosts {
         path: &std::path::Path,
     ) -> Result<(), FrameError> {
         frame::write_drawn_with(frame, sources, drawn, path, choice.exr, |sink| {
-            if choice.ghosts {
-                self.ghost_layers_into(device, frame, sources, choice.exr.pixel_type, sink)
-            } else {
-                Ok(())
-            }
+            self.ghost_sink(device, frame, sources, choice, sink)
         })
     }
 }

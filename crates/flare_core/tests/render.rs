@@ -297,9 +297,8 @@ fn a_frame_is_written_as_png_and_as_a_layered_exr() {
         let path = dir.path().join(name);
         // 32-bit floats: the layers' sums below are exact.
         let exr = output::ExrSettings { pixel_type: output::ExrPixel::Float, ..Default::default() };
-        let drawn =
-            frame::render_to_file(&mut Device::Cpu, &frame, &sources, LayerChoice { ghosts, exr }, &path).unwrap();
-        (path, drawn, frame)
+        frame::render_to_file(&mut Device::Cpu, &frame, &sources, LayerChoice { ghosts, exr }, &path).unwrap();
+        (path, frame::draw_cpu(&frame, &sources), frame)
     };
     // PNG: the tonemapped composite, byte for byte.
     let (png, drawn, _) = write(1.0, Some(&plate), "flare.png", false);
@@ -312,8 +311,17 @@ fn a_frame_is_written_as_png_and_as_a_layered_exr() {
     // change with the plate or its exposure.
     let (exr1, _, frame) = write(1.0, Some(&plate), "a.exr", true);
     let (exr2, _, _) = write(-2.0, Some(&plate), "b.exr", false);
-    let (exr3, _, _) = write(0.0, None, "c.exr", false);
+    let (exr3, drawn3, frame3) = write(0.0, None, "c.exr", false);
     let (a, b, c) = (read_exr(&exr1), read_exr(&exr2), read_exr(&exr3));
+    // `render_to_file` writes an EXR from the accumulation alone (no display image made): the same layers as
+    // the EXR of a whole draw.
+    let whole = tempfile::tempdir().unwrap();
+    let exr = output::ExrSettings { pixel_type: output::ExrPixel::Float, ..Default::default() };
+    let sources3 = Sources { flare: &flare, lut: None, plate: None };
+    let path = whole.path().join("whole.exr");
+    frame::write_drawn(&mut Device::Cpu, &frame3, &sources3, &drawn3, LayerChoice { ghosts: false, exr }, &path)
+        .unwrap();
+    assert_eq!(read_exr(&path), c, "an EXR of the accumulation alone is that of the whole draw");
     for name in ["R", "G", "B", "A", "flare.R", "flare.G", "flare.B", "starburst.R", "plate.R", "plate.B"] {
         assert!(a.contains_key(name), "layer {name} in {:?}", a.keys());
     }

@@ -92,6 +92,14 @@ fn a_traced_sequence_writes_the_stills_of_its_frames() {
         let (drawn, _) = traced.draw(&device, &frame, &s).unwrap();
         let still = dir.path().join("still.exr");
         traced.write(&device, &frame, &s, &drawn, LayerChoice { ghosts: true, ..Default::default() }, &still).unwrap();
+        // Written in one call (`render`'s way: the EXR from the accumulation alone, no display image made): the
+        // same channels as the drawn frame's.
+        let direct = dir.path().join("direct.exr");
+        traced
+            .render_to_file(&device, &frame, &s, LayerChoice { ghosts: true, ..Default::default() }, &direct)
+            .unwrap();
+        let channels = |p: &std::path::Path| flare_core::output::read_exr_channels(p).unwrap().channels;
+        assert_eq!(channels(&direct), channels(&still), "{}: render_to_file against draw + write", device.name());
         let read = |p: &std::path::Path| {
             exr::prelude::read_all_flat_layers_from_file(p)
                 .unwrap()

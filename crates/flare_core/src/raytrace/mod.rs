@@ -20,8 +20,8 @@
 //! the light (the irradiance on the entrance plane of a unit light is cos theta), spread over its footprint on
 //! the sensor, so irradiance = that energy / sensor area: where rays bunch into a caustic, the image
 //! brightens exactly as much as the footprint shrinks. The footprint is **box filtered**, as a sensor pixel
-//! integrates: the triangle is clipped to each pixel it covers (`Polygon`) and the pixel gets the
-//! irradiance times that area. The stop coordinates, relative radius and weight are interpolated
+//! integrates: each pixel the triangle touches gets the irradiance times the area of the triangle's part in it
+//! (in closed form from its edges, `splat::Band`). The stop coordinates, relative radius and weight are interpolated
 //! barycentrically at the centroid of each covered part; the aperture mask is looked up at every stop crossing
 //! and multiplied (the stop's blade shape, anti-aliased; skipped when the triangle's corners all lie in the
 //! disc where the mask is fully open), and a part whose interpolated relative radius exceeds 1 is vignetted.

@@ -1,6 +1,14 @@
-//! Splatting traced triangles with their energy conserved: each triangle clipped to the pixels it covers (a box
-//! filter, [`Polygon`]), its attributes interpolated at each covered part, the aperture mask looked up at every
-//! stop crossing, and the light added to a per-thread [`Accumulator`] that becomes a [`RayGridImage`].
+//! Splatting traced triangles with their energy conserved: each triangle box-filtered into the pixels it covers,
+//! its attributes interpolated at each covered part, the aperture mask looked up at every stop crossing, and the
+//! light added to a per-thread [`Accumulator`] that becomes a [`RayGridImage`].
+//!
+//! # How it works
+//! [`splat_triangle`] walks the triangle's rows in the frame. In each row the pixels it covers whole (both of
+//! its sections at the row's edges lie beyond the pixel on either side) are one run, each shaded at its centre
+//! ([`Accumulator::add_run`]); every other pixel it touches gets the area of the triangle's part in it and that
+//! part's centroid in closed form from the three edges ([`Band`]: Green's theorem, no polygon cut), the same
+//! steps as the GPU's `raygrid_box.wgsl` (`band_of`, `band_part`), in f64. A triangle collapsed to a line or a
+//! point, or inside one pixel, puts all of its light in one pixel.
 
 use crate::aperture::ApertureMask;
 use crate::image::{GhostMoments, HdrImage};
@@ -214,6 +222,8 @@ impl Plane {
 /// Barycentric interpolation over one triangle in pixel space: the three barycentric coordinates as planes.
 pub(super) struct Interpolator {
     pub(super) bary: [Plane; 3],
+    /// The triangle's winding: 1 where twice its signed area `(v1 - v0) x (v2 - v0)` is positive, else -1.
+    pub(super) sign: f64,
 }
 impl Interpolator {
     /// `None` for a triangle of zero area.
@@ -228,7 +238,8 @@ impl Interpolator {
             ax: (q[1] - r[1]) / area2,
             ay: (r[0] - q[0]) / area2,
         };
-        Some(Self { bary: [plane(v[1], v[2]), plane(v[2], v[0]), plane(v[0], v[1])] })
+        let sign = if area2 < 0.0 { -1.0 } else { 1.0 };
+        Some(Self { bary: [plane(v[1], v[2]), plane(v[2], v[0]), plane(v[0], v[1])], sign })
     }
 
     /// The plane of a quantity with values `f` at the three vertices.
@@ -351,37 +362,38 @@ pub(super) fn splat_triangle(tri: [&Vertex; 3], frame: &JobFrame, acc: &mut Accu
         return true;
     }
     // Irradiance (the triangle's flux over its footprint) x the area it covers of each pixel, shaded at the
-    // centroid of that part: the box filter a sensor pixel applies.
+    // centroid of that part: the box filter a sensor pixel applies. Rows and columns outside the frame are
+    // skipped (the part of the triangle in the frame is what each pixel's own area counts).
     let irradiance = frame.triangle_flux / area_px;
-    // The part in the frame, cut into rows, each row into pixels.
-    let mut rows = Polygon::triangle(pixels);
-    if x_lo < 0.0 || y_lo < 0.0 || x_hi > w || y_hi > h {
-        rows = rows.clip(0, 0.0, false).clip(0, w, true).clip(1, 0.0, false).clip(1, h, true);
-    }
-    let Some([_, y_first, ..]) = rows.bounds() else { return true };
-    // Cut in place, row by row and pixel by pixel (no polygon is copied whole: at 136 bytes each, copies were
-    // a tenth of a bake's time).
-    let mut rows = Cutter::new(rows);
-    let (mut columns, mut piece) = (Cutter::new(Polygon::EMPTY), Polygon::EMPTY);
-    let mut y = y_first.floor();
-    while rows.rest().count >= 3 {
-        rows.cut_below(1, y + 1.0, columns.reset());
-        if let Some([x_first, ..]) = columns.rest().bounds() {
-            // The pixels the row's part covers whole (area 1, centroid at the centre) are added without cutting.
-            let (full_lo, full_hi) = columns.rest().full_columns(y);
-            let mut x = x_first.floor();
-            while columns.rest().count >= 3 {
-                if x == full_lo {
+    let sign = interp.sign;
+    let mut y = y_lo.floor().max(0.0);
+    let y_last = y_hi.floor().min(h - 1.0);
+    while y <= y_last {
+        // The columns the row touches, and those it covers whole (the triangle spans the row and both of its
+        // sections lie beyond the pixel on either side: a convex section's extent is extreme at the band's ends).
+        let (top, bottom) = (section(pixels, y), section(pixels, y + 1.0));
+        let (mut row_lo, mut row_hi) = (top[0].min(bottom[0]), top[1].max(bottom[1]));
+        for v in pixels.iter().filter(|v| v[1] > y && v[1] < y + 1.0) {
+            (row_lo, row_hi) = (row_lo.min(v[0]), row_hi.max(v[0]));
+        }
+        let x_first = row_lo.floor().max(0.0);
+        let x_end = row_hi.floor().min(w - 1.0) + 1.0;
+        if x_end > x_first {
+            let spans = y_lo <= y && y_hi >= y + 1.0;
+            let full_lo = if spans { top[0].max(bottom[0]).ceil() } else { x_end }.clamp(x_first, x_end);
+            let full_hi = if spans { top[1].min(bottom[1]).floor() } else { x_end }.clamp(full_lo, x_end);
+            let band = Band::new(pixels, y);
+            let mut x = x_first;
+            while x < x_end {
+                if x == full_lo && full_lo < full_hi {
                     let centre_y = y + 0.5;
                     acc.add_run(y as i64, full_lo as i64, full_hi as i64, frame, |centre_x| {
                         irradiance * shader.shade([centre_x, centre_y])
                     });
-                    columns.cut_below(0, full_hi, &mut piece);
                     x = full_hi;
                     continue;
                 }
-                columns.cut_below(0, x + 1.0, &mut piece);
-                if let Some((area, centroid)) = piece.area_centroid() {
+                if let Some((area, centroid)) = band.part(x, y, sign) {
                     acc.add(x as i64, y as i64, irradiance * area * shader.shade(centroid), frame);
                 }
                 x += 1.0;
@@ -391,163 +403,83 @@ pub(super) fn splat_triangle(tri: [&Vertex; 3], frame: &JobFrame, acc: &mut Accu
     }
     true
 }
-/// A polygon cut into pieces from one side, in place: [`Self::cut_below`] moves the part below a line out and
-/// keeps the rest, alternating between two buffers.
-struct Cutter {
-    buffers: [Polygon; 2],
-    current: usize,
+/// The x extent `[min, max]` of the triangle's section by the line at height `at`; empty (min > max) when the
+/// line misses it. A horizontal edge on the line adds nothing its two neighbours do not.
+#[inline(always)]
+fn section(p: [[f64; 2]; 3], at: f64) -> [f64; 2] {
+    let mut s = [f64::INFINITY, f64::NEG_INFINITY];
+    for i in 0..3 {
+        let (u, v) = (p[i], p[(i + 1) % 3]);
+        if u[1] != v[1] && u[1].min(v[1]) <= at && at <= u[1].max(v[1]) {
+            let x = u[0] + (at - u[1]) * (v[0] - u[0]) / (v[1] - u[1]);
+            s = [s[0].min(x), s[1].max(x)];
+        }
+    }
+    s
 }
-impl Cutter {
-    fn new(polygon: Polygon) -> Self {
-        Self { buffers: [polygon, Polygon::EMPTY], current: 0 }
-    }
-
-    /// What is left.
-    #[inline(always)]
-    fn rest(&self) -> &Polygon {
-        &self.buffers[self.current]
-    }
-
-    /// Empties it, for a polygon to be written into.
-    #[inline(always)]
-    fn reset(&mut self) -> &mut Polygon {
-        self.current = 0;
-        &mut self.buffers[0]
-    }
-
-    /// Moves the part with `p[axis] <= at` into `lower`; the rest, `p[axis] >= at`, stays.
-    #[inline(always)]
-    fn cut_below(&mut self, axis: usize, at: f64, lower: &mut Polygon) {
-        let [first, second] = &mut self.buffers;
-        let (from, to) = if self.current == 0 { (&*first, second) } else { (&*second, first) };
-        from.split_into(axis, at, lower, to);
-        self.current = 1 - self.current;
-    }
+/// The triangle's three edges cut to the band of rows `[y, y + 1]`, for the part of the triangle in each pixel
+/// of the row in closed form ([`Self::part`]; the GPU's `band_of` and `band_part` in
+/// `shaders/raygrid_box.wgsl`). Per edge: the ends' heights relative to the row, clamped to `[0, 1]` (`ya`,
+/// `yb`), the x at the first end (frame pixels), the x run to the second (`dx`) and its inverse (0 for a part of
+/// no run).
+struct Band {
+    ya: [f64; 3],
+    yb: [f64; 3],
+    xa: [f64; 3],
+    dx: [f64; 3],
+    inv: [f64; 3],
 }
-/// A convex polygon in pixel space: a triangle clipped to an axis-aligned box (the frame, a row of it, a pixel),
-/// so at most seven vertices (each side of the box adds at most one).
-#[derive(Clone, Copy)]
-pub(super) struct Polygon {
-    pub(super) vertices: [[f64; 2]; 8],
-    pub(super) count: usize,
-}
-impl Polygon {
-    const EMPTY: Self = Self { vertices: [[0.0; 2]; 8], count: 0 };
-
-    pub(super) fn triangle(v: [[f64; 2]; 3]) -> Self {
-        let mut vertices = [[0.0; 2]; 8];
-        vertices[..3].copy_from_slice(&v);
-        Self { vertices, count: 3 }
-    }
-
-    /// The part with `p[axis] <= at` (`below`) or `p[axis] >= at`.
-    pub(super) fn clip(&self, axis: usize, at: f64, below: bool) -> Self {
-        let (mut lower, mut upper) = (Self::EMPTY, Self::EMPTY);
-        self.split_into(axis, at, &mut lower, &mut upper);
-        if below { lower } else { upper }
-    }
-
-    /// Writes the parts with `p[axis] <= at` into `lower` and with `p[axis] >= at` into `upper`
-    /// (Sutherland-Hodgman against one line, both sides in one pass).
+impl Band {
     #[inline(always)]
-    pub(super) fn split_into(&self, axis: usize, at: f64, lower: &mut Self, upper: &mut Self) {
-        let n = self.count;
-        // Which vertices lie on each side, as bits (vertex i is bit i).
-        let (mut below, mut above) = (0u32, 0u32);
-        for (i, p) in self.vertices[..n].iter().enumerate() {
-            below |= u32::from(p[axis] <= at) << i;
-            above |= u32::from(p[axis] >= at) << i;
+    fn new(p: [[f64; 2]; 3], y: f64) -> Self {
+        let mut band = Self { ya: [0.0; 3], yb: [0.0; 3], xa: [0.0; 3], dx: [0.0; 3], inv: [0.0; 3] };
+        for i in 0..3 {
+            let (a, b) = (p[i], p[(i + 1) % 3]);
+            let (py, qy) = (a[1] - y, b[1] - y);
+            let dy = qy - py;
+            let k = if dy == 0.0 { 0.0 } else { (b[0] - a[0]) / dy };
+            band.ya[i] = py.clamp(0.0, 1.0);
+            band.yb[i] = qy.clamp(0.0, 1.0);
+            band.xa[i] = a[0] + (band.ya[i] - py) * k;
+            band.dx[i] = a[0] + (band.yb[i] - py) * k - band.xa[i];
+            band.inv[i] = if band.dx[i] == 0.0 { 0.0 } else { 1.0 / band.dx[i] };
         }
-        let all = (1u32 << n) - 1;
-        if below == all {
-            (lower.vertices, lower.count, upper.count) = (self.vertices, n, 0);
-            return;
-        }
-        if above == all {
-            (upper.vertices, upper.count, lower.count) = (self.vertices, n, 0);
-            return;
-        }
-        lower.count = 0;
-        upper.count = 0;
-        let push = |poly: &mut Self, p: [f64; 2]| {
-            if poly.count < poly.vertices.len() {
-                poly.vertices[poly.count] = p;
-                poly.count += 1;
-            }
-        };
-        let mut a = self.vertices[n - 1];
-        let mut a_bit = 1u32 << (n - 1);
-        for (i, &b) in self.vertices[..n].iter().enumerate() {
-            let b_bit = 1u32 << i;
-            if below & a_bit != 0 {
-                push(lower, a);
-            }
-            if above & a_bit != 0 {
-                push(upper, a);
-            }
-            // The edge crosses the line when one end is strictly below and the other strictly above (so its
-            // ends differ along `axis`): the crossing belongs to both.
-            let strictly = |bit: u32| (below & bit != 0, above & bit != 0);
-            let ((a_le, a_ge), (b_le, b_ge)) = (strictly(a_bit), strictly(b_bit));
-            if (a_le && !a_ge && b_ge && !b_le) || (a_ge && !a_le && b_le && !b_ge) {
-                let t = (at - a[axis]) / (b[axis] - a[axis]);
-                let mut p = [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])];
-                p[axis] = at;
-                push(lower, p);
-                push(upper, p);
-            }
-            a = b;
-            a_bit = b_bit;
-        }
+        band
     }
 
-    /// For a convex polygon within the row `y..y + 1`: the columns `[lo, hi)` of the pixels it covers whole
-    /// (NaN when none). Only a polygon that spans the row's height covers any: its left side is convex
-    /// and its right side concave in y, so both are furthest in at the row's edges, where its vertices lie on
-    /// the cut lines.
+    /// The area (px^2) of the triangle's part in pixel (x, y) of the band's row and the centroid of that part
+    /// (frame pixels); `None` where it has no area. `sign` is that of the triangle's winding.
+    ///
+    /// By Green's theorem, with G(u) = clamp(u, 0, 1) in the pixel's own unit square and each edge's integral
+    /// over its y clamped to the row, signed by its direction (the sum is the signed area):
+    /// area = sum of integral G dy, area x cx = sum of integral G^2 / 2 dy, area x cy = sum of integral y G dy.
+    /// On an edge G is linear in y between the points where it crosses u = 0 and u = 1, so each integral is
+    /// three trapezoids. No cutting, no branch on the polygon's shape: the same steps in every pixel.
     #[inline(always)]
-    pub(super) fn full_columns(&self, y: f64) -> (f64, f64) {
-        let (mut bottom, mut top) = ([f64::INFINITY, f64::NEG_INFINITY], [f64::INFINITY, f64::NEG_INFINITY]);
-        for p in &self.vertices[..self.count] {
-            if p[1] == y {
-                bottom = [bottom[0].min(p[0]), bottom[1].max(p[0])];
-            } else if p[1] == y + 1.0 {
-                top = [top[0].min(p[0]), top[1].max(p[0])];
-            }
+    fn part(&self, x: f64, y: f64, sign: f64) -> Option<(f64, [f64; 2])> {
+        let (mut area, mut mx, mut my) = (0.0, 0.0, 0.0);
+        for i in 0..3 {
+            let (ya, yb, dx, inv) = (self.ya[i], self.yb[i], self.dx[i], self.inv[i]);
+            let xa = self.xa[i] - x;
+            let t0 = (-xa * inv).clamp(0.0, 1.0);
+            let t1 = ((1.0 - xa) * inv).clamp(0.0, 1.0);
+            let (tl, th) = (t0.min(t1), t0.max(t1));
+            let y1 = ya + tl * (yb - ya);
+            let y2 = ya + th * (yb - ya);
+            let g0 = xa.clamp(0.0, 1.0);
+            let g1 = (xa + tl * dx).clamp(0.0, 1.0);
+            let g2 = (xa + th * dx).clamp(0.0, 1.0);
+            let g3 = (xa + dx).clamp(0.0, 1.0);
+            let (d0, d1, d2) = (y1 - ya, y2 - y1, yb - y2);
+            area += d0 * (g0 + g1) + d1 * (g1 + g2) + d2 * (g2 + g3);
+            mx += d0 * (g0 * g0 + g0 * g1 + g1 * g1)
+                + d1 * (g1 * g1 + g1 * g2 + g2 * g2)
+                + d2 * (g2 * g2 + g2 * g3 + g3 * g3);
+            my += d0 * (ya * (2.0 * g0 + g1) + y1 * (g0 + 2.0 * g1))
+                + d1 * (y1 * (2.0 * g1 + g2) + y2 * (g1 + 2.0 * g2))
+                + d2 * (y2 * (2.0 * g2 + g3) + yb * (g2 + 2.0 * g3));
         }
-        let (lo, hi) = (bottom[0].max(top[0]).ceil(), bottom[1].min(top[1]).floor());
-        if lo < hi { (lo, hi) } else { (f64::NAN, f64::NAN) }
-    }
-
-    /// `[x_min, y_min, x_max, y_max]`, `None` when the polygon is empty.
-    #[inline(always)]
-    pub(super) fn bounds(&self) -> Option<[f64; 4]> {
-        (self.count >= 3).then(|| {
-            self.vertices[..self.count]
-                .iter()
-                .fold([f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY], |b, p| {
-                    [b[0].min(p[0]), b[1].min(p[1]), b[2].max(p[0]), b[3].max(p[1])]
-                })
-        })
-    }
-
-    /// Area (px^2) and centroid; `None` when empty or of no area.
-    #[inline(always)]
-    pub(super) fn area_centroid(&self) -> Option<(f64, [f64; 2])> {
-        if self.count < 3 {
-            return None;
-        }
-        let o = self.vertices[0];
-        let (mut area2, mut cx, mut cy) = (0.0, 0.0, 0.0);
-        for i in 1..self.count - 1 {
-            let (a, b) = (self.vertices[i], self.vertices[i + 1]);
-            let (ax, ay, bx, by) = (a[0] - o[0], a[1] - o[1], b[0] - o[0], b[1] - o[1]);
-            let cross = ax * by - ay * bx;
-            area2 += cross;
-            cx += cross * (ax + bx);
-            cy += cross * (ay + by);
-        }
-        (area2 != 0.0 && area2.is_finite())
-            .then(|| (0.5 * area2.abs(), [o[0] + cx / (3.0 * area2), o[1] + cy / (3.0 * area2)]))
+        let area = sign * 0.5 * area;
+        (area > 0.0).then(|| (area, [x + sign * mx / (6.0 * area), y + sign * my / (6.0 * area)]))
     }
 }

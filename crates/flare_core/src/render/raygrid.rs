@@ -25,9 +25,9 @@
 //! ([`RayGridRenderer::plan_scouted`]), and the trace turns every landing and stop coordinate by the view's
 //! turn (`rgb.w` of [`GpuJob`]), as the CPU's [`View`] does, once per azimuth.
 //!
-//! The CPU twin box-filters its triangles (cuts each into the pixels it covers). The default GPU path does the
-//! same in a compute pass (`raygrid_box.wgsl`): each pixel a triangle touches gets the area and centroid of the
-//! triangle's part in it, in closed form from the three edges (Green's theorem; no polygon is cut), and a
+//! The CPU twin box-filters its triangles (`splat_triangle`). The default GPU path does the same in a compute
+//! pass (`raygrid_box.wgsl`): each pixel a triangle touches gets the area and centroid of the triangle's part
+//! in it, in closed form from the three edges (Green's theorem; no polygon is cut, on either side), and a
 //! triangle collapsed to a line or a point puts its light in one pixel as on the CPU. Per row the pass also
 //! finds, in closed form, where the shading can be non-zero and where it is the weight alone (no mask to look
 //! up): nothing is done outside the first, and a run of whole pixels in the second is added as second

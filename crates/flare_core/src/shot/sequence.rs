@@ -228,13 +228,8 @@ pub fn render_sequence(
                         let frame = build(plan);
                         let s = Sources { flare: sources.flare, lut: sources.lut, plate: plate.as_deref() };
                         let written = match &options.traced {
-                            Some(t) => frame::check_output(&path, options.layers).and_then(|_| {
-                                let (drawn, _) = t.draw(&Device::Cpu, &frame, &s)?;
-                                t.write(&Device::Cpu, &frame, &s, &drawn, options.layers, &path)
-                            }),
-                            None => {
-                                frame::render_to_file(&mut Device::Cpu, &frame, &s, options.layers, &path).map(|_| ())
-                            }
+                            Some(t) => t.render_to_file(&Device::Cpu, &frame, &s, options.layers, &path).map(|_| ()),
+                            None => frame::render_to_file(&mut Device::Cpu, &frame, &s, options.layers, &path),
                         };
                         outcome_of(plan.frame, &path, written)
                     }
