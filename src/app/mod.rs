@@ -1084,12 +1084,14 @@ impl FlareLabApp {
             let plate = plate.resolve(&flare, report)?;
             let sources = Sources { flare: &flare, lut: lut.as_deref(), plate: plate.as_deref() };
             let mut device = Device::Cpu;
-            let drawn = device.draw(&frame, &sources).map_err(|e| e.to_string())?;
+            // An EXR's frame without its display image (the file holds none): see `frame::Made`.
+            let made = flare_core::frame::draw_for_file(&mut device, &frame, &sources, choice, &target)
+                .map_err(|e| e.to_string())?;
             if cancel.load(std::sync::atomic::Ordering::Relaxed) {
                 return Err("cancelled: nothing written".into());
             }
             report(0.5, format!("writing {}", target.display()));
-            flare_core::frame::write_drawn(&mut device, &frame, &sources, &drawn, choice, &target)
+            flare_core::frame::write_made(&mut device, &frame, &sources, &made, choice, &target)
                 .map_err(|e| e.to_string())
         });
         self.session.say(format!("exporting {}", path.display()));

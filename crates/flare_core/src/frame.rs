@@ -26,9 +26,9 @@
 //! `dirt` (the front dirt's glow, its share of the flare, only for a dirty lens: [`crate::dirt`]),
 //! `plate` (the plate x `2^plate_ev`) and the composite `flare + plate`, which is what the display image
 //! shows through the request's display transform ([`FrameRequest::view`], the OCIO view, or a tonemap curve); [`ghost_layers`] adds one layer per drawn ghost, each drawn alone on the same device.
-//! A file of linear layers only (an EXR) is written from the accumulation alone ([`render_to_file`] through
-//! [`Device::draw_linear`] and [`write_linear_with`]): the CPU twin then makes no display image, whose OCIO
-//! view was most of an EXR's time (the layers are the same bytes either way).
+//! A file of linear layers only (an EXR) is written from the accumulation alone ([`draw_for_file`] makes a
+//! [`Made::Linear`] through [`Device::draw_linear`], [`write_made`] writes it): the CPU twin then makes no
+//! display image, whose OCIO view was most of an EXR's time (the layers are the same bytes either way).
 
 use crate::flare::PreparedFlare;
 use crate::ghost::{GhostFrame, Sensor, light_slopes_for_frame_position};
@@ -708,9 +708,8 @@ pub fn check_output(path: &std::path::Path, choice: LayerChoice) -> Result<crate
     Ok(kind)
 }
 
-/// Draws `frame` on `device` and writes it to `path` through the one writer (PNG: the tonemapped composite,
-/// [`crate::output::write_frame`]; EXR: the linear layers, [`write_linear_with`], from the accumulation alone:
-/// [`Device::draw_linear`], no display image made that the file would not hold).
+/// Draws `frame` on `device` and writes it to `path` through the one writer: [`draw_for_file`], then
+/// [`write_made`].
 pub fn render_to_file(
     device: &mut Device,
     frame: &Frame,
@@ -718,19 +717,50 @@ pub fn render_to_file(
     choice: LayerChoice,
     path: &std::path::Path,
 ) -> Result<(), FrameError> {
-    match check_output(path, choice)? {
-        crate::output::ImageKind::Png => {
-            let drawn = device.draw(frame, sources)?;
-            crate::output::write_frame(path, &drawn.display, None)?;
-        }
-        crate::output::ImageKind::Exr => {
-            let hdr = device.draw_linear(frame, sources)?;
-            write_linear_with(frame, sources, &hdr, path, choice.exr, |sink| {
-                asked_ghost_layers(device, frame, sources, choice, sink)
-            })?;
-        }
+    let made = draw_for_file(device, frame, sources, choice, path)?;
+    write_made(device, frame, sources, &made, choice, path)
+}
+
+/// A frame drawn for a file ([`draw_for_file`]): what a PNG or an EXR of it is written from.
+pub enum Made {
+    /// For a PNG: the accumulation and its display image.
+    Drawn(Drawn),
+    /// For an EXR: the accumulation alone. The file holds linear layers only, so no display image is made
+    /// (on the CPU twin that is the tonemap pass, every pixel through the OCIO view).
+    Linear(HdrImage),
+}
+
+/// Draws `frame` on `device` as the file at `path` needs it (see [`Made`]), once `path` and `choice` are
+/// known to be writable together ([`check_output`]).
+pub fn draw_for_file(
+    device: &mut Device,
+    frame: &Frame,
+    sources: &Sources,
+    choice: LayerChoice,
+    path: &std::path::Path,
+) -> Result<Made, FrameError> {
+    Ok(match check_output(path, choice)? {
+        crate::output::ImageKind::Png => Made::Drawn(device.draw(frame, sources)?),
+        crate::output::ImageKind::Exr => Made::Linear(device.draw_linear(frame, sources)?),
+    })
+}
+
+/// Writes a frame drawn by [`draw_for_file`] to `path` through the one writer ([`write_drawn`] or
+/// [`write_linear_with`]), its ghost layers drawn on `device` when `choice` asks for them.
+pub fn write_made(
+    device: &mut Device,
+    frame: &Frame,
+    sources: &Sources,
+    made: &Made,
+    choice: LayerChoice,
+    path: &std::path::Path,
+) -> Result<(), FrameError> {
+    match made {
+        Made::Drawn(drawn) => write_drawn(device, frame, sources, drawn, choice, path),
+        Made::Linear(hdr) => write_linear_with(frame, sources, hdr, path, choice.exr, |sink| {
+            asked_ghost_layers(device, frame, sources, choice, sink)
+        }),
     }
-    Ok(())
 }
 
 /// Writes a frame already drawn (by [`Device::draw`], or by a ray-traced method into the same kind of
@@ -787,6 +817,12 @@ pub fn write_linear_with(
     exr: crate::output::ExrSettings,
     ghost_layers: impl FnOnce(&mut LayerSink) -> Result<(), FrameError>,
 ) -> Result<(), FrameError> {
+    if crate::output::ImageKind::from_path(path)? != crate::output::ImageKind::Exr {
+        return Err(FrameError::Request(format!(
+            "{}: a frame drawn without its display image can only be written as an EXR",
+            path.display()
+        )));
+    }
     let mut file = crate::output::ExrLayers::new(&linear_layers(frame, sources, hdr), exr);
     ghost_layers(&mut |name, image| file.add_ghost(&name, &image))?;
     file.write(path)?;

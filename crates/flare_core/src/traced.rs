@@ -13,7 +13,7 @@
 //! [`crate::shot::sequence::render_sequence`] traces each frame of a sequence this way when asked.
 
 use crate::flare::PreparedFlare;
-use crate::frame::{self, Device, Drawn, Frame, FrameError, LayerChoice, Sources};
+use crate::frame::{self, Device, Drawn, Frame, FrameError, LayerChoice, Made, Sources};
 use crate::image::HdrImage;
 use crate::raytrace::{Grid, RayGridRenderer, RayGridRequest, Window};
 use crate::render::raygrid::{GpuRayGrid, GpuRayGridError};
@@ -167,10 +167,8 @@ impl TracedGhosts {
         Ok(())
     }
 
-    /// `frame` with its ghosts traced, written to `path` through the one writer (what `render` and a CPU
-    /// sequence do), and the tracing's line. For an EXR the frame is made without its display image
-    /// ([`frame::linear_with_traced_ghosts`]: the file holds linear layers only), as
-    /// [`frame::render_to_file`] does for drawn ghosts.
+    /// `frame` with its ghosts traced, written to `path` through the one writer ([`Self::draw_for_file`], then
+    /// [`Self::write_made`]), and the tracing's line.
     pub fn render_to_file(
         &self,
         device: &Device,
@@ -179,20 +177,49 @@ impl TracedGhosts {
         choice: LayerChoice,
         path: &std::path::Path,
     ) -> Result<String, FrameError> {
-        match frame::check_output(path, choice)? {
+        let (made, how) = self.draw_for_file(device, frame, sources, choice, path)?;
+        self.write_made(device, frame, sources, &made, choice, path)?;
+        Ok(how)
+    }
+
+    /// `frame` with its ghosts traced, as the file at `path` needs it ([`frame::draw_for_file`]'s rule: for an
+    /// EXR the accumulation alone, [`frame::linear_with_traced_ghosts`]), and the tracing's line.
+    pub fn draw_for_file(
+        &self,
+        device: &Device,
+        frame: &Frame,
+        sources: &Sources,
+        choice: LayerChoice,
+        path: &std::path::Path,
+    ) -> Result<(Made, String), FrameError> {
+        Ok(match frame::check_output(path, choice)? {
             crate::output::ImageKind::Png => {
                 let (drawn, how) = self.draw(device, frame, sources)?;
-                self.write(device, frame, sources, &drawn, choice, path)?;
-                Ok(how)
+                (Made::Drawn(drawn), how)
             }
             crate::output::ImageKind::Exr => {
                 let traced = self.trace(device, frame)?;
-                let hdr = frame::linear_with_traced_ghosts(frame, sources, traced.hdr);
-                frame::write_linear_with(frame, sources, &hdr, path, choice.exr, |sink| {
-                    self.ghost_sink(device, frame, sources, choice, sink)
-                })?;
-                Ok(traced.how)
+                (Made::Linear(frame::linear_with_traced_ghosts(frame, sources, traced.hdr)), traced.how)
             }
+        })
+    }
+
+    /// Writes a frame made by [`Self::draw_for_file`] to `path` through the one writer; its ghost layers, when
+    /// asked, traced.
+    pub fn write_made(
+        &self,
+        device: &Device,
+        frame: &Frame,
+        sources: &Sources,
+        made: &Made,
+        choice: LayerChoice,
+        path: &std::path::Path,
+    ) -> Result<(), FrameError> {
+        match made {
+            Made::Drawn(drawn) => self.write(device, frame, sources, drawn, choice, path),
+            Made::Linear(hdr) => frame::write_linear_with(frame, sources, hdr, path, choice.exr, |sink| {
+                self.ghost_sink(device, frame, sources, choice, sink)
+            }),
         }
     }
 

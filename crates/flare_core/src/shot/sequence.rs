@@ -27,7 +27,7 @@ use serde::Serialize;
 use super::pattern::FramePattern;
 use super::plan::{FramePlan, ShotPlan};
 use crate::flare::PreparedFlare;
-use crate::frame::{self, Device, Drawn, Frame, FrameError, LayerChoice, Sources};
+use crate::frame::{self, Device, Frame, LayerChoice, Made, Sources};
 use crate::image::HdrImage;
 use crate::lut::blend::LiveLut;
 use crate::preset::Document;
@@ -183,7 +183,7 @@ fn outcome_of<T>(frame: i64, path: &Path, result: Result<T, frame::FrameError>) 
 /// A drawn frame waiting to be written by the writer thread.
 struct Pending {
     frame: Frame,
-    drawn: Drawn,
+    made: Made,
     plate: Option<Arc<HdrImage>>,
     path: PathBuf,
     plan: FramePlan,
@@ -254,7 +254,7 @@ pub fn render_sequence(
                             let s = Sources { flare: sources.flare, lut: sources.lut, plate: p.plate.as_deref() };
                             // No ghost layers here: the CPU device is never asked to draw.
                             let written =
-                                frame::write_drawn(&mut Device::Cpu, &p.frame, &s, &p.drawn, options.layers, &p.path);
+                                frame::write_made(&mut Device::Cpu, &p.frame, &s, &p.made, options.layers, &p.path);
                             let outcome = outcome_of(p.plan.frame, &p.path, written);
                             finish(record(&p.plan, p.path, p.started, outcome))
                         })
@@ -281,11 +281,11 @@ pub fn render_sequence(
                     };
                     let frame = build(plan);
                     let s = Sources { flare: sources.flare, lut: sources.lut, plate: plate.as_deref() };
-                    let drawn = match &options.traced {
-                        Some(t) => t.draw(device, &frame, &s).map(|(drawn, _)| drawn),
-                        None => device.draw(&frame, &s).map_err(FrameError::from),
+                    let made = match &options.traced {
+                        Some(t) => t.draw_for_file(device, &frame, &s, options.layers, &path).map(|(made, _)| made),
+                        None => frame::draw_for_file(device, &frame, &s, options.layers, &path),
                     };
-                    let drawn = match drawn {
+                    let made = match made {
                         Ok(d) => d,
                         Err(e) => {
                             let failed = FrameOutcome::Failed(format!("frame {}: {e}", plan.frame));
@@ -294,14 +294,14 @@ pub fn render_sequence(
                         }
                     };
                     if write_apart {
-                        let pending = Pending { frame, drawn, plate, path, plan: plan.clone(), started };
+                        let pending = Pending { frame, made, plate, path, plan: plan.clone(), started };
                         if tx.send(pending).is_err() {
                             break;
                         }
                     } else {
                         let written = match &options.traced {
-                            Some(t) => t.write(device, &frame, &s, &drawn, options.layers, &path),
-                            None => frame::write_drawn(device, &frame, &s, &drawn, options.layers, &path),
+                            Some(t) => t.write_made(device, &frame, &s, &made, options.layers, &path),
+                            None => frame::write_made(device, &frame, &s, &made, options.layers, &path),
                         };
                         let outcome = outcome_of(plan.frame, &path, written);
                         inline.push(finish(record(plan, path, started, outcome)));
