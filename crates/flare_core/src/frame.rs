@@ -755,11 +755,24 @@ pub fn write_made(
     choice: LayerChoice,
     path: &std::path::Path,
 ) -> Result<(), FrameError> {
+    write_made_with(frame, sources, made, path, choice.exr, |sink| {
+        asked_ghost_layers(device, frame, sources, choice, sink)
+    })
+}
+
+/// [`write_made`] with the ghost layers from `ghost_layers` (called only for an EXR file): the drawn ghosts on a
+/// device, or ray-traced ones ([`crate::traced::TracedGhosts::write_made`]).
+pub fn write_made_with(
+    frame: &Frame,
+    sources: &Sources,
+    made: &Made,
+    path: &std::path::Path,
+    exr: crate::output::ExrSettings,
+    ghost_layers: impl FnOnce(&mut LayerSink) -> Result<(), FrameError>,
+) -> Result<(), FrameError> {
     match made {
-        Made::Drawn(drawn) => write_drawn(device, frame, sources, drawn, choice, path),
-        Made::Linear(hdr) => write_linear_with(frame, sources, hdr, path, choice.exr, |sink| {
-            asked_ghost_layers(device, frame, sources, choice, sink)
-        }),
+        Made::Drawn(drawn) => write_drawn_with(frame, sources, drawn, path, exr, ghost_layers),
+        Made::Linear(hdr) => write_linear_with(frame, sources, hdr, path, exr, ghost_layers),
     }
 }
 

@@ -215,12 +215,9 @@ impl TracedGhosts {
         choice: LayerChoice,
         path: &std::path::Path,
     ) -> Result<(), FrameError> {
-        match made {
-            Made::Drawn(drawn) => self.write(device, frame, sources, drawn, choice, path),
-            Made::Linear(hdr) => frame::write_linear_with(frame, sources, hdr, path, choice.exr, |sink| {
-                self.ghost_sink(device, frame, sources, choice, sink)
-            }),
-        }
+        frame::write_made_with(frame, sources, made, path, choice.exr, |sink| {
+            self.ghost_sink(device, frame, sources, choice, sink)
+        })
     }
 
     /// The ghost layers `choice` asks for, into `sink` (none unless it asks).
