@@ -10,6 +10,8 @@
 //! renderers and compared by [`crate::metrics`]. [`finite_half`] is how every value bound for a 16-bit GPU
 //! texture is made one.
 
+use rayon::prelude::*;
+
 /// `v` as a 16-bit float a GPU texture may hold: what is not finite becomes 0, and what lies beyond f16's range
 /// its largest value of that sign (never an infinity).
 pub fn finite_half(v: f32) -> half::f16 {
@@ -96,17 +98,18 @@ impl HdrImage {
     /// At its own size with bilinear sampling every pixel is read exactly.
     pub fn resampled(&self, width: u32, height: u32, sampling: Sampling, gain: f32) -> Self {
         let (w, h) = (width as usize, height as usize);
-        let mut pixels = Vec::with_capacity(w * h);
-        for y in 0..h {
-            for x in 0..w {
+        let mut pixels = vec![[0.0; 4]; w * h];
+        // Rows in parallel (each pixel is its own sample).
+        pixels.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row)| {
+            for (x, out) in row.iter_mut().enumerate() {
                 let (s, t) = ((x as f32 + 0.5) / w as f32, (y as f32 + 0.5) / h as f32);
                 let p = match sampling {
                     Sampling::Nearest => self.sample_nearest(s, t),
                     Sampling::Bilinear => self.sample_bilinear(s, t),
                 };
-                pixels.push([p[0] * gain, p[1] * gain, p[2] * gain, p[3]]);
+                *out = [p[0] * gain, p[1] * gain, p[2] * gain, p[3]];
             }
-        }
+        });
         Self { width, height, pixels }
     }
 

@@ -10,6 +10,8 @@
 //! steps as the GPU's `raygrid_box.wgsl` (`band_of`, `band_part`), in f64. A triangle collapsed to a line or a
 //! point, or inside one pixel, puts all of its light in one pixel.
 
+use rayon::prelude::*;
+
 use crate::aperture::ApertureMask;
 use crate::image::{GhostMoments, HdrImage};
 
@@ -35,6 +37,8 @@ pub struct RayGridImage {
 }
 /// Pixels a side of an accumulator's tile.
 const TILE: usize = 32;
+/// Pixels in a tile; its three channels are planes of this many values each.
+const TILE_PIXELS: usize = TILE * TILE;
 
 /// Per-thread accumulation: energy per pixel (relative irradiance x mm^2) and per-ghost moments.
 ///
@@ -42,14 +46,27 @@ const TILE: usize = 32;
 /// in it: rayon's fold starts a fresh accumulator for every piece of the job list it hands a thread, and a
 /// ghost's light covers a part of the frame, so the cost of an accumulator (made, merged) follows the pixels
 /// its jobs touch, not the frame's size. The sums are those of one frame-sized buffer, bit for bit (a tile not
-/// yet made holds zeros).
+/// yet made holds zeros). A tile holds its red, green and blue as three planes: a wavelength that weighs one
+/// channel (the RGB spectrum's three) reads and writes a third of the bytes it would with the channels side
+/// by side, and the splat's loops are bound by those bytes.
 pub(super) struct Accumulator {
     pub(super) width: usize,
     pub(super) height: usize,
     tiles_x: usize,
-    tiles: Vec<Option<Vec<[f64; 3]>>>,
+    tiles: Vec<Option<Vec<f64>>>,
     pub(super) moments: Vec<GhostMoments>,
     pub(super) stats: RayGridStats,
+}
+/// A tile of zeros, its memory written as it is made: memory the system hands out zeroed is mapped to one
+/// shared page of zeros until it is written, so a first `+=` would read it there and fault again to write it
+/// (a TLB shoot-down on every other thread, each time).
+fn new_tile() -> Vec<f64> {
+    let mut tile = vec![0.0; 3 * TILE_PIXELS];
+    // One value a 4 KiB page; `black_box` keeps the compiler from dropping stores of what the memory holds.
+    for value in tile.iter_mut().step_by(512) {
+        *value = std::hint::black_box(0.0);
+    }
+    tile
 }
 impl Accumulator {
     pub(super) fn new(width: usize, height: usize, ghosts: usize) -> Self {
@@ -73,7 +90,8 @@ impl Accumulator {
             let (x0, y0) = ((t % self.tiles_x) * TILE, (t / self.tiles_x) * TILE);
             for y in y0..(y0 + TILE).min(self.height) {
                 for x in x0..(x0 + TILE).min(self.width) {
-                    out[y * self.width + x] = tile[(y - y0) * TILE + (x - x0)];
+                    let i = (y - y0) * TILE + (x - x0);
+                    out[y * self.width + x] = [tile[i], tile[TILE_PIXELS + i], tile[2 * TILE_PIXELS + i]];
                 }
             }
         }
@@ -85,9 +103,7 @@ impl Accumulator {
             match (a.as_mut(), b) {
                 (Some(a), Some(b)) => {
                     for (p, q) in a.iter_mut().zip(&b) {
-                        for c in 0..3 {
-                            p[c] += q[c];
-                        }
+                        *p += q;
                     }
                 }
                 (None, Some(b)) => *a = Some(b),
@@ -117,24 +133,37 @@ impl Accumulator {
                 sum_y: m.sum_y / pixel_area_mm2,
             })
             .collect();
-        // Pixels no tile reached stay black; the tiles are read where they are (no frame of f64 made).
+        // Pixels no tile reached stay black; the tiles are read where they are (no frame of f64 made), a row of
+        // tiles a thread.
         let mut pixels = vec![[0.0, 0.0, 0.0, 1.0]; self.width * self.height];
-        for (t, tile) in self.tiles.iter().enumerate() {
-            let Some(tile) = tile else { continue };
-            let (x0, y0) = ((t % self.tiles_x) * TILE, (t / self.tiles_x) * TILE);
-            for y in y0..(y0 + TILE).min(self.height) {
-                for x in x0..(x0 + TILE).min(self.width) {
-                    let v = tile[(y - y0) * TILE + (x - x0)].map(|c| (c / pixel_area_mm2) as f32);
-                    let v = v.map(|c| if c.is_finite() && c > 0.0 { c } else { 0.0 });
-                    pixels[y * self.width + x] = [v[0], v[1], v[2], 1.0];
+        let (width, tiles_x) = (self.width, self.tiles_x);
+        pixels.par_chunks_mut((width * TILE).max(1)).zip(self.tiles.par_chunks(tiles_x.max(1))).for_each(
+            |(band, tiles)| {
+                for (tx, tile) in tiles.iter().enumerate() {
+                    let Some(tile) = tile else { continue };
+                    for (y, row) in band.chunks_exact_mut(width).enumerate() {
+                        for x in tx * TILE..((tx + 1) * TILE).min(width) {
+                            let i = y * TILE + x - tx * TILE;
+                            let rgb = [tile[i], tile[TILE_PIXELS + i], tile[2 * TILE_PIXELS + i]];
+                            let v = rgb.map(|c| (c / pixel_area_mm2) as f32);
+                            let v = v.map(|c| if c.is_finite() && c > 0.0 { c } else { 0.0 });
+                            row[x] = [v[0], v[1], v[2], 1.0];
+                        }
+                    }
                 }
-            }
-        }
+            },
+        );
         RayGridImage {
             hdr: HdrImage { width: self.width as u32, height: self.height as u32, pixels },
             moments,
             stats: self.stats,
         }
+    }
+
+    /// The tile holding pixel (x, y) of the frame, made when it is not yet.
+    #[inline(always)]
+    fn tile_at(&mut self, x: usize, y: usize) -> &mut [f64] {
+        self.tiles[(y / TILE) * self.tiles_x + x / TILE].get_or_insert_with(new_tile)
     }
 
     /// Adds `energy` (scalar, before the spectral weight) at pixel (x, y) when it lies in the frame.
@@ -144,12 +173,12 @@ impl Accumulator {
             return;
         }
         let (x, y) = (x as usize, y as usize);
-        let tile = self.tiles[(y / TILE) * self.tiles_x + x / TILE].get_or_insert_with(|| vec![[0.0; 3]; TILE * TILE]);
-        let p = &mut tile[(y % TILE) * TILE + x % TILE];
+        let i = (y % TILE) * TILE + x % TILE;
+        let tile = self.tile_at(x, y);
         // A channel the wavelength does not weigh is left alone (adding 0 would change nothing).
-        for (value, weight) in p.iter_mut().zip(job.rgb) {
+        for (plane, weight) in tile.chunks_exact_mut(TILE_PIXELS).zip(job.rgb) {
             if weight != 0.0 {
-                *value += energy * weight;
+                plane[i] += energy * weight;
             }
         }
         let luma = energy * job.luma;
@@ -158,7 +187,8 @@ impl Accumulator {
 
     /// Adds `energy(x_centre)` at each pixel of row `y` from column `x_lo` to before `x_hi` (the pixels a row of a
     /// triangle covers whole): the same sums as [`Self::add`] pixel by pixel, with the tile looked up once per
-    /// tile the run crosses and the ghost's moments summed once for the run.
+    /// tile the run crosses, the planes of channels the wavelength does not weigh not touched, and the ghost's
+    /// moments summed once for the run.
     #[inline(always)]
     pub(super) fn add_run(&mut self, y: i64, x_lo: i64, x_hi: i64, job: &JobFrame, energy: impl Fn(f64) -> f64) {
         let (x_lo, x_hi) = (x_lo.max(0), x_hi.min(self.width as i64));
@@ -166,21 +196,28 @@ impl Accumulator {
             return;
         }
         let (y, x_hi) = (y as usize, x_hi as usize);
+        // The planes the wavelength weighs, each with its weight: one for the RGB spectrum's wavelengths.
+        let mut planes = [(0, 0.0); 3];
+        let mut weighed = 0;
+        for (c, weight) in job.rgb.into_iter().enumerate() {
+            if weight != 0.0 {
+                planes[weighed] = (c * TILE_PIXELS, weight);
+                weighed += 1;
+            }
+        }
+        let planes = &planes[..weighed];
         let (mut sum, mut sum_x) = (0.0, 0.0);
         let mut x = x_lo as usize;
         while x < x_hi {
             let end = ((x / TILE + 1) * TILE).min(x_hi);
-            let tile =
-                self.tiles[(y / TILE) * self.tiles_x + x / TILE].get_or_insert_with(|| vec![[0.0; 3]; TILE * TILE]);
-            let row = &mut tile[(y % TILE) * TILE..(y % TILE + 1) * TILE];
-            for (p, column) in row[x % TILE..x % TILE + (end - x)].iter_mut().zip(x..end) {
+            let first = (y % TILE) * TILE + x % TILE;
+            let tile = self.tile_at(x, y);
+            for (i, column) in (first..).zip(x..end) {
                 let centre = column as f64 + 0.5;
                 let e = energy(centre);
                 if e > 0.0 {
-                    // Sums of non-negative terms from +0, so adding 0 for a channel the wavelength does not weigh
-                    // leaves it as `add` does by skipping it.
-                    for (value, weight) in p.iter_mut().zip(job.rgb) {
-                        *value += e * weight;
+                    for &(plane, weight) in planes {
+                        tile[plane + i] += e * weight;
                     }
                     sum += e;
                     sum_x += e * centre;
@@ -302,13 +339,17 @@ impl<'a> TriangleShader<'a> {
         tri.iter().all(|v| v.stops[..frame.stop_count].iter().all(|&s| inside(s)))
     }
 
+    /// The weight at the pixel position `p`, 0 where vignetted, with no aperture mask: [`Self::shade`] of a
+    /// triangle that is [`Self::open`].
+    #[inline(always)]
+    pub(super) fn shade_open(&self, p: [f64; 2]) -> f64 {
+        if self.ratio.at(p) > 1.0 { 0.0 } else { self.weight.at(p).max(0.0) }
+    }
+
     /// Weight x aperture masks at the pixel position `p`; 0 where vignetted.
     #[inline(always)]
     pub(super) fn shade(&self, p: [f64; 2]) -> f64 {
-        if self.ratio.at(p) > 1.0 {
-            return 0.0;
-        }
-        let mut m = self.weight.at(p).max(0.0);
+        let mut m = self.shade_open(p);
         if self.open {
             return m;
         }
@@ -386,10 +427,13 @@ pub(super) fn splat_triangle(tri: [&Vertex; 3], frame: &JobFrame, acc: &mut Accu
             let mut x = x_first;
             while x < x_end {
                 if x == full_lo && full_lo < full_hi {
-                    let centre_y = y + 0.5;
-                    acc.add_run(y as i64, full_lo as i64, full_hi as i64, frame, |centre_x| {
-                        irradiance * shader.shade([centre_x, centre_y])
-                    });
+                    let (centre_y, (lo, hi)) = (y + 0.5, (full_lo as i64, full_hi as i64));
+                    // A triangle clear of the masks' edges (most) shades without the lookups' loop, inlined.
+                    if shader.open {
+                        acc.add_run(y as i64, lo, hi, frame, |x| irradiance * shader.shade_open([x, centre_y]));
+                    } else {
+                        acc.add_run(y as i64, lo, hi, frame, |x| irradiance * shader.shade([x, centre_y]));
+                    }
                     x = full_hi;
                     continue;
                 }

@@ -1,5 +1,7 @@
 //! `starburst.wgsl` on the CPU: the light's diffraction evaluated per pixel out to its reach, additive.
 
+use rayon::prelude::*;
+
 use super::quads::{accumulation_scale, covered};
 use crate::image::HdrImage;
 use crate::render::{FlareScene, STARBURST_MAX};
@@ -29,8 +31,11 @@ pub fn starburst_pass(scene: &FlareScene, texture: &StarburstTexture, hdr: &mut 
     // An anamorphic lens's far field is stretched along x by N_x / N_y (1 for a lens of revolution).
     let stretch = if core[3] > 0.0 { core[3] } else { 1.0 };
     let (sx, sy) = accumulation_scale(scene);
-    for y in covered(cy, reach, sy, h) {
-        for x in covered(cx, reach * stretch.max(1.0), sx, w) {
+    let (rows, columns) = (covered(cy, reach, sy, h), covered(cx, reach * stretch.max(1.0), sx, w));
+    // Rows in parallel: each pixel's sum is its own, so the image is the same on any number of threads.
+    let band = &mut hdr.pixels[rows.start * w..rows.end * w];
+    band.par_chunks_mut(w.max(1)).zip(rows).for_each(|(row, y)| {
+        for x in columns.clone() {
             let (px, py) = ((x as f32 + 0.5) * sx - cx, (y as f32 + 0.5) * sy - cy);
             // The far field's own coordinates, in which it is the round pattern.
             let (dx, dy) = (px / stretch, py);
@@ -45,10 +50,10 @@ pub fn starburst_pass(scene: &FlareScene, texture: &StarburstTexture, hdr: &mut 
                 let p = Starburst::profile_at(&texture.profile, dx, dy) / (r_mm * r_mm * r_mm) / stretch;
                 [kr * p, kg * p, kb * p]
             };
-            let px = &mut hdr.pixels[y * w + x];
+            let px = &mut row[x];
             for k in 0..3 {
                 px[k] += c[k].min(STARBURST_MAX as f32);
             }
         }
-    }
+    });
 }
