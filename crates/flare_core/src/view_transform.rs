@@ -312,6 +312,9 @@ impl ViewTransform {
     pub fn apply_rgba(&self, pixels: &mut [[f32; 4]]) {
         use rayon::prelude::*;
         pixels.par_chunks_mut(4096).for_each(|chunk| {
+            // The first colour of each run, all of a chunk's through the processor in one call (what `apply`
+            // does to each: the same operators, value for value).
+            let (mut runs, mut firsts) = (Vec::new(), Vec::new());
             let mut start = 0;
             while start < chunk.len() {
                 let mut end = start + 1;
@@ -319,11 +322,16 @@ impl ViewTransform {
                     end += 1;
                 }
                 let c = chunk[start];
-                let p = self.apply([c[0], c[1], c[2]]);
-                for q in &mut chunk[start..end] {
+                runs.push(start..end);
+                firsts.push([c[0], c[1], c[2], 1.0]);
+                start = end;
+            }
+            self.forward.apply_rgba_slice(bytemuck::cast_slice_mut(&mut firsts));
+            for (run, p) in runs.into_iter().zip(&firsts) {
+                let p = [p[0], p[1], p[2]].map(|v| if v.is_finite() { v } else { 0.0 });
+                for q in &mut chunk[run] {
                     q[..3].copy_from_slice(&p);
                 }
-                start = end;
             }
         });
     }
@@ -353,6 +361,9 @@ fn wgsl(processor: &ocio::Processor) -> Result<WgslShader, ocio::Error> {
     desc.set_language(ocio::GpuLanguage::Wgsl);
     desc.set_function_name("ocio_display");
     desc.set_resource_prefix("ocio_");
+    // 1D tables packed into 2D textures, as OCIO does for targets without 1D textures: OpenGL ES (wgpu's GL
+    // backend, llvmpipe's OpenGL among them) has none, and there a 1D texture reads as zeros.
+    desc.set_allow_texture_1d(false);
     desc.set_descriptor_set_index(WGSL_GROUP, 1)?;
     gpu.extract_gpu_shader_info(&mut desc)?;
     let bindings = desc.wgsl_bindings().ok_or_else(|| ocio::Error::msg("no WGSL bindings"))?;
@@ -394,10 +405,11 @@ fn wgsl(processor: &ocio::Processor) -> Result<WgslShader, ocio::Error> {
     Ok(WgslShader { text, textures, uniforms, sampler: None })
 }
 
-/// `text` with each module-scope `var<private> NAME: array<f32, N> = array<f32, N>(...)` made a 1D `R32Float`
-/// texture (bindings from `first_binding` in [`WGSL_GROUP`]) read by `NAME_at(i)`, the index clamped to the
-/// array as WGSL clamps an array's index; every `NAME[expr]` becomes `NAME_at(i32(expr))`. `None` (the text
-/// kept as OCIO made it) when there is no such array or one declaration is not of that form.
+/// `text` with each module-scope `var<private> NAME: array<f32, N> = array<f32, N>(...)` made an `R32Float`
+/// texture of N x 1 texels (2D: OpenGL ES has no 1D textures; bindings from `first_binding` in [`WGSL_GROUP`])
+/// read by `NAME_at(i)`, the index clamped to the array as WGSL clamps an array's index; every `NAME[expr]`
+/// becomes `NAME_at(i32(expr))`. `None` (the text kept as OCIO made it) when there is no such array or one
+/// declaration is not of that form.
 fn private_arrays_as_textures(text: &str, first_binding: u32) -> Option<(String, Vec<WgslTexture>)> {
     const PRIVATE: &str = "var<private> ";
     let mut out = text.to_owned();
@@ -427,8 +439,9 @@ fn private_arrays_as_textures(text: &str, first_binding: u32) -> Option<(String,
         let binding = first_binding + textures.len() as u32;
         let last = values.len() - 1;
         let declaration = format!(
-            "@group({WGSL_GROUP}) @binding({binding}) var {name}_texture: texture_1d<f32>;\n\
-             fn {name}_at(i: i32) -> f32 {{\n    return textureLoad({name}_texture, clamp(i, 0, {last}), 0).x;\n}}"
+            "@group({WGSL_GROUP}) @binding({binding}) var {name}_texture: texture_2d<f32>;\n\
+             fn {name}_at(i: i32) -> f32 {{\n    \
+             return textureLoad({name}_texture, vec2<i32>(clamp(i, 0, {last}), 0), 0).x;\n}}"
         );
         out.replace_range(start..end, &declaration);
         let index = format!("{name}[");
@@ -453,7 +466,7 @@ fn private_arrays_as_textures(text: &str, first_binding: u32) -> Option<(String,
         }
         textures.push(WgslTexture {
             binding,
-            dimensions: 1,
+            dimensions: 2,
             size: [values.len() as u32, 1, 1],
             rgba: false,
             bytes: bytemuck::cast_slice(&values).to_vec(),
@@ -484,11 +497,11 @@ mod tests {
                     fn f(i: i32) -> f32 { return t_hues[i] + t_hues[min(i + 1, 2)] * t_hues[a[i]]; }";
         let (out, tables) = private_arrays_as_textures(text, 3).expect("one table");
         assert!(!out.contains("var<private>") && !out.contains("t_hues["), "{out}");
-        assert!(out.contains("@group(1) @binding(3) var t_hues_texture: texture_1d<f32>;"), "{out}");
-        assert!(out.contains("clamp(i, 0, 2)"), "{out}");
+        assert!(out.contains("@group(1) @binding(3) var t_hues_texture: texture_2d<f32>;"), "{out}");
+        assert!(out.contains("vec2<i32>(clamp(i, 0, 2), 0)"), "{out}");
         assert!(out.contains("t_hues_at(i32(i)) + t_hues_at(i32(min(i + 1, 2))) * t_hues_at(i32(a[i]))"), "{out}");
         assert_eq!(tables.len(), 1);
-        assert_eq!((tables[0].binding, tables[0].dimensions, tables[0].size, tables[0].rgba), (3, 1, [3, 1, 1], false));
+        assert_eq!((tables[0].binding, tables[0].dimensions, tables[0].size, tables[0].rgba), (3, 2, [3, 1, 1], false));
         assert_eq!(bytemuck::cast_slice::<u8, f32>(&tables[0].bytes), &[-1.5, 0.0, 2.25]);
         // What is not a table of f32 is left as OCIO wrote it.
         assert!(private_arrays_as_textures("var<private> n: i32 = 3;", 1).is_none());

@@ -7,7 +7,7 @@ use flare_core::flare::{FlareConfig, PreparedFlare};
 use flare_core::frame::{self, Device, Frame, FrameRequest, GpuDrawer, Sources};
 use flare_core::image::HdrImage;
 use flare_core::render::DisplaySettings;
-use flare_core::render::gpu::test_context;
+use flare_core::render::gpu::{GpuContext, skip_without_gpu, test_context};
 use flare_core::view_lut::ViewLut;
 use flare_core::view_transform::{ColorDoc, ViewTransform};
 
@@ -117,6 +117,26 @@ fn a_cube_is_applied_as_a_look_and_changes_the_display() {
 #[test]
 fn the_gpu_runs_the_views_wgsl_as_its_cpu_twin_runs_the_processor() {
     let Some(ctx) = test_context() else { return };
+    views_draw_as_their_cpu_twins(ctx);
+}
+
+/// The same on wgpu's OpenGL ES backend (llvmpipe's OpenGL here; a machine without Vulkan draws on it): OpenGL
+/// ES has no 1D textures, where the ACES 2.0 view's table of hues once lay, and a frame through the view came
+/// out black without an error.
+#[test]
+fn the_views_draw_on_opengl_es_as_on_vulkan() {
+    let ctx = match GpuContext::headless_on(wgpu::Backends::GL, true) {
+        Ok(ctx) => ctx,
+        Err(e) => return skip_without_gpu(&format!("no OpenGL ES adapter: {e}")),
+    };
+    println!("GPU adapter: {} ({:?}, {:?})", ctx.adapter.name, ctx.adapter.device_type, ctx.adapter.backend);
+    assert_eq!(ctx.adapter.backend, wgpu::Backend::Gl);
+    views_draw_as_their_cpu_twins(ctx);
+}
+
+/// Four views (the default, another view, another display, a `.cube` look) drawn on one device (as the app
+/// keeps one: each view's pipeline made when a frame asks for it), each within 1/255 of its CPU twin.
+fn views_draw_as_their_cpu_twins(ctx: GpuContext) {
     let dir = tempfile::tempdir().unwrap();
     let cube = dir.path().join("warm.cube");
     warm_cube(&cube);
@@ -127,7 +147,6 @@ fn the_gpu_runs_the_views_wgsl_as_its_cpu_twin_runs_the_processor() {
         ColorDoc { display: Some("Display P3 - Display".into()), ..Default::default() },
         ColorDoc { cube: Some(cube.display().to_string()), ..Default::default() },
     ];
-    // One device for every view, as the app keeps one: each view's pipeline is made when a frame asks for it.
     for doc in views {
         let view = ViewTransform::cached(&doc).unwrap();
         let (flare, frame, plate) = frame_of(Some(view.clone()));

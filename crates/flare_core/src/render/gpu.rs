@@ -85,8 +85,13 @@ impl GpuContext {
     /// Picks an adapter with no surface. `prefer_software` ranks CPU adapters (lavapipe, llvmpipe) first,
     /// which keeps test images identical from machine to machine; otherwise real GPUs come first.
     pub fn headless(prefer_software: bool) -> Result<Self, GpuError> {
+        Self::headless_on(wgpu::Backends::all(), prefer_software)
+    }
+
+    /// [`Self::headless`] among the adapters of `backends` alone (a test of the OpenGL ES backend, say).
+    pub fn headless_on(backends: wgpu::Backends, prefer_software: bool) -> Result<Self, GpuError> {
         let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-        let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+        let adapters = pollster::block_on(instance.enumerate_adapters(backends));
         let rank = |info: &wgpu::AdapterInfo| {
             let software = info.device_type == wgpu::DeviceType::Cpu;
             let kind = match info.device_type {
