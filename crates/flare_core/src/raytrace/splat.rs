@@ -142,12 +142,12 @@ impl Accumulator {
                 for (tx, tile) in tiles.iter().enumerate() {
                     let Some(tile) = tile else { continue };
                     for (y, row) in band.chunks_exact_mut(width).enumerate() {
-                        for x in tx * TILE..((tx + 1) * TILE).min(width) {
-                            let i = y * TILE + x - tx * TILE;
+                        let columns = tx * TILE..((tx + 1) * TILE).min(width);
+                        for (i, pixel) in (y * TILE..).zip(&mut row[columns]) {
                             let rgb = [tile[i], tile[TILE_PIXELS + i], tile[2 * TILE_PIXELS + i]];
                             let v = rgb.map(|c| (c / pixel_area_mm2) as f32);
                             let v = v.map(|c| if c.is_finite() && c > 0.0 { c } else { 0.0 });
-                            row[x] = [v[0], v[1], v[2], 1.0];
+                            *pixel = [v[0], v[1], v[2], 1.0];
                         }
                     }
                 }
