@@ -7,7 +7,7 @@ use flare_core::flare::{FlareConfig, PreparedFlare};
 use flare_core::frame::{self, Device, Frame, FrameRequest, GpuDrawer, Sources};
 use flare_core::image::HdrImage;
 use flare_core::render::DisplaySettings;
-use flare_core::render::gpu::{GpuContext, skip_without_gpu, test_context};
+use flare_core::render::gpu::{GpuContext, gl_test_context, test_context};
 use flare_core::view_lut::ViewLut;
 use flare_core::view_transform::{ColorDoc, ViewTransform};
 
@@ -125,12 +125,7 @@ fn the_gpu_runs_the_views_wgsl_as_its_cpu_twin_runs_the_processor() {
 /// out black without an error.
 #[test]
 fn the_views_draw_on_opengl_es_as_on_vulkan() {
-    let ctx = match GpuContext::headless_on(wgpu::Backends::GL, true) {
-        Ok(ctx) => ctx,
-        Err(e) => return skip_without_gpu(&format!("no OpenGL ES adapter: {e}")),
-    };
-    println!("GPU adapter: {} ({:?}, {:?})", ctx.adapter.name, ctx.adapter.device_type, ctx.adapter.backend);
-    assert_eq!(ctx.adapter.backend, wgpu::Backend::Gl);
+    let Some(ctx) = gl_test_context() else { return };
     views_draw_as_their_cpu_twins(ctx);
 }
 

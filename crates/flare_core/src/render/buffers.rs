@@ -136,7 +136,17 @@ pub fn texture_2d(
 
 /// Writes `bytes` (rows of `bytes_per_pixel` bytes a texel, no padding) into the whole of `texture`'s first level.
 pub(crate) fn upload(queue: &wgpu::Queue, texture: &wgpu::Texture, bytes: &[u8], bytes_per_pixel: u32) {
-    let size = texture.size();
+    upload_part(queue, texture, bytes, bytes_per_pixel, texture.size());
+}
+
+/// [`upload`] into the first `size` texels of `texture` (its first layers, say).
+pub(crate) fn upload_part(
+    queue: &wgpu::Queue,
+    texture: &wgpu::Texture,
+    bytes: &[u8],
+    bytes_per_pixel: u32,
+    size: wgpu::Extent3d,
+) {
     queue.write_texture(
         wgpu::TexelCopyTextureInfo {
             texture,

@@ -37,7 +37,7 @@
 use wgpu_profiler::{GpuProfiler, GpuProfilerSettings, GpuTimerQueryResult};
 
 pub use super::buffers::{HDR_FORMAT, texture_2d};
-use super::buffers::{render_pipeline, upload};
+use super::buffers::{render_pipeline, upload, upload_part};
 use super::gpu_ghosts::ComputeGhosts;
 use super::gpu_lut::{ComputeLut, TILE};
 use super::gpu_view::{PassKey, ViewPass};
@@ -220,13 +220,25 @@ pub fn skip_without_gpu(reason: &str) {
 /// The adapter tests use: a software one first (reproducible images); `None` when there is none (see
 /// [`skip_without_gpu`]).
 pub fn test_context() -> Option<GpuContext> {
-    match GpuContext::headless(true) {
+    test_context_on(wgpu::Backends::all())
+}
+
+/// [`test_context`] on wgpu's OpenGL ES backend (llvmpipe's OpenGL in CI): what a machine without Vulkan draws
+/// on, and what it lacks (1D textures, a one-layer texture viewed as an array) is tested there.
+pub fn gl_test_context() -> Option<GpuContext> {
+    let ctx = test_context_on(wgpu::Backends::GL)?;
+    assert_eq!(ctx.adapter.backend, wgpu::Backend::Gl);
+    Some(ctx)
+}
+
+fn test_context_on(backends: wgpu::Backends) -> Option<GpuContext> {
+    match GpuContext::headless_on(backends, true) {
         Ok(ctx) => {
             println!("GPU adapter: {} ({:?}, {:?})", ctx.adapter.name, ctx.adapter.device_type, ctx.adapter.backend);
             Some(ctx)
         }
         Err(e) => {
-            skip_without_gpu(&e.to_string());
+            skip_without_gpu(&format!("{e} ({backends:?})"));
             None
         }
     }
@@ -237,25 +249,30 @@ fn half_floats(rgba: &[[f32; 4]]) -> Vec<u8> {
     bytemuck::cast_slice(&halves).to_vec()
 }
 
-/// An Rgba16Float 2D array texture of `layers` square pages of `side` texels.
-fn atlas_texture(device: &wgpu::Device, side: u32, layers: u32) -> wgpu::Texture {
-    device.create_texture(&wgpu::TextureDescriptor {
+/// An Rgba16Float 2D array texture of `pages` square pages of `side` texels holding `bytes` (half floats, the
+/// pages in order). wgpu's OpenGL ES backend makes a texture of one layer a plain 2D texture, which the
+/// shaders' array view then cannot read (wgpu issues 1574 and 1614: a one-page LUT drew 60% of its light
+/// wrong): there the texture gets a second layer, left black and never sampled.
+fn atlas_texture(device: &wgpu::Device, queue: &wgpu::Queue, side: u32, pages: u32, bytes: &[u8]) -> wgpu::Texture {
+    let pages = pages.max(1);
+    let gl = device.adapter_info().backend == wgpu::Backend::Gl;
+    let texture = device.create_texture(&wgpu::TextureDescriptor {
         label: Some("lut atlas"),
-        size: wgpu::Extent3d { width: side, height: side, depth_or_array_layers: layers.max(1) },
+        size: wgpu::Extent3d { width: side, height: side, depth_or_array_layers: pages.max(if gl { 2 } else { 1 }) },
         mip_level_count: 1,
         sample_count: 1,
         dimension: wgpu::TextureDimension::D2,
         format: HDR_FORMAT,
         usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
         view_formats: &[],
-    })
+    });
+    upload_part(queue, &texture, bytes, 8, wgpu::Extent3d { width: side, height: side, depth_or_array_layers: pages });
+    texture
 }
 
 /// The atlas when no LUT is set: one black texel.
 fn empty_atlas(device: &wgpu::Device, queue: &wgpu::Queue) -> wgpu::Texture {
-    let atlas = atlas_texture(device, 1, 1);
-    upload(queue, &atlas, &half_floats(&[[0.0; 4]]), 8);
-    atlas
+    atlas_texture(device, queue, 1, 1, &half_floats(&[[0.0; 4]]))
 }
 
 /// A vertex buffer for `capacity` instances of `T`, written by the queue.
@@ -707,9 +724,9 @@ impl FlareRenderer {
         self.lut_footprints = lut.map(|l| l.footprints.clone()).unwrap_or_default();
         match lut.filter(|l| l.layout.pages > 0) {
             Some(live) => {
-                self.lut_atlas = atlas_texture(device, ATLAS_PAGE, live.layout.pages);
                 let texels = live.atlas_pages();
-                upload(queue, &self.lut_atlas, bytemuck::cast_slice(&texels), 8);
+                self.lut_atlas =
+                    atlas_texture(device, queue, ATLAS_PAGE, live.layout.pages, bytemuck::cast_slice(&texels));
             }
             None => self.lut_atlas = empty_atlas(device, queue),
         }
