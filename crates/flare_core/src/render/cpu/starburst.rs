@@ -32,6 +32,8 @@ pub fn starburst_pass(scene: &FlareScene, texture: &StarburstTexture, hdr: &mut 
     let stretch = if core[3] > 0.0 { core[3] } else { 1.0 };
     let (sx, sy) = accumulation_scale(scene);
     let (rows, columns) = (covered(cy, reach, sy, h), covered(cx, reach * stretch.max(1.0), sx, w));
+    // A reach that ends short of the frame is an empty range whose start may lie past its end (or the frame).
+    let rows = rows.start.min(rows.end)..rows.end;
     // Rows in parallel: each pixel's sum is its own, so the image is the same on any number of threads.
     let band = &mut hdr.pixels[rows.start * w..rows.end * w];
     band.par_chunks_mut(w.max(1)).zip(rows).for_each(|(row, y)| {
@@ -56,4 +58,33 @@ pub fn starburst_pass(scene: &FlareScene, texture: &StarburstTexture, hdr: &mut 
             }
         }
     });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::flare::{FlareConfig, PreparedFlare};
+    use crate::frame::{Frame, FrameRequest};
+    use crate::optics::library::builtin_lens;
+
+    /// A light whose starburst reaches the frame adds to it; one whose reach ends short of the frame on any side
+    /// (its rows or columns an empty range, the first past the last) adds nothing and is no error.
+    #[test]
+    fn a_starburst_that_misses_the_frame_adds_nothing() {
+        let flare = PreparedFlare::new(&builtin_lens("tessar").unwrap(), &FlareConfig::default()).unwrap();
+        let frame = Frame::build(&flare, None, &FrameRequest { width: 64, height: 48, ..FrameRequest::default() });
+        let (sx, sy) = accumulation_scale(&frame.scene);
+        let (w, h) = (frame.scene.hdr_width as f32 * sx, frame.scene.hdr_height as f32 * sy);
+        let lit = |cx: f32, cy: f32| {
+            let mut scene = frame.scene.clone();
+            scene.globals.starburst = [cx, cy, 6.0, 1.0];
+            let mut hdr = HdrImage::black(scene.hdr_width, scene.hdr_height);
+            starburst_pass(&scene, &flare.starburst_texture, &mut hdr);
+            hdr.pixels.iter().filter(|p| p[..3].iter().any(|&v| v > 0.0)).count()
+        };
+        assert!(lit(0.5 * w, 0.5 * h) > 0);
+        for (cx, cy) in [(0.5 * w, 3.0 * h), (0.5 * w, -2.0 * h), (3.0 * w, 0.5 * h), (-2.0 * w, 0.5 * h)] {
+            assert_eq!(lit(cx, cy), 0, "light at ({cx}, {cy})");
+        }
+    }
 }
