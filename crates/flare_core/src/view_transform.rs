@@ -11,12 +11,12 @@
 //! is applied where OCIO applies every look, and the display transform is OCIO's legacy viewing pipeline from
 //! the working space to the display and view with those looks. Its CPU processor is the CPU twin
 //! ([`ViewTransform::apply`]); its WGSL shader ([`WgslShader`], function `ocio_display`, its LUTs as 2D and
-//! 3D textures of bind group [`WGSL_GROUP`]: no 1D ones, which OpenGL ES lacks) is what the tonemap pass of the GPU renderer runs when the document's tonemap
-//! is [`crate::color::Tonemap::View`] (the default): the same numbers to within OCIO's 1e-3. OCIO writes
-//! some tables into that shader as `var<private>` arrays (the ACES 2.0 views' 363 hues), which each
-//! invocation would copy into its own memory before reading two entries (a third of a lavapipe draft's time);
-//! `wgsl` makes each one a texture of the group (one row of texels), read with the same clamped index, and
-//! keeps OCIO's text when one is of another form.
+//! 3D textures of bind group [`WGSL_GROUP`]: no 1D ones, which OpenGL ES lacks) is what the tonemap pass of
+//! the GPU renderer runs when the document's tonemap is [`crate::color::Tonemap::View`] (the default): the
+//! same numbers to within OCIO's 1e-3. OCIO writes some tables into that shader as `var<private>` arrays (the
+//! ACES 2.0 views' 363 hues), which each invocation would copy into its own memory before reading two entries
+//! (a third of a lavapipe draft's time); `wgsl` makes each one a texture of the group (one row of texels), read
+//! with the same clamped index, and keeps OCIO's text when one is of another form.
 //!
 //! FlareLab's own curves (clamp, Reinhard, Narkowicz's ACES fit, [`crate::color::Tonemap`]) are kept as the
 //! other tonemaps: each is a tone curve followed by the sRGB encoding, as if on the "sRGB - Display" with the
