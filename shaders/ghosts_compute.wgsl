@@ -507,23 +507,7 @@ fn spans_walks(@builtin(global_invocation_id) gid: vec3<u32>) {
 
 // ---- the per-row sum ----
 
-// The three channels' 64-bit sums of a column (or of a run of columns) as vectors: the low words and the high
-// words. Vectors rather than an array of three (low, high) pairs: the compiler keeps them in registers, where an
-// array indexed in a loop may go to memory; on an H200 the per-row sum took 0.78 ms of a 4K frame with arrays.
-struct Sums {
-    lo: vec3<u32>,
-    hi: vec3<u32>,
-};
-
-fn no_sums() -> Sums {
-    return Sums(vec3<u32>(0u), vec3<u32>(0u));
-}
-
-// a + b modulo 2^64 per channel (`add64` of fixed64.wgsl, three at a time).
-fn add_sums(a: Sums, b: Sums) -> Sums {
-    let lo = a.lo + b.lo;
-    return Sums(lo, a.hi + b.hi + select(vec3<u32>(0u), vec3<u32>(1u), lo < a.lo));
-}
+// The sums (`Sums`, `add_sums`, `float_sums`) and the workgroup's scan (`scan_chunk`) come from scan64.wgsl.
 
 // The sums of steps in a column's six words (per channel: low, high), each high 2^k + low.
 fn load_column(at: u32) -> Sums {
@@ -552,11 +536,10 @@ fn clear_column(at: u32) {
     }
 }
 
-// Writes the sums `acc` of row `row`'s columns up to x into the HDR texture (`float64` of fixed64.wgsl per
-// channel, times the unit; the LUT layer applied where the frame has one).
+// Writes the sums `acc` of row `row`'s columns up to x into the HDR texture (`float_sums` of scan64.wgsl,
+// times the unit; the LUT layer applied where the frame has one).
 fn write_pixel(row: u32, x: u32, acc: Sums) {
-    let sums = vec3<f32>(bitcast<vec3<i32>>(acc.hi)) * 4294967296.0 + vec3<f32>(acc.lo);
-    store_pixel(row, x, sums * strip.unit_per_fixed);
+    store_pixel(row, x, float_sums(acc) * strip.unit_per_fixed);
 }
 
 // Writes the irradiance `rgb` at pixel x of strip row `row` (the LUT layer applied where the frame has one).
@@ -598,31 +581,6 @@ fn resolve_rows(@builtin(global_invocation_id) gid: vec3<u32>) {
 }
 
 // ---- the per-row sum in chunks of 256 columns (hardware GPUs) ----
-
-// Columns of a chunk, one an invocation.
-const CHUNK: u32 = 256u;
-// A chunk's running sums, one an invocation.
-var<workgroup> chunk: array<Sums, 256>;
-
-// The inclusive scan over the workgroup's 256 invocations of `v` (Hillis-Steele, 8 steps, each invocation's
-// running sum kept in a register); the chunk's total is left in `chunk[255]` until the next barrier. Called
-// from uniform control flow.
-fn scan_chunk(t: u32, v: Sums) -> Sums {
-    var sum = v;
-    chunk[t] = sum;
-    workgroupBarrier();
-    for (var step = 1u; step < CHUNK; step = step * 2u) {
-        var add = no_sums();
-        if (t >= step) {
-            add = chunk[t - step];
-        }
-        workgroupBarrier();
-        sum = add_sums(sum, add);
-        chunk[t] = sum;
-        workgroupBarrier();
-    }
-    return sum;
-}
 
 // One workgroup of 256 per strip row, walking it in chunks of 256 columns, one column an invocation
 // (neighbouring invocations read neighbouring words): each chunk's sums are scanned by `scan_chunk` and added

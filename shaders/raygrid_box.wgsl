@@ -573,49 +573,50 @@ fn resolve_box(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
 }
 
-// `resolve_box` on a GPU: one workgroup per row of the strip, 64 columns at a time, one column an invocation
+// The same words as `sums`, for `resolve_box_scan` (bound apart: the splat's atomics are done, a pass boundary
+// lies between), read and cleared by plain loads and stores.
+@group(0) @binding(6) var<storage, read_write> plain_sums: array<u32>;
+
+// The three channels' 64-bit sums at `word` (R, G, B as (low, high) pairs) as `Sums` (scan64.wgsl).
+fn load_sums(word: u32) -> Sums {
+    return Sums(
+        vec3<u32>(plain_sums[word], plain_sums[word + 2u], plain_sums[word + 4u]),
+        vec3<u32>(plain_sums[word + 1u], plain_sums[word + 3u], plain_sums[word + 5u]),
+    );
+}
+
+// `resolve_box` on a GPU: one workgroup per row of the strip, 256 columns at a time, one column an invocation
 // (neighbouring invocations read neighbouring words; one invocation walking a whole row leaves a GPU idle):
-// the second differences scanned into slopes, the slopes into levels, plus the direct sums. The same sums.
-@compute @workgroup_size(64)
+// the second differences scanned into slopes, the slopes into levels (`scan_chunk` of scan64.wgsl, each
+// running sum a pair of vectors in registers, as the ghosts' `resolve`), plus the direct sums. The same sums.
+@compute @workgroup_size(256)
 fn resolve_box_scan(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) t: u32) {
     let row = wid.y * box_params.groups_x + wid.x;
     if (row >= box_params.rows) {
         return;
     }
-    let zero = vec2<u32>(0u);
-    var slope_before = array<vec2<u32>, 3>(zero, zero, zero);
-    var level_before = array<vec2<u32>, 3>(zero, zero, zero);
-    for (var x0 = 0u; x0 < box_params.width; x0 = x0 + 64u) {
+    var slope_before = no_sums();
+    var level_before = no_sums();
+    for (var x0 = 0u; x0 < box_params.width; x0 = x0 + CHUNK) {
         let x = x0 + t;
         let inside = x < box_params.width;
         let base = (row * box_params.width + min(x, box_params.width - 1u)) * WORDS_PER_PIXEL;
-        var direct = array<vec2<u32>, 3>(zero, zero, zero);
-        var second = array<vec2<u32>, 3>(zero, zero, zero);
+        var direct = no_sums();
+        var second = no_sums();
         if (inside) {
-            for (var c = 0u; c < 3u; c = c + 1u) {
-                let word = base + 2u * c;
-                direct[c] = vec2<u32>(atomicLoad(&sums[word]), atomicLoad(&sums[word + 1u]));
-                second[c] = vec2<u32>(atomicLoad(&sums[word + 6u]), atomicLoad(&sums[word + 7u]));
-            }
+            direct = load_sums(base);
+            second = load_sums(base + 6u);
         }
-        let slope_in = scan64(t, second);
-        var slope = array<vec2<u32>, 3>(zero, zero, zero);
-        for (var c = 0u; c < 3u; c = c + 1u) {
-            slope[c] = add64(slope_before[c], slope_in[c]);
-            slope_before[c] = add64(slope_before[c], scan_chunk[63u * 3u + c]);
-        }
+        let slope = add_sums(slope_before, scan_chunk(t, second));
+        slope_before = add_sums(slope_before, chunk[CHUNK - 1u]);
         workgroupBarrier();
-        let level_in = scan64(t, slope);
-        var out = vec4<f32>(0.0, 0.0, 0.0, 1.0);
-        for (var c = 0u; c < 3u; c = c + 1u) {
-            let level = add64(level_before[c], level_in[c]);
-            level_before[c] = add64(level_before[c], scan_chunk[63u * 3u + c]);
-            out[c] = max(float64(add64(level, direct[c])) * box_params.unit_per_fixed, 0.0);
-        }
+        let level = add_sums(level_before, scan_chunk(t, slope));
+        level_before = add_sums(level_before, chunk[CHUNK - 1u]);
         if (inside) {
-            textureStore(resolved, vec2<u32>(x, box_params.first_row + row), out);
+            let rgb = max(float_sums(add_sums(level, direct)) * box_params.unit_per_fixed, vec3<f32>(0.0));
+            textureStore(resolved, vec2<u32>(x, box_params.first_row + row), vec4<f32>(rgb, 1.0));
             for (var word = base; word < base + WORDS_PER_PIXEL; word = word + 1u) {
-                atomicStore(&sums[word], 0u);
+                plain_sums[word] = 0u;
             }
         }
         workgroupBarrier();

@@ -134,7 +134,8 @@ fn gpu_ray_grids_are_deterministic_and_draw_in_strips() {
     let mut raygrid = GpuRayGrid::new(&ctx.device);
     let flare = prepared("pbrt_dgauss_50mm");
     let renderer = flare.ray_grid_renderer();
-    let (w, h) = (200, 130);
+    // Wider than one chunk of the scanning resolve (256 columns), so that its sums carry from chunk to chunk.
+    let (w, h) = (300, 130);
     let render = |raygrid: &GpuRayGrid| {
         raygrid.render(&ctx, &renderer, [7.0, -2.0], Window::frame(w, h), 32, SUPERSAMPLE, &[]).unwrap().hdr
     };

@@ -717,7 +717,11 @@ impl GpuRayGrid {
                 label: Some("raygrid resolve"),
                 layout: &self.resolve_pipeline.get_bind_group_layout(0),
                 entries: &[
-                    wgpu::BindGroupEntry { binding: 4, resource: sums.as_entire_binding() },
+                    // `resolve_box` reads the sums by atomics (binding 4), `resolve_box_scan` by plain loads.
+                    wgpu::BindGroupEntry {
+                        binding: if self.row_split > 1 { 6 } else { 4 },
+                        resource: sums.as_entire_binding(),
+                    },
                     wgpu::BindGroupEntry { binding: 3, resource: params(s * (batches.len() + 1) + batches.len()) },
                     wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::TextureView(&target_view) },
                 ],
@@ -1020,8 +1024,15 @@ fn box_pipelines(
 /// rasteriser, which runs a workgroup's invocations one SIMD batch after another anyway, 8 on a GPU, where an
 /// invocation walking a large triangle's rows alone keeps its warp waiting (NVIDIA H200, the Nikon at
 /// 1920x1080: the splat took 59 ms at grid 64 and 114 ms at grid 32, whose triangles are four times larger).
+/// Above 1 the resolve is `resolve_box_scan`: a device without room for its workgroup (256 invocations, 8 KiB
+/// of workgroup memory) keeps 1.
 fn row_split(device: &wgpu::Device) -> u32 {
-    if software_device(device) { 1 } else { 8 }
+    // `resolve_box_scan` takes 256 invocations a workgroup and 32 bytes of workgroup memory each.
+    let l = device.limits();
+    let scan_fits = l.max_compute_invocations_per_workgroup >= 256
+        && l.max_compute_workgroup_size_x >= 256
+        && l.max_compute_workgroup_storage_size >= 32 * 256;
+    if software_device(device) || !scan_fits { 1 } else { 8 }
 }
 
 /// The limits every GPU ray-grid render checks before anything is dispatched: the tracer's workgroups, one
