@@ -285,6 +285,8 @@ impl CallbackTrait for FlareCallback {
             return Vec::new();
         };
         if res.drawn == *generation {
+            // Nothing to draw: take the last frame's GPU times if they came back (the status bar shows them).
+            res.renderer.collect_pass_times(queue);
             return Vec::new();
         }
         res.drawn = *generation;

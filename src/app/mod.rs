@@ -654,11 +654,20 @@ impl FlareLabApp {
             ),
             None => quality,
         };
+        // The viewport draws only when the frame changes; until the last frame's timestamps are back, UI frames
+        // keep coming so that it can take them (else the times shown would be the frame's before, a draft's).
+        let pending = self.gpu_times_pending();
+        if pending {
+            ui.ctx().request_repaint_after(std::time::Duration::from_millis(50));
+        }
         let gpu_time = match (self.gpu.as_ref(), self.gpu_pass_times()) {
-            (_, Some((adapter, times))) => format!("GPU time ({adapter}, timestamp queries): {}", times.summary()),
-            (Some(_), None) => {
-                "GPU time: not measured (no timestamp queries on this adapter, or none back yet)".to_owned()
-            }
+            (_, Some((adapter, times))) => format!(
+                "GPU time ({adapter}, timestamp queries){}: {}",
+                if pending { ", the frame before (this one's not back yet)" } else { "" },
+                times.summary()
+            ),
+            (Some(_), None) if pending => "GPU time: waiting for the frame's timestamps".to_owned(),
+            (Some(_), None) => "GPU time: not measured (this adapter has no timestamp queries)".to_owned(),
             (None, None) => "no GPU".to_owned(),
         };
         ui.label(format!("{quality} | {gpu_time}"));
@@ -1125,6 +1134,14 @@ impl FlareLabApp {
     }
 
     /// The adapter's name and the GPU pass times of the latest viewport frame whose timestamps came back.
+    /// Whether the viewport's last frame's GPU times have yet to come back (see `FlareRenderer::pass_times_pending`).
+    fn gpu_times_pending(&self) -> bool {
+        self.gpu
+            .as_ref()
+            .and_then(|rs| ViewportResources::read(rs, |res| res.renderer.pass_times_pending()))
+            .unwrap_or(false)
+    }
+
     fn gpu_pass_times(&self) -> Option<(String, flare_core::render::gpu::PassTimes)> {
         let rs = self.gpu.as_ref()?;
         let times = ViewportResources::read(rs, |res| res.renderer.pass_times().cloned())??;

@@ -26,8 +26,10 @@
 //! timestamp queries at its start and end when the device has `TIMESTAMP_QUERY` (devices made here and the
 //! app's ask for it where the adapter offers it; lavapipe does). Results come back asynchronously, a frame or
 //! more later, without stalling: [`FlareRenderer::pass_times`] is the latest frame's ([`PassTimes`], per pass in
-//! ms, named with the adapter), read by the app's status bar; a headless caller that wants this frame's waits
-//! for it with [`FlareRenderer::wait_pass_times`]. Without timestamp support there are simply no times.
+//! ms, named with the adapter), read by the app's status bar; the app's viewport, which draws only when its
+//! frame changes, takes them on the UI frames between with [`FlareRenderer::collect_pass_times`] while
+//! [`FlareRenderer::pass_times_pending`]; a headless caller that wants this frame's waits for it with
+//! [`FlareRenderer::wait_pass_times`]. Without timestamp support there are simply no times.
 //!
 //! It never owns a window: the app hands it egui's device and a view, tests and the command line hand it a
 //! headless device ([`GpuContext::headless`]) and read the result back ([`render_display_with_lut`],
@@ -323,9 +325,12 @@ pub struct FlareRenderer {
     groups: Option<BindGroups>,
     /// Timestamp scopes around every pass (see the module documentation).
     profiler: GpuProfiler,
-    /// A frame was recorded whose profiler frame is not yet ended (it is, once submitted: at the next render
-    /// or [`Self::wait_pass_times`]).
+    /// A frame was recorded whose profiler frame is not yet ended (it is, once submitted: at the next render,
+    /// [`Self::collect_pass_times`] or [`Self::wait_pass_times`]).
     profiled_open: bool,
+    /// Profiler frames ended whose results have not come back yet (each comes back once, with or without
+    /// timestamps).
+    unread_frames: usize,
     /// The latest frame's GPU pass times that came back.
     pass_times: Option<PassTimes>,
     /// The ghost sprites as compute ([`super::gpu_ghosts`]); `None` on a device that cannot run it, which
@@ -547,6 +552,7 @@ impl FlareRenderer {
             profiler: GpuProfiler::new(device, GpuProfilerSettings::default())
                 .expect("the default profiler settings are valid"),
             profiled_open: false,
+            unread_frames: 0,
             pass_times: None,
             ghost_pipeline,
             starburst_pipeline,
@@ -983,18 +989,33 @@ impl FlareRenderer {
         self.pass_times.as_ref()
     }
 
+    /// Whether the last frame's pass times may still change what [`Self::pass_times`] says: its profiler frame
+    /// is not ended, or its results have not come back. A caller that draws only when its scene changes (the
+    /// app's viewport) calls [`Self::collect_pass_times`] until this is false, or the times it shows stay those
+    /// of the frame before (a draft's, after the full frame that followed it).
+    pub fn pass_times_pending(&self) -> bool {
+        self.profiled_open || self.unread_frames > 0
+    }
+
+    /// Takes the pass times that came back since the last render, without drawing or waiting: ends the last
+    /// render's profiler frame (its commands must have been submitted, as they are by the next UI frame).
+    pub fn collect_pass_times(&mut self, queue: &wgpu::Queue) {
+        self.end_profiled_frame(queue, None);
+    }
+
     /// Ends the profiler frame of the last render (its commands must have been submitted), waits for the GPU
     /// when given the device, and takes whatever results have come back.
     fn end_profiled_frame(&mut self, queue: &wgpu::Queue, wait: Option<&wgpu::Device>) {
-        if std::mem::take(&mut self.profiled_open) {
-            // An error here means a scope was left open: a bug, but never worth a frame.
-            let _ = self.profiler.end_frame();
+        // An error here means a scope was left open: a bug, but never worth a frame (nothing then comes back).
+        if std::mem::take(&mut self.profiled_open) && self.profiler.end_frame().is_ok() {
+            self.unread_frames += 1;
         }
         if let Some(device) = wait {
             let _ = device.poll(wgpu::PollType::wait_indefinitely());
         }
         // Older frames first: keep reading until the newest.
         while let Some(results) = self.profiler.process_finished_frame(queue.get_timestamp_period()) {
+            self.unread_frames = self.unread_frames.saturating_sub(1);
             let times = PassTimes::from_results(&results);
             if !times.passes.is_empty() {
                 self.pass_times = Some(times);
@@ -1169,6 +1190,61 @@ mod tests {
             eprintln!("desqueeze {desqueeze}: {w}x{h}, {lit} lit pixels, {differ} bytes differ, worst {worst}/255");
             assert!(lit > (w * h / 20) as usize, "only {lit} lit pixels");
             assert!(worst <= 1 && differ * 1000 <= computed.len(), "{differ} bytes differ, worst {worst}/255");
+        }
+    }
+
+    /// The last frame's GPU times come back without another frame being drawn (the app's viewport draws only
+    /// when its frame changes, and collects them on the UI frames between): after a frame with the starburst
+    /// and one without, the times shown are the second's, and nothing is left pending.
+    #[test]
+    fn the_last_frames_gpu_times_come_back_without_another_frame() {
+        use crate::flare::{FlareConfig, PreparedFlare};
+        use crate::frame::{Frame, FrameRequest, GpuDrawer};
+        use crate::render::DisplaySettings;
+        let Some(ctx) = test_context() else { return };
+        let timestamps = ctx.device.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+        let mut drawer = GpuDrawer::on(ctx);
+        let lens = crate::optics::library::builtin_lens("heliar").unwrap();
+        let flare = PreparedFlare::new(&lens, &FlareConfig::default()).unwrap();
+        let frame = |starburst: bool| {
+            let request = FrameRequest { light_deg: [7.0, 4.0], width: 96, height: 64, ..FrameRequest::default() };
+            let display = DisplaySettings { starburst, ..request.display };
+            Frame::build(&flare, None, &FrameRequest { display, ..request })
+        };
+        let (with, without) = (frame(true), frame(false));
+        let (w, h) = with.scene.output_size;
+        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC;
+        let target = texture_2d(&drawer.ctx.device, "times", w, h, wgpu::TextureFormat::Rgba8Unorm, usage);
+        let view = target.create_view(&wgpu::TextureViewDescriptor::default());
+        let labels = |drawer: &mut GpuDrawer, frame: &Frame| {
+            let (device, queue) = (&drawer.ctx.device, &drawer.ctx.queue);
+            let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
+            drawer.renderer.render_with_lut(device, queue, &mut encoder, &view, &frame.scene, None);
+            queue.submit(Some(encoder.finish()));
+            assert!(drawer.renderer.pass_times_pending());
+            // The UI frames that follow: nothing drawn, the times collected, the queue polled.
+            for _ in 0..500 {
+                drawer.renderer.collect_pass_times(queue);
+                if !drawer.renderer.pass_times_pending() {
+                    break;
+                }
+                let _ = device.poll(wgpu::PollType::Poll);
+                std::thread::sleep(std::time::Duration::from_millis(5));
+            }
+            assert!(!drawer.renderer.pass_times_pending(), "the frame's times never came back");
+            let times = drawer.renderer.pass_times().cloned();
+            times.map(|t| t.passes.into_iter().map(|(label, _)| label).collect::<Vec<_>>())
+        };
+        for (frame, starburst) in [(&with, true), (&without, false), (&with, true)] {
+            let labels = labels(&mut drawer, frame);
+            eprintln!("starburst {starburst}: {labels:?}");
+            match labels {
+                Some(labels) => {
+                    assert!(labels.iter().any(|l| l == "tonemap"), "{labels:?}");
+                    assert_eq!(labels.iter().any(|l| l == "starburst"), starburst, "{labels:?}");
+                }
+                None => assert!(!timestamps, "timestamp queries, but no times"),
+            }
         }
     }
 
