@@ -303,7 +303,7 @@ impl ViewTransform {
     pub fn apply(&self, rgb: [f32; 3]) -> [f32; 3] {
         let mut p = [rgb[0], rgb[1], rgb[2], 1.0];
         self.forward.apply_rgba(&mut p);
-        [p[0], p[1], p[2]].map(|v| if v.is_finite() { v } else { 0.0 })
+        finite_rgb(p)
     }
 
     /// Display values of many colours at once (RGBA, in place; alpha untouched). The processor runs on every
@@ -328,7 +328,7 @@ impl ViewTransform {
             }
             self.forward.apply_rgba_slice(bytemuck::cast_slice_mut(&mut firsts));
             for (run, p) in runs.into_iter().zip(&firsts) {
-                let p = [p[0], p[1], p[2]].map(|v| if v.is_finite() { v } else { 0.0 });
+                let p = finite_rgb(*p);
                 for q in &mut chunk[run] {
                     q[..3].copy_from_slice(&p);
                 }
@@ -351,6 +351,12 @@ impl ViewTransform {
             }
         }
     }
+}
+
+/// The RGB of an RGBA value the processor gave, each channel that came out non-finite as 0 (no NaN or
+/// infinity reaches an image).
+fn finite_rgb(p: [f32; 4]) -> [f32; 3] {
+    [p[0], p[1], p[2]].map(|v| if v.is_finite() { v } else { 0.0 })
 }
 
 /// The processor's WGSL shader and its resources (see [`WgslShader`]).
