@@ -1154,22 +1154,15 @@ fn aperture_view(
     aperture.create_view(&wgpu::TextureViewDescriptor::default())
 }
 
-/// Waits for the GPU and returns the time of each pass of a render's batches, every batch summed per pass name
-/// (`None` without timestamps).
+/// Waits for the GPU and returns the time of each pass of a render's batches (one profiler frame a render;
+/// `PassTimes::from_results` sums every batch's scopes of one pass name), `None` without timestamps.
 fn summed_times(device: &wgpu::Device, queue: &wgpu::Queue, profiler: &mut GpuProfiler) -> Option<PassTimes> {
     let _ = device.poll(wgpu::PollType::wait_indefinitely());
-    let mut summed: Option<PassTimes> = None;
+    let mut last = None;
     while let Some(results) = profiler.process_finished_frame(queue.get_timestamp_period()) {
-        let mut times = PassTimes::default();
-        for (name, ms) in PassTimes::from_results(&results).passes {
-            match times.passes.iter_mut().find(|(n, _)| *n == name) {
-                Some((_, total)) => *total += ms,
-                None => times.passes.push((name, ms)),
-            }
-        }
-        summed = Some(times);
+        last = Some(PassTimes::from_results(&results));
     }
-    summed.filter(|t| !t.passes.is_empty())
+    last.filter(|t| !t.passes.is_empty())
 }
 
 /// `v` as f32, 0 where it is not finite.
