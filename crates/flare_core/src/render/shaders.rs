@@ -2,17 +2,18 @@
 //!
 //! # How it works
 //! `shaders/common.wgsl` holds the one declaration of the uniforms every pass reads ([`super::Globals`]); it is
-//! prepended to each shader that uses them here, at compile time, so no shader carries a copy to keep in sync. Likewise
-//! `aperture.wgsl` (the mask lookup) for the two passes that read the aperture, and `raygrid_common.wgsl` (the ray-grid
-//! structs) for the GPU ray grids' passes, and `fixed64.wgsl` (64-bit fixed point in two u32 words) for the passes that
-//! sum light with integer atomics, `scan64.wgsl` (those sums as vectors and a workgroup's scan of them) for the two
-//! resolves that sum a row 256 columns at a time on a GPU, `mask_texels.wgsl` (the mask looked up one word a bilinear
-//! footprint) for the compute passes that read the aperture, and `word_texels.wgsl` (words read as rows of Rgba32Uint
-//! texels) for the compute passes that read words a software rasteriser would load lane by lane. A test parses every
-//! shader with naga and checks that the WGSL `Globals` has the Rust struct's size and member offsets. The tonemap pass
-//! is the one shader put together at run time: [`tonemap_wgsl`] puts the OCIO display transform's WGSL (made for the
-//! document's display and view, or `ocio_lut.wgsl` after its constants for the view's cube, [`crate::view_lut`]) before
-//! `tonemap.wgsl`; a test in `tests/colour.rs` validates it with the cube.
+//! prepended to each shader that uses them here, at compile time, so no shader carries a copy to keep in sync.
+//! Likewise `aperture.wgsl` (the mask lookup) for the two passes that read the aperture, and `raygrid_common.wgsl`
+//! (the ray-grid structs) for the GPU ray grids' passes, and `fixed64.wgsl` (64-bit fixed point in two u32 words)
+//! for the passes that sum light with integer atomics, `scan64.wgsl` (those sums as vectors and a workgroup's scan
+//! of them) for the two resolves that sum a row 256 columns at a time on a GPU, `mask_texels.wgsl` (the mask looked
+//! up one word a bilinear footprint) for the compute passes that read the aperture, and `word_texels.wgsl` (words
+//! read as rows of Rgba32Uint texels) for the compute passes that read words a software rasteriser would load lane
+//! by lane. A test parses every shader with naga and checks that the WGSL `Globals` has the Rust struct's size and
+//! member offsets. The tonemap pass is the one shader put together at run time: [`tonemap_wgsl`] puts the OCIO
+//! display transform's WGSL (made for the document's display and view, or `ocio_lut.wgsl` after its constants for
+//! the view's cube, [`crate::view_lut`]) before `tonemap.wgsl`; a test in `tests/colour.rs` validates it with the
+//! cube.
 
 /// The shared uniforms (prepended to the shaders below).
 pub const COMMON_WGSL: &str = include_str!("../../../../shaders/common.wgsl");
