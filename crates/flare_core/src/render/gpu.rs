@@ -163,7 +163,7 @@ pub struct PassTimes {
     pub passes: Vec<(String, f64)>,
 }
 
-/// A scope's time that its nested scopes leave out is listed as its own entry (`"<label> (rest of the pass)"`)
+/// A scope's time that its nested scopes leave out is listed as its own entry (`"<label> (untimed part)"`)
 /// when it is more than this share of the scope's time and more than [`REST_MIN_MS`].
 const REST_SHARE: f64 = 0.1;
 const REST_MIN_MS: f64 = 0.05;
@@ -199,7 +199,7 @@ impl PassTimes {
                     if let Some(ms) = ms {
                         let rest = ms - parts;
                         if rest > REST_MIN_MS && rest > REST_SHARE * ms {
-                            add(out, &format!("{} (rest of the pass)", r.label), rest);
+                            add(out, &format!("{} (untimed part)", r.label), rest);
                             added += rest;
                         }
                     }
@@ -354,6 +354,8 @@ pub struct FlareRenderer {
     /// Profiler frames ended whose results have not come back yet (each comes back once, with or without
     /// timestamps).
     unread_frames: usize,
+    /// The device writes timestamps (`TIMESTAMP_QUERY`): without, no frame ever has times to wait for.
+    timed: bool,
     /// The latest frame's GPU pass times that came back.
     pass_times: Option<PassTimes>,
     /// The ghost sprites as compute ([`super::gpu_ghosts`]); `None` on a device that cannot run it, which
@@ -576,6 +578,7 @@ impl FlareRenderer {
                 .expect("the default profiler settings are valid"),
             profiled_open: false,
             unread_frames: 0,
+            timed: device.features().contains(wgpu::Features::TIMESTAMP_QUERY),
             pass_times: None,
             ghost_pipeline,
             starburst_pipeline,
@@ -1016,8 +1019,9 @@ impl FlareRenderer {
     /// is not ended, or its results have not come back. A caller that draws only when its scene changes (the
     /// app's viewport) calls [`Self::collect_pass_times`] until this is false, or the times it shows stay those
     /// of the frame before (a draft's, after the full frame that followed it).
+    /// Never on a device without timestamp queries.
     pub fn pass_times_pending(&self) -> bool {
-        self.profiled_open || self.unread_frames > 0
+        self.timed && (self.profiled_open || self.unread_frames > 0)
     }
 
     /// Takes the pass times that came back since the last render, without drawing or waiting: ends the last
@@ -1257,11 +1261,11 @@ mod tests {
         // The parts cover the pass but for 0.1 of 12 ms (under a tenth): as they are.
         let whole = PassTimes::from_results(&frame(10.0));
         close(&whole, &[("ghost spans", 10.0), ("ghost resolve", 1.9), ("tonemap", 8.0)]);
-        // The spans' scope missed its dispatch: the rest of the pass is listed, the total is the frame's.
+        // The spans' scope missed its dispatch: the untimed part of the pass is listed, the total is the frame's.
         let missed = PassTimes::from_results(&frame(0.1));
         close(
             &missed,
-            &[("ghost spans", 0.1), ("ghost resolve", 1.9), ("ghosts (rest of the pass)", 10.0), ("tonemap", 8.0)],
+            &[("ghost spans", 0.1), ("ghost resolve", 1.9), ("ghosts (untimed part)", 10.0), ("tonemap", 8.0)],
         );
         assert!((missed.total_ms() - 20.0).abs() < 1e-9);
     }
@@ -1294,7 +1298,7 @@ mod tests {
             let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
             drawer.renderer.render_with_lut(device, queue, &mut encoder, &view, &frame.scene, None);
             queue.submit(Some(encoder.finish()));
-            assert!(drawer.renderer.pass_times_pending());
+            assert_eq!(drawer.renderer.pass_times_pending(), timestamps);
             // The UI frames that follow: nothing drawn, the times collected, the queue polled.
             for _ in 0..500 {
                 drawer.renderer.collect_pass_times(queue);
