@@ -655,7 +655,7 @@ impl FlareLabApp {
             None => quality,
         };
         // The viewport draws only when the frame changes; until the last frame's timestamps are back, UI frames
-        // keep coming so that it can take them (else the times shown would be the frame's before, a draft's).
+        // keep coming so that it can take them (else the times shown would be those of the frame before: a draft's).
         let pending = self.gpu_times_pending();
         if pending {
             ui.ctx().request_repaint_after(std::time::Duration::from_millis(50));
@@ -1137,7 +1137,6 @@ impl FlareLabApp {
         }
     }
 
-    /// The adapter's name and the GPU pass times of the latest viewport frame whose timestamps came back.
     /// Whether the viewport's last frame's GPU times have yet to come back (see `FlareRenderer::pass_times_pending`).
     fn gpu_times_pending(&self) -> bool {
         self.gpu
@@ -1146,6 +1145,7 @@ impl FlareLabApp {
             .unwrap_or(false)
     }
 
+    /// The adapter's name and the GPU pass times of the latest viewport frame whose timestamps came back.
     fn gpu_pass_times(&self) -> Option<(String, flare_core::render::gpu::PassTimes)> {
         let rs = self.gpu.as_ref()?;
         let times = ViewportResources::read(rs, |res| res.renderer.pass_times().cloned())??;
