@@ -68,6 +68,10 @@ fn new_tile() -> Vec<f64> {
     }
     tile
 }
+/// Pixel `i` of a tile (row-major in the tile) as red, green and blue, one from each plane.
+fn tile_rgb(tile: &[f64], i: usize) -> [f64; 3] {
+    [tile[i], tile[TILE_PIXELS + i], tile[2 * TILE_PIXELS + i]]
+}
 impl Accumulator {
     pub(super) fn new(width: usize, height: usize, ghosts: usize) -> Self {
         let tiles_x = width.div_ceil(TILE);
@@ -91,7 +95,7 @@ impl Accumulator {
             for y in y0..(y0 + TILE).min(self.height) {
                 for x in x0..(x0 + TILE).min(self.width) {
                     let i = (y - y0) * TILE + (x - x0);
-                    out[y * self.width + x] = [tile[i], tile[TILE_PIXELS + i], tile[2 * TILE_PIXELS + i]];
+                    out[y * self.width + x] = tile_rgb(tile, i);
                 }
             }
         }
@@ -144,8 +148,7 @@ impl Accumulator {
                     for (y, row) in band.chunks_exact_mut(width).enumerate() {
                         let columns = tx * TILE..((tx + 1) * TILE).min(width);
                         for (i, pixel) in (y * TILE..).zip(&mut row[columns]) {
-                            let rgb = [tile[i], tile[TILE_PIXELS + i], tile[2 * TILE_PIXELS + i]];
-                            let v = rgb.map(|c| (c / pixel_area_mm2) as f32);
+                            let v = tile_rgb(tile, i).map(|c| (c / pixel_area_mm2) as f32);
                             let v = v.map(|c| if c.is_finite() && c > 0.0 { c } else { 0.0 });
                             *pixel = [v[0], v[1], v[2], 1.0];
                         }
