@@ -578,6 +578,11 @@ impl Derived {
         self.lut_generation += 1;
     }
 
+    /// Whether the viewport's adapter is a software one (lavapipe, llvmpipe).
+    pub fn software(&self) -> bool {
+        self.software
+    }
+
     /// The accumulation divisor of the viewport: half resolution on software adapters.
     pub fn view_divisor(&self) -> u32 {
         if self.software { 2 } else { 1 }

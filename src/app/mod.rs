@@ -662,11 +662,10 @@ impl FlareLabApp {
         }
         // lavapipe's timestamps misplace its compute work (in other scopes, or in none: the README's benchmark
         // section): said beside them.
-        let software = self.gpu.as_ref().is_some_and(|rs| rs.adapter.get_info().device_type == wgpu::DeviceType::Cpu);
         let gpu_time = match (self.gpu.as_ref(), self.gpu_pass_times()) {
             (_, Some((adapter, times))) => format!(
                 "GPU time ({adapter}, timestamp queries{}){}: {}",
-                if software { ", unreliable on a software adapter" } else { "" },
+                if self.derived.software() { ", unreliable on a software adapter" } else { "" },
                 if pending { ", the frame before (this one's not back yet)" } else { "" },
                 times.summary()
             ),
