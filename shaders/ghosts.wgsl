@@ -6,7 +6,7 @@
 struct GhostInstance {
     @location(0) centre_half: vec4<f32>, // centre x, y (pixels); half-size x, y (pixels, signed: q -> pixel)
     @location(1) colour: vec4<f32>,      // linear RGB irradiance
-    @location(2) stop0: vec4<f32>,       // aperture map of stop crossing 0: scale, offset x, offset y, enabled
+    @location(2) stop0: vec4<f32>,       // aperture map of stop crossing 0: scale, offset x, offset y, level (0: off)
     @location(3) stop1: vec4<f32>,
     @location(4) stop2: vec4<f32>,
     @location(5) front: vec4<f32>,       // front-lens disc map: scale, offset x, offset y, anti-alias width
@@ -27,6 +27,10 @@ struct VertexOut {
 @group(0) @binding(0) var<uniform> globals: Globals;
 @group(0) @binding(1) var aperture_texture: texture_2d<f32>;
 @group(0) @binding(2) var aperture_sampler: sampler;
+// The finer levels of the mask (`GhostMasks`: twice and four times the base's texels), named by a stop map's
+// level 2 and 3.
+@group(0) @binding(3) var aperture_finer: texture_2d<f32>;
+@group(0) @binding(4) var aperture_finest: texture_2d<f32>;
 
 @vertex
 fn vs_main(@builtin(vertex_index) vertex: u32, instance: GhostInstance) -> VertexOut {
@@ -54,7 +58,18 @@ fn stop_mask(map: vec4<f32>, scale_y: f32, q: vec2<f32>) -> f32 {
     if (map.w == 0.0) {
         return 1.0;
     }
-    return aperture_at(vec2<f32>(map.x, scale_y) * q + map.yz);
+    let uv = vec2<f32>(map.x, scale_y) * q + map.yz;
+    if (map.w < 1.5) {
+        return aperture_at(uv);
+    }
+    if (abs(uv.x) > 1.0 || abs(uv.y) > 1.0) {
+        return 0.0;
+    }
+    let tex = vec2<f32>(uv.x * 0.5 + 0.5, 0.5 - uv.y * 0.5);
+    if (map.w < 2.5) {
+        return textureSampleLevel(aperture_finer, aperture_sampler, tex, 0.0).r;
+    }
+    return textureSampleLevel(aperture_finest, aperture_sampler, tex, 0.0).r;
 }
 
 // Anti-aliased unit disc: coverage of the front lens's clear aperture.

@@ -32,7 +32,7 @@
 struct GhostInstance {
     centre_half: vec4<f32>, // centre x, y (image pixels); half-size x, y (signed: q -> pixel)
     colour: vec4<f32>,      // linear RGB irradiance
-    stop0: vec4<f32>,       // aperture map of stop crossing 0: scale, offset x, offset y, enabled
+    stop0: vec4<f32>,       // aperture map of stop crossing 0: scale, offset x, offset y, mask level (0: off)
     stop1: vec4<f32>,
     stop2: vec4<f32>,
     front: vec4<f32>,       // front-lens disc map: scale, offset x, offset y, anti-alias width
@@ -47,7 +47,7 @@ struct ComputeStrip {
     instances: u32,      // sprites, (sprite, row) items of this strip, workgroups along x of `spans`
     items: u32,
     groups_x: u32,
-    mask_size: u32,      // texels a side of the aperture mask
+    mask_size: u32,      // texels a side of the aperture mask's base level (level l: mask_size << l)
     scale_x: f32,        // image pixels per accumulation pixel
     scale_y: f32,
     fixed_per_unit: f32, // fixed-point units per unit of irradiance, and its inverse
@@ -56,6 +56,10 @@ struct ComputeStrip {
     split_bits: u32,     // k: a step d is added as hi = round(d / 2^k) and lo = d - hi 2^k, each to its own word
     pieces: u32,         // invocations a (sprite, row) item's walk is split between
     spread: u32,         // `spans_sprites`: workgroup x draws sprite x * spread mod sprites
+    mask_levels: u32,    // levels of the mask in `mask` (GhostMasks: 1 to 3)
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 };
 
 // True (hardware GPUs): the stop masks' texels gathered from `mask_texture` (one fetch a lookup), every mask of a
@@ -67,9 +71,11 @@ override GATHER_MASKS: bool = false;
 @group(0) @binding(1) var<storage, read> instances: array<GhostInstance>;
 // Per sprite: its first item and its first row in this strip; then (items, 0).
 @group(0) @binding(2) var<storage, read> items: array<vec2<u32>>;
-// The aperture mask (one buffer: four storage buffers are all a downlevel adapter has): first, per band of mask
-// rows (mask_size + 1 of them), u where the bilinear sample is exactly 1 (lo, hi) and u outside which it is 0
-// (lo, hi), as f32 bits; then each bilinear footprint's four 8-bit texels in one word (mask_texels.wgsl).
+// The aperture mask's levels (one buffer: four storage buffers are all a downlevel adapter has), each level of
+// n texels a side in turn: first, per band of mask rows (n + 1 of them), u where the bilinear sample is exactly
+// 1 (lo, hi) and u outside which it is 0 (lo, hi), as f32 bits; then each bilinear footprint's four 8-bit texels
+// in one word (mask_texels.wgsl); then up to three words of padding, so that each level starts at a multiple of
+// four words (a row of its table is one texel of `mask_texels`).
 @group(0) @binding(3) var<storage, read> mask: array<u32>;
 // Per strip row, per column 0..=width, per channel R, G, B: a 64-bit difference as (low word, high word).
 // All zero between strips: `resolve` clears what it read.
@@ -78,8 +84,11 @@ override GATHER_MASKS: bool = false;
 @group(0) @binding(7) var<storage, read_write> columns: array<u32>;
 // The same words as `mask` as rows of texels (word_texels.wgsl), read where GATHER_MASKS is false.
 @group(0) @binding(10) var mask_texels: texture_2d<u32>;
-// The same mask as a texture (R8Unorm) and a sampler clamped to the edge, for `textureGather`.
+// The same mask as a texture (R8Unorm) and a sampler clamped to the edge, for `textureGather`: the base level,
+// then the finer ones (a level the mask lacks binds the base again, and no stop map names it).
 @group(0) @binding(8) var mask_texture: texture_2d<f32>;
+@group(0) @binding(12) var mask_texture_finer: texture_2d<f32>;
+@group(0) @binding(13) var mask_texture_finest: texture_2d<f32>;
 @group(0) @binding(9) var mask_sampler: sampler;
 @group(0) @binding(5) var hdr: texture_storage_2d<rgba16float, write>;
 // The LUT layer of this frame, (A, K): the pixel becomes A + K x the ghosts (a 1 x 1 texture when `lut` is 0).
@@ -87,54 +96,82 @@ override GATHER_MASKS: bool = false;
 
 // ---- the aperture mask (ApertureMask::sample) ----
 
-// The footprints' words (`ApertureMask::quad_words`) follow the mask's row table (`mask_size + 1` rows of four
-// words) in `mask`, and in `mask_texels`, which a software rasteriser reads (word_texels.wgsl): there a row of
-// the table is one texel.
+// A word of `mask`, or of `mask_texels`, which a software rasteriser reads (word_texels.wgsl): there a row of
+// a level's table is one texel.
 fn mask_quad(w: u32) -> u32 {
-    let at = (strip.mask_size + 1u) * 4u + w;
     if (GATHER_MASKS) {
-        return mask[at];
+        return mask[w];
     }
-    return texel_at(mask_texels, at / 4u)[at % 4u];
+    return texel_at(mask_texels, w / 4u)[w % 4u];
 }
 
-// Band `band`'s row of the table: (lo, hi) of u where the bilinear sample is exactly 1, and of u outside which
-// it is 0.
-fn mask_row(band: u32) -> vec4<f32> {
+// The level a stop map's last field names (1 the base; `GhostMasks::level`, clamped to the levels there are).
+fn level_of(code: f32) -> u32 {
+    return min(u32(max(code, 1.0)) - 1u, strip.mask_levels - 1u);
+}
+
+// Texels a side of level `level`.
+fn level_size(level: u32) -> u32 {
+    return strip.mask_size << level;
+}
+
+// The word of `mask` where level `level` starts (its table, then its footprints; `mask_words` in gpu_ghosts.rs).
+fn level_start(level: u32) -> u32 {
+    var at = 0u;
+    for (var l = 0u; l < level; l = l + 1u) {
+        let n = level_size(l) + 1u;
+        at = at + ((n * 4u + n * n + 3u) & ~3u);
+    }
+    return at;
+}
+
+// Band `band`'s row of level `level`'s table: (lo, hi) of u where the bilinear sample is exactly 1, and of u
+// outside which it is 0.
+fn mask_row(level: u32, band: u32) -> vec4<f32> {
+    let at = level_start(level) + band * 4u;
     if (GATHER_MASKS) {
-        let at = band * 4u;
         return bitcast<vec4<f32>>(vec4<u32>(mask[at], mask[at + 1u], mask[at + 2u], mask[at + 3u]));
     }
-    return bitcast<vec4<f32>>(texel_at(mask_texels, band));
+    return bitcast<vec4<f32>>(texel_at(mask_texels, at / 4u));
 }
 
-fn mask_sample(u: f32, v: f32) -> f32 {
+fn mask_sample(u: f32, v: f32, level: u32) -> f32 {
     if (GATHER_MASKS) {
-        return mask_gathered(u, v);
+        return mask_gathered(u, v, level);
     }
-    return mask_bilinear(u, v, strip.mask_size);
+    let n = level_size(level);
+    return mask_bilinear(u, v, n, level_start(level) + (n + 1u) * 4u);
 }
 
-// `mask_bilinear` with the four texels fetched by one gather from the texture: the same texels (asked for at
-// the corner they share, where the hardware's choice of footprint is unambiguous), turned back into 0..255,
-// and the same `mask_spot` and `mask_mix` (mask_texels.wgsl), so the same value.
-fn mask_gathered(u: f32, v: f32) -> f32 {
+// `mask_bilinear` with the four texels fetched by one gather from the level's texture: the same texels (asked
+// for at the corner they share, where the hardware's choice of footprint is unambiguous), turned back into
+// 0..255, and the same `mask_spot` and `mask_mix` (mask_texels.wgsl), so the same value.
+fn mask_gathered(u: f32, v: f32, level: u32) -> f32 {
     if (!(abs(u) <= 1.0 && abs(v) <= 1.0)) {
         return 0.0;
     }
-    let s = mask_spot(u, v, strip.mask_size);
-    let corner = vec2<f32>(f32(s.x0) + 1.0, f32(s.y0) + 1.0) / f32(strip.mask_size);
+    let n = level_size(level);
+    let s = mask_spot(u, v, n);
+    let corner = vec2<f32>(f32(s.x0) + 1.0, f32(s.y0) + 1.0) / f32(n);
     // Components: x (x0, y0 + 1), y (x0 + 1, y0 + 1), z (x0 + 1, y0), w (x0, y0).
-    let g = round(textureGather(0, mask_texture, mask_sampler, corner) * 255.0);
+    var g: vec4<f32>;
+    if (level == 0u) {
+        g = textureGather(0, mask_texture, mask_sampler, corner);
+    } else if (level == 1u) {
+        g = textureGather(0, mask_texture_finer, mask_sampler, corner);
+    } else {
+        g = textureGather(0, mask_texture_finest, mask_sampler, corner);
+    }
+    g = round(g * 255.0);
     return mask_mix(vec4<f32>(g.w, g.z, g.x, g.y), s);
 }
 
-// The band of mask rows a sample at v reads (MaskRows::at); -1 outside [-1, 1].
-fn mask_band(v: f32) -> i32 {
+// The band of level `level`'s mask rows a sample at v reads (MaskRows::at); -1 outside [-1, 1].
+fn mask_band(v: f32, level: u32) -> i32 {
     if (!(abs(v) <= 1.0)) {
         return -1;
     }
-    let y = (0.5 - v * 0.5) * f32(strip.mask_size) - 0.5;
+    let y = (0.5 - v * 0.5) * f32(level_size(level)) - 0.5;
     let y0 = i32(y + 1.0) - 1;
     return max(y0 + 1, 0);
 }
@@ -145,7 +182,7 @@ fn stop_mask(map: vec4<f32>, scale_y: f32, q: vec2<f32>) -> f32 {
     if (map.w == 0.0) {
         return 1.0;
     }
-    return mask_sample(map.x * q.x + map.y, scale_y * q.y + map.z);
+    return mask_sample(map.x * q.x + map.y, scale_y * q.y + map.z, level_of(map.w));
 }
 
 fn front_mask(map: vec4<f32>, scale_y: f32, q: vec2<f32>) -> f32 {
@@ -383,11 +420,12 @@ fn sprite_walk(inst: GhostInstance, sprite: u32, start: vec2<u32>, item: u32) ->
         if (s.w == 0.0) {
             continue;
         }
-        let band = mask_band(inst.scale_y[k] * q_y + s.z);
+        let level = level_of(s.w);
+        let band = mask_band(inst.scale_y[k] * q_y + s.z, level);
         if (band < 0) {
             return walk;
         }
-        let rows = mask_row(u32(band));
+        let rows = mask_row(level, u32(band));
         clip_to(&open, s.x, s.y, rows.xy);
         clip_to(&support, s.x, s.y, rows.zw);
     }

@@ -3,8 +3,8 @@
 // raygrid_box.wgsl when they are embedded). CPU twin: `ApertureMask::sample` in
 // crates/flare_core/src/aperture.rs, the same steps. The words are `ApertureMask::quad_words`: each bilinear
 // footprint's four u8 texels (clamped to the edge, row 0 at v = +1) in one word, so that a lookup is one load;
-// the including shader defines `mask_quad(w: u32) -> u32`, the w-th of those words (from a storage buffer or a
-// texture of words, word_texels.wgsl).
+// the including shader defines `mask_quad(w: u32) -> u32`, the w-th word of what it binds (from a storage buffer
+// or a texture of words, word_texels.wgsl), the footprints of a mask starting at its word `start`.
 
 // Where a sample at (u, v) in [-1, 1]^2 falls between texel centres: the top-left texel of its four and the
 // fractions towards the next column and row.
@@ -33,7 +33,7 @@ fn mask_mix(t: vec4<f32>, s: MaskSpot) -> f32 {
 }
 
 // The mask at (u, v) in [-1, 1]^2, 0 outside (and for a NaN): bilinear between texel centres.
-fn mask_bilinear(u: f32, v: f32, size: u32) -> f32 {
+fn mask_bilinear(u: f32, v: f32, size: u32, start: u32) -> f32 {
     if (!(abs(u) <= 1.0 && abs(v) <= 1.0)) {
         return 0.0;
     }
@@ -41,7 +41,7 @@ fn mask_bilinear(u: f32, v: f32, size: u32) -> f32 {
     // |u|, |v| <= 1 keeps x0 and y0 in -1..size; clamped all the same, as the CPU clamps each texel.
     let x = u32(clamp(s.x0, -1, i32(size) - 1) + 1);
     let y = u32(clamp(s.y0, -1, i32(size) - 1) + 1);
-    let q = mask_quad(y * (size + 1u) + x);
+    let q = mask_quad(start + y * (size + 1u) + x);
     let t = vec4<f32>(vec4<u32>(q & 255u, (q >> 8u) & 255u, (q >> 16u) & 255u, q >> 24u));
     return mask_mix(t, s);
 }

@@ -75,7 +75,7 @@ fn mask_quad(w: u32) -> u32 {
 }
 
 fn mask_at(u: f32, v: f32) -> f32 {
-    return mask_bilinear(u, v, box_params.mask_size);
+    return mask_bilinear(u, v, box_params.mask_size, 0u);
 }
 
 // The planes of crossing k's stop point: u in the first, v in the second.

@@ -459,7 +459,7 @@ impl Derived {
                 self.first_order = FirstOrder::d_line(&doc.lens).ok();
                 if let Some(rs) = gpu {
                     ViewportResources::with(rs, |res, device, queue| {
-                        res.renderer.set_aperture(device, queue, &flare.mask);
+                        res.renderer.set_aperture(device, queue, &flare.ghost_masks);
                         res.renderer.set_starburst(device, queue, &flare.starburst);
                         res.renderer.set_dirt(device, queue, flare.dirt.as_ref());
                     });

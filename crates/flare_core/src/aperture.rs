@@ -13,6 +13,8 @@
 
 use std::f64::consts::PI;
 
+use rayon::prelude::*;
+
 /// The most blades a stop may have, for every command, file and panel alike.
 pub const MAX_BLADES: u32 = 32;
 
@@ -226,7 +228,8 @@ impl Aperture {
         let size = size.max(2);
         let texel = 2.0 / size as f64;
         let mut texels = vec![0u8; size * size];
-        for j in 0..size {
+        // Rows in parallel (the ghost passes' finest level is 1024^2 texels).
+        texels.par_chunks_mut(size).enumerate().for_each(|(j, row)| {
             for i in 0..size {
                 let u = -1.0 + texel * (i as f64 + 0.5);
                 let v = 1.0 - texel * (j as f64 + 0.5);
@@ -242,9 +245,9 @@ impl Aperture {
                         (0.5 + (edge - r) / texel).clamp(0.0, 1.0)
                     }
                 };
-                texels[j * size + i] = (coverage * 255.0).round() as u8;
+                row[i] = (coverage * 255.0).round() as u8;
             }
-        }
+        });
         ApertureMask { size, texels }
     }
 }

@@ -3,12 +3,15 @@
 //! # How it works
 //! [`FlareConfig`] is everything besides the lens that changes the optics: aperture (shape, f-number), spectrum,
 //! coating override and the culling threshold. [`PreparedFlare::new`] does the work that depends on those and on
-//! the lens (ghost matrices and reflectance tables, the aperture mask, the starburst's FFT, the last two kept per
+//! the lens (ghost matrices and reflectance tables, the aperture mask (and, for the ghost passes, the same mask at two
+//! and four times the resolution: [`GhostMasks`]), the starburst's FFT, the last two kept per
 //! stop shape so a lens edit does not redo them, and the front dirt's map seen through the stop); it is redone only when one of them changes, never for a display
 //! setting (exposure, tonemap, plate, starburst gain, view size). [`PreparedFlare::scene_with`] is the per-frame
 //! part: ghost sprites for the light's position and the GPU-ready [`FlareScene`], with the display settings and
 //! per-ghost gains of that frame. [`crate::frame`] builds every frame of the app, the command line and the
 //! benchmarks through it.
+
+use std::sync::Arc;
 
 use crate::aperture::{Aperture, ApertureError, ApertureMask, DEFAULT_MASK_SIZE};
 use crate::dirt::{DirtPattern, PreparedDirt};
@@ -16,6 +19,7 @@ use crate::ghost::light_slopes_for_frame_position;
 use crate::ghost::{FrameSettings, GhostError, GhostFrame, GhostSettings, GhostSystem, Sensor};
 use crate::optics::{Coating, Lens};
 use crate::render::cpu::StarburstTexture;
+use crate::render::cpu::ghosts::GhostMasks;
 use crate::render::{DisplaySettings, FlareScene};
 use crate::spectrum::Spectrum;
 use crate::starburst::Starburst;
@@ -70,7 +74,10 @@ pub enum FlareError {
 pub struct PreparedFlare {
     pub config: FlareConfig,
     pub system: GhostSystem,
+    /// The stop's mask at the base size: what the dirt, the ray grids and the panels read.
     pub mask: ApertureMask,
+    /// The same mask at the resolutions the ghost passes pick from per sprite (its first level is `mask`).
+    pub ghost_masks: Arc<GhostMasks>,
     pub starburst: Starburst,
     /// The starburst as the GPU holds it (half floats), for the CPU twin.
     pub starburst_texture: StarburstTexture,
@@ -87,8 +94,8 @@ const STOP_IMAGES_KEPT: usize = 4;
 /// The aperture mask and the starburst of `aperture`'s shape (they do not depend on the f-number, the lens or
 /// the spectrum), from a small process-wide cache keyed by the shape's fingerprint: the 1024^2 FFT and the
 /// 512^2 raster take ~50 ms, which a lens edit in the app should not pay.
-fn stop_images(aperture: &Aperture) -> (ApertureMask, Starburst) {
-    type Kept = Vec<(u64, ApertureMask, Starburst)>;
+fn stop_images(aperture: &Aperture) -> (Arc<GhostMasks>, Starburst) {
+    type Kept = Vec<(u64, Arc<GhostMasks>, Starburst)>;
     static KEPT: std::sync::Mutex<Kept> = std::sync::Mutex::new(Vec::new());
     let key = crate::fingerprint::of(&aperture.shape);
     if let Ok(kept) = KEPT.lock()
@@ -96,7 +103,7 @@ fn stop_images(aperture: &Aperture) -> (ApertureMask, Starburst) {
     {
         return (mask.clone(), starburst.clone());
     }
-    let mask = aperture.rasterise(DEFAULT_MASK_SIZE);
+    let mask = Arc::new(GhostMasks::new(aperture, aperture.rasterise(DEFAULT_MASK_SIZE)));
     let starburst = Starburst::compute(&aperture.rasterise(crate::starburst::STARBURST_MASK_SIZE));
     if let Ok(mut kept) = KEPT.lock() {
         kept.retain(|(k, _, _)| *k != key);
@@ -117,11 +124,12 @@ impl PreparedFlare {
             coating_override: config.coating_override.clone(),
         };
         let system = GhostSystem::build(lens, &settings)?;
-        let (mask, starburst) = stop_images(&config.aperture);
+        let (ghost_masks, starburst) = stop_images(&config.aperture);
+        let mask = ghost_masks.levels()[0].mask.clone();
         let starburst_texture = StarburstTexture::from_starburst(&starburst);
         let dirt = config.dirt.as_ref().map(|pattern| PreparedDirt::new(&system, &mask, pattern));
         let id = crate::fingerprint::unique_id();
-        Ok(Self { config: config.clone(), system, mask, starburst, starburst_texture, dirt, id })
+        Ok(Self { config: config.clone(), system, mask, ghost_masks, starburst, starburst_texture, dirt, id })
     }
 
     /// Frame settings for an image of `width` x `height` pixels on the full-frame sensor drawn at the flare gain
@@ -160,6 +168,7 @@ impl PreparedFlare {
         let frame_settings = self.frame_settings_on(sensor, width, display.flare_gain());
         let frame = self.system.frame(u, &frame_settings);
         let mut scene = FlareScene::build(&self.system, &frame, u, &frame_settings, display, width, height, gains);
+        self.ghost_masks.assign_levels(&mut scene);
         scene.place_starburst(&self.system, &self.starburst, u, &sensor, display);
         scene.place_dirt(&self.system, self.dirt.as_ref(), u, &sensor, display);
         (scene, frame)

@@ -434,7 +434,7 @@ impl GpuDrawer {
             return;
         }
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        self.renderer.set_aperture(device, queue, &sources.flare.mask);
+        self.renderer.set_aperture(device, queue, &sources.flare.ghost_masks);
         self.renderer.set_starburst(device, queue, &sources.flare.starburst);
         self.renderer.set_dirt(device, queue, sources.flare.dirt.as_ref());
         self.renderer.set_background(device, queue, sources.plate);
@@ -609,7 +609,7 @@ pub fn traced_accumulation(frame: &Frame, ghosts: &HdrImage) -> HdrImage {
 /// The accumulation passes of the CPU twin: ghosts, LUT ghosts, starburst, the front dirt's glow.
 pub fn draw_cpu_hdr(frame: &Frame, sources: &Sources) -> HdrImage {
     let scene = &frame.scene;
-    let mut hdr = cpu::ghost_pass(scene, &sources.flare.mask);
+    let mut hdr = cpu::ghost_pass(scene, &sources.flare.ghost_masks);
     if let (Some(l), Some(live)) = (&frame.lut, sources.lut) {
         lut_pass((scene.width, scene.height), l, live, &mut hdr);
     }

@@ -431,8 +431,8 @@ fn measure_against_reference(lens: &Lens) -> Measured {
             ..RayGridRequest::frame(light, w, h, Grid::Adaptive(256))
         };
         let traced = renderer.render_request(&request).unwrap().remove(0);
-        let paraxial = cpu::ghost_pass(&scene, &flare.mask);
-        let moments = cpu::ghost_moments(&scene, &flare.mask, system.ghosts.len());
+        let paraxial = cpu::ghost_pass(&scene, &flare.ghost_masks);
+        let moments = cpu::ghost_moments(&scene, &flare.ghost_masks, system.ghosts.len());
         (paraxial, moments, traced)
     };
     let (paraxial, moments, traced) = render(&gains);

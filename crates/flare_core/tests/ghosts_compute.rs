@@ -76,6 +76,11 @@ fn the_compute_pass_draws_the_cpu_twins_image() {
         let flare = prepared(lens, blades);
         let frame = Frame::build(&flare, None, &request(light, w, h, divisor));
         assert!(frame.scene.instances.len() > 10, "{lens}: {} sprites", frame.scene.instances.len());
+        if w == 1600 {
+            // The large frame's sprites read every level of the mask (`GhostMasks`).
+            let level = |code: f32| frame.scene.instances.iter().any(|i| i.stops.iter().any(|s| s[3] == code));
+            assert!(level(1.0) && level(2.0) && level(3.0), "{lens}: not every mask level is read");
+        }
         let sources = Sources { flare: &flare, lut: None, plate: None };
         let gpu = drawer.draw(&frame, &sources).unwrap();
         let cpu = frame::draw_cpu(&frame, &sources);

@@ -79,8 +79,8 @@ fn paraxial_against_reference(lens: &flare_core::optics::Lens, must_be_visible: 
         let flare = prepared(lens, f_number);
         let reference = flare.ray_grid_renderer().render(light, w, h, Grid::Adaptive(256)).unwrap();
         let (scene, _) = flare.scene(light, w, h);
-        let paraxial = cpu::ghost_pass(&scene, &flare.mask);
-        let moments = cpu::ghost_moments(&scene, &flare.mask, flare.system.ghosts.len());
+        let paraxial = cpu::ghost_pass(&scene, &flare.ghost_masks);
+        let moments = cpu::ghost_moments(&scene, &flare.ghost_masks, flare.system.ghosts.len());
         let c = metrics::compare(&paraxial, &moments, &reference.hdr, &reference.moments);
         eprintln!("{} f/{f_number:?}: {c:?}", lens.id);
         if f_number.is_some() {

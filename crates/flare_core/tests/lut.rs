@@ -64,7 +64,7 @@ fn lut_alone(live: &LiveLut, flare: &PreparedFlare, light: [f64; 2], width: u32,
 
 /// The CPU twin's accumulation of a scene and its LUT instances (ghost pass, then LUT pass).
 fn render_cpu(flare: &PreparedFlare, live: &LiveLut, scene: &FlareScene, lut_scene: &LutScene) -> HdrImage {
-    let mut hdr = flare_core::render::cpu::ghost_pass(scene, &flare.mask);
+    let mut hdr = flare_core::render::cpu::ghost_pass(scene, &flare.ghost_masks);
     lut_pass((scene.width, scene.height), lut_scene, live, &mut hdr);
     hdr
 }
@@ -453,7 +453,7 @@ fn blend_modes_weigh_the_lut_against_the_sprite() {
     let frame = scenes(&live, &flare, light, 120, 80, &over, true);
     let (scene, lut_scene) = (frame.scene.clone(), frame.lut.clone().unwrap_or_default());
     assert!(lut_scene.alpha_over);
-    let base = flare_core::render::cpu::ghost_pass(&scene, &flare.mask);
+    let base = flare_core::render::cpu::ghost_pass(&scene, &flare.ghost_masks);
     let mut composed = base.clone();
     lut_pass((scene.width, scene.height), &lut_scene, &live, &mut composed);
     let mut added = base.clone();
@@ -500,7 +500,7 @@ fn the_lut_pass_draws_the_same_bytes_with_and_without_sse() {
         let frame = scenes(&live, &flare, light_position_deg(9.0, 140.0), 200, 150, &blend, true);
         let (scene, lut_scene) = (frame.scene.clone(), frame.lut.clone().unwrap_or_default());
         assert!(!lut_scene.instances.is_empty());
-        let base = flare_core::render::cpu::ghost_pass(&scene, &flare.mask);
+        let base = flare_core::render::cpu::ghost_pass(&scene, &flare.ghost_masks);
         let (mut simd, mut scalar) = (base.clone(), base);
         lut_pass((scene.width, scene.height), &lut_scene, &live, &mut simd);
         flare_core::lut::blend::lut_pass_scalar((scene.width, scene.height), &lut_scene, &live, &mut scalar);
@@ -598,7 +598,7 @@ fn lut_ghosts_as_the_cpu_twin(ctx: &flare_core::render::gpu::GpuContext) {
             _ => {}
         }
         assert_eq!(renderer.ghosts_as_compute(), raster != 1);
-        renderer.set_aperture(&ctx.device, &ctx.queue, &flare.mask);
+        renderer.set_aperture(&ctx.device, &ctx.queue, &flare.ghost_masks);
         renderer.set_lut(&ctx.device, &ctx.queue, Some(live));
         flare_core::render::gpu::render_display_with_lut(ctx, &mut renderer, &scene, Some(&lut_scene)).unwrap();
         let gpu = flare_core::render::gpu::read_hdr(ctx, &renderer).unwrap();

@@ -73,7 +73,7 @@ fn check_paraxial(flare: &PreparedFlare, light_deg: [f64; 2], what: &str) -> Fla
         );
     }
     assert!(bytemuck::cast_slice::<_, f32>(&[scene.globals]).iter().all(|v| v.is_finite()), "{what}");
-    assert_image_ok(&cpu::ghost_pass(&scene, &flare.mask), what);
+    assert_image_ok(&cpu::ghost_pass(&scene, &flare.ghost_masks), what);
     scene
 }
 
@@ -230,7 +230,7 @@ fn dragging_the_light_does_not_flicker() {
         let flare = PreparedFlare::new(&builtin_lens(id).unwrap(), &config).unwrap();
         let image = |theta: f64| {
             let (scene, _) = flare.scene(light(theta, 30.0), 120, 80);
-            cpu::ghost_pass(&scene, &flare.mask)
+            cpu::ghost_pass(&scene, &flare.ghost_masks)
         };
         let step_deg = 0.1;
         let mut worst_ratio = 0.0f64;

@@ -296,7 +296,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                 let frame = Frame::build(&flare, None, &request);
                 Ok((frame::draw_cpu_hdr(&frame, &sources), frame.scene))
             })?;
-            let moments = cpu::ghost_moments(&scene, &flare.mask, ghosts);
+            let moments = cpu::ghost_moments(&scene, &flare.ghost_masks, ghosts);
             rows.push(row("paraxial".into(), ms, runs, against("paraxial", &image, &moments)?));
             // The same at half accumulation resolution (the app's choice on software adapters), upsampled.
             let half_request =
@@ -305,7 +305,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                 let frame = Frame::build(&flare, None, &half_request);
                 Ok((frame::draw_cpu_hdr(&frame, &sources), frame.scene))
             })?;
-            let moments = cpu::ghost_moments(&scene, &flare.mask, ghosts);
+            let moments = cpu::ghost_moments(&scene, &flare.ghost_masks, ghosts);
             let upsampled = image.resampled(width, height, Sampling::Bilinear, 1.0);
             rows.push(row("paraxial-half".into(), ms, runs, against("paraxial-half", &upsampled, &moments)?));
             // Blended: the paraxial flare with the LUT ghosts (CPU twin), as the paraxial row is timed.
@@ -315,7 +315,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                 let frame = Frame::build(&flare, Some(&live), &blended_request);
                 Ok((frame::draw_cpu_hdr(&frame, &blended_sources), frame))
             })?;
-            let mut moments = cpu::ghost_moments(&frame.scene, &flare.mask, ghosts);
+            let mut moments = cpu::ghost_moments(&frame.scene, &flare.ghost_masks, ghosts);
             if let Some(lut_scene) = &frame.lut {
                 lut_moments(&frame.scene, lut_scene, &live, &mut moments);
             }
@@ -339,7 +339,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                     }
                 }
                 let image = gpu::read_hdr(&gpu.drawer.ctx, &gpu.drawer.renderer)?;
-                let moments = cpu::ghost_moments(&frame.scene, &flare.mask, ghosts);
+                let moments = cpu::ghost_moments(&frame.scene, &flare.ghost_masks, ghosts);
                 let mut measured = row("paraxial-gpu".into(), ms, runs, against("paraxial-gpu", &image, &moments)?);
                 if let Some(last) = gpu_times.last() {
                     let totals: Vec<f64> = gpu_times.iter().map(gpu::PassTimes::total_ms).collect();

@@ -151,7 +151,8 @@ pub(crate) fn paraxial_image(flare: &PreparedFlare, g: usize, light_deg: [f64; 2
         inst.centre_half[0] += (window.centre_mm[0] * k) as f32;
         inst.centre_half[1] -= (window.centre_mm[1] * k) as f32;
     }
-    cpu::ghost_pass(&scene, &flare.mask)
+    flare.ghost_masks.assign_levels(&mut scene);
+    cpu::ghost_pass(&scene, &flare.ghost_masks)
 }
 
 /// Measures every ghost of `flare`; `forced` lists (ghost, non-linear?) choices of the user.

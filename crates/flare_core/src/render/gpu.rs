@@ -45,7 +45,7 @@ use super::gpu_lut::{ComputeLut, TILE};
 use super::gpu_view::{PassKey, ViewPass};
 use super::shaders::{DIRT_WGSL, GHOSTS_WGSL, LUT_GHOSTS_WGSL, STARBURST_WGSL};
 use super::{FlareScene, GhostInstance, Globals};
-use crate::aperture::ApertureMask;
+use super::cpu::ghosts::{GhostMasks, MASK_LEVELS};
 use crate::dirt::PreparedDirt;
 use crate::image::{DisplayImage, HdrImage};
 use crate::lut::blend::{ATLAS_PAGE, LiveLut, LutInstance, LutScene};
@@ -324,10 +324,12 @@ pub struct FlareRenderer {
     /// Tonemap the next frames whose tonemap is the view through the view's cube ([`Self::sample_view_from_cube`]).
     view_from_cube: bool,
     ghost_layout: wgpu::BindGroupLayout,
+    raster_ghost_layout: wgpu::BindGroupLayout,
     tonemap_layout: wgpu::BindGroupLayout,
     globals: wgpu::Buffer,
     sampler: wgpu::Sampler,
-    aperture: wgpu::Texture,
+    /// The aperture's levels (`GhostMasks`), the base first; a missing level repeats the last (never read).
+    aperture: [wgpu::Texture; MASK_LEVELS],
     starburst: wgpu::Texture,
     /// The front dirt's map D (Rgba16Float, D in red; 1 x 1 black for a clean lens).
     dirt: wgpu::Texture,
@@ -410,8 +412,13 @@ impl FlareRenderer {
             count: None,
         };
         let ghost_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("ghosts"),
+            label: Some("starburst and dirt"),
             entries: &[uniform, texture(1, true), sampler_entry],
+        });
+        // The raster ghosts read the aperture's levels (`GhostMasks`): the base at 1, the finer ones at 3 and 4.
+        let raster_ghost_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("ghosts"),
+            entries: &[uniform, texture(1, true), sampler_entry, texture(3, true), texture(4, true)],
         });
         // The tonemap's resources are read by its fragment and its compute form alike.
         let tonemap_stages = wgpu::ShaderStages::VERTEX_FRAGMENT | wgpu::ShaderStages::COMPUTE;
@@ -432,7 +439,8 @@ impl FlareRenderer {
                 immediate_size: 0,
             })
         };
-        let ghost_pl = layout(&ghost_layout);
+        let ghost_pl = layout(&raster_ghost_layout);
+        let sprite_pl = layout(&ghost_layout);
         let additive = wgpu::BlendState {
             color: wgpu::BlendComponent {
                 src_factor: wgpu::BlendFactor::One,
@@ -469,9 +477,9 @@ impl FlareRenderer {
             Some(additive),
         );
         let starburst_pipeline =
-            render_pipeline(device, "starburst", &ghost_pl, &starburst_module, &[], HDR_FORMAT, Some(additive));
+            render_pipeline(device, "starburst", &sprite_pl, &starburst_module, &[], HDR_FORMAT, Some(additive));
         let dirt_module = module("dirt.wgsl", DIRT_WGSL);
-        let dirt_pipeline = render_pipeline(device, "dirt", &ghost_pl, &dirt_module, &[], HDR_FORMAT, Some(additive));
+        let dirt_pipeline = render_pipeline(device, "dirt", &sprite_pl, &dirt_module, &[], HDR_FORMAT, Some(additive));
         let view_pass = ViewPass::new(
             device,
             queue,
@@ -546,8 +554,11 @@ impl FlareRenderer {
             ..Default::default()
         });
         let sampled = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
-        let aperture = texture_2d(device, "aperture", 1, 1, wgpu::TextureFormat::R8Unorm, sampled);
-        upload(queue, &aperture, &[255], 1);
+        let aperture = std::array::from_fn(|_| {
+            let level = texture_2d(device, "aperture", 1, 1, wgpu::TextureFormat::R8Unorm, sampled);
+            upload(queue, &level, &[255], 1);
+            level
+        });
         let starburst = texture_2d(device, "starburst", 1, 1, HDR_FORMAT, sampled);
         upload(queue, &starburst, &half_floats(&[[0.0; 4]]), 8);
         let dirt = texture_2d(device, "dirt", 1, 1, HDR_FORMAT, sampled);
@@ -587,6 +598,7 @@ impl FlareRenderer {
             cube_pass: None,
             view_from_cube: false,
             ghost_layout,
+            raster_ghost_layout,
             tonemap_layout,
             globals,
             sampler,
@@ -622,15 +634,19 @@ impl FlareRenderer {
         self.target_format
     }
 
-    /// Replaces the aperture mask (when the aperture settings change).
-    pub fn set_aperture(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, mask: &ApertureMask) {
+    /// Replaces the aperture mask's levels (when the aperture settings change).
+    pub fn set_aperture(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, masks: &GhostMasks) {
         self.groups = None;
         let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
-        self.aperture =
-            texture_2d(device, "aperture", mask.size as u32, mask.size as u32, wgpu::TextureFormat::R8Unorm, usage);
-        upload(queue, &self.aperture, &mask.texels, 1);
+        self.aperture = std::array::from_fn(|l| {
+            let mask = &masks.levels()[l.min(masks.levels().len() - 1)].mask;
+            let size = mask.size as u32;
+            let level = texture_2d(device, "aperture", size, size, wgpu::TextureFormat::R8Unorm, usage);
+            upload(queue, &level, &mask.texels, 1);
+            level
+        });
         if let Some(compute) = &mut self.compute {
-            compute.set_aperture(device, queue, mask);
+            compute.set_aperture(device, queue, masks);
         }
     }
 
@@ -767,7 +783,8 @@ impl FlareRenderer {
     /// The bind groups of every pass for the current textures (made when one of them was replaced or the
     /// accumulation resized, not every frame).
     fn bind_groups(&self, device: &wgpu::Device, hdr_view: &wgpu::TextureView) -> BindGroups {
-        let aperture_view = self.aperture.create_view(&wgpu::TextureViewDescriptor::default());
+        let [aperture_view, finer_view, finest_view] =
+            self.aperture.each_ref().map(|t| t.create_view(&wgpu::TextureViewDescriptor::default()));
         let starburst_view = self.starburst.create_view(&wgpu::TextureViewDescriptor::default());
         let dirt_view = self.dirt.create_view(&wgpu::TextureViewDescriptor::default());
         let background_view = self.background.create_view(&wgpu::TextureViewDescriptor::default());
@@ -789,7 +806,16 @@ impl FlareRenderer {
                 device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries: &entries })
             };
         BindGroups {
-            ghosts: bind("ghosts", &self.ghost_layout, &aperture_view, vec![sampler()]),
+            ghosts: bind(
+                "ghosts",
+                &self.raster_ghost_layout,
+                &aperture_view,
+                vec![
+                    sampler(),
+                    wgpu::BindingResource::TextureView(&finer_view),
+                    wgpu::BindingResource::TextureView(&finest_view),
+                ],
+            ),
             starburst: bind("starburst", &self.ghost_layout, &starburst_view, vec![sampler()]),
             dirt: bind("dirt", &self.ghost_layout, &dirt_view, vec![sampler()]),
             lut: bind("lut ghosts", &self.lut_layout, &atlas_view, vec![sampler()]),

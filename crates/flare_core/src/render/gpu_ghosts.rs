@@ -44,7 +44,7 @@ use super::buffers::{
     HDR_FORMAT, compute_pipeline, compute_pipeline_with, grow_storage, software_device, spread_stride, storage,
     texture_2d, upload, word_texels,
 };
-use super::cpu::ghosts::{MaskRows, without_open_stops};
+use super::cpu::ghosts::{GhostMasks, MASK_LEVELS, level_index, without_open_stops};
 use super::cpu::quads::{accumulation_scale, covered};
 use super::shaders::GHOSTS_COMPUTE_WGSL;
 use super::{FlareScene, GhostInstance};
@@ -97,8 +97,11 @@ pub(crate) struct ComputeStrip {
     pub pieces: u32,
     /// `spans_sprites`: workgroup x draws sprite x * spread mod sprites (a `buffers::spread_stride`).
     pub spread: u32,
+    /// Levels of the mask (`GhostMasks`), each twice the texels a side of the one before (`mask_size` the first).
+    pub mask_levels: u32,
+    pub pad: [u32; 3],
 }
-const _: () = assert!(std::mem::size_of::<ComputeStrip>() == 64);
+const _: () = assert!(std::mem::size_of::<ComputeStrip>() == 80);
 
 /// How the shader's steps are split between a column's two words (see `atomic_add_split` in the shader).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -200,7 +203,7 @@ pub(crate) struct StripPlan {
 pub(crate) fn plan_strips(
     scene: &FlareScene,
     instances: &[GhostInstance],
-    mask_size: u32,
+    (mask_size, mask_levels): (u32, u32),
     strip_rows: u32,
     max_groups: u32,
     pieces: u32,
@@ -249,6 +252,8 @@ pub(crate) fn plan_strips(
                 items: total,
                 groups_x,
                 mask_size,
+                mask_levels,
+                pad: [0; 3],
                 scale_x: sx,
                 scale_y: sy,
                 fixed_per_unit,
@@ -263,12 +268,16 @@ pub(crate) fn plan_strips(
         .collect()
 }
 
-/// The mask as `ghosts_compute.wgsl` reads it: the per-band table (f32 bits), then each bilinear footprint's
-/// four texels in one word (`ApertureMask::quad_words`).
-fn mask_words(mask: &ApertureMask) -> Vec<u32> {
-    let rows = MaskRows::new(mask);
-    let mut words: Vec<u32> = rows.table().iter().flat_map(|b| b.map(f32::to_bits)).collect();
-    words.extend(mask.quad_words());
+/// The mask's levels as `ghosts_compute.wgsl` reads them (its `level_start`): each level's per-band table
+/// (f32 bits), then each of its bilinear footprints' four texels in one word (`ApertureMask::quad_words`), then
+/// zeros up to a multiple of four words.
+fn mask_words(masks: &GhostMasks) -> Vec<u32> {
+    let mut words = Vec::new();
+    for level in masks.levels() {
+        words.extend(level.rows.table().iter().flat_map(|b| b.map(f32::to_bits)));
+        words.extend(level.mask.quad_words());
+        words.resize(words.len().next_multiple_of(4), 0);
+    }
     words
 }
 
@@ -292,11 +301,14 @@ pub(crate) struct ComputeGhosts {
     mask: wgpu::Buffer,
     /// The same words as rows of texels (a software rasteriser's lookups, `mask_texels` in the shader).
     mask_texels: wgpu::TextureView,
-    /// The mask as a texture, and the sampler `textureGather` reads it with.
-    mask_texture: wgpu::TextureView,
+    /// The mask's levels as textures (a level the mask lacks repeats the last), and the sampler `textureGather`
+    /// reads them with.
+    mask_texture: [wgpu::TextureView; MASK_LEVELS],
     mask_sampler: wgpu::Sampler,
-    mask_size: u32,
-    open_radius: f32,
+    /// The base level's texels a side and the number of levels.
+    mask_size: (u32, u32),
+    /// Each level's fully open radius (`without_open_stops`).
+    open_radii: Vec<f32>,
     /// The difference buffer and its size in bytes (all zero between strips).
     diff: Option<(wgpu::Buffer, u64)>,
     /// The most bytes a strip's difference buffer may take (the adapter's limits; tests lower it).
@@ -338,19 +350,21 @@ impl ComputeGhosts {
             form,
             mask: storage(device, queue, "ghost mask", &[0; 16], wgpu::BufferUsages::STORAGE),
             mask_texels: word_texels(device, queue, "ghost mask texels", &[0; 16]),
-            mask_texture: texture_2d(device, "ghost mask", 1, 1, R8, wgpu::TextureUsages::TEXTURE_BINDING)
-                .create_view(&wgpu::TextureViewDescriptor::default()),
+            mask_texture: std::array::from_fn(|_| {
+                texture_2d(device, "ghost mask", 1, 1, R8, wgpu::TextureUsages::TEXTURE_BINDING)
+                    .create_view(&wgpu::TextureViewDescriptor::default())
+            }),
             mask_sampler: device
                 .create_sampler(&wgpu::SamplerDescriptor { label: Some("ghost mask"), ..Default::default() }),
-            mask_size: 1,
-            open_radius: 0.0,
+            mask_size: (1, 1),
+            open_radii: vec![0.0],
             diff: None,
             strip_bytes: limits.max_storage_buffer_binding_size.min(limits.max_buffer_size),
             no_layer: texture_2d(device, "no lut layer", 1, 1, HDR_FORMAT, wgpu::TextureUsages::TEXTURE_BINDING)
                 .create_view(&wgpu::TextureViewDescriptor::default()),
             module,
         };
-        this.set_aperture(device, queue, &open);
+        this.set_aperture(device, queue, &GhostMasks::from_masks(vec![open]));
         // The device's own form's entry now, so that its first frame does not wait for the compiler.
         this.spans_pipeline(device, spans_entry(form, form.setup_once));
         this
@@ -367,18 +381,22 @@ impl ComputeGhosts {
         })
     }
 
-    /// Uploads the aperture mask and its per-row table.
-    pub(crate) fn set_aperture(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, mask: &ApertureMask) {
-        let words = mask_words(mask);
+    /// Uploads the aperture mask's levels and their per-row tables.
+    pub(crate) fn set_aperture(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, masks: &GhostMasks) {
+        let words = mask_words(masks);
         self.mask = storage(device, queue, "ghost mask", bytemuck::cast_slice(&words), wgpu::BufferUsages::STORAGE);
         self.mask_texels = word_texels(device, queue, "ghost mask texels", bytemuck::cast_slice(&words));
-        self.mask_size = mask.size as u32;
-        self.open_radius = mask.open_radius();
-        let size = mask.size as u32;
+        let levels = masks.levels();
+        self.mask_size = (levels[0].mask.size as u32, levels.len() as u32);
+        self.open_radii = levels.iter().map(|l| l.open_radius).collect();
         let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
-        let texture = texture_2d(device, "ghost mask", size, size, R8, usage);
-        upload(queue, &texture, &mask.texels, 1);
-        self.mask_texture = texture.create_view(&wgpu::TextureViewDescriptor::default());
+        self.mask_texture = std::array::from_fn(|l| {
+            let mask = &levels[l.min(levels.len() - 1)].mask;
+            let size = mask.size as u32;
+            let texture = texture_2d(device, "ghost mask", size, size, R8, usage);
+            upload(queue, &texture, &mask.texels, 1);
+            texture.create_view(&wgpu::TextureViewDescriptor::default())
+        });
     }
 
     /// Records the pass into `pass`: every sprite of `scene` into `hdr` (the accumulation, a storage texture of
@@ -394,7 +412,7 @@ impl ComputeGhosts {
         lut_layer: Option<&wgpu::TextureView>,
     ) {
         let instances: Vec<GhostInstance> =
-            scene.instances.iter().map(|i| without_open_stops(i, self.open_radius)).collect();
+            scene.instances.iter().map(|i| without_open_stops(i, |code| self.open_radii[level_index(code, self.open_radii.len())])).collect();
         let width = u64::from(scene.hdr_width.max(1));
         let row_bytes = (width + 1) * BYTES_PER_COLUMN;
         let strip_rows = (self.strip_bytes / row_bytes).clamp(1, u64::from(scene.hdr_height.max(1))) as u32;
@@ -468,7 +486,15 @@ impl ComputeGhosts {
                     wgpu::BindGroupEntry { binding: 4, resource: diff.as_entire_binding() },
                     wgpu::BindGroupEntry {
                         binding: 8,
-                        resource: wgpu::BindingResource::TextureView(&self.mask_texture),
+                        resource: wgpu::BindingResource::TextureView(&self.mask_texture[0]),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 12,
+                        resource: wgpu::BindingResource::TextureView(&self.mask_texture[1]),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 13,
+                        resource: wgpu::BindingResource::TextureView(&self.mask_texture[2]),
                     },
                     wgpu::BindGroupEntry { binding: 9, resource: wgpu::BindingResource::Sampler(&self.mask_sampler) },
                     wgpu::BindGroupEntry {
@@ -552,12 +578,12 @@ mod tests {
     fn strips_cover_every_row_and_item_once() {
         let flare = PreparedFlare::new(&builtin_lens("heliar").unwrap(), &FlareConfig::default()).unwrap();
         let (scene, _) = flare.scene([6.0, 3.0], 200, 120);
-        let one = plan_strips(&scene, &scene.instances, 64, 1000, 65535, 1);
+        let one = plan_strips(&scene, &scene.instances, (64, 1), 1000, 65535, 1);
         assert_eq!(one.len(), 1);
         let total = one[0].params.items;
         assert!(total > 100, "{total} items");
         for rows in [1, 7, 50] {
-            let strips = plan_strips(&scene, &scene.instances, 64, rows, 3, 1);
+            let strips = plan_strips(&scene, &scene.instances, (64, 1), rows, 3, 1);
             assert_eq!(strips.iter().map(|s| s.params.rows).sum::<u32>(), 120);
             assert_eq!(strips.iter().map(|s| s.params.items).sum::<u32>(), total);
             for s in &strips {

@@ -2,21 +2,29 @@
 //! of the same fragments. Each mask map is affine per axis, `(scale_x q_x, scale_y q_y) + offset`: the x scale
 //! in the map, the y scale in `GhostInstance::scale_y` (the same number for a lens of revolution; an
 //! anamorphic lens's sprites are ellipses).
+//!
+//! Each enabled stop map names the level of [`GhostMasks`] it reads (`stops[k][3]`: 1 the base mask of
+//! [`crate::aperture::DEFAULT_MASK_SIZE`] texels, 2 and 3 the same shape rasterised at twice and four times
+//! that), picked per sprite by [`GhostMasks::assign_levels`] so that a texel spans at most
+//! [`MAX_PIXELS_PER_TEXEL`] accumulation pixels where a finer level exists. A mask's edge is a texel wide (the
+//! rasteriser's anti-aliasing) and the bilinear lookup widens it to two: at the base size a frame-filling sprite
+//! of a 4K frame has edges 32 pixels wide, which the fast pass shades pixel by pixel, while the sprites
+//! smaller than the base mask would alias if they read a finer one.
 
 use rayon::prelude::*;
 
 use super::quads::{accumulation_scale, covered};
-use crate::aperture::ApertureMask;
+use crate::aperture::{Aperture, ApertureMask, ApertureShape};
 use crate::color::luminance;
 use crate::image::{GhostMoments, HdrImage};
 use crate::render::{FlareScene, GhostInstance};
 
-/// A stop map `[x scale, offset x, offset y, enabled]` with its y scale `scale_y`.
-fn stop_mask(mask: &ApertureMask, map: [f32; 4], scale_y: f32, q: [f32; 2]) -> f32 {
+/// A stop map `[x scale, offset x, offset y, level]` with its y scale `scale_y` (level 0: not enabled).
+fn stop_mask(masks: &GhostMasks, map: [f32; 4], scale_y: f32, q: [f32; 2]) -> f32 {
     if map[3] == 0.0 {
         return 1.0;
     }
-    mask.sample(map[0] * q[0] + map[1], scale_y * q[1] + map[2])
+    masks.mask(map[3]).sample(map[0] * q[0] + map[1], scale_y * q[1] + map[2])
 }
 
 fn front_mask(map: [f32; 4], scale_y: f32, q: [f32; 2]) -> f32 {
@@ -28,7 +36,7 @@ fn front_mask(map: [f32; 4], scale_y: f32, q: [f32; 2]) -> f32 {
 /// The fragment shader's mask product at the quad coordinate `q`: 0 outside the quad, else the front disc
 /// (1 when `front_open`) times the aperture mask at every enabled stop crossing. The front disc first:
 /// outside it nothing passes, and the aperture lookups are skipped.
-fn mask_product(inst: &GhostInstance, mask: &ApertureMask, front_open: bool, q: [f32; 2]) -> f32 {
+fn mask_product(inst: &GhostInstance, masks: &GhostMasks, front_open: bool, q: [f32; 2]) -> f32 {
     if q[0].abs() > 1.0 || q[1].abs() > 1.0 {
         return 0.0;
     }
@@ -37,7 +45,7 @@ fn mask_product(inst: &GhostInstance, mask: &ApertureMask, front_open: bool, q: 
         if m <= 0.0 {
             return 0.0;
         }
-        m *= stop_mask(mask, *stop, scale_y, q);
+        m *= stop_mask(masks, *stop, scale_y, q);
     }
     m
 }
@@ -46,8 +54,7 @@ fn mask_product(inst: &GhostInstance, mask: &ApertureMask, front_open: bool, q: 
 /// with the mask product m > 0, exactly as `ghosts.wgsl` shades them.
 fn shade_instance(
     inst: &GhostInstance,
-    mask: &ApertureMask,
-    open_radius: f32,
+    masks: &GhostMasks,
     scale: (f32, f32),
     size: (usize, usize),
     rows: std::ops::Range<usize>,
@@ -55,7 +62,7 @@ fn shade_instance(
 ) {
     let [cx, cy, hx, hy] = inst.centre_half;
     // A mask whose whole quad maps inside its fully open disc is 1 everywhere (a speed-up only): skip it.
-    let inst = without_open_stops(inst, open_radius);
+    let inst = without_open_stops(inst, |code| masks.level(code).open_radius);
     let front_open = reach(inst.front, inst.scale_y[3]) <= 1.0 - 0.5 * inst.front[3];
     let inst = &inst;
     let (sx, sy) = scale;
@@ -72,7 +79,7 @@ fn shade_instance(
         for x in first..last {
             // The accumulation pixel's centre, in image pixels.
             let q = [((x as f32 + 0.5) * sx - cx) / hx, ((y as f32 + 0.5) * sy - cy) / hy];
-            let m = mask_product(inst, mask, front_open, q);
+            let m = mask_product(inst, masks, front_open, q);
             if m > 0.0 {
                 fragment(x, y, m);
             }
@@ -119,16 +126,15 @@ const BAND_ROWS: usize = 8;
 /// `ghosts.wgsl` pixel by pixel: every instance into a cleared HDR accumulation image (`hdr_width` x
 /// `hdr_height`), every covered pixel shaded with its mask lookups, as the fragment shader does. The oracle of
 /// [`ghost_pass`] (a test holds the two within a fraction of an 8-bit step) and of the GPU comparison.
-pub fn ghost_pass_direct(scene: &FlareScene, mask: &ApertureMask) -> HdrImage {
+pub fn ghost_pass_direct(scene: &FlareScene, masks: &GhostMasks) -> HdrImage {
     let (w, h) = (scene.hdr_width as usize, scene.hdr_height as usize);
     let scale = accumulation_scale(scene);
-    let open_radius = mask.open_radius();
     let mut pixels = vec![[0.0f32; 4]; w * h];
     pixels.par_chunks_mut(w * BAND_ROWS).enumerate().for_each(|(band, chunk)| {
         let y0 = band * BAND_ROWS;
         let rows = y0..(y0 + BAND_ROWS).min(h);
         for inst in &scene.instances {
-            shade_instance(inst, mask, open_radius, scale, (w, h), rows.clone(), |x, y, m| {
+            shade_instance(inst, masks, scale, (w, h), rows.clone(), |x, y, m| {
                 let p = &mut chunk[(y - y0) * w + x];
                 for (value, colour) in p.iter_mut().zip(inst.colour).take(3) {
                     *value += colour * m;
@@ -148,13 +154,10 @@ pub fn ghost_pass_direct(scene: &FlareScene, mask: &ApertureMask) -> HdrImage {
 /// mask rows, where its bilinear sample is exactly 1 and where it can be non-zero), with half a texel of margin
 /// on the safe side: a pixel in doubt is shaded. Bands of rows run in parallel (rayon); the result does not
 /// depend on the thread count.
-pub fn ghost_pass(scene: &FlareScene, mask: &ApertureMask) -> HdrImage {
+pub fn ghost_pass(scene: &FlareScene, masks: &GhostMasks) -> HdrImage {
     let (w, h) = (scene.hdr_width as usize, scene.hdr_height as usize);
     let scale = accumulation_scale(scene);
-    let rows_of_mask = MaskRows::new(mask);
-    let open_radius = mask.open_radius();
-    let instances: Vec<GhostInstance> =
-        scene.instances.iter().map(|inst| without_open_stops(inst, open_radius)).collect();
+    let instances: Vec<GhostInstance> = scene.instances.iter().map(|inst| without_open_stops(inst, |code| masks.level(code).open_radius)).collect();
     let mut pixels = vec![[0.0f32; 4]; w * h];
     pixels.par_chunks_mut(w * BAND_ROWS).enumerate().for_each(|(band, chunk)| {
         let y0 = band * BAND_ROWS;
@@ -162,7 +165,7 @@ pub fn ghost_pass(scene: &FlareScene, mask: &ApertureMask) -> HdrImage {
         // Per row of the band, w + 1 running differences of RGB.
         let mut spans = vec![[0.0f64; 3]; rows.len() * (w + 1)];
         for inst in &instances {
-            sweep_instance(inst, mask, &rows_of_mask, scale, (w, h), rows.clone(), |fragment| match fragment {
+            sweep_instance(inst, masks, scale, (w, h), rows.clone(), |fragment| match fragment {
                 Fragment::Open { y, x0, x1 } => {
                     let row = &mut spans[(y - y0) * (w + 1)..][..w + 1];
                     // RGB only: the fourth channel of `colour` is not an image channel.
@@ -197,12 +200,13 @@ pub fn ghost_pass(scene: &FlareScene, mask: &ApertureMask) -> HdrImage {
     HdrImage { width: scene.hdr_width, height: scene.hdr_height, pixels }
 }
 
-/// The instance with every stop crossing whose whole quad maps inside the mask's fully open disc disabled (its
-/// mask is 1 wherever the quad is).
-pub(crate) fn without_open_stops(inst: &GhostInstance, open_radius: f32) -> GhostInstance {
+/// The instance with every stop crossing whose whole quad maps inside its mask level's fully open disc
+/// disabled (its mask is 1 wherever the quad is).
+/// `open_radius(level)` is the open radius of the level a stop map's last field names.
+pub(crate) fn without_open_stops(inst: &GhostInstance, open_radius: impl Fn(f32) -> f32) -> GhostInstance {
     let mut inst = *inst;
     for (stop, &scale_y) in inst.stops.iter_mut().zip(&inst.scale_y) {
-        if stop[3] != 0.0 && reach(*stop, scale_y) <= open_radius {
+        if stop[3] != 0.0 && reach(*stop, scale_y) <= open_radius(stop[3]) {
             stop[3] = 0.0;
         }
     }
@@ -215,9 +219,103 @@ fn reach(map: [f32; 4], scale_y: f32) -> f32 {
     (map[1].abs() + map[0].abs()).hypot(map[2].abs() + scale_y.abs())
 }
 
+/// The most accumulation pixels one texel of a sprite's stop mask may span before the sprite reads the next
+/// finer level of [`GhostMasks`] (where there is one): the texel of a finer level is never under a pixel.
+pub const MAX_PIXELS_PER_TEXEL: f32 = 4.0;
+
+/// How many times finer than the base mask the finest level of [`GhostMasks`] is: levels of
+/// [`DEFAULT_MASK_SIZE`] x 1, 2 and 4 texels a side.
+pub const MASK_LEVELS: usize = 3;
+
+/// One level of [`GhostMasks`]: the mask, its per-band table and its fully open radius.
+#[derive(Debug)]
+pub struct MaskLevel {
+    pub mask: ApertureMask,
+    pub(crate) rows: MaskRows,
+    pub open_radius: f32,
+}
+
+/// The stop's mask at the resolutions the ghost passes pick from, per sprite and stop crossing (see the module
+/// documentation): level 0 is the base mask every other pass reads ([`crate::flare::PreparedFlare::mask`]);
+/// a blade or round stop has [`MASK_LEVELS`] levels, each rasterised from the shape itself, while an image stop
+/// has only its base (a finer raster of an image would repeat its texels, with no sharper edge).
+#[derive(Debug)]
+pub struct GhostMasks {
+    levels: Vec<MaskLevel>,
+}
+
+impl GhostMasks {
+    /// The levels of `aperture`'s shape over its base mask `base` (rasterised from it at the base size).
+    pub fn new(aperture: &Aperture, base: ApertureMask) -> Self {
+        let finer = match aperture.shape {
+            ApertureShape::Image { .. } => 0,
+            _ => MASK_LEVELS - 1,
+        };
+        let size = base.size;
+        let masks = std::iter::once(base).chain((1..=finer).map(|l| aperture.rasterise(size << l)));
+        Self::from_masks(masks.collect())
+    }
+
+    /// Levels from masks of any sizes, the coarsest first (tests; a single mask is a one-level set).
+    pub fn from_masks(masks: Vec<ApertureMask>) -> Self {
+        let levels = masks
+            .into_iter()
+            .map(|mask| MaskLevel { rows: MaskRows::new(&mask), open_radius: mask.open_radius(), mask })
+            .collect();
+        Self { levels }
+    }
+
+    /// The levels, the coarsest first.
+    pub fn levels(&self) -> &[MaskLevel] {
+        &self.levels
+    }
+
+    /// The level a stop map's last field names (1 the first; clamped to the levels there are).
+    pub fn level(&self, code: f32) -> &MaskLevel {
+        &self.levels[level_index(code, self.levels.len())]
+    }
+
+    pub fn mask(&self, code: f32) -> &ApertureMask {
+        &self.level(code).mask
+    }
+
+    /// The level code (1 the coarsest) for a stop map whose mask coordinate moves `pixels_per_unit`
+    /// accumulation pixels per unit: the coarsest level whose texel spans at most [`MAX_PIXELS_PER_TEXEL`]
+    /// of them, else the finest.
+    pub fn pick(&self, pixels_per_unit: f32) -> f32 {
+        let fits = |l: &MaskLevel| pixels_per_unit * 2.0 / l.mask.size as f32 <= MAX_PIXELS_PER_TEXEL;
+        let index = self.levels.iter().position(fits).unwrap_or(self.levels.len() - 1);
+        (index + 1) as f32
+    }
+
+    /// Names in each enabled stop map of `scene` the level its sprite reads ([`Self::pick`] for the faster of
+    /// the map's two axes, in the scene's accumulation pixels).
+    pub fn assign_levels(&self, scene: &mut crate::render::FlareScene) {
+        let (sx, sy) = accumulation_scale(scene);
+        for inst in &mut scene.instances {
+            let [_, _, hx, hy] = inst.centre_half;
+            for (stop, &scale_y) in inst.stops.iter_mut().zip(&inst.scale_y) {
+                if stop[3] != 0.0 {
+                    // Pixels per unit of the mask coordinate; a map of scale 0 (the whole sprite one texel)
+                    // reads the finest level, and so does one whose ratio is not a number.
+                    let per_unit = (hx.abs() / (stop[0].abs() * sx)).max(hy.abs() / (scale_y.abs() * sy));
+                    stop[3] = self.pick(if per_unit.is_nan() { f32::INFINITY } else { per_unit });
+                }
+            }
+        }
+    }
+}
+
+/// The index of the level a stop map's last field `code` names among `levels` levels: 1 the first, clamped
+/// to those there are (`ghosts_compute.wgsl`'s `level_of`).
+pub(crate) fn level_index(code: f32, levels: usize) -> usize {
+    (code.max(1.0) as usize - 1).min(levels.saturating_sub(1))
+}
+
 /// Per band of the mask's rows (the two texel rows a bilinear sample at one v reads): the interval of u where
 /// the sample is exactly 1 (every texel it reads is 255; the longest such run) and the interval outside which
 /// it is 0, each shrunk or grown by half a texel. Band b holds v whose sample reads rows b - 1 and b (clamped).
+#[derive(Debug)]
 pub(crate) struct MaskRows {
     size: usize,
     /// Per band: open u interval (empty when lo > hi), then the non-zero u interval.
@@ -292,8 +390,7 @@ enum Fragment {
 /// [`shade_instance`] shades them.
 fn sweep_instance(
     inst: &GhostInstance,
-    mask: &ApertureMask,
-    rows_of_mask: &MaskRows,
+    masks: &GhostMasks,
     scale: (f32, f32),
     size: (usize, usize),
     rows: std::ops::Range<usize>,
@@ -342,7 +439,7 @@ fn sweep_instance(
             if enabled == 0.0 {
                 continue;
             }
-            let Some((open, support)) = rows_of_mask.at(scale_y * q_y + oy) else {
+            let Some((open, support)) = masks.level(enabled).rows.at(scale_y * q_y + oy) else {
                 lit = false;
                 break;
             };
@@ -372,7 +469,7 @@ fn sweep_instance(
                 x = open_last + 1;
                 continue;
             }
-            let m = mask_product(inst, mask, front_open, [((x as f32 + 0.5) * sx - cx) / hx, q_y]);
+            let m = mask_product(inst, masks, front_open, [((x as f32 + 0.5) * sx - cx) / hx, q_y]);
             if m > 0.0 {
                 emit(Fragment::Edge { x, y, m });
             }
@@ -383,16 +480,15 @@ fn sweep_instance(
 
 /// Per ghost (`ghosts` of them), the luminance-weighted energy [`ghost_pass`] draws in the frame and its
 /// first moments in image pixels: what the metrics compare with the reference's ghosts.
-pub fn ghost_moments(scene: &FlareScene, mask: &ApertureMask, ghosts: usize) -> Vec<GhostMoments> {
+pub fn ghost_moments(scene: &FlareScene, masks: &GhostMasks, ghosts: usize) -> Vec<GhostMoments> {
     let (w, h) = (scene.hdr_width as usize, scene.hdr_height as usize);
     let (sx, sy) = accumulation_scale(scene);
     let mut moments = vec![GhostMoments::default(); ghosts];
-    let open_radius = mask.open_radius();
     for (inst, &g) in scene.instances.iter().zip(&scene.instance_ghosts) {
         let luma = luminance([inst.colour[0], inst.colour[1], inst.colour[2]].map(f64::from));
         // Each accumulation pixel stands for sx x sy image pixels.
         let area = f64::from(sx * sy);
-        shade_instance(inst, mask, open_radius, (sx, sy), (w, h), 0..h, |x, y, m| {
+        shade_instance(inst, masks, (sx, sy), (w, h), 0..h, |x, y, m| {
             let p = [(x as f64 + 0.5) * f64::from(sx), (y as f64 + 0.5) * f64::from(sy)];
             moments[g as usize].add_sample(luma * f64::from(m) * area, p);
         });
@@ -430,7 +526,8 @@ mod tests {
                 scene.hdr_height = scene.height.div_ceil(divisor);
             }
             assert!(scene.instances.len() > 10, "{id}: {} instances", scene.instances.len());
-            let (fast, direct) = (ghost_pass(&scene, &flare.mask), ghost_pass_direct(&scene, &flare.mask));
+            let masks = &flare.ghost_masks;
+            let (fast, direct) = (ghost_pass(&scene, masks), ghost_pass_direct(&scene, masks));
             let gain = scene.globals.flare_gain();
             let (mut worst, mut lit) = (0.0f32, 0);
             for (a, b) in fast.pixels.iter().zip(&direct.pixels) {
@@ -447,23 +544,85 @@ mod tests {
             assert!(lit > 1000, "{id}: only {lit} lit pixels");
             assert!(worst * 255.0 < 0.2, "{id}: display values differ by {} of an 8-bit step", worst * 255.0);
             // The fast pass shaded only the edges: count its per-pixel fragments against the direct pass's.
-            let rows = MaskRows::new(&flare.mask);
-            let open = flare.mask.open_radius();
             let (w, h) = (scene.hdr_width as usize, scene.hdr_height as usize);
             let scale = accumulation_scale(&scene);
             let (mut edges, mut all) = (0usize, 0usize);
             for inst in &scene.instances {
-                let inst = without_open_stops(inst, open);
-                sweep_instance(&inst, &flare.mask, &rows, scale, (w, h), 0..h, |f| match f {
+                let inst = without_open_stops(inst, |code| masks.level(code).open_radius);
+                sweep_instance(&inst, masks, scale, (w, h), 0..h, |f| match f {
                     Fragment::Edge { .. } => edges += 1,
                     Fragment::Open { .. } => {}
                 });
-                shade_instance(&inst, &flare.mask, open, scale, (w, h), 0..h, |_, _, _| all += 1);
+                shade_instance(&inst, masks, scale, (w, h), 0..h, |_, _, _| all += 1);
             }
             edge_share.push((id, edges as f64 / all as f64));
         }
         eprintln!("edge pixels shaded / direct fragments: {edge_share:?}");
         // On the frame-filling ghosts of the Nikon most fragments are open.
         assert!(edge_share[0].1 < 0.25, "{edge_share:?}");
+    }
+
+    /// The sprites whose base mask texel would span more than `MAX_PIXELS_PER_TEXEL` pixels read a finer level
+    /// (the Nikon's frame-filling ghosts at 960x540: every level is used), the small ones keep the base; the
+    /// fast pass then shades far fewer edge pixels than with the base mask alone, and still draws the direct
+    /// pass's image. An image stop has its base level only, and every sprite reads it.
+    #[test]
+    fn large_sprites_read_finer_levels_and_shade_fewer_edges() {
+        let config = FlareConfig::default();
+        let flare = PreparedFlare::new(&builtin_lens("nikon_zoom_28_75mm").unwrap(), &config).unwrap();
+        let masks = &*flare.ghost_masks;
+        assert_eq!(masks.levels().iter().map(|l| l.mask.size).collect::<Vec<_>>(), [256, 512, 1024]);
+        assert_eq!(masks.levels()[0].mask, flare.mask);
+        let (scene, _) = flare.scene([9.0, 5.0], 960, 540);
+        let mut per_level = [0usize; 4];
+        for inst in &scene.instances {
+            let [_, _, hx, hy] = inst.centre_half;
+            for (stop, scale_y) in inst.stops.iter().zip(inst.scale_y) {
+                per_level[stop[3] as usize] += 1;
+                if stop[3] != 0.0 {
+                    // The texel of the level read spans at most the bound, or the level is the finest.
+                    let size = masks.mask(stop[3]).size as f32;
+                    let texel_px = (hx.abs() / stop[0].abs()).max(hy.abs() / scale_y.abs()) * 2.0 / size;
+                    assert!(texel_px <= MAX_PIXELS_PER_TEXEL || stop[3] == 3.0, "{texel_px} px a texel at {size}");
+                    if stop[3] > 1.0 {
+                        let coarser = texel_px * 2.0;
+                        assert!(coarser > MAX_PIXELS_PER_TEXEL, "{coarser} px a texel would have done");
+                    }
+                }
+            }
+        }
+        assert!(per_level[1..].iter().all(|&n| n > 50), "stop maps per level (0: off): {per_level:?}");
+        // The edges at 1920x1080, where the level of most frame-filling sprites is finer.
+        let base = GhostMasks::from_masks(vec![flare.mask.clone()]);
+        let (large, _) = flare.scene([9.0, 5.0], 1920, 1080);
+        let edges = |masks: &GhostMasks| {
+            let mut edges = 0usize;
+            for inst in &large.instances {
+                let inst = without_open_stops(inst, |code| masks.level(code).open_radius);
+                let size = (large.hdr_width as usize, large.hdr_height as usize);
+                sweep_instance(&inst, masks, accumulation_scale(&large), size, 0..size.1, |f| {
+                    edges += usize::from(matches!(f, Fragment::Edge { .. }))
+                });
+            }
+            edges
+        };
+        let (coarse, fine) = (edges(&base), edges(masks));
+        eprintln!("edge pixels at 1920x1080: {coarse} with the base mask, {fine} with its levels");
+        assert!((fine as f64) < 0.7 * coarse as f64, "{fine} edge pixels against {coarse}");
+        let (fast, direct) = (ghost_pass(&scene, masks), ghost_pass_direct(&scene, masks));
+        let gain = scene.globals.flare_gain();
+        let mut worst = 0.0f32;
+        for (a, b) in fast.pixels.iter().zip(&direct.pixels) {
+            let shown = |p: &[f32; 4]| tonemap_pixel([p[0], p[1], p[2]].map(|v| v * gain), &scene);
+            let (da, db) = (shown(a), shown(b));
+            worst = (0..3).fold(worst, |m, c| m.max((da[c] - db[c]).abs()));
+        }
+        assert!(worst * 255.0 < 0.2, "display values differ by {} of an 8-bit step", worst * 255.0);
+
+        let image = ApertureShape::Image { size: 8, luminance: vec![1.0; 64] };
+        let image = Aperture { shape: image, f_number: None };
+        let masks = GhostMasks::new(&image, image.rasterise(256));
+        assert_eq!(masks.levels().len(), 1);
+        assert_eq!(masks.pick(1e9), 1.0);
     }
 }
