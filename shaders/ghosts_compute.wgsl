@@ -12,7 +12,10 @@
 // (its edge pixels, the open span's first pixel, the end) is split between `pieces` invocations, each taking
 // one run of it and shading the pixel before its run once more: a long edge does not hold up its warp. Each
 // of them works the item out (`spans`), or one invocation an item does so into `walks` first (`walks_setup`,
-// then `spans_walks`: hardware GPUs, where the repeats cost 0.26 ms of a 4K frame). A stop mask lookup reads
+// then `spans_walks`: hardware GPUs, where the repeats cost 0.26 ms of a 4K frame). Each stop map names the level
+// of the mask it reads (its .w: 1 the base of `mask_size` texels a side, 2 and 3 twice and four times that;
+// `GhostMasks` in the CPU twin), chosen per sprite so that a texel spans a few pixels: the edges, a texel or
+// two of the mask wide, stay a few pixels wide on a frame-filling sprite. A stop mask lookup reads
 // its four texels as one word (`ApertureMask::quad_words`) of a texture of words, as does a row of the mask's
 // table (`mask_texels`: a software rasteriser gathers a texel fetch for its lanes, where it loads a storage
 // word lane by lane), or, where GATHER_MASKS (hardware GPUs), by one `textureGather`, every mask of the pixel

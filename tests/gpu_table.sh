@@ -67,6 +67,8 @@ run() {
     step /usr/bin/time -f "bake on the CPU, whole command: %e s" \
         $d/flarelab bake nikon_zoom_28_75mm --device cpu -o /tmp/zoom_cpu.flut
     step $d/gpu_timing nikon_zoom_28_75mm 3840 2160 compute frames=9
+    # The same frame with every sprite on the base mask level (as before GhostMasks): the levels' gain.
+    step $d/gpu_timing nikon_zoom_28_75mm 3840 2160 compute frames=9 base-mask
     step $d/gpu_timing nikon_zoom_28_75mm 3840 2160 /tmp/zoom.flut compute frames=9
     step $d/gpu_timing nikon_zoom_28_75mm 1920 1080 compute frames=9
     step $d/gpu_timing nikon_zoom_28_75mm 1920 1080 /tmp/zoom.flut compute frames=9

@@ -10,7 +10,8 @@
 //! `textureGather`, `once` works each item out once,
 //! `pieces=N` or `once` spread the items over invocations rather than a workgroup a sprite, `resolve=` picks the
 //! per-row sum; `frames=N`: N frames rather than 9, their medians; `inline`: the LUT
-//! pass samples its coarse instances at every pixel instead of into coarse images).
+//! pass samples its coarse instances at every pixel instead of into coarse images; `base-mask`: every sprite
+//! reads the base level of the stop mask, as before `GhostMasks`, for a before-and-after in one build).
 
 use std::time::Instant;
 
@@ -24,13 +25,13 @@ use flare_core::render::DisplaySettings;
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     let usage = "usage: gpu_timing LENS WIDTH HEIGHT [LUT.flut] [starburst] [compute] [resolve=rows|scan] [pieces=N] \
-                 [buffer] [gather] [once] [inline] [frames=N]";
+                 [buffer] [gather] [once] [inline] [base-mask] [frames=N]";
     let flag = |name: &str| args.iter().any(|a| a == name);
     let value = |key: &str| args.iter().find_map(|a| a.strip_prefix(key).map(str::to_owned));
     let (starburst, compute_only) = (flag("starburst"), flag("compute"));
     let frames: usize = value("frames=").map_or(Ok(9), |n| n.parse())?;
     let form_args = (value("resolve="), value("pieces="), flag("buffer"), flag("once"));
-    let options = ["starburst", "compute", "buffer", "inline", "once", "gather"];
+    let options = ["starburst", "compute", "buffer", "inline", "once", "gather", "base-mask"];
     let args: Vec<String> =
         args.iter().filter(|a| !options.contains(&a.as_str()) && !a.contains('=')).cloned().collect();
     let lens = builtin_lens(args.get(1).ok_or(usage)?)?;
@@ -49,10 +50,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ..FrameRequest::default()
     };
     let sources = Sources { flare: &flare, lut: live.as_ref(), plate: None };
+    let base_mask = flag("base-mask");
+    let build = || {
+        let mut f = Frame::build(&flare, live.as_ref(), &request);
+        if base_mask {
+            for stop in f.scene.instances.iter_mut().flat_map(|i| &mut i.stops) {
+                stop[3] = stop[3].min(1.0);
+            }
+        }
+        f
+    };
     let cpu: Vec<f64> = (0..if compute_only { 0 } else { 9 })
         .map(|_| {
             let start = Instant::now();
-            let f = Frame::build(&flare, live.as_ref(), &request);
+            let f = build();
             let _ = frame::draw_cpu_hdr(&f, &sources);
             start.elapsed().as_secs_f64() * 1e3
         })
@@ -92,7 +103,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let (mut wall, mut gpu, mut last) = (Vec::new(), Vec::new(), None);
         for _ in 0..frames {
             let start = Instant::now();
-            let f = Frame::build(&flare, live.as_ref(), &request);
+            let f = build();
             drawer.render_into(&f, &sources, &view)?;
             wall.push(start.elapsed().as_secs_f64() * 1e3);
             if let Some(t) = drawer.renderer.wait_pass_times(&drawer.ctx.device, &drawer.ctx.queue) {

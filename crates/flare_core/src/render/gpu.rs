@@ -40,12 +40,12 @@ use wgpu_profiler::{GpuProfiler, GpuProfilerSettings, GpuTimerQueryResult};
 
 pub use super::buffers::{HDR_FORMAT, texture_2d};
 use super::buffers::{render_pipeline, upload, upload_part};
+use super::cpu::ghosts::{GhostMasks, MASK_LEVELS};
 use super::gpu_ghosts::ComputeGhosts;
 use super::gpu_lut::{ComputeLut, TILE};
 use super::gpu_view::{PassKey, ViewPass};
 use super::shaders::{DIRT_WGSL, GHOSTS_WGSL, LUT_GHOSTS_WGSL, STARBURST_WGSL};
 use super::{FlareScene, GhostInstance, Globals};
-use super::cpu::ghosts::{GhostMasks, MASK_LEVELS};
 use crate::dirt::PreparedDirt;
 use crate::image::{DisplayImage, HdrImage};
 use crate::lut::blend::{ATLAS_PAGE, LiveLut, LutInstance, LutScene};

@@ -8,7 +8,10 @@
 //! exactly 1, from the aperture's per-row table, [`super::cpu::ghosts`]'s `MaskRows`) is added in O(1), only
 //! the pixels outside it are shaded as the fragment shader does, and the row's values go in as differences
 //! `F(x) - F(x - 1)` to a per-row buffer; `resolve` then sums each row once into the HDR texture. The cost
-//! follows rows x sprites plus edge pixels, not covered area. On a hardware GPU ([`ComputeForm`]) an item's
+//! follows rows x sprites plus edge pixels, not covered area. The edge pixels are those where a mask is between
+//! 0 and 1, a mask texel or two wide: each stop crossing reads the level of the mask ([`GhostMasks`], 256 to
+//! 1024 texels a side, one storage buffer of their tables and footprints, one texture each) that its sprite's
+//! size calls for, so that a frame-filling sprite's edge is a few pixels wide, not 32 (at 4K). On a hardware GPU ([`ComputeForm`]) an item's
 //! walk is split between several invocations (`default_pieces`: at 4K one invocation walking a long edge held
 //! its warp up), each item is worked out once into a buffer those invocations read (`walks_setup`), and each
 //! mask lookup gathers its four texels from a texture in one fetch. A software rasteriser (lavapipe) loads a
@@ -411,8 +414,11 @@ impl ComputeGhosts {
         hdr: &wgpu::TextureView,
         lut_layer: Option<&wgpu::TextureView>,
     ) {
-        let instances: Vec<GhostInstance> =
-            scene.instances.iter().map(|i| without_open_stops(i, |code| self.open_radii[level_index(code, self.open_radii.len())])).collect();
+        let instances: Vec<GhostInstance> = scene
+            .instances
+            .iter()
+            .map(|i| without_open_stops(i, |code| self.open_radii[level_index(code, self.open_radii.len())]))
+            .collect();
         let width = u64::from(scene.hdr_width.max(1));
         let row_bytes = (width + 1) * BYTES_PER_COLUMN;
         let strip_rows = (self.strip_bytes / row_bytes).clamp(1, u64::from(scene.hdr_height.max(1))) as u32;

@@ -156,7 +156,9 @@ pub struct GhostInstance {
     pub centre_half: [f32; 4],
     /// Linear RGB irradiance; alpha unused.
     pub colour: [f32; 4],
-    /// Aperture maps of up to three stop crossings: scale, offset x, offset y, enabled (0/1).
+    /// Aperture maps of up to three stop crossings: scale, offset x, offset y, and the level of the mask it
+    /// reads (0: not enabled; 1 the base mask, as [`FlareScene::build`] leaves it, 2 and 3 the finer ones
+    /// that [`cpu::ghosts::GhostMasks::assign_levels`] picks for large sprites).
     pub stops: [[f32; 4]; 3],
     /// Front-lens disc map: scale, offset x, offset y, anti-alias width (in its units per pixel).
     pub front: [f32; 4],

@@ -157,7 +157,8 @@ pub fn ghost_pass_direct(scene: &FlareScene, masks: &GhostMasks) -> HdrImage {
 pub fn ghost_pass(scene: &FlareScene, masks: &GhostMasks) -> HdrImage {
     let (w, h) = (scene.hdr_width as usize, scene.hdr_height as usize);
     let scale = accumulation_scale(scene);
-    let instances: Vec<GhostInstance> = scene.instances.iter().map(|inst| without_open_stops(inst, |code| masks.level(code).open_radius)).collect();
+    let instances: Vec<GhostInstance> =
+        scene.instances.iter().map(|inst| without_open_stops(inst, |code| masks.level(code).open_radius)).collect();
     let mut pixels = vec![[0.0f32; 4]; w * h];
     pixels.par_chunks_mut(w * BAND_ROWS).enumerate().for_each(|(band, chunk)| {
         let y0 = band * BAND_ROWS;
