@@ -18,6 +18,9 @@ use rayon::prelude::*;
 /// The most blades a stop may have, for every command, file and panel alike.
 pub const MAX_BLADES: u32 = 32;
 
+/// The largest edge radius the raster draws (a stop touching [-1, 1]^2's sides would be cut by its square).
+const EDGE_LIMIT: f64 = 0.999;
+
 /// Default mask resolution (texels across).
 pub const DEFAULT_MASK_SIZE: usize = 256;
 
@@ -223,10 +226,24 @@ impl Aperture {
         }
     }
 
+    /// The least edge radius over every direction ([`Self::edge_radius`], capped as the raster caps it): the
+    /// inscribed circle's radius of a polygon, mixed towards 1 by the roundness.
+    fn inner_radius(&self) -> f64 {
+        let radius = match &self.shape {
+            ApertureShape::Blades { count, roundness, .. } => {
+                let polygon = (PI / f64::from(*count)).cos();
+                polygon + roundness * (1.0 - polygon)
+            }
+            _ => 1.0,
+        };
+        radius.min(EDGE_LIMIT)
+    }
+
     /// Rasterises the shape into a `size` x `size` mask.
     pub fn rasterise(&self, size: usize) -> ApertureMask {
         let size = size.max(2);
         let texel = 2.0 / size as f64;
+        let inner = self.inner_radius();
         let mut texels = vec![0u8; size * size];
         // Rows in parallel (the ghost passes' finest level is 1024^2 texels).
         texels.par_chunks_mut(size).enumerate().for_each(|(j, row)| {
@@ -241,8 +258,16 @@ impl Aperture {
                     }
                     _ => {
                         let r = u.hypot(v);
-                        let edge = self.edge_radius(v.atan2(u)).min(0.999);
-                        (0.5 + (edge - r) / texel).clamp(0.0, 1.0)
+                        // A texel a whole texel inside the inscribed circle is 1, and one a texel beyond the
+                        // circumradius 0 (what the formula gives there, without its angle).
+                        if r <= inner - texel {
+                            1.0
+                        } else if r >= EDGE_LIMIT + texel {
+                            0.0
+                        } else {
+                            let edge = self.edge_radius(v.atan2(u)).min(EDGE_LIMIT);
+                            (0.5 + (edge - r) / texel).clamp(0.0, 1.0)
+                        }
                     }
                 };
                 row[i] = (coverage * 255.0).round() as u8;
@@ -272,6 +297,28 @@ mod tests {
         let round =
             Aperture { shape: ApertureShape::Blades { count: 6, rotation_deg: 0.0, roundness: 1.0 }, f_number: None };
         assert!((round.rasterise(256).open_fraction() - circle.open_fraction()).abs() < 3e-3);
+    }
+
+    /// The raster's shortcut (texels well inside the inscribed circle or beyond the circumradius) gives the
+    /// bytes of the edge formula at every texel, for polygons, rounded blades and the circle.
+    #[test]
+    fn the_raster_shortcut_gives_the_formulas_bytes() {
+        let blades = |count, rotation_deg, roundness| ApertureShape::Blades { count, rotation_deg, roundness };
+        let shapes = [ApertureShape::Circle, blades(3, 0.0, 0.0), blades(6, 17.0, 0.4), blades(32, 5.0, 1.0)];
+        for shape in shapes {
+            let aperture = Aperture { shape, f_number: None };
+            for size in [16, 97, 256] {
+                let mask = aperture.rasterise(size);
+                let texel = 2.0 / size as f64;
+                for (k, &t) in mask.texels.iter().enumerate() {
+                    let (i, j) = ((k % size) as f64, (k / size) as f64);
+                    let (u, v) = (-1.0 + texel * (i + 0.5), 1.0 - texel * (j + 0.5));
+                    let edge = aperture.edge_radius(v.atan2(u)).min(EDGE_LIMIT);
+                    let coverage = (0.5 + (edge - u.hypot(v)) / texel).clamp(0.0, 1.0);
+                    assert_eq!(t, (coverage * 255.0).round() as u8, "{:?} at {size}: texel {k}", aperture.shape);
+                }
+            }
+        }
     }
 
     #[test]

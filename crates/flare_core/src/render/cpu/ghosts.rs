@@ -330,6 +330,7 @@ impl MaskRows {
         let texel_u = |x: f32| (x + 0.5) / n as f32 * 2.0 - 1.0;
         let margin = 1.0 / n as f32; // half a texel in u
         let bands = (0..=n)
+            .into_par_iter()
             .map(|b| {
                 let (r0, r1) = (b.saturating_sub(1).min(last), b.min(last));
                 let row = |j: usize| &mask.texels[j * n..(j + 1) * n];
