@@ -247,7 +247,7 @@ impl Aperture {
         let mut texels = vec![0u8; size * size];
         // Rows in parallel (the ghost passes' finest level is 1024^2 texels).
         texels.par_chunks_mut(size).enumerate().for_each(|(j, row)| {
-            for i in 0..size {
+            for (i, out) in row.iter_mut().enumerate() {
                 let u = -1.0 + texel * (i as f64 + 0.5);
                 let v = 1.0 - texel * (j as f64 + 0.5);
                 let coverage = match &self.shape {
@@ -270,7 +270,7 @@ impl Aperture {
                         }
                     }
                 };
-                row[i] = (coverage * 255.0).round() as u8;
+                *out = (coverage * 255.0).round() as u8;
             }
         });
         ApertureMask { size, texels }
