@@ -60,9 +60,9 @@ struct ComputeStrip {
     pieces: u32,         // invocations a (sprite, row) item's walk is split between
     spread: u32,         // `spans_sprites`: workgroup x draws sprite x * spread mod sprites
     mask_levels: u32,    // levels of the mask in `mask` (GhostMasks: 1 to 3)
-    pad0: u32,
-    pad1: u32,
-    pad2: u32,
+    level_start0: u32,   // the words of `mask` where levels 0, 1 and 2 start (`mask_words` in gpu_ghosts.rs)
+    level_start1: u32,
+    level_start2: u32,
 };
 
 // True (hardware GPUs): the stop masks' texels gathered from `mask_texture` (one fetch a lookup), every mask of a
@@ -118,14 +118,15 @@ fn level_size(level: u32) -> u32 {
     return strip.mask_size << level;
 }
 
-// The word of `mask` where level `level` starts (its table, then its footprints; `mask_words` in gpu_ghosts.rs).
+// The word of `mask` where level `level` starts (its table, then its footprints).
 fn level_start(level: u32) -> u32 {
-    var at = 0u;
-    for (var l = 0u; l < level; l = l + 1u) {
-        let n = level_size(l) + 1u;
-        at = at + ((n * 4u + n * n + 3u) & ~3u);
+    if (level == 0u) {
+        return strip.level_start0;
     }
-    return at;
+    if (level == 1u) {
+        return strip.level_start1;
+    }
+    return strip.level_start2;
 }
 
 // Band `band`'s row of level `level`'s table: (lo, hi) of u where the bilinear sample is exactly 1, and of u

@@ -102,7 +102,8 @@ pub(crate) struct ComputeStrip {
     pub spread: u32,
     /// Levels of the mask (`GhostMasks`), each twice the texels a side of the one before (`mask_size` the first).
     pub mask_levels: u32,
-    pub pad: [u32; 3],
+    /// The word of the mask buffer where each level starts (`mask_words`; 0 for a level it lacks).
+    pub level_starts: [u32; MASK_LEVELS],
 }
 const _: () = assert!(std::mem::size_of::<ComputeStrip>() == 80);
 
@@ -206,7 +207,7 @@ pub(crate) struct StripPlan {
 pub(crate) fn plan_strips(
     scene: &FlareScene,
     instances: &[GhostInstance],
-    (mask_size, mask_levels): (u32, u32),
+    mask: &MaskLayout,
     strip_rows: u32,
     max_groups: u32,
     pieces: u32,
@@ -254,9 +255,9 @@ pub(crate) fn plan_strips(
                 instances: instances.len() as u32,
                 items: total,
                 groups_x,
-                mask_size,
-                mask_levels,
-                pad: [0; 3],
+                mask_size: mask.size,
+                mask_levels: mask.levels,
+                level_starts: mask.starts,
                 scale_x: sx,
                 scale_y: sy,
                 fixed_per_unit,
@@ -271,17 +272,30 @@ pub(crate) fn plan_strips(
         .collect()
 }
 
-/// The mask's levels as `ghosts_compute.wgsl` reads them (its `level_start`): each level's per-band table
-/// (f32 bits), then each of its bilinear footprints' four texels in one word (`ApertureMask::quad_words`), then
-/// zeros up to a multiple of four words.
-fn mask_words(masks: &GhostMasks) -> Vec<u32> {
+/// Where the mask's levels lie in the buffer `mask_words` makes (what `ComputeStrip` tells the shader).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct MaskLayout {
+    /// Texels a side of the base level, and the number of levels.
+    pub size: u32,
+    pub levels: u32,
+    /// The word where each level starts (a multiple of four; 0 for a level the mask lacks).
+    pub starts: [u32; MASK_LEVELS],
+}
+
+/// The mask's levels as `ghosts_compute.wgsl` reads them: each level's per-band table (f32 bits), then each of
+/// its bilinear footprints' four texels in one word (`ApertureMask::quad_words`), then zeros up to a multiple of
+/// four words (a row of the table is then one texel of the texture of words); and where each level starts.
+fn mask_words(masks: &GhostMasks) -> (Vec<u32>, MaskLayout) {
     let mut words = Vec::new();
-    for level in masks.levels() {
+    let mut starts = [0; MASK_LEVELS];
+    for (level, start) in masks.levels().iter().zip(&mut starts) {
+        *start = words.len() as u32;
         words.extend(level.rows.table().iter().flat_map(|b| b.map(f32::to_bits)));
         words.extend(level.mask.quad_words());
         words.resize(words.len().next_multiple_of(4), 0);
     }
-    words
+    let layout = MaskLayout { size: masks.levels()[0].mask.size as u32, levels: masks.levels().len() as u32, starts };
+    (words, layout)
 }
 
 /// The pass's pipelines and buffers (see the module documentation).
@@ -308,8 +322,8 @@ pub(crate) struct ComputeGhosts {
     /// reads them with.
     mask_texture: [wgpu::TextureView; MASK_LEVELS],
     mask_sampler: wgpu::Sampler,
-    /// The base level's texels a side and the number of levels.
-    mask_size: (u32, u32),
+    /// Where the levels lie in `mask`.
+    mask_layout: MaskLayout,
     /// Each level's fully open radius (`without_open_stops`).
     open_radii: Vec<f32>,
     /// The difference buffer and its size in bytes (all zero between strips).
@@ -359,7 +373,7 @@ impl ComputeGhosts {
             }),
             mask_sampler: device
                 .create_sampler(&wgpu::SamplerDescriptor { label: Some("ghost mask"), ..Default::default() }),
-            mask_size: (1, 1),
+            mask_layout: MaskLayout { size: 1, levels: 1, starts: [0; MASK_LEVELS] },
             open_radii: vec![0.0],
             diff: None,
             strip_bytes: limits.max_storage_buffer_binding_size.min(limits.max_buffer_size),
@@ -386,11 +400,11 @@ impl ComputeGhosts {
 
     /// Uploads the aperture mask's levels and their per-row tables.
     pub(crate) fn set_aperture(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, masks: &GhostMasks) {
-        let words = mask_words(masks);
+        let (words, layout) = mask_words(masks);
         self.mask = storage(device, queue, "ghost mask", bytemuck::cast_slice(&words), wgpu::BufferUsages::STORAGE);
         self.mask_texels = word_texels(device, queue, "ghost mask texels", bytemuck::cast_slice(&words));
         let levels = masks.levels();
-        self.mask_size = (levels[0].mask.size as u32, levels.len() as u32);
+        self.mask_layout = layout;
         self.open_radii = levels.iter().map(|l| l.open_radius).collect();
         let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
         self.mask_texture = std::array::from_fn(|l| {
@@ -426,7 +440,7 @@ impl ComputeGhosts {
         let sprite_groups = self.form.sprite_groups;
         let pieces =
             if sprite_groups { 1 } else { self.form.pieces.unwrap_or_else(|| default_pieces(scene.hdr_width)) };
-        let mut strips = plan_strips(scene, &instances, self.mask_size, strip_rows, max_groups, pieces);
+        let mut strips = plan_strips(scene, &instances, &self.mask_layout, strip_rows, max_groups, pieces);
         for s in &mut strips {
             s.params.lut = u32::from(lut_layer.is_some());
         }
@@ -582,14 +596,15 @@ mod tests {
     /// more workgroups than a dimension allows spills into the second.
     #[test]
     fn strips_cover_every_row_and_item_once() {
+        const ONE_LEVEL: MaskLayout = MaskLayout { size: 64, levels: 1, starts: [0; MASK_LEVELS] };
         let flare = PreparedFlare::new(&builtin_lens("heliar").unwrap(), &FlareConfig::default()).unwrap();
         let (scene, _) = flare.scene([6.0, 3.0], 200, 120);
-        let one = plan_strips(&scene, &scene.instances, (64, 1), 1000, 65535, 1);
+        let one = plan_strips(&scene, &scene.instances, &ONE_LEVEL, 1000, 65535, 1);
         assert_eq!(one.len(), 1);
         let total = one[0].params.items;
         assert!(total > 100, "{total} items");
         for rows in [1, 7, 50] {
-            let strips = plan_strips(&scene, &scene.instances, (64, 1), rows, 3, 1);
+            let strips = plan_strips(&scene, &scene.instances, &ONE_LEVEL, rows, 3, 1);
             assert_eq!(strips.iter().map(|s| s.params.rows).sum::<u32>(), 120);
             assert_eq!(strips.iter().map(|s| s.params.items).sum::<u32>(), total);
             for s in &strips {
