@@ -11,8 +11,8 @@
 //! follows rows x sprites plus edge pixels, not covered area. The edge pixels are those where a mask is between
 //! 0 and 1, a mask texel or two wide: each stop crossing reads the level of the mask ([`GhostMasks`], 256 to
 //! 1024 texels a side, one storage buffer of their tables and footprints, one texture each) that its sprite's
-//! size calls for, so that a frame-filling sprite's edge is a few pixels wide, not 32 (at 4K). On a hardware GPU ([`ComputeForm`]) an item's
-//! walk is split between several invocations (`default_pieces`: at 4K one invocation walking a long edge held
+//! size calls for, so that a frame-filling sprite's edge is a few pixels wide, not 32 (at 4K). On a hardware
+//! GPU ([`ComputeForm`]) an item's walk is split between several invocations (`default_pieces`: at 4K one invocation walking a long edge held
 //! its warp up), each item is worked out once into a buffer those invocations read (`walks_setup`), and each
 //! mask lookup gathers its four texels from a texture in one fetch. A software rasteriser (lavapipe) loads a
 //! storage word lane by lane, so there the form keeps such loads few: each sprite is one workgroup whose

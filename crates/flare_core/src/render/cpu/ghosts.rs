@@ -202,8 +202,8 @@ pub fn ghost_pass(scene: &FlareScene, masks: &GhostMasks) -> HdrImage {
 }
 
 /// The instance with every stop crossing whose whole quad maps inside its mask level's fully open disc
-/// disabled (its mask is 1 wherever the quad is).
-/// `open_radius(level)` is the open radius of the level a stop map's last field names.
+/// disabled (its mask is 1 wherever the quad is); `open_radius(code)` is the open radius of the level that a
+/// stop map's last field `code` names.
 pub(crate) fn without_open_stops(inst: &GhostInstance, open_radius: impl Fn(f32) -> f32) -> GhostInstance {
     let mut inst = *inst;
     for (stop, &scale_y) in inst.stops.iter_mut().zip(&inst.scale_y) {
@@ -224,8 +224,7 @@ fn reach(map: [f32; 4], scale_y: f32) -> f32 {
 /// finer level of [`GhostMasks`] (where there is one): the texel of a finer level is never under a pixel.
 pub const MAX_PIXELS_PER_TEXEL: f32 = 4.0;
 
-/// How many times finer than the base mask the finest level of [`GhostMasks`] is: levels of
-/// [`DEFAULT_MASK_SIZE`] x 1, 2 and 4 texels a side.
+/// The most levels [`GhostMasks`] has: [`crate::aperture::DEFAULT_MASK_SIZE`] x 1, 2 and 4 texels a side.
 pub const MASK_LEVELS: usize = 3;
 
 /// One level of [`GhostMasks`]: the mask, its per-band table and its fully open radius.
@@ -246,7 +245,8 @@ pub struct GhostMasks {
 }
 
 impl GhostMasks {
-    /// The levels of `aperture`'s shape over its base mask `base` (rasterised from it at the base size).
+    /// The levels of `aperture`'s shape: `base` (its raster at the base size), then, for blades or a circle,
+    /// the shape rasterised at twice and four times that.
     pub fn new(aperture: &Aperture, base: ApertureMask) -> Self {
         let finer = match aperture.shape {
             ApertureShape::Image { .. } => 0,
@@ -257,8 +257,11 @@ impl GhostMasks {
         Self::from_masks(masks.collect())
     }
 
-    /// Levels from masks of any sizes, the coarsest first (tests; a single mask is a one-level set).
+    /// Levels from masks of any sizes, the coarsest first (tests; a single mask is a one-level set). At least
+    /// one mask, and at most [`MASK_LEVELS`] (what the GPU passes bind): a caller's error otherwise, which
+    /// panics.
     pub fn from_masks(masks: Vec<ApertureMask>) -> Self {
+        assert!((1..=MASK_LEVELS).contains(&masks.len()), "{} mask levels", masks.len());
         let levels = masks
             .into_iter()
             .map(|mask| MaskLevel { rows: MaskRows::new(&mask), open_radius: mask.open_radius(), mask })

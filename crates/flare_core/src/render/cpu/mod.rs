@@ -4,7 +4,8 @@
 //! # How it works
 //! [`ghosts::ghost_pass_direct`] is `ghosts.wgsl` step for step: for each instance it visits the pixels whose
 //! centres fall inside the quad, recovers the quad coordinate q, multiplies the aperture mask (bilinear, 0
-//! outside [-1, 1]^2, at the resolution the stop map names: [`ghosts::GhostMasks`]) at every enabled stop crossing and the anti-aliased front disc, and adds the colour.
+//! outside [-1, 1]^2, at the resolution the stop map names: [`ghosts::GhostMasks`]) at every enabled stop
+//! crossing and the anti-aliased front disc, and adds the colour.
 //! [`ghosts::ghost_pass`] draws the same image for a fraction of the work (what every caller uses): per row of
 //! a sprite, the span where every mask is exactly 1 is added in O(1) to a difference buffer and only its
 //! edges are shaded as above (a test holds the two within 0.2/255). [`ghosts::ghost_moments`] walks the
