@@ -41,7 +41,7 @@ use wgpu_profiler::{GpuProfiler, GpuProfilerSettings, GpuTimerQueryResult};
 pub use super::buffers::{HDR_FORMAT, texture_2d};
 use super::buffers::{render_pipeline, upload, upload_part};
 use super::cpu::ghosts::{GhostMasks, MASK_LEVELS};
-use super::gpu_ghosts::ComputeGhosts;
+use super::gpu_ghosts::{ComputeGhosts, mask_level_textures};
 use super::gpu_lut::{ComputeLut, TILE};
 use super::gpu_view::{PassKey, ViewPass};
 use super::shaders::{DIRT_WGSL, GHOSTS_WGSL, LUT_GHOSTS_WGSL, STARBURST_WGSL};
@@ -637,17 +637,11 @@ impl FlareRenderer {
     /// Replaces the aperture mask's levels (when the aperture settings change).
     pub fn set_aperture(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, masks: &GhostMasks) {
         self.groups = None;
-        let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
-        self.aperture = std::array::from_fn(|l| {
-            let mask = &masks.levels()[l.min(masks.levels().len() - 1)].mask;
-            let size = mask.size as u32;
-            let level = texture_2d(device, "aperture", size, size, wgpu::TextureFormat::R8Unorm, usage);
-            upload(queue, &level, &mask.texels, 1);
-            level
-        });
+        let textures = mask_level_textures(device, queue, masks);
         if let Some(compute) = &mut self.compute {
-            compute.set_aperture(device, queue, masks);
+            compute.set_aperture(device, queue, masks, &textures);
         }
+        self.aperture = textures;
     }
 
     /// Whether the ghost sprites are drawn by the compute pass (`ghosts_compute.wgsl`) rather than rasterised

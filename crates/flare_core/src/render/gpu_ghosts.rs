@@ -272,6 +272,24 @@ pub(crate) fn plan_strips(
         .collect()
 }
 
+/// One R8 texture a level of `masks` (a level they lack repeats the last, and no stop map names it): what the
+/// raster ghosts sample and the compute pass gathers from, uploaded once for both.
+pub(crate) fn mask_level_textures(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    masks: &GhostMasks,
+) -> [wgpu::Texture; MASK_LEVELS] {
+    let levels = masks.levels();
+    let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
+    std::array::from_fn(|l| {
+        let mask = &levels[l.min(levels.len() - 1)].mask;
+        let size = mask.size as u32;
+        let texture = texture_2d(device, "aperture", size, size, R8, usage);
+        upload(queue, &texture, &mask.texels, 1);
+        texture
+    })
+}
+
 /// Where the mask's levels lie in the buffer `mask_words` makes (what `ComputeStrip` tells the shader).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct MaskLayout {
@@ -381,7 +399,8 @@ impl ComputeGhosts {
                 .create_view(&wgpu::TextureViewDescriptor::default()),
             module,
         };
-        this.set_aperture(device, queue, &GhostMasks::from_masks(vec![open]));
+        let open = GhostMasks::from_masks(vec![open]);
+        this.set_aperture(device, queue, &open, &mask_level_textures(device, queue, &open));
         // The device's own form's entry now, so that its first frame does not wait for the compiler.
         this.spans_pipeline(device, spans_entry(form, form.setup_once));
         this
@@ -398,22 +417,22 @@ impl ComputeGhosts {
         })
     }
 
-    /// Uploads the aperture mask's levels and their per-row tables.
-    pub(crate) fn set_aperture(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, masks: &GhostMasks) {
+    /// Uploads the aperture mask's levels' per-row tables and footprints, and gathers from `textures`, the
+    /// levels as [`mask_level_textures`] made them (the renderer's raster pass samples the same ones).
+    pub(crate) fn set_aperture(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        masks: &GhostMasks,
+        textures: &[wgpu::Texture; MASK_LEVELS],
+    ) {
         let (words, layout) = mask_words(masks);
         self.mask = storage(device, queue, "ghost mask", bytemuck::cast_slice(&words), wgpu::BufferUsages::STORAGE);
         self.mask_texels = word_texels(device, queue, "ghost mask texels", bytemuck::cast_slice(&words));
         let levels = masks.levels();
         self.mask_layout = layout;
         self.open_radii = levels.iter().map(|l| l.open_radius).collect();
-        let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
-        self.mask_texture = std::array::from_fn(|l| {
-            let mask = &levels[l.min(levels.len() - 1)].mask;
-            let size = mask.size as u32;
-            let texture = texture_2d(device, "ghost mask", size, size, R8, usage);
-            upload(queue, &texture, &mask.texels, 1);
-            texture.create_view(&wgpu::TextureViewDescriptor::default())
-        });
+        self.mask_texture = textures.each_ref().map(|t| t.create_view(&wgpu::TextureViewDescriptor::default()));
     }
 
     /// Records the pass into `pass`: every sprite of `scene` into `hdr` (the accumulation, a storage texture of
