@@ -323,7 +323,9 @@ pub struct FlareRenderer {
     cube_pass: Option<ViewPass>,
     /// Tonemap the next frames whose tonemap is the view through the view's cube ([`Self::sample_view_from_cube`]).
     view_from_cube: bool,
-    ghost_layout: wgpu::BindGroupLayout,
+    /// The starburst's and the dirt's resources (uniforms, a texture, a sampler).
+    sprite_layout: wgpu::BindGroupLayout,
+    /// The raster ghosts' (the same, and the aperture's finer levels).
     raster_ghost_layout: wgpu::BindGroupLayout,
     tonemap_layout: wgpu::BindGroupLayout,
     globals: wgpu::Buffer,
@@ -411,7 +413,7 @@ impl FlareRenderer {
             ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
             count: None,
         };
-        let ghost_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        let sprite_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("starburst and dirt"),
             entries: &[uniform, texture(1, true), sampler_entry],
         });
@@ -440,7 +442,7 @@ impl FlareRenderer {
             })
         };
         let ghost_pl = layout(&raster_ghost_layout);
-        let sprite_pl = layout(&ghost_layout);
+        let sprite_pl = layout(&sprite_layout);
         let additive = wgpu::BlendState {
             color: wgpu::BlendComponent {
                 src_factor: wgpu::BlendFactor::One,
@@ -597,7 +599,7 @@ impl FlareRenderer {
             view_pass,
             cube_pass: None,
             view_from_cube: false,
-            ghost_layout,
+            sprite_layout,
             raster_ghost_layout,
             tonemap_layout,
             globals,
@@ -810,8 +812,8 @@ impl FlareRenderer {
                     wgpu::BindingResource::TextureView(&finest_view),
                 ],
             ),
-            starburst: bind("starburst", &self.ghost_layout, &starburst_view, vec![sampler()]),
-            dirt: bind("dirt", &self.ghost_layout, &dirt_view, vec![sampler()]),
+            starburst: bind("starburst", &self.sprite_layout, &starburst_view, vec![sampler()]),
+            dirt: bind("dirt", &self.sprite_layout, &dirt_view, vec![sampler()]),
             lut: bind("lut ghosts", &self.lut_layout, &atlas_view, vec![sampler()]),
             tonemap: bind(
                 "tonemap",
