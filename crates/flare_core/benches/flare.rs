@@ -1,13 +1,15 @@
 //! Speed of the paraxial flare (criterion): the per-frame CPU cost of every ghost with matrices cached, the
 //! full rebuild after a lens edit, a whole 1280x720 GPU frame (lavapipe where there is no GPU), with and
 //! without a dusty front element, and the front dirt's own costs (its map prepared once per lens and stop,
-//! its glow per frame on the CPU twin).
+//! its glow per frame on the CPU twin), and what an edit of the stop's shape costs (its mask levels and
+//! starburst made anew: a blade rotation dragged in the app pays it every frame).
 //! Targets (issue 3): frame under 20 us and rebuild under 1 ms for a lens of 25+ surfaces.
 //! Run: `cargo bench -p flare_core --bench flare`.
 
 use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
+use flare_core::aperture::{Aperture, ApertureShape};
 use flare_core::flare::{FlareConfig, PreparedFlare};
 use flare_core::frame::{Frame, FrameRequest, GpuDrawer, Sources};
 use flare_core::ghost::{FrameSettings, GhostFrame, GhostSettings, GhostSystem};
@@ -132,5 +134,23 @@ fn dirt(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, ghost_frame, ghost_rebuild, gpu_frame, dirt);
+/// A prepared flare for a stop shape not seen before (each iteration turns the blades by another step, so the
+/// cache of recent shapes never has it): the ghost system, the three mask levels and the starburst's FFT.
+fn stop_shape(c: &mut Criterion) {
+    let mut group = c.benchmark_group("stop_shape");
+    group.sample_size(20);
+    let lens = builtin_lens("heliar").unwrap();
+    let mut k = 0u32;
+    group.bench_function("new_shape_heliar_9", |b| {
+        b.iter(|| {
+            k = k.wrapping_add(1);
+            let shape = ApertureShape::Blades { count: 6, rotation_deg: 0.01 * f64::from(k), roundness: 0.2 };
+            let config = FlareConfig { aperture: Aperture { shape, f_number: None }, ..FlareConfig::default() };
+            PreparedFlare::new(black_box(&lens), &config).unwrap()
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(benches, ghost_frame, ghost_rebuild, gpu_frame, dirt, stop_shape);
 criterion_main!(benches);

@@ -26,6 +26,7 @@
 //! far as they would in a photograph and never fade at a texture's edge. Inside one pixel of the light's
 //! image the rest of the energy (`E` minus the far field's share) is spread evenly: the blown-out light.
 
+use rayon::prelude::*;
 use rustfft::FftPlanner;
 use rustfft::num_complex::Complex32;
 
@@ -54,21 +55,37 @@ pub struct Starburst {
 }
 
 /// A 2D FFT in place of an `m` x `m` grid (row by row): rows, then columns. The starburst's far field and the
-/// front dirt's footprint convolution ([`crate::dirt`]) both use it.
+/// front dirt's footprint convolution ([`crate::dirt`]) both use it. Rows go to rayon's threads; the columns
+/// are made rows by a transpose (blocks of [`TRANSPOSE_BLOCK`] squared), transformed as rows and put back.
+/// Each 1D transform is the one rustfft computes alone, so the result is the same, bit for bit, on any number
+/// of threads (a test holds it to the serial rows-then-columns form).
 pub(crate) fn fft_2d(grid: &mut [Complex32], m: usize, fft: &dyn rustfft::Fft<f32>) {
-    for row in grid.chunks_mut(m) {
-        fft.process(row);
+    if m == 0 {
+        return;
     }
-    let mut column = vec![Complex32::new(0.0, 0.0); m];
-    for i in 0..m {
-        for j in 0..m {
-            column[j] = grid[j * m + i];
+    grid.par_chunks_mut(m).for_each(|row| fft.process(row));
+    let mut columns = vec![Complex32::new(0.0, 0.0); m * m];
+    transpose(grid, &mut columns, m);
+    columns.par_chunks_mut(m).for_each(|column| fft.process(column));
+    transpose(&columns, grid, m);
+}
+
+/// The side of the square blocks [`transpose`] copies (8 KiB of `Complex32` each: two fit a core's L1).
+const TRANSPOSE_BLOCK: usize = 32;
+
+/// `to[i m + j] = from[j m + i]` for an `m` x `m` grid, bands of [`TRANSPOSE_BLOCK`] rows of `to` in parallel.
+fn transpose(from: &[Complex32], to: &mut [Complex32], m: usize) {
+    to.par_chunks_mut(TRANSPOSE_BLOCK * m).enumerate().for_each(|(band, out)| {
+        let i0 = band * TRANSPOSE_BLOCK;
+        let rows = out.len() / m;
+        for j0 in (0..m).step_by(TRANSPOSE_BLOCK) {
+            for j in j0..(j0 + TRANSPOSE_BLOCK).min(m) {
+                for di in 0..rows {
+                    out[di * m + j] = from[j * m + i0 + di];
+                }
+            }
         }
-        fft.process(&mut column);
-        for j in 0..m {
-            grid[j * m + i] = column[j];
-        }
-    }
+    });
 }
 
 impl Starburst {
@@ -195,6 +212,41 @@ fn fill_gaps(sum: &[f64], weight: &[f64]) -> Vec<f64> {
 mod tests {
     use super::*;
     use crate::aperture::{Aperture, ApertureShape};
+
+    /// The parallel 2D FFT gives the serial rows-then-columns transform's bits, forward and inverse, on a grid
+    /// whose side is not a multiple of the transpose's block.
+    #[test]
+    fn the_parallel_fft_is_the_serial_one_bit_for_bit() {
+        let serial = |grid: &mut [Complex32], m: usize, fft: &dyn rustfft::Fft<f32>| {
+            for row in grid.chunks_mut(m) {
+                fft.process(row);
+            }
+            let mut column = vec![Complex32::new(0.0, 0.0); m];
+            for i in 0..m {
+                for j in 0..m {
+                    column[j] = grid[j * m + i];
+                }
+                fft.process(&mut column);
+                for j in 0..m {
+                    grid[j * m + i] = column[j];
+                }
+            }
+        };
+        let mut planner = FftPlanner::<f32>::new();
+        for m in [1usize, 40, 128] {
+            let grid: Vec<Complex32> = (0..m * m)
+                .map(|k| Complex32::new(((k * 7919) % 257) as f32 / 257.0, ((k * 104_729) % 61) as f32 / 61.0 - 0.5))
+                .collect();
+            for fft in [planner.plan_fft_forward(m), planner.plan_fft_inverse(m)] {
+                let (mut a, mut b) = (grid.clone(), grid.clone());
+                fft_2d(&mut a, m, fft.as_ref());
+                serial(&mut b, m, fft.as_ref());
+                let bits =
+                    |g: &[Complex32]| g.iter().flat_map(|c| [c.re.to_bits(), c.im.to_bits()]).collect::<Vec<_>>();
+                assert_eq!(bits(&a), bits(&b), "side {m}");
+            }
+        }
+    }
 
     #[test]
     fn a_round_stop_sends_two_over_pi_squared_of_its_light_past_u() {
