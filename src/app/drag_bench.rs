@@ -1,6 +1,8 @@
 //! `FLARELAB_DRAG_BENCH=N`: the app measuring itself. The light (or, with `FLARELAB_DRAG_BENCH_WHAT=exposure`,
 //! the flare's exposure from 6 to 14 EV; with `FLARELAB_DRAG_BENCH_WHAT=scrub`, the playhead, one frame of the
-//! timeline a UI frame, plates read and all) moves one step a frame for N frames, as a drag would (the viewport
+//! timeline a UI frame, plates read and all; with `FLARELAB_DRAG_BENCH_WHAT=blades`, the blades' rotation from
+//! 0 to 60 degrees, a stop shape not seen before every frame, its optics rebuilt and its mask levels and
+//! starburst made and uploaded) moves one step a frame for N frames, as a drag would (the viewport
 //! draws drafts, see [`super::draft`]); then it lets go, waits for the full-quality frame, and prints the
 //! median frame interval, the median scene build, what the drafts drew, how long after letting go the full
 //! frame was on screen and what was rebuilt during the sweep; the window closes.
@@ -18,6 +20,7 @@ enum Sweep {
     Light,
     Exposure,
     Scrub,
+    Blades,
 }
 
 /// The drag bench's state.
@@ -51,6 +54,7 @@ impl DragBench {
             what: match std::env::var("FLARELAB_DRAG_BENCH_WHAT").as_deref() {
                 Ok("exposure") => Sweep::Exposure,
                 Ok("scrub") => Sweep::Scrub,
+                Ok("blades") => Sweep::Blades,
                 _ => Sweep::Light,
             },
             rebuilds_at_start: None,
@@ -122,6 +126,11 @@ impl DragBench {
                 doc.flare_ev = 6.0 + 8.0 * t;
             }
             Sweep::Light => doc.light_deg = [-20.0 + 40.0 * t, -10.0 + 20.0 * t],
+            // The aperture panel's rotation slider, dragged (an image stop has no blades to turn).
+            Sweep::Blades => {
+                doc.aperture.image = None;
+                doc.aperture.rotation_deg = 60.0 * t;
+            }
             Sweep::Scrub => {
                 let (first, last) = (doc.timeline.first_frame, doc.timeline.last_frame);
                 *playhead = first + (self.done as i64).rem_euclid(last - first + 1);
@@ -154,6 +163,7 @@ impl DragBench {
                 Sweep::Exposure => "exposure",
                 Sweep::Light => "light",
                 Sweep::Scrub => "scrub",
+                Sweep::Blades => "blades",
             },
             self.frames,
             view_px.0,

@@ -116,8 +116,10 @@ impl ApertureMask {
     pub fn quad_words(&self) -> Vec<u32> {
         let (n, last) = (self.size as i32, self.size as i32 - 1);
         let texel = |i: i32, j: i32| self.texels[(j.clamp(0, last) * n + i.clamp(0, last)) as usize];
+        // Rows of footprints in parallel (the finest mask level has a million), collected in order.
         (-1..n)
-            .flat_map(|y0| {
+            .into_par_iter()
+            .flat_map_iter(|y0| {
                 (-1..n).map(move |x0| {
                     u32::from_le_bytes([texel(x0, y0), texel(x0 + 1, y0), texel(x0, y0 + 1), texel(x0 + 1, y0 + 1)])
                 })

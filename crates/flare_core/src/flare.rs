@@ -104,8 +104,11 @@ fn stop_images(aperture: &Aperture) -> (Arc<GhostMasks>, Starburst) {
     {
         return (mask.clone(), starburst.clone());
     }
-    let mask = Arc::new(GhostMasks::new(aperture, aperture.rasterise(DEFAULT_MASK_SIZE)));
-    let starburst = Starburst::compute(&aperture.rasterise(crate::starburst::STARBURST_MASK_SIZE));
+    // The two are independent: side by side on rayon's threads (each is parallel within, with serial parts).
+    let (mask, starburst) = rayon::join(
+        || Arc::new(GhostMasks::new(aperture, aperture.rasterise(DEFAULT_MASK_SIZE))),
+        || Starburst::compute(&aperture.rasterise(crate::starburst::STARBURST_MASK_SIZE)),
+    );
     if let Ok(mut kept) = KEPT.lock() {
         kept.retain(|(k, _, _)| *k != key);
         kept.push((key, mask.clone(), starburst.clone()));
