@@ -4,9 +4,14 @@
 
 // The aperture mask at uv in [-1, 1]^2 (v up), 0 outside.
 fn aperture_at(uv: vec2<f32>) -> f32 {
+    return aperture_in(aperture_texture, uv);
+}
+
+// `aperture_at` in `mask`, a mask of any size (the ghosts' finer levels).
+fn aperture_in(mask: texture_2d<f32>, uv: vec2<f32>) -> f32 {
     if (abs(uv.x) > 1.0 || abs(uv.y) > 1.0) {
         return 0.0;
     }
     let tex = vec2<f32>(uv.x * 0.5 + 0.5, 0.5 - uv.y * 0.5);
-    return textureSampleLevel(aperture_texture, aperture_sampler, tex, 0.0).r;
+    return textureSampleLevel(mask, aperture_sampler, tex, 0.0).r;
 }

@@ -62,14 +62,10 @@ fn stop_mask(map: vec4<f32>, scale_y: f32, q: vec2<f32>) -> f32 {
     if (map.w < 1.5) {
         return aperture_at(uv);
     }
-    if (abs(uv.x) > 1.0 || abs(uv.y) > 1.0) {
-        return 0.0;
-    }
-    let tex = vec2<f32>(uv.x * 0.5 + 0.5, 0.5 - uv.y * 0.5);
     if (map.w < 2.5) {
-        return textureSampleLevel(aperture_finer, aperture_sampler, tex, 0.0).r;
+        return aperture_in(aperture_finer, uv);
     }
-    return textureSampleLevel(aperture_finest, aperture_sampler, tex, 0.0).r;
+    return aperture_in(aperture_finest, uv);
 }
 
 // Anti-aliased unit disc: coverage of the front lens's clear aperture.

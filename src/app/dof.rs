@@ -169,8 +169,15 @@ impl DofWork {
             if doc.dof.method == DofMethod::Reference {
                 report(0.2, "the reference method (every pixel's kernel, on the CPU)".into());
                 let image = dof::per_channel(&plate, &models, |plate, model| {
-                    dof::reference::render_until(plate, &depth_mm, model, &flare.mask, dof::reference::LAYER_PX, cancel)
-                        .map_err(|e| e.to_string())
+                    dof::reference::render_until(
+                        plate,
+                        &depth_mm,
+                        model,
+                        flare.mask(),
+                        dof::reference::LAYER_PX,
+                        cancel,
+                    )
+                    .map_err(|e| e.to_string())
                 })?;
                 return Ok((image, format!("reference on the CPU, {focus}, {:.2} s", started.elapsed().as_secs_f64())));
             }
@@ -178,7 +185,7 @@ impl DofWork {
             let mut held = pipelines.lock().map_err(|_| "the GPU pipelines are poisoned".to_string())?;
             let mut how = String::new();
             let image = dof::per_channel(&plate, &models, |plate, model| {
-                let plan = LivePlan::new(&depth_mm, model, &flare.mask).map_err(|e| e.to_string())?;
+                let plan = LivePlan::new(&depth_mm, model, flare.mask()).map_err(|e| e.to_string())?;
                 let layers = plan.layers.len();
                 if let Some((device, queue, adapter, false)) = &device {
                     report(0.4, format!("live on {adapter}"));

@@ -71,7 +71,7 @@ impl ReportState {
         if self.job.is_none() && !current {
             let (lens, flare) = (lens.clone(), flare.clone());
             let job = Job::spawn("ghost report", move |_, _| {
-                ghost_report(&lens, &flare.system, &flare.mask, u).map_err(|e| e.to_string())
+                ghost_report(&lens, &flare.system, flare.mask(), u).map_err(|e| e.to_string())
             });
             self.job = Some((key, job));
         }

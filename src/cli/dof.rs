@@ -131,9 +131,9 @@ pub fn run(args: &DofArgs) -> Result<()> {
     let mut said = Vec::new();
     let image = dof::per_channel(&plate, &models, |plate, model| -> Result<_> {
         if args.method == MethodArg::Reference {
-            return Ok(dof::reference::render(plate, &depth, model, &flare.mask)?);
+            return Ok(dof::reference::render(plate, &depth, model, flare.mask())?);
         }
-        let plan = LivePlan::new(&depth, model, &flare.mask)?;
+        let plan = LivePlan::new(&depth, model, flare.mask())?;
         if let (Some(ctx), Some(g)) = (&gpu, gpu_dof.as_mut()) {
             match g.render(ctx, &plan, plate) {
                 Ok(out) => {

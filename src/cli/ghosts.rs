@@ -178,7 +178,7 @@ fn report(
     let config = FlareConfig { aperture, spectrum, coating_override, ..FlareConfig::default() };
     let flare = PreparedFlare::new(lens, &config).with_context(|| args.file.clone())?;
     let u = [0.0, args.field_deg.to_radians().tan()];
-    let r = ghost_report(lens, &flare.system, &flare.mask, u).with_context(|| args.file.clone())?;
+    let r = ghost_report(lens, &flare.system, flare.mask(), u).with_context(|| args.file.clone())?;
     if args.csv {
         print!("{}", to_csv(&r));
         return Ok(());

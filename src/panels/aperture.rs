@@ -76,7 +76,7 @@ fn previews_ui(ui: &mut egui::Ui, flare: &flare_core::flare::PreparedFlare, prev
             };
             [grey(&d.share, "dirt"), grey(&d.map, "dirt seen through the stop")]
         });
-        let m = &flare.mask;
+        let m = flare.mask();
         let mask = egui::ColorImage::from_gray([m.size, m.size], &m.texels);
         preview.mask = Some(ui.ctx().load_texture("aperture mask", mask, egui::TextureOptions::LINEAR));
         // The far field on a log scale (six decades) shows the rays and the rings at once.

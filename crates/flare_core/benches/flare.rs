@@ -119,7 +119,7 @@ fn dirt(c: &mut Criterion) {
     let flare = PreparedFlare::new(&lens, &FlareConfig::default()).unwrap();
     let pattern = flare_core::dirt::DirtPattern::Dust { seed: 1 };
     group.bench_function("prepare_map_320", |b| {
-        b.iter(|| flare_core::dirt::PreparedDirt::new(&flare.system, &flare.mask, black_box(&pattern)))
+        b.iter(|| flare_core::dirt::PreparedDirt::new(&flare.system, flare.mask(), black_box(&pattern)))
     });
     let dusty = PreparedFlare::new(&lens, &FlareConfig { dirt: Some(pattern), ..FlareConfig::default() }).unwrap();
     let request = FrameRequest {

@@ -74,9 +74,8 @@ pub enum FlareError {
 pub struct PreparedFlare {
     pub config: FlareConfig,
     pub system: GhostSystem,
-    /// The stop's mask at the base size: what the dirt, the ray grids and the panels read.
-    pub mask: ApertureMask,
-    /// The same mask at the resolutions the ghost passes pick from per sprite (its first level is `mask`).
+    /// The stop's mask at the resolutions the ghost passes pick from per sprite (its first level is
+    /// [`Self::mask`]).
     pub ghost_masks: Arc<GhostMasks>,
     pub starburst: Starburst,
     /// The starburst as the GPU holds it (half floats), for the CPU twin.
@@ -129,11 +128,17 @@ impl PreparedFlare {
         };
         let system = GhostSystem::build(lens, &settings)?;
         let (ghost_masks, starburst) = stop_images(&config.aperture);
-        let mask = ghost_masks.levels()[0].mask.clone();
         let starburst_texture = StarburstTexture::from_starburst(&starburst);
-        let dirt = config.dirt.as_ref().map(|pattern| PreparedDirt::new(&system, &mask, pattern));
+        let dirt =
+            config.dirt.as_ref().map(|pattern| PreparedDirt::new(&system, &ghost_masks.levels()[0].mask, pattern));
         let id = crate::fingerprint::unique_id();
-        Ok(Self { config: config.clone(), system, mask, ghost_masks, starburst, starburst_texture, dirt, id })
+        Ok(Self { config: config.clone(), system, ghost_masks, starburst, starburst_texture, dirt, id })
+    }
+
+    /// The stop's mask at the base size ([`DEFAULT_MASK_SIZE`]): what the dirt, the ray grids, the reports and
+    /// the panels read (the first of [`Self::ghost_masks`]' levels).
+    pub fn mask(&self) -> &ApertureMask {
+        &self.ghost_masks.levels()[0].mask
     }
 
     /// Frame settings for an image of `width` x `height` pixels on the full-frame sensor drawn at the flare gain
@@ -250,7 +255,7 @@ impl crate::lut::GhostLut {
 impl PreparedFlare {
     /// The ray-traced renderer of this lens and its settings ([`ray_grid_setup`]).
     pub fn ray_grid_renderer(&self) -> crate::raytrace::RayGridRenderer {
-        crate::raytrace::RayGridRenderer::new(ray_grid_setup(&self.system), &self.mask)
+        crate::raytrace::RayGridRenderer::new(ray_grid_setup(&self.system), self.mask())
     }
 }
 

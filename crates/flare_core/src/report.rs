@@ -355,7 +355,7 @@ mod tests {
         let lens = builtin_lens(id).unwrap();
         let flare = PreparedFlare::new(&lens, config).unwrap();
         let u = light_slopes_for_frame_position(light_deg[0], light_deg[1]);
-        ghost_report(&lens, &flare.system, &flare.mask, u).unwrap()
+        ghost_report(&lens, &flare.system, flare.mask(), u).unwrap()
     }
 
     #[test]
@@ -387,8 +387,8 @@ mod tests {
         let lens = builtin_lens("heliar").unwrap();
         let flare = PreparedFlare::new(&lens, &FlareConfig::default()).unwrap();
         let u = light_slopes_for_frame_position(2.0, 1.0);
-        let coarse = measure(&flare.system, &flare.mask, u, 24);
-        let fine = measure(&flare.system, &flare.mask, u, 96);
+        let coarse = measure(&flare.system, flare.mask(), u, 24);
+        let fine = measure(&flare.system, flare.mask(), u, 96);
         for (g, (a, b)) in coarse.iter().zip(&fine).enumerate() {
             if b.energy_fraction > 1e-6 {
                 assert!((a.energy_fraction / b.energy_fraction - 1.0).abs() < 0.08, "ghost {g}: {a:?} vs {b:?}");

@@ -488,7 +488,7 @@ fn a_ghost_between_surfaces_flat_in_x_is_a_streak_along_y() {
     let lens = test_lens();
     let flare = PreparedFlare::new(&lens, &FlareConfig::default()).unwrap();
     let u = [0.0, 3f64.to_radians().tan()];
-    let report = ghost_report(&lens, &flare.system, &flare.mask, u).unwrap();
+    let report = ghost_report(&lens, &flare.system, flare.mask(), u).unwrap();
     let row = |i: usize, j: usize| report.ghosts.iter().find(|g| (g.i, g.j) == (i, j)).unwrap();
     let fo = FirstOrder::d_line(&lens).unwrap();
     let x_focus_behind_sensor = fo.section(Section::X).sensor_z_mm() - fo.sensor_z_mm();
@@ -501,7 +501,7 @@ fn a_ghost_between_surfaces_flat_in_x_is_a_streak_along_y() {
     // For a lens of revolution the two foci and sizes are one.
     let round = flare_core::optics::library::builtin_lens("pbrt_dgauss_50mm").unwrap();
     let flare = PreparedFlare::new(&round, &FlareConfig::default()).unwrap();
-    for g in ghost_report(&round, &flare.system, &flare.mask, u).unwrap().ghosts {
+    for g in ghost_report(&round, &flare.system, flare.mask(), u).unwrap().ghosts {
         assert_eq!((g.focus_x_mm, g.image_width_mm), (g.focus_mm, g.image_diameter_mm));
     }
 }
@@ -574,7 +574,7 @@ fn the_built_in_panavision_squeezes_and_streaks() {
     assert!((y.efl_mm - 19.7).abs() < 0.05 * 19.7, "EFL {}", y.efl_mm);
     assert!((x.sensor_z_mm() - y.sensor_z_mm()).abs() < 0.5, "the sections' foci are far apart");
     let flare = PreparedFlare::new(&lens, &FlareConfig::default()).unwrap();
-    let report = ghost_report(&lens, &flare.system, &flare.mask, [0.0, 3f64.to_radians().tan()]).unwrap();
+    let report = ghost_report(&lens, &flare.system, flare.mask(), [0.0, 3f64.to_radians().tan()]).unwrap();
     let powered_in_x = |s: usize| lens.surfaces[s].radius_mm == 0.0 && lens.surfaces[s].radius_x_mm.is_some();
     let powered_in_y = |s: usize| lens.surfaces[s].radius_x_mm == Some(0.0);
     // (ghosts, of them streaks) between x cylinders, then between y cylinders.

@@ -201,7 +201,7 @@ fn each_pixel_sees_the_dirt_over_the_footprint_the_exact_tracer_finds() {
                 let landed = tracer.trace_visit(&ray, |hit| {
                     if hit.surface == stop {
                         let (sx, sy) = (hit.point_mm.x / stop_radius, hit.point_mm.y / stop_radius);
-                        through = flare.mask.sample(sx as f32, sy as f32) >= 0.5;
+                        through = flare.mask().sample(sx as f32, sy as f32) >= 0.5;
                     }
                     through
                 });

@@ -51,7 +51,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let repeats = args.repeats.unwrap_or(3).max(1);
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let s = scene(&flare, width, height)?;
-    let mask = &flare.mask;
+    let mask = flare.mask();
     eprintln!(
         "depth of field on the street ({width}x{height}) through {} at f/{:.1}, focus {FOCUS_M} m: the far field blurs to {:.1} px",
         lens.id,

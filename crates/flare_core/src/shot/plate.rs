@@ -78,6 +78,6 @@ pub fn dof_lens<'a>(doc: &'a Document, flare: &'a PreparedFlare) -> DofLens<'a> 
         lens: &flare.system.lens,
         stop_scale: flare.system.settings.stop_scale,
         sensor_width_mm: doc.sensor_width_mm,
-        mask: &flare.mask,
+        mask: flare.mask(),
     }
 }

@@ -62,7 +62,7 @@ fn shade_instance(
 ) {
     let [cx, cy, hx, hy] = inst.centre_half;
     // A mask whose whole quad maps inside its fully open disc is 1 everywhere (a speed-up only): skip it.
-    let inst = without_open_stops(inst, |code| masks.level(code).open_radius);
+    let inst = masks.without_open_stops(inst);
     let front_open = reach(inst.front, inst.scale_y[3]) <= 1.0 - 0.5 * inst.front[3];
     let inst = &inst;
     let (sx, sy) = scale;
@@ -157,8 +157,7 @@ pub fn ghost_pass_direct(scene: &FlareScene, masks: &GhostMasks) -> HdrImage {
 pub fn ghost_pass(scene: &FlareScene, masks: &GhostMasks) -> HdrImage {
     let (w, h) = (scene.hdr_width as usize, scene.hdr_height as usize);
     let scale = accumulation_scale(scene);
-    let instances: Vec<GhostInstance> =
-        scene.instances.iter().map(|inst| without_open_stops(inst, |code| masks.level(code).open_radius)).collect();
+    let instances: Vec<GhostInstance> = scene.instances.iter().map(|inst| masks.without_open_stops(inst)).collect();
     let mut pixels = vec![[0.0f32; 4]; w * h];
     pixels.par_chunks_mut(w * BAND_ROWS).enumerate().for_each(|(band, chunk)| {
         let y0 = band * BAND_ROWS;
@@ -281,6 +280,11 @@ impl GhostMasks {
 
     pub fn mask(&self, code: f32) -> &ApertureMask {
         &self.level(code).mask
+    }
+
+    /// [`without_open_stops`] with the open radius of the level each stop map names.
+    pub(crate) fn without_open_stops(&self, inst: &GhostInstance) -> GhostInstance {
+        without_open_stops(inst, |code| self.level(code).open_radius)
     }
 
     /// The level code (1 the coarsest) for a stop map whose mask coordinate moves `pixels_per_unit`
@@ -553,7 +557,7 @@ mod tests {
             let scale = accumulation_scale(&scene);
             let (mut edges, mut all) = (0usize, 0usize);
             for inst in &scene.instances {
-                let inst = without_open_stops(inst, |code| masks.level(code).open_radius);
+                let inst = masks.without_open_stops(inst);
                 sweep_instance(&inst, masks, scale, (w, h), 0..h, |f| match f {
                     Fragment::Edge { .. } => edges += 1,
                     Fragment::Open { .. } => {}
@@ -577,7 +581,7 @@ mod tests {
         let flare = PreparedFlare::new(&builtin_lens("nikon_zoom_28_75mm").unwrap(), &config).unwrap();
         let masks = &*flare.ghost_masks;
         assert_eq!(masks.levels().iter().map(|l| l.mask.size).collect::<Vec<_>>(), [256, 512, 1024]);
-        assert_eq!(masks.levels()[0].mask, flare.mask);
+        assert_eq!(&masks.levels()[0].mask, flare.mask());
         let (scene, _) = flare.scene([9.0, 5.0], 960, 540);
         let mut per_level = [0usize; 4];
         for inst in &scene.instances {
@@ -598,12 +602,12 @@ mod tests {
         }
         assert!(per_level[1..].iter().all(|&n| n > 50), "stop maps per level (0: off): {per_level:?}");
         // The edges at 1920x1080, where the level of most frame-filling sprites is finer.
-        let base = GhostMasks::from_masks(vec![flare.mask.clone()]);
+        let base = GhostMasks::from_masks(vec![flare.mask().clone()]);
         let (large, _) = flare.scene([9.0, 5.0], 1920, 1080);
         let edges = |masks: &GhostMasks| {
             let mut edges = 0usize;
             for inst in &large.instances {
-                let inst = without_open_stops(inst, |code| masks.level(code).open_radius);
+                let inst = masks.without_open_stops(inst);
                 let size = (large.hdr_width as usize, large.hdr_height as usize);
                 sweep_instance(&inst, masks, accumulation_scale(&large), size, 0..size.1, |f| {
                     edges += usize::from(matches!(f, Fragment::Edge { .. }))
