@@ -9,8 +9,12 @@ struct GhostInstance {
     @location(2) stop0: vec4<f32>,       // aperture map of stop crossing 0: scale, offset x, offset y, level (0: off)
     @location(3) stop1: vec4<f32>,
     @location(4) stop2: vec4<f32>,
-    @location(5) front: vec4<f32>,       // front-lens disc map: scale, offset x, offset y, anti-alias width
-    @location(6) scale_y: vec4<f32>,     // the y scales of stop0..2 and front (.x above: x; equal when round)
+    @location(5) scale_y: vec4<f32>,     // the y scales of stop0..2 (.x above: x; equal when round); .w unused
+    @location(6) disc0: vec4<f32>,       // clear-aperture disc maps: scale, offset x, offset y, anti-alias width
+    @location(7) disc1: vec4<f32>,       // (0: no disc)
+    @location(8) disc2: vec4<f32>,
+    @location(9) disc3: vec4<f32>,
+    @location(10) disc_scale_y: vec4<f32>, // the y scales of disc0..3
 };
 
 struct VertexOut {
@@ -20,8 +24,12 @@ struct VertexOut {
     @location(2) stop0: vec4<f32>,
     @location(3) stop1: vec4<f32>,
     @location(4) stop2: vec4<f32>,
-    @location(5) front: vec4<f32>,
-    @location(6) scale_y: vec4<f32>,
+    @location(5) scale_y: vec4<f32>,
+    @location(6) disc0: vec4<f32>,
+    @location(7) disc1: vec4<f32>,
+    @location(8) disc2: vec4<f32>,
+    @location(9) disc3: vec4<f32>,
+    @location(10) disc_scale_y: vec4<f32>,
 };
 
 @group(0) @binding(0) var<uniform> globals: Globals;
@@ -49,8 +57,12 @@ fn vs_main(@builtin(vertex_index) vertex: u32, instance: GhostInstance) -> Verte
     out.stop0 = instance.stop0;
     out.stop1 = instance.stop1;
     out.stop2 = instance.stop2;
-    out.front = instance.front;
     out.scale_y = instance.scale_y;
+    out.disc0 = instance.disc0;
+    out.disc1 = instance.disc1;
+    out.disc2 = instance.disc2;
+    out.disc3 = instance.disc3;
+    out.disc_scale_y = instance.disc_scale_y;
     return out;
 }
 
@@ -68,20 +80,24 @@ fn stop_mask(map: vec4<f32>, scale_y: f32, q: vec2<f32>) -> f32 {
     return aperture_in(aperture_finest, uv);
 }
 
-// Anti-aliased unit disc: coverage of the front lens's clear aperture.
-fn front_mask(map: vec4<f32>, scale_y: f32, q: vec2<f32>) -> f32 {
+// Anti-aliased unit disc: coverage of a clear aperture (an anti-alias width of 0 marks an empty slot: 1).
+fn disc_mask(map: vec4<f32>, scale_y: f32, q: vec2<f32>) -> f32 {
+    if (map.w == 0.0) {
+        return 1.0;
+    }
     let r = length(vec2<f32>(map.x, scale_y) * q + map.yz);
     return clamp(0.5 + (1.0 - r) / map.w, 0.0, 1.0);
 }
 
 @fragment
 fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
-    // The front disc first: outside it nothing passes, and the aperture lookups are skipped.
-    let front = front_mask(in.front, in.scale_y.w, in.q);
-    if (front <= 0.0) {
+    // The discs first: outside one nothing passes, and the aperture lookups are skipped.
+    let discs = disc_mask(in.disc0, in.disc_scale_y.x, in.q) * disc_mask(in.disc1, in.disc_scale_y.y, in.q)
+        * disc_mask(in.disc2, in.disc_scale_y.z, in.q) * disc_mask(in.disc3, in.disc_scale_y.w, in.q);
+    if (discs <= 0.0) {
         return vec4<f32>(0.0);
     }
-    let mask = front * stop_mask(in.stop0, in.scale_y.x, in.q) * stop_mask(in.stop1, in.scale_y.y, in.q)
+    let mask = discs * stop_mask(in.stop0, in.scale_y.x, in.q) * stop_mask(in.stop1, in.scale_y.y, in.q)
         * stop_mask(in.stop2, in.scale_y.z, in.q);
     return vec4<f32>(in.colour.rgb * mask, 0.0);
 }

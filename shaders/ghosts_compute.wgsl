@@ -5,7 +5,7 @@
 // and `ComputeStrip` in crates/flare_core/src/render/gpu_ghosts.rs.
 //
 // How it works. Each (sprite, accumulation row) the sprite covers is an item: `spans` finds the row's open
-// span (where the front disc and every stop crossing's mask are exactly 1, from the mask's per-row table) and
+// span (where every clear-aperture disc and every stop crossing's mask are exactly 1, from the mask's per-row table) and
 // shades only the pixels outside it, as the fragment shader would. The row's values F(x) (0 outside the
 // sprite, the colour in the open span, colour x mask at an edge pixel) go into a per-row difference buffer as
 // F(x) - F(x - 1), wherever that is not 0: a frame-filling sprite costs its edges, not its area. An item's walk
@@ -38,8 +38,9 @@ struct GhostInstance {
     stop0: vec4<f32>,       // aperture map of stop crossing 0: scale, offset x, offset y, mask level (0: off)
     stop1: vec4<f32>,
     stop2: vec4<f32>,
-    front: vec4<f32>,       // front-lens disc map: scale, offset x, offset y, anti-alias width
-    scale_y: vec4<f32>,     // the y scales of stop0..2 and front (.x above is the x scale; equal when round)
+    scale_y: vec4<f32>,     // the y scales of stop0..2 (.x above is the x scale; equal when round); .w unused
+    discs: array<vec4<f32>, 4>, // clear-aperture disc maps: scale, offset x, offset y, anti-alias width (0: none)
+    disc_scale_y: vec4<f32>,    // the y scales of the four discs
 };
 
 struct ComputeStrip {
@@ -189,33 +190,33 @@ fn stop_mask(map: vec4<f32>, scale_y: f32, q: vec2<f32>) -> f32 {
     return mask_sample(map.x * q.x + map.y, scale_y * q.y + map.z, level_of(map.w));
 }
 
-fn front_mask(map: vec4<f32>, scale_y: f32, q: vec2<f32>) -> f32 {
+// An anti-aliased unit disc: the coverage of a clear aperture (an anti-alias width of 0 marks an empty slot: 1).
+fn disc_mask(map: vec4<f32>, scale_y: f32, q: vec2<f32>) -> f32 {
+    if (map.w == 0.0) {
+        return 1.0;
+    }
     let x = map.x * q.x + map.y;
     let y = scale_y * q.y + map.z;
     let r = sqrt(x * x + y * y);
     return clamp(0.5 + (1.0 - r) / map.w, 0.0, 1.0);
 }
 
-fn mask_product(inst: GhostInstance, front_open: bool, q: vec2<f32>) -> f32 {
+fn mask_product(inst: GhostInstance, q: vec2<f32>) -> f32 {
     if (abs(q.x) > 1.0 || abs(q.y) > 1.0) {
         return 0.0;
+    }
+    var m = 1.0;
+    for (var k = 0u; k < 4u; k = k + 1u) {
+        m = m * disc_mask(inst.discs[k], inst.disc_scale_y[k], q);
     }
     if (GATHER_MASKS) {
         // Every lookup issued at once (a GPU waits on one fetch at a time otherwise); each factor is in
         // [0, 1], so a factor of 0 gives the 0 the early returns below give, and the products are taken in
         // their order: the same value.
-        var front = 1.0;
-        if (!front_open) {
-            front = max(front_mask(inst.front, inst.scale_y.w, q), 0.0);
-        }
         let s0 = stop_mask(inst.stop0, inst.scale_y.x, q);
         let s1 = stop_mask(inst.stop1, inst.scale_y.y, q);
         let s2 = stop_mask(inst.stop2, inst.scale_y.z, q);
-        return ((front * s0) * s1) * s2;
-    }
-    var m = 1.0;
-    if (!front_open) {
-        m = front_mask(inst.front, inst.scale_y.w, q);
+        return ((max(m, 0.0) * s0) * s1) * s2;
     }
     if (m <= 0.0) {
         return 0.0;
@@ -318,7 +319,6 @@ struct Walk {
     open_first: u32,
     right_first: u32,
     has_open: u32,   // 1: the row has an open span
-    front_open: u32, // 1: the front disc is 1 over the whole sprite
     q_y: f32,
     sprite: u32,
     row: u32,        // the strip row
@@ -351,7 +351,7 @@ fn walk_value(inst: GhostInstance, w: Walk, i: u32) -> vec3<i32> {
     }
     let x = walk_x(w, i);
     let q = vec2<f32>(((f32(x) + 0.5) * strip.scale_x - inst.centre_half.x) / inst.centre_half.z, w.q_y);
-    let m = mask_product(inst, w.front_open == 1u, q);
+    let m = mask_product(inst, q);
     if (m > 0.0) {
         return fixed_colour(inst.colour, m);
     }
@@ -385,19 +385,22 @@ fn sprite_walk(inst: GhostInstance, sprite: u32, start: vec2<u32>, item: u32) ->
     let hy = inst.centre_half.w;
     let sx = strip.scale_x;
     let sy = strip.scale_y;
-    let f = inst.front;
-    let fsy = inst.scale_y.w;
-    let front_open = length(vec2<f32>(abs(f.y) + abs(f.x), abs(f.z) + abs(fsy))) <= 1.0 - 0.5 * f.w;
     let q_y = ((f32(y) + 0.5) * sy - cy) / hy;
     // row_support: where in this row the masks can be non-zero.
     if (abs(q_y) > 1.0) {
         return walk;
     }
     var support = vec2<f32>(-1.0, 1.0);
-    let reach = 1.0 + 0.5 * f.w;
-    let fy = fsy * q_y + f.z;
-    if (abs(fy) > reach || !clip_reach(&support, f.x, f.y, sqrt(max(reach * reach - fy * fy, 0.0)))) {
-        return walk;
+    for (var k = 0u; k < 4u; k = k + 1u) {
+        let f = inst.discs[k];
+        if (f.w == 0.0) {
+            continue;
+        }
+        let reach = 1.0 + 0.5 * f.w;
+        let fy = inst.disc_scale_y[k] * q_y + f.z;
+        if (abs(fy) > reach || !clip_reach(&support, f.x, f.y, sqrt(max(reach * reach - fy * fy, 0.0)))) {
+            return walk;
+        }
     }
     for (var k = 0u; k < 3u; k = k + 1u) {
         let s = stop_of(inst, k);
@@ -410,8 +413,13 @@ fn sprite_walk(inst: GhostInstance, sprite: u32, start: vec2<u32>, item: u32) ->
     }
     // The open interval, narrowed by each mask; the support, by where each mask is non-zero.
     var open = support;
-    if (!front_open) {
+    for (var k = 0u; k < 4u; k = k + 1u) {
+        let f = inst.discs[k];
+        if (f.w == 0.0) {
+            continue;
+        }
         let inner = 1.0 - 0.5 * f.w;
+        let fy = inst.disc_scale_y[k] * q_y + f.z;
         if (inner <= abs(fy)) {
             open = vec2<f32>(1.0, -1.0);
         } else {
@@ -467,7 +475,6 @@ fn sprite_walk(inst: GhostInstance, sprite: u32, start: vec2<u32>, item: u32) ->
     walk.n_left = select(last, open_first, has_open) - first;
     walk.n = walk.n_left + select(0u, 1u + last - walk.right_first, has_open) + 1u;
     walk.q_y = q_y;
-    walk.front_open = select(0u, 1u, front_open);
     walk.sprite = sprite;
     walk.row = y - strip.first_row;
     return walk;

@@ -275,10 +275,9 @@ pub fn ray_grid_setup(system: &GhostSystem) -> crate::raytrace::RayGridSetup {
     let wavelengths = system.settings.spectrum.len();
     let hint_system = std::sync::Arc::new(system.clone());
     let entrance_hint: crate::raytrace::EntranceHint = std::sync::Arc::new(move |g, w, u| {
-        let front = hint_system.sprite_masks(g * wavelengths + w, u).front_map;
-        let radius_mm = hint_system.front_radius_mm;
+        let region = hint_system.sprite_masks(g * wavelengths + w, u).region;
         // The entrance region's bounding disc (an anamorphic lens's box has two half-sizes: the larger).
-        Some((front.offset.map(|o| o * radius_mm), front.scale[0].abs().max(front.scale[1].abs()) * radius_mm))
+        Some((region.offset, region.scale[0].abs().max(region.scale[1].abs())))
     });
     crate::raytrace::RayGridSetup {
         lens: system.lens.clone(),

@@ -6,24 +6,33 @@
 //! entering the entrance plane (the first vertex, z = 0) at the point `x0` (2-vector) with the light's slope
 //! vector `u` reaches the sensor at `A_f x0 + B_f u` and the stop, at its k-th crossing, at `A_k x0 + B_k u`
 //! (`M_f = [[A_f, B_f], ..]` and `M_a = [[A_k, B_k], ..]` from [`crate::optics::paraxial::PathMatrices`]).
-//! - **Effective entrance region**: the rays that pass crossing k form the disc of centre `-B_k u / A_k` and
-//!   radius `r_a / |A_k|` (the patent's `r_e = (r_a - M_a12 theta_e) / M_a11`); the front lens's clear aperture
-//!   adds the disc `|x0| <= h_0`. The region is their intersection: empty (culled) when two discs miss each
-//!   other. A ghost whose reflections straddle the stop crosses it three times and gets all three discs:
-//!   none is dropped.
+//! - **Effective entrance region**: the rays that pass crossing k of the stop form the disc of centre
+//!   `-B_k u / A_k` and radius `r_a / |A_k|` (the patent's `r_e = (r_a - M_a12 theta_e) / M_a11`), and so does
+//!   every crossing of every other surface's clear aperture `a` (the front lens's first, then the middle
+//!   groups', the reflecting surfaces' too), with radius `a / |A|` from its own entrance-to-arrival matrix
+//!   ([`Disc`]). The region is their intersection: empty (culled) when two discs miss each other. A ghost
+//!   whose reflections straddle the stop crosses it three times and gets all three stop discs. Off axis the
+//!   discs slide apart by `|c_k - c_m| |u|`, so the region is cut into the cat's eyes and lemons of real
+//!   lenses. A clear aperture cuts only where it does not hold another disc: at rebuild each disc gets the
+//!   slope below which it holds one ([`Disc::redundant_below_slope`]), and per frame
+//!   [`GhostSystem::sprite_masks`] keeps the discs that cut the sprite's quad at this light, at most
+//!   [`MAX_DISCS`] (when more cut, those that cut the most of a 16 x 16 grid of the quad; the rest are counted).
+//!   A crossing with `A = 0` passes a ray only while `|B u| <= a`: it empties the region past that slope.
 //! - **Sprite**: the smallest of those discs, centre E and radius rho, bounds the region; mapped to the
 //!   sensor it gives the sprite's centre `C = A_f E + B_f u` and signed half-size `S = A_f rho` (the flare
 //!   quad: the four corner rays `E + rho (+-1, +-1)` land on `C + S (+-1, +-1)`; centre and rim rays give the
 //!   circle). Inside the sprite, at quad coordinate q in [-1, 1]^2, the entrance point is `E + rho q`, so each
 //!   crossing's aperture coordinate is the affine `uv_k = (A_k rho / r_a) q + (A_k E + B_k u) / r_a`: the
-//!   renderer multiplies the aperture mask at every crossing and the front-disc mask.
+//!   renderer multiplies the aperture mask at every stop crossing and each cutting disc's
+//!   `(E + rho q - c u) / r` (a unit circle). What the discs cut off is gone: the irradiance inside is
+//!   unchanged, so energy stays conserved.
 //! - **Brightness**: energy is conserved, so the irradiance relative to the incoming light is
 //!   `cos(theta) R_i R_j T (entrance area / sensor area) = cos(theta) R_i R_j T / A_f^2`, where T is the
 //!   product of the transmittances `1 - R` of every refraction along the path, taken at normal incidence
 //!   (a constant per ghost and wavelength: a ghost that crosses 40 uncoated surfaces keeps only ~13%). A ghost focused onto the
 //!   sensor (A_f -> 0) gets the half-size `max(|S|, r_min)` and the irradiance `R_i R_j (rho / S)^2` with that
 //!   size: bounded, with the same total energy, never infinite. When `A_k -> 0` (the stop's image at
-//!   infinity) the front disc bounds the region and nothing divides by zero.
+//!   infinity) another disc bounds the region (the front lens's at least) and nothing divides by zero.
 //! - **Reflectance**: each reflection's angle of incidence is paraxial, `i = u + s c y` for the ray through the
 //!   region's centre E, linear in E and the light's slope; the reflectance of each (surface, side, wavelength) is
 //!   tabulated at rebuild over sin^2(i) in [0, 1] ([`REFLECTANCE_SAMPLES`] samples, linear interpolation) from
@@ -42,14 +51,17 @@
 //!   sections' bounding intervals, mapped to the half-sizes `(S_x, S_y)`; the irradiance is
 //!   `cos(theta) R_i R_j T rho_x rho_y / (S_x S_y)` (energy conserved), the angles of incidence add their
 //!   squares, and the region is empty when either section's discs part (a box test: never a lit ghost culled).
+//!   Each clear aperture's disc is then an ellipse, its x semi-axis and centre from the x-z section, its y ones
+//!   from the y-z section (a circle on the surface seen through two different matrices).
 //!   A lens of revolution takes the first branch of every such choice, unchanged.
 //!
 //! What changes per frame is only `u`: [`GhostSystem::frame`] is all the per-frame CPU work.
 
 use crate::coating::InterfaceTables;
 use crate::optics::mapping::ImageMapping;
+use crate::optics::path::PathError;
 pub use crate::optics::sensor::{Sensor, light_slopes_for_frame_position, sensor_to_pixel};
-use crate::optics::{Coating, FirstOrder, Lens, Mat2, ParaxialError, PathMatrices, Section};
+use crate::optics::{Coating, FirstOrder, Lens, LightPath, Mat2, ParaxialError, PathMatrices, Section};
 use crate::spectrum::Spectrum;
 
 /// Samples of each reflectance table over sin^2(i) in [0, 1].
@@ -90,30 +102,35 @@ impl Default for FrameSettings {
 
 impl FrameCoefficients {
     /// Everything linear in the light slope u, from the ghost's matrices (see the module documentation).
-    fn new(ghost: usize, wavelength: usize, optics: &GhostOptics, r_a: f64, r_front: f64) -> Self {
+    /// `discs` are the ghost's clear-aperture discs (every crossing of a surface other than the stop, the front
+    /// lens's first), which it indexes from `first_disc` in [`GhostSystem`]'s list.
+    fn new(ghost: usize, wavelength: usize, optics: &GhostOptics, r_a: f64, discs: &[Disc], first_disc: usize) -> Self {
         let m = &optics.matrices;
         let f = m.sensor_from_entrance;
-        // Entrance discs as (centre per slope, radius): the front lens, then each stop crossing with A != 0.
-        // A crossing with A = 0 does not depend on the entry point: every ray misses it once |B u| > r_a.
-        let mut discs = vec![(0.0, r_front)];
-        let mut empty_from_slope = f64::INFINITY;
+        // Entrance discs as (centre per slope, radius): every clear aperture, then each stop crossing with A != 0.
+        // A crossing with A = 0 does not depend on the entry point: every ray misses it once |B u| > r_a (the
+        // clear apertures' such crossings are folded into `Disc::empty_from_slope`).
+        let mut all: Vec<(f64, f64)> = discs.iter().map(|d| (d.centre_per_slope, d.radius_mm)).collect();
+        let mut empty_from_slope = discs.iter().map(|d| d.empty_from_slope).fold(f64::INFINITY, f64::min);
         for a in &m.stop_from_entrance {
             if a.a.abs() > 1e-12 {
-                discs.push((-a.b / a.a, r_a / a.a.abs()));
+                all.push((-a.b / a.a, r_a / a.a.abs()));
             } else if a.b != 0.0 {
                 empty_from_slope = empty_from_slope.min(r_a / a.b.abs());
             }
         }
         // Two discs of centres c_p u and c_q u stop overlapping when |c_p - c_q| |u| >= r_p + r_q.
-        for p in 0..discs.len() {
-            for q in p + 1..discs.len() {
-                let dc = (discs[p].0 - discs[q].0).abs();
+        for p in 0..all.len() {
+            for q in p + 1..all.len() {
+                let dc = (all[p].0 - all[q].0).abs();
                 if dc > 0.0 {
-                    empty_from_slope = empty_from_slope.min((discs[p].1 + discs[q].1) / dc);
+                    empty_from_slope = empty_from_slope.min((all[p].1 + all[q].1) / dc);
                 }
             }
         }
-        let (e_per_slope, rho) = discs.iter().copied().fold(discs[0], |best, d| if d.1 < best.1 { d } else { best });
+        // The region's bounding disc: the smallest of them (a lens always has its front disc).
+        let (e_per_slope, rho) =
+            all.iter().copied().fold((0.0, f64::INFINITY), |best, d| if d.1 < best.1 { d } else { best });
         let mut stop_scale = [0.0; 3];
         let mut stop_offset_per_slope = [0.0; 3];
         for (k, a) in m.stop_from_entrance.iter().take(3).enumerate() {
@@ -138,8 +155,54 @@ impl FrameCoefficients {
             stop_scale,
             stop_offset_per_slope,
             stop_count: m.stop_from_entrance.len().min(3) as u8,
-            front_scale: rho / r_front,
-            front_offset_per_slope: e_per_slope / r_front,
+            rho_mm: rho,
+            e_per_slope,
+            discs: first_disc as u32..(first_disc + discs.len()) as u32,
+        }
+    }
+}
+
+/// The most clear-aperture discs a sprite's masks carry ([`SpriteMasks::discs`]): those that cut the sprite's
+/// region most at the frame's light. The rest are counted in [`SpriteMasks::discs_left_out`].
+pub const MAX_DISCS: usize = 4;
+
+/// One crossing of a clear aperture (a surface other than the stop) by a ghost path at one wavelength: the rays
+/// that pass it form, in the entrance plane, the disc of centre `centre_per_slope * u` and radius `radius_mm`
+/// (`-B u / A` and `a / |A|` from the entrance-to-arrival matrix `[[A, B], ..]` and the semi-aperture `a`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Disc {
+    /// The surface crossed.
+    pub surface: usize,
+    pub centre_per_slope: f64,
+    pub radius_mm: f64,
+    /// The disc holds another of the ghost's discs (clear or the stop's circle) while `|u|` is below this, so
+    /// it cannot cut the region there (0 when never; see [`GhostSystem::set_redundancy`]).
+    pub redundant_below_slope: f64,
+    /// No ray passes once `|u|` reaches this: a crossing with `A = 0`, where the height `B u` does not depend
+    /// on the entry point (infinity otherwise).
+    pub empty_from_slope: f64,
+}
+
+impl Disc {
+    /// The disc of a crossing of `surface` (semi-aperture `a_mm`) whose entrance-to-arrival matrix is `m`; a
+    /// crossing with `A = 0` gives an unbounded disc that empties past `|u| = a / |B|`.
+    fn new(surface: usize, m: &Mat2, a_mm: f64) -> Self {
+        if m.a.abs() > 1e-12 {
+            Self {
+                surface,
+                centre_per_slope: -m.b / m.a,
+                radius_mm: a_mm / m.a.abs(),
+                redundant_below_slope: 0.0,
+                empty_from_slope: f64::INFINITY,
+            }
+        } else {
+            Self {
+                surface,
+                centre_per_slope: 0.0,
+                radius_mm: f64::INFINITY,
+                redundant_below_slope: f64::INFINITY,
+                empty_from_slope: if m.b != 0.0 { a_mm / m.b.abs() } else { f64::INFINITY },
+            }
         }
     }
 }
@@ -179,7 +242,7 @@ pub struct GhostOptics {
 
 /// What a frame needs of one ghost at one wavelength, precomputed so that the frame is a handful of
 /// multiplications: the entrance region's centre E is (a constant) x u, so everything is linear in u.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 struct FrameCoefficients {
     ghost: u32,
     wavelength: u32,
@@ -204,8 +267,11 @@ struct FrameCoefficients {
     stop_scale: [f64; 3],
     stop_offset_per_slope: [f64; 3],
     stop_count: u8,
-    front_scale: f64,
-    front_offset_per_slope: f64,
+    /// The entrance region's bounding disc: radius (mm) and centre per unit slope (`E = e_per_slope u`).
+    rho_mm: f64,
+    e_per_slope: f64,
+    /// This sprite's clear-aperture discs in [`GhostSystem`]'s list.
+    discs: std::ops::Range<u32>,
 }
 
 /// One two-reflection ghost.
@@ -269,13 +335,23 @@ pub struct Sprite {
     pub culled: Option<CullReason>,
 }
 
-/// The masks of one sprite: the aperture at each stop crossing (the first `stop_count`) and the front disc.
+/// The masks of one sprite at one light: the aperture at each stop crossing (the first `stop_count`) and the
+/// clear-aperture discs that cut its region there (the first `disc_count`, each a circle of radius 1 in its
+/// coordinates: the front lens's, and any other surface's that vignettes the ghost).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SpriteMasks {
     pub stop_maps: [MaskMap; 3],
     pub stop_count: usize,
-    /// The front lens's clear-aperture disc (a circle of radius 1 in its coordinates).
-    pub front_map: MaskMap,
+    /// The cutting discs; a disc that holds the whole quad is left out (it is 1 there).
+    pub disc_maps: [MaskMap; MAX_DISCS],
+    /// The surface of each disc.
+    pub disc_surfaces: [usize; MAX_DISCS],
+    pub disc_count: usize,
+    /// Cutting discs beyond [`MAX_DISCS`], left out (the region drawn is then a little larger than the lens's).
+    pub discs_left_out: usize,
+    /// Quad coordinate q -> entrance-plane point (mm): the region's bounding disc's centre E and radius rho per
+    /// axis (`x0 = E + rho q`).
+    pub region: MaskMap,
 }
 
 impl SpriteMasks {
@@ -283,6 +359,22 @@ impl SpriteMasks {
     pub fn stops(&self) -> &[MaskMap] {
         &self.stop_maps[..self.stop_count]
     }
+
+    /// The clear-aperture discs that cut this sprite.
+    pub fn discs(&self) -> &[MaskMap] {
+        &self.disc_maps[..self.disc_count]
+    }
+
+    /// The surfaces whose clear apertures cut this sprite (as [`Self::discs`]).
+    pub fn cutting_surfaces(&self) -> &[usize] {
+        &self.disc_surfaces[..self.disc_count]
+    }
+}
+
+/// How far from its centre a mask map reaches over the quad [-1, 1]^2: a disc map reaching at most 1 holds the
+/// whole quad.
+pub fn map_reach(map: &MaskMap) -> f64 {
+    (map.offset[0].abs() + map.scale[0].abs()).hypot(map.offset[1].abs() + map.scale[1].abs())
 }
 
 /// Counts of what a frame drew and skipped.
@@ -307,6 +399,8 @@ pub struct GhostFrame {
 pub enum GhostError {
     #[error(transparent)]
     Paraxial(#[from] ParaxialError),
+    #[error(transparent)]
+    Path(#[from] PathError),
     #[error("stop scale {0} must be in (0, 1]")]
     StopScale(f64),
     #[error(
@@ -361,6 +455,8 @@ pub struct GhostSystem {
     tables: InterfaceTables,
     /// Per (ghost, wavelength), ghost-major: the frame's coefficients.
     coefficients: Vec<FrameCoefficients>,
+    /// Every sprite's clear-aperture discs, in the sprites' order ([`FrameCoefficients::discs`] indexes them).
+    discs: Vec<Disc>,
     /// For an anamorphic lens, the ghosts of its x-z section ([`Lens::section`]) on the lens's sensor plane:
     /// every x quantity of a sprite comes from it, every y quantity from this system (whose matrices are then
     /// the y-z section's). `None` for a lens of revolution.
@@ -378,7 +474,9 @@ impl GhostSystem {
     pub fn build(lens: &Lens, settings: &GhostSettings) -> Result<Self, GhostError> {
         let first_order = FirstOrder::d_line(lens)?;
         if !lens.is_anamorphic() {
-            return Self::build_with(lens, settings, first_order);
+            let mut system = Self::build_with(lens, settings, first_order)?;
+            system.set_redundancy();
+            return Ok(system);
         }
         // Axis by axis: each section is a lens of revolution, its ghosts ending on this lens's sensor plane.
         let section = |s: Section| {
@@ -398,6 +496,7 @@ impl GhostSystem {
         y.lens = lens.clone();
         y.first_order = first_order;
         y.x_section = Some(Box::new(x));
+        y.set_redundancy();
         Ok(y)
     }
 
@@ -562,10 +661,21 @@ impl GhostSystem {
             spectrum.wavelengths_nm[middle],
             image_centre_per_slope[middle],
         );
+        // Every crossing of a clear aperture (a surface other than the stop) along each ghost path, per
+        // wavelength: its disc in the entrance plane, from the entrance-to-arrival matrix (heights on arrival).
+        let mut discs = Vec::new();
         let mut coefficients = Vec::with_capacity(ghosts.len() * n_w);
         for (g, ghost) in ghosts.iter().enumerate() {
+            let path = LightPath::ghost(lens, ghost.i, ghost.j)?;
             for (w, optics) in ghost.per_wavelength.iter().enumerate() {
-                coefficients.push(FrameCoefficients::new(g, w, optics, stop_radius_mm, front_radius_mm));
+                let first = discs.len();
+                PathMatrices::walk(lens, &z, &indices[w], &path, sensor_z, |step, m| {
+                    let surface = path.steps[step].surface;
+                    if surface != stop {
+                        discs.push(Disc::new(surface, m, lens.surfaces[surface].semi_aperture_mm));
+                    }
+                });
+                coefficients.push(FrameCoefficients::new(g, w, optics, stop_radius_mm, &discs[first..], first));
             }
         }
         Ok(Self {
@@ -581,6 +691,7 @@ impl GhostSystem {
             mapping,
             tables,
             coefficients,
+            discs,
             x_section: None,
         })
     }
@@ -628,9 +739,8 @@ impl GhostSystem {
         let f_of =
             |s: &GhostSystem| s.ghosts[sprite_ghost].per_wavelength[sprite_wavelength].matrices.sensor_from_entrance;
         let (fx, fy) = (f_of(self.x_system()), f_of(self));
-        let front = self.sprite_masks(k, u).front_map;
-        let rho = front.scale.map(|s| s * self.front_radius_mm);
-        let e = front.offset.map(|o| o * self.front_radius_mm);
+        let region = self.sprite_masks(k, u).region;
+        let (rho, e) = (region.scale, region.offset);
         [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]].map(|q| {
             let x0 = [e[0] + rho[0] * q[0], e[1] + rho[1] * q[1]];
             [fx.a * x0[0] + fx.b * u[0], fy.a * x0[1] + fy.b * u[1]]
@@ -783,7 +893,7 @@ impl GhostSystem {
     /// Ghost `g`'s paraxial sprites summed over the spectrum for light slope `u`, with no culling: the frame a
     /// LUT ghost is fitted to ([`crate::lut`]). The centre and half-size are averaged over the wavelengths with
     /// their luminance weights (the half-size at least `min_half_mm`); the energy is the luminance of
-    /// irradiance x sprite area, before any vignetting by the front lens or the stop (0 when the entrance region
+    /// irradiance x sprite area, before any vignetting by a clear aperture or the stop (0 when the entrance region
     /// is empty).
     pub fn paraxial_frame(&self, g: usize, u: [f64; 2], min_half_mm: f64) -> ParaxialFrame {
         let u2 = u[0] * u[0] + u[1] * u[1];
@@ -831,10 +941,13 @@ impl GhostSystem {
     }
 
     /// The masks of the `k`-th sprite of a frame (sprites come ghost by ghost, wavelength by wavelength) for
-    /// light slope `u`: computed only for the sprites that are drawn.
+    /// light slope `u`: computed only for the sprites that are drawn. Of the sprite's clear-aperture discs, those
+    /// that hold another of its discs at this light ([`Disc::redundant_below_slope`]) or the whole quad cannot
+    /// cut and are left out; when more than [`MAX_DISCS`] remain, those that cut the most points of a 16 x 16 grid
+    /// over the quad are kept, one by one.
     pub fn sprite_masks(&self, k: usize, u: [f64; 2]) -> SpriteMasks {
         // x from the x-z section's coefficients (the same ones for a lens of revolution), y from these.
-        let (cx, co) = (&self.x_system().coefficients[k], &self.coefficients[k]);
+        let (xs, cx, co) = (self.x_system(), &self.x_system().coefficients[k], &self.coefficients[k]);
         let map = |scale: [f64; 2], per_slope: [f64; 2]| MaskMap {
             scale,
             offset: [per_slope[0] * u[0], per_slope[1] * u[1]],
@@ -842,10 +955,158 @@ impl GhostSystem {
         let stop = |i: usize| {
             map([cx.stop_scale[i], co.stop_scale[i]], [cx.stop_offset_per_slope[i], co.stop_offset_per_slope[i]])
         };
-        SpriteMasks {
+        let rho = [cx.rho_mm, co.rho_mm];
+        let e = [cx.e_per_slope * u[0], co.e_per_slope * u[1]];
+        let mut masks = SpriteMasks {
             stop_maps: [stop(0), stop(1), stop(2)],
             stop_count: co.stop_count as usize,
-            front_map: map([cx.front_scale, co.front_scale], [cx.front_offset_per_slope, co.front_offset_per_slope]),
+            disc_maps: [MaskMap { scale: [0.0; 2], offset: [0.0; 2] }; MAX_DISCS],
+            disc_surfaces: [0; MAX_DISCS],
+            disc_count: 0,
+            discs_left_out: 0,
+            region: MaskMap { scale: rho, offset: e },
+        };
+        let slope = u[0].hypot(u[1]);
+        let range = co.discs.start as usize..co.discs.end as usize;
+        let mut cutting: Vec<(MaskMap, usize)> = Vec::new();
+        for (a, b) in xs.discs[range.clone()].iter().zip(&self.discs[range]) {
+            if !(slope >= b.redundant_below_slope) || !(a.radius_mm.is_finite() && b.radius_mm.is_finite()) {
+                continue;
+            }
+            let disc = MaskMap {
+                scale: [rho[0] / a.radius_mm, rho[1] / b.radius_mm],
+                offset: [
+                    (e[0] - a.centre_per_slope * u[0]) / a.radius_mm,
+                    (e[1] - b.centre_per_slope * u[1]) / b.radius_mm,
+                ],
+            };
+            if map_reach(&disc) > 1.0 {
+                cutting.push((disc, b.surface));
+            }
+        }
+        if cutting.len() > MAX_DISCS {
+            // More discs may cut than a sprite carries: keep those that cut the most, greedily, judged on a grid
+            // of 16 x 16 points of the quad (cell centres) inside every stop crossing's circle. A disc that cuts
+            // none of the points the kept ones leave is dropped as not cutting, unless a slot is free; any other is left out.
+            const SIDE: usize = 16;
+            type Points = [u64; SIDE * SIDE / 64];
+            let inside = |m: &MaskMap, q: [f64; 2]| {
+                let p = m.at(q);
+                p[0] * p[0] + p[1] * p[1] <= 1.0
+            };
+            let point = |i: usize| {
+                let at = |k: usize| (k as f64 + 0.5) * 2.0 / SIDE as f64 - 1.0;
+                [at(i % SIDE), at(i / SIDE)]
+            };
+            let set = |test: &dyn Fn([f64; 2]) -> bool| -> Points {
+                let mut bits = [0u64; SIDE * SIDE / 64];
+                for i in 0..SIDE * SIDE {
+                    if test(point(i)) {
+                        bits[i / 64] |= 1 << (i % 64);
+                    }
+                }
+                bits
+            };
+            let and_count = |a: &Points, b: &Points| a.iter().zip(b).map(|(x, y)| (x & y).count_ones()).sum::<u32>();
+            let mut alive = set(&|q| masks.stops().iter().all(|m| inside(m, q)));
+            let outside: Vec<Points> = cutting.iter().map(|(m, _)| set(&|q| !inside(m, q))).collect();
+            let mut kept = Vec::with_capacity(MAX_DISCS);
+            while kept.len() < MAX_DISCS {
+                let best = (0..cutting.len())
+                    .filter(|k| !kept.contains(k))
+                    .max_by_key(|&k| (and_count(&outside[k], &alive), std::cmp::Reverse(k)));
+                match best {
+                    Some(k) if and_count(&outside[k], &alive) > 0 => {
+                        for (a, o) in alive.iter_mut().zip(&outside[k]) {
+                            *a &= !o;
+                        }
+                        kept.push(k);
+                    }
+                    _ => break,
+                }
+            }
+            masks.discs_left_out =
+                (0..cutting.len()).filter(|k| !kept.contains(k) && and_count(&outside[*k], &alive) > 0).count();
+            // Free slots take the discs that cut between the points (slivers at the region's edge), those whose
+            // edges come closest to the region's centre, relative to its size, first.
+            let gap = |m: &MaskMap| (1.0 - m.offset[0].hypot(m.offset[1])) / m.scale[0].abs().max(m.scale[1].abs());
+            let mut rest: Vec<usize> = (0..cutting.len()).filter(|k| !kept.contains(k)).collect();
+            rest.sort_by(|&a, &b| gap(&cutting[a].0).total_cmp(&gap(&cutting[b].0)));
+            kept.extend(rest.into_iter().take(MAX_DISCS - kept.len()));
+            cutting = kept.into_iter().map(|k| cutting[k]).collect();
+        }
+        masks.disc_count = cutting.len();
+        for (slot, (map, surface)) in cutting.into_iter().enumerate() {
+            masks.disc_maps[slot] = map;
+            masks.disc_surfaces[slot] = surface;
+        }
+        masks
+    }
+
+    /// Sets each clear-aperture disc's [`Disc::redundant_below_slope`] from the discs of the same sprite (x
+    /// quantities from `self.x_system()`, y from `self`): disc k holds disc m while `|u| < (1 - max(a, b)) /
+    /// max(|alpha|, |beta|)`, where in k's own units m's centre lies at `(alpha u_x, beta u_y)` and its
+    /// semi-axes are `(a, b)` (a sufficient condition; exact for a lens of revolution, where it reads `|u| <
+    /// (r_k - r_m) / |c_k - c_m|`). The stop's circles at its crossings are discs m too. Of two equal discs the
+    /// later one is redundant, never both.
+    fn set_redundancy(&mut self) {
+        let nw = self.settings.spectrum.len();
+        let mut thresholds = vec![0.0f64; self.discs.len()];
+        {
+            let xs = self.x_system();
+            for (k, cy) in self.coefficients.iter().enumerate() {
+                let (g, w) = (k / nw.max(1), k % nw.max(1));
+                // Every disc of this sprite as (centre x, centre y, radius x, radius y, is a clear aperture).
+                let mut all: Vec<([f64; 2], [f64; 2], Option<usize>)> = Vec::new();
+                let range = cy.discs.start as usize..cy.discs.end as usize;
+                for (i, (a, b)) in xs.discs[range.clone()].iter().zip(&self.discs[range.clone()]).enumerate() {
+                    all.push((
+                        [a.centre_per_slope, b.centre_per_slope],
+                        [a.radius_mm, b.radius_mm],
+                        Some(range.start + i),
+                    ));
+                }
+                let stops = |s: &GhostSystem| -> Vec<(f64, f64)> {
+                    let r_a = s.stop_radius_mm;
+                    s.ghosts[g].per_wavelength[w]
+                        .matrices
+                        .stop_from_entrance
+                        .iter()
+                        .map(|m| if m.a.abs() > 1e-12 { (-m.b / m.a, r_a / m.a.abs()) } else { (0.0, f64::INFINITY) })
+                        .collect()
+                };
+                for (a, b) in stops(xs).into_iter().zip(stops(self)) {
+                    all.push(([a.0, b.0], [a.1, b.1], None));
+                }
+                for (ki, (ck, rk, index)) in all.iter().enumerate() {
+                    let Some(index) = *index else { continue };
+                    if !(rk[0].is_finite() && rk[1].is_finite()) {
+                        thresholds[index] = f64::INFINITY;
+                        continue;
+                    }
+                    let mut best = 0.0f64;
+                    for (mi, (cm, rm, _)) in all.iter().enumerate() {
+                        if mi == ki || !(rm[0].is_finite() && rm[1].is_finite()) {
+                            continue;
+                        }
+                        let (a, b) = (rm[0] / rk[0], rm[1] / rk[1]);
+                        let (alpha, beta) = ((cm[0] - ck[0]) / rk[0], (cm[1] - ck[1]) / rk[1]);
+                        let size = a.max(b);
+                        let spread = alpha.abs().max(beta.abs());
+                        let s = if spread == 0.0 {
+                            // Concentric: held at every light, or never; of two equal discs the later goes.
+                            if size < 1.0 || (size == 1.0 && a == b && mi < ki) { f64::INFINITY } else { 0.0 }
+                        } else {
+                            (1.0 - size) / spread
+                        };
+                        best = best.max(s);
+                    }
+                    thresholds[index] = best;
+                }
+            }
+        }
+        for (disc, t) in self.discs.iter_mut().zip(thresholds) {
+            disc.redundant_below_slope = t;
         }
     }
 }
@@ -958,7 +1219,7 @@ mod tests {
         for u in [[0.0, 0.0], [0.3, 0.0], [0.0, -0.6], [2.0, 2.0]] {
             for (k, sprite) in s.frame(u, &settings).sprites.into_iter().enumerate() {
                 assert!(sprite.half_size_mm[0].abs() >= settings.min_half_size_mm);
-                let rho = s.sprite_masks(k, u).front_map.scale[0] * s.front_radius_mm;
+                let rho = s.sprite_masks(k, u).region.scale[0];
                 let energy = sprite.irradiance * sprite.half_size_mm[0].powi(2);
                 assert!(energy <= rho * rho * 1.0001, "energy never exceeds what enters: {energy} vs {}", rho * rho);
                 assert!(sprite.rgb.iter().all(|c| c.is_finite() && *c >= 0.0));

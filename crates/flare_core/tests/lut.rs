@@ -709,9 +709,10 @@ fn classification_finds_the_known_non_linear_ghost_and_honours_forced_choices() 
     let g46 = flare.system.ghosts.iter().position(|g| (g.i, g.j) == (4, 6)).unwrap();
     let classes = flare_core::lut::classify::classify(&flare, &renderer, &settings, &[(0, true), (g46, false)]);
     assert_eq!(classes.len(), flare.system.ghosts.len());
-    // Ghost (4, 6): paraxial radius 21.7 mm, real rays within 9.1 mm folding into a caustic.
+    // Ghost (4, 6): paraxial radius 21.7 mm (the clear apertures cut its sprite to 1.43 times the real rays'
+    // size), real rays within 9.1 mm folding into a caustic.
     let c = &classes[g46];
-    assert!(c.measured_nonlinear && c.image_error > 0.3 && c.size_ratio > 1.5, "{c:?}");
+    assert!(c.measured_nonlinear && c.image_error > 0.3 && c.size_ratio > 1.3, "{c:?}");
     assert!(!c.nonlinear(), "forced linear");
     assert!(classes[0].nonlinear() && classes[0].forced == Some(true));
     let linear = classes.iter().filter(|c| !c.measured_nonlinear).count();

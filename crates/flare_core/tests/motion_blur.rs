@@ -144,16 +144,23 @@ fn a_180_degree_shutter_streaks_each_ghost_by_half_its_motion_with_the_same_ener
         if reshaped > 0.1 * (motion_px / 2.0).powi(2) / 12.0 {
             continue;
         }
+
         let Some((a0, a1)) = lit_columns(&sharp, peak * 1e-6) else { continue };
         let room = motion_px + 2.0;
         if motion_px < 2.0 || f64::from(a0) < room || f64::from(a1) + room > f64::from(W) {
             continue;
         }
-        let (_, blurred) = draw(&flare, &blur_doc, at, Some(alone));
+        let (_, blurred) = draw(&flare, &blur_doc, at, Some(alone.clone()));
         let n = samples.per_ghost[g] as f64;
         let added = moments_x(&blurred).1 - moments_x(&sharp).1;
         let streak = (12.0 * added.max(0.0) * (n - 1.0) / (n + 1.0)).sqrt();
-        let e = energy(&blurred) / energy(&sharp);
+        // A ghost whose light changes as it moves (a clear aperture cutting it more or less) streaks the mean of
+        // its light over the open shutter (frames at - 1/4 to at + 1/4), not the middle frame's.
+        let over_shutter = (0..=8)
+            .map(|i| energy(&draw(&flare, &sharp_doc, at - 0.25 + 0.0625 * f64::from(i), Some(alone.clone())).1))
+            .collect::<Vec<f64>>();
+        let mean = (over_shutter[1..8].iter().sum::<f64>() + 0.5 * (over_shutter[0] + over_shutter[8])) / 8.0;
+        let e = energy(&blurred) / mean;
         println!(
             "ghost {g}: moves {motion_px:.2} px/frame, streak {streak:.2} px (half its motion: {:.2}), energy {e:.4}",
             motion_px / 2.0
@@ -166,7 +173,9 @@ fn a_180_degree_shutter_streaks_each_ghost_by_half_its_motion_with_the_same_ener
         assert!((e - 1.0).abs() < 0.01, "ghost {g}: energy ratio {e}");
         measured += 1;
     }
-    assert!(measured >= 5, "only {measured} ghosts could be measured");
+    // Since every clear aperture cuts the ghosts, most of this lens's ghosts change shape as the light moves 4 degrees a
+    // frame (they are left out above); the two that keep it are the bright one on the light's image and one more.
+    assert!(measured >= 2, "only {measured} ghosts could be measured");
 }
 
 #[test]

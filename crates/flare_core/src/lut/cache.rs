@@ -22,8 +22,10 @@ use crate::lut::bake::BakeSettings;
 use crate::lut::format::{read_lut, write_lut};
 use crate::optics::Lens;
 
-/// Bumped when the baker changes what it writes for the same settings: every older entry becomes a miss.
-pub const CACHE_VERSION: u32 = 1;
+/// Bumped when the baker changes what it writes for the same settings: every older entry becomes a miss. 2:
+/// every clear aperture cuts the paraxial sprites, so the classification against them (which ghosts a LUT
+/// carries) changed.
+pub const CACHE_VERSION: u32 = 2;
 
 /// What a lookup found.
 #[derive(Debug)]

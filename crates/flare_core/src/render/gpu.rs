@@ -463,7 +463,7 @@ impl FlareRenderer {
         };
         let ghosts = module("ghosts.wgsl", GHOSTS_WGSL);
         let starburst_module = module("starburst.wgsl", STARBURST_WGSL);
-        let instance_attributes = wgpu::vertex_attr_array![0 => Float32x4, 1 => Float32x4, 2 => Float32x4, 3 => Float32x4, 4 => Float32x4, 5 => Float32x4, 6 => Float32x4];
+        let instance_attributes = wgpu::vertex_attr_array![0 => Float32x4, 1 => Float32x4, 2 => Float32x4, 3 => Float32x4, 4 => Float32x4, 5 => Float32x4, 6 => Float32x4, 7 => Float32x4, 8 => Float32x4, 9 => Float32x4, 10 => Float32x4];
         let instance_buffer_layout = wgpu::VertexBufferLayout {
             array_stride: std::mem::size_of::<GhostInstance>() as u64,
             step_mode: wgpu::VertexStepMode::Instance,

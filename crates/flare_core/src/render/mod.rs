@@ -3,7 +3,7 @@
 //! # How it works
 //! [`FlareScene::build`] turns one frame of ghost sprites ([`crate::ghost`]) into what both renderers draw:
 //! one [`GhostInstance`] per drawn sprite (pixel centre and signed half-size, colour, the affine maps into
-//! the aperture mask at every stop crossing and into the front-lens disc), the starburst's placement, and
+//! the aperture mask at every stop crossing and into each clear-aperture disc that cuts it), the starburst's placement, and
 //! the display settings in [`Globals`]. The GPU path ([`gpu`]) and the CPU twin ([`cpu`]) read exactly these
 //! structs, so a test can compare their images pixel by pixel. [`raygrid`] is the other GPU renderer: the
 //! ray-traced ghosts of [`crate::raytrace`] (its f64 CPU twin) traced and splatted on the GPU; [`dof_gpu`]
@@ -32,7 +32,7 @@ use bytemuck::{Pod, Zeroable};
 pub use crate::color::Tonemap;
 use crate::color::gain_from_ev;
 use crate::dirt::{PreparedDirt, henyey_greenstein, henyey_greenstein_g};
-use crate::ghost::{FrameSettings, GhostFrame, GhostSystem};
+use crate::ghost::{FrameSettings, GhostFrame, GhostSystem, MAX_DISCS, map_reach};
 pub use crate::ghost::{light_slopes_for_frame_position, sensor_to_pixel};
 pub use crate::image::{DisplayImage, HdrImage};
 use crate::optics::sensor::Sensor;
@@ -148,7 +148,8 @@ impl Globals {
     }
 }
 
-/// One ghost sprite for the GPU. Must be kept in sync with `struct GhostInstance` in `shaders/ghosts.wgsl`.
+/// One ghost sprite for the GPU. Must be kept in sync with `struct GhostInstance` in `shaders/ghosts.wgsl` and
+/// `shaders/ghosts_compute.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 pub struct GhostInstance {
@@ -160,13 +161,17 @@ pub struct GhostInstance {
     /// reads (0: not enabled; 1 the base mask, as [`FlareScene::build`] leaves it, 2 and 3 the finer ones
     /// that [`cpu::ghosts::GhostMasks::assign_levels`] picks for large sprites).
     pub stops: [[f32; 4]; 3],
-    /// Front-lens disc map: scale, offset x, offset y, anti-alias width (in its units per pixel).
-    pub front: [f32; 4],
-    /// The y scales of the three stop maps and of the front map (`stops[k][0]` and `front[0]` are the x
-    /// scales): equal to them for a lens of revolution, the y-z section's for an anamorphic lens.
+    /// The y scales of the three stop maps (`stops[k][0]` are the x scales): equal to them for a lens of
+    /// revolution, the y-z section's for an anamorphic lens; the fourth unused.
     pub scale_y: [f32; 4],
+    /// The clear-aperture discs that cut the sprite ([`crate::ghost::SpriteMasks::discs`], the front lens's among
+    /// them when it cuts), each an anti-aliased unit circle in its map: x scale, offset x, offset y, anti-alias
+    /// width (in its units per pixel; 0: no disc in this slot). A disc that holds the whole quad is left out.
+    pub discs: [[f32; 4]; MAX_DISCS],
+    /// The y scales of the disc maps.
+    pub disc_scale_y: [f32; MAX_DISCS],
 }
-const _: () = assert!(std::mem::size_of::<GhostInstance>() == 112);
+const _: () = assert!(std::mem::size_of::<GhostInstance>() == 16 * (6 + 5 * MAX_DISCS / 4));
 
 impl GhostInstance {
     /// True when every field is finite (the only instances ever uploaded).
@@ -189,6 +194,8 @@ pub struct FlareScene {
     pub instance_ghosts: Vec<u32>,
     /// Sprites dropped because a value was not finite (expected: always 0).
     pub dropped_non_finite: usize,
+    /// Clear-aperture discs that cut a drawn sprite but were left out, beyond [`MAX_DISCS`] a sprite.
+    pub discs_left_out: usize,
     /// The OCIO display transform of [`Tonemap::View`] (`None`: the built-in default,
     /// [`crate::view_transform::ViewTransform::builtin`]).
     pub view: Option<std::sync::Arc<crate::view_transform::ViewTransform>>,
@@ -225,6 +232,7 @@ impl FlareScene {
         let mut instances = Vec::with_capacity(frame.stats.drawn);
         let mut instance_ghosts = Vec::with_capacity(frame.stats.drawn);
         let mut dropped_non_finite = 0;
+        let mut discs_left_out = 0;
         for (index, sprite) in frame.sprites.iter().enumerate().filter(|(_, s)| s.culled.is_none()) {
             let gain = gains.get(sprite.ghost).copied().unwrap_or(1.0);
             if gain.is_nan() || gain <= 0.0 {
@@ -239,17 +247,28 @@ impl FlareScene {
                 *slot = [map.scale[0] as f32, map.offset[0] as f32, map.offset[1] as f32, 1.0];
                 *y = map.scale[1] as f32;
             }
-            // The front disc's coordinate changes by |scale| / |half_px| per pixel: the anti-alias width (the
-            // faster of the two axes).
-            let front = masks.front_map;
-            scale_y[3] = front.scale[1] as f32;
-            let aa = (front.scale[0].abs() / half_px[0].abs()).max(front.scale[1].abs() / half_px[1].abs()).max(1e-6);
+            // Each disc's coordinate changes by |scale| / |half_px| per pixel: its anti-alias width (the faster of
+            // the two axes). A disc whose soft edge stays outside the quad is 1 there: left out.
+            let mut discs = [[0.0f32; 4]; MAX_DISCS];
+            let mut disc_scale_y = [0.0f32; MAX_DISCS];
+            let mut n = 0;
+            for map in masks.discs() {
+                let aa = (map.scale[0].abs() / half_px[0].abs()).max(map.scale[1].abs() / half_px[1].abs()).max(1e-6);
+                if map_reach(map) <= 1.0 - 0.5 * aa {
+                    continue;
+                }
+                discs[n] = [map.scale[0] as f32, map.offset[0] as f32, map.offset[1] as f32, aa as f32];
+                disc_scale_y[n] = map.scale[1] as f32;
+                n += 1;
+            }
+            discs_left_out += masks.discs_left_out;
             let instance = GhostInstance {
                 centre_half: [c[0] as f32, c[1] as f32, -half_px[0] as f32, half_px[1] as f32],
                 colour: [sprite.rgb[0] as f32 * gain, sprite.rgb[1] as f32 * gain, sprite.rgb[2] as f32 * gain, 0.0],
                 stops,
-                front: [front.scale[0] as f32, front.offset[0] as f32, front.offset[1] as f32, aa as f32],
                 scale_y,
+                discs,
+                disc_scale_y,
             };
             if instance.is_finite() {
                 instances.push(instance);
@@ -281,6 +300,7 @@ impl FlareScene {
             instances,
             instance_ghosts,
             dropped_non_finite,
+            discs_left_out,
             view: None,
             output_size: (width, height),
         }

@@ -27,20 +27,28 @@ fn stop_mask(masks: &GhostMasks, map: [f32; 4], scale_y: f32, q: [f32; 2]) -> f3
     masks.mask(map[3]).sample(map[0] * q[0] + map[1], scale_y * q[1] + map[2])
 }
 
-fn front_mask(map: [f32; 4], scale_y: f32, q: [f32; 2]) -> f32 {
+/// An anti-aliased unit disc in the map `[x scale, offset x, offset y, anti-alias width]` with y scale `scale_y`:
+/// the coverage of a clear aperture (a width of 0 marks an empty slot: 1).
+fn disc_mask(map: [f32; 4], scale_y: f32, q: [f32; 2]) -> f32 {
+    if map[3] == 0.0 {
+        return 1.0;
+    }
     let (x, y) = (map[0] * q[0] + map[1], scale_y * q[1] + map[2]);
     let r = (x * x + y * y).sqrt();
     (0.5 + (1.0 - r) / map[3]).clamp(0.0, 1.0)
 }
 
-/// The fragment shader's mask product at the quad coordinate `q`: 0 outside the quad, else the front disc
-/// (1 when `front_open`) times the aperture mask at every enabled stop crossing. The front disc first:
-/// outside it nothing passes, and the aperture lookups are skipped.
-fn mask_product(inst: &GhostInstance, masks: &GhostMasks, front_open: bool, q: [f32; 2]) -> f32 {
+/// The fragment shader's mask product at the quad coordinate `q`: 0 outside the quad, else every clear-aperture
+/// disc times the aperture mask at every enabled stop crossing. The discs first: outside one nothing passes,
+/// and the aperture lookups are skipped.
+fn mask_product(inst: &GhostInstance, masks: &GhostMasks, q: [f32; 2]) -> f32 {
     if q[0].abs() > 1.0 || q[1].abs() > 1.0 {
         return 0.0;
     }
-    let mut m = if front_open { 1.0 } else { front_mask(inst.front, inst.scale_y[3], q) };
+    let mut m = 1.0;
+    for (disc, &scale_y) in inst.discs.iter().zip(&inst.disc_scale_y) {
+        m *= disc_mask(*disc, scale_y, q);
+    }
     for (stop, &scale_y) in inst.stops.iter().zip(&inst.scale_y) {
         if m <= 0.0 {
             return 0.0;
@@ -63,7 +71,6 @@ fn shade_instance(
     let [cx, cy, hx, hy] = inst.centre_half;
     // A mask whose whole quad maps inside its fully open disc is 1 everywhere (a speed-up only): skip it.
     let inst = masks.without_open_stops(inst);
-    let front_open = reach(inst.front, inst.scale_y[3]) <= 1.0 - 0.5 * inst.front[3];
     let inst = &inst;
     let (sx, sy) = scale;
     let covered_rows = covered(cy, hy, sy, size.1);
@@ -79,7 +86,7 @@ fn shade_instance(
         for x in first..last {
             // The accumulation pixel's centre, in image pixels.
             let q = [((x as f32 + 0.5) * sx - cx) / hx, ((y as f32 + 0.5) * sy - cy) / hy];
-            let m = mask_product(inst, masks, front_open, q);
+            let m = mask_product(inst, masks, q);
             if m > 0.0 {
                 fragment(x, y, m);
             }
@@ -87,9 +94,9 @@ fn shade_instance(
     }
 }
 
-/// The interval of the quad coordinate q_x in which a row at `q_y` can have light: inside the quad, the front
-/// disc (grown by its anti-aliasing half-width) and the mask square [-1, 1]^2 of every stop crossing; `None`
-/// when the row has none.
+/// The interval of the quad coordinate q_x in which a row at `q_y` can have light: inside the quad, every disc
+/// (grown by its anti-aliasing half-width) and the mask square [-1, 1]^2 of every stop crossing; `None` when
+/// the row has none.
 fn row_support(inst: &GhostInstance, q_y: f32) -> Option<(f32, f32)> {
     if q_y.abs() > 1.0 {
         return None;
@@ -105,11 +112,15 @@ fn row_support(inst: &GhostInstance, q_y: f32) -> Option<(f32, f32)> {
         hi = hi.min(a.max(b));
         true
     };
-    let [scale, ox, oy, aa] = inst.front;
-    let reach = 1.0 + 0.5 * aa;
-    let fy = inst.scale_y[3] * q_y + oy;
-    if fy.abs() > reach || !clip(scale, ox, (reach * reach - fy * fy).max(0.0).sqrt()) {
-        return None;
+    for ([scale, ox, oy, aa], scale_y) in inst.discs.into_iter().zip(inst.disc_scale_y) {
+        if aa == 0.0 {
+            continue;
+        }
+        let reach = 1.0 + 0.5 * aa;
+        let fy = scale_y * q_y + oy;
+        if fy.abs() > reach || !clip(scale, ox, (reach * reach - fy * fy).max(0.0).sqrt()) {
+            return None;
+        }
     }
     for ([scale, ox, oy, enabled], scale_y) in inst.stops.into_iter().zip(inst.scale_y) {
         if enabled != 0.0 && ((scale_y * q_y + oy).abs() > 1.0 || !clip(scale, ox, 1.0)) {
@@ -146,7 +157,7 @@ pub fn ghost_pass_direct(scene: &FlareScene, masks: &GhostMasks) -> HdrImage {
 }
 
 /// `ghosts.wgsl` on the CPU, fast: the same image as [`ghost_pass_direct`] (to float rounding) for a fraction
-/// of the work. In each row a sprite has an **open span**, where the front disc and every stop crossing's mask
+/// of the work. In each row a sprite has an **open span**, where every clear-aperture disc and every stop mask
 /// are exactly 1 (no lookup can change the fragment, which is the instance's colour), flanked by its edges. The
 /// edges are shaded pixel by pixel as the shader does; the open span is added in O(1) as two entries of a
 /// per-row difference buffer (f64), summed along the row once per band after every instance. A frame-filling
@@ -409,7 +420,6 @@ fn sweep_instance(
     let (sx, sy) = scale;
     let covered_rows = covered(cy, hy, sy, size.1);
     let columns = covered(cx, hx, sx, size.0);
-    let front_open = reach(inst.front, inst.scale_y[3]) <= 1.0 - 0.5 * inst.front[3];
     let to_column = |q: f32| (cx + q * hx) / sx - 0.5;
     for y in covered_rows.start.max(rows.start)..covered_rows.end.min(rows.end) {
         let q_y = ((y as f32 + 0.5) * sy - cy) / hy;
@@ -431,10 +441,12 @@ fn sweep_instance(
                 *hi = hi.min(a.max(b));
             }
         };
-        // The front disc: fully open within radius 1 - aa / 2 of its centre.
-        if !front_open {
-            let [scale, ox, oy, aa] = inst.front;
-            let (inner, fy) = (1.0 - 0.5 * aa, inst.scale_y[3] * q_y + oy);
+        // Each disc: fully open within radius 1 - aa / 2 of its centre.
+        for ([scale, ox, oy, aa], scale_y) in inst.discs.into_iter().zip(inst.disc_scale_y) {
+            if aa == 0.0 {
+                continue;
+            }
+            let (inner, fy) = (1.0 - 0.5 * aa, scale_y * q_y + oy);
             if inner <= fy.abs() {
                 o_lo = 1.0;
                 o_hi = -1.0;
@@ -478,7 +490,7 @@ fn sweep_instance(
                 x = open_last + 1;
                 continue;
             }
-            let m = mask_product(inst, masks, front_open, [((x as f32 + 0.5) * sx - cx) / hx, q_y]);
+            let m = mask_product(inst, masks, [((x as f32 + 0.5) * sx - cx) / hx, q_y]);
             if m > 0.0 {
                 emit(Fragment::Edge { x, y, m });
             }
