@@ -290,7 +290,7 @@ fn a_frame_is_written_as_png_and_as_a_layered_exr() {
     }
     let dir = tempfile::tempdir().unwrap();
     let write = |plate_ev: f64, plate: Option<&HdrImage>, name: &str, ghosts: bool| {
-        let mut req = request([20.0, 12.0], w, h, 1);
+        let mut req = request([16.0, 10.0], w, h, 1);
         req.display.plate_ev = plate_ev;
         let frame = Frame::build(&flare, None, &req);
         let sources = Sources { flare: &flare, lut: None, plate };
