@@ -40,6 +40,7 @@ pub enum ReportColumn {
     Mean,
     Share,
     Stop,
+    Vignetted,
 }
 
 /// The Report tab's state.

@@ -87,6 +87,7 @@ impl FlareLabApp {
                 ReportColumn::Mean => r.mean_vs_source,
                 ReportColumn::Share => r.energy_share,
                 ReportColumn::Stop => r.stop_crossings as f64,
+                ReportColumn::Vignetted => r.vignetted_share,
             }
         };
         rows.sort_by(|a, b| {
@@ -97,7 +98,7 @@ impl FlareLabApp {
         egui::ScrollArea::vertical().id_salt("report_rows").max_height(height).auto_shrink([false, false]).show(
             ui,
             |ui| {
-                egui::Grid::new("report_table").num_columns(9).striped(true).spacing([8.0, 2.0]).show(ui, |ui| {
+                egui::Grid::new("report_table").num_columns(10).striped(true).spacing([8.0, 2.0]).show(ui, |ui| {
                     for (c, title, hover) in [
                         (ReportColumn::Rank, "#", "rank, worst (highest peak) first"),
                         (ReportColumn::Pair, "pair", "the surfaces it reflects at (j, then i)"),
@@ -108,6 +109,12 @@ impl FlareLabApp {
                         (ReportColumn::Mean, "mean", "mean irradiance over its lit area / the same"),
                         (ReportColumn::Share, "share", "its share of all the ghosts' energy"),
                         (ReportColumn::Stop, "stop", "how many times it crosses the stop"),
+                        (
+                            ReportColumn::Vignetted,
+                            "cut by",
+                            "the surfaces whose clear apertures cut it at this light, and the share of its light they \
+                             take (sorts by the share)",
+                        ),
                     ] {
                         let arrow = if c == column { if descending { " v" } else { " ^" } } else { "" };
                         if ui.button(format!("{title}{arrow}")).on_hover_text(hover).clicked() {
@@ -142,6 +149,12 @@ impl FlareLabApp {
                             "once".to_owned()
                         } else {
                             format!("{}x", r.stop_crossings)
+                        });
+                        ui.label(if r.vignetted_by.is_empty() {
+                            "-".to_owned()
+                        } else {
+                            let surfaces: Vec<String> = r.vignetted_by.iter().map(|k| k.to_string()).collect();
+                            format!("{} ({:.0} %)", surfaces.join(" "), 100.0 * r.vignetted_share)
                         });
                         ui.end_row();
                     }

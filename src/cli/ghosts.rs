@@ -201,7 +201,7 @@ fn report(
         println!("  anamorphic: focus and size in the y-z section, then in the x-z section (focus x, width)");
     }
     println!(
-        "  {:>4} {:>3} {:>3} {:>10} {:>9} {:>8} {:>10} {:>10} {:>7}  stop{}",
+        "  {:>4} {:>3} {:>3} {:>10} {:>9} {:>8} {:>10} {:>10} {:>7}  {:<8}{}  cut by (light taken)",
         "rank",
         "i",
         "j",
@@ -211,12 +211,22 @@ fn report(
         "peak/src",
         "mean/src",
         "share",
+        "stop",
         if anamorphic { "       focus x   width mm" } else { "" }
     );
+    // The clear apertures that cut a ghost at this light and the share of its light they take.
+    let vignetting = |g: &flare_core::report::GhostRow| {
+        if g.vignetted_by.is_empty() {
+            "-".to_owned()
+        } else {
+            let surfaces: Vec<String> = g.vignetted_by.iter().map(|k| k.to_string()).collect();
+            format!("{} ({:.0} %)", surfaces.join(", "), 100.0 * g.vignetted_share)
+        }
+    };
     let opt = |v: Option<f64>, p: usize| v.map(|v| format!("{v:.p$}")).unwrap_or_else(|| "afocal".into());
     for (rank, g) in r.ghosts.iter().enumerate() {
         println!(
-            "  {:>4} {:>3} {:>3} {:>10} {:>9.3} {:>8} {:>10.2e} {:>10.2e} {:>6.2}%  {}{}",
+            "  {:>4} {:>3} {:>3} {:>10} {:>9.3} {:>8} {:>10.2e} {:>10.2e} {:>6.2}%  {:<8}{}  {}",
             rank + 1,
             g.i,
             g.j,
@@ -231,7 +241,8 @@ fn report(
                 format!("  {:>12} {:>10.3}", opt(g.focus_x_mm, 2), g.image_width_mm)
             } else {
                 String::new()
-            }
+            },
+            vignetting(g)
         );
     }
     println!();

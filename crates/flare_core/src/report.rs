@@ -10,6 +10,9 @@
 //!   current stop (the cone of a ghost focused at `-1/C` behind its principal plane); `None` when afocal.
 //! - `image_diameter_mm`: the stop's image through the ghost path on the sensor (Lee and Eisemann's sprite)
 //!   at the spectrum's middle wavelength.
+//! - `vignetted_by` and `vignetted_share`: the surfaces whose clear apertures cut the ghost's sprites at this
+//!   light ([`crate::ghost::SpriteMasks::cutting_surfaces`]) and the share of the light its stop crossings pass
+//!   that they take (the same grid sampled without the discs).
 //! - Irradiance on the sensor: each wavelength's sprite is uniform inside the masks the frame applies (the
 //!   aperture at every stop crossing, every clear aperture that cuts it); sampling those masks on a grid over the
 //!   union of the ghost's sprites gives its luminance-weighted irradiance map, whose **peak** and **mean**
@@ -73,6 +76,10 @@ pub struct GhostRow {
     pub stop_crossings: usize,
     /// Centre of the ghost on the sensor (mm, sensor coordinates) at the middle wavelength.
     pub centre_mm: [f64; 2],
+    /// The surfaces whose clear apertures cut the ghost at this light (any wavelength's sprite), in order.
+    pub vignetted_by: Vec<usize>,
+    /// The share of the ghost's light (what its stop crossings pass) that those apertures remove.
+    pub vignetted_share: f64,
 }
 
 /// What coating one surface alone would do.
@@ -146,6 +153,8 @@ pub fn ghost_report(
                 straddles_stop: ghost.straddles_stop,
                 stop_crossings: ghost.per_wavelength.first().map_or(1, |w| w.matrices.stop_from_entrance.len()),
                 centre_mm: sprite.map_or([0.0; 2], |s| s.0),
+                vignetted_by: m.vignetted_by.clone(),
+                vignetted_share: m.vignetted_share,
             }
         })
         .collect();
@@ -163,17 +172,18 @@ pub fn ghost_report(
 
 /// The CSV columns of [`to_csv`], in order.
 pub const CSV_HEADER: &str = "rank,i,j,focus_mm,image_diameter_mm,f_number,peak_vs_source,mean_vs_source,\
-energy_fraction,energy_share,straddles_stop,stop_crossings,centre_x_mm,centre_y_mm,focus_x_mm,image_width_mm";
+energy_fraction,energy_share,straddles_stop,stop_crossings,centre_x_mm,centre_y_mm,focus_x_mm,image_width_mm,\
+vignetted_by,vignetted_share";
 
 /// The ghost table as CSV (one header line, one row per ghost, worst first; empty cells for afocal ghosts'
-/// focus and f-number): what `flarelab ghosts --report --csv` prints and the app exports.
+/// focus and f-number; the vignetting surfaces separated by spaces): what `flarelab ghosts --report --csv` prints and the app exports.
 pub fn to_csv(report: &GhostReport) -> String {
     let opt = |v: Option<f64>| v.map(|v| format!("{v}")).unwrap_or_default();
     let mut out = String::from(CSV_HEADER);
     out.push('\n');
     for (rank, g) in report.ghosts.iter().enumerate() {
         out.push_str(&format!(
-            "{},{},{},{},{},{},{:e},{:e},{:e},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{:e},{:e},{:e},{},{},{},{},{},{},{},{},{}\n",
             rank + 1,
             g.i,
             g.j,
@@ -189,7 +199,9 @@ pub fn to_csv(report: &GhostReport) -> String {
             g.centre_mm[0],
             g.centre_mm[1],
             opt(g.focus_x_mm),
-            g.image_width_mm
+            g.image_width_mm,
+            g.vignetted_by.iter().map(|k| k.to_string()).collect::<Vec<_>>().join(" "),
+            g.vignetted_share
         ));
     }
     out
@@ -206,11 +218,13 @@ pub fn describe(coating: &Coating) -> String {
 }
 
 /// Per ghost: what the grid over its sprites measured.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 struct Measured {
     peak_vs_source: f64,
     mean_vs_source: f64,
     energy_fraction: f64,
+    vignetted_by: Vec<usize>,
+    vignetted_share: f64,
 }
 
 /// Samples every ghost's sprites and masks on an `n` x `n` grid over the union of its sprites.
@@ -252,6 +266,21 @@ fn measure(system: &GhostSystem, mask: &ApertureMask, u: [f64; 2], n: usize) -> 
             }
             let cell = [(hi[0] - lo[0]) / n as f64, (hi[1] - lo[1]) / n as f64];
             let masks: Vec<_> = sprites.iter().map(|&k| system.sprite_masks(k, u)).collect();
+            let mut vignetted_by: Vec<usize> = masks.iter().flat_map(|m| m.cutting_surfaces().to_vec()).collect();
+            vignetted_by.sort_unstable();
+            vignetted_by.dedup();
+            // The light the stop crossings alone pass, with no clear aperture cutting.
+            let uncut_at = |p: [f64; 2]| {
+                let mut value = 0.0;
+                for (&k, m) in sprites.iter().zip(&masks) {
+                    let s = &frame.sprites[k];
+                    let q = [(p[0] - s.centre_mm[0]) / s.half_size_mm[0], (p[1] - s.centre_mm[1]) / s.half_size_mm[1]];
+                    if q[0].abs() <= 1.0 && q[1].abs() <= 1.0 {
+                        value += lum[s.wavelength] * s.irradiance * mask_product(mask, &[], m.stops(), q);
+                    }
+                }
+                value
+            };
             let value_at = |p: [f64; 2]| {
                 let mut value = 0.0;
                 for (&k, m) in sprites.iter().zip(&masks) {
@@ -265,10 +294,14 @@ fn measure(system: &GhostSystem, mask: &ApertureMask, u: [f64; 2], n: usize) -> 
                 }
                 value / lum_total
             };
-            let (mut peak, mut sum, mut lit) = (0.0f64, 0.0f64, 0usize);
+            let (mut peak, mut sum, mut lit, mut uncut) = (0.0f64, 0.0f64, 0usize, 0.0f64);
             for yi in 0..n {
                 for xi in 0..n {
-                    let value = value_at([lo[0] + (xi as f64 + 0.5) * cell[0], lo[1] + (yi as f64 + 0.5) * cell[1]]);
+                    let p = [lo[0] + (xi as f64 + 0.5) * cell[0], lo[1] + (yi as f64 + 0.5) * cell[1]];
+                    if !vignetted_by.is_empty() {
+                        uncut += uncut_at(p);
+                    }
+                    let value = value_at(p);
                     if value > 0.0 {
                         peak = peak.max(value);
                         sum += value;
@@ -288,6 +321,8 @@ fn measure(system: &GhostSystem, mask: &ApertureMask, u: [f64; 2], n: usize) -> 
                 peak_vs_source: finite(peak / source_peak),
                 mean_vs_source: if lit > 0 { finite(sum / lit as f64 / source_peak) } else { 0.0 },
                 energy_fraction: finite(energy / power_in),
+                vignetted_share: if uncut > 0.0 { finite(1.0 - sum * lum_total / uncut).clamp(0.0, 1.0) } else { 0.0 },
+                vignetted_by,
             }
         })
         .collect()
@@ -381,6 +416,31 @@ mod tests {
         let cells = CSV_HEADER.split(',').count();
         assert!(lines.iter().all(|l| l.split(',').count() == cells), "{csv}");
         assert!(lines[1].starts_with(&format!("1,{},{},", r.ghosts[0].i, r.ghosts[0].j)));
+    }
+
+    /// Off axis the double Gauss's middle apertures cut some ghosts: the report names the surfaces and how much of
+    /// the light they take; a ghost nothing cuts says so with a share of 0. Near the axis at f/16 nothing is cut.
+    #[test]
+    fn the_report_names_the_apertures_that_cut_each_ghost() {
+        let r = report("dgauss", &FlareConfig::default(), [14.0, 6.0]);
+        let stop = builtin_lens("dgauss").unwrap().stop_index();
+        let cut: Vec<&GhostRow> = r.ghosts.iter().filter(|g| g.vignetted_by.iter().any(|&k| k != 0)).collect();
+        assert!(cut.len() >= 3, "{} ghosts cut by a middle aperture", cut.len());
+        assert!(cut.iter().any(|g| g.vignetted_share > 0.05), "{cut:?}");
+        for g in &r.ghosts {
+            assert!((0.0..=1.0).contains(&g.vignetted_share), "{g:?}");
+            assert!(!g.vignetted_by.contains(&stop), "the stop is a mask of its own: {g:?}");
+            assert!(g.vignetted_by.windows(2).all(|w| w[0] < w[1]), "{g:?}");
+            if g.vignetted_by.is_empty() {
+                assert_eq!(g.vignetted_share, 0.0, "{g:?}");
+            }
+        }
+        let stopped = FlareConfig {
+            aperture: crate::aperture::Aperture { f_number: Some(16.0), ..Default::default() },
+            ..FlareConfig::default()
+        };
+        let r = report("dgauss", &stopped, [0.5, 0.2]);
+        assert!(r.ghosts.iter().all(|g| g.vignetted_share < 0.01), "{:?}", r.ghosts);
     }
 
     #[test]
