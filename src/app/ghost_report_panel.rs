@@ -150,12 +150,7 @@ impl FlareLabApp {
                         } else {
                             format!("{}x", r.stop_crossings)
                         });
-                        ui.label(if r.vignetted_by.is_empty() {
-                            "-".to_owned()
-                        } else {
-                            let surfaces: Vec<String> = r.vignetted_by.iter().map(|k| k.to_string()).collect();
-                            format!("{} ({:.0} %)", surfaces.join(" "), 100.0 * r.vignetted_share)
-                        });
+                        ui.label(r.vignetting_words());
                         ui.end_row();
                     }
                 });

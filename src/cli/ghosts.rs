@@ -214,15 +214,7 @@ fn report(
         "stop",
         if anamorphic { "       focus x   width mm" } else { "" }
     );
-    // The clear apertures that cut a ghost at this light and the share of its light they take.
-    let vignetting = |g: &flare_core::report::GhostRow| {
-        if g.vignetted_by.is_empty() {
-            "-".to_owned()
-        } else {
-            let surfaces: Vec<String> = g.vignetted_by.iter().map(|k| k.to_string()).collect();
-            format!("{} ({:.0} %)", surfaces.join(", "), 100.0 * g.vignetted_share)
-        }
-    };
+
     let opt = |v: Option<f64>, p: usize| v.map(|v| format!("{v:.p$}")).unwrap_or_else(|| "afocal".into());
     for (rank, g) in r.ghosts.iter().enumerate() {
         println!(
@@ -242,7 +234,7 @@ fn report(
             } else {
                 String::new()
             },
-            vignetting(g)
+            g.vignetting_words()
         );
     }
     println!();

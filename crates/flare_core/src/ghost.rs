@@ -113,11 +113,11 @@ impl FrameCoefficients {
         let mut all: Vec<(f64, f64)> = discs.iter().map(|d| (d.centre_per_slope, d.radius_mm)).collect();
         let mut empty_from_slope = discs.iter().map(|d| d.empty_from_slope).fold(f64::INFINITY, f64::min);
         for a in &m.stop_from_entrance {
-            if a.a.abs() > 1e-12 {
-                all.push((-a.b / a.a, r_a / a.a.abs()));
-            } else if a.b != 0.0 {
-                empty_from_slope = empty_from_slope.min(r_a / a.b.abs());
+            let (centre, radius, empty) = entrance_disc(a, r_a);
+            if radius.is_finite() {
+                all.push((centre, radius));
             }
+            empty_from_slope = empty_from_slope.min(empty);
         }
         // Two discs of centres c_p u and c_q u stop overlapping when |c_p - c_q| |u| >= r_p + r_q.
         for p in 0..all.len() {
@@ -184,26 +184,24 @@ pub struct Disc {
 }
 
 impl Disc {
-    /// The disc of a crossing of `surface` (semi-aperture `a_mm`) whose entrance-to-arrival matrix is `m`; a
-    /// crossing with `A = 0` gives an unbounded disc that empties past `|u| = a / |B|`.
+    /// The disc of a crossing of `surface` (semi-aperture `a_mm`) whose entrance-to-arrival matrix is `m`
+    /// ([`entrance_disc`]); an unbounded one never cuts, so it is redundant at every light.
     fn new(surface: usize, m: &Mat2, a_mm: f64) -> Self {
-        if m.a.abs() > 1e-12 {
-            Self {
-                surface,
-                centre_per_slope: -m.b / m.a,
-                radius_mm: a_mm / m.a.abs(),
-                redundant_below_slope: 0.0,
-                empty_from_slope: f64::INFINITY,
-            }
-        } else {
-            Self {
-                surface,
-                centre_per_slope: 0.0,
-                radius_mm: f64::INFINITY,
-                redundant_below_slope: f64::INFINITY,
-                empty_from_slope: if m.b != 0.0 { a_mm / m.b.abs() } else { f64::INFINITY },
-            }
-        }
+        let (centre_per_slope, radius_mm, empty_from_slope) = entrance_disc(m, a_mm);
+        let redundant_below_slope = if radius_mm.is_finite() { 0.0 } else { f64::INFINITY };
+        Self { surface, centre_per_slope, radius_mm, redundant_below_slope, empty_from_slope }
+    }
+}
+
+/// The entrance-plane disc of the rays that pass an aperture of radius `a_mm` reached through the
+/// entrance-to-arrival matrix `m`: (centre per unit slope `-B / A`, radius `a / |A|`, the slope from which it is
+/// empty). A crossing with `A = 0` does not depend on the entry point: an unbounded disc that every ray misses
+/// once `|B u| > a` (infinity when B is 0 too).
+fn entrance_disc(m: &Mat2, a_mm: f64) -> (f64, f64, f64) {
+    if m.a.abs() > 1e-12 {
+        (-m.b / m.a, a_mm / m.a.abs(), f64::INFINITY)
+    } else {
+        (0.0, f64::INFINITY, if m.b != 0.0 { a_mm / m.b.abs() } else { f64::INFINITY })
     }
 }
 
@@ -369,6 +367,18 @@ impl SpriteMasks {
     pub fn cutting_surfaces(&self) -> &[usize] {
         &self.disc_surfaces[..self.disc_count]
     }
+}
+
+/// The map from quad coordinates into a clear-aperture disc's own (a unit circle), x from `discs[0]` (the x-z
+/// section's), y from `discs[1]`, for the region `region` (`x0 = E + rho q`) at light slope `u`:
+/// `(E + rho q - c u) / r` per axis.
+fn disc_map(discs: [&Disc; 2], region: &MaskMap, u: [f64; 2]) -> MaskMap {
+    let axis = |k: usize| {
+        let d = discs[k];
+        (region.scale[k] / d.radius_mm, (region.offset[k] - d.centre_per_slope * u[k]) / d.radius_mm)
+    };
+    let (x, y) = (axis(0), axis(1));
+    MaskMap { scale: [x.0, y.0], offset: [x.1, y.1] }
 }
 
 /// How far from its centre a mask map reaches over the quad [-1, 1]^2: a disc map reaching at most 1 holds the
@@ -975,13 +985,7 @@ impl GhostSystem {
             if redundant || !(a.radius_mm.is_finite() && b.radius_mm.is_finite()) {
                 continue;
             }
-            let disc = MaskMap {
-                scale: [rho[0] / a.radius_mm, rho[1] / b.radius_mm],
-                offset: [
-                    (e[0] - a.centre_per_slope * u[0]) / a.radius_mm,
-                    (e[1] - b.centre_per_slope * u[1]) / b.radius_mm,
-                ],
-            };
+            let disc = disc_map([a, b], &masks.region, u);
             if map_reach(&disc) > 1.0 {
                 cutting.push((disc, b.surface));
             }
@@ -1074,7 +1078,10 @@ impl GhostSystem {
                         .matrices
                         .stop_from_entrance
                         .iter()
-                        .map(|m| if m.a.abs() > 1e-12 { (-m.b / m.a, r_a / m.a.abs()) } else { (0.0, f64::INFINITY) })
+                        .map(|m| {
+                            let (centre, radius, _) = entrance_disc(m, r_a);
+                            (centre, radius)
+                        })
                         .collect()
                 };
                 for (a, b) in stops(xs).into_iter().zip(stops(self)) {
@@ -1189,17 +1196,10 @@ mod tests {
                 for (k, sprite) in frame.sprites.iter().enumerate().filter(|(_, sp)| sp.culled.is_none()) {
                     let masks = s.sprite_masks(k, light);
                     let co = &s.coefficients[k];
-                    let (rho, e) = (masks.region.scale, masks.region.offset);
                     let every: Vec<MaskMap> = s.discs[co.discs.start as usize..co.discs.end as usize]
                         .iter()
                         .filter(|d| d.radius_mm.is_finite())
-                        .map(|d| MaskMap {
-                            scale: [rho[0] / d.radius_mm, rho[1] / d.radius_mm],
-                            offset: [
-                                (e[0] - d.centre_per_slope * light[0]) / d.radius_mm,
-                                (e[1] - d.centre_per_slope * light[1]) / d.radius_mm,
-                            ],
-                        })
+                        .map(|d| disc_map([d, d], &masks.region, light))
                         .collect();
                     for disc in masks.discs() {
                         assert!(map_reach(disc) > 1.0, "{id}: a kept disc cuts the quad");

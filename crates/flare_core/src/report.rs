@@ -82,6 +82,18 @@ pub struct GhostRow {
     pub vignetted_share: f64,
 }
 
+impl GhostRow {
+    /// The clear apertures that cut the ghost and the share of its light they take, in a few words
+    /// ("7, 8 (20 %)"), or "-" when none cuts it: the text table's and the app's words.
+    pub fn vignetting_words(&self) -> String {
+        if self.vignetted_by.is_empty() {
+            return "-".to_owned();
+        }
+        let surfaces: Vec<String> = self.vignetted_by.iter().map(|k| k.to_string()).collect();
+        format!("{} ({:.0} %)", surfaces.join(", "), 100.0 * self.vignetted_share)
+    }
+}
+
 /// What coating one surface alone would do.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct CoatingSensitivity {
@@ -269,19 +281,9 @@ fn measure(system: &GhostSystem, mask: &ApertureMask, u: [f64; 2], n: usize) -> 
             let mut vignetted_by: Vec<usize> = masks.iter().flat_map(|m| m.cutting_surfaces().to_vec()).collect();
             vignetted_by.sort_unstable();
             vignetted_by.dedup();
-            // The light the stop crossings alone pass, with no clear aperture cutting.
-            let uncut_at = |p: [f64; 2]| {
-                let mut value = 0.0;
-                for (&k, m) in sprites.iter().zip(&masks) {
-                    let s = &frame.sprites[k];
-                    let q = [(p[0] - s.centre_mm[0]) / s.half_size_mm[0], (p[1] - s.centre_mm[1]) / s.half_size_mm[1]];
-                    if q[0].abs() <= 1.0 && q[1].abs() <= 1.0 {
-                        value += lum[s.wavelength] * s.irradiance * mask_product(mask, &[], m.stops(), q);
-                    }
-                }
-                value
-            };
-            let value_at = |p: [f64; 2]| {
+            // The luminance at p relative to the source's, through every mask or (`cut` false) the stop crossings
+            // alone, no clear aperture cutting.
+            let light_at = |p: [f64; 2], cut: bool| {
                 let mut value = 0.0;
                 for (&k, m) in sprites.iter().zip(&masks) {
                     let s = &frame.sprites[k];
@@ -289,17 +291,18 @@ fn measure(system: &GhostSystem, mask: &ApertureMask, u: [f64; 2], n: usize) -> 
                     if q[0].abs() > 1.0 || q[1].abs() > 1.0 {
                         continue;
                     }
-                    let open = mask_product(mask, m.discs(), m.stops(), q);
+                    let open = mask_product(mask, if cut { m.discs() } else { &[] }, m.stops(), q);
                     value += lum[s.wavelength] * s.irradiance * open;
                 }
                 value / lum_total
             };
+            let value_at = |p: [f64; 2]| light_at(p, true);
             let (mut peak, mut sum, mut lit, mut uncut) = (0.0f64, 0.0f64, 0usize, 0.0f64);
             for yi in 0..n {
                 for xi in 0..n {
                     let p = [lo[0] + (xi as f64 + 0.5) * cell[0], lo[1] + (yi as f64 + 0.5) * cell[1]];
                     if !vignetted_by.is_empty() {
-                        uncut += uncut_at(p);
+                        uncut += light_at(p, false);
                     }
                     let value = value_at(p);
                     if value > 0.0 {
@@ -321,7 +324,7 @@ fn measure(system: &GhostSystem, mask: &ApertureMask, u: [f64; 2], n: usize) -> 
                 peak_vs_source: finite(peak / source_peak),
                 mean_vs_source: if lit > 0 { finite(sum / lit as f64 / source_peak) } else { 0.0 },
                 energy_fraction: finite(energy / power_in),
-                vignetted_share: if uncut > 0.0 { finite(1.0 - sum * lum_total / uncut).clamp(0.0, 1.0) } else { 0.0 },
+                vignetted_share: if uncut > 0.0 { finite(1.0 - sum / uncut).clamp(0.0, 1.0) } else { 0.0 },
                 vignetted_by,
             }
         })
