@@ -476,6 +476,75 @@ fn render_with_the_ray_traced_methods() {
     }
 }
 
+/// The ray-traced methods draw the frame's own sensor: an 18 mm sensor at 160x96 is the middle of the 36 mm
+/// frame at 320x192 (the same pixels a millimetre, the same pixel centres), ghost for ghost.
+#[test]
+fn the_ray_traced_methods_draw_the_frames_own_sensor() {
+    let dir = tempfile::tempdir().unwrap();
+    let devices: &[&str] =
+        if std::env::var("FLARELAB_REQUIRE_GPU").is_ok_and(|v| v == "1") { &["cpu", "gpu"] } else { &["cpu"] };
+    for &device in devices {
+        let render = |sensor_mm: &str, size: &str| {
+            let out = dir.path().join(format!("{device}-{sensor_mm}.exr"));
+            let args = [
+                "render",
+                "tessar",
+                "--light-deg",
+                "5,3",
+                "--size",
+                size,
+                "--sensor-mm",
+                sensor_mm,
+                "--method",
+                "raygrid",
+                "--grid",
+                "16",
+                "--device",
+                device,
+                "--no-starburst",
+                "--exposure-ev",
+                "10",
+                "--coating",
+                "lens",
+                "-o",
+                out.to_str().unwrap(),
+            ];
+            let result = flarelab(&args);
+            assert!(result.status.success(), "{args:?}: {}", String::from_utf8_lossy(&result.stderr));
+            flare_core::output::read_exr_channels(&out).unwrap()
+        };
+        let (small, whole) = (render("18", "160x96"), render("36", "320x192"));
+        assert_eq!((small.width, small.height), (160, 96));
+        // The grid follows the part of each ghost that lands in the window, so the smaller window samples its
+        // ghosts more finely: the same light in the same place, not the same bytes.
+        let (mut sums, mut difference) = ([[0.0f64; 3]; 2], 0.0f64);
+        for c in ["flare.R", "flare.G", "flare.B"] {
+            let (a, b) = (&small.channels[c], &whole.channels[c]);
+            for y in 0..96 {
+                for x in 0..160 {
+                    let (p, q) = (f64::from(a[y * 160 + x]), f64::from(b[(y + 48) * 320 + x + 80]));
+                    for (k, v) in [p, q].into_iter().enumerate() {
+                        sums[k][0] += v;
+                        sums[k][1] += v * (x as f64 + 0.5);
+                        sums[k][2] += v * (y as f64 + 0.5);
+                    }
+                    difference += (p - q).abs();
+                }
+            }
+        }
+        let [a, b] = sums;
+        assert!(b[0] > 0.0, "{device}: the middle of the frame has ghosts");
+        let (energy, mean_difference) = (a[0] / b[0], difference / b[0]);
+        let shift = (a[1] / a[0] - b[1] / b[0]).hypot(a[2] / a[0] - b[2] / b[0]);
+        eprintln!(
+            "{device}: energy 18 mm / 36 mm {energy:.4}, centroid {shift:.3} px apart, mean difference {mean_difference:.3}"
+        );
+        assert!((energy - 1.0).abs() < 0.02, "{device}: energy ratio {energy}");
+        assert!(shift < 0.25, "{device}: the ghosts' centroid moved {shift} px");
+        assert!(mean_difference < 0.12, "{device}: mean difference {mean_difference} of the light");
+    }
+}
+
 #[test]
 fn bench_writes_csv_markdown_and_plot_and_updates_the_readme() {
     let dir = tempfile::tempdir().unwrap();

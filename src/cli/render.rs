@@ -22,7 +22,6 @@ use flare_core::preset::{Document, LutSource};
 use flare_core::raytrace::{self};
 
 use flare_core::frame::parse_size;
-use flare_core::optics::sensor::FULL_FRAME_WIDTH_MM;
 use flare_core::shot::{
     self,
     pattern::FramePattern,
@@ -646,9 +645,6 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         (None, Some(_)) => bail!("-o {out_text}: the name has a frame field; give --frames A-B to render a sequence"),
         (None, None) => None,
     };
-    if grid.is_some() && doc.sensor_width_mm != FULL_FRAME_WIDTH_MM {
-        bail!("--sensor-mm {}: the ray-traced methods draw the 36 mm frame", doc.sensor_width_mm);
-    }
     if grid.is_some() && doc.auto_light.is_some() {
         bail!("--light auto applies to the paraxial, blended and photo methods");
     }

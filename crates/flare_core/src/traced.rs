@@ -64,10 +64,12 @@ impl TracedGhosts {
     fn trace_gains(&self, device: &Device, frame: &Frame, gains: &[f32]) -> Result<Traced, FrameError> {
         let started = std::time::Instant::now();
         // On the sensor: a desqueezed frame's rows are the sensor's, averaged down when it is written.
+        // On the frame's own sensor, as the paraxial sprites are drawn.
         let (light, (width, height)) = (frame.request.light_deg, (frame.scene.width, frame.scene.height));
+        let sensor_width_mm = frame.request.sensor_width();
         let mut fallback = String::new();
         if let (Some(gpu), Device::Gpu(drawer), Grid::Fixed(cells)) = (&self.gpu, device, self.grid) {
-            let window = Window::frame(width, height);
+            let window = Window::for_sensor(sensor_width_mm, width, height);
             match gpu.render(&drawer.ctx, &self.renderer, light, window, cells, self.gpu_samples, gains) {
                 Ok(traced) => {
                     let how = format!(
@@ -95,7 +97,7 @@ impl TracedGhosts {
                 Err(e) => return Err(FrameError::Request(e.to_string())),
             }
         }
-        let request = RayGridRequest::frame(light, width, height, self.grid).weighted(gains);
+        let request = RayGridRequest::frame_on(light, sensor_width_mm, width, height, self.grid).weighted(gains);
         let traced = self
             .renderer
             .render_request(&request)

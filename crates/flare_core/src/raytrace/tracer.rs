@@ -62,9 +62,15 @@ pub struct RayGridRequest<'a> {
 }
 
 impl<'a> RayGridRequest<'a> {
-    /// Every ghost in a `width` x `height` frame.
+    /// Every ghost in a `width` x `height` frame on the full-frame sensor.
     pub fn frame(light_deg: [f64; 2], width: u32, height: u32, grid: Grid) -> Self {
         Self::views(light_deg, vec![View { window: Window::frame(width, height), turn_deg: 0.0 }], grid)
+    }
+
+    /// Every ghost in a `width` x `height` frame on a sensor `sensor_width_mm` wide (a look's own sensor).
+    pub fn frame_on(light_deg: [f64; 2], sensor_width_mm: f64, width: u32, height: u32, grid: Grid) -> Self {
+        let window = Window::for_sensor(sensor_width_mm, width, height);
+        Self::views(light_deg, vec![View { window, turn_deg: 0.0 }], grid)
     }
 
     /// Every ghost in `views`.
