@@ -207,7 +207,7 @@ impl Frame {
             display.accumulation_divisor = if d >= 2 { d / 2 } else { 1 };
         }
         let path = request.motion.as_ref().filter(|p| p.moves());
-        let shutter = path.map(|p| crate::shutter::plan_samples(flare, p, sensor, w, h, display.flare_gain()));
+        let shutter = path.map(|p| crate::shutter::plan_samples(flare, p, sensor, w, display.flare_gain()));
         let (mut scene, lut_scene, sprites) = match (path, &shutter) {
             (Some(path), Some(samples)) if samples.count > 1 => {
                 // The frame's own time (the middle) gives the starburst, the uniforms and the sprite list.

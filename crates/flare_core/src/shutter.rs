@@ -11,10 +11,12 @@
 //! linearly ([`LightPath::at`]).
 //!
 //! [`plan_samples`] chooses how many time samples each ghost needs: every paraxial sprite of the frame is laid
-//! out at each path point (the same culling as the frame), and the distance a ghost's sprites travel (in
-//! pixels, summed along the path, the longest of its wavelengths) gives it the smallest `2^j + 1` samples at
-//! least `ceil(length) + 1`, evenly spaced from opening to closing inclusive: no two consecutive images of it
-//! are more than a pixel apart. A ghost that moves less than half a pixel is drawn once, at the frame's time
+//! out at each path point (the same culling as the frame) and followed by its ghost and wavelength; the
+//! distance its quad's farthest corner travels (the centre's motion plus the half-size's growth, in pixels,
+//! summed along the path over every step where the sprite is drawn at either end, the longest of the ghost's
+//! wavelengths) gives the ghost the smallest `2^j + 1` samples at least `ceil(length) + 1`, evenly spaced from
+//! opening to closing inclusive: no two consecutive images of its centre or its edges are more than a pixel
+//! apart. A ghost that moves less than half a pixel is drawn once, at the frame's time
 //! (unless the light's intensity changes while the shutter is open: then every ghost gets at least
 //! [`PATH_POINTS`] samples). The frame is built at the most any ghost needs (at most [`MAX_SAMPLES`]; a
 //! longer path leaves gaps, and [`ShutterSamples::max_gap_px`] says how large), and since the sample counts
@@ -25,11 +27,14 @@
 //! the drawn frame is the time average (the same on the GPU and its CPU twin, in the app, `render`, sequences
 //! and per-ghost layers). A streak therefore holds the energy of the
 //! sharp frame (up to the change of the ghosts' brightness along the path). The starburst (the light's own
-//! image) stays at the frame's time: it is not streaked. LUT ghosts composited over the flare through alpha
-//! (`blend.mode` alpha) are averaged as if added, which is exact only where the samples do not overlap.
+//! image) stays at the frame's time: it is not streaked (its reach is the frame's largest quad: streaking it
+//! would draw that once per sample). LUT ghosts composited over the flare through alpha (`blend.mode` alpha) are
+//! weighted as premultiplied colour and coverage (both times the sample's weight, composited one after
+//! another): exact where one sample covers a pixel; where all n samples cover it with coverage a, what lies
+//! beneath keeps `(1 - a / n)^n` instead of `1 - a`.
 
 use crate::flare::PreparedFlare;
-use crate::ghost::{Sensor, light_slopes_for_frame_position, sensor_to_pixel};
+use crate::ghost::{Sensor, light_slopes_for_frame_position};
 
 /// The widest shutter (degrees): open the whole frame.
 pub const MAX_SHUTTER_DEG: f64 = 360.0;
@@ -163,6 +168,10 @@ impl ShutterSamples {
     }
 }
 
+/// One path point's sprites by (ghost, wavelength): whether each is drawn there, and its centre and half-size
+/// (mm, the half-size's magnitude per axis).
+type SpritesAt = std::collections::HashMap<(usize, usize), (bool, [f64; 4])>;
+
 /// The smallest `2^j + 1` samples that put no more than a pixel between consecutive images along a path of
 /// `length_px`, capped at [`MAX_SAMPLES`]; at least `least`.
 fn samples_for(length_px: f64, least: usize) -> usize {
@@ -174,7 +183,7 @@ fn samples_for(length_px: f64, least: usize) -> usize {
     n
 }
 
-/// How many samples `path` needs in a `width` x `height` frame on `sensor` at the flare's gain `flare_gain`
+/// How many samples `path` needs in a frame `width` pixels wide on `sensor` at the flare's gain `flare_gain`
 /// (see the module documentation): per lens ghost, from the longest path of its sprites, and for the frame the
 /// most any ghost needs.
 pub fn plan_samples(
@@ -182,11 +191,13 @@ pub fn plan_samples(
     path: &LightPath,
     sensor: Sensor,
     width: u32,
-    height: u32,
     flare_gain: f32,
 ) -> ShutterSamples {
     let settings = flare.frame_settings_on(sensor, width, flare_gain);
-    let frames: Vec<Vec<(usize, Option<[f64; 2]>)>> = path
+    let px_per_mm = f64::from(width) / sensor.width_mm;
+    // Per path point, each sprite by its ghost and wavelength (never by its place in the list, which changes
+    // as sprites are culled): whether it is drawn there, and its centre and half-size (mm).
+    let frames: Vec<SpritesAt> = path
         .points
         .iter()
         .map(|p| {
@@ -195,25 +206,34 @@ pub fn plan_samples(
             frame
                 .sprites
                 .iter()
-                .map(|s| (s.ghost, s.culled.is_none().then(|| sensor_to_pixel(s.centre_mm, &sensor, width, height))))
+                .map(|s| {
+                    let [cx, cy] = s.centre_mm;
+                    let [hx, hy] = s.half_size_mm;
+                    ((s.ghost, s.wavelength), (s.culled.is_none(), [cx, cy, hx.abs(), hy.abs()]))
+                })
                 .collect()
         })
         .collect();
     let ghosts = flare.system.ghosts.len();
-    let sprites = frames.iter().map(Vec::len).min().unwrap_or(0);
     let mut ghost_length = vec![0.0f64; ghosts];
-    for i in 0..sprites {
+    let keys: std::collections::BTreeSet<(usize, usize)> = frames.iter().flat_map(|f| f.keys().copied()).collect();
+    for key in keys {
         let mut length = 0.0;
         for pair in frames.windows(2) {
-            // A sprite culled at either end of a step (too faint there) is not drawn there: the step is not seen.
-            if let (Some(a), Some(b)) = (pair[0][i].1, pair[1][i].1) {
-                let step = (b[0] - a[0]).hypot(b[1] - a[1]);
-                if step.is_finite() {
-                    length += step;
-                }
+            // A step is seen when the sprite is drawn at either end of it (it appears or fades within it), and
+            // its length is the farthest any corner of the sprite's quad moves: the centre's motion plus the
+            // growth of its half-size, per axis.
+            let (Some(&(drawn_a, a)), Some(&(drawn_b, b))) = (pair[0].get(&key), pair[1].get(&key)) else { continue };
+            if !(drawn_a || drawn_b) {
+                continue;
+            }
+            let along = |i: usize| ((b[i] - a[i]).abs() + (b[i + 2] - a[i + 2]).abs()) * px_per_mm;
+            let step = along(0).hypot(along(1));
+            if step.is_finite() {
+                length += step;
             }
         }
-        if let Some(g) = ghost_length.get_mut(frames[0][i].0) {
+        if let Some(g) = ghost_length.get_mut(key.0) {
             *g = g.max(length);
         }
     }

@@ -194,3 +194,113 @@ fn the_gpu_draws_the_blurred_frame_as_its_cpu_twin() {
     println!("blurred frame: {} samples, GPU vs CPU twin worst {worst}/255", built.shutter.as_ref().unwrap().count);
     assert!(worst <= 2, "worst display difference {worst}/255");
 }
+
+/// Issue 59's shot: a double Gauss whose light is keyed linearly from 2 to 10 degrees over frames 1 to 3 (4
+/// degrees a frame), seen at frame 2 through a 180-degree shutter, 480x270, one wavelength, no starburst.
+fn issue_59_shot(shutter_deg: f64) -> Document {
+    let mut doc = Document::for_lens(flare_core::optics::library::builtin_lens("pbrt_dgauss_50mm").unwrap());
+    doc.wavelengths = 1;
+    doc.starburst = false;
+    doc.exposure_auto = false;
+    doc.timeline.interpolation = Interpolation::Linear;
+    doc.timeline.light_deg.keys = vec![Key { frame: 1, value: [2.0, 0.0] }, Key { frame: 3, value: [10.0, 0.0] }];
+    doc.timeline.shutter_deg = shutter_deg;
+    doc
+}
+
+/// The time integral of the open shutter: the mean of `STILLS` still frames at the middles of equal slices of
+/// it (frames 1.75 to 2.25), each ghost at `gains`.
+fn integral(flare: &PreparedFlare, still: &Document, w: u32, h: u32, gains: &[f32]) -> HdrImage {
+    const STILLS: usize = 256;
+    let mut sum = vec![[0.0f64; 3]; (w * h) as usize];
+    for i in 0..STILLS {
+        let t = 1.75 + 0.5 * (i as f64 + 0.5) / STILLS as f64;
+        let mut request = still.frame_request_at(&flare.system, t, w, h, 1);
+        request.ghost_gains = gains.to_vec();
+        let hdr = frame::draw_cpu_hdr(&Frame::build(flare, None, &request), &Sources { flare, lut: None, plate: None });
+        for (s, p) in sum.iter_mut().zip(&hdr.pixels) {
+            for k in 0..3 {
+                s[k] += f64::from(p[k]);
+            }
+        }
+    }
+    let mut out = HdrImage::black(w, h);
+    for (o, s) in out.pixels.iter_mut().zip(&sum) {
+        for k in 0..3 {
+            o[k] = (s[k] / STILLS as f64) as f32;
+        }
+    }
+    out
+}
+
+/// Per column, the brightest pixel of any channel.
+fn column_peaks(image: &HdrImage) -> Vec<f32> {
+    (0..image.width)
+        .map(|x| {
+            (0..image.height)
+                .map(|y| image.pixels[(y * image.width + x) as usize][..3].iter().copied().fold(0.0f32, f32::max))
+                .fold(0.0f32, f32::max)
+        })
+        .collect()
+}
+
+#[test]
+fn a_blurred_frame_is_the_time_integral_of_still_frames_and_never_breaks_a_streak() {
+    let (w, h) = (480, 270);
+    let (blur_doc, still_doc) = (issue_59_shot(180.0), issue_59_shot(0.0));
+    let flare = prepared(&blur_doc);
+    let ghosts = flare.system.ghosts.len();
+    let ones = vec![1.0f32; ghosts];
+    let blurred_request = blur_doc.frame_request_at(&flare.system, 2.0, w, h, 1);
+    let blurred = Frame::build(&flare, None, &blurred_request);
+    let samples = blurred.shutter.clone().expect("the light moves while the shutter is open");
+    let sources = Sources { flare: &flare, lut: None, plate: None };
+    let test = frame::draw_cpu_hdr(&blurred, &sources);
+    let reference = integral(&flare, &still_doc, w, h, &ones);
+    let exposure = flare_core::metrics::exposure_for(&reference);
+    let psnr = flare_core::metrics::psnr(
+        &flare_core::metrics::display_values(&test, exposure),
+        &flare_core::metrics::display_values(&reference, exposure),
+    );
+    let ratio = energy(&test) / energy(&reference);
+    println!(
+        "issue 59's shot: {} samples ({:.1} a ghost, longest {:.1} px, largest gap {:.2} px): {psnr:.2} dB against 256 stills, energy {ratio:.5}",
+        samples.count,
+        samples.mean_per_ghost(),
+        samples.longest_px,
+        samples.max_gap_px
+    );
+    assert!(psnr >= 40.0, "{psnr} dB against the integral");
+    assert!((ratio - 1.0).abs() <= 0.01, "energy ratio {ratio}");
+
+    // The ghost focused near the sensor (the brightest drawn sprite, a point of light near the light's own
+    // image): alone, its streak has no gap along it wider than a pixel where the integral's streak is lit.
+    let focused = blurred
+        .sprites
+        .sprites
+        .iter()
+        .filter(|s| s.culled.is_none())
+        .max_by(|a, b| a.irradiance.total_cmp(&b.irradiance))
+        .expect("a ghost is drawn")
+        .ghost;
+    let alone: Vec<f32> = (0..ghosts).map(|g| if g == focused { 1.0 } else { 0.0 }).collect();
+    let mut request = blurred_request.clone();
+    request.ghost_gains = alone.clone();
+    let streak = column_peaks(&frame::draw_cpu_hdr(&Frame::build(&flare, None, &request), &sources));
+    let expected = column_peaks(&integral(&flare, &still_doc, w, h, &alone));
+    let peak = expected.iter().copied().fold(0.0f32, f32::max);
+    let (mut gap, mut widest, mut lit) = (0, 0, 0);
+    for (s, e) in streak.iter().zip(&expected) {
+        if *e > 0.05 * peak {
+            lit += 1;
+            gap = if *s < 0.25 * e { gap + 1 } else { 0 };
+            widest = widest.max(gap);
+        }
+    }
+    println!(
+        "ghost {focused} (the brightest): {lit} lit columns, {} samples, widest gap {widest} px",
+        samples.per_ghost[focused]
+    );
+    assert!(lit > 10, "the focused ghost streaks across {lit} columns");
+    assert!(widest <= 1, "ghost {focused}'s streak has a gap of {widest} px");
+}

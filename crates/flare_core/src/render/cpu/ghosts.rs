@@ -307,9 +307,11 @@ impl GhostMasks {
         (index + 1) as f32
     }
 
-    /// Names in each enabled stop map of `scene` the level its sprite reads ([`Self::pick`] for the faster of
-    /// the map's two axes, in the scene's accumulation pixels).
+    /// Fits `scene`'s instances to its accumulation pixels: settles the point sprites
+    /// ([`Self::settle_point_sprites`]), then names in each enabled stop map the level its sprite reads
+    /// ([`Self::pick`] for the faster of the map's two axes, in the scene's accumulation pixels).
     pub fn assign_levels(&self, scene: &mut crate::render::FlareScene) {
+        self.settle_point_sprites(scene);
         let (sx, sy) = accumulation_scale(scene);
         for inst in &mut scene.instances {
             let [_, _, hx, hy] = inst.centre_half;
@@ -324,6 +326,68 @@ impl GhostMasks {
         }
     }
 }
+
+impl GhostMasks {
+    /// Draws every sprite whose quad spans at most [`POINT_SPRITE_PX`] accumulation pixels along both axes (a
+    /// ghost focused near the sensor, or one clamped to the frame's smallest sprite) as a point: a quad of
+    /// exactly [`POINT_SPRITE_PX`] pixels a side with no masks, its colour the sprite's energy (its colour times
+    /// its quad's area) times the share of the quad its masks let through, spread over the new quad's area.
+    ///
+    /// Why: a mask sampled at the centres of the one to four pixels such a quad covers lets through 0 to 4 times
+    /// the light it should as the sprite moves by a fraction of a pixel, so a moving light strobes the ghost
+    /// and a motion-blurred one breaks its streak into dashes; a quad of a whole number of pixels covers that
+    /// many pixel centres wherever it lies, and its energy is the same at every position. The share is the mean
+    /// over a [`POINT_SHARE_GRID`]-square grid of the quad of the mask product with hard disc edges and the
+    /// base aperture mask (the detail no pixel can show). The three passes draw the instance this leaves.
+    pub fn settle_point_sprites(&self, scene: &mut crate::render::FlareScene) {
+        let (sx, sy) = accumulation_scale(scene);
+        let base = &self.levels[0].mask;
+        for inst in &mut scene.instances {
+            let [cx, cy, hx, hy] = inst.centre_half;
+            let point = 0.5 * POINT_SPRITE_PX;
+            if !(hx.abs() <= point * sx && hy.abs() <= point * sy) {
+                continue;
+            }
+            let mut lit = 0.0f64;
+            for j in 0..POINT_SHARE_GRID {
+                for i in 0..POINT_SHARE_GRID {
+                    let cell = |k: usize| -1.0 + (2 * k + 1) as f32 / POINT_SHARE_GRID as f32;
+                    let q = [cell(i), cell(j)];
+                    let inside_discs = inst.discs.iter().zip(&inst.disc_scale_y).all(|(d, &scale_y)| {
+                        let (x, y) = (d[0] * q[0] + d[1], scale_y * q[1] + d[2]);
+                        d[3] == 0.0 || x * x + y * y <= 1.0
+                    });
+                    if !inside_discs {
+                        continue;
+                    }
+                    let open = inst.stops.iter().zip(&inst.scale_y).fold(1.0f32, |m, (stop, &scale_y)| {
+                        if stop[3] == 0.0 {
+                            m
+                        } else {
+                            m * base.sample(stop[0] * q[0] + stop[1], scale_y * q[1] + stop[2])
+                        }
+                    });
+                    lit += f64::from(open);
+                }
+            }
+            let share = lit / (POINT_SHARE_GRID * POINT_SHARE_GRID) as f64;
+            let (nx, ny) = (point * sx, point * sy);
+            let gain = (share * f64::from(hx.abs() * hy.abs()) / f64::from(nx * ny)) as f32;
+            for c in &mut inst.colour[..3] {
+                *c *= gain;
+            }
+            inst.centre_half = [cx, cy, nx.copysign(hx), ny.copysign(hy)];
+            inst.stops = [[0.0; 4]; 3];
+            inst.discs = [[0.0; 4]; crate::ghost::MAX_DISCS];
+        }
+    }
+}
+
+/// The side (accumulation pixels) at and below which a sprite is drawn as a point
+/// ([`GhostMasks::settle_point_sprites`]).
+pub const POINT_SPRITE_PX: f32 = 2.0;
+/// Samples a side of the grid a point sprite's lit share is measured on.
+pub const POINT_SHARE_GRID: usize = 16;
 
 /// The index of the level a stop map's last field `code` names among `levels` levels: 1 the first, clamped
 /// to those there are (`ghosts_compute.wgsl`'s `level_of`).
