@@ -66,16 +66,22 @@ const CUT: f64 = 0.15;
 const STOP: f64 = 0.15;
 const LIGHT: [f64; 2] = [3.0, 1.0];
 
-#[test]
-fn a_middle_aperture_cuts_a_ghost_as_exact_rays_are_cut() {
-    use flare_core::ghost::{FrameSettings, GhostSettings, GhostSystem, MaskMap};
-    use flare_core::optics::{LightPath, TraceOptions, TraceStatus, Tracer};
+/// The Heliar with the clear aperture two surfaces behind the stop at `CUT` of its own and the iris itself at
+/// `STOP` (so that exact rays see it too: near the axis of every surface), and the index of the cut surface.
+fn shrunk_heliar() -> (Lens, usize) {
     let mut lens = builtin_lens("heliar").unwrap();
     let stop = lens.stop_index();
     let cut = stop + 2;
     lens.surfaces[cut].semi_aperture_mm *= CUT;
-    // Stopped down (the iris itself, so that the exact rays see it too): near the axis of every surface.
     lens.surfaces[stop].semi_aperture_mm *= STOP;
+    (lens, cut)
+}
+
+#[test]
+fn a_middle_aperture_cuts_a_ghost_as_exact_rays_are_cut() {
+    use flare_core::ghost::{FrameSettings, GhostSettings, GhostSystem, MaskMap};
+    use flare_core::optics::{LightPath, TraceOptions, TraceStatus, Tracer};
+    let (lens, cut) = shrunk_heliar();
     let settings =
         GhostSettings { spectrum: flare_core::spectrum::Spectrum::single(550.0).unwrap(), ..Default::default() };
     let system = GhostSystem::build(&lens, &settings).unwrap();
@@ -147,4 +153,100 @@ fn a_middle_aperture_cuts_a_ghost_as_exact_rays_are_cut() {
     assert!(masks.cutting_surfaces().contains(&cut));
     assert!((paraxial / exact - 1.0).abs() < 0.03, "paraxial {paraxial} against exact {exact}");
     assert!(before > 1.15 * exact, "before the discs: {before} against exact {exact}");
+}
+
+/// On the sensor: the same Heliar (a middle clear aperture and the iris shrunk, near the axis of every surface,
+/// a round stop, one wavelength), the ghost the shrunk aperture cuts most drawn alone by the paraxial method
+/// (the CPU twin) and by the ray-traced reference, on a sensor wide enough to hold it whole. The sprite lights
+/// the area the traced ghost lights within 3 %; through its stop crossings alone (no clear aperture cutting) it
+/// would light far more.
+#[test]
+fn the_paraxial_sprite_lights_the_area_the_traced_ghost_lights() {
+    use flare_core::aperture::{Aperture, ApertureShape};
+    use flare_core::raytrace::RayGridRequest;
+    let (lens, cut) = shrunk_heliar();
+    let config = FlareConfig {
+        intensity_threshold: Some(0.0),
+        spectrum: flare_core::spectrum::Spectrum::single(550.0).unwrap(),
+        aperture: Aperture { shape: ApertureShape::Circle, f_number: None },
+        ..FlareConfig::default()
+    };
+    let flare = PreparedFlare::new(&lens, &config).unwrap();
+    let (_, frame) = flare.scene(LIGHT, 480, 320);
+    let u = flare_core::ghost::light_slopes_for_frame_position(LIGHT[0], LIGHT[1]);
+    // The ghost whose sprite the shrunk aperture cuts most (the share of its quad it takes).
+    let open_share = |m: &flare_core::ghost::SpriteMasks, with_discs: bool| {
+        let n = 64;
+        let inside = |map: &flare_core::ghost::MaskMap, q: [f64; 2]| {
+            let p = map.at(q);
+            p[0].hypot(p[1]) <= 1.0
+        };
+        let discs = if with_discs { m.discs() } else { &[] };
+        let count = (0..n * n)
+            .filter(|i| {
+                let q = [((i % n) as f64 + 0.5) / n as f64 * 2.0 - 1.0, ((i / n) as f64 + 0.5) / n as f64 * 2.0 - 1.0];
+                m.stops().iter().chain(discs).all(|map| inside(map, q))
+            })
+            .count();
+        count as f64 / (n * n) as f64
+    };
+    let (k, sprite) = frame
+        .sprites
+        .iter()
+        .enumerate()
+        .filter(|(k, s)| s.culled.is_none() && flare.system.sprite_masks(*k, u).cutting_surfaces().contains(&cut))
+        .max_by(|a, b| {
+            let taken = |k: usize| {
+                let m = flare.system.sprite_masks(k, u);
+                1.0 - open_share(&m, true) / open_share(&m, false).max(1e-12)
+            };
+            taken(a.0).total_cmp(&taken(b.0))
+        })
+        .expect("the shrunk aperture cuts a ghost");
+    let g = sprite.ghost;
+    let gains: Vec<f32> = (0..flare.system.ghosts.len()).map(|h| if h == g { 1.0 } else { 0.0 }).collect();
+    // A square frame on a sensor wide enough to hold the whole ghost (its quad and a tenth more), so that
+    // neither image is cut by the frame's edges.
+    let reach_mm = 1.1 * (sprite.centre_mm[0].abs().max(sprite.centre_mm[1].abs()) + sprite.half_size_mm[0].abs());
+    let side = 400;
+    let sensor = flare_core::optics::sensor::Sensor::for_frame(2.0 * reach_mm, side, side);
+    let display = flare_core::render::DisplaySettings::default();
+    let (alone, _) = flare.scene_with(LIGHT, sensor, side, side, &display, &gains);
+    let paraxial = cpu::ghost_pass(&alone, &flare.ghost_masks);
+    let traced = flare
+        .ray_grid_renderer()
+        .render_request(&RayGridRequest::frame_on(LIGHT, sensor.width_mm, side, side, Grid::Adaptive(512)).only(g))
+        .unwrap()
+        .remove(0)
+        .hdr;
+    // Lit: above half the ghost's typical irradiance (the median of its clearly lit pixels), so that an
+    // anti-aliased edge counts by half and a traced ghost's soft edge as the sprite's does.
+    let lit = |image: &flare_core::image::HdrImage| {
+        let values: Vec<f32> = image.pixels.iter().map(|p| p[1]).collect();
+        let peak = values.iter().copied().fold(0.0f32, f32::max);
+        let mut clear: Vec<f32> = values.iter().copied().filter(|&v| v > 0.05 * peak).collect();
+        clear.sort_by(f32::total_cmp);
+        let typical = clear[clear.len() / 2];
+        values.iter().filter(|&&v| v > 0.5 * typical).count()
+    };
+    let (a, b) = (lit(&paraxial), lit(&traced));
+    let masks = flare.system.sprite_masks(k, u);
+    let half_px = sprite.half_size_mm.map(|v| v.abs() * f64::from(side) / sensor.width_mm);
+    let edge_lit = |image: &flare_core::image::HdrImage| {
+        let n = side as usize;
+        (0..n).any(|i| [i, (n - 1) * n + i, i * n, i * n + n - 1].iter().any(|&k| image.pixels[k][1] > 0.0))
+    };
+    assert!(!edge_lit(&paraxial) && !edge_lit(&traced), "the whole ghost is in the frame");
+    // The stop crossings alone, no clear aperture cutting: what the sprite lit before any middle aperture cut it.
+    let uncut = open_share(&masks, false) * 4.0 * half_px[0] * half_px[1];
+    eprintln!(
+        "ghost ({}, {}), cut by {:?}: lit pixels paraxial {a}, traced {b} (ratio {:.4}); through the stop crossings alone {uncut:.0}",
+        flare.system.ghosts[g].i,
+        flare.system.ghosts[g].j,
+        masks.cutting_surfaces(),
+        a as f64 / b as f64,
+    );
+    assert!(b > 200, "the traced ghost is large: {b} px");
+    assert!((a as f64 / b as f64 - 1.0).abs() <= 0.03, "paraxial {a} px against traced {b} px");
+    assert!(uncut > 1.15 * b as f64, "uncut, the sprite would light {uncut:.0} px against {b}");
 }
