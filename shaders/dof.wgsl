@@ -16,9 +16,12 @@ struct Layer {
     pixels: vec4<u32>,
     // layer defocus, spacing, lowest and highest layer defocus
     shape: vec4<f32>,
-    // cat's eye centre at pixel (x, y): (c0x + cx x, c0y + cy y) as c0x, cx, c0y, cy
-    cat: vec4<f32>,
-    // cat's eye radius, soft edge, on (1/0), unused
+    // the cat's eye: up to 4 clear apertures' circles, each centre at pixel (x, y) (c0x + cx x, c0y + cy y) as
+    // c0x, cx, c0y, cy
+    cat: array<vec4<f32>, 4>,
+    // each circle's radius (pupil radii; 0: an empty slot)
+    cat_radius: vec4<f32>,
+    // circles in use, soft edge, on (1/0), unused
     cat_more: vec4<f32>,
     // pupil radii per pixel of offset along x and along y (2 / sigma of each axis, signed), the cat's eye's x
     // scale (an anamorphic pupil's x semi-axis over its y one; 1 for a round one), unused
@@ -88,10 +91,19 @@ fn cat_factor(q: vec2<f32>, x: f32, y: f32) -> f32 {
     if (layer.cat_more.z == 0.0) {
         return 1.0;
     }
-    let c = vec2<f32>(layer.cat.x + layer.cat.y * x, layer.cat.z + layer.cat.w * y);
     let qx = q.x * layer.pupil.z;
-    let d = sqrt((qx - c.x) * (qx - c.x) + (q.y - c.y) * (q.y - c.y));
-    return clamp(0.5 + (layer.cat_more.x - d) / layer.cat_more.y, 0.0, 1.0);
+    var m = 1.0;
+    for (var k = 0u; k < 4u; k = k + 1u) {
+        let radius = layer.cat_radius[k];
+        if (radius == 0.0) {
+            continue;
+        }
+        let cat = layer.cat[k];
+        let c = vec2<f32>(cat.x + cat.y * x, cat.z + cat.w * y);
+        let d = sqrt((qx - c.x) * (qx - c.x) + (q.y - c.y) * (q.y - c.y));
+        m = m * clamp(0.5 + (radius - d) / layer.cat_more.y, 0.0, 1.0);
+    }
+    return m;
 }
 
 // The normalisation at pixel (x, y) (twin: `live::norm_at`).

@@ -1,12 +1,12 @@
 //! The blur kernel: the stop's shape seen through the entrance pupil, scaled to the blur diameter, cut off-axis
-//! by the front clear aperture (the cat's eye), normalised to 1.
+//! by the lens's clear apertures (the cat's eye), normalised to 1.
 //!
 //! # How it works
 //! A frame offset `o` (pixels, X right, Y up) from a source of signed defocus `sigma` (pixels, see
 //! [`super::DofModel::defocus_px`]) is the pupil point `q = sign(sigma) o / (|sigma| / 2)` in pupil radii:
 //! upright behind the focus plane, point-reflected in front of it. Its weight is the aperture mask at
-//! `mask_sign q` (the stop imaged into the pupil) times, with the cat's eye, the coverage of the front aperture's
-//! circle in pupil units ([`super::DofModel::cat_eye_at`]) with a soft edge `edge` wide (the sampling step, so
+//! `mask_sign q` (the stop imaged into the pupil) times, with the cat's eye, the coverage of each cutting clear
+//! aperture's circle in pupil units ([`super::DofModel::cat_eyes_at`]) with a soft edge `edge` wide (the sampling step, so
 //! that the cut is antialiased like the mask). [`raster`] integrates it over each target pixel (s x s samples)
 //! for the reference; [`super::live`] samples it per tap. An anamorphic lens's kernel has a defocus per axis
 //! ([`pupil_point_xy`], [`raster_xy`]): the pupil point is `2 o_x / sigma_x` along x and `2 o_y / sigma_y` along y.
@@ -27,17 +27,20 @@ pub fn pupil_point_xy(o: [f64; 2], sigma: [f64; 2]) -> [f64; 2] {
     [o[0] * (2.0 / sigma[0]), o[1] * (2.0 / sigma[1])]
 }
 
-/// The coverage of the circle `cat` (centre, radius in pupil radii) at `q`, with a soft edge `edge` wide; `q`'s
-/// x is first scaled by `x_scale` (an anamorphic pupil's x semi-axis over its y one; 1 for a round pupil).
+/// The coverage of the circles `cats` (each centre and radius in pupil radii: the clear apertures that cut the
+/// pupil) at `q`, the product of each one's, with a soft edge `edge` wide; `q`'s x is first scaled by `x_scale`
+/// (an anamorphic pupil's x semi-axis over its y one; 1 for a round pupil). No circles: 1.
 #[inline]
-pub fn cat_eye_coverage(q: [f64; 2], cat: Option<([f64; 2], f64)>, edge: f64, x_scale: f64) -> f64 {
-    match cat {
-        None => 1.0,
-        Some((c, r)) => {
-            let d = (q[0] * x_scale - c[0]).hypot(q[1] - c[1]);
-            (0.5 + (r - d) / edge.max(1e-9)).clamp(0.0, 1.0)
+pub fn cat_eye_coverage(q: [f64; 2], cats: &[([f64; 2], f64)], edge: f64, x_scale: f64) -> f64 {
+    let mut m = 1.0;
+    for &(c, r) in cats {
+        let d = (q[0] * x_scale - c[0]).hypot(q[1] - c[1]);
+        m *= (0.5 + (r - d) / edge.max(1e-9)).clamp(0.0, 1.0);
+        if m == 0.0 {
+            break;
         }
     }
+    m
 }
 
 /// The kernel's weight at the pupil point `q` (before normalisation).
@@ -46,12 +49,12 @@ pub fn weight(
     mask: &ApertureMask,
     mask_sign: f64,
     q: [f64; 2],
-    cat: Option<([f64; 2], f64)>,
+    cats: &[([f64; 2], f64)],
     edge: f64,
     x_scale: f64,
 ) -> f64 {
     let open = f64::from(mask.sample((mask_sign * q[0]) as f32, (mask_sign * q[1]) as f32));
-    if open == 0.0 { 0.0 } else { open * cat_eye_coverage(q, cat, edge, x_scale) }
+    if open == 0.0 { 0.0 } else { open * cat_eye_coverage(q, cats, edge, x_scale) }
 }
 
 /// A kernel rasterised on the pixel grid around its source: `(2 radius + 1)^2` weights, row by row from the top
@@ -77,8 +80,8 @@ pub fn samples_per_pixel(diameter_px: f64) -> usize {
 /// The kernel of a source of defocus `sigma` (pixels) integrated over each target pixel with s x s samples
 /// ([`samples_per_pixel`]), normalised to 1; the identity when no sample falls inside (a blur below the sample
 /// spacing, or a cat's eye that closes the pupil: then the pixel keeps its own light).
-pub fn raster(mask: &ApertureMask, mask_sign: f64, sigma: f64, cat: Option<([f64; 2], f64)>) -> RasterKernel {
-    raster_xy(mask, mask_sign, [sigma; 2], cat, 1.0)
+pub fn raster(mask: &ApertureMask, mask_sign: f64, sigma: f64, cats: &[([f64; 2], f64)]) -> RasterKernel {
+    raster_xy(mask, mask_sign, [sigma; 2], cats, 1.0)
 }
 
 /// [`raster`] of an oval: the defocus `sigma` along x and along y (an anamorphic lens's), the cat's eye comparing
@@ -87,7 +90,7 @@ pub fn raster_xy(
     mask: &ApertureMask,
     mask_sign: f64,
     sigma: [f64; 2],
-    cat: Option<([f64; 2], f64)>,
+    cats: &[([f64; 2], f64)],
     x_scale: f64,
 ) -> RasterKernel {
     let widest = sigma[0].abs().max(sigma[1].abs());
@@ -109,7 +112,7 @@ pub fn raster_xy(
                 // The sample's frame offset (X right, Y up) from the source's centre.
                 let ox = f64::from(i) - 0.5 + (sx as f64 + 0.5) * step;
                 let oy = -(f64::from(j) - 0.5 + (sy as f64 + 0.5) * step);
-                sum += weight(mask, mask_sign, pupil_point_xy([ox, oy], sigma), cat, edge, x_scale);
+                sum += weight(mask, mask_sign, pupil_point_xy([ox, oy], sigma), cats, edge, x_scale);
             }
         }
         *w = sum;
@@ -134,7 +137,7 @@ mod tests {
     fn a_kernel_sums_to_one_and_spans_its_diameter() {
         let m = mask(ApertureShape::Circle);
         for sigma in [0.3, 3.0, 17.5, -40.0] {
-            let k = raster(&m, 1.0, sigma, None);
+            let k = raster(&m, 1.0, sigma, &[]);
             let total: f64 = k.weights.iter().map(|&w| f64::from(w)).sum();
             assert!((total - 1.0).abs() < 1e-5, "{sigma}: {total}");
             // The widest row holds about the diameter's worth of lit pixels.
@@ -144,14 +147,14 @@ mod tests {
             let across: f32 = middle.iter().map(|w| w / peak).sum();
             assert!((f64::from(across) - sigma.abs().max(1.0)).abs() < 1.0, "{sigma}: {across}");
         }
-        assert_eq!(raster(&m, 1.0, 0.0, None), RasterKernel::identity());
+        assert_eq!(raster(&m, 1.0, 0.0, &[]), RasterKernel::identity());
     }
 
     #[test]
     fn in_front_of_the_focus_plane_the_pupil_is_point_reflected() {
         // Five blades are not point-symmetric: the kernel in front is the one behind turned by 180 degrees.
         let m = mask(ApertureShape::Blades { count: 5, rotation_deg: 0.0, roundness: 0.0 });
-        let (behind, front) = (raster(&m, 1.0, 21.0, None), raster(&m, 1.0, -21.0, None));
+        let (behind, front) = (raster(&m, 1.0, 21.0, &[]), raster(&m, 1.0, -21.0, &[]));
         let flipped: Vec<f32> = front.weights.iter().rev().cloned().collect();
         let diff = behind.weights.iter().zip(&flipped).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
         assert!(diff < 1e-6, "{diff}");
@@ -162,8 +165,8 @@ mod tests {
     #[test]
     fn the_cat_eye_cuts_the_side_towards_its_offset() {
         let m = mask(ApertureShape::Circle);
-        let full = raster(&m, 1.0, 30.0, None);
-        let cut = raster(&m, 1.0, 30.0, Some(([1.2, 0.0], 1.0)));
+        let full = raster(&m, 1.0, 30.0, &[]);
+        let cut = raster(&m, 1.0, 30.0, &[([1.2, 0.0], 1.0)]);
         // Lit pixels: fewer, and all on the right half (X > 0) where the circle centred at +1.2 overlaps.
         let lit = |k: &RasterKernel| k.weights.iter().filter(|&&w| w > 0.0).count();
         assert!(lit(&cut) < lit(&full) / 2, "{} of {}", lit(&cut), lit(&full));

@@ -66,16 +66,23 @@ pub struct LiveLayer {
     pub pixels: [u32; 4],
     /// The layer's defocus, the spacing of the layers (hat weights), the lowest and the highest layer's defocus.
     pub shape: [f32; 4],
-    /// The cat's eye centre (pupil radii) at pixel (x, y): `[c0x + cx x, c0y + cy y]`: c0x, cx, c0y, cy.
-    pub cat: [f32; 4],
-    /// The cat's eye radius, its soft edge (pupil radii), 1 when the cat's eye is on, 2 / |sigma_k|.
+    /// The cat's eye: up to [`MAX_LAYER_CATS`] clear apertures' circles, each centre (pupil radii) at pixel (x, y)
+    /// `[c0x + cx x, c0y + cy y]`: c0x, cx, c0y, cy.
+    pub cat: [[f32; 4]; MAX_LAYER_CATS],
+    /// Each circle's radius (pupil radii; 0: an empty slot).
+    pub cat_radius: [f32; MAX_LAYER_CATS],
+    /// Circles in use, their soft edge (pupil radii), 1 when the cat's eye is on, unused.
     pub cat_more: [f32; 4],
     /// Pupil radii per pixel of offset along x and along y, `2 / sigma` of each axis (signed: reflected in front of
     /// its focus; equal for a lens of revolution), the pupil's x semi-axis over its y one (the cat's eye's x
     /// scale, 1 for a lens of revolution), unused.
     pub pupil: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<LiveLayer>() == 144);
+const _: () = assert!(std::mem::size_of::<LiveLayer>() == 208);
+
+/// The most clear-aperture circles a layer's cat's eye carries: those that cut deepest into the pupil at the
+/// frame's corners ([`LivePlan::new`]).
+pub const MAX_LAYER_CATS: usize = 4;
 
 /// Everything the live method needs, planned on the CPU for either twin.
 #[derive(Clone, Debug)]
@@ -109,10 +116,17 @@ fn cat_factor(layer: &LiveLayer, q: [f32; 2], x: f32, y: f32) -> f32 {
     if layer.cat_more[2] == 0.0 {
         return 1.0;
     }
-    let c = [layer.cat[0] + layer.cat[1] * x, layer.cat[2] + layer.cat[3] * y];
     let qx = q[0] * layer.pupil[2];
-    let d = ((qx - c[0]) * (qx - c[0]) + (q[1] - c[1]) * (q[1] - c[1])).sqrt();
-    (0.5 + (layer.cat_more[0] - d) / layer.cat_more[1]).clamp(0.0, 1.0)
+    let mut m = 1.0f32;
+    for (cat, &radius) in layer.cat.iter().zip(&layer.cat_radius) {
+        if radius == 0.0 {
+            continue;
+        }
+        let c = [cat[0] + cat[1] * x, cat[2] + cat[3] * y];
+        let d = ((qx - c[0]) * (qx - c[0]) + (q[1] - c[1]) * (q[1] - c[1])).sqrt();
+        m *= (0.5 + (radius - d) / layer.cat_more[1]).clamp(0.0, 1.0);
+    }
+    m
 }
 
 /// The pupil point of tap offset `t` (texels, Y down) in `layer`.
@@ -212,13 +226,37 @@ impl LivePlan {
         let f = f64::from(factor);
         let small = diameter < 1e-3;
         let pupil_per_px = sigma.map(|s| if small || s.abs() < 1e-9 { 0.0 } else { 2.0 / s });
-        // The cat's eye at the layer's depth: linear in the pixel position.
+        // The cat's eye at the layer's depth: each clear aperture's circle, its centre linear in the pixel
+        // position, its radius the same everywhere. Of those that cut the pupil at some corner of the frame (the
+        // farthest a centre goes), the MAX_LAYER_CATS that cut deepest.
         let depth_mm = depth_of(model, centre);
-        let cat = model.cat_eye_at(0.0, 0.0, depth_mm).zip(model.cat_eye_at(1.0, 1.0, depth_mm));
-        let (cat_coeffs, cat_radius) = match cat {
-            Some(((c0, r), (c1, _))) => ([c0[0], c1[0] - c0[0], c0[1], c1[1] - c0[1]], r),
-            None => ([0.0; 4], 0.0),
-        };
+        let (fw, fh) = (f64::from(self.width), f64::from(self.height));
+        let (at0, at1) = (model.cat_circles_at(0.0, 0.0, depth_mm), model.cat_circles_at(1.0, 1.0, depth_mm));
+        let corners: Vec<Vec<([f64; 2], f64)>> = [(0.0, 0.0), (fw, 0.0), (0.0, fh), (fw, fh)]
+            .iter()
+            .map(|&(x, y)| model.cat_circles_at(x, y, depth_mm))
+            .collect();
+        let mut chosen: Vec<(f64, usize)> = (0..at0.len())
+            .map(|k| {
+                let depth = corners
+                    .iter()
+                    .map(|c| super::model::cut_depth(c[k].0, c[k].1, model.cat_x_scale()))
+                    .fold(f64::MIN, f64::max);
+                (depth, k)
+            })
+            .filter(|&(depth, _)| depth > 0.0)
+            .collect();
+        chosen.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+        chosen.truncate(MAX_LAYER_CATS);
+        let cat_on = model.cat_eye;
+        let mut cat_coeffs = [[0.0f32; 4]; MAX_LAYER_CATS];
+        let mut cat_radius = [0.0f32; MAX_LAYER_CATS];
+        for (slot, &(_, k)) in chosen.iter().enumerate() {
+            let ((c0, r), (c1, _)) = (at0[k], at1[k]);
+            cat_coeffs[slot] = [c0[0], c1[0] - c0[0], c0[1], c1[1] - c0[1]].map(|v| v as f32);
+            // A circle that passes nothing has radius 0, which marks an empty slot: the smallest radius instead.
+            cat_radius[slot] = (r as f32).max(f32::MIN_POSITIVE);
+        }
         let cell_pupil = if small { 1.0 } else { 2.0 * f / diameter };
         let reach = if small { 0 } else { (diameter / (2.0 * f) + 0.5).ceil() as u32 };
         // The texels a pixel's tent weights reach, and those the taps reach from them.
@@ -241,8 +279,14 @@ impl LivePlan {
             out,
             pixels: [0; 4],
             shape: [centre as f32, spacing as f32, lo as f32, hi as f32],
-            cat: cat_coeffs.map(|v| v as f32),
-            cat_more: [cat_radius as f32, cell_pupil as f32, if cat.is_some() { 1.0 } else { 0.0 }, 0.0],
+            cat: cat_coeffs,
+            cat_radius,
+            cat_more: [
+                chosen.len() as f32,
+                cell_pupil as f32,
+                if cat_on && !chosen.is_empty() { 1.0 } else { 0.0 },
+                0.0,
+            ],
             pupil: [pupil_per_px[0] as f32, pupil_per_px[1] as f32, model.cat_x_scale() as f32, 0.0],
         };
         // Taps: the kernel averaged over 3 x 3 points of each texel cell (no cat's eye: that is per source).
@@ -255,7 +299,7 @@ impl LivePlan {
                     for sx in 0..3 {
                         let ox = (f64::from(tx) + (f64::from(sx) - 1.0) / 3.0) * f;
                         let oy = -(f64::from(ty) + (f64::from(sy) - 1.0) / 3.0) * f;
-                        sum += weight(mask, model.mask_sign, pupil_point_xy([ox, oy], sigma), None, 1.0, 1.0);
+                        sum += weight(mask, model.mask_sign, pupil_point_xy([ox, oy], sigma), &[], 1.0, 1.0);
                     }
                 }
                 if sum > 0.0 {
@@ -268,7 +312,7 @@ impl LivePlan {
         }
         layer.taps[1] = taps.len() as u32;
         // Normalisation: one value, or a table over the frame with the cat's eye.
-        if cat.is_none() {
+        if layer.cat_more[2] == 0.0 {
             let total: f32 = taps.iter().map(|t| t[2]).sum();
             self.norm.push(1.0 / total);
         } else {

@@ -22,10 +22,15 @@
 //!
 //! **The kernel** ([`kernel`]) is the stop's shape (blades, rotation, roundness or a custom image: the same
 //! [`crate::aperture::ApertureMask`] as the ghosts) seen through the entrance pupil, scaled to c. With the cat's
-//! eye on, it is cut off-axis by the front clear aperture: the paraxial entrance region of the image path, the
-//! computation the ghost sprites use for their front-disc mask. A ray from an object point at S, whose chief
-//! ray has the slope u, through the pupil point P crosses the first vertex's plane at `P (1 - z_ep / S) - u z_ep`,
-//! which must lie within the front semi-aperture R. Every kernel is normalised to 1: energy is conserved.
+//! eye on, it is cut off-axis by every clear aperture of the image path, as the ghost sprites are by theirs: a
+//! ray from an object point at S, whose chief ray has the slope u, through the pupil point P crosses the first
+//! vertex's plane at `P (1 - z_ep / S) - u z_ep` with the slope `P / S + u`, and each surface's plane at the
+//! paraxial height its entrance matrix gives, which must lie within its semi-aperture: a circle in the pupil per
+//! surface ([`DofModel::cat_circles_at`]; the front one cuts the outer side of a corner's pupil, the rear group's
+//! the inner side: the lemon-shaped bokeh). The reference cuts each pixel's kernel by every circle that cuts it;
+//! the live method takes per layer the [`live::MAX_LAYER_CATS`] that cut deepest at the frame's corners. Against
+//! exact rays through a fast double Gauss (a test), the share of the pupil left at a corner is within 2 %. Every
+//! kernel is normalised to 1: energy is conserved.
 //!
 //! **Occlusion** (both methods). The scene is a plate with one depth per pixel (2.5D). Pixels are grouped into
 //! layers by depth; each layer scatters (or gathers) its premultiplied colour and its coverage with its own
@@ -57,8 +62,9 @@
 //!
 //! **Axial colour** (optional, [`DofDoc::axial_colour`]): the sensor stays where the d-line focuses, and each of
 //! R, G and B is defocused with the model of its own wavelength ([`DofModel::at_wavelength`]: the object plane
-//! that wavelength images onto the sensor), so out-of-focus edges take the lens's colour fringes.
-//! Not modelled: the vignetting by surfaces other than the front one.
+//! that wavelength images onto the sensor), so out-of-focus edges take the lens's colour fringes; the clear
+//! apertures' circles stay the d-line's. An anamorphic lens's bokeh is cut by its front aperture alone (its other
+//! apertures would cut ellipses per section, not modelled).
 
 pub mod depth;
 pub mod kernel;
@@ -88,7 +94,7 @@ pub struct DofDoc {
     pub focus_m: f64,
     /// Focus on the depth at this plate pixel (x, y from the top-left) instead of `focus_m`.
     pub focus_px: Option<[u32; 2]>,
-    /// Cut the kernel off-axis by the front clear aperture.
+    /// Cut the kernel off-axis by the lens's clear apertures (the cat's eye).
     pub cat_eye: bool,
     /// Axial colour: each of R, G and B defocused at its own wavelength (the RGB spectrum's, 650, 510 and 475
     /// nm), the sensor where the d-line focuses; three times the work.

@@ -65,13 +65,18 @@ pub struct DofModel {
     pub focus_magnification: f64,
     /// Front clear semi-aperture (mm).
     pub front_radius_mm: f64,
+    /// Every clear aperture of a lens of revolution but the stop's, the front one first: `[A, B, semi-aperture]`
+    /// with `[[A, B], ..]` the d-line image path's matrix from the entrance plane to that surface, so that a ray
+    /// of entrance height `y0` and slope `u` crosses it at `A y0 + B u` (empty for an anamorphic lens, cut by its
+    /// front aperture alone).
+    pub clear_apertures: Vec<[f64; 3]>,
     /// +1 or -1: the stop's image in the entrance pupil is upright or inverted (the mask's orientation).
     pub mask_sign: f64,
     /// Sensor millimetres per pixel (the plate spans the sensor width).
     pub pixel_mm: f64,
     pub width: u32,
     pub height: u32,
-    /// Cut the kernel by the front clear aperture off-axis.
+    /// Cut the kernel off axis by the lens's clear apertures (the cat's eye).
     pub cat_eye: bool,
     /// The wavelength this model's light has (the d-line unless axial colour is drawn per channel).
     pub wavelength_nm: f64,
@@ -120,6 +125,7 @@ impl SectionDefocus {
 /// The lens's paraxial data a model needs, from the d-line image path.
 struct LensData {
     system: [f64; 4],
+    clear_apertures: Vec<[f64; 3]>,
     pupil_z_mm: f64,
     pupil_radius_mm: f64,
     efl_mm: f64,
@@ -135,11 +141,21 @@ fn lens_data(lens: &Lens) -> Result<LensData, DofError> {
     }
     let fo = crate::optics::FirstOrder::d_line(lens).map_err(|e| DofError::Lens(e.to_string()))?;
     let z_last = lens.vertex_z_mm().last().copied().unwrap_or(0.0);
-    let m = PathMatrices::compute(lens, &LightPath::image(lens), D_LINE_NM, z_last);
+    let path = LightPath::image(lens);
+    let (z, n, stop) = (lens.vertex_z_mm(), lens.media_indices_at(D_LINE_NM), lens.stop_index());
+    let mut clear_apertures = Vec::new();
+    let m = PathMatrices::walk(lens, &z, &n, &path, z_last, |step, arriving| {
+        let k = path.steps[step].surface;
+        let a = lens.surfaces[k].semi_aperture_mm;
+        if k != stop && a.is_finite() && a > 0.0 {
+            clear_apertures.push([arriving.a, arriving.b, a]);
+        }
+    });
     let a_stop = m.stop_from_entrance.first().map_or(1.0, |s| s.a);
     let s = fo.system;
     Ok(LensData {
         system: [s.a, s.b, s.c, s.d],
+        clear_apertures,
         pupil_z_mm: fo.entrance_pupil_z_mm,
         pupil_radius_mm: fo.entrance_pupil_radius_mm(),
         efl_mm: fo.efl_mm,
@@ -193,6 +209,7 @@ impl DofModel {
             focus_mm,
             focus_magnification,
             front_radius_mm: lens.surfaces.first().map_or(f64::INFINITY, |s| s.semi_aperture_mm),
+            clear_apertures: data.clear_apertures,
             mask_sign: data.mask_sign,
             pixel_mm: sensor_width_mm / f64::from(width.max(1)),
             width,
@@ -244,6 +261,7 @@ impl DofModel {
             focus_mm,
             focus_magnification: sy.to_sensor[0],
             front_radius_mm: lens.surfaces.first().map_or(f64::INFINITY, |s| s.semi_aperture_mm),
+            clear_apertures: Vec::new(),
             mask_sign: y.mask_sign,
             pixel_mm: sensor_width_mm / f64::from(width.max(1)),
             width,
@@ -345,31 +363,78 @@ impl DofModel {
         self.defocus_px(f64::INFINITY)
     }
 
-    /// The cat's eye of a source pixel at (`x`, `y`) (pixel centres, from the top-left) at depth `depth_mm`:
-    /// the front aperture's circle in pupil units (centre, radius) that the kernel is cut by; `None` when the
-    /// cat's eye is off.
-    pub fn cat_eye_at(&self, x: f64, y: f64, depth_mm: f64) -> Option<([f64; 2], f64)> {
+    /// Every clear aperture's circle in the pupil (centre, radius in pupil radii) for a source pixel at (`x`,
+    /// `y`) (pixel centres, from the top-left) at depth `depth_mm`, cutting or not, the front one first; empty
+    /// when the cat's eye is off. A pupil point q passes an aperture when it lies inside its circle.
+    ///
+    /// Frame millimetres (X right, Y up) are minus the sensor's (the display is turned by 180 degrees). An object
+    /// at height X in the focus plane images at m_f X on the sensor, and its chief ray has the slope u = -X / S_f,
+    /// so u = frame / (m_f S_f). The ray from the object (S from the pupil) through the pupil point P (mm) has
+    /// the slope `P / S + u` and crosses the first vertex's plane at `P (1 - z_ep / S) - u z_ep`; at a surface
+    /// whose entrance matrix row is `[A, B]` it is at `P alpha - u (A z_ep - B)` with `alpha = A (1 - z_ep / S) +
+    /// B / S`, inside the semi-aperture a when `|P - c| <= a / |alpha|`, `c = u (A z_ep - B) / alpha`. A surface
+    /// with `alpha = 0` (the object imaged onto it) passes the whole pupil or none of it: a circle of radius
+    /// infinity or 0. An anamorphic lens: its front aperture alone, each axis from its own section
+    /// ([`Self::cat_x_scale`] scales a pupil point's x before it is compared).
+    pub fn cat_circles_at(&self, x: f64, y: f64, depth_mm: f64) -> Vec<([f64; 2], f64)> {
         if !self.cat_eye {
-            return None;
+            return Vec::new();
         }
-        // Frame millimetres (X right, Y up) are minus the sensor's (the display is turned by 180 degrees). An
-        // object at height X in the focus plane images at m_f X on the sensor, and its chief ray has the slope
-        // u = -X / S_f, so u = frame / (m_f S_f). The ray through the pupil point P crosses the first vertex's
-        // plane at P (1 - z_ep / S) - u z_ep: in pupil radii, |q - c| <= rho with c = u z_ep / (r_ep shrink).
         let frame_mm =
             [(x - 0.5 * f64::from(self.width)) * self.pixel_mm, (0.5 * f64::from(self.height) - y) * self.pixel_mm];
-        // An anamorphic lens: each axis by its own section's magnification and pupil position; the circle in y
-        // pupil radii (a pupil point's x is scaled by [`Self::cat_x_scale`] before it is compared).
         let (m, z) = match &self.sections {
             None => ([self.focus_magnification; 2], [self.pupil_z_mm; 2]),
             Some(s) => ([s[0].to_sensor[0], s[1].to_sensor[0]], [s[0].pupil_z_mm, s[1].pupil_z_mm]),
         };
         let slope = [frame_mm[0] / (m[0] * self.focus_mm), frame_mm[1] / (m[1] * self.focus_mm)];
-        let shrink = if depth_mm.is_infinite() { 1.0 } else { 1.0 - self.pupil_z_mm / depth_mm };
-        let shrink = shrink.max(1e-6);
-        let unit = self.pupil_radius_mm * shrink;
-        Some(([slope[0] * z[0] / unit, slope[1] * z[1] / unit], self.front_radius_mm / unit))
+        let inverse_depth = if depth_mm.is_infinite() { 0.0 } else { 1.0 / depth_mm };
+        let shrink = (1.0 - self.pupil_z_mm * inverse_depth).max(1e-6);
+        let r = self.pupil_radius_mm;
+        if self.sections.is_some() || self.clear_apertures.is_empty() {
+            let unit = r * shrink;
+            return vec![([slope[0] * z[0] / unit, slope[1] * z[1] / unit], self.front_radius_mm / unit)];
+        }
+        self.clear_apertures
+            .iter()
+            .map(|&[a, b, semi]| {
+                let alpha = a * shrink + b * inverse_depth;
+                let offset = a * self.pupil_z_mm - b;
+                if alpha.abs() < 1e-12 {
+                    let passes = slope[0].hypot(slope[1]) * offset.abs() <= semi;
+                    return ([0.0, 0.0], if passes { f64::INFINITY } else { 0.0 });
+                }
+                ([slope[0] * offset / (alpha * r), slope[1] * offset / (alpha * r)], semi / (alpha.abs() * r))
+            })
+            .collect()
     }
+
+    /// The circles of [`Self::cat_circles_at`] that cut the pupil there (those that do not hold the whole unit
+    /// pupil), in the same order.
+    pub fn cat_eyes_at(&self, x: f64, y: f64, depth_mm: f64) -> Vec<([f64; 2], f64)> {
+        let mut circles = self.cat_circles_at(x, y, depth_mm);
+        circles.retain(|&(c, r)| cuts(c, r, self.cat_x_scale()));
+        circles
+    }
+
+    /// The front aperture's circle alone ([`Self::cat_circles_at`]'s first): `None` when the cat's eye is off.
+    pub fn cat_eye_at(&self, x: f64, y: f64, depth_mm: f64) -> Option<([f64; 2], f64)> {
+        self.cat_circles_at(x, y, depth_mm).into_iter().next()
+    }
+}
+
+/// Whether the circle (centre `c`, radius `r`, pupil radii) leaves part of the unit pupil (its x scaled by
+/// `x_scale`) outside: by how much its edge reaches into it, `|c| + x_scale.max(1) - r`, is positive.
+pub fn cuts(c: [f64; 2], r: f64, x_scale: f64) -> bool {
+    cut_depth(c, r, x_scale) > 0.0
+}
+
+/// How far (pupil radii) the circle's edge reaches into the unit pupil: `|c| + x_scale.max(1) - r` (positive:
+/// it cuts; a radius that is not a number cuts everything).
+pub fn cut_depth(c: [f64; 2], r: f64, x_scale: f64) -> f64 {
+    if r.is_nan() {
+        return f64::INFINITY;
+    }
+    c[0].hypot(c[1]) + x_scale.max(1.0) - r
 }
 
 /// The depth (mm from the pupil) whose defocus (along y for an anamorphic lens) is `sigma` pixels: for a lens of

@@ -5,8 +5,8 @@
 //! Each pixel's signed defocus ([`super::DofModel::defocus_px`]) orders it (far first). Consecutive pixels whose
 //! defocus lies within [`LAYER_PX`] of the layer's first form a layer: within it, the pixels' kernels hardly
 //! differ in size, and occlusion between them is ignored. Per layer, every pixel scatters its colour and its
-//! coverage with its own kernel ([`super::kernel::raster`], the defocus quantised to 1/16 px and the cat's eye to
-//! 1/32 of a pupil radius, so that the kernels of a layer are made once), into f64 sums, in parallel over bands
+//! coverage with its own kernel ([`super::kernel::raster`], the defocus quantised to 1/16 px and each cutting clear
+//! aperture's circle to 1/32 of a pupil radius, so that the kernels of a layer are made once), into f64 sums, in parallel over bands
 //! of target rows; the band is then composited over what is behind it ([`super::over`]). At the end the
 //! composite is divided by its coverage ([`super::resolve`]). Light scattered beyond the frame is lost, as it is
 //! on a sensor.
@@ -25,21 +25,27 @@ pub const LAYER_PX: f64 = 0.5;
 /// Rows of one band of the parallel scatter.
 const BAND_ROWS: usize = 16;
 
-/// A kernel's key: the defocus in 1/16 px, the cat's eye centre and radius in 1/32 pupil radius.
-type Key = (i64, i64, i64, i64);
+/// A kernel's key: the defocus in 1/16 px, then each cutting clear aperture's circle (centre and radius) in 1/32
+/// pupil radius (a radius beyond [`MAX_KEY_RADIUS`] pupil radii, which cannot cut, is left out).
+type Key = Vec<i64>;
+
+/// The largest circle radius (pupil radii) a key records; a larger circle holds the unit pupil wherever its
+/// centre is within `MAX_KEY_RADIUS - 1` of the axis, and a circle farther out than that cuts everything.
+const MAX_KEY_RADIUS: f64 = 1e6;
 
 fn key(model: &DofModel, sigma: f64, x: f64, y: f64, depth_mm: f64) -> Key {
-    let s = (sigma * 16.0).round() as i64;
-    match model.cat_eye_at(x, y, depth_mm) {
-        None => (s, 0, 0, 0),
-        Some((c, r)) => (s, (c[0] * 32.0).round() as i64, (c[1] * 32.0).round() as i64, (r * 32.0).round() as i64),
+    let mut key = vec![(sigma * 16.0).round() as i64];
+    for (c, r) in model.cat_eyes_at(x, y, depth_mm) {
+        key.extend([c[0], c[1], r.min(MAX_KEY_RADIUS)].map(|v| (v * 32.0).round() as i64));
     }
+    key
 }
 
-fn kernel_of(key: Key, model: &DofModel, mask: &ApertureMask) -> RasterKernel {
-    let sigma = key.0 as f64 / 16.0;
-    let cat = model.cat_eye.then(|| ([key.1 as f64 / 32.0, key.2 as f64 / 32.0], key.3 as f64 / 32.0));
-    raster_xy(mask, model.mask_sign, [model.defocus_x_for(sigma), sigma], cat, model.cat_x_scale())
+fn kernel_of(key: &Key, model: &DofModel, mask: &ApertureMask) -> RasterKernel {
+    let sigma = key[0] as f64 / 16.0;
+    let cats: Vec<([f64; 2], f64)> =
+        key[1..].chunks_exact(3).map(|c| ([c[0] as f64 / 32.0, c[1] as f64 / 32.0], c[2] as f64 / 32.0)).collect();
+    raster_xy(mask, model.mask_sign, [model.defocus_x_for(sigma), sigma], &cats, model.cat_x_scale())
 }
 
 /// The plate defocused by the reference method (see the module documentation); `depth_mm` per pixel from the
@@ -88,7 +94,7 @@ pub fn render_until(
                 (k, key(model, sigma[k], x, y, depth_mm[k]))
             })
             .collect();
-        layer.sort_unstable_by_key(|&(k, _)| k);
+        layer.sort_unstable_by_key(|(k, _)| *k);
         scatter_layer(&layer, plate, model, mask, &mut out);
         start = end;
     }
@@ -104,23 +110,23 @@ fn scatter_layer(
     out: &mut [[f32; 4]],
 ) {
     let w = plate.width as usize;
-    let mut keys: Vec<Key> = layer.iter().map(|&(_, k)| k).collect();
+    let mut keys: Vec<&Key> = layer.iter().map(|(_, k)| k).collect();
     keys.sort_unstable();
     keys.dedup();
-    let kernels: HashMap<Key, RasterKernel> = keys.par_iter().map(|&k| (k, kernel_of(k, model, mask))).collect();
+    let kernels: HashMap<&Key, RasterKernel> = keys.par_iter().map(|&k| (k, kernel_of(k, model, mask))).collect();
     let reach = kernels.values().map(|k| k.radius as usize).max().unwrap_or(0);
     out.par_chunks_mut(BAND_ROWS * w).enumerate().for_each(|(band, rows)| {
         let (y0, y1) = (band * BAND_ROWS, band * BAND_ROWS + rows.len() / w);
         // The pixels whose kernels can reach rows y0..y1.
-        let from = layer.partition_point(|&(k, _)| k / w + reach < y0);
-        let to = layer.partition_point(|&(k, _)| k / w < y1 + reach);
+        let from = layer.partition_point(|(k, _)| k / w + reach < y0);
+        let to = layer.partition_point(|(k, _)| k / w < y1 + reach);
         if from >= to {
             return;
         }
         let mut sums = vec![[0.0f64; 4]; rows.len()];
         let mut touched = false;
-        for &(k, key) in &layer[from..to] {
-            let kernel = &kernels[&key];
+        for (k, key) in &layer[from..to] {
+            let (k, kernel) = (*k, &kernels[key]);
             let (sx, sy) = ((k % w) as i64, (k / w) as i64);
             let r = i64::from(kernel.radius);
             let side = (2 * r + 1) as usize;
