@@ -24,8 +24,8 @@ use crate::optics::Lens;
 
 /// Bumped when the baker changes what it writes for the same settings: every older entry becomes a miss. 2:
 /// every clear aperture cuts the paraxial sprites, so the classification against them (which ghosts a LUT
-/// carries) changed.
-pub const CACHE_VERSION: u32 = 2;
+/// carries) changed. 3: a ghost whose sprite carries the wrong light is non-linear too.
+pub const CACHE_VERSION: u32 = 3;
 
 /// What a lookup found.
 #[derive(Debug)]

@@ -4,15 +4,17 @@
 //! For each ghost and each of a few light angles from 0 to the useful field (at the symmetry axis's azimuth),
 //! both images of that ghost alone are rendered into the same window of the sensor (the union of the two
 //! footprints, [`ClassifySettings::res`] texels across): the ray-traced one on a coarse fixed grid
-//! ([`crate::raytrace`]) and the paraxial sprites through the CPU twin of the GPU renderer. Three measures
+//! ([`crate::raytrace`]) and the paraxial sprites through the CPU twin of the GPU renderer. These measures
 //! compare them, each the worst over the angles:
 //! - the **centroid** offset (mm, and in units of the paraxial half-size);
 //! - the **size** ratio of the rms radii about each centroid (reported as the larger of r and 1 / r);
 //! - the **image error**: the total-variation distance of the two footprints, each normalised to unit
 //!   energy, `0.5 sum |T / E_T - P / E_P|`, from 0 (same shape and place) to 1 (disjoint).
 //!
-//! A ghost is **non-linear** when its image error exceeds [`ClassifySettings::threshold`] at an angle where
-//! the ghost is visible: its peak irradiance reaches [`ClassifySettings::visible_irradiance`]; and it is
+//! A ghost is **non-linear** when its image error, or its energy ratio less 1, exceeds
+//! [`ClassifySettings::threshold`] at an angle where the ghost is visible: its peak irradiance reaches
+//! [`ClassifySettings::visible_irradiance`] (a sprite of the right shape with the wrong light is as wrong in
+//! a frame: the 28-surface zoom's ghost (4, 5) on the axis carries 0.85 of its traced light); and it is
 //! baked only when it is also bright enough to matter: a **faint** ghost, whose traced peak stays under
 //! [`ClassifySettings::faint_fraction`] of the brightest ghost's, stays paraxial (its misplaced light is
 //! below the other ghosts' by that ratio, and a 25-surface lens has dozens of them: baking them would cost
@@ -40,7 +42,7 @@ pub struct ClassifySettings {
     /// Light angles from 0 to `theta_max_deg` (inclusive).
     pub angles: usize,
     pub theta_max_deg: f64,
-    /// Image error above which a visible ghost is non-linear.
+    /// Image error (and energy ratio less 1) above which a visible ghost is non-linear.
     pub threshold: f64,
     /// Peak relative irradiance from which a ghost counts as visible.
     pub visible_irradiance: f64,
@@ -247,7 +249,10 @@ pub fn classify(
                     class.misplaced_energy = class.misplaced_energy.max(misplaced);
                 }
             }
-            class.measured_nonlinear = class.image_error > settings.threshold;
+            // Its shape, or its light: a sprite of the right shape that carries the wrong light (a clear aperture
+            // cutting the real ghost where the paraxial disc does not) is as wrong in a frame.
+            class.measured_nonlinear =
+                class.image_error > settings.threshold || class.energy_ratio > 1.0 + settings.threshold;
             class
         })
         .collect();
