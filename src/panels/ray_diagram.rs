@@ -13,7 +13,9 @@
 //! reflected) is drawn grey up to where it stopped. The ghost path reflects first at surface `j` then at `i`,
 //! so its recorded points are: the start, the hits on surfaces `0..=j` (the last one is the first
 //! reflection), then on `j-1` down to `i` (the second reflection, where the backward leg ends), then on to
-//! the sensor.
+//! the sensor. With a ghost selected, the clear apertures that cut its sprites at the light (the live flare's
+//! discs, [`flare_core::ghost::GhostSystem::sprite_masks`]) are marked by a red tick at their rims and named in
+//! the title.
 //!
 //! An anamorphic lens has two sections: a choice above the plot draws the y-z section (the light's y angle,
 //! surfaces by their y-z profile) or the x-z section (rays in the x-z plane at the light's x angle across the
@@ -51,6 +53,33 @@ pub struct RayDiagram {
     reflections: Vec<[f64; 2]>,
     /// The section drawn (an anamorphic lens has two; a lens of revolution's y-z section stands for all).
     section: Option<Section>,
+    /// The clear apertures that cut the selected ghost at the light (every wavelength's sprite), and what they
+    /// were found for: the flare's identity, the light's bits and the ghost.
+    cutting: Vec<usize>,
+    cutting_key: Option<(u64, [u64; 2], (usize, usize))>,
+}
+
+impl RayDiagram {
+    /// The surfaces whose clear apertures cut ghost (i, j)'s sprites at the light (`GhostSystem::sprite_masks`,
+    /// as the live flare and the report cut them), found again when the flare, the light or the ghost changed.
+    fn cutting_surfaces(&mut self, flare: &PreparedFlare, light_deg: [f64; 2], (i, j): (usize, usize)) -> &[usize] {
+        let key = (flare.id, light_deg.map(f64::to_bits), (i, j));
+        if self.cutting_key != Some(key) {
+            self.cutting_key = Some(key);
+            self.cutting.clear();
+            let system = &flare.system;
+            if let Some(g) = system.ghosts.iter().position(|h| (h.i, h.j) == (i, j)) {
+                let u = flare_core::ghost::light_slopes_for_frame_position(light_deg[0], light_deg[1]);
+                let wavelengths = system.settings.spectrum.len();
+                for k in g * wavelengths..(g + 1) * wavelengths {
+                    self.cutting.extend_from_slice(system.sprite_masks(k, u).cutting_surfaces());
+                }
+                self.cutting.sort_unstable();
+                self.cutting.dedup();
+            }
+        }
+        &self.cutting
+    }
 }
 
 impl RayDiagram {
@@ -172,14 +201,23 @@ pub fn ray_diagram_ui(
         (true, Section::Y) => light_deg[1],
     };
     diagram.update(flare, field_deg, ghost, section);
+    let cutting = ghost.map(|g| diagram.cutting_surfaces(flare, light_deg, g).to_vec()).unwrap_or_default();
     let Some(lens) = diagram.lens.as_ref() else { return };
     let z = lens.vertex_z_mm();
     let h_max = flare.system.lens.surfaces.iter().map(|s| s.semi_aperture_mm).fold(1.0, f64::max);
     let f_number = fo.f_number / stop_scale;
+    let cut_words = match cutting.as_slice() {
+        [] => "no clear aperture cuts it here".to_string(),
+        [k] => format!("the clear aperture of surface {k} cuts it here (marked red)"),
+        many => format!(
+            "the clear apertures of surfaces {} cut it here (marked red)",
+            many.iter().map(|k| k.to_string()).collect::<Vec<_>>().join(", ")
+        ),
+    };
     let title = match ghost {
         Some((i, j)) => format!(
             "ghost {i}-{j} at f/{f_number:.1}: exact rays at {field_deg:.1} deg, towards the sensor orange, back \
-             towards the front blue, reflections marked"
+             towards the front blue, reflections marked; {cut_words}"
         ),
         None => format!("image path at f/{f_number:.1}: exact rays at {field_deg:.1} deg (select a ghost to trace it)"),
     };
@@ -220,6 +258,21 @@ pub fn ray_diagram_ui(
                     })
                     .collect();
                 plot.line(Line::new("surfaces", PlotPoints::from(pts)).color(glass).width(1.5));
+                if cutting.contains(&k) {
+                    // The rim that cuts the selected ghost: a thick red tick outwards from each edge.
+                    let a = s.semi_aperture_mm;
+                    for sign in [-1.0, 1.0] {
+                        let h = sign * a;
+                        let sag = if section == Section::X { s.sag_xy_mm(h, 0.0) } else { s.sag_mm(h) };
+                        let zk = z[k] + sag.unwrap_or(0.0);
+                        let tick = vec![[zk, h], [zk, h + sign * 0.08 * h_max]];
+                        plot.line(
+                            Line::new("cuts the ghost", PlotPoints::from(tick))
+                                .color(egui::Color32::from_rgb(255, 70, 70))
+                                .width(4.0),
+                        );
+                    }
+                }
             }
             let sensor = fo.sensor_z_mm();
             plot.line(
