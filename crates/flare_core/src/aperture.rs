@@ -322,7 +322,7 @@ impl Aperture {
     /// Each texel of a blade or round stop takes the coverage formula of the module documentation, with the
     /// angle's edge radius ([`Self::edge_radius`]). Most texels are 0 or 1 and need no angle: those a whole
     /// texel inside the inscribed circle or beyond the circumradius are decided by their squared radius, and
-    /// the rest first by the edge radius found without the angle ([`Self::edge_radius_at`]), which differs
+    /// the rest first by the edge radius found without the angle (`edge_radius_at`), which differs
     /// from the angle's by rounding only; a texel is given 0 or 1 from it only when its coverage there is a
     /// millionth of a texel clear of (0, 1), so every texel gets the formula's byte (a test checks each).
     pub fn rasterise(&self, size: usize) -> ApertureMask {

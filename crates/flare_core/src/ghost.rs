@@ -176,7 +176,7 @@ pub struct Disc {
     pub centre_per_slope: f64,
     pub radius_mm: f64,
     /// The disc holds another of the ghost's discs (clear or the stop's circle) while `|u|` is below this, so
-    /// it cannot cut the region there (0 when never; see [`GhostSystem::set_redundancy`]).
+    /// it cannot cut the region there (0 when never; see `GhostSystem::set_redundancy`, at rebuild).
     pub redundant_below_slope: f64,
     /// No ray passes once `|u|` reaches this: a crossing with `A = 0`, where the height `B u` does not depend
     /// on the entry point (infinity otherwise).
