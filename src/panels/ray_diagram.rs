@@ -60,23 +60,20 @@ pub struct RayDiagram {
 }
 
 impl RayDiagram {
-    /// The surfaces whose clear apertures cut ghost (i, j)'s sprites at the light (`GhostSystem::sprite_masks`,
-    /// as the live flare and the report cut them), found again when the flare, the light or the ghost changed.
+    /// The surfaces whose clear apertures cut ghost (i, j)'s sprites at the light
+    /// (`GhostSystem::cutting_surfaces`, as the live flare and the report cut them), found again when the flare,
+    /// the light or the ghost changed.
     fn cutting_surfaces(&mut self, flare: &PreparedFlare, light_deg: [f64; 2], (i, j): (usize, usize)) -> &[usize] {
         let key = (flare.id, light_deg.map(f64::to_bits), (i, j));
         if self.cutting_key != Some(key) {
             self.cutting_key = Some(key);
-            self.cutting.clear();
             let system = &flare.system;
-            if let Some(g) = system.ghosts.iter().position(|h| (h.i, h.j) == (i, j)) {
-                let u = flare_core::ghost::light_slopes_for_frame_position(light_deg[0], light_deg[1]);
-                let wavelengths = system.settings.spectrum.len();
-                for k in g * wavelengths..(g + 1) * wavelengths {
-                    self.cutting.extend_from_slice(system.sprite_masks(k, u).cutting_surfaces());
-                }
-                self.cutting.sort_unstable();
-                self.cutting.dedup();
-            }
+            let u = flare_core::ghost::light_slopes_for_frame_position(light_deg[0], light_deg[1]);
+            self.cutting = system
+                .ghosts
+                .iter()
+                .position(|h| (h.i, h.j) == (i, j))
+                .map_or_else(Vec::new, |g| system.cutting_surfaces(g, u));
         }
         &self.cutting
     }

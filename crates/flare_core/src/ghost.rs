@@ -369,6 +369,15 @@ impl SpriteMasks {
     }
 }
 
+/// The surfaces whose clear apertures cut any of the sprites `masks` belong to ([`SpriteMasks::cutting_surfaces`]),
+/// in increasing order, each once.
+pub fn surfaces_cutting(masks: impl IntoIterator<Item = SpriteMasks>) -> Vec<usize> {
+    let mut surfaces: Vec<usize> = masks.into_iter().flat_map(|m| m.cutting_surfaces().to_vec()).collect();
+    surfaces.sort_unstable();
+    surfaces.dedup();
+    surfaces
+}
+
 /// The map from quad coordinates into a clear-aperture disc's own (a unit circle), x from `discs[0]` (the x-z
 /// section's), y from `discs[1]`, for the region `region` (`x0 = E + rho q`) at light slope `u`:
 /// `(E + rho q - c u) / r` per axis.
@@ -948,6 +957,13 @@ impl GhostSystem {
         } else {
             ParaxialFrame { centre_mm: [0.0; 2], half_mm: min_half_mm, energy: 0.0 }
         }
+    }
+
+    /// The surfaces whose clear apertures cut lens ghost `g`'s sprites (every wavelength's) at light slope `u`
+    /// ([`surfaces_cutting`] of their [`Self::sprite_masks`]).
+    pub fn cutting_surfaces(&self, g: usize, u: [f64; 2]) -> Vec<usize> {
+        let wavelengths = self.settings.spectrum.len();
+        surfaces_cutting((g * wavelengths..(g + 1) * wavelengths).map(|k| self.sprite_masks(k, u)))
     }
 
     /// The masks of the `k`-th sprite of a frame (sprites come ghost by ghost, wavelength by wavelength) for

@@ -278,9 +278,7 @@ fn measure(system: &GhostSystem, mask: &ApertureMask, u: [f64; 2], n: usize) -> 
             }
             let cell = [(hi[0] - lo[0]) / n as f64, (hi[1] - lo[1]) / n as f64];
             let masks: Vec<_> = sprites.iter().map(|&k| system.sprite_masks(k, u)).collect();
-            let mut vignetted_by: Vec<usize> = masks.iter().flat_map(|m| m.cutting_surfaces().to_vec()).collect();
-            vignetted_by.sort_unstable();
-            vignetted_by.dedup();
+            let vignetted_by = crate::ghost::surfaces_cutting(masks.iter().copied());
             // The luminance at p relative to the source's, through every mask or (`cut` false) the stop crossings
             // alone, no clear aperture cutting.
             let light_at = |p: [f64; 2], cut: bool| {

@@ -64,7 +64,7 @@ pub struct RayGridRequest<'a> {
 impl<'a> RayGridRequest<'a> {
     /// Every ghost in a `width` x `height` frame on the full-frame sensor.
     pub fn frame(light_deg: [f64; 2], width: u32, height: u32, grid: Grid) -> Self {
-        Self::views(light_deg, vec![View { window: Window::frame(width, height), turn_deg: 0.0 }], grid)
+        Self::frame_on(light_deg, crate::optics::sensor::FULL_FRAME_WIDTH_MM, width, height, grid)
     }
 
     /// Every ghost in a `width` x `height` frame on a sensor `sensor_width_mm` wide (a look's own sensor).
