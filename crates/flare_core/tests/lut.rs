@@ -1111,3 +1111,96 @@ fn an_anamorphic_lenss_lut_symmetry_is_what_it_shares_with_the_stop() {
     let e = of(&toroidal, &blades(6, 10.0)).unwrap_err();
     assert!(e.contains("mirror symmetry") && e.contains("30"), "{e}");
 }
+
+/// A lens whose ghosts are all dim is exposed up to them (auto exposure), so classification judges its ghosts
+/// at that exposure (or at the fixed gain, whichever shows more): the Heliar's large misdrawn ghosts, invisible
+/// at the fixed gain alone, are measured and baked.
+#[test]
+fn a_dim_lens_is_judged_at_its_own_auto_exposure() {
+    use flare_core::lut::classify::{ClassifySettings, VISIBILITY_GAIN, classify};
+    // As the app and the command line prepare a lens: the document's defaults (its coating and spectrum).
+    let config = flare_core::preset::Document::default().flare_config().unwrap();
+    for (id, dim) in [("heliar", true), ("pbrt_dgauss_50mm", false)] {
+        let flare = PreparedFlare::new(&builtin_lens(id).unwrap(), &config).unwrap();
+        let renderer = flare.ray_grid_renderer();
+        let settings = ClassifySettings::for_flare(&flare, 12.0);
+        let auto_ev = flare_core::exposure::auto_flare_ev(&flare.system, 36.0);
+        let fixed = flare.config.threshold(VISIBILITY_GAIN);
+        let gain = 2f64.powf(auto_ev).max(f64::from(VISIBILITY_GAIN)) as f32;
+        assert_eq!(settings.visible_irradiance, flare.config.threshold(gain), "{id}");
+        assert_eq!(settings.visible_irradiance < fixed, dim, "{id}: auto exposure {auto_ev:+.2} EV");
+        if !dim {
+            continue;
+        }
+        let at_auto = classify(&flare, &renderer, &settings, &[]);
+        let at_fixed = classify(&flare, &renderer, &ClassifySettings { visible_irradiance: fixed, ..settings }, &[]);
+        let judged: Vec<_> = at_auto
+            .iter()
+            .zip(&at_fixed)
+            .filter(|(a, f)| a.measured_nonlinear && !f.measured_nonlinear)
+            .map(|(a, _)| (a.surfaces, a.image_error, a.energy_ratio, a.peak_irradiance))
+            .collect();
+        // Measured: 8 ghosts, among them the three largest misdrawn ones of the peers' Heliar frame (2, 6),
+        // (3, 6) and (3, 8), whose sprites carried 1.12-1.20x the traced light at 10 degrees.
+        for surfaces in [(2, 6), (3, 6), (3, 8)] {
+            assert!(judged.iter().any(|j| j.0 == surfaces), "{id}: {surfaces:?} not judged: {judged:?}");
+        }
+        // What was non-linear at the fixed gain stays so.
+        assert!(at_fixed.iter().zip(&at_auto).all(|(f, a)| !f.measured_nonlinear || a.measured_nonlinear));
+    }
+}
+
+/// The finer entries of a large ghost are traced on a grid refined with their texels: drawn on the `res` entry's
+/// grid, the Heliar's rim ghost at 10 degrees showed its cells as rings of flat triangles over its smooth
+/// interior (texel-to-texel steps of several percent that the blend magnified to 4-pixel rings).
+#[test]
+fn a_finer_entry_is_traced_on_a_finer_grid_and_shows_no_rings() {
+    use flare_core::lut::bake::render_entry;
+    let config = flare_core::preset::Document::default().flare_config().unwrap();
+    let flare = PreparedFlare::new(&builtin_lens("heliar").unwrap(), &config).unwrap();
+    let renderer = flare.ray_grid_renderer();
+    let g = flare.system.ghosts.iter().position(|g| (g.i, g.j) == (0, 8)).unwrap();
+    let symmetry = Symmetry::of(&flare.system.lens, &flare.config.aperture).unwrap();
+    let entry = |settings: &BakeSettings| render_entry(&flare, &renderer, g, 10.0, 0.0, &symmetry, settings);
+    let fine = entry(&BakeSettings::default());
+    // The default's `res` grid (64) once more with a grid a quarter as fine: the finer entry then gets 64 cells.
+    let coarse_grid = entry(&BakeSettings { grid: 16, ..BakeSettings::default() });
+    assert_eq!((fine.width, fine.height, fine.texel_mm), (coarse_grid.width, coarse_grid.height, coarse_grid.texel_mm));
+    assert!(fine.height > 256, "the rim ghost's entry is drawn finer: {}x{}", fine.width, fine.height);
+    // The same window at twice the reference's grid.
+    let light = light_position_deg(10.0, symmetry.axis_deg);
+    let view = flare_core::raytrace::View { window: fine.window(), turn_deg: 0.0 };
+    let truth = renderer
+        .render_request(&RayGridRequest::views(light, vec![view], Grid::Adaptive(512)).only(g))
+        .unwrap()
+        .remove(0)
+        .hdr;
+    let lum = |p: [f32; 3]| f64::from(0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]);
+    let w = fine.width as usize;
+    // The interior: texels whose 5 x 5 neighbourhood is lit in the truth (the rim and the window's edge left out).
+    let interior = |k: usize| {
+        let (x, y) = ((k % w) as i64, (k / w) as i64);
+        (-2..=2).all(|dy| {
+            (-2..=2).all(|dx| {
+                let (xx, yy) = (x + dx, y + dy);
+                xx >= 0 && yy >= 0 && (xx as usize) < w && (yy as usize) < fine.height as usize && {
+                    let p = truth.pixels[yy as usize * w + xx as usize];
+                    lum([p[0], p[1], p[2]]) > 0.0
+                }
+            })
+        })
+    };
+    let error = |e: &flare_core::lut::LutEntry| {
+        let (mut diff, mut sum) = (0.0, 0.0);
+        for (_, (t, p)) in e.texels.iter().zip(&truth.pixels).enumerate().filter(|(k, _)| interior(*k)) {
+            let a = lum([t[0].to_f32(), t[1].to_f32(), t[2].to_f32()]);
+            let b = lum([p[0], p[1], p[2]]);
+            diff += (a - b).abs();
+            sum += b;
+        }
+        diff / sum
+    };
+    let (e_fine, e_coarse) = (error(&fine), error(&coarse_grid));
+    // Measured: 0.0035 on the finer grid, 0.0272 on the `res` grid.
+    assert!(e_fine < 0.01 && e_fine < 0.25 * e_coarse, "finer grid {e_fine:.4}, the res grid {e_coarse:.4}");
+}

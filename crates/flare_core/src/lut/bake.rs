@@ -16,7 +16,9 @@
 //!    [`BakeSettings::diagonal_texels`] across the sensor's diagonal) and an entry loses more than
 //!    [`BakeSettings::detail_tolerance`] of its light's placement when halved ([`super::LutEntry::detail_lost`]: a
 //!    sharp rim or caustic reaches its texels), the column is drawn again with texels `res`'s halved the number
-//!    of times that comes nearest, and each entry is halved back while that loses no more than the tolerance. A
+//!    of times that comes nearest, on a grid refined as often (up to the reference's
+//!    [`crate::raytrace::REFERENCE_GRID`] cells: cells several texels wide draw a smooth interior as rings of
+//!    flat triangles), and each entry is halved back while that loses no more than the tolerance. A
 //!    smooth ghost keeps its `res` entries, byte for byte; a sharp one is drawn finer and stored as fine as its
 //!    detail needs (the run time's mip levels, [`super::blend::LiveLut`], draw it on small frames for the cost
 //!    of the `res` entry).
@@ -110,9 +112,11 @@ pub struct BakeSettings {
     /// is then halved back while that loses no more than this. On the Heliar the rim ghost loses 0.16-0.24 at
     /// `res`, the smooth one 0.010-0.015; on the Nikon zoom 99 of 1031 large entries lose more than 0.05.
     pub detail_tolerance: f64,
-    /// Most ray-grid cells across a ghost's entrance region (the reference renderer's adaptive grid). 64 by
-    /// default: over the scouted region that is about one cell per two texels; 32 costs the double Gauss
-    /// 0.002-0.004 SSIM at 0 and 13 deg (how the default was chosen: CHANGELOG.md).
+    /// Most ray-grid cells across a ghost's entrance region (the reference renderer's adaptive grid) for a
+    /// `res` entry; an entry drawn finer ([`Self::diagonal_texels`]) gets this many times its halvings, up to
+    /// [`crate::raytrace::REFERENCE_GRID`]. 64 by default: over the scouted region that is about one cell per
+    /// two texels; 32 costs the double Gauss 0.002-0.004 SSIM at 0 and 13 deg (how the default was chosen:
+    /// CHANGELOG.md).
     pub grid: usize,
     /// Azimuth steps over the symmetry wedge (0: one azimuth, rotation only).
     pub phi_steps: u32,
@@ -382,7 +386,10 @@ fn draw_column(
         return entries;
     }
     let only: Vec<View> = views.iter().map(|v| v.1).collect();
-    let Some(images) = tracing.trace_column(renderer, scout, only, Grid::Adaptive(settings.grid)) else {
+    // A finer entry gets a finer grid as well (the grid's cells kept to the same texels each), up to the
+    // reference's: cells several texels wide draw a large ghost's smooth interior as rings of flat triangles.
+    let cells = (settings.grid << halvings).min(crate::raytrace::REFERENCE_GRID);
+    let Some(images) = tracing.trace_column(renderer, scout, only, Grid::Adaptive(cells)) else {
         return empty.to_vec();
     };
     for ((k, _), image) in views.into_iter().zip(images) {
@@ -468,7 +475,7 @@ pub fn interpolation_error(a: &LutEntry, b: &LutEntry, t: f64, target: &LutEntry
 
 /// Revision of how entries are chosen and rendered, part of every ghost's key: a LUT baked by an older
 /// revision is re-baked, not kept, by `--update` (what each revision changed: CHANGELOG.md).
-const BAKE_REVISION: u32 = 4;
+const BAKE_REVISION: u32 = 5;
 
 /// The key of ghost `g` for these settings (see the module documentation): a [`crate::fingerprint::of`] of
 /// the bake revision, the lens's fingerprint, the ghost and the settings.

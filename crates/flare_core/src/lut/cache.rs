@@ -24,8 +24,10 @@ use crate::optics::Lens;
 
 /// Bumped when the baker changes what it writes for the same settings: every older entry becomes a miss. 2:
 /// every clear aperture cuts the paraxial sprites, so the classification against them (which ghosts a LUT
-/// carries) changed. 3: a ghost whose sprite carries the wrong light is non-linear too.
-pub const CACHE_VERSION: u32 = 3;
+/// carries) changed. 3: a ghost whose sprite carries the wrong light is non-linear too. 4: ghosts are judged
+/// visible at the lens's own auto exposure as well (a dim lens has more of them), and a finer entry is traced on
+/// a finer grid.
+pub const CACHE_VERSION: u32 = 4;
 
 /// What a lookup found.
 #[derive(Debug)]

@@ -13,7 +13,9 @@
 //!
 //! A ghost is **non-linear** when its image error, or its energy ratio less 1, exceeds
 //! [`ClassifySettings::threshold`] at an angle where the ghost is visible: its peak irradiance reaches
-//! [`ClassifySettings::visible_irradiance`] (a sprite of the right shape with the wrong light is as wrong in
+//! [`ClassifySettings::visible_irradiance`] (by default a quarter of an 8-bit step at the fixed gain
+//! [`VISIBILITY_GAIN`] or at the lens's own auto exposure, whichever shows more: [`ClassifySettings::for_flare`])
+//! (a sprite of the right shape with the wrong light is as wrong in
 //! a frame: the 28-surface zoom's ghost (4, 5) on the axis carries 0.85 of its traced light); and it is
 //! baked only when it is also bright enough to matter: a **faint** ghost, whose traced peak stays under
 //! [`ClassifySettings::faint_fraction`] of the brightest ghost's, stays paraxial (its misplaced light is
@@ -61,13 +63,20 @@ pub const VISIBILITY_GAIN: f32 = 100.0;
 
 impl ClassifySettings {
     /// Defaults for `flare`: 4 angles to `theta_max_deg`, threshold 0.15, visible from a quarter of an 8-bit
-    /// step at the flare gain [`VISIBILITY_GAIN`] (the culling level of the paraxial renderer there).
+    /// step (the culling level of the paraxial renderer) at the flare gain [`VISIBILITY_GAIN`] or at the lens's
+    /// own auto exposure on the full-frame sensor ([`crate::exposure::auto_flare_ev`]), whichever shows more:
+    /// a lens whose ghosts are all dim is exposed up to them, and its ghosts are judged as a frame shows them.
+    /// Both depend on the optics alone, so a LUT does not depend on a display setting. The Heliar (auto
+    /// +9.5 EV, gain 724) had its three largest misdrawn ghosts judged invisible at gain 100 alone.
     pub fn for_flare(flare: &PreparedFlare, theta_max_deg: f64) -> Self {
+        let auto_gain =
+            2f64.powf(crate::exposure::auto_flare_ev(&flare.system, crate::optics::sensor::FULL_FRAME_WIDTH_MM));
+        let gain = (auto_gain as f32).max(VISIBILITY_GAIN);
         Self {
             angles: 4,
             theta_max_deg,
             threshold: 0.15,
-            visible_irradiance: flare.config.threshold(VISIBILITY_GAIN),
+            visible_irradiance: flare.config.threshold(gain),
             faint_fraction: DEFAULT_FAINT_FRACTION,
             res: 64,
             grid: 32,
