@@ -7,7 +7,37 @@ use std::process::ExitCode;
 
 use flarelab::{app, cli};
 
+/// Gives the libraries a runtime folder when the session has none. Vulkan's window-system layer asks
+/// libwayland for a display on every GPU device made, and libwayland prints "error: XDG_RUNTIME_DIR is invalid
+/// or not set in the environment." when the variable is missing (a container, ssh, cron), although nothing is
+/// wrong and no window is wanted. Where it is unset or not a folder, it becomes a private folder of the user's
+/// under the temporary folder (`flarelab-runtime-UID`, mode 0700, as the XDG specification asks), made once; a
+/// folder that cannot be made leaves the environment as it was (the line is then printed, nothing else fails).
+#[cfg(target_os = "linux")]
+fn give_libraries_a_runtime_dir() {
+    use std::os::unix::fs::{DirBuilderExt, MetadataExt, PermissionsExt};
+    if std::env::var_os("XDG_RUNTIME_DIR").is_some_and(|dir| std::path::Path::new(&dir).is_dir()) {
+        return;
+    }
+    // SAFETY: getuid has no preconditions and cannot fail.
+    let uid = unsafe { libc::getuid() };
+    let dir = std::env::temp_dir().join(format!("flarelab-runtime-{uid}"));
+    let _ = std::fs::DirBuilder::new().mode(0o700).create(&dir);
+    // Only a folder that is the user's own and private (another user could have made one of that name first).
+    let Ok(meta) = std::fs::symlink_metadata(&dir) else { return };
+    if !meta.is_dir() || meta.uid() != uid || meta.permissions().mode() & 0o077 != 0 {
+        return;
+    }
+    // SAFETY: called first thing in `main`, before any thread exists, so nothing reads the environment while it
+    // changes.
+    unsafe { std::env::set_var("XDG_RUNTIME_DIR", &dir) };
+}
+
+#[cfg(not(target_os = "linux"))]
+fn give_libraries_a_runtime_dir() {}
+
 fn main() -> ExitCode {
+    give_libraries_a_runtime_dir();
     std::panic::set_hook(Box::new(|info| {
         let message = info
             .payload()

@@ -334,6 +334,32 @@ fn render_on_the_gpu_matches_the_cpu_twin() {
     assert!(mean < 1.0, "GPU and CPU images differ by {mean}/255 on average");
 }
 
+/// A render on the GPU with no runtime folder in the environment (a container, ssh, cron) prints no error line:
+/// libwayland's "XDG_RUNTIME_DIR is invalid or not set" came on every GPU device made, although nothing was
+/// wrong (issue 60).
+#[test]
+fn a_render_without_a_runtime_folder_prints_no_error_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x.png");
+    let cache = dir.path().join("cache");
+    let output = Command::new(env!("CARGO_BIN_EXE_flarelab"))
+        .args(["render", "tessar", "--size", "96x64", "--device", "gpu", "-o", out.to_str().unwrap()])
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .env_remove("XDG_RUNTIME_DIR")
+        .env("FLARELAB_CACHE_DIR", &cache)
+        .output()
+        .expect("runs");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    if !output.status.success() {
+        assert!(stderr.contains("no GPU adapter"), "{stderr}");
+        flare_core::render::gpu::skip_without_gpu(&stderr);
+        return;
+    }
+    assert!(stderr.lines().all(|l| !l.to_lowercase().contains("error")), "{stderr}");
+    assert!(stderr.contains("rendered on"), "{stderr}");
+}
+
 #[test]
 fn render_takes_an_aperture_image_and_a_background_plate() {
     let dir = tempfile::tempdir().unwrap();

@@ -1159,6 +1159,22 @@ fn the_ray_grid_view_traces_the_frame_shown_and_shows_it_in_the_viewport() {
     h.state_mut().jobs_mut().raygrid_mut().cancel();
     h.step();
     assert!(!h.state().jobs().raygrid().busy() && h.state().jobs().raygrid().status.contains("cancelled"));
+    // Its thread ends (the CPU trace stops at its next ghost), watched by the view.
+    step_until(&mut h, 60.0, |app| app.jobs().raygrid().stopping() == 0);
+    // Issue 60's hang: every exposure step of a drag made a new frame, each new trace cancelled the one before,
+    // and the cancelled ones ran on to the end, 136 of them queued in the pool the frame itself uses. Now a
+    // burst of new frames leaves one trace running and every replaced one stops.
+    h.state_mut().jobs_mut().raygrid_mut().grid = Some(128);
+    for k in 0..12 {
+        h.state_mut().edit().flare_ev = 7.0 + f64::from(k);
+        h.step();
+        assert!(h.state().jobs().raygrid().stopping() <= 12, "traces pile up");
+    }
+    assert!(h.state().jobs().raygrid().busy(), "the last frame is being traced");
+    let stopped_in = step_until(&mut h, 60.0, |app| app.jobs().raygrid().stopping() == 0);
+    println!("12 replaced ray-grid 128 traces ended {stopped_in:.2} s after the last new frame");
+    h.state_mut().jobs_mut().raygrid_mut().cancel();
+    step_until(&mut h, 60.0, |app| app.jobs().raygrid().stopping() == 0 && !app.jobs().raygrid().busy());
     h.state_mut().jobs_mut().raygrid_mut().grid = None;
     h.run();
     assert!(!h.state().view_shows_traced() && h.state().jobs().raygrid().status.is_empty());
@@ -1506,4 +1522,45 @@ fn the_dirt_control_dirties_the_front_element_and_undo_cleans_it() {
         h.run();
     }
     assert_eq!(h.state().doc().dirt, before, "undo gives back exactly the clean lens");
+}
+
+/// One truth (issue 60): every shipped look applied in the app draws the frame `flarelab render --preset NAME`
+/// draws. The anamorphic look kept the app's 36 mm sensor and framed its light 1.5x wider than the command
+/// line. Each look applied to the fresh document (undone after), both at 192x108 on the CPU twin without LUT
+/// ghosts (the app's bake is off here; `--method paraxial`), the app through File > Export image's writer,
+/// compared in display values.
+#[test]
+fn every_shipped_look_applied_in_the_app_draws_the_command_lines_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut h = harness();
+    h.run();
+    for (k, preset) in flare_core::preset::shipped().iter().enumerate() {
+        h.state_mut().apply_look(k);
+        // The optics are prepared on the UI thread's next frames.
+        step_until(&mut h, 60.0, |app| app.derived().flare().as_ref().is_some_and(|f| f.system.lens == app.doc().lens));
+        h.run_steps(2);
+        let app_png = dir.path().join(format!("app-{k}.png"));
+        let cli_png = dir.path().join(format!("cli-{k}.png"));
+        h.state().export_image_to((192, 108), &app_png).unwrap();
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_flarelab"))
+            .args(["render", "--preset", preset.name, "--size", "192x108", "--device", "cpu"])
+            .args(["--method", "paraxial", "-o", cli_png.to_str().unwrap()])
+            .env("FLARELAB_CACHE_DIR", dir.path().join("cache"))
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}: {}", preset.name, String::from_utf8_lossy(&out.stderr));
+        let read = |p: &std::path::Path| -> Vec<[f32; 3]> {
+            let image = image::open(p).unwrap().to_rgb8();
+            image.pixels().map(|p| p.0.map(|v| f32::from(v) / 255.0)).collect()
+        };
+        let (app, cli) = (read(&app_png), read(&cli_png));
+        assert_eq!(app.len(), cli.len(), "{}", preset.name);
+        let psnr = flare_core::metrics::psnr(&app, &cli);
+        println!("{}: the app's frame against the command line's {psnr:.1} dB", preset.name);
+        assert!(psnr >= 40.0, "{}: the app's frame is {psnr:.1} dB from the command line's", preset.name);
+        assert_eq!(h.state().doc().sensor_width_mm, preset.document().unwrap().sensor_width_mm, "{}", preset.name);
+        // Back to the fresh document (an animated look's keys would otherwise stay as the user's shot).
+        h.state_mut().undo();
+        h.run();
+    }
 }

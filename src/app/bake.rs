@@ -10,7 +10,7 @@ use flare_core::flare::PreparedFlare;
 use flare_core::lut::GhostLut;
 use flare_core::lut::bake::{BakeProgress, BakeSettings, bake_with, useful_field_deg};
 use flare_core::lut::cache::LutCache;
-use flare_core::lut::classify::{ClassifySettings, GhostClass, classify};
+use flare_core::lut::classify::{ClassifySettings, GhostClass, classify_until};
 use flare_core::render::gpu::GpuContext;
 use flare_core::render::raygrid::{GpuBake, SUPERSAMPLE};
 
@@ -48,7 +48,9 @@ pub fn start_bake(
     Job::spawn_with(Priority::Background, CLASSIFYING, move |cancel, progress| {
         let renderer = flare.ray_grid_renderer();
         let classify_settings = ClassifySettings::for_flare(&flare, useful_field_deg(&flare));
-        let classes = classify(&flare, &renderer, &classify_settings, &[]);
+        // Cancel stops the classification too (a large lens takes a minute there before its first entry).
+        let classes = classify_until(&flare, &renderer, &classify_settings, &[], cancel)
+            .ok_or_else(|| flare_core::lut::bake::BakeError::Cancelled.to_string())?;
         let chosen: Vec<usize> = classes.iter().filter(|c| c.nonlinear()).map(|c| c.ghost).collect();
         let report = |p: BakeProgress| {
             progress(

@@ -2,11 +2,13 @@
 //! bake ([`super::bake`]), the shot jobs ([`super::shot`]) and File > Export image.
 //!
 //! One priority rule ([`Priority`]): what the user waits for (the depth of field's focus, an export, a ray-grid
-//! view) is **interactive** and runs on rayon's global pool at the app's priority; what only improves the view
+//! view) is **interactive** and runs on a pool of its own at the app's priority; what only improves the view
 //! later (the bake, the looks' thumbnails) is **background** and runs on a pool of its own whose threads, and
 //! the job's own thread, run at the lowest priority the system gives (nice 19 on Unix). On a 2-core machine a
 //! bake at full speed then no longer starves a focus click: the scheduler gives the interactive threads
-//! nearly all of the processor while both run, and the bake the rest.
+//! nearly all of the processor while both run, and the bake the rest. **No job runs on rayon's global pool**:
+//! that pool is the UI thread's (the frame's CPU work, the LUT pass), so a frame never queues behind a job's
+//! parallel work (a frame once waited there behind 136 ray-grid traces).
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -24,12 +26,23 @@ pub struct Job<T> {
     cancel: Arc<AtomicBool>,
     progress: Arc<Mutex<(f32, String)>>,
     result: Arc<Mutex<Option<T>>>,
+    /// Set when the job's thread has ended (its work returned or panicked).
+    ended: Arc<AtomicBool>,
+}
+
+/// Sets its flag when dropped: a job's thread marks its end however its work ends.
+struct EndGuard(Arc<AtomicBool>);
+
+impl Drop for EndGuard {
+    fn drop(&mut self) {
+        self.0.store(true, Ordering::Release);
+    }
 }
 
 /// Whom a job yields to (see the module documentation).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Priority {
-    /// The user waits for it: rayon's global pool, the app's priority.
+    /// The user waits for it: a pool of its own, the app's priority.
     Interactive,
     /// It only improves the view later: its own pool at the lowest priority.
     Background,
@@ -44,6 +57,20 @@ fn background_pool() -> Option<&'static rayon::ThreadPool> {
             .num_threads(rayon::current_num_threads())
             .thread_name(|k| format!("background-{k}"))
             .start_handler(|_| lower_this_threads_priority())
+            .build()
+            .ok()
+    })
+    .as_ref()
+}
+
+/// The pool interactive jobs run their parallel work on: as many threads as the global pool, at the app's
+/// priority, apart from the global pool the UI thread's frame uses.
+fn interactive_pool() -> Option<&'static rayon::ThreadPool> {
+    static POOL: std::sync::OnceLock<Option<rayon::ThreadPool>> = std::sync::OnceLock::new();
+    POOL.get_or_init(|| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(rayon::current_num_threads())
+            .thread_name(|k| format!("job-{k}"))
             .build()
             .ok()
     })
@@ -82,20 +109,29 @@ impl<T: Send + 'static> Job<T> {
             cancel: Arc::new(AtomicBool::new(false)),
             progress: Arc::new(Mutex::new((0.0, first.to_owned()))),
             result: Arc::new(Mutex::new(None)),
+            ended: Arc::new(AtomicBool::new(false)),
         };
         let (cancel, progress, result) = (job.cancel.clone(), job.progress.clone(), job.result.clone());
+        let ended = EndGuard(job.ended.clone());
         std::thread::spawn(move || {
+            let _ended = ended;
             let report = move |fraction: f32, text: String| {
                 if let Ok(mut p) = progress.lock() {
                     *p = (fraction, text);
                 }
             };
-            let outcome = match (priority, background_pool()) {
-                (Priority::Background, Some(pool)) => {
+            let outcome = match priority {
+                Priority::Background => {
                     lower_this_threads_priority();
-                    pool.install(|| work(&cancel, &report))
+                    match background_pool() {
+                        Some(pool) => pool.install(|| work(&cancel, &report)),
+                        None => work(&cancel, &report),
+                    }
                 }
-                _ => work(&cancel, &report),
+                Priority::Interactive => match interactive_pool() {
+                    Some(pool) => pool.install(|| work(&cancel, &report)),
+                    None => work(&cancel, &report),
+                },
             };
             if let Ok(mut r) = result.lock() {
                 *r = Some(outcome);
@@ -107,6 +143,11 @@ impl<T: Send + 'static> Job<T> {
     /// Asks the thread to stop at its next check.
     pub fn cancel(&self) {
         self.cancel.store(true, Ordering::Relaxed);
+    }
+
+    /// True once the job's thread has ended (whether or not its outcome was taken).
+    pub fn ended(&self) -> bool {
+        self.ended.load(Ordering::Acquire)
     }
 
     /// True once Cancel was asked for.

@@ -6,7 +6,8 @@
 //! through the one frame pipeline on the CPU twin ([`flare_core::preset::Document::thumbnail`]); the panel shows
 //! the ones done so far and the worker's progress, and keeps the textures for the session (the thumbnails are made
 //! once). Clicking a look replaces the document's optics and display with the look's
-//! ([`flare_core::preset::Document::with_look`]: the plate, the timeline and the sensor stay) as one undo step; the
+//! ([`flare_core::preset::Document::with_look`]: the look's camera comes with it, the plate and the timeline stay,
+//! so the view frames what `flarelab render --preset NAME` draws) as one undo step; the
 //! automatic bake then fetches or bakes its LUT ghosts.
 
 use std::sync::{Arc, Mutex};

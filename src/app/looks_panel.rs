@@ -17,7 +17,7 @@ impl FlareLabApp {
                 ui.add(egui::ProgressBar::new(fraction).text(text));
             }
         }
-        ui.label("A look replaces the lens, stop, coatings and display; your plate, timeline and sensor stay.");
+        ui.label("A look replaces the lens, stop, coatings, sensor and display; your plate and timeline, if you have them, stay.");
         let mut chosen = None;
         egui::Grid::new("looks").num_columns(2).spacing([8.0, 8.0]).show(ui, |ui| {
             for (k, preset) in shipped().iter().enumerate() {

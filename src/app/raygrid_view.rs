@@ -15,7 +15,9 @@
 //! ([`ViewportResources::show_image`]). A trace is for the optics, the frame's request, the plate and the grid
 //! (`TraceKey`): one that finishes after any of them changed is dropped, and a new frame that differs only in
 //! its LUT (a bake that finished) shows the same trace again. Cancel stops the trace of this frame (the next
-//! frame is traced again). Exports and commands draw the document's look, not
+//! frame is traced again): the CPU trace stops at its next ghost and wavelength
+//! ([`RayGridRequest::cancellable`]), and a trace cancelled or replaced (a new frame while one runs) is watched
+//! until its thread ends ([`RayGridView::stopping`]), so traces never pile up behind the view. Exports and commands draw the document's look, not
 //! this view.
 
 use std::sync::atomic::Ordering;
@@ -76,6 +78,9 @@ pub struct RayGridView {
     shown: Option<(TraceKey, u64, Traced)>,
     /// What a cancelled trace was for: not traced again.
     cancelled: Option<TraceKey>,
+    /// Traces cancelled and not yet stopped (each stops at its next ghost): watched until their threads end,
+    /// never left running behind the view's back.
+    stopping: Vec<TraceJob>,
     /// What the status bar says.
     pub status: String,
     device: DeviceCell,
@@ -92,6 +97,17 @@ impl RayGridView {
         self.shown.as_ref().filter(|(key, g, _)| *g == generation && Some(key.grid) == self.grid).map(|s| &s.2)
     }
 
+    /// Cancelled traces whose threads have not ended yet.
+    pub fn stopping(&self) -> usize {
+        self.stopping.iter().filter(|job| !job.ended()).count()
+    }
+
+    /// Cancels `job` and watches it until its thread ends.
+    fn stop(&mut self, job: TraceJob) {
+        job.cancel();
+        self.stopping.push(job);
+    }
+
     /// The running trace's progress.
     pub fn progress(&self) -> Option<(f32, String)> {
         self.job.as_ref().map(|(_, job)| job.progress())
@@ -100,7 +116,7 @@ impl RayGridView {
     /// Stops the running trace; what it was for is not traced again.
     pub fn cancel(&mut self) {
         if let Some((key, job)) = self.job.take() {
-            job.cancel();
+            self.stop(job);
             self.cancelled = Some(key);
             self.status = "ray grid: cancelled (the paraxial frame is shown; the next frame is traced)".into();
         }
@@ -108,9 +124,10 @@ impl RayGridView {
 
     /// One UI frame's step (see the module documentation); `gpu` is the viewport's device, `None` in tests.
     pub fn step(&mut self, derived: &Derived, gpu: Option<&RenderState>) {
+        self.stopping.retain(|job| !job.ended());
         let Some(grid) = self.grid else {
             if let Some((_, job)) = self.job.take() {
-                job.cancel();
+                self.stop(job);
             }
             if self.shown.take().is_some()
                 && let Some(rs) = gpu
@@ -149,7 +166,7 @@ impl RayGridView {
         // Drafts while the user drags; the trace waits for the full frame.
         if derived.draft().is_some() {
             if let Some((_, job)) = self.job.take() {
-                job.cancel();
+                self.stop(job);
             }
             self.status = format!("ray grid {grid}: paraxial drafts while dragging; traced when input stops");
             return;
@@ -170,9 +187,12 @@ impl RayGridView {
         if self.cancelled.as_ref() == Some(&key) {
             return;
         }
-        match &self.job {
-            Some((for_key, _)) if *for_key == key => return,
-            Some((_, job)) => job.cancel(),
+        match self.job.take() {
+            Some((for_key, job)) if for_key == key => {
+                self.job = Some((for_key, job));
+                return;
+            }
+            Some((_, job)) => self.stop(job),
             None => {}
         }
         let plate = derived.plate().clone();
@@ -233,7 +253,8 @@ fn trace_frame(
             }
             report(0.1, format!("ray grid {grid}: tracing on the CPU…"));
             let request = RayGridRequest::views(light, vec![View { window, turn_deg: 0.0 }], Grid::Fixed(grid))
-                .weighted(&frame.request.ghost_gains);
+                .weighted(&frame.request.ghost_gains)
+                .cancellable(cancel);
             let mut images = renderer.render_request(&request).map_err(|e| e.to_string())?;
             images.remove(0).hdr
         }

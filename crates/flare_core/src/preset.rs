@@ -451,15 +451,23 @@ impl Document {
         }
     }
 
-    /// This document with `look`'s optics and display: lens, stop, coatings, spectrum, culling, blend, ghost
-    /// switches, exposures of the flare and the starburst, tonemap. The shot stays: the plate and its exposure,
-    /// the sensor, the timeline, the light found in the plate; the static light comes from the look unless the
-    /// timeline keys the light.
+    /// This document with `look`'s optics, camera and display: lens, stop, coatings, spectrum, culling, blend,
+    /// ghost switches, the sensor and desqueeze, exposures of the flare and the starburst, tonemap; applied to
+    /// a fresh document it is the look itself, the frame `flarelab render --preset NAME` draws (the anamorphic
+    /// look is framed on its own Super 35 sensor, not the 36 mm one the app had before). The user's shot stays
+    /// where there is one (a plate, a timeline changed from the default, a light found in the plate): the plate
+    /// and its exposure, the timeline, the light found in the plate; the static light comes from the look unless
+    /// the timeline keys the light. Without one, the look's own shot comes with it (an animated look's keys).
     pub fn with_look(&self, look: &Document) -> Document {
+        let has_shot = self.background.is_some()
+            || self.auto_light.is_some()
+            || self.timeline != crate::timeline::Timeline::default();
+        if !has_shot {
+            return look.clone();
+        }
         Document {
             background: self.background.clone(),
             plate_ev: self.plate_ev,
-            sensor_width_mm: self.sensor_width_mm,
             timeline: self.timeline.clone(),
             auto_light: self.auto_light.clone(),
             light_deg: if self.timeline.light_deg.is_empty() { look.light_deg } else { self.light_deg },
@@ -967,6 +975,16 @@ mod tests {
         assert_eq!((&applied.lens, &applied.aperture, applied.light_deg), (&look.lens, &look.aperture, look.light_deg));
         assert_eq!((&applied.background, applied.plate_ev), (&shot.background, -1.0));
         assert_eq!(applied.timeline, shot.timeline);
+        // The camera is the look's: the anamorphic look frames its light on its own Super 35 sensor.
+        let anamorphic = Document::open_named("anamorphic-panavision").unwrap();
+        let applied = shot.with_look(&anamorphic);
+        assert_ne!(anamorphic.sensor_width_mm, shot.sensor_width_mm);
+        assert_eq!((applied.sensor_width_mm, applied.desqueeze), (anamorphic.sensor_width_mm, anamorphic.desqueeze));
+        // On a fresh document a look is the preset itself.
+        for preset in shipped() {
+            let look = preset.document().unwrap();
+            assert!(Document::default().with_look(&look) == look, "{}", preset.name);
+        }
         let image = look.thumbnail(64, 36).unwrap();
         assert_eq!((image.width, image.height), (64, 36));
         assert!(image.pixels.iter().any(|p| p[0] > 40), "the thumbnail shows the flare");

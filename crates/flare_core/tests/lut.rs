@@ -1204,3 +1204,24 @@ fn a_finer_entry_is_traced_on_a_finer_grid_and_shows_no_rings() {
     // Measured: 0.0035 on the finer grid, 0.0272 on the `res` grid.
     assert!(e_fine < 0.01 && e_fine < 0.25 * e_coarse, "finer grid {e_fine:.4}, the res grid {e_coarse:.4}");
 }
+
+/// A job the user cancels stops where its time goes: a ray-grid render at its next ghost and wavelength
+/// (`RayGridRequest::cancellable`: it answers `Cancelled`, tracing nothing more), the classification at its next
+/// ghost and light angle (`classify_until`: `None`). With the flag clear both give what they always gave.
+#[test]
+fn a_cancelled_ray_grid_render_and_classification_stop_and_say_so() {
+    use flare_core::lut::classify::{ClassifySettings, classify, classify_until};
+    use flare_core::raytrace::RayGridError;
+    let flare = flare("tessar");
+    let renderer = flare.ray_grid_renderer();
+    let (stop, go) = (AtomicBool::new(true), AtomicBool::new(false));
+    let request = || RayGridRequest::frame([6.0, 3.0], 96, 64, Grid::Fixed(16));
+    assert!(matches!(renderer.render_request(&request().cancellable(&stop)), Err(RayGridError::Cancelled)));
+    let plain = renderer.render_request(&request()).unwrap().remove(0).hdr;
+    let cleared = renderer.render_request(&request().cancellable(&go)).unwrap().remove(0).hdr;
+    assert_eq!(plain.pixels, cleared.pixels);
+    let settings = ClassifySettings::for_flare(&flare, 12.0);
+    assert!(classify_until(&flare, &renderer, &settings, &[], &stop).is_none());
+    let measured = classify_until(&flare, &renderer, &settings, &[], &go).unwrap();
+    assert_eq!(measured, classify(&flare, &renderer, &settings, &[]));
+}

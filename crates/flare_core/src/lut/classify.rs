@@ -173,6 +173,20 @@ pub fn classify(
     settings: &ClassifySettings,
     forced: &[(usize, bool)],
 ) -> Vec<GhostClass> {
+    let never = std::sync::atomic::AtomicBool::new(false);
+    classify_until(flare, renderer, settings, forced, &never).unwrap_or_default()
+}
+
+/// [`classify`], stopped when `cancel` is set: every ghost and light angle not yet measured is skipped (the
+/// Panavision lens's 1540 ghosts take a minute on two cores), and the answer is `None`.
+pub fn classify_until(
+    flare: &PreparedFlare,
+    renderer: &RayGridRenderer,
+    settings: &ClassifySettings,
+    forced: &[(usize, bool)],
+    cancel: &std::sync::atomic::AtomicBool,
+) -> Option<Vec<GhostClass>> {
+    let cancelled = || cancel.load(std::sync::atomic::Ordering::Relaxed);
     let axis = super::Symmetry::of(&flare.system.lens, &flare.config.aperture)
         .unwrap_or_else(|_| super::Symmetry::of_aperture(&flare.config.aperture))
         .axis_deg;
@@ -198,6 +212,9 @@ pub fn classify(
                 forced: forced.iter().find(|(h, _)| *h == g).map(|(_, f)| *f),
             };
             for &theta in &angles {
+                if cancelled() {
+                    break;
+                }
                 let light = super::light_position_deg(theta, axis);
                 let u = crate::ghost::light_slopes_for_frame_position(light[0], light[1]);
                 let para = flare.system.paraxial_frame(g, u, super::MIN_TEXEL_MM);
@@ -265,6 +282,9 @@ pub fn classify(
             class
         })
         .collect();
+    if cancelled() {
+        return None;
+    }
     let brightest = classes.iter().map(|c| c.peak_irradiance).fold(0.0, f64::max);
     for class in &mut classes {
         if class.measured_nonlinear && class.peak_irradiance < settings.faint_fraction * brightest {
@@ -272,5 +292,5 @@ pub fn classify(
             class.faint = true;
         }
     }
-    classes
+    Some(classes)
 }

@@ -8,6 +8,7 @@ use rayon::prelude::*;
 use crate::aperture::ApertureMask;
 use crate::coating::InterfaceTables;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::optics::sensor::light_slopes_for_frame_position;
 use crate::optics::{Coating, Lens, LightPath, Ray, Tracer, VertexRecipe};
@@ -59,6 +60,9 @@ pub struct RayGridRequest<'a> {
     pub views: Vec<View>,
     pub grid: Grid,
     pub ghosts: Ghosts<'a>,
+    /// When set, the render stops at its next ghost and wavelength and answers [`RayGridError::Cancelled`]
+    /// (a job the user cancelled stops within one ghost's trace, its threads free for the next).
+    pub cancel: Option<&'a AtomicBool>,
 }
 
 impl<'a> RayGridRequest<'a> {
@@ -75,12 +79,12 @@ impl<'a> RayGridRequest<'a> {
 
     /// Every ghost in `views`.
     pub fn views(light_deg: [f64; 2], views: Vec<View>, grid: Grid) -> Self {
-        Self { light_deg, views, grid, ghosts: Ghosts::All }
+        Self { light_deg, views, grid, ghosts: Ghosts::All, cancel: None }
     }
 
     /// The scouted ghost, for the scout's light, in `views`.
     pub fn scouted(scout: &'a Scout, views: Vec<View>, grid: Grid) -> Self {
-        Self { light_deg: scout.light_deg, views, grid, ghosts: Ghosts::Scouted(scout) }
+        Self { light_deg: scout.light_deg, views, grid, ghosts: Ghosts::Scouted(scout), cancel: None }
     }
 
     /// This request for ghost `ghost` only.
@@ -91,6 +95,11 @@ impl<'a> RayGridRequest<'a> {
     /// This request with every ghost `g` at the gain `gains[g]` ([`Ghosts::Weighted`]).
     pub fn weighted(self, gains: &'a [f32]) -> Self {
         Self { ghosts: Ghosts::Weighted(gains), ..self }
+    }
+
+    /// This request stopped when `cancel` is set (see [`Self::cancel`]).
+    pub fn cancellable(self, cancel: &'a AtomicBool) -> Self {
+        Self { cancel: Some(cancel), ..self }
     }
 }
 
@@ -177,6 +186,8 @@ pub enum RayGridError {
     Window(f64),
     #[error("light angle {0:?} deg: each angle must be finite and within +-89 degrees")]
     Angle([f64; 2]),
+    #[error("cancelled")]
+    Cancelled,
 }
 impl RayGridRenderer {
     /// Prepares every ghost of `setup` with the stop shape `mask`.
@@ -259,17 +270,17 @@ impl RayGridRenderer {
     /// wavelength's light passes as the pre-pass (finer than one over the whole front lens, and not traced
     /// again), and does not trace a wavelength where none passed.
     pub fn render_request(&self, request: &RayGridRequest) -> Result<Vec<RayGridImage>, RayGridError> {
-        let (light, views, grid) = (request.light_deg, request.views.as_slice(), request.grid);
+        let (light, views, grid, cancel) = (request.light_deg, request.views.as_slice(), request.grid, request.cancel);
         match request.ghosts {
-            Ghosts::All => self.render_views(light, views, grid, |_: &Job| Some((None, 1.0))),
+            Ghosts::All => self.render_views(light, views, grid, cancel, |_: &Job| Some((None, 1.0))),
             Ghosts::Only(g) => {
-                self.render_views(light, views, grid, |job: &Job| (job.ghost == g).then_some((None, 1.0)))
+                self.render_views(light, views, grid, cancel, |job: &Job| (job.ghost == g).then_some((None, 1.0)))
             }
-            Ghosts::Weighted(gains) => self.render_views(light, views, grid, |job: &Job| {
+            Ghosts::Weighted(gains) => self.render_views(light, views, grid, cancel, |job: &Job| {
                 let gain = ghost_gain(gains, job.ghost);
                 (gain > 0.0).then_some((None, gain))
             }),
-            Ghosts::Scouted(scout) => self.render_views(scout.light_deg, views, grid, |job: &Job| {
+            Ghosts::Scouted(scout) => self.render_views(scout.light_deg, views, grid, cancel, |job: &Job| {
                 if job.ghost != scout.ghost {
                     return None;
                 }
@@ -280,12 +291,14 @@ impl RayGridRenderer {
 
     /// Validates a request and renders it: `plan(job)` is `None` for a job not drawn, `Some((None, gain))` for
     /// one whose pre-pass is traced over the whole front lens and `Some((Some(grid), gain))` for one whose
-    /// pre-pass is the scouted `grid`; its light is multiplied by `gain`.
+    /// pre-pass is the scouted `grid`; its light is multiplied by `gain`. A set `cancel` skips every job not yet
+    /// begun and answers [`RayGridError::Cancelled`].
     fn render_views<'s>(
         &self,
         light_deg: [f64; 2],
         views: &[View],
         grid: Grid,
+        cancel: Option<&AtomicBool>,
         plan: impl Fn(&Job) -> Option<(Option<&'s TracedGrid>, f64)> + Sync,
     ) -> Result<Vec<RayGridImage>, RayGridError> {
         validate(light_deg, views, grid)?;
@@ -304,13 +317,20 @@ impl RayGridRenderer {
             self.jobs.iter().filter_map(|job| plan(job).map(|planned| (job, planned))).collect();
         let free: std::sync::Mutex<Vec<Vec<Accumulator>>> = std::sync::Mutex::new(Vec::new());
         let take = || free.lock().ok().and_then(|mut f| f.pop()).unwrap_or_else(fresh);
+        let cancelled = || cancel.is_some_and(|c| c.load(Ordering::Relaxed));
         drawn.into_par_iter().for_each(|(job, (scouted, gain))| {
+            if cancelled() {
+                return;
+            }
             let mut accs = take();
             self.render_job(job, u, views, grid, scouted, gain, &mut accs);
             if let Ok(mut f) = free.lock() {
                 f.push(accs);
             }
         });
+        if cancelled() {
+            return Err(RayGridError::Cancelled);
+        }
         let sets = free.into_inner().unwrap_or_else(std::sync::PoisonError::into_inner);
         let accs = sets.into_iter().reduce(merge).unwrap_or_else(fresh);
         Ok(views.iter().zip(accs).map(|(view, acc)| acc.into_image(&view.window)).collect())
