@@ -8,7 +8,9 @@
 //! change) and, unless the LUT on screen already has that key, takes the first of: a LUT kept in memory
 //! ([`MEMORY`] of them, so an undo to a lens baked in this session is instant), a checked cache file (a
 //! damaged one is removed, reported, and baked again), or a new bake. A bake for older optics is cancelled
-//! when the optics change; a bake the user cancelled is not started again until they change. A finished
+//! when the optics change, an undo to a lens whose LUT is at hand included (no bake for optics the user left
+//! runs on in the background; its thread is watched until it ends, `JobBoard::stopping_bakes`); a bake the user
+//! cancelled is not started again until they change. A finished
 //! bake is stored on disk and in memory, and shown if its optics are still the live ones. A new bake starts only
 //! once the optics have stood for [`SETTLE`] (a drag through many values bakes the last one), and takes the
 //! ghosts it can from the latest LUT (`bake_with`'s `previous`: unchanged ghosts are not baked again); a setting

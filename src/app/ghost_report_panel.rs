@@ -20,7 +20,7 @@ impl FlareLabApp {
         let u = super::view::light_slopes(light);
         let key = ReportKey::new(&flare, u);
         if self.jobs.report_mut().step(key, &self.session.doc().lens, &flare, u) {
-            ui.ctx().request_repaint_after(std::time::Duration::from_millis(100));
+            ui.ctx().request_repaint_after(super::job::PROGRESS_REPAINT);
         }
         let stale = self.jobs.report_mut().stale(key);
         ui.horizontal(|ui| {

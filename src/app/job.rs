@@ -13,6 +13,12 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 
+/// How often the window repaints while a job runs and nothing else asks (its progress bar moves, a finished job
+/// is taken): twice a second. Every repaint draws the whole window, which on a software rasteriser costs tens of
+/// milliseconds of the cores the jobs work on; at 10 a second (issue 60) an idle window with a bake running took
+/// half a core of two.
+pub const PROGRESS_REPAINT: std::time::Duration = std::time::Duration::from_millis(500);
+
 /// Where a job stands.
 pub enum JobPoll<T> {
     /// Still running: the fraction done and what it is doing.

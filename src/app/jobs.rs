@@ -65,6 +65,8 @@ type ExportJob = (PathBuf, Job<Result<(), String>>);
 /// The job board (see the module documentation).
 pub struct JobBoard {
     bake: Option<BakeJob>,
+    /// Bakes cancelled because the user left their optics, until their threads end (their outcome is dropped).
+    stopping_bakes: Vec<BakeJob>,
     bake_status: BakeStatus,
     /// The classification of the LUT on screen, when this session baked it.
     classes: Option<Vec<GhostClass>>,
@@ -85,6 +87,7 @@ impl Default for JobBoard {
     fn default() -> Self {
         Self {
             bake: None,
+            stopping_bakes: Vec::new(),
             bake_status: BakeStatus::Idle,
             classes: None,
             autobake: AutoBake::default(),
@@ -105,6 +108,7 @@ impl JobBoard {
     /// Polls every job with a thread of its own and runs the automatic bake (see the module documentation).
     pub fn poll(&mut self, live: &Live) -> Vec<JobEvent> {
         let mut events = Vec::new();
+        self.stopping_bakes.retain(|job| !job.ended());
         self.poll_bake(live, &mut events);
         self.poll_export(&mut events);
         self.poll_shot(&mut events);
@@ -144,13 +148,8 @@ impl JobBoard {
         // The bake (started by itself or from the Blend panel).
         if let (Some(job), BakeStatus::Running { fraction, text }) = (&self.bake, &self.bake_status) {
             ui.horizontal(|ui| {
-                if self.autobake.baking.is_some() && self.autobake.baking != self.autobake.live {
-                    // Optics the user left (an undo): the bake goes on, kept for a redo.
-                    ui.label(format!("baking LUT ghosts for earlier optics (kept for a redo): {text}"));
-                } else {
-                    let meanwhile = if lut_shown { "the LUT ghosts shown" } else { "the paraxial flare" };
-                    ui.label(format!("baking LUT ghosts, {meanwhile} until then: {text}"));
-                }
+                let meanwhile = if lut_shown { "the LUT ghosts shown" } else { "the paraxial flare" };
+                ui.label(format!("baking LUT ghosts, {meanwhile} until then: {text}"));
                 ui.add(egui::ProgressBar::new(*fraction).desired_width(160.0));
                 if ui.button("Cancel bake").clicked() {
                     job.cancel();
@@ -222,6 +221,24 @@ impl JobBoard {
         }
         let (Some(key), Some(flare)) = (self.live_key(live), live.flare) else { return };
         self.spawn_bake(flare.clone(), key);
+    }
+
+    /// Bakes cancelled for optics the user left whose threads have not ended yet.
+    pub fn stopping_bakes(&self) -> usize {
+        self.stopping_bakes.iter().filter(|job| !job.ended()).count()
+    }
+
+    /// Cancels the running bake when it is for other optics than `key` (an undo to a lens whose LUT is at hand):
+    /// no bake for optics the user left goes on in the background; its thread is watched until it ends.
+    fn stop_bake_unless_for(&mut self, key: u64) {
+        if self.autobake.baking != Some(key)
+            && let Some(job) = self.bake.take()
+        {
+            job.cancel();
+            self.stopping_bakes.push(job);
+            self.autobake.baking = None;
+            self.bake_status = BakeStatus::Idle;
+        }
     }
 
     pub fn cancel_bake(&self) {

@@ -11,7 +11,7 @@ impl FlareLabApp {
     pub(super) fn looks_ui(&mut self, ui: &mut egui::Ui) {
         self.jobs.looks_mut().start();
         if self.jobs.looks_mut().poll(ui.ctx()) {
-            ui.ctx().request_repaint_after(std::time::Duration::from_millis(100));
+            ui.ctx().request_repaint_after(super::job::PROGRESS_REPAINT);
             if let Some(job) = &self.jobs.looks_mut().job {
                 let (fraction, text) = job.progress();
                 ui.add(egui::ProgressBar::new(fraction).text(text));

@@ -438,7 +438,7 @@ impl FlareLabApp {
             self.session.commit();
         }
         if self.jobs.busy() {
-            ui.ctx().request_repaint_after(std::time::Duration::from_millis(100));
+            ui.ctx().request_repaint_after(job::PROGRESS_REPAINT);
         }
     }
 

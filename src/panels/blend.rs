@@ -95,7 +95,8 @@ pub fn blend_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, actio
     match ctx.bake {
         BakeStatus::Idle => {}
         BakeStatus::Running { fraction, text } => {
-            ui.add(egui::ProgressBar::new(*fraction).text(text.as_str()).animate(true));
+            // Not animated: an animated bar repaints the window every frame for as long as the bake runs.
+            ui.add(egui::ProgressBar::new(*fraction).text(text.as_str()));
         }
         BakeStatus::Done(text) => {
             ui.label(text);

@@ -25,6 +25,7 @@ impl JobBoard {
             return;
         }
         if let Some(baked) = self.autobake.remembered(key) {
+            self.stop_bake_unless_for(key);
             self.show_baked(key, baked, "kept from this session", events);
             return;
         }
@@ -33,6 +34,7 @@ impl JobBoard {
             if let Some(cache) = &self.autobake.cache {
                 match cache.load(&flare.system.lens, &flare.config, &self.autobake.settings) {
                     Lookup::Hit(lut) => {
+                        self.stop_bake_unless_for(key);
                         let baked = (Arc::new(*lut), None);
                         self.autobake.remember(key, baked.clone());
                         self.show_baked(key, baked, "from the cache", events);
@@ -46,11 +48,8 @@ impl JobBoard {
         if (self.autobake.baking == Some(key) && self.bake.is_some()) || self.autobake.declined == Some(key) {
             return;
         }
-        if let Some(old) = self.bake.take() {
-            // A bake for optics that are no longer the live ones.
-            old.cancel();
-            self.autobake.baking = None;
-        }
+        // A bake for optics that are no longer the live ones.
+        self.stop_bake_unless_for(key);
         // Optics an edit just made must stand for a moment before their bake starts (see `autobake::SETTLE`).
         if let Some((k, since)) = self.autobake.settling
             && k == key
