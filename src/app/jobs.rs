@@ -126,45 +126,41 @@ impl JobBoard {
             || self.looks.job.is_some()
     }
 
-    /// Every job's line in the status area: what it does, its progress and its Cancel; `lut_shown`: LUT ghosts
-    /// are on screen (a bake then says they stay until it lands, not that the paraxial flare stands in).
+    /// Every job in the status bar's one row: what it does (truncated to a fixed width, the whole text on
+    /// hover), its progress and its Cancel, each item where the one before leaves it (nothing wraps, the row
+    /// never grows); `lut_shown`: LUT ghosts are on screen (a bake then says they stay until it lands, not that
+    /// the paraxial flare stands in).
     pub fn status_ui(&mut self, ui: &mut egui::Ui, lut_shown: bool) {
         if !self.dof.status.is_empty() {
-            ui.label(&self.dof.status);
+            status_label(ui, &self.dof.status, 220.0);
         }
         // The ray-grid view: what it shows or is tracing, with Cancel.
         if !self.raygrid.status.is_empty() {
-            ui.horizontal(|ui| {
-                if let Some((fraction, text)) = self.raygrid.progress() {
-                    ui.add(egui::ProgressBar::new(fraction).text(text).desired_width(360.0));
-                    if ui.button("Cancel trace").clicked() {
-                        self.raygrid.cancel();
-                    }
-                } else {
-                    ui.label(&self.raygrid.status);
+            if let Some((fraction, text)) = self.raygrid.progress() {
+                ui.add(egui::ProgressBar::new(fraction).text(text).desired_width(240.0));
+                if ui.button("Cancel trace").clicked() {
+                    self.raygrid.cancel();
                 }
-            });
+            } else {
+                status_label(ui, &self.raygrid.status, 260.0);
+            }
         }
         // The bake (started by itself or from the Blend panel).
         if let (Some(job), BakeStatus::Running { fraction, text }) = (&self.bake, &self.bake_status) {
-            ui.horizontal(|ui| {
-                let meanwhile = if lut_shown { "the LUT ghosts shown" } else { "the paraxial flare" };
-                ui.label(format!("baking LUT ghosts, {meanwhile} until then: {text}"));
-                ui.add(egui::ProgressBar::new(*fraction).desired_width(160.0));
-                if ui.button("Cancel bake").clicked() {
-                    job.cancel();
-                }
-            });
+            let meanwhile = if lut_shown { "the LUT ghosts shown" } else { "the paraxial flare" };
+            status_label(ui, &format!("baking LUT ghosts, {meanwhile} until then: {text}"), 260.0);
+            ui.add(egui::ProgressBar::new(*fraction).desired_width(100.0));
+            if ui.button("Cancel bake").clicked() {
+                job.cancel();
+            }
         }
         if let Some((path, job)) = &self.export {
-            ui.horizontal(|ui| {
-                let (fraction, text) = job.progress();
-                ui.add(egui::ProgressBar::new(fraction).text(text).desired_width(360.0));
-                ui.label(format!("exporting {}", path.display()));
-                if ui.button("Cancel export").clicked() {
-                    job.cancel();
-                }
-            });
+            let (fraction, text) = job.progress();
+            ui.add(egui::ProgressBar::new(fraction).text(text).desired_width(160.0));
+            status_label(ui, &format!("exporting {}", path.display()), 200.0);
+            if ui.button("Cancel export").clicked() {
+                job.cancel();
+            }
         }
         // A shot job, whichever panel is open.
         self.shot_progress_ui(ui);
@@ -175,7 +171,8 @@ impl JobBoard {
         if let Some(job) = &self.shot {
             ui.horizontal(|ui| {
                 let (fraction, _) = job.job.progress();
-                ui.add(egui::ProgressBar::new(fraction).text(self.shot_status.clone()).desired_width(360.0));
+                ui.add(egui::ProgressBar::new(fraction).text(self.shot_status.clone()).desired_width(240.0))
+                    .on_hover_text(self.shot_status.clone());
                 if ui.button("Cancel").clicked() {
                     job.job.cancel();
                 }
@@ -526,4 +523,14 @@ impl JobBoard {
     pub fn report_mut(&mut self) -> &mut ReportState {
         &mut self.report
     }
+}
+
+/// A label of the status bar's row: `text` on one line at most `width` points wide (cut with an ellipsis), the
+/// whole text on hover.
+pub fn status_label(ui: &mut egui::Ui, text: &str, width: f32) {
+    let height = ui.spacing().interact_size.y;
+    ui.allocate_ui_with_layout(egui::vec2(width, height), egui::Layout::left_to_right(egui::Align::Center), |ui| {
+        ui.set_max_width(width);
+        ui.add(egui::Label::new(text).truncate()).on_hover_text(text);
+    });
 }

@@ -176,6 +176,10 @@ pub struct FlareLabApp {
     /// are drawn unfilled; without it (the UI tests' harness clears to transparent) one rectangle paints the
     /// same colour under them.
     cleared_by_window: bool,
+    /// The side panel is folded away (the View menu): the viewport takes the window's width.
+    panels_hidden: bool,
+    /// The height (points) the rows under the viewport took in the last frame: the viewport takes the rest.
+    under_view: f32,
 }
 
 impl FlareLabApp {
@@ -208,6 +212,8 @@ impl FlareLabApp {
             colour_cube: String::new(),
 
             cleared_by_window: false,
+            panels_hidden: false,
+            under_view: 280.0,
         };
         // FLARELAB_RAYGRID=N starts the view in its ray-grid mode (the Xvfb test and screenshots).
         app.jobs.raygrid_mut().grid = std::env::var("FLARELAB_RAYGRID")
@@ -391,21 +397,26 @@ impl FlareLabApp {
         let side = unfilled(egui::Frame::side_top_panel(ui.style()));
         egui::Panel::top("menu").frame(side).show(ui, |ui| self.menu_ui(ui));
         egui::Panel::bottom("status").frame(side).show(ui, |ui| self.status_ui(ui));
+        // Resizable and foldable (View > Panels): the picture first, the panels' tables at their width.
         let panels = egui::Panel::right("panels").frame(side).default_size(600.0).min_size(400.0).resizable(true);
-        panels.show(ui, |ui| {
-            ui.horizontal(|ui| {
-                for tab in Tab::ALL {
-                    if ui.selectable_label(self.session.tab() == tab, tab.name()).clicked() {
-                        self.session.show_tab(tab);
+        if !self.panels_hidden {
+            panels.show(ui, |ui| {
+                ui.horizontal_wrapped(|ui| {
+                    for tab in Tab::ALL {
+                        if ui.selectable_label(self.session.tab() == tab, tab.name()).clicked() {
+                            self.session.show_tab(tab);
+                        }
                     }
-                }
+                });
+                ui.separator();
+                self.panel_ui(ui, &mut actions);
             });
-            ui.separator();
-            self.panel_ui(ui, &mut actions);
-        });
+        }
         egui::CentralPanel::default().frame(unfilled(egui::Frame::central_panel(ui.style()))).show(ui, |ui| {
-            let height = ui.available_height();
-            ui.allocate_ui(egui::vec2(ui.available_width(), height * 0.6), |ui| self.viewport_ui(ui, &mut actions));
+            // The viewport takes what the rows under it (as tall as they were last frame) leave.
+            let height = (ui.available_height() - self.under_view).max(120.0);
+            ui.allocate_ui(egui::vec2(ui.available_width(), height), |ui| self.viewport_ui(ui, &mut actions));
+            let under_top = ui.cursor().top();
             self.timeline_ui(ui);
             self.display_ui(ui);
             self.colour_ui(ui);
@@ -415,14 +426,22 @@ impl FlareLabApp {
                 .selected()
                 .and_then(|g| self.derived.flare().as_ref().map(|f| &f.system.ghosts[g]))
                 .map(|g| (g.i, g.j));
-            crate::panels::ray_diagram::ray_diagram_ui(
-                ui,
-                &mut self.ray_diagram,
-                self.derived.flare().as_deref(),
-                self.derived.lens_problem().as_ref(),
-                self.derived.light_deg(self.session.doc()),
-                ghost,
-            );
+            // Foldable: folded, the viewport takes its height.
+            egui::CollapsingHeader::new("ray diagram").default_open(true).show(ui, |ui| {
+                crate::panels::ray_diagram::ray_diagram_ui(
+                    ui,
+                    &mut self.ray_diagram,
+                    self.derived.flare().as_deref(),
+                    self.derived.lens_problem().as_ref(),
+                    self.derived.light_deg(self.session.doc()),
+                    ghost,
+                );
+            });
+            let used = ui.cursor().top() - under_top;
+            if (used - self.under_view).abs() > 0.5 {
+                self.under_view = used;
+                ui.ctx().request_repaint();
+            }
         });
         for action in actions {
             self.act(action);
@@ -565,6 +584,16 @@ impl FlareLabApp {
                     self.act(Action::ExportLut);
                 }
             });
+            ui.menu_button("View", |ui| {
+                let mut shown = !self.panels_hidden;
+                if ui
+                    .checkbox(&mut shown, "Panels")
+                    .on_hover_text("the side panel; folded, the view takes the width")
+                    .changed()
+                {
+                    self.panels_hidden = !shown;
+                }
+            });
             ui.menu_button("Edit", |ui| {
                 if ui.add_enabled(self.session.can_undo(), egui::Button::new("Undo  (Ctrl+Z)")).clicked() {
                     self.undo();
@@ -605,19 +634,13 @@ impl FlareLabApp {
         }
     }
 
+    /// The status bar: one row of fixed height (issue 60: it grew to 5-7 lines and moved the Cancel buttons
+    /// under the pointer). Left to right: every job with its progress and Cancel, what the last action said, and
+    /// the frame in a few words; the frame's details (sprites, culling, GPU pass times, motion blur) on hover.
     fn status_ui(&mut self, ui: &mut egui::Ui) {
-        // What the last action did (or why it failed) stays here until the next one says something.
-        if let Some(message) = self.session.message().map(str::to_owned) {
-            ui.horizontal(|ui| {
-                ui.colored_label(egui::Color32::from_rgb(255, 170, 90), message);
-                if ui.small_button("x").on_hover_text("dismiss").clicked() {
-                    self.session.hush();
-                }
-            });
-        }
         let dt_ms = ui.ctx().input(|i| i.unstable_dt) * 1e3;
         let light = self.derived.light_deg(self.session.doc());
-        ui.label(format!(
+        let frame_details = format!(
             "frame {} | light ({:.1}, {:.1}) deg | scene {:.2} ms, frame {:.1} ms at {}x{} | sprites drawn {}, culled {} dim / {} off sensor / {} empty entrance{}",
             self.view.playhead(),
             light[0],
@@ -631,7 +654,7 @@ impl FlareLabApp {
             self.derived.stats().off_sensor,
             self.derived.stats().empty_entrance_region,
             if self.derived.lut().is_some() { " | LUT ghosts on" } else { "" }
-        ));
+        );
         // One line, always there: whether the view shows a draft, and the GPU's own time of the flare's passes.
         let quality = match self.derived.draft_shown() {
             Some(d) => format!(
@@ -673,8 +696,38 @@ impl FlareLabApp {
             (Some(_), None) => "GPU time: not measured (this adapter has no timestamp queries)".to_owned(),
             (None, None) => "no GPU".to_owned(),
         };
-        ui.label(format!("{quality} | {gpu_time}"));
-        self.jobs.status_ui(ui, self.derived.lut().is_some());
+        let short = format!(
+            "frame {} | light ({:.1}, {:.1}) deg | {} sprites{} | {}",
+            self.view.playhead(),
+            light[0],
+            light[1],
+            self.derived.stats().drawn,
+            if self.derived.lut().is_some() { ", LUT ghosts on" } else { "" },
+            if self.derived.draft_shown().is_some() { "draft while dragging" } else { "full quality" },
+        );
+        let details = format!("{frame_details}\n{quality}\n{gpu_time}");
+        ui.horizontal(|ui| {
+            ui.set_height(ui.spacing().interact_size.y);
+            ui.style_mut().wrap_mode = Some(egui::TextWrapMode::Truncate);
+            self.jobs.status_ui(ui, self.derived.lut().is_some());
+            // What the last action did (or why it failed) stays here until the next one says something.
+            if let Some(message) = self.session.message().map(str::to_owned) {
+                let room = (ui.available_width() - 260.0).max(120.0);
+                ui.allocate_ui_with_layout(
+                    egui::vec2(room, ui.spacing().interact_size.y),
+                    egui::Layout::left_to_right(egui::Align::Center),
+                    |ui| {
+                        ui.set_max_width(room);
+                        if ui.small_button("x").on_hover_text("dismiss").clicked() {
+                            self.session.hush();
+                        }
+                        let text = egui::RichText::new(&message).color(egui::Color32::from_rgb(255, 170, 90));
+                        ui.add(egui::Label::new(text).truncate()).on_hover_text(&message);
+                    },
+                );
+            }
+            ui.add(egui::Label::new(short).truncate()).on_hover_text(details);
+        });
     }
 
     /// The display settings under the view, in two rows (a slider and its value never wrap apart): the

@@ -29,6 +29,9 @@ use flare_core::optics::{EntrancePupil, Lens, LightPath, Ray, Section, TraceOpti
 
 use super::LensProblem;
 
+/// The diagram's plot height (points).
+pub const RAY_DIAGRAM_HEIGHT: f32 = 150.0;
+
 /// Rays across the pupil.
 const FAN: usize = 11;
 
@@ -226,7 +229,10 @@ pub fn ray_diagram_ui(
     }
     let forward = egui::Color32::from_rgb(255, 140, 60);
     let backward = egui::Color32::from_rgb(90, 170, 255);
+    // A fixed height: the viewport above takes what the rows under it leave, so a diagram that filled the
+    // leftover height would shrink to a sliver.
     Plot::new("ray_diagram")
+        .height(RAY_DIAGRAM_HEIGHT)
         .data_aspect(1.0)
         .legend(Legend::default().position(egui_plot::Corner::LeftTop))
         .x_axis_label("z (mm)")
