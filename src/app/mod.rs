@@ -397,8 +397,12 @@ impl FlareLabApp {
         let side = unfilled(egui::Frame::side_top_panel(ui.style()));
         egui::Panel::top("menu").frame(side).show(ui, |ui| self.menu_ui(ui));
         egui::Panel::bottom("status").frame(side).show(ui, |ui| self.status_ui(ui));
-        // Resizable and foldable (View > Panels): the picture first, the panels' tables at their width.
-        let panels = egui::Panel::right("panels").frame(side).default_size(600.0).min_size(400.0).resizable(true);
+        // Resizable and foldable (View > Panels): the picture first, the panels' tables at their width. At first
+        // 600 points, what the Lens table needs, from a 1200-point window up; 40 % of a narrower one, at least 360
+        // (at 1024x700 a fixed 600 left the view 408x230; its tables then scroll sideways).
+        let width = ui.available_width();
+        let first_width = if width >= 1200.0 { 600.0 } else { (0.4 * width).max(360.0) };
+        let panels = egui::Panel::right("panels").frame(side).default_size(first_width).min_size(320.0).resizable(true);
         if !self.panels_hidden {
             panels.show(ui, |ui| {
                 ui.horizontal_wrapped(|ui| {
