@@ -54,29 +54,27 @@ pub enum Priority {
     Background,
 }
 
-/// The pool background jobs run their parallel work on: as many threads as the global pool, each at the lowest
-/// priority.
-fn background_pool() -> Option<&'static rayon::ThreadPool> {
-    static POOL: std::sync::OnceLock<Option<rayon::ThreadPool>> = std::sync::OnceLock::new();
-    POOL.get_or_init(|| {
+/// The pool jobs of `priority` run their parallel work on, made on first use: as many threads as the global
+/// pool, named `job-N` (interactive, at the app's priority) or `background-N` (each at the lowest priority). Both
+/// stay apart from the global pool, which the UI thread's frame uses. `None` if the system refuses the threads
+/// (the job then runs on its own thread alone).
+fn pool(priority: Priority) -> Option<&'static rayon::ThreadPool> {
+    type Cell = std::sync::OnceLock<Option<rayon::ThreadPool>>;
+    static INTERACTIVE: Cell = Cell::new();
+    static BACKGROUND: Cell = Cell::new();
+    let (cell, name, lowered) = match priority {
+        Priority::Interactive => (&INTERACTIVE, "job", false),
+        Priority::Background => (&BACKGROUND, "background", true),
+    };
+    cell.get_or_init(|| {
         rayon::ThreadPoolBuilder::new()
             .num_threads(rayon::current_num_threads())
-            .thread_name(|k| format!("background-{k}"))
-            .start_handler(|_| lower_this_threads_priority())
-            .build()
-            .ok()
-    })
-    .as_ref()
-}
-
-/// The pool interactive jobs run their parallel work on: as many threads as the global pool, at the app's
-/// priority, apart from the global pool the UI thread's frame uses.
-fn interactive_pool() -> Option<&'static rayon::ThreadPool> {
-    static POOL: std::sync::OnceLock<Option<rayon::ThreadPool>> = std::sync::OnceLock::new();
-    POOL.get_or_init(|| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(rayon::current_num_threads())
-            .thread_name(|k| format!("job-{k}"))
+            .thread_name(move |k| format!("{name}-{k}"))
+            .start_handler(move |_| {
+                if lowered {
+                    lower_this_threads_priority();
+                }
+            })
             .build()
             .ok()
     })
@@ -126,18 +124,12 @@ impl<T: Send + 'static> Job<T> {
                     *p = (fraction, text);
                 }
             };
-            let outcome = match priority {
-                Priority::Background => {
-                    lower_this_threads_priority();
-                    match background_pool() {
-                        Some(pool) => pool.install(|| work(&cancel, &report)),
-                        None => work(&cancel, &report),
-                    }
-                }
-                Priority::Interactive => match interactive_pool() {
-                    Some(pool) => pool.install(|| work(&cancel, &report)),
-                    None => work(&cancel, &report),
-                },
+            if priority == Priority::Background {
+                lower_this_threads_priority();
+            }
+            let outcome = match pool(priority) {
+                Some(pool) => pool.install(|| work(&cancel, &report)),
+                None => work(&cancel, &report),
             };
             if let Ok(mut r) = result.lock() {
                 *r = Some(outcome);
