@@ -57,8 +57,9 @@ pub struct ClassifySettings {
     pub grid: usize,
 }
 
-/// The flare gain (about 6.6 stops) at which classification judges a ghost visible. It is fixed, not the
-/// user's exposure, so that a LUT does not depend on a display setting.
+/// The flare gain (about 6.6 stops) at which classification judges a ghost visible, or the lens's own auto
+/// exposure where that is higher ([`ClassifySettings::for_flare`]). Neither is the user's exposure, so that a
+/// LUT does not depend on a display setting.
 pub const VISIBILITY_GAIN: f32 = 100.0;
 
 impl ClassifySettings {
