@@ -169,3 +169,31 @@ impl<T: Send + 'static> Job<T> {
         }
     }
 }
+
+/// Jobs cancelled and not yet ended: each was asked to stop and is watched until its thread ends (its outcome is
+/// dropped), so no cancelled work goes on unseen behind the UI.
+pub struct Stopping<T>(Vec<Job<T>>);
+
+impl<T> Default for Stopping<T> {
+    fn default() -> Self {
+        Self(Vec::new())
+    }
+}
+
+impl<T: Send + 'static> Stopping<T> {
+    /// Cancels `job` and watches it.
+    pub fn stop(&mut self, job: Job<T>) {
+        job.cancel();
+        self.0.push(job);
+    }
+
+    /// Forgets the jobs whose threads have ended.
+    pub fn prune(&mut self) {
+        self.0.retain(|job| !job.ended());
+    }
+
+    /// How many of them still run.
+    pub fn running(&self) -> usize {
+        self.0.iter().filter(|job| !job.ended()).count()
+    }
+}

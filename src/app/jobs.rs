@@ -31,7 +31,7 @@ use super::autobake::{AutoBake, Baked};
 use super::bake::{self, BakeJob, BakeOutcome, BakePoll};
 use super::dof::DofWork;
 use super::ghost_report::ReportState;
-use super::job::{Job, JobPoll};
+use super::job::{Job, JobPoll, Stopping};
 use super::looks::Looks;
 use super::raygrid_view::RayGridView;
 use super::shot::{ShotJob, ShotOutcome, light_key};
@@ -65,8 +65,8 @@ type ExportJob = (PathBuf, Job<Result<(), String>>);
 /// The job board (see the module documentation).
 pub struct JobBoard {
     bake: Option<BakeJob>,
-    /// Bakes cancelled because the user left their optics, until their threads end (their outcome is dropped).
-    stopping_bakes: Vec<BakeJob>,
+    /// Bakes cancelled because the user left their optics, until their threads end.
+    stopping_bakes: Stopping<BakeOutcome>,
     bake_status: BakeStatus,
     /// The classification of the LUT on screen, when this session baked it.
     classes: Option<Vec<GhostClass>>,
@@ -87,7 +87,7 @@ impl Default for JobBoard {
     fn default() -> Self {
         Self {
             bake: None,
-            stopping_bakes: Vec::new(),
+            stopping_bakes: Stopping::default(),
             bake_status: BakeStatus::Idle,
             classes: None,
             autobake: AutoBake::default(),
@@ -108,7 +108,7 @@ impl JobBoard {
     /// Polls every job with a thread of its own and runs the automatic bake (see the module documentation).
     pub fn poll(&mut self, live: &Live) -> Vec<JobEvent> {
         let mut events = Vec::new();
-        self.stopping_bakes.retain(|job| !job.ended());
+        self.stopping_bakes.prune();
         self.poll_bake(live, &mut events);
         self.poll_export(&mut events);
         self.poll_shot(&mut events);
@@ -222,7 +222,7 @@ impl JobBoard {
 
     /// Bakes cancelled for optics the user left whose threads have not ended yet.
     pub fn stopping_bakes(&self) -> usize {
-        self.stopping_bakes.iter().filter(|job| !job.ended()).count()
+        self.stopping_bakes.running()
     }
 
     /// Cancels the running bake when it is for other optics than `key` (an undo to a lens whose LUT is at hand):
@@ -231,8 +231,7 @@ impl JobBoard {
         if self.autobake.baking != Some(key)
             && let Some(job) = self.bake.take()
         {
-            job.cancel();
-            self.stopping_bakes.push(job);
+            self.stopping_bakes.stop(job);
             self.autobake.baking = None;
             self.bake_status = BakeStatus::Idle;
         }

@@ -17,8 +17,8 @@
 //! its LUT (a bake that finished) shows the same trace again. Cancel stops the trace of this frame (the next
 //! frame is traced again): the CPU trace stops at its next ghost and wavelength
 //! ([`RayGridRequest::cancellable`]), and a trace cancelled or replaced (a new frame while one runs) is watched
-//! until its thread ends ([`RayGridView::stopping`]), so traces never pile up behind the view. Exports and commands draw the document's look, not
-//! this view.
+//! until its thread ends ([`RayGridView::stopping`]), so traces never pile up behind the view. Exports and
+//! commands draw the document's look, not this view.
 
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, OnceLock};
@@ -31,7 +31,7 @@ use flare_core::render::gpu::GpuContext;
 use flare_core::render::raygrid::{GpuRayGrid, GpuRayGridError, SUPERSAMPLE};
 
 use super::derived::Derived;
-use super::job::{Job, JobPoll};
+use super::job::{Job, JobPoll, Stopping};
 use crate::viewport::ViewportResources;
 
 /// The grids the view offers (cells across each ghost's entrance region).
@@ -78,9 +78,8 @@ pub struct RayGridView {
     shown: Option<(TraceKey, u64, Traced)>,
     /// What a cancelled trace was for: not traced again.
     cancelled: Option<TraceKey>,
-    /// Traces cancelled and not yet stopped (each stops at its next ghost): watched until their threads end,
-    /// never left running behind the view's back.
-    stopping: Vec<TraceJob>,
+    /// Traces cancelled and not yet stopped (each stops at its next ghost).
+    stopping: Stopping<Result<Traced, String>>,
     /// What the status bar says.
     pub status: String,
     device: DeviceCell,
@@ -99,13 +98,7 @@ impl RayGridView {
 
     /// Cancelled traces whose threads have not ended yet.
     pub fn stopping(&self) -> usize {
-        self.stopping.iter().filter(|job| !job.ended()).count()
-    }
-
-    /// Cancels `job` and watches it until its thread ends.
-    fn stop(&mut self, job: TraceJob) {
-        job.cancel();
-        self.stopping.push(job);
+        self.stopping.running()
     }
 
     /// The running trace's progress.
@@ -116,7 +109,7 @@ impl RayGridView {
     /// Stops the running trace; what it was for is not traced again.
     pub fn cancel(&mut self) {
         if let Some((key, job)) = self.job.take() {
-            self.stop(job);
+            self.stopping.stop(job);
             self.cancelled = Some(key);
             self.status = "ray grid: cancelled (the paraxial frame is shown; the next frame is traced)".into();
         }
@@ -124,10 +117,10 @@ impl RayGridView {
 
     /// One UI frame's step (see the module documentation); `gpu` is the viewport's device, `None` in tests.
     pub fn step(&mut self, derived: &Derived, gpu: Option<&RenderState>) {
-        self.stopping.retain(|job| !job.ended());
+        self.stopping.prune();
         let Some(grid) = self.grid else {
             if let Some((_, job)) = self.job.take() {
-                self.stop(job);
+                self.stopping.stop(job);
             }
             if self.shown.take().is_some()
                 && let Some(rs) = gpu
@@ -166,7 +159,7 @@ impl RayGridView {
         // Drafts while the user drags; the trace waits for the full frame.
         if derived.draft().is_some() {
             if let Some((_, job)) = self.job.take() {
-                self.stop(job);
+                self.stopping.stop(job);
             }
             self.status = format!("ray grid {grid}: paraxial drafts while dragging; traced when input stops");
             return;
@@ -192,7 +185,7 @@ impl RayGridView {
                 self.job = Some((for_key, job));
                 return;
             }
-            Some((_, job)) => self.stop(job),
+            Some((_, job)) => self.stopping.stop(job),
             None => {}
         }
         let plate = derived.plate().clone();
