@@ -63,8 +63,8 @@ impl TracedGhosts {
 
     fn trace_gains(&self, device: &Device, frame: &Frame, gains: &[f32]) -> Result<Traced, FrameError> {
         let started = std::time::Instant::now();
-        // On the sensor: a desqueezed frame's rows are the sensor's, averaged down when it is written.
-        // On the frame's own sensor, as the paraxial sprites are drawn.
+        // On the frame's own sensor, as the paraxial sprites are drawn: a desqueezed frame's rows are the sensor's,
+        // averaged down when it is written.
         let (light, (width, height)) = (frame.request.light_deg, (frame.scene.width, frame.scene.height));
         let sensor_width_mm = frame.request.sensor_width();
         let mut fallback = String::new();

@@ -231,11 +231,12 @@ impl LivePlan {
         // farthest a centre goes), the MAX_LAYER_CATS that cut deepest.
         let depth_mm = depth_of(model, centre);
         let (fw, fh) = (f64::from(self.width), f64::from(self.height));
-        let (at0, at1) = (model.cat_circles_at(0.0, 0.0, depth_mm), model.cat_circles_at(1.0, 1.0, depth_mm));
         let corners: Vec<Vec<([f64; 2], f64)>> = [(0.0, 0.0), (fw, 0.0), (0.0, fh), (fw, fh)]
             .iter()
             .map(|&(x, y)| model.cat_circles_at(x, y, depth_mm))
             .collect();
+        // The circles at pixel (0, 0), the first corner, and at (1, 1): each centre's linear coefficients.
+        let (at0, at1) = (&corners[0], model.cat_circles_at(1.0, 1.0, depth_mm));
         let mut chosen: Vec<(f64, usize)> = (0..at0.len())
             .map(|k| {
                 let depth = corners
