@@ -21,10 +21,11 @@ struct Layer {
     cat: array<vec4<f32>, 4>,
     // each circle's radius (pupil radii; 0: an empty slot)
     cat_radius: vec4<f32>,
+    // each circle's x scale (1 for a lens of revolution; an anamorphic lens's regions are ellipses)
+    cat_x_scale: vec4<f32>,
     // circles in use, soft edge, on (1/0), unused
     cat_more: vec4<f32>,
-    // pupil radii per pixel of offset along x and along y (2 / sigma of each axis, signed), the cat's eye's x
-    // scale (an anamorphic pupil's x semi-axis over its y one; 1 for a round one), unused
+    // pupil radii per pixel of offset along x and along y (2 / sigma of each axis, signed), unused, unused
     pupil: vec4<f32>,
 }
 
@@ -91,7 +92,6 @@ fn cat_factor(q: vec2<f32>, x: f32, y: f32) -> f32 {
     if (layer.cat_more.z == 0.0) {
         return 1.0;
     }
-    let qx = q.x * layer.pupil.z;
     var m = 1.0;
     for (var k = 0u; k < 4u; k = k + 1u) {
         let radius = layer.cat_radius[k];
@@ -100,6 +100,7 @@ fn cat_factor(q: vec2<f32>, x: f32, y: f32) -> f32 {
         }
         let cat = layer.cat[k];
         let c = vec2<f32>(cat.x + cat.y * x, cat.z + cat.w * y);
+        let qx = q.x * layer.cat_x_scale[k];
         let d = sqrt((qx - c.x) * (qx - c.x) + (q.y - c.y) * (q.y - c.y));
         m = m * clamp(0.5 + (radius - d) / layer.cat_more.y, 0.0, 1.0);
     }

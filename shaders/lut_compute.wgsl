@@ -1,18 +1,19 @@
 // LUT ghosts as compute: every accumulation pixel samples the LUT instances binned to its tile, in the frame's
 // order, and writes once. CPU twin: crates/flare_core/src/lut/blend.rs, `lut_pass` (the same instances, the same
-// order per pixel). Must be kept in sync with `LutInstance` in crates/flare_core/src/lut/blend.rs and `LutTiles` in
-// crates/flare_core/src/render/gpu_lut.rs.
+// order per pixel). Must be kept in sync with `LutInstance` in crates/flare_core/src/lut/blend.rs and with
+// `TiledInstance` and `LutTiles` in crates/flare_core/src/render/gpu_lut.rs.
 //
 // How it works. The CPU bins each instance into the square tiles its lit texels can reach
 // (`lut::blend::bin_instances`). One invocation per pixel walks its tile's list: q = the instance's inverse map of
 // the pixel centre, outside the quad nothing, else the atlas sampled as the raster pass sampled it. The pass does
 // not read the ghosts: it writes what the LUT layer does to any accumulation beneath it, (A, K) with
-// `out = A + K x under`: added, A is the sum of the instances and K is 1; composited over through alpha, each
-// instance i makes A = lut_i + (1 - alpha_i) A and K = (1 - alpha_i) K. The ghost pass's `resolve` applies it as it
-// writes each pixel, so the accumulation is written once.
+// `out = A + K x under`: added, A is the sum of the instances and K is 1; composited over through alpha, each run
+// of consecutive instances of one LUT ghost (its interpolated entries, and under motion blur its time samples) is
+// summed first, colour S and coverage a, then makes A = S + (1 - a) A and K = (1 - a) K (the CPU's
+// `composite_runs`). The ghost pass's `resolve` applies it as it writes each pixel, so the accumulation is written
+// once.
 //
-// An instance magnified enough is sampled coarsely (`lut::blend::instance_levels`, its level in
-// `axis_y_page.w`): the CPU draws it every 2^level pixels into a smaller image and adds that image's bilinear
+// An instance magnified enough is sampled coarsely (`lut::blend::instance_levels`, its `level`): the CPU draws it every 2^level pixels into a smaller image and adds that image's bilinear
 // upsample, and so does the GPU where it can bind those images (`coarse_images` 1): `lut_coarse` draws each
 // coarse level's instances, in the frame's order, at the centres of that level's pixels (one invocation a
 // coarse pixel, the list of the tile holding its centre) into `coarse`, and `lut_tiles` adds each level's
@@ -25,11 +26,15 @@
 // An instance's `rect` is the atlas rectangle of the mip level it is drawn from (`LutScene::choose_mips`): the
 // same window of the sensor at the level's texels, so nothing here depends on the level.
 
-struct LutInstance {
+struct TiledInstance {
     centre_axis_x: vec4<f32>, // quad centre (image pixels); pixels per unit q.x
-    axis_y_page: vec4<f32>,   // pixels per unit q.y; atlas page; sampling level (0: every pixel)
+    axis_y_page: vec4<f32>,   // pixels per unit q.y; atlas page; unused
     rect: vec4<f32>,          // the entry in its page: u0, v0, u1, v1
     colour: vec4<f32>,        // RGB gain, alpha gain
+    level: u32,               // sampled every 2^level pixels (0: every pixel)
+    ghost: u32,               // the LUT ghost: through alpha, a run of one ghost's instances is laid over at once
+    unused0: u32,
+    unused1: u32,
 };
 
 struct LutTiles {
@@ -44,7 +49,7 @@ struct LutTiles {
 };
 
 @group(0) @binding(0) var<uniform> tiles: LutTiles;
-@group(0) @binding(1) var<storage, read> instances: array<LutInstance>;
+@group(0) @binding(1) var<storage, read> instances: array<TiledInstance>;
 // Per tile, where its list starts; then the lists' total length. Then the lists (per tile its instances of
 // level 0, then level 1, then level 2, each in the frame's order). Then per tile where its level 1 and its
 // level 2 instances start.
@@ -90,7 +95,7 @@ fn coarse_start(level: u32) -> u32 {
 }
 
 // The instance's texel at the image pixel position p (RGBA, before its colour), and whether p is in its quad.
-fn sample_instance(inst: LutInstance, p: vec2<f32>) -> vec4<f32> {
+fn sample_instance(inst: TiledInstance, p: vec2<f32>) -> vec4<f32> {
     let c = inst.centre_axis_x.xy;
     let ax = inst.centre_axis_x.zw;
     let ay = inst.axis_y_page.xy;
@@ -163,12 +168,15 @@ fn lut_tiles(@builtin(global_invocation_id) gid: vec3<u32>) {
     let p = (vec2<f32>(gid.xy) + 0.5) * scale;
     var add = vec3<f32>(0.0);
     var keep = 1.0;
+    // Through alpha: the run of one ghost's instances being summed (colour, coverage) and its ghost.
+    var run_sum = vec4<f32>(0.0);
+    var run_ghost = 0xffffffffu;
     // With the coarse images, the tile's level 0 instances alone (the others are drawn by `lut_coarse` and
     // added below); else every instance of the tile.
     let run = tile_run(t, select(3u, 0u, tiles.coarse_images != 0u));
     for (var k = run.x; k < run.y; k = k + 1u) {
         let inst = instances[bins[lists + k]];
-        let level = u32(inst.axis_y_page.w);
+        let level = inst.level;
         if (level > 0u) {
             // Sampled coarsely: the bilinear upsample of the samples at the four coarse pixel centres around.
             let step = 1u << level;
@@ -185,14 +193,23 @@ fn lut_tiles(@builtin(global_invocation_id) gid: vec3<u32>) {
             continue;
         }
         let texel = sample_instance(inst, p);
-        let rgb = texel.rgb * inst.colour.rgb;
         if (tiles.alpha_over == 1u) {
-            let through = 1.0 - clamp(texel.a * inst.colour.a, 0.0, 1.0);
-            add = rgb + add * through;
-            keep = keep * through;
+            if (inst.ghost != run_ghost) {
+                let through = 1.0 - clamp(run_sum.a, 0.0, 1.0);
+                add = run_sum.rgb + add * through;
+                keep = keep * through;
+                run_sum = vec4<f32>(0.0);
+                run_ghost = inst.ghost;
+            }
+            run_sum = texel * inst.colour + run_sum;
         } else {
-            add = add + rgb;
+            add = add + texel.rgb * inst.colour.rgb;
         }
+    }
+    if (tiles.alpha_over == 1u) {
+        let through = 1.0 - clamp(run_sum.a, 0.0, 1.0);
+        add = run_sum.rgb + add * through;
+        keep = keep * through;
     }
     for (var level = 1u; level <= 2u; level = level + 1u) {
         if ((tiles.coarse_images & (1u << level)) != 0u) {

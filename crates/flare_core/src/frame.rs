@@ -244,6 +244,10 @@ impl Frame {
                         all.dropped_non_finite += l.dropped_non_finite;
                     }
                 }
+                if let Some(l) = lut_scene.as_mut().filter(|l| l.alpha_over) {
+                    // Each ghost's samples one run, laid over the flare at once with their summed coverage.
+                    l.group_by_ghost();
+                }
                 (scene, lut_scene, sprites)
             }
             _ => sharp(flare, lut, request, (sensor, w, h), &display, request.light_deg, light_gain),

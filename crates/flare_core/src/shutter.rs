@@ -28,10 +28,11 @@
 //! and per-ghost layers). A streak therefore holds the energy of the
 //! sharp frame (up to the change of the ghosts' brightness along the path). The starburst (the light's own
 //! image) stays at the frame's time: it is not streaked (its reach is the frame's largest quad: streaking it
-//! would draw that once per sample). LUT ghosts composited over the flare through alpha (`blend.mode` alpha) are
-//! weighted as premultiplied colour and coverage (both times the sample's weight, composited one after
-//! another): exact where one sample covers a pixel; where all n samples cover it with coverage a, what lies
-//! beneath keeps `(1 - a / n)^n` instead of `1 - a`.
+//! would draw that once per sample). LUT ghosts composited over the flare through alpha (`blend.mode` alpha) keep
+//! colour and coverage each times the sample's weight, and each ghost's samples are put next to each other
+//! ([`crate::lut::blend::LutScene::group_by_ghost`]) so that the passes lay them over the flare at once with their
+//! summed coverage: where all n samples cover a pixel with coverage a, what lies beneath keeps `1 - a`, the time
+//! average over a still flare (one after another it kept `(1 - a / n)^n`).
 
 use crate::flare::PreparedFlare;
 use crate::ghost::{Sensor, light_slopes_for_frame_position};

@@ -472,6 +472,78 @@ fn blend_modes_weigh_the_lut_against_the_sprite() {
     assert!(lit > 0 && darker > 0, "where both layers have light, alpha hides some of the linear flare");
 }
 
+/// Composited through alpha, each LUT ghost's instances (its interpolated entries, and under motion blur its
+/// time samples) are laid over the flare at once with their summed coverage. A blurred frame whose light stands
+/// still (its intensity alone changes, by 1e-9, so every ghost gets nine samples of a ninth each) is the sharp
+/// frame, on the CPU twin and the GPU alike: composited one sample after another, where a LUT image covers
+/// the flare with a, nine samples left `(1 - a / 9)^9` of it beneath instead of `1 - a`.
+#[test]
+fn through_alpha_a_lut_ghosts_time_samples_cover_the_flare_as_the_sharp_frame_does() {
+    let flare = flare("tessar");
+    let live = LiveLut::new(small_lut(&flare));
+    let light = light_position_deg(9.0, 140.0);
+    let request = FrameRequest {
+        light_deg: light,
+        width: 200,
+        height: 150,
+        display: DisplaySettings { starburst: false, ..DisplaySettings::default() },
+        blend: BlendSettings { mode: BlendMode::Alpha, ..BlendSettings::default() },
+        lut_use: LutUse::Blend,
+        ..FrameRequest::default()
+    };
+    let sharp = Frame::build(&flare, Some(&live), &request);
+    let path = flare_core::shutter::LightPath::over(0.0, 1.0, |t| (light, 1.0 + 1e-9 * t));
+    let blurred = Frame::build(&flare, Some(&live), &FrameRequest { motion: path, ..request.clone() });
+    assert_eq!(blurred.shutter.as_ref().map(|s| s.count), Some(flare_core::shutter::PATH_POINTS));
+    let (sharp_lut, blurred_lut) = (sharp.lut.clone().unwrap(), blurred.lut.clone().unwrap());
+    assert!(!sharp_lut.instances.is_empty());
+    assert_eq!(blurred_lut.instances.len(), 9 * sharp_lut.instances.len());
+    // Each LUT ghost's instances are one run.
+    let runs: Vec<u32> = blurred_lut.sources.chunk_by(|a, b| a.0 == b.0).map(|r| r[0].0).collect();
+    let mut ghosts = runs.clone();
+    ghosts.dedup();
+    ghosts.sort_unstable();
+    ghosts.dedup();
+    assert_eq!(runs.len(), ghosts.len(), "runs {runs:?}");
+
+    let draw = |frame: &Frame| render_cpu(&flare, &live, &frame.scene, frame.lut.as_ref().unwrap());
+    let (a, b) = (draw(&sharp), draw(&blurred));
+    let peak = a.pixels.iter().map(|p| p[1]).fold(0.0f32, f32::max);
+    let worst = a.pixels.iter().zip(&b.pixels).map(|(p, q)| (p[1] - q[1]).abs()).fold(0.0f32, f32::max);
+    // What compositing one instance after another leaves (the passes before): each instance over the last.
+    let mut c = flare_core::render::cpu::ghost_pass(&blurred.scene, &flare.ghost_masks);
+    for (instance, source) in blurred_lut.instances.iter().zip(&blurred_lut.sources) {
+        let one = LutScene { instances: vec![*instance], sources: vec![*source], ..blurred_lut.clone() };
+        lut_pass((blurred.scene.width, blurred.scene.height), &one, &live, &mut c);
+    }
+    let apart = a.pixels.iter().zip(&c.pixels).map(|(p, q)| (p[1] - q[1]).abs()).fold(0.0f32, f32::max);
+    println!("peak {peak}: blurred against sharp {worst} at most, sample by sample {apart}");
+    assert!(peak > 0.0 && worst <= 1e-4 * peak, "the blurred frame is {worst} from the sharp one (peak {peak})");
+    assert!(apart > 100.0 * worst.max(1e-6 * peak), "sample by sample the frames differ by {apart} only");
+
+    // The GPU lays the runs over as the twin does: as compute, and rasterised (the scratch image of a run).
+    let Some(ctx) = flare_core::render::gpu::test_context() else { return };
+    for raster in [false, true] {
+        let mut renderer =
+            flare_core::render::gpu::FlareRenderer::new(&ctx.device, &ctx.queue, wgpu::TextureFormat::Rgba8Unorm);
+        if raster {
+            renderer.force_raster_ghosts();
+        }
+        renderer.set_aperture(&ctx.device, &ctx.queue, &flare.ghost_masks);
+        renderer.set_lut(&ctx.device, &ctx.queue, Some(&live));
+        flare_core::render::gpu::render_display_with_lut(&ctx, &mut renderer, &blurred.scene, Some(&blurred_lut))
+            .unwrap();
+        let gpu = flare_core::render::gpu::read_hdr(&ctx, &renderer).unwrap();
+        let (acc, cpu) = (&gpu, &b);
+        assert_eq!((acc.width, acc.height), (cpu.width, cpu.height));
+        let energy = |img: &HdrImage| img.pixels.iter().map(|p| f64::from(p[0] + p[1] + p[2])).sum::<f64>();
+        let off = cpu.pixels.iter().zip(&acc.pixels).map(|(p, q)| (p[1] - q[1]).abs()).fold(0.0f32, f32::max);
+        let ratio = energy(acc) / energy(cpu);
+        println!("raster {raster}: energy {ratio:.5}, worst {off} (peak {peak})");
+        assert!((ratio - 1.0).abs() < 0.02 && off <= 0.02 * peak, "raster {raster}: energy {ratio}, worst {off}");
+    }
+}
+
 #[test]
 fn every_lut_instance_and_image_is_finite() {
     let flare = flare("tessar");

@@ -1,6 +1,7 @@
 //! The defocus model: the blur diameter of every depth from the lens's first-order data, and the compositing
 //! both methods share (see the parent module's documentation for the derivation).
 
+use super::kernel::Cat;
 use crate::image::HdrImage;
 use crate::optics::{D_LINE_NM, Lens, LightPath, PathMatrices};
 
@@ -67,8 +68,8 @@ pub struct DofModel {
     pub front_radius_mm: f64,
     /// Every clear aperture of a lens of revolution but the stop's, the front one first: `[A, B, semi-aperture]`
     /// with `[[A, B], ..]` the d-line image path's matrix from the entrance plane to that surface, so that a ray
-    /// of entrance height `y0` and slope `u` crosses it at `A y0 + B u` (empty for an anamorphic lens, cut by its
-    /// front aperture alone).
+    /// of entrance height `y0` and slope `u` crosses it at `A y0 + B u` (empty for an anamorphic lens: each of
+    /// its sections holds its own, [`SectionDefocus::clear_apertures`]).
     pub clear_apertures: Vec<[f64; 3]>,
     /// +1 or -1: the stop's image in the entrance pupil is upright or inverted (the mask's orientation).
     pub mask_sign: f64,
@@ -97,6 +98,9 @@ pub struct SectionDefocus {
     /// The section's entrance pupil: distance behind the first vertex, radius at the chosen f-number (mm).
     pub pupil_z_mm: f64,
     pub pupil_radius_mm: f64,
+    /// The section's clear apertures as [`DofModel::clear_apertures`] holds a lens of revolution's: `[A, B,
+    /// semi-aperture]`, the section's matrix from the entrance plane to each (the same surfaces in both sections).
+    pub clear_apertures: Vec<[f64; 3]>,
 }
 
 impl SectionDefocus {
@@ -252,6 +256,7 @@ impl DofModel {
                 sensor_mm: b,
                 pupil_z_mm: data.pupil_z_mm,
                 pupil_radius_mm: data.pupil_radius_mm * stop_scale.clamp(1e-3, 1.0),
+                clear_apertures: data.clear_apertures.clone(),
             }
         };
         let (sx, sy) = (section(&x), section(&y));
@@ -291,15 +296,6 @@ impl DofModel {
         match &self.sections {
             None => sigma_y,
             Some(_) => self.defocus_xy_px(depth_of_defocus(self, sigma_y))[0],
-        }
-    }
-
-    /// The pupil's x semi-axis over its y one (1 for a lens of revolution): the cat's eye compares pupil points in
-    /// y pupil radii.
-    pub fn cat_x_scale(&self) -> f64 {
-        match &self.sections {
-            None => 1.0,
-            Some(s) => s[0].pupil_radius_mm / s[1].pupil_radius_mm,
         }
     }
 
@@ -363,78 +359,96 @@ impl DofModel {
         self.defocus_px(f64::INFINITY)
     }
 
-    /// Every clear aperture's circle in the pupil (centre, radius in pupil radii) for a source pixel at (`x`,
-    /// `y`) (pixel centres, from the top-left) at depth `depth_mm`, cutting or not, the front one first; empty
-    /// when the cat's eye is off. A pupil point q passes an aperture when it lies inside its circle.
+    /// Every clear aperture's region in the pupil ([`Cat`], pupil radii) for a source pixel at (`x`, `y`) (pixel
+    /// centres, from the top-left) at depth `depth_mm`, cutting or not, the front one first; empty when the cat's
+    /// eye is off. A pupil point q passes an aperture when it lies inside its region.
     ///
     /// Frame millimetres (X right, Y up) are minus the sensor's (the display is turned by 180 degrees). An object
     /// at height X in the focus plane images at m_f X on the sensor, and its chief ray has the slope u = -X / S_f,
     /// so u = frame / (m_f S_f). The ray from the object (S from the pupil) through the pupil point P (mm) has
     /// the slope `P / S + u` and crosses the first vertex's plane at `P (1 - z_ep / S) - u z_ep`; at a surface
     /// whose entrance matrix row is `[A, B]` it is at `P alpha - u (A z_ep - B)` with `alpha = A (1 - z_ep / S) +
-    /// B / S`, inside the semi-aperture a when `|P - c| <= a / |alpha|`, `c = u (A z_ep - B) / alpha`. A surface
-    /// with `alpha = 0` (the object imaged onto it) passes the whole pupil or none of it: a circle of radius
-    /// infinity or 0. An anamorphic lens: its front aperture alone, each axis from its own section
-    /// ([`Self::cat_x_scale`] scales a pupil point's x before it is compared).
-    pub fn cat_circles_at(&self, x: f64, y: f64, depth_mm: f64) -> Vec<([f64; 2], f64)> {
+    /// B / S`, inside the semi-aperture a when `|P - c| <= a / |alpha|`, `c = u (A z_ep - B) / alpha`: a circle.
+    /// An anamorphic lens does this per section (x with the x section's matrices, pupil and magnification, y with
+    /// the y section's): the crossing `(P_x alpha_x - u_x o_x, P_y alpha_y - u_y o_y)` must lie within the
+    /// surface's round semi-aperture, an ellipse in the pupil whose x is stretched by `alpha_x / alpha_y` beside
+    /// the pupil's own `r_x / r_y` ([`Cat::x_scale`]). A surface with `alpha = 0` (the object imaged onto it, in
+    /// either section) passes the whole pupil or none of it, as the chief ray passes or not: a radius of infinity
+    /// or 0.
+    pub fn cat_circles_at(&self, x: f64, y: f64, depth_mm: f64) -> Vec<Cat> {
         if !self.cat_eye {
             return Vec::new();
         }
         let frame_mm =
             [(x - 0.5 * f64::from(self.width)) * self.pixel_mm, (0.5 * f64::from(self.height) - y) * self.pixel_mm];
-        let (m, z) = match &self.sections {
-            None => ([self.focus_magnification; 2], [self.pupil_z_mm; 2]),
-            Some(s) => ([s[0].to_sensor[0], s[1].to_sensor[0]], [s[0].pupil_z_mm, s[1].pupil_z_mm]),
+        // Per axis: the magnification, the pupil's place and radius; and each aperture's rows in x and in y.
+        type Rows = ([f64; 2], [f64; 2], f64);
+        type Axes = ([f64; 2], [f64; 2], [f64; 2]);
+        let front = || vec![([1.0, 0.0], [1.0, 0.0], self.front_radius_mm)];
+        // `m`: the frame's millimetres per unit of the chief ray's slope, `m_f S_f`. A section, whose sensor is not
+        // where it images the focus plane, lands the chief ray of slope u through its pupil (z behind the first
+        // vertex, so crossing it at -u z) at `A' (-u z) + B' u` on the sensor, with `[A', B']` its `to_sensor`:
+        // `(A' z - B') u` in the frame (turned by 180 degrees), which is `m_f S_f u` where the section is in focus.
+        let ((m, z, r), rows): (Axes, Vec<Rows>) = match &self.sections {
+            None => {
+                let rows: Vec<Rows> = self.clear_apertures.iter().map(|&[a, b, semi]| ([a, b], [a, b], semi)).collect();
+                let m_f_s_f = self.focus_magnification * self.focus_mm;
+                let axes = ([m_f_s_f; 2], [self.pupil_z_mm; 2], [self.pupil_radius_mm; 2]);
+                (axes, if rows.is_empty() { front() } else { rows })
+            }
+            Some(s) => {
+                let (sx, sy) = (&s[0], &s[1]);
+                let same = sx.clear_apertures.len() == sy.clear_apertures.len() && !sx.clear_apertures.is_empty();
+                let rows: Vec<Rows> = sx
+                    .clear_apertures
+                    .iter()
+                    .zip(&sy.clear_apertures)
+                    .map(|(&[ax, bx, semi], &[ay, by, _])| ([ax, bx], [ay, by], semi))
+                    .collect();
+                let chief = |s: &SectionDefocus| s.to_sensor[0] * s.pupil_z_mm - s.to_sensor[1];
+                let axes =
+                    ([chief(sx), chief(sy)], [sx.pupil_z_mm, sy.pupil_z_mm], [sx.pupil_radius_mm, sy.pupil_radius_mm]);
+                (axes, if same { rows } else { front() })
+            }
         };
-        let slope = [frame_mm[0] / (m[0] * self.focus_mm), frame_mm[1] / (m[1] * self.focus_mm)];
-        let inverse_depth = if depth_mm.is_infinite() { 0.0 } else { 1.0 / depth_mm };
-        let shrink = (1.0 - self.pupil_z_mm * inverse_depth).max(1e-6);
-        let r = self.pupil_radius_mm;
-        if self.sections.is_some() || self.clear_apertures.is_empty() {
-            let unit = r * shrink;
-            return vec![([slope[0] * z[0] / unit, slope[1] * z[1] / unit], self.front_radius_mm / unit)];
-        }
-        self.clear_apertures
-            .iter()
-            .map(|&[a, b, semi]| {
-                let alpha = a * shrink + b * inverse_depth;
-                let offset = a * self.pupil_z_mm - b;
-                if alpha.abs() < 1e-12 {
-                    let passes = slope[0].hypot(slope[1]) * offset.abs() <= semi;
-                    return ([0.0, 0.0], if passes { f64::INFINITY } else { 0.0 });
+        let slope = [frame_mm[0] / m[0], frame_mm[1] / m[1]];
+        // The object's distance in front of the first vertex, then per axis from that axis's pupil.
+        let front_mm = depth_mm - self.pupil_z_mm;
+        let inverse_depth = z.map(|z| if front_mm.is_infinite() { 0.0 } else { 1.0 / (front_mm + z) });
+        let shrink = [0, 1].map(|k| (1.0 - z[k] * inverse_depth[k]).max(1e-6));
+        rows.iter()
+            .map(|&(row_x, row_y, semi)| {
+                let alpha = [0, 1].map(|k| {
+                    let [a, b] = if k == 0 { row_x } else { row_y };
+                    a * shrink[k] + b * inverse_depth[k]
+                });
+                let offset = [row_x[0] * z[0] - row_x[1], row_y[0] * z[1] - row_y[1]];
+                if alpha[0].abs() < 1e-12 || alpha[1].abs() < 1e-12 {
+                    let passes = (slope[0] * offset[0]).hypot(slope[1] * offset[1]) <= semi;
+                    return Cat::circle([0.0, 0.0], if passes { f64::INFINITY } else { 0.0 });
                 }
-                ([slope[0] * offset / (alpha * r), slope[1] * offset / (alpha * r)], semi / (alpha.abs() * r))
+                let unit = alpha[1] * r[1];
+                Cat {
+                    centre: [slope[0] * offset[0] / unit, slope[1] * offset[1] / unit],
+                    radius: semi / unit.abs(),
+                    x_scale: alpha[0] * r[0] / unit,
+                }
             })
             .collect()
     }
 
-    /// The circles of [`Self::cat_circles_at`] that cut the pupil there (those that do not hold the whole unit
+    /// The regions of [`Self::cat_circles_at`] that cut the pupil there (those that do not hold the whole unit
     /// pupil), in the same order.
-    pub fn cat_eyes_at(&self, x: f64, y: f64, depth_mm: f64) -> Vec<([f64; 2], f64)> {
-        let mut circles = self.cat_circles_at(x, y, depth_mm);
-        circles.retain(|&(c, r)| cuts(c, r, self.cat_x_scale()));
-        circles
+    pub fn cat_eyes_at(&self, x: f64, y: f64, depth_mm: f64) -> Vec<Cat> {
+        let mut cats = self.cat_circles_at(x, y, depth_mm);
+        cats.retain(Cat::cuts);
+        cats
     }
 
-    /// The front aperture's circle alone ([`Self::cat_circles_at`]'s first): `None` when the cat's eye is off.
-    pub fn cat_eye_at(&self, x: f64, y: f64, depth_mm: f64) -> Option<([f64; 2], f64)> {
+    /// The front aperture's region alone ([`Self::cat_circles_at`]'s first): `None` when the cat's eye is off.
+    pub fn cat_eye_at(&self, x: f64, y: f64, depth_mm: f64) -> Option<Cat> {
         self.cat_circles_at(x, y, depth_mm).into_iter().next()
     }
-}
-
-/// Whether the circle (centre `c`, radius `r`, pupil radii) leaves part of the unit pupil (its x scaled by
-/// `x_scale`) outside: by how much its edge reaches into it, `|c| + x_scale.max(1) - r`, is positive.
-pub fn cuts(c: [f64; 2], r: f64, x_scale: f64) -> bool {
-    cut_depth(c, r, x_scale) > 0.0
-}
-
-/// How far (pupil radii) the circle's edge reaches into the unit pupil: `|c| + x_scale.max(1) - r` (positive:
-/// it cuts; a radius that is not a number cuts everything).
-pub fn cut_depth(c: [f64; 2], r: f64, x_scale: f64) -> f64 {
-    if r.is_nan() {
-        return f64::INFINITY;
-    }
-    c[0].hypot(c[1]) + x_scale.max(1.0) - r
 }
 
 /// The depth (mm from the pupil) whose defocus (along y for an anamorphic lens) is `sigma` pixels: for a lens of
@@ -601,14 +615,14 @@ mod tests {
     fn the_cat_eye_moves_with_the_field_and_is_off_on_axis() {
         let lens = builtin_lens("heliar").unwrap();
         let m = DofModel::new(&lens, 1.0, 2.0, 36.0, (1920, 1080), true).unwrap();
-        let (c, r) = m.cat_eye_at(960.0, 540.0, 5000.0).unwrap();
-        assert!(c[0].abs() < 1e-12 && c[1].abs() < 1e-12 && r > 1.0);
+        let Cat { centre: c, radius: r, x_scale } = m.cat_eye_at(960.0, 540.0, 5000.0).unwrap();
+        assert!(c[0].abs() < 1e-12 && c[1].abs() < 1e-12 && r > 1.0 && x_scale == 1.0);
         // The top-left corner: the front lens cuts the outer side of the pupil, so the circle that keeps the
         // light lies towards the frame's centre (right and down: +X, -Y).
-        let (corner, _) = m.cat_eye_at(0.0, 0.0, 5000.0).unwrap();
+        let corner = m.cat_eye_at(0.0, 0.0, 5000.0).unwrap().centre;
         assert!(corner[0] > 0.0 && corner[1] < 0.0, "{corner:?}");
         // Opposite corners cut opposite sides.
-        let (other, _) = m.cat_eye_at(1920.0, 1080.0, 5000.0).unwrap();
+        let other = m.cat_eye_at(1920.0, 1080.0, 5000.0).unwrap().centre;
         assert!((corner[0] + other[0]).abs() < 1e-12 && (corner[1] + other[1]).abs() < 1e-12);
     }
 }

@@ -15,7 +15,7 @@ use std::collections::HashMap;
 
 use rayon::prelude::*;
 
-use super::kernel::{RasterKernel, raster_xy};
+use super::kernel::{Cat, RasterKernel, raster_xy};
 use super::model::{DofError, DofModel, defocus_map, over, resolve};
 use crate::aperture::ApertureMask;
 use crate::image::HdrImage;
@@ -25,8 +25,8 @@ pub const LAYER_PX: f64 = 0.5;
 /// Rows of one band of the parallel scatter.
 const BAND_ROWS: usize = 16;
 
-/// A kernel's key: the defocus in 1/16 px, then each cutting clear aperture's circle (centre and radius) in 1/32
-/// pupil radius (a radius beyond [`MAX_KEY_RADIUS`] pupil radii, which cannot cut, is left out).
+/// A kernel's key: the defocus in 1/16 px, then each cutting clear aperture's region (centre and radius in 1/32
+/// pupil radius, a radius beyond [`MAX_KEY_RADIUS`] pupil radii recorded as that; its x scale in 1/1024).
 type Key = Vec<i64>;
 
 /// The largest circle radius (pupil radii) a key records; a larger circle holds the unit pupil wherever its
@@ -35,17 +35,25 @@ const MAX_KEY_RADIUS: f64 = 1e6;
 
 fn key(model: &DofModel, sigma: f64, x: f64, y: f64, depth_mm: f64) -> Key {
     let mut key = vec![(sigma * 16.0).round() as i64];
-    for (c, r) in model.cat_eyes_at(x, y, depth_mm) {
-        key.extend([c[0], c[1], r.min(MAX_KEY_RADIUS)].map(|v| (v * 32.0).round() as i64));
+    for cat in model.cat_eyes_at(x, y, depth_mm) {
+        let [cx, cy] = cat.centre;
+        key.extend([cx, cy, cat.radius.min(MAX_KEY_RADIUS)].map(|v| (v * 32.0).round() as i64));
+        key.push((cat.x_scale * 1024.0).round() as i64);
     }
     key
 }
 
 fn kernel_of(key: &Key, model: &DofModel, mask: &ApertureMask) -> RasterKernel {
     let sigma = key[0] as f64 / 16.0;
-    let cats: Vec<([f64; 2], f64)> =
-        key[1..].chunks_exact(3).map(|c| ([c[0] as f64 / 32.0, c[1] as f64 / 32.0], c[2] as f64 / 32.0)).collect();
-    raster_xy(mask, model.mask_sign, [model.defocus_x_for(sigma), sigma], &cats, model.cat_x_scale())
+    let cats: Vec<Cat> = key[1..]
+        .chunks_exact(4)
+        .map(|c| Cat {
+            centre: [c[0] as f64 / 32.0, c[1] as f64 / 32.0],
+            radius: c[2] as f64 / 32.0,
+            x_scale: c[3] as f64 / 1024.0,
+        })
+        .collect();
+    raster_xy(mask, model.mask_sign, [model.defocus_x_for(sigma), sigma], &cats)
 }
 
 /// The plate defocused by the reference method (see the module documentation); `depth_mm` per pixel from the

@@ -210,7 +210,7 @@ impl AtlasLayout {
 pub struct LutInstance {
     /// Quad centre x, y (image pixels); pixels per unit of the quad coordinate q.x (x, y).
     pub centre_axis_x: [f32; 4],
-    /// Pixels per unit of q.y (x, y); atlas page; unused.
+    /// Pixels per unit of q.y (x, y); atlas page; unused (0).
     pub axis_y_page: [f32; 4],
     /// The entry's texels in the atlas page: u0, v0, u1, v1 (texture coordinates).
     pub rect: [f32; 4],
@@ -425,6 +425,22 @@ impl LutScene {
         }
     }
 
+    /// Puts each LUT ghost's instances next to each other, the ghosts in the order they first appear and each
+    /// ghost's instances in their order (a stable sort). Composited through alpha, the passes lay a run of one
+    /// ghost's instances over what lies beneath at once ([`lut_pass`]): a motion-blurred frame, whose instances
+    /// come time sample by time sample, is grouped so that each ghost's samples make one run. A still frame's
+    /// instances are grouped already ([`LutScene::build`] places each ghost's entries together).
+    pub fn group_by_ghost(&mut self) {
+        let mut first = std::collections::HashMap::new();
+        for (k, s) in self.sources.iter().enumerate() {
+            first.entry(s.0).or_insert(k);
+        }
+        let mut order: Vec<usize> = (0..self.instances.len()).collect();
+        order.sort_by_key(|&k| first[&self.sources[k].0]);
+        self.instances = order.iter().map(|&k| self.instances[k]).collect();
+        self.sources = order.iter().map(|&k| self.sources[k]).collect();
+    }
+
     /// The weight the paraxial sprites of lens ghost `g` keep (1 for a ghost the LUT does not hold).
     pub fn paraxial_weight(&self, g: u32) -> f32 {
         self.paraxial_weights.iter().find(|(h, _)| *h == g).map_or(1.0, |(_, w)| *w)
@@ -512,6 +528,8 @@ struct Prepared<'a> {
     entry: &'a LutEntry,
     colour: [f32; 4],
     map: TexelMap,
+    /// The LUT ghost it draws: composited through alpha, a run of instances of one ghost is composited once.
+    ghost: u32,
 }
 
 impl TexelMap {
@@ -775,7 +793,7 @@ fn lut_pass_on(
         };
         let k = (1u32 << level) as f32;
         if let Some(map) = TexelMap::new(inst, footprint, (scale.0 * k, scale.1 * k)) {
-            levels[usize::from(level)].push(Prepared { entry, colour: inst.colour, map });
+            levels[usize::from(level)].push(Prepared { entry, colour: inst.colour, map, ghost: source.0 });
         }
     }
     draw_level(&levels[0], alpha_over, hdr, simd);
@@ -832,7 +850,8 @@ pub fn instance_levels(
         .collect()
 }
 
-/// The instances `prepared` onto `hdr` (their maps made for its size), in bands of rows in parallel.
+/// The instances `prepared` onto `hdr` (their maps made for its size), in bands of rows in parallel: added, or
+/// composited over it through alpha one run of a ghost's instances at a time ([`composite_runs`]).
 fn draw_level(prepared: &[Prepared], alpha_over: bool, hdr: &mut HdrImage, simd: bool) {
     if prepared.is_empty() {
         return;
@@ -841,13 +860,73 @@ fn draw_level(prepared: &[Prepared], alpha_over: bool, hdr: &mut HdrImage, simd:
     hdr.pixels.par_chunks_mut(w * BAND_ROWS).enumerate().for_each(|(band, chunk)| {
         let y0 = band * BAND_ROWS;
         let rows = y0..(y0 + BAND_ROWS).min(h);
-        #[cfg(target_arch = "x86_64")]
-        if simd && has_avx2_f16c() {
-            // SAFETY: the processor has AVX2 and F16C (checked at run time).
-            return unsafe { lut_band_avx2(prepared, alpha_over, rows, w, chunk) };
+        if alpha_over {
+            composite_runs(prepared, rows, w, chunk, simd);
+        } else {
+            add_band(prepared, rows, w, chunk, simd, false);
         }
-        lut_band(prepared, rows, w, chunk, |inst, i, f, p| bilinear_add(inst, alpha_over, i, f, p));
     });
+}
+
+/// The instances `prepared` added onto the rows `rows` of `chunk` (and their coverage to its fourth channel
+/// when `with_coverage`): on the SSE path where `simd` and the processor allow, else the scalar one.
+fn add_band(
+    prepared: &[Prepared],
+    rows: std::ops::Range<usize>,
+    width: usize,
+    chunk: &mut [[f32; 4]],
+    simd: bool,
+    with_coverage: bool,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if simd && has_avx2_f16c() {
+        // SAFETY: the processor has AVX2 and F16C (checked at run time).
+        return unsafe { lut_band_avx2(prepared, rows, width, chunk, with_coverage) };
+    }
+    let _ = simd;
+    lut_band(prepared, rows, width, chunk, |inst, i, f, p| bilinear_add(inst, with_coverage, i, f, p));
+}
+
+/// Composited through alpha: each run of consecutive instances of one LUT ghost (its up to four interpolated
+/// entries, and under motion blur every time sample's, [`LutScene::group_by_ghost`]) is summed first, colour
+/// and coverage (`s`), then laid over what lies beneath once: `p = s_rgb + (1 - clamp(s_a, 0, 1)) p`. So n
+/// samples of a still light that each cover a pixel with a / n leave `1 - a` of what lies beneath, the time
+/// average, where compositing them one after another left `(1 - a / n)^n`; a run of one instance is the plain
+/// `over` (the same bits). Per row only the columns a run reached are composited.
+fn composite_runs(
+    prepared: &[Prepared],
+    rows: std::ops::Range<usize>,
+    width: usize,
+    chunk: &mut [[f32; 4]],
+    simd: bool,
+) {
+    let mut sum = vec![[0.0f32; 4]; chunk.len()];
+    let mut reached = vec![(usize::MAX, 0usize); rows.len()];
+    for run in prepared.chunk_by(|a, b| a.ghost == b.ghost) {
+        for inst in run {
+            for (y, span) in rows.clone().zip(reached.iter_mut()) {
+                let columns = inst.map.columns(y, width);
+                if !columns.is_empty() {
+                    *span = (span.0.min(columns.start), span.1.max(columns.end));
+                }
+            }
+        }
+        add_band(run, rows.clone(), width, &mut sum, simd, true);
+        for (r, span) in reached.iter_mut().enumerate() {
+            if span.0 >= span.1 {
+                continue;
+            }
+            let at = r * width;
+            for (p, s) in chunk[at + span.0..at + span.1].iter_mut().zip(&mut sum[at + span.0..at + span.1]) {
+                let keep = 1.0 - s[3].clamp(0.0, 1.0);
+                for ch in 0..3 {
+                    p[ch] = s[ch] + p[ch] * keep;
+                }
+                *s = [0.0; 4];
+            }
+            *span = (usize::MAX, 0);
+        }
+    }
 }
 
 /// The coarse image's bilinear upsample by `k` (its pixel (i, j) centred on accumulation pixel position
@@ -884,19 +963,20 @@ fn has_avx2_f16c() -> bool {
 }
 
 /// [`lut_band`] compiled for AVX2, each pixel's four channels in one SSE register: the texels converted by
-/// F16C, then the same products and sums as [`bilinear_add`] in the same order (the same image, bit for bit).
+/// F16C, then the same products and sums as [`bilinear_add`] in the same order (the same image, bit for bit),
+/// the fourth channel (coverage) summed too when `with_coverage`.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,f16c")]
 unsafe fn lut_band_avx2(
     prepared: &[Prepared],
-    alpha_over: bool,
     rows: std::ops::Range<usize>,
     width: usize,
     chunk: &mut [[f32; 4]],
+    with_coverage: bool,
 ) {
     use std::arch::x86_64::{
-        __m128, _mm_add_ps, _mm_blend_ps, _mm_cvtph_ps, _mm_cvtss_f32, _mm_loadl_epi64, _mm_loadu_ps, _mm_mul_ps,
-        _mm_set_ps, _mm_set1_ps, _mm_setzero_ps, _mm_shuffle_ps, _mm_storeu_ps,
+        __m128, _mm_add_ps, _mm_blend_ps, _mm_cvtph_ps, _mm_loadl_epi64, _mm_loadu_ps, _mm_mul_ps, _mm_set_ps,
+        _mm_set1_ps, _mm_setzero_ps, _mm_storeu_ps,
     };
     lut_band(prepared, rows, width, chunk, |inst, [ix, iy], [fx, fy], p| {
         let (ew, eh) = (inst.entry.width as i32, inst.entry.height as i32);
@@ -915,25 +995,28 @@ unsafe fn lut_band_avx2(
         let bottom = _mm_add_ps(_mm_mul_ps(c, gxv), _mm_mul_ps(d, fxv));
         let t = _mm_add_ps(_mm_mul_ps(top, gyv), _mm_mul_ps(bottom, fyv));
         let [c0, c1, c2, c3] = inst.colour;
-        let keep =
-            if alpha_over { 1.0 - (_mm_cvtss_f32(_mm_shuffle_ps::<0xFF>(t, t)) * c3).clamp(0.0, 1.0) } else { 1.0 };
         // SAFETY: `p` is 16 readable and writable bytes.
         let old = unsafe { _mm_loadu_ps(p.as_ptr()) };
-        let new = _mm_add_ps(_mm_mul_ps(t, _mm_set_ps(0.0, c2, c1, c0)), _mm_mul_ps(old, _mm_set1_ps(keep)));
-        // The fourth channel is not an image channel: it keeps its value.
-        unsafe { _mm_storeu_ps(p.as_mut_ptr(), _mm_blend_ps::<0b1000>(new, old)) };
+        let new = _mm_add_ps(_mm_mul_ps(t, _mm_set_ps(c3, c2, c1, c0)), old);
+        if with_coverage {
+            unsafe { _mm_storeu_ps(p.as_mut_ptr(), new) };
+        } else {
+            // The fourth channel is not an image channel: it keeps its value.
+            unsafe { _mm_storeu_ps(p.as_mut_ptr(), _mm_blend_ps::<0b1000>(new, old)) };
+        }
     });
 }
 
 /// One accumulation pixel `p` of instance `inst`: the entry's bilinear sample at the texel `i` + `f` (0 outside
-/// the entry) times the instance's colour added, or composited over `p` through alpha.
+/// the entry) times the instance's colour added, and its coverage (alpha times the alpha gain) added to the
+/// fourth channel when `with_coverage` (a run's sum, [`composite_runs`]).
 #[inline(always)]
-fn bilinear_add(inst: &Prepared, alpha_over: bool, [ix, iy]: [i32; 2], [fx, fy]: [f32; 2], p: &mut [f32; 4]) {
+fn bilinear_add(inst: &Prepared, with_coverage: bool, [ix, iy]: [i32; 2], [fx, fy]: [f32; 2], p: &mut [f32; 4]) {
     let texels = &inst.entry.texels;
     let t = inst.entry.bilinear_at([i64::from(ix), i64::from(iy)], [fx, fy], |k| texels[k].map(half::f16::to_f32));
-    let keep = if alpha_over { 1.0 - (t[3] * inst.colour[3]).clamp(0.0, 1.0) } else { 1.0 };
-    for ch in 0..3 {
-        p[ch] = t[ch] * inst.colour[ch] + p[ch] * keep;
+    let channels = if with_coverage { 4 } else { 3 };
+    for ch in 0..channels {
+        p[ch] += t[ch] * inst.colour[ch];
     }
 }
 

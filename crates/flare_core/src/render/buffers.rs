@@ -210,6 +210,66 @@ pub(crate) fn spread_stride(n: u32) -> u32 {
     (start.max(1)..n.max(2)).find(|&s| gcd(s, n) == 1).unwrap_or(1)
 }
 
+/// A vertex buffer of `capacity` items of `T`, written through the queue.
+pub(crate) fn vertex_buffer<T>(device: &wgpu::Device, label: &str, capacity: usize) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: (capacity * std::mem::size_of::<T>()) as u64,
+        usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
+/// A bind group layout entry: the uniform buffer at `binding`, read by the vertex and fragment stages.
+pub(crate) fn uniform_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+/// A bind group layout entry: a float texture of `dimension` at `binding`, read by the fragment stage
+/// (`filterable`: through a filtering sampler).
+pub(crate) fn texture_entry(
+    binding: u32,
+    filterable: bool,
+    dimension: wgpu::TextureViewDimension,
+) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::FRAGMENT,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable },
+            view_dimension: dimension,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
+/// The pipeline layout of one bind group, `bind_group`.
+pub(crate) fn pipeline_layout(device: &wgpu::Device, bind_group: &wgpu::BindGroupLayout) -> wgpu::PipelineLayout {
+    device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: None,
+        bind_group_layouts: &[Some(bind_group)],
+        immediate_size: 0,
+    })
+}
+
+/// The shader module of the WGSL `source` (named `label` in the device's messages).
+pub(crate) fn shader_module(device: &wgpu::Device, label: &str, source: &str) -> wgpu::ShaderModule {
+    device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::spread_stride;

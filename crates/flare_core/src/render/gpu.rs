@@ -39,16 +39,19 @@
 use wgpu_profiler::{GpuProfiler, GpuProfilerSettings, GpuTimerQueryResult};
 
 pub use super::buffers::{HDR_FORMAT, texture_2d};
-use super::buffers::{render_pipeline, upload, upload_part};
+use super::buffers::{
+    pipeline_layout, render_pipeline, shader_module, texture_entry, uniform_entry, upload, upload_part, vertex_buffer,
+};
 use super::cpu::ghosts::{GhostMasks, MASK_LEVELS};
 use super::gpu_ghosts::{ComputeGhosts, mask_level_textures};
 use super::gpu_lut::{ComputeLut, TILE};
+use super::gpu_lut_raster::RasterLut;
 use super::gpu_view::{PassKey, ViewPass};
-use super::shaders::{DIRT_WGSL, GHOSTS_WGSL, LUT_GHOSTS_WGSL, STARBURST_WGSL};
+use super::shaders::{DIRT_WGSL, GHOSTS_WGSL, STARBURST_WGSL};
 use super::{FlareScene, GhostInstance, Globals};
 use crate::dirt::PreparedDirt;
 use crate::image::{DisplayImage, HdrImage};
-use crate::lut::blend::{ATLAS_PAGE, LiveLut, LutInstance, LutScene};
+use crate::lut::blend::{ATLAS_PAGE, LiveLut, LutScene};
 use crate::lut::blend::{Footprint, bin_instances};
 use crate::starburst::Starburst;
 
@@ -110,7 +113,7 @@ impl GpuContext {
         let info = adapter.get_info();
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("flarelab"),
-            required_features: timer_features(&adapter) | (adapter.features() & wgpu::Features::FLOAT32_BLENDABLE),
+            required_features: wanted_features(&adapter),
             required_limits: wgpu::Limits::downlevel_defaults().using_resolution(adapter.limits()),
             ..Default::default()
         }))
@@ -155,6 +158,13 @@ impl GpuContext {
 /// that [`FlareRenderer`] can time its passes.
 pub fn timer_features(adapter: &wgpu::Adapter) -> wgpu::Features {
     adapter.features() & GpuProfiler::ALL_WGPU_TIMER_FEATURES
+}
+
+/// The features a device for the renderer asks of `adapter`, where it has them: the timestamp queries
+/// ([`timer_features`]) and blending into 32-bit float targets (the ray grids' splats and the rasterised LUT
+/// layer's run sums add in f32 there, in f16 without it).
+pub fn wanted_features(adapter: &wgpu::Adapter) -> wgpu::Features {
+    timer_features(adapter) | (adapter.features() & wgpu::Features::FLOAT32_BLENDABLE)
 }
 
 /// GPU time of each pass of one frame, measured by timestamp queries on the GPU (ms), in drawing order.
@@ -301,15 +311,6 @@ fn empty_atlas(device: &wgpu::Device, queue: &wgpu::Queue) -> wgpu::Texture {
 }
 
 /// A vertex buffer for `capacity` instances of `T`, written by the queue.
-fn vertex_buffer<T>(device: &wgpu::Device, label: &str, capacity: usize) -> wgpu::Buffer {
-    device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size: (capacity * std::mem::size_of::<T>()) as u64,
-        usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    })
-}
-
 /// The GPU flare renderer.
 pub struct FlareRenderer {
     ghost_pipeline: wgpu::RenderPipeline,
@@ -341,13 +342,10 @@ pub struct FlareRenderer {
     instances: wgpu::Buffer,
     instance_capacity: usize,
     target_format: wgpu::TextureFormat,
-    lut_add_pipeline: wgpu::RenderPipeline,
-    lut_over_pipeline: wgpu::RenderPipeline,
-    lut_layout: wgpu::BindGroupLayout,
+    /// The LUT layer rasterised (no compute, or bins past the storage binding).
+    raster_lut: RasterLut,
     /// The LUT atlas (a 1 x 1 x 1 black array when no LUT is set).
     lut_atlas: wgpu::Texture,
-    lut_instances: wgpu::Buffer,
-    lut_capacity: usize,
     /// The bind groups of the last frame, made again only when a texture they bind was replaced.
     groups: Option<BindGroups>,
     /// Timestamp scopes around every pass (see the module documentation).
@@ -387,26 +385,8 @@ struct BindGroups {
 impl FlareRenderer {
     /// Pipelines for drawing into views of `target_format`.
     pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, target_format: wgpu::TextureFormat) -> Self {
-        let uniform = wgpu::BindGroupLayoutEntry {
-            binding: 0,
-            visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Uniform,
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
-        let texture = |binding, filterable| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::FRAGMENT,
-            ty: wgpu::BindingType::Texture {
-                sample_type: wgpu::TextureSampleType::Float { filterable },
-                view_dimension: wgpu::TextureViewDimension::D2,
-                multisampled: false,
-            },
-            count: None,
-        };
+        let uniform = uniform_entry(0);
+        let texture = |binding, filterable| texture_entry(binding, filterable, wgpu::TextureViewDimension::D2);
         let sampler_entry = wgpu::BindGroupLayoutEntry {
             binding: 2,
             visibility: wgpu::ShaderStages::FRAGMENT,
@@ -434,13 +414,7 @@ impl FlareRenderer {
             ]
             .map(|e| wgpu::BindGroupLayoutEntry { visibility: tonemap_stages, ..e }),
         });
-        let layout = |bgl: &wgpu::BindGroupLayout| {
-            device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: None,
-                bind_group_layouts: &[Some(bgl)],
-                immediate_size: 0,
-            })
-        };
+        let layout = |bgl: &wgpu::BindGroupLayout| pipeline_layout(device, bgl);
         let ghost_pl = layout(&raster_ghost_layout);
         let sprite_pl = layout(&sprite_layout);
         let additive = wgpu::BlendState {
@@ -455,12 +429,7 @@ impl FlareRenderer {
                 operation: wgpu::BlendOperation::Add,
             },
         };
-        let module = |label, source: &str| {
-            device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some(label),
-                source: wgpu::ShaderSource::Wgsl(source.into()),
-            })
-        };
+        let module = |label, source: &str| shader_module(device, label, source);
         let ghosts = module("ghosts.wgsl", GHOSTS_WGSL);
         let starburst_module = module("starburst.wgsl", STARBURST_WGSL);
         let instance_attributes = wgpu::vertex_attr_array![0 => Float32x4, 1 => Float32x4, 2 => Float32x4, 3 => Float32x4, 4 => Float32x4, 5 => Float32x4, 6 => Float32x4, 7 => Float32x4, 8 => Float32x4, 9 => Float32x4, 10 => Float32x4];
@@ -490,59 +459,6 @@ impl FlareRenderer {
             &crate::view_transform::ViewTransform::builtin(),
             Self::supports_compute(device),
         );
-        let lut_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("lut ghosts"),
-            entries: &[
-                uniform,
-                wgpu::BindGroupLayoutEntry {
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                        view_dimension: wgpu::TextureViewDimension::D2Array,
-                        multisampled: false,
-                    },
-                    ..texture(1, true)
-                },
-                sampler_entry,
-            ],
-        });
-        let lut_pl = layout(&lut_layout);
-        let lut_module = module("lut_ghosts.wgsl", LUT_GHOSTS_WGSL);
-        let lut_attributes = wgpu::vertex_attr_array![0 => Float32x4, 1 => Float32x4, 2 => Float32x4, 3 => Float32x4];
-        let lut_buffer_layout = wgpu::VertexBufferLayout {
-            array_stride: std::mem::size_of::<LutInstance>() as u64,
-            step_mode: wgpu::VertexStepMode::Instance,
-            attributes: &lut_attributes,
-        };
-        let over = wgpu::BlendState {
-            color: wgpu::BlendComponent {
-                src_factor: wgpu::BlendFactor::One,
-                dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
-                operation: wgpu::BlendOperation::Add,
-            },
-            alpha: wgpu::BlendComponent {
-                src_factor: wgpu::BlendFactor::One,
-                dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
-                operation: wgpu::BlendOperation::Add,
-            },
-        };
-        let lut_add_pipeline = render_pipeline(
-            device,
-            "lut ghosts",
-            &lut_pl,
-            &lut_module,
-            &[Some(lut_buffer_layout.clone())],
-            HDR_FORMAT,
-            Some(additive),
-        );
-        let lut_over_pipeline = render_pipeline(
-            device,
-            "lut ghosts over",
-            &lut_pl,
-            &lut_module,
-            &[Some(lut_buffer_layout)],
-            HDR_FORMAT,
-            Some(over),
-        );
         let globals = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("globals"),
             size: std::mem::size_of::<Globals>() as u64,
@@ -570,8 +486,6 @@ impl FlareRenderer {
         let instance_capacity = 256;
         let instances = vertex_buffer::<GhostInstance>(device, "ghost instances", instance_capacity);
         let lut_atlas = empty_atlas(device, queue);
-        let lut_capacity = 64;
-        let lut_instances = vertex_buffer::<LutInstance>(device, "lut instances", lut_capacity);
         let compute = ComputeGhosts::supported(device).then(|| ComputeGhosts::new(device, queue));
         let compute_lut = compute.is_some().then(|| ComputeLut::new(device));
         Self {
@@ -580,12 +494,8 @@ impl FlareRenderer {
             lut_footprints: Vec::new(),
             rasterise: false,
             lut_bin_bytes: device.limits().max_storage_buffer_binding_size.min(device.limits().max_buffer_size),
-            lut_add_pipeline,
-            lut_over_pipeline,
-            lut_layout,
+            raster_lut: RasterLut::new(device),
             lut_atlas,
-            lut_instances,
-            lut_capacity,
             groups: None,
             profiler: GpuProfiler::new(device, GpuProfilerSettings::default())
                 .expect("the default profiler settings are valid"),
@@ -814,7 +724,7 @@ impl FlareRenderer {
             ),
             starburst: bind("starburst", &self.sprite_layout, &starburst_view, vec![sampler()]),
             dirt: bind("dirt", &self.sprite_layout, &dirt_view, vec![sampler()]),
-            lut: bind("lut ghosts", &self.lut_layout, &atlas_view, vec![sampler()]),
+            lut: bind("lut ghosts", &self.raster_lut.layout, &atlas_view, vec![sampler()]),
             tonemap: bind(
                 "tonemap",
                 &self.tonemap_layout,
@@ -896,11 +806,7 @@ impl FlareRenderer {
         });
         let raster_lut = bins.is_none();
         if let Some(lut) = lut.filter(|_| raster_lut) {
-            if lut.instances.len() > self.lut_capacity {
-                self.lut_capacity = lut.instances.len().next_power_of_two();
-                self.lut_instances = vertex_buffer::<LutInstance>(device, "lut instances", self.lut_capacity);
-            }
-            queue.write_buffer(&self.lut_instances, 0, bytemuck::cast_slice(&lut.instances));
+            self.raster_lut.upload(device, queue, lut, (w, h));
         }
         let Some((hdr, _, _)) = &self.hdr else { return };
         let hdr_view = hdr.create_view(&wgpu::TextureViewDescriptor::default());
@@ -961,11 +867,7 @@ impl FlareRenderer {
                 }
             }
             if let Some(lut) = lut.filter(|_| raster_lut) {
-                let mut pass = frame.scoped_render_pass("lut", accumulate(&load));
-                pass.set_pipeline(if lut.alpha_over { &self.lut_over_pipeline } else { &self.lut_add_pipeline });
-                pass.set_bind_group(0, &groups.lut, &[]);
-                pass.set_vertex_buffer(0, self.lut_instances.slice(..));
-                pass.draw(0..6, 0..lut.instances.len() as u32);
+                self.raster_lut.draw(&mut frame, &hdr_view, &groups.lut, lut);
             }
             if globals.starburst[2] > 0.0 {
                 let mut pass = frame.scoped_render_pass("starburst", accumulate(&load));

@@ -26,6 +26,20 @@ pub(crate) const TILE: u32 = 32;
 /// Invocations a side of a workgroup (a tile is four workgroups a side).
 const WORKGROUP: u32 = 8;
 
+/// One LUT instance as the pass reads it. Must be kept in sync with `struct TiledInstance` in
+/// `shaders/lut_compute.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+struct TiledInstance {
+    instance: LutInstance,
+    /// Sampled every 2^level pixels ([`crate::lut::blend::instance_levels`]).
+    level: u32,
+    /// The LUT ghost it draws: composited through alpha, a run of one ghost's instances is laid over at once.
+    ghost: u32,
+    unused: [u32; 2],
+}
+const _: () = assert!(std::mem::size_of::<TiledInstance>() == 80);
+
 /// The pass's parameters. Must be kept in sync with `struct LutTiles` in `shaders/lut_compute.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
@@ -127,19 +141,21 @@ impl ComputeLut {
             coarse_images,
         };
         let uniform = storage(device, queue, "lut tiles", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
-        // Each instance's sampling level ([`crate::lut::blend::instance_levels`]) in its unused last word.
-        let with_levels: Vec<LutInstance> = lut
+        // Each instance with its sampling level ([`crate::lut::blend::instance_levels`]) and LUT ghost.
+        let tiled: Vec<TiledInstance> = lut
             .instances
             .iter()
+            .zip(&lut.sources)
             .zip(bins.levels.iter().chain(std::iter::repeat(&0)))
-            .map(|(inst, &level)| {
-                let mut inst = *inst;
-                inst.axis_y_page[3] = f32::from(level);
-                inst
+            .map(|((&instance, source), &level)| TiledInstance {
+                instance,
+                level: u32::from(level),
+                ghost: source.0,
+                unused: [0; 2],
             })
             .collect();
         let instances =
-            storage(device, queue, "lut sprites", bytemuck::cast_slice(&with_levels), wgpu::BufferUsages::STORAGE);
+            storage(device, queue, "lut sprites", bytemuck::cast_slice(&tiled), wgpu::BufferUsages::STORAGE);
         let splits = bins.splits.iter().flatten();
         let words: Vec<u32> = bins.starts.iter().chain(&bins.list).chain(splits).copied().collect();
         let bin_buffer = storage(device, queue, "lut bins", bytemuck::cast_slice(&words), wgpu::BufferUsages::STORAGE);

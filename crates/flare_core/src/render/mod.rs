@@ -23,6 +23,7 @@ pub mod dof_gpu;
 pub mod gpu;
 pub mod gpu_ghosts;
 mod gpu_lut;
+mod gpu_lut_raster;
 mod gpu_view;
 pub mod raygrid;
 pub mod shaders;

@@ -61,6 +61,8 @@ pub fn tonemap_wgsl(ocio: &str) -> String {
 /// LUT ghosts from the atlas.
 pub const LUT_GHOSTS_WGSL: &str =
     concat!(include_str!("../../../../shaders/common.wgsl"), include_str!("../../../../shaders/lut_ghosts.wgsl"));
+/// The run of a LUT ghost's instances laid over the accumulation at once (the rasterised LUT layer through alpha).
+pub const LUT_RUNS_WGSL: &str = include_str!("../../../../shaders/lut_runs.wgsl");
 /// LUT ghosts as compute: the instances binned to each tile, sampled per pixel.
 pub const LUT_COMPUTE_WGSL: &str = include_str!("../../../../shaders/lut_compute.wgsl");
 /// Ray grids on the GPU, pass 1: the compute tracer (with the declarations both passes share).
@@ -99,6 +101,7 @@ pub const ALL: &[(&str, &str)] = &[
     ("dirt.wgsl", DIRT_WGSL),
     ("tonemap.wgsl", TONEMAP_WGSL),
     ("lut_ghosts.wgsl", LUT_GHOSTS_WGSL),
+    ("lut_runs.wgsl", LUT_RUNS_WGSL),
     ("lut_compute.wgsl", LUT_COMPUTE_WGSL),
     ("viewport.wgsl", VIEWPORT_WGSL),
     ("raygrid_trace.wgsl", RAYGRID_TRACE_WGSL),
