@@ -88,11 +88,16 @@ fn editing_a_radius_marks_an_impossible_value_and_keeps_the_last_valid_lens() {
     assert!(problem.reason.contains("no sphere is that wide"), "{}", problem.reason);
     assert_eq!(h.state().flare().unwrap().system.lens, flare_before, "the viewport keeps the last valid lens");
     assert!(h.query_by_label_contains("the view shows the last valid lens").is_some(), "the reason is shown");
+    // The status bar says it too, and stops saying it once the lens is valid again.
+    let said = h.state().message().map(str::to_owned).unwrap_or_default();
+    assert!(said.contains("lens edit refused") && said.contains("no sphere is that wide"), "{said}");
     // Undo (Ctrl+Z) takes the bad value back and the lens is valid again.
     h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
     h.run();
     assert_eq!(h.state().doc().lens.surfaces[stop].radius_mm, 0.0);
     assert!(h.state().derived().lens_problem().is_none());
+    let said = h.state().message().map(str::to_owned).unwrap_or_default();
+    assert!(said.contains("valid again") && !said.contains("refused"), "{said}");
 }
 
 #[test]
@@ -277,9 +282,14 @@ fn the_blend_panel_bakes_on_a_thread_cancels_and_shows_the_classification() {
         h.state().bake_status()
     );
     assert!(h.state().lut().is_none());
-    // A whole bake: the LUT is used, the ghost list shows which ghosts are non-linear.
+    // A whole bake: the LUT is used, the ghost list shows which ghosts are non-linear. Export LUT while it
+    // runs says that the bake is on its way, not only that there is no LUT.
     h.get_by_label("Bake").click();
     h.run_steps(2);
+    h.get_by_label("Export LUT…").click();
+    h.run();
+    let said = h.state().message().map(str::to_owned).unwrap_or_default();
+    assert!(said.contains("no LUT to export yet: the bake is at"), "{said}");
     let seconds = step_until(&mut h, 600.0, |app| app.lut().is_some());
     println!("the Heliar baked from the Blend panel in {seconds:.1} s");
     // The document is not written (undo gives back what was there); what the view draws and a saved preset
@@ -509,6 +519,34 @@ fn the_apps_export_and_render_preset_give_the_same_image() {
     assert!(mean < 0.5 && worst <= 4 && over_two <= 1e-4, "mean {mean}, worst {worst}, over 2: {over_two}");
 }
 
+/// The flare exposure's slider steers in stops: its track is wide enough that a 36 px drag moves the exposure by
+/// about 6 EV (issue 60: 7 to 25 EV before), and the value beside it drags at 50 px a stop.
+#[test]
+fn the_exposure_slider_moves_a_stop_every_few_pixels() {
+    let mut h = harness();
+    h.run();
+    let ev = |h: &Harness<'static, FlareLabApp>| h.state().derived().flare_ev(h.state().doc());
+    let track = h.get_by_role_and_label(egui::accesskit::Role::Slider, "flare exposure").rect();
+    let px_per_ev = track.width() / 32.0;
+    println!("flare exposure track {:.0} px wide: {px_per_ev:.1} px a stop", track.width());
+    assert!(px_per_ev >= 5.0, "{px_per_ev} px a stop");
+    // From the handle (a press elsewhere on the track jumps to it first).
+    let before = ev(&h);
+    let from = egui::pos2(track.left() + ((before + 4.0) / 32.0) as f32 * track.width(), track.center().y);
+    h.drag_at(from);
+    h.run_steps(2);
+    for k in 1..=6 {
+        h.hover_at(from + egui::vec2(6.0 * k as f32, 0.0));
+        h.run_steps(1);
+    }
+    h.drop_at(from + egui::vec2(36.0, 0.0));
+    h.run();
+    let moved = ev(&h) - before;
+    println!("a 36 px drag of the track: {moved:+.2} EV");
+    assert!(moved > 3.0 && moved < 8.0, "{moved} EV");
+    assert!(!h.state().doc().exposure_auto, "moving the exposure locks it");
+}
+
 /// Drags in the viewport from `from` to `to` (the viewport is the top left of the window).
 fn drag(h: &mut Harness<'static, FlareLabApp>, from: egui::Pos2, to: egui::Pos2) {
     h.drag_at(from);
@@ -531,6 +569,8 @@ fn the_timeline_keys_the_light_interpolates_plays_and_undo_covers_the_keys() {
     h.get_by_label("Set key").click();
     h.run();
     assert_eq!(h.state().doc().timeline.light_deg.keys.len(), 1);
+    let said = h.state().message().map(str::to_owned).unwrap_or_default();
+    assert!(said.contains("keyed frame 1") && said.contains("(-10.00, 2.00) deg"), "Set key says what it did: {said}");
     assert_eq!(h.state().doc().timeline.light_deg.key_at(1).unwrap().value, a);
     // Frame 11: dragging the light keys it there.
     h.get_by_label("frame").set_value_accesskit(11.0);
@@ -1224,13 +1264,19 @@ fn undo_and_redo_return_the_document_exactly_through_a_refused_edit_and_auto_exp
         assert!(json(&h) == *expected, "undo {}: the document is not what it was", k + 1);
         // The status bar names what was undone, then that there is nothing more.
         let said = h.state().message().map(str::to_owned).unwrap_or_default();
-        let wanted = if k < 2 { "undid: lens surface 6" } else { "nothing to undo" };
-        assert_eq!(said, wanted, "undo {}", k + 1);
+        // The first undo goes back to the refused radius and says so; the second to a valid lens.
+        let wanted = match k {
+            0 => "undid: lens surface 6; lens edit refused: surface 6, field `radius`",
+            1 => "undid: lens surface 6; the lens is valid again",
+            _ => "nothing to undo",
+        };
+        assert!(said.starts_with(wanted), "undo {}: {said}", k + 1);
     }
     assert_eq!(shown_ev(&h), ev0, "back on the first lens, its automatic exposure");
     redo(&mut h);
     assert!(json(&h) == j1, "redo 1");
-    assert_eq!(h.state().message(), Some("redid: lens surface 6"));
+    let said = h.state().message().map(str::to_owned).unwrap_or_default();
+    assert!(said.starts_with("redid: lens surface 6; lens edit refused"), "{said}");
     redo(&mut h);
     assert!(json(&h) == j2, "redo 2");
     redo(&mut h);

@@ -442,7 +442,7 @@ impl Derived {
                 flare_core::optics::LensError::Field { surface, field, .. } => (Some(*surface), Some(*field)),
                 _ => (None, None),
             };
-            self.lens_problem = Some(LensProblem { surface, field, reason: e.to_string() });
+            self.set_lens_problem(Some(LensProblem { surface, field, reason: e.to_string() }), events);
             return;
         }
         let config = match doc.flare_config() {
@@ -474,10 +474,27 @@ impl Derived {
                     events.push(SyncEvent::LutDropped);
                 }
                 self.flare = Some(Arc::new(flare));
-                self.lens_problem = None;
+                self.set_lens_problem(None, events);
             }
-            Err(e) => self.lens_problem = Some(LensProblem { surface: None, field: None, reason: e.to_string() }),
+            Err(e) => {
+                self.set_lens_problem(Some(LensProblem { surface: None, field: None, reason: e.to_string() }), events)
+            }
         }
+    }
+
+    /// Records why the lens is refused (or that it is not), and says so in the status bar when that changes: the
+    /// refusal with its reason, and once the lens is valid again, that the view follows it, so the refusal's words
+    /// never outlive it.
+    fn set_lens_problem(&mut self, problem: Option<LensProblem>, events: &mut Vec<SyncEvent>) {
+        let said = match (&self.lens_problem, &problem) {
+            (old, Some(new)) if old.as_ref().map(|o| &o.reason) != Some(&new.reason) => {
+                Some(format!("lens edit refused: {}; the view keeps the last valid lens", new.reason))
+            }
+            (Some(_), None) => Some("the lens is valid again: the view follows it".to_owned()),
+            _ => None,
+        };
+        events.extend(said.map(SyncEvent::Message));
+        self.lens_problem = problem;
     }
 
     fn sync_background(&mut self, doc: &Document, gpu: Option<&RenderState>, events: &mut Vec<SyncEvent>) {

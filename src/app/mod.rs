@@ -95,13 +95,13 @@ pub fn run() -> Result<()> {
         ..Default::default()
     };
 
-    // The device also asks for the timestamp queries the adapter offers: the renderer times its passes on the
-    // GPU (the status bar shows them).
+    // The device also asks for the timestamp queries the adapter offers (the renderer times its passes on the
+    // GPU; the status bar shows them) and for blending into 32-bit float targets.
     if let eframe::egui_wgpu::WgpuSetup::CreateNew(create) = &mut options.wgpu_options.wgpu_setup {
         let base = create.device_descriptor.clone();
         create.device_descriptor = std::sync::Arc::new(move |adapter| {
             let mut descriptor = base(adapter);
-            descriptor.required_features |= flare_core::render::gpu::timer_features(adapter);
+            descriptor.required_features |= flare_core::render::gpu::wanted_features(adapter);
             descriptor
         });
     }
@@ -743,15 +743,7 @@ impl FlareLabApp {
             // The slider shows the exposure the view uses (the automatic one is derived, never written into the
             // document); moving it writes the user's value and locks it.
             let mut ev = self.derived.flare_ev(self.session.doc());
-            let moved = ui
-                .add(
-                    egui::Slider::new(&mut ev, -4.0..=40.0)
-                        .clamping(egui::SliderClamping::Never)
-                        .fixed_decimals(2)
-                        .suffix(" EV")
-                        .text("flare exposure"),
-                )
-                .changed();
+            let moved = stops_slider(ui, &mut ev, -4.0..=28.0, "flare exposure", None).changed();
             if moved {
                 self.session.edit().flare_ev = ev;
                 self.session.edit().exposure_auto = false;
@@ -771,13 +763,7 @@ impl FlareLabApp {
                 self.session.edit().exposure_auto = auto;
             }
             if self.session.doc().background.is_some() {
-                ui.add(
-                    egui::Slider::new(&mut self.session.edit().plate_ev, -8.0..=8.0)
-                        .clamping(egui::SliderClamping::Never)
-                        .fixed_decimals(2)
-                        .suffix(" EV")
-                        .text("plate exposure"),
-                );
+                stops_slider(ui, &mut self.session.edit().plate_ev, -8.0..=8.0, "plate exposure", None);
             }
         });
         ui.horizontal(|ui| {
@@ -800,14 +786,8 @@ impl FlareLabApp {
                 );
             ui.checkbox(&mut self.session.edit().starburst, "starburst");
             if self.session.doc().starburst {
-                ui.add(
-                    egui::Slider::new(&mut self.session.edit().starburst_ev, -12.0..=4.0)
-                        .clamping(egui::SliderClamping::Never)
-                        .fixed_decimals(1)
-                        .suffix(" EV")
-                        .text("starburst"),
-                )
-                .on_hover_text("the starburst's brightness against the physical one (0 EV)");
+                let what = "the starburst's brightness against the physical one (0 EV)";
+                stops_slider(ui, &mut self.session.edit().starburst_ev, -12.0..=4.0, "starburst", Some(what));
             }
         });
     }
@@ -981,7 +961,8 @@ impl FlareLabApp {
             Action::OpenLut => self.pick_file(FileUse::OpenLut),
             Action::ExportLut => {
                 if self.derived.lut().is_none() {
-                    self.session.say("no LUT to export: bake one (Blend panel) or open one");
+                    let why = self.no_lut_to_export();
+                    self.session.say(why);
                     return;
                 }
                 self.pick_file(FileUse::ExportLut);
@@ -1092,10 +1073,22 @@ impl FlareLabApp {
         });
     }
 
+    /// Why there is no LUT to export: a bake still running (with how far it is), or none baked or opened.
+    fn no_lut_to_export(&self) -> String {
+        match self.jobs.bake_status() {
+            BakeStatus::Running { fraction, text } => format!(
+                "no LUT to export yet: the bake is at {:.0} % ({text}); export it when it lands",
+                100.0 * fraction
+            ),
+            _ => "no LUT to export: bake one (Blend panel) or open one".to_owned(),
+        }
+    }
+
     /// Writes the LUT in use to `path`.
     fn export_lut_to(&mut self, path: &std::path::Path) {
         let Some(live) = self.derived.lut().clone() else {
-            self.session.say("no LUT to export: bake one (Blend panel) or open one");
+            let why = self.no_lut_to_export();
+            self.session.say(why);
             return;
         };
         self.session.say(match flare_core::lut::format::write_lut(path, &live.lut) {
@@ -1372,4 +1365,39 @@ impl eframe::App for FlareLabApp {
         let recent: Vec<String> = self.files.recent.iter().map(|p| p.display().to_string()).collect();
         storage.set_string(RECENT_KEY, serde_json::to_string(&recent).unwrap_or_default());
     }
+}
+
+/// Pixels of drag per stop on an exposure slider's track ([`stops_slider`]).
+pub const STOPS_TRACK_PX_PER_EV: f32 = 6.0;
+/// Stops per pixel of drag on an exposure slider's value: 50 px a stop, ten times finer with Shift held (egui's
+/// own slow drag), a double-click to type one.
+pub const STOPS_VALUE_EV_PER_PX: f64 = 0.02;
+/// How an exposure slider is steered, said on hover.
+const STOPS_HINT: &str =
+    "Drag the track for whole stops, the value for fine steps (Shift: ten times finer), double-click it to type.";
+
+/// An exposure slider in stops over `range` (its track wide enough for [`STOPS_TRACK_PX_PER_EV`] pixels a
+/// stop; values beyond the track typed or dragged in its value box), labelled `label`, with `what` it sets and
+/// how to steer it on hover.
+pub fn stops_slider(
+    ui: &mut egui::Ui,
+    value: &mut f64,
+    range: std::ops::RangeInclusive<f64>,
+    label: &str,
+    what: Option<&str>,
+) -> egui::Response {
+    let stops = (range.end() - range.start()) as f32;
+    ui.scope(|ui| {
+        ui.spacing_mut().slider_width = (stops * STOPS_TRACK_PX_PER_EV).max(ui.spacing().slider_width);
+        ui.add(
+            egui::Slider::new(value, range)
+                .clamping(egui::SliderClamping::Never)
+                .fixed_decimals(2)
+                .drag_value_speed(STOPS_VALUE_EV_PER_PX)
+                .suffix(" EV")
+                .text(label),
+        )
+    })
+    .inner
+    .on_hover_text(what.map_or_else(|| STOPS_HINT.to_owned(), |w| format!("{w}. {STOPS_HINT}")))
 }

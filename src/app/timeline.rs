@@ -146,7 +146,16 @@ impl FlareLabApp {
                 .copied()
                 .unwrap_or_else(|| self.session.doc().ghosts.get(&key).map_or(1.0, |d| d.gain));
             self.session.edit().timeline.ghost_gain.entry(key).or_default().set(frame, gain);
+            self.session.say(format!(
+                "keyed frame {frame}: the light at ({:.2}, {:.2}) deg, {:+.1} EV, ghost {}-{} at gain {gain:.2}",
+                light[0], light[1], sample.light_ev, g.i, g.j
+            ));
+            return;
         }
+        self.session.say(format!(
+            "keyed frame {frame}: the light at ({:.2}, {:.2}) deg, {:+.1} EV",
+            light[0], light[1], sample.light_ev
+        ));
     }
 
     /// Puts the light at `deg`: the key at the playhead when the timeline has light keys, else the static
