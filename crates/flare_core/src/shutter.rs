@@ -28,7 +28,8 @@
 //! and per-ghost layers). A streak therefore holds the energy of the
 //! sharp frame (up to the change of the ghosts' brightness along the path). The starburst (the light's own
 //! image) stays at the frame's time: it is not streaked (its reach is the frame's largest quad: streaking it
-//! would draw that once per sample). LUT ghosts composited over the flare through alpha (`blend.mode` alpha) keep
+//! would draw that once per sample, up to [`MAX_SAMPLES`] times; at 11.7 ms a pass on lavapipe for a 1280x720
+//! frame, about 3 s a frame). LUT ghosts composited over the flare through alpha (`blend.mode` alpha) keep
 //! colour and coverage each times the sample's weight, and each ghost's samples are put next to each other
 //! ([`crate::lut::blend::LutScene::group_by_ghost`]) so that the passes lay them over the flare at once with their
 //! summed coverage: where all n samples cover a pixel with coverage a, what lies beneath keeps `1 - a`, the time
