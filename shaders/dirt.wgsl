@@ -16,10 +16,9 @@ struct VertexOut {
 // One triangle covering the frame.
 @vertex
 fn vs_main(@builtin(vertex_index) vertex: u32) -> VertexOut {
-    var corners = array<vec2<f32>, 3>(vec2<f32>(0.0, 0.0), vec2<f32>(2.0, 0.0), vec2<f32>(0.0, 2.0));
-    let q = corners[vertex];
+    let q = fullscreen_corner(vertex);
     var out: VertexOut;
-    out.position = vec4<f32>(q.x * 2.0 - 1.0, 1.0 - q.y * 2.0, 0.0, 1.0);
+    out.position = fullscreen_clip(q);
     out.pixel = q * globals.viewport.xy;
     return out;
 }

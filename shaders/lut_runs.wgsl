@@ -14,10 +14,8 @@ struct VertexOut {
 // A triangle covering the target.
 @vertex
 fn vs_main(@builtin(vertex_index) vertex: u32) -> VertexOut {
-    var corners = array<vec2<f32>, 3>(vec2<f32>(0.0, 0.0), vec2<f32>(2.0, 0.0), vec2<f32>(0.0, 2.0));
-    let q = corners[vertex];
     var out: VertexOut;
-    out.position = vec4<f32>(q.x * 2.0 - 1.0, 1.0 - q.y * 2.0, 0.0, 1.0);
+    out.position = fullscreen_clip(fullscreen_corner(vertex));
     return out;
 }
 

@@ -35,8 +35,11 @@ pub const GHOSTS_COMPUTE_WGSL: &str = concat!(
 pub const STARBURST_WGSL: &str =
     concat!(include_str!("../../../../shaders/common.wgsl"), include_str!("../../../../shaders/starburst.wgsl"));
 /// The front dirt's glow over the whole accumulation.
-pub const DIRT_WGSL: &str =
-    concat!(include_str!("../../../../shaders/common.wgsl"), include_str!("../../../../shaders/dirt.wgsl"));
+pub const DIRT_WGSL: &str = concat!(
+    include_str!("../../../../shaders/common.wgsl"),
+    include_str!("../../../../shaders/fullscreen.wgsl"),
+    include_str!("../../../../shaders/dirt.wgsl")
+);
 /// Flare and plate exposures, tonemap, sRGB, with the identity in place of the OCIO display transform (what
 /// the validation reads; the renderer builds [`tonemap_wgsl`] of the document's view).
 pub const TONEMAP_WGSL: &str = concat!(
@@ -62,7 +65,8 @@ pub fn tonemap_wgsl(ocio: &str) -> String {
 pub const LUT_GHOSTS_WGSL: &str =
     concat!(include_str!("../../../../shaders/common.wgsl"), include_str!("../../../../shaders/lut_ghosts.wgsl"));
 /// The run of a LUT ghost's instances laid over the accumulation at once (the rasterised LUT layer through alpha).
-pub const LUT_RUNS_WGSL: &str = include_str!("../../../../shaders/lut_runs.wgsl");
+pub const LUT_RUNS_WGSL: &str =
+    concat!(include_str!("../../../../shaders/fullscreen.wgsl"), include_str!("../../../../shaders/lut_runs.wgsl"));
 /// LUT ghosts as compute: the instances binned to each tile, sampled per pixel.
 pub const LUT_COMPUTE_WGSL: &str = include_str!("../../../../shaders/lut_compute.wgsl");
 /// Ray grids on the GPU, pass 1: the compute tracer (with the declarations both passes share).
