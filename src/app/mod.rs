@@ -1370,11 +1370,11 @@ impl eframe::App for FlareLabApp {
 /// Pixels of drag per stop on an exposure slider's track ([`stops_slider`]).
 pub const STOPS_TRACK_PX_PER_EV: f32 = 6.0;
 /// Stops per pixel of drag on an exposure slider's value: 50 px a stop, ten times finer with Shift held (egui's
-/// own slow drag), a double-click to type one.
+/// own slow drag), a click on it to type one.
 pub const STOPS_VALUE_EV_PER_PX: f64 = 0.02;
 /// How an exposure slider is steered, said on hover.
 const STOPS_HINT: &str =
-    "Drag the track for whole stops, the value for fine steps (Shift: ten times finer), double-click it to type.";
+    "Drag the track for whole stops, the value for fine steps (Shift: ten times finer), click it to type.";
 
 /// An exposure slider in stops over `range` (its track wide enough for [`STOPS_TRACK_PX_PER_EV`] pixels a
 /// stop; values beyond the track typed or dragged in its value box), labelled `label`, with `what` it sets and

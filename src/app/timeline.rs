@@ -136,6 +136,10 @@ impl FlareLabApp {
         let sample = self.session.doc().timeline.sample(frame as f64);
         self.session.edit().timeline.light_deg.set(frame, light);
         self.session.edit().timeline.light_ev.set(frame, sample.light_ev);
+        let mut said = format!(
+            "keyed frame {frame}: the light at ({:.2}, {:.2}) deg, {:+.1} EV",
+            light[0], light[1], sample.light_ev
+        );
         if let Some(g) =
             self.session.selected().and_then(|g| self.derived.flare().as_ref().map(|f| f.system.ghosts[g].clone()))
         {
@@ -146,16 +150,9 @@ impl FlareLabApp {
                 .copied()
                 .unwrap_or_else(|| self.session.doc().ghosts.get(&key).map_or(1.0, |d| d.gain));
             self.session.edit().timeline.ghost_gain.entry(key).or_default().set(frame, gain);
-            self.session.say(format!(
-                "keyed frame {frame}: the light at ({:.2}, {:.2}) deg, {:+.1} EV, ghost {}-{} at gain {gain:.2}",
-                light[0], light[1], sample.light_ev, g.i, g.j
-            ));
-            return;
+            said.push_str(&format!(", ghost {}-{} at gain {gain:.2}", g.i, g.j));
         }
-        self.session.say(format!(
-            "keyed frame {frame}: the light at ({:.2}, {:.2}) deg, {:+.1} EV",
-            light[0], light[1], sample.light_ev
-        ));
+        self.session.say(said);
     }
 
     /// Puts the light at `deg`: the key at the playhead when the timeline has light keys, else the static
