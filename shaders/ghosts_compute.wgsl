@@ -6,7 +6,9 @@
 //
 // How it works. Each (sprite, accumulation row) the sprite covers is an item: `spans` finds the row's open
 // span (where every clear-aperture disc and every stop crossing's mask are exactly 1, from the mask's per-row table) and
-// shades only the pixels outside it, as the fragment shader would. The row's values F(x) (0 outside the
+// shades only the pixels outside it, as the fragment shader would, each evaluating only the masks that are not
+// open over the row's whole walk (`live`: a factor of 1 changes no bit; every mask worked out with constant
+// indices, since a software rasteriser keeps a dynamically indexed array in memory). The row's values F(x) (0 outside the
 // sprite, the colour in the open span, colour x mask at an edge pixel) go into a per-row difference buffer as
 // F(x) - F(x - 1), wherever that is not 0: a frame-filling sprite costs its edges, not its area. An item's walk
 // (its edge pixels, the open span's first pixel, the end) is split between `pieces` invocations, each taking
@@ -201,35 +203,57 @@ fn disc_mask(map: vec4<f32>, scale_y: f32, q: vec2<f32>) -> f32 {
     return clamp(0.5 + (1.0 - r) / map.w, 0.0, 1.0);
 }
 
-fn mask_product(inst: GhostInstance, q: vec2<f32>) -> f32 {
+// A stop map left out of a pixel's product (an off map: 1 everywhere).
+const MAP_OFF = vec4<f32>(0.0);
+// An open interval's bound where a mask does not narrow it (the CPU twin's `OPEN_FAR`).
+const OPEN_FAR = 1.0e30;
+// The bit of stop crossing 0 in a walk's live set (disc k is bit k).
+const FIRST_STOP_BIT = 4u;
+
+// The masks' product at q, only the masks of `live` evaluated (the CPU twin's `mask_product_of`): the others
+// are exactly 1 at every pixel of the walk (`sprite_walk`), and a factor of 1 changes no bit of the product.
+fn mask_product(inst: GhostInstance, q: vec2<f32>, live: u32) -> f32 {
     if (abs(q.x) > 1.0 || abs(q.y) > 1.0) {
         return 0.0;
     }
+    // Constant indices, in the CPU twin's order (a software rasteriser keeps no array in memory).
     var m = 1.0;
-    for (var k = 0u; k < 4u; k = k + 1u) {
-        m = m * disc_mask(inst.discs[k], inst.disc_scale_y[k], q);
+    if ((live & 1u) != 0u) {
+        m = m * disc_mask(inst.discs[0], inst.disc_scale_y.x, q);
     }
+    if ((live & 2u) != 0u) {
+        m = m * disc_mask(inst.discs[1], inst.disc_scale_y.y, q);
+    }
+    if ((live & 4u) != 0u) {
+        m = m * disc_mask(inst.discs[2], inst.disc_scale_y.z, q);
+    }
+    if ((live & 8u) != 0u) {
+        m = m * disc_mask(inst.discs[3], inst.disc_scale_y.w, q);
+    }
+    let stop0 = select(MAP_OFF, inst.stop0, (live & (1u << FIRST_STOP_BIT)) != 0u);
+    let stop1 = select(MAP_OFF, inst.stop1, (live & (2u << FIRST_STOP_BIT)) != 0u);
+    let stop2 = select(MAP_OFF, inst.stop2, (live & (4u << FIRST_STOP_BIT)) != 0u);
     if (GATHER_MASKS) {
         // Every lookup issued at once (a GPU waits on one fetch at a time otherwise); each factor is in
         // [0, 1], so a factor of 0 gives the 0 the early returns below give, and the products are taken in
         // their order: the same value.
-        let s0 = stop_mask(inst.stop0, inst.scale_y.x, q);
-        let s1 = stop_mask(inst.stop1, inst.scale_y.y, q);
-        let s2 = stop_mask(inst.stop2, inst.scale_y.z, q);
+        let s0 = stop_mask(stop0, inst.scale_y.x, q);
+        let s1 = stop_mask(stop1, inst.scale_y.y, q);
+        let s2 = stop_mask(stop2, inst.scale_y.z, q);
         return ((max(m, 0.0) * s0) * s1) * s2;
     }
     if (m <= 0.0) {
         return 0.0;
     }
-    m = m * stop_mask(inst.stop0, inst.scale_y.x, q);
+    m = m * stop_mask(stop0, inst.scale_y.x, q);
     if (m <= 0.0) {
         return 0.0;
     }
-    m = m * stop_mask(inst.stop1, inst.scale_y.y, q);
+    m = m * stop_mask(stop1, inst.scale_y.y, q);
     if (m <= 0.0) {
         return 0.0;
     }
-    return m * stop_mask(inst.stop2, inst.scale_y.z, q);
+    return m * stop_mask(stop2, inst.scale_y.z, q);
 }
 
 // ---- intervals of the quad coordinate q_x along a row ----
@@ -322,6 +346,7 @@ struct Walk {
     q_y: f32,
     sprite: u32,
     row: u32,        // the strip row
+    live: u32,       // the masks its edge pixels evaluate (bits 0-3 the discs, 4-6 the stops; `mask_product`)
 };
 
 // Per item of the strip, its walk, worked out once by `walks_setup` (where `ComputeForm::setup_once`).
@@ -351,7 +376,7 @@ fn walk_value(inst: GhostInstance, w: Walk, i: u32) -> vec3<i32> {
     }
     let x = walk_x(w, i);
     let q = vec2<f32>(((f32(x) + 0.5) * strip.scale_x - inst.centre_half.x) / inst.centre_half.z, w.q_y);
-    let m = mask_product(inst, q);
+    let m = mask_product(inst, q, w.live);
     if (m > 0.0) {
         return fixed_colour(inst.colour, m);
     }
@@ -374,6 +399,84 @@ fn item_walk(item: u32) -> Walk {
     return sprite_walk(instances[lo], lo, items[lo], item);
 }
 
+// The columns whose centres lie inside the open interval `open` of q by a pixel's margin: first, last (as f32).
+fn open_columns(open: vec2<f32>, cx: f32, hx: f32, sx: f32) -> vec2<f32> {
+    let a = (cx + open.x * hx) / sx - 0.5;
+    let b = (cx + open.y * hx) / sx - 0.5;
+    return vec2<f32>(ceil(min(a, b)) + 1.0, floor(max(a, b)) - 1.0);
+}
+
+// ---- one mask's intervals along a row (constant indices only: a software rasteriser keeps no array in memory) ----
+
+// A disc's part of row_support: false when the row misses the disc (grown by its anti-alias half-width).
+fn disc_support(span: ptr<function, vec2<f32>>, f: vec4<f32>, scale_y: f32, q_y: f32) -> bool {
+    if (f.w == 0.0) {
+        return true;
+    }
+    let reach = 1.0 + 0.5 * f.w;
+    let fy = scale_y * q_y + f.z;
+    return abs(fy) <= reach && clip_reach(span, f.x, f.y, sqrt(max(reach * reach - fy * fy, 0.0)));
+}
+
+// A disc's own open interval of q along the row (fully open within radius 1 - w / 2 of its centre): all of it
+// (+-OPEN_FAR) for an empty slot, empty (x > y) where the row passes outside that radius.
+fn disc_open(f: vec4<f32>, scale_y: f32, q_y: f32) -> vec2<f32> {
+    var own = vec2<f32>(-OPEN_FAR, OPEN_FAR);
+    if (f.w == 0.0) {
+        return own;
+    }
+    let inner = 1.0 - 0.5 * f.w;
+    let fy = scale_y * q_y + f.z;
+    if (inner <= abs(fy)) {
+        return vec2<f32>(1.0, -1.0);
+    }
+    let half_width = sqrt(inner * inner - fy * fy);
+    clip_to(&own, f.x, f.y, vec2<f32>(-half_width, half_width));
+    return own;
+}
+
+// A stop crossing's own intervals of q along the row, from the mask's row table: where it is exactly 1 (.xy)
+// and where it is not 0 (.zw); all of it for an off map. `missed` is set where the row passes outside the mask.
+struct StopRow {
+    open: vec2<f32>,
+    support: vec2<f32>,
+    missed: bool,
+};
+
+fn stop_row(s: vec4<f32>, scale_y: f32, q_y: f32) -> StopRow {
+    var open = vec2<f32>(-OPEN_FAR, OPEN_FAR);
+    var support = open;
+    if (s.w == 0.0) {
+        return StopRow(open, support, false);
+    }
+    let level = level_of(s.w);
+    let band = mask_band(scale_y * q_y + s.z, level);
+    if (band < 0) {
+        return StopRow(open, support, true);
+    }
+    let rows = mask_row(level, u32(band));
+    clip_to(&open, s.x, s.y, rows.xy);
+    clip_to(&support, s.x, s.y, rows.zw);
+    return StopRow(open, support, false);
+}
+
+// `span` narrowed to `by` (clip_to's intersection; an empty `by` leaves it empty).
+fn narrowed(span: vec2<f32>, by: vec2<f32>) -> vec2<f32> {
+    return vec2<f32>(max(span.x, by.x), min(span.y, by.y));
+}
+
+// `bit` when the mask whose own open interval is `own` is not exactly 1 at every column first..last - 1 (by the
+// open span's pixel margin): its edge pixels must evaluate it.
+fn live_bit(own: vec2<f32>, bit: u32, cx: f32, hx: f32, sx: f32, first: f32, last: f32) -> u32 {
+    if (own.x < own.y) {
+        let o = open_columns(own, cx, hx, sx);
+        if (o.x <= first && o.y >= last - 1.0) {
+            return 0u;
+        }
+    }
+    return 1u << bit;
+}
+
 // The walk of item `item` of sprite `sprite` (`inst`), whose first item and first row are `start`.
 fn sprite_walk(inst: GhostInstance, sprite: u32, start: vec2<u32>, item: u32) -> Walk {
     var walk: Walk;
@@ -391,16 +494,11 @@ fn sprite_walk(inst: GhostInstance, sprite: u32, start: vec2<u32>, item: u32) ->
         return walk;
     }
     var support = vec2<f32>(-1.0, 1.0);
-    for (var k = 0u; k < 4u; k = k + 1u) {
-        let f = inst.discs[k];
-        if (f.w == 0.0) {
-            continue;
-        }
-        let reach = 1.0 + 0.5 * f.w;
-        let fy = inst.disc_scale_y[k] * q_y + f.z;
-        if (abs(fy) > reach || !clip_reach(&support, f.x, f.y, sqrt(max(reach * reach - fy * fy, 0.0)))) {
-            return walk;
-        }
+    if (!disc_support(&support, inst.discs[0], inst.disc_scale_y.x, q_y)
+        || !disc_support(&support, inst.discs[1], inst.disc_scale_y.y, q_y)
+        || !disc_support(&support, inst.discs[2], inst.disc_scale_y.z, q_y)
+        || !disc_support(&support, inst.discs[3], inst.disc_scale_y.w, q_y)) {
+        return walk;
     }
     for (var k = 0u; k < 3u; k = k + 1u) {
         let s = stop_of(inst, k);
@@ -411,36 +509,21 @@ fn sprite_walk(inst: GhostInstance, sprite: u32, start: vec2<u32>, item: u32) ->
     if (support.x > support.y) {
         return walk;
     }
-    // The open interval, narrowed by each mask; the support, by where each mask is non-zero.
-    var open = support;
-    for (var k = 0u; k < 4u; k = k + 1u) {
-        let f = inst.discs[k];
-        if (f.w == 0.0) {
-            continue;
-        }
-        let inner = 1.0 - 0.5 * f.w;
-        let fy = inst.disc_scale_y[k] * q_y + f.z;
-        if (inner <= abs(fy)) {
-            open = vec2<f32>(1.0, -1.0);
-        } else {
-            let half_width = sqrt(inner * inner - fy * fy);
-            clip_to(&open, f.x, f.y, vec2<f32>(-half_width, half_width));
-        }
+    // Each mask's own open interval; the open interval is where all are open, the support narrowed by where
+    // each stop's mask is non-zero.
+    let d0 = disc_open(inst.discs[0], inst.disc_scale_y.x, q_y);
+    let d1 = disc_open(inst.discs[1], inst.disc_scale_y.y, q_y);
+    let d2 = disc_open(inst.discs[2], inst.disc_scale_y.z, q_y);
+    let d3 = disc_open(inst.discs[3], inst.disc_scale_y.w, q_y);
+    let s0 = stop_row(inst.stop0, inst.scale_y.x, q_y);
+    let s1 = stop_row(inst.stop1, inst.scale_y.y, q_y);
+    let s2 = stop_row(inst.stop2, inst.scale_y.z, q_y);
+    if (s0.missed || s1.missed || s2.missed) {
+        return walk;
     }
-    for (var k = 0u; k < 3u; k = k + 1u) {
-        let s = stop_of(inst, k);
-        if (s.w == 0.0) {
-            continue;
-        }
-        let level = level_of(s.w);
-        let band = mask_band(inst.scale_y[k] * q_y + s.z, level);
-        if (band < 0) {
-            return walk;
-        }
-        let rows = mask_row(level, u32(band));
-        clip_to(&open, s.x, s.y, rows.xy);
-        clip_to(&support, s.x, s.y, rows.zw);
-    }
+    let open = narrowed(narrowed(narrowed(narrowed(narrowed(narrowed(narrowed(support, d0), d1), d2), d3), s0.open),
+        s1.open), s2.open);
+    support = narrowed(narrowed(narrowed(support, s0.support), s1.support), s2.support);
     if (support.x > support.y) {
         return walk;
     }
@@ -454,10 +537,9 @@ fn sprite_walk(inst: GhostInstance, sprite: u32, start: vec2<u32>, item: u32) ->
     var open_first = 0xffffffffu;
     var open_last = 0u;
     if (open.x < open.y) {
-        let oa = (cx + open.x * hx) / sx - 0.5;
-        let ob = (cx + open.y * hx) / sx - 0.5;
-        let o_lo = max(ceil(min(oa, ob)) + 1.0, f32(first));
-        let o_hi = min(floor(max(oa, ob)) - 1.0, f32(last) - 1.0);
+        let o = open_columns(open, cx, hx, sx);
+        let o_lo = max(o.x, f32(first));
+        let o_hi = min(o.y, f32(last) - 1.0);
         if (o_lo <= o_hi) {
             open_first = u32(o_lo);
             open_last = u32(o_hi);
@@ -466,6 +548,13 @@ fn sprite_walk(inst: GhostInstance, sprite: u32, start: vec2<u32>, item: u32) ->
     if (first >= last) {
         return walk;
     }
+    // The live masks: those not open (by the same pixel's margin) at every column the row shades.
+    let f = f32(first);
+    let l = f32(last);
+    walk.live = live_bit(d0, 0u, cx, hx, sx, f, l) | live_bit(d1, 1u, cx, hx, sx, f, l)
+        | live_bit(d2, 2u, cx, hx, sx, f, l) | live_bit(d3, 3u, cx, hx, sx, f, l)
+        | live_bit(s0.open, FIRST_STOP_BIT, cx, hx, sx, f, l) | live_bit(s1.open, FIRST_STOP_BIT + 1u, cx, hx, sx, f, l)
+        | live_bit(s2.open, FIRST_STOP_BIT + 2u, cx, hx, sx, f, l);
     let has_open = open_first <= open_last;
     walk.first = first;
     walk.last = last;

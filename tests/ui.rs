@@ -67,6 +67,17 @@ fn show(h: &mut Harness<'static, FlareLabApp>, tab: Tab) {
     h.run();
 }
 
+/// Clicks `item` in the menu of the Lens table's row `k` (its number), as a user does.
+fn surface_menu(h: &mut Harness<'static, FlareLabApp>, k: usize, item: &str) {
+    h.get_by_label(&k.to_string()).click();
+    h.run();
+    h.get_by_label(item).click();
+    h.run();
+}
+
+const ADD_DUMMY: &str = "+ dummy surface after";
+const REMOVE_SURFACE: &str = "x remove";
+
 #[test]
 fn editing_a_radius_marks_an_impossible_value_and_keeps_the_last_valid_lens() {
     let mut h = harness();
@@ -146,8 +157,9 @@ fn dragging_in_the_viewport_moves_the_light_and_undo_takes_the_whole_drag_back()
     let mut h = harness();
     show(&mut h, Tab::Ghosts);
     let before = h.state().doc().light_deg;
-    // The viewport is the top left of the window (a placeholder without a GPU, with the same input).
-    let (from, to) = (egui::pos2(300.0, 250.0), egui::pos2(420.0, 200.0));
+    // The viewport fills the window's left (a placeholder without a GPU, with the same input).
+    let centre = h.state().view_rect().expect("a viewport").center();
+    let (from, to) = (centre + egui::vec2(-40.0, 40.0), centre + egui::vec2(80.0, -10.0));
     drag(&mut h, from, to);
     let after = h.state().doc().light_deg;
     assert_ne!(after, before, "the drag moved the light");
@@ -300,7 +312,7 @@ fn the_blend_panel_bakes_on_a_thread_cancels_and_shows_the_classification() {
     let baked = h.state().lut().unwrap().ghosts.len();
     assert!(baked > 0);
     show(&mut h, Tab::Ghosts);
-    assert_eq!(h.query_all_by_label("non-linear (baked)").count(), baked, "one row per baked ghost says so");
+    assert_eq!(h.query_all_by_label("baked").count(), baked, "one row per baked ghost says so");
     // The baked LUT written to a file opens in a fresh app for the same lens; a damaged copy is refused
     // with the reason and changes nothing.
     let dir = tempfile::tempdir().unwrap();
@@ -671,7 +683,11 @@ fn the_colour_row_sets_the_view_refuses_what_does_not_resolve_and_undo_returns_i
         (view.display.clone(), view.view.clone())
     };
     assert_eq!(shown(&h), ("sRGB - Display".to_owned(), "ACES 2.0 - SDR 100 nits (Rec.709)".to_owned()));
-    // The view menu lists the display's views; choosing one changes the frame's view.
+    // The colour rows open by their toggle; the view menu lists the display's views; choosing one changes the
+    // frame's view.
+    assert!(h.query_by_label("view").is_none(), "the colour rows start folded");
+    h.get_by_label("colour").click();
+    h.run();
     h.get_by_label("view").click();
     h.run();
     h.get_by_label("Video (colorimetric)").click();
@@ -765,13 +781,8 @@ fn inserting_a_surface_splits_a_gap_and_changes_nothing_optically() {
     let fo = |app: &FlareLabApp| app.derived().first_order().clone().expect("a valid lens");
     let (efl, bfd) = (fo(h.state()).efl_mm, fo(h.state()).bfd_mm);
     // "+" on row 1 (inside glass) and on the last row.
-    let plus: Vec<_> = h.get_all_by_label("+").collect();
-    assert_eq!(plus.len(), before.surfaces.len());
-    plus[1].click();
-    h.run();
-    let plus: Vec<_> = h.get_all_by_label("+").collect();
-    plus[plus.len() - 1].click();
-    h.run();
+    surface_menu(&mut h, 1, ADD_DUMMY);
+    surface_menu(&mut h, before.surfaces.len(), ADD_DUMMY);
     let after = &h.state().doc().lens;
     assert_eq!(after.surfaces.len(), before.surfaces.len() + 2);
     assert!(h.state().derived().lens_problem().is_none(), "{:?}", h.state().derived().lens_problem());
@@ -864,6 +875,15 @@ fn lut_ghosts_bake_by_themselves_and_undo_to_a_baked_lens_needs_no_bake() {
     fresh.run_steps(2);
     assert_eq!(fresh.state().jobs().autobake().bakes_started, 0);
     assert_eq!(fresh.state().lut().map(|l| l.lens_id.as_str()), Some("heliar_tronnier_us2645156"));
+    // "+" (a dummy surface: the same optics) keeps the LUT on screen, says nothing of it and starts no bake.
+    show(&mut fresh, Tab::Lens);
+    surface_menu(&mut fresh, 1, ADD_DUMMY);
+    fresh.run_steps(3);
+    assert_eq!(fresh.state().doc().lens.surfaces.len(), heliar().lens.surfaces.len() + 1);
+    let said = fresh.state().message().map(str::to_owned);
+    assert_eq!(fresh.state().lut().map(|l| l.lens_id.as_str()), Some("heliar_tronnier_us2645156"), "{said:?}");
+    assert!(!said.as_deref().is_some_and(|m| m.contains("optics changed")), "{said:?}");
+    assert_eq!(fresh.state().jobs().autobake().bakes_started, 0, "no bake for a dummy surface");
     // A damaged cache entry is not trusted: it is reported and baked again.
     for entry in std::fs::read_dir(dir.path()).unwrap() {
         let path = entry.unwrap().path();
@@ -1086,8 +1106,10 @@ fn the_depth_of_field_defocuses_the_plate_on_a_thread_as_the_command_line_does()
     let doc = street_doc(dir.path(), 320, 180, false);
     let mut h = harness_on(Some(doc));
     h.run();
-    // Off: the plate as read.
+    // Off: the plate as read. Its rows open by their toggle.
     assert!(!h.state().doc().dof.enabled);
+    h.get_by_label("DoF").click();
+    h.run();
     h.get_by_label("depth of field").click();
     h.step();
     h.step();
@@ -1306,16 +1328,12 @@ fn plus_then_x_on_every_shipped_lens_gives_back_the_lens() {
         h.run();
         let before = h.state().doc().lens.clone();
         let (efl0, bfd0, ghosts0) = optics(h.state());
-        h.get_all_by_label("+").next().unwrap().click_accesskit();
-        h.run();
+        surface_menu(&mut h, 0, ADD_DUMMY);
         assert_eq!(h.state().doc().lens.surfaces.len(), before.surfaces.len() + 1, "{id}: {:?}", h.state().message());
         let (efl, bfd, ghosts) = optics(h.state());
         assert!((efl - efl0).abs() < 1e-9 && (bfd - bfd0).abs() < 1e-9, "{id}: {efl} {bfd} against {efl0} {bfd0}");
         assert_eq!(ghosts, ghosts0, "{id}: a dummy surface makes no ghost");
-        assert_eq!(h.get_all_by_label("x").count(), before.surfaces.len() + 1, "{id}: one x a row");
-        // By accesskit: the pointer still hovers "+", whose tooltip covers its neighbour.
-        h.get_all_by_label("x").nth(1).unwrap().click_accesskit();
-        h.run();
+        surface_menu(&mut h, 1, REMOVE_SURFACE);
         assert_eq!(h.state().doc().lens, before, "{id}: x removes exactly what + added ({:?})", h.state().message());
         let (efl, bfd, ghosts) = optics(h.state());
         assert!((efl - efl0).abs() < 1e-9 && (bfd - bfd0).abs() < 1e-9 && ghosts == ghosts0, "{id}");
@@ -1450,7 +1468,8 @@ fn the_lens_panels_buttons_are_inside_the_default_window() {
     show(&mut h, Tab::Lens);
     let window = egui::Rect::from_min_size(egui::Pos2::ZERO, egui::vec2(1440.0, 900.0));
     let mut seen = 0;
-    for label in ["Open…", "+", "x", "⬆", "⬇"] {
+    let rows: Vec<String> = (0..h.state().doc().lens.surfaces.len()).map(|k| k.to_string()).collect();
+    for label in std::iter::once("Open…").chain(rows.iter().map(String::as_str)) {
         for node in h.get_all_by_label(label) {
             let r = node.rect();
             // Rows scrolled below the panel's bottom are not shown; what is shown lies inside the window.
@@ -1461,6 +1480,59 @@ fn the_lens_panels_buttons_are_inside_the_default_window() {
         }
     }
     assert!(seen > 20, "{seen} buttons seen");
+}
+
+/// Picture first: from 1024x700 to 2560x1440 with the side panel open, the viewport takes most of the window
+/// (at least 60 % at 1440x900, where a 600-point panel and six rows under the view left it 31 %), the status
+/// bar is one line, and every tab's content fits the panel's width (nothing lies right of the window: the
+/// panel would scroll sideways); the sections under the view open by their toggles and fold back.
+#[test]
+fn the_viewport_takes_most_of_the_window_and_every_tab_fits_the_panel() {
+    use egui_kittest::kittest::by;
+    for (width, height, least) in [(1024.0, 700.0, 0.45), (1440.0, 900.0, 0.60), (2560.0, 1440.0, 0.60)] {
+        let mut h = Harness::builder()
+            .with_size(egui::vec2(width, height))
+            .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), quiet(FlareLabApp::new(None, None)));
+        h.run_steps(2);
+        let view = h.state().view_rect().expect("a viewport");
+        let share = view.area() / (width * height);
+        println!(
+            "{width}x{height}: the viewport {:.0}x{:.0}, {:.1} % of the window",
+            view.width(),
+            view.height(),
+            100.0 * share
+        );
+        assert!(share >= least, "{width}x{height}: the viewport {view:?} is {share:.3} of the window");
+        let mut widened = Vec::new();
+        for tab in Tab::ALL {
+            // (The Looks tab's thumbnails keep a spinner turning: steps, not `run`.)
+            h.state_mut().show_tab(tab);
+            h.run_steps(3);
+            for node in h.query_all(by().predicate(|n| n.bounding_box().is_some())) {
+                let r = node.rect();
+                assert!(r.max.x <= width + 0.5, "{width}x{height}, {tab:?}: {node:?} at {r:?}");
+            }
+            // No tab widens the panel: the view keeps its size.
+            let now = h.state().view_rect().unwrap();
+            if now != view {
+                widened.push(format!("{width}x{height}: {tab:?} left the view {now:?}"));
+            }
+        }
+        assert!(widened.is_empty(), "{widened:#?} (was {view:?})");
+        // The status bar: one line (a button's height), under the view.
+        let status = h.get_by_label_contains("sprites").rect();
+        assert!(status.height() <= 24.0 && status.min.y > view.max.y, "{status:?}");
+        // A section opens under the view (the view gives it room) and folds back.
+        h.get_by_label("ray diagram").click();
+        h.run_steps(2);
+        h.run_steps(2);
+        h.run_steps(2);
+        let open = h.state().view_rect().unwrap();
+        assert!(h.state().ui_state().rays_open && open.area() < 0.95 * view.area(), "{open:?} against {view:?}");
+        h.get_by_label("ray diagram").click();
+        h.run_steps(4);
+        assert_eq!(h.state().view_rect().unwrap(), view, "folded, the view takes its height back");
+    }
 }
 
 /// Lens table cells apply a typed value on Enter (or focus loss), not on every keystroke: typing "-12" never

@@ -1,4 +1,4 @@
-//! The DoF row under the view (on/off, the depth map, the focus distance or focus by click, method, cat's eye)
+//! The DoF rows under the view, open by their toggle (on/off, the depth map, the focus distance or focus by click, method, cat's eye)
 //! and focus by click: with it on, the next click in the view focuses on the depth under it
 //! ([`flare_core::dof::DofDoc::focus_px`]). The defocus itself is `super::dof`.
 
@@ -90,6 +90,8 @@ impl FlareLabApp {
         }
         self.session.edit().dof.depth = Some(text);
         self.session.edit().dof.enabled = true;
+        // Its rows open, so the focus that comes next is at hand.
+        self.ui.dof_open = true;
     }
 
     /// Focus by click: the plate pixel under `pointer` in the view `rect`.

@@ -23,7 +23,7 @@ impl FlareLabApp {
             ui.ctx().request_repaint_after(super::job::PROGRESS_REPAINT);
         }
         let stale = self.jobs.report_mut().stale(key);
-        ui.horizontal(|ui| {
+        ui.horizontal_wrapped(|ui| {
             ui.label(format!(
                 "Light at ({:.1}, {:.1}) deg, f/{:.2}",
                 light[0],
@@ -94,28 +94,61 @@ impl FlareLabApp {
             let o = value(a.1, a.0).total_cmp(&value(b.1, b.0));
             if descending { o.reverse() } else { o }
         });
+        // Every column, for the sort chooser: (column, its header, what it is).
+        let columns = [
+            (ReportColumn::Rank, "#", "rank, worst (highest peak) first"),
+            (ReportColumn::Pair, "pair", "the surfaces it reflects at (j, then i)"),
+            (ReportColumn::Focus, "focus mm", "where it focuses, from the image plane (sorts by |focus|)"),
+            (ReportColumn::Size, "size mm", "its diameter on the sensor"),
+            (ReportColumn::FNumber, "f/#", "its working f-number"),
+            (ReportColumn::Peak, "peak", "peak irradiance / the source image's peak"),
+            (ReportColumn::Mean, "mean", "mean irradiance over its lit area / the same"),
+            (ReportColumn::Share, "share", "its share of all the ghosts' energy"),
+            (ReportColumn::Stop, "stop", "how many times it crosses the stop"),
+            (
+                ReportColumn::Vignetted,
+                "cut by",
+                "the surfaces whose clear apertures cut it at this light, and the share of its light they take \
+                 (sorts by the share)",
+            ),
+        ];
+        let title = |c: ReportColumn| columns.iter().find(|(k, _, _)| *k == c).map_or("", |(_, t, _)| *t);
+        // Sorting by any column; the table shows five (so it fits the side panel), each row's other figures on
+        // its pair's hover (and all of them in the CSV export).
+        let mut sort = (column, descending);
+        ui.horizontal(|ui| {
+            egui::ComboBox::from_label("sort by").selected_text(title(column)).show_ui(ui, |ui| {
+                for (c, t, hover) in columns {
+                    ui.selectable_value(&mut sort.0, c, t).on_hover_text(hover);
+                }
+            });
+            let word = if descending { "highest first" } else { "lowest first" };
+            if ui.button(word).on_hover_text("reverse the order").clicked() {
+                sort.1 = !descending;
+            }
+        });
+        if sort.0 != column {
+            sort.1 = sort.0 != ReportColumn::Rank;
+        }
+        if sort != (column, descending) {
+            self.jobs.report_mut().sort = sort;
+        }
         let height = (ui.available_height() * 0.6).max(200.0);
         egui::ScrollArea::vertical().id_salt("report_rows").max_height(height).auto_shrink([false, false]).show(
             ui,
             |ui| {
-                egui::Grid::new("report_table").num_columns(10).striped(true).spacing([8.0, 2.0]).show(ui, |ui| {
-                    for (c, title, hover) in [
-                        (ReportColumn::Rank, "#", "rank, worst (highest peak) first"),
-                        (ReportColumn::Pair, "pair", "the surfaces it reflects at (j, then i)"),
-                        (ReportColumn::Focus, "focus mm", "where it focuses, from the image plane (sorts by |focus|)"),
-                        (ReportColumn::Size, "size mm", "its diameter on the sensor"),
-                        (ReportColumn::FNumber, "f/#", "its working f-number"),
-                        (ReportColumn::Peak, "peak", "peak irradiance / the source image's peak"),
-                        (ReportColumn::Mean, "mean", "mean irradiance over its lit area / the same"),
-                        (ReportColumn::Share, "share", "its share of all the ghosts' energy"),
-                        (ReportColumn::Stop, "stop", "how many times it crosses the stop"),
-                        (
-                            ReportColumn::Vignetted,
-                            "cut by",
-                            "the surfaces whose clear apertures cut it at this light, and the share of its light they \
-                             take (sorts by the share)",
-                        ),
-                    ] {
+                egui::Grid::new("report_table").num_columns(5).striped(true).spacing([6.0, 2.0]).show(ui, |ui| {
+                    for (c, title, hover) in columns {
+                        if !matches!(
+                            c,
+                            ReportColumn::Rank
+                                | ReportColumn::Pair
+                                | ReportColumn::Peak
+                                | ReportColumn::Share
+                                | ReportColumn::Vignetted
+                        ) {
+                            continue;
+                        }
                         let arrow = if c == column { if descending { " v" } else { " ^" } } else { "" };
                         if ui.button(format!("{title}{arrow}")).on_hover_text(hover).clicked() {
                             self.jobs.report_mut().sort =
@@ -128,29 +161,30 @@ impl FlareLabApp {
                         ui.label(format!("{}", rank + 1));
                         let g = flare.system.ghosts.iter().position(|g| g.i == r.i && g.j == r.j);
                         let selected = g.is_some() && self.session.selected() == g;
-                        if ui.selectable_label(selected, format!("{}-{}", r.i, r.j)).clicked() {
+                        // Its other figures on hover: where it focuses and its size (each section's on an
+                        // anamorphic lens), its f-number, mean and stop crossings.
+                        let (focus, size) = if flare.system.is_anamorphic() {
+                            (
+                                format!("{} / {} (y-z / x-z)", opt(r.focus_mm, 2), opt(r.focus_x_mm, 2)),
+                                format!("{:.3} x {:.3} (height x width)", r.image_diameter_mm, r.image_width_mm),
+                            )
+                        } else {
+                            (opt(r.focus_mm, 2), format!("{:.3}", r.image_diameter_mm))
+                        };
+                        let stop =
+                            if r.stop_crossings == 1 { "once".to_owned() } else { format!("{}x", r.stop_crossings) };
+                        let figures = format!(
+                            "focus {focus} mm, size {size} mm, f/{}, mean {:.2e}, crosses the stop {stop}",
+                            opt(r.f_number, 1),
+                            r.mean_vs_source
+                        );
+                        if ui.selectable_label(selected, format!("{}-{}", r.i, r.j)).on_hover_text(figures).clicked() {
                             self.session.select(if selected { None } else { g });
                         }
-                        if flare.system.is_anamorphic() {
-                            // Each section focuses on its own: y-z / x-z, and the ellipse's height x width.
-                            ui.label(format!("{} / {}", opt(r.focus_mm, 2), opt(r.focus_x_mm, 2)))
-                                .on_hover_text("y-z section / x-z section");
-                            ui.label(format!("{:.3} x {:.3}", r.image_diameter_mm, r.image_width_mm))
-                                .on_hover_text("height (y) x width (x)");
-                        } else {
-                            ui.label(opt(r.focus_mm, 2));
-                            ui.label(format!("{:.3}", r.image_diameter_mm));
-                        }
-                        ui.label(opt(r.f_number, 1));
                         ui.label(format!("{:.2e}", r.peak_vs_source));
-                        ui.label(format!("{:.2e}", r.mean_vs_source));
                         ui.label(format!("{:.2} %", 100.0 * r.energy_share));
-                        ui.label(if r.stop_crossings == 1 {
-                            "once".to_owned()
-                        } else {
-                            format!("{}x", r.stop_crossings)
-                        });
-                        ui.label(r.vignetting_words());
+                        let cut = r.vignetting_words();
+                        ui.add(egui::Label::new(&cut).truncate()).on_hover_text(&cut);
                         ui.end_row();
                     }
                 });

@@ -19,10 +19,12 @@ impl FlareLabApp {
         }
         ui.label("A look replaces the lens, stop, coatings, sensor and display; your plate and timeline, if you have them, stay.");
         let mut chosen = None;
+        // Two thumbnails a row, shrunk to fit the panel's width.
+        let width = ((ui.available_width() - 8.0) / 2.0).clamp(80.0, THUMB.0 as f32);
+        let size = egui::vec2(width, width * THUMB.1 as f32 / THUMB.0 as f32);
         egui::Grid::new("looks").num_columns(2).spacing([8.0, 8.0]).show(ui, |ui| {
             for (k, preset) in shipped().iter().enumerate() {
                 ui.vertical(|ui| {
-                    let size = egui::vec2(THUMB.0 as f32, THUMB.1 as f32);
                     let response = match self.jobs.looks_mut().thumbnails.get(k).cloned().flatten() {
                         Some(Ok(texture)) => {
                             ui.add(egui::Image::from_texture((texture.id(), size)).sense(egui::Sense::click()))

@@ -25,6 +25,7 @@
 use jobs::{JobBoard, JobEvent, Live};
 use session::Session;
 pub use session::Tab;
+use ui_state::UiState;
 use view::View;
 
 pub mod autobake;
@@ -47,6 +48,7 @@ pub mod raygrid_view;
 pub mod session;
 pub mod shot;
 pub mod timeline;
+pub mod ui_state;
 pub mod view;
 
 pub use shot::DEFAULT_EXPORT_PX;
@@ -132,6 +134,7 @@ pub fn run() -> Result<()> {
             }
             if let Some(storage) = cc.storage {
                 app.files.recent = restore_recent(storage);
+                app.ui = UiState::restore(storage);
             }
             Ok(Box::new(app))
         }),
@@ -176,8 +179,8 @@ pub struct FlareLabApp {
     /// are drawn unfilled; without it (the UI tests' harness clears to transparent) one rectangle paints the
     /// same colour under them.
     cleared_by_window: bool,
-    /// The side panel is folded away (the View menu): the viewport takes the window's width.
-    panels_hidden: bool,
+    /// The window's own state: the tab, the folded panels and sections (see [`ui_state`]).
+    ui: UiState,
     /// The height (points) the rows under the viewport took in the last frame: the viewport takes the rest.
     under_view: f32,
 }
@@ -212,8 +215,8 @@ impl FlareLabApp {
             colour_cube: String::new(),
 
             cleared_by_window: false,
-            panels_hidden: false,
-            under_view: 280.0,
+            ui: UiState::default(),
+            under_view: 80.0,
         };
         // FLARELAB_RAYGRID=N starts the view in its ray-grid mode (the Xvfb test and screenshots).
         app.jobs.raygrid_mut().grid = std::env::var("FLARELAB_RAYGRID")
@@ -250,7 +253,22 @@ impl FlareLabApp {
 
     /// Opens `tab` in the side panel, as its button does.
     pub fn show_tab(&mut self, tab: Tab) {
-        self.session.show_tab(tab);
+        self.ui.tab = tab;
+    }
+
+    /// The viewport's rectangle laid out last (points).
+    pub fn view_rect(&self) -> Option<egui::Rect> {
+        self.view.rect()
+    }
+
+    /// The window's own state (see [`ui_state`]).
+    pub fn ui_state(&self) -> &UiState {
+        &self.ui
+    }
+
+    /// The window's own state, to set as the user does (the tests open the sections under the view).
+    pub fn ui_state_mut(&mut self) -> &mut UiState {
+        &mut self.ui
     }
 
     /// Selects a ghost (an index into the live flare's ghosts), as a click on it does.
@@ -397,18 +415,24 @@ impl FlareLabApp {
         let side = unfilled(egui::Frame::side_top_panel(ui.style()));
         egui::Panel::top("menu").frame(side).show(ui, |ui| self.menu_ui(ui));
         egui::Panel::bottom("status").frame(side).show(ui, |ui| self.status_ui(ui));
-        // Resizable and foldable (View > Panels): the picture first, the panels' tables at their width. At first
-        // 600 points, what the Lens table needs, from a 1200-point window up; 40 % of a narrower one, at least 360
-        // (at 1024x700 a fixed 600 left the view 408x230; its tables then scroll sideways).
+        // Resizable and foldable (View > Panels): the picture first. At first a quarter of the window's width,
+        // from `PANEL_MIN_WIDTH` (what every tab needs without a sideways scroll) to 600 points: 360 of a
+        // 1440-point window, whose view then takes over 60 % of it (with a fixed 600 it took 31 %).
         let width = ui.available_width();
-        let first_width = if width >= 1200.0 { 600.0 } else { (0.4 * width).max(360.0) };
-        let panels = egui::Panel::right("panels").frame(side).default_size(first_width).min_size(320.0).resizable(true);
-        if !self.panels_hidden {
+        let first_width = (0.25 * width).clamp(PANEL_MIN_WIDTH, 600.0);
+        let panels = egui::Panel::right("panels")
+            .frame(side)
+            .default_size(first_width)
+            .min_size(PANEL_MIN_WIDTH)
+            .resizable(true);
+        if !self.ui.panels_hidden {
             panels.show(ui, |ui| {
+                // The tables fit the panel's width: a little less room between items.
+                ui.spacing_mut().item_spacing.x = 6.0;
                 ui.horizontal_wrapped(|ui| {
                     for tab in Tab::ALL {
-                        if ui.selectable_label(self.session.tab() == tab, tab.name()).clicked() {
-                            self.session.show_tab(tab);
+                        if ui.selectable_label(self.ui.tab == tab, tab.name()).clicked() {
+                            self.ui.tab = tab;
                         }
                     }
                 });
@@ -423,15 +447,20 @@ impl FlareLabApp {
             let under_top = ui.cursor().top();
             self.timeline_ui(ui);
             self.display_ui(ui);
-            self.colour_ui(ui);
-            self.dof_ui(ui);
-            let ghost = self
-                .session
-                .selected()
-                .and_then(|g| self.derived.flare().as_ref().map(|f| &f.system.ghosts[g]))
-                .map(|g| (g.i, g.j));
-            // Foldable: folded, the viewport takes its height.
-            egui::CollapsingHeader::new("ray diagram").default_open(true).show(ui, |ui| {
+            // The sections under the view, each open by its toggle ([`Self::sections_ui`]); folded, the
+            // viewport takes their height.
+            if self.ui.colour_open {
+                self.colour_ui(ui);
+            }
+            if self.ui.dof_open {
+                self.dof_ui(ui);
+            }
+            if self.ui.rays_open {
+                let ghost = self
+                    .session
+                    .selected()
+                    .and_then(|g| self.derived.flare().as_ref().map(|f| &f.system.ghosts[g]))
+                    .map(|g| (g.i, g.j));
                 crate::panels::ray_diagram::ray_diagram_ui(
                     ui,
                     &mut self.ray_diagram,
@@ -440,7 +469,7 @@ impl FlareLabApp {
                     self.derived.light_deg(self.session.doc()),
                     ghost,
                 );
-            });
+            }
             let used = ui.cursor().top() - under_top;
             if (used - self.under_view).abs() > 0.5 {
                 self.under_view = used;
@@ -467,7 +496,7 @@ impl FlareLabApp {
 
     /// The tab's panel: one match over [`Tab`], the app's own panels first, then the document's.
     fn panel_ui(&mut self, ui: &mut egui::Ui, actions: &mut Vec<Action>) {
-        match self.session.tab() {
+        match self.ui.tab {
             Tab::Shot => return panel_scroll().show(ui, |ui| self.shot_panel_ui(ui)).inner,
             Tab::Looks => return panel_scroll().show(ui, |ui| self.looks_ui(ui)).inner,
             Tab::Report => return panel_scroll().show(ui, |ui| self.report_ui(ui)).inner,
@@ -499,7 +528,7 @@ impl FlareLabApp {
             )
         });
         let ctx = PanelContext { lut_summary: summary.as_deref(), ..ctx };
-        panel_scroll().show(ui, |ui| match self.session.tab() {
+        panel_scroll().show(ui, |ui| match self.ui.tab {
             Tab::Lens => crate::panels::lens::lens_ui(ui, self.session.edit(), &ctx, actions),
             Tab::Aperture => {
                 crate::panels::aperture::aperture_ui(
@@ -589,13 +618,13 @@ impl FlareLabApp {
                 }
             });
             ui.menu_button("View", |ui| {
-                let mut shown = !self.panels_hidden;
+                let mut shown = !self.ui.panels_hidden;
                 if ui
                     .checkbox(&mut shown, "Panels")
                     .on_hover_text("the side panel; folded, the view takes the width")
                     .changed()
                 {
-                    self.panels_hidden = !shown;
+                    self.ui.panels_hidden = !shown;
                 }
             });
             ui.menu_button("Edit", |ui| {
@@ -734,69 +763,107 @@ impl FlareLabApp {
         });
     }
 
-    /// The display settings under the view, in two rows (a slider and its value never wrap apart): the
-    /// exposures, then the tonemap and the starburst.
+    /// The toggles of the sections under the view (colour, depth of field, ray diagram), at the end of the
+    /// timeline's row: each opens its rows under the view; folded, the picture takes their height. Their state
+    /// is the window's ([`UiState`]).
+    pub(super) fn sections_ui(&mut self, ui: &mut egui::Ui) {
+        let dof = if self.session.doc().dof.enabled { "DoF (on)" } else { "DoF" };
+        let toggles = [
+            (
+                &mut self.ui.colour_open,
+                "colour",
+                "the OCIO display, view and look, the plates' colour space, a .cube, the config",
+            ),
+            (&mut self.ui.dof_open, dof, "depth of field: the plate defocused through this lens (depth map, focus)"),
+            (&mut self.ui.rays_open, "ray diagram", "the selected ghost's path through the lens"),
+        ];
+        for (open, text, hover) in toggles {
+            if ui.selectable_label(*open, text).on_hover_text(hover).clicked() {
+                *open = !*open;
+            }
+        }
+    }
+
+    /// The display settings under the view: the exposures, then the ghosts' method and the starburst, in one
+    /// row where the view is `DISPLAY_ONE_ROW` wide (`DISPLAY_ONE_ROW_WITH_PLATE` with a plate), else in two (a slider and its value never part).
     fn display_ui(&mut self, ui: &mut egui::Ui) {
-        ui.horizontal(|ui| {
-            // Exposures in stops: the flare's relative irradiance times 2^EV, the plate as shot at 0 EV. Moving
-            // the flare's exposure locks it; "auto" hands it back to the optics.
-            // The slider shows the exposure the view uses (the automatic one is derived, never written into the
-            // document); moving it writes the user's value and locks it.
-            let mut ev = self.derived.flare_ev(self.session.doc());
-            let moved = stops_slider(ui, &mut ev, -4.0..=28.0, "flare exposure", None).changed();
-            if moved {
-                self.session.edit().flare_ev = ev;
-                self.session.edit().exposure_auto = false;
+        let plate = self.session.doc().background.is_some();
+        if ui.available_width() >= if plate { DISPLAY_ONE_ROW_WITH_PLATE } else { DISPLAY_ONE_ROW } {
+            ui.horizontal(|ui| {
+                self.exposure_ui(ui);
+                self.ghosts_method_ui(ui);
+            });
+        } else {
+            ui.horizontal(|ui| self.exposure_ui(ui));
+            ui.horizontal(|ui| self.ghosts_method_ui(ui));
+        }
+    }
+
+    /// The exposures: the flare's (with "auto") and, with a plate, the plate's.
+    fn exposure_ui(&mut self, ui: &mut egui::Ui) {
+        // Exposures in stops: the flare's relative irradiance times 2^EV, the plate as shot at 0 EV. Moving
+        // the flare's exposure locks it; "auto" hands it back to the optics.
+        // The slider shows the exposure the view uses (the automatic one is derived, never written into the
+        // document); moving it writes the user's value and locks it.
+        let mut ev = self.derived.flare_ev(self.session.doc());
+        let moved = stops_slider(ui, &mut ev, -4.0..=28.0, "flare exposure", None).changed();
+        if moved {
+            self.session.edit().flare_ev = ev;
+            self.session.edit().exposure_auto = false;
+        }
+        let mut auto = self.session.doc().exposure_auto;
+        let toggled = ui
+            .checkbox(&mut auto, "auto")
+            .on_hover_text(
+                "the brightest ghost at a fixed display level, set again when the lens, coating or stop change",
+            )
+            .changed();
+        if toggled {
+            // Locking keeps the exposure shown: the automatic value becomes the user's.
+            if !auto {
+                self.session.edit().flare_ev = self.derived.flare_ev(self.session.doc());
             }
-            let mut auto = self.session.doc().exposure_auto;
-            let toggled = ui
-                .checkbox(&mut auto, "auto")
-                .on_hover_text(
-                    "the brightest ghost at a fixed display level, set again when the lens, coating or stop change",
-                )
-                .changed();
-            if toggled {
-                // Locking keeps the exposure shown: the automatic value becomes the user's.
-                if !auto {
-                    self.session.edit().flare_ev = self.derived.flare_ev(self.session.doc());
+            self.session.edit().exposure_auto = auto;
+        }
+        if self.session.doc().background.is_some() {
+            stops_slider(ui, &mut self.session.edit().plate_ev, -8.0..=8.0, "plate exposure", None);
+        }
+    }
+
+    /// The ghosts' method (the look or a ray grid) and the starburst.
+    fn ghosts_method_ui(&mut self, ui: &mut egui::Ui) {
+        let ghosts_label = |grid: Option<usize>| match grid {
+            None => "look".to_owned(),
+            Some(n) => format!("ray grid {n}"),
+        };
+        egui::ComboBox::from_label("ghosts")
+            .selected_text(ghosts_label(self.jobs.raygrid().grid))
+            .width(90.0)
+            .show_ui(ui, |ui| {
+                ui.selectable_value(&mut self.jobs.raygrid_mut().grid, None, "look (paraxial + LUT)");
+                for n in raygrid_view::GRIDS {
+                    ui.selectable_value(&mut self.jobs.raygrid_mut().grid, Some(n), format!("ray grid {n} (exact)"));
                 }
-                self.session.edit().exposure_auto = auto;
-            }
-            if self.session.doc().background.is_some() {
-                stops_slider(ui, &mut self.session.edit().plate_ev, -8.0..=8.0, "plate exposure", None);
-            }
-        });
-        ui.horizontal(|ui| {
-            let ghosts_label = |grid: Option<usize>| match grid {
-                None => "look".to_owned(),
-                Some(n) => format!("ray grid {n}"),
-            };
-            egui::ComboBox::from_label("ghosts")
-                .selected_text(ghosts_label(self.jobs.raygrid().grid))
-                .width(90.0)
-                .show_ui(ui, |ui| {
-                    ui.selectable_value(&mut self.jobs.raygrid_mut().grid, None, "look (paraxial + LUT)");
-                    for n in raygrid_view::GRIDS {
-                        ui.selectable_value(&mut self.jobs.raygrid_mut().grid, Some(n), format!("ray grid {n} (exact)"));
-                    }
-                })
-                .response
-                .on_hover_text(
-                    "the view's ghosts ray-traced exactly on an N x N grid per ghost (Hullin 2011), on a hardware GPU when there is one: drafts while dragging, traced when input stops; exports draw the look",
-                );
-            ui.checkbox(&mut self.session.edit().starburst, "starburst");
-            if self.session.doc().starburst {
-                let what = "the starburst's brightness against the physical one (0 EV)";
-                stops_slider(ui, &mut self.session.edit().starburst_ev, -12.0..=4.0, "starburst", Some(what));
-            }
-        });
+            })
+            .response
+            .on_hover_text(
+                "the view's ghosts ray-traced exactly on an N x N grid per ghost (Hullin 2011), on a hardware GPU when there is one: drafts while dragging, traced when input stops; exports draw the look",
+            );
+        ui.checkbox(&mut self.session.edit().starburst, "starburst");
+        if self.session.doc().starburst {
+            let what = "the starburst's brightness against the physical one (0 EV)";
+            stops_slider(ui, &mut self.session.edit().starburst_ev, -12.0..=4.0, "starburst", Some(what));
+        }
     }
 
     /// The viewport: the flare, the light's drag and arrow keys, a click selects the ghost under it.
     fn viewport_ui(&mut self, ui: &mut egui::Ui, actions: &mut Vec<Action>) {
         let avail = ui.available_size();
-        let size = egui::vec2(avail.x, (avail.x * 9.0 / 16.0).min(avail.y));
-        let (rect, response) = ui.allocate_exact_size(size, egui::Sense::click_and_drag());
+        let (outer, _) = ui.allocate_exact_size(avail, egui::Sense::hover());
+        let export = self.export_px();
+        let shape = view_shape(avail, export, self.session.doc().background.is_some());
+        let rect = egui::Rect::from_center_size(outer.center(), shape.size);
+        let response = ui.interact(rect, egui::Id::unique("flare viewport"), egui::Sense::click_and_drag());
         let px = self.view.layout(rect, ui.ctx().pixels_per_point());
         if px != self.derived.view_px() {
             self.derived.set_view_px(px);
@@ -821,6 +888,9 @@ impl FlareLabApp {
         } else {
             FlareCallback::paint(ui.painter(), rect, self.derived.view_frame().clone());
             self.derived.painted();
+            if let Some(band) = shape.export_band {
+                export_guide(ui.painter(), rect, band, export);
+            }
         }
         if response.dragged()
             && let Some(p) = response.interact_pointer_pos()
@@ -944,7 +1014,7 @@ impl FlareLabApp {
             Action::Message(text) => self.session.say(text),
             Action::EditCoating(k) => {
                 self.coatings.surface = k;
-                self.session.show_tab(Tab::Coatings);
+                self.ui.tab = Tab::Coatings;
             }
             Action::OpenLensFile => self.pick_file(FileUse::OpenLens),
             Action::Bake => {
@@ -1247,10 +1317,11 @@ impl FlareLabApp {
     }
 }
 
-/// The side panel's scroll area: it fills the panel and scrolls both ways, so no tab's content can widen the
-/// panel (the panel keeps its width across tabs).
+/// The side panel's scroll area: it fills the panel and scrolls up and down; its content is laid out to the
+/// panel's width (text wraps, tables are made to fit it: a test holds every tab inside), so no tab's content can
+/// widen the panel (the panel keeps its width across tabs).
 fn panel_scroll() -> egui::ScrollArea {
-    egui::ScrollArea::both().id_salt("panel_scroll").auto_shrink([false, false])
+    egui::ScrollArea::vertical().id_salt("panel_scroll").auto_shrink([false, false])
 }
 
 /// The recent files from eframe's storage (none when absent or unreadable).
@@ -1364,7 +1435,61 @@ impl eframe::App for FlareLabApp {
         storage.set_string(STORAGE_KEY, self.session.doc().to_json());
         let recent: Vec<String> = self.files.recent.iter().map(|p| p.display().to_string()).collect();
         storage.set_string(RECENT_KEY, serde_json::to_string(&recent).unwrap_or_default());
+        self.ui.store(storage);
     }
+}
+
+/// The width (points) the display settings under the view need in one row, and with a plate's exposure too.
+const DISPLAY_ONE_ROW: f32 = 840.0;
+const DISPLAY_ONE_ROW_WITH_PLATE: f32 = 1160.0;
+
+/// The side panel's least width (points): what the widest tab's table (the Lens table) needs without a
+/// sideways scroll.
+const PANEL_MIN_WIDTH: f32 = 360.0;
+
+/// The viewport's size in the room it has, and where in it the exported frame lies.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ViewShape {
+    /// The viewport's size (points), centred in the room.
+    pub size: egui::Vec2,
+    /// The exported frame's rows as a fraction of the viewport's height, top and bottom, where the viewport
+    /// shows more than it (`None`: the viewport is the exported frame).
+    pub export_band: Option<(f32, f32)>,
+}
+
+/// The viewport in `room` (points) for a frame exported at `export` pixels: the frame spans the sensor's
+/// width across the viewport's, so a viewport as wide as the room and taller than the exported frame shows it
+/// whole, with more of the sensor above and below (marked by [`export_guide`]); a room wider than the
+/// exported frame's shape gets the frame's shape, centred. With a plate the viewport is the plate's shape
+/// (the plate spans the frame).
+pub fn view_shape(room: egui::Vec2, export: (u32, u32), plate: bool) -> ViewShape {
+    let aspect = export.0.max(1) as f32 / export.1.max(1) as f32;
+    let room = egui::vec2(room.x.max(16.0), room.y.max(16.0));
+    if plate || room.x / room.y > aspect {
+        let width = room.x.min(room.y * aspect);
+        return ViewShape { size: egui::vec2(width, width / aspect), export_band: None };
+    }
+    let band = room.x / aspect / room.y;
+    let export_band = (band < 0.995).then_some((0.5 - 0.5 * band, 0.5 + 0.5 * band));
+    ViewShape { size: room, export_band }
+}
+
+/// The exported frame's outline in the viewport `rect` (its rows `band`, [`ViewShape::export_band`]), what lies
+/// outside it dimmed, and its size in the outline's corner.
+fn export_guide(painter: &egui::Painter, rect: egui::Rect, band: (f32, f32), export: (u32, u32)) {
+    let (top, bottom) = (rect.top() + band.0 * rect.height(), rect.top() + band.1 * rect.height());
+    let dim = egui::Color32::from_black_alpha(110);
+    painter.rect_filled(egui::Rect::from_x_y_ranges(rect.x_range(), rect.top()..=top), 0.0, dim);
+    painter.rect_filled(egui::Rect::from_x_y_ranges(rect.x_range(), bottom..=rect.bottom()), 0.0, dim);
+    let frame = egui::Rect::from_x_y_ranges(rect.x_range(), top..=bottom);
+    painter.rect_stroke(frame, 0.0, egui::Stroke::new(1.0, egui::Color32::from_gray(120)), egui::StrokeKind::Inside);
+    painter.text(
+        frame.left_top() + egui::vec2(6.0, 4.0),
+        egui::Align2::LEFT_TOP,
+        format!("export {}x{}", export.0, export.1),
+        egui::FontId::proportional(11.0),
+        egui::Color32::from_gray(150),
+    );
 }
 
 /// Pixels of drag per stop on an exposure slider's track ([`stops_slider`]).

@@ -1,5 +1,6 @@
-//! The session: what the user edits and what is saved (the document, its undo history, the selected ghost,
-//! the open tab) and the one status line that says what the last action did.
+//! The session: what the user edits and what is saved (the document, its undo history, the selected ghost)
+//! and the one status line that says what the last action did. The window's own state (the tab, the folded
+//! sections) is [`super::ui_state`]'s.
 //!
 //! # How it works
 //! [`Session`] is the only writer of these: its fields are private, the panels edit the document through
@@ -17,7 +18,7 @@ use flare_core::preset::Document;
 use crate::history::History;
 
 /// Which panel the right side shows.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Tab {
     Looks,
     Lens,
@@ -53,13 +54,12 @@ pub struct Session {
     doc: Document,
     history: History,
     selected: Option<usize>,
-    tab: Tab,
     message: Option<String>,
 }
 
 impl Session {
     pub fn new(doc: Document) -> Self {
-        Self { history: History::new(&doc), doc, selected: None, tab: Tab::Ghosts, message: None }
+        Self { history: History::new(&doc), doc, selected: None, message: None }
     }
 
     /// The document as the user left it.
@@ -114,15 +114,6 @@ impl Session {
 
     pub fn select(&mut self, ghost: Option<usize>) {
         self.selected = ghost;
-    }
-
-    /// The side panel's tab.
-    pub fn tab(&self) -> Tab {
-        self.tab
-    }
-
-    pub fn show_tab(&mut self, tab: Tab) {
-        self.tab = tab;
     }
 
     /// What the status line says (what the last action did, or why it failed).

@@ -67,6 +67,8 @@ impl FlareLabApp {
             if ev != self.session.doc().timeline.sample(self.view.playhead() as f64).light_ev {
                 self.session.edit().timeline.light_ev.set(self.view.playhead(), ev);
             }
+            ui.separator();
+            self.sections_ui(ui);
         });
         self.scrub_bar_ui(ui, first, last);
     }
@@ -346,9 +348,14 @@ impl FlareLabApp {
         self.view.clamp_playhead(timeline.first_frame, timeline.last_frame);
         ui.separator();
         ui.heading("Plate");
+        // Each path field takes the panel's width, its buttons under it.
+        let r = ui.add(
+            egui::TextEdit::singleline(&mut self.plate_path)
+                .hint_text("plates/shot.####.exr")
+                .desired_width(ui.available_width()),
+        );
+        r.on_hover_text("a plate, or a sequence with #### or %04d for the frame number");
         ui.horizontal(|ui| {
-            let r = ui.add(egui::TextEdit::singleline(&mut self.plate_path).hint_text("plates/shot.####.exr"));
-            r.on_hover_text("a plate, or a sequence with #### or %04d for the frame number");
             if ui.button("Use").clicked() {
                 let text = self.plate_path.trim().to_string();
                 if text.is_empty() {
@@ -438,10 +445,11 @@ impl FlareLabApp {
         } else if !self.jobs.shot_status().is_empty() {
             ui.label(self.jobs.shot_status());
         }
+        ui.add(
+            egui::TextEdit::singleline(&mut self.track_path).hint_text("track.csv").desired_width(ui.available_width()),
+        )
+        .on_hover_text("a tracker's CSV: frame,x_px,y_px[,intensity_ev], pixels from the top-left corner, y down");
         ui.horizontal(|ui| {
-            ui.add(egui::TextEdit::singleline(&mut self.track_path).hint_text("track.csv")).on_hover_text(
-                "a tracker's CSV: frame,x_px,y_px[,intensity_ev], pixels from the top-left corner, y down",
-            );
             if ui.button("Import track").clicked() {
                 let path = std::path::PathBuf::from(self.track_path.trim());
                 self.import_track(&path);
@@ -452,9 +460,13 @@ impl FlareLabApp {
         });
         ui.separator();
         ui.heading("Export sequence");
+        ui.add(
+            egui::TextEdit::singleline(&mut self.sequence_path)
+                .hint_text("out/flare.####.exr")
+                .desired_width(ui.available_width()),
+        )
+        .on_hover_text("EXR: linear layers (composite, flare, starburst, plate); PNG: tonemapped");
         ui.horizontal(|ui| {
-            ui.add(egui::TextEdit::singleline(&mut self.sequence_path).hint_text("out/flare.####.exr"))
-                .on_hover_text("EXR: linear layers (composite, flare, starburst, plate); PNG: tonemapped");
             let exporting = self.jobs.exporting_sequence();
             if ui.add_enabled(!exporting, egui::Button::new("Export sequence")).clicked() {
                 let pattern = self.sequence_path.trim().to_string();

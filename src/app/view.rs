@@ -92,6 +92,11 @@ impl View {
         Some(LightMap { rect: self.rect?, px, sensor: Sensor::for_frame(sensor_width_mm, px.0, px.1), flare })
     }
 
+    /// The viewport's rectangle laid out last (points); none before the first layout.
+    pub fn rect(&self) -> Option<egui::Rect> {
+        self.rect
+    }
+
     pub fn playhead(&self) -> i64 {
         self.playhead
     }

@@ -25,9 +25,21 @@ pub fn ghosts_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, acti
     // The list takes the whole panel below its header.
     let height = ui.available_height().max(200.0);
     egui::ScrollArea::vertical().id_salt("ghost_list").max_height(height).auto_shrink([false, false]).show(ui, |ui| {
+        // Cells as wide as their content (not egui's 40-point least) and short words (the whole on hover), so the
+        // table fits the side panel at its least width.
+        ui.spacing_mut().interact_size.x = 20.0;
         egui::Grid::new("ghost_table").num_columns(7).striped(true).spacing([6.0, 2.0]).show(ui, |ui| {
-            for h in ["on", "pair", "", "intensity", "kind", "gain", ""] {
-                ui.strong(h);
+            let headers = [
+                ("on", "drawn or not"),
+                ("pair", "the two reflecting surfaces (click: select the ghost)"),
+                ("", ""),
+                ("level", "its light against the brightest ghost's (the irradiance on hover)"),
+                ("kind", "how it is drawn (why, on hover)"),
+                ("gain", "the artist's gain on its light"),
+                ("", ""),
+            ];
+            for (h, hover) in headers {
+                ui.strong(h).on_hover_text(hover);
             }
             ui.end_row();
             for row in rows {
@@ -48,15 +60,14 @@ pub fn ghosts_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, acti
                 );
                 let (rect, _) = ui.allocate_exact_size(egui::vec2(14.0, 14.0), egui::Sense::hover());
                 ui.painter().rect_filled(rect, 2.0, swatch);
-                ui.label(format!(
-                    "{:.1e} ({:.0} dB)",
-                    row.intensity(),
-                    10.0 * (row.intensity() / brightest).max(1e-12).log10()
-                ));
-                let kind = kind_words(ctx, row.ghost);
+                let db = 10.0 * (row.intensity() / brightest).max(1e-12).log10();
+                ui.label(format!("{db:.0} dB")).on_hover_text(format!("relative irradiance {:.2e}", row.intensity()));
+                let (short, kind) = kind_words(ctx, row.ghost);
                 match row.culled {
-                    Some(reason) => ui.weak(format!("{kind}; culled: {}", culled_words(reason))),
-                    None => ui.label(kind),
+                    Some(reason) => {
+                        ui.weak("culled").on_hover_text(format!("{kind}; culled: {}", culled_words(reason)))
+                    }
+                    None => ui.label(short).on_hover_text(kind),
                 };
                 let mut gain = doc.ghosts.get(&key).map_or(1.0, |g| g.gain);
                 let r = ui.add(egui::DragValue::new(&mut gain).range(0.0..=100.0).speed(0.02).max_decimals(2));
@@ -73,17 +84,17 @@ pub fn ghosts_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, acti
     });
 }
 
-/// The kind column in words: how the ghost is drawn and why.
-pub fn kind_words(ctx: &PanelContext, ghost: usize) -> &'static str {
+/// The kind column: a word for the table and the words for its hover (how the ghost is drawn and why).
+pub fn kind_words(ctx: &PanelContext, ghost: usize) -> (&'static str, &'static str) {
     let baked = ctx.lut.is_some_and(|lut| {
         lut.kind == flare_core::lut::LutKind::RayTraced && lut.ghosts.iter().any(|g| g.ghost as usize == ghost)
     });
     match ctx.classes.and_then(|c| c.get(ghost)) {
-        _ if baked => "non-linear (baked)",
-        Some(c) if c.nonlinear() => "non-linear (paraxial)",
-        Some(c) if c.faint => "non-linear, too faint to bake",
-        Some(_) => "linear",
-        None => "paraxial",
+        _ if baked => ("baked", "non-linear: drawn from the LUT (ray-traced)"),
+        Some(c) if c.nonlinear() => ("non-linear", "non-linear, drawn paraxial until its LUT entries are baked"),
+        Some(c) if c.faint => ("faint", "non-linear, too faint to bake: drawn paraxial"),
+        Some(_) => ("linear", "linear: the paraxial sprite is exact enough"),
+        None => ("paraxial", "paraxial (not classified: no LUT baked in this session)"),
     }
 }
 

@@ -1,6 +1,7 @@
 //! Lens panel: the built-in library, opening a lens file (and what loading it decided), first-order data, and the
 //! interface table (radius, conic with the aspheric terms on hover, thickness, n_d / V_d, semi-aperture, stop;
-//! for an anamorphic lens also each toroid's x-z radius) with rows added, removed and reordered. A cell whose value
+//! for an anamorphic lens also each toroid's x-z radius); each row's number is a menu that adds a dummy surface
+//! after it, removes it, moves it and opens its coating. A cell whose value
 //! makes the lens impossible is marked with the reason; the viewport keeps the last valid lens meanwhile.
 
 use eframe::egui;
@@ -9,6 +10,10 @@ use flare_core::optics::library::{builtin_lens, ids};
 use super::{Action, PanelContext, labelled_check, labelled_value};
 use flare_core::preset::Document;
 
+/// The most characters of the lens's name the lens choice shows (the whole name on hover).
+const NAME_CHARS: usize = 28;
+/// The surface table's type size (points).
+const TABLE_TEXT_PT: f32 = 12.0;
 const BAD: egui::Color32 = egui::Color32::from_rgb(255, 110, 110);
 const WARN: egui::Color32 = egui::Color32::from_rgb(240, 200, 90);
 
@@ -17,17 +22,23 @@ pub fn lens_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, action
         let mut chosen = doc.lens.id.clone();
         let name = if doc.lens.name.is_empty() { doc.lens.id.clone() } else { doc.lens.name.clone() };
         // A long name is cut (whole on hover), so that the choice, its label and Open fit the panel.
-        let shown = match name.char_indices().nth(44) {
+        let shown = match name.char_indices().nth(NAME_CHARS) {
             Some((at, _)) => format!("{}…", name[..at].trim_end()),
             None => name.clone(),
         };
-        egui::ComboBox::from_label("lens").selected_text(shown).width(260.0).show_ui(ui, |ui| {
-            for id in ids() {
-                // The lens's name (its patent or source), the id on hover.
-                let name = builtin_lens(id).map(|l| l.name).unwrap_or_else(|_| id.to_owned());
-                ui.selectable_value(&mut chosen, id.to_owned(), name).on_hover_text(id);
-            }
-        });
+        // 200 points: the choice, its label and Open fit the panel at its least width.
+        egui::ComboBox::from_label("lens")
+            .selected_text(shown)
+            .width(200.0)
+            .show_ui(ui, |ui| {
+                for id in ids() {
+                    // The lens's name (its patent or source), the id on hover.
+                    let name = builtin_lens(id).map(|l| l.name).unwrap_or_else(|_| id.to_owned());
+                    ui.selectable_value(&mut chosen, id.to_owned(), name).on_hover_text(id);
+                }
+            })
+            .response
+            .on_hover_text(&name);
         if chosen != doc.lens.id
             && let Ok(lens) = builtin_lens(&chosen)
         {
@@ -61,14 +72,16 @@ pub fn lens_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, action
             let sections = fo.sections.as_ref().map_or(String::new(), |both| {
                 format!(", f_x = {:.2} mm (squeeze {:.3})", both[0].efl_mm, both[1].efl_mm / both[0].efl_mm)
             });
-            ui.label(format!(
+            // One line at any panel width (cut, whole on hover), as the refusal's.
+            let text = format!(
                 "f = {:.2} mm{sections}, f/{:.2}, BFD {:.2} mm, {} surfaces, {} ghosts",
                 fo.efl_mm,
                 fo.f_number,
                 fo.bfd_mm,
                 doc.lens.surfaces.len(),
                 doc.lens.ghost_pairs().len()
-            ));
+            );
+            ui.add(egui::Label::new(&text).truncate()).on_hover_text(&text);
         }
         (None, None) => {
             ui.label("");
@@ -88,18 +101,72 @@ fn surface_table_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, a
     // An anamorphic lens shows its toroids' x-z radii (Zemax's radius of rotation) beside the profile's radius.
     let anamorphic = doc.lens.is_anamorphic();
     egui::ScrollArea::vertical().id_salt("surfaces").max_height(height).show(ui, |ui| {
-        let columns = 10 + usize::from(anamorphic);
+        // Cells as wide as their values (not egui's 40-point least), so the table fits the side panel at its
+        // least width (`PANEL_MIN_WIDTH`): the row's moves and its coating are in the menu under its number.
+        ui.spacing_mut().interact_size.x = 20.0;
+        ui.spacing_mut().button_padding = egui::vec2(2.0, 1.0);
+        // A table's type, a little smaller than the panels' (12 points for 14): the numbers stay legible.
+        for style in [egui::TextStyle::Body, egui::TextStyle::Button] {
+            if let Some(font) = ui.style_mut().text_styles.get_mut(&style) {
+                font.size = TABLE_TEXT_PT;
+            }
+        }
+        let columns = 8 + usize::from(anamorphic);
         egui::Grid::new("surface_table").num_columns(columns).striped(true).spacing([4.0, 2.0]).show(ui, |ui| {
-            for h in ["#", "radius", "radius x", "conic", "thickness", "nd", "Vd", "semi-ap", "stop", "coating", ""] {
+            let headers = [
+                ("#", "the surface (its menu: add a dummy surface after it, remove it, move it, its coating)"),
+                ("radius", "the radius of curvature, mm (0: flat; + centre behind)"),
+                ("radius x", "the toroid's x-z radius, mm"),
+                ("conic", "the conic constant (the aspheric terms on the cell's hover)"),
+                ("thick", "the thickness to the next surface along the axis, mm"),
+                ("nd", "the refractive index after the surface, at the d line"),
+                ("Vd", "the Abbe number after the surface (blank: no dispersion)"),
+                ("semi-ap", "the clear semi-aperture, mm"),
+                ("stop", "the aperture stop"),
+            ];
+            for (h, hover) in headers {
                 if h != "radius x" || anamorphic {
-                    ui.strong(h);
+                    ui.strong(h).on_hover_text(hover);
                 }
             }
             ui.end_row();
             let count = doc.lens.surfaces.len();
             let doc_override = doc.coating_override.clone();
             for (k, s) in doc.lens.surfaces.iter_mut().enumerate() {
-                ui.label(k.to_string());
+                // The row's number opens its menu: moves, and the coating in use (edited in the Coatings panel).
+                let coating = doc_override.as_ref().unwrap_or(&s.coating);
+                let coating_item = match doc_override {
+                    Some(_) => format!("coating: {} on every surface…", super::coatings::kind(coating)),
+                    None => format!("coating: {}…", super::coatings::kind(coating)),
+                };
+                ui.menu_button(k.to_string(), |ui| {
+                    if ui
+                        .button("+ dummy surface after")
+                        .on_hover_text("split the gap after this surface with a dummy surface, one medium on both sides (changes nothing optically: the LUT ghosts stay; removing it gives back the lens)")
+                        .clicked()
+                    {
+                        edit = Some(RowEdit::InsertAfter(k));
+                    }
+                    if ui
+                        .add_enabled(count > 1, egui::Button::new("x remove"))
+                        .on_hover_text("remove this surface (the others stay where they are)")
+                        .clicked()
+                    {
+                        edit = Some(RowEdit::Remove(k));
+                    }
+                    ui.separator();
+                    if ui.add_enabled(k > 0, egui::Button::new("move up")).clicked() {
+                        edit = Some(RowEdit::Swap(k - 1, k));
+                    }
+                    if ui.add_enabled(k + 1 < count, egui::Button::new("move down")).clicked() {
+                        edit = Some(RowEdit::Swap(k, k + 1));
+                    }
+                    if ui.button(coating_item).on_hover_text("edit in the Coatings panel").clicked() {
+                        actions.push(Action::EditCoating(k));
+                    }
+                })
+                .response
+                .on_hover_text(format!("surface {k}: add a dummy surface after it, remove it, move it, its coating"));
                 let cell = |ui: &mut egui::Ui, value: &mut f64, field: &'static str, label: &str, speed: f64| {
                     let bad = bad_cell(k, field);
                     // A typed value applies on Enter or when the cell loses focus, so a refused intermediate value
@@ -184,36 +251,6 @@ fn surface_table_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, a
                 cell(ui, &mut s.semi_aperture_mm, "semi_aperture", "semi-aperture", 0.05);
                 let stop = s.stop;
                 labelled_check(ui.checkbox(&mut s.stop, ""), &format!("stop {k}"), stop);
-                // The coating in use (the override when one is set), edited in the Coatings panel.
-                let coating = doc_override.as_ref().unwrap_or(&s.coating);
-                let (text, hover) = match doc_override {
-                    Some(_) => {
-                        let kind = super::coatings::kind(coating);
-                        ("all".to_owned(), format!("{kind} on every surface: edit in the Coatings panel"))
-                    }
-                    None => (super::coatings::kind(coating).to_owned(), "edit in the Coatings panel".to_owned()),
-                };
-                if ui.small_button(text).on_hover_text(hover).clicked() {
-                    actions.push(Action::EditCoating(k));
-                }
-                ui.horizontal(|ui| {
-                    if ui.small_button("⬆").on_hover_text("move up").clicked() && k > 0 {
-                        edit = Some(RowEdit::Swap(k - 1, k));
-                    }
-                    if ui.small_button("⬇").on_hover_text("move down").clicked() && k + 1 < count {
-                        edit = Some(RowEdit::Swap(k, k + 1));
-                    }
-                    if ui
-                        .small_button("+")
-                        .on_hover_text("split the gap after this surface with a dummy surface, one medium on both sides (changes nothing optically; x on it gives back the lens)")
-                        .clicked()
-                    {
-                        edit = Some(RowEdit::InsertAfter(k));
-                    }
-                    if ui.small_button("x").on_hover_text("remove this surface (the others stay where they are)").clicked() {
-                        edit = Some(RowEdit::Remove(k));
-                    }
-                });
                 ui.end_row();
             }
         });

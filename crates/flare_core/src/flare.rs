@@ -193,6 +193,9 @@ impl PreparedFlare {
 /// its indices at the spectrum's wavelengths are part of the fingerprint too; a lens with no such medium keeps
 /// the fingerprint it had before this was added (its LUTs stay valid).
 pub fn lut_fingerprint(lens: &Lens, config: &FlareConfig) -> u64 {
+    // Inert surfaces (a dummy "+" adds) change no optics: the fingerprint is the lens's without them.
+    let (lens, _) = lens.without_inert();
+    let lens = lens.as_ref();
     let wavelengths = &config.spectrum.wavelengths_nm;
     let base = (&lens.surfaces, wavelengths, &config.spectrum.weights_rgb, &config.aperture, &config.coating_override);
     let curves: Vec<(usize, Vec<f64>)> = lens
@@ -227,17 +230,30 @@ impl crate::lut::GhostLut {
             });
         }
         // Every ghost it names must be one of this lens's, with the same two surfaces: the fingerprint covers
-        // the optics, not the indices a damaged or forged file carries (they index the live ghost list).
+        // the optics, not the indices a damaged or forged file carries (they index the live ghost list). Inert
+        // surfaces reflect nothing, so the ghost list is the same with or without them; a LUT baked for the lens
+        // without them names the surfaces as that lens numbers them.
         let pairs = lens.ghost_pairs();
+        let (canonical, kept) = lens.without_inert();
+        let canonical_pairs = canonical.ghost_pairs();
+        let as_numbered = |(a, b): (usize, usize)| (kept.get(a).copied(), kept.get(b).copied());
         for (entry, g) in self.ghosts.iter().enumerate() {
             if g.ghost == crate::lut::PHOTO_GHOST {
                 continue;
             }
             let [i, j] = g.surfaces;
+            let same = |(a, b): (usize, usize)| (a as u32, b as u32) == (i, j);
             let reason = match pairs.get(g.ghost as usize) {
                 None => format!("it has {} ghosts", pairs.len()),
-                Some(&(a, b)) if (a as u32, b as u32) != (i, j) => format!("its ghost {} is {a}-{b}", g.ghost),
-                Some(_) => continue,
+                Some(&live) if same(live) => continue,
+                Some(&live)
+                    if canonical_pairs
+                        .get(g.ghost as usize)
+                        .is_some_and(|&c| same(c) && as_numbered(c) == (Some(live.0), Some(live.1))) =>
+                {
+                    continue;
+                }
+                Some(&(a, b)) => format!("its ghost {} is {a}-{b}", g.ghost),
             };
             return Err(crate::lut::format::LutError::NoSuchGhost {
                 entry,

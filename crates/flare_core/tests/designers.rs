@@ -432,11 +432,13 @@ fn openlensflare_systems_read_by_extension_and_content() {
 }
 
 /// "+" (`Lens::insert_dummy_after`, a surface with one medium on both sides) on every row of every shipped lens is optically inert: the lens stays
-/// valid with the same focal length and ghost count (and, but after the last row, the same back focal distance);
+/// valid with the same focal length, ghost count and LUT fingerprint (`Lens::is_inert`) (and, but after the last row, the same back focal distance);
 /// "x" (`Lens::remove_surface`) on the new row gives back exactly the lens (every field, so its EFL, BFD, ghosts
 /// and vertices).
 #[test]
 fn a_dummy_surface_inserted_and_removed_on_every_row_of_every_shipped_lens_changes_nothing() {
+    use flare_core::flare::lut_fingerprint;
+    let config = flare_core::preset::Document::default().flare_config().unwrap();
     let mut rows = 0;
     for id in flare_core::optics::library::ids() {
         let lens = builtin_lens(id).unwrap();
@@ -458,6 +460,10 @@ fn a_dummy_surface_inserted_and_removed_on_every_row_of_every_shipped_lens_chang
                 assert!((inserted.bfd_mm - before.bfd_mm).abs() < 1e-9, "{id} row {k}: BFD");
             }
             assert_eq!(plus.ghost_pairs().len(), ghosts, "{id} row {k}: a new reflecting surface");
+            // Inert, so the LUT's fingerprint is the lens's: its LUT stays valid (and its cached LUT found).
+            assert!(plus.is_inert(new), "{id} row {k}: the dummy is not inert");
+            assert!(plus.without_inert().0.as_ref() == lens.without_inert().0.as_ref(), "{id} row {k}");
+            assert_eq!(lut_fingerprint(&plus, &config), lut_fingerprint(&lens, &config), "{id} row {k}");
             plus.remove_surface(new).unwrap();
             let back = FirstOrder::d_line(&plus).unwrap();
             assert!(
@@ -475,4 +481,30 @@ fn a_dummy_surface_inserted_and_removed_on_every_row_of_every_shipped_lens_chang
     }
     eprintln!("{rows} rows of shipped lenses: + then x changes nothing");
     assert!(rows > 100);
+}
+
+/// A surface that could cut or bend light is never taken for inert (its LUT fingerprint is then its own): a
+/// dummy made narrower than its neighbours, coated, made the stop, or given another medium.
+#[test]
+fn a_surface_that_could_cut_or_bend_light_is_not_inert() {
+    use flare_core::flare::lut_fingerprint;
+    use flare_core::optics::Coating;
+    let config = flare_core::preset::Document::default().flare_config().unwrap();
+    let lens = builtin_lens("pbrt_dgauss_50mm").unwrap();
+    let mut plus = lens.clone();
+    let k = plus.insert_dummy_after(1).unwrap();
+    assert!(plus.is_inert(k));
+    type Change = fn(&mut flare_core::optics::Surface);
+    let changes: [(&str, Change); 4] = [
+        ("narrower", |s| s.semi_aperture_mm *= 0.5),
+        ("coated", |s| s.coating = Coating::QuarterWave { design_wavelength_nm: 550.0, layer_index: None }),
+        ("stop", |s| s.stop = true),
+        ("another medium", |s| s.medium.n_d += 0.01),
+    ];
+    for (what, change) in changes {
+        let mut other = plus.clone();
+        change(&mut other.surfaces[k]);
+        assert!(!other.is_inert(k), "{what}");
+        assert_ne!(lut_fingerprint(&other, &config), lut_fingerprint(&lens, &config), "{what}");
+    }
 }

@@ -62,7 +62,7 @@ const CHUNK: u32 = 256;
 /// Bytes of one accumulation column's difference: three channels of 64 bits.
 const BYTES_PER_COLUMN: u64 = 24;
 /// Bytes of one item's walk (`struct Walk` in the shader).
-const BYTES_PER_WALK: u64 = 40;
+const BYTES_PER_WALK: u64 = 44;
 /// The most fixed-point units for the brightest sprite's brightest channel: 2^-30 of it is far below what a
 /// display or a half float resolves ([`split_units`] takes fewer only for more than about 32 000 sprites).
 const MAX_SPRITE_BITS: u32 = 30;

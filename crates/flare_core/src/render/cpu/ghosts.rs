@@ -9,13 +9,16 @@
 //! [`MAX_PIXELS_PER_TEXEL`] accumulation pixels where a finer level exists. A mask's edge is a texel wide (the
 //! rasteriser's anti-aliasing) and the bilinear lookup widens it to two: at the base size a frame-filling sprite
 //! of a 4K frame has edges 32 pixels wide, which the fast pass shades pixel by pixel, while the sprites
-//! smaller than the base mask would alias if they read a finer one.
+//! smaller than the base mask would alias if they read a finer one. The fast pass ([`ghost_pass`]) shades a row's
+//! open span (every mask exactly 1) as one run and its edge pixels one by one, each evaluating only the masks not
+//! open over the row's whole walk (`mask_product_of`; a factor of 1 changes no bit of the product).
 
 use rayon::prelude::*;
 
 use super::quads::{accumulation_scale, covered};
 use crate::aperture::{Aperture, ApertureMask, ApertureShape};
 use crate::color::luminance;
+use crate::ghost::MAX_DISCS;
 use crate::image::{GhostMoments, HdrImage};
 use crate::render::{FlareScene, GhostInstance};
 
@@ -42,14 +45,34 @@ fn disc_mask(map: [f32; 4], scale_y: f32, q: [f32; 2]) -> f32 {
 /// disc times the aperture mask at every enabled stop crossing. The discs first: outside one nothing passes,
 /// and the aperture lookups are skipped.
 fn mask_product(inst: &GhostInstance, masks: &GhostMasks, q: [f32; 2]) -> f32 {
+    mask_product_of(inst, masks, q, ALL_MASKS)
+}
+
+/// Every mask of a sprite live: bits 0-3 its discs, bits 4-6 its stop crossings.
+const ALL_MASKS: u32 = (1 << (FIRST_STOP_BIT + 3)) - 1;
+/// The bit of stop crossing 0 in a live set (disc k is bit k; the shader's four discs).
+const FIRST_STOP_BIT: usize = MAX_DISCS;
+/// An open interval's bound where a mask does not narrow it (far beyond any quad's [-1, 1], and finite: a
+/// column worked out from it stays finite; `OPEN_FAR` in ghosts_compute.wgsl).
+const OPEN_FAR: f32 = 1.0e30;
+
+/// [`mask_product`] with only the masks of `live` evaluated: the others are exactly 1 at `q` (a row's walk
+/// leaves out those whose fully open interval holds all its edge pixels; `sweep_instance`), and a factor of 1
+/// changes no bit of the product.
+fn mask_product_of(inst: &GhostInstance, masks: &GhostMasks, q: [f32; 2], live: u32) -> f32 {
     if q[0].abs() > 1.0 || q[1].abs() > 1.0 {
         return 0.0;
     }
     let mut m = 1.0;
-    for (disc, &scale_y) in inst.discs.iter().zip(&inst.disc_scale_y) {
-        m *= disc_mask(*disc, scale_y, q);
+    for (k, (disc, &scale_y)) in inst.discs.iter().zip(&inst.disc_scale_y).enumerate() {
+        if live & (1 << k) != 0 {
+            m *= disc_mask(*disc, scale_y, q);
+        }
     }
-    for (stop, &scale_y) in inst.stops.iter().zip(&inst.scale_y) {
+    for (k, (stop, &scale_y)) in inst.stops.iter().zip(&inst.scale_y).enumerate() {
+        if live & (1 << (FIRST_STOP_BIT + k)) == 0 {
+            continue;
+        }
         if m <= 0.0 {
             return 0.0;
         }
@@ -505,9 +528,12 @@ fn sweep_instance(
                 *hi = hi.min(a.max(b));
             }
         };
+        // Each mask's own open interval (`OPEN_FAR` where it does not narrow it), kept for the live set below.
+        let mut own = [(1.0f32, -1.0f32); FIRST_STOP_BIT + 3];
         // Each disc: fully open within radius 1 - aa / 2 of its centre.
-        for ([scale, ox, oy, aa], scale_y) in inst.discs.into_iter().zip(inst.disc_scale_y) {
+        for (k, ([scale, ox, oy, aa], scale_y)) in inst.discs.into_iter().zip(inst.disc_scale_y).enumerate() {
             if aa == 0.0 {
+                own[k] = (-OPEN_FAR, OPEN_FAR);
                 continue;
             }
             let (inner, fy) = (1.0 - 0.5 * aa, scale_y * q_y + oy);
@@ -517,11 +543,15 @@ fn sweep_instance(
             } else {
                 let half = (inner * inner - fy * fy).sqrt();
                 clip(&mut o_lo, &mut o_hi, scale, ox, [-half, half]);
+                own[k] = (-OPEN_FAR, OPEN_FAR);
+                clip(&mut own[k].0, &mut own[k].1, scale, ox, [-half, half]);
             }
         }
         let mut lit = true;
-        for ([scale, ox, oy, enabled], scale_y) in inst.stops.into_iter().zip(inst.scale_y) {
+        for (k, ([scale, ox, oy, enabled], scale_y)) in inst.stops.into_iter().zip(inst.scale_y).enumerate() {
+            let k = FIRST_STOP_BIT + k;
             if enabled == 0.0 {
+                own[k] = (-OPEN_FAR, OPEN_FAR);
                 continue;
             }
             let Some((open, support)) = masks.level(enabled).rows.at(scale_y * q_y + oy) else {
@@ -530,6 +560,8 @@ fn sweep_instance(
             };
             clip(&mut o_lo, &mut o_hi, scale, ox, open);
             clip(&mut q_lo, &mut q_hi, scale, ox, support);
+            own[k] = (-OPEN_FAR, OPEN_FAR);
+            clip(&mut own[k].0, &mut own[k].1, scale, ox, open);
         }
         if !lit || q_lo > q_hi {
             continue;
@@ -538,14 +570,25 @@ fn sweep_instance(
         let first = (a.min(b).floor() - 1.0).max(columns.start as f32) as usize;
         let last = ((a.max(b).ceil() + 2.0).max(0.0) as usize).min(columns.end);
         // Open columns: those whose centres lie inside the open interval by a pixel's margin.
+        let open_columns = |lo: f32, hi: f32| {
+            let (a, b) = (to_column(lo), to_column(hi));
+            (a.min(b).ceil() + 1.0, a.max(b).floor() - 1.0)
+        };
         let (open_first, open_last) = if o_lo < o_hi {
-            let (a, b) = (to_column(o_lo), to_column(o_hi));
-            let lo = (a.min(b).ceil() + 1.0).max(first as f32);
-            let hi = (a.max(b).floor() - 1.0).min(last as f32 - 1.0);
+            let (lo, hi) = open_columns(o_lo, o_hi);
+            let (lo, hi) = (lo.max(first as f32), hi.min(last as f32 - 1.0));
             if lo <= hi { (lo as usize, hi as usize) } else { (usize::MAX, 0) }
         } else {
             (usize::MAX, 0)
         };
+        // The live masks: those not open (by the same pixel's margin) at every column the row shades.
+        let mut live = 0;
+        for (k, &(lo, hi)) in own.iter().enumerate() {
+            let (lo, hi) = if lo < hi { open_columns(lo, hi) } else { (1.0, -1.0) };
+            if !(lo <= first as f32 && hi >= last as f32 - 1.0) {
+                live |= 1 << k;
+            }
+        }
         let has_open = open_first <= open_last;
         let mut x = first;
         while x < last {
@@ -554,7 +597,7 @@ fn sweep_instance(
                 x = open_last + 1;
                 continue;
             }
-            let m = mask_product(inst, masks, [((x as f32 + 0.5) * sx - cx) / hx, q_y]);
+            let m = mask_product_of(inst, masks, [((x as f32 + 0.5) * sx - cx) / hx, q_y], live);
             if m > 0.0 {
                 emit(Fragment::Edge { x, y, m });
             }
