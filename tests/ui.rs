@@ -1691,3 +1691,29 @@ fn every_shipped_look_applied_in_the_app_draws_the_command_lines_frame() {
         h.run();
     }
 }
+
+/// View changes are said: the ghosts' method (the look or a ray grid) and folding the side panel away (which
+/// gives the view the window's width), each replacing what the status line said.
+#[test]
+fn view_changes_say_what_the_view_now_draws() {
+    let mut h = Harness::builder()
+        .with_size(egui::vec2(1440.0, 900.0))
+        .build_ui_state(|ui, app: &mut FlareLabApp| app.ui_root(ui), quiet(FlareLabApp::new(None, None)));
+    h.run_steps(2);
+    let view = h.state().view_rect().unwrap();
+    h.get_by_label("ghosts").click();
+    h.run_steps(2);
+    h.get_by_label("ray grid 16 (exact)").click();
+    h.run_steps(2);
+    let said = h.state().message().unwrap_or_default().to_owned();
+    assert!(said.contains("ray grid 16") && said.contains("exports still draw the look"), "{said}");
+    h.state_mut().jobs_mut().raygrid_mut().grid = None;
+    h.get_by_label("View").click();
+    h.run_steps(2);
+    h.get_by_label("Panels").click();
+    h.run_steps(3);
+    let said = h.state().message().unwrap_or_default().to_owned();
+    assert!(said.contains("folded away"), "{said}");
+    let wide = h.state().view_rect().unwrap();
+    assert!(wide.area() > 1.2 * view.area(), "{wide:?} against {view:?}");
+}

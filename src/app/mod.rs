@@ -625,6 +625,11 @@ impl FlareLabApp {
                     .changed()
                 {
                     self.ui.panels_hidden = !shown;
+                    self.session.say(if shown {
+                        "the side panel is back"
+                    } else {
+                        "the side panel is folded away: the view takes the window's width (View > Panels brings it back)"
+                    });
                 }
             });
             ui.menu_button("Edit", |ui| {
@@ -832,6 +837,7 @@ impl FlareLabApp {
 
     /// The ghosts' method (the look or a ray grid) and the starburst.
     fn ghosts_method_ui(&mut self, ui: &mut egui::Ui) {
+        let before = self.jobs.raygrid().grid;
         let ghosts_label = |grid: Option<usize>| match grid {
             None => "look".to_owned(),
             Some(n) => format!("ray grid {n}"),
@@ -849,6 +855,17 @@ impl FlareLabApp {
             .on_hover_text(
                 "the view's ghosts ray-traced exactly on an N x N grid per ghost (Hullin 2011), on a hardware GPU when there is one: drafts while dragging, traced when input stops; exports draw the look",
             );
+        // A change of what the view draws is said (a view setting, not the document: undo does not take it back).
+        let after = self.jobs.raygrid().grid;
+        if after != before {
+            self.session.say(match after {
+                None => "the view's ghosts: the look (paraxial and LUT ghosts)".to_owned(),
+                Some(n) => format!(
+                    "the view's ghosts: ray grid {n}, traced exactly when input stops (drafts while dragging); \
+                     exports still draw the look"
+                ),
+            });
+        }
         ui.checkbox(&mut self.session.edit().starburst, "starburst");
         if self.session.doc().starburst {
             let what = "the starburst's brightness against the physical one (0 EV)";
