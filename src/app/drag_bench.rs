@@ -16,7 +16,7 @@ use super::derived::RebuildCounts;
 
 /// What the bench sweeps.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Sweep {
+pub enum Sweep {
     Light,
     Exposure,
     Scrub,
@@ -47,16 +47,10 @@ pub struct DragBench {
 }
 
 impl DragBench {
-    /// The bench `FLARELAB_DRAG_BENCH` asks for, if any.
-    pub fn from_env() -> Option<Self> {
-        let frames = std::env::var("FLARELAB_DRAG_BENCH").ok()?.parse().ok()?;
-        Some(Self {
-            what: match std::env::var("FLARELAB_DRAG_BENCH_WHAT").as_deref() {
-                Ok("exposure") => Sweep::Exposure,
-                Ok("scrub") => Sweep::Scrub,
-                Ok("blades") => Sweep::Blades,
-                _ => Sweep::Light,
-            },
+    /// The bench of `frames` frames sweeping `what` (`FLARELAB_DRAG_BENCH`, read by [`super::options`]).
+    pub fn new(frames: usize, what: Sweep) -> Self {
+        Self {
+            what,
             rebuilds_at_start: None,
             frames,
             done: 0,
@@ -70,7 +64,7 @@ impl DragBench {
             adapter: String::new(),
             last_passes: String::new(),
             released: None,
-        })
+        }
     }
 
     /// Still moving (the app draws drafts).

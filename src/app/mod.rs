@@ -44,6 +44,7 @@ pub mod job;
 pub mod jobs;
 pub mod looks;
 mod looks_panel;
+pub mod options;
 pub mod raygrid_view;
 pub mod session;
 pub mod shot;
@@ -88,10 +89,9 @@ pub fn run() -> Result<()> {
     {
         bail!(NO_DISPLAY);
     }
-    let size = std::env::var("FLARELAB_WINDOW")
-        .ok()
-        .and_then(|s| flare_core::frame::parse_size(&s).ok())
-        .map_or([1440.0, 900.0], |(w, h)| [w as f32, h as f32]);
+    // Every FLARELAB_* variable the window reads, read once here.
+    let app_options = options::AppOptions::from_env();
+    let size = [app_options.window.0, app_options.window.1];
     let mut options = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default().with_inner_size(size).with_title("FlareLab"),
         ..Default::default()
@@ -113,25 +113,15 @@ pub fn run() -> Result<()> {
         Box::new(|cc| {
             // FLARELAB_PRESET=FILE opens a preset; FLARELAB_FRESH=1 starts from the default document instead of
             // the last session.
-            let preset = std::env::var_os("FLARELAB_PRESET").and_then(|p| {
-                Document::open(std::path::Path::new(&p))
-                    .map_err(|e| {
-                        eprintln!("flarelab: FLARELAB_PRESET {}: {e}; starting without it", p.to_string_lossy())
-                    })
+            let preset = app_options.preset.as_ref().and_then(|p| {
+                Document::open(p)
+                    .map_err(|e| eprintln!("flarelab: FLARELAB_PRESET {}: {e}; starting without it", p.display()))
                     .ok()
             });
-            let stored = if preset.is_some() || std::env::var_os("FLARELAB_FRESH").is_some() {
-                preset
-            } else {
-                cc.storage.and_then(restore)
-            };
-            let mut app = FlareLabApp::new(cc.wgpu_render_state.clone(), stored);
+            let stored = if preset.is_some() || app_options.fresh { preset } else { cc.storage.and_then(restore) };
+            let mut app = FlareLabApp::with_options(cc.wgpu_render_state.clone(), stored, &app_options);
             // eframe clears the window to the panels' colour (`clear_color`).
             app.cleared_by_window = true;
-            if std::env::var_os("FLARELAB_AUTO_BAKE").is_some_and(|v| v == "0") {
-                // For measurements: no background bake competing for the cores.
-                app.jobs.autobake_mut().enabled = false;
-            }
             if let Some(storage) = cc.storage {
                 app.files.recent = restore_recent(storage);
                 app.ui = UiState::restore(storage);
@@ -186,15 +176,21 @@ pub struct FlareLabApp {
 }
 
 impl FlareLabApp {
-    /// The app on `gpu` (none in UI tests: no viewport), from `stored` or the default document.
+    /// The app on `gpu` (none in UI tests: no viewport), from `stored` or the default document, with the default
+    /// options (whatever the environment says).
     pub fn new(gpu: Option<RenderState>, stored: Option<Document>) -> Self {
+        Self::with_options(gpu, stored, &options::AppOptions::default())
+    }
+
+    /// [`Self::new`] with `options` (the window's: [`options::AppOptions::from_env`]).
+    pub fn with_options(gpu: Option<RenderState>, stored: Option<Document>, options: &options::AppOptions) -> Self {
         let software = gpu.as_ref().is_some_and(|r| r.adapter.get_info().device_type == wgpu::DeviceType::Cpu);
         if let Some(rs) = &gpu {
             ViewportResources::install(rs);
         }
         let doc = stored.unwrap_or_default();
         let first_frame = doc.timeline.first_frame;
-        let drag_bench = DragBench::from_env();
+        let drag_bench = options.drag_bench.map(|(frames, what)| DragBench::new(frames, what));
         let mut app = Self {
             session: Session::new(doc),
             gpu,
@@ -206,7 +202,7 @@ impl FlareLabApp {
             ray_diagram: RayDiagram::default(),
             drag_bench,
             export_size: None,
-            view: View::new(software, first_frame),
+            view: View::new(software, first_frame, options.view_px),
             jobs: JobBoard::default(),
             track_path: String::new(),
             sequence_path: "flare.####.exr".into(),
@@ -218,11 +214,12 @@ impl FlareLabApp {
             ui: UiState::default(),
             under_view: 80.0,
         };
-        // FLARELAB_RAYGRID=N starts the view in its ray-grid mode (the Xvfb test and screenshots).
-        app.jobs.raygrid_mut().grid = std::env::var("FLARELAB_RAYGRID")
-            .ok()
-            .and_then(|s| s.parse().ok())
-            .filter(|n| raygrid_view::GRIDS.contains(n));
+        // FLARELAB_RAYGRID=N starts the view in its ray-grid mode (the Xvfb test and screenshots); FLARELAB_AUTO_BAKE=0
+        // turns the automatic bake off (measurements: no background bake competing for the cores).
+        app.jobs.raygrid_mut().grid = options.raygrid;
+        if !options.auto_bake {
+            app.jobs.autobake_mut().enabled = false;
+        }
         app.plate_path = app.session.doc().background.clone().unwrap_or_default();
         app.sync();
         app

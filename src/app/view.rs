@@ -5,7 +5,7 @@
 //! # How it works
 //! [`View`] is the only writer of its fields (they are private). Each UI frame the viewport lays itself out
 //! through [`View::layout`], which keeps the widget's rect and returns the drawing size: the widget's pixels,
-//! at most [`MAX_VIEW_WIDTH`] across (a larger window is upsampled), or `FLARELAB_VIEW_PX` read once in
+//! at most [`MAX_VIEW_WIDTH`] across (a larger window is upsampled), or `FLARELAB_VIEW_PX` (read once into [`super::options::AppOptions`]) in
 //! [`View::new`]. Every conversion between a point of the viewport and the optics goes through one
 //! [`LightMap`] (built by [`View::light_map`] from the live flare): sensor millimetres to points (the light's
 //! marker, the selected ghost's ring, the ghost under a click), a pointer to the light's angles through the
@@ -39,7 +39,7 @@ pub fn light_slopes(light_deg: [f64; 2]) -> [f64; 2] {
 pub struct View {
     /// Where the viewport was last laid out (points).
     rect: Option<egui::Rect>,
-    /// `FLARELAB_VIEW_PX`: the flare drawn at this size whatever the widget's (read once, at start).
+    /// `FLARELAB_VIEW_PX`: the flare drawn at this size whatever the widget's (from the options, read at start).
     fixed_px: Option<(u32, u32)>,
     /// Drafts while the user drags (see [`super::draft`]).
     draft: DraftControl,
@@ -53,10 +53,10 @@ pub struct View {
 
 impl View {
     /// The view at `first_frame`; `software`: the adapter is a software rasteriser (coarser drafts).
-    pub fn new(software: bool, first_frame: i64) -> Self {
+    pub fn new(software: bool, first_frame: i64, fixed_px: Option<(u32, u32)>) -> Self {
         Self {
             rect: None,
-            fixed_px: std::env::var("FLARELAB_VIEW_PX").ok().and_then(|s| flare_core::frame::parse_size(&s).ok()),
+            fixed_px,
             draft: DraftControl::new(software),
             focus_pick: false,
             playhead: first_frame,
@@ -223,7 +223,7 @@ mod tests {
     #[test]
     fn the_light_drawn_at_a_point_is_the_light_a_pointer_there_gives() {
         let flare = flare();
-        let mut view = View::new(false, 1);
+        let mut view = View::new(false, 1, None);
         let px = view.layout(egui::Rect::from_min_size(egui::pos2(10.0, 20.0), egui::vec2(960.0, 540.0)), 1.0);
         assert_eq!(px, (960, 540));
         for desqueeze in [1.0, 2.0] {
@@ -250,7 +250,7 @@ mod tests {
 
     #[test]
     fn a_wide_window_is_drawn_at_most_1920_across_and_the_playhead_stays_in_range() {
-        let mut view = View::new(false, 1);
+        let mut view = View::new(false, 1, None);
         let px = view.layout(egui::Rect::from_min_size(egui::Pos2::ZERO, egui::vec2(1600.0, 900.0)), 2.0);
         assert_eq!(px, (1920, 1080));
         view.seek(50, 1, 24);
