@@ -588,13 +588,16 @@ fn the_timeline_keys_the_light_interpolates_plays_and_undo_covers_the_keys() {
     h.get_by_label("frame").set_value_accesskit(11.0);
     h.run();
     assert_eq!(h.state().playhead(), 11);
-    drag(&mut h, egui::pos2(300.0, 250.0), egui::pos2(420.0, 200.0));
+    // Right of and above the view's centre: +x and +y in the frame.
+    let centre = h.state().view_rect().expect("a viewport").center();
+    let (to, again) = (centre + egui::vec2(80.0, -10.0), centre + egui::vec2(40.0, 20.0));
+    drag(&mut h, centre + egui::vec2(-40.0, 40.0), to);
     let b = h.state().doc().timeline.light_deg.key_at(11).expect("the drag keyed frame 11").value;
     assert!(b[0] > 0.0 && b[1] > 0.0, "{b:?}");
     assert_eq!(h.state().doc().light_deg, a, "the static light is not what a keyed drag moves");
     assert_eq!(h.state().doc().timeline.key_frames(), vec![1, 11], "the ticks");
     // Dragging again at a keyed frame edits that key.
-    drag(&mut h, egui::pos2(420.0, 200.0), egui::pos2(380.0, 230.0));
+    drag(&mut h, to, again);
     let b2 = h.state().doc().timeline.light_deg.key_at(11).unwrap().value;
     assert_ne!(b2, b);
     assert_eq!(h.state().doc().timeline.light_deg.keys.len(), 2);
