@@ -231,8 +231,9 @@ impl crate::lut::GhostLut {
         }
         // Every ghost it names must be one of this lens's, with the same two surfaces: the fingerprint covers
         // the optics, not the indices a damaged or forged file carries (they index the live ghost list). Inert
-        // surfaces reflect nothing, so the ghost list is the same with or without them; a LUT baked for the lens
-        // without them names the surfaces as that lens numbers them.
+        // surfaces reflect nothing, so the ghost list is the same with or without them; a bake names a ghost's
+        // surfaces as the lens without them numbers them (`lut::bake`), so its LUT holds for the lens with or
+        // without a dummy surface (a LUT from before that named them as its lens did is taken as it was).
         let pairs = lens.ghost_pairs();
         let (canonical, kept) = lens.without_inert();
         let canonical_pairs = canonical.ghost_pairs();

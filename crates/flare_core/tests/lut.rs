@@ -1297,3 +1297,35 @@ fn a_cancelled_ray_grid_render_and_classification_stop_and_say_so() {
     let measured = classify_until(&flare, &renderer, &settings, &[], &go).unwrap();
     assert_eq!(measured, classify(&flare, &renderer, &settings, &[]));
 }
+
+/// A LUT baked for a lens with a dummy surface ("+": inert) holds for the lens without it and back: the
+/// fingerprint is the lens's without its inert surfaces, and the bake names a ghost's surfaces as that lens
+/// numbers them (the same pair on both), its ghosts' images the same bytes.
+#[test]
+fn a_lut_baked_with_a_dummy_surface_holds_for_the_lens_without_it() {
+    let lens = builtin_lens("tessar").unwrap();
+    let mut plus = lens.clone();
+    plus.insert_dummy_after(1).unwrap();
+    let config = FlareConfig::default();
+    let (bare, dummy) = (PreparedFlare::new(&lens, &config).unwrap(), PreparedFlare::new(&plus, &config).unwrap());
+    let settings = BakeSettings { theta_max_deg: Some(8.0), initial_steps: 1, ..small_settings() };
+    let never = AtomicBool::new(false);
+    let baked = |flare: &PreparedFlare| {
+        bake(flare, &flare.ray_grid_renderer(), &[3], &settings, None, &|_| {}, &never).unwrap()
+    };
+    let (from_bare, from_dummy) = (baked(&bare), baked(&dummy));
+    for lut in [&from_bare, &from_dummy] {
+        lut.check_for(&lens, &config).unwrap();
+        lut.check_for(&plus, &config).unwrap();
+    }
+    assert_eq!(from_dummy.ghosts[0].surfaces, from_bare.ghosts[0].surfaces, "the lens without the dummy's numbers");
+    assert_eq!(from_dummy.ghosts[0].key, from_bare.ghosts[0].key);
+    assert_eq!(from_dummy.lens_fingerprint, from_bare.lens_fingerprint);
+    let texels =
+        |lut: &flare_core::lut::GhostLut| lut.ghosts[0].entries.iter().map(|e| e.texels.clone()).collect::<Vec<_>>();
+    assert!(texels(&from_dummy) == texels(&from_bare), "the same images");
+    // A surface that is not inert (narrowed to cut light) makes another lens: the LUT is refused for it.
+    let mut narrowed = plus.clone();
+    narrowed.surfaces[2].semi_aperture_mm *= 0.5;
+    assert!(from_bare.check_for(&narrowed, &config).is_err());
+}

@@ -517,6 +517,10 @@ pub fn bake_with(
     }
     let lens = &flare.system.lens;
     let fingerprint = crate::flare::lut_fingerprint(lens, &flare.config);
+    // A ghost's surfaces as the lens without its inert surfaces numbers them (the fingerprint's lens): the LUT
+    // and its ghosts' keys hold for the lens with or without a dummy surface.
+    let numbering = lens.without_inert().1;
+    let canonical = |k: usize| numbering.iter().position(|&live| live == k).unwrap_or(k);
     let symmetry = Symmetry::of(lens, &flare.config.aperture).map_err(BakeError::Anamorphic)?;
     let theta_max = settings.theta_max_deg.unwrap_or_else(|| useful_field_deg(flare));
     // An anamorphic lens's ghosts change shape with the light's azimuth (no rotation turns one into another):
@@ -542,7 +546,8 @@ pub fn bake_with(
         .par_iter()
         .map(|&g| {
             let model = &flare.system.ghosts[g];
-            let key = ghost_key(fingerprint, g, (model.i, model.j), theta_max, settings);
+            let pair = (canonical(model.i), canonical(model.j));
+            let key = ghost_key(fingerprint, g, pair, theta_max, settings);
             if let Some(old) = previous.filter(|p| p.lens_fingerprint == fingerprint).and_then(|p| p.ghost(g))
                 && old.key == key
             {
@@ -607,7 +612,7 @@ pub fn bake_with(
             report();
             Ok(LutGhost {
                 ghost: g as u32,
-                surfaces: [model.i as u32, model.j as u32],
+                surfaces: [pair.0 as u32, pair.1 as u32],
                 key,
                 thetas_deg: columns.iter().map(|c| c.0).collect(),
                 fitted: columns[..columns.len() - 1].iter().map(|c| c.2).collect(),
