@@ -1540,3 +1540,25 @@ pub fn stops_slider(
     .inner
     .on_hover_text(what.map_or_else(|| STOPS_HINT.to_owned(), |w| format!("{w}. {STOPS_HINT}")))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The viewport's shape: a room taller than the exported frame is filled, the frame's rows marked; a wider
+    /// room gets the frame's shape, centred; with a plate the plate's shape, always; a degenerate room or export
+    /// size gives a finite shape.
+    #[test]
+    fn the_view_fills_a_tall_room_and_keeps_the_frames_shape_in_a_wide_one() {
+        let tall = view_shape(egui::vec2(1048.0, 751.0), (1920, 1080), false);
+        assert_eq!(tall.size, egui::vec2(1048.0, 751.0));
+        let (top, bottom) = tall.export_band.unwrap();
+        assert!(((bottom - top) * 751.0 - 1048.0 * 1080.0 / 1920.0).abs() < 1e-3 && (top + bottom - 1.0).abs() < 1e-6);
+        let wide = view_shape(egui::vec2(1600.0, 600.0), (1920, 1080), false);
+        assert!((wide.size.x - 600.0 * 16.0 / 9.0).abs() < 1e-3 && wide.size.y == 600.0 && wide.export_band.is_none());
+        let plate = view_shape(egui::vec2(1048.0, 751.0), (1920, 1080), true);
+        assert!((plate.size.y - 1048.0 * 9.0 / 16.0).abs() < 1e-3 && plate.export_band.is_none());
+        let odd = view_shape(egui::vec2(0.0, -5.0), (0, 0), false);
+        assert!(odd.size.x.is_finite() && odd.size.y.is_finite() && odd.size.x > 0.0 && odd.size.y > 0.0);
+    }
+}
