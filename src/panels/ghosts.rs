@@ -25,9 +25,9 @@ pub fn ghosts_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, acti
     // The list takes the whole panel below its header.
     let height = ui.available_height().max(200.0);
     egui::ScrollArea::vertical().id_salt("ghost_list").max_height(height).auto_shrink([false, false]).show(ui, |ui| {
-        // Cells as wide as their content (not egui's 40-point least) and short words (the whole on hover), so the
-        // table fits the side panel at its least width.
-        ui.spacing_mut().interact_size.x = 20.0;
+        // Cells as wide as their content and short words (the whole on hover), so the table fits the side panel at
+        // its least width.
+        super::compact_cells(ui);
         egui::Grid::new("ghost_table").num_columns(7).striped(true).spacing([6.0, 2.0]).show(ui, |ui| {
             let headers = [
                 ("on", "drawn or not"),

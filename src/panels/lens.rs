@@ -101,9 +101,9 @@ fn surface_table_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, a
     // An anamorphic lens shows its toroids' x-z radii (Zemax's radius of rotation) beside the profile's radius.
     let anamorphic = doc.lens.is_anamorphic();
     egui::ScrollArea::vertical().id_salt("surfaces").max_height(height).show(ui, |ui| {
-        // Cells as wide as their values (not egui's 40-point least), so the table fits the side panel at its
-        // least width (`PANEL_MIN_WIDTH`): the row's moves and its coating are in the menu under its number.
-        ui.spacing_mut().interact_size.x = 20.0;
+        // Cells as wide as their values, so the table fits the side panel at its least width: the row's moves and
+        // its coating are in the menu under its number.
+        super::compact_cells(ui);
         ui.spacing_mut().button_padding = egui::vec2(2.0, 1.0);
         // A table's type, a little smaller than the panels' (12 points for 14): the numbers stay legible.
         for style in [egui::TextStyle::Body, egui::TextStyle::Button] {

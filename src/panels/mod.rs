@@ -102,6 +102,12 @@ pub fn labelled_value(response: egui::Response, label: &str, value: f64) -> egui
     response
 }
 
+/// A table's cells as wide as their content, not egui's 40-point least: the Lens and Ghosts tables fit the side
+/// panel at its least width (`PANEL_MIN_WIDTH`).
+pub fn compact_cells(ui: &mut egui::Ui) {
+    ui.spacing_mut().interact_size.x = 20.0;
+}
+
 /// Gives a check box without text an accessible label.
 pub fn labelled_check(response: egui::Response, label: &str, checked: bool) -> egui::Response {
     response.widget_info(|| egui::WidgetInfo::selected(egui::Role::CheckBox, true, checked, label));

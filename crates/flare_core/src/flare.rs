@@ -194,8 +194,11 @@ impl PreparedFlare {
 /// the fingerprint it had before this was added (its LUTs stay valid).
 pub fn lut_fingerprint(lens: &Lens, config: &FlareConfig) -> u64 {
     // Inert surfaces (a dummy "+" adds) change no optics: the fingerprint is the lens's without them.
-    let (lens, _) = lens.without_inert();
-    let lens = lens.as_ref();
+    fingerprint_without_inert(lens.without_inert().0.as_ref(), config)
+}
+
+/// [`lut_fingerprint`] of a lens already without its inert surfaces ([`Lens::without_inert`]).
+fn fingerprint_without_inert(lens: &Lens, config: &FlareConfig) -> u64 {
     let wavelengths = &config.spectrum.wavelengths_nm;
     let base = (&lens.surfaces, wavelengths, &config.spectrum.weights_rgb, &config.aperture, &config.coating_override);
     let curves: Vec<(usize, Vec<f64>)> = lens
@@ -220,7 +223,8 @@ impl crate::lut::GhostLut {
         if self.fingerprint_scheme != crate::fingerprint::SCHEME {
             return Err(crate::lut::format::LutError::OldFingerprint { lut_lens: self.lens_id.clone() });
         }
-        let live = lut_fingerprint(lens, config);
+        let (canonical, kept) = lens.without_inert();
+        let live = fingerprint_without_inert(&canonical, config);
         if live != self.lens_fingerprint {
             return Err(crate::lut::format::LutError::OtherLens {
                 lut_lens: self.lens_id.clone(),
@@ -235,7 +239,6 @@ impl crate::lut::GhostLut {
         // surfaces as the lens without them numbers them (`lut::bake`), so its LUT holds for the lens with or
         // without a dummy surface (a LUT from before that named them as its lens did is taken as it was).
         let pairs = lens.ghost_pairs();
-        let (canonical, kept) = lens.without_inert();
         let canonical_pairs = canonical.ghost_pairs();
         let as_numbered = |(a, b): (usize, usize)| (kept.get(a).copied(), kept.get(b).copied());
         for (entry, g) in self.ghosts.iter().enumerate() {

@@ -465,6 +465,17 @@ impl LensError {
     }
 }
 
+/// Points along both sections' axes out to `semi_mm`, 257 on each: where [`Lens::insert_dummy_after`] and
+/// [`Lens::is_inert`] sample sags (a toroid's sag differs between its sections, and a difference of two toroids'
+/// sags, a quadratic form near the axis, is extreme on one of them).
+fn section_points(semi_mm: f64) -> impl Iterator<Item = (f64, f64)> {
+    const SAMPLES: u32 = 256;
+    (0..=SAMPLES).flat_map(move |i| {
+        let h = semi_mm * f64::from(i) / f64::from(SAMPLES);
+        [(0.0, h), (h, 0.0)]
+    })
+}
+
 impl Lens {
     /// Number of interfaces, the stop included.
     pub fn number_of_surfaces(&self) -> usize {
@@ -513,18 +524,9 @@ impl Lens {
         let Some(here) = self.surfaces.get(k) else {
             return Err(format!("there is no surface {k} (the lens has {})", self.surfaces.len()));
         };
-        let samples = 256;
-        // Points along both sections' axes out to `semi`: a toroid's sag differs between them (and a difference
-        // of two toroids' sags, a quadratic form near the axis, is extreme on one of them).
-        let points = |semi: f64| {
-            (0..=samples).flat_map(move |i| {
-                let h = semi * f64::from(i) / f64::from(samples);
-                [(0.0, h), (h, 0.0)]
-            })
-        };
         // The extreme sag of a surface over its clear aperture: the largest (`deepest`) or the smallest.
         let extreme = |s: &Surface, deepest: bool| -> f64 {
-            points(s.semi_aperture_mm)
+            section_points(s.semi_aperture_mm)
                 .filter_map(|(x, y)| s.sag_xy_mm(x, y))
                 .fold(0.0, |m: f64, z| if deepest { m.max(z) } else { m.min(z) })
         };
@@ -540,7 +542,7 @@ impl Lens {
             (Some(t), Some(next)) => {
                 // The shape of the neighbour with the larger clear aperture (defined over all of the dummy's),
                 // moved towards the other by half the narrowest gap between the two.
-                let gap = points(here.semi_aperture_mm.min(next.semi_aperture_mm))
+                let gap = section_points(here.semi_aperture_mm.min(next.semi_aperture_mm))
                     .map(|(x, y)| match (here.sag_xy_mm(x, y), next.sag_xy_mm(x, y)) {
                         (Some(a), Some(b)) => t + b - a,
                         _ => f64::NEG_INFINITY,
@@ -604,23 +606,17 @@ impl Lens {
         if s.semi_aperture_mm < prev.semi_aperture_mm.max(next.map_or(0.0, |n| n.semi_aperture_mm)) {
             return false;
         }
-        let samples = 256;
-        let points = |semi: f64| {
-            (0..=samples).flat_map(move |i| {
-                let h = semi * f64::from(i) / f64::from(samples);
-                [(0.0, h), (h, 0.0)]
-            })
-        };
         // z of each surface at (x, y), from the vertex of the surface before.
-        let behind_prev = points(prev.semi_aperture_mm).all(|(x, y)| match (prev.sag_xy_mm(x, y), s.sag_xy_mm(x, y)) {
-            (Some(a), Some(b)) => a <= gap_before + b,
-            _ => false,
-        });
+        let behind_prev =
+            section_points(prev.semi_aperture_mm).all(|(x, y)| match (prev.sag_xy_mm(x, y), s.sag_xy_mm(x, y)) {
+                (Some(a), Some(b)) => a <= gap_before + b,
+                _ => false,
+            });
         let ahead_of_next = match (next, s.thickness_mm) {
             (None, _) => true,
             (Some(_), None) => false,
             (Some(next), Some(gap_after)) => {
-                points(next.semi_aperture_mm).all(|(x, y)| match (s.sag_xy_mm(x, y), next.sag_xy_mm(x, y)) {
+                section_points(next.semi_aperture_mm).all(|(x, y)| match (s.sag_xy_mm(x, y), next.sag_xy_mm(x, y)) {
                     (Some(b), Some(c)) => b <= gap_after + c,
                     _ => false,
                 })

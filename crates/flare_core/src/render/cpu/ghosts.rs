@@ -512,7 +512,6 @@ fn sweep_instance(
         let q_y = ((y as f32 + 0.5) * sy - cy) / hy;
         let Some((mut q_lo, mut q_hi)) = row_support(inst, q_y) else { continue };
         // The open interval, narrowed by each mask below; the support, by where each mask is non-zero.
-        let (mut o_lo, mut o_hi) = (q_lo, q_hi);
         let clip = |lo: &mut f32, hi: &mut f32, scale: f32, offset: f32, u: [f32; 2]| {
             if u[0] > u[1] {
                 *lo = 1.0;
@@ -528,41 +527,43 @@ fn sweep_instance(
                 *hi = hi.min(a.max(b));
             }
         };
-        // Each mask's own open interval (`OPEN_FAR` where it does not narrow it), kept for the live set below.
-        let mut own = [(1.0f32, -1.0f32); FIRST_STOP_BIT + 3];
+        // Where `scale q + offset` lies in `u`: a mask's own open interval (all of it, `OPEN_FAR`, before `clip`).
+        let own_interval = |scale: f32, offset: f32, u: [f32; 2]| {
+            let (mut lo, mut hi) = (-OPEN_FAR, OPEN_FAR);
+            clip(&mut lo, &mut hi, scale, offset, u);
+            (lo, hi)
+        };
+        // Each mask's own open interval (all of it where it is off; empty where it is nowhere exactly 1 on the
+        // row): the open interval is their intersection with the support, and the live set comes from them.
+        let mut own = [(-OPEN_FAR, OPEN_FAR); FIRST_STOP_BIT + 3];
         // Each disc: fully open within radius 1 - aa / 2 of its centre.
         for (k, ([scale, ox, oy, aa], scale_y)) in inst.discs.into_iter().zip(inst.disc_scale_y).enumerate() {
             if aa == 0.0 {
-                own[k] = (-OPEN_FAR, OPEN_FAR);
                 continue;
             }
             let (inner, fy) = (1.0 - 0.5 * aa, scale_y * q_y + oy);
-            if inner <= fy.abs() {
-                o_lo = 1.0;
-                o_hi = -1.0;
+            own[k] = if inner <= fy.abs() {
+                (1.0, -1.0)
             } else {
                 let half = (inner * inner - fy * fy).sqrt();
-                clip(&mut o_lo, &mut o_hi, scale, ox, [-half, half]);
-                own[k] = (-OPEN_FAR, OPEN_FAR);
-                clip(&mut own[k].0, &mut own[k].1, scale, ox, [-half, half]);
-            }
+                own_interval(scale, ox, [-half, half])
+            };
         }
+        // The open interval starts from the row's support before the stops narrow it (as the shader's does).
+        let support = (q_lo, q_hi);
         let mut lit = true;
         for (k, ([scale, ox, oy, enabled], scale_y)) in inst.stops.into_iter().zip(inst.scale_y).enumerate() {
-            let k = FIRST_STOP_BIT + k;
             if enabled == 0.0 {
-                own[k] = (-OPEN_FAR, OPEN_FAR);
                 continue;
             }
             let Some((open, support)) = masks.level(enabled).rows.at(scale_y * q_y + oy) else {
                 lit = false;
                 break;
             };
-            clip(&mut o_lo, &mut o_hi, scale, ox, open);
+            own[FIRST_STOP_BIT + k] = own_interval(scale, ox, open);
             clip(&mut q_lo, &mut q_hi, scale, ox, support);
-            own[k] = (-OPEN_FAR, OPEN_FAR);
-            clip(&mut own[k].0, &mut own[k].1, scale, ox, open);
         }
+        let (o_lo, o_hi) = own.iter().fold(support, |(lo, hi), &(a, b)| (lo.max(a), hi.min(b)));
         if !lit || q_lo > q_hi {
             continue;
         }
