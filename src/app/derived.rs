@@ -26,6 +26,7 @@ use flare_core::lut::blend::LiveLut;
 use flare_core::lut::{GhostLut, LutKind};
 use flare_core::optics::FirstOrder;
 use flare_core::preset::{Document, LutSource};
+use flare_core::render::gpu::LutAtlas;
 use flare_core::shot::ShotPlan;
 use flare_core::shot::pattern::FramePattern;
 
@@ -182,7 +183,7 @@ pub struct Derived {
     background_key: Option<String>,
     /// The background plate the view and exports use (defocused when the depth of field is on and done).
     plate: Option<Arc<HdrImage>>,
-    /// The plate as read, and a count of its changes (what the depth of field defocuses, `crate::app::dof`).
+    /// The plate as read, and a count of its changes (what the depth of field defocuses, `crate::app::jobs::dof`).
     sharp_plate: Option<Arc<HdrImage>>,
     sharp_generation: u64,
     /// Plates read lately or ahead of the playhead ([`PlateCache`]).
@@ -567,13 +568,23 @@ impl Derived {
 
     /// Replaces the LUT in use (uploading its atlas): one the user opened or asked for.
     pub fn set_lut(&mut self, lut: Option<GhostLut>, gpu: Option<&RenderState>) {
-        self.replace_lut(lut, false, gpu);
+        self.replace_lut(lut.map(|l| Arc::new(LiveLut::new(l))), false, gpu);
     }
 
     /// Shows the automatic bake's LUT (from memory, the cache or a bake): blended even while the document names
-    /// no LUT (see [`Self::resolved`]).
-    pub fn show_auto_lut(&mut self, lut: GhostLut, gpu: Option<&RenderState>) {
-        self.replace_lut(Some(lut), true, gpu);
+    /// no LUT (see [`Self::resolved`]). It comes prepared ([`LiveLut::new`] on the job's thread): what is left
+    /// here is the upload.
+    pub fn show_auto_lut(&mut self, live: Arc<LiveLut>, atlas: Option<LutAtlas>, gpu: Option<&RenderState>) {
+        match (gpu, atlas) {
+            (Some(rs), Some(atlas)) => {
+                ViewportResources::with(rs, |res, _, _| res.renderer.set_lut_atlas(&live, atlas));
+                self.rebuilds.textures += 1;
+                self.lut_auto = true;
+                self.lut = Some(live);
+                self.lut_generation += 1;
+            }
+            (gpu, _) => self.replace_lut(Some(live), true, gpu),
+        }
     }
 
     /// Takes the automatic bake's LUT off the screen (automatic baking was turned off); a LUT the user opened
@@ -584,9 +595,8 @@ impl Derived {
         }
     }
 
-    fn replace_lut(&mut self, lut: Option<GhostLut>, auto: bool, gpu: Option<&RenderState>) {
+    fn replace_lut(&mut self, live: Option<Arc<LiveLut>>, auto: bool, gpu: Option<&RenderState>) {
         self.lut_auto = auto;
-        let live = lut.map(|l| Arc::new(LiveLut::new(l)));
         if let Some(rs) = gpu {
             ViewportResources::with(rs, |res, device, queue| res.renderer.set_lut(device, queue, live.as_deref()));
             self.rebuilds.textures += 1;

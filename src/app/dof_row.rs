@@ -1,6 +1,6 @@
 //! The DoF rows under the view, open by their toggle (on/off, the depth map, the focus distance or focus by click, method, cat's eye)
 //! and focus by click: with it on, the next click in the view focuses on the depth under it
-//! ([`flare_core::dof::DofDoc::focus_px`]). The defocus itself is `super::dof`.
+//! ([`flare_core::dof::DofDoc::focus_px`]). The defocus itself is `super::jobs::dof`.
 
 use eframe::egui;
 use flare_core::dof::DofMethod;
@@ -23,9 +23,9 @@ impl FlareLabApp {
                 None => ui.weak("no depth map"),
             };
             if self.session.doc().dof.enabled {
-                let busy = self.jobs.dof().busy();
-                if busy {
-                    ui.spinner();
+                // Words, not a spinner (it would repaint the window every frame while the defocus runs).
+                if self.jobs.dof().busy() {
+                    ui.weak("defocusing…");
                 }
             }
         });

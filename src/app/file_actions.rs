@@ -8,7 +8,7 @@ use eframe::egui;
 
 use super::FlareLabApp;
 use super::files::{FileUse, NATIVE_TOO_FAST};
-use super::job::{Job, JobPoll};
+use super::jobs::job::{Job, JobPoll};
 
 impl FlareLabApp {
     /// Chooses a file for `use_` (see the module documentation); the action happens when one is chosen.

@@ -13,7 +13,7 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use super::job::Job;
+use super::jobs::job::Job;
 
 /// Recent files kept.
 pub const RECENT: usize = 10;

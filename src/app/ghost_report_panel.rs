@@ -1,4 +1,4 @@
-//! The Report tab: the ghost report of the frame shown (see [`super::ghost_report`]) as a sortable table, the
+//! The Report tab: the ghost report of the frame shown (see [`super::jobs::report`]) as a sortable table, the
 //! coating sensitivity, and the export to CSV or JSON.
 
 use eframe::egui;
@@ -7,7 +7,7 @@ use flare_core::report::{GhostReport, GhostRow, to_csv};
 
 use super::FlareLabApp;
 use super::files::FileUse;
-use super::ghost_report::{ReportColumn, ReportKey};
+use super::jobs::report::{ReportColumn, ReportKey};
 
 impl FlareLabApp {
     /// The Report tab (see the module documentation).
@@ -20,7 +20,7 @@ impl FlareLabApp {
         let u = super::view::light_slopes(light);
         let key = ReportKey::new(&flare, u);
         if self.jobs.report_mut().step(key, &self.session.doc().lens, &flare, u) {
-            ui.ctx().request_repaint_after(super::job::PROGRESS_REPAINT);
+            ui.ctx().request_repaint_after(super::jobs::job::PROGRESS_REPAINT);
         }
         let stale = self.jobs.report_mut().stale(key);
         ui.horizontal_wrapped(|ui| {
@@ -30,8 +30,8 @@ impl FlareLabApp {
                 light[1],
                 flare.system.first_order.f_number / flare.system.settings.stop_scale
             ));
+            // Words, not a spinner: a spinner repaints the window every frame while it shows.
             if stale {
-                ui.add(egui::Spinner::new());
                 ui.weak("computing…");
             }
             let ready = matches!(&self.jobs.report_mut().shown, Some((_, Ok(_))));

@@ -1,21 +1,32 @@
-//! The Looks panel's UI and applying a look (see [`super::looks`]).
+//! The Looks panel's UI and applying a look (see [`super::jobs::looks`]).
 
 use eframe::egui;
 use flare_core::preset::shipped;
 
 use super::FlareLabApp;
-use super::looks::THUMB;
+use super::jobs::looks::THUMB;
 
 impl FlareLabApp {
     /// The Looks panel (see the module documentation).
     pub(super) fn looks_ui(&mut self, ui: &mut egui::Ui) {
         self.jobs.looks_mut().start();
         if self.jobs.looks_mut().poll(ui.ctx()) {
-            ui.ctx().request_repaint_after(super::job::PROGRESS_REPAINT);
-            if let Some(job) = &self.jobs.looks_mut().job {
-                let (fraction, text) = job.progress();
-                ui.add(egui::ProgressBar::new(fraction).text(text));
+            ui.ctx().request_repaint_after(super::jobs::job::PROGRESS_REPAINT);
+            if let Some((fraction, text)) = self.jobs.looks().progress() {
+                ui.horizontal(|ui| {
+                    ui.add(egui::ProgressBar::new(fraction).text(text).desired_width(ui.available_width() - 70.0));
+                    if ui.button("Cancel").clicked() {
+                        self.jobs.looks_mut().cancel();
+                    }
+                });
             }
+        } else if self.jobs.looks().cancelled && !self.jobs.looks().ready() {
+            ui.horizontal_wrapped(|ui| {
+                ui.label("The thumbnails were cancelled.");
+                if ui.button("Render the rest").clicked() {
+                    self.jobs.looks_mut().resume();
+                }
+            });
         }
         ui.label("A look replaces the lens, stop, coatings, sensor and display; your plate and timeline, if you have them, stay.");
         let mut chosen = None;
@@ -30,7 +41,9 @@ impl FlareLabApp {
                             ui.add(egui::Image::from_texture((texture.id(), size)).sense(egui::Sense::click()))
                         }
                         Some(Err(e)) => ui.colored_label(egui::Color32::from_rgb(255, 110, 110), e),
-                        None => ui.add_sized(size, egui::Spinner::new()),
+                        // A still placeholder: a spinner would repaint the window every frame until the
+                        // thumbnails are made (31 frames a second beside a bake, 17 % of a core).
+                        None => ui.add_sized(size, egui::Label::new(egui::RichText::new("rendering…").weak())),
                     };
                     let button = ui.button(preset.name).on_hover_text(preset.title);
                     if response.on_hover_text(preset.title).clicked() || button.clicked() {

@@ -28,31 +28,24 @@ pub use session::Tab;
 use ui_state::UiState;
 use view::View;
 
-pub mod autobake;
-pub mod bake;
 mod colour;
 pub mod derived;
-pub mod dof;
 mod dof_row;
 pub mod draft;
 pub mod drag_bench;
 mod file_actions;
 pub mod files;
-pub mod ghost_report;
+pub mod frame_log;
 mod ghost_report_panel;
-pub mod job;
 pub mod jobs;
-pub mod looks;
 mod looks_panel;
 pub mod options;
-pub mod raygrid_view;
 pub mod session;
-pub mod shot;
 pub mod timeline;
 pub mod ui_state;
 pub mod view;
 
-pub use shot::DEFAULT_EXPORT_PX;
+pub use jobs::shot::DEFAULT_EXPORT_PX;
 
 use crate::panels::aperture::AperturePreview;
 use crate::panels::coatings::CoatingsState;
@@ -173,6 +166,8 @@ pub struct FlareLabApp {
     ui: UiState,
     /// The height (points) the rows under the viewport took in the last frame: the viewport takes the rest.
     under_view: f32,
+    /// Every UI frame's start and duration, when `FLARELAB_FRAME_LOG` asks (see [`frame_log`]).
+    frame_log: Option<frame_log::FrameLog>,
 }
 
 impl FlareLabApp {
@@ -213,10 +208,12 @@ impl FlareLabApp {
             cleared_by_window: false,
             ui: UiState::default(),
             under_view: 80.0,
+            frame_log: options.frame_log.clone().map(frame_log::FrameLog::new),
         };
         // FLARELAB_RAYGRID=N starts the view in its ray-grid mode (the Xvfb test and screenshots); FLARELAB_AUTO_BAKE=0
         // turns the automatic bake off (measurements: no background bake competing for the cores).
         app.jobs.raygrid_mut().grid = options.raygrid;
+        app.jobs.set_device(app.gpu.as_ref().map(|rs| (rs.device.clone(), rs.queue.clone())));
         if !options.auto_bake {
             app.jobs.autobake_mut().enabled = false;
         }
@@ -487,7 +484,7 @@ impl FlareLabApp {
             self.session.commit();
         }
         if self.jobs.busy() {
-            ui.ctx().request_repaint_after(job::PROGRESS_REPAINT);
+            ui.ctx().request_repaint_after(jobs::job::PROGRESS_REPAINT);
         }
     }
 
@@ -844,7 +841,7 @@ impl FlareLabApp {
             .width(90.0)
             .show_ui(ui, |ui| {
                 ui.selectable_value(&mut self.jobs.raygrid_mut().grid, None, "look (paraxial + LUT)");
-                for n in raygrid_view::GRIDS {
+                for n in jobs::raygrid_view::GRIDS {
                     ui.selectable_value(&mut self.jobs.raygrid_mut().grid, Some(n), format!("ray grid {n} (exact)"));
                 }
             })
@@ -1225,7 +1222,7 @@ impl FlareLabApp {
         };
         let target = path.to_path_buf();
         let choice = self.session.doc().layer_choice(false);
-        let job = job::Job::spawn("drawing the frame on the CPU", move |cancel, report| {
+        let job = jobs::job::Job::spawn("drawing the frame on the CPU", move |cancel, report| {
             let (frame, flare, lut, plate) = prepared;
             let plate = plate.resolve(&flare, report)?;
             let sources = Sources { flare: &flare, lut: lut.as_deref(), plate: plate.as_deref() };
@@ -1264,7 +1261,7 @@ impl FlareLabApp {
         for event in self.jobs.poll(&live) {
             match event {
                 JobEvent::Say(text) => self.session.say(text),
-                JobEvent::ShowLut(lut) => self.derived.show_auto_lut((*lut).clone(), self.gpu.as_ref()),
+                JobEvent::ShowLut(live, atlas) => self.derived.show_auto_lut(live, atlas, self.gpu.as_ref()),
                 JobEvent::LightFound(plan) => self.derived.set_shot_plan(Some(plan)),
             }
         }
@@ -1433,8 +1430,19 @@ impl ExportPlate {
 }
 
 impl eframe::App for FlareLabApp {
-    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+    fn ui(&mut self, ui: &mut egui::Ui, frame: &mut eframe::Frame) {
+        let began = (std::time::SystemTime::now(), std::time::Instant::now());
+        let (lut_before, looks_before) = (self.derived.lut().is_some(), self.jobs.looks().ready());
         self.ui_root(ui);
+        if let Some(log) = &mut self.frame_log {
+            if self.derived.lut().is_some() && !lut_before {
+                log.event("lut-shown");
+            }
+            if self.jobs.looks().ready() && !looks_before {
+                log.event("looks-ready");
+            }
+            log.frame(began.0, began.1.elapsed(), frame.info().cpu_usage);
+        }
     }
 
     /// The panels' colour (gamma-encoded, as egui's non-sRGB target takes it): the window's background, drawn

@@ -18,12 +18,14 @@ pub struct AppOptions {
     pub fresh: bool,
     /// `FLARELAB_AUTO_BAKE=0`: no automatic bake competing for the cores (measurements).
     pub auto_bake: bool,
-    /// `FLARELAB_RAYGRID=N` (one of [`super::raygrid_view::GRIDS`]): start the view in its ray-grid mode.
+    /// `FLARELAB_RAYGRID=N` (one of [`super::jobs::raygrid_view::GRIDS`]): start the view in its ray-grid mode.
     pub raygrid: Option<usize>,
     /// `FLARELAB_VIEW_PX=WxH`: draw the view at this size whatever the window's (the drag bench).
     pub view_px: Option<(u32, u32)>,
     /// `FLARELAB_DRAG_BENCH=N` frames of `FLARELAB_DRAG_BENCH_WHAT` (light, exposure, scrub, blades).
     pub drag_bench: Option<(usize, Sweep)>,
+    /// `FLARELAB_FRAME_LOG=FILE`: record every UI frame's start and duration there (see [`super::frame_log`]).
+    pub frame_log: Option<PathBuf>,
 }
 
 impl Default for AppOptions {
@@ -36,6 +38,7 @@ impl Default for AppOptions {
             raygrid: None,
             view_px: None,
             drag_bench: None,
+            frame_log: None,
         }
     }
 }
@@ -57,7 +60,7 @@ impl AppOptions {
             auto_bake: var("FLARELAB_AUTO_BAKE").is_none_or(|v| v != "0"),
             raygrid: var("FLARELAB_RAYGRID")
                 .and_then(|s| s.trim().parse().ok())
-                .filter(|n| super::raygrid_view::GRIDS.contains(n)),
+                .filter(|n| super::jobs::raygrid_view::GRIDS.contains(n)),
             view_px: size("FLARELAB_VIEW_PX"),
             drag_bench: var("FLARELAB_DRAG_BENCH").and_then(|s| s.trim().parse().ok()).map(|frames| {
                 let what = match var("FLARELAB_DRAG_BENCH_WHAT").as_deref() {
@@ -68,6 +71,7 @@ impl AppOptions {
                 };
                 (frames, what)
             }),
+            frame_log: var("FLARELAB_FRAME_LOG").filter(|p| !p.is_empty()).map(PathBuf::from),
         }
     }
 }
@@ -91,6 +95,7 @@ mod tests {
             ("FLARELAB_VIEW_PX", "1280x720"),
             ("FLARELAB_DRAG_BENCH", "40"),
             ("FLARELAB_DRAG_BENCH_WHAT", "scrub"),
+            ("FLARELAB_FRAME_LOG", "frames.txt"),
         ]);
         assert_eq!(
             all,
@@ -102,6 +107,7 @@ mod tests {
                 raygrid: Some(32),
                 view_px: Some((1280, 720)),
                 drag_bench: Some((40, Sweep::Scrub)),
+                frame_log: Some(PathBuf::from("frames.txt")),
             }
         );
         let bad = set(&[("FLARELAB_WINDOW", "big"), ("FLARELAB_RAYGRID", "17"), ("FLARELAB_DRAG_BENCH", "x")]);

@@ -7,7 +7,7 @@
 //! The playhead is the app's, not the document's (moving it is not an edit): the frame shown is the
 //! timeline's sample at the playhead ([`flare_core::preset::Document::frame_request_at`]), with the plate of
 //! that frame and, when the document finds the light in the plate, the light found there (a job scans every
-//! plate of the range once per change of what it depends on, [`super::shot::light_key`]). Keys are document
+//! plate of the range once per change of what it depends on, [`super::jobs::shot::light_key`]). Keys are document
 //! edits, so undo covers them. Dragging the light when the timeline has light keys sets the key at the
 //! playhead (editing it when there is one); with no keys it moves the static light. Playback advances the
 //! playhead at the timeline's rate, looping over the range, and asks for a repaint only while it plays.
@@ -20,7 +20,7 @@ use flare_core::shot::track::{read_track, to_keys};
 use flare_core::timeline::Interpolation;
 
 use super::FlareLabApp;
-use super::shot::ShotJob;
+use super::jobs::shot;
 
 impl FlareLabApp {
     /// The timeline strip (see the module documentation).
@@ -260,7 +260,7 @@ impl FlareLabApp {
         }
         // The light found in the plates serves the export when it was found for this very document.
         let found = self.derived.shot_plan().clone().filter(|_| self.jobs.light_found_for(self.session.doc()));
-        self.jobs.start_sequence(ShotJob::export(
+        self.jobs.start_sequence(shot::export(
             self.derived.resolved(self.session.doc()),
             flare,
             self.derived.lut().clone(),

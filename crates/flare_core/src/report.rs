@@ -32,9 +32,11 @@
 //! multilayer), and reports how much of the bare lens's total ghost energy that removes (negative where the
 //! coating adds light: an air-glass AR stack on a cemented interface reflects more than the bare interface,
 //! and a coated surface transmits more of every other ghost). All numbers are finite: a ghost whose sprite is
-//! degenerate gets zeros, never NaN.
+//! degenerate gets zeros, never NaN. [`ghost_report_until`] stops between ghosts and between coating trials when
+//! asked (the app's Cancel).
 
 use serde::Serialize;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::aperture::ApertureMask;
 use crate::color::luminance;
@@ -125,7 +127,24 @@ pub fn ghost_report(
     mask: &ApertureMask,
     u: [f64; 2],
 ) -> Result<GhostReport, GhostError> {
-    let measured = measure(system, mask, u, REPORT_GRID);
+    let never = AtomicBool::new(false);
+    Ok(ghost_report_until(lens, system, mask, u, &never)?.expect("never cancelled"))
+}
+
+/// [`ghost_report`] that stops when `cancel` is set (checked between ghosts and between the coating trials, so
+/// within a few milliseconds): `Ok(None)` then.
+pub fn ghost_report_until(
+    lens: &Lens,
+    system: &GhostSystem,
+    mask: &ApertureMask,
+    u: [f64; 2],
+    cancel: &AtomicBool,
+) -> Result<Option<GhostReport>, GhostError> {
+    let cancelled = || cancel.load(Ordering::Relaxed);
+    let measured = measure(system, mask, u, REPORT_GRID, cancel);
+    if cancelled() {
+        return Ok(None);
+    }
     let total: f64 = measured.iter().map(|m| m.energy_fraction).sum();
     let sensor_z = system.first_order.sensor_z_mm();
     let epd = system.first_order.entrance_pupil_diameter_mm * system.settings.stop_scale;
@@ -172,14 +191,14 @@ pub fn ghost_report(
         .collect();
     ghosts.sort_by(|a, b| b.peak_vs_source.total_cmp(&a.peak_vs_source).then(a.i.cmp(&b.i)).then(a.j.cmp(&b.j)));
     let coating = system.settings.coating_override.clone().unwrap_or_else(Coating::broadband);
-    let sensitivity = coating_sensitivity(lens, system, mask, u, &coating)?;
-    Ok(GhostReport {
+    let Some(sensitivity) = coating_sensitivity(lens, system, mask, u, &coating, cancel)? else { return Ok(None) };
+    Ok(Some(GhostReport {
         light_slope: u,
         ghosts,
         total_energy_fraction: total,
         sensitivity_coating: describe(&coating),
         sensitivity,
-    })
+    }))
 }
 
 /// The CSV columns of [`to_csv`], in order.
@@ -240,7 +259,8 @@ struct Measured {
 }
 
 /// Samples every ghost's sprites and masks on an `n` x `n` grid over the union of its sprites.
-fn measure(system: &GhostSystem, mask: &ApertureMask, u: [f64; 2], n: usize) -> Vec<Measured> {
+/// Stops early (the rest left at zero) when `cancel` is set.
+fn measure(system: &GhostSystem, mask: &ApertureMask, u: [f64; 2], n: usize, cancel: &AtomicBool) -> Vec<Measured> {
     let settings = FrameSettings { intensity_threshold: 0.0, min_half_size_mm: 0.0, ..FrameSettings::default() };
     let frame = system.frame(u, &settings);
     let spectrum = &system.settings.spectrum;
@@ -264,7 +284,7 @@ fn measure(system: &GhostSystem, mask: &ApertureMask, u: [f64; 2], n: usize) -> 
     per_ghost
         .iter()
         .map(|sprites| {
-            if sprites.is_empty() || !(source_peak > 0.0 && power_in > 0.0) {
+            if sprites.is_empty() || !(source_peak > 0.0 && power_in > 0.0) || cancel.load(Ordering::Relaxed) {
                 return Measured::default();
             }
             let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
@@ -356,11 +376,12 @@ fn coating_sensitivity(
     mask: &ApertureMask,
     u: [f64; 2],
     coating: &Coating,
-) -> Result<Vec<CoatingSensitivity>, GhostError> {
+    cancel: &AtomicBool,
+) -> Result<Option<Vec<CoatingSensitivity>>, GhostError> {
     let settings = crate::ghost::GhostSettings { coating_override: None, ..system.settings.clone() };
     let total = |lens: &Lens| -> Result<f64, GhostError> {
         let s = GhostSystem::build(lens, &settings)?;
-        Ok(measure(&s, mask, u, SENSITIVITY_GRID).iter().map(|m| m.energy_fraction).sum())
+        Ok(measure(&s, mask, u, SENSITIVITY_GRID, cancel).iter().map(|m| m.energy_fraction).sum())
     };
     let mut bare = lens.clone();
     for s in &mut bare.surfaces {
@@ -369,6 +390,9 @@ fn coating_sensitivity(
     let base = total(&bare)?;
     let mut out = Vec::new();
     for k in lens.reflecting_surfaces() {
+        if cancel.load(Ordering::Relaxed) {
+            return Ok(None);
+        }
         let energy_drop = if base <= 0.0 || *coating == Coating::Uncoated {
             0.0
         } else {
@@ -379,7 +403,7 @@ fn coating_sensitivity(
         out.push(CoatingSensitivity { surface: k, energy_drop });
     }
     out.sort_by(|a, b| b.energy_drop.total_cmp(&a.energy_drop).then(a.surface.cmp(&b.surface)));
-    Ok(out)
+    Ok((!cancel.load(Ordering::Relaxed)).then_some(out))
 }
 
 #[cfg(test)]
@@ -450,8 +474,9 @@ mod tests {
         let lens = builtin_lens("heliar").unwrap();
         let flare = PreparedFlare::new(&lens, &FlareConfig::default()).unwrap();
         let u = light_slopes_for_frame_position(2.0, 1.0);
-        let coarse = measure(&flare.system, flare.mask(), u, 24);
-        let fine = measure(&flare.system, flare.mask(), u, 96);
+        let never = AtomicBool::new(false);
+        let coarse = measure(&flare.system, flare.mask(), u, 24, &never);
+        let fine = measure(&flare.system, flare.mask(), u, 96, &never);
         for (g, (a, b)) in coarse.iter().zip(&fine).enumerate() {
             if b.energy_fraction > 1e-6 {
                 assert!((a.energy_fraction / b.energy_fraction - 1.0).abs() < 0.08, "ghost {g}: {a:?} vs {b:?}");

@@ -186,16 +186,21 @@ impl AtlasLayout {
         Self { pages: if used { page + 1 } else { 0 }, slots }
     }
 
-    /// The atlas pages as RGBA half-float texels (page-major, rows from the top), zero between images.
-    pub fn pages_f16(&self, levels: &[Vec<Vec<&LutEntry>>]) -> Vec<[half::f16; 4]> {
+    /// Atlas page `page` as RGBA half-float texels (rows from the top), zero between images: the atlas is
+    /// written a page at a time (one page is 32 MB; a large LUT's thirteen at once, and their staging copy,
+    /// were most of the app's memory).
+    pub fn page_f16(&self, levels: &[Vec<Vec<&LutEntry>>], page: u32) -> Vec<[half::f16; 4]> {
         let side = ATLAS_PAGE as usize;
-        let mut texels = vec![[half::f16::ZERO; 4]; side * side * self.pages as usize];
+        let mut texels = vec![[half::f16::ZERO; 4]; side * side];
         for (g, ghost) in levels.iter().enumerate() {
             for (k, (m, e)) in ghost.iter().enumerate().flat_map(|(k, l)| l.iter().enumerate().map(move |i| (k, i))) {
-                let Some(&(page, x0, y0)) = self.slots[g][k].get(m) else { continue };
+                let Some(&(on, x0, y0)) = self.slots[g][k].get(m) else { continue };
+                if on != page {
+                    continue;
+                }
                 let (w, h) = ((e.width as usize).min(side - 2), (e.height as usize).min(side - 2));
                 for y in 0..h {
-                    let start = page as usize * side * side + (y0 as usize + y) * side + x0 as usize;
+                    let start = (y0 as usize + y) * side + x0 as usize;
                     texels[start..start + w].copy_from_slice(&e.texels[y * e.width as usize..y * e.width as usize + w]);
                 }
             }
@@ -1117,9 +1122,9 @@ impl LiveLut {
         if m == 0 { Some(entry) } else { self.mips.get(g as usize)?.get(k as usize)?.get(m as usize - 1) }
     }
 
-    /// The atlas pages ([`AtlasLayout::pages_f16`]) of every level.
-    pub fn atlas_pages(&self) -> Vec<[half::f16; 4]> {
-        self.layout.pages_f16(&all_levels(&self.lut, &self.mips))
+    /// Atlas page `page` ([`AtlasLayout::page_f16`]) of every level.
+    pub fn atlas_page(&self, page: u32) -> Vec<[half::f16; 4]> {
+        self.layout.page_f16(&all_levels(&self.lut, &self.mips), page)
     }
 }
 

@@ -284,11 +284,17 @@ fn half_floats(rgba: &[[f32; 4]]) -> Vec<u8> {
     bytemuck::cast_slice(&halves).to_vec()
 }
 
-/// An Rgba16Float 2D array texture of `pages` square pages of `side` texels holding `bytes` (half floats, the
-/// pages in order). wgpu's OpenGL ES backend makes a texture of one layer a plain 2D texture, which the
+/// An Rgba16Float 2D array texture of `pages` square pages of `side` texels holding `bytes` when given (half
+/// floats, the pages in order; else filled later, [`LutAtlas::new`]). wgpu's OpenGL ES backend makes a texture of one layer a plain 2D texture, which the
 /// shaders' array view then cannot read (wgpu issues 1574 and 1614: a one-page LUT drew 60% of its light
 /// wrong): there the texture gets a second layer, left black and never sampled.
-fn atlas_texture(device: &wgpu::Device, queue: &wgpu::Queue, side: u32, pages: u32, bytes: &[u8]) -> wgpu::Texture {
+fn atlas_texture(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    side: u32,
+    pages: u32,
+    bytes: Option<&[u8]>,
+) -> wgpu::Texture {
     let pages = pages.max(1);
     let gl = device.adapter_info().backend == wgpu::Backend::Gl;
     let texture = device.create_texture(&wgpu::TextureDescriptor {
@@ -301,13 +307,56 @@ fn atlas_texture(device: &wgpu::Device, queue: &wgpu::Queue, side: u32, pages: u
         usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
         view_formats: &[],
     });
-    upload_part(queue, &texture, bytes, 8, wgpu::Extent3d { width: side, height: side, depth_or_array_layers: pages });
+    if let Some(bytes) = bytes {
+        let size = wgpu::Extent3d { width: side, height: side, depth_or_array_layers: pages };
+        upload_part(queue, &texture, bytes, 8, size);
+    }
     texture
+}
+
+/// A LUT's atlas texture, made and filled by [`LutAtlas::new`] on any thread (wgpu's device and queue are shared
+/// between threads): a large LUT's atlas (13 pages, 436 MB of half floats) took 0.27 s to pack and 0.21 s to
+/// write on lavapipe, which the app's UI thread no longer pays. [`FlareRenderer::set_lut_atlas`] takes it.
+pub struct LutAtlas {
+    texture: wgpu::Texture,
+    lut_id: u64,
+}
+
+impl LutAtlas {
+    /// Packs `live`'s entries and mip levels into atlas pages and writes them into a new texture, a page at a
+    /// time (each write handed to the queue before the next page is packed: the memory it takes is a page's,
+    /// not the atlas's twice over).
+    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, live: &LiveLut) -> Self {
+        if live.layout.pages == 0 {
+            return Self { texture: empty_atlas(device, queue), lut_id: live.id };
+        }
+        let texture = atlas_texture(device, queue, ATLAS_PAGE, live.layout.pages, None);
+        for page in 0..live.layout.pages {
+            let texels = live.atlas_page(page);
+            queue.write_texture(
+                wgpu::TexelCopyTextureInfo {
+                    texture: &texture,
+                    mip_level: 0,
+                    origin: wgpu::Origin3d { x: 0, y: 0, z: page },
+                    aspect: wgpu::TextureAspect::All,
+                },
+                bytemuck::cast_slice(&texels),
+                wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(ATLAS_PAGE * 8),
+                    rows_per_image: Some(ATLAS_PAGE),
+                },
+                wgpu::Extent3d { width: ATLAS_PAGE, height: ATLAS_PAGE, depth_or_array_layers: 1 },
+            );
+            queue.submit(std::iter::empty());
+        }
+        Self { texture, lut_id: live.id }
+    }
 }
 
 /// The atlas when no LUT is set: one black texel.
 fn empty_atlas(device: &wgpu::Device, queue: &wgpu::Queue) -> wgpu::Texture {
-    atlas_texture(device, queue, 1, 1, &half_floats(&[[0.0; 4]]))
+    atlas_texture(device, queue, 1, 1, Some(&half_floats(&[[0.0; 4]])))
 }
 
 /// A vertex buffer for `capacity` instances of `T`, written by the queue.
@@ -674,16 +723,22 @@ impl FlareRenderer {
 
     /// Uploads a LUT's atlas (`None` removes it).
     pub fn set_lut(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, lut: Option<&LiveLut>) {
-        self.groups = None;
-        self.lut_footprints = lut.map(|l| l.footprints.clone()).unwrap_or_default();
-        match lut.filter(|l| l.layout.pages > 0) {
-            Some(live) => {
-                let texels = live.atlas_pages();
-                self.lut_atlas =
-                    atlas_texture(device, queue, ATLAS_PAGE, live.layout.pages, bytemuck::cast_slice(&texels));
+        match lut {
+            Some(live) => self.set_lut_atlas(live, LutAtlas::new(device, queue, live)),
+            None => {
+                self.groups = None;
+                self.lut_footprints = Vec::new();
+                self.lut_atlas = empty_atlas(device, queue);
             }
-            None => self.lut_atlas = empty_atlas(device, queue),
         }
+    }
+
+    /// [`Self::set_lut`] with its atlas already made ([`LutAtlas::new`], on any thread): what is left is cheap.
+    pub fn set_lut_atlas(&mut self, live: &LiveLut, atlas: LutAtlas) {
+        debug_assert_eq!(atlas.lut_id, live.id, "the atlas of another LUT");
+        self.groups = None;
+        self.lut_footprints = live.footprints.clone();
+        self.lut_atlas = atlas.texture;
     }
 
     /// The bind groups of every pass for the current textures (made when one of them was replaced or the

@@ -11,9 +11,9 @@ use std::sync::Arc;
 
 use flare_core::flare::PreparedFlare;
 use flare_core::optics::Lens;
-use flare_core::report::{GhostReport, ghost_report};
+use flare_core::report::{GhostReport, ghost_report_until};
 
-use super::job::{Job, JobPoll};
+use super::job::{Job, Slot};
 
 /// Which numbers the report was made for: the prepared flare and the light's slopes (as bits).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -45,7 +45,10 @@ pub enum ReportColumn {
 
 /// The Report tab's state.
 pub struct ReportState {
-    job: Option<(ReportKey, Job<Result<GhostReport, String>>)>,
+    /// The report being computed (or waiting for a cancelled one to end) and what it is for.
+    slot: Slot<ReportKey, Result<GhostReport, String>>,
+    /// What a cancelled report was for: not computed again until the optics or the light change.
+    cancelled: Option<ReportKey>,
     /// The latest report and the key it was made for.
     pub shown: Option<(ReportKey, Result<GhostReport, String>)>,
     /// Column and descending.
@@ -54,29 +57,47 @@ pub struct ReportState {
 
 impl Default for ReportState {
     fn default() -> Self {
-        Self { job: None, shown: None, sort: (ReportColumn::Rank, false) }
+        Self { slot: Slot::default(), cancelled: None, shown: None, sort: (ReportColumn::Rank, false) }
     }
 }
 
 impl ReportState {
-    /// Takes a finished report and starts one for `key` when the shown one is for another; true while a
-    /// job runs (the caller repaints).
+    /// Takes a finished report and starts one for `key` when the shown one is for another (one at a time: a
+    /// key that changes while one runs cancels it, and the last key is computed once it has ended); true while
+    /// a job runs (the caller repaints).
     pub fn step(&mut self, key: ReportKey, lens: &Lens, flare: &Arc<PreparedFlare>, u: [f64; 2]) -> bool {
-        if let Some((done_key, job)) = &self.job
-            && let JobPoll::Finished(outcome) = job.poll()
+        if let Some(done) = self.slot.poll()
+            && !done.cancelled
         {
-            self.shown = Some((*done_key, outcome));
-            self.job = None;
+            self.shown = Some((done.key, done.outcome));
         }
         let current = self.shown.as_ref().is_some_and(|(k, _)| *k == key);
-        if self.job.is_none() && !current {
+        if !current && self.cancelled != Some(key) {
             let (lens, flare) = (lens.clone(), flare.clone());
-            let job = Job::spawn("ghost report", move |_, _| {
-                ghost_report(&lens, &flare.system, flare.mask(), u).map_err(|e| e.to_string())
+            self.slot.request(key, move || {
+                Job::spawn("ghost report", move |cancel, _| {
+                    ghost_report_until(&lens, &flare.system, flare.mask(), u, cancel)
+                        .map_err(|e| e.to_string())?
+                        .ok_or_else(|| "cancelled".to_string())
+                })
             });
-            self.job = Some((key, job));
         }
-        self.job.is_some()
+        self.slot.busy()
+    }
+
+    /// The running report's progress (`None` when none runs).
+    pub fn progress(&self) -> Option<(f32, String)> {
+        self.slot.progress()
+    }
+
+    /// True while a report is computed or waits.
+    pub fn busy(&self) -> bool {
+        self.slot.busy()
+    }
+
+    /// Stops the running report; it is not computed again until the optics or the light change.
+    pub fn cancel(&mut self) {
+        self.cancelled = self.slot.cancel();
     }
 
     /// True when the report shown is not the one for `key` (it is being recomputed).

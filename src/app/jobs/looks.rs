@@ -1,5 +1,5 @@
 //! The Looks panel's state: the presets shipped in the binary as rendered thumbnails (the panel and applying a
-//! look: [`super::looks_panel`]).
+//! look: [`crate::app::looks_panel`]).
 //!
 //! # How it works
 //! The first time the panel is shown, a worker ([`super::job::Job`]) renders every shipped preset's thumbnail
@@ -27,31 +27,37 @@ type Rendered = (usize, Result<DisplayImage, String>);
 /// The panel's state.
 #[derive(Default)]
 pub struct Looks {
-    pub(super) job: Option<Job<()>>,
+    job: Option<Job<()>>,
     /// Rendered by the worker, not yet uploaded.
     done: Arc<Mutex<Vec<Rendered>>>,
     /// Per shipped preset: its texture, or why there is none.
     pub thumbnails: Vec<Option<Result<egui::TextureHandle, String>>>,
+    /// The user cancelled the thumbnails: not started again until they ask ([`Self::resume`]).
+    pub cancelled: bool,
 }
 
 impl Looks {
-    /// Starts the worker once.
-    pub(super) fn start(&mut self) {
-        if self.job.is_some() || !self.thumbnails.is_empty() {
+    /// Starts the worker for the thumbnails not made yet, unless one runs, all are made or the user cancelled.
+    pub(crate) fn start(&mut self) {
+        if self.job.is_some() || self.cancelled || self.ready() {
             return;
         }
-        self.thumbnails = vec![None; shipped().len()];
+        if self.thumbnails.is_empty() {
+            self.thumbnails = vec![None; shipped().len()];
+        }
+        let missing: Vec<usize> = (0..self.thumbnails.len()).filter(|&k| self.thumbnails[k].is_none()).collect();
         let done = self.done.clone();
         self.job = Some(Job::spawn_with(Priority::Background, "rendering the looks…", move |cancel, progress| {
             // A pool of its own: a background bake keeps rayon's global pool busy for half a minute, and the
             // thumbnails should not wait for it.
             let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().ok();
-            let total = shipped().len();
-            for (k, preset) in shipped().iter().enumerate() {
+            let total = missing.len();
+            for (n, &k) in missing.iter().enumerate() {
                 if cancel.load(std::sync::atomic::Ordering::Relaxed) {
                     return;
                 }
-                progress(k as f32 / total as f32, format!("rendering the looks: {k}/{total}"));
+                progress(n as f32 / total as f32, format!("rendering the looks: {n}/{total}"));
+                let preset = &shipped()[k];
                 let render =
                     || preset.document().and_then(|d| d.thumbnail(THUMB.0, THUMB.1)).map_err(|e| e.to_string());
                 let image = match &pool {
@@ -65,9 +71,33 @@ impl Looks {
         }));
     }
 
+    /// The worker's progress (`None` when it does not run).
+    pub fn progress(&self) -> Option<(f32, String)> {
+        self.job.as_ref().map(Job::progress)
+    }
+
+    /// True while the worker runs (or a cancelled one has not stopped yet).
+    pub fn busy(&self) -> bool {
+        self.job.is_some()
+    }
+
+    /// Stops the worker after the thumbnail it is drawing (the ones made stay); the panel offers to go on.
+    pub fn cancel(&mut self) {
+        if let Some(job) = &self.job {
+            job.cancel();
+            self.cancelled = true;
+        }
+    }
+
+    /// Goes on with the thumbnails not made (after Cancel).
+    pub fn resume(&mut self) {
+        self.cancelled = false;
+        self.start();
+    }
+
     /// Uploads what the worker finished; true while it still runs.
-    pub(super) fn poll(&mut self, ctx: &egui::Context) -> bool {
-        let finished: Vec<Rendered> = self.done.lock().map(|mut d| std::mem::take(&mut *d)).unwrap_or_default();
+    pub(crate) fn poll(&mut self, ctx: &egui::Context) -> bool {
+        let finished: Vec<Rendered> = self.done.try_lock().map(|mut d| std::mem::take(&mut *d)).unwrap_or_default();
         for (k, image) in finished {
             self.thumbnails[k] = Some(image.map(|img| {
                 let pixels: Vec<egui::Color32> =

@@ -1,43 +1,59 @@
-//! The job board: every piece of work the app runs on a thread (the bake and its automatic policy, File >
-//! Export image, the shot's jobs: finding the light and exporting a sequence, the depth of field, the ray-grid
-//! view, the looks' thumbnails, the ghost report), polled in one place, shown in one status area, under one
-//! priority rule.
+//! The job board: every piece of work the app runs on a thread, each kind in a module of this folder: the bake
+//! ([`bake`]) and its automatic policy ([`autobake`]), File > Export image, the shot's jobs ([`shot`]: finding
+//! the light and exporting a sequence), the depth of field ([`dof`]), the ray-grid view ([`raygrid_view`]), the
+//! looks' thumbnails ([`looks`]) and the ghost report ([`report`]); polled in one place, shown in one status
+//! row, bounded by one rule and run under one priority rule.
 //!
 //! # How it works
 //! [`JobBoard`] owns the jobs and what they said (its fields are private; it is their only writer). Each UI
 //! frame the app calls [`JobBoard::poll`] once with [`Live`], what the live document and optics are: it takes
 //! the progress and outcome of the bake, the export and the shot job, runs the automatic bake's policy (see
-//! [`super::autobake`]: the bake restarts only for the optics it serves, once an edit has stood, and keeps
+//! [`autobake`]: the bake restarts only for the optics it serves, once an edit has stood, and keeps
 //! finished ghosts) and hands the app back [`JobEvent`]s (a LUT to show, a light found, a sentence for the
 //! status line); the board never touches the document or the frame source itself. The depth of field, the
 //! ray-grid view, the looks and the report keep their own step (each needs its own inputs), but live here:
 //! [`JobBoard::busy`] answers for all of them (the app repaints only while something runs) and
-//! [`JobBoard::status_ui`] draws every running job's progress with its Cancel. The priority rule is
-//! [`super::job::Priority`]: what the user waits for (a focus, an export, a sequence, a ray-grid trace, the
-//! report) is interactive; what only improves the view later (the bake, the thumbnails) is background.
+//! [`JobBoard::status_ui`] draws every running job's progress with its Cancel, in one row.
+//!
+//! **Bounded**: the bake, the depth of field, the ray-grid trace, the report and the shot job each sit in a
+//! [`job::Slot`]: at most one job of a kind runs; a new request cancels it (its thread is watched until it
+//! ends, and each checks its cancel flag inside the loops that take time) and waits until it has ended, a
+//! newer request replacing the waiting one. The export and the thumbnails run one at a time by their own rule
+//! (a second export is refused; the thumbnails start once). **Priorities** ([`job::Priority`]): what the user
+//! waits for (a focus, an export, a sequence, a ray-grid trace, the report) is interactive; what only improves
+//! the view later (the bake, the thumbnails) is background.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use eframe::egui;
 use flare_core::flare::PreparedFlare;
-use flare_core::lut::GhostLut;
+use flare_core::lut::blend::LiveLut;
 use flare_core::lut::classify::GhostClass;
 use flare_core::preset::{Document, LutSource};
+use flare_core::render::gpu::LutAtlas;
 use flare_core::shot::plan::ShotPlan;
 use flare_core::shot::sequence::SequenceReport;
 
-use super::autobake::{AutoBake, Baked};
-use super::bake::{self, BakeJob, BakeOutcome, BakePoll};
-use super::dof::DofWork;
-use super::ghost_report::ReportState;
-use super::job::{Job, JobPoll, Stopping};
-use super::looks::Looks;
-use super::raygrid_view::RayGridView;
-use super::shot::{ShotJob, ShotOutcome, light_key};
 use crate::panels::BakeStatus;
+use autobake::{AutoBake, Baked};
+use bake::BakeOutcome;
+use dof::DofWork;
+use job::{Done, Job, JobPoll, Slot};
+use looks::Looks;
+use raygrid_view::RayGridView;
+use report::ReportState;
+use shot::{ShotKind, ShotOutcome, ShotResult, light_key};
 
-mod auto_bake;
+pub mod autobake;
+mod autobake_step;
+pub mod bake;
+pub mod dof;
+pub mod job;
+pub mod looks;
+pub mod raygrid_view;
+pub mod report;
+pub mod shot;
 
 /// What the board needs to know of the live state to poll: the document, the prepared flare, its optics
 /// key, whether the lens is refused, whether a LUT is on screen.
@@ -54,9 +70,18 @@ pub enum JobEvent {
     /// Says this in the status line (replacing what it said).
     Say(String),
     /// Put this LUT on screen: the background bake's (or the cache's) LUT ghosts for the live optics.
-    ShowLut(Arc<GhostLut>),
+    ShowLut(Arc<LiveLut>, Option<LutAtlas>),
     /// The light found in the plates for the live document.
     LightFound(ShotPlan),
+}
+
+/// A LUT prepared for the view on a thread: the LUT, its atlas on the app's device, its classification (when
+/// this session baked it) and where it came from.
+struct Landing {
+    live: Arc<LiveLut>,
+    atlas: Option<LutAtlas>,
+    classes: Option<Vec<GhostClass>>,
+    source: String,
 }
 
 /// An image export on its thread: the file it writes and the job.
@@ -64,15 +89,21 @@ type ExportJob = (PathBuf, Job<Result<(), String>>);
 
 /// The job board (see the module documentation).
 pub struct JobBoard {
-    bake: Option<BakeJob>,
-    /// Bakes cancelled because the user left their optics, until their threads end.
-    stopping_bakes: Stopping<BakeOutcome>,
+    /// The bake running (or waiting for a cancelled one to stop) and the cache key of the optics it is for.
+    bake: Slot<u64, BakeOutcome>,
     bake_status: BakeStatus,
     /// The classification of the LUT on screen, when this session baked it.
     classes: Option<Vec<GhostClass>>,
     autobake: AutoBake,
+    /// Reading the live optics' LUT from the disk cache and preparing it for the frame, on a thread.
+    lookup: Slot<u64, autobake::Found>,
+    /// A LUT about to be shown, its atlas texture made and filled on a thread (see [`LutAtlas`]).
+    landing: Slot<u64, Landing>,
+    /// The app's wgpu device and queue, for the atlases (`None` without a GPU: the tests' harness).
+    device: Option<(wgpu::Device, wgpu::Queue)>,
     export: Option<ExportJob>,
-    shot: Option<ShotJob>,
+    /// Finding the light or exporting a sequence: one shot job at a time.
+    shot: Slot<ShotKind, ShotResult>,
     shot_status: String,
     /// What the light found in the plates was (or is being) found for.
     light_key: Option<u64>,
@@ -86,13 +117,15 @@ pub struct JobBoard {
 impl Default for JobBoard {
     fn default() -> Self {
         Self {
-            bake: None,
-            stopping_bakes: Stopping::default(),
+            bake: Slot::default(),
             bake_status: BakeStatus::Idle,
             classes: None,
             autobake: AutoBake::default(),
+            lookup: Slot::default(),
+            landing: Slot::default(),
+            device: None,
             export: None,
-            shot: None,
+            shot: Slot::default(),
             shot_status: String::new(),
             light_key: None,
             last_export: None,
@@ -108,8 +141,8 @@ impl JobBoard {
     /// Polls every job with a thread of its own and runs the automatic bake (see the module documentation).
     pub fn poll(&mut self, live: &Live) -> Vec<JobEvent> {
         let mut events = Vec::new();
-        self.stopping_bakes.prune();
         self.poll_bake(live, &mut events);
+        self.poll_landing(live, &mut events);
         self.poll_export(&mut events);
         self.poll_shot(&mut events);
         self.auto_bake_step(live, &mut events);
@@ -118,12 +151,15 @@ impl JobBoard {
 
     /// True while any job runs (the app then repaints to show its progress).
     pub fn busy(&self) -> bool {
-        self.bake.is_some()
+        self.bake.busy()
+            || self.lookup.busy()
+            || self.landing.busy()
             || self.export.is_some()
-            || self.shot.is_some()
+            || self.shot.busy()
             || self.dof.busy()
             || self.raygrid.busy()
-            || self.looks.job.is_some()
+            || self.looks.busy()
+            || self.report.busy()
     }
 
     /// Every job in the status bar's one row: what it does (truncated to a fixed width, the whole text on
@@ -131,50 +167,64 @@ impl JobBoard {
     /// never grows); `lut_shown`: LUT ghosts are on screen (a bake then says they stay until it lands, not that
     /// the paraxial flare stands in).
     pub fn status_ui(&mut self, ui: &mut egui::Ui, lut_shown: bool) {
-        if !self.dof.status.is_empty() {
-            status_label(ui, &self.dof.status, 220.0);
-        }
-        // The ray-grid view: what it shows or is tracing, with Cancel.
-        if !self.raygrid.status.is_empty() {
-            if let Some((fraction, text)) = self.raygrid.progress() {
-                ui.add(egui::ProgressBar::new(fraction).text(text).desired_width(240.0));
-                if ui.button("Cancel trace").clicked() {
-                    self.raygrid.cancel();
-                }
-            } else {
-                status_label(ui, &self.raygrid.status, 260.0);
-            }
-        }
-        // The bake (started by itself or from the Blend panel).
-        if let (Some(job), BakeStatus::Running { fraction, text }) = (&self.bake, &self.bake_status) {
+        // The bake first: it runs longest, so the items after it move least.
+        if let (true, BakeStatus::Running { fraction, text }) = (self.bake.active(), &self.bake_status) {
             let meanwhile = if lut_shown { "the LUT ghosts shown" } else { "the paraxial flare" };
-            status_label(ui, &format!("baking LUT ghosts, {meanwhile} until then: {text}"), 260.0);
-            ui.add(egui::ProgressBar::new(*fraction).desired_width(100.0));
-            if ui.button("Cancel bake").clicked() {
-                job.cancel();
+            let text = format!("baking LUT ghosts, {meanwhile} until then: {text}");
+            if job_cell(ui, &text, Some(*fraction), "Cancel bake") {
+                self.cancel_bake();
             }
         }
         if let Some((path, job)) = &self.export {
             let (fraction, text) = job.progress();
-            ui.add(egui::ProgressBar::new(fraction).text(text).desired_width(160.0));
-            status_label(ui, &format!("exporting {}", path.display()), 200.0);
-            if ui.button("Cancel export").clicked() {
+            if job_cell(ui, &format!("exporting {}: {text}", path.display()), Some(fraction), "Cancel export") {
                 job.cancel();
             }
         }
         // A shot job, whichever panel is open.
-        self.shot_progress_ui(ui);
+        if let Some((fraction, _)) = self.shot.progress()
+            && job_cell(ui, &self.shot_status, Some(fraction), "Cancel")
+        {
+            self.cancel_shot();
+        }
+        if let Some((fraction, text)) = self.looks.progress()
+            && job_cell(ui, &text, Some(fraction), "Cancel looks")
+        {
+            self.looks.cancel();
+        }
+        if let Some((fraction, text)) = self.report.progress()
+            && job_cell(ui, &format!("ghost report: {text}"), Some(fraction), "Cancel report")
+        {
+            self.report.cancel();
+        }
+        // The ray-grid view and the depth of field: what they show, or their work with Cancel, in a cell of the
+        // same width either way (a job that ends moves nothing after it).
+        match self.raygrid.progress() {
+            Some((fraction, text)) => {
+                if job_cell(ui, &text, Some(fraction), "Cancel trace") {
+                    self.raygrid.cancel();
+                }
+            }
+            None => status_cell(ui, &self.raygrid.status),
+        }
+        match self.dof.progress() {
+            Some((fraction, text)) => {
+                if job_cell(ui, &format!("depth of field: {text}"), Some(fraction), "Cancel defocus") {
+                    self.dof.cancel();
+                }
+            }
+            None => status_cell(ui, &self.dof.status),
+        }
     }
 
     /// The shot job's progress and Cancel, or what the last one said (the status area and the Shot panel).
     pub fn shot_progress_ui(&mut self, ui: &mut egui::Ui) {
-        if let Some(job) = &self.shot {
+        if let Some((fraction, _)) = self.shot.progress() {
             ui.horizontal(|ui| {
-                let (fraction, _) = job.job.progress();
                 ui.add(egui::ProgressBar::new(fraction).text(self.shot_status.clone()).desired_width(240.0))
                     .on_hover_text(self.shot_status.clone());
                 if ui.button("Cancel").clicked() {
-                    job.job.cancel();
+                    self.cancel_shot();
                 }
             });
         }
@@ -192,7 +242,7 @@ impl JobBoard {
         self.classes.as_deref()
     }
 
-    /// The automatic bake's state and settings (see [`super::autobake`]).
+    /// The automatic bake's state and settings (see [`autobake`]).
     pub fn autobake(&self) -> &AutoBake {
         &self.autobake
     }
@@ -213,7 +263,7 @@ impl JobBoard {
 
     /// The Bake button: a bake of the live optics now (the automatic bake does the same by itself).
     pub fn start_bake(&mut self, live: &Live) {
-        if self.bake.is_some() {
+        if self.bake.active() {
             return;
         }
         let (Some(key), Some(flare)) = (self.live_key(live), live.flare) else { return };
@@ -222,25 +272,33 @@ impl JobBoard {
 
     /// Bakes cancelled for optics the user left whose threads have not ended yet.
     pub fn stopping_bakes(&self) -> usize {
-        self.stopping_bakes.running()
+        self.bake.stopping()
     }
 
     /// Cancels the running bake when it is for other optics than `key` (an undo to a lens whose LUT is at hand):
     /// no bake for optics the user left goes on in the background; its thread is watched until it ends.
     fn stop_bake_unless_for(&mut self, key: u64) {
-        if self.autobake.baking != Some(key)
-            && let Some(job) = self.bake.take()
-        {
-            self.stopping_bakes.stop(job);
-            self.autobake.baking = None;
+        if self.bake.active() && !self.bakes(key) {
+            self.bake.cancel();
             self.bake_status = BakeStatus::Idle;
         }
     }
 
-    pub fn cancel_bake(&self) {
-        if let Some(job) = &self.bake {
-            job.cancel();
+    /// Cancel (the Blend panel, the status bar): the running bake stops at its next check and is not started
+    /// again for these optics; a bake waiting for a cancelled one is dropped.
+    pub fn cancel_bake(&mut self) {
+        if self.bake.running_for().is_some() {
+            self.bake.ask_to_stop();
+        } else if let Some(key) = self.bake.waiting_for().copied() {
+            self.bake.cancel();
+            self.autobake.declined = Some(key);
+            self.bake_status = BakeStatus::Failed("bake stopped: cancelled".into());
         }
+    }
+
+    /// True when the bake running or waiting is for the optics of cache key `key`.
+    fn bakes(&self, key: u64) -> bool {
+        self.bake.running_for() == Some(&key) || self.bake.waiting_for() == Some(&key)
     }
 
     /// The LUT on screen was dropped (the optics changed under a ray-traced LUT): what to say.
@@ -258,12 +316,12 @@ impl JobBoard {
     }
 
     fn poll_bake(&mut self, live: &Live, events: &mut Vec<JobEvent>) {
-        let Some(job) = &self.bake else { return };
-        match job.poll() {
-            BakePoll::Running(fraction, text) => self.bake_status = BakeStatus::Running { fraction, text },
-            BakePoll::Finished(outcome) => {
-                self.bake = None;
-                self.finish_bake(outcome, live, events);
+        match self.bake.poll() {
+            Some(done) => self.finish_bake(done.key, done.outcome, live, events),
+            None => {
+                if let Some((fraction, text)) = self.bake.progress() {
+                    self.bake_status = BakeStatus::Running { fraction, text };
+                }
             }
         }
     }
@@ -277,11 +335,13 @@ impl JobBoard {
             self.bake_status = BakeStatus::Failed(format!("no LUT ghosts: {why}; the paraxial flare is shown"));
             return;
         }
+        self.autobake.declined = None;
+        if self.bakes(key) {
+            return;
+        }
         let previous = self.autobake.latest();
         let (settings, cache) = (self.autobake.settings.clone(), self.autobake.cache.clone());
-        self.bake = Some(bake::start_bake(flare, previous, settings, cache));
-        self.autobake.baking = Some(key);
-        self.autobake.declined = None;
+        self.bake.request(key, move || bake::start_bake(flare, previous, settings, cache));
         self.autobake.bakes_started += 1;
         self.bake_status = BakeStatus::Running { fraction: 0.0, text: bake::CLASSIFYING.into() };
     }
@@ -294,45 +354,71 @@ impl JobBoard {
 
     /// A finished bake (already in the disk cache): kept in memory, and shown if its optics are still the
     /// live ones.
-    fn finish_bake(&mut self, outcome: BakeOutcome, live: &Live, events: &mut Vec<JobEvent>) {
-        let key = self.autobake.baking.take();
+    fn finish_bake(&mut self, key: u64, outcome: BakeOutcome, live: &Live, events: &mut Vec<JobEvent>) {
         match outcome {
             Ok(done) => {
                 if let Err(e) = done.cached {
                     events.push(JobEvent::Say(e));
                 }
-                let ghosts = done.lut.ghosts.len();
+                let ghosts = done.lut.lut.ghosts.len();
                 let source = format!("baked {}", done.device);
                 let baked = (Arc::new(done.lut), Some(done.classes));
-                let Some(key) = key else { return };
                 self.autobake.remember(key, baked.clone());
                 if Some(key) == self.live_key(live) {
-                    self.show_baked(key, baked, &source, events);
+                    self.show_baked(key, baked, &source);
                 } else {
                     self.bake_status = BakeStatus::Done(format!("baked {ghosts} ghosts for earlier optics (kept)"));
                 }
             }
             Err(e) => {
                 if e.contains("cancelled") {
-                    self.autobake.declined = key;
+                    self.autobake.declined = Some(key);
                 }
                 self.bake_status = BakeStatus::Failed(format!("bake stopped: {e}"));
             }
         }
     }
 
-    /// Hands a baked LUT to the screen and says that it replaces the paraxial ghosts.
-    fn show_baked(&mut self, key: u64, (lut, classes): Baked, source: &str, events: &mut Vec<JobEvent>) {
-        let (ghosts, entries) = (lut.ghosts.len(), lut.entry_count());
-        self.classes = classes;
+    /// Hands a baked LUT to the screen: its atlas is made on a thread first ([`Self::poll_landing`] shows it and
+    /// says that it replaces the paraxial ghosts).
+    fn show_baked(&mut self, key: u64, (live, classes): Baked, source: &str) {
         self.autobake.shown = Some(key);
+        let device = self.device.clone();
+        let source = source.to_owned();
+        self.landing.request(key, move || {
+            Job::spawn("preparing the LUT ghosts for the view", move |_, _| {
+                let atlas = device.map(|(device, queue)| LutAtlas::new(&device, &queue, &live));
+                Landing { live, atlas, classes, source }
+            })
+        });
+    }
+
+    /// True while the LUT of `key` is being prepared for the view.
+    fn landing(&self, key: u64) -> bool {
+        self.landing.running_for() == Some(&key) || self.landing.waiting_for() == Some(&key)
+    }
+
+    /// A LUT whose atlas is ready: shown if it is still for the live optics, with what the status says.
+    fn poll_landing(&mut self, live: &Live, events: &mut Vec<JobEvent>) {
+        let Some(done) = self.landing.poll() else { return };
+        if Some(done.key) != self.live_key(live) || self.autobake.shown != Some(done.key) {
+            return;
+        }
+        let Landing { live, atlas, classes, source } = done.outcome;
+        let (ghosts, entries) = (live.lut.ghosts.len(), live.lut.entry_count());
+        self.classes = classes;
         self.bake_status =
             BakeStatus::Done(format!("LUT ghosts on: {ghosts} non-linear ghosts, {entries} entries ({source})"));
-        events.push(JobEvent::ShowLut(lut));
+        events.push(JobEvent::ShowLut(live, atlas));
         // The look changes under the artist: said in the status bar, replacing what it said.
         events.push(JobEvent::Say(format!(
             "LUT ghosts ({source}) now replace the paraxial flare's {ghosts} non-linear ghosts"
         )));
+    }
+
+    /// The app's wgpu device and queue, on which LUT atlases are made.
+    pub fn set_device(&mut self, device: Option<(wgpu::Device, wgpu::Queue)>) {
+        self.device = device;
     }
 
     /// Whether the automatic bake may serve `doc` (it named no LUT file).
@@ -372,18 +458,21 @@ impl JobBoard {
 
     /// True while a sequence exports.
     pub fn exporting_sequence(&self) -> bool {
-        self.shot.as_ref().is_some_and(|j| j.exporting)
+        self.shot.running_for() == Some(&ShotKind::Export)
     }
 
-    /// True while a shot job (finding the light or exporting) runs.
+    /// True while a shot job (finding the light or exporting) runs or waits.
     pub fn shot_running(&self) -> bool {
-        self.shot.is_some()
+        self.shot.active()
     }
 
-    /// Cancels the running shot job, if any.
-    pub fn cancel_shot(&self) {
-        if let Some(job) = &self.shot {
-            job.job.cancel();
+    /// Cancels the running shot job, if any: it stops at its next plate or frame and says what it did (an
+    /// export, the frames it wrote); a request waiting behind it is dropped.
+    pub fn cancel_shot(&mut self) {
+        if self.shot.running_for().is_some() {
+            self.shot.ask_to_stop();
+        } else {
+            self.shot.cancel();
         }
     }
 
@@ -399,14 +488,12 @@ impl JobBoard {
 
     /// Whether the light found in the plates was found for `doc` as it is (and no shot job replaces it).
     pub fn light_found_for(&self, doc: &Document) -> bool {
-        doc.auto_light.is_some() && self.light_key == Some(light_key(doc)) && self.shot.is_none()
+        doc.auto_light.is_some() && self.light_key == Some(light_key(doc)) && !self.shot.active()
     }
 
-    /// Starts a sequence export (replacing a search for the light).
-    pub fn start_sequence(&mut self, job: ShotJob) {
-        if let Some(old) = self.shot.replace(job) {
-            old.job.cancel();
-        }
+    /// Starts a sequence export (replacing a search for the light, which is cancelled).
+    pub fn start_sequence(&mut self, job: Job<ShotResult>) {
+        self.shot.replace(ShotKind::Export, job);
         self.shot_status = "exporting…".into();
     }
 
@@ -421,8 +508,8 @@ impl JobBoard {
         let wanted = doc.auto_light.is_some() && doc.background.is_some();
         if !wanted {
             self.light_key = None;
-            if self.shot.as_ref().is_some_and(|j| !j.exporting) {
-                self.shot = None;
+            if !self.exporting_sequence() {
+                self.shot.cancel();
             }
             return false;
         }
@@ -431,21 +518,21 @@ impl JobBoard {
             return true;
         }
         let Some(flare) = flare else { return true };
-        if let Some(job) = self.shot.take() {
-            job.job.cancel();
-        }
         self.light_key = Some(key);
-        self.shot = Some(ShotJob::find_light(resolved(), flare.clone()));
+        let (doc, flare) = (resolved(), flare.clone());
+        self.shot.request(ShotKind::Light(key), move || shot::find_light(doc, flare));
         true
     }
 
     fn poll_shot(&mut self, events: &mut Vec<JobEvent>) {
-        let Some(job) = &self.shot else { return };
-        match job.job.poll() {
-            JobPoll::Running(_, text) => self.shot_status = text,
-            JobPoll::Finished(outcome) => {
-                let cancelled = job.job.cancelled();
-                self.shot = None;
+        let Some(Done { outcome, cancelled, .. }) = self.shot.poll() else {
+            if let Some((_, text)) = self.shot.progress() {
+                self.shot_status = text;
+            }
+            return;
+        };
+        {
+            {
                 match outcome {
                     Ok(ShotOutcome::Light { plan, key }) => {
                         let found = plan.frames.iter().filter(|f| f.visibility > 0.0).count();
@@ -487,7 +574,7 @@ impl JobBoard {
 
     // The parts with their own step.
 
-    /// The depth of field's work (see [`super::dof`]).
+    /// The depth of field's work (see [`dof`]).
     pub fn dof(&self) -> &DofWork {
         &self.dof
     }
@@ -496,7 +583,7 @@ impl JobBoard {
         &mut self.dof
     }
 
-    /// The ray-grid view (see [`super::raygrid_view`]).
+    /// The ray-grid view (see [`raygrid_view`]).
     pub fn raygrid(&self) -> &RayGridView {
         &self.raygrid
     }
@@ -505,7 +592,7 @@ impl JobBoard {
         &mut self.raygrid
     }
 
-    /// The looks' thumbnails (see [`super::looks`]).
+    /// The looks' thumbnails (see [`looks`]).
     pub fn looks(&self) -> &Looks {
         &self.looks
     }
@@ -514,13 +601,44 @@ impl JobBoard {
         &mut self.looks
     }
 
-    /// The ghost report (see [`super::ghost_report`]).
+    /// The ghost report (see [`report`]).
     pub fn report(&self) -> &ReportState {
         &self.report
     }
 
     pub fn report_mut(&mut self) -> &mut ReportState {
         &mut self.report
+    }
+}
+
+/// The width of a job's cell in the status bar's row (points): its text, progress bar and Cancel.
+const JOB_CELL: f32 = 400.0;
+
+/// One job in the status bar's row, in a cell of fixed width: what it does (one line, cut, the whole text on
+/// hover), and while it runs (`fraction`) its progress and its Cancel button (labelled `cancel`); true when
+/// Cancel was clicked.
+fn job_cell(ui: &mut egui::Ui, text: &str, fraction: Option<f32>, cancel: &str) -> bool {
+    let height = ui.spacing().interact_size.y;
+    let layout = egui::Layout::left_to_right(egui::Align::Center);
+    ui.allocate_ui_with_layout(egui::vec2(JOB_CELL, height), layout, |ui| {
+        ui.set_min_width(JOB_CELL);
+        ui.set_max_width(JOB_CELL);
+        let Some(fraction) = fraction else {
+            status_label(ui, text, JOB_CELL);
+            return false;
+        };
+        status_label(ui, text, JOB_CELL - 200.0);
+        ui.add(egui::ProgressBar::new(fraction.clamp(0.0, 1.0)).desired_width(80.0));
+        ui.button(cancel).clicked()
+    })
+    .inner
+}
+
+/// What a part with nothing running says (the ray-grid view, the depth of field), in a job's cell (nothing when
+/// it says nothing).
+fn status_cell(ui: &mut egui::Ui, text: &str) {
+    if !text.is_empty() {
+        job_cell(ui, text, None, "");
     }
 }
 

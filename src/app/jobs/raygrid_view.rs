@@ -17,7 +17,8 @@
 //! its LUT (a bake that finished) shows the same trace again. Cancel stops the trace of this frame (the next
 //! frame is traced again): the CPU trace stops at its next ghost and wavelength
 //! ([`RayGridRequest::cancellable`]), and a trace cancelled or replaced (a new frame while one runs) is watched
-//! until its thread ends ([`RayGridView::stopping`]), so traces never pile up behind the view. Exports and
+//! until its thread ends; the next trace starts only then ([`super::job::Slot`]: one trace at a time, the
+//! latest request waiting), so traces never pile up behind the view. Exports and
 //! commands draw the document's look, not this view.
 
 use std::sync::atomic::Ordering;
@@ -30,8 +31,8 @@ use flare_core::raytrace::{Grid, RayGridRequest, View, Window};
 use flare_core::render::gpu::GpuContext;
 use flare_core::render::raygrid::{GpuRayGrid, GpuRayGridError, SUPERSAMPLE};
 
-use super::derived::Derived;
-use super::job::{Job, JobPoll, Stopping};
+use super::job::{Job, Slot};
+use crate::app::derived::Derived;
 use crate::viewport::ViewportResources;
 
 /// The grids the view offers (cells across each ghost's entrance region).
@@ -45,9 +46,6 @@ struct TraceDevice {
 
 /// The hardware GPU the traces use, decided on the first trace: `Err` says why there is none.
 type DeviceCell = Arc<OnceLock<Result<TraceDevice, String>>>;
-
-/// A trace on its thread: what it makes, or why it stopped.
-type TraceJob = Job<Result<Traced, String>>;
 
 /// A traced frame: its display image and what it took.
 pub struct Traced {
@@ -71,24 +69,22 @@ struct TraceKey {
 pub struct RayGridView {
     /// Cells across each ghost's grid; `None`: the view draws the document's look.
     pub grid: Option<usize>,
-    /// The trace running and what it is for.
-    job: Option<(TraceKey, TraceJob)>,
+    /// The trace running (or waiting for a cancelled one to stop) and what it is for.
+    slot: Slot<TraceKey, Result<Traced, String>>,
     /// The latest traced frame: what it was traced for, the generation of the frame it is shown as, and what
     /// it made.
     shown: Option<(TraceKey, u64, Traced)>,
     /// What a cancelled trace was for: not traced again.
     cancelled: Option<TraceKey>,
-    /// Traces cancelled and not yet stopped (each stops at its next ghost).
-    stopping: Stopping<Result<Traced, String>>,
     /// What the status bar says.
     pub status: String,
     device: DeviceCell,
 }
 
 impl RayGridView {
-    /// True while a trace runs.
+    /// True while a trace runs, waits, or a cancelled one is still stopping.
     pub fn busy(&self) -> bool {
-        self.job.is_some()
+        self.slot.busy()
     }
 
     /// The display image shown as the frame of `generation`, when it was traced at the grid chosen.
@@ -98,18 +94,17 @@ impl RayGridView {
 
     /// Cancelled traces whose threads have not ended yet.
     pub fn stopping(&self) -> usize {
-        self.stopping.running()
+        self.slot.stopping()
     }
 
     /// The running trace's progress.
     pub fn progress(&self) -> Option<(f32, String)> {
-        self.job.as_ref().map(|(_, job)| job.progress())
+        self.slot.progress()
     }
 
     /// Stops the running trace; what it was for is not traced again.
     pub fn cancel(&mut self) {
-        if let Some((key, job)) = self.job.take() {
-            self.stopping.stop(job);
+        if let Some(key) = self.slot.cancel() {
             self.cancelled = Some(key);
             self.status = "ray grid: cancelled (the paraxial frame is shown; the next frame is traced)".into();
         }
@@ -117,11 +112,9 @@ impl RayGridView {
 
     /// One UI frame's step (see the module documentation); `gpu` is the viewport's device, `None` in tests.
     pub fn step(&mut self, derived: &Derived, gpu: Option<&RenderState>) {
-        self.stopping.prune();
+        let finished = self.slot.poll();
         let Some(grid) = self.grid else {
-            if let Some((_, job)) = self.job.take() {
-                self.stopping.stop(job);
-            }
+            self.slot.cancel();
             if self.shown.take().is_some()
                 && let Some(rs) = gpu
             {
@@ -143,24 +136,19 @@ impl RayGridView {
             grid,
         };
         // A finished trace: kept if it is still what the view shows, dropped otherwise.
-        if let Some((for_key, job)) = &self.job
-            && let JobPoll::Finished(outcome) = job.poll()
-        {
-            match outcome {
-                Ok(traced) if *for_key == key => {
+        if let Some(done) = finished {
+            match done.outcome {
+                Ok(traced) if done.key == key => {
                     self.status = traced.summary.clone();
                     self.shown = Some((key.clone(), 0, traced));
                 }
                 Ok(_) => {}
                 Err(e) => self.status = format!("ray grid {grid}: {e}"),
             }
-            self.job = None;
         }
         // Drafts while the user drags; the trace waits for the full frame.
         if derived.draft().is_some() {
-            if let Some((_, job)) = self.job.take() {
-                self.stopping.stop(job);
-            }
+            self.slot.cancel();
             self.status = format!("ray grid {grid}: paraxial drafts while dragging; traced when input stops");
             return;
         }
@@ -180,21 +168,17 @@ impl RayGridView {
         if self.cancelled.as_ref() == Some(&key) {
             return;
         }
-        match self.job.take() {
-            Some((for_key, job)) if for_key == key => {
-                self.job = Some((for_key, job));
-                return;
-            }
-            Some((_, job)) => self.stopping.stop(job),
-            None => {}
+        if self.slot.running_for() == Some(&key) {
+            return;
         }
         let plate = derived.plate().clone();
         let device = self.device.clone();
-        let job = Job::spawn(&format!("ray grid {grid}: tracing every ghost…"), move |cancel, report| {
-            trace_frame(&flare, &frame, plate.as_deref(), grid, &device, cancel, report)
+        self.slot.request(key, move || {
+            Job::spawn(&format!("ray grid {grid}: tracing every ghost…"), move |cancel, report| {
+                trace_frame(&flare, &frame, plate.as_deref(), grid, &device, cancel, report)
+            })
         });
         self.status = format!("ray grid {grid}: tracing every ghost (the paraxial frame until then)…");
-        self.job = Some((key, job));
     }
 }
 

@@ -1,7 +1,7 @@
 //! LUT ghosts without a click: when the lens, its stop, coatings or spectrum change, the app looks for their
 //! LUT in memory, then in the on-disk cache ([`flare_core::lut::cache`]), and bakes it on a thread when
 //! neither has it, showing the paraxial flare (and saying so) until it is ready. This module holds the state;
-//! the job board ([`super::jobs`]) runs its step.
+//! the job board ([`super`]) runs its step.
 //!
 //! # How it works
 //! Each frame the job board's poll computes the cache key of the prepared flare (once per optics
@@ -9,7 +9,8 @@
 //! ([`MEMORY`] of them, so an undo to a lens baked in this session is instant), a checked cache file (a
 //! damaged one is removed, reported, and baked again), or a new bake. A bake for older optics is cancelled
 //! when the optics change, an undo to a lens whose LUT is at hand included (no bake for optics the user left
-//! runs on in the background; its thread is watched until it ends, `JobBoard::stopping_bakes`); a bake the user
+//! runs on in the background; its thread is watched until it ends, and the next bake starts only then:
+//! [`super::job::Slot`]); a bake the user
 //! cancelled is not started again until they change. A finished
 //! bake is stored on disk and in memory, and shown if its optics are still the live ones. A new bake starts only
 //! once the optics have stood for [`SETTLE`] (a drag through many values bakes the last one), and takes the
@@ -24,8 +25,8 @@
 use std::sync::Arc;
 
 use flare_core::flare::PreparedFlare;
-use flare_core::lut::GhostLut;
 use flare_core::lut::bake::BakeSettings;
+use flare_core::lut::blend::LiveLut;
 use flare_core::lut::cache::LutCache;
 use flare_core::lut::classify::GhostClass;
 
@@ -33,7 +34,16 @@ use flare_core::lut::classify::GhostClass;
 pub const MEMORY: usize = 6;
 
 /// A baked LUT and, when this session baked it, the classification that chose its ghosts.
-pub type Baked = (Arc<GhostLut>, Option<Vec<GhostClass>>);
+/// The LUT comes prepared for the frame ([`LiveLut::new`], done on the job's thread).
+pub type Baked = (Arc<LiveLut>, Option<Vec<GhostClass>>);
+
+/// What the disk cache held for the live optics, read and prepared on a thread.
+pub enum Found {
+    Hit(Arc<LiveLut>),
+    /// A damaged or stale file (removed by the cache), and why.
+    Rejected(String),
+    Miss,
+}
 
 /// The automatic bake's state.
 pub struct AutoBake {
@@ -44,8 +54,6 @@ pub struct AutoBake {
     /// The on-disk cache (`None`: no home folder; memory only).
     pub cache: Option<LutCache>,
     memory: Vec<(u64, Baked)>,
-    /// The key of the running bake.
-    pub baking: Option<u64>,
     /// The key of the LUT on screen.
     pub shown: Option<u64>,
     /// A key whose bake the user cancelled.
@@ -76,7 +84,6 @@ impl Default for AutoBake {
             settings: BakeSettings::default(),
             cache: LutCache::user(),
             memory: Vec::new(),
-            baking: None,
             shown: None,
             declined: None,
             looked_up: None,
@@ -114,7 +121,7 @@ impl AutoBake {
     }
 
     /// The latest LUT in memory: it lends a new bake the ghosts whose images cannot have changed.
-    pub(super) fn latest(&self) -> Option<GhostLut> {
-        self.memory.last().map(|(_, (lut, _))| (**lut).clone())
+    pub(super) fn latest(&self) -> Option<Arc<LiveLut>> {
+        self.memory.last().map(|(_, (live, _))| live.clone())
     }
 }
