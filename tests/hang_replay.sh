@@ -39,6 +39,8 @@ inputs="$work/inputs.txt"
 note() { echo "$(date +%s.%N) $1" >>"$inputs"; }
 act() { note "$1"; shift; xdotool "$@"; }
 sleep 10
+# Xvfb has no window manager: the window gets the keyboard only when given it.
+xdotool search --name FlareLab windowfocus 2>/dev/null
 act "ghosts-combo" mousemove 52 856 click 1; sleep 0.7
 act "ray-grid-32" mousemove 75 784 click 1; sleep 3
 act "exposure-press" mousemove 76 833 mousedown 1
