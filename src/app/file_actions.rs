@@ -105,7 +105,10 @@ impl FlareLabApp {
             FileUse::ApertureImage => self.use_aperture_image(path),
             FileUse::DirtImage => self.use_dirt_image(path),
             FileUse::ExportSequence => self.export_sequence_named(path),
-            FileUse::ExportReport => self.export_report_to(path),
+            FileUse::ExportReport => {
+                let said = super::ghost_report_panel::export_report(self.jobs.report(), path);
+                self.session.say(said);
+            }
             FileUse::GlassCatalogue => self.add_glass_catalogue(path),
             FileUse::DepthMap => self.set_depth_map(path),
         }

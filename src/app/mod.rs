@@ -322,6 +322,11 @@ impl FlareLabApp {
         &mut self.files
     }
 
+    /// Applies shipped look `k` as the Looks panel does (one undo step).
+    pub fn apply_look(&mut self, k: usize) {
+        looks_panel::apply_look(&mut self.session, k);
+    }
+
     /// The job board (see [`jobs`]), to read.
     pub fn jobs(&self) -> &JobBoard {
         &self.jobs
@@ -492,8 +497,20 @@ impl FlareLabApp {
     fn panel_ui(&mut self, ui: &mut egui::Ui, actions: &mut Vec<Action>) {
         match self.ui.tab {
             Tab::Shot => return panel_scroll().show(ui, |ui| self.shot_panel_ui(ui)).inner,
-            Tab::Looks => return panel_scroll().show(ui, |ui| self.looks_ui(ui)).inner,
-            Tab::Report => return panel_scroll().show(ui, |ui| self.report_ui(ui)).inner,
+            Tab::Looks => {
+                let (looks, session) = (self.jobs.looks_mut(), &mut self.session);
+                return panel_scroll().show(ui, |ui| looks_panel::looks_ui(ui, looks, session)).inner;
+            }
+            Tab::Report => {
+                let (flare, light) = (self.derived.flare().clone(), self.derived.light_deg(self.session.doc()));
+                let (state, session) = (self.jobs.report_mut(), &mut self.session);
+                let pick =
+                    panel_scroll().show(ui, |ui| ghost_report_panel::report_ui(ui, state, session, flare, light)).inner;
+                if let Some(use_) = pick {
+                    self.pick_file(use_);
+                }
+                return;
+            }
             Tab::Lens | Tab::Aperture | Tab::Coatings | Tab::Ghosts | Tab::Blend => {}
         }
         let ctx = PanelContext {
