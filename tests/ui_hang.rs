@@ -84,9 +84,12 @@ fn the_hang_replayed_every_frame_answers_and_every_cancel_ends_its_threads() {
     step(&mut h, "Ctrl+Z");
     step(&mut h, "Ctrl+Z");
     assert!(h.state().message().is_some_and(|m| m.starts_with("undid")), "{:?}", h.state().message());
-    // Cancel trace, three times (as the user did: each click stops the trace of the frame shown).
+    // Cancel trace, three times (as the user did: each click stops the trace of the frame shown; a frame that
+    // changes after it, a defocus landing, is traced again and can be cancelled again).
+    let mut cancels = 0;
     for _ in 0..3 {
         if h.query_by_label("Cancel trace").is_some() {
+            cancels += 1;
             h.get_by_label("Cancel trace").click();
             let asked = Instant::now();
             step(&mut h, "Cancel trace");
@@ -99,8 +102,8 @@ fn the_hang_replayed_every_frame_answers_and_every_cancel_ends_its_threads() {
         }
         step(&mut h, "after Cancel trace");
     }
-    assert!(h.state().jobs().raygrid().progress().is_none(), "Cancel stopped the trace");
-    assert!(h.state().jobs().raygrid().status.contains("cancelled"), "{}", h.state().jobs().raygrid().status);
+    assert!(cancels > 0, "no trace to cancel: {}", h.state().jobs().raygrid().status);
+    assert_eq!(h.state().jobs().raygrid().stopping(), 0, "every cancelled trace has ended");
     h.state_mut().jobs_mut().raygrid_mut().grid = None;
     step(&mut h, "ghosts back to the look");
     // The bake lands (the hang: the window stopped answering when it reached its last ghost): its LUT is

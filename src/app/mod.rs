@@ -156,8 +156,7 @@ pub struct FlareLabApp {
     sequence_path: String,
     plate_path: String,
     /// The colour row's text fields: a config file and a `.cube`, applied with their buttons.
-    colour_config: String,
-    colour_cube: String,
+    colour_fields: colour::ColourFields,
     /// The window's render pass clears it to the panels' colour ([`eframe::App::clear_color`]), so the panels
     /// are drawn unfilled; without it (the UI tests' harness clears to transparent) one rectangle paints the
     /// same colour under them.
@@ -202,8 +201,7 @@ impl FlareLabApp {
             track_path: String::new(),
             sequence_path: "flare.####.exr".into(),
             plate_path: String::new(),
-            colour_config: String::new(),
-            colour_cube: String::new(),
+            colour_fields: colour::ColourFields::default(),
 
             cleared_by_window: false,
             ui: UiState::default(),
@@ -320,6 +318,11 @@ impl FlareLabApp {
     /// The file choosers' settings (the tests turn the native dialog off).
     pub fn files_mut(&mut self) -> &mut files::Files {
         &mut self.files
+    }
+
+    /// Writes `color` into the document when it resolves, as the colour row does; else says why.
+    pub fn set_color(&mut self, color: flare_core::view_transform::ColorDoc) {
+        colour::set_color(&mut self.session, color);
     }
 
     /// Applies shipped look `k` as the Looks panel does (one undo step).
@@ -449,10 +452,13 @@ impl FlareLabApp {
             // The sections under the view, each open by its toggle ([`Self::sections_ui`]); folded, the
             // viewport takes their height.
             if self.ui.colour_open {
-                self.colour_ui(ui);
+                colour::colour_ui(ui, &mut self.session, &mut self.colour_fields);
             }
             if self.ui.dof_open {
-                self.dof_ui(ui);
+                let defocusing = self.jobs.dof().busy();
+                if let Some(use_) = dof_row::dof_ui(ui, &mut self.session, &mut self.view, defocusing) {
+                    self.pick_file(use_);
+                }
             }
             if self.ui.rays_open {
                 let ghost = self
