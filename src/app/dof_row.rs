@@ -6,8 +6,8 @@
 use eframe::egui;
 use flare_core::dof::DofMethod;
 use flare_core::dof::depth::PngRange;
+use flare_core::image::HdrImage;
 
-use super::FlareLabApp;
 use super::files::FileUse;
 use super::session::Session;
 use super::view::View;
@@ -78,29 +78,31 @@ pub(super) fn dof_ui(ui: &mut egui::Ui, session: &mut Session, view: &mut View, 
     pick
 }
 
-impl FlareLabApp {
-    /// Chooses the depth map (a PNG gets a near/far range to edit).
-    pub(super) fn set_depth_map(&mut self, path: &std::path::Path) {
-        let text = path.display().to_string();
-        if text.to_ascii_lowercase().ends_with(".png") && self.session.doc().dof.depth_range_m.is_none() {
-            self.session.edit().dof.depth_range_m = Some(PngRange { near_m: 0.5, far_m: 100.0 });
-            self.session.say("a PNG depth map: 0 is 0.5 m and 65535 is 100 m until you edit the range");
-        }
-        self.session.edit().dof.depth = Some(text);
-        self.session.edit().dof.enabled = true;
-        // Its rows open, so the focus that comes next is at hand.
-        self.ui.dof_open = true;
+/// Chooses the depth map (a PNG gets a near/far range to edit) and turns the depth of field on.
+pub(super) fn set_depth_map(session: &mut Session, path: &std::path::Path) {
+    let text = path.display().to_string();
+    if text.to_ascii_lowercase().ends_with(".png") && session.doc().dof.depth_range_m.is_none() {
+        session.edit().dof.depth_range_m = Some(PngRange { near_m: 0.5, far_m: 100.0 });
+        session.say("a PNG depth map: 0 is 0.5 m and 65535 is 100 m until you edit the range");
     }
+    session.edit().dof.depth = Some(text);
+    session.edit().dof.enabled = true;
+}
 
-    /// Focus by click: the plate pixel under `pointer` in the view `rect`.
-    pub fn focus_from_pointer(&mut self, pointer: egui::Pos2, rect: egui::Rect) {
-        self.view.set_focus_pick(false);
-        let Some(plate) = self.derived.sharp_plate().clone() else {
-            self.session.say("focus by click needs a plate (File > Background plate)");
-            return;
-        };
-        let [x, y] = super::view::image_pixel_at(rect, pointer, plate.width, plate.height);
-        self.session.edit().dof.focus_px = Some([x, y]);
-        self.session.say(format!("focus on the depth at plate pixel ({x}, {y})"));
-    }
+/// Focus by click: the pixel of the sharp `plate` under `pointer` in the view `rect` (`None`: no plate, said).
+pub(super) fn focus_at(
+    session: &mut Session,
+    view: &mut View,
+    plate: Option<&HdrImage>,
+    pointer: egui::Pos2,
+    rect: egui::Rect,
+) {
+    view.set_focus_pick(false);
+    let Some(plate) = plate else {
+        session.say("focus by click needs a plate (File > Background plate)");
+        return;
+    };
+    let [x, y] = super::view::image_pixel_at(rect, pointer, plate.width, plate.height);
+    session.edit().dof.focus_px = Some([x, y]);
+    session.say(format!("focus on the depth at plate pixel ({x}, {y})"));
 }

@@ -110,7 +110,11 @@ impl FlareLabApp {
                 self.session.say(said);
             }
             FileUse::GlassCatalogue => self.add_glass_catalogue(path),
-            FileUse::DepthMap => self.set_depth_map(path),
+            FileUse::DepthMap => {
+                super::dof_row::set_depth_map(&mut self.session, path);
+                // Its rows open, so the focus that comes next is at hand.
+                self.ui.dof_open = true;
+            }
         }
         if path.exists() {
             self.files.remember(path);

@@ -325,6 +325,12 @@ impl FlareLabApp {
         colour::set_color(&mut self.session, color);
     }
 
+    /// Focus by click: the plate pixel under `pointer` in the view `rect` (see [`dof_row::focus_at`]).
+    pub fn focus_from_pointer(&mut self, pointer: egui::Pos2, rect: egui::Rect) {
+        let plate = self.derived.sharp_plate().clone();
+        dof_row::focus_at(&mut self.session, &mut self.view, plate.as_deref(), pointer, rect);
+    }
+
     /// Applies shipped look `k` as the Looks panel does (one undo step).
     pub fn apply_look(&mut self, k: usize) {
         looks_panel::apply_look(&mut self.session, k);
