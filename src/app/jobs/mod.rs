@@ -15,13 +15,13 @@
 //! [`JobBoard::busy`] answers for all of them (the app repaints only while something runs) and
 //! [`JobBoard::status_ui`] draws every running job's progress with its Cancel, in one row.
 //!
-//! **Bounded**: the bake, the depth of field, the ray-grid trace, the report and the shot job each sit in a
-//! [`job::Slot`]: at most one job of a kind runs; a new request cancels it (its thread is watched until it
+//! **Bounded**: the bake, the cache lookup, a LUT's landing (its atlas made on a thread), the depth of field,
+//! the ray-grid trace, the report and the shot job each sit in a [`job::Slot`]: at most one job of a kind runs; a new request cancels it (its thread is watched until it
 //! ends, and each checks its cancel flag inside the loops that take time) and waits until it has ended, a
 //! newer request replacing the waiting one. The export and the thumbnails run one at a time by their own rule
-//! (a second export is refused; the thumbnails start once). **Priorities** ([`job::Priority`]): what the user
-//! waits for (a focus, an export, a sequence, a ray-grid trace, the report) is interactive; what only improves
-//! the view later (the bake, the thumbnails) is background.
+//! (a second export is refused; the thumbnails start once). **Priorities** ([`job::Priority`]): the window at
+//! the app's; what the user waits for (a focus, an export, a sequence, a ray-grid trace, the report) is
+//! interactive, a step below; what only improves the view later (the bake, the thumbnails) is background.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -401,7 +401,10 @@ impl JobBoard {
     /// A LUT whose atlas is ready: shown if it is still for the live optics, with what the status says.
     fn poll_landing(&mut self, live: &Live, events: &mut Vec<JobEvent>) {
         let Some(done) = self.landing.poll() else { return };
-        if Some(done.key) != self.live_key(live) || self.autobake.shown != Some(done.key) {
+        // Still the live optics', still wanted (automatic baking not turned off, no LUT file opened meanwhile).
+        let no_file = matches!(live.doc.blend.lut, LutSource::None | LutSource::Simulated { path: None });
+        let wanted = self.autobake.shown == Some(done.key) && no_file;
+        if Some(done.key) != self.live_key(live) || !wanted {
             return;
         }
         let Landing { live, atlas, classes, source } = done.outcome;
