@@ -30,75 +30,7 @@ use flare_core::render::gpu::LutAtlas;
 use flare_core::shot::ShotPlan;
 use flare_core::shot::pattern::FramePattern;
 
-/// Plates kept decoded for scrubbing.
-const PLATE_CACHE: usize = 6;
-/// Frames of a plate sequence read ahead of the playhead.
-const PREFETCH: i64 = 2;
-
-/// A decoded plate and its file.
-type NamedPlate = (String, Arc<HdrImage>);
-
-/// Decoded plates by file, the latest [`PLATE_CACHE`] kept; [`Self::prefetch`] reads files on rayon's
-/// threads into it (a file that cannot be read is left out: reading it in turn reports why).
-#[derive(Default)]
-struct PlateCache {
-    plates: Arc<std::sync::Mutex<Vec<NamedPlate>>>,
-    loading: Arc<std::sync::Mutex<std::collections::BTreeSet<String>>>,
-    /// How the cached plates were read into the working space (the document's colour settings when it names
-    /// an input space); another way empties the cache.
-    color: Option<flare_core::view_transform::ColorDoc>,
-}
-
-impl PlateCache {
-    fn get(&self, path: &str) -> Option<Arc<HdrImage>> {
-        let plates = self.plates.lock().ok()?;
-        plates.iter().find(|(p, _)| p == path).map(|(_, img)| img.clone())
-    }
-
-    fn put(&self, path: String, plate: Arc<HdrImage>) {
-        if let Ok(mut plates) = self.plates.lock() {
-            plates.retain(|(p, _)| *p != path);
-            plates.push((path, plate));
-            let excess = plates.len().saturating_sub(PLATE_CACHE);
-            plates.drain(..excess);
-        }
-    }
-
-    /// Empties the cache when the plates are now read another way (`color`: see the field).
-    fn read_as(&mut self, color: Option<flare_core::view_transform::ColorDoc>) -> bool {
-        if self.color == color {
-            return false;
-        }
-        self.color = color;
-        if let Ok(mut plates) = self.plates.lock() {
-            plates.clear();
-        }
-        true
-    }
-
-    fn prefetch(&self, paths: &[String]) {
-        for path in paths {
-            let fresh = self.get(path).is_none() && self.loading.lock().is_ok_and(|mut l| l.insert(path.clone()));
-            if !fresh {
-                continue;
-            }
-            let (plates, loading, path) = (self.plates.clone(), self.loading.clone(), path.clone());
-            let color = self.color.clone();
-            rayon::spawn(move || {
-                let read = flare_core::shot::plate::read_plate_in(
-                    &color.clone().unwrap_or_default(),
-                    std::path::Path::new(&path),
-                );
-                if let Ok((plate, _)) = read {
-                    PlateCache { plates, loading: loading.clone(), color }.put(path.clone(), Arc::new(plate));
-                }
-                if let Ok(mut l) = loading.lock() {
-                    l.remove(&path);
-                }
-            });
-        }
-    }
-}
+use super::plates::{PREFETCH, PlateCache};
 
 use crate::panels::{GhostRow, LensProblem};
 use crate::viewport::{ViewFrame, ViewportResources};

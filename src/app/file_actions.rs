@@ -99,7 +99,7 @@ impl FlareLabApp {
             FileUse::ExportLut => self.export_lut_to(path),
             FileUse::Background => self.set_background(path),
             FileUse::Track => {
-                self.track_path = path.display().to_string();
+                self.shot_fields.track_path = path.display().to_string();
                 self.import_track(path);
             }
             FileUse::ApertureImage => self.use_aperture_image(path),

@@ -5,7 +5,8 @@
 //! # How it works
 //! Each UI frame adds a line `frame START_S TOOK_MS LAST_MS` (its start as seconds since the Unix epoch, how long
 //! the app's own work took, and how long the frame before took in all, painting included, as eframe says), and the app adds `event START_S TEXT` lines for what a measurement waits for (the
-//! looks' thumbnails all made, a LUT shown). Each line is written as it comes (a few dozen bytes: one write
+//! looks' thumbnails all made, a LUT shown), and `gpu START_S SUMMARY` lines with the viewport's GPU passes
+//! as timed (timestamp queries), each time they change. Each line is written as it comes (a few dozen bytes: one write
 //! call, microseconds), so the record is whole even when the window is killed; a file that cannot be written
 //! is said once on stderr and the record stops.
 
@@ -17,6 +18,8 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 pub struct FrameLog {
     path: PathBuf,
     file: Option<std::fs::File>,
+    /// The GPU passes' summary last written.
+    last_gpu: Option<String>,
 }
 
 /// Seconds since the Unix epoch of `at`.
@@ -30,7 +33,7 @@ impl FrameLog {
         let file = std::fs::File::create(&path)
             .map_err(|e| eprintln!("FLARELAB_FRAME_LOG: {}: {e}; no frame record", path.display()))
             .ok();
-        Self { path, file }
+        Self { path, file, last_gpu: None }
     }
 
     /// One UI frame that began at `began` and took `took`; `last_cpu_s`: what eframe says the frame before took
@@ -38,6 +41,15 @@ impl FrameLog {
     pub fn frame(&mut self, began: SystemTime, took: Duration, last_cpu_s: Option<f32>) {
         let last_ms = last_cpu_s.map_or(-1.0, |s| f64::from(s) * 1e3);
         self.line(&format!("frame {:.6} {:.3} {last_ms:.3}\n", epoch_s(began), took.as_secs_f64() * 1e3));
+    }
+
+    /// The viewport's GPU passes as last timed (`summary`: [`flare_core::render::gpu::PassTimes::summary`]),
+    /// written when they change: a `gpu START_S SUMMARY` line.
+    pub fn gpu(&mut self, summary: &str) {
+        if self.last_gpu.as_deref() != Some(summary) {
+            self.line(&format!("gpu {:.6} {summary}\n", epoch_s(SystemTime::now())));
+            self.last_gpu = Some(summary.to_owned());
+        }
     }
 
     /// Something a measurement waits for, now.

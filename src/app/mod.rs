@@ -40,7 +40,9 @@ mod ghost_report_panel;
 pub mod jobs;
 mod looks_panel;
 pub mod options;
+mod plates;
 pub mod session;
+mod shot_panel;
 pub mod timeline;
 pub mod ui_state;
 pub mod view;
@@ -152,9 +154,7 @@ pub struct FlareLabApp {
     /// Every job on a thread: one poll, one status area, one priority rule (see [`jobs`]).
     jobs: JobBoard,
     /// The Shot panel's text fields.
-    track_path: String,
-    sequence_path: String,
-    plate_path: String,
+    shot_fields: shot_panel::ShotFields,
     /// The colour row's text fields: a config file and a `.cube`, applied with their buttons.
     colour_fields: colour::ColourFields,
     /// The window's render pass clears it to the panels' colour ([`eframe::App::clear_color`]), so the panels
@@ -198,9 +198,7 @@ impl FlareLabApp {
             export_size: None,
             view: View::new(software, first_frame, options.view_px),
             jobs: JobBoard::default(),
-            track_path: String::new(),
-            sequence_path: "flare.####.exr".into(),
-            plate_path: String::new(),
+            shot_fields: shot_panel::ShotFields::default(),
             colour_fields: colour::ColourFields::default(),
 
             cleared_by_window: false,
@@ -215,7 +213,7 @@ impl FlareLabApp {
         if !options.auto_bake {
             app.jobs.autobake_mut().enabled = false;
         }
-        app.plate_path = app.session.doc().background.clone().unwrap_or_default();
+        app.shot_fields.plate_path = app.session.doc().background.clone().unwrap_or_default();
         app.sync();
         app
     }
@@ -453,7 +451,15 @@ impl FlareLabApp {
             let height = (ui.available_height() - self.under_view).max(120.0);
             ui.allocate_ui(egui::vec2(ui.available_width(), height), |ui| self.viewport_ui(ui, &mut actions));
             let under_top = ui.cursor().top();
-            self.timeline_ui(ui);
+            let info = shot_panel::ShotInfo::new(
+                self.session.doc(),
+                self.session.selected(),
+                &self.derived,
+                &self.jobs,
+                self.export_px(),
+                false,
+            );
+            shot_panel::timeline_ui(ui, &mut self.session, &mut self.view, &mut self.ui, &info);
             self.display_ui(ui);
             // The sections under the view, each open by its toggle ([`Self::sections_ui`]); folded, the
             // viewport takes their height.
@@ -508,7 +514,23 @@ impl FlareLabApp {
     /// The tab's panel: one match over [`Tab`], the app's own panels first, then the document's.
     fn panel_ui(&mut self, ui: &mut egui::Ui, actions: &mut Vec<Action>) {
         match self.ui.tab {
-            Tab::Shot => return panel_scroll().show(ui, |ui| self.shot_panel_ui(ui)).inner,
+            Tab::Shot => {
+                let plate_decides = self.export_size.is_none() && self.derived.plate().is_some();
+                let info = shot_panel::ShotInfo::new(
+                    self.session.doc(),
+                    self.session.selected(),
+                    &self.derived,
+                    &self.jobs,
+                    self.export_px(),
+                    plate_decides,
+                );
+                let (session, view, fields) = (&mut self.session, &mut self.view, &mut self.shot_fields);
+                let action = panel_scroll().show(ui, |ui| shot_panel::shot_ui(ui, session, view, fields, &info)).inner;
+                if let Some(action) = action {
+                    self.shot_action(action);
+                }
+                return;
+            }
             Tab::Looks => {
                 let (looks, session) = (self.jobs.looks_mut(), &mut self.session);
                 return panel_scroll().show(ui, |ui| looks_panel::looks_ui(ui, looks, session)).inner;
@@ -598,7 +620,7 @@ impl FlareLabApp {
                     .clicked()
                 {
                     self.session.edit().background = None;
-                    self.plate_path.clear();
+                    self.shot_fields.plate_path.clear();
                     self.session.say("background plate removed");
                 }
                 if ui.button("Import light track…").clicked() {
@@ -789,27 +811,6 @@ impl FlareLabApp {
             }
             ui.add(egui::Label::new(short).truncate()).on_hover_text(details);
         });
-    }
-
-    /// The toggles of the sections under the view (colour, depth of field, ray diagram), at the end of the
-    /// timeline's row: each opens its rows under the view; folded, the picture takes their height. Their state
-    /// is the window's ([`UiState`]).
-    pub(super) fn sections_ui(&mut self, ui: &mut egui::Ui) {
-        let dof = if self.session.doc().dof.enabled { "DoF (on)" } else { "DoF" };
-        let toggles = [
-            (
-                &mut self.ui.colour_open,
-                "colour",
-                "the OCIO display, view and look, the plates' colour space, a .cube, the config",
-            ),
-            (&mut self.ui.dof_open, dof, "depth of field: the plate defocused through this lens (depth map, focus)"),
-            (&mut self.ui.rays_open, "ray diagram", "the selected ghost's path through the lens"),
-        ];
-        for (open, text, hover) in toggles {
-            if ui.selectable_label(*open, text).on_hover_text(hover).clicked() {
-                *open = !*open;
-            }
-        }
     }
 
     /// The display settings under the view: the exposures, then the ghosts' method and the starburst, in one
@@ -1463,7 +1464,11 @@ impl eframe::App for FlareLabApp {
         let began = (std::time::SystemTime::now(), std::time::Instant::now());
         let (lut_before, looks_before) = (self.derived.lut().is_some(), self.jobs.looks().ready());
         self.ui_root(ui);
+        let gpu = self.frame_log.as_ref().and_then(|_| self.gpu_pass_times()).map(|(_, t)| t.summary());
         if let Some(log) = &mut self.frame_log {
+            if let Some(summary) = gpu {
+                log.gpu(&summary);
+            }
             if self.derived.lut().is_some() && !lut_before {
                 log.event("lut-shown");
             }

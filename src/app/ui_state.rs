@@ -8,6 +8,7 @@
 //! damaged record gives the defaults (the Ghosts tab, the panels shown, every section folded: the picture
 //! first), a missing field its default.
 
+use eframe::egui;
 use serde::{Deserialize, Serialize};
 
 use super::session::Tab;
@@ -51,6 +52,27 @@ impl UiState {
     pub fn store(&self, storage: &mut dyn eframe::Storage) {
         if let Ok(text) = serde_json::to_string(self) {
             storage.set_string(UI_STATE_KEY, text);
+        }
+    }
+}
+
+/// The toggles of the sections under the view (colour, depth of field, ray diagram), in the timeline's row:
+/// each opens its rows under the view; folded, the picture takes their height. `dof_on`: the document's depth
+/// of field is on (the toggle says so while its rows are folded).
+pub fn sections_ui(ui: &mut egui::Ui, state: &mut UiState, dof_on: bool) {
+    let dof = if dof_on { "DoF (on)" } else { "DoF" };
+    let toggles = [
+        (
+            &mut state.colour_open,
+            "colour",
+            "the OCIO display, view and look, the plates' colour space, a .cube, the config",
+        ),
+        (&mut state.dof_open, dof, "depth of field: the plate defocused through this lens (depth map, focus)"),
+        (&mut state.rays_open, "ray diagram", "the selected ghost's path through the lens"),
+    ];
+    for (open, text, hover) in toggles {
+        if ui.selectable_label(*open, text).on_hover_text(hover).clicked() {
+            *open = !*open;
         }
     }
 }

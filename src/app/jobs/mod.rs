@@ -217,17 +217,9 @@ impl JobBoard {
         }
     }
 
-    /// The shot job's progress and Cancel, or what the last one said (the status area and the Shot panel).
-    pub fn shot_progress_ui(&mut self, ui: &mut egui::Ui) {
-        if let Some((fraction, _)) = self.shot.progress() {
-            ui.horizontal(|ui| {
-                ui.add(egui::ProgressBar::new(fraction).text(self.shot_status.clone()).desired_width(240.0))
-                    .on_hover_text(self.shot_status.clone());
-                if ui.button("Cancel").clicked() {
-                    self.cancel_shot();
-                }
-            });
-        }
+    /// The shot job's progress (finding the light or exporting) while it runs or waits.
+    pub fn shot_progress(&self) -> Option<(f32, String)> {
+        self.shot.progress()
     }
 
     // The bake.
