@@ -1995,3 +1995,46 @@ fn render_desqueezes_to_the_asked_size() {
     assert!(refusal(&["render", "--desqueeze", "auto", "-o", "x.png"]).contains("not anamorphic"));
     assert!(refusal(&["render", "--desqueeze", "9", "-o", "x.png"]).contains("--desqueeze 9"));
 }
+
+/// Issue 61's command-line cases: each refused at once with exit 2 and one line naming its cause.
+/// - `%070000d` in `-o`: "internal error ... Formatting argument out of range", exit 101.
+/// - an unwritable output folder: found only after the whole bake or every frame (`/sys` takes no file,
+///   even for root, so this holds where the tests run as root).
+/// - `preset new -o` into such a folder: the reason printed twice.
+/// - B44: panicked on a rayon thread (SIGABRT) for thin ghost layers; now refused by name.
+/// - `--size 8192x8192`, `--desqueeze 4` on a wide frame: aborted at 5.1-5.4 GB; now refused with the figure.
+/// - a FIFO as the lens, the preset or `--cube`: blocked forever in `open()`.
+#[test]
+fn issue_61_inputs_are_refused_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = |name: &str| dir.path().join(name).display().to_string();
+    let e = refusal(&["render", "--frames", "1-2", "-o", &out("f.%070000d.png")]);
+    assert!(e.contains("at most 20"), "{e}");
+    let e = refusal(&["synth-shot", "-o", &out("s.%070000d.png")]);
+    assert!(e.contains("at most 20"), "{e}");
+    let started = std::time::Instant::now();
+    let e = refusal(&["render", "--method", "blended", "-o", "/sys/flarelab-still.exr"]);
+    assert!(e.contains("cannot write in the folder /sys"), "{e}");
+    let e = refusal(&["render", "--frames", "1-3", "-o", "/sys/seq/f.####.png"]);
+    assert!(e.contains("cannot write in the folder /sys"), "{e}");
+    println!("refused in {:.1} s, no bake", started.elapsed().as_secs_f64());
+    let e = refusal(&["preset", "new", "-o", "/sys/flarelab-preset.json"]);
+    assert_eq!(e.matches("Permission denied").count(), 1, "the reason once: {e}");
+    for c in ["b44", "b44a"] {
+        let e = refusal(&["render", "--layers", "ghosts", "--exr-compression", c, "-o", &out("b.exr")]);
+        assert!(e.contains("not written here"), "{e}");
+    }
+    let e = refusal(&["render", "--size", "8192x8192", "-o", &out("big.exr")]);
+    assert!(e.contains("8192x8192") && e.contains("GB"), "{e}");
+    let e = refusal(&["render", "--size", "8192x4320", "--desqueeze", "4", "-o", &out("wide.exr")]);
+    assert!(e.contains("drawn at 8192x17280"), "{e}");
+    #[cfg(unix)]
+    for (flag, name) in [(None, "l.json"), (Some("--preset"), "p.json"), (Some("--cube"), "c.cube")] {
+        let fifo = dir.path().join(name).display().to_string();
+        assert!(Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+        let png = out("fifo.png");
+        let args: Vec<&str> = ["render"].into_iter().chain(flag).chain([fifo.as_str(), "-o", png.as_str()]).collect();
+        let e = refusal(&args);
+        assert!(e.contains("not a regular file"), "{flag:?}: {e}");
+    }
+}

@@ -1417,6 +1417,9 @@ impl FlareLabApp {
         ExportPlate,
     )> {
         let Some(flare) = self.derived.flare().clone() else { bail!("no valid lens") };
+        // Refused before any work when the frame would need more memory than it may take.
+        let plate = self.derived.plate().is_some();
+        flare_core::frame::check_frame_memory(size.0, size.1, self.session.doc().desqueeze, plate)?;
         let request = self.derived.request_at(self.session.doc(), &flare, size.0, size.1, 1);
         let frame = Frame::build(&flare, self.derived.lut().as_deref(), &request);
         // The plate the view shows, or the sharp one to defocus on the export's thread when the view's depth

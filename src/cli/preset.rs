@@ -29,12 +29,14 @@ pub enum PresetCommand {
 pub fn run(command: PresetCommand) -> Result<()> {
     match command {
         PresetCommand::New { lens, out } => {
+            flare_core::files::check_target(&out).map_err(|e| anyhow::anyhow!("-o {e}"))?;
             let doc = match lens {
                 Some(name) => Document::for_lens(open_lens(&name)?),
                 None => Document::default(),
             };
             doc.check().with_context(|| "the new preset")?;
-            doc.save(&out).with_context(|| format!("writing {}", out.display()))?;
+            // The write's error names the file once (its cause is its message, not a second line).
+            doc.save(&out).map_err(|e| anyhow::anyhow!("writing {}: {e}", out.display()))?;
             eprintln!("wrote {} ({})", out.display(), doc.lens.id);
             Ok(())
         }

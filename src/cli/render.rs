@@ -132,7 +132,7 @@ pub struct RenderArgs {
     /// the light's core), half (values beyond 65504 clamped) or float. Default: the preset's, auto.
     #[arg(long, value_enum)]
     pub exr_type: Option<ExrTypeArg>,
-    /// EXR compression: none, rle, zips, zip (default), piz, pxr24, b44, b44a (DWAA/DWAB cannot be written).
+    /// EXR compression: none, rle, zips, zip (default), piz, pxr24 (DWAA/DWAB and B44/B44A are not written).
     #[arg(long, value_parser = parse_exr_compression)]
     pub exr_compression: Option<flare_core::output::ExrCompression>,
     /// The shutter in degrees (default: the preset's, 0): a light that moves while it is open streaks its
@@ -659,6 +659,12 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         frame::FrameError::Request(reason) => anyhow::anyhow!("--layers ghosts: {reason}"),
         other => anyhow::anyhow!("{other}"),
     })?;
+    // The folder takes the files now, before a bake, a trace or the first frame (a sequence makes its folder).
+    match sequence {
+        Some(_) => flare_core::files::check_sequence_target(&args.out),
+        None => flare_core::files::check_target(&args.out),
+    }
+    .map_err(|e| anyhow::anyhow!("-o {e}"))?;
     let range = match args.frames {
         Some((a, b)) => a..=b,
         None => {
@@ -838,6 +844,19 @@ fn progress_bar(total: usize, what: &str) -> ProgressBar {
     bar
 }
 
+/// `frames` for a message: at most 10 numbers, then how many more (`frames 1, 2, 3 and 997 more`).
+fn frame_list(frames: impl Iterator<Item = i64>) -> String {
+    let all: Vec<i64> = frames.collect();
+    let shown: Vec<String> = all.iter().take(10).map(i64::to_string).collect();
+    let more = all.len().saturating_sub(10);
+    let word = if all.len() == 1 { "frame" } else { "frames" };
+    if more == 0 {
+        format!("{word} {}", shown.join(", "))
+    } else {
+        format!("{word} {} and {more} more", shown.join(", "))
+    }
+}
+
 /// Renders the planned frames to the sequence `out` with a progress bar; the log when asked; an error (a
 /// non-zero exit) when any frame failed, after all the others were rendered.
 fn render_frames(
@@ -885,13 +904,15 @@ fn render_frames(
     );
     let failed = report.failures();
     if !failed.is_empty() {
-        let frames: Vec<String> = failed.iter().map(|(f, _)| f.to_string()).collect();
-        bail!(
-            "{} of {total} frames failed (frames {}; the first: {}); the others were written",
-            failed.len(),
-            frames.join(", "),
-            failed[0].1
-        );
+        // Exactly what was written: none, all but the failed ones, or the rest skipped as already there.
+        let frames = frame_list(failed.iter().map(|(f, _)| *f));
+        let others = match (report.rendered(), report.skipped()) {
+            (0, 0) => "no frame was written".to_string(),
+            (0, s) => format!("{s} were already there (skipped); none was written"),
+            (r, 0) => format!("the other {r} were written"),
+            (r, s) => format!("{r} were written and {s} already there (skipped)"),
+        };
+        bail!("{} of {total} frames failed ({frames}; the first: {}); {others}", failed.len(), failed[0].1);
     }
     Ok(())
 }

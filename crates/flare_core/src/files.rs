@@ -73,8 +73,10 @@ fn default_permissions(file: &std::fs::File) -> std::io::Result<std::fs::Permiss
     Ok(file.metadata()?.permissions())
 }
 
-/// Checks, before any work, that [`write_atomic`] could write `path`: its folder exists, and it is not there
-/// already as something other than a regular file (what the write would refuse at the end of a long job).
+/// Checks, before any work, that [`write_atomic`] could write `path`: its folder exists and a file can be made
+/// in it (a temporary one, removed at once), and `path` is not there already as something other than a regular
+/// file (what the write would refuse at the end of a long job). Issue 61: an unwritable folder was found only
+/// after the whole bake (22 minutes for the Panavision look) or after every frame of a sequence.
 pub fn check_target(path: &Path) -> Result<(), String> {
     let dir = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
@@ -88,7 +90,36 @@ pub fn check_target(path: &Path) -> Result<(), String> {
     {
         return Err(format!("{} exists and is not a regular file ({}): not replaced", path.display(), kind_of(&meta)));
     }
-    Ok(())
+    probe_folder(path, dir)
+}
+
+/// Makes and removes a temporary file in `dir` as [`write_atomic`] would (`path`: what the caller will write,
+/// named in the error).
+fn probe_folder(path: &Path, dir: &Path) -> Result<(), String> {
+    tempfile::Builder::new()
+        .prefix(TEMP_PREFIX)
+        .tempfile_in(dir)
+        .map(drop)
+        .map_err(|e| format!("{}: cannot write in the folder {}: {}", path.display(), dir.display(), plain(e)))
+}
+
+/// Checks, before any work, that the files of a sequence named like `path` can be written: the nearest folder
+/// of its folder that exists (the sequence makes the rest) takes a file. See [`check_target`].
+pub fn check_sequence_target(path: &Path) -> Result<(), String> {
+    let mut dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    while !dir.exists() {
+        dir = match dir.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        };
+    }
+    if !dir.is_dir() {
+        return Err(format!("{}: {} is not a folder", path.display(), dir.display()));
+    }
+    probe_folder(path, dir)
 }
 
 /// `e` without the temporary file's path the `tempfile` crate appends (the caller names the target: the
@@ -152,16 +183,28 @@ pub fn remove_stale_temps(dir: &Path, age: std::time::Duration) -> usize {
 /// any real one (the largest shipped catalogue is under 1 MB).
 pub const MAX_TEXT_BYTES: u64 = 64 * 1024 * 1024;
 
+/// Opens `path` for reading if it is a regular file (links followed). A folder, a FIFO, a socket or a device is
+/// refused before it is opened: opening a FIFO blocks until a writer comes, forever for a hostile input (issue
+/// 61: a lens, a preset, a `.cube` or an OCIO config given as a FIFO hung the program in `open()`).
+pub fn open_regular(path: &Path) -> Result<std::fs::File, String> {
+    let fail = |e: std::io::Error| format!("cannot read {}: {e}", path.display());
+    let meta = std::fs::metadata(path).map_err(fail)?;
+    if meta.is_dir() {
+        return Err(format!("{} is a folder, not a file", path.display()));
+    }
+    if !meta.is_file() {
+        return Err(format!("{} is not a regular file (a FIFO, socket or device): give a file", path.display()));
+    }
+    std::fs::File::open(path).map_err(fail)
+}
+
 /// Reads `path` whole if it has at most `max_bytes`: at most `max_bytes + 1` bytes are ever read, whatever
 /// the file claims (a FIFO or a device reports no length). The error is one line with the path.
 pub fn read_bounded(path: &Path, max_bytes: u64) -> Result<Vec<u8>, String> {
     use std::io::Read;
     let fail = |e: std::io::Error| format!("cannot read {}: {e}", path.display());
-    let file = std::fs::File::open(path).map_err(fail)?;
+    let file = open_regular(path)?;
     let meta = file.metadata().map_err(fail)?;
-    if meta.is_dir() {
-        return Err(format!("{} is a folder, not a file", path.display()));
-    }
     if meta.len() > max_bytes {
         return Err(too_large(path, max_bytes));
     }
@@ -184,8 +227,38 @@ fn too_large(path: &Path, max_bytes: u64) -> String {
     format!("{} is larger than {} MiB, the most this file may be: not read", path.display(), max_bytes >> 20)
 }
 
-/// A message about a file made safe to print: every `backquoted` token [`shorten`]ed, control characters
-/// elsewhere escaped.
+/// `text` with every number longer than [`TOKEN_CHARS`] characters written short (`1.000e302`, or cut as
+/// [`shorten`] cuts): a value echoed from a file (a 302-digit `semi_aperture`, issue 61) keeps a message to a
+/// line. Shorter numbers, paths and words are left as they are.
+pub fn shorten_numbers(text: &str) -> String {
+    let numeric = |c: char| c.is_ascii_digit() || matches!(c, '.' | 'e' | 'E' | '+' | '-');
+    let mut out = String::with_capacity(text.len().min(1024));
+    let mut run = String::new();
+    let flush = |run: &mut String, out: &mut String| {
+        if run.chars().count() > TOKEN_CHARS && run.chars().filter(char::is_ascii_digit).count() > TOKEN_CHARS / 2 {
+            match run.parse::<f64>() {
+                Ok(v) => out.push_str(&format!("{v:.3e}")),
+                Err(_) => out.push_str(&shorten(run)),
+            }
+        } else {
+            out.push_str(run);
+        }
+        run.clear();
+    };
+    for c in text.chars() {
+        if numeric(c) {
+            run.push(c);
+        } else {
+            flush(&mut run, &mut out);
+            out.push(c);
+        }
+    }
+    flush(&mut run, &mut out);
+    out
+}
+
+/// A message about a file made safe to print: every `backquoted` token [`shorten`]ed, long numbers elsewhere
+/// written short ([`shorten_numbers`]), control characters escaped.
 pub fn clean(message: &str) -> String {
     let mut out = String::with_capacity(message.len().min(1024));
     for (k, part) in message.split('`').enumerate() {
@@ -196,7 +269,8 @@ pub fn clean(message: &str) -> String {
             out.push_str(&shorten(part));
         } else {
             out.extend(
-                part.chars()
+                shorten_numbers(part)
+                    .chars()
                     .flat_map(|c| if c.is_control() { c.escape_default().collect::<Vec<_>>() } else { vec![c] }),
             );
         }
@@ -242,9 +316,24 @@ mod tests {
 
     #[cfg(unix)]
     #[test]
-    fn an_endless_file_is_read_to_the_bound_only() {
+    fn an_endless_device_or_a_fifo_is_refused_before_it_is_opened() {
         let err = read_bounded(Path::new("/dev/zero"), 1 << 20).unwrap_err();
-        assert!(err.contains("larger than 1 MiB"), "{err}");
+        assert!(err.contains("not a regular file"), "{err}");
+        // Issue 61: a FIFO as an input (a lens, a preset, a .cube, an OCIO config) blocked forever in open().
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("in.json");
+        if std::process::Command::new("mkfifo").arg(&fifo).status().is_ok_and(|s| s.success()) {
+            let err = read_bounded(&fifo, 1 << 20).unwrap_err();
+            assert!(err.contains("not a regular file"), "{err}");
+            let err = crate::optics::formats::read_lens_file(&fifo).unwrap_err().to_string();
+            assert!(err.contains("not a regular file"), "{err}");
+            let err = crate::lut::format::read_lut(&fifo).unwrap_err().to_string();
+            assert!(err.contains("not a regular file"), "{err}");
+            let plate = dir.path().join("plate.exr");
+            std::fs::rename(&fifo, &plate).unwrap();
+            let err = crate::output::image_size(&plate, "plate").unwrap_err();
+            assert!(err.contains("not a regular file"), "{err}");
+        }
     }
 
     #[cfg(unix)]

@@ -173,9 +173,26 @@ impl PreparedFlare {
         display: &DisplaySettings,
         gains: &[f32],
     ) -> (FlareScene, GhostFrame) {
+        self.scene_culled_with(light_deg, sensor, width, height, display, gains, None)
+    }
+
+    /// [`Self::scene_with`], the dim threshold seeing `cull_gains` instead of `gains` when given (a ghost's
+    /// own layer is culled as its whole frame is: [`crate::frame::Frame::ghost_alone`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn scene_culled_with(
+        &self,
+        light_deg: [f64; 2],
+        sensor: Sensor,
+        width: u32,
+        height: u32,
+        display: &DisplaySettings,
+        gains: &[f32],
+        cull_gains: Option<&[f32]>,
+    ) -> (FlareScene, GhostFrame) {
         let u = light_slopes_for_frame_position(light_deg[0], light_deg[1]);
         let frame_settings = self.frame_settings_on(sensor, width, display.flare_gain());
-        let frame = self.system.frame(u, &frame_settings);
+        // The dim threshold sees the gains: what is culled stays below it as drawn.
+        let frame = self.system.frame_weighted(u, &frame_settings, cull_gains.unwrap_or(gains));
         let mut scene = FlareScene::build(&self.system, &frame, u, &frame_settings, display, width, height, gains);
         self.ghost_masks.assign_levels(&mut scene);
         scene.place_starburst(&self.system, &self.starburst, u, &sensor, display);

@@ -71,6 +71,9 @@ pub struct FrameRequest {
     pub display: DisplaySettings,
     /// Per lens ghost index, its gain (missing entries are 1, 0 leaves the ghost out).
     pub ghost_gains: Vec<f32>,
+    /// The gains the dim threshold sees when they are not `ghost_gains`: a ghost's own layer
+    /// ([`Frame::ghost_alone`]) is culled as the whole frame is, so that the layers add up to the flare.
+    pub cull_gains: Option<Vec<f32>>,
     pub blend: BlendSettings,
     pub lut_use: LutUse,
     /// Draw a draft instead (the app while the user drags; never an export or a command's frame).
@@ -85,6 +88,70 @@ pub struct FrameRequest {
     /// x). The frame is drawn on the sensor at [`sensor_pixels`] (square pixels, never fewer than delivered)
     /// and averaged down to `width` x `height` as it is tonemapped and written.
     pub desqueeze: f64,
+}
+
+/// What drawing a frame keeps per sensor pixel (the accumulation and its passes), and per delivered pixel (the
+/// display image, the linear layers, the file's channels), at most (bytes). Measured as peak RSS (issue 61,
+/// the default still as EXR), less the process's own (0.12 GB on the CPU twin, 0.32 GB on lavapipe): the
+/// delivered frame without desqueeze took 102 (CPU twin) and 124 (lavapipe) bytes a pixel from 1024x1024 to
+/// 8192x4320 (3.70 and 4.32 GB there); desqueezed by 4 at 4096x2160 (a 4096x8640 sensor) 1.27 and 1.95 GB,
+/// which puts the sensor's share at 9 and 22 bytes a pixel and the delivered share at 93 and 102.
+pub const SENSOR_BYTES_PER_PX: u64 = 32;
+/// See [`SENSOR_BYTES_PER_PX`].
+pub const DELIVERED_BYTES_PER_PX: u64 = 100;
+/// What a plate keeps per pixel of the frame: its decoded RGBA floats and the copy the frame reads.
+pub const PLATE_BYTES_PER_PX: u64 = 32;
+/// The most memory one frame may need (bytes): 6 GiB, an 8192x4320 frame with room (about 4.7 GB), and less
+/// where the machine has less available ([`available_memory_bytes`]).
+pub const MAX_FRAME_BYTES: u64 = 6 << 30;
+
+/// The memory a frame delivered at `width` x `height`, desqueezed by `desqueeze`, needs at most while it is
+/// drawn and written, with a plate when `plate` (bytes; see [`SENSOR_BYTES_PER_PX`]).
+pub fn frame_memory_bytes(width: u32, height: u32, desqueeze: f64, plate: bool) -> u64 {
+    let (w, h) = sensor_pixels(width, height, desqueeze);
+    let sensor = u64::from(w) * u64::from(h);
+    let delivered = u64::from(width) * u64::from(height);
+    let per_delivered = DELIVERED_BYTES_PER_PX + if plate { PLATE_BYTES_PER_PX } else { 0 };
+    sensor * SENSOR_BYTES_PER_PX + delivered * per_delivered
+}
+
+/// The memory this machine has available now (bytes): Linux's `MemAvailable`, or a control group's limit when
+/// lower; `None` where neither can be read.
+pub fn available_memory_bytes() -> Option<u64> {
+    let meminfo = std::fs::read_to_string("/proc/meminfo").ok();
+    let available = meminfo.as_deref().and_then(|text| {
+        let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+        line.split_whitespace().nth(1)?.parse::<u64>().ok().map(|kb| kb.saturating_mul(1024))
+    });
+    let cgroup = std::fs::read_to_string("/sys/fs/cgroup/memory.max").ok().and_then(|t| t.trim().parse::<u64>().ok());
+    match (available, cgroup) {
+        (Some(a), Some(c)) => Some(a.min(c)),
+        (a, c) => a.or(c),
+    }
+}
+
+/// Refuses a frame (see [`frame_memory_bytes`]) that would need more than [`MAX_FRAME_BYTES`] or than nine
+/// tenths of the memory available now, naming both figures, before any work. Issue 61: `--size 8192x8192`, a
+/// black 8192x8192 PNG plate or `--desqueeze 4` aborted at 5.1-5.4 GB when memory ran out.
+pub fn check_frame_memory(width: u32, height: u32, desqueeze: f64, plate: bool) -> Result<(), FrameError> {
+    let need = frame_memory_bytes(width, height, desqueeze, plate);
+    let available = available_memory_bytes().map(|a| a / 10 * 9);
+    let limit = available.map_or(MAX_FRAME_BYTES, |a| a.min(MAX_FRAME_BYTES));
+    if need <= limit {
+        return Ok(());
+    }
+    let (sw, sh) = sensor_pixels(width, height, desqueeze);
+    let drawn = if (sw, sh) == (width, height) { String::new() } else { format!(" (drawn at {sw}x{sh}, desqueezed)") };
+    let why = match available {
+        Some(a) if a < MAX_FRAME_BYTES => {
+            format!("nine tenths of the {:.1} GB this machine has free", a as f64 / 0.9e9)
+        }
+        _ => format!("the {:.1} GB a frame may take", MAX_FRAME_BYTES as f64 / 1e9),
+    };
+    Err(FrameError::Request(format!(
+        "a {width}x{height} frame{drawn} needs about {:.1} GB, more than {why}: draw a smaller frame (--size)",
+        need as f64 / 1e9
+    )))
 }
 
 /// The most a frame is desqueezed (and `1 / MAX_DESQUEEZE` the least).
@@ -154,6 +221,7 @@ impl Default for FrameRequest {
             sensor_width_mm: crate::optics::sensor::FULL_FRAME_WIDTH_MM,
             display: DisplaySettings::default(),
             ghost_gains: Vec::new(),
+            cull_gains: None,
             blend: BlendSettings::default(),
             lut_use: LutUse::Off,
             draft: None,
@@ -291,7 +359,12 @@ impl Frame {
         let gain = self.request.ghost_gains.get(g as usize).copied().unwrap_or(1.0);
         let ghost_gains = (0..flare.system.ghosts.len() as u32).map(|h| if h == g { gain } else { 0.0 }).collect();
         let display = DisplaySettings { starburst: false, ..self.request.display };
-        Frame::build(flare, lut, &FrameRequest { ghost_gains, display, draft: None, ..self.request.clone() })
+        let cull_gains = Some(self.request.cull_gains.clone().unwrap_or_else(|| self.request.ghost_gains.clone()));
+        Frame::build(
+            flare,
+            lut,
+            &FrameRequest { ghost_gains, cull_gains, display, draft: None, ..self.request.clone() },
+        )
     }
 }
 
@@ -313,8 +386,11 @@ fn sharp(
     // lens multiplies nothing (the frame it always drew, bit for bit).
     let taken = dirt_share(flare, u, display);
     let direct_gain = if taken > 0.0 { light_gain * (1.0 - taken) as f32 } else { light_gain };
-    let mut gains: Vec<f32> =
-        (0..ghosts).map(|g| request.ghost_gains.get(g).copied().unwrap_or(1.0).max(0.0) * direct_gain).collect();
+    let scaled = |list: &[f32]| -> Vec<f32> {
+        (0..ghosts).map(|g| list.get(g).copied().unwrap_or(1.0).max(0.0) * direct_gain).collect()
+    };
+    let mut gains = scaled(&request.ghost_gains);
+    let mut cull = request.cull_gains.as_deref().map(scaled);
     let lut_scene = lut.map(|live| {
         let out = Window::for_sensor(sensor.width_mm, w, h);
         let mut scene = LutScene::build(live, &flare.system, u, out, &request.blend, &gains);
@@ -326,8 +402,14 @@ fn sharp(
     if let Some(l) = &lut_scene {
         // A photo LUT is the whole flare photographed: it is never drawn over paraxial sprites.
         let alone = request.lut_use == LutUse::Alone || lut.is_some_and(|live| live.lut.kind == LutKind::Photo);
-        for (g, gain) in gains.iter_mut().enumerate() {
-            *gain = if alone { 0.0 } else { *gain * l.paraxial_weight(g as u32) };
+        let weigh = |list: &mut Vec<f32>| {
+            for (g, gain) in list.iter_mut().enumerate() {
+                *gain = if alone { 0.0 } else { *gain * l.paraxial_weight(g as u32) };
+            }
+        };
+        weigh(&mut gains);
+        if let Some(c) = cull.as_mut() {
+            weigh(c);
         }
     }
     let display = DisplaySettings {
@@ -335,7 +417,7 @@ fn sharp(
         dirt_amount: display.dirt_amount * f64::from(light_gain),
         ..*display
     };
-    let (scene, sprites) = flare.scene_with(light_deg, sensor, w, h, &display, &gains);
+    let (scene, sprites) = flare.scene_culled_with(light_deg, sensor, w, h, &display, &gains, cull.as_deref());
     (scene, lut_scene, sprites)
 }
 

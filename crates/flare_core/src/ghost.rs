@@ -776,8 +776,26 @@ impl GhostSystem {
         frame
     }
 
+    /// [`Self::frame`] with per-ghost gains (`gains[g]` multiplies ghost `g`; a ghost past the list has gain
+    /// 1): the dim threshold is applied to the sprites as they will be drawn, gains included, so that what is
+    /// culled stays below the threshold on screen. Issue 61: with every gain at 1000 the same 39 sprites were
+    /// culled as dim as at gain 1, and at 0 EV with gain 1e6 every sprite was culled and the flare was black.
+    pub fn frame_weighted(&self, u: [f64; 2], settings: &FrameSettings, gains: &[f32]) -> GhostFrame {
+        let mut frame = GhostFrame {
+            sprites: Vec::with_capacity(self.ghosts.len() * self.settings.spectrum.len()),
+            ..Default::default()
+        };
+        self.frame_into_weighted(u, settings, gains, &mut frame);
+        frame
+    }
+
     /// [`Self::frame`] into an existing buffer (no allocation once warmed up).
     pub fn frame_into(&self, u: [f64; 2], settings: &FrameSettings, frame: &mut GhostFrame) {
+        self.frame_into_weighted(u, settings, &[], frame);
+    }
+
+    /// [`Self::frame_weighted`] into an existing buffer.
+    pub fn frame_into_weighted(&self, u: [f64; 2], settings: &FrameSettings, gains: &[f32], frame: &mut GhostFrame) {
         frame.sprites.clear();
         frame.stats = FrameStats::default();
         let u2 = u[0] * u[0] + u[1] * u[1];
@@ -852,7 +870,8 @@ impl GhostSystem {
         // threshold, so that everything culled adds at most the threshold to any pixel. (Culling each sprite
         // below the threshold on its own lost a visible haze on a 28-surface lens, whose hundreds of faint
         // ghosts overlap.) The level is found by bisection, without sorting or allocating.
-        let peak = |s: &Sprite| s.rgb[0].max(s.rgb[1]).max(s.rgb[2]);
+        let gain = |s: &Sprite| gains.get(s.ghost).map_or(1.0, |&g| f64::from(g).max(0.0));
+        let peak = |s: &Sprite| s.rgb[0].max(s.rgb[1]).max(s.rgb[2]) * gain(s);
         let threshold = settings.intensity_threshold;
         let culled_sum = |level: f64| -> f64 {
             frame.sprites.iter().filter(|s| s.culled.is_none() && peak(s) < level).map(peak).sum()
@@ -1304,6 +1323,27 @@ mod tests {
                 assert!(sprite.rgb.iter().all(|c| c.is_finite() && *c >= 0.0));
             }
         }
+    }
+
+    /// Issue 61: the dim threshold ignored the ghosts' gains. Now a gain of 1000 draws ghosts that were dim at
+    /// gain 1, a gain of 0 culls them, and what is culled stays under the threshold as drawn (gains applied).
+    #[test]
+    fn the_dim_threshold_sees_the_ghosts_gains() {
+        let s = system("nikon_zoom_28_75mm");
+        let settings = FrameSettings { intensity_threshold: 1e-5, ..FrameSettings::default() };
+        let u = [0.0, 0.1];
+        let plain = s.frame(u, &settings);
+        assert!(plain.stats.below_threshold > 0, "{:?}", plain.stats);
+        let loud = s.frame_weighted(u, &settings, &vec![1000.0; s.ghosts.len()]);
+        assert!(loud.stats.below_threshold < plain.stats.below_threshold, "{:?} vs {:?}", loud.stats, plain.stats);
+        let as_drawn = |sp: &Sprite| sp.rgb[0].max(sp.rgb[1]).max(sp.rgb[2]) * 1000.0;
+        let culled: f64 =
+            loud.sprites.iter().filter(|sp| sp.culled == Some(CullReason::BelowThreshold)).map(as_drawn).sum();
+        assert!(culled <= settings.intensity_threshold, "culled as drawn: {culled}");
+        let silent = s.frame_weighted(u, &settings, &vec![0.0; s.ghosts.len()]);
+        assert_eq!(silent.stats.drawn, 0, "{:?}", silent.stats);
+        // A ghost past the list keeps gain 1: the empty list is the plain frame.
+        assert_eq!(s.frame_weighted(u, &settings, &[]).stats, plain.stats);
     }
 
     #[test]

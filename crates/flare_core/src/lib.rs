@@ -39,6 +39,7 @@ pub mod ghost;
 pub mod image;
 pub mod lut;
 pub mod metrics;
+pub mod ocio_files;
 pub mod optics;
 pub mod output;
 pub mod preset;

@@ -161,15 +161,33 @@ pub enum ExrCompression {
     Piz,
     /// Lossy for 32-bit floats (24 bits kept), lossless for half.
     Pxr24,
-    /// Lossy 4x4 blocks of half floats (32-bit channels stored uncompressed).
+    /// Lossy 4x4 blocks of half floats: named so that a preset naming it is refused with the reason
+    /// ([`ExrCompression::refusal`]), never written.
     B44,
-    /// B44 with flat blocks stored smaller.
+    /// B44 with flat blocks stored smaller: refused like [`Self::B44`].
     B44a,
 }
 
 impl ExrCompression {
-    pub const ALL: [Self; 8] =
-        [Self::None, Self::Rle, Self::Zips, Self::Zip, Self::Piz, Self::Pxr24, Self::B44, Self::B44a];
+    /// The compressions written (B44 and B44A are refused: [`Self::refusal`]).
+    pub const ALL: [Self; 6] = [Self::None, Self::Rle, Self::Zips, Self::Zip, Self::Piz, Self::Pxr24];
+
+    /// Why this compression is not written, if it is not. The `exr` crate's B44 encoder (issue 61) panicked
+    /// on a rayon thread, aborting the process, for any part one pixel tall and about 50 wide (a thin streak
+    /// ghost's layer), and where it wrote it lost values: half's largest value 65504 came back 0, the plate's
+    /// negatives 0, and 640 of the 772 channels of a still with ghost layers were off by all of their peak
+    /// (OpenEXR's own B44 on the same pixels: at most 16 %). So B44 and B44A are refused up front, for every
+    /// layer, rather than written wrong.
+    pub fn refusal(self) -> Option<String> {
+        matches!(self, Self::B44 | Self::B44a).then(|| {
+            format!(
+                "`{}`: B44 compression is not written here (the exr crate's B44 encoder loses values, 65504 and \
+                 negatives among them, and fails on one-pixel-tall layers); use zip or piz (lossless) or pxr24 \
+                 (lossy)",
+                self.name()
+            )
+        })
+    }
 
     /// The name on the command line and in presets.
     pub fn name(self) -> &'static str {
@@ -192,8 +210,11 @@ impl ExrCompression {
         if key == "dwaa" || key == "dwab" {
             return Err(format!(
                 "`{key}`: DWA compression cannot be written here (the exr crate reads it but has no encoder); use \
-                 zip or piz (lossless) or b44a or pxr24 (lossy)"
+                 zip or piz (lossless) or pxr24 (lossy)"
             ));
+        }
+        if let Some(refusal) = [Self::B44, Self::B44a].into_iter().find(|c| c.name() == key).and_then(Self::refusal) {
+            return Err(refusal);
         }
         Self::ALL.into_iter().find(|c| c.name() == key).ok_or_else(|| {
             format!(
@@ -412,6 +433,9 @@ fn write_exr_parts(
         AnyChannels, Blocks, Encoding, Image, ImageAttributes, Layer, LayerAttributes, LineOrder, SmallVec,
         WritableImage,
     };
+    if let Some(refusal) = settings.compression.refusal() {
+        return Err(ImageError::Encode { path: path.display().to_string(), message: refusal });
+    }
     let encoding = Encoding {
         compression: settings.compression.exr(),
         blocks: Blocks::ScanLines,
@@ -474,6 +498,7 @@ pub const MAX_READ_CHANNEL_BYTES: u64 = 2 << 30;
 pub fn read_exr_channels(path: &Path) -> Result<ExrChannels, ImageError> {
     use exr::prelude::{FlatSamples, read_all_flat_layers_from_file};
     let refuse = |reason: String| ImageError::Plate(format!("{}: {reason}", path.display()));
+    crate::files::open_regular(path).map_err(ImageError::Plate)?;
     let meta =
         exr::meta::MetaData::read_from_file(path, false).map_err(|e| refuse(format!("cannot read the EXR: {e}")))?;
     let first = meta.headers.first().ok_or_else(|| refuse("the EXR has no image in it".into()))?;
@@ -532,10 +557,15 @@ pub const MAX_PLATE_VALUE: f32 = f32::MAX / 1.9e19;
 /// [`MAX_IMAGE_SIDE_PX`] a side or when empty. `what` names the image in the message ("plate", "depth map").
 pub fn image_size(path: &Path, what: &str) -> Result<(u32, u32), String> {
     if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr")) {
-        // The exr crate reads the header alone (the image crate checks the chunk table first).
-        let (w, h) = exr_size(path, what)?;
-        return Ok((w as u32, h as u32));
+        // The exr crate reads the header alone (the image crate checks the chunk table first). A plate is decoded
+        // at its display window (the data window padded out to it): that is its size.
+        exr_size(path, what)?;
+        let meta = exr::meta::MetaData::read_from_file(path, false)
+            .map_err(|e| format!("{}: cannot read the {what}: {e}", path.display()))?;
+        let display = meta.headers[0].shared_attributes.display_window.size;
+        return Ok((display.0 as u32, display.1 as u32));
     }
+    crate::files::open_regular(path)?;
     let reader = ::image::ImageReader::open(path)
         .map_err(|e| format!("{}: cannot read the {what}: {e}", path.display()))?
         .with_guessed_format()
@@ -548,9 +578,14 @@ pub fn image_size(path: &Path, what: &str) -> Result<(u32, u32), String> {
 /// The size of an EXR from its header alone, checked as [`image_size`] does (for readers that use the `exr`
 /// crate directly: a depth map's channel).
 pub fn exr_size(path: &Path, what: &str) -> Result<(usize, usize), String> {
+    crate::files::open_regular(path)?;
     let meta = exr::meta::MetaData::read_from_file(path, false)
         .map_err(|e| format!("{}: cannot read the {what}: {e}", path.display()))?;
     let header = meta.headers.first().ok_or_else(|| format!("{}: the {what} has no image in it", path.display()))?;
+    // The decoder pads the data window out to the display window: both are checked (issue 61: a 3.6 KB EXR of
+    // 16x16 pixels in an 8192x8192 display window passed the check and aborted at 5.4 GB).
+    let display = header.shared_attributes.display_window.size;
+    check_side(path, &format!("{what}'s display window"), display.0 as u64, display.1 as u64)?;
     let (w, h) = (header.layer_size.width(), header.layer_size.height());
     check_side(path, what, w as u64, h as u64)?;
     Ok((w, h))
@@ -568,11 +603,16 @@ fn check_side(path: &Path, what: &str, w: u64, h: u64) -> Result<(), String> {
 }
 
 /// The grey values of the image in `path` ([`open_image`]) resampled to `size` x `size` (triangle filter), row
-/// by row from the top, in [0, 1] (NaN as 0): what aperture and dirt images are read as.
+/// by row from the top, in [0, 1]: what aperture and dirt images are read as. Each pixel is brought into [0, 1]
+/// before the resampling (NaN as 0, +inf as 1): a NaN or an infinity once spread through the filter to the
+/// whole image, and an aperture of white pixels beside one NaN was refused as "black everywhere" (issue 61).
 pub fn read_grey_square(path: &Path, what: &str, size: usize) -> Result<Vec<f32>, String> {
-    let img = open_image(path, what)?;
-    let gray = img.resize_exact(size as u32, size as u32, ::image::imageops::FilterType::Triangle).to_luma32f();
-    Ok(gray.into_raw().into_iter().map(|v| if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) }).collect())
+    let mut gray = open_image(path, what)?.to_luma32f();
+    for v in gray.iter_mut() {
+        *v = if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
+    }
+    let resized = ::image::imageops::resize(&gray, size as u32, size as u32, ::image::imageops::FilterType::Triangle);
+    Ok(resized.into_raw().into_iter().map(|v| if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) }).collect())
 }
 
 /// Decodes the image in `path` after checking its header ([`image_size`]), the decoder limited to the same

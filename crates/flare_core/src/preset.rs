@@ -407,6 +407,7 @@ impl Document {
             sensor_width_mm: self.sensor_width_mm,
             display: self.display(divisor),
             ghost_gains: self.ghost_gains_at(system, frame),
+            cull_gains: None,
             blend: self.blend_settings(),
             lut_use: self.lut_use(),
             draft: None,
@@ -548,6 +549,9 @@ impl Document {
         if let Err(e) = self.lens.validate() {
             return bad("lens", e.to_string());
         }
+        if let Some(refusal) = self.exr.compression.refusal() {
+            return bad("exr.compression", refusal);
+        }
         for (field, ev) in
             [("flare_ev", self.flare_ev), ("plate_ev", self.plate_ev), ("starburst_ev", self.starburst_ev)]
         {
@@ -589,8 +593,8 @@ impl Document {
         if let Err(e) = BlendMode::parse(&self.blend.mode) {
             return bad("blend.mode", e);
         }
-        if !(self.blend.gain.is_finite() && self.blend.gain >= 0.0) {
-            return bad("blend.gain", format!("{} must be 0 or more", self.blend.gain));
+        if !(self.blend.gain.is_finite() && (0.0..=MAX_GHOST_GAIN).contains(&self.blend.gain)) {
+            return bad("blend.gain", format!("{} must be from 0 to {MAX_GHOST_GAIN}", self.blend.gain));
         }
         for (k, surface) in self.lens.surfaces.iter().enumerate() {
             if let Some(key) = surface.extra.keys().next() {
@@ -704,8 +708,7 @@ impl Document {
     }
 }
 
-/// The largest gain of one ghost (+60 dB): more is no look, and 1e308 overflowed to a ghost that vanished.
-pub const MAX_GHOST_GAIN: f64 = 1e6;
+pub use crate::timeline::MAX_GHOST_GAIN;
 
 /// The first key of `input` (a preset's JSON) that the document read from it does not have (`known`, the
 /// document written back), with its path and the known key it is a near miss of. The lens is checked by its
@@ -1035,6 +1038,13 @@ mod tests {
         let mut huge = Document::default();
         huge.ghost_mut(i, j).gain = 1e308;
         assert!(huge.check().unwrap_err().to_string().contains("must be from 0 to"), "an absurd gain is refused");
+        // Issue 61: the LUT layer's gain had no upper bound (at 1e300 every LUT image was dropped, exit 0).
+        let mut huge = Document::default();
+        huge.blend.gain = 1e300;
+        let e = huge.check().unwrap_err().to_string();
+        assert!(e.contains("blend.gain") && e.contains("must be from 0 to 1000000"), "{e}");
+        huge.blend.gain = MAX_GHOST_GAIN;
+        huge.check().unwrap();
         let mut fine = Document::default();
         fine.ghost_mut(i, j).gain = 3.0;
         fine.solo = Some(ghost_key(i, j));

@@ -115,13 +115,14 @@ impl<T: Animatable> Track<T> {
         // keys[i].frame <= frame < keys[i + 1].frame
         let i = keys.partition_point(|k| (k.frame as f64) <= frame) - 1;
         let (a, b) = (&keys[i], &keys[i + 1]);
-        let span = (b.frame - a.frame) as f64;
+        // In doubles: the span between two keys never overflows (checked keys are within `MAX_KEY_FRAME`).
+        let span = b.frame as f64 - a.frame as f64;
         let t = (frame - a.frame as f64) / span;
         Some(match interpolation {
             Interpolation::Linear => T::lerp(a.value, b.value, t),
             Interpolation::Smooth => {
                 // Tangents in value per frame, times the span: Catmull-Rom, one-sided at the ends.
-                let slope = |p: &Key<T>, q: &Key<T>| (p.value, q.value, (q.frame - p.frame) as f64);
+                let slope = |p: &Key<T>, q: &Key<T>| (p.value, q.value, q.frame as f64 - p.frame as f64);
                 let tangent = |before: Option<&Key<T>>, after: Option<&Key<T>>, here: &Key<T>| {
                     let (p, q, df) = slope(before.unwrap_or(here), after.unwrap_or(here));
                     T::combine(&[(q, span / df), (p, -span / df)])
@@ -139,15 +140,21 @@ impl<T: Animatable> Track<T> {
         })
     }
 
-    /// Problems with the keys, for [`Timeline::check`]: unsorted or repeated frames, values not finite.
-    fn check(&self, field: &str, finite: impl Fn(&T) -> bool) -> Result<(), String> {
+    /// Problems with the keys, for [`Timeline::check`]: unsorted or repeated frames, frames beyond
+    /// [`MAX_KEY_FRAME`], values not finite.
+    /// `valid` says whether a value is within bounds, `bounds` says them in words.
+    fn check(&self, field: &str, valid: impl Fn(&T) -> bool, bounds: &str) -> Result<(), String> {
+        if let Some((n, k)) = self.keys.iter().enumerate().find(|(_, k)| k.frame.unsigned_abs() > MAX_KEY_FRAME as u64)
+        {
+            return Err(format!("{field}[{n}]: frame {} is beyond +-{MAX_KEY_FRAME}", k.frame));
+        }
         for (n, pair) in self.keys.windows(2).enumerate() {
             if pair[1].frame <= pair[0].frame {
                 return Err(format!("{field}[{}]: frame {} follows frame {}", n + 1, pair[1].frame, pair[0].frame));
             }
         }
-        if let Some((n, k)) = self.keys.iter().enumerate().find(|(_, k)| !finite(&k.value)) {
-            return Err(format!("{field}[{n}]: frame {} has a value that is not a finite number", k.frame));
+        if let Some((n, k)) = self.keys.iter().enumerate().find(|(_, k)| !valid(&k.value)) {
+            return Err(format!("{field}[{n}]: frame {} has a value that is not {bounds}", k.frame));
         }
         Ok(())
     }
@@ -254,6 +261,11 @@ impl Timeline {
                 format!("{} is before first_frame {}", self.last_frame, self.first_frame),
             ));
         }
+        for (name, frame) in [("first_frame", self.first_frame), ("last_frame", self.last_frame)] {
+            if frame.unsigned_abs() > MAX_KEY_FRAME as u64 {
+                return Err((field(name), format!("{frame} is beyond +-{MAX_KEY_FRAME}")));
+            }
+        }
         if let Err(reason) = check_frame_count(self.first_frame, self.last_frame) {
             return Err((field("last_frame"), reason));
         }
@@ -263,16 +275,41 @@ impl Timeline {
         crate::shutter::check_shutter(self.shutter_deg).map_err(|reason| (field("shutter_deg"), reason))?;
         let in_field = |r: Result<(), String>, f: &str| r.map_err(|reason| (field(f), reason));
         in_field(
-            self.light_deg.check("light_deg", |v| v.iter().all(|a| a.is_finite() && a.abs() < 90.0)),
+            self.light_deg.check(
+                "light_deg",
+                |v| v.iter().all(|a| a.is_finite() && a.abs() < 90.0),
+                "a finite angle under 90 degrees",
+            ),
             "light_deg",
         )?;
-        in_field(self.light_ev.check("light_ev", |v| v.is_finite() && v.abs() <= 64.0), "light_ev")?;
+        in_field(
+            self.light_ev.check(
+                "light_ev",
+                |v| v.is_finite() && v.abs() <= 64.0,
+                "a finite number of stops within +-64",
+            ),
+            "light_ev",
+        )?;
         for (ghost, track) in &self.ghost_gain {
-            in_field(track.check(ghost, |v| v.is_finite() && *v >= 0.0), "ghost_gain")?;
+            let bounds = format!("a gain from 0 to {MAX_GHOST_GAIN}");
+            in_field(
+                track.check(ghost, |v| v.is_finite() && (0.0..=MAX_GHOST_GAIN).contains(v), &bounds),
+                "ghost_gain",
+            )?;
         }
         Ok(())
     }
 }
+
+/// The largest gain of one ghost, static or keyed, and of the LUT layer (+60 dB): more is no look, and 1e308
+/// overflowed to a ghost that vanished (keyed at 1e39 every sprite was dropped, the LUT layer's 1e300 every LUT
+/// image).
+pub const MAX_GHOST_GAIN: f64 = 1e6;
+
+/// The farthest key or range end from frame 0: 2^53 - 1, the integers a double holds exactly (a key's place
+/// between two others is worked out in doubles). Keys near +-2^62 overflowed the span between them (`i64`)
+/// and put the light at -1.48e21 degrees.
+pub const MAX_KEY_FRAME: i64 = (1 << 53) - 1;
 
 /// The most frames a timeline (and a rendered range) may span: 1,000,000, over 11 hours at 24 fps. A shot's plan
 /// holds a record per frame; a range of a hundred million frames asked for gigabytes before the first frame.
@@ -291,6 +328,37 @@ pub fn check_frame_count(first: i64, last: i64) -> Result<(), String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Issue 61: keys near +-2^62 overflowed the span between them (the light at -1.48e21 degrees, exit 0);
+    /// keyed gains had no upper bound (at 1e39 every sprite was dropped).
+    #[test]
+    fn far_keys_and_huge_keyed_gains_are_refused_and_checked_keys_interpolate_exactly() {
+        let far = 1_i64 << 62;
+        let mut t = Timeline::default();
+        t.light_deg.set(-far, [0.0, 0.0]);
+        t.light_deg.set(far, [10.0, 0.0]);
+        let (field, reason) = t.check().unwrap_err();
+        assert_eq!(field, "timeline.light_deg");
+        assert!(reason.contains("beyond"), "{reason}");
+        // At the bound the keys are accepted and the light stays between them.
+        let mut t = Timeline::default();
+        t.light_deg.set(-MAX_KEY_FRAME, [0.0, 0.0]);
+        t.light_deg.set(MAX_KEY_FRAME, [10.0, 0.0]);
+        t.check().unwrap();
+        for how in [Interpolation::Linear, Interpolation::Smooth] {
+            let v = t.light_deg.value_at(0.0, how).unwrap();
+            assert!((v[0] - 5.0).abs() < 1e-9, "{v:?}");
+        }
+        let mut t = Timeline { first_frame: -far, ..Timeline::default() };
+        assert_eq!(t.check().unwrap_err().0, "timeline.first_frame");
+        t.first_frame = 1;
+        t.ghost_gain.entry("2-5".into()).or_default().set(1, 1e39);
+        let (field, reason) = t.check().unwrap_err();
+        assert_eq!(field, "timeline.ghost_gain");
+        assert!(reason.contains("from 0 to 1000000"), "{reason}");
+        t.ghost_gain.entry("2-5".into()).or_default().set(1, MAX_GHOST_GAIN);
+        t.check().unwrap();
+    }
 
     fn track(keys: &[(i64, f64)]) -> Track<f64> {
         let mut t = Track::default();

@@ -47,6 +47,10 @@ pub const DISPLAY_INPUT: &str = "display";
 /// The bind group of the tonemap pass that holds the OCIO shader's LUT textures.
 pub const WGSL_GROUP: u32 = 1;
 
+/// The most looks a document applies (`color.looks`), each named once: a preset of 5,000 repeats once took
+/// over a minute to refuse or apply (issue 61).
+pub const MAX_LOOKS: usize = 16;
+
 /// A document's colour management (its `color`): see the module documentation.
 #[derive(Clone, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(default)]
@@ -132,6 +136,9 @@ pub struct ViewTransform {
     pub shader: WgslShader,
     forward: ocio::CpuProcessor,
     input: Option<ocio::CpuProcessor>,
+    /// The private folder a `.ocioz` config was extracted to ([`crate::ocio_files`]): kept while the
+    /// processors made from it live, removed with the last of them.
+    _extracted: Option<std::sync::Arc<tempfile::TempDir>>,
 }
 
 impl std::fmt::Debug for ViewTransform {
@@ -152,14 +159,10 @@ impl PartialEq for ViewTransform {
     }
 }
 
-/// Reads `config` (a file bounded in size, or an `ocio://` name).
-fn load_config(config: &str) -> Result<ocio::Config, ViewError> {
-    if !config.trim_start().starts_with("ocio://") {
-        let path = std::path::Path::new(config);
-        crate::files::read_bounded(path, crate::files::MAX_TEXT_BYTES)
-            .map_err(|e| refuse("config", format!("{config}: {e}")))?;
-    }
-    ocio::Config::create_from_file(config).map_err(|e| refuse("config", format!("{config}: {e}")))
+/// Reads `config` (a file, its YAML, the files it names and an archive's entries checked first, or an
+/// `ocio://` name: [`crate::ocio_files::load`]).
+fn load_config(config: &str) -> Result<crate::ocio_files::LoadedConfig, ViewError> {
+    crate::ocio_files::load(config).map_err(|e| refuse("config", format!("{}: {e}", crate::files::shorten(config))))
 }
 
 impl ViewTransform {
@@ -168,7 +171,7 @@ impl ViewTransform {
     /// file that cannot be read.
     pub fn new(doc: &ColorDoc) -> Result<Self, ViewError> {
         let config_name = doc.config.clone().unwrap_or_else(|| DEFAULT_CONFIG.to_owned());
-        let mut config = load_config(&config_name)?;
+        let crate::ocio_files::LoadedConfig { mut config, extracted } = load_config(&config_name)?;
         if config.get_color_space(WORKING_SPACE).is_none() {
             return Err(refuse(
                 "config",
@@ -193,10 +196,17 @@ impl ViewTransform {
         let mut looks: Vec<String> = Vec::new();
         if let Some(l) = &doc.looks {
             for name in l.split(',').map(str::trim).filter(|n| !n.is_empty()) {
+                let shown = crate::files::shorten(name);
+                if looks.len() == MAX_LOOKS {
+                    return Err(refuse("looks", format!("more than {MAX_LOOKS} looks: name each look once")));
+                }
+                if looks.iter().any(|k| k == name) {
+                    return Err(refuse("looks", format!("`{shown}` is named twice: each look applies once")));
+                }
                 if !looks_list.iter().any(|k| k == name) {
                     return Err(refuse(
                         "looks",
-                        format!("`{name}` is not a look of {config_name} ({})", looks_list.join(", ")),
+                        format!("`{shown}` is not a look of {config_name} ({})", looks_list.join(", ")),
                     ));
                 }
                 looks.push(name.to_owned());
@@ -274,6 +284,7 @@ impl ViewTransform {
             shader,
             forward,
             input,
+            _extracted: extracted,
         })
     }
 
@@ -557,5 +568,18 @@ mod tests {
         assert_eq!(bad(ColorDoc { config: Some("/no/such.ocio".into()), ..Default::default() }), "config");
         assert_eq!(bad(ColorDoc { config: Some("ocio://nope".into()), ..Default::default() }), "config");
         assert_eq!(bad(ColorDoc { cube: Some("/no/such.cube".into()), ..Default::default() }), "cube");
+    }
+
+    /// Issue 61: a look list of 5,000 repeats (a 185 KB preset) ran past 60 s; now a repeat is refused at once.
+    #[test]
+    fn a_look_named_twice_is_refused_at_once() {
+        let menus = ViewTransform::new(&ColorDoc::default()).unwrap().menus;
+        let look = menus.looks.first().expect("the default config has a look").clone();
+        let once = ColorDoc { looks: Some(look.clone()), ..Default::default() };
+        ViewTransform::new(&once).unwrap();
+        let repeats = ColorDoc { looks: Some(vec![look.as_str(); 5000].join(",")), ..Default::default() };
+        let e = ViewTransform::new(&repeats).unwrap_err();
+        assert_eq!(e.field, "looks");
+        assert!(e.reason.contains("named twice"), "{}", e.reason);
     }
 }

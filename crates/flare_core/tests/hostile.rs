@@ -96,20 +96,99 @@ fn image_headers_past_the_frame_limit_are_refused_before_decoding() {
     assert_eq!(read_plate(&edge).unwrap().width, MAX_IMAGE_SIDE_PX);
 }
 
-/// Reads that never stop: every text input read from an endless file (`/dev/zero`) ends at its bound with a
-/// one-line error instead of reading forever.
+/// Reads that never stop: every text input given an endless device (`/dev/zero`) is refused before it is read
+/// (it was read to its bound; now a device is refused as one), with a one-line error naming it.
 #[cfg(unix)]
 #[test]
-fn endless_files_are_read_to_their_bound_only() {
+fn endless_files_are_refused_before_they_are_read() {
     let zero = Path::new("/dev/zero");
     let e = Document::open(zero).unwrap_err().to_string();
-    assert!(e.contains("larger than") && e.contains("/dev/zero"), "{e}");
+    assert!(e.contains("not a regular file") && e.contains("/dev/zero"), "{e}");
     let e = flare_core::shot::track::read_track(zero).unwrap_err().to_string();
-    assert!(e.contains("larger than"), "{e}");
+    assert!(e.contains("not a regular file"), "{e}");
     let e = flare_core::optics::formats::load_glass_catalogue(zero).unwrap_err();
-    assert!(e.contains("larger than"), "{e}");
+    assert!(e.contains("not a regular file"), "{e}");
     let e = read_lens_file(zero).unwrap_err().to_string();
-    assert!(e.contains("lens files are small"), "{e}");
+    assert!(e.contains("not a regular file"), "{e}");
+}
+
+/// `work` on a thread, its outcome within `seconds` (`None`: it was still running, a hang).
+fn within<T: Send + 'static>(seconds: u64, work: impl FnOnce() -> T + Send + 'static) -> Option<T> {
+    let (send, receive) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = send.send(work());
+    });
+    receive.recv_timeout(std::time::Duration::from_secs(seconds)).ok()
+}
+
+/// Issue 61: FIFOs as inputs (a lens, a preset, `--cube`, `--ocio-config`, a plate, an existing frame under
+/// `--skip-existing`) blocked forever in `open()`. Each is refused at once, naming the file.
+#[cfg(unix)]
+#[test]
+fn fifos_as_inputs_are_refused_without_waiting() {
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = |name: &str| {
+        let path = dir.path().join(name);
+        assert!(std::process::Command::new("mkfifo").arg(&path).status().unwrap().success());
+        path
+    };
+    let (lens, preset, cube, config, plate, frame) =
+        (fifo("a.json"), fifo("b.json"), fifo("c.cube"), fifo("d.ocio"), fifo("e.exr"), fifo("f.0001.png"));
+    let outcome = within(20, move || {
+        let mut said = vec![
+            read_lens_file(&lens).unwrap_err().to_string(),
+            Document::open(&preset).unwrap_err().to_string(),
+            read_plate(&plate).unwrap_err().to_string(),
+        ];
+        for colour in [
+            flare_core::view_transform::ColorDoc { cube: Some(cube.display().to_string()), ..Default::default() },
+            flare_core::view_transform::ColorDoc { config: Some(config.display().to_string()), ..Default::default() },
+        ] {
+            said.push(flare_core::view_transform::ViewTransform::new(&colour).unwrap_err().to_string());
+        }
+        assert!(!flare_core::shot::sequence::reads_back_whole(&frame), "a FIFO is no frame to skip");
+        said
+    });
+    let said = outcome.expect("every FIFO refused within 20 s (it blocked in open() before)");
+    for e in said {
+        assert!(e.contains("not a regular file") && e.lines().count() == 1, "{e}");
+    }
+}
+
+/// Issue 61: a 3.6 KB EXR of 16x16 pixels in an 8192x8192 display window passed the header check (which read
+/// the data window) and aborted at 5.4 GB; a 65 KB black 8192x8192 PNG plate, `--size 8192x8192` and
+/// `--desqueeze 4` the same. Each frame's memory is now known from its sizes before any work, and refused
+/// with the figure.
+#[test]
+fn frames_that_need_more_memory_than_allowed_are_refused_before_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("window.exr");
+    flare_core::output::write_exr_channel(&path, 16, 16, "R", &[0.5; 256]).unwrap();
+    let mut bytes = std::fs::read(&path).unwrap();
+    let name = &b"displayWindow\0box2i\0"[..];
+    let at = bytes.windows(name.len()).position(|s| s == name).expect("the attribute") + name.len() + 4;
+    bytes[at + 8..at + 12].copy_from_slice(&8191i32.to_le_bytes());
+    bytes[at + 12..at + 16].copy_from_slice(&8191i32.to_le_bytes());
+    std::fs::write(&path, bytes).unwrap();
+    assert!(std::fs::metadata(&path).unwrap().len() < 4096);
+    let doc = Document { background: Some(path.display().to_string()), ..Document::default() };
+    let e = flare_core::shot::plan::frame_size(&doc, &(1..=1), None).unwrap_err().to_string();
+    assert!(e.contains("8192x8192") && e.contains("GB"), "{e}");
+    let png = dir.path().join("black.png");
+    image::GrayImage::new(8192, 8192).save(&png).unwrap();
+    let doc = Document { background: Some(png.display().to_string()), ..Document::default() };
+    let e = flare_core::shot::plan::frame_size(&doc, &(1..=1), None).unwrap_err().to_string();
+    assert!(e.contains("8192x8192") && e.contains("GB"), "{e}");
+    let plain = Document::default();
+    let e = flare_core::shot::plan::frame_size(&plain, &(1..=1), Some((8192, 8192))).unwrap_err().to_string();
+    assert!(e.contains("needs about 8.9 GB"), "{e}");
+    let squeezed = Document { desqueeze: 4.0, ..Document::default() };
+    let e = flare_core::shot::plan::frame_size(&squeezed, &(1..=1), Some((8192, 4320))).unwrap_err().to_string();
+    assert!(e.contains("drawn at 8192x17280"), "{e}");
+    // What fits is accepted: the default still, and a 4K frame desqueezed by 2.
+    flare_core::shot::plan::frame_size(&plain, &(1..=1), Some((1920, 1080))).unwrap();
+    let two = Document { desqueeze: 2.0, ..Document::default() };
+    flare_core::shot::plan::frame_size(&two, &(1..=1), Some((4096, 2160))).unwrap();
 }
 
 /// Wrong output: a plate whose values overflow when exposed (3e38 at +1 EV) and a +Inf sun pixel are clamped
@@ -522,4 +601,65 @@ fn the_colour_fuzzings_sources_load() {
     assert_eq!((view.display.as_str(), view.view.as_str()), ("sRGB", "Raw"));
     assert_eq!(view.apply([0.25, 0.5, 2.0]), [0.25, 0.5, 2.0], "Raw is the identity");
     ViewTransform::new(&ColorDoc { cube: Some(cube.display().to_string()), ..Default::default() }).unwrap();
+}
+
+/// Issue 61's untrue or flooding words: a 302-digit `semi_aperture` echoed whole, "PARM value value", a plain
+/// cylinder refused by the `.dat` and `.lens` writers as "aspheric or conic".
+#[test]
+fn messages_name_the_real_reason_in_a_line() {
+    let lens = builtin_lens("heliar").unwrap();
+    let mut text = flare_core::optics::formats::json::write(&lens);
+    text = text.replacen("\"semi_aperture\": 14.5", &format!("\"semi_aperture\": 1{}", "0".repeat(302)), 1);
+    assert!(text.contains(&"0".repeat(302)), "the value went in");
+    let e = read_lens_bytes(text.as_bytes(), Path::new("big.json")).unwrap_err().to_string();
+    assert!(e.contains("1.000e302") && e.len() < 200, "{e}");
+    let zmx = "VERS 1\nUNIT MM X W X CM MR CPMM\nSURF 0\n  TYPE EVENASPH\n  PARM 2 abc\n";
+    let e = read_lens_bytes(zmx.as_bytes(), Path::new("a.zmx")).unwrap_err().to_string();
+    assert!(e.contains("PARM 2 value `abc`") && !e.contains("value value"), "{e}");
+    let anamorphic = builtin_lens("panavision_anamorphic_us20060050403").unwrap();
+    for e in [
+        flare_core::optics::formats::pbrt::write(&anamorphic).unwrap_err().to_string(),
+        flare_core::optics::formats::flaresim::write(&anamorphic).unwrap_err().to_string(),
+    ] {
+        assert!(e.contains("is cylindrical") && !e.contains("aspheric or conic"), "{e}");
+    }
+}
+
+/// Issue 61: an aperture image of white pixels beside NaN and infinite ones was refused as "black
+/// everywhere" (the resampling spread the NaN over the image); now each pixel is brought into [0, 1] first.
+#[test]
+fn an_aperture_with_nan_and_infinite_pixels_keeps_its_white() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("aperture.exr");
+    // A checkerboard: every white pixel beside a NaN or an infinity.
+    let (w, h) = (4usize, 4usize);
+    let mut image = flare_core::image::HdrImage::black(w as u32, h as u32);
+    for (k, p) in image.pixels.iter_mut().enumerate() {
+        *p = match ((k % w) + k / w) % 2 {
+            0 => [1.0; 4],
+            _ if k % 3 == 0 => [f32::INFINITY; 4],
+            _ => [f32::NAN; 4],
+        };
+    }
+    // Written raw (the writer would clamp): an EXR of floats as a hostile file holds them.
+    let channel = |c: usize| image.pixels.iter().map(|p| p[c]).collect::<Vec<f32>>();
+    let layer = exr::prelude::Layer::new(
+        (w, h),
+        exr::prelude::LayerAttributes::default(),
+        exr::prelude::Encoding::UNCOMPRESSED,
+        exr::prelude::AnyChannels::sort(exr::prelude::SmallVec::from_vec(
+            ["B", "G", "R"]
+                .iter()
+                .zip([2, 1, 0])
+                .map(|(name, c)| exr::prelude::AnyChannel::new(*name, exr::prelude::FlatSamples::F32(channel(c))))
+                .collect(),
+        )),
+    );
+    use exr::prelude::WritableImage;
+    exr::prelude::Image::from_layer(layer).write().to_file(&path).unwrap();
+    let shape = flare_core::aperture::Aperture::image_shape_from_file(&path, 16).unwrap();
+    let flare_core::aperture::ApertureShape::Image { luminance, .. } = shape else { panic!("an image shape") };
+    assert!(luminance.iter().all(|v| v.is_finite() && (0.0..=1.0).contains(v)));
+    let mean = luminance.iter().sum::<f32>() / luminance.len() as f32;
+    assert!(mean > 0.25, "the white (and the infinities, as white) stay: mean {mean}");
 }

@@ -475,6 +475,26 @@ fn exr_value_types_compressions_and_ghost_data_windows() {
         println!("{}: {bytes} bytes", c.name());
     }
     assert!(output::ExrCompression::parse("DWAA").unwrap_err().contains("cannot be written"));
+    // Issue 61: B44 panicked on a rayon thread (SIGABRT) for one-pixel-tall parts and lost 65504 and negatives:
+    // refused by name, in a document, and by the writer itself.
+    for c in [output::ExrCompression::B44, output::ExrCompression::B44a] {
+        assert!(output::ExrCompression::parse(c.name()).unwrap_err().contains("not written here"));
+        let settings = output::ExrSettings { pixel_type: output::ExrPixel::Float, compression: c };
+        let thin = flare_core::image::HdrImage::black(50, 1);
+        let layers = output::FrameLayers {
+            composite: thin.clone(),
+            flare: thin.clone(),
+            starburst: thin.clone(),
+            dirt: None,
+            plate: None,
+            ghosts: vec![("ghost_1_2".into(), thin)],
+        };
+        let e = output::write_exr_layers(&dir.path().join("thin.exr"), &layers, settings).unwrap_err();
+        assert!(e.to_string().contains("not written here"), "{e}");
+        assert!(!dir.path().join("thin.exr").exists());
+        let doc = flare_core::preset::Document { exr: settings, ..Default::default() };
+        assert!(doc.check().unwrap_err().to_string().contains("exr.compression"));
+    }
     assert!(output::ExrCompression::parse("zip").is_ok());
 }
 

@@ -274,7 +274,9 @@ pub fn write_lut(path: &Path, lut: &GhostLut) -> std::io::Result<u64> {
 
 /// Reads and checks a LUT file.
 pub fn read_lut(path: &Path) -> Result<GhostLut, LutError> {
-    let file = std::fs::File::open(path)?;
+    // A FIFO or device is refused before it is opened (opening a FIFO waits for a writer).
+    let file = crate::files::open_regular(path)
+        .map_err(|reason| LutError::Io(std::io::Error::new(std::io::ErrorKind::InvalidInput, reason)))?;
     let length = file.metadata()?.len();
     decode(std::io::BufReader::new(file), length)
 }

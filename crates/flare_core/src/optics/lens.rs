@@ -225,6 +225,19 @@ impl Surface {
             && self.radius_x_mm.is_none()
     }
 
+    /// What makes this surface other than a sphere or a plane, in words for a message (`None` for a sphere or a
+    /// plane): "cylindrical" (a toroid flat in one section), "toroidal", "conic", "aspheric".
+    pub fn non_spherical_kind(&self) -> Option<&'static str> {
+        if let Some(rx) = self.radius_x_mm {
+            let flat_in_one = rx.is_infinite() || rx == 0.0 || self.radius_mm.is_infinite() || self.radius_mm == 0.0;
+            return Some(if flat_in_one { "cylindrical" } else { "toroidal" });
+        }
+        if self.aspheric_r2 != 0.0 || self.aspheric.iter().any(|&a| a != 0.0) {
+            return Some("aspheric");
+        }
+        (self.conic != 0.0).then_some("conic")
+    }
+
     /// True for a toroidal (anamorphic) surface: one with a radius of its own in the x-z section.
     pub fn is_toroidal(&self) -> bool {
         self.radius_x_mm.is_some()
@@ -461,7 +474,8 @@ pub enum LensError {
 
 impl LensError {
     pub(crate) fn field(surface: usize, field: &'static str, reason: impl Into<String>) -> Self {
-        Self::Field { surface, field, reason: reason.into() }
+        // A value echoed whole could be hundreds of digits long (a 302-digit semi-aperture): written short.
+        Self::Field { surface, field, reason: crate::files::shorten_numbers(&reason.into()) }
     }
 }
 

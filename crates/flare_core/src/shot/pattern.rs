@@ -3,13 +3,18 @@
 //!
 //! # How it works
 //! [`FramePattern::parse`] splits the name at its one frame field into a prefix, a width and a suffix; a
-//! name with no field is not a pattern (`None`), one with two fields is refused. [`FramePattern::path`]
+//! name with no field is not a pattern (`None`), one with two fields or wider than [`MAX_FRAME_DIGITS`] is
+//! refused. [`FramePattern::path`]
 //! writes the frame zero-padded to the width (a negative frame keeps its minus sign).
 //! [`FramePattern::existing_frames`] lists the frames present on disk: the files of the pattern's folder
 //! whose names are the prefix, digits (at least the width, or exactly it when padded numbers are longer
 //! than needed) and the suffix.
 
 use std::path::{Path, PathBuf};
+
+/// The widest frame field (digits): an `i64` frame has at most 19 digits and a sign. Wider fields are refused
+/// (`%070000d` once reached the formatter's limit of 65535 and panicked).
+pub const MAX_FRAME_DIGITS: usize = 20;
 
 /// A sequence's file name with its frame field (see the module documentation).
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -33,6 +38,13 @@ impl FramePattern {
         };
         if find_hashes(&text[end..]).is_some() || find_printf(&text[end..]).is_some() {
             return Err(format!("`{text}` has two frame fields: use one"));
+        }
+        if width > MAX_FRAME_DIGITS {
+            let field = crate::files::shorten(&text[start..end]);
+            return Err(format!(
+                "the frame field `{field}` pads to {} digits: at most {MAX_FRAME_DIGITS} (a frame number has at most 19 and a sign)",
+                if width == usize::MAX { "too many".to_string() } else { width.to_string() }
+            ));
         }
         Ok(Some(Self { text: text.to_string(), prefix: text[..start].into(), width, suffix: text[end..].into() }))
     }
@@ -105,7 +117,7 @@ fn find_hashes(text: &str) -> Option<(usize, usize, usize)> {
     Some((start, end, end - start))
 }
 
-/// The first `%d` or `%0Nd` in `text`: (start, end, width).
+/// The first `%d` or `%0Nd` in `text`: (start, end, width; `usize::MAX` when the width cannot be read).
 fn find_printf(text: &str) -> Option<(usize, usize, usize)> {
     let bytes = text.as_bytes();
     let mut from = 0;
@@ -114,7 +126,8 @@ fn find_printf(text: &str) -> Option<(usize, usize, usize)> {
         let digits = bytes[start + 1..].iter().take_while(|b| b.is_ascii_digit()).count();
         let end = start + 1 + digits;
         if bytes.get(end) == Some(&b'd') {
-            let width = if digits == 0 { 0 } else { text[start + 1..end].parse().ok()? };
+            // A width too large to read is a field all the same (refused by `parse`), not literal text.
+            let width = if digits == 0 { 0 } else { text[start + 1..end].parse().unwrap_or(usize::MAX) };
             return Some((start, end + 1, width));
         }
         from = start + 1;
@@ -139,6 +152,23 @@ mod tests {
         assert!(FramePattern::parse("a.##.b.##.exr").is_err());
         assert!(FramePattern::parse("a.##.%04d.exr").is_err());
         assert!(!FramePattern::is_pattern("100%.png"));
+    }
+
+    /// Issue 61: `%070000d` passed the formatter's limit (65535) and panicked when a frame's name was made.
+    #[test]
+    fn a_frame_field_wider_than_a_frame_number_is_refused() {
+        let p = FramePattern::parse("f.%020d.exr").unwrap().unwrap();
+        assert_eq!(p.path(-1), PathBuf::from(format!("f.-{}1.exr", "0".repeat(18))));
+        for text in ["f.%021d.exr", "f.%070000d.exr", "f.%099999999999999999999999999d.exr"] {
+            let e = FramePattern::parse(text).unwrap_err();
+            assert!(e.contains("at most 20"), "{e}");
+            assert!(e.len() < 200, "{e}");
+        }
+        let hashes = format!("f.{}.exr", "#".repeat(70_000));
+        let e = FramePattern::parse(&hashes).unwrap_err();
+        assert!(e.contains("70000 digits") && e.len() < 200, "{e}");
+        // The message quotes at most 40 characters of the name, whatever its length.
+        assert!(!e.contains(&"#".repeat(41)), "{e}");
     }
 
     #[test]

@@ -145,23 +145,26 @@ pub fn check_range(doc: &Document, frames: &RangeInclusive<i64>) -> Result<Vec<i
 }
 
 /// The size of the frames of `range`: `size` when given, else the size of the first plate of the range on
-/// disk, else [`DEFAULT_SIZE`]. Refuses a range the plate sequence does not cover ([`check_range`]).
+/// disk, else [`DEFAULT_SIZE`]. Refuses a range the plate sequence does not cover ([`check_range`]) and a frame
+/// that would need more memory than it may take ([`crate::frame::check_frame_memory`]).
 pub fn frame_size(
     doc: &Document,
     range: &RangeInclusive<i64>,
     size: Option<(u32, u32)>,
 ) -> Result<(u32, u32), ShotError> {
     let on_disk = check_range(doc, range)?;
-    if let Some(size) = size {
-        return Ok(size);
-    }
     let first = range.clone().find(|f| on_disk.is_empty() || on_disk.contains(f));
-    let Some((frame, path)) = first.and_then(|f| Some((f, doc.plate_at(f)?))) else { return Ok(DEFAULT_SIZE) };
-    ::image::image_dimensions(&path).map_err(|e| ShotError::Plate {
-        frame,
-        path: path.display().to_string(),
-        reason: e.to_string(),
-    })
+    let plate = first.and_then(|f| Some((f, doc.plate_at(f)?)));
+    let (width, height) = match (size, &plate) {
+        (Some(size), _) => size,
+        (None, None) => DEFAULT_SIZE,
+        // The header alone, the EXR's display window included (its decoder pads the data window out to it).
+        (None, Some((frame, path))) => crate::output::image_size(path, "plate")
+            .map_err(|reason| ShotError::Range(format!("frame {frame}: {reason}")))?,
+    };
+    crate::frame::check_frame_memory(width, height, doc.desqueeze, plate.is_some())
+        .map_err(|e| ShotError::Range(e.to_string()))?;
+    Ok((width, height))
 }
 
 /// Plans `frames` of `doc` (see the module documentation). `size`: the frame size (`None`: the plate's);

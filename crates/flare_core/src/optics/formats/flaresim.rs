@@ -144,10 +144,10 @@ fn check_focal_length(mut loaded: LoadedLens, focal_length: Option<(usize, f64)>
 /// The lens as a FlareSim `.lens` text. Coatings are written as their layer count (a quarter-wave as 1, a
 /// multilayer as its layers); aspheric surfaces and a stop on a lens surface cannot be written.
 pub fn write(lens: &Lens) -> Result<String, FormatError> {
-    if let Some(k) = lens.surfaces.iter().position(|s| !s.is_spherical()) {
+    if let Some((k, kind)) = lens.surfaces.iter().enumerate().find_map(|(k, s)| Some((k, s.non_spherical_kind()?))) {
         return Err(FormatError::Structure {
             format: FORMAT,
-            message: format!("surface {k} is aspheric or conic, and the .lens format holds spheres only"),
+            message: format!("surface {k} is {kind}, and the .lens format holds spheres only"),
         });
     }
     if lens.stop_on_lens_surface() {

@@ -177,7 +177,9 @@ pub fn parse_lens_bytes(bytes: &[u8], name: &Path) -> Result<Lens, FormatError> 
 /// Reads and validates a lens file of any supported format, with the reader's warnings.
 pub fn read_lens_file(path: &Path) -> Result<LoadedLens, FormatError> {
     let io = |error| FormatError::Io { path: path.display().to_string(), error };
-    let file = std::fs::File::open(path).map_err(io)?;
+    // A FIFO or device is refused before it is opened (opening a FIFO waits for a writer).
+    let file = crate::files::open_regular(path)
+        .map_err(|reason| io(std::io::Error::new(std::io::ErrorKind::InvalidInput, reason)))?;
     let bytes = file.metadata().map_err(io)?.len();
     if bytes > MAX_FILE_BYTES {
         return Err(FormatError::TooLarge { bytes });

@@ -75,10 +75,10 @@ pub fn write(lens: &Lens) -> Result<String, FormatError> {
             ),
         });
     }
-    if let Some(k) = lens.surfaces.iter().position(|s| !s.is_spherical()) {
+    if let Some((k, kind)) = lens.surfaces.iter().enumerate().find_map(|(k, s)| Some((k, s.non_spherical_kind()?))) {
         return Err(FormatError::Structure {
             format: "pbrt .dat",
-            message: format!("surface {k} is aspheric or conic, and pbrt's lens table holds spheres only"),
+            message: format!("surface {k} is {kind}, and pbrt's lens table holds spheres only"),
         });
     }
     let mut out =

@@ -37,8 +37,9 @@ fn unsupported(line: usize, what: impl Into<String>) -> FormatError {
 
 fn number(line: usize, field: &str, token: Option<&str>) -> Result<f64, FormatError> {
     let token = token.ok_or_else(|| line_error(line, format!("{field} has no value")))?;
-    let v: f64 = token.parse().map_err(|_| line_error(line, format!("{field} value `{token}` is not a number")))?;
-    if v.is_finite() { Ok(v) } else { Err(line_error(line, format!("{field} value `{token}` is not finite"))) }
+    let shown = crate::files::shorten(token);
+    let v: f64 = token.parse().map_err(|_| line_error(line, format!("{field} value `{shown}` is not a number")))?;
+    if v.is_finite() { Ok(v) } else { Err(line_error(line, format!("{field} value `{shown}` is not finite"))) }
 }
 
 /// One `SURF` block as read, before it becomes a [`Surface`].
@@ -156,7 +157,7 @@ pub fn parse(text: &str, id_hint: &str) -> Result<LoadedLens, FormatError> {
             "CONI" => blocks.last_mut().unwrap().conic = number(line, "CONI", tokens.next())?,
             "PARM" => {
                 let n = number(line, "PARM", tokens.next())?;
-                let v = number(line, "PARM value", tokens.next())?;
+                let v = number(line, &format!("PARM {n}"), tokens.next())?;
                 if n.fract() != 0.0 || !(0.0..=8.0).contains(&n) {
                     if v != 0.0 {
                         return Err(unsupported(line, format!("PARM {n} = {v} (an even asphere has PARM 1 to 8)")));
