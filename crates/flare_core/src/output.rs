@@ -334,7 +334,8 @@ pub fn write_exr_channel(path: &Path, w: u32, h: u32, name: &str, values: &[f32]
     if values.len() != w as usize * h as usize {
         return Err(encode(path, format!("{} values for {w}x{h} pixels", values.len())));
     }
-    let samples = values.iter().map(|&v| if v.is_nan() { 0.0 } else { v }).collect();
+    // No image holds a NaN or an infinity (an infinity as the largest float of its sign).
+    let samples = values.iter().map(|&v| finite(v)).collect();
     let list = typed_channels(&[name.to_owned()], vec![samples], ExrPixel::Float);
     write_exr_parts(path, (w, h), ExrSettings::default(), list, Vec::new())
 }
@@ -575,12 +576,34 @@ pub fn image_size(path: &Path, what: &str) -> Result<(u32, u32), String> {
     Ok((w, h))
 }
 
+/// The data and display windows an EXR's first header states, read from its bytes (the first 64 KiB), for a
+/// message when the `exr` crate refuses the header ("display window 1073741824 x 1073741824 pixels").
+fn raw_exr_windows(path: &Path) -> Option<String> {
+    use std::io::Read;
+    let mut head = Vec::new();
+    crate::files::open_regular(path).ok()?.take(1 << 16).read_to_end(&mut head).ok()?;
+    let mut said = Vec::new();
+    for (name, words) in
+        [(&b"dataWindow\0box2i\0"[..], "data window"), (&b"displayWindow\0box2i\0"[..], "display window")]
+    {
+        let at = head.windows(name.len()).position(|w| w == name)? + name.len() + 4;
+        let int =
+            |k: usize| Some(i64::from(i32::from_le_bytes(head.get(at + 4 * k..at + 4 * k + 4)?.try_into().ok()?)));
+        let (x0, y0, x1, y1) = (int(0)?, int(1)?, int(2)?, int(3)?);
+        said.push(format!("{words} {} x {} pixels", x1 - x0 + 1, y1 - y0 + 1));
+    }
+    Some(said.join(", "))
+}
+
 /// The size of an EXR from its header alone, checked as [`image_size`] does (for readers that use the `exr`
 /// crate directly: a depth map's channel).
 pub fn exr_size(path: &Path, what: &str) -> Result<(usize, usize), String> {
     crate::files::open_regular(path)?;
-    let meta = exr::meta::MetaData::read_from_file(path, false)
-        .map_err(|e| format!("{}: cannot read the {what}: {e}", path.display()))?;
+    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| {
+        // The crate's reason names no size: the windows as the header states them, when it can be read.
+        let windows = raw_exr_windows(path).map_or(String::new(), |w| format!(" ({w})"));
+        format!("{}: cannot read the {what}: {e}{windows}", path.display())
+    })?;
     let header = meta.headers.first().ok_or_else(|| format!("{}: the {what} has no image in it", path.display()))?;
     // The decoder pads the data window out to the display window: both are checked (issue 61: a 3.6 KB EXR of
     // 16x16 pixels in an 8192x8192 display window passed the check and aborted at 5.4 GB).

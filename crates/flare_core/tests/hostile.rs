@@ -663,3 +663,87 @@ fn an_aperture_with_nan_and_infinite_pixels_keeps_its_white() {
     let mean = luminance.iter().sum::<f32>() / luminance.len() as f32;
     assert!(mean > 0.25, "the white (and the infinities, as white) stay: mean {mean}");
 }
+
+/// Issue 61: an EXR whose display window the `exr` crate refuses was named without its size; the message now
+/// says the windows the header states.
+#[test]
+fn a_refused_exr_window_is_named_with_its_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("window.exr");
+    flare_core::output::write_exr_channel(&path, 16, 16, "R", &[0.5; 256]).unwrap();
+    let mut bytes = std::fs::read(&path).unwrap();
+    let name = &b"displayWindow\0box2i\0"[..];
+    let at = bytes.windows(name.len()).position(|s| s == name).expect("the attribute") + name.len() + 4;
+    bytes[at + 8..at + 12].copy_from_slice(&(i32::MAX - 1).to_le_bytes());
+    bytes[at + 12..at + 16].copy_from_slice(&(i32::MAX - 1).to_le_bytes());
+    std::fs::write(&path, bytes).unwrap();
+    let e = read_plate(&path).unwrap_err().to_string();
+    assert!(e.contains("display window 2147483647 x 2147483647 pixels") && e.lines().count() == 1, "{e}");
+}
+
+/// Issue 61: 200 photos of 2046x2046 aborted `photo-lut` at 5.7 GB (every photo's texels kept at once), and 70
+/// made a `.flut` that `--lut` refused as corrupt. The texels are now summed from the headers before any photo
+/// is decoded, against the bound the reader keeps; a LUT the reader would refuse is not written.
+#[test]
+fn photo_luts_past_what_a_lut_holds_are_refused_before_decoding() {
+    let dir = tempfile::tempdir().unwrap();
+    for k in 0..70 {
+        std::fs::write(dir.path().join(format!("flare_{k}deg.png")), png_claiming(2046, 2046)).unwrap();
+    }
+    let e = flare_core::lut::photo::import_folder(dir.path()).unwrap_err().to_string();
+    assert!(e.contains("70 photos make 293028120 texels") && e.contains("268435456"), "{e}");
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: common::cases_or(64), ..ProptestConfig::default() })]
+
+    /// Issue 61's new readers under the fuzz harness: a frame pattern is refused or names files of bounded
+    /// length for every frame (a `%070000d` once panicked in the formatter).
+    #[test]
+    fn frame_patterns_are_refused_or_name_short_files(
+        text in "[a-z/._]{0,8}(#{0,30}|%0?[0-9]{0,7}d)[a-z._#%0-9d]{0,8}",
+        frame in any::<i64>(),
+    ) {
+        if let Ok(Some(pattern)) = flare_core::shot::pattern::FramePattern::parse(&text) {
+            let path = pattern.path(frame);
+            prop_assert!(path.as_os_str().len() <= text.len() + 21 + 8, "{}", path.display());
+        }
+    }
+
+    /// Keyed timelines: any keys are refused naming the field, or sample to finite values everywhere.
+    #[test]
+    fn keyed_timelines_are_refused_or_sample_finitely(
+        keys in proptest::collection::vec((any::<i64>(), -100.0f64..100.0, prop_oneof![Just(1.0f64), Just(1e39), Just(-1.0), Just(f64::NAN), 0.0f64..1e6]), 0..6),
+        at in prop_oneof![any::<f64>(), -1e18f64..1e18],
+    ) {
+        let mut timeline = flare_core::timeline::Timeline::default();
+        for &(frame, deg, gain) in &keys {
+            timeline.light_deg.set(frame, [deg * 0.8, 0.0]);
+            timeline.ghost_gain.entry("2-5".into()).or_default().set(frame, gain);
+        }
+        if timeline.check().is_ok() && at.is_finite() {
+            let sample = timeline.sample(at);
+            prop_assert!(sample.light_deg.is_none_or(|d| d.iter().all(|a| a.is_finite() && a.abs() < 90.0)));
+            prop_assert!(sample.ghost_gain.values().all(|g| g.is_finite() && (0.0..=1e6).contains(g)));
+        }
+    }
+
+    /// OCIO configs' YAML: any text with anchors and aliases is counted as events without expanding, refused
+    /// in one line or read; it never panics and never builds the tree.
+    #[test]
+    fn ocio_yaml_is_counted_without_expanding(
+        depth in 1usize..14,
+        width in 1usize..12,
+        tail in "[a-z:&* \\[\\],{}\\n-]{0,60}",
+    ) {
+        let mut text = String::from("ocio_profile_version: 2\na0: &a0 [x]\n");
+        for k in 1..depth {
+            text.push_str(&format!("a{k}: &a{k} [{}]\n", vec![format!("*a{}", k - 1); width].join(", ")));
+        }
+        text.push_str(&tail);
+        match flare_core::ocio_files::check_config_text(&text) {
+            Ok(_) => prop_assert!((width as f64).powi(depth as i32 - 1) <= 2.0e6),
+            Err(e) => prop_assert_eq!(e.lines().count(), 1),
+        }
+    }
+}

@@ -106,6 +106,8 @@ fn read_exr(path: &Path) -> Result<DepthMap, String> {
     if metres.len() != w * h || w == 0 || h == 0 {
         return Err(format!("{} samples for {w}x{h} pixels", metres.len()));
     }
+    // The largest float (or half) is how a file holds the sky: infinitely far ([`write_exr`]).
+    let metres = metres.into_iter().map(|m| if m >= f64::from(f32::MAX) { f64::INFINITY } else { m }).collect();
     Ok(DepthMap { width: w as u32, height: h as u32, metres })
 }
 
@@ -126,9 +128,12 @@ fn read_png(path: &Path, range: PngRange) -> Result<DepthMap, String> {
     Ok(DepthMap { width, height, metres })
 }
 
-/// Writes a depth map as a one-channel EXR (`Z`, metres; infinity stays infinity) through the one writer.
+/// Writes a depth map as a one-channel EXR (`Z`, metres, 32-bit) through the one writer. No image holds an
+/// infinity: the sky (infinitely far) is written as the largest float, which [`DepthMap::read`] reads back as
+/// infinity (a NaN, which no depth map holds, as 0, refused when the defocus is made).
 pub fn write_exr(path: &Path, map: &DepthMap) -> Result<(), String> {
-    let values: Vec<f32> = map.metres.iter().map(|&m| m as f32).collect();
+    let values: Vec<f32> =
+        map.metres.iter().map(|&m| if m.is_nan() { 0.0 } else { (m as f32).clamp(-f32::MAX, f32::MAX) }).collect();
     crate::output::write_exr_channel(path, map.width, map.height, "Z", &values).map_err(|e| e.to_string())
 }
 

@@ -265,8 +265,23 @@ fn encode_version(lut: &GhostLut, version: u32) -> Vec<u8> {
     out
 }
 
-/// Writes `lut` to `path` atomically (temporary file, then rename).
+/// Writes `lut` to `path` atomically (temporary file, then rename). A LUT this build's reader would refuse for
+/// its size (more than [`MAX_TEXELS`] in all, an entry wider than [`MAX_SIDE`]) is refused here instead of
+/// written (issue 61: a photo LUT of 70 large photos was written, then refused by `--lut` as corrupt).
 pub fn write_lut(path: &Path, lut: &GhostLut) -> std::io::Result<u64> {
+    let entries = || lut.ghosts.iter().flat_map(|g| &g.entries);
+    let texels: u64 = entries().map(|e| u64::from(e.width) * u64::from(e.height)).sum();
+    if texels > MAX_TEXELS {
+        return Err(std::io::Error::other(format!(
+            "{texels} texels in all, more than the {MAX_TEXELS} a LUT file holds: not written"
+        )));
+    }
+    if let Some(e) = entries().find(|e| e.width.max(e.height) > MAX_SIDE) {
+        return Err(std::io::Error::other(format!(
+            "an entry of {}x{} texels, wider than the {MAX_SIDE} a LUT file holds: not written",
+            e.width, e.height
+        )));
+    }
     let bytes = encode(lut);
     crate::files::write_atomic(path, &bytes)?;
     Ok(bytes.len() as u64)
@@ -519,6 +534,22 @@ mod tests {
                 entries: vec![entry(0.0, 1.0), entry(10.0, 1.7)],
             }],
         }
+    }
+
+    /// Issue 61: the writer refuses a LUT the reader would refuse for its size, instead of writing it.
+    #[test]
+    fn a_lut_too_large_to_read_back_is_not_written() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("wide.flut");
+        let mut lut = tiny();
+        lut.ghosts[0].entries[0].width = MAX_SIDE + 1;
+        let e = write_lut(&path, &lut).unwrap_err().to_string();
+        assert!(e.contains("wider than") && !path.exists(), "{e}");
+        let mut lut = tiny();
+        lut.ghosts[0].entries[0].height = (MAX_TEXELS / 3 + 1) as u32;
+        let e = write_lut(&path, &lut).unwrap_err().to_string();
+        assert!(e.contains("texels in all") && !path.exists(), "{e}");
+        write_lut(&path, &tiny()).unwrap();
     }
 
     #[test]

@@ -71,12 +71,20 @@ fn load_linear(path: &Path) -> Result<image::Rgb32FImage, PhotoError> {
         }
     }
     let (w, h) = rgb.dimensions();
-    if w.max(h) > MAX_PHOTO_SIDE {
-        let k = f64::from(MAX_PHOTO_SIDE) / f64::from(w.max(h));
-        let (nw, nh) = (((f64::from(w) * k).round() as u32).max(1), ((f64::from(h) * k).round() as u32).max(1));
+    if (w, h) != kept_size(w, h) {
+        let (nw, nh) = kept_size(w, h);
         rgb = image::imageops::resize(&rgb, nw, nh, image::imageops::FilterType::Triangle);
     }
     Ok(rgb)
+}
+
+/// The size a photo of `w` x `h` is kept at: downscaled to fit [`MAX_PHOTO_SIDE`].
+fn kept_size(w: u32, h: u32) -> (u32, u32) {
+    if w.max(h) <= MAX_PHOTO_SIDE {
+        return (w, h);
+    }
+    let k = f64::from(MAX_PHOTO_SIDE) / f64::from(w.max(h));
+    (((f64::from(w) * k).round() as u32).max(1), ((f64::from(h) * k).round() as u32).max(1))
 }
 
 /// Imports a folder of swept flare images as a photo LUT.
@@ -127,6 +135,25 @@ pub fn import_folder(folder: &Path) -> Result<GhostLut, PhotoError> {
     images.sort_by(|a, b| a.0.total_cmp(&b.0));
     if let Some(w) = images.windows(2).find(|w| w[0].0 == w[1].0) {
         return Err(PhotoError::Duplicate(w[0].0));
+    }
+    // The texels every photo will keep, from the headers alone, before any is decoded: a LUT holds at most
+    // `MAX_TEXELS` (the reader's bound; 2 GiB of half floats while they are made). Issue 61: 200 photos of
+    // 2046x2046 aborted at 5.7 GB, and 70 made a file the reader refused.
+    let mut texels: u64 = 0;
+    for (_, path) in &images {
+        let (w, h) = crate::output::image_size(path, "flare photo").map_err(|e| err(path, e))?;
+        let (w, h) = kept_size(w, h);
+        texels += u64::from(w) * u64::from(h);
+    }
+    if texels > super::format::MAX_TEXELS {
+        return Err(err(
+            folder,
+            format!(
+                "{} photos make {texels} texels, more than the {} a LUT holds: use fewer or smaller photos",
+                images.len(),
+                super::format::MAX_TEXELS
+            ),
+        ));
     }
     let mut entries = Vec::with_capacity(images.len());
     for (theta, path) in &images {
