@@ -390,7 +390,10 @@ fn sharp(
         (0..ghosts).map(|g| list.get(g).copied().unwrap_or(1.0).max(0.0) * direct_gain).collect()
     };
     let mut gains = scaled(&request.ghost_gains);
-    let mut cull = request.cull_gains.as_deref().map(scaled);
+    // The dim threshold sees the user's gains and the light's (what the ghost adds to the picture, whether its
+    // sprite or its LUT image draws it), not the share a LUT takes from the paraxial sprite: a baked ghost is not
+    // "too dim" because its LUT draws it.
+    let cull = scaled(request.cull_gains.as_deref().unwrap_or(&request.ghost_gains));
     let lut_scene = lut.map(|live| {
         let out = Window::for_sensor(sensor.width_mm, w, h);
         let mut scene = LutScene::build(live, &flare.system, u, out, &request.blend, &gains);
@@ -402,14 +405,8 @@ fn sharp(
     if let Some(l) = &lut_scene {
         // A photo LUT is the whole flare photographed: it is never drawn over paraxial sprites.
         let alone = request.lut_use == LutUse::Alone || lut.is_some_and(|live| live.lut.kind == LutKind::Photo);
-        let weigh = |list: &mut Vec<f32>| {
-            for (g, gain) in list.iter_mut().enumerate() {
-                *gain = if alone { 0.0 } else { *gain * l.paraxial_weight(g as u32) };
-            }
-        };
-        weigh(&mut gains);
-        if let Some(c) = cull.as_mut() {
-            weigh(c);
+        for (g, gain) in gains.iter_mut().enumerate() {
+            *gain = if alone { 0.0 } else { *gain * l.paraxial_weight(g as u32) };
         }
     }
     let display = DisplaySettings {
@@ -417,7 +414,7 @@ fn sharp(
         dirt_amount: display.dirt_amount * f64::from(light_gain),
         ..*display
     };
-    let (scene, sprites) = flare.scene_culled_with(light_deg, sensor, w, h, &display, &gains, cull.as_deref());
+    let (scene, sprites) = flare.scene_culled_with(light_deg, sensor, w, h, &display, &gains, Some(&cull));
     (scene, lut_scene, sprites)
 }
 

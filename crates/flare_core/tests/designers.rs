@@ -133,7 +133,7 @@ fn aspheric_refusals_name_the_line_and_the_reason() {
             ASPHERE_ZMX.replace("CONI -0.6", "CONI 30"),
             &["line 16", "surface 1", "conic", "defined up to a height of", "clear semi-aperture 10.16 mm"],
         ),
-        ("term not a number", ASPHERE_ZMX.replace("PARM 2 -0.002", "PARM 2 x"), &["line 21", "PARM value"]),
+        ("term not a number", ASPHERE_ZMX.replace("PARM 2 -0.002", "PARM 2 x"), &["line 21", "PARM 2 value `x`"]),
         ("PARM beyond 8", ASPHERE_ZMX.replace("PARM 8 0", "PARM 8 0\n  PARM 9 1"), &["line 28", "PARM 9"]),
         (
             "PARM on STANDARD",
