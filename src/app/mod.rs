@@ -451,14 +451,7 @@ impl FlareLabApp {
             let height = (ui.available_height() - self.under_view).max(120.0);
             ui.allocate_ui(egui::vec2(ui.available_width(), height), |ui| self.viewport_ui(ui, &mut actions));
             let under_top = ui.cursor().top();
-            let info = shot_panel::ShotInfo::new(
-                self.session.doc(),
-                self.session.selected(),
-                &self.derived,
-                &self.jobs,
-                self.export_px(),
-                false,
-            );
+            let info = shot_panel::ShotInfo::new(&self.session, &self.derived, &self.jobs, self.export_px(), false);
             shot_panel::timeline_ui(ui, &mut self.session, &mut self.view, &mut self.ui, &info);
             self.display_ui(ui);
             // The sections under the view, each open by its toggle ([`Self::sections_ui`]); folded, the
@@ -515,15 +508,9 @@ impl FlareLabApp {
     fn panel_ui(&mut self, ui: &mut egui::Ui, actions: &mut Vec<Action>) {
         match self.ui.tab {
             Tab::Shot => {
-                let plate_decides = self.export_size.is_none() && self.derived.plate().is_some();
-                let info = shot_panel::ShotInfo::new(
-                    self.session.doc(),
-                    self.session.selected(),
-                    &self.derived,
-                    &self.jobs,
-                    self.export_px(),
-                    plate_decides,
-                );
+                let decides = self.export_size.is_none() && self.derived.plate().is_some();
+                let info =
+                    shot_panel::ShotInfo::new(&self.session, &self.derived, &self.jobs, self.export_px(), decides);
                 let (session, view, fields) = (&mut self.session, &mut self.view, &mut self.shot_fields);
                 let action = panel_scroll().show(ui, |ui| shot_panel::shot_ui(ui, session, view, fields, &info)).inner;
                 if let Some(action) = action {

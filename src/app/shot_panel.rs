@@ -66,13 +66,13 @@ impl<'a> ShotInfo<'a> {
     /// What the shot's panels show: the light, the selected ghost, the light found, the squeeze, the export's size
     /// (`export_px`, and whether the plate decides it), the shot job.
     pub fn new(
-        doc: &flare_core::preset::Document,
-        selected: Option<usize>,
+        session: &Session,
         derived: &'a Derived,
         jobs: &'a JobBoard,
         export_px: (u32, u32),
         plate_decides: bool,
     ) -> Self {
+        let (doc, selected) = (session.doc(), session.selected());
         let ghost = selected.and_then(|g| derived.flare().as_ref()?.system.ghosts.get(g).map(|g| (g.i, g.j)));
         let export_size = if plate_decides {
             format!("{}x{} (the plate's size)", export_px.0, export_px.1)

@@ -65,6 +65,19 @@ fn exr_claiming(dir: &Path, w: i32, h: i32) -> PathBuf {
     path
 }
 
+/// A 16x16 EXR whose display window its header states as `side` x `side` pixels.
+fn exr_in_window(dir: &Path, side: i32) -> PathBuf {
+    let path = dir.join("window.exr");
+    flare_core::output::write_exr_channel(&path, 16, 16, "R", &[0.5; 256]).unwrap();
+    let mut bytes = std::fs::read(&path).unwrap();
+    let name = &b"displayWindow\0box2i\0"[..];
+    let at = bytes.windows(name.len()).position(|s| s == name).expect("the attribute") + name.len() + 4;
+    bytes[at + 8..at + 12].copy_from_slice(&(side - 1).to_le_bytes());
+    bytes[at + 12..at + 16].copy_from_slice(&(side - 1).to_le_bytes());
+    std::fs::write(&path, bytes).unwrap();
+    path
+}
+
 /// Memory blow-ups before any size check: a few-dozen-byte PNG claiming 9000-16000 pixels a side (as a plate,
 /// an aperture image, a depth map) and a few-hundred-byte EXR claiming 100000 x 100000 (as a depth map and a
 /// plate) are refused from their headers, naming the size and the limit, before any pixel is decoded.
@@ -162,14 +175,7 @@ fn fifos_as_inputs_are_refused_without_waiting() {
 #[test]
 fn frames_that_need_more_memory_than_allowed_are_refused_before_work() {
     let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("window.exr");
-    flare_core::output::write_exr_channel(&path, 16, 16, "R", &[0.5; 256]).unwrap();
-    let mut bytes = std::fs::read(&path).unwrap();
-    let name = &b"displayWindow\0box2i\0"[..];
-    let at = bytes.windows(name.len()).position(|s| s == name).expect("the attribute") + name.len() + 4;
-    bytes[at + 8..at + 12].copy_from_slice(&8191i32.to_le_bytes());
-    bytes[at + 12..at + 16].copy_from_slice(&8191i32.to_le_bytes());
-    std::fs::write(&path, bytes).unwrap();
+    let path = exr_in_window(dir.path(), 8192);
     assert!(std::fs::metadata(&path).unwrap().len() < 4096);
     let doc = Document { background: Some(path.display().to_string()), ..Document::default() };
     let e = flare_core::shot::plan::frame_size(&doc, &(1..=1), None).unwrap_err().to_string();
@@ -669,14 +675,7 @@ fn an_aperture_with_nan_and_infinite_pixels_keeps_its_white() {
 #[test]
 fn a_refused_exr_window_is_named_with_its_size() {
     let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("window.exr");
-    flare_core::output::write_exr_channel(&path, 16, 16, "R", &[0.5; 256]).unwrap();
-    let mut bytes = std::fs::read(&path).unwrap();
-    let name = &b"displayWindow\0box2i\0"[..];
-    let at = bytes.windows(name.len()).position(|s| s == name).expect("the attribute") + name.len() + 4;
-    bytes[at + 8..at + 12].copy_from_slice(&(i32::MAX - 1).to_le_bytes());
-    bytes[at + 12..at + 16].copy_from_slice(&(i32::MAX - 1).to_le_bytes());
-    std::fs::write(&path, bytes).unwrap();
+    let path = exr_in_window(dir.path(), i32::MAX);
     let e = read_plate(&path).unwrap_err().to_string();
     assert!(e.contains("display window 2147483647 x 2147483647 pixels") && e.lines().count() == 1, "{e}");
 }
