@@ -42,10 +42,7 @@ pub fn write_atomic(path: &Path, contents: &[u8]) -> std::io::Result<()> {
             kind_of(&meta)
         )));
     }
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
+    let dir = folder_of(path);
     remove_stale_temps(dir, std::time::Duration::from_secs(3600));
     let prefix = format!("{TEMP_PREFIX}{}-", std::process::id());
     let mut tmp = tempfile::Builder::new().prefix(&prefix).tempfile_in(dir).map_err(plain)?;
@@ -73,15 +70,20 @@ fn default_permissions(file: &std::fs::File) -> std::io::Result<std::fs::Permiss
     Ok(file.metadata()?.permissions())
 }
 
+/// The folder `path` is in (`.` for a bare name).
+fn folder_of(path: &Path) -> &Path {
+    match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    }
+}
+
 /// Checks, before any work, that [`write_atomic`] could write `path`: its folder exists and a file can be made
 /// in it (a temporary one, removed at once), and `path` is not there already as something other than a regular
 /// file (what the write would refuse at the end of a long job). Issue 61: an unwritable folder was found only
 /// after the whole bake (22 minutes for the Panavision look) or after every frame of a sequence.
 pub fn check_target(path: &Path) -> Result<(), String> {
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
+    let dir = folder_of(path);
     if !dir.is_dir() {
         return Err(format!("{}: the folder {} does not exist", path.display(), dir.display()));
     }
@@ -106,15 +108,9 @@ fn probe_folder(path: &Path, dir: &Path) -> Result<(), String> {
 /// Checks, before any work, that the files of a sequence named like `path` can be written: the nearest folder
 /// of its folder that exists (the sequence makes the rest) takes a file. See [`check_target`].
 pub fn check_sequence_target(path: &Path) -> Result<(), String> {
-    let mut dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
+    let mut dir = folder_of(path);
     while !dir.exists() {
-        dir = match dir.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p,
-            _ => Path::new("."),
-        };
+        dir = folder_of(dir);
     }
     if !dir.is_dir() {
         return Err(format!("{}: {} is not a folder", path.display(), dir.display()));

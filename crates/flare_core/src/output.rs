@@ -560,11 +560,8 @@ pub fn image_size(path: &Path, what: &str) -> Result<(u32, u32), String> {
     if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr")) {
         // The exr crate reads the header alone (the image crate checks the chunk table first). A plate is decoded
         // at its display window (the data window padded out to it): that is its size.
-        exr_size(path, what)?;
-        let meta = exr::meta::MetaData::read_from_file(path, false)
-            .map_err(|e| format!("{}: cannot read the {what}: {e}", path.display()))?;
-        let display = meta.headers[0].shared_attributes.display_window.size;
-        return Ok((display.0 as u32, display.1 as u32));
+        let (_, (w, h)) = exr_windows(path, what)?;
+        return Ok((w as u32, h as u32));
     }
     crate::files::open_regular(path)?;
     let reader = ::image::ImageReader::open(path)
@@ -598,6 +595,15 @@ fn raw_exr_windows(path: &Path) -> Option<String> {
 /// The size of an EXR from its header alone, checked as [`image_size`] does (for readers that use the `exr`
 /// crate directly: a depth map's channel).
 pub fn exr_size(path: &Path, what: &str) -> Result<(usize, usize), String> {
+    exr_windows(path, what).map(|(data, _)| data)
+}
+
+/// A width and a height in pixels.
+type SizePx = (usize, usize);
+
+/// The data window's and the display window's sizes of an EXR, from one read of its header, each checked as
+/// [`exr_size`] says.
+fn exr_windows(path: &Path, what: &str) -> Result<(SizePx, SizePx), String> {
     crate::files::open_regular(path)?;
     let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| {
         // The crate's reason names no size: the windows as the header states them, when it can be read.
@@ -611,7 +617,7 @@ pub fn exr_size(path: &Path, what: &str) -> Result<(usize, usize), String> {
     check_side(path, &format!("{what}'s display window"), display.0 as u64, display.1 as u64)?;
     let (w, h) = (header.layer_size.width(), header.layer_size.height());
     check_side(path, what, w as u64, h as u64)?;
-    Ok((w, h))
+    Ok(((w, h), (display.0, display.1)))
 }
 
 fn check_side(path: &Path, what: &str, w: u64, h: u64) -> Result<(), String> {

@@ -106,7 +106,7 @@ fn read_exr(path: &Path) -> Result<DepthMap, String> {
     if metres.len() != w * h || w == 0 || h == 0 {
         return Err(format!("{} samples for {w}x{h} pixels", metres.len()));
     }
-    // The largest float (or half) is how a file holds the sky: infinitely far ([`write_exr`]).
+    // The largest float is how a file holds the sky: infinitely far ([`write_exr`]).
     let metres = metres.into_iter().map(|m| if m >= f64::from(f32::MAX) { f64::INFINITY } else { m }).collect();
     Ok(DepthMap { width: w as u32, height: h as u32, metres })
 }
@@ -132,8 +132,8 @@ fn read_png(path: &Path, range: PngRange) -> Result<DepthMap, String> {
 /// infinity: the sky (infinitely far) is written as the largest float, which [`DepthMap::read`] reads back as
 /// infinity (a NaN, which no depth map holds, as 0, refused when the defocus is made).
 pub fn write_exr(path: &Path, map: &DepthMap) -> Result<(), String> {
-    let values: Vec<f32> =
-        map.metres.iter().map(|&m| if m.is_nan() { 0.0 } else { (m as f32).clamp(-f32::MAX, f32::MAX) }).collect();
+    // The writer keeps an infinity as the largest float and a NaN as 0 (`write_exr_channel`).
+    let values: Vec<f32> = map.metres.iter().map(|&m| m as f32).collect();
     crate::output::write_exr_channel(path, map.width, map.height, "Z", &values).map_err(|e| e.to_string())
 }
 
