@@ -39,6 +39,10 @@ fn give_libraries_a_runtime_dir() {}
 fn main() -> ExitCode {
     give_libraries_a_runtime_dir();
     std::panic::set_hook(Box::new(|info| {
+        // A panic the core contains becomes an error that names it (`output::panic_is_contained`).
+        if flare_core::output::panic_is_contained() {
+            return;
+        }
         let message = info
             .payload()
             .downcast_ref::<&str>()
@@ -101,7 +105,7 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("flarelab: error: {}", printable(&format!("{e:#}").replace('\n', " ")));
+            eprintln!("flarelab: error: {}", printable(&chain_text(&e).replace('\n', " ")));
             ExitCode::from(2)
         }
     }
@@ -111,4 +115,21 @@ fn main() -> ExitCode {
 /// can move the cursor, clear the screen or ring the bell.
 fn printable(text: &str) -> String {
     text.chars().flat_map(|c| if c.is_control() { c.escape_default().collect::<Vec<_>>() } else { vec![c] }).collect()
+}
+
+/// An error and its causes joined by ": ", a cause left out when the text before it already says it (an error
+/// whose message is its source's would otherwise say it twice).
+fn chain_text(error: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in error.chain() {
+        let said = cause.to_string();
+        if text.contains(&said) {
+            continue;
+        }
+        if !text.is_empty() {
+            text.push_str(": ");
+        }
+        text.push_str(&said);
+    }
+    text
 }

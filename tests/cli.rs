@@ -2038,3 +2038,39 @@ fn issue_61_inputs_are_refused_before_any_work() {
         assert!(e.contains("not a regular file"), "{flag:?}: {e}");
     }
 }
+
+/// What the command line's random walk (`tests/cli_walk.rs`) found once it reached every subcommand (issue 61):
+/// each refused with one line before any work, nothing written.
+#[test]
+fn issue_61_the_walks_findings_are_refused_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = |name: &str| dir.path().join(name).display().to_string();
+    // A LUT named as an image was baked and written.
+    let e = refusal(&["bake", "heliar", "--res", "8", "--grid", "4", "--theta-max", "2", "-o", &out("l.png")]);
+    assert!(e.contains("a LUT file is named .flut"), "{e}");
+    let e = refusal(&["photo-lut", &out(""), "-o", &out("p.png")]);
+    assert!(e.contains("a LUT file is named .flut"), "{e}");
+    // An unwritable folder was found after the work: the street drawn, its plate written, then the depth map
+    // refused; the defocused plate and the photo LUT likewise.
+    let e = refusal(&["synth-dof", "--size", "64x36", "-o", &out("street.exr"), "--depth", "/sys/z.exr"]);
+    assert!(e.contains("/sys"), "{e}");
+    assert!(!dir.path().join("street.exr").exists(), "nothing written before the refusal");
+    flarelab(&["synth-dof", "--size", "64x36", "-o", &out("street.exr"), "--depth", &out("z.exr")]);
+    let e = refusal(&["dof", &out("street.exr"), "--depth", &out("z.exr"), "--device", "cpu", "-o", "/sys/d.exr"]);
+    assert!(e.contains("cannot write in the folder /sys"), "{e}");
+    let e = refusal(&["photo-lut", &out(""), "-o", "/sys/p.flut"]);
+    assert!(e.contains("cannot write in the folder /sys"), "{e}");
+    // A README that is a FIFO blocked `bench --update-readme` forever; a billion repeats ran for days.
+    let fifo = dir.path().join("README.md");
+    assert!(Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    let e = refusal(&["bench", "--lens", "heliar", "--update-readme", &fifo.display().to_string(), "-o", &out("b")]);
+    assert!(e.contains("a FIFO"), "{e}");
+    let e = refusal(&["bench", "--repeats", "1000000000", "-o", &out("b")]);
+    assert!(e.contains("at most 100"), "{e}");
+    // An f-number of 1e300 was accepted (and baked for minutes); its refusal echoes it short.
+    let e = refusal(&["bake", "heliar", "--f-number", "1e300", "-o", &out("l.flut")]);
+    assert!(e.contains("1.000e300") && e.contains("at most 1024") && e.len() < 200, "{e}");
+    // An error whose message is its cause's was said twice.
+    let e = refusal(&["bake", "heliar", "--update", &out("nope.flut"), "-o", &out("l.flut")]);
+    assert_eq!(e.matches("No such file").count(), 1, "{e}");
+}

@@ -71,6 +71,7 @@ pub fn run(args: &DofArgs) -> Result<()> {
     }
     // Check the output's kind before any work: nothing is half-written, and nothing is computed for nothing.
     flare_core::output::ImageKind::from_path(&args.out)?;
+    flare_core::files::check_target(&args.out).map_err(|e| anyhow::anyhow!("-o {e}"))?;
     if args.method == MethodArg::Reference && args.device == DeviceArg::Gpu {
         bail!("--device gpu: the reference runs on the CPU (it is the exact method); use --method live on the GPU");
     }
@@ -94,6 +95,8 @@ pub fn run(args: &DofArgs) -> Result<()> {
     doc.check().map_err(|e| anyhow::anyhow!("{e}"))?;
     let config = doc.flare_config().map_err(|e| anyhow::anyhow!("{e}"))?;
     let flare = flare_core::PreparedFlare::new(&doc.lens, &config).with_context(|| doc.lens.id.clone())?;
+    let (w, h) = flare_core::output::image_size(&args.plate, "the plate").map_err(|e| anyhow::anyhow!("{e}"))?;
+    check_memory("the plate", (w, h), DOF_BYTES_PER_PX)?;
     let plate = read_plate(&args.plate).context("the plate")?;
     let lens = flare_core::shot::plate::dof_lens(&doc, &flare);
     let (models, depth) = dof::prepare(&doc.dof, lens, &args.depth, (plate.width, plate.height))?;
@@ -181,12 +184,39 @@ pub struct SynthDofArgs {
     pub depth: PathBuf,
 }
 
+/// What `synth-dof` keeps per pixel at most (bytes): the plate's RGBA floats, the depth map in f64 and f32, and
+/// the file's channels. Measured as peak RSS: 3.46 GB at 8192x8192, 51 bytes a pixel.
+const SYNTH_BYTES_PER_PX: u64 = 56;
+
+/// What `dof` keeps per plate pixel at most (bytes): the plate, its depth map, the defocus map, the layers and
+/// the output. Measured as peak RSS on the CPU twin: 0.72 GB at 4096x2160 (82 bytes a pixel), 4.1 GB at
+/// 8192x8192 (61).
+const DOF_BYTES_PER_PX: u64 = 96;
+
+/// Refuses `what` of `w` x `h` pixels at `bytes_per_px` when that passes nine tenths of the memory available
+/// now, naming the figures, before any work.
+fn check_memory(what: &str, (w, h): (u32, u32), bytes_per_px: u64) -> Result<()> {
+    let need = u64::from(w) * u64::from(h) * bytes_per_px;
+    if let Some(available) = flare_core::frame::available_memory_bytes()
+        && need > available / 10 * 9
+    {
+        bail!(
+            "{what} ({w}x{h}) needs about {:.1} GB, more than nine tenths of the {:.1} GB this machine has free",
+            need as f64 / 1e9,
+            available as f64 / 1e9
+        );
+    }
+    Ok(())
+}
+
 pub fn synth(args: &SynthDofArgs) -> Result<()> {
     for path in [&args.out, &args.depth] {
         if !path.to_string_lossy().to_ascii_lowercase().ends_with(".exr") {
             bail!("{}: the plate and the depth map are linear: use .exr", path.display());
         }
+        flare_core::files::check_target(path).map_err(|e| anyhow::anyhow!("{e}"))?;
     }
+    check_memory("the street", args.size, SYNTH_BYTES_PER_PX)?;
     let (plate, depth) = dof::scene::street(args.size.0, args.size.1);
     write_linear(&args.out, &plate)?;
     dof::depth::write_exr(&args.depth, &depth).map_err(|e| anyhow::anyhow!("{}: {e}", args.depth.display()))?;

@@ -2,7 +2,7 @@
 //!
 //! Bakes print their progress on stderr as they go; the LUT is written through a temporary file and a rename.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::Instant;
 
@@ -323,7 +323,7 @@ pub fn bake_command(args: &BakeArgs) -> Result<()> {
     };
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("{}.flut", lens.id)));
     // Where the LUT goes is checked before the bake, not after it.
-    flare_core::files::check_target(&out).map_err(|e| anyhow::anyhow!("-o {e}"))?;
+    check_lut_target(&out)?;
     let gpu = bake_gpu(args.device, false)?;
     let (lut, _, seconds) =
         bake_lut(&flare, &renderer, &args.choice, &settings, previous.as_ref(), gpu.as_ref(), false)?;
@@ -351,7 +351,17 @@ pub fn bake_command(args: &BakeArgs) -> Result<()> {
     Ok(())
 }
 
+/// Checks, before any work, that `out` is named `.flut` (a LUT written as `l.png` was accepted, issue 61) and
+/// that its folder takes a file.
+fn check_lut_target(out: &Path) -> Result<()> {
+    if !out.extension().is_some_and(|e| e.eq_ignore_ascii_case("flut")) {
+        bail!("-o {}: a LUT file is named .flut", flare_core::files::shorten(&out.display().to_string()));
+    }
+    flare_core::files::check_target(out).map_err(|e| anyhow::anyhow!("-o {e}"))
+}
+
 pub fn photo_command(args: &PhotoArgs) -> Result<()> {
+    check_lut_target(&args.out)?;
     let lut = photo::import_folder(&args.folder)?;
     let bytes = format::write_lut(&args.out, &lut).with_context(|| format!("writing {}", args.out.display()))?;
     println!(

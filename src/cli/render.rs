@@ -464,7 +464,7 @@ pub fn document(args: &RenderArgs) -> Result<Document> {
     doc.check().map_err(|e| match &e {
         // A value a flag gave is refused in the flag's name.
         flare_core::preset::PresetError::Value { field, reason } => match flag_of(args, field) {
-            Some(flag) => anyhow::anyhow!("{flag}: {reason}"),
+            Some(flag) => anyhow::anyhow!("{}: {reason}", flare_core::files::shorten_numbers(&flag)),
             None => anyhow::anyhow!("{e}"),
         },
         _ => anyhow::anyhow!("{e}"),

@@ -34,6 +34,7 @@ pub fn run(args: &SynthArgs) -> Result<()> {
     if !args.out.to_ascii_lowercase().ends_with(".exr") {
         bail!("-o {}: the plates are linear HDR: use .exr", args.out);
     }
+    flare_core::files::check_sequence_target(std::path::Path::new(&args.out)).map_err(|e| anyhow::anyhow!("-o {e}"))?;
     let (a, b) = args
         .frames
         .split_once('-')

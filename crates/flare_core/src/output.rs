@@ -423,20 +423,36 @@ pub fn write_exr_layers(path: &Path, layers: &FrameLayers, settings: ExrSettings
 /// file then), compressed as `settings` says, the working space named in the header, through a temporary file.
 fn write_exr_parts(
     path: &Path,
-    (w, h): (u32, u32),
+    size: (u32, u32),
     settings: ExrSettings,
     list: Vec<exr::prelude::AnyChannel<exr::prelude::FlatSamples>>,
     ghosts: Vec<GhostPart>,
 ) -> Result<(), ImageError> {
+    if let Some(refusal) = settings.compression.refusal() {
+        return Err(ImageError::Encode { path: path.display().to_string(), message: refusal });
+    }
+    let bytes = encode_exr(&exr_image(size, settings, list, ghosts)).map_err(|message| encode(path, message))?;
+    write_atomic(path, &bytes).map_err(|e| io(path, e))
+}
+
+/// The EXR image of [`write_exr_parts`], not yet encoded.
+type ExrImage = exr::prelude::Image<
+    exr::prelude::SmallVec<[exr::prelude::Layer<exr::prelude::AnyChannels<exr::prelude::FlatSamples>>; 2]>,
+>;
+
+/// The parts of [`write_exr_parts`] as one image, its compression whatever `settings` says (refused ones
+/// included: the caller refuses them).
+fn exr_image(
+    (w, h): (u32, u32),
+    settings: ExrSettings,
+    list: Vec<exr::prelude::AnyChannel<exr::prelude::FlatSamples>>,
+    ghosts: Vec<GhostPart>,
+) -> ExrImage {
     use exr::math::Vec2;
     use exr::meta::attribute::{AttributeValue, Text};
     use exr::prelude::{
         AnyChannels, Blocks, Encoding, Image, ImageAttributes, Layer, LayerAttributes, LineOrder, SmallVec,
-        WritableImage,
     };
-    if let Some(refusal) = settings.compression.refusal() {
-        return Err(ImageError::Encode { path: path.display().to_string(), message: refusal });
-    }
     let encoding = Encoding {
         compression: settings.compression.exr(),
         blocks: Blocks::ScanLines,
@@ -448,12 +464,13 @@ fn write_exr_parts(
         attributes.other.insert(Text::from(key), AttributeValue::Text(Text::from(WORKING_SPACE)));
     }
     let main_attributes = if ghosts.is_empty() { LayerAttributes::default() } else { LayerAttributes::named("rgba") };
-    let mut parts = vec![Layer::new(
+    let mut parts = SmallVec::new();
+    parts.push(Layer::new(
         (w as usize, h as usize),
         main_attributes,
         encoding,
         AnyChannels::sort(SmallVec::from_vec(list)),
-    )];
+    ));
     for ghost in ghosts {
         let mut attributes = LayerAttributes::named(ghost.name.as_str());
         attributes.layer_position = Vec2(ghost.origin.0 as i32, ghost.origin.1 as i32);
@@ -464,9 +481,79 @@ fn write_exr_parts(
             AnyChannels::sort(SmallVec::from_vec(ghost.list)),
         ));
     }
+    Image::from_layers(attributes, parts)
+}
+
+/// How many blocks [`encode_exr`] compresses at once: enough to keep every core busy, few enough that the
+/// uncompressed copies stay a small part of the image (a ZIP block is 16 scan lines).
+const BLOCKS_PER_BATCH: usize = 256;
+
+/// The bytes of `image` as an EXR file. Its blocks are compressed on the current rayon pool (all cores: the
+/// `exr` crate's own parallel writer builds a new thread pool for every file and aborts the process when a
+/// compressor panics on one of its threads), in batches of [`BLOCKS_PER_BATCH`], and written in the file's
+/// order. A compressor that panics is contained ([`contain_panic`]) and the file refused with its message.
+fn encode_exr(image: &ExrImage) -> Result<Vec<u8>, String> {
+    use exr::block::writer::ChunksWriter;
+    use exr::image::write::layers::{LayersWriter, WritableLayers};
+    use exr::prelude::WritableImage;
+    use rayon::prelude::*;
+    let headers = image.write().infer_meta_data();
+    let layers = image.layer_data.create_writer(&headers);
     let mut bytes = Vec::new();
-    Image::from_layers(attributes, parts).write().to_buffered(Cursor::new(&mut bytes)).map_err(|e| encode(path, e))?;
-    write_atomic(path, &bytes).map_err(|e| io(path, e))
+    exr::block::write(Cursor::new(&mut bytes), headers, true, |meta, chunks| {
+        let mut blocks =
+            meta.collect_ordered_block_data(|index| layers.extract_uncompressed_block(&meta.headers, index));
+        loop {
+            let batch: Vec<_> = blocks.by_ref().take(BLOCKS_PER_BATCH).collect();
+            if batch.is_empty() {
+                return Ok(());
+            }
+            let compressed: Vec<_> = batch
+                .into_par_iter()
+                .map(|(index, block)| {
+                    contain_panic(|| block.compress_to_chunk(&meta.headers))
+                        .map_err(|message| {
+                            exr::error::Error::Invalid(format!("the compressor failed: {message}").into())
+                        })
+                        .and_then(|chunk| chunk.map(|chunk| (index, chunk)))
+                })
+                .collect();
+            for result in compressed {
+                let (index, chunk) = result?;
+                chunks.write_chunk(index, chunk)?;
+            }
+        }
+    })
+    .map_err(|e| e.to_string())?;
+    Ok(bytes)
+}
+
+thread_local! {
+    /// Whether this thread is inside [`contain_panic`].
+    static CONTAINING: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Whether a panic on this thread is being contained by [`contain_panic`]: a process's panic hook stays quiet
+/// for it (the panic becomes an error that names it instead of an "internal error").
+pub fn panic_is_contained() -> bool {
+    CONTAINING.with(|c| c.get())
+}
+
+/// `work()`, or its panic's message as an error: for code of other crates that panics on input it cannot
+/// handle (the `exr` crate's compressors), so that a panic on a rayon thread becomes a refusal instead of
+/// aborting the process.
+fn contain_panic<T>(work: impl FnOnce() -> T) -> Result<T, String> {
+    let outer = CONTAINING.with(|c| c.replace(true));
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(work));
+    CONTAINING.with(|c| c.set(outer));
+    result.map_err(|payload| {
+        let message = payload
+            .downcast_ref::<&str>()
+            .map(|s| (*s).to_owned())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "a panic".to_owned());
+        crate::files::shorten(&message.replace('\n', " "))
+    })
 }
 
 /// Every channel of an EXR written by FlareLab (or any scan-line EXR), read from every part and placed in
@@ -717,4 +804,67 @@ pub fn read_plate_values(path: &Path, decode: bool) -> Result<(HdrImage, Option<
         )
     });
     Ok((HdrImage { width, height, pixels }, warning))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Channels `R, G, B` of `w` x `h` half pixels of a ramp.
+    fn ramp(prefix: &str, w: u32, h: u32) -> Vec<exr::prelude::AnyChannel<exr::prelude::FlatSamples>> {
+        let names: Vec<String> = ["R", "G", "B"].iter().map(|c| format!("{prefix}{c}")).collect();
+        let values = (0..3).map(|k| (0..w * h).map(|i| (i + k) as f32 * 0.25).collect()).collect();
+        typed_channels(&names, values, ExrPixel::Half)
+    }
+
+    /// Issue 61: the `exr` crate's B44 compressor panics for a part of half values one pixel tall and 193 or
+    /// more wide ("range end index ... out of range"), and on a thread of its own pool that aborted the process. The compressors now run on rayon's pool under
+    /// [`contain_panic`]: the same parts (B44 is refused before this point in every real path) give an error
+    /// naming the panic, and the test process lives on to say so.
+    #[test]
+    fn a_compressor_that_panics_on_a_pool_thread_is_an_error_not_an_abort() {
+        let settings = ExrSettings { pixel_type: ExrPixel::Half, compression: ExrCompression::B44 };
+        let ghosts = (0..12)
+            .map(|i| GhostPart {
+                name: format!("ghost_{i}"),
+                origin: (0, i),
+                size: (256, 1),
+                list: ramp(&format!("ghost_{i}."), 256, 1),
+            })
+            .collect();
+        let image = exr_image((256, 64), settings, ramp("", 256, 64), ghosts);
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(4).build().expect("a pool");
+        let error = pool.install(|| encode_exr(&image)).err().expect("B44 on 256x1 parts");
+        assert!(error.contains("the compressor failed: range end index"), "{error}");
+        assert!(!panic_is_contained(), "the flag is put back");
+    }
+
+    /// Every compression that is written comes back exactly (the lossless ones and half values under PXR24)
+    /// through the encoder's own batches, a multi-part file with more blocks than one batch included.
+    #[test]
+    fn the_parallel_encoder_writes_what_the_reader_reads() {
+        let dir = tempfile::tempdir().expect("a folder");
+        for compression in ExrCompression::ALL {
+            let settings = ExrSettings { pixel_type: ExrPixel::Half, compression };
+            let ghosts = vec![GhostPart {
+                name: "ghost_1_2".into(),
+                origin: (3, 5),
+                size: (7, 2),
+                list: ramp("ghost_1_2.", 7, 2),
+            }];
+            let path = dir.path().join(format!("{}.exr", compression.name()));
+            write_exr_parts(&path, (40, 4200), settings, ramp("", 40, 4200), ghosts).expect("written");
+            let back = read_exr_channels(&path).expect("read");
+            assert_eq!(back.parts.len(), 2, "{}", compression.name());
+            let r = &back.channels["R"];
+            assert!((0..40 * 4200).all(|i| r[i] == f16_of(i as f32 * 0.25)), "{}", compression.name());
+            let g = &back.channels["ghost_1_2.G"];
+            assert_eq!(g[5 * 40 + 3], 0.25, "{}", compression.name());
+            assert_eq!(g[6 * 40 + 9], (7 + 6 + 1) as f32 * 0.25, "{}", compression.name());
+        }
+    }
+
+    fn f16_of(v: f32) -> f32 {
+        exr::prelude::f16::from_f32(v).to_f32()
+    }
 }

@@ -571,9 +571,16 @@ impl Document {
             return bad("cull_threshold", format!("{t} must be 0 or more"));
         }
         if let Some(f) = self.aperture.f_number
-            && !(f.is_finite() && f > 0.0)
+            && !(f.is_finite() && f > 0.0 && f <= crate::aperture::MAX_F_NUMBER)
         {
-            return bad("aperture.f_number", format!("{f} must be positive"));
+            return bad(
+                "aperture.f_number",
+                format!(
+                    "{} must be above 0 and at most {}",
+                    crate::files::shorten_numbers(&f.to_string()),
+                    crate::aperture::MAX_F_NUMBER
+                ),
+            );
         }
         if !(self.aperture.roundness.is_finite() && (0.0..=1.0).contains(&self.aperture.roundness)) {
             return bad("aperture.roundness", format!("{} must be from 0 to 1", self.aperture.roundness));

@@ -48,7 +48,10 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let name = args.lens.first().cloned().unwrap_or_else(|| DEFAULT_LENS.to_owned());
     let lens = open_lens(&name)?;
     let flare = PreparedFlare::new(&lens, &FlareConfig::default()).with_context(|| name.clone())?;
-    let repeats = args.repeats.unwrap_or(3).max(1);
+    let repeats = super::checked_repeats(args.repeats, 3)?;
+    if let Some(readme) = &args.update_readme {
+        super::readme_section(readme, (README_START, README_END))?;
+    }
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let s = scene(&flare, width, height)?;
     let mask = flare.mask();
@@ -150,8 +153,8 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     }
     let threads = rayon::current_num_threads();
     let md = markdown(&rows, &hd, &lens.id, width, height, s.model.far_defocus_px(), threads, adapter.as_deref());
-    std::fs::write(args.out.join("dof_bench.md"), &md)?;
-    std::fs::write(args.out.join("dof_bench.csv"), super::csv(&rows))?;
+    flare_core::files::write_atomic(&args.out.join("dof_bench.md"), md.as_bytes())?;
+    flare_core::files::write_atomic(&args.out.join("dof_bench.csv"), super::csv(&rows).as_bytes())?;
     super::plot::error_against_time_titled(
         &rows,
         &args.out.join("dof_bench.png"),
@@ -159,12 +162,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     )?;
     println!("{md}");
     if let Some(readme) = &args.update_readme {
-        let text = std::fs::read_to_string(readme).with_context(|| format!("reading {}", readme.display()))?;
-        let (Some(a), Some(b)) = (text.find(README_START), text.find(README_END)) else {
-            anyhow::bail!("{}: no `{README_START}` ... `{README_END}` section to replace", readme.display());
-        };
-        let updated = format!("{}{README_START}\n{md}{}", &text[..a], &text[b..]);
-        flare_core::files::write_atomic(readme, updated.as_bytes())?;
+        super::update_readme(readme, (README_START, README_END), &md)?;
     }
     Ok(())
 }

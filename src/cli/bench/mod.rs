@@ -160,12 +160,9 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     }
     if let Some(readme) = &args.update_readme {
         // Refuse before an hour of benchmarking, not after.
-        readme_section(
-            &std::fs::read_to_string(readme).with_context(|| format!("reading {}", readme.display()))?,
-            readme,
-        )?;
+        readme_section(readme, (README_START, README_END))?;
     }
-    let repeats = args.repeats.unwrap_or(if args.quick { 3 } else { 5 }).max(1);
+    let repeats = checked_repeats(args.repeats, if args.quick { 3 } else { 5 })?;
     let reference_runs = repeats.min(3);
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let images = args.images.then(|| args.out.join("images"));
@@ -394,7 +391,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     write_atomic(&args.out.join("bench.md"), markdown.as_bytes())?;
     plot::error_against_time(&rows, &args.out.join("bench.png"))?;
     if let Some(readme) = &args.update_readme {
-        update_readme(readme, &markdown)?;
+        update_readme(readme, (README_START, README_END), &markdown)?;
     }
     eprintln!("wrote {}/bench.csv, bench.md and bench.png in {elapsed_s:.0} s", args.out.display());
     print!("{markdown}");
@@ -647,22 +644,39 @@ fn write_display(path: &Path, image: &HdrImage, exposure: f32) -> Result<()> {
     Ok(())
 }
 
-/// Where the README's benchmark section starts and ends.
-fn readme_section(text: &str, path: &Path) -> Result<(usize, usize)> {
-    let (Some(a), Some(b)) = (text.find(README_START), text.find(README_END)) else {
-        bail!("{}: no `{README_START}` ... `{README_END}` section to replace", path.display());
-    };
-    if b < a {
-        bail!("{}: `{README_END}` comes before `{README_START}`", path.display());
+/// The most timed runs per method (`--repeats`): a median of 100 runs is as steady as it gets.
+pub(crate) const MAX_REPEATS: usize = 100;
+
+/// `--repeats` (or `default`), at least 1, refused past [`MAX_REPEATS`] before any work.
+pub(crate) fn checked_repeats(repeats: Option<usize>, default: usize) -> Result<usize> {
+    match repeats {
+        Some(n) if n > MAX_REPEATS => bail!("--repeats {n}: at most {MAX_REPEATS} timed runs per method"),
+        n => Ok(n.unwrap_or(default).max(1)),
     }
-    Ok((a, b))
 }
 
-/// Replaces the text between the README's benchmark markers (written atomically).
-fn update_readme(path: &Path, markdown: &str) -> Result<()> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let (a, b) = readme_section(&text, path)?;
-    let updated = format!("{}{README_START}\n{markdown}{}", &text[..a], &text[b..]);
+/// The most bytes of a README that `--update-readme` reads.
+const MAX_README_BYTES: u64 = 16 << 20;
+
+/// The README at `path` (read bounded, a FIFO or device refused) and where its section between `start` and
+/// `end` lies; checked, with the README's folder taking a file, before any benchmarking and again when written.
+pub(crate) fn readme_section(path: &Path, (start, end): (&str, &str)) -> Result<(String, usize, usize)> {
+    flare_core::files::check_target(path).map_err(|e| anyhow::anyhow!("--update-readme {e}"))?;
+    let text = flare_core::files::read_text_bounded(path, MAX_README_BYTES)
+        .map_err(|e| anyhow::anyhow!("--update-readme {e}"))?;
+    let (Some(a), Some(b)) = (text.find(start), text.find(end)) else {
+        bail!("{}: no `{start}` ... `{end}` section to replace", path.display());
+    };
+    if b < a {
+        bail!("{}: `{end}` comes before `{start}`", path.display());
+    }
+    Ok((text, a, b))
+}
+
+/// Replaces the text between the README's markers `start` and `end` with `markdown` (written atomically).
+pub(crate) fn update_readme(path: &Path, (start, end): (&str, &str), markdown: &str) -> Result<()> {
+    let (text, a, b) = readme_section(path, (start, end))?;
+    let updated = format!("{}{start}\n{markdown}{}", &text[..a], &text[b..]);
     write_atomic(path, updated.as_bytes())?;
     Ok(())
 }

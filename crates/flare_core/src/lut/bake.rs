@@ -39,12 +39,13 @@
 //! the refinement are the same for both.
 //!
 //! Progress is reported per entry through a callback, and the bake stops at the next entry when the cancel
-//! flag is set. Given the previous LUT, a ghost whose key (the lens fingerprint, the ghost, the bake
+//! flag is set. Its memory is bounded before it starts ([`BakeMemory`]: each thread's working memory must fit)
+//! and as it goes: the texels it keeps are counted and it stops, naming the figures, when they pass the bound. Given the previous LUT, a ghost whose key (the lens fingerprint, the ghost, the bake
 //! settings and the bake's revision) is unchanged is kept, not re-baked: re-classifying, forcing a ghost or
 //! changing the theta range re-bakes only what changed. Any edit of the lens, its coatings, spectrum or stop
 //! changes every ghost's key, because every ghost path crosses every surface (as a refraction at least).
 
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 
 use half::f16;
 use rayon::prelude::*;
@@ -156,6 +157,68 @@ pub enum BakeError {
     /// An anamorphic lens whose stop breaks its mirror symmetry (the reason).
     #[error("{0}")]
     Anamorphic(String),
+    /// The bake would need more memory than it may take ([`BakeMemory`]): the figures and what to change.
+    #[error("{0}")]
+    TooLarge(String),
+}
+
+/// What one baked texel keeps (bytes): its RGBA in half floats ([`LutEntry::texels`]).
+pub const BYTES_PER_TEXEL: u64 = 8;
+
+/// What each thread of a bake holds at most while it draws a column (bytes): the ray grid's image of an entry
+/// of [`MAX_ENTRY_TEXELS`] a side (RGBA floats, 16 bytes a texel) and as much again for the grid, the entry's
+/// halvings and its texels before they are kept.
+pub const THREAD_BYTES: u64 = (MAX_ENTRY_TEXELS as u64) * (MAX_ENTRY_TEXELS as u64) * 32;
+
+/// The memory a bake may take, worked out before it starts (issue 61: memory known before work). A bake's
+/// entries are refined where the ghost changes (their number is not known before), so its kept texels are
+/// counted as it goes and the bake stops, naming the figures, when they pass [`Self::texels`]: the most a LUT
+/// file holds ([`super::format::MAX_TEXELS`], 2 GiB of texels) or what nine tenths of the memory available
+/// leaves after every thread's working memory ([`THREAD_BYTES`]), whichever is less. A machine without that
+/// working memory free is refused before any work.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BakeMemory {
+    /// The most texels the bake keeps.
+    pub texels: u64,
+    /// Whether [`Self::texels`] is the machine's memory (else the LUT file's limit).
+    pub machine_bound: bool,
+}
+
+impl BakeMemory {
+    /// The bound for `threads` threads and `available` bytes free (`None`: unknown, the file's limit alone).
+    pub fn new(threads: usize, available: Option<u64>) -> Result<Self, BakeError> {
+        let file = super::format::MAX_TEXELS;
+        let Some(available) = available else {
+            return Ok(Self { texels: file, machine_bound: false });
+        };
+        let working = threads.max(1) as u64 * THREAD_BYTES;
+        let usable = available / 10 * 9;
+        // At least a few hundred entries of `res` texels: less than that is no LUT worth baking.
+        let least = working + (1 << 24) * BYTES_PER_TEXEL;
+        if usable < least {
+            return Err(BakeError::TooLarge(format!(
+                "a bake on {threads} threads needs at least {:.1} GB (each thread's working memory, {:.0} MB, and \
+                 room for the LUT), more than nine tenths of the {:.1} GB this machine has free",
+                least as f64 / 1e9,
+                THREAD_BYTES as f64 / 1e6,
+                available as f64 / 1e9
+            )));
+        }
+        let machine = (usable - working) / BYTES_PER_TEXEL;
+        Ok(Self { texels: machine.min(file), machine_bound: machine < file })
+    }
+
+    /// The refusal of a bake whose kept texels reached `texels`.
+    fn refusal(&self, texels: u64) -> BakeError {
+        let bound = if self.machine_bound { "what this machine's free memory holds" } else { "a LUT file holds" };
+        BakeError::TooLarge(format!(
+            "the LUT grew past {:.0} M texels ({:.1} GB), more than the {:.0} M {bound}: bake fewer texels \
+             (--res, --diagonal-texels), fewer steps (--min-step, --tolerance, --phi-steps) or fewer ghosts",
+            texels as f64 / 1e6,
+            (texels * BYTES_PER_TEXEL) as f64 / 1e9,
+            self.texels as f64 / 1e6,
+        ))
+    }
 }
 
 /// Progress of a bake.
@@ -511,6 +574,22 @@ pub fn bake_with(
     cancel: &AtomicBool,
 ) -> Result<GhostLut, BakeError> {
     settings.validate()?;
+    let memory = BakeMemory::new(rayon::current_num_threads(), crate::frame::available_memory_bytes())?;
+    bake_within(flare, renderer, tracing, ghosts, settings, previous, (progress, cancel), memory)
+}
+
+/// [`bake_with`] keeping at most `memory.texels` texels.
+#[allow(clippy::too_many_arguments)]
+fn bake_within(
+    flare: &PreparedFlare,
+    renderer: &RayGridRenderer,
+    tracing: &dyn ColumnTracer,
+    ghosts: &[usize],
+    settings: &BakeSettings,
+    previous: Option<&GhostLut>,
+    (progress, cancel): (&(dyn Fn(BakeProgress) + Sync), &AtomicBool),
+    memory: BakeMemory,
+) -> Result<GhostLut, BakeError> {
     let total = flare.system.ghosts.len();
     if let Some(&bad) = ghosts.iter().find(|&&g| g >= total) {
         return Err(BakeError::NoGhost(bad, total));
@@ -522,6 +601,12 @@ pub fn bake_with(
     let numbering = lens.without_inert().1;
     let canonical = |k: usize| numbering.iter().position(|&live| live == k).unwrap_or(k);
     let symmetry = Symmetry::of(lens, &flare.config.aperture).map_err(BakeError::Anamorphic)?;
+    let texels_kept = AtomicU64::new(0);
+    let keep = |entries: &[LutEntry]| -> Result<(), BakeError> {
+        let texels: u64 = entries.iter().map(|e| e.texels.len() as u64).sum();
+        let now = texels_kept.fetch_add(texels, Ordering::Relaxed) + texels;
+        if now > memory.texels { Err(memory.refusal(now)) } else { Ok(()) }
+    };
     let theta_max = settings.theta_max_deg.unwrap_or_else(|| useful_field_deg(flare));
     // An anamorphic lens's ghosts change shape with the light's azimuth (no rotation turns one into another):
     // its quadrant is sampled every 15 degrees at the least.
@@ -551,6 +636,7 @@ pub fn bake_with(
             if let Some(old) = previous.filter(|p| p.lens_fingerprint == fingerprint).and_then(|p| p.ghost(g))
                 && old.key == key
             {
+                keep(&old.entries)?;
                 kept.fetch_add(1, Ordering::Relaxed);
                 ghosts_done.fetch_add(1, Ordering::Relaxed);
                 report();
@@ -561,6 +647,7 @@ pub fn bake_with(
                     return Err(BakeError::Cancelled);
                 }
                 let column = render_column(flare, renderer, tracing, g, theta, &phis, &symmetry, settings);
+                keep(&column)?;
                 entries_done.fetch_add(column.len(), Ordering::Relaxed);
                 report();
                 Ok(column)
@@ -633,4 +720,44 @@ pub fn bake_with(
         theta_max_deg: theta_max,
         ghosts: baked?,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A machine whose free memory does not hold the threads' working memory refuses the bake before any
+    /// work, naming the figures; with memory to spare the bound is the LUT file's.
+    #[test]
+    fn a_bake_is_bounded_before_it_starts() {
+        let e = BakeMemory::new(16, Some(1 << 30)).unwrap_err().to_string();
+        assert!(e.contains("16 threads") && e.contains("1.1 GB this machine has free"), "{e}");
+        let roomy = BakeMemory::new(2, Some(1 << 40)).unwrap();
+        assert_eq!(roomy, BakeMemory { texels: super::super::format::MAX_TEXELS, machine_bound: false });
+        let tight = BakeMemory::new(2, Some(2 << 30)).unwrap();
+        assert!(tight.machine_bound && tight.texels < super::super::format::MAX_TEXELS);
+        assert_eq!(BakeMemory::new(2, None).unwrap().texels, super::super::format::MAX_TEXELS);
+    }
+
+    /// A bake whose kept texels pass its bound stops there with the figures (issue 61: a bake that grows past
+    /// what a LUT file holds was found only when the file was written, after the whole bake).
+    #[test]
+    fn a_bake_stops_when_its_texels_pass_the_bound() {
+        let lens = crate::optics::library::builtin_lens("heliar").unwrap();
+        let flare = PreparedFlare::new(&lens, &crate::flare::FlareConfig::default()).unwrap();
+        let renderer = flare.ray_grid_renderer();
+        let settings =
+            BakeSettings { theta_max_deg: Some(4.0), res: 16, diagonal_texels: 0, grid: 8, ..BakeSettings::default() };
+        let run = |texels| {
+            let memory = BakeMemory { texels, machine_bound: false };
+            let hooks: (&(dyn Fn(BakeProgress) + Sync), &AtomicBool) = (&|_| {}, &AtomicBool::new(false));
+            bake_within(&flare, &renderer, &CpuTracing, &[3, 7], &settings, None, hooks, memory)
+        };
+        let lut = run(u64::MAX).unwrap();
+        let texels: usize = lut.ghosts.iter().flat_map(|g| &g.entries).map(|e| e.texels.len()).sum();
+        assert!(texels > 1000, "{texels}");
+        let e = run(texels as u64 / 2).unwrap_err().to_string();
+        assert!(e.contains("the LUT grew past") && e.contains("a LUT file holds") && e.contains("--res"), "{e}");
+        assert!(run(texels as u64).is_ok(), "the bound itself is allowed");
+    }
 }

@@ -57,8 +57,10 @@ pub const MAX_SIDE: u32 = super::blend::ATLAS_PAGE - 2;
 /// Why a LUT file is refused.
 #[derive(Debug, thiserror::Error)]
 pub enum LutError {
+    // The cause is the message and deliberately not a `source`: a chain printed with its sources said it twice
+    // ("cannot read nope.flut: No such file ...: cannot read nope.flut: No such file ...", issue 61).
     #[error("{0}")]
-    Io(#[from] std::io::Error),
+    Io(std::io::Error),
     #[error("not a FlareLab LUT (.flut) file: wrong magic bytes")]
     Magic,
     #[error("LUT format version {found}; this FlareLab reads versions {OLDEST_VERSION} to {VERSION}")]
@@ -294,6 +296,12 @@ pub fn read_lut(path: &Path) -> Result<GhostLut, LutError> {
         .map_err(|reason| LutError::Io(std::io::Error::new(std::io::ErrorKind::InvalidInput, reason)))?;
     let length = file.metadata()?.len();
     decode(std::io::BufReader::new(file), length)
+}
+
+impl From<std::io::Error> for LutError {
+    fn from(error: std::io::Error) -> Self {
+        Self::Io(error)
+    }
 }
 
 fn read_exact_or(reader: &mut impl Read, buf: &mut [u8], what: &str) -> Result<(), LutError> {
