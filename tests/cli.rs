@@ -1470,7 +1470,7 @@ fn hostile_targets_and_inputs_are_refused_in_one_line_blaming_their_cause() {
     assert!(!e.contains('\u{1b}') && e.contains("\\u{1b}[2J"), "{e}");
     // A negative number reaches the flag's own check (it was "unexpected argument '-2'").
     let e = refusal(&["render", "tessar", "--f-number", "-2", "-o", &out]);
-    assert!(e.contains("--f-number -2") && e.contains("positive"), "{e}");
+    assert!(e.contains("--f-number -2") && e.contains("above 0"), "{e}");
     let e =
         refusal(&["dof", plate.to_str().unwrap(), "--depth", depth.to_str().unwrap(), "--focus-m", "-3", "-o", &out]);
     assert!(!e.contains("unexpected argument"), "{e}");
