@@ -727,6 +727,142 @@ proptest! {
         }
     }
 
+    /// `.ocioz` archives: any archive (entries named to leave the folder among them), its bytes then damaged,
+    /// is refused in one line or extracted with every file inside the private folder, within the bounds.
+    #[test]
+    fn ocioz_archives_are_refused_or_extracted_inside_their_folder(
+        entries in proptest::collection::vec(
+            (prop_oneof![
+                "[a-z]{1,8}(\\.cube)?",
+                "[a-z]{1,6}/[a-z]{1,6}\\.cube",
+                Just("../escape.cube".to_owned()),
+                Just("/abs.cube".to_owned()),
+                Just("a/../../b.cube".to_owned()),
+            ], 0usize..3000),
+            0..6,
+        ),
+        damage in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 0..4),
+    ) {
+        use std::io::Write;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("config.ocioz");
+        let mut bytes = Vec::new();
+        {
+            let mut zip = zip::ZipWriter::new(std::io::Cursor::new(&mut bytes));
+            for (name, size) in &entries {
+                let options = zip::write::SimpleFileOptions::default();
+                if zip.start_file(name.as_str(), options).is_ok() {
+                    zip.write_all(&vec![b'1'; *size]).unwrap();
+                }
+            }
+            zip.finish().unwrap();
+        }
+        for (at, byte) in &damage {
+            if !bytes.is_empty() {
+                let k = at.index(bytes.len());
+                bytes[k] ^= byte;
+            }
+        }
+        std::fs::write(&path, &bytes).unwrap();
+        match flare_core::ocio_files::extract_archive(&path) {
+            Ok(folder) => {
+                let root = folder.path().canonicalize().unwrap();
+                let mut total = 0u64;
+                let mut stack = vec![root.clone()];
+                while let Some(d) = stack.pop() {
+                    for entry in std::fs::read_dir(&d).unwrap() {
+                        let p = entry.unwrap().path().canonicalize().unwrap();
+                        prop_assert!(p.starts_with(&root), "{} left {}", p.display(), root.display());
+                        if p.is_dir() { stack.push(p) } else { total += std::fs::metadata(&p).unwrap().len() }
+                    }
+                }
+                prop_assert!(total <= 256 << 20);
+                prop_assert!(!dir.path().join("escape.cube").exists() && !Path::new("/abs.cube").exists());
+            }
+            Err(e) => prop_assert_eq!(e.lines().count(), 1, "{}", e),
+        }
+    }
+
+    /// Multi-part EXRs as FlareLab writes them (the frame's part and a part per ghost layer, each compression
+    /// it writes, half or float): whatever the values (NaN, infinities, past half's range, negative), the file
+    /// reads back whole, every value finite and where it was put (issue 61: the `exr` crate's B44 lost values;
+    /// the blocks are now compressed by FlareLab's own parallel encoder).
+    #[test]
+    fn multi_part_exrs_read_back_what_was_written(
+        (w, h) in (1u32..24, 1u32..24),
+        values in proptest::collection::vec(prop_oneof![
+            -1e6f32..1e6,
+            Just(f32::NAN),
+            Just(f32::INFINITY),
+            Just(f32::NEG_INFINITY),
+            Just(65504.0f32),
+            Just(1e30f32),
+        ], 16),
+        ghosts in proptest::collection::vec((any::<prop::sample::Index>(), any::<prop::sample::Index>()), 0..4),
+        compression in 0usize..6,
+        half in any::<bool>(),
+    ) {
+        use flare_core::output::{ExrCompression, ExrPixel, ExrSettings, FrameLayers, read_exr_channels, write_exr_layers};
+        use flare_core::image::HdrImage;
+        let n = (w * h) as usize;
+        let image = |seed: usize| HdrImage {
+            width: w,
+            height: h,
+            pixels: (0..n).map(|i| [0, 1, 2, 3].map(|c| values[(i * 3 + c + seed) % values.len()])).collect(),
+        };
+        let ghost_layers: Vec<(String, HdrImage)> = ghosts
+            .iter()
+            .enumerate()
+            .map(|(k, (a, b))| {
+                // One or two lit pixels: the part's data window is the rectangle holding them.
+                let mut g = HdrImage { width: w, height: h, pixels: vec![[0.0; 4]; n] };
+                g.pixels[a.index(n)] = [1.5, -2.0, 3.0, 1.0];
+                g.pixels[b.index(n)] = [0.25, 0.5, 0.75, 1.0];
+                (format!("ghost_{k}_{}", k + 1), g)
+            })
+            .collect();
+        let layers = FrameLayers {
+            composite: image(0),
+            flare: image(1),
+            starburst: image(2),
+            dirt: None,
+            plate: Some(image(3)),
+            ghosts: ghost_layers.clone(),
+        };
+        let settings = ExrSettings {
+            pixel_type: if half { ExrPixel::Half } else { ExrPixel::Float },
+            compression: ExrCompression::ALL[compression],
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("x.exr");
+        write_exr_layers(&path, &layers, settings).unwrap();
+        let back = read_exr_channels(&path).unwrap();
+        prop_assert_eq!((back.width, back.height), (w, h));
+        prop_assert_eq!(back.parts.len(), 1 + usize::from(!ghost_layers.is_empty()) * ghost_layers.len());
+        let expect = |v: f32| {
+            let v = if v.is_nan() { 0.0 } else { v.clamp(-f32::MAX, f32::MAX) };
+            if half { exr::prelude::f16::from_f32(v.clamp(-65504.0, 65504.0)).to_f32() } else { v }
+        };
+        let lossy = settings.compression == ExrCompression::Pxr24 && !half;
+        for (name, layer) in [("flare.R", &layers.flare), ("plate.G", &layers.plate.clone().unwrap())] {
+            let channel = name.ends_with('G') as usize;
+            for (i, p) in layer.pixels.iter().enumerate() {
+                let (got, want) = (back.channels[name][i], expect(p[channel]));
+                prop_assert!(got.is_finite(), "{name}[{i}] = {got}");
+                if lossy {
+                    prop_assert!((got - want).abs() <= want.abs() * 1e-4, "{name}[{i}]: {got} for {want}");
+                } else {
+                    prop_assert_eq!(got, want, "{}[{}]", name, i);
+                }
+            }
+        }
+        for (name, g) in &ghost_layers {
+            for (i, p) in g.pixels.iter().enumerate() {
+                prop_assert_eq!(back.channels[&format!("{name}.G")][i], p[1], "{}[{}]", name, i);
+            }
+        }
+    }
+
     /// OCIO configs' YAML: any text with anchors and aliases is counted as events without expanding, refused
     /// in one line or read; it never panics and never builds the tree.
     #[test]
