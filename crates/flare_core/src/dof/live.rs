@@ -182,10 +182,18 @@ impl LivePlan {
 
     /// Plans the live method for per-pixel defocus `sigma` (checked already).
     pub fn from_defocus(sigma: &[f64], model: &DofModel, mask: &ApertureMask, settings: LiveSettings) -> Self {
+        // A blur past four times the frame's diagonal looks as that one does (every pixel spread over the whole
+        // frame): clamped there, so that no layer's size or reach overflows (issue 61's walk: a focus of 1e300 m).
+        let most_px = 4.0 * f64::from(model.width).hypot(f64::from(model.height));
+        let clamped: Vec<f64> =
+            sigma.iter().map(|&s| if s.is_nan() { 0.0 } else { s.clamp(-most_px, most_px) }).collect();
+        let sigma = clamped.as_slice();
         let (lo, hi) = sigma.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &s| (a.min(s), b.max(s)));
         let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (0.0, 0.0) };
         let range = hi - lo;
-        let count = ((range / 1.0).floor() as usize + 1).clamp(1, settings.max_layers.max(1));
+        // In f64 before the cast: a range too large for a count (or not finite) is the most layers allowed.
+        let most = settings.max_layers.max(1);
+        let count = if range.is_finite() { (range.floor() + 1.0).clamp(1.0, most as f64) as usize } else { most };
         let spacing = if count > 1 { range / (count - 1) as f64 } else { 0.0 };
         let centres: Vec<f64> = (0..count).map(|k| hi - spacing * k as f64).collect();
         // Where each layer's pixels are (x0, y0, x1, y1, ends excluded; empty: none).
@@ -279,8 +287,8 @@ impl LivePlan {
         let out = [
             low[0].saturating_sub(reach),
             low[1].saturating_sub(reach),
-            (low[2] + reach).min(lw),
-            (low[3] + reach).min(lh),
+            low[2].saturating_add(reach).min(lw),
+            low[3].saturating_add(reach).min(lh),
         ];
         let mut layer = LiveLayer {
             size: [self.width, self.height, lw, lh],
@@ -509,5 +517,22 @@ mod tests {
             assert!((total - 1.0).abs() < 1e-5, "{s}: {total}");
         }
         assert!(plan.layers.windows(2).all(|l| l[0].shape[0] > l[1].shape[0]), "far first");
+    }
+
+    /// Issue 61's walk: a defocus range too large for a layer count (a focus of 1e300 m) overflowed it; a blur
+    /// is clamped at four frame diagonals now, and a focus that far is refused before (`dof::MAX_FOCUS_M`).
+    #[test]
+    fn a_defocus_past_the_frame_is_clamped_and_planned() {
+        let model = DofModel::new(&builtin_lens("heliar").unwrap(), 1.0, 2.0, 36.0, (64, 36), false).unwrap();
+        let mask = crate::aperture::Aperture::default().rasterise(64);
+        for far in [1e30, 1e300, f64::MAX] {
+            let sigma = vec![0.0, 1.0, far];
+            let plan = LivePlan::from_defocus(&sigma, &model, &mask, LiveSettings::default());
+            assert!(plan.sigma.iter().all(|s| s.abs() <= 4.0 * 64f32.hypot(36.0) + 1e-3), "{far}");
+            assert!(!plan.layers.is_empty() && plan.layers.len() <= LiveSettings::default().max_layers, "{far}");
+        }
+        let doc = crate::dof::DofDoc { focus_m: 1e300, ..crate::dof::DofDoc::default() };
+        let (field, reason) = doc.check().unwrap_err();
+        assert!(field == "dof.focus_m" && reason.contains("1.000e300 m") && reason.contains("at most"), "{reason}");
     }
 }

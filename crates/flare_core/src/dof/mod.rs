@@ -121,12 +121,21 @@ impl Default for DofDoc {
     }
 }
 
+/// The farthest focus distance (m): 1000 km, past any lens's hyperfocal distance (a 250 mm lens at f/1 is
+/// sharp to infinity from about 2 km), so farther is the same picture. Issue 61's walk: `--focus-m 1e300` was
+/// accepted, echoed in 301 digits and overflowed the live method's layer count.
+pub const MAX_FOCUS_M: f64 = 1e6;
+
 impl DofDoc {
     /// Values serde cannot check: `(field, reason)`. (On with no depth map is kept, as the app saves it while
     /// the user picks one; drawing it then says so.)
     pub fn check(&self) -> Result<(), (String, String)> {
-        if !(self.focus_m.is_finite() && self.focus_m > 0.0) {
-            return Err(("dof.focus_m".into(), format!("{} m: a finite distance above 0", self.focus_m)));
+        if !(self.focus_m.is_finite() && self.focus_m > 0.0 && self.focus_m <= MAX_FOCUS_M) {
+            let shown = crate::files::shorten_numbers(&self.focus_m.to_string());
+            return Err((
+                "dof.focus_m".into(),
+                format!("{shown} m: a finite distance above 0, at most {MAX_FOCUS_M} m"),
+            ));
         }
         Ok(())
     }
