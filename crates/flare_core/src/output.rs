@@ -533,8 +533,8 @@ thread_local! {
     static CONTAINING: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
 }
 
-/// Whether a panic on this thread is being contained by [`contain_panic`]: a process's panic hook stays quiet
-/// for it (the panic becomes an error that names it instead of an "internal error").
+/// Whether a panic on this thread is being contained (a compressor of [`write_frame`]'s EXR): a process's
+/// panic hook stays quiet for it (the panic becomes an error that names it instead of an "internal error").
 pub fn panic_is_contained() -> bool {
     CONTAINING.with(|c| c.get())
 }
@@ -834,7 +834,7 @@ mod tests {
             .collect();
         let image = exr_image((256, 64), settings, ramp("", 256, 64), ghosts);
         let pool = rayon::ThreadPoolBuilder::new().num_threads(4).build().expect("a pool");
-        let error = pool.install(|| encode_exr(&image)).err().expect("B44 on 256x1 parts");
+        let Err(error) = pool.install(|| encode_exr(&image)) else { panic!("B44 on 256x1 parts was written") };
         assert!(error.contains("the compressor failed: range end index"), "{error}");
         assert!(!panic_is_contained(), "the flag is put back");
     }
