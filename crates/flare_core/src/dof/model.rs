@@ -18,6 +18,14 @@ pub enum DofError {
         "focus distance {focus_m} m is closer than this lens can focus (its image would be virtual; the focal length is {efl_mm:.1} mm)"
     )]
     TooClose { focus_m: f64, efl_mm: f64 },
+    /// Axial colour: at this wavelength no real object plane is imaged onto the sensor (the lens's axial colour
+    /// moves that wavelength's focus past infinity), which the model cannot draw.
+    #[error(
+        "axial colour: at {wavelength_nm:.0} nm this lens focuses past infinity when the d-line focuses at {focus_m} m \
+         (its axial colour is larger than the focus travel from there to infinity); focus closer or draw without \
+         axial colour"
+    )]
+    ColourPastInfinity { wavelength_nm: f64, focus_m: f64 },
     #[error("the lens has no usable first-order data: {0}")]
     Lens(String),
     #[error("sensor width {0} mm: must be finite and positive")]
@@ -303,19 +311,22 @@ impl DofModel {
     /// (`self`). With the system matrix `[[A, B], [C, D]]` at that wavelength, the object plane imaged onto the
     /// sensor (b behind the last vertex) lies `d = -(B + b D) / (A + b C)` in front of the first vertex, with
     /// the magnification `A + b C`: the lens is in focus at another distance for each colour, and every blur
-    /// follows from there. Refused (as too close) when no real object plane is imaged there.
+    /// follows from there. Refused when no real object plane is imaged there ([`DofError::ColourPastInfinity`]:
+    /// the Nikon zoom's 650 nm when the d-line focuses at 2 m or farther; its 620 nm at 63 m when the d-line is
+    /// at 3 m).
     pub fn at_wavelength(&self, lens: &Lens, wavelength_nm: f64) -> Result<Self, DofError> {
         // An anamorphic lens: refused with the reason (its sections' colours are not modelled).
         let d_line = lens_data(lens)?;
         let d_mm = self.focus_mm - d_line.pupil_z_mm;
         let too_close = DofError::TooClose { focus_m: self.focus_mm / 1000.0, efl_mm: d_line.efl_mm };
-        let (image_mm, _) = conjugate(d_line.system, d_mm).ok_or(too_close.clone())?;
+        let (image_mm, _) = conjugate(d_line.system, d_mm).ok_or(too_close)?;
         let z_last = lens.vertex_z_mm().last().copied().unwrap_or(0.0);
         let m = PathMatrices::compute(lens, &LightPath::image(lens), wavelength_nm, z_last).sensor_from_entrance;
         let denominator = m.a + image_mm * m.c;
         let d_lambda = -(m.b + image_mm * m.d) / denominator;
         if !(d_lambda.is_finite() && d_lambda > 0.0 && denominator.is_finite()) {
-            return Err(too_close);
+            // The d-line's focus is real (checked above): the colour's is past infinity, a virtual object.
+            return Err(DofError::ColourPastInfinity { wavelength_nm, focus_m: self.focus_mm / 1000.0 });
         }
         Ok(Self {
             focus_mm: d_lambda + d_line.pupil_z_mm,
@@ -609,6 +620,20 @@ mod tests {
             assert!((y2 + image_mm * u2).abs() < 1e-9, "{wavelength}: {}", y2 + image_mm * u2);
             assert!((c.focus_mm - m.focus_mm).abs() > 1e-3, "{wavelength}: no colour shift at all");
         }
+    }
+
+    /// The Nikon zoom's axial colour moves 650 nm's focus past infinity when the d-line focuses at 2 m or
+    /// farther: refused naming that (at 1 m it draws), where it was refused as "closer than this lens can focus".
+    #[test]
+    fn a_colour_focused_past_infinity_is_refused_as_that() {
+        let lens = builtin_lens("nikon_zoom_28_75mm").unwrap();
+        let m = DofModel::new(&lens, 1.0, 3.0, 36.0, (96, 54), false).unwrap();
+        assert!(m.at_wavelength(&lens, 620.0).is_ok_and(|c| c.focus_mm > 10_000.0));
+        let e = m.at_wavelength(&lens, 650.0).unwrap_err();
+        assert_eq!(e, DofError::ColourPastInfinity { wavelength_nm: 650.0, focus_m: m.focus_mm / 1000.0 });
+        assert!(e.to_string().contains("past infinity") && !e.to_string().contains("closer than"), "{e}");
+        let near = DofModel::new(&lens, 1.0, 1.0, 36.0, (96, 54), false).unwrap();
+        assert!(near.at_wavelength(&lens, 650.0).is_ok(), "focused at 1 m, 650 nm has a real plane in focus");
     }
 
     #[test]
