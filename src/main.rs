@@ -43,12 +43,7 @@ fn main() -> ExitCode {
         if flare_core::output::panic_is_contained() {
             return;
         }
-        let message = info
-            .payload()
-            .downcast_ref::<&str>()
-            .map(|s| (*s).to_owned())
-            .or_else(|| info.payload().downcast_ref::<String>().cloned())
-            .unwrap_or_else(|| "unknown".to_owned());
+        let message = flare_core::output::panic_message(info.payload()).unwrap_or_else(|| "unknown".to_owned());
         // `flarelab ... | head` closes the pipe early: that is the reader's choice, not a bug.
         if message.starts_with("failed printing to stdout") {
             std::process::exit(0);

@@ -198,7 +198,7 @@ const DOF_BYTES_PER_PX: u64 = 96;
 fn check_memory(what: &str, (w, h): (u32, u32), bytes_per_px: u64) -> Result<()> {
     let need = u64::from(w) * u64::from(h) * bytes_per_px;
     if let Some(available) = flare_core::frame::available_memory_bytes()
-        && need > available / 10 * 9
+        && need > flare_core::frame::usable_memory_bytes(available)
     {
         bail!(
             "{what} ({w}x{h}) needs about {:.1} GB, more than nine tenths of the {:.1} GB this machine has free",

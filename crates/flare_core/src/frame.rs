@@ -130,12 +130,18 @@ pub fn available_memory_bytes() -> Option<u64> {
     }
 }
 
+/// What a command may plan on of `available` bytes free (nine tenths: the rest is the system's and the
+/// estimates' margin). The one share every memory check uses (frames, bakes, `dof`, `synth-dof`).
+pub fn usable_memory_bytes(available: u64) -> u64 {
+    available / 10 * 9
+}
+
 /// Refuses a frame (see [`frame_memory_bytes`]) that would need more than [`MAX_FRAME_BYTES`] or than nine
 /// tenths of the memory available now, naming both figures, before any work. Issue 61: `--size 8192x8192`, a
 /// black 8192x8192 PNG plate or `--desqueeze 4` aborted at 5.1-5.4 GB when memory ran out.
 pub fn check_frame_memory(width: u32, height: u32, desqueeze: f64, plate: bool) -> Result<(), FrameError> {
     let need = frame_memory_bytes(width, height, desqueeze, plate);
-    let available = available_memory_bytes().map(|a| a / 10 * 9);
+    let available = available_memory_bytes().map(usable_memory_bytes);
     let limit = available.map_or(MAX_FRAME_BYTES, |a| a.min(MAX_FRAME_BYTES));
     if need <= limit {
         return Ok(());

@@ -547,13 +547,14 @@ fn contain_panic<T>(work: impl FnOnce() -> T) -> Result<T, String> {
     let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(work));
     CONTAINING.with(|c| c.set(outer));
     result.map_err(|payload| {
-        let message = payload
-            .downcast_ref::<&str>()
-            .map(|s| (*s).to_owned())
-            .or_else(|| payload.downcast_ref::<String>().cloned())
-            .unwrap_or_else(|| "a panic".to_owned());
+        let message = panic_message(payload.as_ref()).unwrap_or_else(|| "a panic".to_owned());
         crate::files::shorten(&message.replace('\n', " "))
     })
+}
+
+/// A panic's message, when its payload is text (`panic!` with a literal or a format).
+pub fn panic_message(payload: &(dyn std::any::Any + Send)) -> Option<String> {
+    payload.downcast_ref::<&str>().map(|s| (*s).to_owned()).or_else(|| payload.downcast_ref::<String>().cloned())
 }
 
 /// Every channel of an EXR written by FlareLab (or any scan-line EXR), read from every part and placed in

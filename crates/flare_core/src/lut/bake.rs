@@ -192,7 +192,7 @@ impl BakeMemory {
             return Ok(Self { texels: file, machine_bound: false });
         };
         let working = threads.max(1) as u64 * THREAD_BYTES;
-        let usable = available / 10 * 9;
+        let usable = crate::frame::usable_memory_bytes(available);
         // At least a few hundred entries of `res` texels: less than that is no LUT worth baking.
         let least = working + (1 << 24) * BYTES_PER_TEXEL;
         if usable < least {

@@ -71,8 +71,8 @@ fn load_linear(path: &Path) -> Result<image::Rgb32FImage, PhotoError> {
         }
     }
     let (w, h) = rgb.dimensions();
-    if (w, h) != kept_size(w, h) {
-        let (nw, nh) = kept_size(w, h);
+    let (nw, nh) = kept_size(w, h);
+    if (nw, nh) != (w, h) {
         rgb = image::imageops::resize(&rgb, nw, nh, image::imageops::FilterType::Triangle);
     }
     Ok(rgb)
