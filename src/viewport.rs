@@ -242,6 +242,30 @@ impl ViewportResources {
         Self::read(render_state, |res| res.shows_image && res.drawn == generation).unwrap_or(false)
     }
 
+    /// Draws `draft` (a draft frame of the scene on screen) once into a texture of its own, the way a draft
+    /// is drawn on a software adapter, and changes nothing shown. llvmpipe compiles a pipeline's code for each
+    /// state at its first draw, and the view's cube is baked on a thread at the first draft that asks for it:
+    /// without this, the first draft of the user's first drag waited about 100 ms behind both (issue 60's
+    /// replay). Returns whether the draft went through the view's cube (or needs none): until it does, the
+    /// app warms again once the cube is baked. `None` when the resources are missing.
+    pub fn warm_up_drafts(render_state: &RenderState, draft: &Frame) -> Option<bool> {
+        let mut renderer = render_state.renderer.write();
+        let res = renderer.callback_resources.get_mut::<Self>()?;
+        let (device, queue) = (&render_state.device, &render_state.queue);
+        let scene = &draft.scene;
+        let through_cube = scene.globals.operator() != flare_core::color::Tonemap::View
+            || flare_core::view_lut::ViewLut::ready_or_bake(&scene.view_transform()).is_some();
+        let size = (scene.output_size.0.max(1), scene.output_size.1.max(1));
+        let (target, _) = Self::target(device, &res.renderer, &res.layout, &res.sampler, &res.params, size);
+        let view = target.create_view(&wgpu::TextureViewDescriptor::default());
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("warm-up") });
+        res.renderer.rasterise_ghosts(true);
+        res.renderer.sample_view_from_cube(true);
+        res.renderer.render_with_lut(device, queue, &mut encoder, &view, scene, draft.lut.as_ref());
+        queue.submit([encoder.finish()]);
+        Some(through_cube)
+    }
+
     /// Reads the resources without touching them (nothing is drawn again); `None` before they exist.
     pub fn read<R>(render_state: &RenderState, f: impl FnOnce(&Self) -> R) -> Option<R> {
         let renderer = render_state.renderer.read();

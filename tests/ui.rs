@@ -1670,3 +1670,26 @@ fn view_changes_say_what_the_view_now_draws() {
     let wide = h.state().view_rect().unwrap();
     assert!(wide.area() > 1.2 * view.area(), "{wide:?} against {view:?}");
 }
+
+/// On a software adapter the draft passes are warmed once the first frame is shown: a draft of the view drawn
+/// aside, and again through the view's cube once that is baked, so that the first draft of the user's first
+/// drag does not wait on llvmpipe compiling its code and on the cube's bake (issue 60's replay: 109 ms for
+/// that input before, under 75 ms after). The warm-up changes nothing shown.
+#[test]
+fn the_draft_passes_are_warmed_after_the_first_frame_without_changing_it() {
+    let Some(mut h) = gpu_harness(None) else { return };
+    h.step();
+    assert!(!h.state().drafts_warm(), "the frame that hands over the first picture warms nothing");
+    let rect = h.state().view_rect().expect("the viewport is laid out");
+    let crop = |image: &image::RgbaImage| {
+        let (x, y) = (rect.left().ceil() as u32 + 1, rect.top().ceil() as u32 + 1);
+        image::imageops::crop_imm(image, x, y, rect.width() as u32 - 2, rect.height() as u32 - 2).to_image()
+    };
+    let before = crop(&h.render().unwrap());
+    step_until(&mut h, 60.0, FlareLabApp::drafts_warm);
+    let doc_view = h.state().derived().view_frame().clone().unwrap().1.scene.view_transform();
+    assert!(flare_core::view_lut::ViewLut::ready_or_bake(&doc_view).is_some(), "the view's cube is baked");
+    let after = crop(&h.render().unwrap());
+    assert!(before.pixels().any(|p| p.0[..3] != [0, 0, 0]), "the viewport shows a flare");
+    assert!(before == after, "the warm-up changed the picture");
+}

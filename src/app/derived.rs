@@ -574,6 +574,15 @@ impl Derived {
         self.frame_key.as_ref().map_or_else(|| doc.light_at(self.playhead as f64), |k| k.request.light_deg)
     }
 
+    /// `draft` of the frame on screen, built aside (the viewport warms its draft passes with it); `None`
+    /// before there is a flare.
+    pub fn draft_of_view(&self, doc: &Document, draft: Draft) -> Option<Frame> {
+        let flare = self.flare.as_ref()?;
+        let (w, h) = self.view_px;
+        let request = FrameRequest { draft: Some(draft), ..self.request_at(doc, flare, w, h, self.view_divisor()) };
+        Some(Frame::build(flare, self.lut.as_deref(), &request))
+    }
+
     /// Builds the frame when what it shows changed.
     pub fn sync_frame(&mut self, doc: &Document) {
         let (Some(flare), Some(optics)) = (self.flare.clone(), self.optics_key) else { return };

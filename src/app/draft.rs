@@ -49,8 +49,14 @@ impl DraftControl {
     /// Drafts at 1/4 resolution on a software adapter (starting from a budget of [`SOFTWARE_START_BUDGET`]
     /// fragments), at 1/2 on a GPU (starting with room for everything).
     pub fn new(software: bool) -> Self {
-        let (divisor, budget) = if software { (4, SOFTWARE_START_BUDGET) } else { (2, MAX_BUDGET) };
+        let Draft { divisor, fragment_budget: budget } = Self::first_draft(software);
         Self { divisor, budget, last_step: None, drafting: false, floor_ms: None }
+    }
+
+    /// The first draft of a drag (what the viewport warms its draft passes with on a software adapter).
+    pub fn first_draft(software: bool) -> Draft {
+        let (divisor, fragment_budget) = if software { (4, SOFTWARE_START_BUDGET) } else { (2, MAX_BUDGET) };
+        Draft { divisor, fragment_budget }
     }
 
     /// One UI frame at `now`: the draft to draw when `interacting`, `None` for the full frame. `flare_gpu_ms`
@@ -85,6 +91,22 @@ impl DraftControl {
     pub fn drafting(&self) -> bool {
         self.drafting
     }
+}
+
+/// Warming the draft passes on a software adapter before the first drag (see
+/// [`crate::viewport::ViewportResources::warm_up_drafts`]): once the first frame has been shown, a draft of
+/// the view is drawn aside; if the view's cube was not baked yet, again once it is.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum DraftWarmth {
+    /// Nothing shown yet.
+    #[default]
+    Cold,
+    /// The first frame was handed to the viewport: warm in a later UI frame, after it was presented.
+    Shown,
+    /// Warmed once, before the view's cube was baked: warm again when it is.
+    AwaitingCube,
+    /// Done (or nothing to do: a hardware GPU, or no viewport).
+    Warm,
 }
 
 #[cfg(test)]

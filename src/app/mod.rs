@@ -167,6 +167,8 @@ pub struct FlareLabApp {
     under_view: f32,
     /// Every UI frame's start and duration, when `FLARELAB_FRAME_LOG` asks (see [`frame_log`]).
     frame_log: Option<frame_log::FrameLog>,
+    /// Whether the draft passes were warmed on a software adapter (see [`FlareLabApp::warm_drafts`]).
+    drafts_warmth: draft::DraftWarmth,
 }
 
 impl FlareLabApp {
@@ -205,6 +207,7 @@ impl FlareLabApp {
             ui: UiState::default(),
             under_view: 80.0,
             frame_log: options.frame_log.clone().map(frame_log::FrameLog::new),
+            drafts_warmth: if software { draft::DraftWarmth::Cold } else { draft::DraftWarmth::Warm },
         };
         // FLARELAB_RAYGRID=N starts the view in its ray-grid mode (the Xvfb test and screenshots); FLARELAB_AUTO_BAKE=0
         // turns the automatic bake off (measurements: no background bake competing for the cores).
@@ -216,6 +219,12 @@ impl FlareLabApp {
         app.shot_fields.plate_path = app.session.doc().background.clone().unwrap_or_default();
         app.sync();
         app
+    }
+
+    /// Whether the draft passes are warm: on a software adapter, a draft was drawn aside through the view's baked
+    /// cube after the first frame was shown (see [`FlareLabApp::warm_drafts`]); always on a hardware GPU.
+    pub fn drafts_warm(&self) -> bool {
+        self.drafts_warmth == draft::DraftWarmth::Warm
     }
 
     /// Whether the viewport shows the ray-grid view's traced image of the frame on screen (not its paraxial
@@ -491,6 +500,7 @@ impl FlareLabApp {
         }
         self.sync();
         self.jobs.raygrid_mut().step(&self.derived, self.gpu.as_ref());
+        self.warm_drafts(ui.ctx());
         // An edit in this frame made a new scene after the viewport was painted: paint once more.
         if self.derived.frame_pending() && self.gpu.is_some() {
             ui.ctx().request_repaint();
@@ -1320,6 +1330,40 @@ impl FlareLabApp {
             self.derived.set_draft(draft);
             self.sync_frame();
         }
+    }
+
+    /// Warms the draft passes on a software adapter ([`draft::DraftWarmth`]), outside a drag (a drag's own
+    /// drafts need no warming) and never in the UI frame that hands the viewport its first frame (that frame
+    /// is not delayed by the warm-up's GPU work).
+    fn warm_drafts(&mut self, ctx: &egui::Context) {
+        use draft::DraftWarmth::{AwaitingCube, Cold, Shown, Warm};
+        let Some(rs) = self.gpu.as_ref().filter(|_| self.drafts_warmth != Warm) else { return };
+        let Some((_, shown)) = self.derived.view_frame() else { return };
+        if self.drafts_warmth == Cold {
+            self.drafts_warmth = Shown;
+            ctx.request_repaint();
+            return;
+        }
+        if self.derived.draft().is_some() {
+            return;
+        }
+        let scene = &shown.scene;
+        if self.drafts_warmth == AwaitingCube
+            && scene.globals.operator() == flare_core::color::Tonemap::View
+            && flare_core::view_lut::ViewLut::ready_or_bake(&scene.view_transform()).is_none()
+        {
+            ctx.request_repaint_after(std::time::Duration::from_millis(250));
+            return;
+        }
+        let first = draft::DraftControl::first_draft(true);
+        let Some(frame) = self.derived.draft_of_view(self.session.doc(), first) else { return };
+        self.drafts_warmth = match ViewportResources::warm_up_drafts(rs, &frame) {
+            Some(false) if self.drafts_warmth == Shown => {
+                ctx.request_repaint_after(std::time::Duration::from_millis(250));
+                AwaitingCube
+            }
+            _ => Warm,
+        };
     }
 
     /// One frame of the drag bench (see [`DragBench`]); closes the window when it is done.
