@@ -1,8 +1,9 @@
 //! Ray-traced ghosts: the ground-truth reference renderer and Hullin et al. 2011's ray grids.
 //!
 //! # How it works
-//! Nothing here is paraxial. Per ghost and wavelength (one job; jobs run in parallel with rayon, each into a
-//! per-thread f64 image that is summed at the end) a regular grid of (N+1) x (N+1) rays leaves the entrance
+//! Nothing here is paraxial. Per ghost and wavelength (one job; jobs are traced in parallel with rayon, then
+//! splatted into one f64 frame band of rows by band, each band drawing the jobs in order, so that the image is
+//! the same whatever the threads) a regular grid of (N+1) x (N+1) rays leaves the entrance
 //! plane (z = 0, the first vertex) in the light's direction and is traced exactly, in f64, along the ghost's
 //! path ([`crate::optics::Tracer::trace_vertices`]: 16 rays at a time as columns, vectorised with AVX2 or AVX-512
 //! where the processor has them, each bit for bit what one ray traced alone gives). Each ray records:
@@ -69,7 +70,7 @@ pub use tracer::{
 #[cfg(test)]
 mod tests {
     use super::grid::Vertex;
-    use super::splat::{Accumulator, JobFrame, splat_triangle};
+    use super::splat::{FrameAcc, JobFrame, carries_light, splat_triangle};
     use super::*;
     use crate::flare::FlareConfig;
     use crate::optics::library::builtin_lens;
@@ -111,20 +112,21 @@ mod tests {
             triangle_flux: 2.0,
         };
         let v = Vertex { valid: true, pixel: [10.3, 7.6], stops: [[0.0; 2]; 3], ratio: 0.5, weight: 0.25 };
-        let mut acc = Accumulator::new(20, 20, 1);
-        assert!(splat_triangle([&v, &v, &v], &frame, &mut acc));
+        let mut acc = FrameAcc::new(20, 20, 1);
+        assert!(carries_light([&v, &v, &v], &frame));
+        splat_triangle([&v, &v, &v], &frame, &mut acc.whole());
         let total: f64 = acc.energy().iter().map(|p| p[0]).sum();
         assert!((total - 0.5).abs() < 1e-12, "{total}");
         // A large triangle: irradiance = flux / area, times the area it covers of each pixel.
         let tri = [[2.0, 2.0], [18.0, 2.0], [2.0, 18.0]].map(|pixel| Vertex { pixel, ..v });
-        let mut acc = Accumulator::new(20, 20, 1);
-        splat_triangle([&tri[0], &tri[1], &tri[2]], &frame, &mut acc);
+        let mut acc = FrameAcc::new(20, 20, 1);
+        splat_triangle([&tri[0], &tri[1], &tri[2]], &frame, &mut acc.whole());
         let total: f64 = acc.energy().iter().map(|p| p[0]).sum();
         assert!((total / 0.5 - 1.0).abs() < 1e-9, "box-filtered energy {total} vs 0.5");
         // Partly off the frame: what lands in it is its share by area (x >= 0: a quarter of this one).
         let tri = [[-8.0, 2.0], [8.0, 2.0], [-8.0, 18.0]].map(|pixel| Vertex { pixel, ..v });
-        let mut acc = Accumulator::new(20, 20, 1);
-        splat_triangle([&tri[0], &tri[1], &tri[2]], &frame, &mut acc);
+        let mut acc = FrameAcc::new(20, 20, 1);
+        splat_triangle([&tri[0], &tri[1], &tri[2]], &frame, &mut acc.whole());
         let total: f64 = acc.energy().iter().map(|p| p[0]).sum();
         assert!((total / 0.125 - 1.0).abs() < 1e-9, "{total} vs 1/4 of 0.5");
     }
@@ -151,12 +153,14 @@ mod tests {
                 let (x, y) = (i as f64 * step, j as f64 * step);
                 Vertex { pixel: [offset[0] + x + skew * y, offset[1] + y], ..v }
             };
-            let mut acc = Accumulator::new(32, 32, 1);
+            let mut acc = FrameAcc::new(32, 32, 1);
             for j in 0..n {
                 for i in 0..n {
                     let (a, b, c, d) = (at(i, j), at(i + 1, j), at(i, j + 1), at(i + 1, j + 1));
-                    assert!(splat_triangle([&a, &b, &d], &frame, &mut acc));
-                    assert!(splat_triangle([&a, &d, &c], &frame, &mut acc));
+                    for tri in [[&a, &b, &d], [&a, &d, &c]] {
+                        assert!(carries_light(tri, &frame));
+                        splat_triangle(tri, &frame, &mut acc.whole());
+                    }
                 }
             }
             // Pixels well inside the mesh: irradiance 1 (energy per unit area; a pixel is 1 x 1).
@@ -175,6 +179,35 @@ mod tests {
                 count += 1;
             }
             assert!(count > 100, "step {step}: only {count} pixels inside");
+        }
+    }
+    /// The band splatter's images against those the tiled, per-thread splatter of the build before drew
+    /// (stored as f32 RGB): the same light to rounding (a run's and a cut pixel's light are now summed in
+    /// another form and order), and the same bytes on one thread and on three.
+    #[test]
+    fn ray_grid_images_match_the_previous_splatter_and_do_not_depend_on_threads() {
+        let r = renderer("heliar");
+        let stored: [(&str, [f64; 2], &[u8]); 2] = [
+            ("10, 0", [10.0, 0.0], include_bytes!("../../tests/data/raygrid/heliar_10_0_144x96_grid32.f32")),
+            ("14, 9", [14.0, 9.0], include_bytes!("../../tests/data/raygrid/heliar_14_9_144x96_grid32.f32")),
+        ];
+        for (name, light, bytes) in stored {
+            let pool = |n| rayon::ThreadPoolBuilder::new().num_threads(n).build().unwrap();
+            let one = pool(1).install(|| r.render(light, 144, 96, Grid::Fixed(32)).unwrap());
+            let three = pool(3).install(|| r.render(light, 144, 96, Grid::Fixed(32)).unwrap());
+            assert!(one.hdr.pixels == three.hdr.pixels, "{name}: the image depends on the threads");
+            assert_eq!(format!("{:?}", one.moments), format!("{:?}", three.moments), "{name}");
+            let before: Vec<f32> =
+                bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+            let now: Vec<f32> = one.hdr.pixels.iter().flat_map(|p| [p[0], p[1], p[2]]).collect();
+            assert_eq!(before.len(), now.len());
+            let peak = before.iter().fold(0.0f64, |m, v| m.max(f64::from(*v)));
+            let worst = before.iter().zip(&now).map(|(a, b)| (f64::from(*a) - f64::from(*b)).abs()).fold(0.0, f64::max);
+            let mse = before.iter().zip(&now).map(|(a, b)| (f64::from(*a) - f64::from(*b)).powi(2)).sum::<f64>()
+                / now.len() as f64;
+            let psnr = 10.0 * (peak * peak / mse.max(1e-300)).log10();
+            eprintln!("{name}: peak {peak:e}, largest difference {worst:e}, PSNR {psnr:.1} dB");
+            assert!(peak > 0.0 && psnr > 120.0 && worst <= 1e-5 * peak, "{name}: {worst:e} of {peak:e}, {psnr:.1} dB");
         }
     }
 }

@@ -293,6 +293,10 @@ impl RayGridRenderer {
     /// one whose pre-pass is traced over the whole front lens and `Some((Some(grid), gain))` for one whose
     /// pre-pass is the scouted `grid`; its light is multiplied by `gain`. A set `cancel` skips every job not yet
     /// begun and answers [`RayGridError::Cancelled`].
+    ///
+    /// The jobs are traced in parallel a batch at a time (at most [`BATCH_VERTICES`] vertices held, whatever
+    /// the grid), then splatted band by band ([`FrameAcc`]): each band of rows draws every job of the batch in
+    /// the jobs' order, so the image is the same to the bit whatever the threads.
     fn render_views<'s>(
         &self,
         light_deg: [f64; 2],
@@ -304,36 +308,39 @@ impl RayGridRenderer {
         validate(light_deg, views, grid)?;
         let u = light_slopes_for_frame_position(light_deg[0], light_deg[1]);
         let ghosts = self.ghost_count();
-        let fresh = || -> Vec<Accumulator> {
-            views.iter().map(|v| Accumulator::new(v.window.width as usize, v.window.height as usize, ghosts)).collect()
-        };
-        let merge = |a: Vec<Accumulator>, b: Vec<Accumulator>| a.into_iter().zip(b).map(|(a, b)| a.merge(b)).collect();
         // The jobs drawn, gathered first: a scouted request draws 3 of the lens's (up to thousands of) jobs.
-        // Each job takes a set of accumulators (one per view) from a shared stack, or makes one when none is
-        // free, and puts it back: as many sets are made as jobs ever run at once (about one per thread), not
-        // one per piece rayon splits the list into. A frame's ghosts each cover much of it, so every set ends
-        // up holding most of the frame's tiles: fewer sets are fewer tiles made, merged and freed.
         let drawn: Vec<(&Job, (Option<&TracedGrid>, f64))> =
             self.jobs.iter().filter_map(|job| plan(job).map(|planned| (job, planned))).collect();
-        let free: std::sync::Mutex<Vec<Vec<Accumulator>>> = std::sync::Mutex::new(Vec::new());
-        let take = || free.lock().ok().and_then(|mut f| f.pop()).unwrap_or_else(fresh);
         let cancelled = || cancel.is_some_and(|c| c.load(Ordering::Relaxed));
-        drawn.into_par_iter().for_each(|(job, (scouted, gain))| {
+        let mut frames: Vec<FrameAcc> =
+            views.iter().map(|v| FrameAcc::new(v.window.width as usize, v.window.height as usize, ghosts)).collect();
+        let mut stats = vec![RayGridStats::default(); views.len()];
+        let per_job = (grid.cells() + 1).pow(2) * views.len().max(1);
+        for batch in drawn.chunks((BATCH_VERTICES / per_job).max(1)) {
+            let traced: Vec<Option<TracedJob>> = batch
+                .par_iter()
+                .map(|(job, (scouted, gain))| {
+                    (!cancelled()).then(|| self.trace_job(job, u, views, grid, *scouted, *gain))
+                })
+                .collect();
             if cancelled() {
-                return;
+                return Err(RayGridError::Cancelled);
             }
-            let mut accs = take();
-            self.render_job(job, u, views, grid, scouted, gain, &mut accs);
-            if let Ok(mut f) = free.lock() {
-                f.push(accs);
+            let traced: Vec<TracedJob> = traced.into_iter().flatten().collect();
+            for job in &traced {
+                for (total, s) in stats.iter_mut().zip(&job.stats) {
+                    total.add(s);
+                }
             }
-        });
-        if cancelled() {
-            return Err(RayGridError::Cancelled);
+            for (k, frame) in frames.iter_mut().enumerate() {
+                frame.splat(|band| {
+                    for job in &traced {
+                        job.splat(k, band);
+                    }
+                });
+            }
         }
-        let sets = free.into_inner().unwrap_or_else(std::sync::PoisonError::into_inner);
-        let accs = sets.into_iter().reduce(merge).unwrap_or_else(fresh);
-        Ok(views.iter().zip(accs).map(|(view, acc)| acc.into_image(&view.window)).collect())
+        Ok(views.iter().zip(frames).zip(stats).map(|((view, frame), s)| frame.into_image(&view.window, s)).collect())
     }
 
     /// The jobs of a fixed-grid frame render as [`Self::render`] lays them out, for a twin that traces them
@@ -673,124 +680,162 @@ impl RayGridRenderer {
         (bounds[0] < bounds[2] && bounds[1] < bounds[3]).then_some(PrePass { bounds, extent_px, lit })
     }
 
-    /// Traces `job` once and splats it into every view's accumulator (`accs[k]` for `views[k]`); the pre-pass
-    /// is `scouted`, or traced over the whole front lens. Compiled for AVX2 too, used where the processor has
-    /// it (the splatting's floors and conversions are then single instructions; the same results).
-    #[allow(clippy::too_many_arguments)]
-    fn render_job(
-        &self,
+    /// Traces `job` once (its pre-pass `scouted`, or traced over the whole front lens) and sees its vertices in
+    /// every view, ready to be splatted ([`TracedJob::splat`]).
+    fn trace_job<'m>(
+        &'m self,
         job: &Job,
         u: [f64; 2],
         views: &[View],
         grid: Grid,
         scouted: Option<&TracedGrid>,
         gain: f64,
-        accs: &mut [Accumulator],
-    ) {
-        #[cfg(target_arch = "x86_64")]
-        if crate::optics::simd_level() >= 1 {
-            // SAFETY: the processor has AVX2 (checked once by `simd_level`).
-            return unsafe { self.render_job_avx2(job, u, views, grid, scouted, gain, accs) };
-        }
-        self.render_job_body(job, u, views, grid, scouted, gain, accs)
-    }
-
-    /// [`Self::render_job_body`] compiled for AVX2.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    #[allow(clippy::too_many_arguments)]
-    unsafe fn render_job_avx2(
-        &self,
-        job: &Job,
-        u: [f64; 2],
-        views: &[View],
-        grid: Grid,
-        scouted: Option<&TracedGrid>,
-        gain: f64,
-        accs: &mut [Accumulator],
-    ) {
-        self.render_job_body(job, u, views, grid, scouted, gain, accs)
-    }
-
-    /// The body of [`Self::render_job`].
-    #[inline(always)]
-    #[allow(clippy::too_many_arguments)]
-    fn render_job_body(
-        &self,
-        job: &Job,
-        u: [f64; 2],
-        views: &[View],
-        grid: Grid,
-        scouted: Option<&TracedGrid>,
-        gain: f64,
-        accs: &mut [Accumulator],
-    ) {
-        for acc in accs.iter_mut() {
-            acc.stats.jobs += 1;
-        }
+    ) -> TracedJob<'m> {
+        let mut stats = vec![RayGridStats { jobs: 1, ..RayGridStats::default() }; views.len()];
         let d = DVec3::new(u[0], u[1], 1.0).normalize();
         let pre = match scouted {
             Some(traced) => self.pre_pass(job, u, traced, views),
             None => {
                 let (pre, rays) = self.front_pre_pass(job, u, d, grid, views);
-                accs[0].stats.rays += rays;
+                stats[0].rays += rays;
                 pre
             }
         };
-        let Some(PrePass { bounds: b, extent_px, lit }) = pre else {
-            for acc in accs.iter_mut() {
-                acc.stats.empty_jobs += 1;
-            }
-            return;
-        };
-        let grid = grid.for_extent(extent_px);
         let weights = self.spectrum.weights_rgb[job.wavelength].map(|w| w * gain);
-        let frame = JobFrame {
+        let mut frame = JobFrame {
             ghost: job.ghost,
             rgb: weights,
             luma: crate::color::luminance(weights),
             stop_count: self.stop_count(job),
             mask: &self.mask,
             open_radius2: self.open_radius2,
-            triangle_flux: triangle_flux(d, b, grid),
+            triangle_flux: 0.0,
         };
+        let Some(PrePass { bounds: b, extent_px, lit }) = pre else {
+            for s in &mut stats {
+                s.empty_jobs += 1;
+            }
+            return TracedJob { frame, cells: 0, seen: Vec::new(), stats };
+        };
+        let grid = grid.for_extent(extent_px);
+        frame.triangle_flux = triangle_flux(d, b, grid);
         let (dx, dy) = ((b[2] - b[0]) / grid as f64, (b[3] - b[1]) / grid as f64);
-        // Every ray of the grid first (traced LANES at a time across rows: a row alone leaves lanes idle), a
-        // ray far from every lit cell of the pre-pass not at all (no triangle of it carries light).
+        // Every ray of the grid (traced LANES at a time across rows: a row alone leaves lanes idle), a ray far
+        // from every lit cell of the pre-pass not at all (no triangle of it carries light).
         let n = grid + 1;
         let mut traced: Vec<Vertex> = Vec::with_capacity(n * n);
         let at = |k: usize| {
             let x0 = [b[0] + (k % n) as f64 * dx, b[1] + (k / n) as f64 * dy];
             lit.as_ref().is_none_or(|lit| lit.contains(x0)).then_some(x0)
         };
-        accs[0].stats.rays += self.trace_selected(job, d, n * n, at, &mut traced);
-        // Per view: the previous and the current row as it sees them.
-        let mut previous: Vec<Vec<Vertex>> = vec![Vec::with_capacity(n); views.len()];
-        let mut current: Vec<Vec<Vertex>> = vec![Vec::with_capacity(n); views.len()];
-        let mut any = vec![false; views.len()];
-        let seers: Vec<_> = views.iter().map(View::seer).collect();
-        for (iy, row) in traced.chunks(n).enumerate() {
-            for k in 0..views.len() {
-                current[k].clear();
-                current[k].extend(row.iter().map(&seers[k]));
-                if iy > 0 {
-                    let (previous, current, acc) = (&previous[k], &current[k], &mut accs[k]);
-                    for ix in 0..grid {
-                        let (v00, v10, v01, v11) = (&previous[ix], &previous[ix + 1], &current[ix], &current[ix + 1]);
-                        for tri in [[v00, v10, v11], [v00, v11, v01]] {
-                            if splat_triangle(tri, &frame, acc) {
-                                acc.stats.triangles += 1;
-                                any[k] = true;
+        stats[0].rays += self.trace_selected(job, d, n * n, at, &mut traced);
+        let last = views.len().saturating_sub(1);
+        let mut traced = Some(traced);
+        let seen = views
+            .iter()
+            .zip(&mut stats)
+            .enumerate()
+            .map(|(k, (view, stats))| {
+                let see = view.seer();
+                // The last view sees the traced vertices where they are (one view: no copy).
+                let vertices: Vec<Vertex> = match traced.take_if(|_| k == last) {
+                    Some(mut own) => {
+                        for v in &mut own {
+                            *v = see(v);
+                        }
+                        own
+                    }
+                    None => traced.iter().flatten().map(&see).collect(),
+                };
+                // The triangles that carry light, row of cells by row, and the pixel rows each row's reach.
+                let mut seen = Seen { rows: Vec::with_capacity(grid), starts: vec![0], lit: Vec::new(), vertices };
+                for iy in 0..grid {
+                    let mut reach = [f64::INFINITY, f64::NEG_INFINITY];
+                    for t in 2 * iy * grid..2 * (iy + 1) * grid {
+                        let tri = triangle(&seen.vertices, n, t);
+                        if carries_light(tri, &frame) {
+                            seen.lit.push(t as u32);
+                            for v in tri {
+                                reach = [reach[0].min(v.pixel[1]), reach[1].max(v.pixel[1])];
                             }
                         }
                     }
+                    seen.rows.push(reach);
+                    seen.starts.push(seen.lit.len() as u32);
                 }
-            }
-            std::mem::swap(&mut previous, &mut current);
+                stats.triangles += seen.lit.len() as u64;
+                if seen.lit.is_empty() {
+                    stats.empty_jobs += 1;
+                }
+                seen
+            })
+            .collect();
+        TracedJob { frame, cells: grid, seen, stats }
+    }
+}
+/// The most traced vertices a render holds at once (the jobs of a batch, over all views, with the largest grid):
+/// about 90 MB.
+const BATCH_VERTICES: usize = 1 << 20;
+/// Triangle `t` of a grid of `n` x `n` vertices: cell `t / 2` (row by row), its first or second half (the split
+/// the GPU makes too).
+#[inline(always)]
+fn triangle(vertices: &[Vertex], n: usize, t: usize) -> [&Vertex; 3] {
+    let (iy, ix) = ((t / 2) / (n - 1), (t / 2) % (n - 1));
+    let (v00, v10) = (&vertices[iy * n + ix], &vertices[iy * n + ix + 1]);
+    let (v01, v11) = (&vertices[(iy + 1) * n + ix], &vertices[(iy + 1) * n + ix + 1]);
+    if t.is_multiple_of(2) { [v00, v10, v11] } else { [v00, v11, v01] }
+}
+/// A traced job as one view sees it.
+struct Seen {
+    /// The vertices, `(cells + 1)^2` row by row.
+    vertices: Vec<Vertex>,
+    /// Per row of cells, the pixel rows its triangles that carry light reach (`[lo, hi]`; empty when `lo > hi`).
+    rows: Vec<[f64; 2]>,
+    /// The triangles that carry light ([`triangle`]'s numbers), row of cells by row: row `iy`'s are
+    /// `lit[starts[iy]..starts[iy + 1]]`.
+    starts: Vec<u32>,
+    lit: Vec<u32>,
+}
+/// One job traced and seen in every view of a render, waiting to be splatted.
+struct TracedJob<'m> {
+    frame: JobFrame<'m>,
+    cells: usize,
+    /// Per view (none when no light passes).
+    seen: Vec<Seen>,
+    /// Per view.
+    stats: Vec<RayGridStats>,
+}
+impl TracedJob<'_> {
+    /// Splats this job's triangles in view `k` that reach `band`. Compiled for AVX2 too, used where the
+    /// processor has it (the splatting's floors and conversions are then single instructions; the same
+    /// results).
+    fn splat(&self, k: usize, band: &mut BandAcc) {
+        #[cfg(target_arch = "x86_64")]
+        if crate::optics::simd_level() >= 1 {
+            // SAFETY: the processor has AVX2 (checked once by `simd_level`).
+            return unsafe { self.splat_avx2(k, band) };
         }
-        for (acc, any) in accs.iter_mut().zip(any) {
-            if !any {
-                acc.stats.empty_jobs += 1;
+        self.splat_body(k, band)
+    }
+
+    /// [`Self::splat_body`] compiled for AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn splat_avx2(&self, k: usize, band: &mut BandAcc) {
+        self.splat_body(k, band)
+    }
+
+    /// The body of [`Self::splat`].
+    #[inline(always)]
+    fn splat_body(&self, k: usize, band: &mut BandAcc) {
+        let Some(seen) = self.seen.get(k) else { return };
+        let (y0, y1, n) = (band.y0 as f64, band.y1 as f64, self.cells + 1);
+        for (iy, reach) in seen.rows.iter().enumerate() {
+            if reach[0] > reach[1] || reach[1] < y0 || reach[0] >= y1 {
+                continue;
+            }
+            for &t in &seen.lit[seen.starts[iy] as usize..seen.starts[iy + 1] as usize] {
+                splat_triangle(triangle(&seen.vertices, n, t as usize), &self.frame, band);
             }
         }
     }
