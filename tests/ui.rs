@@ -1677,19 +1677,27 @@ fn view_changes_say_what_the_view_now_draws() {
 /// that input before, under 75 ms after). The warm-up changes nothing shown.
 #[test]
 fn the_draft_passes_are_warmed_after_the_first_frame_without_changing_it() {
-    let Some(mut h) = gpu_harness(None) else { return };
-    h.step();
-    assert!(!h.state().drafts_warm(), "the frame that hands over the first picture warms nothing");
-    let rect = h.state().view_rect().expect("the viewport is laid out");
-    let crop = |image: &image::RgbaImage| {
-        let (x, y) = (rect.left().ceil() as u32 + 1, rect.top().ceil() as u32 + 1);
-        image::imageops::crop_imm(image, x, y, rect.width() as u32 - 2, rect.height() as u32 - 2).to_image()
-    };
-    let before = crop(&h.render().unwrap());
-    step_until(&mut h, 60.0, FlareLabApp::drafts_warm);
-    let doc_view = h.state().derived().view_frame().clone().unwrap().1.scene.view_transform();
+    let Some(mut warmed) = gpu_harness(None) else { return };
+    // Frame by frame, so that the picture compared is the one drawn right after the last warm-up.
+    let started = std::time::Instant::now();
+    while !warmed.state().drafts_warm() {
+        assert!(started.elapsed().as_secs() < 60, "the draft passes were not warmed in 60 s");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+        warmed.step();
+    }
+    let doc_view = warmed.state().derived().view_frame().clone().unwrap().1.scene.view_transform();
     assert!(flare_core::view_lut::ViewLut::ready_or_bake(&doc_view).is_some(), "the view's cube is baked");
-    let after = crop(&h.render().unwrap());
-    assert!(before.pixels().any(|p| p.0[..3] != [0, 0, 0]), "the viewport shows a flare");
-    assert!(before == after, "the warm-up changed the picture");
+    // The same window drawn without the warm-up: the viewport's pixels are the same.
+    let mut plain = gpu_harness(None).unwrap();
+    plain.state_mut().skip_draft_warm_up();
+    plain.run();
+    let crop = |h: &mut egui_kittest::Harness<'static, FlareLabApp>| {
+        let rect = h.state().view_rect().expect("the viewport is laid out");
+        let image = h.render().unwrap();
+        let (x, y) = (rect.left().ceil() as u32 + 1, rect.top().ceil() as u32 + 1);
+        image::imageops::crop_imm(&image, x, y, rect.width() as u32 - 2, rect.height() as u32 - 2).to_image()
+    };
+    let (with, without) = (crop(&mut warmed), crop(&mut plain));
+    assert!(without.pixels().any(|p| p.0[..3] != [0, 0, 0]), "the viewport shows a flare");
+    assert!(with == without, "the warm-up changed the picture");
 }

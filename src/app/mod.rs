@@ -221,6 +221,11 @@ impl FlareLabApp {
         app
     }
 
+    /// Marks the draft passes warm without warming them: a test's reference window, drawn without the warm-up.
+    pub fn skip_draft_warm_up(&mut self) {
+        self.drafts_warmth = draft::DraftWarmth::Warm;
+    }
+
     /// Whether the draft passes are warm: on a software adapter, a draft was drawn aside through the view's baked
     /// cube after the first frame was shown (see [`FlareLabApp::warm_drafts`]); always on a hardware GPU.
     pub fn drafts_warm(&self) -> bool {
