@@ -62,7 +62,14 @@ fn the_hang_replayed_every_frame_answers_and_every_cancel_ends_its_threads() {
     };
     step(&mut h, "launch");
     step(&mut h, "launch");
-    assert!(matches!(h.state().bake_status(), flarelab::panels::BakeStatus::Running { .. }));
+    // The bake starts once the cache's lookup (a thread) has answered: a frame or two after launch (the draft
+    // passes' warm-up on lavapipe takes the second frame).
+    let launched = Instant::now();
+    while !matches!(h.state().bake_status(), flarelab::panels::BakeStatus::Running { .. }) {
+        assert!(launched.elapsed() < Duration::from_secs(5), "no bake 5 s after launch: {:?}", h.state().bake_status());
+        std::thread::sleep(Duration::from_millis(20));
+        step(&mut h, "launch");
+    }
     // Depth of field on; the view's ghosts at ray grid 32.
     h.state_mut().edit().dof.enabled = true;
     step(&mut h, "depth of field on");
