@@ -1,9 +1,10 @@
 //! Ray-traced ghosts: the ground-truth reference renderer and Hullin et al. 2011's ray grids.
 //!
 //! # How it works
-//! Nothing here is paraxial. Per ghost and wavelength (one job; jobs are traced in parallel with rayon, then
-//! splatted into one f64 frame band of rows by band, each band drawing the jobs in order, so that the image is
-//! the same whatever the threads) a regular grid of (N+1) x (N+1) rays leaves the entrance
+//! Nothing here is paraxial. Per ghost and wavelength (one job; jobs are traced in parallel with rayon, a batch
+//! of at most 2^18 vertices at a time, then seen in each view in turn, their lit triangles sorted by the bands of
+//! 16 rows they reach, and splatted into one f64 frame band by band, each band drawing the jobs in order, so
+//! that the image is the same whatever the threads) a regular grid of (N+1) x (N+1) rays leaves the entrance
 //! plane (z = 0, the first vertex) in the light's direction and is traced exactly, in f64, along the ghost's
 //! path ([`crate::optics::Tracer::trace_vertices`]: 16 rays at a time as columns, vectorised with AVX2 or AVX-512
 //! where the processor has them, each bit for bit what one ray traced alone gives). Each ray records:

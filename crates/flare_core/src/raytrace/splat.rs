@@ -6,7 +6,8 @@
 //! [`splat_triangle`] walks the triangle's rows in one band of the frame. In each row the pixels it covers
 //! whole (both of its sections at the row's edges lie beyond the pixel on either side) are one run: where the
 //! triangle's light is linear (no mask edge, nothing vignetted, no negative weight: most triangles) the run is
-//! four adds to the row's second differences ([`BandAcc::add_linear_run`]), else each pixel is shaded at its
+//! four adds to the row's second differences ([`BandAcc::add_linear_run`]; the band's task holds them and sums
+//! them into the frame's planes when the band is done), else each pixel is shaded at its
 //! centre ([`BandAcc::add_run`]). Every other pixel it touches gets the area of the triangle's part in it and
 //! that part's first moments in closed form from the three edges ([`Band`]: Green's theorem, no polygon cut),
 //! the same steps as the GPU's `raygrid_box.wgsl` (`band_of`, `band_part`), in f64; its light is the area times
@@ -30,15 +31,6 @@ pub struct RayGridStats {
     /// Jobs (ghost x wavelength) where no ray passed everything.
     pub empty_jobs: usize,
 }
-impl RayGridStats {
-    /// Adds `other`'s counts.
-    pub(super) fn add(&mut self, other: &Self) {
-        self.jobs += other.jobs;
-        self.rays += other.rays;
-        self.triangles += other.triangles;
-        self.empty_jobs += other.empty_jobs;
-    }
-}
 /// A ray-traced ghost image and what it is made of.
 #[derive(Clone, Debug)]
 pub struct RayGridImage {
@@ -51,32 +43,42 @@ pub struct RayGridImage {
 /// Rows of a band: a frame is splatted band by band, each band by one task that draws every job's triangles
 /// crossing it in the jobs' order.
 pub(super) const BAND_ROWS: usize = 16;
-/// Planes of a row: red, green and blue as each pixel's own adds, then red, green and blue as second
-/// differences along the row (the runs of whole pixels, resolved by two running sums).
-const PLANES: usize = 6;
-/// The first of the difference planes.
-const DIFFS: usize = 3;
+/// Planes of a row: red, green and blue. A band's rows hold them in the frame; while a band is drawn, each row
+/// has three more of a task's own, the second differences along the row of the runs of whole pixels, summed
+/// into the frame's planes by two running sums when the band is done ([`BandAcc`]'s drop).
+const PLANES: usize = 3;
+
+thread_local! {
+    /// A task's second differences, zero outside the rows' reach between bands (kept by the thread: a band's
+    /// draw finds them made).
+    static DIFFS: std::cell::RefCell<Vec<f64>> = const { std::cell::RefCell::new(Vec::new()) };
+}
 
 /// A frame's accumulation: energy per pixel (relative irradiance x mm^2) and per-ghost moments, split into
 /// bands of [`BAND_ROWS`] rows that are splatted in parallel, each by one task ([`Self::splat`]).
 ///
 /// Every pixel belongs to one band and every band draws the jobs in the order given, so each pixel's sum is
 /// made in one order whatever the threads: the image is the same to the bit on any machine. A band's rows
-/// (about `16 x 6 x width` values) stay in the core's cache while it draws, and the frame is one buffer:
-/// no copy per thread to make and merge. Each row holds its red, green and blue as planes (a wavelength of the
-/// RGB spectrum weighs one channel and touches one plane), once for the pixels a triangle cuts (each added
-/// where it is) and once as second differences for the runs of pixels a triangle covers whole, whose light is
-/// linear along the run: a run is four adds whatever its length ([`BandAcc::add_linear_run`]).
+/// (about `16 x 6 x width` values with the task's differences) stay in the core's cache while it draws, and
+/// the frame is one buffer: no copy per thread to make and merge. Each row holds its red, green and blue as
+/// planes (a wavelength of the RGB spectrum weighs one channel and touches one plane) for the pixels a
+/// triangle cuts (each added where it is); the runs of pixels a triangle covers whole, whose light is linear
+/// along the run, are four adds whatever their length to the task's second differences
+/// ([`BandAcc::add_linear_run`]), summed into the planes when the band is done.
 pub(super) struct FrameAcc {
     pub(super) width: usize,
     pub(super) height: usize,
     /// Per band, its rows' planes; made when a triangle first lands in the band (a ghost's window in a LUT bake
     /// is lit in part, and a band no light reaches costs nothing).
     bands: Vec<Option<Vec<f64>>>,
-    /// Per row, the columns `[first, end)` its second differences reach (none: `first >= end`).
+    /// Per row, the columns `[first, end)` its second differences reach while its band is drawn (none:
+    /// `first >= end`).
     reach: Vec<[usize; 2]>,
     /// Per band, per ghost.
     moments: Vec<Vec<GhostMoments>>,
+    /// The differences of [`Self::whole`]'s band.
+    #[cfg(test)]
+    whole_diffs: Vec<f64>,
 }
 /// One band of a [`FrameAcc`]: rows `y0..y1` of a frame `width` x `height`.
 pub(super) struct BandAcc<'a> {
@@ -85,6 +87,8 @@ pub(super) struct BandAcc<'a> {
     pub(super) y0: usize,
     pub(super) y1: usize,
     rows: &'a mut Option<Vec<f64>>,
+    /// The task's second differences: per row, [`PLANES`] planes of `width`; zero outside `reach`.
+    diffs: &'a mut [f64],
     reach: &'a mut [[usize; 2]],
     moments: &'a mut [GhostMoments],
 }
@@ -97,7 +101,14 @@ impl FrameAcc {
             bands: vec![None; bands],
             reach: vec![[usize::MAX, 0]; height],
             moments: vec![vec![GhostMoments::default(); ghosts]; bands],
+            #[cfg(test)]
+            whole_diffs: Vec::new(),
         }
+    }
+
+    /// How many bands of [`BAND_ROWS`] rows the frame has.
+    pub(super) fn bands(&self) -> usize {
+        self.bands.len()
     }
 
     /// Runs `draw` on every band, the bands in parallel.
@@ -111,7 +122,13 @@ impl FrameAcc {
             .for_each(|(b, ((rows, reach), moments))| {
                 let y0 = b * BAND_ROWS;
                 let y1 = (y0 + BAND_ROWS).min(height);
-                draw(&mut BandAcc { width, height, y0, y1, rows, reach, moments });
+                DIFFS.with_borrow_mut(|diffs| {
+                    let len = PLANES * width * (y1 - y0);
+                    if diffs.len() < len {
+                        diffs.resize(len, 0.0);
+                    }
+                    draw(&mut BandAcc { width, height, y0, y1, rows, diffs: &mut diffs[..len], reach, moments });
+                });
             });
     }
 
@@ -120,33 +137,25 @@ impl FrameAcc {
     pub(super) fn whole(&mut self) -> BandAcc<'_> {
         self.bands.truncate(1);
         self.moments.truncate(1);
+        self.whole_diffs = vec![0.0; PLANES * self.width * self.height];
         BandAcc {
             width: self.width,
             height: self.height,
             y0: 0,
             y1: self.height,
             rows: &mut self.bands[0],
+            diffs: &mut self.whole_diffs,
             reach: &mut self.reach,
             moments: &mut self.moments[0],
         }
     }
 
-    /// Row `y`'s energy, channel by channel: its own adds plus its resolved runs (zeros for a row no light
-    /// reached). Past the reach of a row's differences nothing is summed (what they leave there is rounding,
-    /// not light).
-    fn resolve_row(width: usize, row: Option<&[f64]>, reach: [usize; 2], out: &mut [[f64; 3]]) {
+    /// Row `y`'s energy, channel by channel (zeros for a row no light reached).
+    fn resolve_row(width: usize, row: Option<&[f64]>, out: &mut [[f64; 3]]) {
         let Some(row) = row else { return };
         for c in 0..3 {
-            let values = &row[c * width..(c + 1) * width];
-            for (x, v) in values.iter().enumerate() {
+            for (x, v) in row[c * width..(c + 1) * width].iter().enumerate() {
                 out[x][c] = *v;
-            }
-            let diffs = &row[(DIFFS + c) * width..(DIFFS + c + 1) * width];
-            let (mut slope, mut level) = (0.0, 0.0);
-            for x in reach[0]..reach[1].min(width) {
-                slope += diffs[x];
-                level += slope;
-                out[x][c] += level;
             }
         }
     }
@@ -164,7 +173,7 @@ impl FrameAcc {
     pub(super) fn energy(&self) -> Vec<[f64; 3]> {
         let mut out = vec![[0.0; 3]; self.width * self.height];
         for y in 0..self.height {
-            Self::resolve_row(self.width, self.row(y), self.reach[y], &mut out[y * self.width..(y + 1) * self.width]);
+            Self::resolve_row(self.width, self.row(y), &mut out[y * self.width..(y + 1) * self.width]);
         }
         out
     }
@@ -192,7 +201,7 @@ impl FrameAcc {
         pixels.par_chunks_mut(width.max(1)).enumerate().for_each(|(y, out)| {
             let Some(row) = self.row(y) else { return };
             let mut energy = vec![[0.0; 3]; width];
-            Self::resolve_row(width, Some(row), self.reach[y], &mut energy);
+            Self::resolve_row(width, Some(row), &mut energy);
             for (pixel, e) in out.iter_mut().zip(energy) {
                 let v = e.map(|c| (c / pixel_area_mm2) as f32);
                 let v = v.map(|c| if c.is_finite() && c > 0.0 { c } else { 0.0 });
@@ -206,9 +215,15 @@ impl BandAcc<'_> {
     /// The planes of row `y` (in the band), its band's buffer made at the first.
     #[inline(always)]
     fn row(&mut self, y: usize) -> &mut [f64] {
-        let len = PLANES * self.width;
-        let rows = self.rows.get_or_insert_with(|| {
-            let mut rows = vec![0.0; len * (self.y1 - self.y0)];
+        Self::row_of(self.rows, self.width, [self.y0, self.y1], y)
+    }
+
+    /// [`Self::row`] from the band's buffer `rows` (rows `band[0]..band[1]` of `width`).
+    #[inline(always)]
+    fn row_of(rows: &mut Option<Vec<f64>>, width: usize, band: [usize; 2], y: usize) -> &mut [f64] {
+        let len = PLANES * width;
+        let rows = rows.get_or_insert_with(|| {
+            let mut rows = vec![0.0; len * (band[1] - band[0])];
             // Zeroed memory from the system is one shared page of zeros until written: a first `+=` would read
             // it there and fault again to write it (a TLB shoot-down on every other thread). A write to each
             // 4 KiB page first makes each page once.
@@ -217,7 +232,7 @@ impl BandAcc<'_> {
             }
             rows
         });
-        &mut rows[(y - self.y0) * len..(y - self.y0 + 1) * len]
+        &mut rows[(y - band[0]) * len..(y - band[0] + 1) * len]
     }
 
     /// Adds `energy` (scalar, before the spectral weight) at pixel (x, y) when it lies in the band.
@@ -290,7 +305,7 @@ impl BandAcc<'_> {
         let g = |p: usize| if (lo..hi).contains(&p) { a + b * (p as f64 + 0.5) } else { 0.0 };
         let second = |p: usize| g(p) - 2.0 * g(p.wrapping_sub(1)) + g(p.wrapping_sub(2));
         let at = [lo, lo + 1, hi, hi + 1];
-        let row = self.row(y);
+        let diffs = &mut self.diffs[(y - self.y0) * PLANES * width..(y - self.y0 + 1) * PLANES * width];
         for (k, &p) in at.iter().enumerate() {
             if p >= width || (k == 2 && hi == lo + 1) {
                 continue;
@@ -298,7 +313,7 @@ impl BandAcc<'_> {
             let d = second(p);
             for (c, weight) in job.rgb.into_iter().enumerate() {
                 if weight != 0.0 {
-                    row[(DIFFS + c) * width + p] += d * weight;
+                    diffs[c * width + p] += d * weight;
                 }
             }
         }
@@ -321,6 +336,33 @@ impl BandAcc<'_> {
         m.energy += sum * job.luma;
         m.sum_x += sum_x * job.luma;
         m.sum_y += sum * job.luma * (y as f64 + 0.5);
+    }
+}
+impl Drop for BandAcc<'_> {
+    /// Sums each row's second differences into its planes (two running sums along the row, over the reach
+    /// only: past it what they leave is rounding, not light) and leaves the differences zero for the next band.
+    fn drop(&mut self) {
+        let width = self.width;
+        for r in 0..self.y1 - self.y0 {
+            let [lo, hi] = self.reach[r];
+            let hi = hi.min(width);
+            if lo >= hi {
+                continue;
+            }
+            self.reach[r] = [usize::MAX, 0];
+            let row = Self::row_of(self.rows, width, [self.y0, self.y1], self.y0 + r);
+            let diffs = &mut self.diffs[r * PLANES * width..(r + 1) * PLANES * width];
+            for c in 0..PLANES {
+                let (values, diffs) = (&mut row[c * width..(c + 1) * width], &mut diffs[c * width..(c + 1) * width]);
+                let (mut slope, mut level) = (0.0, 0.0);
+                for x in lo..hi {
+                    slope += diffs[x];
+                    level += slope;
+                    values[x] += level;
+                    diffs[x] = 0.0;
+                }
+            }
+        }
     }
 }
 /// What a job's triangles need besides their vertices.
@@ -396,17 +438,19 @@ impl<'a> TriangleShader<'a> {
     #[inline(always)]
     pub(super) fn new(tri: [&Vertex; 3], interp: &Interpolator, frame: &'a JobFrame<'a>) -> Self {
         let attr = |f: &dyn Fn(&Vertex) -> f64| interp.attribute([f(tri[0]), f(tri[1]), f(tri[2])]);
+        // An open triangle never looks its stop coordinates up: their planes are left at zero.
+        let open = Self::open(tri, frame);
         Self {
             ratio: attr(&|v| v.ratio),
             weight: attr(&|v| v.weight),
             stops: std::array::from_fn(|k| {
-                if k < frame.stop_count {
+                if k < frame.stop_count && !open {
                     [attr(&|v| v.stops[k][0]), attr(&|v| v.stops[k][1])]
                 } else {
                     [Plane { a0: 0.0, ax: 0.0, ay: 0.0 }; 2]
                 }
             }),
-            open: Self::open(tri, frame),
+            open,
             frame,
         }
     }

@@ -315,8 +315,10 @@ impl RayGridRenderer {
         let mut frames: Vec<FrameAcc> =
             views.iter().map(|v| FrameAcc::new(v.window.width as usize, v.window.height as usize, ghosts)).collect();
         let mut stats = vec![RayGridStats::default(); views.len()];
-        let per_job = (grid.cells() + 1).pow(2) * views.len().max(1);
-        for batch in drawn.chunks((BATCH_VERTICES / per_job).max(1)) {
+        // A job holds its traced vertices, and while one view is splatted a copy seen in that view (the last view
+        // sees them where they are).
+        let per_job = (grid.cells() + 1).pow(2) * views.len().min(2);
+        for batch in drawn.chunks((BATCH_VERTICES / per_job.max(1)).max(1)) {
             let traced: Vec<Option<TracedJob>> = batch
                 .par_iter()
                 .map(|(job, (scouted, gain))| {
@@ -326,16 +328,20 @@ impl RayGridRenderer {
             if cancelled() {
                 return Err(RayGridError::Cancelled);
             }
-            let traced: Vec<TracedJob> = traced.into_iter().flatten().collect();
-            for job in &traced {
-                for (total, s) in stats.iter_mut().zip(&job.stats) {
-                    total.add(s);
+            let mut traced: Vec<TracedJob> = traced.into_iter().flatten().collect();
+            stats[0].rays += traced.iter().map(|job| job.rays).sum::<u64>();
+            let last = views.len().saturating_sub(1);
+            for (k, (view, frame)) in views.iter().zip(&mut frames).enumerate() {
+                let bands = frame.bands();
+                let seen: Vec<Seen> = traced.par_iter_mut().map(|job| job.see(view, k == last, bands)).collect();
+                for s in &seen {
+                    stats[k].jobs += 1;
+                    stats[k].triangles += s.tris.len() as u64;
+                    stats[k].empty_jobs += usize::from(s.tris.is_empty());
                 }
-            }
-            for (k, frame) in frames.iter_mut().enumerate() {
                 frame.splat(|band| {
-                    for job in &traced {
-                        job.splat(k, band);
+                    for (job, s) in traced.iter().zip(&seen) {
+                        job.splat(s, band);
                     }
                 });
             }
@@ -680,8 +686,8 @@ impl RayGridRenderer {
         (bounds[0] < bounds[2] && bounds[1] < bounds[3]).then_some(PrePass { bounds, extent_px, lit })
     }
 
-    /// Traces `job` once (its pre-pass `scouted`, or traced over the whole front lens) and sees its vertices in
-    /// every view, ready to be splatted ([`TracedJob::splat`]).
+    /// Traces `job` once (its pre-pass `scouted`, or traced over the whole front lens), ready to be seen in each
+    /// view ([`TracedJob::see`]) and splatted.
     fn trace_job<'m>(
         &'m self,
         job: &Job,
@@ -691,13 +697,13 @@ impl RayGridRenderer {
         scouted: Option<&TracedGrid>,
         gain: f64,
     ) -> TracedJob<'m> {
-        let mut stats = vec![RayGridStats { jobs: 1, ..RayGridStats::default() }; views.len()];
+        let mut rays = 0;
         let d = DVec3::new(u[0], u[1], 1.0).normalize();
         let pre = match scouted {
             Some(traced) => self.pre_pass(job, u, traced, views),
             None => {
-                let (pre, rays) = self.front_pre_pass(job, u, d, grid, views);
-                stats[0].rays += rays;
+                let (pre, pre_rays) = self.front_pre_pass(job, u, d, grid, views);
+                rays += pre_rays;
                 pre
             }
         };
@@ -712,10 +718,7 @@ impl RayGridRenderer {
             triangle_flux: 0.0,
         };
         let Some(PrePass { bounds: b, extent_px, lit }) = pre else {
-            for s in &mut stats {
-                s.empty_jobs += 1;
-            }
-            return TracedJob { frame, cells: 0, seen: Vec::new(), stats };
+            return TracedJob { frame, cells: 0, vertices: Vec::new(), rays };
         };
         let grid = grid.for_extent(extent_px);
         frame.triangle_flux = triangle_flux(d, b, grid);
@@ -723,59 +726,18 @@ impl RayGridRenderer {
         // Every ray of the grid (traced LANES at a time across rows: a row alone leaves lanes idle), a ray far
         // from every lit cell of the pre-pass not at all (no triangle of it carries light).
         let n = grid + 1;
-        let mut traced: Vec<Vertex> = Vec::with_capacity(n * n);
+        let mut vertices: Vec<Vertex> = Vec::with_capacity(n * n);
         let at = |k: usize| {
             let x0 = [b[0] + (k % n) as f64 * dx, b[1] + (k / n) as f64 * dy];
             lit.as_ref().is_none_or(|lit| lit.contains(x0)).then_some(x0)
         };
-        stats[0].rays += self.trace_selected(job, d, n * n, at, &mut traced);
-        let last = views.len().saturating_sub(1);
-        let mut traced = Some(traced);
-        let seen = views
-            .iter()
-            .zip(&mut stats)
-            .enumerate()
-            .map(|(k, (view, stats))| {
-                let see = view.seer();
-                // The last view sees the traced vertices where they are (one view: no copy).
-                let vertices: Vec<Vertex> = match traced.take_if(|_| k == last) {
-                    Some(mut own) => {
-                        for v in &mut own {
-                            *v = see(v);
-                        }
-                        own
-                    }
-                    None => traced.iter().flatten().map(&see).collect(),
-                };
-                // The triangles that carry light, row of cells by row, and the pixel rows each row's reach.
-                let mut seen = Seen { rows: Vec::with_capacity(grid), starts: vec![0], lit: Vec::new(), vertices };
-                for iy in 0..grid {
-                    let mut reach = [f64::INFINITY, f64::NEG_INFINITY];
-                    for t in 2 * iy * grid..2 * (iy + 1) * grid {
-                        let tri = triangle(&seen.vertices, n, t);
-                        if carries_light(tri, &frame) {
-                            seen.lit.push(t as u32);
-                            for v in tri {
-                                reach = [reach[0].min(v.pixel[1]), reach[1].max(v.pixel[1])];
-                            }
-                        }
-                    }
-                    seen.rows.push(reach);
-                    seen.starts.push(seen.lit.len() as u32);
-                }
-                stats.triangles += seen.lit.len() as u64;
-                if seen.lit.is_empty() {
-                    stats.empty_jobs += 1;
-                }
-                seen
-            })
-            .collect();
-        TracedJob { frame, cells: grid, seen, stats }
+        rays += self.trace_selected(job, d, n * n, at, &mut vertices);
+        TracedJob { frame, cells: grid, vertices, rays }
     }
 }
-/// The most traced vertices a render holds at once (the jobs of a batch, over all views, with the largest grid):
-/// about 90 MB.
-const BATCH_VERTICES: usize = 1 << 20;
+/// The most traced vertices a render holds at once (the jobs of a batch with the largest grid, and the copies
+/// seen in one view): about 23 MB. (A LUT bake draws a column per ghost on every core at once.)
+const BATCH_VERTICES: usize = 1 << 18;
 /// Triangle `t` of a grid of `n` x `n` vertices: cell `t / 2` (row by row), its first or second half (the split
 /// the GPU makes too).
 #[inline(always)]
@@ -785,58 +747,105 @@ fn triangle(vertices: &[Vertex], n: usize, t: usize) -> [&Vertex; 3] {
     let (v01, v11) = (&vertices[(iy + 1) * n + ix], &vertices[(iy + 1) * n + ix + 1]);
     if t.is_multiple_of(2) { [v00, v10, v11] } else { [v00, v11, v01] }
 }
-/// A traced job as one view sees it.
-struct Seen {
-    /// The vertices, `(cells + 1)^2` row by row.
-    vertices: Vec<Vertex>,
-    /// Per row of cells, the pixel rows its triangles that carry light reach (`[lo, hi]`; empty when `lo > hi`).
-    rows: Vec<[f64; 2]>,
-    /// The triangles that carry light ([`triangle`]'s numbers), row of cells by row: row `iy`'s are
-    /// `lit[starts[iy]..starts[iy + 1]]`.
-    starts: Vec<u32>,
-    lit: Vec<u32>,
-}
-/// One job traced and seen in every view of a render, waiting to be splatted.
+/// One job traced, waiting to be seen in each view and splatted.
 struct TracedJob<'m> {
     frame: JobFrame<'m>,
     cells: usize,
-    /// Per view (none when no light passes).
-    seen: Vec<Seen>,
-    /// Per view.
-    stats: Vec<RayGridStats>,
+    /// `(cells + 1)^2` vertices row by row, landing in sensor mm (none when no light passes); seen in place by
+    /// the last view.
+    vertices: Vec<Vertex>,
+    rays: u64,
+}
+/// A traced job as one view sees it: its triangles that carry light sorted by the bands of rows they reach.
+struct Seen {
+    /// The vertices in the view's pixels; empty when the view sees the job's own (the last view).
+    vertices: Vec<Vertex>,
+    /// The triangles ([`triangle`]'s numbers) that reach band `b`, in the triangles' order:
+    /// `tris[starts[b]..starts[b + 1]]`. A triangle that reaches several bands is listed in each.
+    starts: Vec<u32>,
+    tris: Vec<u32>,
 }
 impl TracedJob<'_> {
-    /// Splats this job's triangles in view `k` that reach `band`. Compiled for AVX2 too, used where the
+    /// This job seen in `view` (`last`: the last view of the render, which sees the vertices in place), its
+    /// triangles that carry light sorted into the `bands` of rows of [`BAND_ROWS`] each: a band draws only the
+    /// triangles that reach it.
+    fn see(&mut self, view: &View, last: bool, bands: usize) -> Seen {
+        let see = view.seer();
+        let vertices = if last {
+            for v in &mut self.vertices {
+                *v = see(v);
+            }
+            Vec::new()
+        } else {
+            self.vertices.iter().map(&see).collect()
+        };
+        let all = if last { &self.vertices } else { &vertices };
+        let (n, cells) = (self.cells + 1, self.cells);
+        let (width, height) = (view.window.width as f64, view.window.height as f64);
+        // The bands each triangle that carries light reaches (the frame's rows only: a part above, below or
+        // beside the frame lands on no pixel; `splat_triangle` passes over the same).
+        let mut reach: Vec<(u32, u32, u32)> = Vec::new();
+        let mut starts = vec![0u32; bands + 1];
+        for t in 0..2 * cells * cells {
+            let tri = triangle(all, n, t);
+            if !carries_light(tri, &self.frame) {
+                continue;
+            }
+            let y_lo = tri.iter().map(|v| v.pixel[1]).fold(f64::INFINITY, f64::min);
+            let y_hi = tri.iter().map(|v| v.pixel[1]).fold(f64::NEG_INFINITY, f64::max);
+            let x_lo = tri.iter().map(|v| v.pixel[0]).fold(f64::INFINITY, f64::min);
+            let x_hi = tri.iter().map(|v| v.pixel[0]).fold(f64::NEG_INFINITY, f64::max);
+            if y_hi < 0.0 || y_lo >= height || x_hi < -1.0 || x_lo > width + 1.0 {
+                continue;
+            }
+            let first = (y_lo.max(0.0) as usize / BAND_ROWS).min(bands - 1);
+            let last = (y_hi.min(height - 1.0) as usize / BAND_ROWS).min(bands - 1);
+            for count in &mut starts[first + 1..=last + 1] {
+                *count += 1;
+            }
+            reach.push((t as u32, first as u32, last as u32));
+        }
+        for b in 0..bands {
+            starts[b + 1] += starts[b];
+        }
+        let mut tris = vec![0u32; starts[bands] as usize];
+        let mut next = starts.clone();
+        for (t, first, last) in reach {
+            for b in first as usize..=last as usize {
+                tris[next[b] as usize] = t;
+                next[b] += 1;
+            }
+        }
+        Seen { vertices, starts, tris }
+    }
+
+    /// Splats this job's triangles, `seen` in a view, that reach `band`. Compiled for AVX2 too, used where the
     /// processor has it (the splatting's floors and conversions are then single instructions; the same
     /// results).
-    fn splat(&self, k: usize, band: &mut BandAcc) {
+    fn splat(&self, seen: &Seen, band: &mut BandAcc) {
         #[cfg(target_arch = "x86_64")]
         if crate::optics::simd_level() >= 1 {
             // SAFETY: the processor has AVX2 (checked once by `simd_level`).
-            return unsafe { self.splat_avx2(k, band) };
+            return unsafe { self.splat_avx2(seen, band) };
         }
-        self.splat_body(k, band)
+        self.splat_body(seen, band)
     }
 
     /// [`Self::splat_body`] compiled for AVX2.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn splat_avx2(&self, k: usize, band: &mut BandAcc) {
-        self.splat_body(k, band)
+    unsafe fn splat_avx2(&self, seen: &Seen, band: &mut BandAcc) {
+        self.splat_body(seen, band)
     }
 
     /// The body of [`Self::splat`].
     #[inline(always)]
-    fn splat_body(&self, k: usize, band: &mut BandAcc) {
-        let Some(seen) = self.seen.get(k) else { return };
-        let (y0, y1, n) = (band.y0 as f64, band.y1 as f64, self.cells + 1);
-        for (iy, reach) in seen.rows.iter().enumerate() {
-            if reach[0] > reach[1] || reach[1] < y0 || reach[0] >= y1 {
-                continue;
-            }
-            for &t in &seen.lit[seen.starts[iy] as usize..seen.starts[iy + 1] as usize] {
-                splat_triangle(triangle(&seen.vertices, n, t as usize), &self.frame, band);
-            }
+    fn splat_body(&self, seen: &Seen, band: &mut BandAcc) {
+        let b = band.y0 / BAND_ROWS;
+        let Some(range) = seen.starts.get(b..b + 2) else { return };
+        let vertices = if seen.vertices.is_empty() { &self.vertices } else { &seen.vertices };
+        for &t in &seen.tris[range[0] as usize..range[1] as usize] {
+            splat_triangle(triangle(vertices, self.cells + 1, t as usize), &self.frame, band);
         }
     }
 }
