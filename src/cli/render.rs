@@ -148,6 +148,10 @@ pub struct RenderArgs {
     /// A sequence on the CPU twin: draw the frames one after another instead of in parallel (to measure).
     #[arg(long, hide = true)]
     pub frames_in_turn: bool,
+    /// Print where the command's time went (reading, preparing the lens, the frame's passes, writing), in
+    /// milliseconds of wall time.
+    #[arg(long)]
+    pub timings: bool,
     /// How the ghosts are made (default: blended or photo when the preset uses a LUT, else paraxial).
     #[arg(long, value_enum)]
     pub method: Option<Method>,
@@ -544,7 +548,9 @@ fn method_of(args: &RenderArgs, doc: &Document) -> Method {
 }
 
 /// The LUT of the document's source: read from its file (checked against the lens), or baked in memory.
-fn lut_for(doc: &Document, flare: &PreparedFlare, method: Method) -> Result<GhostLut> {
+/// The LUT a blended or photo frame draws: `--lut`, the preset's, else the cached bake (baked now on a miss).
+/// Given `near_theta_deg` (a still's light angle), only the images drawn at that angle are read from a file.
+fn lut_for(doc: &Document, flare: &PreparedFlare, method: Method, near_theta_deg: Option<f64>) -> Result<GhostLut> {
     let path = match &doc.blend.lut {
         LutSource::Simulated { path } => path.clone(),
         LutSource::Photo { path } => Some(path.clone()),
@@ -553,7 +559,8 @@ fn lut_for(doc: &Document, flare: &PreparedFlare, method: Method) -> Result<Ghos
     match path {
         Some(path) => {
             let path = Path::new(&path);
-            let lut = format::read_lut(path).with_context(|| format!("reading {}", path.display()))?;
+            let lut =
+                format::read_lut_near(path, near_theta_deg).with_context(|| format!("reading {}", path.display()))?;
             lut.check_for(&doc.lens, &flare.config).with_context(|| path.display().to_string())?;
             if method == Method::Photo && lut.kind != LutKind::Photo {
                 bail!("{}: --method photo needs a photo LUT (this one is ray-traced)", path.display());
@@ -571,7 +578,7 @@ fn lut_for(doc: &Document, flare: &PreparedFlare, method: Method) -> Result<Ghos
             let settings = flare_core::lut::bake::BakeSettings::default();
             let cache = flare_core::lut::cache::LutCache::user();
             if let Some(cache) = &cache {
-                match cache.load(&doc.lens, &flare.config, &settings) {
+                match cache.load_near(&doc.lens, &flare.config, &settings, near_theta_deg) {
                     flare_core::lut::cache::Lookup::Hit(lut) => {
                         eprintln!("LUT ghosts from the cache ({})", cache.dir.display());
                         return Ok(*lut);
@@ -596,7 +603,33 @@ fn lut_for(doc: &Document, flare: &PreparedFlare, method: Method) -> Result<Ghos
 }
 
 pub fn run(args: &RenderArgs) -> Result<()> {
-    let mut doc = document(args)?;
+    if args.timings {
+        flare_core::timing::start();
+    }
+    let started = std::time::Instant::now();
+    let result = run_timed(args);
+    if args.timings {
+        print_timings(&flare_core::timing::finish(), started.elapsed());
+    }
+    result
+}
+
+/// `--timings`: the spans the command made, indented under the span they lie in, and the command's whole time.
+fn print_timings(spans: &[flare_core::timing::Span], total: std::time::Duration) {
+    eprintln!("timings (wall ms; an indented span lies inside the one above it):");
+    for s in spans {
+        let indent = (2 * s.depth).min(16);
+        eprintln!("  {:indent$}{:<width$} {:>9.1}", "", s.name, s.ms, width = 32 - indent);
+    }
+    let top: f64 = spans.iter().filter(|s| s.depth == 0).map(|s| s.ms).sum();
+    let total_ms = total.as_secs_f64() * 1e3;
+    eprintln!("  {:<32} {:>9.1}", "the rest (checks, messages)", (total_ms - top).max(0.0));
+    eprintln!("  {:<32} {:>9.1}", "the command (from its arguments)", total_ms);
+}
+
+fn run_timed(args: &RenderArgs) -> Result<()> {
+    use flare_core::timing::span;
+    let mut doc = span("read the document", || document(args))?;
     let method = method_of(args, &doc);
     let grid = match (method, args.grid) {
         (Method::Paraxial | Method::Blended | Method::Photo, Some(_)) => {
@@ -687,7 +720,8 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         .map(|p| read_track(p).map_err(|e| anyhow::anyhow!("--track {}: {e}", p.display())))
         .transpose()?;
     let config = doc.flare_config().map_err(|e| anyhow::anyhow!("{e}"))?;
-    let flare = PreparedFlare::new(&doc.lens, &config).with_context(|| doc.lens.id.clone())?;
+    let flare =
+        span("prepare the lens", || PreparedFlare::new(&doc.lens, &config)).with_context(|| doc.lens.id.clone())?;
     doc.resolve_exposure(&flare.system);
     if let (Some(rows), Some(path)) = (&track, &args.track) {
         let (width, height) = shot::plan::frame_size(&doc, &range, args.size)?;
@@ -699,10 +733,6 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             doc.timeline.light_ev = intensity;
         }
     }
-    let lut = match method {
-        Method::Blended | Method::Photo => Some(LiveLut::new(lut_for(&doc, &flare, method)?)),
-        _ => None,
-    };
     // Ray grids trace on the GPU too (`render::raygrid`); the reference is the f64 CPU tracer.
     let mut device = match (args.device, grid) {
         (DeviceArg::Gpu, Some(raytrace::Grid::Adaptive(_))) => bail!(
@@ -718,21 +748,37 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let cancel = AtomicBool::new(false);
     let scanning = (doc.auto_light.is_some() && range.clone().count() > 1)
         .then(|| progress_bar(range.clone().count(), "finding the light"));
-    let plan = shot::plan::plan(
-        &doc,
-        &flare.system,
-        range,
-        args.size,
-        &|done, _| {
-            if let Some(bar) = &scanning {
-                bar.set_position(done as u64);
-            }
-        },
-        &cancel,
-    )?;
+    let plan = span("plan the shot", || {
+        shot::plan::plan(
+            &doc,
+            &flare.system,
+            range,
+            args.size,
+            &|done, _| {
+                if let Some(bar) = &scanning {
+                    bar.set_position(done as u64);
+                }
+            },
+            &cancel,
+        )
+    })?;
     if let Some(bar) = scanning {
         bar.finish_and_clear();
     }
+    // A still without motion blur draws the LUT's images at one light angle: only those are read.
+    let near_theta_deg = match plan.frames.as_slice() {
+        [still] if doc.timeline.shutter_deg <= 0.0 => {
+            let u = flare_core::ghost::light_slopes_for_frame_position(still.light_deg[0], still.light_deg[1]);
+            Some(flare_core::lut::light_direction_deg(u).0)
+        }
+        _ => None,
+    };
+    let lut = match method {
+        Method::Blended | Method::Photo => {
+            Some(span("load the LUT", || lut_for(&doc, &flare, method, near_theta_deg).map(LiveLut::new))?)
+        }
+        _ => None,
+    };
     // The ray-traced methods write their accumulation at the frame's full size.
     let divisor = if grid.is_some() { 1 } else { args.accumulation_divisor };
     // The ray-traced methods trace each frame's ghosts, stills and sequences alike (`flare_core::traced`).
@@ -784,15 +830,18 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         }
     }
     let request = plan.request(&doc, &flare.system, planned, divisor);
-    let frame = Frame::build(&flare, lut.as_ref(), &request);
+    let frame = span("build the frame", || Frame::build(&flare, lut.as_ref(), &request));
     let sources = Sources { flare: &flare, lut: lut.as_ref(), plate: plate.as_ref() };
     match &traced {
         Some(t) => {
             // Ray-traced ghosts replace the paraxial accumulation; starburst, tonemap and writer are the same.
-            eprintln!("{}", t.render_to_file(&device, &frame, &sources, choice, &args.out)?);
+            let traced =
+                span("draw and write (ray-traced)", || t.render_to_file(&device, &frame, &sources, choice, &args.out))?;
+            eprintln!("{traced}");
         }
         None => {
-            frame::render_to_file(&mut device, &frame, &sources, choice, &args.out)?;
+            let made = span("draw", || frame::draw_for_file(&mut device, &frame, &sources, choice, &args.out))?;
+            span("write", || frame::write_made(&mut device, &frame, &sources, &made, choice, &args.out))?;
             eprintln!("rendered on {}", device.name());
         }
     }

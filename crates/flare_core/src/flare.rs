@@ -105,8 +105,16 @@ fn stop_images(aperture: &Aperture) -> (Arc<GhostMasks>, Starburst) {
     }
     // The two are independent: side by side on rayon's threads (each is parallel within, with serial parts).
     let (mask, starburst) = rayon::join(
-        || Arc::new(GhostMasks::new(aperture, aperture.rasterise(DEFAULT_MASK_SIZE))),
-        || Starburst::compute(&aperture.rasterise(crate::starburst::STARBURST_MASK_SIZE)),
+        || {
+            crate::timing::span("aperture mask levels", || {
+                Arc::new(GhostMasks::new(aperture, aperture.rasterise(DEFAULT_MASK_SIZE)))
+            })
+        },
+        || {
+            crate::timing::span("starburst (FFT)", || {
+                Starburst::compute(&aperture.rasterise(crate::starburst::STARBURST_MASK_SIZE))
+            })
+        },
     );
     if let Ok(mut kept) = KEPT.lock() {
         kept.retain(|(k, _, _)| *k != key);
@@ -126,7 +134,7 @@ impl PreparedFlare {
             stop_scale: config.aperture.stop_scale(nominal),
             coating_override: config.coating_override.clone(),
         };
-        let system = GhostSystem::build(lens, &settings)?;
+        let system = crate::timing::span("ghost system", || GhostSystem::build(lens, &settings))?;
         let (ghost_masks, starburst) = stop_images(&config.aperture);
         let starburst_texture = StarburstTexture::from_starburst(&starburst);
         let dirt =

@@ -466,9 +466,14 @@ impl Drawn {
 pub fn linear_layers(frame: &Frame, sources: &Sources, hdr: &HdrImage) -> FrameLayers {
     let scene = &frame.scene;
     let flare = cpu::flare_layer(scene, hdr);
-    let mut starburst = HdrImage::black(scene.hdr_width, scene.hdr_height);
-    cpu::starburst_pass(scene, &sources.flare.starburst_texture, &mut starburst);
-    let starburst = cpu::flare_layer(scene, &starburst);
+    // A frame without a starburst writes its layer black (the layers are the same in every file).
+    let starburst = if scene.draws_starburst() {
+        let mut starburst = HdrImage::black(scene.hdr_width, scene.hdr_height);
+        cpu::starburst_pass(scene, &sources.flare.starburst_texture, &mut starburst);
+        cpu::flare_layer(scene, &starburst)
+    } else {
+        HdrImage::black(scene.output_size.0, scene.output_size.1)
+    };
     let dirt = sources.flare.dirt.as_ref().filter(|_| scene.has_dirt_glow()).map(|d| {
         let mut glow = HdrImage::black(scene.hdr_width, scene.hdr_height);
         cpu::dirt_pass(scene, Some(d), &mut glow);
@@ -698,11 +703,11 @@ pub fn traced_accumulation(frame: &Frame, ghosts: &HdrImage) -> HdrImage {
 /// The accumulation passes of the CPU twin: ghosts, LUT ghosts, starburst, the front dirt's glow.
 pub fn draw_cpu_hdr(frame: &Frame, sources: &Sources) -> HdrImage {
     let scene = &frame.scene;
-    let mut hdr = cpu::ghost_pass(scene, &sources.flare.ghost_masks);
+    let mut hdr = crate::timing::span("ghosts", || cpu::ghost_pass(scene, &sources.flare.ghost_masks));
     if let (Some(l), Some(live)) = (&frame.lut, sources.lut) {
-        lut_pass((scene.width, scene.height), l, live, &mut hdr);
+        crate::timing::span("LUT ghosts", || lut_pass((scene.width, scene.height), l, live, &mut hdr));
     }
-    cpu::starburst_pass(scene, &sources.flare.starburst_texture, &mut hdr);
+    crate::timing::span("starburst", || cpu::starburst_pass(scene, &sources.flare.starburst_texture, &mut hdr));
     cpu::dirt_pass(scene, sources.flare.dirt.as_ref(), &mut hdr);
     hdr
 }
@@ -925,9 +930,11 @@ pub fn write_linear_with(
             path.display()
         )));
     }
-    let mut file = crate::output::ExrLayers::new(&linear_layers(frame, sources, hdr), exr);
+    let layers = crate::timing::span("layers", || linear_layers(frame, sources, hdr));
+    let mut file = crate::timing::span("EXR channels", || crate::output::ExrLayers::new(&layers, exr));
+    drop(layers);
     ghost_layers(&mut |name, image| file.add_ghost(&name, &image))?;
-    file.write(path)?;
+    crate::timing::span("EXR encode and write", || file.write(path))?;
     Ok(())
 }
 

@@ -95,9 +95,21 @@ impl HdrImage {
     }
 
     /// This image at `width` x `height` (sampled at each pixel centre), its RGB times `gain`; alpha is kept.
-    /// At its own size with bilinear sampling every pixel is read exactly.
+    /// At its own size every pixel is its own sample, exactly, as a GPU's sampler reads a texture of the
+    /// target's size at its pixel centres (its sub-texel fraction snaps the f32 rounding of the centre's
+    /// coordinates away; sampling here would give a column or row a neighbour's weight of about 1e-7 at
+    /// sizes such as 1920 or 1080).
     pub fn resampled(&self, width: u32, height: u32, sampling: Sampling, gain: f32) -> Self {
         let (w, h) = (width as usize, height as usize);
+        if (width, height) == (self.width, self.height) {
+            let mut pixels = vec![[0.0; 4]; w * h];
+            pixels.par_chunks_mut(w.max(1)).zip(self.pixels.par_chunks(w.max(1))).for_each(|(row, from)| {
+                for (out, p) in row.iter_mut().zip(from) {
+                    *out = [p[0] * gain, p[1] * gain, p[2] * gain, p[3]];
+                }
+            });
+            return Self { width, height, pixels };
+        }
         let mut pixels = vec![[0.0; 4]; w * h];
         // Rows in parallel (each pixel is its own sample).
         pixels.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row)| {

@@ -51,6 +51,7 @@ pub mod shutter;
 pub mod spectrum;
 pub mod starburst;
 pub mod timeline;
+pub mod timing;
 pub mod traced;
 pub mod view_lut;
 pub mod view_transform;

@@ -297,18 +297,35 @@ fn typed_channels(
         .collect()
 }
 
-/// The EXR channels of one layer (`prefix` empty: the default layer), RGB, optionally alpha.
+/// The EXR channels of one layer (`prefix` empty: the default layer), RGB, optionally alpha: half where `pixel`
+/// says so or, for [`ExrPixel::Auto`], when every value of the layer fits half's range ([`typed_channels`]'s
+/// rule), each channel made in one pass over the pixels, in parallel.
 fn channels(
     prefix: &str,
     image: &HdrImage,
     alpha: bool,
     pixel: ExrPixel,
 ) -> Vec<exr::prelude::AnyChannel<exr::prelude::FlatSamples>> {
+    use exr::prelude::{AnyChannel, FlatSamples, f16};
+    use rayon::prelude::*;
     let name = |c: &str| if prefix.is_empty() { c.to_owned() } else { format!("{prefix}.{c}") };
     let count = if alpha { 4 } else { 3 };
-    let names: Vec<String> = (0..count).map(|k| name(["R", "G", "B", "A"][k])).collect();
-    let values = (0..count).map(|k| image.pixels.iter().map(|p| finite(p[k])).collect()).collect();
-    typed_channels(&names, values, pixel)
+    let half = match pixel {
+        ExrPixel::Half => true,
+        ExrPixel::Float => false,
+        ExrPixel::Auto => image.pixels.par_iter().all(|p| p[..count].iter().all(|&v| finite(v).abs() <= HALF_MAX)),
+    };
+    (0..count)
+        .map(|k| {
+            let values = image.pixels.par_iter().map(move |p| finite(p[k]));
+            let samples = if half {
+                FlatSamples::F16(values.map(|x| f16::from_f32(x.clamp(-HALF_MAX, HALF_MAX))).collect())
+            } else {
+                FlatSamples::F32(values.collect())
+            };
+            AnyChannel::new(name(["R", "G", "B", "A"][k]).as_str(), samples)
+        })
+        .collect()
 }
 
 /// Writes one linear image with no tonemap: an EXR's default layer `R, G, B, A` (32-bit), or an 8-bit sRGB

@@ -268,6 +268,22 @@ fn bracket(xs: &[f64], x: f64) -> Vec<(usize, f64)> {
     }
 }
 
+/// The indices of the baked thetas `thetas_deg` whose images a frame with the light `theta_deg` off the axis
+/// may draw ([`LutScene::build`]'s bracket), with those of a light a hair either side of it (the light's angle
+/// worked out again elsewhere rounds alike, or picks no other sample).
+pub fn thetas_drawn(thetas_deg: &[f64], theta_deg: f64) -> Vec<usize> {
+    if thetas_deg.is_empty() || !theta_deg.is_finite() {
+        return (0..thetas_deg.len()).collect();
+    }
+    let mut drawn: Vec<usize> = [theta_deg - 1e-9, theta_deg, theta_deg + 1e-9]
+        .into_iter()
+        .flat_map(|t| bracket(thetas_deg, t).into_iter().map(|(k, _)| k))
+        .collect();
+    drawn.sort_unstable();
+    drawn.dedup();
+    drawn
+}
+
 impl LutScene {
     /// The instances of every LUT ghost for light slopes `u` in the frame `out` (the whole sensor). `system` is the live
     /// lens's (for a photo LUT it is not used). `gains[g]` multiplies the images of lens ghost `g` as it does
@@ -1090,29 +1106,32 @@ pub struct LiveLut {
 impl LiveLut {
     pub fn new(lut: GhostLut) -> Self {
         let photo = lut.kind == LutKind::Photo;
-        let mips: Vec<Vec<Vec<LutEntry>>> = lut
-            .ghosts
-            .par_iter()
-            .map(|g| {
-                g.entries
-                    .iter()
-                    .map(|e| {
-                        let mut levels: Vec<LutEntry> = Vec::new();
-                        loop {
-                            let last = levels.last().unwrap_or(e);
-                            if photo || last.is_empty() || last.width.max(last.height) / 2 < MIP_FLOOR_TEXELS {
-                                break levels;
+        let mips: Vec<Vec<Vec<LutEntry>>> = crate::timing::span("mip levels", || {
+            lut.ghosts
+                .par_iter()
+                .map(|g| {
+                    g.entries
+                        .iter()
+                        .map(|e| {
+                            let mut levels: Vec<LutEntry> = Vec::new();
+                            loop {
+                                let last = levels.last().unwrap_or(e);
+                                if photo || last.is_empty() || last.width.max(last.height) / 2 < MIP_FLOOR_TEXELS {
+                                    break levels;
+                                }
+                                levels.push(last.halved());
                             }
-                            levels.push(last.halved());
-                        }
-                    })
-                    .collect()
-            })
-            .collect();
+                        })
+                        .collect()
+                })
+                .collect()
+        });
         let levels = all_levels(&lut, &mips);
-        let layout = AtlasLayout::new(&levels);
-        let shapes = lut.ghosts.par_iter().map(|g| g.entries.iter().map(LutEntry::shape).collect()).collect();
-        let footprints = footprints(&levels);
+        let layout = crate::timing::span("atlas layout", || AtlasLayout::new(&levels));
+        let shapes = crate::timing::span("entry shapes", || {
+            lut.ghosts.par_iter().map(|g| g.entries.iter().map(LutEntry::shape).collect()).collect()
+        });
+        let footprints = crate::timing::span("footprints", || footprints(&levels));
         Self { lut, mips, layout, shapes, id: crate::fingerprint::unique_id(), footprints }
     }
 

@@ -6,7 +6,7 @@
 //! LUT's own fingerprint ([`crate::flare::lut_fingerprint`]: every surface, glass, coating, the stop and the
 //! spectrum), the [`BakeSettings`] and [`CACHE_VERSION`], so a change to any of them is a new entry
 //! and never a stale hit. [`LutCache::load`] reads the file through the same checked decoder as any LUT
-//! ([`crate::lut::format::read_lut`]) and checks it against the live lens ([`GhostLut::check_for`]); a file
+//! ([`crate::lut::format::read_lut_near`]) and checks it against the live lens ([`GhostLut::check_for`]); a file
 //! that fails either (truncated, damaged, another lens's) is never trusted: it is removed and reported as
 //! [`Lookup::Rejected`], and the caller bakes again. [`LutCache::store`] writes through a temporary file and
 //! a rename, so a crash mid-write leaves no half file under the key.
@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 use crate::flare::{FlareConfig, lut_fingerprint};
 use crate::lut::GhostLut;
 use crate::lut::bake::BakeSettings;
-use crate::lut::format::{read_lut, write_lut};
+use crate::lut::format::{read_lut_near, write_lut};
 use crate::optics::Lens;
 
 /// Bumped when the baker changes what it writes for the same settings: every older entry becomes a miss. 2:
@@ -71,14 +71,26 @@ impl LutCache {
 
     /// The cached LUT of `lens` with `config` baked with `settings`, checked (see the module documentation).
     pub fn load(&self, lens: &Lens, config: &FlareConfig, settings: &BakeSettings) -> Lookup {
+        self.load_near(lens, config, settings, None)
+    }
+
+    /// [`Self::load`], with only the images drawn at `near_theta_deg` when it is given
+    /// ([`super::format::read_lut_near`]).
+    pub fn load_near(
+        &self,
+        lens: &Lens,
+        config: &FlareConfig,
+        settings: &BakeSettings,
+        near_theta_deg: Option<f64>,
+    ) -> Lookup {
         // What a killed bake's write left behind (our temporary files, over an hour old) goes first.
         crate::files::remove_stale_temps(&self.dir, std::time::Duration::from_secs(3600));
         let path = self.path(Self::key(lens, config, settings));
         if !path.exists() {
             return Lookup::Miss;
         }
-        let reason = match read_lut(&path) {
-            Ok(lut) => match lut.check_for(lens, config) {
+        let reason = match read_lut_near(&path, near_theta_deg) {
+            Ok(lut) => match crate::timing::span("check the LUT against the lens", || lut.check_for(lens, config)) {
                 Ok(()) => return Lookup::Hit(Box::new(lut)),
                 Err(e) => e.to_string(),
             },

@@ -291,11 +291,21 @@ pub fn write_lut(path: &Path, lut: &GhostLut) -> std::io::Result<u64> {
 
 /// Reads and checks a LUT file.
 pub fn read_lut(path: &Path) -> Result<GhostLut, LutError> {
+    read_lut_near(path, None)
+}
+
+/// [`read_lut`], with only the images a frame whose light is `near_theta_deg` off the axis draws when that is
+/// given (per ghost, the baked thetas around it, every azimuth: [`super::blend::thetas_drawn`]); every other
+/// entry keeps its place and its paraxial frame with no image ([`LutEntry::empty`]), its data passed over
+/// unread. A still pays for the few images it draws, not for the whole LUT.
+pub fn read_lut_near(path: &Path, near_theta_deg: Option<f64>) -> Result<GhostLut, LutError> {
     // A FIFO or device is refused before it is opened (opening a FIFO waits for a writer).
     let file = crate::files::open_regular(path)
         .map_err(|reason| LutError::Io(std::io::Error::new(std::io::ErrorKind::InvalidInput, reason)))?;
     let length = file.metadata()?.len();
-    decode(std::io::BufReader::new(file), length)
+    crate::timing::span("read and decode the LUT file", || {
+        decode_near(std::io::BufReader::new(file), length, near_theta_deg)
+    })
 }
 
 impl From<std::io::Error> for LutError {
@@ -312,7 +322,12 @@ fn read_exact_or(reader: &mut impl Read, buf: &mut [u8], what: &str) -> Result<(
 }
 
 /// Decodes a LUT from a stream of `length` bytes.
-pub fn decode(mut reader: impl Read, length: u64) -> Result<GhostLut, LutError> {
+pub fn decode(reader: impl Read, length: u64) -> Result<GhostLut, LutError> {
+    decode_near(reader, length, None)
+}
+
+/// [`decode`], with only the images drawn at `near_theta_deg` when it is given ([`read_lut_near`]).
+fn decode_near(mut reader: impl Read, length: u64, near_theta_deg: Option<f64>) -> Result<GhostLut, LutError> {
     let mut magic = [0u8; 8];
     read_exact_or(&mut reader, &mut magic, "magic bytes").map_err(|e| match e {
         LutError::Truncated(_) => LutError::Magic,
@@ -352,49 +367,56 @@ pub fn decode(mut reader: impl Read, length: u64) -> Result<GhostLut, LutError> 
         "photo" => LutKind::Photo,
         other => return Err(LutError::Header(format!("kind `{other}`: expected `ray-traced` or `photo`"))),
     };
+    // Each entry's compressed texels are read in turn (an entry a frame at `near_theta_deg` does not draw is
+    // passed over), then inflated and checked in parallel; the first entry in the file's order that fails is
+    // the error.
+    let channels = stored_channels(version);
+    let mut blobs: Vec<(usize, usize, Vec<u8>)> = Vec::new();
+    for (gi, g) in header.ghosts.iter().enumerate() {
+        // Entry `t * phis + p` is baked at theta `t` (the layout `LutScene::build` reads).
+        let drawn = near_theta_deg
+            .filter(|_| !g.phis_deg.is_empty())
+            .map(|theta| super::blend::thetas_drawn(&g.thetas_deg, theta));
+        for (ei, e) in g.entries.iter().enumerate() {
+            let mut limited = (&mut reader).take(e.compressed_bytes);
+            if drawn.as_ref().is_some_and(|thetas| !thetas.contains(&(ei / g.phis_deg.len()))) {
+                std::io::copy(&mut limited, &mut std::io::sink())?;
+                continue;
+            }
+            let mut compressed = Vec::new();
+            limited.read_to_end(&mut compressed)?;
+            if compressed.len() as u64 != e.compressed_bytes {
+                return Err(LutError::Truncated(format!("ghost {gi}, entry {ei}: its data ends early")));
+            }
+            blobs.push((gi, ei, compressed));
+        }
+    }
+    let decoded: Vec<Result<Vec<[f16; 4]>, LutError>> = blobs
+        .par_iter()
+        .map(|(gi, ei, compressed)| entry_texels(&header.ghosts[*gi].entries[*ei], compressed, channels, (*gi, *ei)))
+        .collect();
+    let mut texels_of = std::collections::HashMap::new();
+    for ((gi, ei, _), texels) in blobs.iter().zip(decoded) {
+        texels_of.insert((*gi, *ei), texels?);
+    }
     let mut ghosts = Vec::with_capacity(header.ghosts.len());
     for (gi, g) in header.ghosts.iter().enumerate() {
         let mut entries = Vec::with_capacity(g.entries.len());
         for (ei, e) in g.entries.iter().enumerate() {
-            let bad = |reason: String| LutError::Entry { ghost: gi, entry: ei, reason };
-            let channels = stored_channels(version);
-            let raw_len = u64::from(e.width) * u64::from(e.height) * 2 * channels as u64;
-            let mut raw = Vec::with_capacity(raw_len as usize);
-            let mut limited = (&mut reader).take(e.compressed_bytes);
-            ZlibDecoder::new(&mut limited).take(raw_len + 1).read_to_end(&mut raw).map_err(|err| match err.kind() {
-                std::io::ErrorKind::UnexpectedEof => {
-                    LutError::Truncated(format!("ghost {gi}, entry {ei}: its data ends early"))
-                }
-                _ => bad(format!("its compressed data is corrupt ({err})")),
-            })?;
-            if raw.len() as u64 != raw_len {
-                return Err(bad(format!(
-                    "{} bytes of texels where {}x{} needs {raw_len}",
-                    raw.len(),
-                    e.width,
-                    e.height
-                )));
-            }
-            // Skip what the decoder did not need, so the next entry starts where the header says.
-            std::io::copy(&mut limited, &mut std::io::sink())?;
-            if unhex(&e.checksum, "checksum")? != fnv1a(&raw, FNV_OFFSET) {
-                return Err(bad("its checksum does not match (the data is damaged)".into()));
-            }
-            let mut texels = unshuffle(&raw, channels);
-            if let Some(k) = texels.iter().position(|t| t.iter().any(|v| !v.is_finite() || v.to_f32() < 0.0)) {
-                return Err(bad(format!("texel {k} is not finite or negative")));
-            }
-            if channels == 3 {
-                super::set_coverage(&mut texels);
-            }
+            let paraxial = ParaxialFrame {
+                centre_mm: e.paraxial_centre_mm,
+                half_mm: e.paraxial_half_mm,
+                energy: e.paraxial_energy,
+            };
+            let Some(texels) = texels_of.remove(&(gi, ei)) else {
+                // Not drawn at `near_theta_deg`: its place is kept, with no image.
+                entries.push(LutEntry::empty(e.theta_deg, e.phi_deg, paraxial));
+                continue;
+            };
             entries.push(LutEntry {
                 theta_deg: e.theta_deg,
                 phi_deg: e.phi_deg,
-                paraxial: ParaxialFrame {
-                    centre_mm: e.paraxial_centre_mm,
-                    half_mm: e.paraxial_half_mm,
-                    energy: e.paraxial_energy,
-                },
+                paraxial,
                 centre_mm: e.centre_mm,
                 texel_mm: e.texel_mm,
                 width: e.width,
@@ -427,6 +449,39 @@ pub fn decode(mut reader: impl Read, length: u64) -> Result<GhostLut, LutError> 
         theta_max_deg: header.theta_max_deg,
         ghosts,
     })
+}
+
+/// The texels of entry `ei` of ghost `gi` (`e` its header) from its `compressed` bytes: inflated to exactly its
+/// size, its checksum matched, every texel finite and not negative.
+fn entry_texels(
+    e: &EntryHeader,
+    compressed: &[u8],
+    channels: usize,
+    (gi, ei): (usize, usize),
+) -> Result<Vec<[f16; 4]>, LutError> {
+    let bad = |reason: String| LutError::Entry { ghost: gi, entry: ei, reason };
+    let raw_len = u64::from(e.width) * u64::from(e.height) * 2 * channels as u64;
+    let mut raw = Vec::with_capacity(raw_len as usize);
+    ZlibDecoder::new(compressed).take(raw_len + 1).read_to_end(&mut raw).map_err(|err| match err.kind() {
+        std::io::ErrorKind::UnexpectedEof => {
+            LutError::Truncated(format!("ghost {gi}, entry {ei}: its data ends early"))
+        }
+        _ => bad(format!("its compressed data is corrupt ({err})")),
+    })?;
+    if raw.len() as u64 != raw_len {
+        return Err(bad(format!("{} bytes of texels where {}x{} needs {raw_len}", raw.len(), e.width, e.height)));
+    }
+    if unhex(&e.checksum, "checksum")? != fnv1a(&raw, FNV_OFFSET) {
+        return Err(bad("its checksum does not match (the data is damaged)".into()));
+    }
+    let mut texels = unshuffle(&raw, channels);
+    if let Some(k) = texels.iter().position(|t| t.iter().any(|v| !v.is_finite() || v.to_f32() < 0.0)) {
+        return Err(bad(format!("texel {k} is not finite or negative")));
+    }
+    if channels == 3 {
+        super::set_coverage(&mut texels);
+    }
+    Ok(texels)
 }
 
 /// Every header field in range, before anything is allocated for the texels.

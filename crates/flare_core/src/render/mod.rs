@@ -492,6 +492,11 @@ impl FlareScene {
     pub fn has_dirt_glow(&self) -> bool {
         self.globals.dirt_colour[..3].iter().any(|&c| c > 0.0)
     }
+
+    /// True when the frame draws a starburst (its reach is positive; off, or a light too dim, it has none).
+    pub fn draws_starburst(&self) -> bool {
+        self.globals.starburst[2] > 0.0
+    }
 }
 
 /// The starburst's core radius in pixels: the light's blown-out image.

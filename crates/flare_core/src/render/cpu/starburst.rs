@@ -21,10 +21,10 @@ impl StarburstTexture {
 
 /// `starburst.wgsl`: the starburst added onto `hdr`.
 pub fn starburst_pass(scene: &FlareScene, texture: &StarburstTexture, hdr: &mut HdrImage) {
-    let [cx, cy, reach, core_px] = scene.globals.starburst;
-    if reach <= 0.0 {
+    if !scene.draws_starburst() {
         return;
     }
+    let [cx, cy, reach, core_px] = scene.globals.starburst;
     let [kr, kg, kb, mm_per_px] = scene.globals.starburst_far;
     let core = scene.globals.starburst_core;
     let (w, h) = (hdr.width as usize, hdr.height as usize);
