@@ -253,8 +253,7 @@ impl ViewportResources {
         let res = renderer.callback_resources.get_mut::<Self>()?;
         let (device, queue) = (&render_state.device, &render_state.queue);
         let scene = &draft.scene;
-        let through_cube = scene.globals.operator() != flare_core::color::Tonemap::View
-            || flare_core::view_lut::ViewLut::ready_or_bake(&scene.view_transform()).is_some();
+        let through_cube = Self::draft_through_cube(scene);
         let size = (scene.output_size.0.max(1), scene.output_size.1.max(1));
         let (target, _) = Self::target(device, &res.renderer, &res.layout, &res.sampler, &res.params, size);
         let view = target.create_view(&wgpu::TextureViewDescriptor::default());
@@ -264,6 +263,13 @@ impl ViewportResources {
         res.renderer.render_with_lut(device, queue, &mut encoder, &view, scene, draft.lut.as_ref());
         queue.submit([encoder.finish()]);
         Some(through_cube)
+    }
+
+    /// Whether a draft of `scene` goes through the view's cube as it would be drawn now: its tonemap needs no
+    /// cube, or the cube is baked (asked for on a thread when it is not).
+    pub fn draft_through_cube(scene: &flare_core::render::FlareScene) -> bool {
+        scene.globals.operator() != flare_core::color::Tonemap::View
+            || flare_core::view_lut::ViewLut::ready_or_bake(&scene.view_transform()).is_some()
     }
 
     /// Reads the resources without touching them (nothing is drawn again); `None` before they exist.

@@ -2074,3 +2074,42 @@ fn issue_61_the_walks_findings_are_refused_before_any_work() {
     let e = refusal(&["bake", "heliar", "--update", &out("nope.flut"), "-o", &out("l.flut")]);
     assert_eq!(e.matches("No such file").count(), 1, "{e}");
 }
+
+/// `--timings` names where a whole command's time went: the document, the lens, the frame's passes and the
+/// writer, each with a number, the parts of a span indented under it, and the command's total last.
+#[test]
+fn render_timings_name_where_the_time_went() {
+    let dir = tempfile::tempdir().unwrap();
+    let exr = dir.path().join("flare.exr");
+    let out = flarelab(&[
+        "render",
+        "dgauss",
+        "--light-deg",
+        "6,-3",
+        "--size",
+        "160x90",
+        "--device",
+        "cpu",
+        "--timings",
+        "-o",
+        exr.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let lines: Vec<&str> = stderr.lines().skip_while(|l| !l.starts_with("timings")).collect();
+    let ms = |name: &str| -> f64 {
+        let line =
+            lines.iter().find(|l| l.trim_start().starts_with(name)).unwrap_or_else(|| panic!("{name}: {stderr}"));
+        line.split_whitespace().last().unwrap().parse().unwrap_or_else(|_| panic!("{line}"))
+    };
+    for name in ["read the document", "prepare the lens", "draw", "write", "EXR encode and write"] {
+        assert!(ms(name) >= 0.0, "{name}");
+    }
+    assert!(lines.iter().any(|l| l.starts_with("    ghosts")), "the draw's passes indented under it: {stderr}");
+    let total = ms("the command");
+    assert!(total >= ms("write") + ms("draw"), "{stderr}");
+    assert!(lines.last().unwrap().trim_start().starts_with("the command"), "{stderr}");
+    // Without the flag nothing is printed.
+    let plain = flarelab(&["render", "dgauss", "--size", "64x36", "--device", "cpu", "-o", exr.to_str().unwrap()]);
+    assert!(!String::from_utf8_lossy(&plain.stderr).contains("timings"));
+}

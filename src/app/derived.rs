@@ -578,18 +578,21 @@ impl Derived {
     /// before there is a flare.
     pub fn draft_of_view(&self, doc: &Document, draft: Draft) -> Option<Frame> {
         let flare = self.flare.as_ref()?;
+        Some(Frame::build(flare, self.lut.as_deref(), &self.view_request(doc, flare, Some(draft))))
+    }
+
+    /// The request of the view's frame (at the viewport's size and divisor) as a draft `draft` or sharp.
+    fn view_request(&self, doc: &Document, flare: &PreparedFlare, draft: Option<Draft>) -> FrameRequest {
         let (w, h) = self.view_px;
-        let request = FrameRequest { draft: Some(draft), ..self.request_at(doc, flare, w, h, self.view_divisor()) };
-        Some(Frame::build(flare, self.lut.as_deref(), &request))
+        FrameRequest { draft, ..self.request_at(doc, flare, w, h, self.view_divisor()) }
     }
 
     /// Builds the frame when what it shows changed.
     pub fn sync_frame(&mut self, doc: &Document) {
         let (Some(flare), Some(optics)) = (self.flare.clone(), self.optics_key) else { return };
-        let (w, h) = self.view_px;
         let key = FrameKey {
             optics,
-            request: FrameRequest { draft: self.draft, ..self.request_at(doc, &flare, w, h, self.view_divisor()) },
+            request: self.view_request(doc, &flare, self.draft),
             lut_generation: self.lut_generation,
             plate_generation: self.plate_generation,
         };

@@ -1352,11 +1352,7 @@ impl FlareLabApp {
         if self.derived.draft().is_some() {
             return;
         }
-        let scene = &shown.scene;
-        if self.drafts_warmth == AwaitingCube
-            && scene.globals.operator() == flare_core::color::Tonemap::View
-            && flare_core::view_lut::ViewLut::ready_or_bake(&scene.view_transform()).is_none()
-        {
+        if self.drafts_warmth == AwaitingCube && !ViewportResources::draft_through_cube(&shown.scene) {
             ctx.request_repaint_after(std::time::Duration::from_millis(250));
             return;
         }

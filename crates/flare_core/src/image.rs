@@ -218,6 +218,15 @@ mod tests {
                 assert_eq!(*a, [b[0] * 2.0, b[1] * 2.0, b[2] * 2.0, b[3]]);
             }
         }
+        // At sizes where the f32 centres `(x + 0.5) / w * w - 0.5` miss x (1920: 51 columns), too.
+        let mut wide = HdrImage::black(1920, 2);
+        for (k, p) in wide.pixels.iter_mut().enumerate() {
+            *p = [(k % 7) as f32 + 0.1, (k % 13) as f32, 1.0 / (k + 1) as f32, 0.5];
+        }
+        let same = wide.resampled(1920, 2, Sampling::Bilinear, 3.0);
+        for (a, b) in same.pixels.iter().zip(&wide.pixels) {
+            assert_eq!(*a, [b[0] * 3.0, b[1] * 3.0, b[2] * 3.0, b[3]]);
+        }
         let doubled = image.resampled(6, 4, Sampling::Nearest, 1.0);
         assert_eq!(doubled.pixels[0], image.pixels[0]);
         assert_eq!(doubled.pixels[6 * 4 - 1], image.pixels[5]);

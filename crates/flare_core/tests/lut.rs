@@ -1329,3 +1329,36 @@ fn a_lut_baked_with_a_dummy_surface_holds_for_the_lens_without_it() {
     narrowed.surfaces[2].semi_aperture_mm *= 0.5;
     assert!(from_bare.check_for(&narrowed, &config).is_err());
 }
+
+/// A still reads only the images its light angle draws (`read_lut_near`): at lights between, on and past the
+/// baked thetas, its LUT images are the whole LUT's to the bit, and it leaves the other thetas' entries without
+/// an image.
+#[test]
+fn a_still_reads_only_the_images_its_light_draws_and_draws_the_same() {
+    let flare = flare("tessar");
+    let lut = small_lut(&flare);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t.flut");
+    flare_core::lut::format::write_lut(&path, &lut).unwrap();
+    let whole = LiveLut::new(flare_core::lut::format::read_lut(&path).unwrap());
+    let thetas = &lut.ghosts[0].thetas_deg;
+    assert!(thetas.len() >= 3, "{thetas:?}");
+    for light in [[3.0, 2.0], [thetas[1], 0.0], [0.0, -thetas[1]], [0.0, 0.0], [40.0, 10.0]] {
+        let u = light_slopes_for_frame_position(light[0], light[1]);
+        let theta = flare_core::lut::light_direction_deg(u).0;
+        let near = flare_core::lut::format::read_lut_near(&path, Some(theta)).unwrap();
+        let (read, all): (usize, usize) = near.ghosts.iter().fold((0, 0), |(r, a), g| {
+            (r + g.entries.iter().filter(|e| !e.texels.is_empty()).count(), a + g.entries.len())
+        });
+        let baked: usize = lut.ghosts.iter().map(|g| g.entries.iter().filter(|e| !e.texels.is_empty()).count()).sum();
+        assert!(read < baked, "light {light:?}: {read} of {baked} images read");
+        assert!(read > 0, "light {light:?}");
+        assert_eq!(all, lut.ghosts.iter().map(|g| g.entries.len()).sum::<usize>(), "every entry keeps its place");
+        let near = LiveLut::new(near);
+        let (a, b) = (lut_alone(&whole, &flare, light, 160, 120), lut_alone(&near, &flare, light, 160, 120));
+        if light == [3.0, 2.0] {
+            assert!(a.pixels.iter().any(|p| p[0] > 0.0), "light {light:?}: the LUT draws something");
+        }
+        assert_eq!(a.pixels, b.pixels, "light {light:?}");
+    }
+}
