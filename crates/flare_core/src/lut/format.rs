@@ -16,13 +16,17 @@
 //! [`super::TEXEL_MANTISSA_BITS`] mantissa bits), byte-shuffled for compression: the low bytes of channel R of
 //! every texel, then its high bytes, then G, B (6 planes of w x h bytes). Alpha (coverage) is not stored: it is
 //! computed on load from the RGB ([`super::set_coverage`]). Version 1 files stored RGBA (8 planes) and no
-//! `fitted` flags; they still load. Each entry carries the FNV-1a 64 of its uncompressed bytes.
+//! `fitted` flags; they still load. Each entry carries the FNV-1a 64 of its uncompressed bytes, and the header
+//! the FNV-1a 64 of all the entries' compressed bytes (`data_checksum`; absent in files written before it).
 //!
 //! Loading ([`read_lut`]) streams the file: it checks the magic, the version, that the header fits the file
 //! and its checksum, then every field of the header (finite, in range, sizes that match, data inside the
-//! file, totals under [`MAX_TEXELS`]) before allocating anything for the texels, then inflates each entry
-//! into a buffer of exactly its declared size (never more) and checks its checksum and that every value is
-//! finite and non-negative. Every failure is a [`LutError`] that names what is wrong; none panics. Writing
+//! file, totals under [`MAX_TEXELS`]) before allocating anything for the texels, then reads each entry's
+//! compressed bytes and inflates them, the entries in parallel, each into a buffer of exactly its declared size
+//! (never more), and checks its checksum and that every value is finite and non-negative; last, the data's
+//! checksum. A still's read ([`read_lut_near`]) inflates only the entries its light angle draws and passes over
+//! the others' bytes, summing them into the data's checksum: a file damaged anywhere is still refused (one
+//! without that checksum is read whole). Every failure is a [`LutError`] that names what is wrong; none panics. Writing
 //! ([`write_lut`]) goes to a temporary file renamed over the target, so a user's file is never half-written.
 
 use std::io::{Read, Write};
@@ -104,6 +108,11 @@ pub struct Header {
     pub symmetry_axis_deg: f64,
     pub theta_max_deg: f64,
     pub ghosts: Vec<GhostHeader>,
+    /// FNV-1a 64 of every entry's compressed bytes in the file's order, 16 hex digits: what lets a read that
+    /// inflates only some entries ([`read_lut_near`]) still refuse a file damaged anywhere. Absent in files
+    /// written before it (such a file is read whole, every entry checked by its own checksum).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub data_checksum: Option<String>,
 }
 
 #[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
@@ -253,6 +262,7 @@ fn encode_version(lut: &GhostLut, version: u32) -> Vec<u8> {
         symmetry_axis_deg: lut.symmetry.axis_deg,
         theta_max_deg: lut.theta_max_deg,
         ghosts,
+        data_checksum: Some(hex(blobs.iter().fold(FNV_OFFSET, |sum, blob| fnv1a(blob, sum)))),
     };
     let json = serde_json::to_vec(&header).expect("the header serialises");
     let mut out = Vec::with_capacity(28 + json.len() + blobs.iter().map(Vec::len).sum::<usize>());
@@ -371,6 +381,10 @@ fn decode_near(mut reader: impl Read, length: u64, near_theta_deg: Option<f64>) 
     // passed over), then inflated and checked in parallel; the first entry in the file's order that fails is
     // the error.
     let channels = stored_channels(version);
+    let data_checksum = header.data_checksum.as_deref().map(|h| unhex(h, "data checksum")).transpose()?;
+    // Without the data's checksum a damaged entry is found only by inflating it: every entry is.
+    let near_theta_deg = near_theta_deg.filter(|_| data_checksum.is_some());
+    let mut data_sum = FNV_OFFSET;
     let mut blobs: Vec<(usize, usize, Vec<u8>)> = Vec::new();
     for (gi, g) in header.ghosts.iter().enumerate() {
         // Entry `t * phis + p` is baked at theta `t` (the layout `LutScene::build` reads).
@@ -379,15 +393,30 @@ fn decode_near(mut reader: impl Read, length: u64, near_theta_deg: Option<f64>) 
             .map(|theta| super::blend::thetas_drawn(&g.thetas_deg, theta));
         for (ei, e) in g.entries.iter().enumerate() {
             let mut limited = (&mut reader).take(e.compressed_bytes);
-            if drawn.as_ref().is_some_and(|thetas| !thetas.contains(&(ei / g.phis_deg.len()))) {
-                std::io::copy(&mut limited, &mut std::io::sink())?;
+            let skipped = drawn.as_ref().is_some_and(|thetas| !thetas.contains(&(ei / g.phis_deg.len())));
+            let mut compressed = Vec::new();
+            if skipped {
+                // Passed over, but summed into the data's checksum (a block at a time).
+                let mut block = [0u8; 1 << 16];
+                let mut read = 0u64;
+                loop {
+                    let n = limited.read(&mut block)?;
+                    if n == 0 {
+                        break;
+                    }
+                    data_sum = fnv1a(&block[..n], data_sum);
+                    read += n as u64;
+                }
+                if read != e.compressed_bytes {
+                    return Err(LutError::Truncated(format!("ghost {gi}, entry {ei}: its data ends early")));
+                }
                 continue;
             }
-            let mut compressed = Vec::new();
             limited.read_to_end(&mut compressed)?;
             if compressed.len() as u64 != e.compressed_bytes {
                 return Err(LutError::Truncated(format!("ghost {gi}, entry {ei}: its data ends early")));
             }
+            data_sum = fnv1a(&compressed, data_sum);
             blobs.push((gi, ei, compressed));
         }
     }
@@ -398,6 +427,10 @@ fn decode_near(mut reader: impl Read, length: u64, near_theta_deg: Option<f64>) 
     let mut texels_of = std::collections::HashMap::new();
     for ((gi, ei, _), texels) in blobs.iter().zip(decoded) {
         texels_of.insert((*gi, *ei), texels?);
+    }
+    // (An entry read and damaged is named above; one passed over is found here.)
+    if data_checksum.is_some_and(|sum| sum != data_sum) {
+        return Err(LutError::Header("its data's checksum does not match (the file is damaged)".into()));
     }
     let mut ghosts = Vec::with_capacity(header.ghosts.len());
     for (gi, g) in header.ghosts.iter().enumerate() {
