@@ -691,13 +691,19 @@ pub fn linear_with_traced_ghosts(frame: &Frame, sources: &Sources, ghosts: HdrIm
 /// ([`Frame::dirt_taken`]; a clean lens multiplies nothing).
 pub fn traced_accumulation(frame: &Frame, ghosts: &HdrImage) -> HdrImage {
     let scene = &frame.scene;
+    // At its own size, bilinear resampling reads every pixel exactly: only the gain is applied then.
+    ghosts.resampled(scene.hdr_width, scene.hdr_height, crate::image::Sampling::Bilinear, traced_light_gain(frame))
+}
+
+/// The gain a frame's traced ghosts are multiplied by: the light's, less the front dirt's share (0 for a light
+/// gain that is not finite).
+pub fn traced_light_gain(frame: &Frame) -> f32 {
     let mut light_gain =
         if frame.request.light_gain.is_finite() { frame.request.light_gain.max(0.0) as f32 } else { 0.0 };
     if frame.dirt_taken > 0.0 {
         light_gain *= (1.0 - frame.dirt_taken) as f32;
     }
-    // At its own size, bilinear resampling reads every pixel exactly: only the gain is applied then.
-    ghosts.resampled(scene.hdr_width, scene.hdr_height, crate::image::Sampling::Bilinear, light_gain)
+    light_gain
 }
 
 /// The accumulation passes of the CPU twin: ghosts, LUT ghosts, starburst, the front dirt's glow.

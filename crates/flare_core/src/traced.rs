@@ -10,12 +10,16 @@
 //! line [`Traced::how`] returns. [`frame::drawn_with_traced_ghosts`] adds the starburst and tonemaps as every
 //! frame is, and the one writer ([`TracedGhosts::write`] through [`frame::write_drawn_with`]) writes it; a
 //! ghost's own layer is that ghost traced alone (every other gain 0), so the layers sum to the flare.
+//! On the CPU a ray grid (not the reference) leaves out the ghost x wavelength jobs too dim to see at the
+//! frame's exposure, as the paraxial sprites and the LUT images are ([`crate::raytrace::Dim::Below`], the
+//! flare's threshold over the light's gain); a ghost's layer leaves out what its whole frame did. The GPU's ray
+//! grid draws every job: its frame holds at most the threshold more light at any pixel.
 //! [`crate::shot::sequence::render_sequence`] traces each frame of a sequence this way when asked.
 
 use crate::flare::PreparedFlare;
 use crate::frame::{self, Device, Drawn, Frame, FrameError, LayerChoice, Made, Sources};
 use crate::image::HdrImage;
-use crate::raytrace::{Grid, RayGridRenderer, RayGridRequest, Window};
+use crate::raytrace::{Dim, Grid, RayGridRenderer, RayGridRequest, Window};
 use crate::render::raygrid::{GpuRayGrid, GpuRayGridError};
 
 /// How a frame's ghosts are traced, with what tracing needs made once (the CPU tracer's tables, the GPU's
@@ -26,6 +30,8 @@ pub struct TracedGhosts {
     pub gpu_samples: u32,
     renderer: RayGridRenderer,
     gpu: Option<GpuRayGrid>,
+    /// The flare's settings, for the dim threshold at a frame's exposure.
+    config: crate::flare::FlareConfig,
 }
 
 impl std::fmt::Debug for TracedGhosts {
@@ -45,6 +51,20 @@ pub struct Traced {
     pub how: String,
 }
 
+/// Which jobs a CPU ray grid of `frame` on `grid` leaves out as too dim to see: on a fixed grid, the faintest
+/// below the flare's threshold at the frame's exposure over the light's gain (what the accumulation is
+/// multiplied by; no light: all of them); the reference's adaptive grid draws every job.
+pub fn dim_for(config: &crate::flare::FlareConfig, frame: &Frame, grid: Grid) -> Dim<'static> {
+    match grid {
+        Grid::Fixed(_) => {
+            let light_gain = frame::traced_light_gain(frame);
+            let threshold = config.threshold(frame.request.display.flare_gain());
+            Dim::Below(if light_gain > 0.0 { threshold / f64::from(light_gain) } else { f64::INFINITY })
+        }
+        Grid::Adaptive(_) => Dim::Drawn,
+    }
+}
+
 impl TracedGhosts {
     /// For frames of `flare` drawn on `device` (its pipelines are made here when it is a GPU and the grid fixed).
     pub fn new(flare: &PreparedFlare, grid: Grid, gpu_samples: u32, device: &Device) -> Self {
@@ -52,16 +72,48 @@ impl TracedGhosts {
             (Device::Gpu(drawer), Grid::Fixed(_)) => Some(GpuRayGrid::new(&drawer.ctx.device)),
             _ => None,
         };
-        Self { grid, gpu_samples, renderer: flare.ray_grid_renderer(), gpu }
+        Self { grid, gpu_samples, renderer: flare.ray_grid_renderer(), gpu, config: flare.config.clone() }
     }
 
     /// `frame`'s ghosts at its ghost gains (see the module documentation). A grid beyond the GPU's limits is an
     /// error naming the limit; a lost device falls back to the CPU.
     pub fn trace(&self, device: &Device, frame: &Frame) -> Result<Traced, FrameError> {
-        self.trace_gains(device, frame, &frame.request.ghost_gains)
+        match &frame.request.cull_gains {
+            // A frame culled as another (a ghost's own): its jobs left out as that frame's are.
+            Some(_) => self.trace_gains(device, frame, &frame.request.ghost_gains, Some(&self.dim_jobs(frame)?)),
+            None => self.trace_gains(device, frame, &frame.request.ghost_gains, None),
+        }
     }
 
-    fn trace_gains(&self, device: &Device, frame: &Frame, gains: &[f32]) -> Result<Traced, FrameError> {
+    /// Per job of the renderer, whether `frame` leaves it out as too dim to see, at its cull gains (its ghost
+    /// gains when it has none).
+    fn dim_jobs(&self, frame: &Frame) -> Result<Vec<bool>, FrameError> {
+        let cull_gains = frame.request.cull_gains.as_deref().unwrap_or(&frame.request.ghost_gains);
+        self.renderer
+            .dim_jobs(&self.cpu_request(frame, cull_gains, None))
+            .map_err(|e| FrameError::Request(e.to_string()))
+    }
+
+    /// The CPU request of `frame`'s ghosts at `gains`, whose jobs too dim to see are left out ([`dim_for`]: a ray
+    /// grid's, not the reference's, as the paraxial sprites and the LUT images are); `skip`, when given, is that
+    /// choice made already for the frame's cull gains ([`RayGridRenderer::dim_jobs`]).
+    fn cpu_request<'a>(&self, frame: &'a Frame, gains: &'a [f32], skip: Option<&'a [bool]>) -> RayGridRequest<'a> {
+        let (light, (width, height)) = (frame.request.light_deg, (frame.scene.width, frame.scene.height));
+        let request = RayGridRequest::frame_on(light, frame.request.sensor_width(), width, height, self.grid);
+        let dim = match skip {
+            Some(skip) => Dim::Skip(skip),
+            None => dim_for(&self.config, frame, self.grid),
+        };
+        request.weighted(gains).dim(dim)
+    }
+
+    fn trace_gains(
+        &self,
+        device: &Device,
+        frame: &Frame,
+        gains: &[f32],
+        skip: Option<&[bool]>,
+    ) -> Result<Traced, FrameError> {
         let started = std::time::Instant::now();
         // On the frame's own sensor, as the paraxial sprites are drawn: a desqueezed frame's rows are the sensor's,
         // averaged down when it is written.
@@ -97,7 +149,7 @@ impl TracedGhosts {
                 Err(e) => return Err(FrameError::Request(e.to_string())),
             }
         }
-        let request = RayGridRequest::frame_on(light, sensor_width_mm, width, height, self.grid).weighted(gains);
+        let request = self.cpu_request(frame, gains, skip);
         let traced = self
             .renderer
             .render_request(&request)
@@ -107,12 +159,13 @@ impl TracedGhosts {
             .ok_or_else(|| FrameError::Request("the ray-grid render drew no view".into()))?;
         let st = traced.stats;
         let how = format!(
-            "{fallback}ray-traced on the CPU {} ghost x wavelength jobs, {:?} grid: {} rays, {} triangles, {} jobs with no light, {:.2} s",
+            "{fallback}ray-traced on the CPU {} ghost x wavelength jobs, {:?} grid: {} rays, {} triangles, {} jobs with no light, {} too dim to see, {:.2} s",
             st.jobs,
             self.grid,
             st.rays,
             st.triangles,
             st.empty_jobs,
+            st.dim_jobs,
             started.elapsed().as_secs_f64()
         );
         Ok(Traced { hdr: traced.hdr, how })
@@ -149,6 +202,9 @@ impl TracedGhosts {
         sink: &mut frame::LayerSink,
     ) -> Result<(), FrameError> {
         let gains = &frame.request.ghost_gains;
+        // The jobs the whole frame leaves out as too dim, left out of each ghost's layer too (the layers sum to
+        // the flare).
+        let dim = self.dim_jobs(frame)?;
         let mut made = 0;
         for (g, model) in sources.flare.system.ghosts.iter().enumerate() {
             let gain = gains.get(g).copied().unwrap_or(1.0);
@@ -157,7 +213,7 @@ impl TracedGhosts {
             }
             let alone: Vec<f32> =
                 (0..sources.flare.system.ghosts.len()).map(|h| if h == g { gain } else { 0.0 }).collect();
-            let traced = self.trace_gains(device, frame, &alone)?;
+            let traced = self.trace_gains(device, frame, &alone, Some(&dim))?;
             if traced.hdr.pixels.iter().all(|p| p[0] == 0.0 && p[1] == 0.0 && p[2] == 0.0) {
                 continue;
             }

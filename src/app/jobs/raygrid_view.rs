@@ -231,9 +231,13 @@ fn trace_frame(
             report(0.1, format!("ray grid {grid}: tracing on the CPU…"));
             let request = RayGridRequest::views(light, vec![View { window, turn_deg: 0.0 }], Grid::Fixed(grid))
                 .weighted(&frame.request.ghost_gains)
+                .dim(flare_core::traced::dim_for(&flare.config, frame, Grid::Fixed(grid)))
                 .cancellable(cancel);
-            let mut images = renderer.render_request(&request).map_err(|e| e.to_string())?;
-            images.remove(0).hdr
+            let image = renderer.render_request(&request).map_err(|e| e.to_string())?.remove(0);
+            if image.stats.dim_jobs > 0 {
+                note += &format!(", {} ghost x wavelength jobs too dim to see left out", image.stats.dim_jobs);
+            }
+            image.hdr
         }
     };
     if cancel.load(Ordering::Relaxed) {

@@ -64,8 +64,8 @@ mod tracer;
 pub use grid::{DENSE_TABLE_SAMPLES, GRID_RANGE, Grid, REFERENCE_GRID, REFERENCE_MIN_GRID, View, Window};
 pub use splat::{RayGridImage, RayGridStats};
 pub use tracer::{
-    EntranceHint, Ghosts, LitCells, PlannedJob, RayGridError, RayGridRenderer, RayGridRequest, RayGridSetup, Scout,
-    TracedGhost,
+    Dim, EntranceHint, Ghosts, LitCells, PlannedJob, RayGridError, RayGridRenderer, RayGridRequest, RayGridSetup,
+    Scout, TracedGhost,
 };
 
 #[cfg(test)]
@@ -182,17 +182,71 @@ mod tests {
             assert!(count > 100, "step {step}: only {count} pixels inside");
         }
     }
+    /// Jobs too dim to see ([`Dim::Below`]) are left out, and only they: the image loses at most the threshold
+    /// at any pixel and is otherwise the whole frame's; the choice is the same whether the jobs fit one batch
+    /// (grid 32) or not (grid 160: 80 of the 84 jobs a batch, the peaks found by a trace of their own), and
+    /// passing it back ([`Dim::Skip`], as a ghost's own layer does) draws the same bytes.
+    #[test]
+    fn a_ray_grid_leaves_out_only_the_light_below_its_threshold() {
+        let r = renderer("heliar");
+        for grid in [32, 160] {
+            let frame = || RayGridRequest::frame([10.0, 0.0], 240, 160, Grid::Fixed(grid));
+            let all = r.render_request(&frame()).unwrap().remove(0);
+            let peak = all.hdr.pixels.iter().flat_map(|p| [p[0], p[1], p[2]]).fold(0.0f32, f32::max);
+            let threshold = 1e-3 * f64::from(peak);
+            let request = frame().dim(Dim::Below(threshold));
+            let dim = r.render_request(&request).unwrap().remove(0);
+            let chosen = r.dim_jobs(&request).unwrap();
+            let left_out = chosen.iter().filter(|d| **d).count();
+            assert!(dim.stats.dim_jobs > 0 && dim.stats.dim_jobs <= left_out, "grid {grid}: {:?}", dim.stats);
+            assert_eq!(dim.stats.jobs, all.stats.jobs);
+            assert!(dim.stats.triangles < all.stats.triangles);
+            // What is left out: at most the threshold at any pixel (and f32 rounding), never light added.
+            let (mut lost, mut gained) = (0.0f64, 0.0f64);
+            for (a, d) in all.hdr.pixels.iter().zip(&dim.hdr.pixels) {
+                for c in 0..3 {
+                    let diff = f64::from(a[c]) - f64::from(d[c]);
+                    (lost, gained) = (lost.max(diff), gained.max(-diff));
+                }
+            }
+            let rounding = 1e-6 * f64::from(peak);
+            eprintln!("grid {grid}: {left_out} jobs left out, largest loss {lost:e} of {threshold:e} allowed");
+            assert!(
+                lost > 0.0 && lost <= threshold + rounding && gained <= rounding,
+                "grid {grid}: {lost:e} {gained:e}"
+            );
+            // The same choice passed back: the same bytes.
+            let skipped = r.render_request(&frame().dim(Dim::Skip(&chosen))).unwrap().remove(0);
+            assert!(skipped.hdr.pixels == dim.hdr.pixels, "grid {grid}: the choice passed back draws another image");
+            // Nothing is left out at a threshold of 0.
+            let none = r.render_request(&frame().dim(Dim::Below(0.0))).unwrap().remove(0);
+            assert!(none.hdr.pixels == all.hdr.pixels && none.stats.dim_jobs == 0, "grid {grid}");
+        }
+    }
+
     /// The band splatter's images against those the tiled, per-thread splatter of the build before drew
     /// (stored as f32 RGB): the same light to rounding (a run's and a cut pixel's light are now summed in
-    /// another form and order), and the same bytes on one thread and on three.
+    /// another form and order), and the same bytes on one thread and on three. The bytes themselves are held
+    /// by their FNV-1a hash: those of the splatter before its rows held their channels side by side (d64b723),
+    /// to the bit.
     #[test]
     fn ray_grid_images_match_the_previous_splatter_and_do_not_depend_on_threads() {
         let r = renderer("heliar");
-        let stored: [(&str, [f64; 2], &[u8]); 2] = [
-            ("10, 0", [10.0, 0.0], include_bytes!("../../tests/data/raygrid/heliar_10_0_144x96_grid32.f32")),
-            ("14, 9", [14.0, 9.0], include_bytes!("../../tests/data/raygrid/heliar_14_9_144x96_grid32.f32")),
+        let stored: [(&str, [f64; 2], &[u8], u64); 2] = [
+            (
+                "10, 0",
+                [10.0, 0.0],
+                include_bytes!("../../tests/data/raygrid/heliar_10_0_144x96_grid32.f32"),
+                0xfd67_85a0_2027_d82e,
+            ),
+            (
+                "14, 9",
+                [14.0, 9.0],
+                include_bytes!("../../tests/data/raygrid/heliar_14_9_144x96_grid32.f32"),
+                0x3a04_7e19_2a7e_90d8,
+            ),
         ];
-        for (name, light, bytes) in stored {
+        for (name, light, bytes, hash) in stored {
             let pool = |n| rayon::ThreadPoolBuilder::new().num_threads(n).build().unwrap();
             let one = pool(1).install(|| r.render(light, 144, 96, Grid::Fixed(32)).unwrap());
             let three = pool(3).install(|| r.render(light, 144, 96, Grid::Fixed(32)).unwrap());
@@ -201,6 +255,11 @@ mod tests {
             let before: Vec<f32> =
                 bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
             let now: Vec<f32> = one.hdr.pixels.iter().flat_map(|p| [p[0], p[1], p[2]]).collect();
+            let fnv = now
+                .iter()
+                .flat_map(|v| v.to_le_bytes())
+                .fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3));
+            assert_eq!(fnv, hash, "{name}: the bytes changed (FNV-1a {fnv:#018x})");
             assert_eq!(before.len(), now.len());
             let peak = before.iter().fold(0.0f64, |m, v| m.max(f64::from(*v)));
             let worst = before.iter().zip(&now).map(|(a, b)| (f64::from(*a) - f64::from(*b)).abs()).fold(0.0, f64::max);

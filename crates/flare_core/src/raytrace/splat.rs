@@ -30,6 +30,8 @@ pub struct RayGridStats {
     pub triangles: u64,
     /// Jobs (ghost x wavelength) where no ray passed everything.
     pub empty_jobs: usize,
+    /// Jobs with light left out as too dim to see ([`super::Dim::Below`]).
+    pub dim_jobs: usize,
 }
 /// A ray-traced ghost image and what it is made of.
 #[derive(Clone, Debug)]
@@ -42,7 +44,11 @@ pub struct RayGridImage {
 }
 /// Rows of a band: a frame is splatted band by band, each band by one task that draws every job's triangles
 /// crossing it in the jobs' order.
-pub(super) const BAND_ROWS: usize = 16;
+pub(super) const BAND_ROWS: usize = 8;
+/// How many bands of [`BAND_ROWS`] rows a frame `height` rows high has.
+pub(super) fn band_count(height: usize) -> usize {
+    height.div_ceil(BAND_ROWS).max(1)
+}
 /// Planes of a row: red, green and blue. A band's rows hold them in the frame; while a band is drawn, each row
 /// has three more of a task's own, the second differences along the row of the runs of whole pixels, summed
 /// into the frame's planes by two running sums when the band is done ([`BandAcc`]'s drop).
@@ -94,7 +100,7 @@ pub(super) struct BandAcc<'a> {
 }
 impl FrameAcc {
     pub(super) fn new(width: usize, height: usize, ghosts: usize) -> Self {
-        let bands = height.div_ceil(BAND_ROWS).max(1);
+        let bands = band_count(height);
         Self {
             width,
             height,
@@ -154,8 +160,8 @@ impl FrameAcc {
     fn resolve_row(width: usize, row: Option<&[f64]>, out: &mut [[f64; 3]]) {
         let Some(row) = row else { return };
         for c in 0..3 {
-            for (x, v) in row[c * width..(c + 1) * width].iter().enumerate() {
-                out[x][c] = *v;
+            for (x, o) in out[..width].iter_mut().enumerate() {
+                o[c] = row[x * PLANES + c];
             }
         }
     }
@@ -247,12 +253,12 @@ impl BandAcc<'_> {
         {
             return;
         }
-        let (x, y, width) = (x as usize, y as usize, self.width);
+        let (x, y) = (x as usize, y as usize);
         let row = self.row(y);
         // A channel the wavelength does not weigh is left alone (adding 0 would change nothing).
         for (c, weight) in job.rgb.into_iter().enumerate() {
             if weight != 0.0 {
-                row[c * width + x] += energy * weight;
+                row[x * PLANES + c] += energy * weight;
             }
         }
         self.moments[job.ghost].add_sample(energy * job.luma, [x as f64 + 0.5, y as f64 + 0.5]);
@@ -267,7 +273,7 @@ impl BandAcc<'_> {
         if y < self.y0 as i64 || y >= self.y1 as i64 || x_lo >= x_hi {
             return;
         }
-        let (y, width) = (y as usize, self.width);
+        let y = y as usize;
         let row = self.row(y);
         let (mut sum, mut sum_x) = (0.0, 0.0);
         for x in x_lo as usize..x_hi as usize {
@@ -276,7 +282,7 @@ impl BandAcc<'_> {
             if e > 0.0 {
                 for (c, weight) in job.rgb.into_iter().enumerate() {
                     if weight != 0.0 {
-                        row[c * width + x] += e * weight;
+                        row[x * PLANES + c] += e * weight;
                     }
                 }
                 sum += e;
@@ -313,7 +319,7 @@ impl BandAcc<'_> {
             let d = second(p);
             for (c, weight) in job.rgb.into_iter().enumerate() {
                 if weight != 0.0 {
-                    diffs[c * width + p] += d * weight;
+                    diffs[p * PLANES + c] += d * weight;
                 }
             }
         }
@@ -352,14 +358,13 @@ impl Drop for BandAcc<'_> {
             self.reach[r] = [usize::MAX, 0];
             let row = Self::row_of(self.rows, width, [self.y0, self.y1], self.y0 + r);
             let diffs = &mut self.diffs[r * PLANES * width..(r + 1) * PLANES * width];
-            for c in 0..PLANES {
-                let (values, diffs) = (&mut row[c * width..(c + 1) * width], &mut diffs[c * width..(c + 1) * width]);
-                let (mut slope, mut level) = (0.0, 0.0);
-                for x in lo..hi {
-                    slope += diffs[x];
-                    level += slope;
-                    values[x] += level;
-                    diffs[x] = 0.0;
+            let (mut slope, mut level) = ([0.0; PLANES], [0.0; PLANES]);
+            for x in lo..hi {
+                for c in 0..PLANES {
+                    slope[c] += diffs[x * PLANES + c];
+                    level[c] += slope[c];
+                    row[x * PLANES + c] += level[c];
+                    diffs[x * PLANES + c] = 0.0;
                 }
             }
         }
@@ -496,6 +501,67 @@ impl<'a> TriangleShader<'a> {
             m *= f64::from(self.frame.mask.sample(su.at(p) as f32, sv.at(p) as f32));
         }
         m
+    }
+}
+/// Pixels across a tile of [`PeakTiles`].
+const PEAK_TILE: usize = 8;
+/// A bound of the most one job adds to any pixel of a view (its peak, for [`super::Dim::Below`]): over tiles of
+/// [`PEAK_TILE`] x [`PEAK_TILE`] pixels, the sum of what each triangle whose box touches the tile can add to one
+/// pixel. [`splat_triangle`] adds to a pixel the triangle's irradiance (its flux over its area) times the light
+/// of the part in the pixel, which is at most the part's area times the largest vertex weight (the weight is
+/// linear between the vertices, vignetting and the masks only take from it): so at most the irradiance times
+/// that weight, or the whole flux times it for a triangle under a pixel (or collapsed into one), times the
+/// largest of the wavelength's RGB weights, in the image's unit. Every pixel a triangle adds to lies in its box.
+pub(super) struct PeakTiles {
+    /// Tiles across and down.
+    across: usize,
+    down: usize,
+    /// The frame's pixels across and down.
+    width: f64,
+    height: f64,
+    tiles: Vec<f64>,
+    /// The job's flux per triangle times its largest RGB weight, over a pixel's area: the image's unit.
+    flux: f64,
+}
+impl PeakTiles {
+    pub(super) fn new(window: &Window, frame: &JobFrame) -> Self {
+        let (width, height) = (window.width as usize, window.height as usize);
+        let (across, down) = (width.div_ceil(PEAK_TILE).max(1), height.div_ceil(PEAK_TILE).max(1));
+        let rgb = frame.rgb.iter().fold(0.0f64, |m, c| m.max(c.abs()));
+        let pixel_area_mm2 = window.px_per_mm().powi(-2);
+        Self {
+            across,
+            down,
+            width: width as f64,
+            height: height as f64,
+            tiles: vec![0.0; across * down],
+            flux: frame.triangle_flux * rgb / pixel_area_mm2,
+        }
+    }
+
+    /// Adds what triangle `tri`, of pixel box `[x_lo, y_lo, x_hi, y_hi]`, can add to any pixel.
+    #[inline(always)]
+    pub(super) fn add(&mut self, tri: [&Vertex; 3], [x_lo, y_lo, x_hi, y_hi]: [f64; 4]) {
+        let p = [tri[0].pixel, tri[1].pixel, tri[2].pixel];
+        let area_px =
+            0.5 * ((p[1][0] - p[0][0]) * (p[2][1] - p[0][1]) - (p[1][1] - p[0][1]) * (p[2][0] - p[0][0])).abs();
+        let weight = tri.iter().fold(0.0f64, |m, v| m.max(v.weight));
+        // Over a pixel or more: the irradiance; under one (or of no area, or none found): the whole flux.
+        let spread = if area_px >= 1.0 { 1.0 / area_px } else { 1.0 };
+        let bound = self.flux * weight * spread;
+        let tile = |v: f64, size: f64| (v.floor().clamp(0.0, size - 1.0) as usize) / PEAK_TILE;
+        let (tx0, tx1) = (tile(x_lo, self.width), tile(x_hi, self.width));
+        let (ty0, ty1) = (tile(y_lo, self.height), tile(y_hi, self.height));
+        for ty in ty0..=ty1.min(self.down - 1) {
+            for t in &mut self.tiles[ty * self.across + tx0..=ty * self.across + tx1.min(self.across - 1)] {
+                *t += bound;
+            }
+        }
+    }
+
+    /// The largest tile: the job's peak bound (infinite when a bound was not finite).
+    pub(super) fn peak(&self) -> f64 {
+        self.tiles.iter().fold(0.0f64, |m, &t| if t.is_nan() { f64::INFINITY } else { m.max(t) })
     }
 }
 /// Whether a triangle carries light: its three vertices traced, not all vignetted, and not entirely outside the

@@ -1,6 +1,8 @@
 //! Planning and tracing: the jobs (one per ghost and wavelength) of a [`RayGridRenderer`], the pre-pass that
 //! finds where light passes, the scout of a LUT bake, and the one entry point every ray-traced image goes
-//! through ([`RayGridRenderer::render_request`]).
+//! through ([`RayGridRenderer::render_request`]). A request may leave out the jobs too dim to see ([`Dim`]):
+//! each traced job's peak is bounded from its triangles (`PeakTiles`) and the faintest go while their peaks
+//! sum to at most the frame's threshold, the paraxial sprites' rule.
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -50,6 +52,23 @@ pub enum Ghosts<'a> {
     Weighted(&'a [f32]),
 }
 
+/// Which of a request's jobs (ghost x wavelength) are left out as too dim to see.
+#[derive(Clone, Copy, Debug, Default)]
+pub enum Dim<'a> {
+    /// Every job with light is drawn (a LUT bake, the reference, a test).
+    #[default]
+    Drawn,
+    /// The faintest jobs are left out, as many as can go while their peaks sum to at most this (relative
+    /// irradiance, the image's unit, gains included): the paraxial sprites' rule
+    /// ([`crate::ghost::FrameSettings::intensity_threshold`]), so what is left out adds at most this to any
+    /// pixel, however many overlap. A job's peak is a bound worked out from its traced triangles (see
+    /// [`RayGridRenderer::render_request`]), never an estimate.
+    Below(f64),
+    /// The jobs whose entry (by the renderer's job order, [`RayGridRenderer::dim_jobs`]) is `true` are left out:
+    /// a ghost's own layer left out as its whole frame decided.
+    Skip(&'a [bool]),
+}
+
 /// One ray-grid render (see [`RayGridRenderer::render_request`]): a light, the views it is seen in, the grid
 /// and the ghosts.
 #[derive(Clone, Debug)]
@@ -63,6 +82,8 @@ pub struct RayGridRequest<'a> {
     /// When set, the render stops at its next ghost and wavelength and answers [`RayGridError::Cancelled`]
     /// (a job the user cancelled stops within one ghost's trace, its threads free for the next).
     pub cancel: Option<&'a AtomicBool>,
+    /// Which jobs are left out as too dim to see ([`Dim::Drawn`]: none).
+    pub dim: Dim<'a>,
 }
 
 impl<'a> RayGridRequest<'a> {
@@ -79,12 +100,12 @@ impl<'a> RayGridRequest<'a> {
 
     /// Every ghost in `views`.
     pub fn views(light_deg: [f64; 2], views: Vec<View>, grid: Grid) -> Self {
-        Self { light_deg, views, grid, ghosts: Ghosts::All, cancel: None }
+        Self { light_deg, views, grid, ghosts: Ghosts::All, cancel: None, dim: Dim::Drawn }
     }
 
     /// The scouted ghost, for the scout's light, in `views`.
     pub fn scouted(scout: &'a Scout, views: Vec<View>, grid: Grid) -> Self {
-        Self { light_deg: scout.light_deg, views, grid, ghosts: Ghosts::Scouted(scout), cancel: None }
+        Self { light_deg: scout.light_deg, views, grid, ghosts: Ghosts::Scouted(scout), cancel: None, dim: Dim::Drawn }
     }
 
     /// This request for ghost `ghost` only.
@@ -95,6 +116,11 @@ impl<'a> RayGridRequest<'a> {
     /// This request with every ghost `g` at the gain `gains[g]` ([`Ghosts::Weighted`]).
     pub fn weighted(self, gains: &'a [f32]) -> Self {
         Self { ghosts: Ghosts::Weighted(gains), ..self }
+    }
+
+    /// This request with the jobs `dim` says left out.
+    pub fn dim(self, dim: Dim<'a>) -> Self {
+        Self { dim, ..self }
     }
 
     /// This request stopped when `cancel` is set (see [`Self::cancel`]).
@@ -269,24 +295,46 @@ impl RayGridRenderer {
     /// theta for the price of one trace. A scouted request uses the scout's grid over the region where each
     /// wavelength's light passes as the pre-pass (finer than one over the whole front lens, and not traced
     /// again), and does not trace a wavelength where none passed.
+    ///
+    /// Jobs too dim to see are left out as the request's [`Dim`] says. For [`Dim::Below`], each job's peak in a
+    /// view is bounded from its traced triangles: a triangle adds to a pixel at most its irradiance (flux over
+    /// its area, or its whole flux when under a pixel) times its largest vertex weight (the light is linear
+    /// between the vertices and the masks pass at most all of it) times the wavelength's largest RGB weight;
+    /// those bounds are summed over tiles of 8 x 8 pixels that each triangle's box touches, and the job's peak
+    /// is its largest tile. The faintest jobs go while their peaks sum to at most the threshold. When the jobs
+    /// do not fit one batch they are traced once more to find the peaks first, so the choice never depends on
+    /// the batches.
     pub fn render_request(&self, request: &RayGridRequest) -> Result<Vec<RayGridImage>, RayGridError> {
-        let (light, views, grid, cancel) = (request.light_deg, request.views.as_slice(), request.grid, request.cancel);
-        match request.ghosts {
-            Ghosts::All => self.render_views(light, views, grid, cancel, |_: &Job| Some((None, 1.0))),
-            Ghosts::Only(g) => {
-                self.render_views(light, views, grid, cancel, |job: &Job| (job.ghost == g).then_some((None, 1.0)))
-            }
-            Ghosts::Weighted(gains) => self.render_views(light, views, grid, cancel, |job: &Job| {
-                let gain = ghost_gain(gains, job.ghost);
-                (gain > 0.0).then_some((None, gain))
-            }),
-            Ghosts::Scouted(scout) => self.render_views(scout.light_deg, views, grid, cancel, |job: &Job| {
-                if job.ghost != scout.ghost {
-                    return None;
+        let (views, grid, cancel) = (request.views.as_slice(), request.grid, request.cancel);
+        self.render_views(light_of(request), views, grid, cancel, request.dim, plan_of(request.ghosts))
+    }
+
+    /// Per job of this renderer (in its order), whether `request` leaves it out as too dim to see (the choice
+    /// [`Self::render_request`] makes, by the first view): what a ghost's own layer passes as [`Dim::Skip`] so
+    /// that the layers leave out what their whole frame does. Nothing is splatted.
+    pub fn dim_jobs(&self, request: &RayGridRequest) -> Result<Vec<bool>, RayGridError> {
+        let (light, views) = (light_of(request), request.views.as_slice());
+        validate(light, views, request.grid)?;
+        let mut out = vec![false; self.jobs.len()];
+        match request.dim {
+            Dim::Drawn => {}
+            Dim::Skip(skip) => {
+                for (o, s) in out.iter_mut().zip(skip) {
+                    *o = *s;
                 }
-                scout.grids.get(job.wavelength).and_then(Option::as_ref).map(|g| (Some(g), 1.0))
-            }),
+            }
+            Dim::Below(threshold) => {
+                let drawn = self.drawn(&plan_of(request.ghosts));
+                let first = &views[..views.len().min(1)];
+                let peaks = self.peaks(light, first, request.grid, request.cancel, &drawn)?;
+                if let Some(peaks) = peaks.first() {
+                    for (&(index, ..), dim) in drawn.iter().zip(faintest(peaks, threshold)) {
+                        out[index] = dim;
+                    }
+                }
+            }
         }
+        Ok(out)
     }
 
     /// Validates a request and renders it: `plan(job)` is `None` for a job not drawn, `Some((None, gain))` for
@@ -303,28 +351,45 @@ impl RayGridRenderer {
         views: &[View],
         grid: Grid,
         cancel: Option<&AtomicBool>,
+        dim: Dim,
         plan: impl Fn(&Job) -> Option<(Option<&'s TracedGrid>, f64)> + Sync,
     ) -> Result<Vec<RayGridImage>, RayGridError> {
         validate(light_deg, views, grid)?;
         let u = light_slopes_for_frame_position(light_deg[0], light_deg[1]);
         let ghosts = self.ghost_count();
         // The jobs drawn, gathered first: a scouted request draws 3 of the lens's (up to thousands of) jobs.
-        let drawn: Vec<(&Job, (Option<&TracedGrid>, f64))> =
-            self.jobs.iter().filter_map(|job| plan(job).map(|planned| (job, planned))).collect();
+        let drawn = self.drawn(&plan);
         let cancelled = || cancel.is_some_and(|c| c.load(Ordering::Relaxed));
         let mut frames: Vec<FrameAcc> =
             views.iter().map(|v| FrameAcc::new(v.window.width as usize, v.window.height as usize, ghosts)).collect();
         let mut stats = vec![RayGridStats::default(); views.len()];
-        // A job holds its traced vertices, and while one view is splatted a copy seen in that view (the last view
-        // sees them where they are).
-        let per_job = (grid.cells() + 1).pow(2) * views.len().min(2);
-        for batch in drawn.chunks((BATCH_VERTICES / per_job.max(1)).max(1)) {
-            let traced: Vec<Option<TracedJob>> = batch
-                .par_iter()
-                .map(|(job, (scouted, gain))| {
-                    (!cancelled()).then(|| self.trace_job(job, u, views, grid, *scouted, *gain))
-                })
-                .collect();
+        let per_batch = self.batch_jobs(grid, views, dim);
+        // Per view, per drawn job: left out as too dim. With more than one batch the peaks are found first (a
+        // trace of their own); with one they come from the batch itself.
+        let mut left_out: Vec<Vec<bool>> = match dim {
+            Dim::Drawn => vec![vec![false; drawn.len()]; views.len()],
+            Dim::Skip(skip) => {
+                let one: Vec<bool> =
+                    drawn.iter().map(|&(index, ..)| skip.get(index).copied().unwrap_or(false)).collect();
+                vec![one; views.len()]
+            }
+            Dim::Below(threshold) if drawn.len() > per_batch => {
+                let peaks = self.peaks(light_deg, views, grid, cancel, &drawn)?;
+                peaks.iter().map(|p| faintest(p, threshold)).collect()
+            }
+            Dim::Below(_) => Vec::new(),
+        };
+        let bound = matches!(dim, Dim::Below(_));
+        for (b, batch) in drawn.chunks(per_batch).enumerate() {
+            let first = b * per_batch;
+            let traced: Vec<Option<TracedJob>> = crate::timing::span("trace the rays", || {
+                batch
+                    .par_iter()
+                    .map(|(_, job, (scouted, gain))| {
+                        (!cancelled()).then(|| self.trace_job(job, u, views, grid, *scouted, *gain))
+                    })
+                    .collect()
+            });
             if cancelled() {
                 return Err(RayGridError::Cancelled);
             }
@@ -333,20 +398,83 @@ impl RayGridRenderer {
             let last = views.len().saturating_sub(1);
             for (k, (view, frame)) in views.iter().zip(&mut frames).enumerate() {
                 let bands = frame.bands();
-                let seen: Vec<Seen> = traced.par_iter_mut().map(|job| job.see(view, k == last, bands)).collect();
-                for s in &seen {
-                    stats[k].jobs += 1;
-                    stats[k].triangles += s.tris.len() as u64;
-                    stats[k].empty_jobs += usize::from(s.tris.is_empty());
+                let seen: Vec<Seen> = crate::timing::span("see the triangles", || {
+                    traced.par_iter_mut().map(|job| job.see(view, k == last, bands, bound)).collect()
+                });
+                if let Dim::Below(threshold) = dim
+                    && left_out.len() == k
+                {
+                    left_out.push(faintest(&seen.iter().map(|s| s.peak).collect::<Vec<_>>(), threshold));
                 }
-                frame.splat(|band| {
-                    for (job, s) in traced.iter().zip(&seen) {
-                        job.splat(s, band);
-                    }
+                let skip = &left_out[k][first..first + seen.len()];
+                for (s, &skip) in seen.iter().zip(skip) {
+                    stats[k].jobs += 1;
+                    stats[k].triangles += if skip { 0 } else { s.lit as u64 };
+                    stats[k].empty_jobs += usize::from(s.lit == 0);
+                    stats[k].dim_jobs += usize::from(skip && s.lit > 0);
+                }
+                crate::timing::span("splat", || {
+                    frame.splat(|band| {
+                        for ((job, s), &skip) in traced.iter().zip(&seen).zip(skip) {
+                            if !skip {
+                                job.splat(s, band);
+                            }
+                        }
+                    })
                 });
             }
         }
         Ok(views.iter().zip(frames).zip(stats).map(|((view, frame), s)| frame.into_image(&view.window, s)).collect())
+    }
+
+    /// The jobs `plan` draws, in the renderer's order: each with its index there and its plan.
+    #[allow(clippy::type_complexity)]
+    fn drawn<'j, 's>(
+        &'j self,
+        plan: &(impl Fn(&Job) -> Option<(Option<&'s TracedGrid>, f64)> + Sync),
+    ) -> Vec<(usize, &'j Job, (Option<&'s TracedGrid>, f64))> {
+        self.jobs.iter().enumerate().filter_map(|(index, job)| plan(job).map(|planned| (index, job, planned))).collect()
+    }
+
+    /// How many jobs a batch traces at once: at most [`BATCH_VERTICES`] vertices held (a job holds its traced
+    /// vertices, and while one view is splatted a copy seen in that view; the last view sees them in place), or
+    /// [`DIM_BATCH_VERTICES`] for a request that leaves dim jobs out.
+    fn batch_jobs(&self, grid: Grid, views: &[View], dim: Dim) -> usize {
+        let per_job = (grid.cells() + 1).pow(2) * views.len().min(2);
+        let held = if matches!(dim, Dim::Drawn) { BATCH_VERTICES } else { DIM_BATCH_VERTICES };
+        (held / per_job.max(1)).max(1)
+    }
+
+    /// Per view, per job of `drawn`: the bound of its peak ([`Dim::Below`]), from the jobs traced a batch at a
+    /// time and nothing splatted.
+    #[allow(clippy::type_complexity)]
+    fn peaks(
+        &self,
+        light_deg: [f64; 2],
+        views: &[View],
+        grid: Grid,
+        cancel: Option<&AtomicBool>,
+        drawn: &[(usize, &Job, (Option<&TracedGrid>, f64))],
+    ) -> Result<Vec<Vec<f64>>, RayGridError> {
+        let u = light_slopes_for_frame_position(light_deg[0], light_deg[1]);
+        crate::timing::span("find the dim jobs' peaks", || {
+            let mut peaks = vec![Vec::with_capacity(drawn.len()); views.len()];
+            for batch in drawn.chunks(self.batch_jobs(grid, views, Dim::Below(0.0))) {
+                let mut traced: Vec<TracedJob> = batch
+                    .par_iter()
+                    .map(|(_, job, (scouted, gain))| self.trace_job(job, u, views, grid, *scouted, *gain))
+                    .collect();
+                if cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
+                    return Err(RayGridError::Cancelled);
+                }
+                for (k, view) in views.iter().enumerate() {
+                    let bands = band_count(view.window.height as usize);
+                    let last = k + 1 == views.len();
+                    peaks[k].par_extend(traced.par_iter_mut().map(|job| job.see(view, last, bands, true).peak));
+                }
+            }
+            Ok(peaks)
+        })
     }
 
     /// The jobs of a fixed-grid frame render as [`Self::render`] lays them out, for a twin that traces them
@@ -738,6 +866,10 @@ impl RayGridRenderer {
 /// The most traced vertices a render holds at once (the jobs of a batch with the largest grid, and the copies
 /// seen in one view): about 23 MB. (A LUT bake draws a column per ghost on every core at once.)
 const BATCH_VERTICES: usize = 1 << 18;
+/// The most a render that leaves dim jobs out holds (a frame's still, one render at a time): about 185 MB, so
+/// that a lens's jobs on grids up to 128 cells fit one batch (the Heliar's 84 at 128: 1.4 million vertices) and
+/// are traced once; more than one batch are traced once more to find their peaks first.
+const DIM_BATCH_VERTICES: usize = 1 << 21;
 /// Triangle `t` of a grid of `n` x `n` vertices: cell `t / 2` (row by row), its first or second half (the split
 /// the GPU makes too).
 #[inline(always)]
@@ -758,6 +890,10 @@ struct TracedJob<'m> {
 }
 /// A traced job as one view sees it: its triangles that carry light sorted by the bands of rows they reach.
 struct Seen {
+    /// How many of its triangles carry light into the view.
+    lit: usize,
+    /// A bound of the most it adds to any pixel ([`Dim::Below`]'s peak); 0 when not asked for.
+    peak: f64,
     /// The vertices in the view's pixels; empty when the view sees the job's own (the last view).
     vertices: Vec<Vertex>,
     /// The triangles ([`triangle`]'s numbers) that reach band `b`, in the triangles' order:
@@ -769,7 +905,9 @@ impl TracedJob<'_> {
     /// This job seen in `view` (`last`: the last view of the render, which sees the vertices in place), its
     /// triangles that carry light sorted into the `bands` of rows of [`BAND_ROWS`] each: a band draws only the
     /// triangles that reach it.
-    fn see(&mut self, view: &View, last: bool, bands: usize) -> Seen {
+    /// With `bound`, the job's peak in the view is bounded too ([`Seen::peak`]; see
+    /// [`RayGridRenderer::render_request`]).
+    fn see(&mut self, view: &View, last: bool, bands: usize, bound: bool) -> Seen {
         let see = view.seer();
         let vertices = if last {
             for v in &mut self.vertices {
@@ -786,6 +924,7 @@ impl TracedJob<'_> {
         // beside the frame lands on no pixel; `splat_triangle` passes over the same).
         let mut reach: Vec<(u32, u32, u32)> = Vec::new();
         let mut starts = vec![0u32; bands + 1];
+        let mut peaks = bound.then(|| PeakTiles::new(&view.window, &self.frame));
         for t in 0..2 * cells * cells {
             let tri = triangle(all, n, t);
             if !carries_light(tri, &self.frame) {
@@ -798,6 +937,9 @@ impl TracedJob<'_> {
             if y_hi < 0.0 || y_lo >= height || x_hi < -1.0 || x_lo > width + 1.0 {
                 continue;
             }
+            if let Some(peaks) = &mut peaks {
+                peaks.add(tri, [x_lo, y_lo, x_hi, y_hi]);
+            }
             let first = (y_lo.max(0.0) as usize / BAND_ROWS).min(bands - 1);
             let last = (y_hi.min(height - 1.0) as usize / BAND_ROWS).min(bands - 1);
             for count in &mut starts[first + 1..=last + 1] {
@@ -808,6 +950,7 @@ impl TracedJob<'_> {
         for b in 0..bands {
             starts[b + 1] += starts[b];
         }
+        let reach_count = reach.len();
         let mut tris = vec![0u32; starts[bands] as usize];
         let mut next = starts.clone();
         for (t, first, last) in reach {
@@ -816,7 +959,8 @@ impl TracedJob<'_> {
                 next[b] += 1;
             }
         }
-        Seen { vertices, starts, tris }
+        let lit = reach_count;
+        Seen { vertices, starts, tris, lit, peak: peaks.map_or(0.0, |p| p.peak()) }
     }
 
     /// Splats this job's triangles, `seen` in a view, that reach `band`. Compiled for AVX2 too, used where the
@@ -874,6 +1018,56 @@ pub struct PlannedJob<'a> {
     /// The cells of the pre-pass whose rays the dense grid traces (the CPU leaves the others untraced, and so
     /// does a twin); `None`: all of `bounds`.
     pub lit: Option<LitCells>,
+}
+
+/// The light of `request` (a scouted request's is its scout's).
+fn light_of(request: &RayGridRequest) -> [f64; 2] {
+    match request.ghosts {
+        Ghosts::Scouted(scout) => scout.light_deg,
+        _ => request.light_deg,
+    }
+}
+
+/// What a request for `ghosts` draws of each job: `None` for a job not drawn, `Some((None, gain))` for one whose
+/// pre-pass is traced over the whole front lens and `Some((Some(grid), gain))` for one whose pre-pass is the
+/// scouted `grid`.
+fn plan_of<'s>(ghosts: Ghosts<'s>) -> impl Fn(&Job) -> Option<(Option<&'s TracedGrid>, f64)> + Sync + 's {
+    move |job: &Job| match ghosts {
+        Ghosts::All => Some((None, 1.0)),
+        Ghosts::Only(g) => (job.ghost == g).then_some((None, 1.0)),
+        Ghosts::Weighted(gains) => {
+            let gain = ghost_gain(gains, job.ghost);
+            (gain > 0.0).then_some((None, gain))
+        }
+        Ghosts::Scouted(scout) => {
+            if job.ghost != scout.ghost {
+                return None;
+            }
+            scout.grids.get(job.wavelength).and_then(Option::as_ref).map(|g| (Some(g), 1.0))
+        }
+    }
+}
+
+/// Which of the jobs of `peaks` are left out as too dim ([`Dim::Below`]): the faintest, as many as can go while
+/// their peaks sum to at most `threshold` (ties in the jobs' order; a peak that is not finite is never left
+/// out, and neither is anything when `threshold` is not positive).
+fn faintest(peaks: &[f64], threshold: f64) -> Vec<bool> {
+    let mut out = vec![false; peaks.len()];
+    if threshold.is_nan() || threshold <= 0.0 {
+        return out;
+    }
+    let mut order: Vec<usize> = (0..peaks.len()).collect();
+    order.sort_by(|&a, &b| peaks[a].total_cmp(&peaks[b]).then(a.cmp(&b)));
+    let mut left = threshold;
+    for k in order {
+        let peak = peaks[k];
+        if !(peak.is_finite() && peak >= 0.0 && peak <= left) {
+            break;
+        }
+        left -= peak;
+        out[k] = true;
+    }
+    out
 }
 
 /// Ghost `g`'s gain in `gains` (missing: 1; not finite or negative: 0).
