@@ -44,7 +44,7 @@ pub struct RayGridImage {
 }
 /// Rows of a band: a frame is splatted band by band, each band by one task that draws every job's triangles
 /// crossing it in the jobs' order.
-pub(super) const BAND_ROWS: usize = 8;
+pub(super) const BAND_ROWS: usize = 16;
 /// How many bands of [`BAND_ROWS`] rows a frame `height` rows high has.
 pub(super) fn band_count(height: usize) -> usize {
     height.div_ceil(BAND_ROWS).max(1)
@@ -160,8 +160,8 @@ impl FrameAcc {
     fn resolve_row(width: usize, row: Option<&[f64]>, out: &mut [[f64; 3]]) {
         let Some(row) = row else { return };
         for c in 0..3 {
-            for (x, o) in out[..width].iter_mut().enumerate() {
-                o[c] = row[x * PLANES + c];
+            for (x, v) in row[c * width..(c + 1) * width].iter().enumerate() {
+                out[x][c] = *v;
             }
         }
     }
@@ -253,12 +253,12 @@ impl BandAcc<'_> {
         {
             return;
         }
-        let (x, y) = (x as usize, y as usize);
+        let (x, y, width) = (x as usize, y as usize, self.width);
         let row = self.row(y);
         // A channel the wavelength does not weigh is left alone (adding 0 would change nothing).
         for (c, weight) in job.rgb.into_iter().enumerate() {
             if weight != 0.0 {
-                row[x * PLANES + c] += energy * weight;
+                row[c * width + x] += energy * weight;
             }
         }
         self.moments[job.ghost].add_sample(energy * job.luma, [x as f64 + 0.5, y as f64 + 0.5]);
@@ -273,7 +273,7 @@ impl BandAcc<'_> {
         if y < self.y0 as i64 || y >= self.y1 as i64 || x_lo >= x_hi {
             return;
         }
-        let y = y as usize;
+        let (y, width) = (y as usize, self.width);
         let row = self.row(y);
         let (mut sum, mut sum_x) = (0.0, 0.0);
         for x in x_lo as usize..x_hi as usize {
@@ -282,7 +282,7 @@ impl BandAcc<'_> {
             if e > 0.0 {
                 for (c, weight) in job.rgb.into_iter().enumerate() {
                     if weight != 0.0 {
-                        row[x * PLANES + c] += e * weight;
+                        row[c * width + x] += e * weight;
                     }
                 }
                 sum += e;
@@ -319,7 +319,7 @@ impl BandAcc<'_> {
             let d = second(p);
             for (c, weight) in job.rgb.into_iter().enumerate() {
                 if weight != 0.0 {
-                    diffs[p * PLANES + c] += d * weight;
+                    diffs[c * width + p] += d * weight;
                 }
             }
         }
@@ -358,13 +358,14 @@ impl Drop for BandAcc<'_> {
             self.reach[r] = [usize::MAX, 0];
             let row = Self::row_of(self.rows, width, [self.y0, self.y1], self.y0 + r);
             let diffs = &mut self.diffs[r * PLANES * width..(r + 1) * PLANES * width];
-            let (mut slope, mut level) = ([0.0; PLANES], [0.0; PLANES]);
-            for x in lo..hi {
-                for c in 0..PLANES {
-                    slope[c] += diffs[x * PLANES + c];
-                    level[c] += slope[c];
-                    row[x * PLANES + c] += level[c];
-                    diffs[x * PLANES + c] = 0.0;
+            for c in 0..PLANES {
+                let (values, diffs) = (&mut row[c * width..(c + 1) * width], &mut diffs[c * width..(c + 1) * width]);
+                let (mut slope, mut level) = (0.0, 0.0);
+                for x in lo..hi {
+                    slope += diffs[x];
+                    level += slope;
+                    values[x] += level;
+                    diffs[x] = 0.0;
                 }
             }
         }
