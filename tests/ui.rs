@@ -1142,11 +1142,10 @@ fn the_ray_grid_view_traces_the_frame_shown_and_shows_it_in_the_viewport() {
     let window =
         flare_core::raytrace::Window::for_sensor(frame.request.sensor_width_mm, scene.hdr_width, scene.hdr_height);
     let view = flare_core::raytrace::View { window, turn_deg: 0.0 };
-    let request = flare_core::raytrace::RayGridRequest::views(
-        frame.request.light_deg,
-        vec![view],
-        flare_core::raytrace::Grid::Fixed(16),
-    );
+    // The jobs too dim to see left out as every CPU ray grid of a frame leaves them out.
+    let grid = flare_core::raytrace::Grid::Fixed(16);
+    let request = flare_core::raytrace::RayGridRequest::views(frame.request.light_deg, vec![view], grid)
+        .dim(flare_core::traced::dim_for(&flare.config, &frame, grid));
     let ghosts = flare.ray_grid_renderer().render_request(&request).unwrap().remove(0).hdr;
     let sources = flare_core::frame::Sources { flare, lut: None, plate: None };
     let again = flare_core::frame::drawn_with_traced_ghosts(&frame, &sources, ghosts);
