@@ -359,7 +359,6 @@ impl RayGridRenderer {
         let ghosts = self.ghost_count();
         // The jobs drawn, gathered first: a scouted request draws 3 of the lens's (up to thousands of) jobs.
         let drawn = self.drawn(&plan);
-        let cancelled = || cancel.is_some_and(|c| c.load(Ordering::Relaxed));
         let mut frames: Vec<FrameAcc> =
             views.iter().map(|v| FrameAcc::new(v.window.width as usize, v.window.height as usize, ghosts)).collect();
         let mut stats = vec![RayGridStats::default(); views.len()];
@@ -382,18 +381,7 @@ impl RayGridRenderer {
         let bound = matches!(dim, Dim::Below(_));
         for (b, batch) in drawn.chunks(per_batch).enumerate() {
             let first = b * per_batch;
-            let traced: Vec<Option<TracedJob>> = crate::timing::span("trace the rays", || {
-                batch
-                    .par_iter()
-                    .map(|(_, job, (scouted, gain))| {
-                        (!cancelled()).then(|| self.trace_job(job, u, views, grid, *scouted, *gain))
-                    })
-                    .collect()
-            });
-            if cancelled() {
-                return Err(RayGridError::Cancelled);
-            }
-            let mut traced: Vec<TracedJob> = traced.into_iter().flatten().collect();
+            let mut traced = crate::timing::span("trace the rays", || self.trace_batch(batch, u, views, grid, cancel))?;
             stats[0].rays += traced.iter().map(|job| job.rays).sum::<u64>();
             let last = views.len().saturating_sub(1);
             for (k, (view, frame)) in views.iter().zip(&mut frames).enumerate() {
@@ -425,6 +413,30 @@ impl RayGridRenderer {
             }
         }
         Ok(views.iter().zip(frames).zip(stats).map(|((view, frame), s)| frame.into_image(&view.window, s)).collect())
+    }
+
+    /// The jobs of `batch` traced in parallel for light slopes `u`; a set `cancel` skips every job not yet begun
+    /// and answers [`RayGridError::Cancelled`].
+    #[allow(clippy::type_complexity)]
+    fn trace_batch(
+        &self,
+        batch: &[(usize, &Job, (Option<&TracedGrid>, f64))],
+        u: [f64; 2],
+        views: &[View],
+        grid: Grid,
+        cancel: Option<&AtomicBool>,
+    ) -> Result<Vec<TracedJob<'_>>, RayGridError> {
+        let cancelled = || cancel.is_some_and(|c| c.load(Ordering::Relaxed));
+        let traced: Vec<Option<TracedJob>> = batch
+            .par_iter()
+            .map(|(_, job, (scouted, gain))| {
+                (!cancelled()).then(|| self.trace_job(job, u, views, grid, *scouted, *gain))
+            })
+            .collect();
+        if cancelled() {
+            return Err(RayGridError::Cancelled);
+        }
+        Ok(traced.into_iter().flatten().collect())
     }
 
     /// The jobs `plan` draws, in the renderer's order: each with its index there and its plan.
@@ -460,13 +472,7 @@ impl RayGridRenderer {
         crate::timing::span("find the dim jobs' peaks", || {
             let mut peaks = vec![Vec::with_capacity(drawn.len()); views.len()];
             for batch in drawn.chunks(self.batch_jobs(grid, views, Dim::Below(0.0))) {
-                let mut traced: Vec<TracedJob> = batch
-                    .par_iter()
-                    .map(|(_, job, (scouted, gain))| self.trace_job(job, u, views, grid, *scouted, *gain))
-                    .collect();
-                if cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
-                    return Err(RayGridError::Cancelled);
-                }
+                let mut traced = self.trace_batch(batch, u, views, grid, cancel)?;
                 for (k, view) in views.iter().enumerate() {
                     let bands = band_count(view.window.height as usize);
                     let last = k + 1 == views.len();
