@@ -378,7 +378,8 @@ impl RayGridRenderer {
             }
             Dim::Below(_) => Vec::new(),
         };
-        let bound = matches!(dim, Dim::Below(_));
+        // The peaks are bounded in the batch only where they were not found first.
+        let bound = matches!(dim, Dim::Below(_)) && left_out.is_empty();
         for (b, batch) in drawn.chunks(per_batch).enumerate() {
             let first = b * per_batch;
             let mut traced = crate::timing::span("trace the rays", || self.trace_batch(batch, u, views, grid, cancel))?;
