@@ -6,13 +6,15 @@
 //! [`splat_triangle`] walks the triangle's rows in one band of the frame. In each row the pixels it covers
 //! whole (both of its sections at the row's edges lie beyond the pixel on either side) are one run: where the
 //! triangle's light is linear (no mask edge, nothing vignetted, no negative weight: most triangles) the run is
-//! four adds to the row's second differences ([`BandAcc::add_linear_run`]; the band's task holds them and sums
-//! them into the frame's planes when the band is done), else each pixel is shaded at its
+//! four adds to the row's second differences ([`BandAcc::add_linear_run`]), else each pixel is shaded at its
 //! centre ([`BandAcc::add_run`]). Every other pixel it touches gets the area of the triangle's part in it and
 //! that part's first moments in closed form from the three edges ([`Band`]: Green's theorem, no polygon cut),
 //! the same steps as the GPU's `raygrid_box.wgsl` (`band_of`, `band_part`), in f64; its light is the area times
 //! the light at the part's centroid. A triangle collapsed to a line or a point, or inside one pixel, puts all of
-//! its light in one pixel. Each band is drawn by one task, every job's triangles in the jobs' order: the image
+//! its light in one pixel. All of it goes first into the band's task's own scratch, one value per pixel before
+//! the job's RGB weight; when the job is done in the band, two running sums turn the differences into light
+//! and the scratch goes into each of the frame's red, green and blue planes times the job's weight there
+//! ([`BandAcc::flush`]). Each band is drawn by one task, every job's triangles in the jobs' order: the image
 //! does not depend on the threads.
 
 use rayon::prelude::*;
@@ -49,15 +51,40 @@ pub(super) const BAND_ROWS: usize = 16;
 pub(super) fn band_count(height: usize) -> usize {
     height.div_ceil(BAND_ROWS).max(1)
 }
-/// Planes of a row: red, green and blue. A band's rows hold them in the frame; while a band is drawn, each row
-/// has three more of a task's own, the second differences along the row of the runs of whole pixels, summed
-/// into the frame's planes by two running sums when the band is done ([`BandAcc`]'s drop).
+/// Planes of a row: red, green and blue. A band's rows hold them in the frame; while a job is drawn in a band,
+/// the task holds its light before the RGB weight in a [`Scratch`] of its own, put into the planes when the job
+/// is done ([`BandAcc::flush`]).
 const PLANES: usize = 3;
 
 thread_local! {
-    /// A task's second differences, zero outside the rows' reach between bands (kept by the thread: a band's
-    /// draw finds them made).
-    static DIFFS: std::cell::RefCell<Vec<f64>> = const { std::cell::RefCell::new(Vec::new()) };
+    /// A task's [`Scratch`], zero outside the rows' reach between bands (kept by the thread: a band's draw finds
+    /// it made).
+    static SCRATCH: std::cell::RefCell<Scratch> = const { std::cell::RefCell::new(Scratch::new()) };
+}
+/// What a band's task adds the light of the job being drawn into, before the job's RGB weight: per row, the
+/// light of the pixels its triangles cut and the second differences of the runs of pixels they cover whole,
+/// `width` values each, zero outside the row's reach (the columns `[first, end)` either was added to; none:
+/// `first >= end`).
+struct Scratch {
+    cut: Vec<f64>,
+    diffs: Vec<f64>,
+    reach: Vec<[usize; 2]>,
+}
+impl Scratch {
+    const fn new() -> Self {
+        Self { cut: Vec::new(), diffs: Vec::new(), reach: Vec::new() }
+    }
+
+    /// Grown to `rows` rows of `width` pixels (what it held stays zero).
+    fn fit(&mut self, width: usize, rows: usize) {
+        if self.cut.len() < width * rows {
+            self.cut.resize(width * rows, 0.0);
+            self.diffs.resize(width * rows, 0.0);
+        }
+        if self.reach.len() < rows {
+            self.reach.resize(rows, [usize::MAX, 0]);
+        }
+    }
 }
 
 /// A frame's accumulation: energy per pixel (relative irradiance x mm^2) and per-ghost moments, split into
@@ -65,26 +92,24 @@ thread_local! {
 ///
 /// Every pixel belongs to one band and every band draws the jobs in the order given, so each pixel's sum is
 /// made in one order whatever the threads: the image is the same to the bit on any machine. A band's rows
-/// (about `16 x 6 x width` values with the task's differences) stay in the core's cache while it draws, and
-/// the frame is one buffer: no copy per thread to make and merge. Each row holds its red, green and blue as
-/// planes (a wavelength of the RGB spectrum weighs one channel and touches one plane) for the pixels a
-/// triangle cuts (each added where it is); the runs of pixels a triangle covers whole, whose light is linear
-/// along the run, are four adds whatever their length to the task's second differences
-/// ([`BandAcc::add_linear_run`]), summed into the planes when the band is done.
+/// (about `16 x 5 x width` values with the task's scratch) stay in the core's cache while it draws, and the
+/// frame is one buffer: no copy per thread to make and merge. Each row holds its red, green and blue as
+/// planes. A job's light goes first into the task's [`Scratch`], one value per pixel whatever the job's RGB
+/// weight: a pixel a triangle cuts is one add where it is; a run of pixels a triangle covers whole, whose
+/// light is linear along the run, is four adds whatever its length to the row's second differences
+/// ([`BandAcc::add_linear_run`]). When the job is done in the band ([`BandAcc::flush`]) two running sums turn
+/// the differences into light, and the scratch goes into each plane times the job's weight there.
 pub(super) struct FrameAcc {
     pub(super) width: usize,
     pub(super) height: usize,
     /// Per band, its rows' planes; made when a triangle first lands in the band (a ghost's window in a LUT bake
     /// is lit in part, and a band no light reaches costs nothing).
     bands: Vec<Option<Vec<f64>>>,
-    /// Per row, the columns `[first, end)` its second differences reach while its band is drawn (none:
-    /// `first >= end`).
-    reach: Vec<[usize; 2]>,
     /// Per band, per ghost.
     moments: Vec<Vec<GhostMoments>>,
-    /// The differences of [`Self::whole`]'s band.
+    /// The scratch of [`Self::whole`]'s band.
     #[cfg(test)]
-    whole_diffs: Vec<f64>,
+    whole_scratch: Scratch,
 }
 /// One band of a [`FrameAcc`]: rows `y0..y1` of a frame `width` x `height`.
 pub(super) struct BandAcc<'a> {
@@ -93,10 +118,20 @@ pub(super) struct BandAcc<'a> {
     pub(super) y0: usize,
     pub(super) y1: usize,
     rows: &'a mut Option<Vec<f64>>,
-    /// The task's second differences: per row, [`PLANES`] planes of `width`; zero outside `reach`.
+    /// The light of the job in `pending` before its RGB weight ([`Scratch`]'s, rows `y0..y1`): it goes into
+    /// the rows when another job adds or the band is done ([`Self::flush`]).
+    cut: &'a mut [f64],
     diffs: &'a mut [f64],
     reach: &'a mut [[usize; 2]],
+    pending: Option<Pending>,
     moments: &'a mut [GhostMoments],
+}
+/// The job whose light a [`BandAcc`]'s `cut` holds: what its values are weighed by.
+#[derive(Clone, Copy, PartialEq)]
+struct Pending {
+    ghost: usize,
+    rgb: [f64; 3],
+    luma: f64,
 }
 impl FrameAcc {
     pub(super) fn new(width: usize, height: usize, ghosts: usize) -> Self {
@@ -105,10 +140,9 @@ impl FrameAcc {
             width,
             height,
             bands: vec![None; bands],
-            reach: vec![[usize::MAX, 0]; height],
             moments: vec![vec![GhostMoments::default(); ghosts]; bands],
             #[cfg(test)]
-            whole_diffs: Vec::new(),
+            whole_scratch: Scratch::new(),
         }
     }
 
@@ -122,18 +156,26 @@ impl FrameAcc {
         let (width, height) = (self.width, self.height);
         self.bands
             .par_iter_mut()
-            .zip(self.reach.par_chunks_mut(BAND_ROWS))
             .zip(self.moments.par_iter_mut())
             .enumerate()
-            .for_each(|(b, ((rows, reach), moments))| {
+            .for_each(|(b, (rows, moments))| {
                 let y0 = b * BAND_ROWS;
                 let y1 = (y0 + BAND_ROWS).min(height);
-                DIFFS.with_borrow_mut(|diffs| {
-                    let len = PLANES * width * (y1 - y0);
-                    if diffs.len() < len {
-                        diffs.resize(len, 0.0);
-                    }
-                    draw(&mut BandAcc { width, height, y0, y1, rows, diffs: &mut diffs[..len], reach, moments });
+                SCRATCH.with_borrow_mut(|scratch| {
+                    let rows_drawn = y1 - y0;
+                    scratch.fit(width, rows_drawn);
+                    draw(&mut BandAcc {
+                        width,
+                        height,
+                        y0,
+                        y1,
+                        rows,
+                        cut: &mut scratch.cut[..width * rows_drawn],
+                        diffs: &mut scratch.diffs[..width * rows_drawn],
+                        reach: &mut scratch.reach[..rows_drawn],
+                        pending: None,
+                        moments,
+                    });
                 });
             });
     }
@@ -143,15 +185,18 @@ impl FrameAcc {
     pub(super) fn whole(&mut self) -> BandAcc<'_> {
         self.bands.truncate(1);
         self.moments.truncate(1);
-        self.whole_diffs = vec![0.0; PLANES * self.width * self.height];
+        self.whole_scratch = Scratch::new();
+        self.whole_scratch.fit(self.width, self.height);
         BandAcc {
             width: self.width,
             height: self.height,
             y0: 0,
             y1: self.height,
             rows: &mut self.bands[0],
-            diffs: &mut self.whole_diffs,
-            reach: &mut self.reach,
+            cut: &mut self.whole_scratch.cut,
+            diffs: &mut self.whole_scratch.diffs,
+            reach: &mut self.whole_scratch.reach,
+            pending: None,
             moments: &mut self.moments[0],
         }
     }
@@ -218,13 +263,8 @@ impl FrameAcc {
     }
 }
 impl BandAcc<'_> {
-    /// The planes of row `y` (in the band), its band's buffer made at the first.
-    #[inline(always)]
-    fn row(&mut self, y: usize) -> &mut [f64] {
-        Self::row_of(self.rows, self.width, [self.y0, self.y1], y)
-    }
-
-    /// [`Self::row`] from the band's buffer `rows` (rows `band[0]..band[1]` of `width`).
+    /// The planes of row `y` (in the band) from the band's buffer `rows` (rows `band[0]..band[1]` of `width`),
+    /// the buffer made at the first.
     #[inline(always)]
     fn row_of(rows: &mut Option<Vec<f64>>, width: usize, band: [usize; 2], y: usize) -> &mut [f64] {
         let len = PLANES * width;
@@ -241,7 +281,8 @@ impl BandAcc<'_> {
         &mut rows[(y - band[0]) * len..(y - band[0] + 1) * len]
     }
 
-    /// Adds `energy` (scalar, before the spectral weight) at pixel (x, y) when it lies in the band.
+    /// Adds `energy` (scalar, before the job's RGB weight) at pixel (x, y) when it lies in the band: into the
+    /// task's scratch, the light of another job put into the rows first.
     #[inline(always)]
     pub(super) fn add(&mut self, x: i64, y: i64, energy: f64, job: &JobFrame) {
         if x < 0
@@ -253,49 +294,124 @@ impl BandAcc<'_> {
         {
             return;
         }
-        let (x, y, width) = (x as usize, y as usize, self.width);
-        let row = self.row(y);
-        // A channel the wavelength does not weigh is left alone (adding 0 would change nothing).
-        for (c, weight) in job.rgb.into_iter().enumerate() {
-            if weight != 0.0 {
-                row[c * width + x] += energy * weight;
-            }
+        let (x, r) = (x as usize, y as usize - self.y0);
+        self.pend(job);
+        self.cut[r * self.width + x] += energy;
+        let reach = &mut self.reach[r];
+        *reach = [reach[0].min(x), reach[1].max(x + 1)];
+    }
+
+    /// Makes `job` the one whose light [`Self::cut`] holds, the light of the one before put in the rows first.
+    #[inline(always)]
+    fn pend(&mut self, job: &JobFrame) {
+        let pending = Pending { ghost: job.ghost, rgb: job.rgb, luma: job.luma };
+        if self.pending != Some(pending) {
+            self.flush();
+            self.pending = Some(pending);
         }
-        self.moments[job.ghost].add_sample(energy * job.luma, [x as f64 + 0.5, y as f64 + 0.5]);
+    }
+
+    /// Puts the pending job's cut light into the rows, each channel times its weight (a channel the wavelength
+    /// does not weigh is left alone), and into the ghost's moments; leaves the cut plane zero. Compiled for
+    /// AVX2 too, used where the processor has it (the same results: no sum changes its order).
+    fn flush(&mut self) {
+        #[cfg(target_arch = "x86_64")]
+        if crate::optics::simd_level() >= 1 {
+            // SAFETY: the processor has AVX2 (checked once by `simd_level`).
+            return unsafe { self.flush_avx2() };
+        }
+        self.flush_body()
+    }
+
+    /// [`Self::flush_body`] compiled for AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn flush_avx2(&mut self) {
+        self.flush_body()
+    }
+
+    /// The body of [`Self::flush`].
+    #[inline(always)]
+    fn flush_body(&mut self) {
+        let Some(job) = self.pending.take() else { return };
+        let width = self.width;
+        for r in 0..self.y1 - self.y0 {
+            let [lo, hi] = self.reach[r];
+            if lo >= hi {
+                continue;
+            }
+            self.reach[r] = [usize::MAX, 0];
+            let row = Self::row_of(self.rows, width, [self.y0, self.y1], self.y0 + r);
+            let cut = &mut self.cut[r * width + lo..r * width + hi];
+            let diffs = &mut self.diffs[r * width + lo..r * width + hi];
+            // The cut pixels' light and its first moment along the row, in four lanes summed in a fixed order
+            // (the runs' moments were added in closed form).
+            let (mut sum, mut sum_x) = ([0.0f64; 4], [0.0f64; 4]);
+            let mut centre = lo as f64 + 0.5;
+            let mut quads = cut.chunks_exact(4);
+            for quad in &mut quads {
+                for lane in 0..4 {
+                    sum[lane] += quad[lane];
+                    sum_x[lane] += quad[lane] * (centre + lane as f64);
+                }
+                centre += 4.0;
+            }
+            for (lane, e) in quads.remainder().iter().enumerate() {
+                sum[lane] += *e;
+                sum_x[lane] += *e * (centre + lane as f64);
+            }
+            // The runs' light from their second differences: two running sums along the reach (past it what
+            // they leave is rounding, not light).
+            let (mut slope, mut level) = (0.0, 0.0);
+            for (value, d) in cut.iter_mut().zip(diffs.iter_mut()) {
+                slope += *d;
+                level += slope;
+                *value += level;
+                *d = 0.0;
+            }
+            for (c, weight) in job.rgb.into_iter().enumerate() {
+                if weight != 0.0 {
+                    for (value, e) in row[c * width + lo..c * width + hi].iter_mut().zip(cut.iter()) {
+                        *value += e * weight;
+                    }
+                }
+            }
+            cut.fill(0.0);
+            let total = |s: [f64; 4]| (s[0] + s[1]) + (s[2] + s[3]);
+            let y = self.y0 + r;
+            let m = &mut self.moments[job.ghost];
+            let sum = total(sum);
+            m.energy += sum * job.luma;
+            m.sum_x += total(sum_x) * job.luma;
+            m.sum_y += sum * job.luma * (y as f64 + 0.5);
+        }
     }
 
     /// Adds `energy(x_centre)` at each pixel of row `y` from column `x_lo` to before `x_hi` (the pixels a row of a
-    /// triangle covers whole): the same sums as [`Self::add`] pixel by pixel, the ghost's moments summed once
-    /// for the run.
+    /// triangle covers whole): the same sums as [`Self::add`] pixel by pixel, the row's reach widened once.
     #[inline(always)]
     pub(super) fn add_run(&mut self, y: i64, x_lo: i64, x_hi: i64, job: &JobFrame, energy: impl Fn(f64) -> f64) {
         let (x_lo, x_hi) = (x_lo.max(0), x_hi.min(self.width as i64));
         if y < self.y0 as i64 || y >= self.y1 as i64 || x_lo >= x_hi {
             return;
         }
-        let (y, width) = (y as usize, self.width);
-        let row = self.row(y);
-        let (mut sum, mut sum_x) = (0.0, 0.0);
-        for x in x_lo as usize..x_hi as usize {
-            let centre = x as f64 + 0.5;
-            let e = energy(centre);
+        let (r, lo, hi) = (y as usize - self.y0, x_lo as usize, x_hi as usize);
+        self.pend(job);
+        let cut = &mut self.cut[r * self.width..(r + 1) * self.width];
+        for (x, value) in cut.iter_mut().enumerate().take(hi).skip(lo) {
+            let e = energy(x as f64 + 0.5);
             if e > 0.0 {
-                for (c, weight) in job.rgb.into_iter().enumerate() {
-                    if weight != 0.0 {
-                        row[c * width + x] += e * weight;
-                    }
-                }
-                sum += e;
-                sum_x += e * centre;
+                *value += e;
             }
         }
-        self.add_moments(job, y, sum, sum_x);
+        let reach = &mut self.reach[r];
+        *reach = [reach[0].min(lo), reach[1].max(hi)];
     }
 
     /// Adds `a + b x_centre` at each pixel of row `y` from column `x_lo` to before `x_hi`, where that is never
     /// negative over the run (a triangle's linear light over pixels it covers whole): four adds to the row's
-    /// second differences per channel whatever the run's length, the moments in closed form. `false` (nothing
-    /// added) when `a` or `b` is not finite.
+    /// second differences whatever the run's length, the moments in closed form. `false` (nothing added) when
+    /// `a` or `b` is not finite.
     #[inline(always)]
     pub(super) fn add_linear_run(&mut self, y: i64, x_lo: i64, x_hi: i64, job: &JobFrame, a: f64, b: f64) -> bool {
         if !(a.is_finite() && b.is_finite()) {
@@ -306,22 +422,18 @@ impl BandAcc<'_> {
             return true;
         }
         let (y, lo, hi, width) = (y as usize, x_lo as usize, x_hi as usize, self.width);
+        self.pend(job);
         // g(p): the run's light at column p (0 outside it); the second difference at p is
         // g(p) - 2 g(p - 1) + g(p - 2), non-zero only at lo, lo + 1, hi and hi + 1.
         let g = |p: usize| if (lo..hi).contains(&p) { a + b * (p as f64 + 0.5) } else { 0.0 };
         let second = |p: usize| g(p) - 2.0 * g(p.wrapping_sub(1)) + g(p.wrapping_sub(2));
         let at = [lo, lo + 1, hi, hi + 1];
-        let diffs = &mut self.diffs[(y - self.y0) * PLANES * width..(y - self.y0 + 1) * PLANES * width];
+        let diffs = &mut self.diffs[(y - self.y0) * width..(y - self.y0 + 1) * width];
         for (k, &p) in at.iter().enumerate() {
             if p >= width || (k == 2 && hi == lo + 1) {
                 continue;
             }
-            let d = second(p);
-            for (c, weight) in job.rgb.into_iter().enumerate() {
-                if weight != 0.0 {
-                    diffs[c * width + p] += d * weight;
-                }
-            }
+            diffs[p] += second(p);
         }
         let reach = &mut self.reach[y - self.y0];
         *reach = [reach[0].min(lo), reach[1].max((hi + 2).min(width))];
@@ -345,30 +457,10 @@ impl BandAcc<'_> {
     }
 }
 impl Drop for BandAcc<'_> {
-    /// Sums each row's second differences into its planes (two running sums along the row, over the reach
-    /// only: past it what they leave is rounding, not light) and leaves the differences zero for the next band.
+    /// Puts the last job's light into the rows ([`Self::flush`]), leaving the task's scratch zero for the next
+    /// band.
     fn drop(&mut self) {
-        let width = self.width;
-        for r in 0..self.y1 - self.y0 {
-            let [lo, hi] = self.reach[r];
-            let hi = hi.min(width);
-            if lo >= hi {
-                continue;
-            }
-            self.reach[r] = [usize::MAX, 0];
-            let row = Self::row_of(self.rows, width, [self.y0, self.y1], self.y0 + r);
-            let diffs = &mut self.diffs[r * PLANES * width..(r + 1) * PLANES * width];
-            for c in 0..PLANES {
-                let (values, diffs) = (&mut row[c * width..(c + 1) * width], &mut diffs[c * width..(c + 1) * width]);
-                let (mut slope, mut level) = (0.0, 0.0);
-                for x in lo..hi {
-                    slope += diffs[x];
-                    level += slope;
-                    values[x] += level;
-                    diffs[x] = 0.0;
-                }
-            }
-        }
+        self.flush();
     }
 }
 /// What a job's triangles need besides their vertices.
