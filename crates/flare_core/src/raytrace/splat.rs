@@ -133,6 +133,12 @@ struct Pending {
     rgb: [f64; 3],
     luma: f64,
 }
+impl Pending {
+    #[inline(always)]
+    fn of(job: &JobFrame) -> Self {
+        Self { ghost: job.ghost, rgb: job.rgb, luma: job.luma }
+    }
+}
 impl FrameAcc {
     pub(super) fn new(width: usize, height: usize, ghosts: usize) -> Self {
         let bands = band_count(height);
@@ -284,7 +290,7 @@ impl BandAcc<'_> {
     /// Adds `energy` (scalar, before the job's RGB weight) at pixel (x, y) when it lies in the band: into the
     /// task's scratch, the light of another job put into the rows first.
     #[inline(always)]
-    pub(super) fn add(&mut self, x: i64, y: i64, energy: f64, job: &JobFrame) {
+    pub(super) fn add(&mut self, x: i64, y: i64, energy: f64) {
         if x < 0
             || y < self.y0 as i64
             || x >= self.width as i64
@@ -295,16 +301,18 @@ impl BandAcc<'_> {
             return;
         }
         let (x, r) = (x as usize, y as usize - self.y0);
-        self.pend(job);
+        debug_assert!(self.pending.is_some(), "light added before its job was pended");
         self.cut[r * self.width + x] += energy;
         let reach = &mut self.reach[r];
         *reach = [reach[0].min(x), reach[1].max(x + 1)];
     }
 
-    /// Makes `job` the one whose light [`Self::cut`] holds, the light of the one before put in the rows first.
+    /// Makes `job` the one whose light the scratch holds, the light of the one before put in the rows first:
+    /// what [`splat_triangle`] does before it adds ([`Self::add`], [`Self::add_run`], [`Self::add_linear_run`]
+    /// add to the job pended last).
     #[inline(always)]
-    fn pend(&mut self, job: &JobFrame) {
-        let pending = Pending { ghost: job.ghost, rgb: job.rgb, luma: job.luma };
+    pub(super) fn pend(&mut self, job: &JobFrame) {
+        let pending = Pending::of(job);
         if self.pending != Some(pending) {
             self.flush();
             self.pending = Some(pending);
@@ -390,13 +398,13 @@ impl BandAcc<'_> {
     /// Adds `energy(x_centre)` at each pixel of row `y` from column `x_lo` to before `x_hi` (the pixels a row of a
     /// triangle covers whole): the same sums as [`Self::add`] pixel by pixel, the row's reach widened once.
     #[inline(always)]
-    pub(super) fn add_run(&mut self, y: i64, x_lo: i64, x_hi: i64, job: &JobFrame, energy: impl Fn(f64) -> f64) {
+    pub(super) fn add_run(&mut self, y: i64, x_lo: i64, x_hi: i64, energy: impl Fn(f64) -> f64) {
         let (x_lo, x_hi) = (x_lo.max(0), x_hi.min(self.width as i64));
         if y < self.y0 as i64 || y >= self.y1 as i64 || x_lo >= x_hi {
             return;
         }
         let (r, lo, hi) = (y as usize - self.y0, x_lo as usize, x_hi as usize);
-        self.pend(job);
+        debug_assert!(self.pending.is_some(), "light added before its job was pended");
         let cut = &mut self.cut[r * self.width..(r + 1) * self.width];
         for (x, value) in cut.iter_mut().enumerate().take(hi).skip(lo) {
             let e = energy(x as f64 + 0.5);
@@ -422,7 +430,7 @@ impl BandAcc<'_> {
             return true;
         }
         let (y, lo, hi, width) = (y as usize, x_lo as usize, x_hi as usize, self.width);
-        self.pend(job);
+        debug_assert!(self.pending == Some(Pending::of(job)), "light added before its job was pended");
         // g(p): the run's light at column p (0 outside it); the second difference at p is
         // g(p) - 2 g(p - 1) + g(p - 2), non-zero only at lo, lo + 1, hi and hi + 1.
         let g = |p: usize| if (lo..hi).contains(&p) { a + b * (p as f64 + 0.5) } else { 0.0 };
@@ -689,12 +697,13 @@ pub(super) fn splat_triangle(tri: [&Vertex; 3], frame: &JobFrame, acc: &mut Band
     if y_hi < acc.y0 as f64 || y_lo >= acc.y1 as f64 {
         return;
     }
+    acc.pend(frame);
     let at = |l: [f64; 3]| [0, 1].map(|c| l[0] * pixels[0][c] + l[1] * pixels[1][c] + l[2] * pixels[2][c]);
     let Some(interp) = Interpolator::new(pixels) else {
         // Collapsed to a line or a point (a ghost focused there): all of its energy in the pixel of its centroid.
         let c = at([1.0 / 3.0; 3]);
         let energy = frame.triangle_flux * TriangleShader::mean(tri, frame).shade(c);
-        acc.add(c[0].floor() as i64, c[1].floor() as i64, energy, frame);
+        acc.add(c[0].floor() as i64, c[1].floor() as i64, energy);
         return;
     };
     let shader = TriangleShader::new(tri, &interp, frame);
@@ -703,7 +712,7 @@ pub(super) fn splat_triangle(tri: [&Vertex; 3], frame: &JobFrame, acc: &mut Band
     let (col, row) = (x_lo.floor(), y_lo.floor());
     if x_hi < col + 1.0 && y_hi < row + 1.0 {
         // Inside one pixel: all of it there.
-        acc.add(col as i64, row as i64, frame.triangle_flux * shader.shade(at([1.0 / 3.0; 3])), frame);
+        acc.add(col as i64, row as i64, frame.triangle_flux * shader.shade(at([1.0 / 3.0; 3])));
         return;
     }
     // Irradiance (the triangle's flux over its footprint) x the area it covers of each pixel, shaded at the
@@ -744,9 +753,9 @@ pub(super) fn splat_triangle(tri: [&Vertex; 3], frame: &JobFrame, acc: &mut Band
                     let a = irradiance * (weight.a0 + weight.ay * centre_y);
                     if !(linear && acc.add_linear_run(y as i64, lo, hi, frame, a, irradiance * weight.ax)) {
                         if shader.open {
-                            acc.add_run(y as i64, lo, hi, frame, |x| irradiance * shader.shade_open([x, centre_y]));
+                            acc.add_run(y as i64, lo, hi, |x| irradiance * shader.shade_open([x, centre_y]));
                         } else {
-                            acc.add_run(y as i64, lo, hi, frame, |x| irradiance * shader.shade([x, centre_y]));
+                            acc.add_run(y as i64, lo, hi, |x| irradiance * shader.shade([x, centre_y]));
                         }
                     }
                     x = full_hi;
@@ -759,7 +768,7 @@ pub(super) fn splat_triangle(tri: [&Vertex; 3], frame: &JobFrame, acc: &mut Band
                     } else {
                         area * shader.shade([x + mx / area, y + my / area])
                     };
-                    acc.add(x as i64, y as i64, irradiance * light, frame);
+                    acc.add(x as i64, y as i64, irradiance * light);
                 }
                 x += 1.0;
             }
