@@ -80,14 +80,21 @@ impl TracedGhosts {
     pub fn trace(&self, device: &Device, frame: &Frame) -> Result<Traced, FrameError> {
         match &frame.request.cull_gains {
             // A frame culled as another (a ghost's own): its jobs left out as that frame's are.
-            Some(_) => self.trace_gains(device, frame, &frame.request.ghost_gains, Some(&self.dim_jobs(frame)?)),
+            Some(_) => {
+                self.trace_gains(device, frame, &frame.request.ghost_gains, Some(&self.dim_jobs(device, frame)?))
+            }
             None => self.trace_gains(device, frame, &frame.request.ghost_gains, None),
         }
     }
 
     /// Per job of the renderer, whether `frame` leaves it out as too dim to see, at its cull gains (its ghost
-    /// gains when it has none).
-    fn dim_jobs(&self, frame: &Frame) -> Result<Vec<bool>, FrameError> {
+    /// gains when it has none). None (an empty choice: every job drawn) where `device` draws the ray grids: the
+    /// GPU draws every job, and so does the CPU should the GPU fail and the frame fall back to it, so no trace
+    /// is spent on a choice nothing would use.
+    fn dim_jobs(&self, device: &Device, frame: &Frame) -> Result<Vec<bool>, FrameError> {
+        if matches!((&self.gpu, device, self.grid), (Some(_), Device::Gpu(_), Grid::Fixed(_))) {
+            return Ok(Vec::new());
+        }
         let cull_gains = frame.request.cull_gains.as_deref().unwrap_or(&frame.request.ghost_gains);
         self.renderer
             .dim_jobs(&self.cpu_request(frame, cull_gains, None))
@@ -204,7 +211,7 @@ impl TracedGhosts {
         let gains = &frame.request.ghost_gains;
         // The jobs the whole frame leaves out as too dim, left out of each ghost's layer too (the layers sum to
         // the flare).
-        let dim = self.dim_jobs(frame)?;
+        let dim = self.dim_jobs(device, frame)?;
         let mut made = 0;
         for (g, model) in sources.flare.system.ghosts.iter().enumerate() {
             let gain = gains.get(g).copied().unwrap_or(1.0);

@@ -119,7 +119,7 @@ pub(super) struct BandAcc<'a> {
     pub(super) y1: usize,
     rows: &'a mut Option<Vec<f64>>,
     /// The light of the job in `pending` before its RGB weight ([`Scratch`]'s, rows `y0..y1`): it goes into
-    /// the rows when another job adds or the band is done ([`Self::flush`]).
+    /// the rows when another job is pended or the band is done ([`Self::flush`]).
     cut: &'a mut [f64],
     diffs: &'a mut [f64],
     reach: &'a mut [[usize; 2]],
@@ -160,30 +160,26 @@ impl FrameAcc {
     /// Runs `draw` on every band, the bands in parallel.
     pub(super) fn splat(&mut self, draw: impl Fn(&mut BandAcc) + Sync) {
         let (width, height) = (self.width, self.height);
-        self.bands
-            .par_iter_mut()
-            .zip(self.moments.par_iter_mut())
-            .enumerate()
-            .for_each(|(b, (rows, moments))| {
-                let y0 = b * BAND_ROWS;
-                let y1 = (y0 + BAND_ROWS).min(height);
-                SCRATCH.with_borrow_mut(|scratch| {
-                    let rows_drawn = y1 - y0;
-                    scratch.fit(width, rows_drawn);
-                    draw(&mut BandAcc {
-                        width,
-                        height,
-                        y0,
-                        y1,
-                        rows,
-                        cut: &mut scratch.cut[..width * rows_drawn],
-                        diffs: &mut scratch.diffs[..width * rows_drawn],
-                        reach: &mut scratch.reach[..rows_drawn],
-                        pending: None,
-                        moments,
-                    });
+        self.bands.par_iter_mut().zip(self.moments.par_iter_mut()).enumerate().for_each(|(b, (rows, moments))| {
+            let y0 = b * BAND_ROWS;
+            let y1 = (y0 + BAND_ROWS).min(height);
+            SCRATCH.with_borrow_mut(|scratch| {
+                let rows_drawn = y1 - y0;
+                scratch.fit(width, rows_drawn);
+                draw(&mut BandAcc {
+                    width,
+                    height,
+                    y0,
+                    y1,
+                    rows,
+                    cut: &mut scratch.cut[..width * rows_drawn],
+                    diffs: &mut scratch.diffs[..width * rows_drawn],
+                    reach: &mut scratch.reach[..rows_drawn],
+                    pending: None,
+                    moments,
                 });
             });
+        });
     }
 
     /// The whole frame as one band (the unit tests' way to splat single triangles).
@@ -288,7 +284,7 @@ impl BandAcc<'_> {
     }
 
     /// Adds `energy` (scalar, before the job's RGB weight) at pixel (x, y) when it lies in the band: into the
-    /// task's scratch, the light of another job put into the rows first.
+    /// task's scratch, for the job pended last ([`Self::pend`]).
     #[inline(always)]
     pub(super) fn add(&mut self, x: i64, y: i64, energy: f64) {
         if x < 0
@@ -319,9 +315,10 @@ impl BandAcc<'_> {
         }
     }
 
-    /// Puts the pending job's cut light into the rows, each channel times its weight (a channel the wavelength
-    /// does not weigh is left alone), and into the ghost's moments; leaves the cut plane zero. Compiled for
-    /// AVX2 too, used where the processor has it (the same results: no sum changes its order).
+    /// Puts the pending job's light into the rows, each channel times its weight (a channel the wavelength does
+    /// not weigh is left alone): the cut pixels' (whose moments it adds to the ghost's) and the runs' from their
+    /// second differences. Leaves the scratch zero. Compiled for AVX2 too, used where the processor has it (the
+    /// same results: no sum changes its order).
     fn flush(&mut self) {
         #[cfg(target_arch = "x86_64")]
         if crate::optics::simd_level() >= 1 {

@@ -65,7 +65,8 @@ pub enum Dim<'a> {
     /// [`RayGridRenderer::render_request`]), never an estimate.
     Below(f64),
     /// The jobs whose entry (by the renderer's job order, [`RayGridRenderer::dim_jobs`]) is `true` are left out:
-    /// a ghost's own layer left out as its whole frame decided.
+    /// a ghost's own layer left out as its whole frame decided. A job past the slice's end is drawn (an empty
+    /// slice draws every job).
     Skip(&'a [bool]),
 }
 
