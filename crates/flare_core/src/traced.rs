@@ -13,7 +13,8 @@
 //! On the CPU a ray grid (not the reference) leaves out the ghost x wavelength jobs too dim to see at the
 //! frame's exposure, as the paraxial sprites and the LUT images are ([`crate::raytrace::Dim::Below`], the
 //! flare's threshold over the light's gain); a ghost's layer leaves out what its whole frame did. The GPU's ray
-//! grid draws every job: its frame holds at most the threshold more light at any pixel.
+//! grid draws every job, for a frame and for its ghosts' layers alike (no choice is traced for them): its frame
+//! holds at most the threshold more light at any pixel.
 //! [`crate::shot::sequence::render_sequence`] traces each frame of a sequence this way when asked.
 
 use crate::flare::PreparedFlare;
