@@ -378,8 +378,9 @@ impl LutScene {
     /// Leaves out the faintest instances, as many as can go while their peaks (the entry's brightest texel
     /// times the instance's gain) sum to at most `threshold` (linear relative irradiance): what is left out
     /// adds at most `threshold` to any pixel, however many overlap, as the paraxial sprites are culled
-    /// ([`crate::ghost::GhostSystem::frame_into`]). Returns how many were left out. In the alpha mode nothing
-    /// is left out (a faint image still covers what lies beneath it).
+    /// ([`crate::ghost::GhostSystem::frame_into`]); the rule a ray grid's dim jobs are chosen by
+    /// ([`crate::raytrace::faintest`]). Returns how many were left out. In the alpha mode nothing is left out (a
+    /// faint image still covers what lies beneath it).
     pub fn cull_faint(&mut self, threshold: f64, footprints: &[Vec<Vec<Footprint>>]) -> usize {
         if self.alpha_over || threshold.is_nan() || threshold <= 0.0 {
             return 0;
@@ -389,16 +390,8 @@ impl LutScene {
             let c = self.instances[k].colour;
             f64::from(texel) * f64::from(c[0].max(c[1]).max(c[2]).max(0.0))
         };
-        let mut order: Vec<(f64, usize)> = (0..self.instances.len()).map(|k| (peak(k), k)).collect();
-        order.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let (mut sum, mut culled) = (0.0, vec![false; self.instances.len()]);
-        for &(p, k) in &order {
-            if (sum + p).is_nan() || sum + p > threshold {
-                break;
-            }
-            sum += p;
-            culled[k] = true;
-        }
+        let peaks: Vec<f64> = (0..self.instances.len()).map(peak).collect();
+        let culled = crate::raytrace::faintest(&peaks, threshold);
         let count = culled.iter().filter(|&&c| c).count();
         if count > 0 {
             let mut k = 0;

@@ -65,7 +65,7 @@ pub use grid::{DENSE_TABLE_SAMPLES, GRID_RANGE, Grid, REFERENCE_GRID, REFERENCE_
 pub use splat::{RayGridImage, RayGridStats};
 pub use tracer::{
     Dim, EntranceHint, Ghosts, LitCells, PlannedJob, RayGridError, RayGridRenderer, RayGridRequest, RayGridSetup,
-    Scout, TracedGhost,
+    Scout, TracedGhost, faintest,
 };
 
 #[cfg(test)]

@@ -958,7 +958,7 @@ impl TracedJob<'_> {
         for b in 0..bands {
             starts[b + 1] += starts[b];
         }
-        let reach_count = reach.len();
+        let lit = reach.len();
         let mut tris = vec![0u32; starts[bands] as usize];
         let mut next = starts.clone();
         for (t, first, last) in reach {
@@ -967,7 +967,6 @@ impl TracedJob<'_> {
                 next[b] += 1;
             }
         }
-        let lit = reach_count;
         Seen { vertices, starts, tris, lit, peak: peaks.map_or(0.0, |p| p.peak()) }
     }
 
@@ -1056,23 +1055,24 @@ fn plan_of<'s>(ghosts: Ghosts<'s>) -> impl Fn(&Job) -> Option<(Option<&'s Traced
     }
 }
 
-/// Which of the jobs of `peaks` are left out as too dim ([`Dim::Below`]): the faintest, as many as can go while
-/// their peaks sum to at most `threshold` (ties in the jobs' order; a peak that is not finite is never left
-/// out, and neither is anything when `threshold` is not positive).
-fn faintest(peaks: &[f64], threshold: f64) -> Vec<bool> {
+/// Which of `peaks` are left out as too dim to see, the rule of [`Dim::Below`] and of the LUT ghosts
+/// ([`crate::lut::blend::LutScene::cull_faint`]): the faintest, as many as can go while their peaks sum to at
+/// most `threshold` (ties in the given order). A peak that is negative or not finite ends the choice, and nothing
+/// goes when `threshold` is not positive.
+pub fn faintest(peaks: &[f64], threshold: f64) -> Vec<bool> {
     let mut out = vec![false; peaks.len()];
     if threshold.is_nan() || threshold <= 0.0 {
         return out;
     }
     let mut order: Vec<usize> = (0..peaks.len()).collect();
     order.sort_by(|&a, &b| peaks[a].total_cmp(&peaks[b]).then(a.cmp(&b)));
-    let mut left = threshold;
+    let mut sum = 0.0;
     for k in order {
         let peak = peaks[k];
-        if !(peak.is_finite() && peak >= 0.0 && peak <= left) {
+        if !(peak.is_finite() && peak >= 0.0 && sum + peak <= threshold) {
             break;
         }
-        left -= peak;
+        sum += peak;
         out[k] = true;
     }
     out
