@@ -671,7 +671,7 @@ fn a_plate_sequence_finds_the_light_and_exports_on_a_thread_as_render_frames_doe
     let dir = tempfile::tempdir().unwrap();
     let shot = SyntheticShot { frames: 1..=4, ..SyntheticShot::small() };
     let plates = dir.path().join("plates/sun.####.exr").display().to_string();
-    shot.write(&flare_core::shot::pattern::FramePattern::parse(&plates).unwrap().unwrap(), None).unwrap();
+    shot.write(&flare_core::footage::pattern::FramePattern::parse(&plates).unwrap().unwrap(), None).unwrap();
     let mut doc = flare_core::preset::Document {
         background: Some(plates),
         auto_light: Some(Default::default()),
@@ -759,8 +759,8 @@ fn inserting_a_surface_splits_a_gap_and_changes_nothing_optically() {
 
 #[test]
 fn lut_ghosts_bake_by_themselves_and_undo_to_a_baked_lens_needs_no_bake() {
-    use flare_core::lut::bake::BakeSettings;
-    use flare_core::lut::cache::LutCache;
+    use flare_core::bake::BakeSettings;
+    use flare_core::bake::cache::LutCache;
     use flare_core::preset::LutSource;
     use flarelab::panels::BakeStatus;
     let dir = tempfile::tempdir().unwrap();
@@ -1374,7 +1374,7 @@ fn an_export_over_a_plate_is_the_plates_size_unless_set() {
 /// which keeps the ghosts of the LUT before it that did not change.
 #[test]
 fn an_exposure_tweak_does_not_restart_the_bake_and_quick_lens_edits_start_one() {
-    use flare_core::lut::bake::BakeSettings;
+    use flare_core::bake::BakeSettings;
     use flarelab::panels::BakeStatus;
     let coarse = BakeSettings { res: 32, grid: 16, initial_steps: 2, tolerance: 0.5, ..BakeSettings::default() };
     let mut app = FlareLabApp::new(None, Some(flare_core::preset::Document::default()));

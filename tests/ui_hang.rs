@@ -41,7 +41,7 @@ fn the_hang_replayed_every_frame_answers_and_every_cancel_ends_its_threads() {
     let Some(mut h) = gpu_harness(Some(doc)) else { return };
     h.state_mut().jobs_mut().set_auto_bake(true);
     h.state_mut().jobs_mut().autobake_mut().cache =
-        Some(flare_core::lut::cache::LutCache::new(dir.path().join("cache")));
+        Some(flare_core::bake::cache::LutCache::new(dir.path().join("cache")));
     let mut worst = (Duration::ZERO, String::new());
     let mut frames = 0usize;
     let mut step = |h: &mut Harness<'static, FlareLabApp>, what: &str| {

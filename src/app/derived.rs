@@ -19,6 +19,7 @@ use std::time::Instant;
 
 use eframe::egui_wgpu::RenderState;
 use flare_core::flare::PreparedFlare;
+use flare_core::footage::pattern::FramePattern;
 use flare_core::frame::{Draft, DraftOutcome, Frame, FrameRequest};
 use flare_core::ghost::{FrameStats, GhostFrame, GhostSystem, Sprite};
 use flare_core::image::HdrImage;
@@ -28,7 +29,6 @@ use flare_core::optics::FirstOrder;
 use flare_core::preset::{Document, LutSource};
 use flare_core::render::gpu::LutAtlas;
 use flare_core::shot::ShotPlan;
-use flare_core::shot::pattern::FramePattern;
 
 use super::plates::{PREFETCH, PlateCache};
 

@@ -15,10 +15,10 @@
 use std::path::PathBuf;
 
 use eframe::egui;
+use flare_core::footage::detect::AutoLight;
+use flare_core::footage::pattern::FramePattern;
 use flare_core::preset::ghost_key;
 use flare_core::shot::ShotPlan;
-use flare_core::shot::detect::AutoLight;
-use flare_core::shot::pattern::FramePattern;
 use flare_core::timeline::Interpolation;
 
 use super::derived::Derived;

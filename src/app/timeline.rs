@@ -12,7 +12,7 @@
 //! playhead at the timeline's rate, looping over the range, and asks for a repaint only while it plays.
 
 use eframe::egui;
-use flare_core::shot::pattern::{FramePattern, sequence_of};
+use flare_core::footage::pattern::{FramePattern, sequence_of};
 use flare_core::shot::track::{read_track, to_keys};
 
 use super::FlareLabApp;

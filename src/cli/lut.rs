@@ -7,9 +7,9 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
+use flare_core::bake::classify::{ClassifySettings, GhostClass, classify};
+use flare_core::bake::{BakeProgress, BakeSettings, bake_with, useful_field_deg};
 use flare_core::flare::PreparedFlare;
-use flare_core::lut::bake::{BakeProgress, BakeSettings, bake_with, useful_field_deg};
-use flare_core::lut::classify::{ClassifySettings, GhostClass, classify};
 use flare_core::lut::{GhostLut, format, photo};
 use flare_core::raytrace::RayGridRenderer;
 use flare_core::render::gpu::GpuContext;
@@ -28,7 +28,7 @@ pub struct LutChoice {
     pub threshold: f64,
     /// A non-linear ghost whose peak is under this fraction of the brightest ghost's is faint and stays
     /// paraxial (0 bakes every non-linear ghost).
-    #[arg(long, default_value_t = flare_core::lut::classify::DEFAULT_FAINT_FRACTION)]
+    #[arg(long, default_value_t = flare_core::bake::classify::DEFAULT_FAINT_FRACTION)]
     pub faint: f64,
     /// Ghosts to bake whatever the measure says, as surface pairs: 4-6,2-9.
     #[arg(long, value_delimiter = ',')]
@@ -107,7 +107,7 @@ impl Default for LutChoice {
         Self {
             theta_max: None,
             threshold: 0.15,
-            faint: flare_core::lut::classify::DEFAULT_FAINT_FRACTION,
+            faint: flare_core::bake::classify::DEFAULT_FAINT_FRACTION,
             force_nonlinear: Vec::new(),
             force_linear: Vec::new(),
         }

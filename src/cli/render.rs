@@ -21,10 +21,10 @@ use flare_core::output::read_plate;
 use flare_core::preset::{Document, LutSource};
 use flare_core::raytrace::{self};
 
+use flare_core::footage::pattern::FramePattern;
 use flare_core::frame::parse_size;
 use flare_core::shot::{
     self,
-    pattern::FramePattern,
     sequence::{FrameOutcome, SequenceOptions, ShotSources, render_sequence, write_log},
     track::read_track,
 };
@@ -575,16 +575,16 @@ fn lut_for(doc: &Document, flare: &PreparedFlare, method: Method, near_theta_deg
             }
             // The LUT baked for this lens and these settings: the app's and this command's shared cache, else
             // baked now (and cached for next time).
-            let settings = flare_core::lut::bake::BakeSettings::default();
-            let cache = flare_core::lut::cache::LutCache::user();
+            let settings = flare_core::bake::BakeSettings::default();
+            let cache = flare_core::bake::cache::LutCache::user();
             if let Some(cache) = &cache {
                 match cache.load_near(&doc.lens, &flare.config, &settings, near_theta_deg) {
-                    flare_core::lut::cache::Lookup::Hit(lut) => {
+                    flare_core::bake::cache::Lookup::Hit(lut) => {
                         eprintln!("LUT ghosts from the cache ({})", cache.dir.display());
                         return Ok(*lut);
                     }
-                    flare_core::lut::cache::Lookup::Rejected(reason) => eprintln!("{reason}: baking it again"),
-                    flare_core::lut::cache::Lookup::Miss => {}
+                    flare_core::bake::cache::Lookup::Rejected(reason) => eprintln!("{reason}: baking it again"),
+                    flare_core::bake::cache::Lookup::Miss => {}
                 }
             }
             let renderer = flare.ray_grid_renderer();

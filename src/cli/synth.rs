@@ -4,8 +4,8 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
+use flare_core::footage::pattern::FramePattern;
 use flare_core::frame::parse_size;
-use flare_core::shot::pattern::FramePattern;
 use flare_core::shot::synthetic::SyntheticShot;
 
 #[derive(clap::Args, Debug)]

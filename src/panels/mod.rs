@@ -10,8 +10,8 @@ pub mod lens;
 pub mod ray_diagram;
 
 use eframe::egui;
+use flare_core::bake::classify::GhostClass;
 use flare_core::flare::PreparedFlare;
-use flare_core::lut::classify::GhostClass;
 use flare_core::optics::FirstOrder;
 
 /// One ghost as the list shows it (from the last rendered frame).

@@ -12,13 +12,16 @@
 //! times its square's share of the frame, summed) would lift the frame's mean above [`MAX_FRAME_MEAN`]: a
 //! lens with hundreds of large faint ghosts is not exposed into a wash. The result is bounded to the
 //! document's range of -40 to 40 stops. A lens with no ghost light
-//! at all (every entrance region empty) gets [`crate::render::DEFAULT_FLARE_EV`].
+//! at all (every entrance region empty) gets [`DEFAULT_FLARE_EV`].
 //!
 //! The exposure depends on the optics and the sensor width only, never on the light's position or a display
 //! setting: it is the same for every frame of a shot and the same in the app and on the command line.
 
 use crate::ghost::{FrameSettings, GhostSystem};
 use crate::optics::sensor::Sensor;
+
+/// The default flare exposure (stops): a quarter-wave coated lens's ghosts (about 1e-4 of the light) show.
+pub const DEFAULT_FLARE_EV: f64 = 10.5;
 
 /// The display level (linear, before the tonemap) the brightest ghost is exposed to.
 pub const AUTO_DISPLAY_LEVEL: f64 = 0.6;
@@ -78,7 +81,7 @@ pub fn ghost_levels(system: &GhostSystem, sensor_width_mm: f64) -> GhostLevels {
 pub fn auto_flare_ev(system: &GhostSystem, sensor_width_mm: f64) -> f64 {
     let levels = ghost_levels(system, sensor_width_mm);
     if levels.brightest_peak <= 0.0 {
-        return crate::render::DEFAULT_FLARE_EV;
+        return DEFAULT_FLARE_EV;
     }
     let gain = (AUTO_DISPLAY_LEVEL / levels.brightest_peak).min(if levels.frame_mean > 0.0 {
         MAX_FRAME_MEAN / levels.frame_mean

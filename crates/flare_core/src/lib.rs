@@ -10,9 +10,9 @@
 //! (request, frame, drawn by [`render`]'s wgpu renderer or its CPU twin, layers), and [`output`] the one image
 //! writer. [`raytrace`] is the other family: ghosts ray-traced exactly on a grid (the ground-truth reference,
 //! and Hullin 2011's ray grids, which [`render`]'s `raygrid` also traces and draws on the GPU, in f32, the f64
-//! tracer its twin); [`lut`] bakes the non-linear ones into LUTs blended at run time; [`metrics`]
+//! tracer its twin); [`lut`] holds the non-linear ones as LUTs blended at run time and [`bake`] bakes them; [`metrics`]
 //! measures any image against the reference. [`timeline`] animates a document over frames and [`shot`] makes
-//! a shot of it: plate sequences, tracks, the light found in the plate, and sequences rendered frame by frame
+//! a shot of it: plate sequences ([`footage`]), tracks, the light found in the plate, and sequences rendered frame by frame
 //! through [`frame`]. [`dof`] defocuses the plate through the same lens and aperture from a depth map (an
 //! exact layered reference and a live layered method that `render` also runs on the GPU) before the flare is
 //! drawn over it. [`view_transform`] is the colour management (an OCIO config's display and view, its CPU
@@ -20,12 +20,26 @@
 //! drafts. [`color`], [`image`], [`files`] and [`fingerprint`] are the small
 //! shared pieces (tonemaps and exposures in stops, images, atomic writes, stable hashes).
 //!
+//! # Layers
+//! Every module (a file or a folder, a "room") sits in one layer, and imports only from its own layer and the
+//! layers below; no two rooms import each other, directly or around a loop. `tests/architecture.rs` reads
+//! this list and checks every import of the code against it:
+//! 1. **Shared pieces**: [`color`], [`files`], [`fingerprint`], [`image`], [`timing`], [`metrics`],
+//!    [`output`], [`ocio_files`].
+//! 2. **Optics**: [`optics`], [`spectrum`], [`coating`], [`aperture`].
+//! 3. **What the light does, and what is read for it**: [`ghost`], [`raytrace`], [`starburst`], [`dirt`],
+//!    [`dof`], [`lut`], [`exposure`], [`report`], [`view_transform`], [`view_lut`], [`footage`].
+//! 4. **Drawing**: [`render`] (the GPU renderer and its CPU twin; it knows scenes, never a lens or a document).
+//! 5. **One frame**: [`flare`], [`shutter`], [`frame`], [`traced`], [`bake`].
+//! 6. **The document and its shots**: [`timeline`], [`preset`], [`shot`].
+//!
 //! All numerics are f64 on the CPU; every singular case (total internal reflection, a ray missing a surface,
 //! a flat surface, an afocal lens, a ghost focused to a point) is an explicit outcome or a bounded value, never
 //! a NaN, and only finite values reach GPU buffers. The physics and the two patented methods are summed up in
 //! `crates/flare_core/METHOD.md`.
 
 pub mod aperture;
+pub mod bake;
 pub mod coating;
 pub mod color;
 pub mod dirt;
@@ -34,6 +48,7 @@ pub mod exposure;
 pub mod files;
 pub mod fingerprint;
 pub mod flare;
+pub mod footage;
 pub mod frame;
 pub mod ghost;
 pub mod image;

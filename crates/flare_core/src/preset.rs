@@ -27,17 +27,18 @@ use serde::{Deserialize, Serialize};
 
 use crate::aperture::{Aperture, ApertureShape, DEFAULT_MASK_SIZE};
 use crate::color::Tonemap;
+use crate::exposure::DEFAULT_FLARE_EV;
 use crate::files::write_atomic;
 use crate::flare::FlareConfig;
+use crate::footage::detect::AutoLight;
+use crate::footage::pattern::FramePattern;
 use crate::frame::{FrameRequest, LutUse};
 use crate::ghost::GhostSystem;
 use crate::lut::blend::{BlendMode, BlendSettings};
 use crate::optics::library::default_lens;
 use crate::optics::sensor::FULL_FRAME_WIDTH_MM;
 use crate::optics::{Coating, Lens};
-use crate::render::{DEFAULT_FLARE_EV, DisplaySettings};
-use crate::shot::detect::AutoLight;
-use crate::shot::pattern::FramePattern;
+use crate::render::DisplaySettings;
 use crate::spectrum::Spectrum;
 use crate::timeline::Timeline;
 
@@ -162,13 +163,13 @@ pub struct Document {
     /// makes it, see [`crate::starburst`]).
     pub starburst_ev: f64,
     /// Background plate file (PNG/EXR/HDR/JPEG), if any; a sequence when it has a frame field
-    /// (`shot.####.exr` or `shot.%04d.exr`, [`crate::shot::pattern`]).
+    /// (`shot.####.exr` or `shot.%04d.exr`, [`crate::footage::pattern`]).
     pub background: Option<String>,
     /// The width of the sensor the frame (and the plate) spans, in mm (36: full frame).
     pub sensor_width_mm: f64,
     /// The shot: frame range, frame rate and keys ([`crate::timeline`]).
     pub timeline: Timeline,
-    /// Find the light in the plate on every frame ([`crate::shot::detect`]); `None`: the keys or the static
+    /// Find the light in the plate on every frame ([`crate::footage::detect`]); `None`: the keys or the static
     /// light say where it is.
     pub auto_light: Option<AutoLight>,
     /// Depth of field of the plate through the same lens and stop ([`crate::dof`]).

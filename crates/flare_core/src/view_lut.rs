@@ -27,6 +27,10 @@ use std::sync::{Arc, Mutex};
 
 use crate::view_transform::{ViewTransform, WgslShader, WgslTexture};
 
+/// The OCIO view baked into a cube (its shaper's constants are put before it, [`ViewLut::shader`]): the
+/// tonemap's `ocio_display` for a software adapter's drafts.
+pub const OCIO_LUT_WGSL: &str = include_str!("../../../shaders/ocio_lut.wgsl");
+
 /// The cube's nodes per side.
 pub const SIZE: usize = 65;
 /// The shaper's linear toe: the offset added before the logarithm.
@@ -178,7 +182,7 @@ impl ViewLut {
         let text = format!(
             "const VIEW_LUT_OFFSET: f32 = {OFFSET:?};\nconst VIEW_LUT_LOG2_OFFSET: f32 = {low:?};\n\
              const VIEW_LUT_INVERSE_RANGE: f32 = {inverse_range:?};\n{}",
-            crate::render::shaders::OCIO_LUT_WGSL
+            OCIO_LUT_WGSL
         );
         let side = self.size as u32;
         WgslShader {

@@ -1,10 +1,15 @@
-//! The shape of the house: no import cycle between the modules of the core or of the app.
+//! The shape of the house: no import cycle between the modules of the core or of the app, and the core's
+//! rooms (its top-level files and folders) in strict layers.
 //!
 //! Each source file is a module (`a/b.rs` and `a/b/mod.rs` are `a::b`). A module depends on every module its
 //! code (not its comments, not its `#[cfg(test)]` tests) names through `crate::...` or `super::...`, resolved
 //! to the longest module path that exists, and every child module it names by a relative path (`plot::Row` in
 //! the module that declares `mod plot`). A depth-first search then looks for a cycle; the first one found
 //! is printed in full.
+//!
+//! The layers are the numbered list under "# Layers" in the core's `lib.rs` (its docs are the map): a room may
+//! import from its own layer and the layers below, never from one above, and the rooms' graph (every module's
+//! imports, gathered by room) has no cycle either, so no two rooms of a layer import each other.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
@@ -182,6 +187,120 @@ fn no_module_of_the_core_or_the_app_imports_in_a_cycle() {
         }
         assert!(all.is_empty(), "{what}: import cycles:\n{}", all.join("\n"));
     }
+}
+
+/// The layers of the core, bottom first, as the "# Layers" list of `lib.rs` names them (each room in
+/// backticks, as an intra-doc link).
+fn layers_of(lib_rs: &str) -> Vec<Vec<String>> {
+    let mut layers: Vec<Vec<String>> = Vec::new();
+    let mut inside = false;
+    for line in lib_rs.lines().map(|l| l.trim_start_matches("//!")) {
+        if line.starts_with(" # ") {
+            inside = line.trim() == "# Layers";
+            continue;
+        }
+        if !inside {
+            continue;
+        }
+        let item = line.trim_start();
+        let numbered =
+            item.split_once(". ").is_some_and(|(n, _)| !n.is_empty() && n.chars().all(|c| c.is_ascii_digit()));
+        if numbered {
+            layers.push(Vec::new());
+        } else if !line.starts_with("    ") {
+            continue; // the prose before and after the list
+        }
+        let Some(layer) = layers.last_mut() else { continue };
+        // The rooms are the links' names: "[`render`]".
+        layer.extend(item.split("[`").skip(1).filter_map(|r| r.split_once("`]")).map(|(room, _)| room.to_owned()));
+    }
+    layers
+}
+
+/// The room of a module: its first segment.
+fn room(module: &str) -> &str {
+    module.split("::").next().unwrap_or(module)
+}
+
+/// Every import of `graph` that breaks `layers`: one that goes up a layer, a room no layer names, and the rooms'
+/// cycles, each said with the modules that make it.
+fn layer_breaks(graph: &Graph, layers: &[Vec<String>]) -> Vec<String> {
+    let layer_of = |r: &str| layers.iter().position(|l| l.iter().any(|x| x == r));
+    let mut breaks = Vec::new();
+    let mut rooms = Graph::new();
+    let mut why: BTreeMap<(String, String), String> = BTreeMap::new();
+    for (module, deps) in graph.iter().filter(|(m, _)| *m != "crate") {
+        let from = room(module);
+        rooms.entry(from.to_owned()).or_default();
+        if layer_of(from).is_none() {
+            breaks.push(format!("the room {from} is in no layer of lib.rs's \"# Layers\""));
+        }
+        for dep in deps.iter().filter(|d| room(d) != from && *d != "crate") {
+            let to = room(dep);
+            rooms.get_mut(from).unwrap().insert(to.to_owned());
+            why.entry((from.to_owned(), to.to_owned())).or_insert_with(|| format!("{module} -> {dep}"));
+            if let (Some(a), Some(b)) = (layer_of(from), layer_of(to))
+                && b > a
+            {
+                breaks.push(format!("{module} -> {dep}: layer {} imports from layer {} above it", a + 1, b + 1));
+            }
+        }
+    }
+    let mut g = rooms;
+    while let Some(cycle) = find_cycle(&g) {
+        let said: Vec<&str> = cycle.windows(2).map(|w| why[&(w[0].clone(), w[1].clone())].as_str()).collect();
+        breaks.push(format!("rooms in a cycle: {} ({})", cycle.join(" -> "), said.join(", ")));
+        let n = cycle.len();
+        g.get_mut(&cycle[n - 2]).unwrap().remove(&cycle[n - 1]);
+    }
+    breaks.sort();
+    breaks.dedup();
+    breaks
+}
+
+fn core_layers() -> (Graph, Vec<Vec<String>>) {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let lib_rs = std::fs::read_to_string(src.join("lib.rs")).unwrap();
+    (graph(&src), layers_of(&lib_rs))
+}
+
+#[test]
+fn the_core_s_rooms_import_only_from_their_layer_and_below() {
+    let (graph, layers) = core_layers();
+    assert!(layers.len() >= 5, "the layers read from lib.rs: {layers:?}");
+    let named: Vec<&String> = layers.iter().flatten().collect();
+    let unique: BTreeSet<&String> = named.iter().copied().collect();
+    assert_eq!(named.len(), unique.len(), "a room in two layers: {layers:?}");
+    for r in &named {
+        assert!(graph.keys().any(|m| room(m) == r.as_str()), "lib.rs's layers name {r}, which is no module");
+    }
+    let breaks = layer_breaks(&graph, &layers);
+    assert!(breaks.is_empty(), "the core's layers are broken:\n{}", breaks.join("\n"));
+}
+
+/// The check fails on a back-import: the real graph with one import added from a low layer to a high one
+/// (the LUTs' blend naming the shot's plan), and with two rooms of a layer importing each other.
+#[test]
+fn a_back_import_breaks_the_layers() {
+    let (graph, layers) = core_layers();
+    let mut up = graph.clone();
+    up.get_mut("lut::blend").expect("lut::blend").insert("shot::plan".to_owned());
+    let breaks = layer_breaks(&up, &layers);
+    assert!(
+        breaks.iter().any(|b| b.starts_with("lut::blend -> shot::plan: layer 3 imports from layer 6")),
+        "{breaks:?}"
+    );
+    assert!(
+        breaks.iter().any(|b| b.starts_with("rooms in a cycle") && b.contains("lut::blend -> shot::plan")),
+        "{breaks:?}"
+    );
+    let mut across = graph.clone();
+    across.get_mut("ghost").expect("ghost").insert("dirt".to_owned());
+    let breaks = layer_breaks(&across, &layers);
+    assert!(breaks.iter().any(|b| b.starts_with("rooms in a cycle") && b.contains("ghost -> dirt")), "{breaks:?}");
+    let mut unnamed = graph;
+    unnamed.insert("attic::junk".to_owned(), BTreeSet::new());
+    assert!(layer_breaks(&unnamed, &layers).iter().any(|b| b.contains("attic is in no layer")));
 }
 
 #[test]

@@ -437,7 +437,7 @@ fn openlensflare_systems_read_by_extension_and_content() {
 /// and vertices).
 #[test]
 fn a_dummy_surface_inserted_and_removed_on_every_row_of_every_shipped_lens_changes_nothing() {
-    use flare_core::flare::lut_fingerprint;
+    use flare_core::bake::lut_fingerprint;
     let config = flare_core::preset::Document::default().flare_config().unwrap();
     let mut rows = 0;
     for id in flare_core::optics::library::ids() {
@@ -487,7 +487,7 @@ fn a_dummy_surface_inserted_and_removed_on_every_row_of_every_shipped_lens_chang
 /// dummy made narrower than its neighbours, coated, made the stop, or given another medium.
 #[test]
 fn a_surface_that_could_cut_or_bend_light_is_not_inert() {
-    use flare_core::flare::lut_fingerprint;
+    use flare_core::bake::lut_fingerprint;
     use flare_core::optics::Coating;
     let config = flare_core::preset::Document::default().flare_config().unwrap();
     let lens = builtin_lens("pbrt_dgauss_50mm").unwrap();

@@ -703,7 +703,7 @@ proptest! {
         text in "[a-z/._]{0,8}(#{0,30}|%0?[0-9]{0,7}d)[a-z._#%0-9d]{0,8}",
         frame in any::<i64>(),
     ) {
-        if let Ok(Some(pattern)) = flare_core::shot::pattern::FramePattern::parse(&text) {
+        if let Ok(Some(pattern)) = flare_core::footage::pattern::FramePattern::parse(&text) {
             let path = pattern.path(frame);
             prop_assert!(path.as_os_str().len() <= text.len() + 21 + 8, "{}", path.display());
         }

@@ -2,9 +2,9 @@
 
 use std::sync::atomic::AtomicBool;
 
+use flare_core::bake::{BakeSettings, bake};
 use flare_core::flare::{FlareConfig, PreparedFlare};
 use flare_core::frame::{Frame, FrameRequest, LutUse};
-use flare_core::lut::bake::{BakeSettings, bake};
 use flare_core::lut::blend::{BlendMode, BlendSettings, LiveLut, LutScene, lut_pass};
 use flare_core::lut::format::{LutError, decode, encode};
 use flare_core::lut::{GhostLut, Symmetry, light_position_deg, mat_apply, photo};
@@ -108,7 +108,7 @@ fn large_ghosts_with_detail_get_finer_entries() {
         }
         let halvings = (a.texel_mm / b.texel_mm).log2();
         assert!((halvings - halvings.round()).abs() < 1e-9 && halvings >= -1e-9, "{} -> {}", a.texel_mm, b.texel_mm);
-        let max = flare_core::lut::bake::MAX_ENTRY_TEXELS.max(a.width.max(a.height));
+        let max = flare_core::bake::MAX_ENTRY_TEXELS.max(a.width.max(a.height));
         assert!(b.width <= max && b.height <= max, "{}x{} texels", b.width, b.height);
         if halvings.round() > 0.0 {
             finer += 1;
@@ -318,7 +318,7 @@ fn the_lut_file_round_trips_and_a_rebake_keeps_unchanged_ghosts() {
     assert_eq!(again.ghosts[0], lut.ghosts[0]);
     // A cancelled bake stops with an error.
     let cancelled = bake(&flare, &renderer, &[9], &settings, None, &|_| {}, &AtomicBool::new(true));
-    assert_eq!(cancelled.unwrap_err(), flare_core::lut::bake::BakeError::Cancelled);
+    assert_eq!(cancelled.unwrap_err(), flare_core::bake::BakeError::Cancelled);
 }
 
 #[test]
@@ -777,9 +777,9 @@ fn a_photo_lut_plays_back_its_images_turned_with_the_light() {
 fn classification_finds_the_known_non_linear_ghost_and_honours_forced_choices() {
     let flare = flare("pbrt_dgauss_50mm");
     let renderer = flare.ray_grid_renderer();
-    let settings = flare_core::lut::classify::ClassifySettings::for_flare(&flare, 20.0);
+    let settings = flare_core::bake::classify::ClassifySettings::for_flare(&flare, 20.0);
     let g46 = flare.system.ghosts.iter().position(|g| (g.i, g.j) == (4, 6)).unwrap();
-    let classes = flare_core::lut::classify::classify(&flare, &renderer, &settings, &[(0, true), (g46, false)]);
+    let classes = flare_core::bake::classify::classify(&flare, &renderer, &settings, &[(0, true), (g46, false)]);
     assert_eq!(classes.len(), flare.system.ghosts.len());
     // Ghost (4, 6): paraxial radius 21.7 mm (the clear apertures cut its sprite to 1.43 times the real rays'
     // size), real rays within 9.1 mm folding into a caustic.
@@ -792,10 +792,10 @@ fn classification_finds_the_known_non_linear_ghost_and_honours_forced_choices() 
     assert!(classes.iter().all(|c| !c.faint), "the default bakes every non-linear ghost");
     // With a faint cutoff, exactly the non-linear ghosts under it stay paraxial, flagged as faint.
     let cutoff = 2e-3;
-    let faint = flare_core::lut::classify::classify(
+    let faint = flare_core::bake::classify::classify(
         &flare,
         &renderer,
-        &flare_core::lut::classify::ClassifySettings { faint_fraction: cutoff, ..settings },
+        &flare_core::bake::classify::ClassifySettings { faint_fraction: cutoff, ..settings },
         &[],
     );
     let brightest = classes.iter().map(|c| c.peak_irradiance).fold(0.0, f64::max);
@@ -841,7 +841,7 @@ fn blob_entry(theta_deg: f64, at_mm: [f64; 2], sigma_mm: f64) -> flare_core::lut
 /// faded copies, fitting them onto one shape first draws the middle one.
 #[test]
 fn fitting_the_picks_draws_a_moving_ghost_once_not_twice() {
-    use flare_core::lut::bake::interpolation_error;
+    use flare_core::bake::interpolation_error;
     use flare_core::lut::{MAX_FIT_STRETCH, fit_picks};
     let (a, b) = (blob_entry(0.0, [0.1, 0.0], 0.2), blob_entry(2.0, [0.7, 0.0], 0.3));
     let middle = blob_entry(1.0, [0.4, 0.0], 0.25);
@@ -975,7 +975,7 @@ fn a_scouted_render_is_the_plain_render_for_fewer_rays() {
 /// Refinement gives up for lack of gain only on moderate errors; a large one is always split.
 #[test]
 fn refinement_stops_for_lack_of_gain_only_on_moderate_errors() {
-    use flare_core::lut::bake::{REFINE_ALWAYS_ABOVE, REFINE_GAIN, refinement_done};
+    use flare_core::bake::{REFINE_ALWAYS_ABOVE, REFINE_GAIN, refinement_done};
     let tol = 0.12;
     assert!(refinement_done(0.1, f64::INFINITY, tol), "within the tolerance");
     assert!(!refinement_done(0.2, f64::INFINITY, tol), "an initial interval over the tolerance is split");
@@ -1068,7 +1068,7 @@ fn ghosts_of_an_aspheric_lens_bake_and_blend() {
 /// that ghost instead of panicking.
 #[test]
 fn a_lut_naming_a_ghost_the_lens_lacks_is_refused_removed_from_the_cache_and_never_panics() {
-    use flare_core::lut::cache::{Lookup, LutCache};
+    use flare_core::bake::cache::{Lookup, LutCache};
     let flare = flare("tessar");
     let ghosts = flare.system.ghosts.len();
     let settings = tiny_settings();
@@ -1189,7 +1189,7 @@ fn an_anamorphic_lenss_lut_symmetry_is_what_it_shares_with_the_stop() {
 /// at the fixed gain alone, are measured and baked.
 #[test]
 fn a_dim_lens_is_judged_at_its_own_auto_exposure() {
-    use flare_core::lut::classify::{ClassifySettings, VISIBILITY_GAIN, classify};
+    use flare_core::bake::classify::{ClassifySettings, VISIBILITY_GAIN, classify};
     // As the app and the command line prepare a lens: the document's defaults (its coating and spectrum).
     let config = flare_core::preset::Document::default().flare_config().unwrap();
     for (id, dim) in [("heliar", true), ("pbrt_dgauss_50mm", false)] {
@@ -1227,7 +1227,7 @@ fn a_dim_lens_is_judged_at_its_own_auto_exposure() {
 /// interior (texel-to-texel steps of several percent that the blend magnified to 4-pixel rings).
 #[test]
 fn a_finer_entry_is_traced_on_a_finer_grid_and_shows_no_rings() {
-    use flare_core::lut::bake::render_entry;
+    use flare_core::bake::render_entry;
     let config = flare_core::preset::Document::default().flare_config().unwrap();
     let flare = PreparedFlare::new(&builtin_lens("heliar").unwrap(), &config).unwrap();
     let renderer = flare.ray_grid_renderer();
@@ -1282,7 +1282,7 @@ fn a_finer_entry_is_traced_on_a_finer_grid_and_shows_no_rings() {
 /// ghost and light angle (`classify_until`: `None`). With the flag clear both give what they always gave.
 #[test]
 fn a_cancelled_ray_grid_render_and_classification_stop_and_say_so() {
-    use flare_core::lut::classify::{ClassifySettings, classify, classify_until};
+    use flare_core::bake::classify::{ClassifySettings, classify, classify_until};
     use flare_core::raytrace::RayGridError;
     let flare = flare("tessar");
     let renderer = flare.ray_grid_renderer();

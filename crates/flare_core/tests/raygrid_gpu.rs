@@ -231,7 +231,7 @@ fn a_lost_device_is_an_error_not_a_panic() {
 /// three), several thetas and azimuths each.
 #[test]
 fn gpu_bake_matches_the_cpu_bake() {
-    use flare_core::lut::bake::{BakeSettings, bake, bake_with};
+    use flare_core::bake::{BakeSettings, bake, bake_with};
     use flare_core::render::raygrid::GpuBake;
     use half::f16;
     use std::sync::atomic::AtomicBool;

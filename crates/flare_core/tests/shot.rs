@@ -5,11 +5,11 @@
 use std::sync::atomic::AtomicBool;
 
 use flare_core::flare::PreparedFlare;
+use flare_core::footage::detect::{AutoLight, detect, triangular_filter};
+use flare_core::footage::pattern::FramePattern;
 use flare_core::frame::{Frame, Sources, draw_cpu};
 use flare_core::preset::Document;
 use flare_core::render::cpu;
-use flare_core::shot::detect::{AutoLight, detect, triangular_filter};
-use flare_core::shot::pattern::FramePattern;
 use flare_core::shot::plan::{ShotPlan, plan};
 use flare_core::shot::synthetic::SyntheticShot;
 use flare_core::shot::track::{parse_track, to_keys};

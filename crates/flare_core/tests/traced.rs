@@ -6,11 +6,11 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
 use flare_core::flare::PreparedFlare;
+use flare_core::footage::pattern::FramePattern;
 use flare_core::frame::{Device, Frame, LayerChoice, Sources};
 use flare_core::preset::Document;
 use flare_core::raytrace::Grid;
 use flare_core::render::cpu;
-use flare_core::shot::pattern::FramePattern;
 use flare_core::shot::plan::plan;
 use flare_core::shot::sequence::{FrameOutcome, SequenceOptions, ShotSources, render_sequence};
 use flare_core::traced::TracedGhosts;

@@ -1,5 +1,5 @@
 //! LUT ghosts without a click: when the lens, its stop, coatings or spectrum change, the app looks for their
-//! LUT in memory, then in the on-disk cache ([`flare_core::lut::cache`]), and bakes it on a thread when
+//! LUT in memory, then in the on-disk cache ([`flare_core::bake::cache`]), and bakes it on a thread when
 //! neither has it, showing the paraxial flare (and saying so) until it is ready. This module holds the state;
 //! the job board ([`super`]) runs its step.
 //!
@@ -24,11 +24,11 @@
 
 use std::sync::Arc;
 
+use flare_core::bake::BakeSettings;
+use flare_core::bake::cache::LutCache;
+use flare_core::bake::classify::GhostClass;
 use flare_core::flare::PreparedFlare;
-use flare_core::lut::bake::BakeSettings;
 use flare_core::lut::blend::LiveLut;
-use flare_core::lut::cache::LutCache;
-use flare_core::lut::classify::GhostClass;
 
 /// LUTs kept in memory.
 pub const MEMORY: usize = 6;

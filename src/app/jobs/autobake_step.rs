@@ -3,8 +3,8 @@
 
 use std::sync::Arc;
 
+use flare_core::bake::cache::Lookup;
 use flare_core::lut::blend::LiveLut;
-use flare_core::lut::cache::Lookup;
 
 use super::job::Job;
 

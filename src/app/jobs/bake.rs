@@ -6,11 +6,11 @@ use std::sync::Arc;
 
 use super::job::{Job, JobPoll, Priority};
 
+use flare_core::bake::cache::LutCache;
+use flare_core::bake::classify::{ClassifySettings, GhostClass, classify_until};
+use flare_core::bake::{BakeProgress, BakeSettings, bake_with, useful_field_deg};
 use flare_core::flare::PreparedFlare;
-use flare_core::lut::bake::{BakeProgress, BakeSettings, bake_with, useful_field_deg};
 use flare_core::lut::blend::LiveLut;
-use flare_core::lut::cache::LutCache;
-use flare_core::lut::classify::{ClassifySettings, GhostClass, classify_until};
 use flare_core::render::gpu::GpuContext;
 use flare_core::render::raygrid::{GpuBake, SUPERSAMPLE};
 
@@ -52,7 +52,7 @@ pub fn start_bake(
         let classify_settings = ClassifySettings::for_flare(&flare, useful_field_deg(&flare));
         // Cancel stops the classification too (a large lens takes a minute there before its first entry).
         let classes = classify_until(&flare, &renderer, &classify_settings, &[], cancel)
-            .ok_or_else(|| flare_core::lut::bake::BakeError::Cancelled.to_string())?;
+            .ok_or_else(|| flare_core::bake::BakeError::Cancelled.to_string())?;
         let chosen: Vec<usize> = classes.iter().filter(|c| c.nonlinear()).map(|c| c.ghost).collect();
         let report = |p: BakeProgress| {
             progress(

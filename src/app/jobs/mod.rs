@@ -27,9 +27,9 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use eframe::egui;
+use flare_core::bake::classify::GhostClass;
 use flare_core::flare::PreparedFlare;
 use flare_core::lut::blend::LiveLut;
-use flare_core::lut::classify::GhostClass;
 use flare_core::preset::{Document, LutSource};
 use flare_core::render::gpu::LutAtlas;
 use flare_core::shot::plan::ShotPlan;

@@ -7,10 +7,10 @@ use std::sync::Arc;
 use super::job::Job;
 
 use flare_core::flare::PreparedFlare;
+use flare_core::footage::pattern::FramePattern;
 use flare_core::frame::Device;
 use flare_core::lut::blend::LiveLut;
 use flare_core::preset::Document;
-use flare_core::shot::pattern::FramePattern;
 use flare_core::shot::plan::{ShotPlan, plan};
 use flare_core::shot::sequence::{FrameOutcome, SequenceOptions, SequenceReport, ShotSources, render_sequence};
 

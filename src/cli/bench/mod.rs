@@ -13,8 +13,8 @@
 //! settings, bake time and file size reported in their own table), sprites + LUT instances + the CPU twin's two
 //! passes; raygrid-N / reference = tracing and splatting every ghost (rayon over ghosts).
 //!
-//! Writes `bench.csv`, `bench.md` (the tables that `--update-readme` puts into the README between the
-//! `<!-- bench:start -->` and `<!-- bench:end -->` markers) and `bench.png` (error against run time).
+//! Writes `bench.csv`, `bench.md` (the tables that `--update-readme` puts into a Markdown page between the
+//! `<!-- bench:start -->` and `<!-- bench:end -->` markers: `docs/ground-truth.md`) and `bench.png` (error against run time).
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -67,7 +67,8 @@ pub struct BenchArgs {
     /// Timed runs per method (the median is reported; a method whose first run takes over 2 s runs once).
     #[arg(long)]
     pub repeats: Option<usize>,
-    /// Also replace the README's benchmark section with the new tables.
+    /// Also replace the benchmark section (between its markers) of this Markdown page with the new tables: the
+    /// book's `docs/ground-truth.md` (`docs/depth-of-field.md` with `--dof`).
     #[arg(long)]
     pub update_readme: Option<PathBuf>,
     /// Also write every method's image (ghosts only, at the reference's exposure, ACES, sRGB) to OUT/images.
@@ -85,7 +86,7 @@ pub struct BenchArgs {
     #[command(flatten)]
     pub lut: super::lut::LutChoice,
     /// Most texels across a LUT entry of the blended method.
-    #[arg(long, default_value_t = flare_core::lut::bake::BakeSettings::default().res)]
+    #[arg(long, default_value_t = flare_core::bake::BakeSettings::default().res)]
     pub lut_res: u32,
 }
 
@@ -191,7 +192,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             &flare,
             &tracer,
             &args.lut,
-            &flare_core::lut::bake::BakeSettings { res: args.lut_res, ..Default::default() },
+            &flare_core::bake::BakeSettings { res: args.lut_res, ..Default::default() },
             None,
             None,
             true,

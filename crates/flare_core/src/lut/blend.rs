@@ -1069,7 +1069,7 @@ fn lut_band(
 }
 
 /// Mip levels are made of an entry while halving it leaves at least this many texels across (the default bake
-/// `res`): an entry baked finer than that for its detail ([`super::bake::BakeSettings::diagonal_texels`]) can be
+/// `res`): an entry baked finer than that for its detail ([`crate::bake::BakeSettings::diagonal_texels`]) can be
 /// drawn at the default's resolution where its texels would be smaller than the frame needs.
 pub const MIP_FLOOR_TEXELS: u32 = 128;
 /// [`LutScene::choose_mips`] draws an instance from the finest level whose texels span at least this many

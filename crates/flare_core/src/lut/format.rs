@@ -55,7 +55,7 @@ pub const MAX_HEADER_BYTES: u64 = 64 << 20;
 /// Most texels accepted over all entries (2 GiB of half floats).
 pub const MAX_TEXELS: u64 = 1 << 28;
 /// Most texels across an entry: what an atlas page holds inside its zero border ([`super::blend::ATLAS_PAGE`]),
-/// so the GPU draws every texel the CPU twin draws (a bake makes at most [`super::bake::MAX_ENTRY_TEXELS`]).
+/// so the GPU draws every texel the CPU twin draws (a bake makes at most [`crate::bake::MAX_ENTRY_TEXELS`]).
 pub const MAX_SIDE: u32 = super::blend::ATLAS_PAGE - 2;
 
 /// Why a LUT file is refused.

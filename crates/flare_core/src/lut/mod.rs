@@ -10,9 +10,9 @@
 //! the azimuths a mirror) of the image at the reduced azimuth. A circular stop needs one azimuth; a user's
 //! image stop has no known symmetry and is treated like a circle (rotation only, the patent's approximation).
 //!
-//! - [`classify`]: per ghost, how far the paraxial sprite is from the ray-traced footprint over theta;
+//! - [`crate::bake::classify`]: per ghost, how far the paraxial sprite is from the ray-traced footprint over theta;
 //!   ghosts above a threshold (and visible) are non-linear, and the user can force any ghost either way.
-//! - [`bake`]: each non-linear ghost ray-traced ([`crate::raytrace`], exact, energy conserving) at thetas
+//! - [`crate::bake`]: each non-linear ghost ray-traced ([`crate::raytrace`], exact, energy conserving) at thetas
 //!   from 0 to the lens's useful field, refined where the pattern changes fastest, and at the wedge's azimuths.
 //!   Each [`LutEntry`] stores its image (RGBA half floats, A = coverage) in a window of the sensor around
 //!   the ghost, with the ghost's paraxial frame (centre, half-size, energy) at that light.
@@ -26,10 +26,7 @@
 //! Entry images are in the display orientation of [`crate::raytrace::Window`]: texel (0, 0) is the top-left,
 //! x grows to the left on the sensor and y downwards (the sensor rotated by 180 degrees, as the frame is).
 
-pub mod bake;
 pub mod blend;
-pub mod cache;
-pub mod classify;
 pub mod format;
 pub mod photo;
 
@@ -49,7 +46,7 @@ pub const PHOTO_GHOST: u32 = u32::MAX;
 /// Where a LUT's images come from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum LutKind {
-    /// Ray-traced per non-linear ghost ([`bake`]).
+    /// Ray-traced per non-linear ghost ([`crate::bake`]).
     RayTraced,
     /// Photographs of a real flare swept over theta, all ghosts together ([`photo`]).
     Photo,
@@ -276,7 +273,7 @@ impl LutEntry {
     /// The entry at half its resolution: each texel the mean of a 2 x 2 block (all four channels; a block past
     /// an odd edge is padded with zeros, so the image grows by at most one fine texel at its high-index sides),
     /// texels twice as large on the sensor. The same energy; what a mip level and the bake's
-    /// [`bake::BakeSettings::detail_tolerance`] test are made of. An empty entry stays empty.
+    /// [`crate::bake::BakeSettings::detail_tolerance`] test are made of. An empty entry stays empty.
     pub fn halved(&self) -> Self {
         if self.is_empty() {
             return self.clone();
@@ -558,7 +555,7 @@ impl LutGhost {
 pub struct GhostLut {
     pub kind: LutKind,
     pub lens_id: String,
-    /// [`crate::flare::lut_fingerprint`] of the lens and settings it was baked for (0 for a photo LUT: any lens).
+    /// [`crate::bake::lut_fingerprint`] of the lens and settings it was baked for (0 for a photo LUT: any lens).
     pub lens_fingerprint: u64,
     /// The rule `lens_fingerprint` was made by ([`crate::fingerprint::SCHEME`]; 0: a file from before schemes,
     /// whose fingerprint cannot be compared).

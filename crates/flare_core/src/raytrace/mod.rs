@@ -64,8 +64,8 @@ mod tracer;
 pub use grid::{DENSE_TABLE_SAMPLES, GRID_RANGE, Grid, REFERENCE_GRID, REFERENCE_MIN_GRID, View, Window};
 pub use splat::{RayGridImage, RayGridStats};
 pub use tracer::{
-    Dim, EntranceHint, Ghosts, LitCells, PlannedJob, RayGridError, RayGridRenderer, RayGridRequest, RayGridSetup,
-    Scout, TracedGhost, faintest,
+    ColumnTracer, CpuTracing, Dim, EntranceHint, Ghosts, LitCells, PlannedJob, RayGridError, RayGridRenderer,
+    RayGridRequest, RayGridSetup, Scout, TracedGhost, faintest,
 };
 
 #[cfg(test)]

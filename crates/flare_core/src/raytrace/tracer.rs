@@ -216,6 +216,37 @@ pub enum RayGridError {
     #[error("cancelled")]
     Cancelled,
 }
+/// What draws a column's entries once the scout has placed their windows: the CPU reference renderer
+/// ([`CpuTracing`]) or its GPU twin (`render::raygrid::GpuBake`, which falls back to the CPU if its device is
+/// lost). Everything else of the bake (scouts, windows, refinement) is the same for both.
+pub trait ColumnTracer: Sync {
+    /// The scouted ghost, for the scout's light, seen in each of `views` (linear irradiance); `None` when it
+    /// cannot be drawn (the column's entries then stay empty).
+    fn trace_column(
+        &self,
+        renderer: &RayGridRenderer,
+        scout: &Scout,
+        views: Vec<View>,
+        grid: Grid,
+    ) -> Option<Vec<crate::image::HdrImage>>;
+}
+
+/// The bake's columns traced on the CPU, in f64: [`RayGridRenderer::render_request`] of a scouted request.
+pub struct CpuTracing;
+
+impl ColumnTracer for CpuTracing {
+    fn trace_column(
+        &self,
+        renderer: &RayGridRenderer,
+        scout: &Scout,
+        views: Vec<View>,
+        grid: Grid,
+    ) -> Option<Vec<crate::image::HdrImage>> {
+        let images = renderer.render_request(&RayGridRequest::scouted(scout, views, grid)).ok()?;
+        Some(images.into_iter().map(|i| i.hdr).collect())
+    }
+}
+
 impl RayGridRenderer {
     /// Prepares every ghost of `setup` with the stop shape `mask`.
     pub fn new(setup: RayGridSetup, mask: &ApertureMask) -> Self {

@@ -64,13 +64,10 @@ pub struct DisplaySettings {
     pub dirt_spread_deg: f64,
 }
 
-/// The default flare exposure (stops): a quarter-wave coated lens's ghosts (about 1e-4 of the light) show.
-pub const DEFAULT_FLARE_EV: f64 = 10.5;
-
 impl Default for DisplaySettings {
     fn default() -> Self {
         Self {
-            flare_ev: DEFAULT_FLARE_EV,
+            flare_ev: crate::exposure::DEFAULT_FLARE_EV,
             plate_ev: 0.0,
             tonemap: Tonemap::View,
             starburst: true,

@@ -1214,11 +1214,11 @@ impl<'a> GpuBake<'a> {
         }
     }
 
-    /// The columns' tracer of a bake: `gpu` where there is one, else the CPU's ([`crate::lut::bake::CpuTracing`]).
-    pub fn or_cpu<'g>(gpu: Option<&'g GpuBake<'a>>) -> &'g dyn crate::lut::bake::ColumnTracer {
+    /// The columns' tracer of a bake: `gpu` where there is one, else the CPU's ([`crate::raytrace::CpuTracing`]).
+    pub fn or_cpu<'g>(gpu: Option<&'g GpuBake<'a>>) -> &'g dyn crate::raytrace::ColumnTracer {
         match gpu {
             Some(g) => g,
-            None => &crate::lut::bake::CpuTracing,
+            None => &crate::raytrace::CpuTracing,
         }
     }
 
@@ -1234,7 +1234,7 @@ impl<'a> GpuBake<'a> {
     }
 }
 
-impl crate::lut::bake::ColumnTracer for GpuBake<'_> {
+impl crate::raytrace::ColumnTracer for GpuBake<'_> {
     fn trace_column(
         &self,
         renderer: &RayGridRenderer,
@@ -1259,6 +1259,6 @@ impl crate::lut::bake::ColumnTracer for GpuBake<'_> {
             }
         }
         self.on_cpu.fetch_add(1, Relaxed);
-        crate::lut::bake::CpuTracing.trace_column(renderer, scout, views, grid)
+        crate::raytrace::CpuTracing.trace_column(renderer, scout, views, grid)
     }
 }

@@ -48,10 +48,6 @@ pub const TONEMAP_WGSL: &str = concat!(
     include_str!("../../../../shaders/tonemap.wgsl")
 );
 
-/// The OCIO view baked into a cube ([`crate::view_lut`], which puts the shaper's constants before it): the
-/// tonemap's `ocio_display` for a software adapter's drafts.
-pub const OCIO_LUT_WGSL: &str = include_str!("../../../../shaders/ocio_lut.wgsl");
-
 /// The identity in place of the OCIO display transform: the tonemap pass of frames drawn through FlareLab's own
 /// curves, which never call it (`render::gpu_view::ViewPass::curves`).
 pub const OCIO_IDENTITY_WGSL: &str = include_str!("../../../../shaders/ocio_identity.wgsl");

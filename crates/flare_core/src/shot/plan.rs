@@ -5,7 +5,7 @@
 //! disk are listed; a frame missing *inside* the sequence is not refused here: that frame fails when it is
 //! drawn and the others still render). [`plan`] then fixes the frame size (the given size, else the plate's,
 //! else 1280x720) and the sensor it spans (the document's width, the image's aspect), and per frame takes the
-//! timeline's keyed or static light. When the document finds the light in the plate ([`super::detect`]),
+//! timeline's keyed or static light. When the document finds the light in the plate ([`crate::footage::detect`]),
 //! every plate of the range is read (in parallel) and scanned first; the solved position replaces the light
 //! and the filtered visibility is kept. A planned frame's request is the document's request of that frame
 //! ([`crate::preset::Document::frame_request_at`], whose light gain is `2^light_ev` there) with the planned
@@ -20,8 +20,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use rayon::prelude::*;
 
-use super::detect::{self, DetectError, Scan};
-use super::pattern::FramePattern;
+use crate::footage::detect::{self, DetectError, Scan};
+use crate::footage::pattern::FramePattern;
 use crate::frame::FrameRequest;
 use crate::ghost::GhostSystem;
 use crate::optics::sensor::Sensor;

@@ -24,9 +24,9 @@ use std::time::Instant;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::pattern::FramePattern;
 use super::plan::{FramePlan, ShotPlan};
 use crate::flare::PreparedFlare;
+use crate::footage::pattern::FramePattern;
 use crate::frame::{self, Device, Frame, LayerChoice, Made, Sources};
 use crate::image::HdrImage;
 use crate::lut::blend::LiveLut;

@@ -14,7 +14,7 @@ use std::io::Cursor;
 use std::ops::RangeInclusive;
 use std::path::Path;
 
-use super::pattern::FramePattern;
+use crate::footage::pattern::FramePattern;
 use crate::image::HdrImage;
 
 /// Sub-samples per pixel side.

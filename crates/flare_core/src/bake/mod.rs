@@ -1,32 +1,37 @@
 //! The LUT generator: each non-linear ghost ray-traced at the thetas and azimuths the run time interpolates.
 //!
+//! The room holds what makes a LUT: [`classify`] (which ghosts need one), this module (the bake), [`check`]
+//! (whether a LUT belongs to a lens: its fingerprint) and [`cache`] (the on-disk cache). It sits above the frame
+//! pipeline ([`crate::flare`], [`crate::render`]'s CPU twin), which it uses to compare the paraxial sprites;
+//! what a LUT is and how it is drawn at run time is [`crate::lut`], below the renderer.
+//!
 //! # How it works
 //! Per ghost (ghosts in parallel with rayon; inside a ghost, its wavelengths in parallel too), and per azimuth
-//! of the symmetry wedge ([`super::Symmetry::phi_samples`]):
+//! of the symmetry wedge ([`crate::lut::Symmetry::phi_samples`]):
 //! 1. **A column of entries** at theta, one per azimuth phi of the wedge (the light at `theta` from the axis
 //!    with the azimuth `axis + phi`), from one set of traced rays: the lens is rotationally symmetric, so the
 //!    rays traced for the first azimuth, turned about the axis, are the rays of every other; only the stop's
 //!    blades do not turn, and the mask is looked up at the turned stop coordinates
 //!    ([`crate::raytrace::RayGridRequest`]'s views). Where the ghost lands is found by a scout
 //!    ([`RayGridRenderer::scout`]); the window around it gets at most [`BakeSettings::res`] texels across
-//!    (never finer than [`super::MIN_TEXEL_MM`]), and the ghost alone is rendered into it by the reference
+//!    (never finer than [`crate::lut::MIN_TEXEL_MM`]), and the ghost alone is rendered into it by the reference
 //!    renderer ([`Grid::Adaptive`], up to [`BakeSettings::grid`] cells, over only the region the scout saw
-//!    light pass: [`crate::raytrace::Ghosts::Scouted`]). Alpha is the coverage ([`super::texels_with_coverage`]).
+//!    light pass: [`crate::raytrace::Ghosts::Scouted`]). Alpha is the coverage ([`crate::lut::texels_with_coverage`]).
 //!    **Detail**: where the ghost is large on the sensor (`res` texels coarser than
 //!    [`BakeSettings::diagonal_texels`] across the sensor's diagonal) and an entry loses more than
-//!    [`BakeSettings::detail_tolerance`] of its light's placement when halved ([`super::LutEntry::detail_lost`]: a
+//!    [`BakeSettings::detail_tolerance`] of its light's placement when halved ([`crate::lut::LutEntry::detail_lost`]: a
 //!    sharp rim or caustic reaches its texels), the column is drawn again with texels `res`'s halved the number
 //!    of times that comes nearest, on a grid refined as often (up to the reference's
 //!    [`crate::raytrace::REFERENCE_GRID`] cells: cells several texels wide draw a smooth interior as rings of
 //!    flat triangles), and each entry is halved back while that loses no more than the tolerance. A
 //!    smooth ghost keeps its `res` entries, byte for byte; a sharp one is drawn finer and stored as fine as its
-//!    detail needs (the run time's mip levels, [`super::blend::LiveLut`], draw it on small frames for the cost
+//!    detail needs (the run time's mip levels, [`crate::lut::blend::LiveLut`], draw it on small frames for the cost
 //!    of the `res` entry).
 //! 2. **Thetas where the pattern changes**: the angles start at `initial_steps` even steps from 0 to the
 //!    useful field (the light angle whose image reaches the corner of the 36 x 24 mm sensor). Every interval
 //!    wider than twice [`BakeSettings::min_step_deg`] gets its middle rendered and kept; while the run time's
 //!    prediction of that middle (the two neighbours interpolated in their paraxial frames, exactly as
-//!    [`super::blend`] draws them, plainly and fitted onto one shape by [`super::fit_picks`]) is off by more
+//!    [`crate::lut::blend`] draws them, plainly and fitted onto one shape by [`crate::lut::fit_picks`]) is off by more
 //!    than [`BakeSettings::tolerance`] (relative L1 of luminance, worst azimuth), both halves are split again,
 //!    unless the error is moderate (under [`REFINE_ALWAYS_ABOVE`] x the tolerance) and halving the step did
 //!    not improve the prediction by [`REFINE_GAIN`] (then the error is not the spacing, and more entries would
@@ -45,51 +50,25 @@
 //! changing the theta range re-bakes only what changed. Any edit of the lens, its coatings, spectrum or stop
 //! changes every ghost's key, because every ghost path crosses every surface (as a refraction at least).
 
+pub mod cache;
+pub mod check;
+pub mod classify;
+
+pub use check::lut_fingerprint;
+
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 
 use half::f16;
 use rayon::prelude::*;
 
-use super::{
-    Fit, GhostLut, LutEntry, LutGhost, LutKind, MIN_TEXEL_MM, Mat2, Symmetry, fit_picks, light_position_deg, mat_apply,
-    mat_det, mat_inverse, texels_with_coverage,
-};
 use crate::color::luminance;
 use crate::flare::PreparedFlare;
 use crate::ghost::light_slopes_for_frame_position;
-use crate::image::HdrImage;
-use crate::raytrace::{Grid, RayGridRenderer, RayGridRequest, Scout, View, Window};
-
-/// What draws a column's entries once the scout has placed their windows: the CPU reference renderer
-/// ([`CpuTracing`]) or its GPU twin (`render::raygrid::GpuBake`, which falls back to the CPU if its device is
-/// lost). Everything else of the bake (scouts, windows, refinement) is the same for both.
-pub trait ColumnTracer: Sync {
-    /// The scouted ghost, for the scout's light, seen in each of `views` (linear irradiance); `None` when it
-    /// cannot be drawn (the column's entries then stay empty).
-    fn trace_column(
-        &self,
-        renderer: &RayGridRenderer,
-        scout: &Scout,
-        views: Vec<View>,
-        grid: Grid,
-    ) -> Option<Vec<HdrImage>>;
-}
-
-/// The bake's columns traced on the CPU, in f64: [`RayGridRenderer::render_request`] of a scouted request.
-pub struct CpuTracing;
-
-impl ColumnTracer for CpuTracing {
-    fn trace_column(
-        &self,
-        renderer: &RayGridRenderer,
-        scout: &Scout,
-        views: Vec<View>,
-        grid: Grid,
-    ) -> Option<Vec<HdrImage>> {
-        let images = renderer.render_request(&RayGridRequest::scouted(scout, views, grid)).ok()?;
-        Some(images.into_iter().map(|i| i.hdr).collect())
-    }
-}
+use crate::lut::{
+    Fit, GhostLut, LutEntry, LutGhost, LutKind, MIN_TEXEL_MM, Mat2, Symmetry, fit_picks, light_position_deg, mat_apply,
+    mat_det, mat_inverse, texels_with_coverage,
+};
+use crate::raytrace::{ColumnTracer, CpuTracing, Grid, RayGridRenderer, Scout, View, Window};
 
 /// How a LUT is baked.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -102,13 +81,13 @@ pub struct BakeSettings {
     /// detail needs them ([`Self::detail_tolerance`]): its texels are those of `res` halved the number of times
     /// that comes nearest (up to [`MAX_ENTRY_TEXELS`] across), so that stretched over the frame it does not show
     /// its texels as stair steps. 0: `res` alone. The run time draws such an entry from a mip pyramid
-    /// ([`super::blend::LiveLut`]), so a small frame samples it about as often as the `res` entry. Measured
+    /// ([`crate::lut::blend::LiveLut`]), so a small frame samples it about as often as the `res` entry. Measured
     /// (README, "LUT images without stair steps"): the Heliar's rim ghost at 1536x1024 goes from 31.5 dB at `res`
     /// alone to 33.8 dB at 512 (the default: 4-pixel beading left along the rim) and 35.0 dB at 1024 (no steps
     /// seen), the Nikon zoom's LUT from 45 M texels to 58 M and 95 M.
     pub diagonal_texels: u32,
     /// An entry of a large ghost is baked finer ([`Self::diagonal_texels`]) where halving it at `res` loses more
-    /// than this share of its light's placement ([`super::LutEntry::detail_lost`]: relative L1 of luminance
+    /// than this share of its light's placement ([`crate::lut::LutEntry::detail_lost`]: relative L1 of luminance
     /// against the halved image's bilinear upsample): a sharp rim or caustic, not a smooth blur; the finer entry
     /// is then halved back while that loses no more than this. On the Heliar the rim ghost loses 0.16-0.24 at
     /// `res`, the smooth one 0.010-0.015; on the Nikon zoom 99 of 1031 large entries lose more than 0.05.
@@ -173,7 +152,7 @@ pub const THREAD_BYTES: u64 = (MAX_ENTRY_TEXELS as u64) * (MAX_ENTRY_TEXELS as u
 /// The memory a bake may take, worked out before it starts (issue 61: memory known before work). A bake's
 /// entries are refined where the ghost changes (their number is not known before), so its kept texels are
 /// counted as it goes and the bake stops, naming the figures, when they pass [`Self::texels`]: the most a LUT
-/// file holds ([`super::format::MAX_TEXELS`], 2 GiB of texels) or what nine tenths of the memory available
+/// file holds ([`crate::lut::format::MAX_TEXELS`], 2 GiB of texels) or what nine tenths of the memory available
 /// leaves after every thread's working memory ([`THREAD_BYTES`]), whichever is less. A machine without that
 /// working memory free is refused before any work.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -187,7 +166,7 @@ pub struct BakeMemory {
 impl BakeMemory {
     /// The bound for `threads` threads and `available` bytes free (`None`: unknown, the file's limit alone).
     pub fn new(threads: usize, available: Option<u64>) -> Result<Self, BakeError> {
-        let file = super::format::MAX_TEXELS;
+        let file = crate::lut::format::MAX_TEXELS;
         let Some(available) = available else {
             return Ok(Self { texels: file, machine_bound: false });
         };
@@ -237,7 +216,11 @@ pub struct BakeProgress {
 /// its focal length; at most 60 degrees.
 pub fn useful_field_deg(flare: &PreparedFlare) -> f64 {
     let f = flare.system.first_order.efl_mm.abs();
-    if f > 0.0 && f.is_finite() { (super::SENSOR_HALF_DIAGONAL_MM / f).atan().to_degrees().min(60.0) } else { 20.0 }
+    if f > 0.0 && f.is_finite() {
+        (crate::lut::SENSOR_HALF_DIAGONAL_MM / f).atan().to_degrees().min(60.0)
+    } else {
+        20.0
+    }
 }
 
 impl BakeSettings {
@@ -297,7 +280,7 @@ pub fn refinement_done(error: f64, parent_error: f64, tolerance: f64) -> bool {
 /// An entry's window reaches this many times the sensor's half-diagonal from the axis, at most.
 pub const VISIBLE_MARGIN: f64 = 1.15;
 /// The most texels across an entry (a large ghost's, [`BakeSettings::diagonal_texels`]): an atlas page
-/// ([`super::blend::ATLAS_PAGE`]) less the zero border, with room to spare.
+/// ([`crate::lut::blend::ATLAS_PAGE`]) less the zero border, with room to spare.
 pub const MAX_ENTRY_TEXELS: u32 = 2040;
 
 /// Renders one entry: ghost `g` with the light at `theta_deg` and the azimuth `axis + phi_deg`.
@@ -341,7 +324,7 @@ pub fn render_column(
     let scout = renderer.scout(g, base, 48, &turns);
     // Only what can reach the frame: the sensor's corners at any azimuth, with a margin for the frames that
     // interpolation and fitting move an entry by.
-    let reach = VISIBLE_MARGIN * super::SENSOR_HALF_DIAGONAL_MM;
+    let reach = VISIBLE_MARGIN * crate::lut::SENSOR_HALF_DIAGONAL_MM;
     let boxes: Vec<Option<[f64; 4]>> = scout
         .footprints_mm
         .iter()
@@ -380,7 +363,7 @@ pub fn render_column(
                     }
                     e = halved;
                 }
-                super::set_coverage(&mut e.texels);
+                crate::lut::set_coverage(&mut e.texels);
                 e
             })
             .collect();
@@ -401,7 +384,7 @@ fn finer_halvings(b: &[f64; 4], settings: &BakeSettings) -> u32 {
         return 0;
     }
     let coarse = res_texel_mm(b, settings);
-    let target = 2.0 * super::SENSOR_HALF_DIAGONAL_MM / f64::from(settings.diagonal_texels);
+    let target = 2.0 * crate::lut::SENSOR_HALF_DIAGONAL_MM / f64::from(settings.diagonal_texels);
     let extent_mm = (b[2] - b[0]).max(b[3] - b[1]);
     let mut k = (coarse / target).log2().round().clamp(0.0, 16.0) as u32;
     while k > 0 && {
@@ -469,7 +452,7 @@ fn draw_column(
 
 /// The run time's prediction of `target` from `a` and `b` (weights 1 - t, t), in `target`'s texels, and its
 /// relative L1 error (luminance) against `target`. With `fitted` the two are first fitted onto one shape
-/// ([`super::fit_picks`]), as the run time does for an interval baked as fitted.
+/// ([`crate::lut::fit_picks`]), as the run time does for an interval baked as fitted.
 pub fn interpolation_error(a: &LutEntry, b: &LutEntry, t: f64, target: &LutEntry, fitted: bool) -> f64 {
     if target.is_empty() {
         // All of the neighbours' light would be drawn where there is none.
@@ -595,7 +578,7 @@ fn bake_within(
         return Err(BakeError::NoGhost(bad, total));
     }
     let lens = &flare.system.lens;
-    let fingerprint = crate::flare::lut_fingerprint(lens, &flare.config);
+    let fingerprint = lut_fingerprint(lens, &flare.config);
     // A ghost's surfaces as the lens without its inert surfaces numbers them (the fingerprint's lens): the LUT
     // and its ghosts' keys hold for the lens with or without a dummy surface.
     let numbering = lens.without_inert().1;
@@ -733,10 +716,10 @@ mod tests {
         let e = BakeMemory::new(16, Some(1 << 30)).unwrap_err().to_string();
         assert!(e.contains("16 threads") && e.contains("1.1 GB this machine has free"), "{e}");
         let roomy = BakeMemory::new(2, Some(1 << 40)).unwrap();
-        assert_eq!(roomy, BakeMemory { texels: super::super::format::MAX_TEXELS, machine_bound: false });
+        assert_eq!(roomy, BakeMemory { texels: crate::lut::format::MAX_TEXELS, machine_bound: false });
         let tight = BakeMemory::new(2, Some(2 << 30)).unwrap();
-        assert!(tight.machine_bound && tight.texels < super::super::format::MAX_TEXELS);
-        assert_eq!(BakeMemory::new(2, None).unwrap().texels, super::super::format::MAX_TEXELS);
+        assert!(tight.machine_bound && tight.texels < crate::lut::format::MAX_TEXELS);
+        assert_eq!(BakeMemory::new(2, None).unwrap().texels, crate::lut::format::MAX_TEXELS);
     }
 
     /// A bake whose kept texels pass its bound stops there with the figures (issue 61: a bake that grows past

@@ -188,8 +188,8 @@ pub fn classify_until(
     cancel: &std::sync::atomic::AtomicBool,
 ) -> Option<Vec<GhostClass>> {
     let cancelled = || cancel.load(std::sync::atomic::Ordering::Relaxed);
-    let axis = super::Symmetry::of(&flare.system.lens, &flare.config.aperture)
-        .unwrap_or_else(|_| super::Symmetry::of_aperture(&flare.config.aperture))
+    let axis = crate::lut::Symmetry::of(&flare.system.lens, &flare.config.aperture)
+        .unwrap_or_else(|_| crate::lut::Symmetry::of_aperture(&flare.config.aperture))
         .axis_deg;
     let angles: Vec<f64> = (0..settings.angles.max(1))
         .map(|k| settings.theta_max_deg * k as f64 / (settings.angles.max(2) - 1) as f64)
@@ -216,9 +216,9 @@ pub fn classify_until(
                 if cancelled() {
                     break;
                 }
-                let light = super::light_position_deg(theta, axis);
+                let light = crate::lut::light_position_deg(theta, axis);
                 let u = crate::ghost::light_slopes_for_frame_position(light[0], light[1]);
-                let para = flare.system.paraxial_frame(g, u, super::MIN_TEXEL_MM);
+                let para = flare.system.paraxial_frame(g, u, crate::lut::MIN_TEXEL_MM);
                 let Some(traced) = renderer.footprint_mm(g, light, 24) else { continue };
                 let r = 1.5 * para.half_mm;
                 let b = [

@@ -3,7 +3,7 @@
 //!
 //! # How it works
 //! A cached LUT is an ordinary `.flut` file named by [`LutCache::key`]: a [`crate::fingerprint::of`] the
-//! LUT's own fingerprint ([`crate::flare::lut_fingerprint`]: every surface, glass, coating, the stop and the
+//! LUT's own fingerprint ([`super::lut_fingerprint`]: every surface, glass, coating, the stop and the
 //! spectrum), the [`BakeSettings`] and [`CACHE_VERSION`], so a change to any of them is a new entry
 //! and never a stale hit. [`LutCache::load`] reads the file through the same checked decoder as any LUT
 //! ([`crate::lut::format::read_lut_near`]) and checks it against the live lens ([`GhostLut::check_for`]); a file
@@ -16,9 +16,10 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::flare::{FlareConfig, lut_fingerprint};
+use super::lut_fingerprint;
+use crate::bake::BakeSettings;
+use crate::flare::FlareConfig;
 use crate::lut::GhostLut;
-use crate::lut::bake::BakeSettings;
 use crate::lut::format::{read_lut_near, write_lut};
 use crate::optics::Lens;
 
@@ -75,7 +76,7 @@ impl LutCache {
     }
 
     /// [`Self::load`], with only the images drawn at `near_theta_deg` when it is given
-    /// ([`super::format::read_lut_near`]).
+    /// ([`crate::lut::format::read_lut_near`]).
     pub fn load_near(
         &self,
         lens: &Lens,
@@ -125,8 +126,8 @@ fn display(path: &Path) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::bake::bake;
     use crate::flare::PreparedFlare;
-    use crate::lut::bake::bake;
     use crate::optics::library::builtin_lens;
 
     #[test]
