@@ -116,23 +116,23 @@ fn answer(line: &str) -> Value {
 /// The settings of `args` that are not the document's.
 fn others(args: &RenderArgs) -> Value {
     json!({
-        "size": format!("{:?}", args.size),
-        "frames": format!("{:?}", args.frames),
-        "frame": format!("{:?}", args.frame),
-        "light": format!("{:?}", args.light),
-        "track": format!("{:?}", args.track),
-        "log": format!("{:?}", args.log),
-        "skip_existing": args.skip_existing,
-        "frames_in_turn": args.frames_in_turn,
-        "timings": args.timings,
-        "method": format!("{:?}", args.method),
-        "lut": format!("{:?}", args.lut),
-        "grid": format!("{:?}", args.grid),
-        "gpu_samples": args.gpu_samples,
-        "accumulation_divisor": args.accumulation_divisor,
-        "device": format!("{:?}", args.device),
-        "layers": format!("{:?}", args.layers),
-        "out": format!("{:?}", args.out),
+        "size": format!("{:?}", args.output.size),
+        "frames": format!("{:?}", args.shot.frames),
+        "frame": format!("{:?}", args.shot.frame),
+        "light": format!("{:?}", args.light.source),
+        "track": format!("{:?}", args.light.track),
+        "log": format!("{:?}", args.shot.log),
+        "skip_existing": args.shot.skip_existing,
+        "frames_in_turn": args.shot.frames_in_turn,
+        "timings": args.output.timings,
+        "method": format!("{:?}", args.method.kind),
+        "lut": format!("{:?}", args.method.lut),
+        "grid": format!("{:?}", args.method.grid),
+        "gpu_samples": args.method.gpu_samples,
+        "accumulation_divisor": args.method.accumulation_divisor,
+        "device": format!("{:?}", args.method.device),
+        "layers": format!("{:?}", args.output.layers),
+        "out": format!("{:?}", args.output.out),
     })
 }
 
@@ -193,4 +193,54 @@ fn render_s_flags_and_documents_are_what_they_were() {
     let refusals = now_lines.iter().filter(|l| l["answer"].get("error").is_some()).count();
     let documents = now_lines.iter().filter(|l| l["answer"].get("document").is_some()).count();
     assert!(refusals >= 20 && documents >= 25, "{refusals} refusals, {documents} documents");
+}
+
+/// clap's own checks of the whole command line (unique ids, conflicts naming real flags, ...), which a release
+/// build does not make.
+#[test]
+fn the_command_line_is_well_formed() {
+    Cli::command().debug_assert();
+}
+
+/// `render --help` in its groups, each under its heading, in the order a user sets a frame up.
+#[test]
+fn render_s_help_is_in_groups() {
+    let mut cli = Cli::command();
+    let help = cli.find_subcommand_mut("render").expect("render").render_long_help().to_string();
+    let headings =
+        ["Optics:", "Light:", "Look:", "Camera:", "Colour:", "Shot:", "Depth of field:", "Method:", "Output:"];
+    let at: Vec<usize> = headings
+        .iter()
+        .map(|h| help.find(&format!("\n{h}\n")).unwrap_or_else(|| panic!("no {h} in\n{help}")))
+        .collect();
+    assert!(at.windows(2).all(|w| w[0] < w[1]), "headings out of order:\n{help}");
+    // Each flag under its own group's heading.
+    let under = |flag: &str, heading: &str| {
+        // The flag's own line (not the usage line's mention).
+        let f = [format!("      --{flag} "), format!("      --{flag}\n"), format!("  -o, --{flag} ")]
+            .iter()
+            .find_map(|line| help.find(line.as_str()))
+            .expect(flag);
+        let h = headings.iter().position(|x| *x == heading).unwrap();
+        at[h] < f && at.get(h + 1).is_none_or(|&next| f < next)
+    };
+    for (flag, heading) in [
+        ("preset", "Optics:"),
+        ("f-number", "Optics:"),
+        ("aperture", "Optics:"),
+        ("light-deg", "Light:"),
+        ("light-smooth", "Light:"),
+        ("exposure-ev", "Look:"),
+        ("dirt", "Look:"),
+        ("shutter-deg", "Camera:"),
+        ("ocio-config", "Colour:"),
+        ("frames", "Shot:"),
+        ("focus-m", "Depth of field:"),
+        ("method", "Method:"),
+        ("device", "Method:"),
+        ("out", "Output:"),
+        ("exr-type", "Output:"),
+    ] {
+        assert!(under(flag, heading), "--{flag} is not under {heading}\n{help}");
+    }
 }

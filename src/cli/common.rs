@@ -175,6 +175,7 @@ pub fn parse_aperture(spec: &str, f_number: Option<f64>) -> Result<ApertureDoc> 
 /// the coating and the f-number given replacing its fields. `render`, `classify` and `bake` all start here,
 /// so a LUT's optics (and fingerprint) match the frames it is used in.
 #[derive(clap::Args, Debug, Clone, Default)]
+#[command(next_help_heading = "Optics")]
 pub struct OpticsChoice {
     /// Lens file or built-in lens name (default: the preset's lens, else the default lens).
     #[arg(value_name = "LENS")]
