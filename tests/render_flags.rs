@@ -244,3 +244,27 @@ fn render_s_help_is_in_groups() {
         assert!(under(flag, heading), "--{flag} is not under {heading}\n{help}");
     }
 }
+
+/// The plate-light flags tune a preset's own light found in the plate (they once went unread unless `--light
+/// auto` was given too), and are refused, naming them, where the document finds no light.
+#[test]
+fn the_light_flags_tune_a_preset_s_found_light() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("found.json");
+    let mut preset = flare_core::preset::Document::default();
+    preset.auto_light = Some(Default::default());
+    preset.save(&path).unwrap();
+    let parse = |extra: &[&str]| {
+        let mut words = vec!["flarelab", "render", "--preset", path.to_str().unwrap(), "-o", "x.png"];
+        words.extend(extra);
+        match Cli::try_parse_from(&words).unwrap().command {
+            Some(Command::Render(args)) => document(&args),
+            other => panic!("{other:?}"),
+        }
+    };
+    let doc = parse(&["--light-threshold", "2", "--light-power", "50", "--light-smooth", "3"]).unwrap();
+    let light = doc.auto_light.expect("the preset's light");
+    assert_eq!((light.threshold, light.reference_power, light.smooth_frames), (2.0, Some(50.0), 3));
+    let refused = parse(&["--light", "keys", "--light-smooth", "3"]).unwrap_err().to_string();
+    assert!(refused.contains("apply to --light auto"), "{refused}");
+}
