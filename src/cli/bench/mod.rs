@@ -134,43 +134,75 @@ pub fn light_position_deg(theta_deg: f64) -> [f64; 2] {
     [(t * phi.cos()).atan().to_degrees(), (t * phi.sin()).atan().to_degrees()]
 }
 
-pub fn run(args: &BenchArgs) -> Result<()> {
-    let (width, height) = flare_core::frame::parse_size(args.size.as_deref().unwrap_or("480x320"))
-        .map_err(|e| anyhow::anyhow!("--size: {e}"))?;
-    let lenses: Vec<String> = if !args.lens.is_empty() {
-        args.lens.clone()
-    } else if args.quick {
-        vec!["pbrt_dgauss_50mm".into(), "nikon_zoom_28_75mm".into()]
-    } else {
-        flare_core::optics::library::ids().into_iter().map(str::to_owned).collect()
-    };
-    let fields: Vec<f64> = parse_list(
-        args.field_deg.as_deref().unwrap_or(if args.quick { "0,10,20" } else { "0,5,10,15,20,25" }),
-        "--field-deg",
-    )?;
-    if let Some(bad) = fields.iter().find(|f| !(f.is_finite() && (0.0..=89.0).contains(*f))) {
-        bail!("--field-deg {bad}: angles from 0 to 89 degrees");
-    }
-    let grids: Vec<usize> =
-        parse_list(args.grids.as_deref().unwrap_or(if args.quick { "16,32,64" } else { "16,32,64,128" }), "--grids")?;
-    let reference_grid = args.reference_grid;
-    for &g in grids.iter().chain([&reference_grid]) {
-        if !flare_core::raytrace::GRID_RANGE.contains(&g) {
-            bail!("grid {g}: use 2 to 4096 cells across");
+/// What a run measures, from its flags.
+struct Plan {
+    width: u32,
+    height: u32,
+    lenses: Vec<String>,
+    fields: Vec<f64>,
+    grids: Vec<usize>,
+    reference_grid: usize,
+    repeats: usize,
+    /// Where `--images` writes every method's image.
+    images: Option<PathBuf>,
+}
+
+impl Plan {
+    /// The plan of `args`, every flag checked (and the README's section found) before any benchmarking.
+    fn new(args: &BenchArgs) -> Result<Self> {
+        let (width, height) = flare_core::frame::parse_size(args.size.as_deref().unwrap_or("480x320"))
+            .map_err(|e| anyhow::anyhow!("--size: {e}"))?;
+        let lenses: Vec<String> = if !args.lens.is_empty() {
+            args.lens.clone()
+        } else if args.quick {
+            vec!["pbrt_dgauss_50mm".into(), "nikon_zoom_28_75mm".into()]
+        } else {
+            flare_core::optics::library::ids().into_iter().map(str::to_owned).collect()
+        };
+        let fields: Vec<f64> = parse_list(
+            args.field_deg.as_deref().unwrap_or(if args.quick { "0,10,20" } else { "0,5,10,15,20,25" }),
+            "--field-deg",
+        )?;
+        if let Some(bad) = fields.iter().find(|f| !(f.is_finite() && (0.0..=89.0).contains(*f))) {
+            bail!("--field-deg {bad}: angles from 0 to 89 degrees");
         }
+        let grids: Vec<usize> = parse_list(
+            args.grids.as_deref().unwrap_or(if args.quick { "16,32,64" } else { "16,32,64,128" }),
+            "--grids",
+        )?;
+        let reference_grid = args.reference_grid;
+        for &g in grids.iter().chain([&reference_grid]) {
+            if !flare_core::raytrace::GRID_RANGE.contains(&g) {
+                bail!("grid {g}: use 2 to 4096 cells across");
+            }
+        }
+        if let Some(readme) = &args.update_readme {
+            // Refuse before an hour of benchmarking, not after.
+            readme_section(readme, (README_START, README_END))?;
+        }
+        let repeats = checked_repeats(args.repeats, if args.quick { 3 } else { 5 })?;
+        std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+        let images = args.images.then(|| args.out.join("images"));
+        if let Some(dir) = &images {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        }
+        Ok(Self { width, height, lenses, fields, grids, reference_grid, repeats, images })
     }
-    if let Some(readme) = &args.update_readme {
-        // Refuse before an hour of benchmarking, not after.
-        readme_section(readme, (README_START, README_END))?;
-    }
-    let repeats = checked_repeats(args.repeats, if args.quick { 3 } else { 5 })?;
-    let reference_runs = repeats.min(3);
-    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
-    let images = args.images.then(|| args.out.join("images"));
-    if let Some(dir) = &images {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    }
-    let mut gpu = match GpuBench::new(width, height) {
+}
+
+/// Everything a run measured.
+#[derive(Default)]
+struct Results {
+    rows: Vec<Row>,
+    convergence: Vec<Convergence>,
+    bakes: Vec<Bake>,
+    /// GPU ray grids against CPU ray grids at the same grid: (lens, angle, grid, comparison).
+    twins: Vec<(String, f64, usize, Comparison)>,
+}
+
+pub fn run(args: &BenchArgs) -> Result<()> {
+    let plan = Plan::new(args)?;
+    let mut gpu = match GpuBench::new(plan.width, plan.height) {
         Ok(gpu) => Some(gpu),
         Err(e) => {
             eprintln!("no paraxial-gpu rows: {e}");
@@ -178,219 +210,303 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         }
     };
     let started = Instant::now();
-    let mut rows = Vec::new();
-    let mut convergence = Vec::new();
-    let mut bakes = Vec::new();
-    // GPU ray grids against CPU ray grids at the same grid: (lens, angle, grid, comparison).
-    let mut twins: Vec<(String, f64, usize, Comparison)> = Vec::new();
-    for name in &lenses {
+    let mut results = Results::default();
+    for name in &plan.lenses {
         let lens = open_lens(name)?;
         let flare = PreparedFlare::new(&lens, &FlareConfig::default()).with_context(|| name.clone())?;
         let tracer = flare.ray_grid_renderer();
-        // The blended method's LUT: classified and baked at the default settings, timed and measured once.
-        let (lut, _, bake_s) = super::lut::bake_lut(
-            &flare,
-            &tracer,
-            &args.lut,
-            &flare_core::bake::BakeSettings { res: args.lut_res, ..Default::default() },
-            None,
-            None,
-            true,
-        )?;
-        // Kept beside the tables, so that the blended rows can be timed again (`blend_timing`).
-        let lut_bytes = flare_core::lut::format::write_lut(&args.out.join(format!("{}.flut", lens.id)), &lut)
-            .with_context(|| format!("writing the LUT of {}", lens.id))?;
-        bakes.push(Bake {
-            lens: lens.id.clone(),
-            surfaces: lens.surfaces.len(),
-            ghosts: flare.system.ghosts.len(),
-            lut_ghosts: lut.ghosts.len(),
-            entries: lut.entry_count(),
-            seconds: bake_s,
-            megabytes: lut_bytes as f64 / 1e6,
-            theta_max_deg: lut.theta_max_deg,
-        });
-        eprintln!(
-            "[{:6.1} s] {}: baked {} LUT ghosts ({} entries) in {bake_s:.1} s, {:.1} MB",
-            started.elapsed().as_secs_f64(),
-            lens.id,
-            lut.ghosts.len(),
-            lut.entry_count(),
-            lut_bytes as f64 / 1e6
-        );
-        let live = flare_core::lut::blend::LiveLut::new(lut);
-        let blend = flare_core::lut::blend::BlendSettings::default();
-        let (surfaces, ghosts) = (lens.surfaces.len(), flare.system.ghosts.len());
-        for (k, &theta) in fields.iter().enumerate() {
-            let light = light_position_deg(theta);
-            let render = |grid: Grid| -> Result<RayGridImage> { Ok(tracer.render(light, width, height, grid)?) };
-            let (ms, reference_runs, reference) = timed(reference_runs, || render(Grid::Adaptive(reference_grid)))?;
-            eprintln!(
-                "[{:6.1} s] {} at {theta} deg: reference ({reference_grid}) {:.0} ms, {} rays",
-                started.elapsed().as_secs_f64(),
-                lens.id,
-                ms,
-                reference.stats.rays
-            );
-            let row = |method: String, ms_median: f64, runs: usize, errors: Comparison| Row {
-                lens: lens.id.clone(),
-                surfaces,
-                ghosts,
-                field_deg: theta,
-                method,
-                ms_median,
-                runs,
-                errors,
-                gpu: None,
-            };
-            // Each method's image against the reference, and written out with --images.
-            let truth = metrics::Reference::new(&reference.hdr, &reference.moments);
-            let exposure = truth.exposure;
-            let against = |method: &str, image: &HdrImage, moments: &[metrics::GhostMoments]| -> Result<Comparison> {
-                if let Some(dir) = &images {
-                    let name = format!("{}_{theta}deg_{method}.png", lens.id);
-                    write_display(&dir.join(name), image, exposure)?;
-                }
-                Ok(truth.compare(image, moments))
-            };
-            rows.push(row(
-                "reference".into(),
-                ms,
-                reference_runs,
-                against("reference", &reference.hdr, &reference.moments)?,
-            ));
-            if k == 0 {
-                // Convergence: the reference grid halved twice, each image against the finer one.
-                let mut finer = reference.clone();
-                let mut grid = reference_grid;
-                for _ in 0..2 {
-                    if grid / 2 < 4 {
-                        break;
-                    }
-                    let (ms_half, _, half) = timed(1, || render(Grid::Adaptive(grid / 2)))?;
-                    let vs_half = metrics::compare(&half.hdr, &half.moments, &finer.hdr, &finer.moments);
-                    convergence.push(Convergence {
-                        lens: lens.id.clone(),
-                        field_deg: theta,
-                        grid,
-                        vs_half,
-                        ms: ms_half,
-                    });
-                    finer = half;
-                    grid /= 2;
-                }
-            }
-            // Paraxial: frames drawn at the reference's exposure (which sets the culling threshold), no
-            // starburst, through the one frame pipeline; the timing covers building the frame and the CPU
-            // twin's passes, as the app does it.
-            let display = DisplaySettings {
-                flare_ev: f64::from(exposure).log2(),
-                starburst: false,
-                ..DisplaySettings::default()
-            };
-            let request = FrameRequest { light_deg: light, width, height, display, ..FrameRequest::default() };
-            let sources = Sources { flare: &flare, lut: None, plate: None };
-            let (ms, runs, (image, scene)) = timed(repeats, || {
-                let frame = Frame::build(&flare, None, &request);
-                Ok((frame::draw_cpu_hdr(&frame, &sources), frame.scene))
-            })?;
-            let moments = cpu::ghost_moments(&scene, &flare.ghost_masks, ghosts);
-            rows.push(row("paraxial".into(), ms, runs, against("paraxial", &image, &moments)?));
-            // The same at half accumulation resolution (the app's choice on software adapters), upsampled.
-            let half_request =
-                FrameRequest { display: DisplaySettings { accumulation_divisor: 2, ..display }, ..request.clone() };
-            let (ms, runs, (image, scene)) = timed(repeats, || {
-                let frame = Frame::build(&flare, None, &half_request);
-                Ok((frame::draw_cpu_hdr(&frame, &sources), frame.scene))
-            })?;
-            let moments = cpu::ghost_moments(&scene, &flare.ghost_masks, ghosts);
-            let upsampled = image.resampled(width, height, Sampling::Bilinear, 1.0);
-            rows.push(row("paraxial-half".into(), ms, runs, against("paraxial-half", &upsampled, &moments)?));
-            // Blended: the paraxial flare with the LUT ghosts (CPU twin), as the paraxial row is timed.
-            let blended_request = FrameRequest { blend: blend.clone(), lut_use: LutUse::Blend, ..request.clone() };
-            let blended_sources = Sources { lut: Some(&live), ..sources };
-            let (ms, runs, (image, frame)) = timed(repeats, || {
-                let frame = Frame::build(&flare, Some(&live), &blended_request);
-                Ok((frame::draw_cpu_hdr(&frame, &blended_sources), frame))
-            })?;
-            let mut moments = cpu::ghost_moments(&frame.scene, &flare.ghost_masks, ghosts);
-            if let Some(lut_scene) = &frame.lut {
-                lut_moments(&frame.scene, lut_scene, &live, &mut moments);
-            }
-            rows.push(row("blended".into(), ms, runs, against("blended", &image, &moments)?));
-            // On the GPU, as the app draws it: frame, upload, draw, wait (no read-back in the timing).
-            // The GPU's own time of the passes (timestamp queries) is reported beside the wall-clock time.
-            if let Some(gpu) = gpu.as_mut() {
-                let mut gpu_times = Vec::new();
-                let (ms, runs, frame) = timed(repeats, || {
-                    let frame = Frame::build(&flare, None, &request);
-                    gpu.drawer.render_into(&frame, &sources, &gpu.view)?;
-                    Ok(frame)
-                })?;
-                // Timed apart, so that waiting for the timestamps is not in the wall-clock time.
-                for _ in 0..runs {
-                    let frame = Frame::build(&flare, None, &request);
-                    gpu.drawer.render_into(&frame, &sources, &gpu.view)?;
-                    let (device, queue) = (&gpu.drawer.ctx.device, &gpu.drawer.ctx.queue);
-                    if let Some(times) = gpu.drawer.renderer.wait_pass_times(device, queue) {
-                        gpu_times.push(times);
-                    }
-                }
-                let image = gpu::read_hdr(&gpu.drawer.ctx, &gpu.drawer.renderer)?;
-                let moments = cpu::ghost_moments(&frame.scene, &flare.ghost_masks, ghosts);
-                let mut measured = row("paraxial-gpu".into(), ms, runs, against("paraxial-gpu", &image, &moments)?);
-                if let Some(last) = gpu_times.last() {
-                    let totals: Vec<f64> = gpu_times.iter().map(gpu::PassTimes::total_ms).collect();
-                    measured.gpu = Some((metrics::median(&totals), last.summary()));
-                }
-                rows.push(measured);
-            }
-            for &grid in &grids {
-                let (ms, runs, image) = timed(repeats, || render(Grid::Fixed(grid)))?;
-                let method = format!("raygrid-{grid}");
-                let errors = against(&method, &image.hdr, &image.moments)?;
-                rows.push(row(method, ms, runs, errors));
-                // The same grid traced and box-filtered on the GPU, against the reference and
-                // against the CPU's image at this grid.
-                if let Some(gpu) = gpu.as_ref() {
-                    let window = flare_core::raytrace::Window::frame(width, height);
-                    let samples = flare_core::render::raygrid::SUPERSAMPLE;
-                    let mut gpu_times = Vec::new();
-                    let (ms, runs, gpu_image) = timed(repeats, || {
-                        let image = gpu.raygrid.render(&gpu.drawer.ctx, &tracer, light, window, grid, samples, &[])?;
-                        gpu_times.extend(image.gpu_times.clone());
-                        Ok(image)
-                    })?;
-                    let method = format!("raygrid-{grid}-gpu");
-                    // No per-ghost moments from the GPU: no centroid error ("-" in the table).
-                    let errors = against(&method, &gpu_image.hdr, &[])?;
-                    let twin = metrics::compare(&gpu_image.hdr, &[], &image.hdr, &[]);
-                    let mut measured = row(method, ms, runs, errors);
-                    if let Some(last) = gpu_times.last() {
-                        let totals: Vec<f64> = gpu_times.iter().map(gpu::PassTimes::total_ms).collect();
-                        measured.gpu = Some((metrics::median(&totals), last.summary()));
-                    }
-                    rows.push(measured);
-                    twins.push((lens.id.clone(), theta, grid, twin));
-                }
-            }
-            eprintln!("[{:6.1} s] {} at {theta} deg: done", started.elapsed().as_secs_f64(), lens.id);
+        let live = bake_for_blended(args, &flare, &tracer, &mut results, started)?;
+        let lens_bench = LensBench { plan: &plan, flare: &flare, tracer: &tracer, live: &live, started };
+        for (k, &theta) in plan.fields.iter().enumerate() {
+            lens_bench.angle(theta, k == 0, gpu.as_mut(), &mut results)?;
         }
     }
-    let elapsed_s = started.elapsed().as_secs_f64();
-    let device =
-        gpu.as_ref().map_or_else(|| "no GPU adapter".to_owned(), |g| format!("GPU: {}", g.drawer.ctx.adapter.name));
+    write_results(args, &plan, &results, gpu.as_ref(), started.elapsed().as_secs_f64())
+}
+
+/// The blended method's LUT of `flare`: classified and baked at the default settings, timed and measured once,
+/// and kept beside the tables (so that the blended rows can be timed again: `blend_timing`).
+fn bake_for_blended(
+    args: &BenchArgs,
+    flare: &PreparedFlare,
+    tracer: &flare_core::raytrace::RayGridRenderer,
+    results: &mut Results,
+    started: Instant,
+) -> Result<flare_core::lut::blend::LiveLut> {
+    let lens = &flare.system.lens;
+    let settings = flare_core::bake::BakeSettings { res: args.lut_res, ..Default::default() };
+    let (lut, _, bake_s) = super::lut::bake_lut(flare, tracer, &args.lut, &settings, None, None, true)?;
+    let lut_bytes = flare_core::lut::format::write_lut(&args.out.join(format!("{}.flut", lens.id)), &lut)
+        .with_context(|| format!("writing the LUT of {}", lens.id))?;
+    results.bakes.push(Bake {
+        lens: lens.id.clone(),
+        surfaces: lens.surfaces.len(),
+        ghosts: flare.system.ghosts.len(),
+        lut_ghosts: lut.ghosts.len(),
+        entries: lut.entry_count(),
+        seconds: bake_s,
+        megabytes: lut_bytes as f64 / 1e6,
+        theta_max_deg: lut.theta_max_deg,
+    });
+    eprintln!(
+        "[{:6.1} s] {}: baked {} LUT ghosts ({} entries) in {bake_s:.1} s, {:.1} MB",
+        started.elapsed().as_secs_f64(),
+        lens.id,
+        lut.ghosts.len(),
+        lut.entry_count(),
+        lut_bytes as f64 / 1e6
+    );
+    Ok(flare_core::lut::blend::LiveLut::new(lut))
+}
+
+/// One lens's benchmark: what every light angle of it measures with.
+struct LensBench<'a> {
+    plan: &'a Plan,
+    flare: &'a PreparedFlare,
+    tracer: &'a flare_core::raytrace::RayGridRenderer,
+    live: &'a flare_core::lut::blend::LiveLut,
+    started: Instant,
+}
+
+/// One light angle of one lens: its reference, and each method's row against it.
+struct AngleBench<'a> {
+    lens: &'a LensBench<'a>,
+    theta: f64,
+    light: [f64; 2],
+    truth: metrics::Reference<'a>,
+}
+
+impl AngleBench<'_> {
+    /// A row of the table for `method`.
+    fn row(&self, method: String, ms_median: f64, runs: usize, errors: Comparison) -> Row {
+        let flare = self.lens.flare;
+        Row {
+            lens: flare.system.lens.id.clone(),
+            surfaces: flare.system.lens.surfaces.len(),
+            ghosts: flare.system.ghosts.len(),
+            field_deg: self.theta,
+            method,
+            ms_median,
+            runs,
+            errors,
+            gpu: None,
+        }
+    }
+
+    /// `method`'s image against the reference, and written out with `--images`.
+    fn against(&self, method: &str, image: &HdrImage, moments: &[metrics::GhostMoments]) -> Result<Comparison> {
+        if let Some(dir) = &self.lens.plan.images {
+            let name = format!("{}_{}deg_{method}.png", self.lens.flare.system.lens.id, self.theta);
+            write_display(&dir.join(name), image, self.truth.exposure)?;
+        }
+        Ok(self.truth.compare(image, moments))
+    }
+
+    /// The ray-traced image of this light at `grid`.
+    fn trace(&self, grid: Grid) -> Result<RayGridImage> {
+        self.lens.trace(self.light, grid)
+    }
+}
+
+impl LensBench<'_> {
+    /// The ray-traced image of the light at `light` (degrees) at `grid`.
+    fn trace(&self, light: [f64; 2], grid: Grid) -> Result<RayGridImage> {
+        Ok(self.tracer.render(light, self.plan.width, self.plan.height, grid)?)
+    }
+
+    /// Every method at the light `theta` degrees from the axis (and, at the `first` angle, the reference's
+    /// convergence).
+    fn angle(&self, theta: f64, first: bool, mut gpu: Option<&mut GpuBench>, results: &mut Results) -> Result<()> {
+        let (plan, id) = (self.plan, &self.flare.system.lens.id);
+        let light = light_position_deg(theta);
+        let (ms, runs, reference) =
+            timed(plan.repeats.min(3), || self.trace(light, Grid::Adaptive(plan.reference_grid)))?;
+        eprintln!(
+            "[{:6.1} s] {id} at {theta} deg: reference ({}) {ms:.0} ms, {} rays",
+            self.started.elapsed().as_secs_f64(),
+            plan.reference_grid,
+            reference.stats.rays
+        );
+        let truth = metrics::Reference::new(&reference.hdr, &reference.moments);
+        let at = AngleBench { lens: self, theta, light, truth };
+        let errors = at.against("reference", &reference.hdr, &reference.moments)?;
+        results.rows.push(at.row("reference".into(), ms, runs, errors));
+        if first {
+            at.convergence(&reference, &mut results.convergence)?;
+        }
+        at.paraxial_rows(&mut results.rows)?;
+        if let Some(gpu) = gpu.as_deref_mut() {
+            at.gpu_paraxial_row(gpu, &mut results.rows)?;
+        }
+        at.raygrid_rows(gpu.as_deref(), results)?;
+        eprintln!("[{:6.1} s] {id} at {theta} deg: done", self.started.elapsed().as_secs_f64());
+        Ok(())
+    }
+}
+
+impl AngleBench<'_> {
+    /// Convergence: the reference grid halved twice, each image against the finer one.
+    fn convergence(&self, reference: &RayGridImage, out: &mut Vec<Convergence>) -> Result<()> {
+        let mut finer = reference.clone();
+        let mut grid = self.lens.plan.reference_grid;
+        for _ in 0..2 {
+            if grid / 2 < 4 {
+                break;
+            }
+            let (ms_half, _, half) = timed(1, || self.trace(Grid::Adaptive(grid / 2)))?;
+            let vs_half = metrics::compare(&half.hdr, &half.moments, &finer.hdr, &finer.moments);
+            let lens = self.lens.flare.system.lens.id.clone();
+            out.push(Convergence { lens, field_deg: self.theta, grid, vs_half, ms: ms_half });
+            finer = half;
+            grid /= 2;
+        }
+        Ok(())
+    }
+
+    /// The frame request of the paraxial methods: drawn at the reference's exposure (which sets the culling
+    /// threshold), no starburst.
+    fn request(&self) -> FrameRequest {
+        let display = DisplaySettings {
+            flare_ev: f64::from(self.truth.exposure).log2(),
+            starburst: false,
+            ..DisplaySettings::default()
+        };
+        let (width, height) = (self.lens.plan.width, self.lens.plan.height);
+        FrameRequest { light_deg: self.light, width, height, display, ..FrameRequest::default() }
+    }
+
+    /// Paraxial, paraxial at half accumulation resolution and blended, through the one frame pipeline; the
+    /// timing covers building the frame and the CPU twin's passes, as the app does it.
+    fn paraxial_rows(&self, rows: &mut Vec<Row>) -> Result<()> {
+        let (flare, plan, live) = (self.lens.flare, self.lens.plan, self.lens.live);
+        let ghosts = flare.system.ghosts.len();
+        let request = self.request();
+        let sources = Sources { flare, lut: None, plate: None };
+        let (ms, runs, (image, scene)) = timed(plan.repeats, || {
+            let frame = Frame::build(flare, None, &request);
+            Ok((frame::draw_cpu_hdr(&frame, &sources), frame.scene))
+        })?;
+        let moments = cpu::ghost_moments(&scene, &flare.ghost_masks, ghosts);
+        rows.push(self.row("paraxial".into(), ms, runs, self.against("paraxial", &image, &moments)?));
+        // The same at half accumulation resolution (the app's choice on software adapters), upsampled.
+        let half_request =
+            FrameRequest { display: DisplaySettings { accumulation_divisor: 2, ..request.display }, ..request.clone() };
+        let (ms, runs, (image, scene)) = timed(plan.repeats, || {
+            let frame = Frame::build(flare, None, &half_request);
+            Ok((frame::draw_cpu_hdr(&frame, &sources), frame.scene))
+        })?;
+        let moments = cpu::ghost_moments(&scene, &flare.ghost_masks, ghosts);
+        let upsampled = image.resampled(plan.width, plan.height, Sampling::Bilinear, 1.0);
+        rows.push(self.row("paraxial-half".into(), ms, runs, self.against("paraxial-half", &upsampled, &moments)?));
+        // Blended: the paraxial flare with the LUT ghosts (CPU twin), as the paraxial row is timed.
+        let blend = flare_core::lut::blend::BlendSettings::default();
+        let blended_request = FrameRequest { blend, lut_use: LutUse::Blend, ..request };
+        let blended_sources = Sources { lut: Some(live), ..sources };
+        let (ms, runs, (image, frame)) = timed(plan.repeats, || {
+            let frame = Frame::build(flare, Some(live), &blended_request);
+            Ok((frame::draw_cpu_hdr(&frame, &blended_sources), frame))
+        })?;
+        let mut moments = cpu::ghost_moments(&frame.scene, &flare.ghost_masks, ghosts);
+        if let Some(lut_scene) = &frame.lut {
+            lut_moments(&frame.scene, lut_scene, live, &mut moments);
+        }
+        rows.push(self.row("blended".into(), ms, runs, self.against("blended", &image, &moments)?));
+        Ok(())
+    }
+
+    /// The paraxial frame on the GPU, as the app draws it: frame, upload, draw, wait (no read-back in the
+    /// timing). The GPU's own time of the passes (timestamp queries) is reported beside the wall-clock time.
+    fn gpu_paraxial_row(&self, gpu: &mut GpuBench, rows: &mut Vec<Row>) -> Result<()> {
+        let (flare, plan) = (self.lens.flare, self.lens.plan);
+        let request = self.request();
+        let sources = Sources { flare, lut: None, plate: None };
+        let mut gpu_times = Vec::new();
+        let (ms, runs, frame) = timed(plan.repeats, || {
+            let frame = Frame::build(flare, None, &request);
+            gpu.drawer.render_into(&frame, &sources, &gpu.view)?;
+            Ok(frame)
+        })?;
+        // Timed apart, so that waiting for the timestamps is not in the wall-clock time.
+        for _ in 0..runs {
+            let frame = Frame::build(flare, None, &request);
+            gpu.drawer.render_into(&frame, &sources, &gpu.view)?;
+            let (device, queue) = (&gpu.drawer.ctx.device, &gpu.drawer.ctx.queue);
+            if let Some(times) = gpu.drawer.renderer.wait_pass_times(device, queue) {
+                gpu_times.push(times);
+            }
+        }
+        let image = gpu::read_hdr(&gpu.drawer.ctx, &gpu.drawer.renderer)?;
+        let moments = cpu::ghost_moments(&frame.scene, &flare.ghost_masks, flare.system.ghosts.len());
+        let mut measured = self.row("paraxial-gpu".into(), ms, runs, self.against("paraxial-gpu", &image, &moments)?);
+        if let Some(last) = gpu_times.last() {
+            let totals: Vec<f64> = gpu_times.iter().map(gpu::PassTimes::total_ms).collect();
+            measured.gpu = Some((metrics::median(&totals), last.summary()));
+        }
+        rows.push(measured);
+        Ok(())
+    }
+
+    /// Every ray grid on the CPU and, with a GPU, the same grid traced and box-filtered there, against the
+    /// reference and against the CPU's image at this grid.
+    fn raygrid_rows(&self, gpu: Option<&GpuBench>, results: &mut Results) -> Result<()> {
+        let plan = self.lens.plan;
+        for &grid in &plan.grids {
+            let (ms, runs, image) = timed(plan.repeats, || self.trace(Grid::Fixed(grid)))?;
+            let method = format!("raygrid-{grid}");
+            let errors = self.against(&method, &image.hdr, &image.moments)?;
+            results.rows.push(self.row(method, ms, runs, errors));
+            let Some(gpu) = gpu else { continue };
+            let window = flare_core::raytrace::Window::frame(plan.width, plan.height);
+            let samples = flare_core::render::raygrid::SUPERSAMPLE;
+            let mut gpu_times = Vec::new();
+            let (ms, runs, gpu_image) = timed(plan.repeats, || {
+                let image =
+                    gpu.raygrid.render(&gpu.drawer.ctx, self.lens.tracer, self.light, window, grid, samples, &[])?;
+                gpu_times.extend(image.gpu_times.clone());
+                Ok(image)
+            })?;
+            let method = format!("raygrid-{grid}-gpu");
+            // No per-ghost moments from the GPU: no centroid error ("-" in the table).
+            let errors = self.against(&method, &gpu_image.hdr, &[])?;
+            let twin = metrics::compare(&gpu_image.hdr, &[], &image.hdr, &[]);
+            let mut measured = self.row(method, ms, runs, errors);
+            if let Some(last) = gpu_times.last() {
+                let totals: Vec<f64> = gpu_times.iter().map(gpu::PassTimes::total_ms).collect();
+                measured.gpu = Some((metrics::median(&totals), last.summary()));
+            }
+            results.rows.push(measured);
+            results.twins.push((self.lens.flare.system.lens.id.clone(), self.theta, grid, twin));
+        }
+        Ok(())
+    }
+}
+
+/// The tables (CSV, Markdown), the chart and, with `--update-readme`, the page's section.
+fn write_results(
+    args: &BenchArgs,
+    plan: &Plan,
+    results: &Results,
+    gpu: Option<&GpuBench>,
+    elapsed_s: f64,
+) -> Result<()> {
+    let Results { rows, convergence, bakes, twins } = results;
+    let adapter = gpu.map(|g| g.drawer.ctx.adapter.name.as_str());
+    let device = adapter.map_or_else(|| "no GPU adapter".to_owned(), |name| format!("GPU: {name}"));
     let settings = format!(
-        "{width}x{height}, {device}, RGB (650/510/475 nm), 6-blade aperture wide open, each lens's own coatings, light at {LIGHT_AZIMUTH_DEG} deg azimuth; reference grid {reference_grid}; {} threads; median of {repeats} timed runs per method (1 for runs over {:.0} s); whole run {elapsed_s:.0} s",
+        "{}x{}, {device}, RGB (650/510/475 nm), 6-blade aperture wide open, each lens's own coatings, light at {LIGHT_AZIMUTH_DEG} deg azimuth; reference grid {}; {} threads; median of {} timed runs per method (1 for runs over {:.0} s); whole run {elapsed_s:.0} s",
+        plan.width,
+        plan.height,
+        plan.reference_grid,
         rayon::current_num_threads(),
+        plan.repeats,
         REPEAT_BELOW_MS / 1e3
     );
-    write_atomic(&args.out.join("bench.csv"), csv(&rows).as_bytes())?;
-    let mut markdown = markdown(&rows, &convergence, &settings);
-    markdown.push_str(&twin_table(&twins, gpu.as_ref().map(|g| g.drawer.ctx.adapter.name.as_str())));
-    markdown.push_str(&bake_table(&bakes, &rows));
+    write_atomic(&args.out.join("bench.csv"), csv(rows).as_bytes())?;
+    let mut markdown = markdown(rows, convergence, &settings);
+    markdown.push_str(&twin_table(twins, adapter));
+    markdown.push_str(&bake_table(bakes, rows));
     write_atomic(&args.out.join("bench.md"), markdown.as_bytes())?;
-    plot::error_against_time(&rows, &args.out.join("bench.png"))?;
+    plot::error_against_time(rows, &args.out.join("bench.png"))?;
     if let Some(readme) = &args.update_readme {
         update_readme(readme, (README_START, README_END), &markdown)?;
     }

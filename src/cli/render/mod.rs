@@ -145,89 +145,13 @@ fn run_timed(args: &RenderArgs) -> Result<()> {
     use flare_core::timing::span;
     let mut doc = span("read the document", || document(args))?;
     let method = method_of(args, &doc);
-    let grid = match (method, args.method.grid) {
-        (Method::Paraxial | Method::Blended | Method::Photo, Some(_)) => {
-            bail!("--grid applies to --method raygrid or reference")
-        }
-        (Method::Paraxial | Method::Blended | Method::Photo, None) => None,
-        (Method::Raygrid, None) => bail!("--method raygrid needs --grid N (Hullin 2011 used 16 to 128)"),
-        (Method::Raygrid, Some(n)) => Some(raytrace::Grid::Fixed(n)),
-        (Method::Reference, n) => Some(raytrace::Grid::Adaptive(n.unwrap_or(raytrace::REFERENCE_GRID))),
-    };
-    if let Some(n) = grid.map(raytrace::Grid::cells)
-        && !raytrace::GRID_RANGE.contains(&n)
-    {
-        bail!("--grid {n}: use {} to {}", raytrace::GRID_RANGE.start(), raytrace::GRID_RANGE.end());
-    }
-    if args.method.lut.is_some() && !matches!(method, Method::Blended | Method::Photo) {
-        bail!("--lut applies to --method blended or photo");
-    }
-    if method == Method::Photo
-        && let Some(path) = &args.method.lut
-    {
-        doc.blend.lut = LutSource::Photo { path: path.display().to_string() };
-    }
-    match method {
-        Method::Blended if doc.blend.lut == LutSource::None => doc.blend.lut = LutSource::Simulated { path: None },
-        Method::Blended | Method::Photo => {}
-        _ => doc.blend.lut = LutSource::None,
-    }
-    if args.method.gpu_samples > 8 {
-        bail!("--gpu-samples {}: use 0 (the box filter) or 1 to 8 samples a pixel across", args.method.gpu_samples);
-    }
-    if ![1, 2, 4].contains(&args.method.accumulation_divisor) {
-        bail!("--accumulation-divisor {}: use 1, 2 or 4", args.method.accumulation_divisor);
-    }
+    let grid = grid_of(args, method)?;
+    settle_lut_source(args, &mut doc, method)?;
     let choice = doc.layer_choice(args.output.layers == Some(Layers::Ghosts));
     // Everything that can be refused is checked before any work: the output's name and type, the range, the
     // plate, the track.
-    let out_text = args.output.out.display().to_string();
-    let out_pattern = FramePattern::parse(&out_text).map_err(|e| anyhow::anyhow!("-o {e}"))?;
-    let sequence = match (args.shot.frames, out_pattern) {
-        (Some(_), Some(pattern)) => Some(pattern),
-        (Some(_), None) => bail!(
-            "-o {out_text}: a sequence needs a frame field in the file name, e.g. out/flare.####.exr or \
-             out/flare.%04d.exr"
-        ),
-        (None, Some(_)) => bail!("-o {out_text}: the name has a frame field; give --frames A-B to render a sequence"),
-        (None, None) => None,
-    };
-    if grid.is_some() && doc.auto_light.is_some() {
-        bail!("--light auto applies to the paraxial, blended and photo methods");
-    }
-    if grid.is_some() && doc.timeline.shutter_deg > 0.0 {
-        bail!(
-            "--shutter-deg {}: motion blur applies to the paraxial, blended and photo methods (a ray-traced frame \
-             is traced at one instant); give --shutter-deg 0",
-            doc.timeline.shutter_deg
-        );
-    }
-    frame::check_output(&args.output.out, choice).map_err(|e| match e {
-        frame::FrameError::Request(reason) => anyhow::anyhow!("--layers ghosts: {reason}"),
-        other => anyhow::anyhow!("{other}"),
-    })?;
-    // The folder takes the files now, before a bake, a trace or the first frame (a sequence makes its folder).
-    match sequence {
-        Some(_) => flare_core::files::check_sequence_target(&args.output.out),
-        None => flare_core::files::check_target(&args.output.out),
-    }
-    .map_err(|e| anyhow::anyhow!("-o {e}"))?;
-    let range = match args.shot.frames {
-        Some((a, b)) => a..=b,
-        None => {
-            let f = args.shot.frame.unwrap_or(doc.timeline.first_frame);
-            f..=f
-        }
-    };
-    shot::plan::check_range(&doc, &range).map_err(|e| anyhow::anyhow!("--background: {e}"))?;
-    if doc.auto_light.is_some() && doc.background.is_none() {
-        bail!("--light auto finds the light in the plate: give --background (a plate or a sequence)");
-    }
-    if let Some(background) = doc.background.as_deref()
-        && !FramePattern::is_pattern(background)
-    {
-        read_plate(Path::new(background)).context("--background: the plate cannot be used")?;
-    }
+    let sequence = output_pattern(args, &doc, grid, choice)?;
+    let range = frame_range(args, &doc)?;
     let track = args
         .light
         .track
@@ -248,38 +172,9 @@ fn run_timed(args: &RenderArgs) -> Result<()> {
             doc.timeline.light_ev = intensity;
         }
     }
-    // Ray grids trace on the GPU too (`render::raygrid`); the reference is the f64 CPU tracer.
-    let mut device = match (args.method.device, grid) {
-        (DeviceArg::Gpu, Some(raytrace::Grid::Adaptive(_))) => bail!(
-            "--device gpu: the reference is the f64 CPU tracer; for ray grids on the GPU use --method raygrid --grid N"
-        ),
-        (_, Some(raytrace::Grid::Adaptive(_))) | (DeviceArg::Cpu, _) => Device::Cpu,
-        (DeviceArg::Gpu, _) => Device::gpu(false).map_err(|e| anyhow::anyhow!("{e} (or use --device cpu)"))?,
-        (DeviceArg::Auto, _) => Device::gpu(false).unwrap_or_else(|e| {
-            eprintln!("no GPU ({e}): drawing on the CPU twin");
-            Device::Cpu
-        }),
-    };
+    let mut device = device_for(args.method.device, grid)?;
     let cancel = AtomicBool::new(false);
-    let scanning = (doc.auto_light.is_some() && range.clone().count() > 1)
-        .then(|| progress_bar(range.clone().count(), "finding the light"));
-    let plan = span("plan the shot", || {
-        shot::plan::plan(
-            &doc,
-            &flare.system,
-            range,
-            args.output.size,
-            &|done, _| {
-                if let Some(bar) = &scanning {
-                    bar.set_position(done as u64);
-                }
-            },
-            &cancel,
-        )
-    })?;
-    if let Some(bar) = scanning {
-        bar.finish_and_clear();
-    }
+    let plan = plan_shot(args, &doc, &flare, range, &cancel)?;
     // A still without motion blur draws the LUT's images at one light angle: only those are read.
     let near_theta_deg = match plan.frames.as_slice() {
         [still] if doc.timeline.shutter_deg <= 0.0 => {
@@ -298,25 +193,229 @@ fn run_timed(args: &RenderArgs) -> Result<()> {
     let divisor = if grid.is_some() { 1 } else { args.method.accumulation_divisor };
     // The ray-traced methods trace each frame's ghosts, stills and sequences alike (`flare_core::traced`).
     let traced = grid.map(|n| Arc::new(TracedGhosts::new(&flare, n, args.method.gpu_samples, &device)));
-    if let Some(out) = sequence {
-        let sources = ShotSources { doc: &doc, flare: &flare, lut: lut.as_ref(), plan: &plan };
-        let options = SequenceOptions {
-            out,
-            layers: choice,
-            skip_existing: args.shot.skip_existing,
-            divisor,
-            parallel_frames: !args.shot.frames_in_turn,
-            traced,
-        };
-        let result = render_frames(args, &mut device, &sources, &options, &cancel);
-        eprintln!("{}", exposure_line(&doc));
-        return result;
+    let Some(out) = sequence else {
+        let still = Still { doc: &doc, flare: &flare, lut: lut.as_ref(), plan: &plan, divisor, choice };
+        return render_still(args, &mut device, &still, traced.as_deref());
+    };
+    let sources = ShotSources { doc: &doc, flare: &flare, lut: lut.as_ref(), plan: &plan };
+    let options = SequenceOptions {
+        out,
+        layers: choice,
+        skip_existing: args.shot.skip_existing,
+        divisor,
+        parallel_frames: !args.shot.frames_in_turn,
+        traced,
+    };
+    let result = render_frames(args, &mut device, &sources, &options, &cancel);
+    eprintln!("{}", exposure_line(&doc));
+    result
+}
+
+/// The ray grid of the method: `--grid` for `raygrid`, the converged reference's, none for the paraxial
+/// methods (which refuse `--grid`).
+fn grid_of(args: &RenderArgs, method: Method) -> Result<Option<raytrace::Grid>> {
+    let grid = match (method, args.method.grid) {
+        (Method::Paraxial | Method::Blended | Method::Photo, Some(_)) => {
+            bail!("--grid applies to --method raygrid or reference")
+        }
+        (Method::Paraxial | Method::Blended | Method::Photo, None) => None,
+        (Method::Raygrid, None) => bail!("--method raygrid needs --grid N (Hullin 2011 used 16 to 128)"),
+        (Method::Raygrid, Some(n)) => Some(raytrace::Grid::Fixed(n)),
+        (Method::Reference, n) => Some(raytrace::Grid::Adaptive(n.unwrap_or(raytrace::REFERENCE_GRID))),
+    };
+    if let Some(n) = grid.map(raytrace::Grid::cells)
+        && !raytrace::GRID_RANGE.contains(&n)
+    {
+        bail!("--grid {n}: use {} to {}", raytrace::GRID_RANGE.start(), raytrace::GRID_RANGE.end());
     }
+    Ok(grid)
+}
+
+/// The document's LUT source as the method needs it (`--lut` a photo LUT for `photo`; none for the ray-traced
+/// methods), and the method's other flags checked.
+fn settle_lut_source(args: &RenderArgs, doc: &mut Document, method: Method) -> Result<()> {
+    if args.method.lut.is_some() && !matches!(method, Method::Blended | Method::Photo) {
+        bail!("--lut applies to --method blended or photo");
+    }
+    if method == Method::Photo
+        && let Some(path) = &args.method.lut
+    {
+        doc.blend.lut = LutSource::Photo { path: path.display().to_string() };
+    }
+    match method {
+        Method::Blended if doc.blend.lut == LutSource::None => doc.blend.lut = LutSource::Simulated { path: None },
+        Method::Blended | Method::Photo => {}
+        _ => doc.blend.lut = LutSource::None,
+    }
+    if args.method.gpu_samples > 8 {
+        bail!("--gpu-samples {}: use 0 (the box filter) or 1 to 8 samples a pixel across", args.method.gpu_samples);
+    }
+    if ![1, 2, 4].contains(&args.method.accumulation_divisor) {
+        bail!("--accumulation-divisor {}: use 1, 2 or 4", args.method.accumulation_divisor);
+    }
+    Ok(())
+}
+
+/// `-o` checked before any work: a sequence's pattern (`Some`) or a still's file, its type against the layers,
+/// the ray-traced methods' limits, and that its folder takes files.
+fn output_pattern(
+    args: &RenderArgs,
+    doc: &Document,
+    grid: Option<raytrace::Grid>,
+    choice: frame::LayerChoice,
+) -> Result<Option<FramePattern>> {
+    let out = &args.output.out;
+    let out_text = out.display().to_string();
+    let out_pattern = FramePattern::parse(&out_text).map_err(|e| anyhow::anyhow!("-o {e}"))?;
+    let sequence = match (args.shot.frames, out_pattern) {
+        (Some(_), Some(pattern)) => Some(pattern),
+        (Some(_), None) => bail!(
+            "-o {out_text}: a sequence needs a frame field in the file name, e.g. out/flare.####.exr or \
+             out/flare.%04d.exr"
+        ),
+        (None, Some(_)) => bail!("-o {out_text}: the name has a frame field; give --frames A-B to render a sequence"),
+        (None, None) => None,
+    };
+    if grid.is_some() && doc.auto_light.is_some() {
+        bail!("--light auto applies to the paraxial, blended and photo methods");
+    }
+    if grid.is_some() && doc.timeline.shutter_deg > 0.0 {
+        bail!(
+            "--shutter-deg {}: motion blur applies to the paraxial, blended and photo methods (a ray-traced frame \
+             is traced at one instant); give --shutter-deg 0",
+            doc.timeline.shutter_deg
+        );
+    }
+    frame::check_output(out, choice).map_err(|e| match e {
+        frame::FrameError::Request(reason) => anyhow::anyhow!("--layers ghosts: {reason}"),
+        other => anyhow::anyhow!("{other}"),
+    })?;
+    // The folder takes the files now, before a bake, a trace or the first frame (a sequence makes its folder).
+    match sequence {
+        Some(_) => flare_core::files::check_sequence_target(out),
+        None => flare_core::files::check_target(out),
+    }
+    .map_err(|e| anyhow::anyhow!("-o {e}"))?;
+    Ok(sequence)
+}
+
+/// The frames drawn (`--frames`, else the still's `--frame` or the timeline's first), checked against the
+/// plate sequence, with the plate that a still or the light found needs.
+fn frame_range(args: &RenderArgs, doc: &Document) -> Result<std::ops::RangeInclusive<i64>> {
+    let range = match args.shot.frames {
+        Some((a, b)) => a..=b,
+        None => {
+            let f = args.shot.frame.unwrap_or(doc.timeline.first_frame);
+            f..=f
+        }
+    };
+    shot::plan::check_range(doc, &range).map_err(|e| anyhow::anyhow!("--background: {e}"))?;
+    if doc.auto_light.is_some() && doc.background.is_none() {
+        bail!("--light auto finds the light in the plate: give --background (a plate or a sequence)");
+    }
+    if let Some(background) = doc.background.as_deref()
+        && !FramePattern::is_pattern(background)
+    {
+        read_plate(Path::new(background)).context("--background: the plate cannot be used")?;
+    }
+    Ok(range)
+}
+
+/// Where the frame is drawn: `--device`, except the reference, which is the f64 CPU tracer (ray grids trace
+/// on the GPU too, `render::raygrid`).
+fn device_for(device: DeviceArg, grid: Option<raytrace::Grid>) -> Result<Device> {
+    Ok(match (device, grid) {
+        (DeviceArg::Gpu, Some(raytrace::Grid::Adaptive(_))) => bail!(
+            "--device gpu: the reference is the f64 CPU tracer; for ray grids on the GPU use --method raygrid --grid N"
+        ),
+        (_, Some(raytrace::Grid::Adaptive(_))) | (DeviceArg::Cpu, _) => Device::Cpu,
+        (DeviceArg::Gpu, _) => Device::gpu(false).map_err(|e| anyhow::anyhow!("{e} (or use --device cpu)"))?,
+        (DeviceArg::Auto, _) => Device::gpu(false).unwrap_or_else(|e| {
+            eprintln!("no GPU ({e}): drawing on the CPU twin");
+            Device::Cpu
+        }),
+    })
+}
+
+/// Every frame of `range` planned (the light, its gain, the plate), with a progress bar while the light is
+/// found in a sequence's plates.
+fn plan_shot(
+    args: &RenderArgs,
+    doc: &Document,
+    flare: &PreparedFlare,
+    range: std::ops::RangeInclusive<i64>,
+    cancel: &AtomicBool,
+) -> Result<shot::ShotPlan> {
+    let scanning = (doc.auto_light.is_some() && range.clone().count() > 1)
+        .then(|| progress_bar(range.clone().count(), "finding the light"));
+    let plan = flare_core::timing::span("plan the shot", || {
+        shot::plan::plan(
+            doc,
+            &flare.system,
+            range,
+            args.output.size,
+            &|done, _| {
+                if let Some(bar) = &scanning {
+                    bar.set_position(done as u64);
+                }
+            },
+            cancel,
+        )
+    })?;
+    if let Some(bar) = scanning {
+        bar.finish_and_clear();
+    }
+    Ok(plan)
+}
+
+/// What a still is drawn from.
+struct Still<'a> {
+    doc: &'a Document,
+    flare: &'a PreparedFlare,
+    lut: Option<&'a LiveLut>,
+    plan: &'a shot::ShotPlan,
+    divisor: u32,
+    choice: frame::LayerChoice,
+}
+
+/// Draws and writes the still (its plate defocused where the document asks), then says what was drawn.
+fn render_still(args: &RenderArgs, device: &mut Device, still: &Still, traced: Option<&TracedGhosts>) -> Result<()> {
+    use flare_core::timing::span;
+    let Still { doc, flare, lut, plan, divisor, choice } = *still;
     let planned = &plan.frames[0];
-    let (width, height) = (plan.width, plan.height);
-    // The plate, then its depth of field: each error blamed on what caused it (a bad depth map is not the plate's).
-    let plate = match planned.plate.as_deref() {
-        Some(p) => match shot::plate::frame_plate(&doc, &flare, planned.frame, p) {
+    let plate = still_plate(doc, flare, planned.frame, planned.plate.as_deref())?;
+    let request = plan.request(doc, &flare.system, planned, divisor);
+    let frame = span("build the frame", || Frame::build(flare, lut, &request));
+    let sources = Sources { flare, lut, plate: plate.as_ref() };
+    let out = &args.output.out;
+    match traced {
+        Some(t) => {
+            // Ray-traced ghosts replace the paraxial accumulation; starburst, tonemap and writer are the same.
+            let traced =
+                span("draw and write (ray-traced)", || t.render_to_file(device, &frame, &sources, choice, out))?;
+            eprintln!("{traced}");
+        }
+        None => {
+            let made = span("draw", || frame::draw_for_file(device, &frame, &sources, choice, out))?;
+            span("write", || frame::write_made(device, &frame, &sources, &made, choice, out))?;
+            eprintln!("rendered on {}", device.name());
+        }
+    }
+    eprintln!("{}", exposure_line(doc));
+    report_still(args, still, &frame);
+    Ok(())
+}
+
+/// The still's plate, then its depth of field: each error blamed on what caused it (a bad depth map is not the
+/// plate's); what the depth of field does, said.
+fn still_plate(
+    doc: &Document,
+    flare: &PreparedFlare,
+    frame: i64,
+    plate: Option<&Path>,
+) -> Result<Option<flare_core::image::HdrImage>> {
+    let plate = match plate {
+        Some(p) => match shot::plate::frame_plate(doc, flare, frame, p) {
             Ok((plate, warning)) => {
                 if let Some(warning) = warning {
                     eprintln!("warning: {warning}");
@@ -325,9 +424,9 @@ fn run_timed(args: &RenderArgs) -> Result<()> {
             }
             Err(shot::plate::FramePlateError::Plate(e)) => {
                 return Err(anyhow::anyhow!(e))
-                    .with_context(|| format!("--background: frame {}: the plate cannot be used", planned.frame));
+                    .with_context(|| format!("--background: frame {frame}: the plate cannot be used"));
             }
-            Err(shot::plate::FramePlateError::DepthOfField(e)) => bail!("frame {}: {e}", planned.frame),
+            Err(shot::plate::FramePlateError::DepthOfField(e)) => bail!("frame {frame}: {e}"),
         },
         None => None,
     };
@@ -344,24 +443,12 @@ fn run_timed(args: &RenderArgs) -> Result<()> {
             }
         }
     }
-    let request = plan.request(&doc, &flare.system, planned, divisor);
-    let frame = span("build the frame", || Frame::build(&flare, lut.as_ref(), &request));
-    let sources = Sources { flare: &flare, lut: lut.as_ref(), plate: plate.as_ref() };
-    match &traced {
-        Some(t) => {
-            // Ray-traced ghosts replace the paraxial accumulation; starburst, tonemap and writer are the same.
-            let traced = span("draw and write (ray-traced)", || {
-                t.render_to_file(&device, &frame, &sources, choice, &args.output.out)
-            })?;
-            eprintln!("{traced}");
-        }
-        None => {
-            let made = span("draw", || frame::draw_for_file(&mut device, &frame, &sources, choice, &args.output.out))?;
-            span("write", || frame::write_made(&mut device, &frame, &sources, &made, choice, &args.output.out))?;
-            eprintln!("rendered on {}", device.name());
-        }
-    }
-    eprintln!("{}", exposure_line(&doc));
+    Ok(plate)
+}
+
+/// What the still drew: motion blur, the display, the ghosts, sprites and LUT images.
+fn report_still(args: &RenderArgs, still: &Still, frame: &Frame) {
+    let Still { doc, flare, lut, plan, .. } = *still;
     if let Some(s) = &frame.shutter {
         eprintln!(
             "motion blur ({} degree shutter): up to {} time samples, {:.1} a ghost on average; the fastest ghost moves \
@@ -381,21 +468,22 @@ fn run_timed(args: &RenderArgs) -> Result<()> {
     }
     let st = frame.sprites.stats;
     eprintln!(
-        "wrote {} ({width}x{height}): {} ghosts x {} wavelengths, {} sprites drawn, culled {} dim / {} off sensor / {} empty entrance{}",
+        "wrote {} ({}x{}): {} ghosts x {} wavelengths, {} sprites drawn, culled {} dim / {} off sensor / {} empty entrance{}",
         args.output.out.display(),
+        plan.width,
+        plan.height,
         flare.system.ghosts.len(),
-        config.spectrum.len(),
+        flare.config.spectrum.len(),
         frame.scene.instances.len(),
         st.below_threshold,
         st.off_sensor,
         st.empty_entrance_region,
-        match (&lut, &frame.lut) {
+        match (lut, &frame.lut) {
             (Some(live), Some(l)) =>
                 format!(", {} LUT images from {} LUT ghosts", l.instances.len(), live.lut.ghosts.len()),
             _ => String::new(),
         }
     );
-    Ok(())
 }
 
 /// A terminal progress bar with the rate and the time left.
