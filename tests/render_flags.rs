@@ -251,8 +251,7 @@ fn render_s_help_is_in_groups() {
 fn the_light_flags_tune_a_preset_s_found_light() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("found.json");
-    let mut preset = flare_core::preset::Document::default();
-    preset.auto_light = Some(Default::default());
+    let preset = flare_core::preset::Document { auto_light: Some(Default::default()), ..Default::default() };
     preset.save(&path).unwrap();
     let parse = |extra: &[&str]| {
         let mut words = vec!["flarelab", "render", "--preset", path.to_str().unwrap(), "-o", "x.png"];
