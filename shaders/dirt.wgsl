@@ -19,7 +19,7 @@ fn vs_main(@builtin(vertex_index) vertex: u32) -> VertexOut {
     let q = fullscreen_corner(vertex);
     var out: VertexOut;
     out.position = fullscreen_clip(q);
-    out.pixel = q * globals.viewport.xy;
+    out.pixel = q * globals.viewport_px;
     return out;
 }
 
@@ -48,22 +48,21 @@ fn sample_map(t: vec2<f32>) -> f32 {
 
 @fragment
 fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
-    let light = globals.dirt_light;
-    let a = globals.dirt_geom;
+    let a = globals.dirt_slopes_per_px;
     let j = globals.dirt_footprint;
-    let lobe_g = globals.dirt_lobe.x;
-    let u_s = light.zw;
-    let p = in.pixel - light.xy;
+    let lobe_g = globals.dirt_g;
+    let u_s = globals.dirt_light_slopes;
+    let p = in.pixel - globals.dirt_light_px;
     let du = vec2<f32>(a.x * p.x + a.y * p.y, a.z * p.x + a.w * p.y);
     let u = u_s + du;
     let n_u = sqrt(1.0 + u.x * u.x + u.y * u.y);
-    let inv_ns = globals.dirt_lobe.z;
+    let inv_ns = globals.dirt_inv_ns;
     // 1 - cos(alpha) = |v - v_s|^2 / 2 with v = (u, 1) / |(u, 1)|: no cancellation near the light.
     let d = vec3<f32>(u.x / n_u - u_s.x * inv_ns, u.y / n_u - u_s.y * inv_ns, 1.0 / n_u - inv_ns);
     let q = (1.0 - lobe_g) * (1.0 - lobe_g) + lobe_g * dot(d, d);
-    let lobe = globals.dirt_colour.w / (q * sqrt(q));
-    let jacobian = globals.dirt_lobe.y / (n_u * n_u * n_u);
-    let t = globals.dirt_centre.xy + vec2<f32>(j.x * du.x + j.y * du.y, j.z * du.x + j.w * du.y);
+    let lobe = globals.dirt_hg_norm / (q * sqrt(q));
+    let jacobian = globals.dirt_per_mm2 / (n_u * n_u * n_u);
+    let t = globals.dirt_centre_texels + vec2<f32>(j.x * du.x + j.y * du.y, j.z * du.x + j.w * du.y);
     let share = sample_map(t);
-    return vec4<f32>(globals.dirt_colour.rgb * (lobe * jacobian * share), 0.0);
+    return vec4<f32>(globals.dirt_power_rgb * (lobe * jacobian * share), 0.0);
 }

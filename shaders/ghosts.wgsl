@@ -49,7 +49,7 @@ fn vs_main(@builtin(vertex_index) vertex: u32, instance: GhostInstance) -> Verte
     );
     let q = corners[vertex];
     let pixel = instance.centre_half.xy + instance.centre_half.zw * q;
-    let ndc = vec2<f32>(pixel.x * globals.viewport.z * 2.0 - 1.0, 1.0 - pixel.y * globals.viewport.w * 2.0);
+    let ndc = vec2<f32>(pixel.x * globals.inv_viewport_px.x * 2.0 - 1.0, 1.0 - pixel.y * globals.inv_viewport_px.y * 2.0);
     var out: VertexOut;
     out.position = vec4<f32>(ndc, 0.0, 1.0);
     out.q = q;

@@ -32,7 +32,7 @@ fn vs_main(@builtin(vertex_index) vertex: u32, instance: LutInstance) -> VertexO
     );
     let q = corners[vertex];
     let pixel = instance.centre_axis_x.xy + instance.centre_axis_x.zw * q.x + instance.axis_y_page.xy * q.y;
-    let ndc = vec2<f32>(pixel.x * globals.viewport.z * 2.0 - 1.0, 1.0 - pixel.y * globals.viewport.w * 2.0);
+    let ndc = vec2<f32>(pixel.x * globals.inv_viewport_px.x * 2.0 - 1.0, 1.0 - pixel.y * globals.inv_viewport_px.y * 2.0);
     var out: VertexOut;
     out.position = vec4<f32>(ndc, 0.0, 1.0);
     out.q = q;

@@ -457,7 +457,7 @@ fn splat_box(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_in
     let a = vertex_at(grid, v00);
     let b = vertex_at(grid, second);
     let c = vertex_at(grid, third);
-    if (a.valid < 0.5 || b.valid < 0.5 || c.valid < 0.5 || (a.ratio > 1.0 && b.ratio > 1.0 && c.ratio > 1.0)) {
+    if (a.valid == 0u || b.valid == 0u || c.valid == 0u || (a.ratio > 1.0 && b.ratio > 1.0 && c.ratio > 1.0)) {
         return;
     }
     let crossings = u32(job.frame.z + 0.5);

@@ -40,7 +40,7 @@ struct Vertex {
     stop0: vec2<f32>,      // coordinates at each stop crossing (stop radii)
     stop1: vec2<f32>,
     stop2: vec2<f32>,
-    valid: f32,            // 1 when the ray reached the sensor
+    valid: u32,            // 1 when the ray reached the sensor, else 0
     pad: f32,
 };
 
@@ -68,5 +68,5 @@ fn vertex_at(words: texture_2d<u32>, i: u32) -> Vertex {
     let a = bitcast<vec4<f32>>(texel_at(words, 3u * i));
     let b = bitcast<vec4<f32>>(texel_at(words, 3u * i + 1u));
     let c = bitcast<vec4<f32>>(texel_at(words, 3u * i + 2u));
-    return Vertex(a.xy, a.z, a.w, b.xy, b.zw, c.xy, c.z, c.w);
+    return Vertex(a.xy, a.z, a.w, b.xy, b.zw, c.xy, bitcast<u32>(c.z), c.w);
 }

@@ -47,7 +47,7 @@ fn vs_splat(@builtin(vertex_index) index: u32, @builtin(instance_index) job_inde
     let a = grid[v00];
     let b = grid[second];
     let c = grid[third];
-    if (a.valid < 0.5 || b.valid < 0.5 || c.valid < 0.5 || (a.ratio > 1.0 && b.ratio > 1.0 && c.ratio > 1.0)) {
+    if (a.valid == 0u || b.valid == 0u || c.valid == 0u || (a.ratio > 1.0 && b.ratio > 1.0 && c.ratio > 1.0)) {
         return out;
     }
     let area = 0.5 * abs((b.pixel.x - a.pixel.x) * (c.pixel.y - a.pixel.y) - (b.pixel.y - a.pixel.y) * (c.pixel.x - a.pixel.x));

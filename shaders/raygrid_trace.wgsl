@@ -292,7 +292,7 @@ fn trace_main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(workgroup_i
         return;
     }
     var v: Vertex;
-    v.valid = 0.0;
+    v.valid = 0u;
     v.weight = 1.0;
     var p = vec3<f32>(job.region.x + f32(k % (n + 1u)) * job.region.z, job.region.y + f32(k / (n + 1u)) * job.region.w, 0.0);
     var d = job.direction.xyz;
@@ -370,7 +370,7 @@ fn trace_main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(workgroup_i
         let kpx = job.view.z;
         v.pixel = vec2<f32>(0.5 * job.frame.x - (landing.x - job.view.x) * kpx, 0.5 * job.frame.y + (landing.y - job.view.y) * kpx);
         let finite = abs(v.pixel.x) < 1e30 && abs(v.pixel.y) < 1e30 && abs(v.weight) < 1e30 && v.ratio < 1e30;
-        v.valid = select(0.0, 1.0, finite);
+        v.valid = select(0u, 1u, finite);
     }
     vertices[job.steps.z + k] = v;
 }

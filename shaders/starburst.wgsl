@@ -23,9 +23,9 @@ fn vs_main(@builtin(vertex_index) vertex: u32) -> VertexOut {
         vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
     );
     let q = corners[vertex];
-    let pixel = globals.starburst.xy + globals.starburst.z * vec2<f32>(max(stretch(), 1.0), 1.0) * q;
+    let pixel = globals.starburst_centre_px + globals.starburst_reach_px * vec2<f32>(max(stretch(), 1.0), 1.0) * q;
     var out: VertexOut;
-    out.position = vec4<f32>(pixel.x * globals.viewport.z * 2.0 - 1.0, 1.0 - pixel.y * globals.viewport.w * 2.0, 0.0, 1.0);
+    out.position = vec4<f32>(pixel.x * globals.inv_viewport_px.x * 2.0 - 1.0, 1.0 - pixel.y * globals.inv_viewport_px.y * 2.0, 0.0, 1.0);
     out.pixel = pixel;
     return out;
 }
@@ -47,24 +47,24 @@ fn profile_at(d: vec2<f32>) -> f32 {
 
 // An anamorphic lens's far field is stretched along x by N_x / N_y (1 for a lens of revolution).
 fn stretch() -> f32 {
-    return select(1.0, globals.starburst_core.w, globals.starburst_core.w > 0.0);
+    return select(1.0, globals.starburst_stretch_x, globals.starburst_stretch_x > 0.0);
 }
 
 @fragment
 fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     // The far field's own coordinates, in which it is the round pattern.
     let s = stretch();
-    let d = (in.pixel - globals.starburst.xy) / vec2<f32>(s, 1.0);
+    let d = (in.pixel - globals.starburst_centre_px) / vec2<f32>(s, 1.0);
     let r_px = length(d);
-    if (r_px > globals.starburst.z) {
+    if (r_px > globals.starburst_reach_px) {
         return vec4<f32>(0.0);
     }
     var c: vec3<f32>;
-    if (r_px < globals.starburst.w) {
-        c = globals.starburst_core.rgb;
+    if (r_px < globals.starburst_core_px) {
+        c = globals.starburst_core_rgb;
     } else {
-        let r_mm = r_px * globals.starburst_far.w;
-        c = globals.starburst_far.rgb * (profile_at(d) / (r_mm * r_mm * r_mm) / s);
+        let r_mm = r_px * globals.starburst_mm_per_px;
+        c = globals.starburst_far_k * (profile_at(d) / (r_mm * r_mm * r_mm) / s);
     }
     return vec4<f32>(min(c, vec3<f32>(STARBURST_MAX)), 0.0);
 }

@@ -40,30 +40,30 @@ fn decode_srgb(c: vec3<f32>) -> vec3<f32> {
 // The display value of the target pixel whose centre is at `position` (pixels from the top-left corner).
 fn display_at(position: vec2<f32>) -> vec4<f32> {
     // The accumulation may be smaller than the image: sample it bilinearly (exact texels when it is not).
-    // A desqueezed frame delivers fewer rows (or columns) than the sensor's: `plate.zw` is the delivered image's 1 / size.
-    var c = textureSampleLevel(hdr_texture, hdr_sampler, position * globals.plate.zw, 0.0).rgb * globals.tonemap.x;
-    if (globals.plate.y > 0.5) {
+    // A desqueezed frame delivers fewer rows (or columns) than the sensor's: `inv_output_px` is the delivered image's 1 / size.
+    var c = textureSampleLevel(hdr_texture, hdr_sampler, position * globals.inv_output_px, 0.0).rgb * globals.flare_gain;
+    if (globals.plate_present != 0u) {
         let size = vec2<f32>(textureDimensions(background_texture));
-        let at = vec2<i32>(position * size * globals.plate.zw);
-        c = c + textureLoad(background_texture, at, 0).rgb * globals.plate.x;
+        let at = vec2<i32>(position * size * globals.inv_output_px);
+        c = c + textureLoad(background_texture, at, 0).rgb * globals.plate_gain;
     }
-    if (globals.tonemap.y > 2.5) {
+    if (globals.tonemap_operator == TONEMAP_VIEW) {
         // The OCIO view gives display-encoded values; a target that encodes sRGB itself gets them decoded.
         // Negative values (colours outside the working gamut, from a plate's input space) go in as they are.
         c = clamp(ocio_display(vec4<f32>(c, 1.0)).rgb, vec3<f32>(0.0), vec3<f32>(1.0));
-        if (globals.tonemap.z < 0.5) {
+        if (globals.encode_srgb == 0u) {
             c = decode_srgb(c);
         }
         return vec4<f32>(c, 1.0);
     }
     c = max(c, vec3<f32>(0.0));
-    if (globals.tonemap.y > 1.5) {
+    if (globals.tonemap_operator == TONEMAP_ACES) {
         c = aces(c);
-    } else if (globals.tonemap.y > 0.5) {
+    } else if (globals.tonemap_operator == TONEMAP_REINHARD) {
         c = c / (vec3<f32>(1.0) + c);
     }
     c = clamp(c, vec3<f32>(0.0), vec3<f32>(1.0));
-    if (globals.tonemap.z > 0.5) {
+    if (globals.encode_srgb != 0u) {
         c = encode_srgb(c);
     }
     return vec4<f32>(c, 1.0);

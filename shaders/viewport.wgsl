@@ -3,8 +3,11 @@
 // CPU twin: none needed, this pass only resamples; `encode_srgb` mirrors flare_core's tonemap encoding.
 
 struct Params {
-    // x: 1 when egui's target is not an sRGB format (encode here), else 0; yzw unused.
-    flags: vec4<f32>,
+    // 1 when egui's target is not an sRGB format (encode here), else 0.
+    encode_srgb: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 @group(0) @binding(0) var flare_texture: texture_2d<f32>;
@@ -35,6 +38,6 @@ fn encode_srgb(c: vec3<f32>) -> vec3<f32> {
 @fragment
 fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     let linear = textureSample(flare_texture, flare_sampler, in.uv).rgb;
-    let rgb = select(linear, encode_srgb(linear), params.flags.x > 0.5);
+    let rgb = select(linear, encode_srgb(linear), params.encode_srgb != 0u);
     return vec4<f32>(rgb, 1.0);
 }

@@ -23,6 +23,17 @@ use flare_core::frame::Frame;
 use flare_core::render::gpu::FlareRenderer;
 use flare_core::render::shaders::VIEWPORT_WGSL;
 
+/// The viewport pass's uniforms: `struct Params` in `shaders/viewport.wgsl` (a test checks the layout with naga).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+struct ViewportParams {
+    /// 1 when egui's target is not an sRGB format (the pass encodes), else 0.
+    encode_srgb: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
+}
+
 /// The offscreen texture's format as sampled: sRGB, so that sampling it gives linear values. The flare draws
 /// into it as `Rgba8Unorm` (the sRGB-encoded bytes the tonemap writes) where the device runs compute and can view
 /// a texture in its sRGB form: its tonemap is then a compute pass ([`FlareRenderer::target_usage`]).
@@ -133,14 +144,15 @@ impl ViewportResources {
             min_filter: wgpu::FilterMode::Linear,
             ..Default::default()
         });
-        let encode = if render_state.target_format.is_srgb() { 0.0f32 } else { 1.0 };
+        let encode =
+            ViewportParams { encode_srgb: u32::from(!render_state.target_format.is_srgb()), ..Default::default() };
         let params = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("viewport params"),
-            size: 16,
+            size: std::mem::size_of::<ViewportParams>() as u64,
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        render_state.queue.write_buffer(&params, 0, bytemuck::cast_slice(&[encode, 0.0, 0.0, 0.0]));
+        render_state.queue.write_buffer(&params, 0, bytemuck::bytes_of(&encode));
         let (target, bind_group) = Self::target(device, &renderer, &layout, &sampler, &params, (16, 16));
         let resources = Self {
             renderer,
@@ -348,5 +360,28 @@ impl CallbackTrait for FlareCallback {
         render_pass.set_pipeline(&res.pipeline);
         render_pass.set_bind_group(0, &res.bind_group, &[]);
         render_pass.draw(0..3, 0..1);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `ViewportParams` has the layout of the shader's `Params`, member for member.
+    #[test]
+    fn the_params_have_the_shader_s_layout() {
+        let module = naga::front::wgsl::parse_str(VIEWPORT_WGSL).unwrap();
+        let (_, ty) = module.types.iter().find(|(_, t)| t.name.as_deref() == Some("Params")).expect("Params");
+        let naga::TypeInner::Struct { members, span } = &ty.inner else { panic!("Params is a struct") };
+        assert_eq!(*span as usize, std::mem::size_of::<ViewportParams>());
+        let rust = [
+            ("encode_srgb", std::mem::offset_of!(ViewportParams, encode_srgb)),
+            ("_pad0", std::mem::offset_of!(ViewportParams, _pad0)),
+            ("_pad1", std::mem::offset_of!(ViewportParams, _pad1)),
+            ("_pad2", std::mem::offset_of!(ViewportParams, _pad2)),
+        ];
+        let wgsl: Vec<(&str, usize)> =
+            members.iter().map(|m| (m.name.as_deref().unwrap_or(""), m.offset as usize)).collect();
+        assert_eq!(wgsl, rust);
     }
 }

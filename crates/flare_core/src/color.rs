@@ -56,26 +56,23 @@ impl Tonemap {
     /// Every operator, in menu order.
     pub const ALL: [Self; 4] = [Self::View, Self::None, Self::Reinhard, Self::Aces];
 
-    /// The code the tonemap shader reads (`Globals.tonemap.y`).
-    pub fn code(self) -> f32 {
+    /// The code the tonemap shader reads (`Globals.tonemap_operator`, its `TONEMAP_*` constants).
+    pub fn code(self) -> u32 {
         match self {
-            Self::None => 0.0,
-            Self::Reinhard => 1.0,
-            Self::Aces => 2.0,
-            Self::View => 3.0,
+            Self::None => 0,
+            Self::Reinhard => 1,
+            Self::Aces => 2,
+            Self::View => 3,
         }
     }
 
-    /// The operator of a shader code (the nearest; unknown codes clamp only).
-    pub fn from_code(code: f32) -> Self {
-        if code > 2.5 {
-            Self::View
-        } else if code > 1.5 {
-            Self::Aces
-        } else if code > 0.5 {
-            Self::Reinhard
-        } else {
-            Self::None
+    /// The operator of a shader code; an unknown code is the OCIO view (the shader's last branch too).
+    pub fn from_code(code: u32) -> Self {
+        match code {
+            0 => Self::None,
+            1 => Self::Reinhard,
+            2 => Self::Aces,
+            _ => Self::View,
         }
     }
 

@@ -522,19 +522,18 @@ fn the_starburst_stretches_with_the_sections_f_numbers() {
     let (scene, _) = flare.scene([3.0, 2.0], 200, 160);
     let fo = FirstOrder::d_line(&lens).unwrap();
     let expected = fo.section(Section::X).f_number / fo.section(Section::Y).f_number;
-    assert!((f64::from(scene.globals.starburst_core[3]) - expected).abs() < 1e-6 && (expected - 1.0).abs() > 0.05);
+    assert!((f64::from(scene.globals.starburst_stretch_x) - expected).abs() < 1e-6 && (expected - 1.0).abs() > 0.05);
     let round = PreparedFlare::new(
         &flare_core::optics::library::builtin_lens("pbrt_dgauss_50mm").unwrap(),
         &FlareConfig::default(),
     )
     .unwrap();
-    assert_eq!(round.scene([3.0, 2.0], 200, 160).0.globals.starburst_core[3], 0.0);
+    assert_eq!(round.scene([3.0, 2.0], 200, 160).0.globals.starburst_stretch_x, 0.0);
     let draw = |stretch: f32| {
         let mut s = scene.clone();
-        s.globals.starburst[0] = 100.5;
-        s.globals.starburst[1] = 80.5;
-        s.globals.starburst[2] = 60.0;
-        s.globals.starburst_core[3] = stretch;
+        s.globals.starburst_centre_px = [100.5, 80.5];
+        s.globals.starburst_reach_px = 60.0;
+        s.globals.starburst_stretch_x = stretch;
         let mut hdr = HdrImage::black(s.hdr_width, s.hdr_height);
         cpu::starburst_pass(&s, &flare.starburst_texture, &mut hdr);
         hdr

@@ -65,7 +65,7 @@ fn a_desqueezed_frame_is_the_sensors_pixels_averaged() {
     // A desqueeze of 1 is the frame itself.
     let one = Frame::build(&flare, None, &request((160, 90), 1.0));
     assert_eq!(one.scene.output_size, (one.scene.width, one.scene.height));
-    assert_eq!(one.scene.globals.plate[2..], one.scene.globals.viewport[2..]);
+    assert_eq!(one.scene.globals.inv_output_px, one.scene.globals.inv_viewport_px);
 }
 
 /// The GPU delivers the desqueezed frame its CPU twin does (the tonemap pass sampling the sensor's rows at the

@@ -108,7 +108,7 @@ fn the_glow_adds_what_the_dirt_took() {
                 assert!(clean.colour[k] == 0.0 || (kept - (1.0 - amount)).abs() < 1e-6, "{name}: kept {kept}");
             }
         }
-        let core = |f: &Frame| f64::from(f.scene.globals.starburst_core[0]);
+        let core = |f: &Frame| f64::from(f.scene.globals.starburst_core_rgb[0]);
         assert!((core(&frame) / core(&plain) - (1.0 - amount)).abs() < 1e-6, "{name}: starburst");
 
         // The glow's power against what the dirt took.
@@ -118,8 +118,8 @@ fn the_glow_adds_what_the_dirt_took() {
             std::array::from_fn(|k| image.pixels.iter().map(|p| f64::from(p[k])).sum::<f64>() * mm_per_px * mm_per_px);
         let u_s = light_slopes_for_frame_position(light[0], light[1]);
         let taken = flare.dirt.as_ref().unwrap().taken_power(&flare.system, u_s, amount);
-        let [lx, ly, _, _] = frame.scene.globals.dirt_light.map(f64::from);
-        let a = frame.scene.globals.dirt_geom.map(f64::from);
+        let [lx, ly] = frame.scene.globals.dirt_light_px.map(f64::from);
+        let a = frame.scene.globals.dirt_slopes_per_px.map(f64::from);
         let g = henyey_greenstein_g(2.0);
         let v_s = DVec3::new(u_s[0], u_s[1], 1.0).normalize();
         let sub = 8;
@@ -164,8 +164,8 @@ fn each_pixel_sees_the_dirt_over_the_footprint_the_exact_tracer_finds() {
     let stop = lens.stop_index();
     let stop_radius = system.stop_radius_mm;
     let globals = frame.scene.globals;
-    let [lx, ly, usx, usy] = globals.dirt_light.map(f64::from);
-    let a = globals.dirt_geom.map(f64::from);
+    let ([lx, ly], [usx, usy]) = (globals.dirt_light_px.map(f64::from), globals.dirt_light_slopes.map(f64::from));
+    let a = globals.dirt_slopes_per_px.map(f64::from);
     let scale = dirt.size as f64 / (2.0 * dirt.half_extent_mm);
     let share_at = |x: f64, y: f64| {
         let (tx, ty) = (x * scale + 0.5 * dirt.size as f64 - 0.5, -y * scale + 0.5 * dirt.size as f64 - 0.5);
@@ -217,8 +217,8 @@ fn each_pixel_sees_the_dirt_over_the_footprint_the_exact_tracer_finds() {
         let j = globals.dirt_footprint.map(f64::from);
         let (du, dv) = (u[0] - usx, u[1] - usy);
         let t = [
-            f64::from(globals.dirt_centre[0]) + j[0] * du + j[1] * dv,
-            f64::from(globals.dirt_centre[1]) + j[2] * du + j[3] * dv,
+            f64::from(globals.dirt_centre_texels[0]) + j[0] * du + j[1] * dv,
+            f64::from(globals.dirt_centre_texels[1]) + j[2] * du + j[3] * dv,
         ];
         let map = f64::from(sample_map(&dirt.map, dirt.size, t[0] as f32, t[1] as f32));
         worst = worst.max((map - exact).abs());
@@ -259,14 +259,14 @@ fn the_glow_moves_with_the_light_over_dirt_that_stays() {
         }
         centroids.push([sx / s, sy / s]);
         let g = frame.scene.globals;
-        light_px.push([f64::from(g.dirt_light[0]), f64::from(g.dirt_light[1])]);
+        light_px.push(g.dirt_light_px.map(f64::from));
         // The glow over the lobe and the Jacobian: colour x D at each pixel.
         let lobe = |x: f32, y: f32| {
             // The same pass over a map of ones (every texel 1): the lobe and the Jacobian alone.
             let one = vec![1.0f32; 4];
             let mut flat = frame.scene.clone();
             flat.globals.dirt_footprint = [0.0; 4];
-            flat.globals.dirt_centre = [0.5, 0.5, 0.0, 0.0];
+            flat.globals.dirt_centre_texels = [0.5, 0.5];
             cpu::dirt::dirt_glow_at(&flat, &one, 2, [x, y])[1]
         };
         seen.push(

@@ -39,7 +39,7 @@ fn request(light_deg: [f64; 2], width: u32, height: u32, divisor: u32) -> FrameR
 /// The worst and mean display difference (in 8-bit steps, as floats: before quantisation) between two
 /// accumulations of `frame`, and the share of lit pixels.
 fn display_difference(frame: &Frame, a: &HdrImage, b: &HdrImage) -> (f32, f64, f64) {
-    let gain = frame.scene.globals.flare_gain();
+    let gain = frame.scene.globals.flare_gain;
     let (mut worst, mut sum, mut lit) = (0.0f32, 0.0f64, 0usize);
     for (p, q) in a.pixels.iter().zip(&b.pixels) {
         let (dp, dq) = (
@@ -184,7 +184,7 @@ fn an_anamorphic_frame_draws_the_cpu_twins_image() {
         (0..3).any(|k| i.stops[k][3] != 0.0 && (i.scale_y[k] / i.stops[k][0] - 1.0).abs() > 0.1)
     };
     assert!(frame.scene.instances.iter().any(ellipse), "ellipses");
-    assert!(frame.scene.globals.starburst_core[3] > 1.0, "a stretched starburst");
+    assert!(frame.scene.globals.starburst_stretch_x > 1.0, "a stretched starburst");
     let sources = Sources { flare: &flare, lut: None, plate: None };
     let cpu = frame::draw_cpu(&frame, &sources);
     let computed = GpuDrawer::on(ctx).draw(&frame, &sources).unwrap();

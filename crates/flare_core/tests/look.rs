@@ -22,7 +22,7 @@ fn default_frame(width: u32, height: u32) -> (Frame, flare_core::image::DisplayI
 fn the_default_frame_shows_at_least_five_distinct_ghosts_and_no_wash() {
     let (width, height) = (640u32, 360u32);
     let (frame, display) = default_frame(width, height);
-    let gain = f64::from(frame.scene.globals.flare_gain());
+    let gain = f64::from(frame.scene.globals.flare_gain);
     let sensor = flare_core::optics::sensor::Sensor::for_frame(36.0, width, height);
     // Each lens ghost: its brightest channel summed over the wavelengths (what shows), its centre and radius in
     // pixels (averaged over the wavelengths).
@@ -77,7 +77,7 @@ fn the_default_frame_shows_at_least_five_distinct_ghosts_and_no_wash() {
     assert!(bright <= 0.25, "{:.1} % of the frame is washed out", 100.0 * bright);
     assert!(clipped <= 0.05, "{:.2} % clipped", 100.0 * clipped);
     // The ghosts lie on the line through the frame's centre and the light (a chain, not a scatter).
-    let light = frame.scene.globals.starburst;
+    let light = frame.scene.globals.starburst_centre_px;
     let (cx, cy) = (f64::from(width) / 2.0, f64::from(height) / 2.0);
     let axis = [f64::from(light[0]) - cx, f64::from(light[1]) - cy];
     for (_, c, _) in &distinct {

@@ -639,7 +639,7 @@ fn lut_ghosts_as_the_cpu_twin(ctx: &flare_core::render::gpu::GpuContext) {
         let blend = BlendSettings { mode, ..BlendSettings::default() };
         let frame = scenes(live, &flare, light, 160, 120, &blend, true);
         let (mut scene, lut_scene) = (frame.scene.clone(), frame.lut.clone().unwrap_or_default());
-        scene.globals.starburst = [0.0; 4];
+        scene.globals.starburst_reach_px = 0.0;
         assert!(!lut_scene.instances.is_empty());
         // Additive frames sample their magnified instances coarsely (`instance_levels`): the compute pass must
         // interpolate them as the twin upsamples them.
@@ -682,7 +682,7 @@ fn lut_ghosts_as_the_cpu_twin(ctx: &flare_core::render::gpu::GpuContext) {
             .map(|(a, b)| (0..3).map(|c| f64::from((a[c] - b[c]).abs())).sum::<f64>())
             .sum();
         assert!(mean(&cpu) > 0.0);
-        let gain = scene.globals.flare_gain();
+        let gain = scene.globals.flare_gain;
         let worst = cpu
             .pixels
             .iter()

@@ -55,7 +55,7 @@ fn gpu_landings_follow_the_f64_tracer() {
                 let x0 = [b[0] + (v % 17) as f64 * (b[2] - b[0]) / 16.0, b[1] + (v / 17) as f64 * (b[3] - b[1]) / 16.0];
                 let (landing_mm, valid) = renderer.trace_planned(job, x0);
                 let gpu = vertices[j * per_job + v];
-                if valid != (gpu.valid > 0.5) {
+                if valid != (gpu.valid != 0) {
                     disagree += 1;
                     continue;
                 }

@@ -12,7 +12,7 @@ use flare_core::image::HdrImage;
 use flare_core::optics::library::builtin_lens;
 use flare_core::output;
 use flare_core::render::gpu::test_context;
-use flare_core::render::{DisplaySettings, Globals, shaders};
+use flare_core::render::{DisplaySettings, shaders};
 
 #[test]
 fn every_shader_parses_and_validates_with_naga() {
@@ -38,48 +38,24 @@ fn every_shader_parses_and_validates_with_naga() {
     }
 }
 
+/// `Globals` is declared once, in `common.wgsl` (its layout against the Rust struct: the crate's
+/// `render::layouts` test); no embedded shader carries a copy of its own, and no shader compares a float with a
+/// fraction to read a code (`> 0.5`): codes are `u32`s.
 #[test]
-fn the_one_wgsl_globals_has_the_rust_layout() {
-    let module = naga::front::wgsl::parse_str(shaders::COMMON_WGSL).unwrap();
-    let (_, ty) = module.types.iter().find(|(_, t)| t.name.as_deref() == Some("Globals")).expect("struct Globals");
-    let naga::TypeInner::Struct { members, span } = &ty.inner else { panic!("Globals is a struct") };
-    assert_eq!(*span as usize, std::mem::size_of::<Globals>(), "size");
-    let g = Globals {
-        viewport: [0.0; 4],
-        starburst: [0.0; 4],
-        tonemap: [0.0; 4],
-        plate: [0.0; 4],
-        starburst_far: [0.0; 4],
-        starburst_core: [0.0; 4],
-        dirt_light: [0.0; 4],
-        dirt_geom: [0.0; 4],
-        dirt_footprint: [0.0; 4],
-        dirt_centre: [0.0; 4],
-        dirt_lobe: [0.0; 4],
-        dirt_colour: [0.0; 4],
-    };
-    let base = &g as *const Globals as usize;
-    let rust = [
-        ("viewport", &g.viewport as *const _ as usize - base),
-        ("starburst", &g.starburst as *const _ as usize - base),
-        ("tonemap", &g.tonemap as *const _ as usize - base),
-        ("plate", &g.plate as *const _ as usize - base),
-        ("starburst_far", &g.starburst_far as *const _ as usize - base),
-        ("starburst_core", &g.starburst_core as *const _ as usize - base),
-        ("dirt_light", &g.dirt_light as *const _ as usize - base),
-        ("dirt_geom", &g.dirt_geom as *const _ as usize - base),
-        ("dirt_footprint", &g.dirt_footprint as *const _ as usize - base),
-        ("dirt_centre", &g.dirt_centre as *const _ as usize - base),
-        ("dirt_lobe", &g.dirt_lobe as *const _ as usize - base),
-        ("dirt_colour", &g.dirt_colour as *const _ as usize - base),
-    ];
-    assert_eq!(members.len(), rust.len());
-    for (member, (name, offset)) in members.iter().zip(rust) {
-        assert_eq!((member.name.as_deref(), member.offset as usize), (Some(name), offset));
-    }
-    // No shader that is embedded carries a copy of its own.
+fn globals_are_declared_once_and_no_shader_reads_a_float_code() {
     for (name, source) in shaders::ALL {
         assert!(source.matches("struct Globals").count() <= 1, "{name} declares Globals twice");
+    }
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shaders");
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        let text = std::fs::read_to_string(&path).unwrap();
+        for (n, line) in text.lines().enumerate() {
+            let code = line.split("//").next().unwrap_or("");
+            for fraction in ["> 0.5", "< 0.5", "> 1.5", "> 2.5", ">= 0.5"] {
+                assert!(!code.contains(fraction), "{}:{}: a float read as a code: {line}", path.display(), n + 1);
+            }
+        }
     }
 }
 

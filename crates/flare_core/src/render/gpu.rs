@@ -839,8 +839,8 @@ impl FlareRenderer {
             }
         }
         let mut globals = scene.globals;
-        globals.tonemap[2] = if self.target_format.is_srgb() { 0.0 } else { 1.0 };
-        globals.plate[1] = if self.has_background { 1.0 } else { 0.0 };
+        globals.encode_srgb = u32::from(!self.target_format.is_srgb());
+        globals.plate_present = u32::from(self.has_background);
         queue.write_buffer(&self.globals, 0, bytemuck::bytes_of(&globals));
         let use_compute = self.compute.is_some() && !self.rasterise;
         if !use_compute && scene.instances.len() > self.instance_capacity {
@@ -924,7 +924,7 @@ impl FlareRenderer {
             if let Some(lut) = lut.filter(|_| raster_lut) {
                 self.raster_lut.draw(&mut frame, &hdr_view, &groups.lut, lut);
             }
-            if globals.starburst[2] > 0.0 {
+            if globals.starburst_reach_px > 0.0 {
                 let mut pass = frame.scoped_render_pass("starburst", accumulate(&load));
                 pass.set_pipeline(&self.starburst_pipeline);
                 pass.set_bind_group(0, &groups.starburst, &[]);

@@ -191,3 +191,17 @@ impl ComputeLut {
         view
     }
 }
+
+/// The pass's structs against `lut_compute.wgsl`'s (a [`TiledInstance`]'s [`LutInstance`] spelled out there).
+#[cfg(test)]
+pub(crate) fn assert_layouts() {
+    use super::shaders::{LUT_COMPUTE_WGSL, layout::*};
+    assert_same_layout(
+        LUT_COMPUTE_WGSL,
+        "LutTiles",
+        fields!(LutTiles: width, height, tile, tiles_x, scale_x, scale_y, alpha_over, coarse_images),
+    );
+    let (size, tiled) = fields!(TiledInstance: instance, level, ghost, unused);
+    let (_, instance) = fields!(LutInstance: centre_axis_x, axis_y_page, rect, colour);
+    assert_same_layout(LUT_COMPUTE_WGSL, "TiledInstance", (size, [instance, tiled[1..].to_vec()].concat()));
+}

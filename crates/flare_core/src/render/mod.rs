@@ -92,57 +92,74 @@ impl DisplaySettings {
 }
 
 /// Uniforms shared by every shader: the Rust side of `struct Globals` in `shaders/common.wgsl` (the one WGSL
-/// declaration; a test checks size and offsets with naga).
+/// declaration; a test checks every member's name and offset with naga). Codes are `u32`s, never floats.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 pub struct Globals {
-    /// width, height, 1 / width, 1 / height (pixels).
-    pub viewport: [f32; 4],
-    /// The starburst: centre x, centre y, reach (pixels; 0: none), core radius (pixels).
-    pub starburst: [f32; 4],
-    /// flare gain (`2^flare_ev`), operator ([`Tonemap::code`]), encode sRGB (0/1, set by the renderer), unused.
-    pub tonemap: [f32; 4],
-    /// plate gain (`2^plate_ev`), plate present (0/1, set by the renderer), then 1 / width and 1 / height of the
-    /// delivered image (the tonemap's pixels: the frame's own, or a desqueezed frame's fewer rows or columns).
-    pub plate: [f32; 4],
-    /// The starburst's far field: `K` per channel (`I = K c(phi) / r_mm^3`), mm per pixel.
-    pub starburst_far: [f32; 4],
-    /// The starburst's core: relative irradiance per channel inside the core radius; then the far field's stretch
-    /// along x, `N_x / N_y` of an anamorphic lens (0 stands for 1: a lens of revolution).
-    pub starburst_core: [f32; 4],
-    /// The front dirt's glow ([`crate::dirt`]): the light's image (pixels), its slopes `u_s`.
-    pub dirt_light: [f32; 4],
+    /// The frame's width and height (pixels).
+    pub viewport_px: [f32; 2],
+    /// 1 / width and 1 / height.
+    pub inv_viewport_px: [f32; 2],
+    /// The starburst's centre: the light's image (pixels).
+    pub starburst_centre_px: [f32; 2],
+    /// How far the starburst is drawn (pixels; 0: no starburst).
+    pub starburst_reach_px: f32,
+    /// The blown-out core's radius (pixels).
+    pub starburst_core_px: f32,
+    /// The flare's linear gain, `2^flare_ev`.
+    pub flare_gain: f32,
+    /// The operator ([`Tonemap::code`]: `TONEMAP_*` in the shader).
+    pub tonemap_operator: u32,
+    /// 1 when the shader encodes sRGB (a target that does not encode it itself; set by the renderer), else 0.
+    pub encode_srgb: u32,
+    /// 1 when a background plate is bound (set by the renderer), else 0.
+    pub plate_present: u32,
+    /// 1 / width and 1 / height of the delivered image (the tonemap's pixels: the frame's own, or a desqueezed
+    /// frame's fewer rows or columns).
+    pub inv_output_px: [f32; 2],
+    /// The plate's linear gain, `2^plate_ev`.
+    pub plate_gain: f32,
+    pub _pad0: u32,
+    /// The starburst's far field: `K` per channel (`I = K c(phi) / r_mm^3`).
+    pub starburst_far_k: [f32; 3],
+    /// mm per pixel on the sensor.
+    pub starburst_mm_per_px: f32,
+    /// The starburst's core: relative irradiance per channel inside the core radius.
+    pub starburst_core_rgb: [f32; 3],
+    /// The far field's stretch along x, `N_x / N_y` of an anamorphic lens (0 stands for 1: a lens of revolution).
+    pub starburst_stretch_x: f32,
+    /// The front dirt's glow ([`crate::dirt`]): the light's image (pixels).
+    pub dirt_light_px: [f32; 2],
+    /// The light's slopes `u_s`.
+    pub dirt_light_slopes: [f32; 2],
     /// The slopes per image pixel about the light, row-major 2x2 (`u = u_s + A (pixel - light)`): the inverse of
     /// the lens's own mapping's derivative there.
-    pub dirt_geom: [f32; 4],
+    pub dirt_slopes_per_px: [f32; 4],
     /// The footprint's centre, in map texels, per unit slope about the light, row-major 2x2 (the derivative of
     /// the chief ray's entrance point there).
     pub dirt_footprint: [f32; 4],
-    /// The footprint's centre for the light itself, in map texels (x, y); unused; unused.
-    pub dirt_centre: [f32; 4],
-    /// The glow's lobe: `g`, `|det A|` in mm^-2 per unit slope^2 (`1 / |det dx/du|`), `1 / sqrt(1 + |u_s|^2)`,
-    /// unused.
-    pub dirt_lobe: [f32; 4],
-    /// The glow's power per channel (`amount A_EP cos(theta_s) T` x the light's gain; 0: no glow), then
+    /// The footprint's centre for the light itself, in map texels (x, y).
+    pub dirt_centre_texels: [f32; 2],
+    /// The glow's lobe: the Henyey-Greenstein `g`.
+    pub dirt_g: f32,
+    /// `|det A|` in mm^-2 per unit slope^2 (`1 / |det dx/du|`).
+    pub dirt_per_mm2: f32,
+    /// The glow's power per channel (`amount A_EP cos(theta_s) T` x the light's gain; 0: no glow).
+    pub dirt_power_rgb: [f32; 3],
     /// `(1 - g^2) / (4 pi)`.
-    pub dirt_colour: [f32; 4],
+    pub dirt_hg_norm: f32,
+    /// `1 / sqrt(1 + |u_s|^2)`.
+    pub dirt_inv_ns: f32,
+    pub _pad1: u32,
+    pub _pad2: u32,
+    pub _pad3: u32,
 }
 const _: () = assert!(std::mem::size_of::<Globals>() == 192);
 
 impl Globals {
-    /// The flare's linear gain.
-    pub fn flare_gain(&self) -> f32 {
-        self.tonemap[0]
-    }
-
-    /// The plate's linear gain.
-    pub fn plate_gain(&self) -> f32 {
-        self.plate[0]
-    }
-
     /// The tonemap operator.
     pub fn operator(&self) -> Tonemap {
-        Tonemap::from_code(self.tonemap[1])
+        Tonemap::from_code(self.tonemap_operator)
     }
 }
 
@@ -275,19 +292,16 @@ impl FlareScene {
                 dropped_non_finite += 1;
             }
         }
+        let inv_px = [1.0 / width as f32, 1.0 / height as f32];
         let globals = Globals {
-            viewport: [width as f32, height as f32, 1.0 / width as f32, 1.0 / height as f32],
-            starburst: [0.0; 4],
-            tonemap: [display.flare_gain(), display.tonemap.code(), 1.0, 0.0],
-            plate: [display.plate_gain(), 0.0, 1.0 / width as f32, 1.0 / height as f32],
-            starburst_far: [0.0; 4],
-            starburst_core: [0.0; 4],
-            dirt_light: [0.0; 4],
-            dirt_geom: [0.0; 4],
-            dirt_footprint: [0.0; 4],
-            dirt_centre: [0.0; 4],
-            dirt_lobe: [0.0; 4],
-            dirt_colour: [0.0; 4],
+            viewport_px: [width as f32, height as f32],
+            inv_viewport_px: inv_px,
+            flare_gain: display.flare_gain(),
+            tonemap_operator: display.tonemap.code(),
+            encode_srgb: 1,
+            inv_output_px: inv_px,
+            plate_gain: display.plate_gain(),
+            ..Globals::zeroed()
         };
         Self {
             width,
@@ -305,11 +319,10 @@ impl FlareScene {
     }
 
     /// Delivers the frame at `size` (a desqueezed frame's fewer rows or columns): the tonemap samples the accumulation at
-    /// the delivered pixels ([`Globals::plate`]'s last two).
+    /// the delivered pixels ([`Globals::inv_output_px`]).
     pub fn set_output_size(&mut self, size: (u32, u32)) {
         self.output_size = (size.0.max(1), size.1.max(1));
-        self.globals.plate[2] = 1.0 / self.output_size.0 as f32;
-        self.globals.plate[3] = 1.0 / self.output_size.1 as f32;
+        self.globals.inv_output_px = [1.0 / self.output_size.0 as f32, 1.0 / self.output_size.1 as f32];
     }
 
     /// The accumulation fragments `inst` covers: its quad clipped to the accumulation (what a sprite costs a
@@ -359,9 +372,9 @@ impl FlareScene {
         display: &DisplaySettings,
     ) {
         let (g, width, height) = (&mut self.globals, self.width, self.height);
-        g.starburst = [0.0; 4];
-        g.starburst_far = [0.0; 4];
-        g.starburst_core = [0.0; 4];
+        (g.starburst_centre_px, g.starburst_reach_px, g.starburst_core_px) = ([0.0; 2], 0.0, 0.0);
+        (g.starburst_far_k, g.starburst_mm_per_px) = ([0.0; 3], 0.0);
+        (g.starburst_core_rgb, g.starburst_stretch_x) = ([0.0; 3], 0.0);
         let intensity = f64::from(display.starburst_intensity);
         let lit = display.starburst && intensity.is_finite() && intensity > 0.0 && starburst.profile_peak > 0.0;
         if !lit {
@@ -396,8 +409,9 @@ impl FlareScene {
         if !(reach_px.is_finite() && reach_px > STARBURST_CORE_PX) {
             return;
         }
-        g.starburst = [finite(light[0]), finite(light[1]), finite(reach_px), STARBURST_CORE_PX as f32];
-        g.starburst_far = [finite(far[0]), finite(far[1]), finite(far[2]), finite(mm_per_px)];
+        (g.starburst_centre_px, g.starburst_reach_px) = ([finite(light[0]), finite(light[1])], finite(reach_px));
+        g.starburst_core_px = STARBURST_CORE_PX as f32;
+        (g.starburst_far_k, g.starburst_mm_per_px) = (far.map(finite), finite(mm_per_px));
         let core = core.map(|v| v.min(STARBURST_MAX));
         // An anamorphic lens diffracts with a working f-number per section: the far field (scaled by lambda N)
         // is stretched along x by N_x / N_y, its energy kept (the uniform 0 means 1, a lens of revolution).
@@ -405,7 +419,7 @@ impl FlareScene {
             Some(both) => (both[0].f_number / both[1].f_number).abs(),
             None => 0.0,
         };
-        g.starburst_core = [finite(core[0]), finite(core[1]), finite(core[2]), finite(stretch)];
+        (g.starburst_core_rgb, g.starburst_stretch_x) = (core.map(finite), finite(stretch));
     }
 }
 
@@ -424,10 +438,9 @@ impl FlareScene {
     ) {
         let (width, height) = (self.width, self.height);
         let g = &mut self.globals;
-        for v in [&mut g.dirt_light, &mut g.dirt_geom, &mut g.dirt_footprint, &mut g.dirt_centre] {
-            *v = [0.0; 4];
-        }
-        (g.dirt_lobe, g.dirt_colour) = ([0.0; 4], [0.0; 4]);
+        (g.dirt_light_px, g.dirt_light_slopes, g.dirt_slopes_per_px) = ([0.0; 2], [0.0; 2], [0.0; 4]);
+        (g.dirt_footprint, g.dirt_centre_texels, g.dirt_g, g.dirt_per_mm2) = ([0.0; 4], [0.0; 2], 0.0, 0.0);
+        (g.dirt_power_rgb, g.dirt_hg_norm, g.dirt_inv_ns) = ([0.0; 3], 0.0, 0.0);
         let amount = display.dirt_amount;
         let Some(dirt) = dirt.filter(|_| amount.is_finite() && amount > 0.0 && u.iter().all(|v| v.is_finite())) else {
             return;
@@ -481,18 +494,21 @@ impl FlareScene {
             return;
         }
         let f = |v: [f64; 4]| v.map(|x| x as f32);
-        (g.dirt_light, g.dirt_geom, g.dirt_footprint) = (f(values[0]), f(values[1]), f(values[2]));
-        (g.dirt_centre, g.dirt_lobe, g.dirt_colour) = (f(values[3]), f(values[4]), f(values[5]));
+        let [light, geom, footprint, centre, lobe, colour] = values.map(f);
+        (g.dirt_light_px, g.dirt_light_slopes) = ([light[0], light[1]], [light[2], light[3]]);
+        (g.dirt_slopes_per_px, g.dirt_footprint, g.dirt_centre_texels) = (geom, footprint, [centre[0], centre[1]]);
+        (g.dirt_g, g.dirt_per_mm2, g.dirt_inv_ns) = (lobe[0], lobe[1], lobe[2]);
+        (g.dirt_power_rgb, g.dirt_hg_norm) = ([colour[0], colour[1], colour[2]], colour[3]);
     }
 
     /// True when the frame draws a dirt glow.
     pub fn has_dirt_glow(&self) -> bool {
-        self.globals.dirt_colour[..3].iter().any(|&c| c > 0.0)
+        self.globals.dirt_power_rgb.iter().any(|&c| c > 0.0)
     }
 
     /// True when the frame draws a starburst (its reach is positive; off, or a light too dim, it has none).
     pub fn draws_starburst(&self) -> bool {
-        self.globals.starburst[2] > 0.0
+        self.globals.starburst_reach_px > 0.0
     }
 }
 
@@ -501,3 +517,43 @@ pub const STARBURST_CORE_PX: f64 = 1.0;
 /// The most relative irradiance the starburst adds to a pixel (before the flare's gain): the half-float
 /// accumulation holds it, and the light's image is white long before it.
 pub const STARBURST_MAX: f64 = 3.0e4;
+
+#[cfg(test)]
+mod layouts {
+    //! Every struct the GPU reads, named on both sides: the Rust struct's fields against the WGSL's members.
+    use super::shaders::{self, layout::*};
+    use super::*;
+
+    #[test]
+    fn every_gpu_struct_has_its_wgsl_layout() {
+        assert_same_layout(
+            shaders::COMMON_WGSL,
+            "Globals",
+            fields!(Globals: viewport_px, inv_viewport_px, starburst_centre_px, starburst_reach_px, starburst_core_px,
+                flare_gain, tonemap_operator, encode_srgb, plate_present, inv_output_px, plate_gain, _pad0,
+                starburst_far_k, starburst_mm_per_px, starburst_core_rgb, starburst_stretch_x, dirt_light_px,
+                dirt_light_slopes, dirt_slopes_per_px, dirt_footprint, dirt_centre_texels, dirt_g, dirt_per_mm2,
+                dirt_power_rgb, dirt_hg_norm, dirt_inv_ns, _pad1, _pad2, _pad3),
+        );
+        assert_same_layout(
+            shaders::GHOSTS_COMPUTE_WGSL,
+            "GhostInstance",
+            fields!(GhostInstance: centre_half, colour, stops, scale_y, discs, disc_scale_y),
+        );
+        use super::gpu_ghosts::ComputeStrip;
+        assert_same_layout(
+            shaders::GHOSTS_COMPUTE_WGSL,
+            "ComputeStrip",
+            fields!(ComputeStrip: width, height, first_row, rows, instances, items, groups_x, mask_size, scale_x,
+                scale_y, fixed_per_unit, unit_per_fixed, lut, split_bits, pieces, spread, mask_levels, level_starts),
+        );
+        super::gpu_lut::assert_layouts();
+        super::raygrid::assert_layouts();
+        use crate::dof::live::LiveLayer;
+        assert_same_layout(
+            shaders::DOF_WGSL,
+            "Layer",
+            fields!(LiveLayer: size, taps, low, out, pixels, shape, cat, cat_radius, cat_x_scale, cat_more, pupil),
+        );
+    }
+}

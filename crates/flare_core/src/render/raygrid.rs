@@ -117,8 +117,8 @@ pub struct GpuVertex {
     pub ratio: f32,
     pub weight: f32,
     pub stops: [[f32; 2]; 3],
-    /// 1 when the ray reached the sensor.
-    pub valid: f32,
+    /// 1 when the ray reached the sensor, else 0.
+    pub valid: u32,
     pub pad: f32,
 }
 const _: () = assert!(std::mem::size_of::<GpuVertex>() == 48);
@@ -1261,4 +1261,23 @@ impl crate::raytrace::ColumnTracer for GpuBake<'_> {
         self.on_cpu.fetch_add(1, Relaxed);
         crate::raytrace::CpuTracing.trace_column(renderer, scout, views, grid)
     }
+}
+
+/// The ray grid's structs against `raygrid_common.wgsl`'s and `raygrid_box.wgsl`'s.
+#[cfg(test)]
+pub(crate) fn assert_layouts() {
+    use super::shaders::{RAYGRID_BOX_WGSL, layout::*};
+    assert_same_layout(RAYGRID_BOX_WGSL, "Step", fields!(GpuStep: surface, optics, terms_lo, terms_hi));
+    assert_same_layout(
+        RAYGRID_BOX_WGSL,
+        "Job",
+        fields!(GpuJob: steps, region, direction, view, frame, rgb, lit, lit_cells),
+    );
+    assert_same_layout(RAYGRID_BOX_WGSL, "Vertex", fields!(GpuVertex: pixel, ratio, weight, stops, valid, pad));
+    assert_same_layout(
+        RAYGRID_BOX_WGSL,
+        "BoxParams",
+        fields!(BoxParams: width, height, jobs, first_row, rows, groups_x, mask_size, job_stride, fixed_per_unit,
+            unit_per_fixed, open_radius2, support_radius2),
+    );
 }

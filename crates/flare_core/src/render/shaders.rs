@@ -9,8 +9,8 @@
 //! of them) for the two resolves that sum a row 256 columns at a time on a GPU, `mask_texels.wgsl` (the mask looked
 //! up one word a bilinear footprint) for the compute passes that read the aperture, and `word_texels.wgsl` (words
 //! read as rows of Rgba32Uint texels) for the compute passes that read words a software rasteriser would load lane
-//! by lane. A test parses every shader with naga and checks that the WGSL `Globals` has the Rust struct's size and
-//! member offsets. The tonemap pass is the one shader put together at run time: [`tonemap_wgsl`] puts the OCIO
+//! by lane. A test parses every shader with naga; `layout` (a test helper) checks every struct the GPU reads,
+//! member by member, against naga's reflection of its WGSL (`render::layouts`). The tonemap pass is the one shader put together at run time: [`tonemap_wgsl`] puts the OCIO
 //! display transform's WGSL (made for the document's display and view, or `ocio_lut.wgsl` after its constants for
 //! the view's cube, [`crate::view_lut`]) before `tonemap.wgsl`; a test in `tests/colour.rs` validates it with the
 //! cube.
@@ -109,3 +109,65 @@ pub const ALL: &[(&str, &str)] = &[
     ("raygrid_box.wgsl", RAYGRID_BOX_WGSL),
     ("dof.wgsl", DOF_WGSL),
 ];
+
+/// The layout of the structs the GPU reads, checked against naga's reflection of the WGSL that declares them.
+#[cfg(test)]
+pub(crate) mod layout {
+    /// Each field of a Rust struct: its name and offset (`fields!(Type: a, b, c)`), and the struct's size.
+    macro_rules! fields {
+        ($t:ty: $($f:ident),+ $(,)?) => {
+            (std::mem::size_of::<$t>(), vec![$((stringify!($f), std::mem::offset_of!($t, $f))),+])
+        };
+    }
+    pub(crate) use fields;
+
+    /// The struct `name` of the WGSL `source`: its size and each member's name and offset (naga's layout).
+    pub(crate) fn wgsl_layout(source: &str, name: &str) -> (usize, Vec<(String, usize)>) {
+        let module = naga::front::wgsl::parse_str(source).unwrap_or_else(|e| panic!("{}", e.emit_to_string(source)));
+        let (_, ty) =
+            module.types.iter().find(|(_, t)| t.name.as_deref() == Some(name)).unwrap_or_else(|| panic!("no {name}"));
+        let naga::TypeInner::Struct { members, span } = &ty.inner else { panic!("{name} is not a struct") };
+        let members = members.iter().map(|m| (m.name.clone().unwrap_or_default(), m.offset as usize)).collect();
+        (*span as usize, members)
+    }
+
+    /// Asserts that the WGSL struct `name` of `source` has the Rust struct's `size` and that each of its members
+    /// lies where the Rust field of its name does: the same name at the same offset, or the members `stop0`,
+    /// `stop1`, ... of a WGSL that spells an array out within the Rust array field `stops` (or `stop`), in order.
+    /// Every Rust field is met by some member.
+    pub(crate) fn assert_same_layout(source: &str, name: &str, (size, rust): (usize, Vec<(&str, usize)>)) {
+        let (span, members) = wgsl_layout(source, name);
+        assert_eq!(span, size, "{name}: WGSL size {span}, Rust size {size}");
+        let end = |k: usize| rust.get(k + 1).map_or(size, |f| f.1);
+        let mut met = vec![false; rust.len()];
+        let mut last = None;
+        for (member, offset) in &members {
+            let stem = member.trim_end_matches(|c: char| c.is_ascii_digit());
+            let k = rust.iter().position(|(f, _)| f == member).or_else(|| {
+                (stem.len() < member.len())
+                    .then(|| rust.iter().position(|(f, _)| *f == format!("{stem}s") || *f == stem))
+                    .flatten()
+            });
+            let Some(k) = k else { panic!("{name}: WGSL member {member} has no Rust field") };
+            let (field, at) = rust[k];
+            if field == member {
+                assert_eq!(*offset, at, "{name}.{member}: WGSL offset {offset}, Rust {at}");
+            } else {
+                assert!((at..end(k)).contains(offset), "{name}.{member}: offset {offset} outside the field {field}");
+            }
+            assert!(last < Some(*offset), "{name}.{member}: members out of order");
+            (met[k], last) = (true, Some(*offset));
+        }
+        assert!(met.iter().all(|&m| m), "{name}: Rust fields no WGSL member meets: {rust:?} / {members:?}");
+    }
+
+    #[test]
+    fn the_checker_refuses_a_moved_or_missing_member() {
+        let wgsl = "struct S { a: vec2<f32>, b0: f32, b1: f32, c: u32, _pad: u32 };";
+        let rust = |names: [&'static str; 4], offsets: [usize; 4]| (24, names.into_iter().zip(offsets).collect());
+        assert_same_layout(wgsl, "S", rust(["a", "b", "c", "_pad"], [0, 8, 16, 20]));
+        for bad in [rust(["a", "b", "c", "_pad"], [0, 8, 12, 20]), rust(["a", "bb", "c", "_pad"], [0, 8, 16, 20])] {
+            assert!(std::panic::catch_unwind(|| assert_same_layout(wgsl, "S", bad)).is_err());
+        }
+    }
+}

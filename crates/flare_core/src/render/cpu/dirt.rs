@@ -10,11 +10,11 @@ use crate::render::FlareScene;
 /// The glow at the image pixel `pixel` (f32, as the shader computes it), before it is added.
 pub fn dirt_glow_at(scene: &FlareScene, map: &[f32], size: usize, pixel: [f32; 2]) -> [f32; 3] {
     let g = &scene.globals;
-    let [lx, ly, usx, usy] = g.dirt_light;
-    let [a00, a01, a10, a11] = g.dirt_geom;
+    let ([lx, ly], [usx, usy]) = (g.dirt_light_px, g.dirt_light_slopes);
+    let [a00, a01, a10, a11] = g.dirt_slopes_per_px;
     let [j00, j01, j10, j11] = g.dirt_footprint;
-    let [hg_g, per_mm2, inv_ns, _] = g.dirt_lobe;
-    let [r, gr, b, norm] = g.dirt_colour;
+    let (hg_g, per_mm2, inv_ns) = (g.dirt_g, g.dirt_per_mm2, g.dirt_inv_ns);
+    let ([r, gr, b], norm) = (g.dirt_power_rgb, g.dirt_hg_norm);
     let p = [pixel[0] - lx, pixel[1] - ly];
     let du = [a00 * p[0] + a01 * p[1], a10 * p[0] + a11 * p[1]];
     let u = [usx + du[0], usy + du[1]];
@@ -24,7 +24,8 @@ pub fn dirt_glow_at(scene: &FlareScene, map: &[f32], size: usize, pixel: [f32; 2
     let q = (1.0 - hg_g) * (1.0 - hg_g) + hg_g * (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
     let lobe = norm / (q * q.sqrt());
     let jacobian = per_mm2 / (n_u * n_u * n_u);
-    let t = [g.dirt_centre[0] + j00 * du[0] + j01 * du[1], g.dirt_centre[1] + j10 * du[0] + j11 * du[1]];
+    let [cx, cy] = g.dirt_centre_texels;
+    let t = [cx + j00 * du[0] + j01 * du[1], cy + j10 * du[0] + j11 * du[1]];
     let share = sample_map(map, size, t[0], t[1]);
     let k = lobe * jacobian * share;
     [r * k, gr * k, b * k]

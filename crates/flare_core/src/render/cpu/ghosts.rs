@@ -657,7 +657,7 @@ mod tests {
             assert!(scene.instances.len() > 10, "{id}: {} instances", scene.instances.len());
             let masks = &flare.ghost_masks;
             let (fast, direct) = (ghost_pass(&scene, masks), ghost_pass_direct(&scene, masks));
-            let gain = scene.globals.flare_gain();
+            let gain = scene.globals.flare_gain;
             let (mut worst, mut lit) = (0.0f32, 0);
             for (a, b) in fast.pixels.iter().zip(&direct.pixels) {
                 let (da, db) = (
@@ -739,7 +739,7 @@ mod tests {
         eprintln!("edge pixels at 1920x1080: {coarse} with the base mask, {fine} with its levels");
         assert!((fine as f64) < 0.7 * coarse as f64, "{fine} edge pixels against {coarse}");
         let (fast, direct) = (ghost_pass(&scene, masks), ghost_pass_direct(&scene, masks));
-        let gain = scene.globals.flare_gain();
+        let gain = scene.globals.flare_gain;
         let mut worst = 0.0f32;
         for (a, b) in fast.pixels.iter().zip(&direct.pixels) {
             let shown = |p: &[f32; 4]| tonemap_pixel([p[0], p[1], p[2]].map(|v| v * gain), &scene);

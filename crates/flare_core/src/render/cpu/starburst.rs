@@ -24,12 +24,13 @@ pub fn starburst_pass(scene: &FlareScene, texture: &StarburstTexture, hdr: &mut 
     if !scene.draws_starburst() {
         return;
     }
-    let [cx, cy, reach, core_px] = scene.globals.starburst;
-    let [kr, kg, kb, mm_per_px] = scene.globals.starburst_far;
-    let core = scene.globals.starburst_core;
+    let g = &scene.globals;
+    let ([cx, cy], reach, core_px) = (g.starburst_centre_px, g.starburst_reach_px, g.starburst_core_px);
+    let ([kr, kg, kb], mm_per_px) = (g.starburst_far_k, g.starburst_mm_per_px);
+    let core = g.starburst_core_rgb;
     let (w, h) = (hdr.width as usize, hdr.height as usize);
     // An anamorphic lens's far field is stretched along x by N_x / N_y (1 for a lens of revolution).
-    let stretch = if core[3] > 0.0 { core[3] } else { 1.0 };
+    let stretch = if g.starburst_stretch_x > 0.0 { g.starburst_stretch_x } else { 1.0 };
     let (sx, sy) = accumulation_scale(scene);
     let (rows, columns) = (covered(cy, reach, sy, h), covered(cx, reach * stretch.max(1.0), sx, w));
     // A reach that ends short of the frame is an empty range whose start may lie past its end (or the frame).
@@ -77,7 +78,8 @@ mod tests {
         let (w, h) = (frame.scene.hdr_width as f32 * sx, frame.scene.hdr_height as f32 * sy);
         let lit = |cx: f32, cy: f32| {
             let mut scene = frame.scene.clone();
-            scene.globals.starburst = [cx, cy, 6.0, 1.0];
+            (scene.globals.starburst_centre_px, scene.globals.starburst_reach_px) = ([cx, cy], 6.0);
+            scene.globals.starburst_core_px = 1.0;
             let mut hdr = HdrImage::black(scene.hdr_width, scene.hdr_height);
             starburst_pass(&scene, &flare.starburst_texture, &mut hdr);
             hdr.pixels.iter().filter(|p| p[..3].iter().any(|&v| v > 0.0)).count()

@@ -12,7 +12,7 @@ use crate::render::FlareScene;
 /// encoding; a clamp to [0, 1].
 pub fn tonemap_pixel(c: [f32; 3], scene: &FlareScene) -> [f32; 3] {
     let globals = &scene.globals;
-    let encode = globals.tonemap[2] > 0.5;
+    let encode = globals.encode_srgb != 0;
     match globals.operator() {
         Tonemap::View => {
             let c = c.map(|v| if v.is_finite() { v } else { 0.0 });
@@ -37,13 +37,13 @@ pub fn composite(scene: &FlareScene, hdr: &HdrImage, plate: Option<&HdrImage>) -
 /// The flare alone at the image size, times its gain (what the EXR's `flare` layer holds).
 pub fn flare_layer(scene: &FlareScene, hdr: &HdrImage) -> HdrImage {
     let (w, h) = scene.output_size;
-    hdr.resampled(w, h, Sampling::Bilinear, scene.globals.flare_gain())
+    hdr.resampled(w, h, Sampling::Bilinear, scene.globals.flare_gain)
 }
 
 /// The plate at the image size, times its gain (what the EXR's `plate` layer holds).
 pub fn plate_layer(scene: &FlareScene, plate: &HdrImage) -> HdrImage {
     let (w, h) = scene.output_size;
-    let mut layer = plate.resampled(w, h, Sampling::Nearest, scene.globals.plate_gain());
+    let mut layer = plate.resampled(w, h, Sampling::Nearest, scene.globals.plate_gain);
     for p in &mut layer.pixels {
         p[3] = 1.0;
     }
@@ -59,7 +59,7 @@ pub fn tonemap_pass(scene: &FlareScene, hdr: &HdrImage, plate: Option<&HdrImage>
 /// view over the whole image at once).
 pub fn display_of(scene: &FlareScene, composite: &HdrImage) -> DisplayImage {
     let pixels = if scene.globals.operator() == Tonemap::View {
-        let encode = scene.globals.tonemap[2] > 0.5;
+        let encode = scene.globals.encode_srgb != 0;
         let mut values: Vec<[f32; 4]> = composite
             .pixels
             .iter()
