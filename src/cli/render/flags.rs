@@ -403,6 +403,24 @@ fn shown<T: std::fmt::Display>(flag: &str, value: Option<T>) -> Option<String> {
     value.map(|v| format!("{flag} {v}"))
 }
 
+/// An entry of [`FLAGS`] for a flag whose value is the field's: `value!("--plate-ev", "plate_ev", look.plate_ev
+/// => plate_ev)` sets `doc.plate_ev` to `--plate-ev`'s value; `value!(..., Some)` sets an optional field to
+/// `Some` of it.
+macro_rules! value {
+    ($flag:literal, $field:literal, $($arg:ident).+ => $($doc:ident).+ $(, $wrap:ident)?) => {
+        FlagField {
+            fields: &[$field],
+            given: |a| shown($flag, a.$($arg).+.as_ref()),
+            apply: |a, d| {
+                if let Some(v) = &a.$($arg).+ {
+                    d.$($doc).+ = $($wrap)?(v.clone());
+                }
+                Ok(())
+            },
+        }
+    };
+}
+
 /// The flags the preset's fields come from, in the order [`document`] applies them. LENS, --coating and
 /// --f-number are applied first, with --preset, by [`OpticsChoice::document`] (shared with `classify` and
 /// `bake`): their entries name them for refusals only.
@@ -434,14 +452,7 @@ pub const FLAGS: &[FlagField] = &[
             Ok(())
         },
     },
-    FlagField {
-        fields: &["wavelengths"],
-        given: |a| shown("--spectrum", a.stop.spectrum),
-        apply: |a, d| {
-            d.wavelengths = a.stop.spectrum.unwrap_or(d.wavelengths);
-            Ok(())
-        },
-    },
+    value!("--spectrum", "wavelengths", stop.spectrum => wavelengths),
     FlagField {
         fields: &["flare_ev"],
         given: |a| match a.look.exposure_ev? {
@@ -464,14 +475,7 @@ pub const FLAGS: &[FlagField] = &[
             Ok(())
         },
     },
-    FlagField {
-        fields: &["plate_ev"],
-        given: |a| shown("--plate-ev", a.look.plate_ev),
-        apply: |a, d| {
-            d.plate_ev = a.look.plate_ev.unwrap_or(d.plate_ev);
-            Ok(())
-        },
-    },
+    value!("--plate-ev", "plate_ev", look.plate_ev => plate_ev),
     FlagField {
         fields: &["tonemap"],
         given: |a| a.colour.tonemap.map(|t| format!("--tonemap {t:?}").to_lowercase()),
@@ -490,14 +494,7 @@ pub const FLAGS: &[FlagField] = &[
             Ok(())
         },
     },
-    FlagField {
-        fields: &["starburst_ev"],
-        given: |a| shown("--starburst-ev", a.look.starburst_ev),
-        apply: |a, d| {
-            d.starburst_ev = a.look.starburst_ev.unwrap_or(d.starburst_ev);
-            Ok(())
-        },
-    },
+    value!("--starburst-ev", "starburst_ev", look.starburst_ev => starburst_ev),
     FlagField {
         fields: &["desqueeze"],
         given: |a| shown("--desqueeze", a.camera.desqueeze.as_ref()),
@@ -521,22 +518,8 @@ pub const FLAGS: &[FlagField] = &[
         given: |a| shown("--dirt", a.look.dirt.as_ref()),
         apply: |a, d| a.look.dirt.as_ref().map_or(Ok(()), |spec| parse_dirt(spec, &mut d.dirt)),
     },
-    FlagField {
-        fields: &["dirt.amount"],
-        given: |a| shown("--dirt-amount", a.look.dirt_amount),
-        apply: |a, d| {
-            d.dirt.amount = a.look.dirt_amount.unwrap_or(d.dirt.amount);
-            Ok(())
-        },
-    },
-    FlagField {
-        fields: &["dirt.spread_deg"],
-        given: |a| shown("--dirt-spread-deg", a.look.dirt_spread_deg),
-        apply: |a, d| {
-            d.dirt.spread_deg = a.look.dirt_spread_deg.unwrap_or(d.dirt.spread_deg);
-            Ok(())
-        },
-    },
+    value!("--dirt-amount", "dirt.amount", look.dirt_amount => dirt.amount),
+    value!("--dirt-spread-deg", "dirt.spread_deg", look.dirt_spread_deg => dirt.spread_deg),
     FlagField {
         fields: &["background"],
         given: |a| shown("--background", a.shot.background.as_ref().map(|b| b.display())),
@@ -545,22 +528,8 @@ pub const FLAGS: &[FlagField] = &[
             Ok(())
         },
     },
-    FlagField {
-        fields: &["sensor_width_mm"],
-        given: |a| shown("--sensor-mm", a.camera.sensor_mm),
-        apply: |a, d| {
-            d.sensor_width_mm = a.camera.sensor_mm.unwrap_or(d.sensor_width_mm);
-            Ok(())
-        },
-    },
-    FlagField {
-        fields: &["color.config"],
-        given: |a| shown("--ocio-config", a.colour.ocio_config.as_ref()),
-        apply: |a, d| {
-            d.color.config = a.colour.ocio_config.clone();
-            Ok(())
-        },
-    },
+    value!("--sensor-mm", "sensor_width_mm", camera.sensor_mm => sensor_width_mm),
+    value!("--ocio-config", "color.config", colour.ocio_config => color.config, Some),
     FlagField {
         fields: &["color.display"],
         given: |a| shown("--display", a.colour.display.as_ref()),
@@ -571,30 +540,9 @@ pub const FLAGS: &[FlagField] = &[
             Ok(())
         },
     },
-    FlagField {
-        fields: &["color.view"],
-        given: |a| shown("--view", a.colour.view.as_ref()),
-        apply: |a, d| {
-            d.color.view = a.colour.view.clone();
-            Ok(())
-        },
-    },
-    FlagField {
-        fields: &["color.looks"],
-        given: |a| shown("--look", a.colour.looks.as_ref()),
-        apply: |a, d| {
-            d.color.looks = a.colour.looks.clone();
-            Ok(())
-        },
-    },
-    FlagField {
-        fields: &["color.input_space"],
-        given: |a| shown("--input-space", a.colour.input_space.as_ref()),
-        apply: |a, d| {
-            d.color.input_space = a.colour.input_space.clone();
-            Ok(())
-        },
-    },
+    value!("--view", "color.view", colour.view => color.view, Some),
+    value!("--look", "color.looks", colour.looks => color.looks, Some),
+    value!("--input-space", "color.input_space", colour.input_space => color.input_space, Some),
     FlagField {
         fields: &["color.cube"],
         given: |a| shown("--cube", a.colour.cube.as_ref().map(|c| c.display())),
@@ -621,14 +569,7 @@ pub const FLAGS: &[FlagField] = &[
             Ok(())
         },
     },
-    FlagField {
-        fields: &["timeline.shutter_deg"],
-        given: |a| shown("--shutter-deg", a.camera.shutter_deg),
-        apply: |a, d| {
-            d.timeline.shutter_deg = a.camera.shutter_deg.unwrap_or(d.timeline.shutter_deg);
-            Ok(())
-        },
-    },
+    value!("--shutter-deg", "timeline.shutter_deg", camera.shutter_deg => timeline.shutter_deg),
     FlagField {
         fields: &["dof.depth"],
         given: |a| shown("--depth", a.dof.depth.as_ref()),
@@ -725,14 +666,7 @@ pub const FLAGS: &[FlagField] = &[
             Ok(())
         },
     },
-    FlagField {
-        fields: &["cull_threshold"],
-        given: |a| shown("--threshold", a.method.threshold),
-        apply: |a, d| {
-            d.cull_threshold = a.method.threshold.or(d.cull_threshold);
-            Ok(())
-        },
-    },
+    value!("--threshold", "cull_threshold", method.threshold => cull_threshold, Some),
     FlagField {
         fields: &["blend.mode"],
         given: |a| shown("--blend", a.method.blend.as_ref()),
