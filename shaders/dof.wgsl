@@ -23,8 +23,13 @@ struct Layer {
     cat_radius: vec4<f32>,
     // each circle's x scale (1 for a lens of revolution; an anamorphic lens's regions are ellipses)
     cat_x_scale: vec4<f32>,
-    // circles in use, soft edge, on (1/0), unused
-    cat_more: vec4<f32>,
+    // circles in use
+    cat_count: u32,
+    // the circles' soft edge (pupil radii)
+    cat_edge: f32,
+    // 1 when the cat's eye is on, else 0
+    cat_on: u32,
+    _pad0: u32,
     // pupil radii per pixel of offset along x and along y (2 / sigma of each axis, signed), unused, unused
     pupil: vec4<f32>,
 }
@@ -89,7 +94,7 @@ fn split(@builtin(global_invocation_id) gid: vec3<u32>) {
 
 // The cat's eye factor of a tap at pupil point q from a source at pixel (x, y) (twin: `live::cat_factor`).
 fn cat_factor(q: vec2<f32>, x: f32, y: f32) -> f32 {
-    if (layer.cat_more.z == 0.0) {
+    if (layer.cat_on == 0u) {
         return 1.0;
     }
     var m = 1.0;
@@ -102,14 +107,14 @@ fn cat_factor(q: vec2<f32>, x: f32, y: f32) -> f32 {
         let c = vec2<f32>(cat.x + cat.y * x, cat.z + cat.w * y);
         let qx = q.x * layer.cat_x_scale[k];
         let d = sqrt((qx - c.x) * (qx - c.x) + (q.y - c.y) * (q.y - c.y));
-        m = m * clamp(0.5 + (radius - d) / layer.cat_more.y, 0.0, 1.0);
+        m = m * clamp(0.5 + (radius - d) / layer.cat_edge, 0.0, 1.0);
     }
     return m;
 }
 
 // The normalisation at pixel (x, y) (twin: `live::norm_at`).
 fn norm_at(x: f32, y: f32) -> f32 {
-    if (layer.cat_more.z == 0.0) {
+    if (layer.cat_on == 0u) {
         return norm[layer.taps.w];
     }
     let n = f32(NORM_CELLS);

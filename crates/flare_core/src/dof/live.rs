@@ -74,8 +74,13 @@ pub struct LiveLayer {
     /// Each circle's x scale ([`super::kernel::Cat::x_scale`]: 1 for a lens of revolution; an anamorphic lens's
     /// regions are ellipses).
     pub cat_x_scale: [f32; MAX_LAYER_CATS],
-    /// Circles in use, their soft edge (pupil radii), 1 when the cat's eye is on, unused.
-    pub cat_more: [f32; 4],
+    /// Circles in use.
+    pub cat_count: u32,
+    /// The circles' soft edge (pupil radii).
+    pub cat_edge: f32,
+    /// 1 when the cat's eye is on, else 0.
+    pub cat_on: u32,
+    pub _pad0: u32,
     /// Pupil radii per pixel of offset along x and along y, `2 / sigma` of each axis (signed: reflected in front of
     /// its focus; equal for a lens of revolution), unused, unused.
     pub pupil: [f32; 4],
@@ -123,7 +128,7 @@ pub fn hat(layer: &LiveLayer, s: f32) -> f32 {
 /// The cat's eye factor of a tap at the pupil point `q` from the source texel centre at pixel (`x`, `y`).
 #[inline]
 fn cat_factor(layer: &LiveLayer, q: [f32; 2], x: f32, y: f32) -> f32 {
-    if layer.cat_more[2] == 0.0 {
+    if layer.cat_on == 0 {
         return 1.0;
     }
     let mut m = 1.0f32;
@@ -134,7 +139,7 @@ fn cat_factor(layer: &LiveLayer, q: [f32; 2], x: f32, y: f32) -> f32 {
         let c = [cat[0] + cat[1] * x, cat[2] + cat[3] * y];
         let qx = q[0] * x_scale;
         let d = ((qx - c[0]) * (qx - c[0]) + (q[1] - c[1]) * (q[1] - c[1])).sqrt();
-        m *= (0.5 + (radius - d) / layer.cat_more[1]).clamp(0.0, 1.0);
+        m *= (0.5 + (radius - d) / layer.cat_edge).clamp(0.0, 1.0);
     }
     m
 }
@@ -149,7 +154,7 @@ fn tap_pupil(layer: &LiveLayer, t: [f32; 2]) -> [f32; 2] {
 /// The normalisation at pixel (`x`, `y`), bilinear in the layer's table.
 #[inline]
 fn norm_at(layer: &LiveLayer, norm: &[f32], x: f32, y: f32) -> f32 {
-    if layer.cat_more[2] == 0.0 {
+    if layer.cat_on == 0 {
         return norm[layer.taps[3] as usize];
     }
     let n = NORM_CELLS as f32;
@@ -300,12 +305,10 @@ impl LivePlan {
             cat: cat_coeffs,
             cat_radius,
             cat_x_scale,
-            cat_more: [
-                chosen.len() as f32,
-                (CAT_EDGE_CELLS * cell_pupil) as f32,
-                if cat_on && !chosen.is_empty() { 1.0 } else { 0.0 },
-                0.0,
-            ],
+            cat_count: chosen.len() as u32,
+            cat_edge: (CAT_EDGE_CELLS * cell_pupil) as f32,
+            cat_on: u32::from(cat_on && !chosen.is_empty()),
+            _pad0: 0,
             pupil: [pupil_per_px[0] as f32, pupil_per_px[1] as f32, 0.0, 0.0],
         };
         // Taps: the kernel averaged over 3 x 3 points of each texel cell (no cat's eye: that is per source).
@@ -331,7 +334,7 @@ impl LivePlan {
         }
         layer.taps[1] = taps.len() as u32;
         // Normalisation: one value, or a table over the frame with the cat's eye.
-        if layer.cat_more[2] == 0.0 {
+        if layer.cat_on == 0 {
             let total: f32 = taps.iter().map(|t| t[2]).sum();
             self.norm.push(1.0 / total);
         } else {

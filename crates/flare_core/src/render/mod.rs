@@ -553,7 +553,8 @@ mod layouts {
         assert_same_layout(
             shaders::DOF_WGSL,
             "Layer",
-            fields!(LiveLayer: size, taps, low, out, pixels, shape, cat, cat_radius, cat_x_scale, cat_more, pupil),
+            fields!(LiveLayer: size, taps, low, out, pixels, shape, cat, cat_radius, cat_x_scale, cat_count, cat_edge,
+                cat_on, _pad0, pupil),
         );
     }
 }
