@@ -106,7 +106,7 @@ pub fn parse_coating(spec: &str) -> Result<Coating> {
             }
             Coating::Multilayer { layers }
         }
-        other => bail!("--coating {other}: use lens, none, quarter-wave[:NM] or multilayer:N/T,..."),
+        other => bail!("--coating {other}: use lens, none, quarter-wave[:NM], broadband or multilayer:N/T,..."),
     };
     // Validate through a lens surface so that the rules are the lens file's rules.
     let mut probe = flare_core::optics::library::default_lens();
