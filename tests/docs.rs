@@ -27,27 +27,23 @@ fn pages() -> Vec<PathBuf> {
     pages
 }
 
-/// The lines of `text` outside fenced code blocks, with their numbers (from 1) and inline code removed.
-fn prose(text: &str) -> Vec<(usize, String)> {
+/// The lines of `text` outside fenced code blocks, with their numbers (from 1).
+fn outside_fences(text: &str) -> Vec<(usize, &str)> {
     let mut fenced = false;
     let mut out = Vec::new();
     for (n, line) in text.lines().enumerate() {
         if line.trim_start().starts_with("```") {
             fenced = !fenced;
-            continue;
+        } else if !fenced {
+            out.push((n + 1, line));
         }
-        if fenced {
-            continue;
-        }
-        let mut kept = String::new();
-        for (k, part) in line.split('`').enumerate() {
-            if k % 2 == 0 {
-                kept.push_str(part);
-            }
-        }
-        out.push((n + 1, kept));
     }
     out
+}
+
+/// The lines of `text` outside fenced code blocks, with their numbers (from 1) and inline code removed.
+fn prose(text: &str) -> Vec<(usize, String)> {
+    outside_fences(text).into_iter().map(|(n, line)| (n, line.split('`').step_by(2).collect::<String>())).collect()
 }
 
 /// GitHub's anchor for a heading's text.
@@ -64,15 +60,7 @@ fn slug(heading: &str) -> String {
 /// Every anchor of a Markdown file: its headings' and its `<a id="...">`s.
 fn anchors(text: &str) -> BTreeSet<String> {
     let mut out = BTreeSet::new();
-    let mut fenced = false;
-    for line in text.lines() {
-        if line.trim_start().starts_with("```") {
-            fenced = !fenced;
-            continue;
-        }
-        if fenced {
-            continue;
-        }
+    for (_, line) in outside_fences(text) {
         let hashes = line.chars().take_while(|&c| c == '#').count();
         if (1..=6).contains(&hashes) && line[hashes..].starts_with(' ') {
             out.insert(slug(&line[hashes..].replace('`', "")));
