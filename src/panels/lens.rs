@@ -5,6 +5,7 @@
 //! makes the lens impossible is marked with the reason; the viewport keeps the last valid lens meanwhile.
 
 use eframe::egui;
+use flare_core::optics::Surface;
 use flare_core::optics::library::{builtin_lens, ids};
 
 use super::{Action, PanelContext, labelled_check, labelled_value};
@@ -113,18 +114,7 @@ fn surface_table_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, a
         }
         let columns = 8 + usize::from(anamorphic);
         egui::Grid::new("surface_table").num_columns(columns).striped(true).spacing([4.0, 2.0]).show(ui, |ui| {
-            let headers = [
-                ("#", "the surface (its menu: add a dummy surface after it, remove it, move it, its coating)"),
-                ("radius", "the radius of curvature, mm (0: flat; + centre behind)"),
-                ("radius x", "the toroid's x-z radius, mm"),
-                ("conic", "the conic constant (the aspheric terms on the cell's hover)"),
-                ("thick", "the thickness to the next surface along the axis, mm"),
-                ("nd", "the refractive index after the surface, at the d line"),
-                ("Vd", "the Abbe number after the surface (blank: no dispersion)"),
-                ("semi-ap", "the clear semi-aperture, mm"),
-                ("stop", "the aperture stop"),
-            ];
-            for (h, hover) in headers {
+            for (h, hover) in SURFACE_COLUMNS {
                 if h != "radius x" || anamorphic {
                     ui.strong(h).on_hover_text(hover);
                 }
@@ -139,69 +129,9 @@ fn surface_table_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, a
                     Some(_) => format!("coating: {} on every surface…", super::coatings::kind(coating)),
                     None => format!("coating: {}…", super::coatings::kind(coating)),
                 };
-                ui.menu_button(k.to_string(), |ui| {
-                    if ui
-                        .button("+ dummy surface after")
-                        .on_hover_text("split the gap after this surface with a dummy surface, one medium on both sides (changes nothing optically: the LUT ghosts stay; removing it gives back the lens)")
-                        .clicked()
-                    {
-                        edit = Some(RowEdit::InsertAfter(k));
-                    }
-                    if ui
-                        .add_enabled(count > 1, egui::Button::new("x remove"))
-                        .on_hover_text("remove this surface (the others stay where they are)")
-                        .clicked()
-                    {
-                        edit = Some(RowEdit::Remove(k));
-                    }
-                    ui.separator();
-                    if ui.add_enabled(k > 0, egui::Button::new("move up")).clicked() {
-                        edit = Some(RowEdit::Swap(k - 1, k));
-                    }
-                    if ui.add_enabled(k + 1 < count, egui::Button::new("move down")).clicked() {
-                        edit = Some(RowEdit::Swap(k, k + 1));
-                    }
-                    if ui.button(coating_item).on_hover_text("edit in the Coatings panel").clicked() {
-                        actions.push(Action::EditCoating(k));
-                    }
-                })
-                .response
-                .on_hover_text(format!("surface {k}: add a dummy surface after it, remove it, move it, its coating"));
+                row_menu_ui(ui, k, count, &coating_item, &mut edit, actions);
                 let cell = |ui: &mut egui::Ui, value: &mut f64, field: &'static str, label: &str, speed: f64| {
-                    let bad = bad_cell(k, field);
-                    // A typed value applies on Enter or when the cell loses focus, so a refused intermediate value
-                    // ("-1" on the way to "-12") never reaches the lens; Escape gives back the value the edit
-                    // started from (egui's DragValue would apply the typed text on the frame after Escape: the
-                    // value is put back then).
-                    let before = *value;
-                    let mut drag =
-                        egui::DragValue::new(&mut *value).speed(speed).max_decimals(4).update_while_editing(false);
-                    if field == "vd" {
-                        // An unknown Abbe number (0 here: dispersion assumed) shows blank, not as 0.0.
-                        drag = drag.custom_formatter(|v, _| if v > 0.0 { format!("{v:.1}") } else { String::new() });
-                    }
-                    if bad.is_some() {
-                        drag = drag.prefix("! ");
-                    }
-                    let response = labelled_value(ui.add(drag), &format!("{label} {k}"), *value);
-                    // While typing nothing applies, so the value before this frame is the one the edit started
-                    // from.
-                    let revert = response.id.with("revert");
-                    let escaped = ui.input(|i| i.key_pressed(egui::Key::Escape));
-                    if escaped && response.lost_focus() {
-                        ui.data_mut(|d| d.insert_temp(revert, before));
-                    } else if !escaped && let Some(v) = ui.data_mut(|d| d.remove_temp::<f64>(revert)) {
-                        *value = v;
-                    }
-                    if let Some(reason) = bad {
-                        ui.painter().rect_stroke(
-                            response.rect,
-                            2.0,
-                            egui::Stroke::new(1.5, BAD),
-                            egui::StrokeKind::Outside,
-                        );
-                        response.on_hover_text(reason);
-                    }
+                    value_cell(ui, value, (field, &format!("{label} {k}")), speed, bad_cell(k, field));
                 };
                 cell(ui, &mut s.radius_mm, "radius", "radius", 0.1);
                 if anamorphic {
@@ -218,15 +148,7 @@ fn surface_table_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, a
                     }
                 }
                 // The conic constant; the even aspheric terms (read from the file) on hover.
-                let terms = if s.aspheric_r2 == 0.0 && s.aspheric.is_empty() {
-                    "no aspheric terms".to_owned()
-                } else {
-                    let mut t = format!("A2 {:e}", s.aspheric_r2);
-                    for (i, a) in s.aspheric.iter().enumerate() {
-                        t.push_str(&format!(", A{} {a:e}", 2 * i + 4));
-                    }
-                    t
-                };
+                let terms = aspheric_terms(s);
                 let bad_terms = bad_cell(k, "aspheric");
                 let response = ui.scope(|ui| cell(ui, &mut s.conic, "conic", "conic", 0.01)).response;
                 response.on_hover_text(match bad_terms {
@@ -271,6 +193,103 @@ fn surface_table_ui(ui: &mut egui::Ui, doc: &mut Document, ctx: &PanelContext, a
         }
         _ => {}
     }
+}
+
+/// The surface table's columns and what each says ("radius x" only for an anamorphic lens).
+const SURFACE_COLUMNS: [(&str, &str); 9] = [
+    ("#", "the surface (its menu: add a dummy surface after it, remove it, move it, its coating)"),
+    ("radius", "the radius of curvature, mm (0: flat; + centre behind)"),
+    ("radius x", "the toroid's x-z radius, mm"),
+    ("conic", "the conic constant (the aspheric terms on the cell's hover)"),
+    ("thick", "the thickness to the next surface along the axis, mm"),
+    ("nd", "the refractive index after the surface, at the d line"),
+    ("Vd", "the Abbe number after the surface (blank: no dispersion)"),
+    ("semi-ap", "the clear semi-aperture, mm"),
+    ("stop", "the aperture stop"),
+];
+
+/// Row `k`'s menu under its number (of `count` rows): a dummy surface after it, its removal, its moves and
+/// `coating_item`, which opens the Coatings panel.
+fn row_menu_ui(
+    ui: &mut egui::Ui,
+    k: usize,
+    count: usize,
+    coating_item: &str,
+    edit: &mut Option<RowEdit>,
+    actions: &mut Vec<Action>,
+) {
+    ui.menu_button(k.to_string(), |ui| {
+        if ui
+            .button("+ dummy surface after")
+            .on_hover_text("split the gap after this surface with a dummy surface, one medium on both sides (changes nothing optically: the LUT ghosts stay; removing it gives back the lens)")
+            .clicked()
+        {
+            *edit = Some(RowEdit::InsertAfter(k));
+        }
+        if ui
+            .add_enabled(count > 1, egui::Button::new("x remove"))
+            .on_hover_text("remove this surface (the others stay where they are)")
+            .clicked()
+        {
+            *edit = Some(RowEdit::Remove(k));
+        }
+        ui.separator();
+        if ui.add_enabled(k > 0, egui::Button::new("move up")).clicked() {
+            *edit = Some(RowEdit::Swap(k - 1, k));
+        }
+        if ui.add_enabled(k + 1 < count, egui::Button::new("move down")).clicked() {
+            *edit = Some(RowEdit::Swap(k, k + 1));
+        }
+        if ui.button(coating_item).on_hover_text("edit in the Coatings panel").clicked() {
+            actions.push(Action::EditCoating(k));
+        }
+    })
+    .response
+    .on_hover_text(format!("surface {k}: add a dummy surface after it, remove it, move it, its coating"));
+}
+
+/// One number of the table: `field` of the surface, its accessible `name`, dragged by `speed` a point, marked
+/// with `bad`'s reason where the lens's problem is this cell.
+fn value_cell(ui: &mut egui::Ui, value: &mut f64, (field, name): (&str, &str), speed: f64, bad: Option<String>) {
+    // A typed value applies on Enter or when the cell loses focus, so a refused intermediate value
+    // ("-1" on the way to "-12") never reaches the lens; Escape gives back the value the edit
+    // started from (egui's DragValue would apply the typed text on the frame after Escape: the
+    // value is put back then).
+    let before = *value;
+    let mut drag = egui::DragValue::new(&mut *value).speed(speed).max_decimals(4).update_while_editing(false);
+    if field == "vd" {
+        // An unknown Abbe number (0 here: dispersion assumed) shows blank, not as 0.0.
+        drag = drag.custom_formatter(|v, _| if v > 0.0 { format!("{v:.1}") } else { String::new() });
+    }
+    if bad.is_some() {
+        drag = drag.prefix("! ");
+    }
+    let response = labelled_value(ui.add(drag), name, *value);
+    // While typing nothing applies, so the value before this frame is the one the edit started
+    // from.
+    let revert = response.id.with("revert");
+    let escaped = ui.input(|i| i.key_pressed(egui::Key::Escape));
+    if escaped && response.lost_focus() {
+        ui.data_mut(|d| d.insert_temp(revert, before));
+    } else if !escaped && let Some(v) = ui.data_mut(|d| d.remove_temp::<f64>(revert)) {
+        *value = v;
+    }
+    if let Some(reason) = bad {
+        ui.painter().rect_stroke(response.rect, 2.0, egui::Stroke::new(1.5, BAD), egui::StrokeKind::Outside);
+        response.on_hover_text(reason);
+    }
+}
+
+/// The surface's even aspheric terms, as the conic cell's hover says them.
+fn aspheric_terms(s: &Surface) -> String {
+    if s.aspheric_r2 == 0.0 && s.aspheric.is_empty() {
+        return "no aspheric terms".to_owned();
+    }
+    let mut t = format!("A2 {:e}", s.aspheric_r2);
+    for (i, a) in s.aspheric.iter().enumerate() {
+        t.push_str(&format!(", A{} {a:e}", 2 * i + 4));
+    }
+    t
 }
 
 enum RowEdit {

@@ -580,36 +580,12 @@ impl GhostSystem {
         let mut image_transmission = Vec::with_capacity(n_w);
         let mut image_stop_a = Vec::with_capacity(n_w);
         for (w, &wavelength_nm) in spectrum.wavelengths_nm.iter().enumerate() {
-            let n = &indices[w];
             let transmittance = |k: usize, backward: bool| 1.0 - tables.table(tables.index(k, backward, w)).at(0.0);
-            let gap = |a: usize, b: usize| Mat2::translation((z[a] - z[b]).abs());
-            let forward_refraction = |k: usize| Mat2::refraction(curvature[k], n[k], n[k + 1], 1.0);
-            let backward_refraction = |k: usize| Mat2::refraction(curvature[k], n[k + 1], n[k], -1.0);
-            // arrive[k]: entrance -> arriving at surface k travelling forward.
-            let mut arrive = Vec::with_capacity(n_surfaces);
-            let mut m = Mat2::IDENTITY;
-            for k in 0..n_surfaces {
-                if k > 0 {
-                    m = gap(k, k - 1).mul(&forward_refraction(k - 1).mul(&m));
-                }
-                arrive.push(m);
-            }
-            // to_sensor[k]: leaving surface k forward (after its interaction) -> sensor.
-            // to_stop[k]: leaving surface k forward -> arriving at the stop (k < stop).
+            let system = Paraxial { z: &z, curvature: &curvature, n: &indices[w] };
+            let (gap, forward_refraction) = (|a, b| system.gap(a, b), |k| system.forward(k));
+            let backward_refraction = |k| system.backward(k);
+            let Sweeps { arrive, to_sensor, to_stop } = system.sweeps(stop, sensor_z);
             let last = n_surfaces - 1;
-            let mut to_sensor = vec![Mat2::IDENTITY; n_surfaces];
-            to_sensor[last] = Mat2::translation((sensor_z - z[last]).abs());
-            for k in (0..last).rev() {
-                to_sensor[k] = to_sensor[k + 1].mul(&forward_refraction(k + 1)).mul(&gap(k + 1, k));
-            }
-            let mut to_stop = vec![Mat2::IDENTITY; n_surfaces];
-            for k in (0..stop).rev() {
-                to_stop[k] = if k + 1 == stop {
-                    gap(stop, k)
-                } else {
-                    to_stop[k + 1].mul(&forward_refraction(k + 1)).mul(&gap(k + 1, k))
-                };
-            }
             let image_f = to_sensor[last].mul(&forward_refraction(last)).mul(&arrive[last]);
             let image_a = arrive[stop];
             image_centre_per_slope.push(image_f.b - image_f.a * image_a.b / image_a.a);
@@ -680,23 +656,7 @@ impl GhostSystem {
             spectrum.wavelengths_nm[middle],
             image_centre_per_slope[middle],
         );
-        // Every crossing of a clear aperture (a surface other than the stop) along each ghost path, per
-        // wavelength: its disc in the entrance plane, from the entrance-to-arrival matrix (heights on arrival).
-        let mut discs = Vec::new();
-        let mut coefficients = Vec::with_capacity(ghosts.len() * n_w);
-        for (g, ghost) in ghosts.iter().enumerate() {
-            let path = LightPath::ghost(lens, ghost.i, ghost.j)?;
-            for (w, optics) in ghost.per_wavelength.iter().enumerate() {
-                let first = discs.len();
-                PathMatrices::walk(lens, &z, &indices[w], &path, sensor_z, |step, m| {
-                    let surface = path.steps[step].surface;
-                    if surface != stop {
-                        discs.push(Disc::new(surface, m, lens.surfaces[surface].semi_aperture_mm));
-                    }
-                });
-                coefficients.push(FrameCoefficients::new(g, w, optics, stop_radius_mm, &discs[first..], first));
-            }
-        }
+        let (discs, coefficients) = clear_apertures(lens, &ghosts, &indices, sensor_z, stop_radius_mm)?;
         Ok(Self {
             lens: lens.clone(),
             first_order,
@@ -1153,6 +1113,99 @@ impl GhostSystem {
             disc.redundant_below_slope = t;
         }
     }
+}
+
+/// One wavelength's paraxial system ([`GhostSystem::build_with`]): the vertices' z, the vertex curvatures and
+/// the media's indices (medium k before surface k).
+struct Paraxial<'a> {
+    z: &'a [f64],
+    curvature: &'a [f64],
+    n: &'a [f64],
+}
+
+/// The sweeps every ghost path of one wavelength is made of ([`Paraxial::sweeps`]).
+struct Sweeps {
+    /// `arrive[k]`: entrance -> arriving at surface k travelling forward.
+    arrive: Vec<Mat2>,
+    /// `to_sensor[k]`: leaving surface k forward (after its interaction) -> sensor.
+    to_sensor: Vec<Mat2>,
+    /// `to_stop[k]`: leaving surface k forward -> arriving at the stop (k < stop).
+    to_stop: Vec<Mat2>,
+}
+
+impl Paraxial<'_> {
+    /// The gap between surfaces `a` and `b`.
+    fn gap(&self, a: usize, b: usize) -> Mat2 {
+        Mat2::translation((self.z[a] - self.z[b]).abs())
+    }
+
+    /// Refraction at surface `k` travelling forward.
+    fn forward(&self, k: usize) -> Mat2 {
+        Mat2::refraction(self.curvature[k], self.n[k], self.n[k + 1], 1.0)
+    }
+
+    /// Refraction at surface `k` travelling backward.
+    fn backward(&self, k: usize) -> Mat2 {
+        Mat2::refraction(self.curvature[k], self.n[k + 1], self.n[k], -1.0)
+    }
+
+    /// The forward sweeps from the entrance to each surface, from each surface to the sensor at `sensor_z`
+    /// and from each surface before the stop to the stop.
+    fn sweeps(&self, stop: usize, sensor_z: f64) -> Sweeps {
+        let n_surfaces = self.curvature.len();
+        let mut arrive = Vec::with_capacity(n_surfaces);
+        let mut m = Mat2::IDENTITY;
+        for k in 0..n_surfaces {
+            if k > 0 {
+                m = self.gap(k, k - 1).mul(&self.forward(k - 1).mul(&m));
+            }
+            arrive.push(m);
+        }
+        let last = n_surfaces - 1;
+        let mut to_sensor = vec![Mat2::IDENTITY; n_surfaces];
+        to_sensor[last] = Mat2::translation((sensor_z - self.z[last]).abs());
+        for k in (0..last).rev() {
+            to_sensor[k] = to_sensor[k + 1].mul(&self.forward(k + 1)).mul(&self.gap(k + 1, k));
+        }
+        let mut to_stop = vec![Mat2::IDENTITY; n_surfaces];
+        for k in (0..stop).rev() {
+            to_stop[k] = if k + 1 == stop {
+                self.gap(stop, k)
+            } else {
+                to_stop[k + 1].mul(&self.forward(k + 1)).mul(&self.gap(k + 1, k))
+            };
+        }
+        Sweeps { arrive, to_sensor, to_stop }
+    }
+}
+
+/// Every crossing of a clear aperture (a surface other than the stop) along each ghost path, per wavelength:
+/// its disc in the entrance plane, from the entrance-to-arrival matrix (heights on arrival); and each
+/// (ghost, wavelength)'s frame coefficients, which index those discs.
+fn clear_apertures(
+    lens: &Lens,
+    ghosts: &[GhostModel],
+    indices: &[Vec<f64>],
+    sensor_z: f64,
+    stop_radius_mm: f64,
+) -> Result<(Vec<Disc>, Vec<FrameCoefficients>), GhostError> {
+    let (z, stop) = (lens.vertex_z_mm(), lens.stop_index());
+    let mut discs = Vec::new();
+    let mut coefficients = Vec::with_capacity(ghosts.len() * indices.len());
+    for (g, ghost) in ghosts.iter().enumerate() {
+        let path = LightPath::ghost(lens, ghost.i, ghost.j)?;
+        for (w, optics) in ghost.per_wavelength.iter().enumerate() {
+            let first = discs.len();
+            PathMatrices::walk(lens, &z, &indices[w], &path, sensor_z, |step, m| {
+                let surface = path.steps[step].surface;
+                if surface != stop {
+                    discs.push(Disc::new(surface, m, lens.surfaces[surface].semi_aperture_mm));
+                }
+            });
+            coefficients.push(FrameCoefficients::new(g, w, optics, stop_radius_mm, &discs[first..], first));
+        }
+    }
+    Ok((discs, coefficients))
 }
 
 #[cfg(test)]

@@ -8,6 +8,20 @@
 //! [`render_pipeline`] a full render pipeline of a shader's `vs_main` and `fs_main` into one target, and
 //! [`upload`] writes a texture's texels (the renderer's textures and the compute ghosts' mask).
 
+/// Every source added to what the target holds (the accumulation's passes).
+pub(crate) const ADDITIVE: wgpu::BlendState = wgpu::BlendState {
+    color: wgpu::BlendComponent {
+        src_factor: wgpu::BlendFactor::One,
+        dst_factor: wgpu::BlendFactor::One,
+        operation: wgpu::BlendOperation::Add,
+    },
+    alpha: wgpu::BlendComponent {
+        src_factor: wgpu::BlendFactor::One,
+        dst_factor: wgpu::BlendFactor::One,
+        operation: wgpu::BlendOperation::Add,
+    },
+};
+
 /// A render pipeline of `module`'s `vs_main` and `fs_main` drawing into one target of `format` (every pass
 /// of the renderer: ghosts, starburst, LUT ghosts and the tonemap of `gpu_view`).
 pub(crate) fn render_pipeline(

@@ -73,20 +73,7 @@ impl GpuDof {
         plate: &HdrImage,
     ) -> Result<GpuDofImage, GpuError> {
         let (w, h) = (plan.width, plan.height);
-        let pixels = u64::from(w) * u64::from(h);
-        let frame_bytes = pixels * 16;
-        let limits = device.limits();
-        let binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
-        if frame_bytes > binding {
-            return Err(GpuError::Limit {
-                what: format!("a {w}x{h} depth of field needs {frame_bytes} bytes a buffer"),
-                limit: binding,
-                name: "max_storage_buffer_binding_size",
-            });
-        }
-        if plate.width != w || plate.height != h {
-            return Err(GpuError::Readback(format!("plate {}x{} for a {w}x{h} plan", plate.width, plate.height)));
-        }
+        let frame_bytes = frame_bytes(device, plan, plate)?;
         let buffer = |label: &str, contents: &[u8], usage| storage(device, queue, label, contents, usage);
         let empty = |label: &str, size: u64, usage: wgpu::BufferUsages| {
             device.create_buffer(&wgpu::BufferDescriptor {
@@ -108,14 +95,7 @@ impl GpuDof {
         let low = empty("dof low", frame_bytes, storage);
         let gathered = empty("dof gathered", frame_bytes, storage);
         let out = empty("dof out", frame_bytes, storage | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST);
-        // Layer parameters at 256-byte strides, and one more (the frame's size) for `resolve`.
-        let mut uniforms = vec![0u8; LAYER_STRIDE as usize * (plan.layers.len() + 1)];
-        let frame = LiveLayer { size: [w, h, w, h], taps: [0, 0, 1, 0], ..LiveLayer::default() };
-        for (k, layer) in plan.layers.iter().chain(std::iter::once(&frame)).enumerate() {
-            let at = k * LAYER_STRIDE as usize;
-            uniforms[at..at + std::mem::size_of::<LiveLayer>()].copy_from_slice(bytemuck::bytes_of(layer));
-        }
-        let uniform_buffer = buffer("dof layers", &uniforms, wgpu::BufferUsages::UNIFORM);
+        let uniform_buffer = buffer("dof layers", &layer_uniforms(plan), wgpu::BufferUsages::UNIFORM);
         let layer_binding = |k: usize| {
             wgpu::BindingResource::Buffer(wgpu::BufferBinding {
                 buffer: &uniform_buffer,
@@ -186,4 +166,36 @@ impl GpuDof {
         }
         Ok(GpuDofImage { image: HdrImage { width: w, height: h, pixels }, gpu_ms })
     }
+}
+
+/// The bytes of one of `plan`'s frames (RGBA f32), which every buffer of the pass holds; refused where they
+/// pass the adapter's largest storage binding, or where `plate` is not the plan's size.
+fn frame_bytes(device: &wgpu::Device, plan: &LivePlan, plate: &HdrImage) -> Result<u64, GpuError> {
+    let (w, h) = (plan.width, plan.height);
+    let frame_bytes = u64::from(w) * u64::from(h) * 16;
+    let limits = device.limits();
+    let binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+    if frame_bytes > binding {
+        return Err(GpuError::Limit {
+            what: format!("a {w}x{h} depth of field needs {frame_bytes} bytes a buffer"),
+            limit: binding,
+            name: "max_storage_buffer_binding_size",
+        });
+    }
+    if plate.width != w || plate.height != h {
+        return Err(GpuError::Readback(format!("plate {}x{} for a {w}x{h} plan", plate.width, plate.height)));
+    }
+    Ok(frame_bytes)
+}
+
+/// Every layer's parameters at [`LAYER_STRIDE`]-byte strides, and one more (the frame's size) for `resolve`.
+fn layer_uniforms(plan: &LivePlan) -> Vec<u8> {
+    let (w, h) = (plan.width, plan.height);
+    let mut uniforms = vec![0u8; LAYER_STRIDE as usize * (plan.layers.len() + 1)];
+    let frame = LiveLayer { size: [w, h, w, h], taps: [0, 0, 1, 0], ..LiveLayer::default() };
+    for (k, layer) in plan.layers.iter().chain(std::iter::once(&frame)).enumerate() {
+        let at = k * LAYER_STRIDE as usize;
+        uniforms[at..at + std::mem::size_of::<LiveLayer>()].copy_from_slice(bytemuck::bytes_of(layer));
+    }
+    uniforms
 }

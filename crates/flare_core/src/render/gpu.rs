@@ -38,10 +38,11 @@
 
 use wgpu_profiler::{GpuProfiler, GpuProfilerSettings, GpuTimerQueryResult};
 
-pub use super::buffers::{HDR_FORMAT, texture_2d};
 use super::buffers::{
-    pipeline_layout, render_pipeline, shader_module, texture_entry, uniform_entry, upload, upload_part, vertex_buffer,
+    ADDITIVE, pipeline_layout, render_pipeline, shader_module, texture_entry, uniform_entry, upload, upload_part,
+    vertex_buffer,
 };
+pub use super::buffers::{HDR_FORMAT, texture_2d};
 use super::cpu::ghosts::{GhostMasks, MASK_LEVELS};
 use super::gpu_ghosts::{ComputeGhosts, mask_level_textures};
 use super::gpu_lut::{ComputeLut, TILE};
@@ -431,75 +432,64 @@ struct BindGroups {
     tonemap: wgpu::BindGroup,
 }
 
+/// The renderer's bind group layouts: the starburst's and the dirt's, the raster ghosts' and the tonemap's.
+fn frame_layouts(device: &wgpu::Device) -> [wgpu::BindGroupLayout; 3] {
+    let uniform = uniform_entry(0);
+    let texture = |binding, filterable| texture_entry(binding, filterable, wgpu::TextureViewDimension::D2);
+    let sampler_entry = wgpu::BindGroupLayoutEntry {
+        binding: 2,
+        visibility: wgpu::ShaderStages::FRAGMENT,
+        ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+        count: None,
+    };
+    let sprite_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("starburst and dirt"),
+        entries: &[uniform, texture(1, true), sampler_entry],
+    });
+    // The raster ghosts read the aperture's levels (`GhostMasks`): the base at 1, the finer ones at 3 and 4.
+    let raster_ghost_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("ghosts"),
+        entries: &[uniform, texture(1, true), sampler_entry, texture(3, true), texture(4, true)],
+    });
+    // The tonemap's resources are read by its fragment and its compute form alike.
+    let tonemap_stages = wgpu::ShaderStages::VERTEX_FRAGMENT | wgpu::ShaderStages::COMPUTE;
+    let tonemap_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("tonemap"),
+        entries: &[
+            uniform,
+            texture(1, true),
+            texture(2, false),
+            wgpu::BindGroupLayoutEntry { binding: 3, ..sampler_entry },
+        ]
+        .map(|e| wgpu::BindGroupLayoutEntry { visibility: tonemap_stages, ..e }),
+    });
+    [sprite_layout, raster_ghost_layout, tonemap_layout]
+}
+
+/// The raster ghosts' pipeline: one quad per [`GhostInstance`], its eleven `vec4`s as instance attributes,
+/// added into the accumulation.
+fn ghost_pipeline(device: &wgpu::Device, layout: &wgpu::BindGroupLayout) -> wgpu::RenderPipeline {
+    let module = shader_module(device, "ghosts.wgsl", GHOSTS_WGSL);
+    let instance_attributes = wgpu::vertex_attr_array![0 => Float32x4, 1 => Float32x4, 2 => Float32x4, 3 => Float32x4, 4 => Float32x4, 5 => Float32x4, 6 => Float32x4, 7 => Float32x4, 8 => Float32x4, 9 => Float32x4, 10 => Float32x4];
+    let instances = wgpu::VertexBufferLayout {
+        array_stride: std::mem::size_of::<GhostInstance>() as u64,
+        step_mode: wgpu::VertexStepMode::Instance,
+        attributes: &instance_attributes,
+    };
+    let layout = pipeline_layout(device, layout);
+    render_pipeline(device, "ghosts", &layout, &module, &[Some(instances)], HDR_FORMAT, Some(ADDITIVE))
+}
+
 impl FlareRenderer {
     /// Pipelines for drawing into views of `target_format`.
     pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, target_format: wgpu::TextureFormat) -> Self {
-        let uniform = uniform_entry(0);
-        let texture = |binding, filterable| texture_entry(binding, filterable, wgpu::TextureViewDimension::D2);
-        let sampler_entry = wgpu::BindGroupLayoutEntry {
-            binding: 2,
-            visibility: wgpu::ShaderStages::FRAGMENT,
-            ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-            count: None,
-        };
-        let sprite_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("starburst and dirt"),
-            entries: &[uniform, texture(1, true), sampler_entry],
-        });
-        // The raster ghosts read the aperture's levels (`GhostMasks`): the base at 1, the finer ones at 3 and 4.
-        let raster_ghost_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("ghosts"),
-            entries: &[uniform, texture(1, true), sampler_entry, texture(3, true), texture(4, true)],
-        });
-        // The tonemap's resources are read by its fragment and its compute form alike.
-        let tonemap_stages = wgpu::ShaderStages::VERTEX_FRAGMENT | wgpu::ShaderStages::COMPUTE;
-        let tonemap_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("tonemap"),
-            entries: &[
-                uniform,
-                texture(1, true),
-                texture(2, false),
-                wgpu::BindGroupLayoutEntry { binding: 3, ..sampler_entry },
-            ]
-            .map(|e| wgpu::BindGroupLayoutEntry { visibility: tonemap_stages, ..e }),
-        });
-        let layout = |bgl: &wgpu::BindGroupLayout| pipeline_layout(device, bgl);
-        let ghost_pl = layout(&raster_ghost_layout);
-        let sprite_pl = layout(&sprite_layout);
-        let additive = wgpu::BlendState {
-            color: wgpu::BlendComponent {
-                src_factor: wgpu::BlendFactor::One,
-                dst_factor: wgpu::BlendFactor::One,
-                operation: wgpu::BlendOperation::Add,
-            },
-            alpha: wgpu::BlendComponent {
-                src_factor: wgpu::BlendFactor::One,
-                dst_factor: wgpu::BlendFactor::One,
-                operation: wgpu::BlendOperation::Add,
-            },
-        };
-        let module = |label, source: &str| shader_module(device, label, source);
-        let ghosts = module("ghosts.wgsl", GHOSTS_WGSL);
-        let starburst_module = module("starburst.wgsl", STARBURST_WGSL);
-        let instance_attributes = wgpu::vertex_attr_array![0 => Float32x4, 1 => Float32x4, 2 => Float32x4, 3 => Float32x4, 4 => Float32x4, 5 => Float32x4, 6 => Float32x4, 7 => Float32x4, 8 => Float32x4, 9 => Float32x4, 10 => Float32x4];
-        let instance_buffer_layout = wgpu::VertexBufferLayout {
-            array_stride: std::mem::size_of::<GhostInstance>() as u64,
-            step_mode: wgpu::VertexStepMode::Instance,
-            attributes: &instance_attributes,
-        };
-        let ghost_pipeline = render_pipeline(
-            device,
-            "ghosts",
-            &ghost_pl,
-            &ghosts,
-            &[Some(instance_buffer_layout)],
-            HDR_FORMAT,
-            Some(additive),
-        );
+        let [sprite_layout, raster_ghost_layout, tonemap_layout] = frame_layouts(device);
+        let sprite_pl = pipeline_layout(device, &sprite_layout);
+        let starburst_module = shader_module(device, "starburst.wgsl", STARBURST_WGSL);
         let starburst_pipeline =
-            render_pipeline(device, "starburst", &sprite_pl, &starburst_module, &[], HDR_FORMAT, Some(additive));
-        let dirt_module = module("dirt.wgsl", DIRT_WGSL);
-        let dirt_pipeline = render_pipeline(device, "dirt", &sprite_pl, &dirt_module, &[], HDR_FORMAT, Some(additive));
+            render_pipeline(device, "starburst", &sprite_pl, &starburst_module, &[], HDR_FORMAT, Some(ADDITIVE));
+        let dirt_module = shader_module(device, "dirt.wgsl", DIRT_WGSL);
+        let dirt_pipeline = render_pipeline(device, "dirt", &sprite_pl, &dirt_module, &[], HDR_FORMAT, Some(ADDITIVE));
         let view_pass = ViewPass::new(
             device,
             queue,
@@ -526,12 +516,12 @@ impl FlareRenderer {
             upload(queue, &level, &[255], 1);
             level
         });
-        let starburst = texture_2d(device, "starburst", 1, 1, HDR_FORMAT, sampled);
-        upload(queue, &starburst, &half_floats(&[[0.0; 4]]), 8);
-        let dirt = texture_2d(device, "dirt", 1, 1, HDR_FORMAT, sampled);
-        upload(queue, &dirt, &half_floats(&[[0.0; 4]]), 8);
-        let background = texture_2d(device, "background", 1, 1, HDR_FORMAT, sampled);
-        upload(queue, &background, &half_floats(&[[0.0; 4]]), 8);
+        // Black, one texel each, until a frame brings its own.
+        let [starburst, dirt, background] = ["starburst", "dirt", "background"].map(|label| {
+            let texture = texture_2d(device, label, 1, 1, HDR_FORMAT, sampled);
+            upload(queue, &texture, &half_floats(&[[0.0; 4]]), 8);
+            texture
+        });
         let instance_capacity = 256;
         let instances = vertex_buffer::<GhostInstance>(device, "ghost instances", instance_capacity);
         let lut_atlas = empty_atlas(device, queue);
@@ -552,7 +542,7 @@ impl FlareRenderer {
             unread_frames: 0,
             timed: device.features().contains(wgpu::Features::TIMESTAMP_QUERY),
             pass_times: None,
-            ghost_pipeline,
+            ghost_pipeline: ghost_pipeline(device, &raster_ghost_layout),
             starburst_pipeline,
             dirt_pipeline,
             view_pass,
@@ -575,7 +565,6 @@ impl FlareRenderer {
         }
     }
 
-    /// The format of the views this renderer draws into.
     /// Whether `device` runs the compute passes (the ghosts, the LUT images and the tonemap as compute).
     pub fn supports_compute(device: &wgpu::Device) -> bool {
         ComputeGhosts::supported(device)
@@ -591,6 +580,7 @@ impl FlareRenderer {
             | if storage { wgpu::TextureUsages::STORAGE_BINDING } else { wgpu::TextureUsages::empty() }
     }
 
+    /// The format of the views this renderer draws into.
     pub fn target_format(&self) -> wgpu::TextureFormat {
         self.target_format
     }
@@ -806,38 +796,8 @@ impl FlareRenderer {
         // The previous frame was submitted by now: end its profiler frame and collect what came back.
         self.end_profiled_frame(queue, None);
         let (w, h) = (scene.hdr_width.max(1), scene.hdr_height.max(1));
-        if !matches!(&self.hdr, Some((_, hw, hh)) if *hw == w && *hh == h) {
-            let mut usage = wgpu::TextureUsages::RENDER_ATTACHMENT
-                | wgpu::TextureUsages::TEXTURE_BINDING
-                | wgpu::TextureUsages::COPY_SRC;
-            if self.compute.is_some() {
-                usage |= wgpu::TextureUsages::STORAGE_BINDING;
-            }
-            self.hdr = Some((texture_2d(device, "hdr", w, h, HDR_FORMAT, usage), w, h));
-            self.groups = None;
-        }
-        // The view's pass where the frame's tonemap is the view (or its cube's, where asked), else the pass
-        // without the view's code (see `gpu_view`).
-        let view = (scene.globals.operator() == crate::color::Tonemap::View).then(|| scene.view_transform());
-        let compute = self.view_pass.compute.is_some();
-        let (layout, format) = (&self.tonemap_layout, self.target_format);
-        // The cube is baked on a thread of its own the first time a frame asks for it: until it is, frames go
-        // through the exact view.
-        let cube = view.as_ref().filter(|_| self.view_from_cube).and_then(crate::view_lut::ViewLut::ready_or_bake);
-        let through_cube = cube.is_some();
-        if let Some(cube) = cube {
-            if self.cube_pass.as_ref().map(|p| p.key) != Some(PassKey::Cube(cube.key)) {
-                self.cube_pass = Some(ViewPass::cube(device, queue, layout, format, &cube, compute));
-            }
-        } else {
-            let key = view.as_ref().map_or(PassKey::Curves, |v| PassKey::View(v.key));
-            if key != self.view_pass.key {
-                self.view_pass = match &view {
-                    Some(view) => ViewPass::new(device, queue, layout, format, view, compute),
-                    None => ViewPass::curves(device, queue, layout, format, compute),
-                };
-            }
-        }
+        self.size_hdr(device, w, h);
+        let through_cube = self.choose_view_pass(device, queue, scene);
         let mut globals = scene.globals;
         globals.encode_srgb = u32::from(!self.target_format.is_srgb());
         globals.plate_present = u32::from(self.has_background);
@@ -895,18 +855,8 @@ impl FlareRenderer {
                             ..Default::default()
                         });
                         let mut pass = frame.scoped_compute_pass("lut");
-                        let frame_size = (scene.width, scene.height);
-                        Some(compute_lut.encode(
-                            device,
-                            queue,
-                            &mut pass,
-                            frame_size,
-                            (w, h),
-                            lut,
-                            bins,
-                            &atlas,
-                            &self.sampler,
-                        ))
+                        let sizes = ((scene.width, scene.height), (w, h));
+                        Some(compute_lut.encode(device, queue, &mut pass, sizes, lut, bins, &atlas, &self.sampler))
                     }
                     _ => None,
                 };
@@ -940,52 +890,51 @@ impl FlareRenderer {
                 Some(cube) if through_cube => cube,
                 _ => &self.view_pass,
             };
-            // The tonemap as compute where the target is an rgba8unorm storage texture (see `target_usage`).
-            let storage_target = (target.texture().format() == wgpu::TextureFormat::Rgba8Unorm
-                && target.texture().usage().contains(wgpu::TextureUsages::STORAGE_BINDING))
-            .then_some(tonemap.compute.as_ref())
-            .flatten();
-            if let Some((pipeline, output_layout)) = storage_target {
-                let output = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("tonemap target"),
-                    layout: output_layout,
-                    entries: &[wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: wgpu::BindingResource::TextureView(target),
-                    }],
-                });
-                let size = target.texture().size();
-                let mut pass = frame.scoped_compute_pass("tonemap");
-                pass.set_pipeline(pipeline);
-                pass.set_bind_group(0, &groups.tonemap, &[]);
-                pass.set_bind_group(1, &tonemap.group, &[]);
-                pass.set_bind_group(2, &output, &[]);
-                pass.dispatch_workgroups(size.width.div_ceil(8), size.height.div_ceil(8), 1);
-            } else {
-                let mut pass = frame.scoped_render_pass(
-                    "tonemap",
-                    wgpu::RenderPassDescriptor {
-                        label: Some("flare tonemap"),
-                        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                            view: target,
-                            depth_slice: None,
-                            resolve_target: None,
-                            ops: wgpu::Operations {
-                                load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                                store: wgpu::StoreOp::Store,
-                            },
-                        })],
-                        ..Default::default()
-                    },
-                );
-                pass.set_pipeline(&tonemap.pipeline);
-                pass.set_bind_group(0, &groups.tonemap, &[]);
-                pass.set_bind_group(1, &tonemap.group, &[]);
-                pass.draw(0..3, 0..1);
-            }
+            tonemap.record(device, &mut frame, &groups.tonemap, target);
         }
         self.profiler.resolve_queries(encoder);
         self.profiled_open = true;
+    }
+
+    /// Makes the accumulation `w` x `h`, new bind groups with it where its size changed.
+    fn size_hdr(&mut self, device: &wgpu::Device, w: u32, h: u32) {
+        if matches!(&self.hdr, Some((_, hw, hh)) if *hw == w && *hh == h) {
+            return;
+        }
+        let mut usage = wgpu::TextureUsages::RENDER_ATTACHMENT
+            | wgpu::TextureUsages::TEXTURE_BINDING
+            | wgpu::TextureUsages::COPY_SRC;
+        if self.compute.is_some() {
+            usage |= wgpu::TextureUsages::STORAGE_BINDING;
+        }
+        self.hdr = Some((texture_2d(device, "hdr", w, h, HDR_FORMAT, usage), w, h));
+        self.groups = None;
+    }
+
+    /// Makes the tonemap pass `scene` asks for: the view's where its tonemap is the view (or its cube's, where
+    /// asked), else the pass without the view's code (see `gpu_view`). True where the frame goes through the
+    /// cube pass.
+    fn choose_view_pass(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, scene: &FlareScene) -> bool {
+        let view = (scene.globals.operator() == crate::color::Tonemap::View).then(|| scene.view_transform());
+        let compute = self.view_pass.compute.is_some();
+        let (layout, format) = (&self.tonemap_layout, self.target_format);
+        // The cube is baked on a thread of its own the first time a frame asks for it: until it is, frames go
+        // through the exact view.
+        let cube = view.as_ref().filter(|_| self.view_from_cube).and_then(crate::view_lut::ViewLut::ready_or_bake);
+        let Some(cube) = cube else {
+            let key = view.as_ref().map_or(PassKey::Curves, |v| PassKey::View(v.key));
+            if key != self.view_pass.key {
+                self.view_pass = match &view {
+                    Some(view) => ViewPass::new(device, queue, layout, format, view, compute),
+                    None => ViewPass::curves(device, queue, layout, format, compute),
+                };
+            }
+            return false;
+        };
+        if self.cube_pass.as_ref().map(|p| p.key) != Some(PassKey::Cube(cube.key)) {
+            self.cube_pass = Some(ViewPass::cube(device, queue, layout, format, &cube, compute));
+        }
+        true
     }
 
     /// The GPU time of each pass of the latest frame whose timestamps have come back (`None` before any, or

@@ -435,6 +435,72 @@ impl ComputeGhosts {
         self.mask_texture = textures.each_ref().map(|t| t.create_view(&wgpu::TextureViewDescriptor::default()));
     }
 
+    /// Records strip `s`'s spans: where the walks are set up once, their setup first, then the spans pass
+    /// (one workgroup a sprite with `sprite_groups`), timed apart as "ghost spans" where the device has
+    /// timestamps inside passes ("ghosts" otherwise).
+    fn record_spans(
+        &self,
+        device: &wgpu::Device,
+        pass: &mut wgpu_profiler::OwningScope<'_, wgpu::ComputePass<'_>>,
+        spans: &wgpu::ComputePipeline,
+        s: &StripPlan,
+        inputs: &StripInputs,
+    ) {
+        let mut pass = pass.scope("ghost spans");
+        let mask_view = |k: usize| wgpu::BindingResource::TextureView(&self.mask_texture[k]);
+        let texels = wgpu::BindingResource::TextureView(&self.mask_texels);
+        if let Some(walks) = inputs.walks {
+            let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("ghost walks"),
+                layout: &self.walks_setup.get_bind_group_layout(0),
+                entries: &[
+                    wgpu::BindGroupEntry { binding: 0, resource: inputs.params.clone() },
+                    wgpu::BindGroupEntry { binding: 1, resource: inputs.instances.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 2, resource: inputs.items.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 3, resource: self.mask.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 10, resource: texels.clone() },
+                    wgpu::BindGroupEntry { binding: 11, resource: walks.as_entire_binding() },
+                ],
+            });
+            // One invocation an item, counted as `spans` counts its invocations (rows of `groups_x`).
+            let groups = s.params.items.div_ceil(WORKGROUP);
+            let rows = groups.div_ceil(s.params.groups_x);
+            pass.set_pipeline(&self.walks_setup);
+            pass.set_bind_group(0, &group, &[]);
+            pass.dispatch_workgroups(if rows > 1 { s.params.groups_x } else { groups }, rows, 1);
+        }
+        let entries = [
+            wgpu::BindGroupEntry { binding: 0, resource: inputs.params.clone() },
+            wgpu::BindGroupEntry { binding: 1, resource: inputs.instances.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 3, resource: self.mask.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 4, resource: inputs.diff.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 8, resource: mask_view(0) },
+            wgpu::BindGroupEntry { binding: 12, resource: mask_view(1) },
+            wgpu::BindGroupEntry { binding: 13, resource: mask_view(2) },
+            wgpu::BindGroupEntry { binding: 9, resource: wgpu::BindingResource::Sampler(&self.mask_sampler) },
+            wgpu::BindGroupEntry { binding: 10, resource: texels },
+            match inputs.walks {
+                Some(walks) => wgpu::BindGroupEntry { binding: 11, resource: walks.as_entire_binding() },
+                None => wgpu::BindGroupEntry { binding: 2, resource: inputs.items.as_entire_binding() },
+            },
+        ];
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("ghost spans"),
+            layout: &spans.get_bind_group_layout(0),
+            entries: &entries,
+        });
+        pass.set_pipeline(spans);
+        pass.set_bind_group(0, &group, &[]);
+        if self.form.sprite_groups {
+            // One workgroup a sprite (rows of `max_groups`; the shader counts them by `num_workgroups`).
+            let max_groups = device.limits().max_compute_workgroups_per_dimension;
+            let n = s.params.instances;
+            pass.dispatch_workgroups(n.min(max_groups), n.div_ceil(max_groups), 1);
+        } else {
+            pass.dispatch_workgroups(s.groups.0, s.groups.1, 1);
+        }
+    }
+
     /// Records the pass into `pass`: every sprite of `scene` into `hdr` (the accumulation, a storage texture of
     /// the scene's accumulation size), every pixel written (the pass also clears it), with the LUT layer
     /// `lut_layer` (`render::gpu_lut`) applied as it is written.
@@ -493,72 +559,9 @@ impl ComputeGhosts {
                 size: wgpu::BufferSize::new(std::mem::size_of::<ComputeStrip>() as u64),
             });
             if s.params.items > 0 {
-                // Timed apart where the device has timestamps inside passes ("ghosts" otherwise).
-                let mut pass = pass.scope("ghost spans");
-                if let Some(walks) = walks {
-                    let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                        label: Some("ghost walks"),
-                        layout: &self.walks_setup.get_bind_group_layout(0),
-                        entries: &[
-                            wgpu::BindGroupEntry { binding: 0, resource: params.clone() },
-                            wgpu::BindGroupEntry { binding: 1, resource: instance_buffer.as_entire_binding() },
-                            wgpu::BindGroupEntry { binding: 2, resource: items.as_entire_binding() },
-                            wgpu::BindGroupEntry { binding: 3, resource: self.mask.as_entire_binding() },
-                            wgpu::BindGroupEntry {
-                                binding: 10,
-                                resource: wgpu::BindingResource::TextureView(&self.mask_texels),
-                            },
-                            wgpu::BindGroupEntry { binding: 11, resource: walks.as_entire_binding() },
-                        ],
-                    });
-                    // One invocation an item, counted as `spans` counts its invocations (rows of `groups_x`).
-                    let groups = s.params.items.div_ceil(WORKGROUP);
-                    let rows = groups.div_ceil(s.params.groups_x);
-                    pass.set_pipeline(&self.walks_setup);
-                    pass.set_bind_group(0, &group, &[]);
-                    pass.dispatch_workgroups(if rows > 1 { s.params.groups_x } else { groups }, rows, 1);
-                }
-                let mut entries = vec![
-                    wgpu::BindGroupEntry { binding: 0, resource: params.clone() },
-                    wgpu::BindGroupEntry { binding: 1, resource: instance_buffer.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 3, resource: self.mask.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 4, resource: diff.as_entire_binding() },
-                    wgpu::BindGroupEntry {
-                        binding: 8,
-                        resource: wgpu::BindingResource::TextureView(&self.mask_texture[0]),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 12,
-                        resource: wgpu::BindingResource::TextureView(&self.mask_texture[1]),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 13,
-                        resource: wgpu::BindingResource::TextureView(&self.mask_texture[2]),
-                    },
-                    wgpu::BindGroupEntry { binding: 9, resource: wgpu::BindingResource::Sampler(&self.mask_sampler) },
-                    wgpu::BindGroupEntry {
-                        binding: 10,
-                        resource: wgpu::BindingResource::TextureView(&self.mask_texels),
-                    },
-                ];
-                entries.push(match walks {
-                    Some(walks) => wgpu::BindGroupEntry { binding: 11, resource: walks.as_entire_binding() },
-                    None => wgpu::BindGroupEntry { binding: 2, resource: items.as_entire_binding() },
-                });
-                let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("ghost spans"),
-                    layout: &spans.get_bind_group_layout(0),
-                    entries: &entries,
-                });
-                pass.set_pipeline(spans);
-                pass.set_bind_group(0, &group, &[]);
-                if sprite_groups {
-                    // One workgroup a sprite (rows of `max_groups`; the shader counts them by `num_workgroups`).
-                    let n = s.params.instances;
-                    pass.dispatch_workgroups(n.min(max_groups), n.div_ceil(max_groups), 1);
-                } else {
-                    pass.dispatch_workgroups(s.groups.0, s.groups.1, 1);
-                }
+                let inputs =
+                    StripInputs { params: params.clone(), instances: &instance_buffer, items: &items, diff, walks };
+                self.record_spans(device, pass, spans, s, &inputs);
             }
             let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("ghost resolve"),
@@ -580,6 +583,15 @@ impl ComputeGhosts {
             pass.dispatch_workgroups(if self.form.scan { s.params.rows } else { s.params.rows.div_ceil(8) }, 1, 1);
         }
     }
+}
+
+/// The buffers one strip's spans read ([`ComputeGhosts::record_spans`]).
+struct StripInputs<'a> {
+    params: wgpu::BindingResource<'a>,
+    instances: &'a wgpu::Buffer,
+    items: &'a wgpu::Buffer,
+    diff: &'a wgpu::Buffer,
+    walks: Option<&'a wgpu::Buffer>,
 }
 
 #[cfg(test)]

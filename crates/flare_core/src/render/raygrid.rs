@@ -267,11 +267,7 @@ impl GpuRayGrid {
         } else {
             wgpu::TextureFormat::Rgba16Float
         };
-        let additive = wgpu::BlendComponent {
-            src_factor: wgpu::BlendFactor::One,
-            dst_factor: wgpu::BlendFactor::One,
-            operation: wgpu::BlendOperation::Add,
-        };
+        let additive = super::buffers::ADDITIVE.color;
         let splat_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
             label: Some("raygrid splat"),
             layout: None,
@@ -513,27 +509,11 @@ impl GpuRayGrid {
                     p.resolve_queries(&mut encoder);
                 }
                 batches += 1;
-                // Each batch's buffers are freed once it has run: submit as they are recorded.
-                queue.submit(Some(
-                    std::mem::replace(
-                        &mut encoder,
-                        device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("raygrid") }),
-                    )
-                    .finish(),
-                ));
+                submit_batch(device, queue, &mut encoder);
             }
         }
-        if let Some(p) = profiler.as_deref_mut() {
-            // An error here means a query was left open: a bug, but never worth an image.
-            let _ = p.end_frame();
-        }
-        let hdr = read_hdr(ctx, &target, self.target_format);
-        // A device lost on the way (or an error it reported on its own) spoils the image, whatever came back.
-        if let Some(reason) = ctx.failure() {
-            return Err(GpuError::Lost(reason).into());
-        }
-        let gpu_times = profiler.and_then(|p| summed_times(device, queue, p));
-        Ok(GpuRayGridImage { hdr: hdr?.box_reduced(s), jobs: planned.len(), batches, gpu_times })
+        let (hdr, gpu_times) = finish_frame(ctx, &target, self.target_format, profiler)?;
+        Ok(GpuRayGridImage { hdr: hdr.box_reduced(s), jobs: planned.len(), batches, gpu_times })
     }
 
     /// [`Self::draw`] box-filtered: each batch traced, then its triangles splatted by `splat_box` into 64-bit
@@ -552,25 +532,7 @@ impl GpuRayGrid {
         let (device, queue) = (&ctx.device, &ctx.queue);
         let limits = device.limits();
         let cells = planned.iter().map(|j| j.cells).max().unwrap_or(1);
-        let binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
-        let max_groups = u64::from(limits.max_compute_workgroups_per_dimension);
-        let limit = |what, needed: u64, limit: u64, name| {
-            (needed > limit).then_some(GpuRayGridError::Limit { cells, what, needed, limit, name })
-        };
-        let row_bytes = u64::from(window.width) * BOX_BYTES_PER_PIXEL;
-        let side = u64::from(window.width.max(window.height));
-        if let Some(e) = shared_limits(&limits, cells, side, "pixels across the frame")
-            .or_else(|| {
-                let groups = (2 * cells * cells) as u64 * u64::from(self.row_split) / u64::from(WORKGROUP);
-                limit("workgroups per dispatch", groups, max_groups, "max_compute_workgroups_per_dimension")
-            })
-            .or_else(|| limit("bytes of sums for one row", row_bytes, binding, "max_storage_buffer_binding_size"))
-            .or_else(|| {
-                let rows = vertex_bytes(cells).div_ceil(TEXEL_ROW_BYTES);
-                let max = u64::from(limits.max_texture_dimension_2d);
-                limit("texel rows of vertices for one ghost", rows, max, "max_texture_dimension_2d")
-            })
-        {
+        if let Some(e) = self.box_refusal(&limits, cells, window) {
             return Err(e);
         }
         if planned.is_empty() {
@@ -585,90 +547,24 @@ impl GpuRayGrid {
             wgpu::TextureFormat::Rgba32Float,
             wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
         );
-        let target_view = target.create_view(&wgpu::TextureViewDescriptor::default());
-        let mask = renderer.mask();
-        // The mask's bilinear footprints, one word each, fetched as texels and filtered in the shader as
-        // `ApertureMask::sample` does (no sampler: a software rasteriser samples a texture several times slower).
-        let quads = mask.quad_words();
-        let mask_texels = word_texels(device, queue, "raygrid mask", bytemuck::cast_slice(&quads));
-        // No pixel can gather more than every triangle's flux (weights and masks are at most 1).
-        let pixel_area_mm2 = window.px_per_mm().powi(-2);
-        let bound: f64 = planned
-            .iter()
-            .map(|j| {
-                let rgb = j.rgb[0].max(j.rgb[1]).max(j.rgb[2]).max(0.0);
-                2.0 * (j.cells * j.cells) as f64 * j.triangle_flux / pixel_area_mm2 * rgb
-            })
-            .filter(|v| v.is_finite())
-            .sum();
-        let units = 4_503_599_627_370_496.0; // 2^52
-        let (fixed_per_unit, unit_per_fixed) = if bound > 0.0 && bound.is_finite() {
-            ((units / bound) as f32, (bound / units) as f32)
-        } else {
-            (0.0, 0.0)
-        };
-        let strip_rows = (self.box_strip_bytes.min(binding) / row_bytes).clamp(1, u64::from(window.height)) as u32;
-        let sums = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("raygrid sums"),
-            size: row_bytes * u64::from(strip_rows),
-            usage: wgpu::BufferUsages::STORAGE,
-            mapped_at_creation: false,
-        });
-        let open_radius2 = mask.open_radius().powi(2);
-        let support_radius2 = mask.support_radius().powi(2);
         // Jobs of one grid size together, in batches whose vertices fit one storage binding (at most 256 MB,
         // and at most 65535 jobs, the dispatch's y).
         let batches = batches_of(planned, &limits);
-        let strips: Vec<u32> = (0..window.height).step_by(strip_rows as usize).collect();
-        // One parameter block per (strip, batch) dispatch and one per strip's resolve, at 256-byte strides.
-        let blocks = strips.len() * (batches.len() + 1);
-        let mut uniforms = vec![0u8; BOX_STRIDE as usize * blocks];
-        let mut block = |k: usize, params: BoxParams| {
-            let at = k * BOX_STRIDE as usize;
-            uniforms[at..at + std::mem::size_of::<BoxParams>()].copy_from_slice(bytemuck::bytes_of(&params));
-        };
-        for (s, &first_row) in strips.iter().enumerate() {
-            let rows = strip_rows.min(window.height - first_row);
-            let groups = u64::from(self.resolve_groups(rows));
-            let groups_x = groups.min(max_groups).max(1) as u32;
-            let base = BoxParams {
-                width: window.width,
-                height: window.height,
-                first_row,
-                rows,
-                groups_x,
-                fixed_per_unit,
-                unit_per_fixed,
-                open_radius2,
-                support_radius2,
-                mask_size: mask.size as u32,
-                ..BoxParams::default()
-            };
-            for (b, batch) in batches.iter().enumerate() {
-                let jobs = batch.len() as u32;
-                block(s * (batches.len() + 1) + b, BoxParams { jobs, job_stride: spread_stride(jobs), ..base });
-            }
-            block(s * (batches.len() + 1) + batches.len(), base);
-        }
-        let uniform_buffer = storage(device, queue, "raygrid box", &uniforms, wgpu::BufferUsages::UNIFORM);
-        let params = |k: usize| {
-            wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                buffer: &uniform_buffer,
-                offset: k as u64 * BOX_STRIDE,
-                size: wgpu::BufferSize::new(std::mem::size_of::<BoxParams>() as u64),
-            })
-        };
+        let frame = self.box_frame(ctx, renderer, planned, &batches, window, &target);
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("raygrid") });
         let mut dispatched = 0;
-        for (s, &first_row) in strips.iter().enumerate() {
+        for (s, &first_row) in frame.strips.iter().enumerate() {
             for (b, batch) in batches.iter().enumerate() {
-                let cells = batch[0].cells;
-                let query = profiler.as_deref().map(|p| p.begin_pass_query("trace", &mut encoder));
-                let writes = query.as_ref().and_then(|q| q.compute_pass_timestamp_writes());
-                let traced = self.trace(device, queue, &mut encoder, renderer, batch, window, view.turn_deg, writes);
-                if let (Some(p), Some(q)) = (profiler.as_deref(), query) {
-                    p.end_query(&mut encoder, q);
-                }
+                let traced = {
+                    let query = profiler.as_deref().map(|p| p.begin_pass_query("trace", &mut encoder));
+                    let writes = query.as_ref().and_then(|q| q.compute_pass_timestamp_writes());
+                    let traced =
+                        self.trace(device, queue, &mut encoder, renderer, batch, window, view.turn_deg, writes);
+                    if let (Some(p), Some(q)) = (profiler.as_deref(), query) {
+                        p.end_query(&mut encoder, q);
+                    }
+                    traced
+                };
                 let grid = vertex_texels(device, &mut encoder, &traced.vertices, traced.vertex_count);
                 let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("raygrid box"),
@@ -679,40 +575,24 @@ impl GpuRayGrid {
                             binding: 1,
                             resource: wgpu::BindingResource::TextureView(&traced.job_texels),
                         },
-                        wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&mask_texels) },
-                        wgpu::BindGroupEntry { binding: 4, resource: sums.as_entire_binding() },
-                        wgpu::BindGroupEntry { binding: 3, resource: params(s * (batches.len() + 1) + b) },
+                        wgpu::BindGroupEntry {
+                            binding: 2,
+                            resource: wgpu::BindingResource::TextureView(&frame.mask_texels),
+                        },
+                        wgpu::BindGroupEntry { binding: 4, resource: frame.sums.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 3, resource: frame.params(s, b) },
                     ],
                 });
-                let query = profiler.as_deref().map(|p| p.begin_pass_query("splat", &mut encoder));
-                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("raygrid box"),
-                    timestamp_writes: query.as_ref().and_then(|q| q.compute_pass_timestamp_writes()),
-                });
-                pass.set_pipeline(&self.box_pipeline);
-                pass.set_bind_group(0, &group, &[]);
-                pass.dispatch_workgroups(
-                    batch.len() as u32,
-                    (2 * cells * cells * self.row_split as usize).div_ceil(WORKGROUP as usize) as u32,
-                    1,
-                );
-                drop(pass);
-                if let (Some(p), Some(q)) = (profiler.as_deref(), query) {
-                    p.end_query(&mut encoder, q);
-                }
+                let cells = batch[0].cells;
+                let groups_y = (2 * cells * cells * self.row_split as usize).div_ceil(WORKGROUP as usize) as u32;
+                let pass = ("splat", "raygrid box", &self.box_pipeline);
+                timed_dispatch(&mut encoder, profiler.as_deref(), pass, &group, (batch.len() as u32, groups_y));
                 dispatched += 1;
-                // Each batch's buffers are freed once it has run: submit as they are recorded.
-                queue.submit(Some(
-                    std::mem::replace(
-                        &mut encoder,
-                        device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("raygrid") }),
-                    )
-                    .finish(),
-                ));
+                submit_batch(device, queue, &mut encoder);
             }
-            let rows = strip_rows.min(window.height - first_row);
+            let rows = frame.strip_rows.min(window.height - first_row);
             let groups = self.resolve_groups(rows);
-            let groups_x = groups.min(max_groups as u32).max(1);
+            let groups_x = groups.min(limits.max_compute_workgroups_per_dimension).max(1);
             let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("raygrid resolve"),
                 layout: &self.resolve_pipeline.get_bind_group_layout(0),
@@ -720,38 +600,116 @@ impl GpuRayGrid {
                     // `resolve_box` reads the sums by atomics (binding 4), `resolve_box_scan` by plain loads.
                     wgpu::BindGroupEntry {
                         binding: if self.row_split > 1 { 6 } else { 4 },
-                        resource: sums.as_entire_binding(),
+                        resource: frame.sums.as_entire_binding(),
                     },
-                    wgpu::BindGroupEntry { binding: 3, resource: params(s * (batches.len() + 1) + batches.len()) },
-                    wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::TextureView(&target_view) },
+                    wgpu::BindGroupEntry { binding: 3, resource: frame.params(s, batches.len()) },
+                    wgpu::BindGroupEntry {
+                        binding: 5,
+                        resource: wgpu::BindingResource::TextureView(&frame.target_view),
+                    },
                 ],
             });
-            let query = profiler.as_deref().map(|p| p.begin_pass_query("resolve", &mut encoder));
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("raygrid resolve"),
-                timestamp_writes: query.as_ref().and_then(|q| q.compute_pass_timestamp_writes()),
-            });
-            pass.set_pipeline(&self.resolve_pipeline);
-            pass.set_bind_group(0, &group, &[]);
-            pass.dispatch_workgroups(groups_x, groups.div_ceil(groups_x), 1);
-            drop(pass);
+            let pass = ("resolve", "raygrid resolve", &self.resolve_pipeline);
+            timed_dispatch(&mut encoder, profiler.as_deref(), pass, &group, (groups_x, groups.div_ceil(groups_x)));
             if let Some(p) = profiler.as_deref_mut() {
-                if let Some(q) = query {
-                    p.end_query(&mut encoder, q);
-                }
                 p.resolve_queries(&mut encoder);
             }
         }
         queue.submit(Some(encoder.finish()));
-        if let Some(p) = profiler.as_deref_mut() {
-            let _ = p.end_frame();
+        let (hdr, gpu_times) = finish_frame(ctx, &target, wgpu::TextureFormat::Rgba32Float, profiler)?;
+        Ok(GpuRayGridImage { hdr, jobs: planned.len(), batches: dispatched, gpu_times })
+    }
+
+    /// Why the box filter cannot draw jobs of `cells` cells into `window` on an adapter of `limits`, if it
+    /// cannot.
+    fn box_refusal(&self, limits: &wgpu::Limits, cells: usize, window: Window) -> Option<GpuRayGridError> {
+        let binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        let max_groups = u64::from(limits.max_compute_workgroups_per_dimension);
+        let limit = |what, needed: u64, limit: u64, name| {
+            (needed > limit).then_some(GpuRayGridError::Limit { cells, what, needed, limit, name })
+        };
+        let row_bytes = u64::from(window.width) * BOX_BYTES_PER_PIXEL;
+        let side = u64::from(window.width.max(window.height));
+        shared_limits(limits, cells, side, "pixels across the frame")
+            .or_else(|| {
+                let groups = (2 * cells * cells) as u64 * u64::from(self.row_split) / u64::from(WORKGROUP);
+                limit("workgroups per dispatch", groups, max_groups, "max_compute_workgroups_per_dimension")
+            })
+            .or_else(|| limit("bytes of sums for one row", row_bytes, binding, "max_storage_buffer_binding_size"))
+            .or_else(|| {
+                let rows = vertex_bytes(cells).div_ceil(TEXEL_ROW_BYTES);
+                let max = u64::from(limits.max_texture_dimension_2d);
+                limit("texel rows of vertices for one ghost", rows, max, "max_texture_dimension_2d")
+            })
+    }
+
+    /// What every strip and batch of one box-filtered frame shares: the sums of one strip of rows, the mask,
+    /// the target and every dispatch's parameters.
+    fn box_frame(
+        &self,
+        ctx: &GpuContext,
+        renderer: &RayGridRenderer,
+        planned: &[&PlannedJob],
+        batches: &[Vec<&PlannedJob>],
+        window: Window,
+        target: &wgpu::Texture,
+    ) -> BoxFrame {
+        let (device, queue) = (&ctx.device, &ctx.queue);
+        let limits = device.limits();
+        let binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        let row_bytes = u64::from(window.width) * BOX_BYTES_PER_PIXEL;
+        let mask = renderer.mask();
+        // The mask's bilinear footprints, one word each, fetched as texels and filtered in the shader as
+        // `ApertureMask::sample` does (no sampler: a software rasteriser samples a texture several times slower).
+        let quads = mask.quad_words();
+        let mask_texels = word_texels(device, queue, "raygrid mask", bytemuck::cast_slice(&quads));
+        let (fixed_per_unit, unit_per_fixed) = box_scale(planned, window);
+        let strip_rows = (self.box_strip_bytes.min(binding) / row_bytes).clamp(1, u64::from(window.height)) as u32;
+        let sums = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("raygrid sums"),
+            size: row_bytes * u64::from(strip_rows),
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        });
+        let strips: Vec<u32> = (0..window.height).step_by(strip_rows as usize).collect();
+        // One parameter block per (strip, batch) dispatch and one per strip's resolve, at 256-byte strides.
+        let per_strip = batches.len() + 1;
+        let mut uniforms = vec![0u8; BOX_STRIDE as usize * strips.len() * per_strip];
+        let mut block = |k: usize, params: BoxParams| {
+            let at = k * BOX_STRIDE as usize;
+            uniforms[at..at + std::mem::size_of::<BoxParams>()].copy_from_slice(bytemuck::bytes_of(&params));
+        };
+        for (s, &first_row) in strips.iter().enumerate() {
+            let rows = strip_rows.min(window.height - first_row);
+            let groups_x = self.resolve_groups(rows).min(limits.max_compute_workgroups_per_dimension).max(1);
+            let base = BoxParams {
+                width: window.width,
+                height: window.height,
+                first_row,
+                rows,
+                groups_x,
+                fixed_per_unit,
+                unit_per_fixed,
+                open_radius2: mask.open_radius().powi(2),
+                support_radius2: mask.support_radius().powi(2),
+                mask_size: mask.size as u32,
+                ..BoxParams::default()
+            };
+            for (b, batch) in batches.iter().enumerate() {
+                let jobs = batch.len() as u32;
+                block(s * per_strip + b, BoxParams { jobs, job_stride: spread_stride(jobs), ..base });
+            }
+            block(s * per_strip + batches.len(), base);
         }
-        let hdr = read_hdr(ctx, &target, wgpu::TextureFormat::Rgba32Float);
-        if let Some(reason) = ctx.failure() {
-            return Err(GpuError::Lost(reason).into());
+        BoxFrame {
+            uniforms: storage(device, queue, "raygrid box", &uniforms, wgpu::BufferUsages::UNIFORM),
+            per_strip,
+            sums,
+            mask_texels,
+            target_view: target.create_view(&wgpu::TextureViewDescriptor::default()),
+            strips,
+            strip_rows,
         }
-        let gpu_times = profiler.and_then(|p| summed_times(device, queue, p));
-        Ok(GpuRayGridImage { hdr: hdr?, jobs: planned.len(), batches: dispatched, gpu_times })
     }
 
     /// The traced vertices of the first `jobs` planned jobs (for the landing comparison with the f64 tracer),
@@ -1152,6 +1110,99 @@ fn aperture_view(
         aperture.size(),
     );
     aperture.create_view(&wgpu::TextureViewDescriptor::default())
+}
+
+/// What every strip and batch of one box-filtered frame shares ([`GpuRayGrid::box_frame`]).
+struct BoxFrame {
+    /// Every dispatch's [`BoxParams`], one block per (strip, batch) and one per strip's resolve, at
+    /// [`BOX_STRIDE`] bytes.
+    uniforms: wgpu::Buffer,
+    /// Blocks per strip: the batches' and the resolve's.
+    per_strip: usize,
+    /// The 64-bit sums of one strip of rows.
+    sums: wgpu::Buffer,
+    mask_texels: wgpu::TextureView,
+    target_view: wgpu::TextureView,
+    /// Each strip's first row.
+    strips: Vec<u32>,
+    strip_rows: u32,
+}
+
+impl BoxFrame {
+    /// The parameters of strip `strip`'s dispatch `k`: a batch's splat, or the resolve at `k` = batches.
+    fn params(&self, strip: usize, k: usize) -> wgpu::BindingResource<'_> {
+        wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+            buffer: &self.uniforms,
+            offset: (strip * self.per_strip + k) as u64 * BOX_STRIDE,
+            size: wgpu::BufferSize::new(std::mem::size_of::<BoxParams>() as u64),
+        })
+    }
+}
+
+/// The box filter's fixed-point scale as (units per unit of radiance, radiance per unit): 2^52 units are the
+/// most any pixel can gather, every triangle's flux (weights and masks are at most 1); (0, 0) without light.
+fn box_scale(planned: &[&PlannedJob], window: Window) -> (f32, f32) {
+    let pixel_area_mm2 = window.px_per_mm().powi(-2);
+    let bound: f64 = planned
+        .iter()
+        .map(|j| {
+            let rgb = j.rgb[0].max(j.rgb[1]).max(j.rgb[2]).max(0.0);
+            2.0 * (j.cells * j.cells) as f64 * j.triangle_flux / pixel_area_mm2 * rgb
+        })
+        .filter(|v| v.is_finite())
+        .sum();
+    let units = 4_503_599_627_370_496.0; // 2^52
+    if bound > 0.0 && bound.is_finite() { ((units / bound) as f32, (bound / units) as f32) } else { (0.0, 0.0) }
+}
+
+/// Records one compute pass, `(scope, label, pipeline)`, with `group` over `groups` workgroups, timed as
+/// `scope` when `profiler` writes timestamps.
+fn timed_dispatch(
+    encoder: &mut wgpu::CommandEncoder,
+    profiler: Option<&GpuProfiler>,
+    (scope, label, pipeline): (&str, &str, &wgpu::ComputePipeline),
+    group: &wgpu::BindGroup,
+    groups: (u32, u32),
+) {
+    let query = profiler.map(|p| p.begin_pass_query(scope, encoder));
+    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+        label: Some(label),
+        timestamp_writes: query.as_ref().and_then(|q| q.compute_pass_timestamp_writes()),
+    });
+    pass.set_pipeline(pipeline);
+    pass.set_bind_group(0, group, &[]);
+    pass.dispatch_workgroups(groups.0, groups.1, 1);
+    drop(pass);
+    if let (Some(p), Some(q)) = (profiler, query) {
+        p.end_query(encoder, q);
+    }
+}
+
+/// Submits what `encoder` recorded and leaves a fresh encoder in its place: each batch's buffers are freed
+/// once it has run.
+fn submit_batch(device: &wgpu::Device, queue: &wgpu::Queue, encoder: &mut wgpu::CommandEncoder) {
+    let fresh = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("raygrid") });
+    queue.submit(Some(std::mem::replace(encoder, fresh).finish()));
+}
+
+/// Ends a render's profiler frame, reads `target` back and sums its passes' times. A device lost on the way
+/// (or an error it reported on its own) spoils the image, whatever came back.
+fn finish_frame(
+    ctx: &GpuContext,
+    target: &wgpu::Texture,
+    format: wgpu::TextureFormat,
+    mut profiler: Option<&mut GpuProfiler>,
+) -> Result<(HdrImage, Option<PassTimes>), GpuRayGridError> {
+    if let Some(p) = profiler.as_deref_mut() {
+        // An error here means a query was left open: a bug, but never worth an image.
+        let _ = p.end_frame();
+    }
+    let hdr = read_hdr(ctx, target, format);
+    if let Some(reason) = ctx.failure() {
+        return Err(GpuError::Lost(reason).into());
+    }
+    let gpu_times = profiler.and_then(|p| summed_times(&ctx.device, &ctx.queue, p));
+    Ok((hdr?, gpu_times))
 }
 
 /// Waits for the GPU and returns the time of each pass of a render's batches (one profiler frame a render;
