@@ -28,7 +28,9 @@
 
 struct TiledInstance {
     centre_axis_x: vec4<f32>, // quad centre (image pixels); pixels per unit q.x
-    axis_y_page: vec4<f32>,   // pixels per unit q.y; atlas page; unused
+    axis_y: vec2<f32>,        // pixels per unit q.y
+    page: u32,                // the atlas page that holds the entry
+    _pad0: u32,
     rect: vec4<f32>,          // the entry in its page: u0, v0, u1, v1
     colour: vec4<f32>,        // RGB gain, alpha gain
     level: u32,               // sampled every 2^level pixels (0: every pixel)
@@ -98,7 +100,7 @@ fn coarse_start(level: u32) -> u32 {
 fn sample_instance(inst: TiledInstance, p: vec2<f32>) -> vec4<f32> {
     let c = inst.centre_axis_x.xy;
     let ax = inst.centre_axis_x.zw;
-    let ay = inst.axis_y_page.xy;
+    let ay = inst.axis_y;
     let det = ax.x * ay.y - ay.x * ax.y;
     let d = p - c;
     let q = vec2<f32>(ay.y * d.x - ay.x * d.y, ax.x * d.y - ax.y * d.x) / det;
@@ -107,7 +109,7 @@ fn sample_instance(inst: TiledInstance, p: vec2<f32>) -> vec4<f32> {
     }
     let st = q * 0.5 + vec2<f32>(0.5);
     let uv = mix(inst.rect.xy, inst.rect.zw, st);
-    return textureSampleLevel(atlas, atlas_sampler, uv, i32(inst.axis_y_page.z), 0.0);
+    return textureSampleLevel(atlas, atlas_sampler, uv, i32(inst.page), 0.0);
 }
 
 // The two clamped coarse indices around accumulation pixel `x` at `k` pixels a sample, and the fraction.

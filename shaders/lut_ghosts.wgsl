@@ -7,7 +7,8 @@
 
 struct LutInstance {
     @location(0) centre_axis_x: vec4<f32>, // quad centre (pixels); pixels per unit q.x
-    @location(1) axis_y_page: vec4<f32>,   // pixels per unit q.y; atlas page; unused
+    @location(1) axis_y: vec2<f32>,        // pixels per unit q.y
+    @location(4) page: u32,                // the atlas page that holds the entry
     @location(2) rect: vec4<f32>,          // the entry in its page: u0, v0, u1, v1
     @location(3) colour: vec4<f32>,        // RGB gain, alpha gain
 };
@@ -31,12 +32,12 @@ fn vs_main(@builtin(vertex_index) vertex: u32, instance: LutInstance) -> VertexO
         vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
     );
     let q = corners[vertex];
-    let pixel = instance.centre_axis_x.xy + instance.centre_axis_x.zw * q.x + instance.axis_y_page.xy * q.y;
+    let pixel = instance.centre_axis_x.xy + instance.centre_axis_x.zw * q.x + instance.axis_y * q.y;
     let ndc = vec2<f32>(pixel.x * globals.inv_viewport_px.x * 2.0 - 1.0, 1.0 - pixel.y * globals.inv_viewport_px.y * 2.0);
     var out: VertexOut;
     out.position = vec4<f32>(ndc, 0.0, 1.0);
     out.q = q;
-    out.page = i32(instance.axis_y_page.z);
+    out.page = i32(instance.page);
     out.rect = instance.rect;
     out.colour = instance.colour;
     return out;

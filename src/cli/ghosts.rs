@@ -125,7 +125,12 @@ pub fn run(args: &GhostsArgs) -> Result<()> {
         st.off_sensor,
         st.empty_entrance_region
     );
-    let anamorphic = system.is_anamorphic();
+    print_rows(&rows, system.is_anamorphic());
+    Ok(())
+}
+
+/// The ghosts' rows as a table, brightest first; an anamorphic lens's with both semi-axes.
+fn print_rows(rows: &[serde_json::Value], anamorphic: bool) {
     if anamorphic {
         println!("  anamorphic: each ghost is an ellipse, its semi-axes along x and y (radius x, radius y)");
         println!(
@@ -164,7 +169,6 @@ pub fn run(args: &GhostsArgs) -> Result<()> {
             r["culled"].as_str().unwrap_or("")
         );
     }
-    Ok(())
 }
 
 /// `flarelab ghosts --report`: [`flare_core::report::ghost_report`] as text, JSON or CSV.

@@ -203,32 +203,15 @@ pub fn ray_diagram_ui(
     diagram.update(flare, field_deg, ghost, section);
     let cutting = ghost.map(|g| diagram.cutting_surfaces(flare, light_deg, g).to_vec()).unwrap_or_default();
     let Some(lens) = diagram.lens.as_ref() else { return };
-    let z = lens.vertex_z_mm();
     let h_max = flare.system.lens.surfaces.iter().map(|s| s.semi_aperture_mm).fold(1.0, f64::max);
     let f_number = fo.f_number / stop_scale;
-    let cut_words = match cutting.as_slice() {
-        [] => "no clear aperture cuts it here".to_string(),
-        [k] => format!("the clear aperture of surface {k} cuts it here (marked red)"),
-        many => format!(
-            "the clear apertures of surfaces {} cut it here (marked red)",
-            many.iter().map(|k| k.to_string()).collect::<Vec<_>>().join(", ")
-        ),
-    };
-    let title = match ghost {
-        Some((i, j)) => format!(
-            "ghost {i}-{j} at f/{f_number:.1}: exact rays at {field_deg:.1} deg, towards the sensor orange, back \
-             towards the front blue, reflections marked; {cut_words}"
-        ),
-        None => format!("image path at f/{f_number:.1}: exact rays at {field_deg:.1} deg (select a ghost to trace it)"),
-    };
+    let title = diagram_title(ghost, f_number, field_deg, &cutting);
     // Wrapped: a long title must not widen the central panel under the side panel.
     ui.add(egui::Label::new(title).wrap());
     if let Some(problem) = problem {
         let text = format!("showing the last valid lens: the edited one is refused ({})", problem.reason);
         ui.add(egui::Label::new(egui::RichText::new(text).color(egui::Color32::from_rgb(255, 170, 90))).wrap());
     }
-    let forward = egui::Color32::from_rgb(255, 140, 60);
-    let backward = egui::Color32::from_rgb(90, 170, 255);
     // A fixed height: the viewport above takes what the rows under it leave, so a diagram that filled the
     // leftover height would shrink to a sliver.
     Plot::new("ray_diagram")
@@ -238,95 +221,14 @@ pub fn ray_diagram_ui(
         .x_axis_label("z (mm)")
         .y_axis_label(if section == Section::X { "x (mm)" } else { "y (mm)" })
         .show(ui, |plot| {
-            let glass = egui::Color32::from_rgb(150, 200, 255);
-            for (k, s) in lens.surfaces.iter().enumerate() {
-                if s.stop {
-                    for sign in [-1.0, 1.0] {
-                        let pts = vec![[z[k], sign * s.semi_aperture_mm], [z[k], sign * h_max * 1.1]];
-                        plot.line(
-                            Line::new("stop", PlotPoints::from(pts))
-                                .color(egui::Color32::from_rgb(240, 200, 80))
-                                .width(3.0),
-                        );
-                    }
-                    if !lens.stop_on_lens_surface() {
-                        continue;
-                    }
-                }
-                let pts: Vec<[f64; 2]> = (0..=40)
-                    .map(|n| {
-                        let h = s.semi_aperture_mm * (n as f64 / 20.0 - 1.0);
-                        let sag = if section == Section::X { s.sag_xy_mm(h, 0.0) } else { s.sag_mm(h) };
-                        [z[k] + sag.unwrap_or(0.0), h]
-                    })
-                    .collect();
-                plot.line(Line::new("surfaces", PlotPoints::from(pts)).color(glass).width(1.5));
-                if cutting.contains(&k) {
-                    // The rim that cuts the selected ghost: a thick red tick outwards from each edge.
-                    let a = s.semi_aperture_mm;
-                    for sign in [-1.0, 1.0] {
-                        let h = sign * a;
-                        let sag = if section == Section::X { s.sag_xy_mm(h, 0.0) } else { s.sag_mm(h) };
-                        let zk = z[k] + sag.unwrap_or(0.0);
-                        let tick = vec![[zk, h], [zk, h + sign * 0.08 * h_max]];
-                        plot.line(
-                            Line::new("cuts the ghost", PlotPoints::from(tick))
-                                .color(egui::Color32::from_rgb(255, 70, 70))
-                                .width(4.0),
-                        );
-                    }
-                }
-            }
+            plot_lens(plot, lens, section, h_max, &cutting);
             let sensor = fo.sensor_z_mm();
             plot.line(
                 Line::new("sensor", PlotPoints::from(vec![[sensor, -h_max], [sensor, h_max]]))
                     .color(egui::Color32::from_gray(200))
                     .width(2.0),
             );
-            let arrow = 0.04 * fo.total_track_mm.abs().max(1.0);
-            let (mut origins, mut tips) = (Vec::new(), Vec::new());
-            for (n, (points, status, legs)) in diagram.rays.iter().enumerate() {
-                match (status, legs) {
-                    (TraceStatus::Landed, Some((first, second))) => {
-                        // In, back between the reflections, out: two colours, one arrow per leg on the middle ray.
-                        let parts =
-                            [(0, *first, forward), (*first, *second, backward), (*second, points.len() - 1, forward)];
-                        for (a, b, color) in parts {
-                            let name = if color == forward { "to the sensor" } else { "backwards" };
-                            plot.line(
-                                Line::new(name, PlotPoints::from(points[a..=b].to_vec())).color(color).width(1.0),
-                            );
-                            if n == diagram.rays.len() / 2
-                                && let Some((o, t)) = arrow_on(points, a, b, arrow)
-                            {
-                                origins.push(o);
-                                tips.push(t);
-                            }
-                        }
-                    }
-                    (TraceStatus::Landed, None) => {
-                        plot.line(Line::new("rays", PlotPoints::from(points.clone())).color(forward).width(1.0));
-                        if n == diagram.rays.len() / 2
-                            && let Some((o, t)) = arrow_on(points, 0, points.len() - 1, arrow)
-                        {
-                            origins.push(o);
-                            tips.push(t);
-                        }
-                    }
-                    _ => plot.line(
-                        Line::new("stopped rays", PlotPoints::from(points.clone()))
-                            .color(egui::Color32::from_gray(130))
-                            .width(1.0),
-                    ),
-                }
-            }
-            if !origins.is_empty() {
-                plot.arrows(
-                    Arrows::new("direction", PlotPoints::from(origins), PlotPoints::from(tips))
-                        .color(egui::Color32::WHITE)
-                        .tip_length(10.0),
-                );
-            }
+            plot_rays(plot, diagram, 0.04 * fo.total_track_mm.abs().max(1.0));
             if !diagram.reflections.is_empty() {
                 plot.points(
                     Points::new("reflections", PlotPoints::from(diagram.reflections.clone()))
@@ -335,4 +237,116 @@ pub fn ray_diagram_ui(
                 );
             }
         });
+}
+
+/// The diagram's title: the ghost traced (or the image path), its f-number, the light's angle and what cuts it.
+fn diagram_title(ghost: Option<(usize, usize)>, f_number: f64, field_deg: f64, cutting: &[usize]) -> String {
+    let cut_words = match cutting {
+        [] => "no clear aperture cuts it here".to_string(),
+        [k] => format!("the clear aperture of surface {k} cuts it here (marked red)"),
+        many => format!(
+            "the clear apertures of surfaces {} cut it here (marked red)",
+            many.iter().map(|k| k.to_string()).collect::<Vec<_>>().join(", ")
+        ),
+    };
+    match ghost {
+        Some((i, j)) => format!(
+            "ghost {i}-{j} at f/{f_number:.1}: exact rays at {field_deg:.1} deg, towards the sensor orange, back \
+             towards the front blue, reflections marked; {cut_words}"
+        ),
+        None => format!("image path at f/{f_number:.1}: exact rays at {field_deg:.1} deg (select a ghost to trace it)"),
+    }
+}
+
+/// The lens in `section`: each surface's arc up to its semi-aperture, the stop open from its rim to past the
+/// tallest surface (`h_max`), and a red tick on each rim in `cutting`.
+fn plot_lens(plot: &mut egui_plot::PlotUi<'_>, lens: &Lens, section: Section, h_max: f64, cutting: &[usize]) {
+    let z = lens.vertex_z_mm();
+    let glass = egui::Color32::from_rgb(150, 200, 255);
+    for (k, s) in lens.surfaces.iter().enumerate() {
+        if s.stop {
+            for sign in [-1.0, 1.0] {
+                let pts = vec![[z[k], sign * s.semi_aperture_mm], [z[k], sign * h_max * 1.1]];
+                plot.line(
+                    Line::new("stop", PlotPoints::from(pts)).color(egui::Color32::from_rgb(240, 200, 80)).width(3.0),
+                );
+            }
+            if !lens.stop_on_lens_surface() {
+                continue;
+            }
+        }
+        let pts: Vec<[f64; 2]> = (0..=40)
+            .map(|n| {
+                let h = s.semi_aperture_mm * (n as f64 / 20.0 - 1.0);
+                let sag = if section == Section::X { s.sag_xy_mm(h, 0.0) } else { s.sag_mm(h) };
+                [z[k] + sag.unwrap_or(0.0), h]
+            })
+            .collect();
+        plot.line(Line::new("surfaces", PlotPoints::from(pts)).color(glass).width(1.5));
+        if cutting.contains(&k) {
+            // The rim that cuts the selected ghost: a thick red tick outwards from each edge.
+            let a = s.semi_aperture_mm;
+            for sign in [-1.0, 1.0] {
+                let h = sign * a;
+                let sag = if section == Section::X { s.sag_xy_mm(h, 0.0) } else { s.sag_mm(h) };
+                let zk = z[k] + sag.unwrap_or(0.0);
+                let tick = vec![[zk, h], [zk, h + sign * 0.08 * h_max]];
+                plot.line(
+                    Line::new("cuts the ghost", PlotPoints::from(tick))
+                        .color(egui::Color32::from_rgb(255, 70, 70))
+                        .width(4.0),
+                );
+            }
+        }
+    }
+}
+
+/// The colour of rays travelling towards the sensor.
+const FORWARD: egui::Color32 = egui::Color32::from_rgb(255, 140, 60);
+/// The colour of rays travelling back towards the front.
+const BACKWARD: egui::Color32 = egui::Color32::from_rgb(90, 170, 255);
+
+/// The traced rays: a ghost's legs in two colours with an arrow each on the middle ray, an image ray in one,
+/// rays the lens stops in grey; arrows `arrow` mm long.
+fn plot_rays(plot: &mut egui_plot::PlotUi<'_>, diagram: &RayDiagram, arrow: f64) {
+    let (mut origins, mut tips) = (Vec::new(), Vec::new());
+    for (n, (points, status, legs)) in diagram.rays.iter().enumerate() {
+        match (status, legs) {
+            (TraceStatus::Landed, Some((first, second))) => {
+                // In, back between the reflections, out: two colours, one arrow per leg on the middle ray.
+                let parts = [(0, *first, FORWARD), (*first, *second, BACKWARD), (*second, points.len() - 1, FORWARD)];
+                for (a, b, color) in parts {
+                    let name = if color == FORWARD { "to the sensor" } else { "backwards" };
+                    plot.line(Line::new(name, PlotPoints::from(points[a..=b].to_vec())).color(color).width(1.0));
+                    if n == diagram.rays.len() / 2
+                        && let Some((o, t)) = arrow_on(points, a, b, arrow)
+                    {
+                        origins.push(o);
+                        tips.push(t);
+                    }
+                }
+            }
+            (TraceStatus::Landed, None) => {
+                plot.line(Line::new("rays", PlotPoints::from(points.clone())).color(FORWARD).width(1.0));
+                if n == diagram.rays.len() / 2
+                    && let Some((o, t)) = arrow_on(points, 0, points.len() - 1, arrow)
+                {
+                    origins.push(o);
+                    tips.push(t);
+                }
+            }
+            _ => plot.line(
+                Line::new("stopped rays", PlotPoints::from(points.clone()))
+                    .color(egui::Color32::from_gray(130))
+                    .width(1.0),
+            ),
+        }
+    }
+    if !origins.is_empty() {
+        plot.arrows(
+            Arrows::new("direction", PlotPoints::from(origins), PlotPoints::from(tips))
+                .color(egui::Color32::WHITE)
+                .tip_length(10.0),
+        );
+    }
 }

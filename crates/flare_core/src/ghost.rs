@@ -553,7 +553,6 @@ impl GhostSystem {
         let n_w = spectrum.len();
         let pairs = lens.ghost_pairs();
         let curvature: Vec<f64> = lens.surfaces.iter().map(|s| s.vertex_curvature_per_mm()).collect();
-
         let tables = InterfaceTables::new(
             lens,
             settings.coating_override.as_ref(),
@@ -561,11 +560,8 @@ impl GhostSystem {
             REFLECTANCE_SAMPLES,
         );
         let indices: Vec<Vec<f64>> = spectrum.wavelengths_nm.iter().map(|&w| lens.media_indices_at(w)).collect();
-        let reflecting: Vec<bool> = {
-            let r = lens.reflecting_surfaces();
-            (0..n_surfaces).map(|k| r.contains(&k)).collect()
-        };
-
+        let reflecting_surfaces = lens.reflecting_surfaces();
+        let reflecting: Vec<bool> = (0..n_surfaces).map(|k| reflecting_surfaces.contains(&k)).collect();
         let mut ghosts: Vec<GhostModel> = pairs
             .iter()
             .map(|&(i, j)| GhostModel {
@@ -584,7 +580,8 @@ impl GhostSystem {
             let system = Paraxial { z: &z, curvature: &curvature, n: &indices[w] };
             let (gap, forward_refraction) = (|a, b| system.gap(a, b), |k| system.forward(k));
             let backward_refraction = |k| system.backward(k);
-            let Sweeps { arrive, to_sensor, to_stop } = system.sweeps(stop, sensor_z);
+            let sweeps = system.sweeps(stop, sensor_z);
+            let Sweeps { arrive, to_sensor, .. } = &sweeps;
             let last = n_surfaces - 1;
             let image_f = to_sensor[last].mul(&forward_refraction(last)).mul(&arrive[last]);
             let image_a = arrive[stop];
@@ -612,21 +609,8 @@ impl GhostSystem {
                     {
                         let after_i = Mat2::reflection(curvature[k], -1.0).mul(&at_k);
                         let sensor_from_entrance = to_sensor[k].mul(&after_i);
-                        let mut stop_from_entrance = Vec::with_capacity(3);
-                        // The stop's crossings in path order, each just after its interaction there: going
-                        // forward to j (a reflection when the stop is surface j itself), coming back (a
-                        // reflection when it is surface i), and going forward again after i.
-                        if stop < j {
-                            stop_from_entrance.push(forward_refraction(stop).mul(&arrive[stop]));
-                        } else if stop == j {
-                            stop_from_entrance.push(Mat2::reflection(curvature[j], 1.0).mul(&arrive[stop]));
-                        }
-                        if let Some(crossing) = backward_stop_crossing {
-                            stop_from_entrance.push(if k == stop { after_i } else { crossing });
-                        }
-                        if k < stop {
-                            stop_from_entrance.push(forward_refraction(stop).mul(&to_stop[k].mul(&after_i)));
-                        }
+                        let stop_from_entrance =
+                            system.stop_crossings(&sweeps, stop, (k, j), after_i, backward_stop_crossing);
                         let last_crossing = *stop_from_entrance.last().expect("every path crosses the stop");
                         let sensor_from_stop = sensor_from_entrance.mul(&last_crossing.inverse());
                         // Refractions: forward 0..j, back j-1..=i+1, forward i+1..N.
@@ -1176,6 +1160,32 @@ impl Paraxial<'_> {
             };
         }
         Sweeps { arrive, to_sensor, to_stop }
+    }
+
+    /// The stop's crossings along ghost `(i, j)` in path order, each just after its interaction there: going
+    /// forward to j (a reflection when the stop is surface j itself), coming back (`back_crossing`, or
+    /// `after_i`, the reflection, when the stop is surface i), and going forward again after i.
+    fn stop_crossings(
+        &self,
+        sweeps: &Sweeps,
+        stop: usize,
+        (i, j): (usize, usize),
+        after_i: Mat2,
+        back_crossing: Option<Mat2>,
+    ) -> Vec<Mat2> {
+        let mut crossings = Vec::with_capacity(3);
+        if stop < j {
+            crossings.push(self.forward(stop).mul(&sweeps.arrive[stop]));
+        } else if stop == j {
+            crossings.push(Mat2::reflection(self.curvature[j], 1.0).mul(&sweeps.arrive[stop]));
+        }
+        if let Some(crossing) = back_crossing {
+            crossings.push(if i == stop { after_i } else { crossing });
+        }
+        if i < stop {
+            crossings.push(self.forward(stop).mul(&sweeps.to_stop[i].mul(&after_i)));
+        }
+        crossings
     }
 }
 

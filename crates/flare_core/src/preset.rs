@@ -604,45 +604,7 @@ impl Document {
         if !(self.blend.gain.is_finite() && (0.0..=MAX_GHOST_GAIN).contains(&self.blend.gain)) {
             return bad("blend.gain", format!("{} must be from 0 to {MAX_GHOST_GAIN}", self.blend.gain));
         }
-        for (k, surface) in self.lens.surfaces.iter().enumerate() {
-            if let Some(key) = surface.extra.keys().next() {
-                let surface_keys = crate::optics::formats::json::SURFACE_KEYS;
-                let hint = crate::optics::formats::json::near_miss(key, surface_keys)
-                    .map_or(String::new(), |m| format!(" (did you mean `{m}`?)"));
-                return bad(
-                    &format!("lens.surfaces[{k}]"),
-                    format!("unknown surface key `{}`{hint}", crate::files::shorten(key)),
-                );
-            }
-        }
-        for (key, g) in &self.ghosts {
-            if !(g.gain.is_finite() && (0.0..=MAX_GHOST_GAIN).contains(&g.gain)) {
-                return bad(&format!("ghosts.{key}.gain"), format!("{} must be from 0 to {MAX_GHOST_GAIN}", g.gain));
-            }
-        }
-        // Every ghost a key names must be one of the lens's (a gain or a solo for a ghost it lacks did nothing).
-        let pairs = self.lens.ghost_pairs();
-        let has = |key: &str| pairs.iter().any(|&(i, j)| ghost_key(i, j) == key);
-        let lacks = |key: &str| {
-            format!(
-                "the lens `{}` has no ghost `{}` (ghosts are named I-J by their two reflecting surfaces, from {} to {})",
-                self.lens.id,
-                crate::files::shorten(key),
-                pairs.first().map_or("-".into(), |&(i, j)| ghost_key(i, j)),
-                pairs.last().map_or("-".into(), |&(i, j)| ghost_key(i, j)),
-            )
-        };
-        if let Some(key) = self.ghosts.keys().find(|k| !has(k)) {
-            return bad(&format!("ghosts.{}", crate::files::shorten(key)), lacks(key));
-        }
-        if let Some(solo) = &self.solo
-            && !has(solo)
-        {
-            return bad("solo", lacks(solo));
-        }
-        if let Some(key) = self.timeline.ghost_gain.keys().find(|k| !has(k)) {
-            return bad(&format!("timeline.ghost_gain.{}", crate::files::shorten(key)), lacks(key));
-        }
+        self.check_keys()?;
         if !(self.sensor_width_mm.is_finite() && (1.0..=200.0).contains(&self.sensor_width_mm)) {
             return bad("sensor_width_mm", format!("{} mm: a sensor from 1 to 200 mm wide", self.sensor_width_mm));
         }
@@ -669,6 +631,51 @@ impl Document {
             && let Err(reason) = FramePattern::parse(depth)
         {
             return bad("dof.depth", reason);
+        }
+        Ok(())
+    }
+
+    /// The keys [`Self::check`] cannot leave to serde: a lens surface's unknown key, and every ghost a gain,
+    /// the solo or the timeline names, which must be one of the lens's (one it lacks did nothing).
+    fn check_keys(&self) -> Result<(), PresetError> {
+        let bad = |field: &str, reason: String| Err(PresetError::Value { field: field.into(), reason });
+        for (k, surface) in self.lens.surfaces.iter().enumerate() {
+            if let Some(key) = surface.extra.keys().next() {
+                let surface_keys = crate::optics::formats::json::SURFACE_KEYS;
+                let hint = crate::optics::formats::json::near_miss(key, surface_keys)
+                    .map_or(String::new(), |m| format!(" (did you mean `{m}`?)"));
+                return bad(
+                    &format!("lens.surfaces[{k}]"),
+                    format!("unknown surface key `{}`{hint}", crate::files::shorten(key)),
+                );
+            }
+        }
+        for (key, g) in &self.ghosts {
+            if !(g.gain.is_finite() && (0.0..=MAX_GHOST_GAIN).contains(&g.gain)) {
+                return bad(&format!("ghosts.{key}.gain"), format!("{} must be from 0 to {MAX_GHOST_GAIN}", g.gain));
+            }
+        }
+        let pairs = self.lens.ghost_pairs();
+        let has = |key: &str| pairs.iter().any(|&(i, j)| ghost_key(i, j) == key);
+        let lacks = |key: &str| {
+            format!(
+                "the lens `{}` has no ghost `{}` (ghosts are named I-J by their two reflecting surfaces, from {} to {})",
+                self.lens.id,
+                crate::files::shorten(key),
+                pairs.first().map_or("-".into(), |&(i, j)| ghost_key(i, j)),
+                pairs.last().map_or("-".into(), |&(i, j)| ghost_key(i, j)),
+            )
+        };
+        if let Some(key) = self.ghosts.keys().find(|k| !has(k)) {
+            return bad(&format!("ghosts.{}", crate::files::shorten(key)), lacks(key));
+        }
+        if let Some(solo) = &self.solo
+            && !has(solo)
+        {
+            return bad("solo", lacks(solo));
+        }
+        if let Some(key) = self.timeline.ghost_gain.keys().find(|k| !has(k)) {
+            return bad(&format!("timeline.ghost_gain.{}", crate::files::shorten(key)), lacks(key));
         }
         Ok(())
     }

@@ -203,7 +203,7 @@ fn fine_entries_are_drawn_from_the_mip_level_the_frame_needs() {
         let e = &live.lut.ghosts[g].entries[k];
         let side = flare_core::lut::blend::ATLAS_PAGE as f32;
         inst.rect = [x0 as f32 / side, y0 as f32 / side, (x0 + e.width) as f32 / side, (y0 + e.height) as f32 / side];
-        inst.axis_y_page[2] = page as f32;
+        inst.page = page;
         source.2 = 0;
     }
     let acc = (frame.scene.hdr_width, frame.scene.hdr_height);

@@ -92,16 +92,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         rows.push(row(format!("reference-{layer_px}px"), ms, runs, judge.compare(&image, &[]), None));
         eprintln!("reference ({layer_px} px layers): {ms:.0} ms, {:.1} dB", rows.last().unwrap().errors.psnr_db);
     }
-    let mut gpu = match GpuContext::headless(false) {
-        Ok(ctx) => {
-            let dof = GpuDof::new(&ctx.device);
-            Some((ctx, dof))
-        }
-        Err(e) => {
-            eprintln!("no dof-live-gpu rows: {e}");
-            None
-        }
-    };
+    let mut gpu = live_gpu();
     let adapter = gpu.as_ref().map(|(ctx, _)| ctx.adapter.name.clone());
     for (taps, layers) in LIVE {
         let settings = LiveSettings { taps_across: taps, max_layers: layers };
@@ -131,26 +122,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             rows.iter().rev().take(1 + usize::from(gpu.is_some())).map(summary).collect::<Vec<_>>().join("; ")
         );
     }
-    // The live method's frame time at 1920x1080 (default settings).
-    let full = scene(&flare, 1920, 1080)?;
-    let (cpu_ms, cpu_runs, _) =
-        timed(repeats, || Ok(LivePlan::new(&full.depth_mm, &full.model, mask)?.render_cpu(&full.plate)))?;
-    let mut hd = vec![("CPU twin".to_owned(), cpu_ms, cpu_runs, None)];
-    if let Some((ctx, dof)) = gpu.as_mut() {
-        let mut gpu_ms = Vec::new();
-        let (ms, runs, _) = timed(repeats, || {
-            let plan = LivePlan::new(&full.depth_mm, &full.model, mask)?;
-            let out = dof.render(ctx, &plan, &full.plate)?;
-            gpu_ms.extend(out.gpu_ms);
-            Ok(())
-        })?;
-        hd.push((
-            format!("GPU: {}", ctx.adapter.name),
-            ms,
-            runs,
-            (!gpu_ms.is_empty()).then(|| metrics::median(&gpu_ms)),
-        ));
-    }
+    let hd = full_hd_times(&flare, repeats, gpu.as_mut())?;
     let threads = rayon::current_num_threads();
     let md = markdown(&rows, &hd, &lens.id, width, height, s.model.far_defocus_px(), threads, adapter.as_deref());
     flare_core::files::write_atomic(&args.out.join("dof_bench.md"), md.as_bytes())?;
@@ -165,6 +137,50 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         super::update_readme(readme, (README_START, README_END), &md)?;
     }
     Ok(())
+}
+
+/// The headless GPU and its depth-of-field pass, or `None` (said once) where there is none.
+fn live_gpu() -> Option<(GpuContext, GpuDof)> {
+    match GpuContext::headless(false) {
+        Ok(ctx) => {
+            let dof = GpuDof::new(&ctx.device);
+            Some((ctx, dof))
+        }
+        Err(e) => {
+            eprintln!("no dof-live-gpu rows: {e}");
+            None
+        }
+    }
+}
+
+/// The live method's frame time at 1920x1080 (default settings): the CPU twin's, and the GPU's where there
+/// is one, as (device, median ms, runs, median GPU ms).
+fn full_hd_times(
+    flare: &PreparedFlare,
+    repeats: usize,
+    gpu: Option<&mut (GpuContext, GpuDof)>,
+) -> Result<Vec<(String, f64, usize, Option<f64>)>> {
+    let mask = flare.mask();
+    let full = scene(&flare, 1920, 1080)?;
+    let (cpu_ms, cpu_runs, _) =
+        timed(repeats, || Ok(LivePlan::new(&full.depth_mm, &full.model, mask)?.render_cpu(&full.plate)))?;
+    let mut hd = vec![("CPU twin".to_owned(), cpu_ms, cpu_runs, None)];
+    if let Some((ctx, dof)) = gpu {
+        let mut gpu_ms = Vec::new();
+        let (ms, runs, _) = timed(repeats, || {
+            let plan = LivePlan::new(&full.depth_mm, &full.model, mask)?;
+            let out = dof.render(ctx, &plan, &full.plate)?;
+            gpu_ms.extend(out.gpu_ms);
+            Ok(())
+        })?;
+        hd.push((
+            format!("GPU: {}", ctx.adapter.name),
+            ms,
+            runs,
+            (!gpu_ms.is_empty()).then(|| metrics::median(&gpu_ms)),
+        ));
+    }
+    Ok(hd)
 }
 
 fn summary(r: &Row) -> String {

@@ -561,6 +561,62 @@ pub fn bake_with(
     bake_within(flare, renderer, tracing, ghosts, settings, previous, (progress, cancel), memory)
 }
 
+/// One column of a ghost's bake: its theta, its entries (one per phi), and whether the interval from it to
+/// the next is fitted.
+type Column = (f64, Vec<LutEntry>, bool);
+
+/// A ghost's columns from 0 to `theta_max` degrees: `settings.initial_steps` intervals, each then refined
+/// ([`refinement_done`]), every column drawn by `render`.
+fn refined_columns(
+    theta_max: f64,
+    settings: &BakeSettings,
+    render: impl Fn(f64) -> Result<Vec<LutEntry>, BakeError>,
+) -> Result<Vec<Column>, BakeError> {
+    let steps = settings.initial_steps;
+    let mut columns: Vec<Column> = (0..=steps)
+        .map(|k| {
+            let theta = theta_max * f64::from(k) / f64::from(steps);
+            render(theta).map(|e| (theta, e, false))
+        })
+        .collect::<Result<_, _>>()?;
+    // Refine: split each interval while its middle is mispredicted both plainly and fitted
+    // (depth-first, left to right); a kept interval is fitted when that predicted its middle better.
+    // `errors[k]` is the error of the interval that interval k was split from (infinite for the
+    // initial ones).
+    let mut errors = vec![f64::INFINITY; columns.len()];
+    let mut k = 0;
+    while k + 1 < columns.len() {
+        let (a, b) = (columns[k].0, columns[k + 1].0);
+        if b - a < 2.0 * settings.min_step_deg {
+            k += 1;
+            continue;
+        }
+        let middle = 0.5 * (a + b);
+        let entries = render(middle)?;
+        let worst = |fitted: bool| {
+            entries
+                .iter()
+                .enumerate()
+                .map(|(p, e)| interpolation_error(&columns[k].1[p], &columns[k + 1].1[p], 0.5, e, fitted))
+                .fold(0.0, f64::max)
+        };
+        let (plain, fitted) = (worst(false), worst(true));
+        let error = plain.min(fitted);
+        let done = refinement_done(error, errors[k], settings.tolerance);
+        // The middle is kept either way (it cost a render). Both halves are fitted or not as the
+        // better prediction of the middle says; a half that is split again gets its own say, and one
+        // too narrow to split (under twice the finest step) keeps this one.
+        columns[k].2 = fitted < plain;
+        columns.insert(k + 1, (middle, entries, fitted < plain));
+        errors[k] = error;
+        errors.insert(k + 1, error);
+        if done {
+            k += 2;
+        }
+    }
+    Ok(columns)
+}
+
 /// [`bake_with`] keeping at most `memory.texels` texels.
 #[allow(clippy::too_many_arguments)]
 fn bake_within(
@@ -635,49 +691,7 @@ fn bake_within(
                 report();
                 Ok(column)
             };
-            let steps = settings.initial_steps;
-            // (theta, its entries, whether the interval from it to the next is fitted).
-            let mut columns: Vec<(f64, Vec<LutEntry>, bool)> = (0..=steps)
-                .map(|k| {
-                    let theta = theta_max * f64::from(k) / f64::from(steps);
-                    render(theta).map(|e| (theta, e, false))
-                })
-                .collect::<Result<_, _>>()?;
-            // Refine: split each interval while its middle is mispredicted both plainly and fitted
-            // (depth-first, left to right); a kept interval is fitted when that predicted its middle better.
-            // `errors[k]` is the error of the interval that interval k was split from (infinite for the
-            // initial ones).
-            let mut errors = vec![f64::INFINITY; columns.len()];
-            let mut k = 0;
-            while k + 1 < columns.len() {
-                let (a, b) = (columns[k].0, columns[k + 1].0);
-                if b - a < 2.0 * settings.min_step_deg {
-                    k += 1;
-                    continue;
-                }
-                let middle = 0.5 * (a + b);
-                let entries = render(middle)?;
-                let worst = |fitted: bool| {
-                    entries
-                        .iter()
-                        .enumerate()
-                        .map(|(p, e)| interpolation_error(&columns[k].1[p], &columns[k + 1].1[p], 0.5, e, fitted))
-                        .fold(0.0, f64::max)
-                };
-                let (plain, fitted) = (worst(false), worst(true));
-                let error = plain.min(fitted);
-                let done = refinement_done(error, errors[k], settings.tolerance);
-                // The middle is kept either way (it cost a render). Both halves are fitted or not as the
-                // better prediction of the middle says; a half that is split again gets its own say, and one
-                // too narrow to split (under twice the finest step) keeps this one.
-                columns[k].2 = fitted < plain;
-                columns.insert(k + 1, (middle, entries, fitted < plain));
-                errors[k] = error;
-                errors.insert(k + 1, error);
-                if done {
-                    k += 2;
-                }
-            }
+            let columns = refined_columns(theta_max, settings, render)?;
             ghosts_done.fetch_add(1, Ordering::Relaxed);
             report();
             Ok(LutGhost {

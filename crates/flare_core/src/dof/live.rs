@@ -249,37 +249,7 @@ impl LivePlan {
         let f = f64::from(factor);
         let small = diameter < 1e-3;
         let pupil_per_px = sigma.map(|s| if small || s.abs() < 1e-9 { 0.0 } else { 2.0 / s });
-        // The cat's eye at the layer's depth: each clear aperture's circle, its centre linear in the pixel
-        // position, its radius the same everywhere. Of those that cut the pupil at some corner of the frame (the
-        // farthest a centre goes), the MAX_LAYER_CATS that cut deepest.
-        let depth_mm = depth_of(model, centre);
-        let (fw, fh) = (f64::from(self.width), f64::from(self.height));
-        let corners: Vec<Vec<Cat>> = [(0.0, 0.0), (fw, 0.0), (0.0, fh), (fw, fh)]
-            .iter()
-            .map(|&(x, y)| model.cat_circles_at(x, y, depth_mm))
-            .collect();
-        // The circles at pixel (0, 0), the first corner, and at (1, 1): each centre's linear coefficients.
-        let (at0, at1) = (&corners[0], model.cat_circles_at(1.0, 1.0, depth_mm));
-        let mut chosen: Vec<(f64, usize)> = (0..at0.len())
-            .map(|k| {
-                let depth = corners.iter().map(|c| c[k].cut_depth()).fold(f64::MIN, f64::max);
-                (depth, k)
-            })
-            .filter(|&(depth, _)| depth > 0.0)
-            .collect();
-        chosen.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
-        chosen.truncate(MAX_LAYER_CATS);
-        let cat_on = model.cat_eye;
-        let mut cat_coeffs = [[0.0f32; 4]; MAX_LAYER_CATS];
-        let mut cat_radius = [0.0f32; MAX_LAYER_CATS];
-        let mut cat_x_scale = [1.0f32; MAX_LAYER_CATS];
-        for (slot, &(_, k)) in chosen.iter().enumerate() {
-            let (c0, c1) = (at0[k].centre, at1[k].centre);
-            cat_coeffs[slot] = [c0[0], c1[0] - c0[0], c0[1], c1[1] - c0[1]].map(|v| v as f32);
-            // A circle that passes nothing has radius 0, which marks an empty slot: the smallest radius instead.
-            cat_radius[slot] = (at0[k].radius as f32).max(f32::MIN_POSITIVE);
-            cat_x_scale[slot] = at0[k].x_scale as f32;
-        }
+        let cats = layer_cats(model, depth_of(model, centre), self.width, self.height);
         let cell_pupil = if small { 1.0 } else { 2.0 * f / diameter };
         let reach = if small { 0 } else { (diameter / (2.0 * f) + 0.5).ceil() as u32 };
         // The texels a pixel's tent weights reach, and those the taps reach from them.
@@ -302,36 +272,16 @@ impl LivePlan {
             out,
             pixels: [0; 4],
             shape: [centre as f32, spacing as f32, lo as f32, hi as f32],
-            cat: cat_coeffs,
-            cat_radius,
-            cat_x_scale,
-            cat_count: chosen.len() as u32,
+            cat: cats.coeffs,
+            cat_radius: cats.radius,
+            cat_x_scale: cats.x_scale,
+            cat_count: cats.count,
             cat_edge: (CAT_EDGE_CELLS * cell_pupil) as f32,
-            cat_on: u32::from(cat_on && !chosen.is_empty()),
+            cat_on: u32::from(model.cat_eye && cats.count > 0),
             _pad0: 0,
             pupil: [pupil_per_px[0] as f32, pupil_per_px[1] as f32, 0.0, 0.0],
         };
-        // Taps: the kernel averaged over 3 x 3 points of each texel cell (no cat's eye: that is per source).
-        let reach = reach as i32;
-        let mut taps = Vec::new();
-        for ty in -reach..=reach {
-            for tx in -reach..=reach {
-                let mut sum = 0.0;
-                for sy in 0..3 {
-                    for sx in 0..3 {
-                        let ox = (f64::from(tx) + (f64::from(sx) - 1.0) / 3.0) * f;
-                        let oy = -(f64::from(ty) + (f64::from(sy) - 1.0) / 3.0) * f;
-                        sum += weight(mask, model.mask_sign, pupil_point_xy([ox, oy], sigma), &[], 1.0);
-                    }
-                }
-                if sum > 0.0 {
-                    taps.push([tx as f32, ty as f32, (sum / 9.0) as f32, 0.0]);
-                }
-            }
-        }
-        if taps.is_empty() {
-            taps.push([0.0, 0.0, 1.0, 0.0]);
-        }
+        let taps = kernel_taps(mask, model.mask_sign, sigma, reach, f);
         layer.taps[1] = taps.len() as u32;
         // Normalisation: one value, or a table over the frame with the cat's eye.
         if layer.cat_on == 0 {
@@ -498,6 +448,75 @@ pub fn sample_bilinear(layer: &LiveLayer, image: &[[f32; 4]], x: f32, y: f32) ->
 /// The depth (mm from the pupil) whose defocus is `sigma` pixels ([`super::model::depth_of_defocus`]).
 pub fn depth_of(model: &DofModel, sigma: f64) -> f64 {
     super::model::depth_of_defocus(model, sigma)
+}
+
+/// The cat's eye of one layer ([`LayerCats`]).
+struct LayerCats {
+    /// Each circle's centre as `[x0, dx/dpx, y0, dy/dpx]`.
+    coeffs: [[f32; 4]; MAX_LAYER_CATS],
+    radius: [f32; MAX_LAYER_CATS],
+    x_scale: [f32; MAX_LAYER_CATS],
+    count: u32,
+}
+
+/// The cat's eye at `depth_mm` over a `width` x `height` frame: each clear aperture's circle, its centre linear
+/// in the pixel position, its radius the same everywhere. Of those that cut the pupil at some corner of the
+/// frame (the farthest a centre goes), the MAX_LAYER_CATS that cut deepest.
+fn layer_cats(model: &DofModel, depth_mm: f64, width: u32, height: u32) -> LayerCats {
+    let (fw, fh) = (f64::from(width), f64::from(height));
+    let corners: Vec<Vec<Cat>> = [(0.0, 0.0), (fw, 0.0), (0.0, fh), (fw, fh)]
+        .iter()
+        .map(|&(x, y)| model.cat_circles_at(x, y, depth_mm))
+        .collect();
+    // The circles at pixel (0, 0), the first corner, and at (1, 1): each centre's linear coefficients.
+    let (at0, at1) = (&corners[0], model.cat_circles_at(1.0, 1.0, depth_mm));
+    let mut chosen: Vec<(f64, usize)> = (0..at0.len())
+        .map(|k| {
+            let depth = corners.iter().map(|c| c[k].cut_depth()).fold(f64::MIN, f64::max);
+            (depth, k)
+        })
+        .filter(|&(depth, _)| depth > 0.0)
+        .collect();
+    chosen.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+    chosen.truncate(MAX_LAYER_CATS);
+    let mut cat_coeffs = [[0.0f32; 4]; MAX_LAYER_CATS];
+    let mut cat_radius = [0.0f32; MAX_LAYER_CATS];
+    let mut cat_x_scale = [1.0f32; MAX_LAYER_CATS];
+    for (slot, &(_, k)) in chosen.iter().enumerate() {
+        let (c0, c1) = (at0[k].centre, at1[k].centre);
+        cat_coeffs[slot] = [c0[0], c1[0] - c0[0], c0[1], c1[1] - c0[1]].map(|v| v as f32);
+        // A circle that passes nothing has radius 0, which marks an empty slot: the smallest radius instead.
+        cat_radius[slot] = (at0[k].radius as f32).max(f32::MIN_POSITIVE);
+        cat_x_scale[slot] = at0[k].x_scale as f32;
+    }
+    LayerCats { coeffs: cat_coeffs, radius: cat_radius, x_scale: cat_x_scale, count: chosen.len() as u32 }
+}
+
+/// A layer's taps: the kernel of blur `sigma` (px, x and y) averaged over 3 x 3 points of each `f`-pixel
+/// texel cell out to `reach` cells (no cat's eye: that is per source), as `[x, y, weight, 0]`; one centre tap
+/// where the kernel passes nothing.
+fn kernel_taps(mask: &ApertureMask, mask_sign: f64, sigma: [f64; 2], reach: u32, f: f64) -> Vec<[f32; 4]> {
+    let reach = reach as i32;
+    let mut taps = Vec::new();
+    for ty in -reach..=reach {
+        for tx in -reach..=reach {
+            let mut sum = 0.0;
+            for sy in 0..3 {
+                for sx in 0..3 {
+                    let ox = (f64::from(tx) + (f64::from(sx) - 1.0) / 3.0) * f;
+                    let oy = -(f64::from(ty) + (f64::from(sy) - 1.0) / 3.0) * f;
+                    sum += weight(mask, mask_sign, pupil_point_xy([ox, oy], sigma), &[], 1.0);
+                }
+            }
+            if sum > 0.0 {
+                taps.push([tx as f32, ty as f32, (sum / 9.0) as f32, 0.0]);
+            }
+        }
+    }
+    if taps.is_empty() {
+        taps.push([0.0, 0.0, 1.0, 0.0]);
+    }
+    taps
 }
 
 #[cfg(test)]

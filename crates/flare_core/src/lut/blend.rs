@@ -215,8 +215,11 @@ impl AtlasLayout {
 pub struct LutInstance {
     /// Quad centre x, y (image pixels); pixels per unit of the quad coordinate q.x (x, y).
     pub centre_axis_x: [f32; 4],
-    /// Pixels per unit of q.y (x, y); atlas page; unused (0).
-    pub axis_y_page: [f32; 4],
+    /// Pixels per unit of q.y (x, y).
+    pub axis_y: [f32; 2],
+    /// The atlas page that holds the entry.
+    pub page: u32,
+    pub _pad0: u32,
     /// The entry's texels in the atlas page: u0, v0, u1, v1 (texture coordinates).
     pub rect: [f32; 4],
     /// RGB gain and alpha gain.
@@ -225,14 +228,16 @@ pub struct LutInstance {
 const _: () = assert!(std::mem::size_of::<LutInstance>() == 64);
 
 impl LutInstance {
+    /// Whether every float of the instance is finite.
     pub fn is_finite(&self) -> bool {
-        bytemuck::cast_slice::<_, f32>(std::slice::from_ref(self)).iter().all(|v| v.is_finite())
+        let floats = [&self.centre_axis_x[..], &self.axis_y, &self.rect, &self.colour];
+        floats.iter().all(|values| values.iter().all(|v| v.is_finite()))
     }
 
     /// q for the image pixel position `p`, `None` when the quad is degenerate.
     fn inverse(&self) -> Option<impl Fn([f32; 2]) -> [f32; 2]> {
         let [cx, cy, ax, ay] = self.centre_axis_x;
-        let [bx, by, _, _] = self.axis_y_page;
+        let [bx, by] = self.axis_y;
         let det = ax * by - bx * ay;
         (det != 0.0 && det.is_finite()).then_some(move |p: [f32; 2]| {
             let (dx, dy) = (p[0] - cx, p[1] - cy);
@@ -434,7 +439,7 @@ impl LutScene {
             // Level 0 is where `build` placed it.
             let Some(&(page, x0, y0)) = live.layout.slots[g][k].get(m).filter(|_| m > 0) else { continue };
             inst.rect = atlas_rect([x0, y0], levels[m].extent.map(f64::from));
-            inst.axis_y_page[2] = page as f32;
+            inst.page = page;
             source.2 = m as u32;
         }
     }
@@ -489,7 +494,9 @@ fn place(
     let (c, x1, y1) = (to_pixel([0.0, 0.0]), to_pixel([1.0, 0.0]), to_pixel([0.0, 1.0]));
     LutInstance {
         centre_axis_x: [c[0] as f32, c[1] as f32, (x1[0] - c[0]) as f32, (x1[1] - c[1]) as f32],
-        axis_y_page: [(y1[0] - c[0]) as f32, (y1[1] - c[1]) as f32, page as f32, 0.0],
+        axis_y: [(y1[0] - c[0]) as f32, (y1[1] - c[1]) as f32],
+        page,
+        _pad0: 0,
         rect: atlas_rect(origin, [w, h]),
         colour: [gain / area as f32, gain / area as f32, gain / area as f32, gain],
     }

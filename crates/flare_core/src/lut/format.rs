@@ -336,8 +336,9 @@ pub fn decode(reader: impl Read, length: u64) -> Result<GhostLut, LutError> {
     decode_near(reader, length, None)
 }
 
-/// [`decode`], with only the images drawn at `near_theta_deg` when it is given ([`read_lut_near`]).
-fn decode_near(mut reader: impl Read, length: u64, near_theta_deg: Option<f64>) -> Result<GhostLut, LutError> {
+/// The fixed part and the header of a LUT file of `length` bytes: its version and its header, checked
+/// against the bytes after it.
+fn read_header(mut reader: impl Read, length: u64) -> Result<(u32, Header), LutError> {
     let mut magic = [0u8; 8];
     read_exact_or(&mut reader, &mut magic, "magic bytes").map_err(|e| match e {
         LutError::Truncated(_) => LutError::Magic,
@@ -372,66 +373,29 @@ fn decode_near(mut reader: impl Read, length: u64, near_theta_deg: Option<f64>) 
     let header: Header = serde_json::from_slice(&json).map_err(|e| LutError::Header(e.to_string()))?;
     let data_len = length - fixed - header_len;
     check_header(&header, data_len)?;
-    let kind = match header.kind.as_str() {
-        "ray-traced" => LutKind::RayTraced,
-        "photo" => LutKind::Photo,
-        other => return Err(LutError::Header(format!("kind `{other}`: expected `ray-traced` or `photo`"))),
-    };
-    // Each entry's compressed texels are read in turn (an entry a frame at `near_theta_deg` does not draw is
-    // passed over), then inflated and checked in parallel; the first entry in the file's order that fails is
-    // the error.
-    let channels = stored_channels(version);
-    let data_checksum = header.data_checksum.as_deref().map(|h| unhex(h, "data checksum")).transpose()?;
-    // Without the data's checksum a damaged entry is found only by inflating it: every entry is.
-    let near_theta_deg = near_theta_deg.filter(|_| data_checksum.is_some());
-    let mut data_sum = FNV_OFFSET;
-    let mut blobs: Vec<(usize, usize, Vec<u8>)> = Vec::new();
-    for (gi, g) in header.ghosts.iter().enumerate() {
-        // Entry `t * phis + p` is baked at theta `t` (the layout `LutScene::build` reads).
-        let drawn = near_theta_deg
-            .filter(|_| !g.phis_deg.is_empty())
-            .map(|theta| super::blend::thetas_drawn(&g.thetas_deg, theta));
-        for (ei, e) in g.entries.iter().enumerate() {
-            let mut limited = (&mut reader).take(e.compressed_bytes);
-            let skipped = drawn.as_ref().is_some_and(|thetas| !thetas.contains(&(ei / g.phis_deg.len())));
-            let mut compressed = Vec::new();
-            if skipped {
-                // Passed over, but summed into the data's checksum (a block at a time).
-                let mut block = [0u8; 1 << 16];
-                let mut read = 0u64;
-                loop {
-                    let n = limited.read(&mut block)?;
-                    if n == 0 {
-                        break;
-                    }
-                    data_sum = fnv1a(&block[..n], data_sum);
-                    read += n as u64;
-                }
-                if read != e.compressed_bytes {
-                    return Err(LutError::Truncated(format!("ghost {gi}, entry {ei}: its data ends early")));
-                }
-                continue;
-            }
-            limited.read_to_end(&mut compressed)?;
-            if compressed.len() as u64 != e.compressed_bytes {
-                return Err(LutError::Truncated(format!("ghost {gi}, entry {ei}: its data ends early")));
-            }
-            data_sum = fnv1a(&compressed, data_sum);
-            blobs.push((gi, ei, compressed));
+    Ok((version, header))
+}
+
+/// Reads `reader` to its end a block at a time, summing what it reads into `sum`; the bytes read.
+fn sum_blocks(mut reader: impl Read, sum: &mut u64) -> Result<u64, LutError> {
+    let mut block = [0u8; 1 << 16];
+    let mut read = 0u64;
+    loop {
+        let n = reader.read(&mut block)?;
+        if n == 0 {
+            return Ok(read);
         }
+        *sum = fnv1a(&block[..n], *sum);
+        read += n as u64;
     }
-    let decoded: Vec<Result<Vec<[f16; 4]>, LutError>> = blobs
-        .par_iter()
-        .map(|(gi, ei, compressed)| entry_texels(&header.ghosts[*gi].entries[*ei], compressed, channels, (*gi, *ei)))
-        .collect();
-    let mut texels_of = std::collections::HashMap::new();
-    for ((gi, ei, _), texels) in blobs.iter().zip(decoded) {
-        texels_of.insert((*gi, *ei), texels?);
-    }
-    // (An entry read and damaged is named above; one passed over is found here.)
-    if data_checksum.is_some_and(|sum| sum != data_sum) {
-        return Err(LutError::Header("its data's checksum does not match (the file is damaged)".into()));
-    }
+}
+
+/// The header's ghosts with the entries' texels, `texels_of` by (ghost, entry); an entry with none there
+/// (not drawn at the angle read near) keeps its place with no image.
+fn ghosts_of(
+    header: &Header,
+    mut texels_of: std::collections::HashMap<(usize, usize), Vec<[f16; 4]>>,
+) -> Result<Vec<LutGhost>, LutError> {
     let mut ghosts = Vec::with_capacity(header.ghosts.len());
     for (gi, g) in header.ghosts.iter().enumerate() {
         let mut entries = Vec::with_capacity(g.entries.len());
@@ -442,7 +406,6 @@ fn decode_near(mut reader: impl Read, length: u64, near_theta_deg: Option<f64>) 
                 energy: e.paraxial_energy,
             };
             let Some(texels) = texels_of.remove(&(gi, ei)) else {
-                // Not drawn at `near_theta_deg`: its place is kept, with no image.
                 entries.push(LutEntry::empty(e.theta_deg, e.phi_deg, paraxial));
                 continue;
             };
@@ -467,6 +430,63 @@ fn decode_near(mut reader: impl Read, length: u64, near_theta_deg: Option<f64>) 
             entries,
         });
     }
+    Ok(ghosts)
+}
+
+/// [`decode`], with only the images drawn at `near_theta_deg` when it is given ([`read_lut_near`]).
+fn decode_near(mut reader: impl Read, length: u64, near_theta_deg: Option<f64>) -> Result<GhostLut, LutError> {
+    let (version, header) = read_header(&mut reader, length)?;
+    let kind = match header.kind.as_str() {
+        "ray-traced" => LutKind::RayTraced,
+        "photo" => LutKind::Photo,
+        other => return Err(LutError::Header(format!("kind `{other}`: expected `ray-traced` or `photo`"))),
+    };
+    // Each entry's compressed texels are read in turn (an entry a frame at `near_theta_deg` does not draw is
+    // passed over), then inflated and checked in parallel; the first entry in the file's order that fails is
+    // the error.
+    let channels = stored_channels(version);
+    let data_checksum = header.data_checksum.as_deref().map(|h| unhex(h, "data checksum")).transpose()?;
+    // Without the data's checksum a damaged entry is found only by inflating it: every entry is.
+    let near_theta_deg = near_theta_deg.filter(|_| data_checksum.is_some());
+    let mut data_sum = FNV_OFFSET;
+    let mut blobs: Vec<(usize, usize, Vec<u8>)> = Vec::new();
+    for (gi, g) in header.ghosts.iter().enumerate() {
+        // Entry `t * phis + p` is baked at theta `t` (the layout `LutScene::build` reads).
+        let drawn = near_theta_deg
+            .filter(|_| !g.phis_deg.is_empty())
+            .map(|theta| super::blend::thetas_drawn(&g.thetas_deg, theta));
+        for (ei, e) in g.entries.iter().enumerate() {
+            let mut limited = (&mut reader).take(e.compressed_bytes);
+            let skipped = drawn.as_ref().is_some_and(|thetas| !thetas.contains(&(ei / g.phis_deg.len())));
+            let mut compressed = Vec::new();
+            // One passed over is summed into the data's checksum a block at a time.
+            let read = if skipped {
+                sum_blocks(&mut limited, &mut data_sum)?
+            } else {
+                limited.read_to_end(&mut compressed)? as u64
+            };
+            if read != e.compressed_bytes {
+                return Err(LutError::Truncated(format!("ghost {gi}, entry {ei}: its data ends early")));
+            }
+            if !skipped {
+                data_sum = fnv1a(&compressed, data_sum);
+                blobs.push((gi, ei, compressed));
+            }
+        }
+    }
+    let decoded: Vec<Result<Vec<[f16; 4]>, LutError>> = blobs
+        .par_iter()
+        .map(|(gi, ei, compressed)| entry_texels(&header.ghosts[*gi].entries[*ei], compressed, channels, (*gi, *ei)))
+        .collect();
+    let mut texels_of = std::collections::HashMap::new();
+    for ((gi, ei, _), texels) in blobs.iter().zip(decoded) {
+        texels_of.insert((*gi, *ei), texels?);
+    }
+    // (An entry read and damaged is named above; one passed over is found here.)
+    if data_checksum.is_some_and(|sum| sum != data_sum) {
+        return Err(LutError::Header("its data's checksum does not match (the file is damaged)".into()));
+    }
+    let ghosts = ghosts_of(&header, texels_of)?;
     let mut rest = [0u8; 1];
     if reader.read(&mut rest)? != 0 {
         return Err(LutError::Header("there are bytes after the last entry".into()));

@@ -53,7 +53,7 @@ use super::{FlareScene, GhostInstance, Globals};
 use crate::dirt::PreparedDirt;
 use crate::image::{DisplayImage, HdrImage};
 use crate::lut::blend::{ATLAS_PAGE, LiveLut, LutScene};
-use crate::lut::blend::{Footprint, bin_instances};
+use crate::lut::blend::{Footprint, LutBins, bin_instances};
 use crate::starburst::Starburst;
 
 /// Why the GPU path is not available or failed.
@@ -803,22 +803,11 @@ impl FlareRenderer {
         globals.plate_present = u32::from(self.has_background);
         queue.write_buffer(&self.globals, 0, bytemuck::bytes_of(&globals));
         let use_compute = self.compute.is_some() && !self.rasterise;
-        if !use_compute && scene.instances.len() > self.instance_capacity {
-            self.instance_capacity = scene.instances.len().next_power_of_two();
-            self.instances = vertex_buffer::<GhostInstance>(device, "ghost instances", self.instance_capacity);
-        }
-        if !use_compute && !scene.instances.is_empty() {
-            queue.write_buffer(&self.instances, 0, bytemuck::cast_slice(&scene.instances));
+        if !use_compute {
+            self.upload_instances(device, queue, &scene.instances);
         }
         let lut = lut.filter(|l| !l.instances.is_empty());
-        // The LUT instances binned for the compute pass; where the bins would pass the adapter's largest storage
-        // binding (a frame of many thousand pixels a side with hundreds of instances), this frame's LUT images
-        // are rasterised over the computed ghosts instead.
-        let bins = lut.filter(|_| use_compute && self.compute_lut.is_some()).and_then(|lut| {
-            let bins = bin_instances((scene.width, scene.height), (w, h), lut, &self.lut_footprints, TILE);
-            let bytes = 4 * (bins.starts.len() + bins.list.len() + 2 * bins.splits.len()) as u64;
-            (bytes <= self.lut_bin_bytes).then_some(bins)
-        });
+        let bins = lut.filter(|_| use_compute && self.compute_lut.is_some()).and_then(|lut| self.bins(scene, lut));
         let raster_lut = bins.is_none();
         if let Some(lut) = lut.filter(|_| raster_lut) {
             self.raster_lut.upload(device, queue, lut, (w, h));
@@ -894,6 +883,27 @@ impl FlareRenderer {
         }
         self.profiler.resolve_queries(encoder);
         self.profiled_open = true;
+    }
+
+    /// Writes the raster ghosts' instances, growing their buffer to the next power of two where they do not fit.
+    fn upload_instances(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, instances: &[GhostInstance]) {
+        if instances.len() > self.instance_capacity {
+            self.instance_capacity = instances.len().next_power_of_two();
+            self.instances = vertex_buffer::<GhostInstance>(device, "ghost instances", self.instance_capacity);
+        }
+        if !instances.is_empty() {
+            queue.write_buffer(&self.instances, 0, bytemuck::cast_slice(instances));
+        }
+    }
+
+    /// The LUT instances binned for the compute pass, or `None` where the bins would pass the adapter's largest
+    /// storage binding (a frame of many thousand pixels a side with hundreds of instances): this frame's LUT
+    /// images are then rasterised over the computed ghosts instead.
+    fn bins(&self, scene: &FlareScene, lut: &LutScene) -> Option<LutBins> {
+        let acc = (scene.hdr_width.max(1), scene.hdr_height.max(1));
+        let bins = bin_instances((scene.width, scene.height), acc, lut, &self.lut_footprints, TILE);
+        let bytes = 4 * (bins.starts.len() + bins.list.len() + 2 * bins.splits.len()) as u64;
+        (bytes <= self.lut_bin_bytes).then_some(bins)
     }
 
     /// Makes the accumulation `w` x `h`, new bind groups with it where its size changed.

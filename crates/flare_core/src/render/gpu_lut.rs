@@ -201,6 +201,6 @@ pub(crate) fn assert_layouts() {
         fields!(LutTiles: width, height, tile, tiles_x, scale_x, scale_y, alpha_over, coarse_images),
     );
     let (size, tiled) = fields!(TiledInstance: instance, level, ghost, unused);
-    let (_, instance) = fields!(LutInstance: centre_axis_x, axis_y_page, rect, colour);
+    let (_, instance) = fields!(LutInstance: centre_axis_x, axis_y, page, _pad0, rect, colour);
     assert_same_layout(LUT_COMPUTE_WGSL, "TiledInstance", (size, [instance, tiled[1..].to_vec()].concat()));
 }

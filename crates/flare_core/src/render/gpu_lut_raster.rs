@@ -106,7 +106,16 @@ impl RasterLut {
             alpha: wgpu::BlendComponent { operation: wgpu::BlendOperation::ReverseSubtract, ..added.alpha },
             ..added
         };
-        let attributes = wgpu::vertex_attr_array![0 => Float32x4, 1 => Float32x4, 2 => Float32x4, 3 => Float32x4];
+        // Each attribute where `LutInstance` has its field (the padding after `page` is not read).
+        let attribute =
+            |shader_location, format, offset| wgpu::VertexAttribute { format, offset: offset as u64, shader_location };
+        let attributes = [
+            attribute(0, wgpu::VertexFormat::Float32x4, std::mem::offset_of!(LutInstance, centre_axis_x)),
+            attribute(1, wgpu::VertexFormat::Float32x2, std::mem::offset_of!(LutInstance, axis_y)),
+            attribute(4, wgpu::VertexFormat::Uint32, std::mem::offset_of!(LutInstance, page)),
+            attribute(2, wgpu::VertexFormat::Float32x4, std::mem::offset_of!(LutInstance, rect)),
+            attribute(3, wgpu::VertexFormat::Float32x4, std::mem::offset_of!(LutInstance, colour)),
+        ];
         let buffers = [Some(wgpu::VertexBufferLayout {
             array_stride: std::mem::size_of::<LutInstance>() as u64,
             step_mode: wgpu::VertexStepMode::Instance,

@@ -427,17 +427,7 @@ impl GpuRayGrid {
         let (device, queue) = (&ctx.device, &ctx.queue);
         let limits = device.limits();
         let cells = planned.iter().map(|j| j.cells).max().unwrap_or(1);
-        let side = u64::from(fine.width.max(fine.height));
-        if let Some(e) = shared_limits(&limits, cells, side, "texels across the supersampled target").or_else(|| {
-            let needed = (cells * cells * 6) as u64;
-            (needed > u64::from(u32::MAX)).then_some(GpuRayGridError::Limit {
-                cells,
-                what: "vertices per draw",
-                needed,
-                limit: u64::from(u32::MAX),
-                name: "u32 vertex index",
-            })
-        }) {
+        if let Some(e) = raster_refusal(&limits, cells, fine) {
             return Err(e);
         }
         if planned.is_empty() {
@@ -991,6 +981,22 @@ fn row_split(device: &wgpu::Device) -> u32 {
         && l.max_compute_workgroup_size_x >= 256
         && l.max_compute_workgroup_storage_size >= 32 * 256;
     if software_device(device) || !scan_fits { 1 } else { 8 }
+}
+
+/// Why the raster splat cannot draw jobs of `cells` cells into the supersampled target `fine` on an adapter
+/// of `limits`, if it cannot.
+fn raster_refusal(limits: &wgpu::Limits, cells: usize, fine: Window) -> Option<GpuRayGridError> {
+    let side = u64::from(fine.width.max(fine.height));
+    shared_limits(limits, cells, side, "texels across the supersampled target").or_else(|| {
+        let needed = (cells * cells * 6) as u64;
+        (needed > u64::from(u32::MAX)).then_some(GpuRayGridError::Limit {
+            cells,
+            what: "vertices per draw",
+            needed,
+            limit: u64::from(u32::MAX),
+            name: "u32 vertex index",
+        })
+    })
 }
 
 /// The limits every GPU ray-grid render checks before anything is dispatched: the tracer's workgroups, one

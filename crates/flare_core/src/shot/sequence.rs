@@ -190,6 +190,41 @@ struct Pending {
     started: Instant,
 }
 
+/// Frame `plan` of the shot, as the document and its timeline make it.
+fn frame_of(plan: &FramePlan, sources: &ShotSources, options: &SequenceOptions) -> Frame {
+    let request = sources.plan.request(sources.doc, &sources.flare.system, plan, options.divisor);
+    Frame::build(sources.flare, sources.lut, &request)
+}
+
+/// Draws frame `plan` on the CPU twin and writes it to `path`.
+fn write_on_cpu(
+    plan: &FramePlan,
+    sources: &ShotSources,
+    options: &SequenceOptions,
+    path: &Path,
+    warned: &std::sync::Mutex<Option<String>>,
+) -> FrameOutcome {
+    let plate = match plate_for(plan, sources, &mut None, warned) {
+        Ok(plate) => plate,
+        Err(e) => return FrameOutcome::Failed(e),
+    };
+    let frame = frame_of(plan, sources, options);
+    let s = Sources { flare: sources.flare, lut: sources.lut, plate: plate.as_deref() };
+    let written = match &options.traced {
+        Some(t) => t.render_to_file(&Device::Cpu, &frame, &s, options.layers, path).map(|_| ()),
+        None => frame::render_to_file(&mut Device::Cpu, &frame, &s, options.layers, path),
+    };
+    outcome_of(plan.frame, path, written)
+}
+
+/// Writes a frame the GPU drew (on the writer thread, while the GPU draws the next).
+fn write_pending(p: &Pending, sources: &ShotSources, options: &SequenceOptions) -> FrameOutcome {
+    let s = Sources { flare: sources.flare, lut: sources.lut, plate: p.plate.as_deref() };
+    // No ghost layers here: the CPU device is never asked to draw.
+    let written = frame::write_made(&mut Device::Cpu, &p.frame, &s, &p.made, options.layers, &p.path);
+    outcome_of(p.plan.frame, &p.path, written)
+}
+
 /// Renders every planned frame (see the module documentation). `on_frame(record, done, total)` is called as
 /// each frame finishes (from worker threads on the CPU twin); `cancel` stops before the next frame.
 pub fn render_sequence(
@@ -208,10 +243,6 @@ pub fn render_sequence(
     // A frame is skipped only when its file reads back whole: a truncated or damaged one is drawn again.
     let skip = |path: &Path| options.skip_existing && path.exists() && reads_back_whole(path);
     let warned = std::sync::Mutex::new(None);
-    let build = |plan: &FramePlan| {
-        let request = sources.plan.request(sources.doc, &sources.flare.system, plan, options.divisor);
-        Frame::build(sources.flare, sources.lut, &request)
-    };
     let mut records: Vec<FrameRecord> = match device {
         Device::Cpu | Device::LostGpu(_) => {
             let one = |plan: &FramePlan| {
@@ -223,18 +254,7 @@ pub fn render_sequence(
                 if skip(&path) {
                     return Some(finish(record(plan, path, started, FrameOutcome::Skipped)));
                 }
-                let outcome = match plate_for(plan, sources, &mut None, &warned) {
-                    Ok(plate) => {
-                        let frame = build(plan);
-                        let s = Sources { flare: sources.flare, lut: sources.lut, plate: plate.as_deref() };
-                        let written = match &options.traced {
-                            Some(t) => t.render_to_file(&Device::Cpu, &frame, &s, options.layers, &path).map(|_| ()),
-                            None => frame::render_to_file(&mut Device::Cpu, &frame, &s, options.layers, &path),
-                        };
-                        outcome_of(plan.frame, &path, written)
-                    }
-                    Err(e) => FrameOutcome::Failed(e),
-                };
+                let outcome = write_on_cpu(plan, sources, options, &path, &warned);
                 Some(finish(record(plan, path, started, outcome)))
             };
             if options.parallel_frames {
@@ -251,11 +271,7 @@ pub fn render_sequence(
                 let writer = scope.spawn(move || {
                     rx.into_iter()
                         .map(|p| {
-                            let s = Sources { flare: sources.flare, lut: sources.lut, plate: p.plate.as_deref() };
-                            // No ghost layers here: the CPU device is never asked to draw.
-                            let written =
-                                frame::write_made(&mut Device::Cpu, &p.frame, &s, &p.made, options.layers, &p.path);
-                            let outcome = outcome_of(p.plan.frame, &p.path, written);
+                            let outcome = write_pending(&p, sources, options);
                             finish(record(&p.plan, p.path, p.started, outcome))
                         })
                         .collect::<Vec<_>>()
@@ -279,7 +295,7 @@ pub fn render_sequence(
                             continue;
                         }
                     };
-                    let frame = build(plan);
+                    let frame = frame_of(plan, sources, options);
                     let s = Sources { flare: sources.flare, lut: sources.lut, plate: plate.as_deref() };
                     let made = match &options.traced {
                         Some(t) => t.draw_for_file(device, &frame, &s, options.layers, &path).map(|(made, _)| made),

@@ -77,8 +77,11 @@ impl Lines<'_> {
     }
 }
 
-/// Parses and validates an OpenLensFlare optical system.
-pub fn parse(text: &str, id_hint: &str) -> Result<LoadedLens, FormatError> {
+/// The `<opticalSystem>`'s own fields as (tag, text, line).
+type SystemFields = Vec<(String, String, usize)>;
+
+/// Reads `text`'s XML: the `<opticalSystem>`'s own fields and its `<elements>`, every value with its line.
+fn read_xml(text: &str) -> Result<(SystemFields, Vec<Element>), FormatError> {
     let mut lines = Lines { text, offset: 0, line: 1 };
     let mut line_of = |offset: u64| lines.at(offset);
     let mut reader = Reader::from_str(text);
@@ -124,6 +127,42 @@ pub fn parse(text: &str, id_hint: &str) -> Result<LoadedLens, FormatError> {
     if !path.is_empty() {
         return Err(line_error(line_of(text.len() as u64), format!("<{}> is never closed", path.last().unwrap())));
     }
+    Ok((system, elements))
+}
+
+/// The surface of element `e` (the aperture stop where `stop`); an aperture texture it names is not used,
+/// and `warnings` says so.
+fn element_surface(e: &Element, stop: bool, warnings: &mut Vec<String>) -> Result<Surface, FormatError> {
+    let height = e.number("height", None)?;
+    let n_d = e.number("refractiveIndex", Some(1.0))?;
+    let abbe = e.number("abbeNumber", Some(0.0))?;
+    let radius_mm = if stop { 0.0 } else { e.number("radius", Some(0.0))? };
+    let v_d = (n_d != 1.0 && abbe > 0.0).then_some(abbe);
+    let glass = (n_d == 1.0).then(|| "air".to_owned());
+    let mut s = Surface::new(radius_mm, Some(e.number("thickness", None)?), Medium { n_d, v_d, glass }, height);
+    s.stop = stop;
+    let lambda = e.number("coatingLambda", Some(0.0))?;
+    let coating_ior = e.number("coatingIor", Some(0.0))?;
+    if lambda > 0.0 {
+        s.coating = Coating::QuarterWave {
+            design_wavelength_nm: lambda,
+            layer_index: (coating_ior > 0.0).then_some(coating_ior),
+        };
+    }
+    for key in ["mask", "maskFT"] {
+        if let Some((v, line)) = e.text(key) {
+            warnings.push(format!(
+                "line {line}: the aperture texture <{key}> {} is not used (set the stop's shape in the Aperture panel)",
+                v.trim()
+            ));
+        }
+    }
+    Ok(s)
+}
+
+/// Parses and validates an OpenLensFlare optical system.
+pub fn parse(text: &str, id_hint: &str) -> Result<LoadedLens, FormatError> {
+    let (system, elements) = read_xml(text)?;
     let field = |key: &str| system.iter().find(|(k, _, _)| k == key).map(|(_, v, l)| (v.trim().to_owned(), *l));
     let mut warnings = Vec::new();
     let (mut surfaces, mut lines) = (Vec::new(), Vec::new());
@@ -153,29 +192,7 @@ pub fn parse(text: &str, id_hint: &str) -> Result<LoadedLens, FormatError> {
                 ));
             }
         }
-        let stop = kind.trim() == "apertureStop";
-        let height = e.number("height", None)?;
-        let n_d = e.number("refractiveIndex", Some(1.0))?;
-        let abbe = e.number("abbeNumber", Some(0.0))?;
-        let radius_mm = if stop { 0.0 } else { e.number("radius", Some(0.0))? };
-        let v_d = (n_d != 1.0 && abbe > 0.0).then_some(abbe);
-        let glass = (n_d == 1.0).then(|| "air".to_owned());
-        let mut s = Surface::new(radius_mm, Some(e.number("thickness", None)?), Medium { n_d, v_d, glass }, height);
-        s.stop = stop;
-        let lambda = e.number("coatingLambda", Some(0.0))?;
-        let coating_ior = e.number("coatingIor", Some(0.0))?;
-        if lambda > 0.0 {
-            s.coating = Coating::QuarterWave {
-                design_wavelength_nm: lambda,
-                layer_index: (coating_ior > 0.0).then_some(coating_ior),
-            };
-        }
-        for key in ["mask", "maskFT"] {
-            if let Some((v, line)) = e.text(key) {
-                warnings.push(format!("line {line}: the aperture texture <{key}> {} is not used (set the stop's shape in the Aperture panel)", v.trim()));
-            }
-        }
-        surfaces.push(s);
+        surfaces.push(element_surface(e, kind.trim() == "apertureStop", &mut warnings)?);
         lines.push(e.line);
     }
     if surfaces.is_empty() {

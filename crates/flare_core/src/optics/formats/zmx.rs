@@ -89,24 +89,8 @@ pub fn parse(text: &str, id_hint: &str) -> Result<LoadedLens, FormatError> {
         let top_level = !raw.starts_with([' ', '\t']);
         if keyword == "SURF" {
             given.clear();
-        } else if !blocks.is_empty()
-            && matches!(keyword, "TYPE" | "CURV" | "CONI" | "PARM" | "DISZ" | "DIAM" | "STOP" | "GLAS")
-        {
-            let key = match keyword {
-                "PARM" => format!("PARM {}", raw.split_whitespace().nth(1).unwrap_or("")),
-                k => k.to_owned(),
-            };
-            if let Some((_, first)) = given.iter().find(|(k, _)| *k == key) {
-                return Err(line_error(
-                    line,
-                    format!(
-                        "{} repeated in SURF {} (first on line {first}): which value is meant is unclear",
-                        crate::files::shorten(&key),
-                        blocks.len() - 1
-                    ),
-                ));
-            }
-            given.push((key, line));
+        } else if !blocks.is_empty() {
+            once_per_surface(&mut given, raw, line, blocks.len() - 1)?;
         }
         match keyword {
             "MODE" => {
@@ -146,61 +130,102 @@ pub fn parse(text: &str, id_hint: &str) -> Result<LoadedLens, FormatError> {
                 apertures.push(SystemAperture::ImageFNumber { line, f_number: f });
             }
             "FLOA" if blocks.is_empty() => apertures.push(SystemAperture::FloatByStop { line }),
-            _ if blocks.is_empty() => {}
-            "TYPE" => match tokens.next() {
-                Some("STANDARD") => {}
-                Some("EVENASPH") => blocks.last_mut().unwrap().even_asphere = true,
-                Some("TOROIDAL") => blocks.last_mut().unwrap().toroidal = true,
-                other => return Err(unsupported(line, format!("surface TYPE {}", other.unwrap_or("(none)")))),
-            },
-            "CURV" => blocks.last_mut().unwrap().curvature = number(line, "CURV", tokens.next())? / scale_to_mm,
-            "CONI" => blocks.last_mut().unwrap().conic = number(line, "CONI", tokens.next())?,
-            "PARM" => {
-                let n = number(line, "PARM", tokens.next())?;
-                let v = number(line, &format!("PARM {n}"), tokens.next())?;
-                if n.fract() != 0.0 || !(0.0..=8.0).contains(&n) {
-                    if v != 0.0 {
-                        return Err(unsupported(line, format!("PARM {n} = {v} (an even asphere has PARM 1 to 8)")));
-                    }
-                } else if n >= 1.0 {
-                    blocks.last_mut().unwrap().parms[n as usize - 1] = (line, v);
+            _ => {
+                if let Some(block) = blocks.last_mut() {
+                    surface_keyword(block, (line, raw), tokens, scale_to_mm, &gcat)?;
                 }
             }
-            "DISZ" => {
-                let b = blocks.last_mut().unwrap();
-                match tokens.next() {
-                    Some("INFINITY") => b.thickness_infinite = true,
-                    t => b.thickness = Some(number(line, "DISZ", t)? * scale_to_mm),
-                }
-            }
-            "DIAM" => {
-                blocks.last_mut().unwrap().semi_diameter = Some(number(line, "DIAM", tokens.next())? * scale_to_mm)
-            }
-            "STOP" => blocks.last_mut().unwrap().stop = true,
-            "GLAS" => {
-                let medium = glass_line(line, &raw.split_whitespace().collect::<Vec<_>>(), &gcat)?;
-                blocks.last_mut().unwrap().glass = Some((line, medium));
-            }
-            "SQAP" | "ELAP" | "OBSC" | "OBDC" | "SPID" => {
-                return Err(unsupported(line, format!("aperture {keyword} (only circular clear apertures)")));
-            }
-            "XDAT" => {
-                // A toroid's extra data are its Zernike terms (their count, the normalisation radius, the
-                // coefficients): all 0 is a plain toroid; anything else changes the surface and is refused.
-                let _index = tokens.next();
-                let value = tokens.next().and_then(|t| t.parse::<f64>().ok());
-                let plain_toroid = blocks.last().is_some_and(|b| b.toroidal) && value == Some(0.0);
-                if !plain_toroid {
-                    return Err(unsupported(
-                        line,
-                        "extra data XDAT (Zernike terms of a TOROIDAL surface, or a special surface's data)",
-                    ));
-                }
-            }
-            _ => {}
         }
     }
     build(blocks, name, id_hint, &apertures, scale_to_mm)
+}
+
+/// Refuses a keyword that changes the optics given twice in one SURF block (which one was meant cannot be
+/// known; the last used to win silently). `given` holds the block's keywords so far with their lines.
+fn once_per_surface(
+    given: &mut Vec<(String, usize)>,
+    raw: &str,
+    line: usize,
+    surface: usize,
+) -> Result<(), FormatError> {
+    let mut tokens = raw.split_whitespace();
+    let key = match tokens.next() {
+        Some("PARM") => format!("PARM {}", tokens.next().unwrap_or("")),
+        Some(k @ ("TYPE" | "CURV" | "CONI" | "DISZ" | "DIAM" | "STOP" | "GLAS")) => k.to_owned(),
+        _ => return Ok(()),
+    };
+    if let Some((_, first)) = given.iter().find(|(k, _)| *k == key) {
+        return Err(line_error(
+            line,
+            format!(
+                "{} repeated in SURF {surface} (first on line {first}): which value is meant is unclear",
+                crate::files::shorten(&key)
+            ),
+        ));
+    }
+    given.push((key, line));
+    Ok(())
+}
+
+/// Reads one keyword of a SURF block into `block`: `raw` is line `line`, `tokens` what follows its keyword,
+/// lengths in the file's unit (`scale_to_mm` mm each), glasses looked up in `gcat` first.
+fn surface_keyword(
+    block: &mut Block,
+    (line, raw): (usize, &str),
+    mut tokens: std::str::SplitWhitespace,
+    scale_to_mm: f64,
+    gcat: &[String],
+) -> Result<(), FormatError> {
+    let keyword = raw.split_whitespace().next().unwrap_or("");
+    match keyword {
+        "TYPE" => match tokens.next() {
+            Some("STANDARD") => {}
+            Some("EVENASPH") => block.even_asphere = true,
+            Some("TOROIDAL") => block.toroidal = true,
+            other => return Err(unsupported(line, format!("surface TYPE {}", other.unwrap_or("(none)")))),
+        },
+        "CURV" => block.curvature = number(line, "CURV", tokens.next())? / scale_to_mm,
+        "CONI" => block.conic = number(line, "CONI", tokens.next())?,
+        "PARM" => {
+            let n = number(line, "PARM", tokens.next())?;
+            let v = number(line, &format!("PARM {n}"), tokens.next())?;
+            if n.fract() != 0.0 || !(0.0..=8.0).contains(&n) {
+                if v != 0.0 {
+                    return Err(unsupported(line, format!("PARM {n} = {v} (an even asphere has PARM 1 to 8)")));
+                }
+            } else if n >= 1.0 {
+                block.parms[n as usize - 1] = (line, v);
+            }
+        }
+        "DISZ" => match tokens.next() {
+            Some("INFINITY") => block.thickness_infinite = true,
+            t => block.thickness = Some(number(line, "DISZ", t)? * scale_to_mm),
+        },
+        "DIAM" => block.semi_diameter = Some(number(line, "DIAM", tokens.next())? * scale_to_mm),
+        "STOP" => block.stop = true,
+        "GLAS" => {
+            let medium = glass_line(line, &raw.split_whitespace().collect::<Vec<_>>(), gcat)?;
+            block.glass = Some((line, medium));
+        }
+        "SQAP" | "ELAP" | "OBSC" | "OBDC" | "SPID" => {
+            return Err(unsupported(line, format!("aperture {keyword} (only circular clear apertures)")));
+        }
+        "XDAT" => {
+            // A toroid's extra data are its Zernike terms (their count, the normalisation radius, the
+            // coefficients): all 0 is a plain toroid; anything else changes the surface and is refused.
+            let _index = tokens.next();
+            let value = tokens.next().and_then(|t| t.parse::<f64>().ok());
+            let plain_toroid = block.toroidal && value == Some(0.0);
+            if !plain_toroid {
+                return Err(unsupported(
+                    line,
+                    "extra data XDAT (Zernike terms of a TOROIDAL surface, or a special surface's data)",
+                ));
+            }
+        }
+        _ => {}
+    }
+    Ok(())
 }
 
 /// Reads a `GLAS name flag flag n_d V_d ...` line. The name is looked up in the file's `GCAT` catalogues
