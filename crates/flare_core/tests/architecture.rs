@@ -10,6 +10,9 @@
 //! The layers are the numbered list under "# Layers" in the core's `lib.rs` (its docs are the map): a room may
 //! import from its own layer and the layers below, never from one above, and the rooms' graph (every module's
 //! imports, gathered by room) has no cycle either, so no two rooms of a layer import each other.
+//!
+//! No function of the core, its examples or the app is longer than 120 lines, counted from its `fn` line to
+//! the closing brace at the same indentation.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
@@ -312,4 +315,90 @@ fn the_cycle_finder_finds_a_cycle() {
     assert_eq!(find_cycle(&graph).unwrap(), ["a", "b", "c", "a"]);
     graph.get_mut("c").unwrap().clear();
     assert!(find_cycle(&graph).is_none());
+}
+
+/// The longest a function may be, in lines from its `fn` to its closing brace.
+const MOST_LINES: usize = 120;
+
+/// Each function of `code` (the part before its `#[cfg(test)]` tests) as (name, first line, lines): from its
+/// `fn` line to the closing brace at the `fn`'s indentation. A function on one line and a declaration without
+/// a body (a trait's `fn f();`) are not counted.
+fn function_lengths(code: &str) -> Vec<(String, usize, usize)> {
+    let lines: Vec<&str> = code.lines().collect();
+    let mut out = Vec::new();
+    for (i, line) in lines.iter().enumerate() {
+        let trimmed = line.trim_start();
+        let indent = line.len() - trimmed.len();
+        let mut rest = trimmed;
+        for word in ["pub(crate) ", "pub(super) ", "pub ", "const ", "async ", "unsafe "] {
+            rest = rest.strip_prefix(word).unwrap_or(rest);
+        }
+        let Some(name) = rest.strip_prefix("fn ") else { continue };
+        let name: String = name.chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect();
+        // The line that opens the body, unless a `;` ends the declaration first.
+        let Some(open) = (i..lines.len()).find(|&j| lines[j].contains('{') || lines[j].trim_end().ends_with(';'))
+        else {
+            continue;
+        };
+        let opening = lines[open];
+        if !opening.contains('{') || opening.matches('{').count() == opening.matches('}').count() {
+            continue;
+        }
+        let close = (open + 1..lines.len()).find(|&k| {
+            let l = lines[k];
+            l.len() - l.trim_start().len() == indent && l.trim_start().starts_with('}')
+        });
+        if let Some(close) = close {
+            out.push((name, i + 1, close - i + 1));
+        }
+    }
+    out
+}
+
+/// Every `.rs` file under `dir`, with its code before `#[cfg(test)]`.
+fn sources(dir: &Path) -> Vec<(std::path::PathBuf, String)> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(dir) = stack.pop() {
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                stack.push(path);
+            } else if path.extension().and_then(|e| e.to_str()) == Some("rs") {
+                let text = std::fs::read_to_string(&path).unwrap();
+                out.push((path, text.split("#[cfg(test)]").next().unwrap_or("").to_owned()));
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn no_function_of_the_core_or_the_app_is_longer_than_120_lines() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dirs = [root.join("src"), root.join("examples"), root.join("benches"), root.join("../../src")];
+    let mut all = Vec::new();
+    for dir in dirs.iter().filter(|d| d.is_dir()) {
+        for (path, code) in sources(dir) {
+            for (name, line, lines) in function_lengths(&code) {
+                all.push((lines, format!("{}:{line} {name}", path.display())));
+            }
+        }
+    }
+    all.sort_by(|a, b| b.0.cmp(&a.0));
+    // The scanner sees the functions (the test can fail): hundreds of them, the longest near the bound.
+    assert!(all.len() > 500 && all[0].0 > 60, "functions found: {}", all.len());
+    let long: Vec<String> =
+        all.iter().filter(|(n, _)| *n > MOST_LINES).map(|(n, at)| format!("{n} lines: {at}")).collect();
+    assert!(long.is_empty(), "functions over {MOST_LINES} lines (split them into their steps):\n{}", long.join("\n"));
+}
+
+#[test]
+fn the_function_scanner_counts_a_long_function() {
+    let body = "    let x = 1;\n".repeat(130);
+    let code = format!(
+        "fn short() {{ 1 }}\ntrait T {{\n    fn declared(&self);\n}}\npub(crate) fn long(\n    a: u32,\n) -> u32 {{\n{body}    if a > 0 {{\n        a\n    }} else {{ 0 }}\n}}\n"
+    );
+    let found = function_lengths(&code);
+    assert_eq!(found, vec![("long".to_owned(), 5, 137)], "{found:?}");
 }
