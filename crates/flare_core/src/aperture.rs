@@ -21,7 +21,7 @@ pub const MAX_BLADES: u32 = 32;
 /// The largest f-number a stop may be set to, for every command, file and panel alike: a pinhole camera's
 /// f/200 to f/500 is within; beyond it the stop's radius underflows what the tracer resolves (issue 61: `bake
 /// --f-number 1e300` was accepted and baked for minutes).
-pub const MAX_F_NUMBER: f64 = 1024.0;
+pub(crate) const MAX_F_NUMBER: f64 = 1024.0;
 
 /// The largest edge radius the raster draws (a stop touching [-1, 1]^2's sides would be cut by its square).
 const EDGE_LIMIT: f64 = 0.999;

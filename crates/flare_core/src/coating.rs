@@ -32,11 +32,11 @@ pub struct Reflection {
 }
 
 /// The lowest index a practical single-layer coating has (MgF2).
-pub const MGF2_INDEX: f64 = 1.38;
+pub(crate) const MGF2_INDEX: f64 = 1.38;
 
 /// The layers a coating puts on an interface between indices `n_a` and `n_b`, listed from the surface
 /// outwards into the lower-index medium.
-pub fn coating_layers(coating: &Coating, n_a: f64, n_b: f64) -> Vec<CoatingLayer> {
+pub(crate) fn coating_layers(coating: &Coating, n_a: f64, n_b: f64) -> Vec<CoatingLayer> {
     match coating {
         Coating::Uncoated => Vec::new(),
         Coating::QuarterWave { design_wavelength_nm, layer_index } => {

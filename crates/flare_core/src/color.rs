@@ -2,12 +2,12 @@
 //!
 //! # How it works
 //! Every image FlareLab holds is linear Rec. 709 RGB (the OCIO working space
-//! [`crate::view_transform::WORKING_SPACE`]). Exposures are in stops (EV): a gain of `2^ev` ([`gain_from_ev`]).
+//! [`crate::view_transform::WORKING_SPACE`]). Exposures are in stops (EV): a gain of `2^ev` (`gain_from_ev`).
 //! A display value is made by the document's [`Tonemap`]: by default the OCIO display and view
-//! ([`crate::view_transform`]); else one of FlareLab's own curves in [`display_value`]: the linear value
+//! ([`crate::view_transform`]); else one of FlareLab's own curves in `display_value`: the linear value
 //! times its gain, the operator (clamp only, Reinhard `c / (1 + c)`, or Narkowicz's fit of the ACES filmic
 //! curve), a clamp to [0, 1] and, for 8-bit targets, the sRGB encoding. `shaders/tonemap.wgsl` does the same
-//! steps; [`crate::render::cpu::tonemap_pass`] is its CPU twin and calls these functions.
+//! steps; `crate::render::cpu::tonemap_pass` is its CPU twin and calls these functions.
 
 use serde::{Deserialize, Serialize};
 
@@ -17,17 +17,17 @@ pub fn luminance(rgb: [f64; 3]) -> f64 {
 }
 
 /// The linear gain of an exposure of `ev` stops (`2^ev`); a non-finite `ev` is 0 stops.
-pub fn gain_from_ev(ev: f64) -> f32 {
+pub(crate) fn gain_from_ev(ev: f64) -> f32 {
     if ev.is_finite() { ev.clamp(-64.0, 64.0).exp2() as f32 } else { 1.0 }
 }
 
 /// The sRGB encoding of a linear value in [0, 1].
-pub fn srgb_encode(c: f32) -> f32 {
+pub(crate) fn srgb_encode(c: f32) -> f32 {
     if c <= 0.0031308 { c * 12.92 } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 }
 }
 
 /// The linear value of an sRGB-encoded one in [0, 1].
-pub fn srgb_decode(v: f32) -> f32 {
+pub(crate) fn srgb_decode(v: f32) -> f32 {
     if v <= 0.04045 { v / 12.92 } else { ((v + 0.055) / 1.055).powf(2.4) }
 }
 
@@ -90,7 +90,7 @@ impl Tonemap {
 /// One linear, already exposed value to display by one of FlareLab's own curves: the operator, a clamp to
 /// [0, 1], and the sRGB encoding when `encode` is set. [`Tonemap::View`] works on whole colours
 /// ([`crate::render::cpu::tonemap_pixel`]); here it clamps only.
-pub fn display_value(v: f32, tonemap: Tonemap, encode: bool) -> f32 {
+pub(crate) fn display_value(v: f32, tonemap: Tonemap, encode: bool) -> f32 {
     let mut v = if v.is_finite() { v.max(0.0) } else { 0.0 };
     v = match tonemap {
         Tonemap::Aces => aces(v),

@@ -19,7 +19,7 @@
 //!   Vignetting by the elements behind the front one is neglected, as the paraxial ghosts neglect it. The mean
 //!   share over the footprint, `D(c)`, is the dirt convolved with the pupil's shape: the dirt seen out of
 //!   focus, each speck drawn as the aperture's shape. [`PreparedDirt::new`] computes it by FFT once per lens,
-//!   stop and pattern, on a [`DIRT_MAP_SIZE`]^2 grid over `[-L, L]^2`, `L = h_0 + r_EP` (beyond it D is 0: no
+//!   stop and pattern, on a `DIRT_MAP_SIZE`^2 grid over `[-L, L]^2`, `L = h_0 + r_EP` (beyond it D is 0: no
 //!   footprint there touches the element), kept in half floats as the GPU holds it.
 //! - **Scattering**: each dirty point scatters the share `s(p)` of the light falling on it (the light's
 //!   irradiance `cos(theta_s)` of 1 across its beam) into directions by a Henyey-Greenstein lobe about the
@@ -57,9 +57,9 @@ use crate::ghost::GhostSystem;
 use crate::starburst::fft_2d;
 
 /// Texels across the dirt map's side.
-pub const DIRT_MAP_SIZE: usize = 320;
+pub(crate) const DIRT_MAP_SIZE: usize = 320;
 /// Texels across a user's dirt image as kept (resampled from the file).
-pub const DIRT_IMAGE_SIZE: usize = 512;
+pub(crate) const DIRT_IMAGE_SIZE: usize = 512;
 /// The narrowest and widest scattering lobes (`dirt_spread_deg`, half width at half peak).
 pub const SPREAD_RANGE_DEG: (f64, f64) = (0.5, 60.0);
 
@@ -86,7 +86,7 @@ pub enum DirtError {
 
 impl DirtPattern {
     /// Loads a grey dirt image (PNG, JPEG, EXR or HDR, 1 to [`crate::output::MAX_IMAGE_SIDE_PX`] pixels a side,
-    /// read through [`crate::output::read_grey_square`]) resampled to [`DIRT_IMAGE_SIZE`]^2. An image that is black
+    /// read through `crate::output::read_grey_square`) resampled to `DIRT_IMAGE_SIZE`^2. An image that is black
     /// everywhere is refused: it holds no dirt.
     pub fn image_from_file(path: &Path) -> Result<Self, DirtError> {
         let luminance =
@@ -459,9 +459,9 @@ impl DirtKind {
 }
 
 /// The amount a fresh dirt pattern starts with: 1% scattered where the dirt is densest.
-pub const DEFAULT_DIRT_AMOUNT: f64 = 0.01;
+pub(crate) const DEFAULT_DIRT_AMOUNT: f64 = 0.01;
 /// The spread a fresh dirt pattern starts with (degrees).
-pub const DEFAULT_DIRT_SPREAD_DEG: f64 = 8.0;
+pub(crate) const DEFAULT_DIRT_SPREAD_DEG: f64 = 8.0;
 
 impl Default for DirtDoc {
     fn default() -> Self {

@@ -5,14 +5,14 @@
 //! [`auto_flare_ev`] lays out the paraxial sprites of every ghost (no culling) for one canonical light: on the
 //! frame's diagonal at half the lens's half-diagonal field of view (capped at 20 degrees), on the document's
 //! sensor. Each ghost's peak is its sprites' RGB irradiance summed over the wavelengths (they overlap), the
-//! largest channel; a ghost focused smaller than [`MIN_GHOST_FRACTION`] of the sensor's width counts as that
+//! largest channel; a ghost focused smaller than `MIN_GHOST_FRACTION` of the sensor's width counts as that
 //! size (its energy spread, as a photograph's small hot spots clip without deciding the exposure). The exposure
 //! is the one that puts the brightest such peak at [`AUTO_DISPLAY_LEVEL`] (linear, before the tonemap):
 //! `ev = log2(level / peak)`, or less when the ghosts' light spread over the frame (each sprite's irradiance
-//! times its square's share of the frame, summed) would lift the frame's mean above [`MAX_FRAME_MEAN`]: a
+//! times its square's share of the frame, summed) would lift the frame's mean above `MAX_FRAME_MEAN`: a
 //! lens with hundreds of large faint ghosts is not exposed into a wash. The result is bounded to the
 //! document's range of -40 to 40 stops. A lens with no ghost light
-//! at all (every entrance region empty) gets [`DEFAULT_FLARE_EV`].
+//! at all (every entrance region empty) gets `DEFAULT_FLARE_EV`.
 //!
 //! The exposure depends on the optics and the sensor width only, never on the light's position or a display
 //! setting: it is the same for every frame of a shot and the same in the app and on the command line.
@@ -21,20 +21,20 @@ use crate::ghost::{FrameSettings, GhostSystem};
 use crate::optics::sensor::Sensor;
 
 /// The default flare exposure (stops): a quarter-wave coated lens's ghosts (about 1e-4 of the light) show.
-pub const DEFAULT_FLARE_EV: f64 = 10.5;
+pub(crate) const DEFAULT_FLARE_EV: f64 = 10.5;
 
 /// The display level (linear, before the tonemap) the brightest ghost is exposed to.
 pub const AUTO_DISPLAY_LEVEL: f64 = 0.6;
 /// The most the ghosts may lift the frame's mean (linear display level): the background stays dark.
-pub const MAX_FRAME_MEAN: f64 = 0.05;
+pub(crate) const MAX_FRAME_MEAN: f64 = 0.05;
 /// Ghosts smaller than this fraction of the sensor width count as this size when judging the brightest.
-pub const MIN_GHOST_FRACTION: f64 = 0.02;
+pub(crate) const MIN_GHOST_FRACTION: f64 = 0.02;
 /// The canonical light's field angle is at most this.
 const MAX_CANONICAL_DEG: f64 = 20.0;
 
 /// The canonical light's field angle (degrees on the diagonal) for `system` on a sensor `sensor_width_mm`
 /// wide (3:2): half the lens's half-diagonal field, at most 20 degrees (`MAX_CANONICAL_DEG`).
-pub fn canonical_light_deg(system: &GhostSystem, sensor_width_mm: f64) -> f64 {
+pub(crate) fn canonical_light_deg(system: &GhostSystem, sensor_width_mm: f64) -> f64 {
     let half_diagonal_mm = 0.5 * sensor_width_mm * (1.0f64 + (2.0f64 / 3.0).powi(2)).sqrt();
     let efl = system.first_order.efl_mm.abs().max(1e-3);
     (0.5 * (half_diagonal_mm / efl).atan().to_degrees()).min(MAX_CANONICAL_DEG)
@@ -42,7 +42,7 @@ pub fn canonical_light_deg(system: &GhostSystem, sensor_width_mm: f64) -> f64 {
 
 /// What auto exposure judges, for the canonical light (see the module documentation).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct GhostLevels {
+pub(crate) struct GhostLevels {
     /// The brightest ghost's peak relative irradiance (0 when no ghost receives light).
     pub brightest_peak: f64,
     /// The ghosts' light spread over the frame: the mean relative irradiance they add to it (the haze that
@@ -52,7 +52,7 @@ pub struct GhostLevels {
 
 /// The brightest ghost's peak and the ghosts' mean over the frame for the canonical light (see the module
 /// documentation).
-pub fn ghost_levels(system: &GhostSystem, sensor_width_mm: f64) -> GhostLevels {
+pub(crate) fn ghost_levels(system: &GhostSystem, sensor_width_mm: f64) -> GhostLevels {
     let sensor = Sensor { width_mm: sensor_width_mm, height_mm: sensor_width_mm * 2.0 / 3.0 };
     let settings =
         FrameSettings { sensor, intensity_threshold: 0.0, min_half_size_mm: MIN_GHOST_FRACTION * sensor_width_mm };
@@ -77,7 +77,7 @@ pub fn ghost_levels(system: &GhostSystem, sensor_width_mm: f64) -> GhostLevels {
 }
 
 /// The flare exposure in stops that puts the brightest ghost at [`AUTO_DISPLAY_LEVEL`], or lower when the
-/// ghosts together would lift the whole frame above [`MAX_FRAME_MEAN`] (see the module documentation).
+/// ghosts together would lift the whole frame above `MAX_FRAME_MEAN` (see the module documentation).
 pub fn auto_flare_ev(system: &GhostSystem, sensor_width_mm: f64) -> f64 {
     let levels = ghost_levels(system, sensor_width_mm);
     if levels.brightest_peak <= 0.0 {

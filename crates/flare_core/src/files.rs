@@ -1,6 +1,6 @@
 //! Files written whole and read within bounds: every file FlareLab writes (images, presets, lenses, LUTs) goes
 //! through [`write_atomic`], and every text file it reads (presets, tracks, glass catalogues, sidecars)
-//! through [`read_bounded`].
+//! through `read_bounded`.
 //!
 //! # How it works
 //! The bytes go to a temporary file in the target's folder, are flushed to disk, and the temporary file is
@@ -8,10 +8,10 @@
 //! or the new one, never half of one; on an error the temporary file is removed and the target is untouched.
 //! A target that exists and is not a regular file (a FIFO, a device, a folder) is refused, never replaced; a
 //! symbolic link is written through (its target replaced, the link kept). Temporary files are named
-//! `.flarelab-tmp-PID-*`, so what a killed process left behind is recognised and removed ([`remove_stale_temps`])
+//! `.flarelab-tmp-PID-*`, so what a killed process left behind is recognised and removed (`remove_stale_temps`)
 //! by the next write into that folder: at once when that process is gone, else once it is an hour old. A read takes at most `max_bytes + 1` bytes,
 //! whatever the file claims to be (an endless FIFO or `/dev/zero` ends there with an error), and
-//! [`shorten`] puts a token from a file into a message at most [`TOKEN_CHARS`] characters long, control
+//! [`shorten`] puts a token from a file into a message at most `TOKEN_CHARS` characters long, control
 //! characters escaped.
 
 use std::io::Write;
@@ -129,7 +129,7 @@ fn plain(e: std::io::Error) -> std::io::Error {
 }
 
 /// The name every temporary file of [`write_atomic`] starts with.
-pub const TEMP_PREFIX: &str = ".flarelab-tmp-";
+pub(crate) const TEMP_PREFIX: &str = ".flarelab-tmp-";
 
 /// What a non-regular file is, in words.
 fn kind_of(meta: &std::fs::Metadata) -> &'static str {
@@ -154,7 +154,7 @@ fn kind_of(meta: &std::fs::Metadata) -> &'static str {
 /// process named in the file (`.flarelab-tmp-PID-...`) is no longer running (Linux: no `/proc/PID`), else once
 /// older than `age` (another system, or a process id used again). Returns how many. Anything else in the folder
 /// is left alone, and a failure removes nothing more.
-pub fn remove_stale_temps(dir: &Path, age: std::time::Duration) -> usize {
+pub(crate) fn remove_stale_temps(dir: &Path, age: std::time::Duration) -> usize {
     let Ok(entries) = std::fs::read_dir(dir) else { return 0 };
     let now = std::time::SystemTime::now();
     let mut removed = 0;
@@ -177,12 +177,12 @@ pub fn remove_stale_temps(dir: &Path, age: std::time::Duration) -> usize {
 
 /// The most bytes a text input (a preset, a track, a glass catalogue, a sidecar) may have: 64 MiB, far above
 /// any real one (the largest shipped catalogue is under 1 MB).
-pub const MAX_TEXT_BYTES: u64 = 64 * 1024 * 1024;
+pub(crate) const MAX_TEXT_BYTES: u64 = 64 * 1024 * 1024;
 
 /// Opens `path` for reading if it is a regular file (links followed). A folder, a FIFO, a socket or a device is
 /// refused before it is opened: opening a FIFO blocks until a writer comes, forever for a hostile input (issue
 /// 61: a lens, a preset, a `.cube` or an OCIO config given as a FIFO hung the program in `open()`).
-pub fn open_regular(path: &Path) -> Result<std::fs::File, String> {
+pub(crate) fn open_regular(path: &Path) -> Result<std::fs::File, String> {
     let fail = |e: std::io::Error| format!("cannot read {}: {e}", path.display());
     let meta = std::fs::metadata(path).map_err(fail)?;
     if meta.is_dir() {
@@ -196,7 +196,7 @@ pub fn open_regular(path: &Path) -> Result<std::fs::File, String> {
 
 /// Reads `path` whole if it has at most `max_bytes`: at most `max_bytes + 1` bytes are ever read, whatever
 /// the file claims (a FIFO or a device reports no length). The error is one line with the path.
-pub fn read_bounded(path: &Path, max_bytes: u64) -> Result<Vec<u8>, String> {
+pub(crate) fn read_bounded(path: &Path, max_bytes: u64) -> Result<Vec<u8>, String> {
     use std::io::Read;
     let fail = |e: std::io::Error| format!("cannot read {}: {e}", path.display());
     let file = open_regular(path)?;
@@ -212,7 +212,7 @@ pub fn read_bounded(path: &Path, max_bytes: u64) -> Result<Vec<u8>, String> {
     Ok(data)
 }
 
-/// [`read_bounded`] as UTF-8 text.
+/// `read_bounded` as UTF-8 text.
 pub fn read_text_bounded(path: &Path, max_bytes: u64) -> Result<String, String> {
     let bytes = read_bounded(path, max_bytes)?;
     String::from_utf8(bytes)
@@ -223,7 +223,7 @@ fn too_large(path: &Path, max_bytes: u64) -> String {
     format!("{} is larger than {} MiB, the most this file may be: not read", path.display(), max_bytes >> 20)
 }
 
-/// `text` with every number longer than [`TOKEN_CHARS`] characters written short (`1.000e302`, or cut as
+/// `text` with every number longer than `TOKEN_CHARS` characters written short (`1.000e302`, or cut as
 /// [`shorten`] cuts): a value echoed from a file (a 302-digit `semi_aperture`, issue 61) keeps a message to a
 /// line. Shorter numbers, paths and words are left as they are.
 pub fn shorten_numbers(text: &str) -> String {
@@ -275,7 +275,7 @@ pub fn clean(message: &str) -> String {
 }
 
 /// [`clean`], then at most 400 characters (a parser's own message may quote a whole value).
-pub fn one_line(message: &str) -> String {
+pub(crate) fn one_line(message: &str) -> String {
     let cleaned = clean(message);
     match cleaned.char_indices().nth(400) {
         Some((at, _)) => format!("{}...", &cleaned[..at]),
@@ -284,9 +284,9 @@ pub fn one_line(message: &str) -> String {
 }
 
 /// The most characters of a token from a file that a message quotes.
-pub const TOKEN_CHARS: usize = 40;
+pub(crate) const TOKEN_CHARS: usize = 40;
 
-/// `token` for a message: at most [`TOKEN_CHARS`] characters (longer ones cut, saying how long they were),
+/// `token` for a message: at most `TOKEN_CHARS` characters (longer ones cut, saying how long they were),
 /// control characters escaped, so a hostile file cannot flood or garble the terminal.
 pub fn shorten(token: &str) -> String {
     let count = token.chars().count();

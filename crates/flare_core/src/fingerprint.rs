@@ -6,14 +6,14 @@
 //! ([`of`]). Unlike `Debug` text (not a stable format) or `std`'s hasher (which may change between Rust
 //! releases), both are fixed: serde_json writes fields in declaration order and floats by the shortest
 //! round-trip digits, so equal values give equal bytes on every machine and build, and a fingerprint written
-//! into a file today is still comparable tomorrow. [`SCHEME`] names this rule; a file that stores a
+//! into a file today is still comparable tomorrow. `SCHEME` names this rule; a file that stores a
 //! fingerprint also stores the scheme, so one made by another rule is recognised and refused with a reason
 //! instead of being compared.
 
 use serde::Serialize;
 
 /// The fingerprint rule (canonical JSON, FNV-1a 64). Files made before it carried none.
-pub const SCHEME: u32 = 2;
+pub(crate) const SCHEME: u32 = 2;
 
 /// FNV-1a's offset basis.
 pub const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
@@ -29,7 +29,7 @@ pub fn fnv1a(bytes: &[u8], mut hash: u64) -> u64 {
 
 /// A number no other call in this process returns: the identity of something built once and never changed
 /// (a prepared flare, a loaded LUT), for caches that must tell a new one from an old one at the same address.
-pub fn unique_id() -> u64 {
+pub(crate) fn unique_id() -> u64 {
     static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
     NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
 }

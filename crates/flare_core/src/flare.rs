@@ -82,7 +82,7 @@ pub struct PreparedFlare {
     pub starburst_texture: StarburstTexture,
     /// The front dirt seen through this stop (`None`: a clean lens).
     pub dirt: Option<PreparedDirt>,
-    /// This flare's identity ([`crate::fingerprint::unique_id`]; a clone keeps it): what a GPU drawer checks
+    /// This flare's identity (`crate::fingerprint::unique_id`; a clone keeps it): what a GPU drawer checks
     /// before uploading the mask and the starburst again.
     pub id: u64,
 }
@@ -210,7 +210,7 @@ impl PreparedFlare {
 }
 
 impl PreparedFlare {
-    /// The ray-traced renderer of this lens and its settings ([`ray_grid_setup`]).
+    /// The ray-traced renderer of this lens and its settings (`ray_grid_setup`).
     pub fn ray_grid_renderer(&self) -> crate::raytrace::RayGridRenderer {
         crate::raytrace::RayGridRenderer::new(ray_grid_setup(&self.system), self.mask())
     }
@@ -219,7 +219,7 @@ impl PreparedFlare {
 /// What the ray tracer needs of a ghost system: the lens and its settings, each ghost's surfaces and stop
 /// crossings, and the paraxial entrance region as the hint of where to look when no coarse ray passes. The
 /// ray tracer itself depends only on the optics, the coatings and the aperture.
-pub fn ray_grid_setup(system: &GhostSystem) -> crate::raytrace::RayGridSetup {
+pub(crate) fn ray_grid_setup(system: &GhostSystem) -> crate::raytrace::RayGridSetup {
     let ghosts = system
         .ghosts
         .iter()

@@ -1,6 +1,6 @@
 //! One frame, drawn the same everywhere: the app's viewport and export, `flarelab render`, the benchmark and the
 //! tests all turn a [`FrameRequest`] into a [`Frame`], draw it with one GPU entry point or its CPU twin
-//! ([`Device`]), and write it with one writer ([`crate::output::write_frame`]).
+//! ([`Device`]), and write it with one writer (`crate::output::write_frame`).
 //!
 //! # How it works
 //! A [`FrameRequest`] is everything that decides a frame besides the prepared optics: the light's position
@@ -96,18 +96,18 @@ pub struct FrameRequest {
 /// delivered frame without desqueeze took 102 (CPU twin) and 124 (lavapipe) bytes a pixel from 1024x1024 to
 /// 8192x4320 (3.70 and 4.32 GB there); desqueezed by 4 at 4096x2160 (a 4096x8640 sensor) 1.27 and 1.95 GB,
 /// which puts the sensor's share at 9 and 22 bytes a pixel and the delivered share at 93 and 102.
-pub const SENSOR_BYTES_PER_PX: u64 = 32;
+pub(crate) const SENSOR_BYTES_PER_PX: u64 = 32;
 /// See [`SENSOR_BYTES_PER_PX`].
-pub const DELIVERED_BYTES_PER_PX: u64 = 100;
+pub(crate) const DELIVERED_BYTES_PER_PX: u64 = 100;
 /// What a plate keeps per pixel of the frame: its decoded RGBA floats and the copy the frame reads.
-pub const PLATE_BYTES_PER_PX: u64 = 32;
+pub(crate) const PLATE_BYTES_PER_PX: u64 = 32;
 /// The most memory one frame may need (bytes): 6 GiB, an 8192x4320 frame with room (about 4.7 GB), and less
 /// where the machine has less available ([`available_memory_bytes`]).
-pub const MAX_FRAME_BYTES: u64 = 6 << 30;
+pub(crate) const MAX_FRAME_BYTES: u64 = 6 << 30;
 
 /// The memory a frame delivered at `width` x `height`, desqueezed by `desqueeze`, needs at most while it is
 /// drawn and written, with a plate when `plate` (bytes; see [`SENSOR_BYTES_PER_PX`]).
-pub fn frame_memory_bytes(width: u32, height: u32, desqueeze: f64, plate: bool) -> u64 {
+pub(crate) fn frame_memory_bytes(width: u32, height: u32, desqueeze: f64, plate: bool) -> u64 {
     let (w, h) = sensor_pixels(width, height, desqueeze);
     let sensor = u64::from(w) * u64::from(h);
     let delivered = u64::from(width) * u64::from(height);
@@ -136,7 +136,7 @@ pub fn usable_memory_bytes(available: u64) -> u64 {
     available / 10 * 9
 }
 
-/// Refuses a frame (see [`frame_memory_bytes`]) that would need more than [`MAX_FRAME_BYTES`] or than nine
+/// Refuses a frame (see `frame_memory_bytes`) that would need more than `MAX_FRAME_BYTES` or than nine
 /// tenths of the memory available now, naming both figures, before any work. Issue 61: `--size 8192x8192`, a
 /// black 8192x8192 PNG plate or `--desqueeze 4` aborted at 5.1-5.4 GB when memory ran out.
 pub fn check_frame_memory(width: u32, height: u32, desqueeze: f64, plate: bool) -> Result<(), FrameError> {
@@ -253,7 +253,7 @@ pub struct Frame {
     pub draft: Option<DraftOutcome>,
     /// When the light moves while the shutter is open: how the shutter was sampled ([`crate::shutter`]).
     pub shutter: Option<ShutterSamples>,
-    /// The share of the light the front dirt takes at the frame's own time ([`dirt_share`]; 0: a clean lens):
+    /// The share of the light the front dirt takes at the frame's own time (`dirt_share`; 0: a clean lens):
     /// what a ray-traced method's ghosts are dimmed by, as the sprites are.
     pub dirt_taken: f64,
 }
@@ -426,7 +426,7 @@ fn sharp(
 
 /// The share of the light of slopes `u` that the front dirt takes from the image and every ghost (0 for a clean
 /// lens or an amount of 0).
-pub fn dirt_share(flare: &PreparedFlare, u: [f64; 2], display: &DisplaySettings) -> f64 {
+pub(crate) fn dirt_share(flare: &PreparedFlare, u: [f64; 2], display: &DisplaySettings) -> f64 {
     flare.dirt.as_ref().map_or(0.0, |d| d.taken_share(&flare.system, u, display.dirt_amount))
 }
 
@@ -463,7 +463,7 @@ impl Drawn {
 
 /// The linear layers of a frame whose accumulation is `hdr` (no ghost layers; see [`ghost_layers`]): what an
 /// EXR holds, and all it needs of a drawn frame.
-pub fn linear_layers(frame: &Frame, sources: &Sources, hdr: &HdrImage) -> FrameLayers {
+pub(crate) fn linear_layers(frame: &Frame, sources: &Sources, hdr: &HdrImage) -> FrameLayers {
     let scene = &frame.scene;
     let flare = cpu::flare_layer(scene, hdr);
     // A frame without a starburst writes its layer black (the layers are the same in every file).
@@ -678,7 +678,7 @@ pub fn drawn_with_traced_ghosts(frame: &Frame, sources: &Sources, ghosts: HdrIma
 }
 
 /// [`drawn_with_traced_ghosts`]'s accumulation alone (no tonemap pass): what an EXR of it is written from.
-pub fn linear_with_traced_ghosts(frame: &Frame, sources: &Sources, ghosts: HdrImage) -> HdrImage {
+pub(crate) fn linear_with_traced_ghosts(frame: &Frame, sources: &Sources, ghosts: HdrImage) -> HdrImage {
     let scene = &frame.scene;
     let mut hdr = traced_accumulation(frame, &ghosts);
     cpu::starburst_pass(scene, &sources.flare.starburst_texture, &mut hdr);
@@ -697,7 +697,7 @@ pub fn traced_accumulation(frame: &Frame, ghosts: &HdrImage) -> HdrImage {
 
 /// The gain a frame's traced ghosts are multiplied by: the light's, less the front dirt's share (0 for a light
 /// gain that is not finite).
-pub fn traced_light_gain(frame: &Frame) -> f32 {
+pub(crate) fn traced_light_gain(frame: &Frame) -> f32 {
     let mut light_gain =
         if frame.request.light_gain.is_finite() { frame.request.light_gain.max(0.0) as f32 } else { 0.0 };
     if frame.dirt_taken > 0.0 {
@@ -720,7 +720,7 @@ pub fn draw_cpu_hdr(frame: &Frame, sources: &Sources) -> HdrImage {
 
 /// Where ghost layers go as they are made: each layer's name and image, once (the writer keeps only its
 /// channels).
-pub type LayerSink<'a> = dyn FnMut(String, HdrImage) + 'a;
+pub(crate) type LayerSink<'a> = dyn FnMut(String, HdrImage) + 'a;
 
 /// One layer per ghost the frame draws (`ghost_I_J`, surfaces I < J), each drawn alone on `device` and
 /// multiplied by the flare's gain.
@@ -736,7 +736,7 @@ pub fn ghost_layers(
 
 /// [`ghost_layers`] handed to `sink` one at a time (refused first when they would not fit
 /// [`MAX_GHOST_LAYER_BYTES`] stored as `pixel` says).
-pub fn ghost_layers_into(
+pub(crate) fn ghost_layers_into(
     device: &mut Device,
     frame: &Frame,
     sources: &Sources,
@@ -756,18 +756,18 @@ pub fn ghost_layers_into(
 
 /// The most memory the ghost layers of one file may take while it is written (bytes): 3 GiB (the default
 /// zoom's 254 ghost layers at 1920x1080 take 3.2 GB).
-pub const MAX_GHOST_LAYER_BYTES: u64 = 3 << 30;
+pub(crate) const MAX_GHOST_LAYER_BYTES: u64 = 3 << 30;
 
 /// What one ghost layer keeps per pixel at most: its EXR channels (RGB, 6 bytes in half, 12 in float), made
 /// as soon as it is drawn ([`crate::output::ExrLayers::add_ghost`], cropped to its lit pixels, which is
 /// usually far less; only the layer being drawn has a float image). [`ExrPixel::Auto`] counts half: a ghost
 /// layer has values beyond half's range only at exposures that turn the frame white.
-pub fn ghost_layer_bytes_per_px(pixel: ExrPixel) -> u64 {
+pub(crate) fn ghost_layer_bytes_per_px(pixel: ExrPixel) -> u64 {
     if pixel == ExrPixel::Float { 12 } else { 6 }
 }
 
 /// Refuses `count` ghost layers of `width` x `height` stored as `pixel` when they could need more than
-/// [`MAX_GHOST_LAYER_BYTES`], naming what they need and the ways out.
+/// `MAX_GHOST_LAYER_BYTES`, naming what they need and the ways out.
 pub fn check_ghost_layers(count: usize, width: u32, height: u32, pixel: ExrPixel) -> Result<(), FrameError> {
     let need = count as u64 * u64::from(width) * u64::from(height) * ghost_layer_bytes_per_px(pixel);
     if need > MAX_GHOST_LAYER_BYTES {
@@ -782,7 +782,7 @@ pub fn check_ghost_layers(count: usize, width: u32, height: u32, pixel: ExrPixel
 }
 
 /// The EXR layer name of ghost (i, j): `ghost_I_J`.
-pub fn ghost_layer_name(i: usize, j: usize) -> String {
+pub(crate) fn ghost_layer_name(i: usize, j: usize) -> String {
     format!("ghost_{i}_{j}")
 }
 
@@ -846,7 +846,7 @@ pub fn draw_for_file(
 }
 
 /// Writes a frame drawn by [`draw_for_file`] to `path` through the one writer ([`write_drawn`] or
-/// [`write_linear_with`]), its ghost layers drawn on `device` when `choice` asks for them.
+/// `write_linear_with`), its ghost layers drawn on `device` when `choice` asks for them.
 pub fn write_made(
     device: &mut Device,
     frame: &Frame,
@@ -862,7 +862,7 @@ pub fn write_made(
 
 /// [`write_made`] with the ghost layers from `ghost_layers` (called only for an EXR file): the drawn ghosts on a
 /// device, or ray-traced ones ([`crate::traced::TracedGhosts::write_made`]).
-pub fn write_made_with(
+pub(crate) fn write_made_with(
     frame: &Frame,
     sources: &Sources,
     made: &Made,
@@ -904,7 +904,7 @@ fn asked_ghost_layers(
 
 /// [`write_drawn`] with the ghost layers from `ghost_layers` (called only for an EXR file): the drawn ghosts
 /// on a device, or ray-traced ones ([`crate::traced::TracedGhosts::write`]).
-pub fn write_drawn_with(
+pub(crate) fn write_drawn_with(
     frame: &Frame,
     sources: &Sources,
     drawn: &Drawn,
@@ -922,7 +922,7 @@ pub fn write_drawn_with(
 /// Writes the EXR of a frame whose accumulation is `hdr` ([`linear_layers`], then the ghost layers from
 /// `ghost_layers`): what [`write_drawn_with`] does for an EXR, for a frame drawn without its display image
 /// ([`Device::draw_linear`], [`linear_with_traced_ghosts`]).
-pub fn write_linear_with(
+pub(crate) fn write_linear_with(
     frame: &Frame,
     sources: &Sources,
     hdr: &HdrImage,

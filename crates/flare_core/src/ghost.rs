@@ -10,13 +10,13 @@
 //!   `-B_k u / A_k` and radius `r_a / |A_k|` (the patent's `r_e = (r_a - M_a12 theta_e) / M_a11`), and so does
 //!   every crossing of every other surface's clear aperture `a` (the front lens's first, then the middle
 //!   groups', the reflecting surfaces' too), with radius `a / |A|` from its own entrance-to-arrival matrix
-//!   ([`Disc`]). The region is their intersection: empty (culled) when two discs miss each other. A ghost
+//!   (`Disc`). The region is their intersection: empty (culled) when two discs miss each other. A ghost
 //!   whose reflections straddle the stop crosses it three times and gets all three stop discs. Off axis the
 //!   discs slide apart by `|c_k - c_m| |u|`, so the region is cut into the cat's eyes and lemons of real
 //!   lenses. A clear aperture cuts only where it does not hold another disc: at rebuild each disc gets the
-//!   slope below which it holds one ([`Disc::redundant_below_slope`]), and per frame
+//!   slope below which it holds one (`Disc::redundant_below_slope`), and per frame
 //!   [`GhostSystem::sprite_masks`] keeps the discs that cut the sprite's quad at this light, at most
-//!   [`MAX_DISCS`] (when more cut, those that cut the most of a 16 x 16 grid of the quad; the rest are counted).
+//!   `MAX_DISCS` (when more cut, those that cut the most of a 16 x 16 grid of the quad; the rest are counted).
 //!   A crossing with `A = 0` passes a ray only while `|B u| <= a`: it empties the region past that slope.
 //! - **Sprite**: the smallest of those discs, centre E and radius rho, bounds the region; mapped to the
 //!   sensor it gives the sprite's centre `C = A_f E + B_f u` and signed half-size `S = A_f rho` (the flare
@@ -35,7 +35,7 @@
 //!   infinity) another disc bounds the region (the front lens's at least) and nothing divides by zero.
 //! - **Reflectance**: each reflection's angle of incidence is paraxial, `i = u + s c y` for the ray through the
 //!   region's centre E, linear in E and the light's slope; the reflectance of each (surface, side, wavelength) is
-//!   tabulated at rebuild over sin^2(i) in [0, 1] ([`REFLECTANCE_SAMPLES`] samples, linear interpolation) from
+//!   tabulated at rebuild over sin^2(i) in [0, 1] (`REFLECTANCE_SAMPLES` samples, linear interpolation) from
 //!   [`crate::coating`], so a frame costs a few multiplications per sprite.
 //! - **Skipping**: sprites that fall entirely off the sensor or whose entrance region is empty are culled, and
 //!   so are the faintest ones, as many as can go while their peak colours sum to at most the threshold (so
@@ -65,7 +65,7 @@ use crate::optics::{Coating, FirstOrder, Lens, LightPath, Mat2, ParaxialError, P
 use crate::spectrum::Spectrum;
 
 /// Samples of each reflectance table over sin^2(i) in [0, 1].
-pub const REFLECTANCE_SAMPLES: usize = 33;
+pub(crate) const REFLECTANCE_SAMPLES: usize = 33;
 
 /// Settings that change the ghosts without changing the lens geometry.
 #[derive(Clone, Debug, PartialEq)]
@@ -164,13 +164,13 @@ impl FrameCoefficients {
 
 /// The most clear-aperture discs a sprite's masks carry ([`SpriteMasks::discs`]): those that cut the sprite's
 /// region most at the frame's light. The rest are counted in [`SpriteMasks::discs_left_out`].
-pub const MAX_DISCS: usize = 4;
+pub(crate) const MAX_DISCS: usize = 4;
 
 /// One crossing of a clear aperture (a surface other than the stop) by a ghost path at one wavelength: the rays
 /// that pass it form, in the entrance plane, the disc of centre `centre_per_slope * u` and radius `radius_mm`
 /// (`-B u / A` and `a / |A|` from the entrance-to-arrival matrix `[[A, B], ..]` and the semi-aperture `a`).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Disc {
+pub(crate) struct Disc {
     /// The surface crossed.
     pub surface: usize,
     pub centre_per_slope: f64,
@@ -345,7 +345,7 @@ pub struct SpriteMasks {
     /// The surface of each disc.
     pub disc_surfaces: [usize; MAX_DISCS],
     pub disc_count: usize,
-    /// Cutting discs beyond [`MAX_DISCS`], left out (the region drawn is then a little larger than the lens's).
+    /// Cutting discs beyond `MAX_DISCS`, left out (the region drawn is then a little larger than the lens's).
     pub discs_left_out: usize,
     /// Quad coordinate q -> entrance-plane point (mm): the region's bounding disc's centre E and radius rho per
     /// axis (`x0 = E + rho q`).
@@ -371,7 +371,7 @@ impl SpriteMasks {
 
 /// The surfaces whose clear apertures cut any of the sprites `masks` belong to ([`SpriteMasks::cutting_surfaces`]),
 /// in increasing order, each once.
-pub fn surfaces_cutting(masks: impl IntoIterator<Item = SpriteMasks>) -> Vec<usize> {
+pub(crate) fn surfaces_cutting(masks: impl IntoIterator<Item = SpriteMasks>) -> Vec<usize> {
     let mut surfaces: Vec<usize> = masks.into_iter().flat_map(|m| m.cutting_surfaces().to_vec()).collect();
     surfaces.sort_unstable();
     surfaces.dedup();
@@ -392,7 +392,7 @@ fn disc_map(discs: [&Disc; 2], region: &MaskMap, u: [f64; 2]) -> MaskMap {
 
 /// How far from its centre a mask map reaches over the quad [-1, 1]^2: a disc map reaching at most 1 holds the
 /// whole quad.
-pub fn map_reach(map: &MaskMap) -> f64 {
+pub(crate) fn map_reach(map: &MaskMap) -> f64 {
     (map.offset[0].abs() + map.scale[0].abs()).hypot(map.offset[1].abs() + map.scale[1].abs())
 }
 
@@ -923,7 +923,7 @@ impl GhostSystem {
     }
 
     /// The surfaces whose clear apertures cut lens ghost `g`'s sprites (every wavelength's) at light slope `u`
-    /// ([`surfaces_cutting`] of their [`Self::sprite_masks`]).
+    /// (`surfaces_cutting` of their [`Self::sprite_masks`]).
     pub fn cutting_surfaces(&self, g: usize, u: [f64; 2]) -> Vec<usize> {
         let wavelengths = self.settings.spectrum.len();
         surfaces_cutting((g * wavelengths..(g + 1) * wavelengths).map(|k| self.sprite_masks(k, u)))
@@ -931,8 +931,8 @@ impl GhostSystem {
 
     /// The masks of the `k`-th sprite of a frame (sprites come ghost by ghost, wavelength by wavelength) for
     /// light slope `u`: computed only for the sprites that are drawn. Of the sprite's clear-aperture discs, those
-    /// that hold another of its discs at this light ([`Disc::redundant_below_slope`]) or the whole quad cannot
-    /// cut and are left out; when more than [`MAX_DISCS`] remain, those that cut the most points of a 16 x 16 grid
+    /// that hold another of its discs at this light (`Disc::redundant_below_slope`) or the whole quad cannot
+    /// cut and are left out; when more than `MAX_DISCS` remain, those that cut the most points of a 16 x 16 grid
     /// over the quad are kept, one by one.
     pub fn sprite_masks(&self, k: usize, u: [f64; 2]) -> SpriteMasks {
         // x from the x-z section's coefficients (the same ones for a lens of revolution), y from these.

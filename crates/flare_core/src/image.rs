@@ -7,14 +7,14 @@
 //! accumulation drawn at a fraction of the frame is brought to the frame's size ([`HdrImage::resampled`]) and
 //! how a background plate of any size is laid under the frame. [`DisplayImage`] is what a PNG holds: 8-bit
 //! sRGB. [`GhostMoments`] is one ghost's luminance-weighted energy and first moments, gathered by the
-//! renderers and compared by [`crate::metrics`]. [`finite_half`] is how every value bound for a 16-bit GPU
+//! renderers and compared by [`crate::metrics`]. `finite_half` is how every value bound for a 16-bit GPU
 //! texture is made one.
 
 use rayon::prelude::*;
 
 /// `v` as a 16-bit float a GPU texture may hold: what is not finite becomes 0, and what lies beyond f16's range
 /// its largest value of that sign (never an infinity).
-pub fn finite_half(v: f32) -> half::f16 {
+pub(crate) fn finite_half(v: f32) -> half::f16 {
     if v.is_finite() { half::f16::from_f32(v.clamp(-65504.0, 65504.0)) } else { half::f16::ZERO }
 }
 

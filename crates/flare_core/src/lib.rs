@@ -77,6 +77,7 @@ pub use flare::{FlareConfig, PreparedFlare};
 pub use frame::{Device, Drawn, Frame, FrameLayers, FrameRequest, LayerChoice, LutUse, Sources};
 pub use image::{DisplayImage, HdrImage};
 pub use optics::Lens;
-pub use output::{ImageKind, read_plate, write_frame};
+
+pub use output::{ImageKind, read_plate};
 pub use preset::Document;
 pub use render::DisplaySettings;

@@ -7,9 +7,9 @@
 //!   luminance maps to 1.0 before tonemapping (the maximum when that percentile is 0; 1 for a black
 //!   reference), and the same exposure is applied to the image under test;
 //! - **display values**: exposure, ACES tonemap and sRGB encoding exactly as the renderer's tonemap pass
-//!   ([`crate::color::display_value`], which the tonemap shader's CPU twin calls), kept as floats in [0, 1] (no 8-bit rounding);
+//!   (`crate::color::display_value`, which the tonemap shader's CPU twin calls), kept as floats in [0, 1] (no 8-bit rounding);
 //! - **PSNR** over the three display channels of every pixel, `10 log10(1 / MSE)`, capped at
-//!   [`PSNR_CAP_DB`] (identical images);
+//!   `PSNR_CAP_DB` (identical images);
 //! - **SSIM** (Wang et al. 2004) on the display luma `0.2126 R' + 0.7152 G' + 0.0722 B'`, an 11 x 11 Gaussian
 //!   window of sigma 1.5, K1 = 0.01, K2 = 0.03, dynamic range 1, averaged over every window that fits inside
 //!   the image;
@@ -17,7 +17,7 @@
 //!   exposure;
 //! - **centroid error**: per ghost, the distance in pixels between the luminance-weighted centroids of its light
 //!   in the frame in the two images ([`GhostMoments`], gathered while rendering), over the ghosts holding at
-//!   least [`CENTROID_MIN_FRACTION`] of the brightest ghost's in-frame energy in the reference; the median is
+//!   least `CENTROID_MIN_FRACTION` of the brightest ghost's in-frame energy in the reference; the median is
 //!   reported.
 
 pub use crate::color::luminance;
@@ -26,10 +26,10 @@ pub use crate::image::GhostMoments;
 use crate::image::HdrImage;
 
 /// PSNR of identical images.
-pub const PSNR_CAP_DB: f64 = 100.0;
+pub(crate) const PSNR_CAP_DB: f64 = 100.0;
 /// Ghosts dimmer than this fraction of the brightest (in-frame energy, reference) are left out of the
 /// centroid error.
-pub const CENTROID_MIN_FRACTION: f64 = 0.01;
+pub(crate) const CENTROID_MIN_FRACTION: f64 = 0.01;
 
 /// The exposure that maps the reference's 99.9th-percentile pixel luminance to 1.0 (see the module docs).
 pub fn exposure_for(reference: &HdrImage) -> f32 {
@@ -53,7 +53,7 @@ pub fn display_values(image: &HdrImage, exposure: f32) -> Vec<[f32; 3]> {
     image.pixels.iter().map(|p| [p[0], p[1], p[2]].map(|v| display_value(v * exposure, Tonemap::Aces, true))).collect()
 }
 
-/// PSNR in dB between two display images of the same size (capped at [`PSNR_CAP_DB`]).
+/// PSNR in dB between two display images of the same size (capped at `PSNR_CAP_DB`).
 pub fn psnr(test: &[[f32; 3]], reference: &[[f32; 3]]) -> f64 {
     assert_eq!(test.len(), reference.len(), "PSNR needs images of one size");
     let n = (test.len() * 3).max(1) as f64;
@@ -151,7 +151,7 @@ pub fn relative_l1(test: &HdrImage, reference: &HdrImage) -> f64 {
 
 /// Per-ghost centroid distances (pixels) over the ghosts that matter in the reference (see the module docs);
 /// a ghost with no light in the frame in the test image is counted at the frame's diagonal.
-pub fn centroid_errors(test: &[GhostMoments], reference: &[GhostMoments], diagonal_px: f64) -> Vec<f64> {
+pub(crate) fn centroid_errors(test: &[GhostMoments], reference: &[GhostMoments], diagonal_px: f64) -> Vec<f64> {
     let brightest = reference.iter().map(|m| m.energy).fold(0.0, f64::max);
     if brightest <= 0.0 {
         return Vec::new();

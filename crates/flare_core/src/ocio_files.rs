@@ -7,16 +7,16 @@
 //! removes. Before it does any of that, [`load`] reads the config itself:
 //! - **The YAML as events** ([`check_config_text`], `yaml-rust2`'s parser, which never expands an alias): the
 //!   nodes the tree would have once every alias is expanded are counted (an anchor's subtree counted once, each
-//!   alias adding that count) and a config past [`MAX_YAML_NODES`] is refused. A 1.2 KB "billion laughs"
+//!   alias adding that count) and a config past `MAX_YAML_NODES` is refused. A 1.2 KB "billion laughs"
 //!   config once expanded to 5.7 GB and aborted the process.
 //! - **The files it names**: every `src` (a FileTransform's file) is resolved as OCIO resolves it, absolute, or
 //!   relative to each `search_path` entry (itself relative to the config's folder), and every such file that
-//!   exists must be a regular file (a FIFO would block OCIO's read forever) of at most [`MAX_LUT_FILE_BYTES`]
-//!   (a 3 GB sparse `.cube` once aborted the process). At most [`MAX_NAMED_FILES`] files are named. A name
+//!   exists must be a regular file (a FIFO would block OCIO's read forever) of at most `MAX_LUT_FILE_BYTES`
+//!   (a 3 GB sparse `.cube` once aborted the process). At most `MAX_NAMED_FILES` files are named. A name
 //!   holding a context variable (`$SHOT`) cannot be resolved here and is refused.
 //! - **Archives**: a `.ocioz` is extracted by [`load`] itself into a private folder ([`tempfile::TempDir`]):
-//!   at most [`MAX_ARCHIVE_ENTRIES`] entries, each at most [`MAX_LUT_FILE_BYTES`] and all together at most
-//!   [`MAX_ARCHIVE_BYTES`] as read (the sizes an archive declares are not trusted), names that would leave the
+//!   at most `MAX_ARCHIVE_ENTRIES` entries, each at most `MAX_LUT_FILE_BYTES` and all together at most
+//!   `MAX_ARCHIVE_BYTES` as read (the sizes an archive declares are not trusted), names that would leave the
 //!   folder refused; its `config.ocio` is then checked as above and loaded from there. The folder lives as
 //!   long as the [`LoadedConfig`] and is removed with it (an 816 KB archive once left 800 MB in `$TMPDIR` per
 //!   use).
@@ -30,15 +30,15 @@ use yaml_rust2::parser::{Event, Parser};
 
 /// The most nodes a config's YAML may have once its aliases are expanded: far above any real config (the
 /// ACES studio config has about 20,000).
-pub const MAX_YAML_NODES: u64 = 1_000_000;
+pub(crate) const MAX_YAML_NODES: u64 = 1_000_000;
 /// The most bytes of one file a config names (a LUT, a CLF), and of one archive entry.
-pub const MAX_LUT_FILE_BYTES: u64 = crate::files::MAX_TEXT_BYTES;
+pub(crate) const MAX_LUT_FILE_BYTES: u64 = crate::files::MAX_TEXT_BYTES;
 /// The most files a config may name (`src` entries).
-pub const MAX_NAMED_FILES: usize = 4096;
+pub(crate) const MAX_NAMED_FILES: usize = 4096;
 /// The most entries of a `.ocioz` archive.
-pub const MAX_ARCHIVE_ENTRIES: usize = 4096;
+pub(crate) const MAX_ARCHIVE_ENTRIES: usize = 4096;
 /// The most bytes a `.ocioz` archive may extract to, all entries together.
-pub const MAX_ARCHIVE_BYTES: u64 = 256 * 1024 * 1024;
+pub(crate) const MAX_ARCHIVE_BYTES: u64 = 256 * 1024 * 1024;
 
 /// A config loaded within bounds, with the private folder its archive was extracted to (removed when the
 /// last clone is dropped).
@@ -75,7 +75,7 @@ struct Open {
 }
 
 /// The YAML `text` read as events: refused (with the line) when it does not parse or expands past
-/// [`MAX_YAML_NODES`] nodes; otherwise what it names.
+/// `MAX_YAML_NODES` nodes; otherwise what it names.
 pub fn check_config_text(text: &str) -> Result<Named, String> {
     let mut parser = Parser::new_from_str(text);
     let mut stack: Vec<Open> = Vec::new();
@@ -159,7 +159,7 @@ fn add_to_parent(stack: &mut [Open], nodes: u64, scalar: Option<String>, named: 
 
 /// Checks every file `named` names as OCIO would find it from the config's folder `dir` (see the module
 /// documentation).
-pub fn check_named_files(named: &Named, dir: &Path) -> Result<(), String> {
+pub(crate) fn check_named_files(named: &Named, dir: &Path) -> Result<(), String> {
     let search: Vec<PathBuf> = if named.search_paths.is_empty() {
         vec![dir.to_path_buf()]
     } else {

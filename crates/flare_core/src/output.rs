@@ -1,4 +1,4 @@
-//! Image files: the one writer of every frame FlareLab writes ([`write_frame`]: PNG, 8-bit display values;
+//! Image files: the one writer of every frame FlareLab writes (`write_frame`: PNG, 8-bit display values;
 //! OpenEXR, linear with named layers), and the reader of background plates ([`read_plate`]).
 //!
 //! # How it works
@@ -8,7 +8,7 @@
 //! `chromaticities`): the default layer `R, G, B, A` is the composite (alpha 1), `flare.R/G/B` the flare alone
 //! (ghosts, LUT ghosts, starburst and the front dirt's glow, to be added over a plate), `starburst.R/G/B` its
 //! starburst, `dirt.R/G/B` its dirt glow (a dirty lens only),
-//! `plate.R/G/B` the exposed plate when there is one; with ghost layers ([`ExrLayers`], each made as its
+//! `plate.R/G/B` the exposed plate when there is one; with ghost layers (`ExrLayers`, each made as its
 //! ghost is drawn) the file has several parts: those layers in the part `rgba`, and one part `ghost_I_J` per
 //! ghost whose data window is the smallest rectangle holding its lit pixels. Values are 16- or 32-bit floats as
 //! [`ExrSettings::pixel_type`] says ([`ExrPixel::Auto`]: half for a layer whose values all fit half's range,
@@ -18,10 +18,10 @@
 //! [`crate::files::write_atomic`]: a temporary file in the target's folder renamed over it, so a failed write
 //! leaves nothing half-written. [`read_exr_channels`] reads every part of an EXR back, placed in its display
 //! window. Plates: PNG and JPEG are decoded from sRGB to linear, EXR and HDR are taken as linear
-//! ([`read_plate_values`] also gives a file's own values, for an OCIO input space to convert).
+//! (`read_plate_values` also gives a file's own values, for an OCIO input space to convert).
 //!
-//! Every image FlareLab reads (plates, depth maps, aperture images, photo LUTs) goes through [`open_image`]
-//! (or, for a depth map's EXR, [`exr_size`]) first: the size is read from the header and refused past
+//! Every image FlareLab reads (plates, depth maps, aperture images, photo LUTs) goes through `open_image`
+//! (or, for a depth map's EXR, `exr_size`) first: the size is read from the header and refused past
 //! [`MAX_IMAGE_SIDE_PX`] a side (the frame's own limit, `--size`) before any pixel is decoded, and the decoder
 //! runs with limits to match, so no file can ask for more than about 1 GiB of pixels. A plate's values that
 //! are not finite or too large to expose are clamped to [`MAX_PLATE_VALUE`] (the flare is never lost from the
@@ -47,7 +47,7 @@ pub enum ImageError {
     Decode { path: String, message: String },
     #[error("{path}: unknown image type (use .png or .exr)")]
     Extension { path: String },
-    /// A plate refused by [`open_image`] (its message names the file and the reason).
+    /// A plate refused by `open_image` (its message names the file and the reason).
     #[error("{0}")]
     Plate(String),
 }
@@ -95,7 +95,7 @@ fn io(path: &Path, error: std::io::Error) -> ImageError {
 }
 
 /// Writes a frame: the display image to a PNG, or `layers` to an EXR (by the extension of `path`).
-pub fn write_frame(path: &Path, display: &DisplayImage, layers: Option<&FrameLayers>) -> Result<(), ImageError> {
+pub(crate) fn write_frame(path: &Path, display: &DisplayImage, layers: Option<&FrameLayers>) -> Result<(), ImageError> {
     match ImageKind::from_path(path)? {
         ImageKind::Png => write_png(path, display),
         ImageKind::Exr => match layers {
@@ -367,7 +367,7 @@ struct GhostPart {
 
 /// An EXR being put together a layer at a time ([`Self::add_ghost`] takes each ghost layer as it is drawn
 /// and keeps only its channels, cropped to its lit pixels), then written whole ([`Self::write`]).
-pub struct ExrLayers {
+pub(crate) struct ExrLayers {
     width: u32,
     height: u32,
     settings: ExrSettings,
@@ -550,7 +550,7 @@ thread_local! {
     static CONTAINING: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
 }
 
-/// Whether a panic on this thread is being contained (a compressor of [`write_frame`]'s EXR): a process's
+/// Whether a panic on this thread is being contained (a compressor of `write_frame`'s EXR): a process's
 /// panic hook stays quiet for it (the panic becomes an error that names it instead of an "internal error").
 pub fn panic_is_contained() -> bool {
     CONTAINING.with(|c| c.get())
@@ -596,11 +596,11 @@ pub struct ExrPart {
 }
 
 /// The most bytes [`read_exr_channels`] spends on the channels it places at the display window's size.
-pub const MAX_READ_CHANNEL_BYTES: u64 = 2 << 30;
+pub(crate) const MAX_READ_CHANNEL_BYTES: u64 = 2 << 30;
 
 /// Reads every channel of every part of `path` (see [`ExrChannels`]); refused, before any pixel is read,
 /// past [`MAX_IMAGE_SIDE_PX`] a side (the display window or any part) or when its channels at the display
-/// window's size would take more than [`MAX_READ_CHANNEL_BYTES`].
+/// window's size would take more than `MAX_READ_CHANNEL_BYTES`.
 pub fn read_exr_channels(path: &Path) -> Result<ExrChannels, ImageError> {
     use exr::prelude::{FlatSamples, read_all_flat_layers_from_file};
     let refuse = |reason: String| ImageError::Plate(format!("{}: {reason}", path.display()));
@@ -699,7 +699,7 @@ fn raw_exr_windows(path: &Path) -> Option<String> {
 
 /// The size of an EXR from its header alone, checked as [`image_size`] does (for readers that use the `exr`
 /// crate directly: a depth map's channel).
-pub fn exr_size(path: &Path, what: &str) -> Result<(usize, usize), String> {
+pub(crate) fn exr_size(path: &Path, what: &str) -> Result<(usize, usize), String> {
     exr_windows(path, what).map(|(data, _)| data)
 }
 
@@ -740,7 +740,7 @@ fn check_side(path: &Path, what: &str, w: u64, h: u64) -> Result<(), String> {
 /// by row from the top, in [0, 1]: what aperture and dirt images are read as. Each pixel is brought into [0, 1]
 /// before the resampling (NaN as 0, +inf as 1): a NaN or an infinity once spread through the filter to the
 /// whole image, and an aperture of white pixels beside one NaN was refused as "black everywhere" (issue 61).
-pub fn read_grey_square(path: &Path, what: &str, size: usize) -> Result<Vec<f32>, String> {
+pub(crate) fn read_grey_square(path: &Path, what: &str, size: usize) -> Result<Vec<f32>, String> {
     let mut gray = open_image(path, what)?.to_luma32f();
     for v in gray.iter_mut() {
         *v = if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
@@ -751,7 +751,7 @@ pub fn read_grey_square(path: &Path, what: &str, size: usize) -> Result<Vec<f32>
 
 /// Decodes the image in `path` after checking its header ([`image_size`]), the decoder limited to the same
 /// size and to 1.5 GiB of allocations.
-pub fn open_image(path: &Path, what: &str) -> Result<::image::DynamicImage, String> {
+pub(crate) fn open_image(path: &Path, what: &str) -> Result<::image::DynamicImage, String> {
     image_size(path, what)?;
     let mut reader = ::image::ImageReader::open(path)
         .and_then(|r| r.with_guessed_format())
@@ -778,7 +778,7 @@ pub fn read_plate_checked(path: &Path) -> Result<(HdrImage, Option<String>), Ima
 /// A plate's pixels: with `decode`, PNG and JPEG decoded from sRGB (EXR and HDR as stored), else every file's
 /// values as stored (a PNG's encoded ones in [0, 1], for an OCIO input space to convert); clamped as
 /// [`read_plate`] says, with what it clamped in words.
-pub fn read_plate_values(path: &Path, decode: bool) -> Result<(HdrImage, Option<String>), ImageError> {
+pub(crate) fn read_plate_values(path: &Path, decode: bool) -> Result<(HdrImage, Option<String>), ImageError> {
     let img = open_image(path, "plate").map_err(ImageError::Plate)?;
     let is_float =
         !decode || matches!(img, ::image::DynamicImage::ImageRgb32F(_) | ::image::DynamicImage::ImageRgba32F(_));

@@ -4,7 +4,7 @@
 //!
 //! # How it works
 //! [`Document`] is plain data with `#[serde(default)]` on every struct, so a preset written by an older
-//! FlareLab (a lower [`PRESET_VERSION`], fewer fields) loads with today's defaults for what it lacks; a preset
+//! FlareLab (a lower `PRESET_VERSION`, fewer fields) loads with today's defaults for what it lacks; a preset
 //! from a newer FlareLab is refused by its version, never half-read. Version 1 stored a linear `exposure`
 //! multiplier: it converts to `flare_ev = log2(exposure)` on load. [`Document::from_json`] names the field that
 //! is wrong (through `serde_path_to_error`) and then checks values serde cannot (a lens that is not
@@ -43,14 +43,14 @@ use crate::spectrum::Spectrum;
 use crate::timeline::Timeline;
 
 /// The preset format this build writes; it reads every version up to this one.
-pub const PRESET_VERSION: u32 = 3;
+pub(crate) const PRESET_VERSION: u32 = 3;
 
 /// Why a preset is refused.
 #[derive(Debug, thiserror::Error)]
 pub enum PresetError {
     #[error("{0}")]
     Io(#[from] std::io::Error),
-    /// The file could not be read, or is larger than any preset ([`crate::files::MAX_TEXT_BYTES`]).
+    /// The file could not be read, or is larger than any preset (`crate::files::MAX_TEXT_BYTES`).
     #[error("{0}")]
     Read(String),
     #[error("not a FlareLab preset: at `{path}`: {reason}")]
@@ -500,7 +500,7 @@ impl Document {
         serde_json::to_string_pretty(&doc).expect("a document always serialises")
     }
 
-    /// Reads a preset (any version up to [`PRESET_VERSION`]) and checks it.
+    /// Reads a preset (any version up to `PRESET_VERSION`) and checks it.
     pub fn from_json(text: &str) -> Result<Self, PresetError> {
         let mut value: serde_json::Value = serde_json::from_str(text).map_err(|e| PresetError::Json {
             path: format!("line {}", e.line()),
@@ -723,7 +723,7 @@ impl Document {
     }
 }
 
-pub use crate::timeline::MAX_GHOST_GAIN;
+pub(crate) use crate::timeline::MAX_GHOST_GAIN;
 
 /// The first key of `input` (a preset's JSON) that the document read from it does not have (`known`, the
 /// document written back), with its path and the known key it is a near miss of. The lens is checked by its

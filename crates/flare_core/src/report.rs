@@ -46,9 +46,9 @@ use crate::optics::path::LightPath;
 use crate::optics::{Coating, Lens, PathMatrices};
 
 /// Samples per side of the grid over a ghost's sprites for its peak, mean and energy.
-pub const REPORT_GRID: usize = 48;
+pub(crate) const REPORT_GRID: usize = 48;
 /// Samples per side for the coating sensitivity's energies (many systems are built).
-pub const SENSITIVITY_GRID: usize = 20;
+pub(crate) const SENSITIVITY_GRID: usize = 20;
 
 /// One ghost in the report.
 #[derive(Clone, Debug, PartialEq, Serialize)]

@@ -3,14 +3,14 @@
 //!
 //! # How it works
 //! A shutter of `shutter_deg` degrees is open for `shutter_deg / 360` of a frame, centred on the frame's time
-//! ([`open_interval`]: frame 10 at 180 degrees is open from 9.75 to 10.25), so the blurred frame's streaks are
+//! (`open_interval`: frame 10 at 180 degrees is open from 9.75 to 10.25), so the blurred frame's streaks are
 //! centred where the sharp frame's ghosts are; 0 degrees is the sharp frame exactly (no path, nothing added).
 //! While it is open the light follows a [`LightPath`]: [`PATH_POINTS`] points evenly spaced from the opening
 //! to the closing, each with the light's position and its intensity relative to the frame's own (from the
 //! timeline's keys as they interpolate, or from a track of positions found in the plate), read between points
 //! linearly ([`LightPath::at`]).
 //!
-//! [`plan_samples`] chooses how many time samples each ghost needs: every paraxial sprite of the frame is laid
+//! `plan_samples` chooses how many time samples each ghost needs: every paraxial sprite of the frame is laid
 //! out at each path point (the same culling as the frame) and followed by its ghost and wavelength; the
 //! distance its quad's farthest corner travels (the centre's motion plus the half-size's growth, in pixels,
 //! summed along the path over every step where the sprite is drawn at either end, the longest of the ghost's
@@ -18,7 +18,7 @@
 //! opening to closing inclusive: no two consecutive images of its centre or its edges are more than a pixel
 //! apart. A ghost that moves less than half a pixel is drawn once, at the frame's time
 //! (unless the light's intensity changes while the shutter is open: then every ghost gets at least
-//! [`PATH_POINTS`] samples). The frame is built at the most any ghost needs (at most [`MAX_SAMPLES`]; a
+//! [`PATH_POINTS`] samples). The frame is built at the most any ghost needs (at most `MAX_SAMPLES`; a
 //! longer path leaves gaps, and [`ShutterSamples::max_gap_px`] says how large), and since the sample counts
 //! are all `2^j + 1`, each ghost's samples are every `2^(m - j)`th of the frame's: a slow ghost costs a few
 //! sprites, not as many as the fastest. [`crate::frame::Frame::build`] builds the frame at each sample with
@@ -28,7 +28,7 @@
 //! and per-ghost layers). A streak therefore holds the energy of the
 //! sharp frame (up to the change of the ghosts' brightness along the path). The starburst (the light's own
 //! image) stays at the frame's time: it is not streaked (its reach is the frame's largest quad: streaking it
-//! would draw that once per sample, up to [`MAX_SAMPLES`] times; at 11.7 ms a pass on lavapipe for a 1280x720
+//! would draw that once per sample, up to `MAX_SAMPLES` times; at 11.7 ms a pass on lavapipe for a 1280x720
 //! frame, about 3 s a frame). LUT ghosts composited over the flare through alpha (`blend.mode` alpha) keep
 //! colour and coverage each times the sample's weight, and each ghost's samples are put next to each other
 //! ([`crate::lut::blend::LutScene::group_by_ghost`]) so that the passes lay them over the flare at once with their
@@ -43,18 +43,18 @@ pub const MAX_SHUTTER_DEG: f64 = 360.0;
 /// Points of a [`LightPath`] from the shutter's opening to its closing.
 pub const PATH_POINTS: usize = 9;
 /// The most time samples one frame is built at (`2^8 + 1`).
-pub const MAX_SAMPLES: usize = 257;
+pub(crate) const MAX_SAMPLES: usize = 257;
 
 /// Frames (as fractional frame numbers) during which a shutter of `shutter_deg` is open at `frame`: centred
 /// on it (see the module documentation). A shutter that is not finite or not positive is closed (0 degrees).
-pub fn open_interval(frame: f64, shutter_deg: f64) -> (f64, f64) {
+pub(crate) fn open_interval(frame: f64, shutter_deg: f64) -> (f64, f64) {
     let deg = if shutter_deg.is_finite() { shutter_deg.clamp(0.0, MAX_SHUTTER_DEG) } else { 0.0 };
     let half = deg / 720.0;
     (frame - half, frame + half)
 }
 
 /// Refuses a shutter angle outside 0 to 360 degrees.
-pub fn check_shutter(shutter_deg: f64) -> Result<(), String> {
+pub(crate) fn check_shutter(shutter_deg: f64) -> Result<(), String> {
     if shutter_deg.is_finite() && (0.0..=MAX_SHUTTER_DEG).contains(&shutter_deg) {
         Ok(())
     } else {
@@ -133,7 +133,7 @@ impl LightPath {
     }
 }
 
-/// How a frame's shutter is sampled (see [`plan_samples`]).
+/// How a frame's shutter is sampled (see `plan_samples`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct ShutterSamples {
     /// Time samples the frame is built at (`2^m + 1`, evenly spaced from opening to closing; 1: the light did
@@ -145,7 +145,7 @@ pub struct ShutterSamples {
     /// The longest path of any sprite while the shutter is open (pixels of the frame).
     pub longest_px: f64,
     /// The largest step between two consecutive images of any ghost (at most 1 pixel unless the samples were
-    /// capped at [`MAX_SAMPLES`]).
+    /// capped at `MAX_SAMPLES`).
     pub max_gap_px: f64,
 }
 
@@ -188,7 +188,7 @@ fn samples_for(length_px: f64, least: usize) -> usize {
 /// How many samples `path` needs in a frame `width` pixels wide on `sensor` at the flare's gain `flare_gain`
 /// (see the module documentation): per lens ghost, from the longest path of its sprites, and for the frame the
 /// most any ghost needs.
-pub fn plan_samples(
+pub(crate) fn plan_samples(
     flare: &PreparedFlare,
     path: &LightPath,
     sensor: Sensor,

@@ -13,9 +13,9 @@
 //!   outside the sRGB gamut) are kept in the sum, where they cancel, and each sprite's colour is clamped at 0.
 
 /// The most wavelengths a spectrum may have.
-pub const MAX_WAVELENGTHS: usize = 32;
+pub(crate) const MAX_WAVELENGTHS: usize = 32;
 /// The RGB wavelengths of the paraxial-flare method.
-pub const RGB_WAVELENGTHS_NM: [f64; 3] = [650.0, 510.0, 475.0];
+pub(crate) const RGB_WAVELENGTHS_NM: [f64; 3] = [650.0, 510.0, 475.0];
 
 /// Wavelengths and their linear-sRGB weights.
 #[derive(Clone, Debug, PartialEq)]
@@ -97,7 +97,7 @@ fn lobe(x: f64, mu: f64, sigma_low: f64, sigma_high: f64) -> f64 {
 }
 
 /// CIE 1931 2-degree colour-matching functions (x-bar, y-bar, z-bar), Wyman-Sloan-Shirley 2013 fit.
-pub fn cie_1931_xyz(wavelength_nm: f64) -> [f64; 3] {
+pub(crate) fn cie_1931_xyz(wavelength_nm: f64) -> [f64; 3] {
     let w = wavelength_nm;
     let x =
         1.056 * lobe(w, 599.8, 37.9, 31.0) + 0.362 * lobe(w, 442.0, 16.0, 26.7) - 0.065 * lobe(w, 501.1, 20.4, 26.2);
@@ -107,7 +107,7 @@ pub fn cie_1931_xyz(wavelength_nm: f64) -> [f64; 3] {
 }
 
 /// XYZ to linear sRGB (IEC 61966-2-1, D65).
-pub fn xyz_to_linear_srgb([x, y, z]: [f64; 3]) -> [f64; 3] {
+pub(crate) fn xyz_to_linear_srgb([x, y, z]: [f64; 3]) -> [f64; 3] {
     [3.2406 * x - 1.5372 * y - 0.4986 * z, -0.9689 * x + 1.8758 * y + 0.0415 * z, 0.0557 * x - 0.2040 * y + 1.0570 * z]
 }
 

@@ -16,11 +16,11 @@
 //! it grows in proportion to `lambda N` as the stop closes and is the same for every wavelength up to that
 //! factor, which spreads red rays further than blue ones.
 //!
-//! [`Starburst::compute`] measures `c(phi)` once per aperture: its [`STARBURST_MASK_SIZE`]^2 raster is drawn
+//! [`Starburst::compute`] measures `c(phi)` once per aperture: its `STARBURST_MASK_SIZE`^2 raster is drawn
 //! texel for texel into a grid twice as wide (one frequency bin is `lambda N / 2`), transformed with rustfft (rows, then columns),
-//! squared and normalised to a total energy of 1; then, on the ring [`BAND_START_U`] to [`BAND_END_U`]
+//! squared and normalised to a total energy of 1; then, on the ring `BAND_START_U` to `BAND_END_U`
 //! (well outside the core, well below the raster's one-texel edge ramp, which would dim the rays), `u^3` times the energy density is averaged
-//! into [`PROFILE_SIZE`] angular bins. The renderer ([`crate::render::FlareScene::build`] and the starburst
+//! into `PROFILE_SIZE` angular bins. The renderer ([`crate::render::FlareScene::build`] and the starburst
 //! pass of both twins) evaluates `I(r, phi)` at every pixel out to the radius where it falls below a
 //! quarter of an 8-bit step at the frame's exposure (or the whole frame), so a bright sun's rays reach as
 //! far as they would in a photograph and never fade at a texture's edge. Inside one pixel of the light's
@@ -34,18 +34,18 @@ use crate::aperture::ApertureMask;
 
 /// The aperture raster the starburst is computed from ([`crate::aperture::Aperture::rasterise`]); it is
 /// drawn texel for texel into an FFT grid twice as wide (one frequency bin is `lambda N / 2` on the sensor).
-pub const STARBURST_MASK_SIZE: usize = 512;
+pub(crate) const STARBURST_MASK_SIZE: usize = 512;
 /// Angular bins of the far-field profile, over the full circle (0.7 degrees each: on the measuring ring,
 /// FFT bins near a lattice direction lie up to 0.45 degrees apart).
-pub const PROFILE_SIZE: usize = 512;
+pub(crate) const PROFILE_SIZE: usize = 512;
 /// The ring the profile is measured on, in units of `lambda N` from the centre.
-pub const BAND_START_U: f64 = 16.0;
-pub const BAND_END_U: f64 = 64.0;
+pub(crate) const BAND_START_U: f64 = 16.0;
+pub(crate) const BAND_END_U: f64 = 64.0;
 
 /// The aperture's far-field diffraction (see the module documentation).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Starburst {
-    /// `c(phi)` over [`PROFILE_SIZE`] bins, bin `k` centred on `phi = (k + 0.5) 2 pi / PROFILE_SIZE`
+    /// `c(phi)` over `PROFILE_SIZE` bins, bin `k` centred on `phi = (k + 0.5) 2 pi / PROFILE_SIZE`
     /// (pixel axes: x right, y down), divided by its peak (so the largest is 1).
     pub profile: Vec<f32>,
     /// The peak of `c(phi)` (per radian, for a total energy of 1).
@@ -90,7 +90,7 @@ fn transpose(from: &[Complex32], to: &mut [Complex32], m: usize) {
 
 impl Starburst {
     /// The far-field profile of `mask` (its texels across the aperture's diameter; see
-    /// [`STARBURST_MASK_SIZE`]).
+    /// `STARBURST_MASK_SIZE`).
     pub fn compute(mask: &ApertureMask) -> Self {
         let a = mask.size.max(2);
         let n = (2 * a).next_power_of_two();

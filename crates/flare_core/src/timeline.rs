@@ -304,18 +304,18 @@ impl Timeline {
 /// The largest gain of one ghost, static or keyed, and of the LUT layer (+60 dB): more is no look, and 1e308
 /// overflowed to a ghost that vanished (keyed at 1e39 every sprite was dropped, the LUT layer's 1e300 every LUT
 /// image).
-pub const MAX_GHOST_GAIN: f64 = 1e6;
+pub(crate) const MAX_GHOST_GAIN: f64 = 1e6;
 
 /// The farthest key or range end from frame 0: 2^53 - 1, the integers a double holds exactly (a key's place
 /// between two others is worked out in doubles). Keys near +-2^62 overflowed the span between them (`i64`)
 /// and put the light at -1.48e21 degrees.
-pub const MAX_KEY_FRAME: i64 = (1 << 53) - 1;
+pub(crate) const MAX_KEY_FRAME: i64 = (1 << 53) - 1;
 
 /// The most frames a timeline (and a rendered range) may span: 1,000,000, over 11 hours at 24 fps. A shot's plan
 /// holds a record per frame; a range of a hundred million frames asked for gigabytes before the first frame.
-pub const MAX_FRAMES: i64 = 1_000_000;
+pub(crate) const MAX_FRAMES: i64 = 1_000_000;
 
-/// Refuses a range `first..=last` longer than [`MAX_FRAMES`] (or whose length overflows).
+/// Refuses a range `first..=last` longer than `MAX_FRAMES` (or whose length overflows).
 pub fn check_frame_count(first: i64, last: i64) -> Result<(), String> {
     match last.checked_sub(first).and_then(|d| d.checked_add(1)) {
         Some(n) if n <= MAX_FRAMES => Ok(()),

@@ -8,7 +8,7 @@
 //! ([`GpuRayGrid::render`]) when the device is a GPU and the grid fixed, else on the CPU's f64 tracer (the
 //! reference's adaptive grid is always there). A device lost on the way falls back to the CPU, said in the
 //! line [`Traced::how`] returns. [`frame::drawn_with_traced_ghosts`] adds the starburst and tonemaps as every
-//! frame is, and the one writer ([`TracedGhosts::write`] through [`frame::write_drawn_with`]) writes it; a
+//! frame is, and the one writer ([`TracedGhosts::write`] through `frame::write_drawn_with`) writes it; a
 //! ghost's own layer is that ghost traced alone (every other gain 0), so the layers sum to the flare.
 //! On the CPU a ray grid (not the reference) leaves out the ghost x wavelength jobs too dim to see at the
 //! frame's exposure, as the paraxial sprites and the LUT images are ([`crate::raytrace::Dim::Below`], the
@@ -200,7 +200,7 @@ impl TracedGhosts {
     }
 
     /// [`Self::ghost_layers`] handed to `sink` one at a time, refused once they would pass
-    /// [`frame::MAX_GHOST_LAYER_BYTES`].
+    /// `frame::MAX_GHOST_LAYER_BYTES`.
     pub fn ghost_layers_into(
         &self,
         device: &Device,
@@ -249,7 +249,7 @@ impl TracedGhosts {
     }
 
     /// `frame` with its ghosts traced, as the file at `path` needs it ([`frame::draw_for_file`]'s rule: for an
-    /// EXR the accumulation alone, [`frame::linear_with_traced_ghosts`]), and the tracing's line.
+    /// EXR the accumulation alone, `frame::linear_with_traced_ghosts`), and the tracing's line.
     pub fn draw_for_file(
         &self,
         device: &Device,

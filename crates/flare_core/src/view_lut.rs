@@ -12,7 +12,7 @@
 //!
 //! Each channel goes through the same shaper before the lookup: `t = (log2(max(x, 0) + OFFSET) -
 //! log2(OFFSET)) / (log2(MAX + OFFSET) - log2(OFFSET))`, clamped to [0, 1], i.e. log-spaced nodes from 0 to
-//! [`MAX`] with a linear toe below [`OFFSET`]: a stop of light covers about the same number of nodes from
+//! [`MAX`] with a linear toe below `OFFSET`: a stop of light covers about the same number of nodes from
 //! the darkest shadow to the brightest flare core. A channel below 0 (a plate colour outside the working
 //! gamut) is looked up as 0, one above [`MAX`] as [`MAX`]. The lookup is trilinear between the 8 nodes
 //! around the shaped colour: on the GPU one `textureSampleLevel` of an `Rgba16Float` 3D texture through a
@@ -29,18 +29,18 @@ use crate::view_transform::{ViewTransform, WgslShader, WgslTexture};
 
 /// The OCIO view baked into a cube (its shaper's constants are put before it, [`ViewLut::shader`]): the
 /// tonemap's `ocio_display` for a software adapter's drafts.
-pub const OCIO_LUT_WGSL: &str = include_str!("../../../shaders/ocio_lut.wgsl");
+pub(crate) const OCIO_LUT_WGSL: &str = include_str!("../../../shaders/ocio_lut.wgsl");
 
 /// The cube's nodes per side.
 pub const SIZE: usize = 65;
 /// The shaper's linear toe: the offset added before the logarithm.
-pub const OFFSET: f32 = 1.0 / 4096.0;
+pub(crate) const OFFSET: f32 = 1.0 / 4096.0;
 /// The brightest channel value with its own nodes (a brighter channel is looked up as this).
 pub const MAX: f32 = 65504.0;
 /// The cube's binding in the tonemap's view group ([`crate::view_transform::WGSL_GROUP`]).
-pub const BINDING: u32 = 1;
+pub(crate) const BINDING: u32 = 1;
 /// Its sampler's binding (linear, clamped to the edge).
-pub const SAMPLER_BINDING: u32 = 2;
+pub(crate) const SAMPLER_BINDING: u32 = 2;
 
 /// `log2(OFFSET)` and `1 / (log2(MAX + OFFSET) - log2(OFFSET))`: the shaper's two constants.
 fn shaper_constants() -> (f32, f32) {
@@ -176,7 +176,7 @@ impl ViewLut {
     }
 
     /// The cube as the tonemap's `ocio_display`: `shaders/ocio_lut.wgsl` after its shaper's constants, the
-    /// cube a filtered (`Rgba16Float`) 3D texture at [`BINDING`], its sampler at [`SAMPLER_BINDING`].
+    /// cube a filtered (`Rgba16Float`) 3D texture at `BINDING`, its sampler at `SAMPLER_BINDING`.
     pub fn shader(&self) -> WgslShader {
         let (low, inverse_range) = shaper_constants();
         let text = format!(

@@ -6,12 +6,12 @@
 //! document's [`ColorDoc`] names an OCIO config ([`DEFAULT_CONFIG`], built into the binary, unless a file or
 //! another `ocio://` name is given), a display and a view (the config's defaults when not given), optional
 //! looks, an optional `.cube` file and an optional input space for plates. [`ViewTransform::new`] resolves
-//! them once: the config is read (a file at most [`crate::files::MAX_TEXT_BYTES`]), a `.cube` becomes a look
+//! them once: the config is read (a file at most `crate::files::MAX_TEXT_BYTES`), a `.cube` becomes a look
 //! named [`CUBE_LOOK`] whose process space is the config's `color_timing` role (else `scene_linear`), so it
 //! is applied where OCIO applies every look, and the display transform is OCIO's legacy viewing pipeline from
 //! the working space to the display and view with those looks. Its CPU processor is the CPU twin
 //! ([`ViewTransform::apply`]); its WGSL shader ([`WgslShader`], function `ocio_display`, its LUTs as 2D and
-//! 3D textures of bind group [`WGSL_GROUP`]: no 1D ones, which OpenGL ES lacks) is what the tonemap pass of
+//! 3D textures of bind group `WGSL_GROUP`: no 1D ones, which OpenGL ES lacks) is what the tonemap pass of
 //! the GPU renderer runs when the document's tonemap is [`crate::color::Tonemap::View`] (the default): the
 //! same numbers to within OCIO's 1e-3. OCIO writes some tables into that shader as `var<private>` arrays (the
 //! ACES 2.0 views' 363 hues), which each invocation would copy into its own memory before reading two entries
@@ -45,11 +45,11 @@ pub const CUBE_LOOK: &str = "flarelab_cube";
 /// The input space that names the inverse of the display and view.
 pub const DISPLAY_INPUT: &str = "display";
 /// The bind group of the tonemap pass that holds the OCIO shader's LUT textures.
-pub const WGSL_GROUP: u32 = 1;
+pub(crate) const WGSL_GROUP: u32 = 1;
 
 /// The most looks a document applies (`color.looks`), each named once: a preset of 5,000 repeats once took
 /// over a minute to refuse or apply (issue 61).
-pub const MAX_LOOKS: usize = 16;
+pub(crate) const MAX_LOOKS: usize = 16;
 
 /// A document's colour management (its `color`): see the module documentation.
 #[derive(Clone, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -82,7 +82,7 @@ fn refuse(field: &'static str, reason: impl Into<String>) -> ViewError {
     ViewError { field, reason: crate::files::one_line(&reason.into()) }
 }
 
-/// A texture of the OCIO shader: its binding in [`WGSL_GROUP`], its size and its texels.
+/// A texture of the OCIO shader: its binding in `WGSL_GROUP`, its size and its texels.
 #[derive(Clone, Debug, PartialEq)]
 pub struct WgslTexture {
     pub binding: u32,
@@ -99,13 +99,13 @@ pub struct WgslTexture {
 }
 
 /// The OCIO display transform as WGSL: `fn ocio_display(inPixel: vec4<f32>) -> vec4<f32>`, its textures and
-/// its uniform buffer (binding 0 of [`WGSL_GROUP`], when it has uniforms).
+/// its uniform buffer (binding 0 of `WGSL_GROUP`, when it has uniforms).
 #[derive(Clone, Debug, PartialEq)]
 pub struct WgslShader {
     pub text: String,
     pub textures: Vec<WgslTexture>,
     pub uniforms: Option<Vec<u8>>,
-    /// The binding of a linear, clamped sampler in [`WGSL_GROUP`], where the shader samples its filtered
+    /// The binding of a linear, clamped sampler in `WGSL_GROUP`, where the shader samples its filtered
     /// textures (OCIO's shaders have none).
     pub sampler: Option<u32>,
 }

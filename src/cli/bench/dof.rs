@@ -153,15 +153,14 @@ fn live_gpu() -> Option<(GpuContext, GpuDof)> {
     }
 }
 
+/// One device's frame time at 1920x1080: (device, median ms, runs, median GPU ms).
+type HdTime = (String, f64, usize, Option<f64>);
+
 /// The live method's frame time at 1920x1080 (default settings): the CPU twin's, and the GPU's where there
-/// is one, as (device, median ms, runs, median GPU ms).
-fn full_hd_times(
-    flare: &PreparedFlare,
-    repeats: usize,
-    gpu: Option<&mut (GpuContext, GpuDof)>,
-) -> Result<Vec<(String, f64, usize, Option<f64>)>> {
+/// is one.
+fn full_hd_times(flare: &PreparedFlare, repeats: usize, gpu: Option<&mut (GpuContext, GpuDof)>) -> Result<Vec<HdTime>> {
     let mask = flare.mask();
-    let full = scene(&flare, 1920, 1080)?;
+    let full = scene(flare, 1920, 1080)?;
     let (cpu_ms, cpu_runs, _) =
         timed(repeats, || Ok(LivePlan::new(&full.depth_mm, &full.model, mask)?.render_cpu(&full.plate)))?;
     let mut hd = vec![("CPU twin".to_owned(), cpu_ms, cpu_runs, None)];
@@ -195,7 +194,7 @@ fn write_png(path: &Path, image: &HdrImage) -> Result<()> {
 #[allow(clippy::too_many_arguments)]
 fn markdown(
     rows: &[Row],
-    hd: &[(String, f64, usize, Option<f64>)],
+    hd: &[HdTime],
     lens: &str,
     width: u32,
     height: u32,

@@ -4,7 +4,7 @@
 //! # How it works
 //! A cached LUT is an ordinary `.flut` file named by [`LutCache::key`]: a [`crate::fingerprint::of`] the
 //! LUT's own fingerprint ([`super::lut_fingerprint`]: every surface, glass, coating, the stop and the
-//! spectrum), the [`BakeSettings`] and [`CACHE_VERSION`], so a change to any of them is a new entry
+//! spectrum), the [`BakeSettings`] and `CACHE_VERSION`, so a change to any of them is a new entry
 //! and never a stale hit. [`LutCache::load`] reads the file through the same checked decoder as any LUT
 //! ([`crate::lut::format::read_lut_near`]) and checks it against the live lens ([`GhostLut::check_for`]); a file
 //! that fails either (truncated, damaged, another lens's) is never trusted: it is removed and reported as
@@ -28,7 +28,7 @@ use crate::optics::Lens;
 /// carries) changed. 3: a ghost whose sprite carries the wrong light is non-linear too. 4: ghosts are judged
 /// visible at the lens's own auto exposure as well (a dim lens has more of them), and a finer entry is traced on
 /// a finer grid.
-pub const CACHE_VERSION: u32 = 4;
+pub(crate) const CACHE_VERSION: u32 = 4;
 
 /// What a lookup found.
 #[derive(Debug)]

@@ -15,7 +15,7 @@ use crate::optics::Lens;
 /// A stable fingerprint of everything a ray-traced LUT depends on: the lens (every surface, glass, coating,
 /// aperture and the sensor distance), the spectrum, the stop's shape and f-number and any coating override.
 /// A LUT whose fingerprint differs from the live lens's is refused on load.
-/// It is a [`crate::fingerprint::of`] (canonical JSON, scheme [`crate::fingerprint::SCHEME`]).
+/// It is a [`crate::fingerprint::of`] (canonical JSON, scheme `crate::fingerprint::SCHEME`).
 ///
 /// A medium named as a catalogue glass takes its curve from the catalogue, which `--catalog` can replace, so
 /// its indices at the spectrum's wavelengths are part of the fingerprint too; a lens with no such medium keeps

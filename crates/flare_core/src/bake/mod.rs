@@ -14,7 +14,7 @@
 //!    blades do not turn, and the mask is looked up at the turned stop coordinates
 //!    ([`crate::raytrace::RayGridRequest`]'s views). Where the ghost lands is found by a scout
 //!    ([`RayGridRenderer::scout`]); the window around it gets at most [`BakeSettings::res`] texels across
-//!    (never finer than [`crate::lut::MIN_TEXEL_MM`]), and the ghost alone is rendered into it by the reference
+//!    (never finer than `crate::lut::MIN_TEXEL_MM`), and the ghost alone is rendered into it by the reference
 //!    renderer ([`Grid::Adaptive`], up to [`BakeSettings::grid`] cells, over only the region the scout saw
 //!    light pass: [`crate::raytrace::Ghosts::Scouted`]). Alpha is the coverage ([`crate::lut::texels_with_coverage`]).
 //!    **Detail**: where the ghost is large on the sensor (`res` texels coarser than
@@ -40,11 +40,11 @@
 //!    finest step keeps that choice).
 //!
 //! What draws a column once the scout has placed it is a [`ColumnTracer`]: the CPU reference renderer
-//! ([`CpuTracing`], [`bake`]) or its GPU twin (`render::raygrid::GpuBake` through [`bake_with`]); the scouts and
+//! (`CpuTracing`, [`bake`]) or its GPU twin (`render::raygrid::GpuBake` through [`bake_with`]); the scouts and
 //! the refinement are the same for both.
 //!
 //! Progress is reported per entry through a callback, and the bake stops at the next entry when the cancel
-//! flag is set. Its memory is bounded before it starts ([`BakeMemory`]: each thread's working memory must fit)
+//! flag is set. Its memory is bounded before it starts (`BakeMemory`: each thread's working memory must fit)
 //! and as it goes: the texels it keeps are counted and it stops, naming the figures, when they pass the bound. Given the previous LUT, a ghost whose key (the lens fingerprint, the ghost, the bake
 //! settings and the bake's revision) is unchanged is kept, not re-baked: re-classifying, forcing a ghost or
 //! changing the theta range re-bakes only what changed. Any edit of the lens, its coatings, spectrum or stop
@@ -136,18 +136,18 @@ pub enum BakeError {
     /// An anamorphic lens whose stop breaks its mirror symmetry (the reason).
     #[error("{0}")]
     Anamorphic(String),
-    /// The bake would need more memory than it may take ([`BakeMemory`]): the figures and what to change.
+    /// The bake would need more memory than it may take (`BakeMemory`): the figures and what to change.
     #[error("{0}")]
     TooLarge(String),
 }
 
 /// What one baked texel keeps (bytes): its RGBA in half floats ([`LutEntry::texels`]).
-pub const BYTES_PER_TEXEL: u64 = 8;
+pub(crate) const BYTES_PER_TEXEL: u64 = 8;
 
 /// What each thread of a bake holds at most while it draws a column (bytes): the ray grid's image of an entry
 /// of [`MAX_ENTRY_TEXELS`] a side (RGBA floats, 16 bytes a texel) and as much again for the grid, the entry's
 /// halvings and its texels before they are kept.
-pub const THREAD_BYTES: u64 = (MAX_ENTRY_TEXELS as u64) * (MAX_ENTRY_TEXELS as u64) * 32;
+pub(crate) const THREAD_BYTES: u64 = (MAX_ENTRY_TEXELS as u64) * (MAX_ENTRY_TEXELS as u64) * 32;
 
 /// The memory a bake may take, worked out before it starts (issue 61: memory known before work). A bake's
 /// entries are refined where the ghost changes (their number is not known before), so its kept texels are
@@ -156,7 +156,7 @@ pub const THREAD_BYTES: u64 = (MAX_ENTRY_TEXELS as u64) * (MAX_ENTRY_TEXELS as u
 /// leaves after every thread's working memory ([`THREAD_BYTES`]), whichever is less. A machine without that
 /// working memory free is refused before any work.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct BakeMemory {
+pub(crate) struct BakeMemory {
     /// The most texels the bake keeps.
     pub texels: u64,
     /// Whether [`Self::texels`] is the machine's memory (else the LUT file's limit).
@@ -278,7 +278,7 @@ pub fn refinement_done(error: f64, parent_error: f64, tolerance: f64) -> bool {
 }
 
 /// An entry's window reaches this many times the sensor's half-diagonal from the axis, at most.
-pub const VISIBLE_MARGIN: f64 = 1.15;
+pub(crate) const VISIBLE_MARGIN: f64 = 1.15;
 /// The most texels across an entry (a large ghost's, [`BakeSettings::diagonal_texels`]): an atlas page
 /// ([`crate::lut::blend::ATLAS_PAGE`]) less the zero border, with room to spare.
 pub const MAX_ENTRY_TEXELS: u32 = 2040;
@@ -299,7 +299,7 @@ pub fn render_entry(
 /// Renders the entries of ghost `g` at `theta_deg` for every azimuth `axis + phi` of `phis_deg`, from one
 /// set of traced rays (a view per azimuth: the lens turns the image with the light), drawn by `tracing`.
 #[allow(clippy::too_many_arguments)]
-pub fn render_column(
+pub(crate) fn render_column(
     flare: &PreparedFlare,
     renderer: &RayGridRenderer,
     tracing: &dyn ColumnTracer,
@@ -529,7 +529,7 @@ fn ghost_key(fingerprint: u64, g: usize, surfaces: (usize, usize), theta_max: f6
     crate::fingerprint::of(&(BAKE_REVISION, fingerprint, g, surfaces, theta_max, settings))
 }
 
-/// Bakes `ghosts` of `flare` (lens indices) on the CPU: [`bake_with`] and [`CpuTracing`].
+/// Bakes `ghosts` of `flare` (lens indices) on the CPU: [`bake_with`] and `CpuTracing`.
 pub fn bake(
     flare: &PreparedFlare,
     renderer: &RayGridRenderer,

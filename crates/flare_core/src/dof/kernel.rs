@@ -9,7 +9,7 @@
 //! aperture's region in pupil units ([`super::DofModel::cat_eyes_at`], a [`Cat`]) with a soft edge `edge` wide (the
 //! sampling step, so that the cut is antialiased like the mask). [`raster`] integrates it over each target pixel (s x s samples)
 //! for the reference; [`super::live`] samples it per tap. An anamorphic lens's kernel has a defocus per axis
-//! ([`pupil_point_xy`], [`raster_xy`]): the pupil point is `2 o_x / sigma_x` along x and `2 o_y / sigma_y` along y.
+//! (`pupil_point_xy`, [`raster_xy`]): the pupil point is `2 o_x / sigma_x` along x and `2 o_y / sigma_y` along y.
 
 use crate::aperture::ApertureMask;
 
@@ -46,24 +46,17 @@ impl Cat {
     }
 }
 
-/// The pupil point (pupil radii) of the frame offset `o` (pixels, X right, Y up) for the signed defocus `sigma`.
+/// The pupil point (pupil radii) of the frame offset `o` (pixels, X right, Y up) for the signed defocus `sigma`
+/// along x and along y (an anamorphic lens's oval; equal for a lens of revolution): `2 o / sigma` on each axis.
 #[inline]
-pub fn pupil_point(o: [f64; 2], sigma: f64) -> [f64; 2] {
-    let k = 2.0 / sigma;
-    [o[0] * k, o[1] * k]
-}
-
-/// The pupil point of the frame offset `o` for the signed defocus `sigma` along x and along y (an anamorphic
-/// lens's oval; [`pupil_point`] on each axis).
-#[inline]
-pub fn pupil_point_xy(o: [f64; 2], sigma: [f64; 2]) -> [f64; 2] {
+pub(crate) fn pupil_point_xy(o: [f64; 2], sigma: [f64; 2]) -> [f64; 2] {
     [o[0] * (2.0 / sigma[0]), o[1] * (2.0 / sigma[1])]
 }
 
 /// The coverage of the clear apertures `cats` (the ones that cut the pupil) at `q`, the product of each one's,
 /// with a soft edge `edge` wide. No apertures: 1.
 #[inline]
-pub fn cat_eye_coverage(q: [f64; 2], cats: &[Cat], edge: f64) -> f64 {
+pub(crate) fn cat_eye_coverage(q: [f64; 2], cats: &[Cat], edge: f64) -> f64 {
     let mut m = 1.0;
     for cat in cats {
         let d = (q[0] * cat.x_scale - cat.centre[0]).hypot(q[1] - cat.centre[1]);
@@ -98,12 +91,12 @@ impl RasterKernel {
 }
 
 /// Samples per pixel side for a blur of `diameter_px`: fine for small kernels, whose shape a few samples decide.
-pub fn samples_per_pixel(diameter_px: f64) -> usize {
+pub(crate) fn samples_per_pixel(diameter_px: f64) -> usize {
     if diameter_px < 24.0 { 4 } else { 2 }
 }
 
 /// The kernel of a source of defocus `sigma` (pixels) integrated over each target pixel with s x s samples
-/// ([`samples_per_pixel`]), normalised to 1; the identity when no sample falls inside (a blur below the sample
+/// (`samples_per_pixel`), normalised to 1; the identity when no sample falls inside (a blur below the sample
 /// spacing, or a cat's eye that closes the pupil: then the pixel keeps its own light).
 pub fn raster(mask: &ApertureMask, mask_sign: f64, sigma: f64, cats: &[Cat]) -> RasterKernel {
     raster_xy(mask, mask_sign, [sigma; 2], cats)

@@ -1,10 +1,10 @@
 //! The live depth of field: a few depth layers, each gathered at a resolution that keeps its kernel about
-//! [`TAPS_ACROSS`] texels across, composited far to near. `render::dof_gpu` runs it in WGSL
+//! `TAPS_ACROSS` texels across, composited far to near. `render::dof_gpu` runs it in WGSL
 //! (`shaders/dof.wgsl`); [`LivePlan::render_cpu`] is its twin, step for step in f32.
 //!
 //! # How it works
 //! The CPU plans ([`LivePlan::new`]): every pixel's signed defocus, and layer centres spaced evenly over the
-//! defocus range (at most [`MAX_LAYERS`], at least 1 px apart; a layer no pixel reaches is dropped). A pixel
+//! defocus range (at most `MAX_LAYERS`, at least 1 px apart; a layer no pixel reaches is dropped). A pixel
 //! belongs to its two nearest layers with hat weights (`1 - |sigma - sigma_k| / spacing`, summing to 1), so no
 //! band shows where one layer meets the next. A layer of defocus sigma_k is gathered at `1 / factor` of the
 //! resolution, `factor = max(1, round(|sigma_k| / TAPS_ACROSS))`, over taps on its texel grid whose weights are
@@ -31,9 +31,9 @@ use crate::aperture::ApertureMask;
 use crate::image::HdrImage;
 
 /// Most layers a frame is split into (the default).
-pub const MAX_LAYERS: usize = 24;
+pub(crate) const MAX_LAYERS: usize = 24;
 /// A layer's kernel spans about this many texels across at its resolution (the default).
-pub const TAPS_ACROSS: f64 = 12.0;
+pub(crate) const TAPS_ACROSS: f64 = 12.0;
 
 /// The live method's speed against its error: how many layers at most, how many taps across a kernel.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -48,7 +48,7 @@ impl Default for LiveSettings {
     }
 }
 /// Cells of the normalisation table across the frame (nodes: one more).
-pub const NORM_CELLS: usize = 16;
+pub(crate) const NORM_CELLS: usize = 16;
 
 /// One layer of a plan. Must be kept in sync with `struct Layer` in `shaders/dof.wgsl`.
 #[repr(C)]
@@ -62,11 +62,11 @@ pub struct LiveLayer {
     pub low: [u32; 4],
     /// The texels where its gathered light can be other than zero: `low` grown by the taps' reach.
     pub out: [u32; 4],
-    /// The pixels the composite covers ([`composite_pixels`]).
+    /// The pixels the composite covers (`composite_pixels`).
     pub pixels: [u32; 4],
     /// The layer's defocus, the spacing of the layers (hat weights), the lowest and the highest layer's defocus.
     pub shape: [f32; 4],
-    /// The cat's eye: up to [`MAX_LAYER_CATS`] clear apertures' circles, each centre (pupil radii) at pixel (x, y)
+    /// The cat's eye: up to `MAX_LAYER_CATS` clear apertures' circles, each centre (pupil radii) at pixel (x, y)
     /// `[c0x + cx x, c0y + cy y]`: c0x, cx, c0y, cy.
     pub cat: [[f32; 4]; MAX_LAYER_CATS],
     /// Each circle's radius (pupil radii; 0: an empty slot).
@@ -93,11 +93,11 @@ const _: () = assert!(std::mem::size_of::<LiveLayer>() == 224);
 /// are 7 mm: the axial bokeh 11 % dimmer than the reference's, the corner's share 0.87 against exact rays' 0.80).
 /// Half a cell keeps an interior cut's mean area and halves that (0.81; the double Gauss's corner 0.570 against
 /// 0.581, was 0.577).
-pub const CAT_EDGE_CELLS: f64 = 0.5;
+pub(crate) const CAT_EDGE_CELLS: f64 = 0.5;
 
 /// The most clear-aperture circles a layer's cat's eye carries: those that cut deepest into the pupil at the
 /// frame's corners ([`LivePlan::new`]).
-pub const MAX_LAYER_CATS: usize = 4;
+pub(crate) const MAX_LAYER_CATS: usize = 4;
 
 /// Everything the live method needs, planned on the CPU for either twin.
 #[derive(Clone, Debug)]
@@ -116,7 +116,7 @@ pub struct LivePlan {
 
 /// The hat weight of defocus `s` in the layer `layer` (the end layers take everything beyond them).
 #[inline]
-pub fn hat(layer: &LiveLayer, s: f32) -> f32 {
+pub(crate) fn hat(layer: &LiveLayer, s: f32) -> f32 {
     let [centre, spacing, lo, hi] = layer.shape;
     let s = s.clamp(lo, hi);
     if spacing <= 0.0 {
@@ -398,7 +398,7 @@ impl LivePlan {
 
 /// The pixels (x0, y0, x1, y1, ends excluded) whose bilinear sample of the gathered layer can touch its `out`
 /// texels.
-pub fn composite_pixels(layer: &LiveLayer) -> [u32; 4] {
+pub(crate) fn composite_pixels(layer: &LiveLayer) -> [u32; 4] {
     let [w, h, ..] = layer.size;
     let f = layer.taps[2];
     let [x0, y0, x1, y1] = layer.out;
@@ -424,7 +424,7 @@ pub fn composite(layer: &LiveLayer, gathered: &[[f32; 4]], out: &mut [[f32; 4]])
 /// Bilinear sample of the gathered layer at texel coordinates (`x`, `y`) (texel centres at integers), clamped to
 /// the layer's texels; a texel outside its `out` region is zero.
 #[inline]
-pub fn sample_bilinear(layer: &LiveLayer, image: &[[f32; 4]], x: f32, y: f32) -> [f32; 4] {
+pub(crate) fn sample_bilinear(layer: &LiveLayer, image: &[[f32; 4]], x: f32, y: f32) -> [f32; 4] {
     let [_, _, w, h] = layer.size.map(|v| v as usize);
     let [bx0, by0, bx1, by1] = layer.out.map(|v| v as usize);
     let x = x.clamp(0.0, (w - 1) as f32);
@@ -446,7 +446,7 @@ pub fn sample_bilinear(layer: &LiveLayer, image: &[[f32; 4]], x: f32, y: f32) ->
 }
 
 /// The depth (mm from the pupil) whose defocus is `sigma` pixels ([`super::model::depth_of_defocus`]).
-pub fn depth_of(model: &DofModel, sigma: f64) -> f64 {
+pub(crate) fn depth_of(model: &DofModel, sigma: f64) -> f64 {
     super::model::depth_of_defocus(model, sigma)
 }
 

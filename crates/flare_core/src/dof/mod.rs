@@ -28,7 +28,7 @@
 //! paraxial height its entrance matrix gives, which must lie within its semi-aperture: a circle in the pupil per
 //! surface ([`DofModel::cat_circles_at`]; the front one cuts the outer side of a corner's pupil, the rear group's
 //! the inner side: the lemon-shaped bokeh). The reference cuts each pixel's kernel by every circle that cuts it;
-//! the live method takes per layer the [`live::MAX_LAYER_CATS`] that cut deepest at the frame's corners. Against
+//! the live method takes per layer the `live::MAX_LAYER_CATS` that cut deepest at the frame's corners. Against
 //! exact rays through a fast double Gauss (a test), the share of the pupil left at a corner is within 2 %. The cut
 //! is paraxial: on a wide lens whose real entrance pupil moves with the field it cuts too much off axis. Every
 //! kernel is normalised to 1: energy is conserved.
@@ -77,7 +77,8 @@ pub mod model;
 pub mod reference;
 pub mod scene;
 
-pub use model::{DofError, DofMethod, DofModel, check_size, defocus_map, over, resolve};
+pub(crate) use model::check_size;
+pub use model::{DofError, DofMethod, DofModel, defocus_map, over, resolve};
 
 use crate::aperture::ApertureMask;
 use crate::image::HdrImage;
@@ -124,7 +125,7 @@ impl Default for DofDoc {
 /// The farthest focus distance (m): 1000 km, past any lens's hyperfocal distance (a 250 mm lens at f/1 is
 /// sharp to infinity from about 2 km), so farther is the same picture. Issue 61's walk: `--focus-m 1e300` was
 /// accepted, echoed in 301 digits and overflowed the live method's layer count.
-pub const MAX_FOCUS_M: f64 = 1e6;
+pub(crate) const MAX_FOCUS_M: f64 = 1e6;
 
 impl DofDoc {
     /// Values serde cannot check: `(field, reason)`. (On with no depth map is kept, as the app saves it while
@@ -161,7 +162,7 @@ pub struct DofLens<'a> {
 
 /// The plate defocused as `doc` says with the depth map at `depth_path`, on the CPU (the live method's twin or
 /// the reference); the plate unchanged when the depth of field is off.
-pub fn defocus_plate(
+pub(crate) fn defocus_plate(
     doc: &DofDoc,
     lens: DofLens,
     depth_path: &std::path::Path,

@@ -298,7 +298,7 @@ impl DofModel {
     }
 
     /// The blur along x (pixels, signed) of the depth whose blur along y is `sigma_y`: `sigma_y` itself for a lens
-    /// of revolution; for an anamorphic lens through the depth ([`depth_of_defocus`]), so that layers and kernels
+    /// of revolution; for an anamorphic lens through the depth (`depth_of_defocus`), so that layers and kernels
     /// keyed by the y blur carry the x blur of the same depth.
     pub fn defocus_x_for(&self, sigma_y: f64) -> f64 {
         match &self.sections {
@@ -464,7 +464,7 @@ impl DofModel {
 
 /// The depth (mm from the pupil) whose defocus (along y for an anamorphic lens) is `sigma` pixels: for a lens of
 /// revolution `S_f / (1 - sigma / sigma_far)`; infinite at and beyond the far field's.
-pub fn depth_of_defocus(model: &DofModel, sigma: f64) -> f64 {
+pub(crate) fn depth_of_defocus(model: &DofModel, sigma: f64) -> f64 {
     if let Some(s) = &model.sections {
         return s[1].distance_for(sigma * model.pixel_mm) + model.pupil_z_mm;
     }
@@ -493,7 +493,7 @@ pub fn defocus_map(model: &DofModel, depth_mm: &[f64]) -> Result<Vec<f64>, DofEr
 }
 
 /// Refuses a plate or depth map of another size than the model's frame.
-pub fn check_size(plate: &HdrImage, depth_mm: &[f64], model: &DofModel) -> Result<(), DofError> {
+pub(crate) fn check_size(plate: &HdrImage, depth_mm: &[f64], model: &DofModel) -> Result<(), DofError> {
     let expected = model.width as usize * model.height as usize;
     if plate.width != model.width || plate.height != model.height || depth_mm.len() != expected {
         let (depth_w, depth_h) =

@@ -12,8 +12,8 @@ use super::depth::DepthMap;
 use crate::image::HdrImage;
 
 /// The pinhole's focal length and the eye height above the ground.
-pub const FOCAL_MM: f64 = 40.0;
-pub const EYE_HEIGHT_M: f64 = 1.6;
+pub(crate) const FOCAL_MM: f64 = 40.0;
+pub(crate) const EYE_HEIGHT_M: f64 = 1.6;
 const SENSOR_WIDTH_MM: f64 = 36.0;
 
 /// Where the sun sits in the scene (pixels as a fraction of the frame): its light position for a flare.

@@ -8,7 +8,7 @@
 //! a disc of the region's area: an occluder as thin as a branch that splits the sun in two leaves one light,
 //! not two. Its position is the luminance-weighted centroid (pixel centres at `i + 0.5`), its power the sum.
 //!
-//! [`solve`] turns the detections of a whole range into one light per frame:
+//! `solve` turns the detections of a whole range into one light per frame:
 //! - **visibility** = power / unoccluded power, the unoccluded power being the user's
 //!   ([`AutoLight::reference_power`]) or the largest detected in the range; it is clamped to 0..1 and is 0 on
 //!   a frame with no light found where the light is on the plate (covered). A light off the plate (its region
@@ -23,7 +23,7 @@
 //!   at the ends of the range), is for noisy plates whose measured power flickers; it spreads an occluder's
 //!   edge over the window (a light covered for at least half the window on both sides of a frame is still
 //!   exactly 0 there);
-//! - **position**: a frame whose raw visibility is at least [`TRUSTED_VISIBILITY`] and whose region does not
+//! - **position**: a frame whose raw visibility is at least `TRUSTED_VISIBILITY` and whose region does not
 //!   touch the plate's border is trusted, and its centroid is the light's position (turned into an angle by
 //!   the lens's mapping). On the others (partly or fully covered, or leaving the frame: a partial centroid
 //!   is biased towards the visible part) the position continues from the track: the timeline's light keys
@@ -36,7 +36,7 @@ use serde::{Deserialize, Serialize};
 use crate::image::HdrImage;
 
 /// Raw visibility from which a frame's detected position is trusted.
-pub const TRUSTED_VISIBILITY: f64 = 0.95;
+pub(crate) const TRUSTED_VISIBILITY: f64 = 0.95;
 
 /// How the light is found in the plate (the document's `auto_light`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -190,7 +190,7 @@ pub fn detect(plate: &HdrImage, threshold: f64) -> Scan {
 
 /// The light of one frame, solved over the range.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SolvedLight {
+pub(crate) struct SolvedLight {
     /// Frame position of the light (degrees, X right, Y up).
     pub light_deg: [f64; 2],
     /// Visibility after the temporal filter (what the flare follows), 0 to 1.
@@ -218,7 +218,7 @@ pub enum DetectError {
 /// a light angle (`None` past the lens's field); `keyed` is the timeline's light position at a frame, if it
 /// has light keys; `on_plate(light_deg, margin_px)` says whether that light's image lands at least
 /// `margin_px` inside the frame.
-pub fn solve(
+pub(crate) fn solve(
     frames: &[i64],
     scans: &[Option<Scan>],
     settings: &AutoLight,

@@ -3,7 +3,7 @@
 //!
 //! # How it works
 //! [`pattern`] parses a sequence's file name (`shot.####.exr` or `shot.%04d.exr`) and lists the frames on disk;
-//! [`detect`] finds the light in one linear plate and [`detect::solve`] turns a range of detections into one
+//! [`detect`] finds the light in one linear plate and `detect::solve` turns a range of detections into one
 //! light per frame (visibility, position). Both read only images and text: the document
 //! ([`crate::preset::Document`]) holds their settings ([`pattern::FramePattern`], [`detect::AutoLight`]) and
 //! [`crate::shot`] uses them frame by frame.

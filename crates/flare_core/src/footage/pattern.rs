@@ -3,7 +3,7 @@
 //!
 //! # How it works
 //! [`FramePattern::parse`] splits the name at its one frame field into a prefix, a width and a suffix; a
-//! name with no field is not a pattern (`None`), one with two fields or wider than [`MAX_FRAME_DIGITS`] is
+//! name with no field is not a pattern (`None`), one with two fields or wider than `MAX_FRAME_DIGITS` is
 //! refused. [`FramePattern::path`]
 //! writes the frame zero-padded to the width (a negative frame keeps its minus sign).
 //! [`FramePattern::existing_frames`] lists the frames present on disk: the files of the pattern's folder
@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 
 /// The widest frame field (digits): an `i64` frame has at most 19 digits and a sign. Wider fields are refused
 /// (`%070000d` once reached the formatter's limit of 65535 and panicked).
-pub const MAX_FRAME_DIGITS: usize = 20;
+pub(crate) const MAX_FRAME_DIGITS: usize = 20;
 
 /// A sequence's file name with its frame field (see the module documentation).
 #[derive(Clone, Debug, PartialEq, Eq)]

@@ -1,5 +1,5 @@
 //! Blending LUT ghosts into the live flare: the run-time half of the patent, on the GPU (`lut_compute.wgsl`,
-//! binned by [`bin_instances`]; `lut_ghosts.wgsl` where the device has no compute) and its CPU twin
+//! binned by `bin_instances`; `lut_ghosts.wgsl` where the device has no compute) and its CPU twin
 //! ([`lut_pass`]).
 //!
 //! # How it works
@@ -24,7 +24,7 @@
 //! zero border of one texel around every entry, so the GPU's bilinear sampler returns what
 //! [`super::LutEntry::sample`] does (0 outside the image). Each entry's [`Footprint`] (size, the box of its lit
 //! texels, its brightest texel) is measured once per LUT: the CPU pass samples only where an entry is lit,
-//! [`bin_instances`] bins instances into tiles by it, and [`LutScene::cull_faint`] leaves out the images that
+//! `bin_instances` bins instances into tiles by it, and [`LutScene::cull_faint`] leaves out the images that
 //! cannot be seen at the frame's exposure. An added instance magnified so that a texel spans a pixel or more
 //! is sampled every 2 or 4 pixels and its samples bilinearly upsampled ([`instance_levels`]), in the twin and
 //! the compute pass alike.
@@ -33,7 +33,7 @@
 //! `bake::BakeSettings::diagonal_texels`, or with a larger `res`) gets mip levels on load ([`LiveLut::mips`],
 //! each [`super::LutEntry::halved`] from the one before, while they keep [`MIP_FLOOR_TEXELS`] across), each a
 //! slot of its own in the atlas. [`LutScene::choose_mips`] draws each instance from the finest level whose
-//! texels span at least [`MIP_TEXEL_PX`] accumulation pixels: the instance keeps its quad and takes the level's
+//! texels span at least `MIP_TEXEL_PX` accumulation pixels: the instance keeps its quad and takes the level's
 //! atlas rectangle (the same window), so the shaders need nothing new, and a small frame samples a fine entry
 //! about as often as the default one.
 
@@ -276,7 +276,7 @@ fn bracket(xs: &[f64], x: f64) -> Vec<(usize, f64)> {
 /// The indices of the baked thetas `thetas_deg` whose images a frame with the light `theta_deg` off the axis
 /// may draw ([`LutScene::build`]'s bracket), with those of a light a hair either side of it (the light's angle
 /// worked out again elsewhere rounds alike, or picks no other sample).
-pub fn thetas_drawn(thetas_deg: &[f64], theta_deg: f64) -> Vec<usize> {
+pub(crate) fn thetas_drawn(thetas_deg: &[f64], theta_deg: f64) -> Vec<usize> {
     if thetas_deg.is_empty() || !theta_deg.is_finite() {
         return (0..thetas_deg.len()).collect();
     }
@@ -414,7 +414,7 @@ impl LutScene {
     }
 
     /// Draws each instance from the finest mip level of its entry ([`LiveLut::level`]) whose texels span at
-    /// least [`MIP_TEXEL_PX`] accumulation pixels of `divisor` frame pixels each, or from its coarsest level when
+    /// least `MIP_TEXEL_PX` accumulation pixels of `divisor` frame pixels each, or from its coarsest level when
     /// none does (an entry without finer-than-needed texels has one level: nothing changes). The instance's quad is
     /// kept; its atlas rectangle becomes the level's, which covers the same window (a level's extent in its own
     /// texels is the entry's halved, the zero padding of an odd edge outside the quad). Alpha-composited
@@ -633,7 +633,7 @@ impl TexelMap {
 /// per tile, the instances whose lit texels can reach it, those of sampling level 0 first, then level 1, then
 /// level 2 ([`instance_levels`]), each level in the frame's order (a pass over one level reads its own run).
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct LutBins {
+pub(crate) struct LutBins {
     /// Accumulation pixels a side of a tile.
     pub tile: u32,
     pub tiles_x: u32,
@@ -650,7 +650,7 @@ pub struct LutBins {
 }
 
 /// The bins of `lut_scene`'s instances over an accumulation of `acc_size` pixels for a frame of `frame_size`.
-pub fn bin_instances(
+pub(crate) fn bin_instances(
     frame_size: (u32, u32),
     acc_size: (u32, u32),
     lut_scene: &LutScene,
@@ -775,7 +775,7 @@ fn footprint(e: &LutEntry, extent: [f32; 2]) -> Footprint {
 /// within a pixel the instances are applied in order, so the image does not depend on the thread count.
 ///
 /// Added instances magnified so that a texel spans a pixel or more are sampled every 2 or 4 pixels into a
-/// smaller image whose bilinear upsample is added ([`LUT_LEVELS`], [`instance_levels`]): on the Nikon zoom at
+/// smaller image whose bilinear upsample is added (`LUT_LEVELS`, [`instance_levels`]): on the Nikon zoom at
 /// 480x320 this took the blended frame from 1.74x to 1.14x the paraxial frame at the same PSNR against the
 /// reference (39.0 dB); a test holds it within 50 dB of [`lut_pass_every_pixel`].
 pub fn lut_pass(frame_size: (u32, u32), lut_scene: &LutScene, live: &LiveLut, hdr: &mut HdrImage) {
@@ -787,7 +787,7 @@ pub fn lut_pass_scalar(frame_size: (u32, u32), lut_scene: &LutScene, live: &Live
     lut_pass_on(frame_size, lut_scene, live, hdr, false, true);
 }
 
-/// [`lut_pass`] with every instance sampled at every pixel (no coarse [`LUT_LEVELS`]): what the coarse levels
+/// [`lut_pass`] with every instance sampled at every pixel (no coarse `LUT_LEVELS`): what the coarse levels
 /// are measured against.
 pub fn lut_pass_every_pixel(frame_size: (u32, u32), lut_scene: &LutScene, live: &LiveLut, hdr: &mut HdrImage) {
     lut_pass_on(frame_size, lut_scene, live, hdr, true, false);
@@ -834,14 +834,14 @@ fn lut_pass_on(
 /// 4) into an image that much smaller, then added to the accumulation by bilinear upsampling (the same
 /// interpolation the texels get): a quarter or a sixteenth of the samples, where the samples would otherwise
 /// repeat the texels' own interpolation. Alpha blending composites instances in order, so it stays at level 0.
-pub const LUT_LEVELS: usize = 3;
+pub(crate) const LUT_LEVELS: usize = 3;
 /// The most texels between neighbouring samples at a coarser level (see [`LUT_LEVELS`]).
-pub const MAX_TEXELS_PER_SAMPLE: f32 = 1.0;
+pub(crate) const MAX_TEXELS_PER_SAMPLE: f32 = 1.0;
 
-/// Per instance of `lut_scene`, the level ([`LUT_LEVELS`]) it is sampled at over an accumulation of `acc_size`
+/// Per instance of `lut_scene`, the level (`LUT_LEVELS`) it is sampled at over an accumulation of `acc_size`
 /// pixels for a frame of `frame_size`: the coarsest at which neighbouring samples stay within
-/// [`MAX_TEXELS_PER_SAMPLE`] texels; 0 when composited through alpha, or when the instance draws nothing. The
-/// CPU twin ([`lut_pass`]), the bins ([`bin_instances`]) and the compute pass (`lut_compute.wgsl`) all take it from
+/// `MAX_TEXELS_PER_SAMPLE` texels; 0 when composited through alpha, or when the instance draws nothing. The
+/// CPU twin ([`lut_pass`]), the bins (`bin_instances`) and the compute pass (`lut_compute.wgsl`) all take it from
 /// here.
 pub fn instance_levels(
     frame_size: (u32, u32),
@@ -1084,7 +1084,7 @@ pub const MIP_FLOOR_TEXELS: u32 = 128;
 /// from 2 on) for detail a bilinear sample between them cannot show. Measured on the Heliar's rim ghost (README,
 /// "LUT images without stair steps"): 3 left the 480x320 frame at the default's 31.8 dB where 2 gives 33.3 dB,
 /// and the Nikon zoom's blended frame at 480x320 costs the same with either.
-pub const MIP_TEXEL_PX: f32 = 2.0;
+pub(crate) const MIP_TEXEL_PX: f32 = 2.0;
 
 /// A LUT ready to draw: the LUT, the mip levels of its fine entries and where they all lie in the atlas.
 #[derive(Clone, Debug, PartialEq)]
@@ -1096,10 +1096,10 @@ pub struct LiveLut {
     pub layout: AtlasLayout,
     /// Per LUT ghost and entry, its shape for [`super::fit_picks`] (measured once, on load).
     pub shapes: Vec<Vec<Option<EntryShape>>>,
-    /// This LUT's identity ([`crate::fingerprint::unique_id`]; a clone keeps it), for upload caches.
+    /// This LUT's identity (`crate::fingerprint::unique_id`; a clone keeps it), for upload caches.
     pub id: u64,
     /// Per LUT ghost, entry and level, its size and lit texels (measured once, on load): what [`lut_pass`]
-    /// samples and [`bin_instances`] bins.
+    /// samples and `bin_instances` bins.
     pub footprints: Vec<Vec<Vec<Footprint>>>,
 }
 

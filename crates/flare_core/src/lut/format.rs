@@ -6,22 +6,22 @@
 //! | bytes | content |
 //! |---|---|
 //! | 8 | magic `FLUT\r\n\x1a\n` (catches text-mode transfers, like PNG's) |
-//! | 4 | format version ([`VERSION`]) |
+//! | 4 | format version (`VERSION`) |
 //! | 8 | header length H |
 //! | 8 | FNV-1a 64 of the header bytes |
 //! | H | header: UTF-8 JSON, [`Header`]: kind, lens id, fingerprint and its scheme, wavelengths, f-number, symmetry, theta range, per ghost its surfaces, key, thetas, azimuths and per entry its light, paraxial frame, window, size, and where its data lies |
 //! | ... | per entry, in header order: its texels compressed with deflate (zlib, `flate2`) |
 //!
 //! An entry's uncompressed data is `width x height` RGB half floats (rounded to
-//! [`super::TEXEL_MANTISSA_BITS`] mantissa bits), byte-shuffled for compression: the low bytes of channel R of
+//! `super::TEXEL_MANTISSA_BITS` mantissa bits), byte-shuffled for compression: the low bytes of channel R of
 //! every texel, then its high bytes, then G, B (6 planes of w x h bytes). Alpha (coverage) is not stored: it is
-//! computed on load from the RGB ([`super::set_coverage`]). Version 1 files stored RGBA (8 planes) and no
+//! computed on load from the RGB (`super::set_coverage`). Version 1 files stored RGBA (8 planes) and no
 //! `fitted` flags; they still load. Each entry carries the FNV-1a 64 of its uncompressed bytes, and the header
 //! the FNV-1a 64 of all the entries' compressed bytes (`data_checksum`; absent in files written before it).
 //!
 //! Loading ([`read_lut`]) streams the file: it checks the magic, the version, that the header fits the file
 //! and its checksum, then every field of the header (finite, in range, sizes that match, data inside the
-//! file, totals under [`MAX_TEXELS`]) before allocating anything for the texels, then reads each entry's
+//! file, totals under `MAX_TEXELS`) before allocating anything for the texels, then reads each entry's
 //! compressed bytes and inflates them, the entries in parallel, each into a buffer of exactly its declared size
 //! (never more), and checks its checksum and that every value is finite and non-negative; last, the data's
 //! checksum. A still's read ([`read_lut_near`]) inflates only the entries its light angle draws and passes over
@@ -44,16 +44,16 @@ use crate::fingerprint::{FNV_OFFSET, fnv1a};
 use crate::ghost::ParaxialFrame;
 
 /// The file's magic bytes.
-pub const MAGIC: [u8; 8] = *b"FLUT\r\n\x1a\n";
+pub(crate) const MAGIC: [u8; 8] = *b"FLUT\r\n\x1a\n";
 /// The format version this build writes; it reads this one and the ones before it ([`OLDEST_VERSION`]).
 /// Version 2 added the per-interval `fitted` flags.
-pub const VERSION: u32 = 2;
+pub(crate) const VERSION: u32 = 2;
 /// The oldest format version this build reads.
-pub const OLDEST_VERSION: u32 = 1;
+pub(crate) const OLDEST_VERSION: u32 = 1;
 /// Most header bytes accepted.
-pub const MAX_HEADER_BYTES: u64 = 64 << 20;
+pub(crate) const MAX_HEADER_BYTES: u64 = 64 << 20;
 /// Most texels accepted over all entries (2 GiB of half floats).
-pub const MAX_TEXELS: u64 = 1 << 28;
+pub(crate) const MAX_TEXELS: u64 = 1 << 28;
 /// Most texels across an entry: what an atlas page holds inside its zero border ([`super::blend::ATLAS_PAGE`]),
 /// so the GPU draws every texel the CPU twin draws (a bake makes at most [`crate::bake::MAX_ENTRY_TEXELS`]).
 pub const MAX_SIDE: u32 = super::blend::ATLAS_PAGE - 2;
@@ -98,7 +98,7 @@ pub struct Header {
     pub lens_id: String,
     /// 16 hex digits.
     pub lens_fingerprint: String,
-    /// The rule the fingerprint was made by ([`crate::fingerprint::SCHEME`]); absent in files from before
+    /// The rule the fingerprint was made by (`crate::fingerprint::SCHEME`); absent in files from before
     /// schemes (read as 0: a ray-traced LUT among them is refused with a request to bake it again).
     #[serde(default)]
     pub fingerprint_scheme: u32,
@@ -278,7 +278,7 @@ fn encode_version(lut: &GhostLut, version: u32) -> Vec<u8> {
 }
 
 /// Writes `lut` to `path` atomically (temporary file, then rename). A LUT this build's reader would refuse for
-/// its size (more than [`MAX_TEXELS`] in all, an entry wider than [`MAX_SIDE`]) is refused here instead of
+/// its size (more than `MAX_TEXELS` in all, an entry wider than [`MAX_SIDE`]) is refused here instead of
 /// written (issue 61: a photo LUT of 70 large photos was written, then refused by `--lut` as corrupt).
 pub fn write_lut(path: &Path, lut: &GhostLut) -> std::io::Result<u64> {
     let entries = || lut.ghosts.iter().flat_map(|g| &g.entries);
@@ -305,7 +305,7 @@ pub fn read_lut(path: &Path) -> Result<GhostLut, LutError> {
 }
 
 /// [`read_lut`], with only the images a frame whose light is `near_theta_deg` off the axis draws when that is
-/// given (per ghost, the baked thetas around it, every azimuth: [`super::blend::thetas_drawn`]); every other
+/// given (per ghost, the baked thetas around it, every azimuth: `super::blend::thetas_drawn`); every other
 /// entry keeps its place and its paraxial frame with no image ([`LutEntry::empty`]), its data passed over
 /// unread. A still pays for the few images it draws, not for the whole LUT.
 pub fn read_lut_near(path: &Path, near_theta_deg: Option<f64>) -> Result<GhostLut, LutError> {

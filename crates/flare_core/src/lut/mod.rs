@@ -37,11 +37,11 @@ use crate::ghost::ParaxialFrame;
 use crate::raytrace::Window;
 
 /// Half-diagonal of the 36 x 24 mm sensor: the light angle whose image reaches a corner sets the useful field.
-pub const SENSOR_HALF_DIAGONAL_MM: f64 = 21.633_307_652_783_937;
+pub(crate) const SENSOR_HALF_DIAGONAL_MM: f64 = 21.633_307_652_783_937;
 /// Finest LUT texel (mm on the sensor): 1/4 of a pixel at 960 pixels across 36 mm.
-pub const MIN_TEXEL_MM: f64 = 0.01;
+pub(crate) const MIN_TEXEL_MM: f64 = 0.01;
 /// The ghost index a photo LUT's single entry list carries.
-pub const PHOTO_GHOST: u32 = u32::MAX;
+pub(crate) const PHOTO_GHOST: u32 = u32::MAX;
 
 /// Where a LUT's images come from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -70,7 +70,7 @@ pub fn rotation(deg: f64) -> Mat2 {
 }
 
 /// `a b`.
-pub fn mat_mul(a: Mat2, b: Mat2) -> Mat2 {
+pub(crate) fn mat_mul(a: Mat2, b: Mat2) -> Mat2 {
     [
         [a[0][0] * b[0][0] + a[0][1] * b[1][0], a[0][0] * b[0][1] + a[0][1] * b[1][1]],
         [a[1][0] * b[0][0] + a[1][1] * b[1][0], a[1][0] * b[0][1] + a[1][1] * b[1][1]],
@@ -396,7 +396,7 @@ pub struct Fit {
 pub const MAX_FIT_STRETCH: f64 = 2.0;
 
 /// The determinant of `m`.
-pub fn mat_det(m: Mat2) -> f64 {
+pub(crate) fn mat_det(m: Mat2) -> f64 {
     m[0][0] * m[1][1] - m[0][1] * m[1][0]
 }
 
@@ -405,7 +405,7 @@ fn transpose(m: Mat2) -> Mat2 {
 }
 
 /// The inverse of `m` (not finite when `m` is singular).
-pub fn mat_inverse(m: Mat2) -> Mat2 {
+pub(crate) fn mat_inverse(m: Mat2) -> Mat2 {
     let d = mat_det(m);
     [[m[1][1] / d, -m[0][1] / d], [-m[1][0] / d, m[0][0] / d]]
 }
@@ -487,13 +487,13 @@ pub fn fit_picks(picks: &[(Option<EntryShape>, Mat2, f64)]) -> Vec<Fit> {
 /// Mantissa bits a LUT texel keeps of a half float's 10: a relative error of at most 2^-8 (0.4%, under the
 /// display's own quantisation), and the low bits that hold only the ray grid's noise, which deflate cannot
 /// compress, are zero (a third smaller files).
-pub const TEXEL_MANTISSA_BITS: u32 = 7;
+pub(crate) const TEXEL_MANTISSA_BITS: u32 = 7;
 /// Coverage (alpha) is 1 from this fraction of an image's brightest texel (luminance) up, and falls linearly
 /// to 0 below it.
-pub const COVERAGE_FRACTION: f64 = 0.05;
+pub(crate) const COVERAGE_FRACTION: f64 = 0.05;
 
 /// `v` as a stored texel value: finite, non-negative (else 0), rounded to [`TEXEL_MANTISSA_BITS`].
-pub fn texel_value(v: f32) -> f16 {
+pub(crate) fn texel_value(v: f32) -> f16 {
     let v = if v.is_finite() { v.max(0.0) } else { 0.0 };
     let drop = 10 - TEXEL_MANTISSA_BITS;
     let bits = f16::from_f32(v).to_bits();
@@ -502,8 +502,8 @@ pub fn texel_value(v: f32) -> f16 {
     f16::from_bits(if f16::from_bits(rounded).is_finite() { rounded } else { 0x7bff & !((1u16 << drop) - 1) })
 }
 
-/// Linear RGB texels of one image as stored: [`texel_value`]s with their coverage as alpha (luminance over
-/// [`COVERAGE_FRACTION`] of the image's brightest, at most 1; computed from the stored values, so that a
+/// Linear RGB texels of one image as stored: `texel_value`s with their coverage as alpha (luminance over
+/// `COVERAGE_FRACTION` of the image's brightest, at most 1; computed from the stored values, so that a
 /// file, which does not store alpha, loads to exactly these texels).
 pub fn texels_with_coverage(rgb: impl Iterator<Item = [f32; 3]>) -> Vec<[f16; 4]> {
     let mut texels: Vec<[f16; 4]> =
@@ -513,7 +513,7 @@ pub fn texels_with_coverage(rgb: impl Iterator<Item = [f32; 3]>) -> Vec<[f16; 4]
 }
 
 /// Sets every texel's alpha to its coverage (see [`texels_with_coverage`]).
-pub fn set_coverage(texels: &mut [[f16; 4]]) {
+pub(crate) fn set_coverage(texels: &mut [[f16; 4]]) {
     let luma = |t: &[f16; 4]| crate::metrics::luminance([t[0].to_f64(), t[1].to_f64(), t[2].to_f64()]);
     let peak = texels.iter().map(luma).fold(0.0, f64::max);
     for t in texels.iter_mut() {
@@ -525,7 +525,7 @@ pub fn set_coverage(texels: &mut [[f16; 4]]) {
 /// One LUT ghost: its images over thetas x azimuths.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LutGhost {
-    /// Index in the lens's ghost list ([`PHOTO_GHOST`] for a photo LUT).
+    /// Index in the lens's ghost list (`PHOTO_GHOST` for a photo LUT).
     pub ghost: u32,
     /// The two reflecting surfaces (i, j).
     pub surfaces: [u32; 2],
@@ -557,7 +557,7 @@ pub struct GhostLut {
     pub lens_id: String,
     /// [`crate::bake::lut_fingerprint`] of the lens and settings it was baked for (0 for a photo LUT: any lens).
     pub lens_fingerprint: u64,
-    /// The rule `lens_fingerprint` was made by ([`crate::fingerprint::SCHEME`]; 0: a file from before schemes,
+    /// The rule `lens_fingerprint` was made by (`crate::fingerprint::SCHEME`; 0: a file from before schemes,
     /// whose fingerprint cannot be compared).
     pub fingerprint_scheme: u32,
     pub wavelengths_nm: Vec<f64>,

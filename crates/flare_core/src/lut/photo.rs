@@ -8,7 +8,7 @@
 //! whose centre is the optical axis and whose width maps to the 36 mm sensor width; `azimuth_deg` (default 0:
 //! the light moved to the right of the frame) is the direction of the sweep, so at run time the image turns
 //! about the axis by the live light's azimuth minus it. Images wider or taller than 2046 pixels are
-//! downscaled to fit an atlas page. The LUT has one pseudo-ghost ([`super::PHOTO_GHOST`]) whose entries are the
+//! downscaled to fit an atlas page. The LUT has one pseudo-ghost (`super::PHOTO_GHOST`) whose entries are the
 //! images; alpha is the coverage, luminance over 5% of the brightest texel of its image.
 
 use std::path::{Path, PathBuf};
@@ -19,7 +19,7 @@ use super::{GhostLut, LutEntry, LutGhost, LutKind, PHOTO_GHOST, Symmetry};
 use crate::ghost::ParaxialFrame;
 
 /// Largest image side kept (an atlas page less its border).
-pub const MAX_PHOTO_SIDE: u32 = super::blend::ATLAS_PAGE - 2;
+pub(crate) const MAX_PHOTO_SIDE: u32 = super::blend::ATLAS_PAGE - 2;
 
 /// Why a photo folder cannot be imported.
 #[derive(Debug, thiserror::Error)]
@@ -50,10 +50,10 @@ struct SidecarImage {
 }
 
 /// The most photos one photo LUT is made of (each is decoded; a sidecar may list any number).
-pub const MAX_PHOTOS: usize = 1024;
+pub(crate) const MAX_PHOTOS: usize = 1024;
 
 /// The first decimal number in a file name (`flare_12.5deg.png` -> 12.5).
-pub fn angle_from_name(name: &str) -> Option<f64> {
+pub(crate) fn angle_from_name(name: &str) -> Option<f64> {
     let start = name.find(|c: char| c.is_ascii_digit())?;
     let text: String = name[start..].chars().take_while(|c| c.is_ascii_digit() || *c == '.').collect();
     text.trim_end_matches('.').parse().ok()

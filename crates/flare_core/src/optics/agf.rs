@@ -57,7 +57,7 @@ pub struct AgfError {
 }
 
 /// Highest formula number the reader knows.
-pub const MAX_FORMULA: u8 = 13;
+pub(crate) const MAX_FORMULA: u8 = 13;
 
 /// Reads an AGF text as catalogue `catalogue` (the vendor's name, by convention the file stem).
 pub fn parse_agf(text: &str, catalogue: &str) -> Result<Vec<CatalogueGlass>, AgfError> {
@@ -144,7 +144,7 @@ pub fn parse_agf(text: &str, catalogue: &str) -> Result<Vec<CatalogueGlass>, Agf
 
 /// The index by AGF formula `formula` with coefficients `c` at `wavelength_um`; `None` where it is not a
 /// real index.
-pub fn formula_index(formula: u8, c: &[f64; 10], wavelength_um: f64) -> Option<f64> {
+pub(crate) fn formula_index(formula: u8, c: &[f64; 10], wavelength_um: f64) -> Option<f64> {
     let l = wavelength_um;
     let l2 = l * l;
     let sellmeier =

@@ -4,10 +4,10 @@
 //! Lens files give each medium's index at the d-line (`n_d`, 587.5618 nm), usually its Abbe number `V_d`,
 //! and sometimes a catalogue glass name. From that, [`Dispersion::for_medium`] picks one model:
 //! 1. **Air** (`n_d == 1`): constant 1. All indices are relative to air, the lens-design convention.
-//! 2. **Catalogue glass** (the name is a known glass, case-insensitive, see [`find_glass`]): the glass's
+//! 2. **Catalogue glass** (the name is a known glass, case-insensitive, see `find_glass`): the glass's
 //!    dispersion formula from its AGF catalogue ([`super::agf`]: the 830 built-in glasses of
-//!    [`BUILTIN_CATALOGUES`], 154 SCHOTT, 213 OHARA, 186 HOYA and 277 CDGM, plus any catalogue added with
-//!    [`add_catalogue`], e.g. `--catalog`), moved and scaled about the d-line so that it gives the file's
+//!    `BUILTIN_CATALOGUES`, 154 SCHOTT, 213 OHARA, 186 HOYA and 277 CDGM, plus any catalogue added with
+//!    `add_catalogue`, e.g. `--catalog`), moved and scaled about the d-line so that it gives the file's
 //!    `n_d` exactly at the d-line and the file's `V_d` (the catalogue's, when the file gives none) exactly:
 //!    `n(L) = n_d + s (n_formula(L) - n_formula(L_d))` with `s = (n_d - 1) / (V_d (n_F - n_C)_formula)`.
 //!    The file stays authoritative at the design wavelength (where the reference figures are computed) and in
@@ -22,7 +22,7 @@
 //!    the blue than 1/L^2) and 3.7e-3 over 450-650 nm. Fringes keep their order and roughly their size; where the
 //!    glass is named and catalogued, model 2 is used instead.
 //! 4. **n_d alone** (no V_d, unknown glass, as in the pbrt files): the Cauchy fit with an assumed
-//!    V_d = [`ASSUMED_ABBE`], a middle-of-the-road glass; reported by [`Dispersion::is_assumed`] so the UI
+//!    V_d = `ASSUMED_ABBE`, a middle-of-the-road glass; reported by [`Dispersion::is_assumed`] so the UI
 //!    and `lens info` can say so.
 //!
 //! At exactly the d-line every model returns `n_d` bit for bit, so d-line results never depend on the model.
@@ -41,17 +41,18 @@
 /// Helium d-line, the wavelength at which `n_d` is given.
 pub const D_LINE_NM: f64 = 587.5618;
 /// Hydrogen F-line.
-pub const F_LINE_NM: f64 = 486.1327;
+pub(crate) const F_LINE_NM: f64 = 486.1327;
 /// Hydrogen C-line.
-pub const C_LINE_NM: f64 = 656.2725;
+pub(crate) const C_LINE_NM: f64 = 656.2725;
 /// Abbe number assumed for a glass whose dispersion the file does not give.
-pub const ASSUMED_ABBE: f64 = 50.0;
+pub(crate) const ASSUMED_ABBE: f64 = 50.0;
 
 pub use super::agf::CatalogueGlass;
 
 /// The formula's n_d and V_d = (n_d - 1) / (n_F - n_C) of a catalogue glass, to check against its published
 /// ones; `None` where the formula gives no index at those lines.
-pub fn computed_nd_vd(glass: &CatalogueGlass) -> Option<(f64, f64)> {
+#[cfg(test)]
+pub(crate) fn computed_nd_vd(glass: &CatalogueGlass) -> Option<(f64, f64)> {
     let (d, f, c) = (glass.formula_index(D_LINE_NM)?, glass.formula_index(F_LINE_NM)?, glass.formula_index(C_LINE_NM)?);
     Some((d, (d - 1.0) / (f - c)))
 }
@@ -59,7 +60,7 @@ pub fn computed_nd_vd(glass: &CatalogueGlass) -> Option<(f64, f64)> {
 /// The catalogues embedded in the binary, as AGF files: (catalogue name, text).
 /// Sources and dates are in each file's `CC` lines (SCHOTT 2013; OHARA 2017, HOYA 2017 and CDGM 2022 from the
 /// public-domain refractiveindex.info database).
-pub const BUILTIN_CATALOGUES: &[(&str, &str)] = &[
+pub(crate) const BUILTIN_CATALOGUES: &[(&str, &str)] = &[
     ("SCHOTT", include_str!("../../../../assets/glass/flarelab-schott.agf")),
     ("OHARA", include_str!("../../../../assets/glass/flarelab-ohara.agf")),
     ("HOYA", include_str!("../../../../assets/glass/flarelab-hoya.agf")),
@@ -86,7 +87,8 @@ fn registry() -> &'static std::sync::RwLock<Vec<(String, &'static CatalogueGlass
 }
 
 /// Every known glass (built-in first, then added catalogues in the order they were added).
-pub fn catalogue_glasses() -> Vec<&'static CatalogueGlass> {
+#[cfg(test)]
+pub(crate) fn catalogue_glasses() -> Vec<&'static CatalogueGlass> {
     registry().read().map(|r| r.iter().map(|(_, g)| *g).collect()).unwrap_or_default()
 }
 
@@ -94,7 +96,7 @@ pub fn catalogue_glasses() -> Vec<&'static CatalogueGlass> {
 /// known from another catalogue is kept too, and found by `CATALOGUE:NAME`. A glass of the same catalogue
 /// and name (a newer `ohara.agf` than the built-in OHARA) replaces the known one in place, so the user's
 /// file wins; models made before keep the glass they had. Returns how many glasses the file holds.
-pub fn add_catalogue(text: &str, name: &str) -> Result<usize, super::agf::AgfError> {
+pub(crate) fn add_catalogue(text: &str, name: &str) -> Result<usize, super::agf::AgfError> {
     let list = super::agf::parse_agf(text, name)?;
     let count = list.len();
     if let Ok(mut r) = registry().write() {
@@ -117,7 +119,7 @@ fn normalise(name: &str) -> String {
 
 /// Finds a catalogue glass by name (case-insensitive; `N_BK7` and `n-bk7` both find N-BK7), or by
 /// `CATALOGUE:NAME` (`OHARA:S-BSL7`) when two catalogues share a name; the first catalogue wins otherwise.
-pub fn find_glass(name: &str) -> Option<&'static CatalogueGlass> {
+pub(crate) fn find_glass(name: &str) -> Option<&'static CatalogueGlass> {
     let (catalogue, glass) = match name.split_once(':') {
         Some((c, g)) => (Some(c.trim().to_ascii_uppercase()), g),
         None => (None, name),

@@ -38,19 +38,19 @@ use serde::{Deserialize, Serialize};
 use super::glass::{D_LINE_NM, Dispersion};
 
 /// Largest number of surfaces a lens may have (a 60-surface zoom is large; 1000 is absurd).
-pub const MAX_SURFACES: usize = 1000;
+pub(crate) const MAX_SURFACES: usize = 1000;
 /// Thicknesses beyond this are refused as absurd (one kilometre).
-pub const MAX_THICKNESS_MM: f64 = 1.0e6;
+pub(crate) const MAX_THICKNESS_MM: f64 = 1.0e6;
 /// Semi-apertures beyond this are refused as absurd (ten metres).
-pub const MAX_SEMI_APERTURE_MM: f64 = 1.0e4;
+pub(crate) const MAX_SEMI_APERTURE_MM: f64 = 1.0e4;
 /// Refractive indices above this are refused as absurd for visible light.
-pub const MAX_INDEX: f64 = 4.0;
+pub(crate) const MAX_INDEX: f64 = 4.0;
 /// Most even aspheric terms above r^2 a surface may carry: A4 to A16, what Zemax's even asphere holds.
-pub const MAX_ASPHERIC_TERMS: usize = 7;
+pub(crate) const MAX_ASPHERIC_TERMS: usize = 7;
 /// Abbe numbers outside (0, this] are refused (real glasses lie between about 17 and 100).
-pub const MAX_ABBE: f64 = 200.0;
+pub(crate) const MAX_ABBE: f64 = 200.0;
 /// Surfaces may touch but not cross: an edge gap below minus this is refused.
-pub const EDGE_OVERLAP_TOLERANCE_MM: f64 = 1.0e-6;
+pub(crate) const EDGE_OVERLAP_TOLERANCE_MM: f64 = 1.0e-6;
 
 /// The optical material behind a surface.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -293,7 +293,7 @@ impl Surface {
 }
 
 /// A surface's shape in the form the inner loops want, `Copy` and allocation-free: curvature, conic, the
-/// r^2 term and up to [`MAX_ASPHERIC_TERMS`] even terms (unused ones 0).
+/// r^2 term and up to `MAX_ASPHERIC_TERMS` even terms (unused ones 0).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SurfaceShape {
     pub curvature_per_mm: f64,
@@ -735,7 +735,7 @@ impl Lens {
     }
 
     /// Every check of [`Self::validate`] but whether neighbouring surfaces cross (which
-    /// [`crate::optics::tolerance::repair`] may mend).
+    /// `crate::optics::tolerance::repair` may mend).
     pub fn validate_except_edges(&self) -> Result<(), LensError> {
         let n = self.surfaces.len();
         if n == 0 {

@@ -24,11 +24,12 @@ pub mod trace;
 
 pub use glass::D_LINE_NM;
 pub use lens::{Coating, CoatingLayer, Lens, LensError, Medium, Section, Surface};
-pub use paraxial::{EntrancePupil, FirstOrder, Mat2, ParaxialError, PathMatrices};
-pub use path::{Interaction, LightPath, PathKind, Step};
+pub use paraxial::Mat2;
+pub use paraxial::{EntrancePupil, FirstOrder, ParaxialError, PathMatrices};
+pub use path::{Interaction, Step};
+pub use path::{LightPath, PathKind};
 #[cfg(target_arch = "x86_64")]
-pub use trace::simd_level;
-pub use trace::{
-    Landing, Ray, StepHit, TraceOptions, TraceResult, TraceStatus, Tracer, VertexRecipe, VertexRecord, pupil_ray,
-    table_at,
-};
+pub(crate) use trace::simd_level;
+pub(crate) use trace::table_at;
+pub use trace::{Landing, Ray, TraceOptions, TraceResult, TraceStatus, Tracer, pupil_ray};
+pub use trace::{StepHit, VertexRecipe, VertexRecord};

@@ -11,7 +11,7 @@ pub struct Sensor {
 }
 
 /// The width of a full-frame sensor, the default one.
-pub const FULL_FRAME_WIDTH_MM: f64 = 36.0;
+pub(crate) const FULL_FRAME_WIDTH_MM: f64 = 36.0;
 
 impl Sensor {
     /// A full-frame-wide sensor (36 mm) with the aspect of a `width` x `height` image.
@@ -37,7 +37,7 @@ pub fn sensor_to_pixel(p_mm: [f64; 2], sensor: &Sensor, width: u32, height: u32)
 }
 
 /// The sensor point (mm) shown at pixel `p` (the inverse of [`sensor_to_pixel`]).
-pub fn pixel_to_sensor(p: [f64; 2], sensor: &Sensor, width: u32, height: u32) -> [f64; 2] {
+pub(crate) fn pixel_to_sensor(p: [f64; 2], sensor: &Sensor, width: u32, height: u32) -> [f64; 2] {
     let k = width as f64 / sensor.width_mm;
     [(0.5 * width as f64 - p[0]) / k, (p[1] - 0.5 * height as f64) / k]
 }

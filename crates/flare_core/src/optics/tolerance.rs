@@ -5,7 +5,7 @@
 //! # How it works
 //! Patents give no clear apertures, so transcriptions guess them, and a guess is often too wide: two
 //! surfaces of an air gap "cross" at the given semi-apertures. Glass cannot extend beyond the height where
-//! the two surfaces meet, so the physical lens was clipped there; [`repair`] does the same, and refuses only
+//! the two surfaces meet, so the physical lens was clipped there; `repair` does the same, and refuses only
 //! when the clip would cut into the axial beam, i.e. when on-axis light through the full stop reaches the
 //! meeting height at either surface (then the stop would no longer be the aperture stop and the f-number
 //! would be wrong). The axial beam is found by exact rays: an on-axis fan across the paraxial entrance pupil
@@ -28,7 +28,7 @@ const FIELD_GRID: usize = 16;
 
 /// Loads `lens` tolerantly: validates it, clips crossing neighbours where that is harmless, and returns the
 /// warnings (one sentence each). The lens is left untouched when it is refused.
-pub fn repair(lens: &mut Lens) -> Result<Vec<String>, LensError> {
+pub(crate) fn repair(lens: &mut Lens) -> Result<Vec<String>, LensError> {
     lens.validate_except_edges()?;
     let crossings = lens.edge_crossings();
     if crossings.is_empty() {

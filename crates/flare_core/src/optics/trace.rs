@@ -11,7 +11,7 @@
 //! where `s_dir` is the travel direction (+1 / -1) that picks the root on the vertex side. A conic or aspheric
 //! surface (see the sag in [`crate::optics::lens`]) starts from the same stable root for its quadric
 //! `c (x^2 + y^2 + (1 + k) z^2) - 2 z = 0` (or from the vertex plane where the line misses the quadric) and
-//! then solves `z(s) - sag(r(s)) = 0` by Newton's method, at most [`MAX_NEWTON_STEPS`] steps, until a step is
+//! then solves `z(s) - sag(r(s)) = 0` by Newton's method, at most `MAX_NEWTON_STEPS` steps, until a step is
 //! below 1e-13 of the distance; a line that leaves the region where the sag is defined, or does not
 //! converge, missed the surface. A toroid (no rotational symmetry) starts Newton's method on
 //! `z(s) - sag(x(s), y(s))` from the vertex plane, its normal from the two slopes of its sag. So a sphere is met
@@ -658,7 +658,7 @@ impl<const L: usize> VertexRecord<L> {
 /// (clamped to [0, 1]), linearly interpolated: what `coating::ReflectanceTable::at` reads, and the one-lane
 /// form of the tracer's vectorised read.
 #[inline(always)]
-pub fn table_at(samples: &[f64], sin2_i: f64) -> f64 {
+pub(crate) fn table_at(samples: &[f64], sin2_i: f64) -> f64 {
     let n = samples.len();
     let x = sin2_i.clamp(0.0, 1.0) * (n - 1) as f64;
     let k = (x as usize).min(n - 2);
@@ -763,7 +763,7 @@ impl<const L: usize> LaneVisitor<L> for RecipeVisitor<'_, '_, L> {
 /// The widest vector instructions [`Tracer::trace_visit_lanes`] may use here: 0 none beyond the baseline,
 /// 1 AVX2, 2 AVX-512 (F, DQ and VL); detected once. `FLARELAB_SIMD=0|1|2` caps it (to compare the paths).
 #[cfg(target_arch = "x86_64")]
-pub fn simd_level() -> u8 {
+pub(crate) fn simd_level() -> u8 {
     static LEVEL: std::sync::OnceLock<u8> = std::sync::OnceLock::new();
     *LEVEL.get_or_init(|| {
         let found = if is_x86_feature_detected!("avx512f")
@@ -816,7 +816,7 @@ fn intersect(p: DVec3, d: DVec3, c: f64, z_dir: f64) -> Option<f64> {
 }
 
 /// Most Newton steps an aspheric intersection may take before the ray counts as missing the surface.
-pub const MAX_NEWTON_STEPS: usize = 40;
+pub(crate) const MAX_NEWTON_STEPS: usize = 40;
 
 /// Distance along unit direction `d` from `p` (relative to the vertex) to the surface `shape`, on the branch
 /// the sag describes; `None` when the line misses it (see the module's notes).

@@ -7,14 +7,14 @@ use crate::optics::sensor::Sensor;
 /// README).
 pub const REFERENCE_GRID: usize = 256;
 /// Fewest grid cells across a ghost's entrance region in the reference renderer.
-pub const REFERENCE_MIN_GRID: usize = 64;
+pub(crate) const REFERENCE_MIN_GRID: usize = 64;
 /// How many rays a render traces per ghost and wavelength.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Grid {
     /// N x N cells over every ghost's entrance region: Hullin 2011's ray grids.
     Fixed(usize),
     /// Up to N x N cells: about two cells per pixel of the ghost's extent in the frame (measured by the
-    /// pre-pass), at least [`REFERENCE_MIN_GRID`], rounded up to a power of two: the reference, whose triangles
+    /// pre-pass), at least `REFERENCE_MIN_GRID`, rounded up to a power of two: the reference, whose triangles
     /// are then at most about half a pixel on the sensor wherever they are not compressed into a caustic.
     Adaptive(usize),
 }
@@ -38,7 +38,7 @@ impl Grid {
     }
 }
 /// Samples of the ray-traced renderers' reflectance tables over sin^2(i).
-pub const DENSE_TABLE_SAMPLES: usize = 1025;
+pub(crate) const DENSE_TABLE_SAMPLES: usize = 1025;
 /// The smallest and largest grid a ray-grid render accepts.
 pub const GRID_RANGE: std::ops::RangeInclusive<usize> = 2..=4096;
 /// The part of the sensor plane an image covers: a rectangle of centre `centre_mm` and width `width_mm`, drawn

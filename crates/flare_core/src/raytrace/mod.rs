@@ -11,7 +11,7 @@
 //! - where it lands on the sensor (the same plane and pixel mapping as the paraxial renderer);
 //! - its **weight**: the reflectance R at both reflections times the transmittance 1 - R at every refraction,
 //!   each at the ray's own angle of incidence and wavelength, with the surface's coating (dense tables of
-//!   [`DENSE_TABLE_SAMPLES`] samples over sin^2 i from [`crate::coating`]);
+//!   `DENSE_TABLE_SAMPLES` samples over sin^2 i from [`crate::coating`]);
 //! - its coordinates at every stop crossing (1 or 3), in units of the stop radius at the chosen f-number;
 //! - its largest relative height `h / semi-aperture` over every other surface it meets (Hullin's "relative
 //!   radius").
@@ -44,7 +44,7 @@
 //! lens, is then the render's pre-pass ([`Ghosts::Scouted`]).
 //!
 //! The tracer depends only on the optics, the coatings and the aperture: [`RayGridSetup`] is all it takes of
-//! a lens and its settings (made from a ghost system by [`crate::flare::ray_grid_setup`], whose paraxial
+//! a lens and its settings (made from a ghost system by `crate::flare::ray_grid_setup`, whose paraxial
 //! entrance regions are its hint of where to look). Every image comes from one entry point, [`RayGridRenderer::render_request`] (a [`RayGridRequest`]: the light,
 //! the views, the grid and which ghosts); [`RayGridRenderer::render`] is its whole-frame shorthand. The module
 //! is in three parts: [`grid`] (grid sizes, windows, the traced vertex), `tracer` (planning the jobs, the
@@ -61,12 +61,13 @@ pub mod grid;
 mod splat;
 mod tracer;
 
-pub use grid::{DENSE_TABLE_SAMPLES, GRID_RANGE, Grid, REFERENCE_GRID, REFERENCE_MIN_GRID, View, Window};
-pub use splat::{RayGridImage, RayGridStats};
-pub use tracer::{
-    ColumnTracer, CpuTracing, Dim, EntranceHint, Ghosts, LitCells, PlannedJob, RayGridError, RayGridRenderer,
-    RayGridRequest, RayGridSetup, Scout, TracedGhost, faintest,
-};
+pub(crate) use grid::DENSE_TABLE_SAMPLES;
+pub use grid::{GRID_RANGE, Grid, REFERENCE_GRID, View, Window};
+pub use splat::RayGridImage;
+pub use splat::RayGridStats;
+pub use tracer::{ColumnTracer, Dim, LitCells, PlannedJob, RayGridSetup, Scout, TracedGhost};
+pub(crate) use tracer::{CpuTracing, EntranceHint};
+pub use tracer::{Ghosts, RayGridError, RayGridRenderer, RayGridRequest, faintest};
 
 #[cfg(test)]
 mod tests {

@@ -156,7 +156,7 @@ pub struct TracedGhost {
 /// Where to look when no coarse ray of ghost `g` at wavelength `w` passes, for light slopes `u`: the centre
 /// (mm) and radius (mm) of a disc on the entrance plane (a hint of where a ghost smaller than a coarse cell may
 /// be, never a result). The paraxial entrance region serves ([`crate::flare::ray_grid_setup`]).
-pub type EntranceHint = Arc<dyn Fn(usize, usize, [f64; 2]) -> Option<([f64; 2], f64)> + Send + Sync>;
+pub(crate) type EntranceHint = Arc<dyn Fn(usize, usize, [f64; 2]) -> Option<([f64; 2], f64)> + Send + Sync>;
 
 /// What the ray tracer needs of a lens and its settings: nothing but optics, coatings and the stop (the
 /// aperture mask comes with [`RayGridRenderer::new`]), and a hint of where to look.
@@ -217,7 +217,7 @@ pub enum RayGridError {
     Cancelled,
 }
 /// What draws a column's entries once the scout has placed their windows: the CPU reference renderer
-/// ([`CpuTracing`]) or its GPU twin (`render::raygrid::GpuBake`, which falls back to the CPU if its device is
+/// (`CpuTracing`) or its GPU twin (`render::raygrid::GpuBake`, which falls back to the CPU if its device is
 /// lost). Everything else of the bake (scouts, windows, refinement) is the same for both.
 pub trait ColumnTracer: Sync {
     /// The scouted ghost, for the scout's light, seen in each of `views` (linear irradiance); `None` when it
@@ -232,7 +232,7 @@ pub trait ColumnTracer: Sync {
 }
 
 /// The bake's columns traced on the CPU, in f64: [`RayGridRenderer::render_request`] of a scouted request.
-pub struct CpuTracing;
+pub(crate) struct CpuTracing;
 
 impl ColumnTracer for CpuTracing {
     fn trace_column(

@@ -125,7 +125,7 @@ pub(crate) fn software_device(device: &wgpu::Device) -> bool {
 }
 
 /// The HDR accumulation format.
-pub const HDR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+pub(crate) const HDR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 
 /// A plain 2D texture (one mip level, one sample).
 pub fn texture_2d(

@@ -38,11 +38,12 @@
 
 use wgpu_profiler::{GpuProfiler, GpuProfilerSettings, GpuTimerQueryResult};
 
+pub(crate) use super::buffers::HDR_FORMAT;
+pub use super::buffers::texture_2d;
 use super::buffers::{
     ADDITIVE, pipeline_layout, render_pipeline, shader_module, texture_entry, uniform_entry, upload, upload_part,
     vertex_buffer,
 };
-pub use super::buffers::{HDR_FORMAT, texture_2d};
 use super::cpu::ghosts::{GhostMasks, MASK_LEVELS};
 use super::gpu_ghosts::{ComputeGhosts, mask_level_textures};
 use super::gpu_lut::{ComputeLut, TILE};
@@ -157,12 +158,12 @@ impl GpuContext {
 
 /// The timestamp-query features `adapter` offers (none on adapters without them): what a device asks for so
 /// that [`FlareRenderer`] can time its passes.
-pub fn timer_features(adapter: &wgpu::Adapter) -> wgpu::Features {
+pub(crate) fn timer_features(adapter: &wgpu::Adapter) -> wgpu::Features {
     adapter.features() & GpuProfiler::ALL_WGPU_TIMER_FEATURES
 }
 
 /// The features a device for the renderer asks of `adapter`, where it has them: the timestamp queries
-/// ([`timer_features`]) and blending into 32-bit float targets (the ray grids' splats and the rasterised LUT
+/// (`timer_features`) and blending into 32-bit float targets (the ray grids' splats and the rasterised LUT
 /// layer's run sums add in f32 there, in f16 without it).
 pub fn wanted_features(adapter: &wgpu::Adapter) -> wgpu::Features {
     timer_features(adapter) | (adapter.features() & wgpu::Features::FLOAT32_BLENDABLE)
@@ -242,12 +243,12 @@ impl PassTimes {
 
 /// True when `FLARELAB_REQUIRE_GPU=1`: tests that need a GPU adapter (or a display) must then fail instead of
 /// skipping (CI sets it: lavapipe and Xvfb are installed there).
-pub fn gpu_required() -> bool {
+pub(crate) fn gpu_required() -> bool {
     std::env::var("FLARELAB_REQUIRE_GPU").is_ok_and(|v| v == "1")
 }
 
 /// A test that needs a GPU adapter or a display skips for want of one: it says so, or, when
-/// [`gpu_required`], fails with `reason`.
+/// `gpu_required`, fails with `reason`.
 pub fn skip_without_gpu(reason: &str) {
     assert!(!gpu_required(), "FLARELAB_REQUIRE_GPU=1 but {reason}");
     println!("SKIPPED: {reason}");

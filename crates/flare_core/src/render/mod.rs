@@ -209,7 +209,7 @@ pub struct FlareScene {
     pub instance_ghosts: Vec<u32>,
     /// Sprites dropped because a value was not finite (expected: always 0).
     pub dropped_non_finite: usize,
-    /// Clear-aperture discs that cut a drawn sprite but were left out, beyond [`MAX_DISCS`] a sprite.
+    /// Clear-aperture discs that cut a drawn sprite but were left out, beyond `MAX_DISCS` a sprite.
     pub discs_left_out: usize,
     /// The OCIO display transform of [`Tonemap::View`] (`None`: the built-in default,
     /// [`crate::view_transform::ViewTransform::builtin`]).
@@ -513,10 +513,10 @@ impl FlareScene {
 }
 
 /// The starburst's core radius in pixels: the light's blown-out image.
-pub const STARBURST_CORE_PX: f64 = 1.0;
+pub(crate) const STARBURST_CORE_PX: f64 = 1.0;
 /// The most relative irradiance the starburst adds to a pixel (before the flare's gain): the half-float
 /// accumulation holds it, and the light's image is white long before it.
-pub const STARBURST_MAX: f64 = 3.0e4;
+pub(crate) const STARBURST_MAX: f64 = 3.0e4;
 
 #[cfg(test)]
 mod layouts {

@@ -4,8 +4,8 @@
 //! # How it works
 //! The CPU plans the frame exactly as a fixed-grid CPU render does ([`RayGridRenderer::plan_fixed`]: per ghost
 //! and wavelength, a coarse pre-pass over the front lens says where the dense grid of `cells` x `cells` cells
-//! lies), then uploads per job its path ([`GpuStep`]: vertex, curvature, conic and aspheric terms, n_in / n_out,
-//! reflect or refract, the clear aperture, which reflectance table) and the grid ([`GpuJob`]), and every dense
+//! lies), then uploads per job its path (`GpuStep`: vertex, curvature, conic and aspheric terms, n_in / n_out,
+//! reflect or refract, the clear aperture, which reflectance table) and the grid (`GpuJob`), and every dense
 //! reflectance table (1025 samples over sin^2 i, the CPU renderer's own), and the pre-pass's lit cells (a ray
 //! outside them is not traced, on the CPU as here). Two passes follow:
 //! 1. `raygrid_trace.wgsl` (compute, one invocation per grid vertex, workgroup row = job): each ray traced
@@ -23,7 +23,7 @@
 //! per pass into [`GpuRayGridImage::gpu_times`]) for a frame render. **The LUT bake** draws each column the
 //! same way ([`GpuRayGrid::render_scouted`], [`GpuBake`]): the CPU plans it from the scout
 //! ([`RayGridRenderer::plan_scouted`]), and the trace turns every landing and stop coordinate by the view's
-//! turn (`rgb.w` of [`GpuJob`]), as the CPU's [`View`] does, once per azimuth.
+//! turn (`rgb.w` of `GpuJob`), as the CPU's [`View`] does, once per azimuth.
 //!
 //! The CPU twin box-filters its triangles (`splat_triangle`). The default GPU path does the same in a compute
 //! pass (`raygrid_box.wgsl`): each pixel a triangle touches gets the area and centroid of the triangle's part
@@ -63,7 +63,7 @@ use wgpu_profiler::{GpuProfiler, GpuProfilerSettings};
 /// One step of a ghost's path. Must be kept in sync with `struct Step` in `shaders/raygrid_common.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
-pub struct GpuStep {
+pub(crate) struct GpuStep {
     /// vertex z (mm), curvature (1/mm), conic, 1 / semi-aperture^2 (0 at the stop).
     pub surface: [f32; 4],
     /// n_in / n_out (f32 bits), offset of the reflectance table in the tables, flags ([`STEP_REFLECT`] ...), a
@@ -78,16 +78,16 @@ const _: () = assert!(std::mem::size_of::<GpuStep>() == 64);
 
 /// [`GpuStep::optics`]'s flags (`STEP_*` in `shaders/raygrid_common.wgsl`): a reflection, the stop, the sphere
 /// formulas alone, a toroid, arriving towards -z.
-pub const STEP_REFLECT: u32 = 1;
-pub const STEP_STOP: u32 = 2;
-pub const STEP_SPHERE: u32 = 4;
-pub const STEP_TOROID: u32 = 8;
-pub const STEP_BACKWARD: u32 = 16;
+pub(crate) const STEP_REFLECT: u32 = 1;
+pub(crate) const STEP_STOP: u32 = 2;
+pub(crate) const STEP_SPHERE: u32 = 4;
+pub(crate) const STEP_TOROID: u32 = 8;
+pub(crate) const STEP_BACKWARD: u32 = 16;
 
 /// One ghost at one wavelength. Must be kept in sync with `struct Job` in `shaders/raygrid_common.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
-pub struct GpuJob {
+pub(crate) struct GpuJob {
     /// First step, step count, first vertex, cells across.
     pub steps: [u32; 4],
     /// x0, y0 of the grid (mm), cell size x, y (mm).
@@ -123,12 +123,12 @@ pub struct GpuVertex {
 }
 const _: () = assert!(std::mem::size_of::<GpuVertex>() == 48);
 
-/// What [`GpuRayGrid::render`] is asked for by default: [`BOX_FILTER`], each triangle box-filtered exactly
+/// What [`GpuRayGrid::render`] is asked for by default: `BOX_FILTER`, each triangle box-filtered exactly
 /// in a compute pass (`raygrid_box.wgsl`), as the CPU twin does.
 pub const SUPERSAMPLE: u32 = BOX_FILTER;
 /// The `supersample` that box-filters (compute); 1 to 8 rasterise the triangles (`raygrid_splat.wgsl`) at that
 /// many samples a pixel across and average them, the earlier path, kept to compare.
-pub const BOX_FILTER: u32 = 0;
+pub(crate) const BOX_FILTER: u32 = 0;
 
 /// The box-filter pass's parameters. Must be kept in sync with `struct BoxParams` in `shaders/raygrid_box.wgsl`.
 #[repr(C)]
@@ -358,7 +358,7 @@ impl GpuRayGrid {
     }
 
     /// The ghosts of `renderer` for a light at the frame position `light_deg`, seen in `window`, a `cells` x
-    /// `cells` grid per ghost and wavelength, traced and drawn on `ctx`'s GPU: with `supersample` [`BOX_FILTER`]
+    /// `cells` grid per ghost and wavelength, traced and drawn on `ctx`'s GPU: with `supersample` `BOX_FILTER`
     /// (the default) each triangle box-filtered exactly by a compute pass as the CPU twin does; else each pixel
     /// the mean of `supersample` x `supersample` samples (the triangles rasterised at that many times the
     /// resolution, then averaged), the earlier path, kept to compare.
@@ -1271,7 +1271,7 @@ impl<'a> GpuBake<'a> {
         }
     }
 
-    /// The columns' tracer of a bake: `gpu` where there is one, else the CPU's ([`crate::raytrace::CpuTracing`]).
+    /// The columns' tracer of a bake: `gpu` where there is one, else the CPU's (`crate::raytrace::CpuTracing`).
     pub fn or_cpu<'g>(gpu: Option<&'g GpuBake<'a>>) -> &'g dyn crate::raytrace::ColumnTracer {
         match gpu {
             Some(g) => g,

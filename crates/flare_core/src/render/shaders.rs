@@ -16,15 +16,15 @@
 //! cube.
 
 /// The shared uniforms (prepended to the shaders below).
-pub const COMMON_WGSL: &str = include_str!("../../../../shaders/common.wgsl");
+pub(crate) const COMMON_WGSL: &str = include_str!("../../../../shaders/common.wgsl");
 /// Instanced ghost sprites.
-pub const GHOSTS_WGSL: &str = concat!(
+pub(crate) const GHOSTS_WGSL: &str = concat!(
     include_str!("../../../../shaders/common.wgsl"),
     include_str!("../../../../shaders/aperture.wgsl"),
     include_str!("../../../../shaders/ghosts.wgsl")
 );
 /// Ghost sprites as compute: open spans and edges into per-row differences, then one sum per row.
-pub const GHOSTS_COMPUTE_WGSL: &str = concat!(
+pub(crate) const GHOSTS_COMPUTE_WGSL: &str = concat!(
     include_str!("../../../../shaders/word_texels.wgsl"),
     include_str!("../../../../shaders/fixed64.wgsl"),
     include_str!("../../../../shaders/scan64.wgsl"),
@@ -32,17 +32,17 @@ pub const GHOSTS_COMPUTE_WGSL: &str = concat!(
     include_str!("../../../../shaders/ghosts_compute.wgsl")
 );
 /// The starburst quad.
-pub const STARBURST_WGSL: &str =
+pub(crate) const STARBURST_WGSL: &str =
     concat!(include_str!("../../../../shaders/common.wgsl"), include_str!("../../../../shaders/starburst.wgsl"));
 /// The front dirt's glow over the whole accumulation.
-pub const DIRT_WGSL: &str = concat!(
+pub(crate) const DIRT_WGSL: &str = concat!(
     include_str!("../../../../shaders/common.wgsl"),
     include_str!("../../../../shaders/fullscreen.wgsl"),
     include_str!("../../../../shaders/dirt.wgsl")
 );
 /// Flare and plate exposures, tonemap, sRGB, with the identity in place of the OCIO display transform (what
 /// the validation reads; the renderer builds [`tonemap_wgsl`] of the document's view).
-pub const TONEMAP_WGSL: &str = concat!(
+pub(crate) const TONEMAP_WGSL: &str = concat!(
     include_str!("../../../../shaders/common.wgsl"),
     include_str!("../../../../shaders/ocio_identity.wgsl"),
     include_str!("../../../../shaders/tonemap.wgsl")
@@ -50,7 +50,7 @@ pub const TONEMAP_WGSL: &str = concat!(
 
 /// The identity in place of the OCIO display transform: the tonemap pass of frames drawn through FlareLab's own
 /// curves, which never call it (`render::gpu_view::ViewPass::curves`).
-pub const OCIO_IDENTITY_WGSL: &str = include_str!("../../../../shaders/ocio_identity.wgsl");
+pub(crate) const OCIO_IDENTITY_WGSL: &str = include_str!("../../../../shaders/ocio_identity.wgsl");
 
 /// The tonemap shader with `ocio`, the WGSL OCIO generated for a display and view
 /// ([`crate::view_transform::WgslShader`]), as its `ocio_display`.
@@ -58,28 +58,28 @@ pub fn tonemap_wgsl(ocio: &str) -> String {
     [COMMON_WGSL, ocio, include_str!("../../../../shaders/tonemap.wgsl")].join("\n")
 }
 /// LUT ghosts from the atlas.
-pub const LUT_GHOSTS_WGSL: &str =
+pub(crate) const LUT_GHOSTS_WGSL: &str =
     concat!(include_str!("../../../../shaders/common.wgsl"), include_str!("../../../../shaders/lut_ghosts.wgsl"));
 /// The run of a LUT ghost's instances laid over the accumulation at once (the rasterised LUT layer through alpha).
-pub const LUT_RUNS_WGSL: &str =
+pub(crate) const LUT_RUNS_WGSL: &str =
     concat!(include_str!("../../../../shaders/fullscreen.wgsl"), include_str!("../../../../shaders/lut_runs.wgsl"));
 /// LUT ghosts as compute: the instances binned to each tile, sampled per pixel.
-pub const LUT_COMPUTE_WGSL: &str = include_str!("../../../../shaders/lut_compute.wgsl");
+pub(crate) const LUT_COMPUTE_WGSL: &str = include_str!("../../../../shaders/lut_compute.wgsl");
 /// Ray grids on the GPU, pass 1: the compute tracer (with the declarations both passes share).
-pub const RAYGRID_TRACE_WGSL: &str = concat!(
+pub(crate) const RAYGRID_TRACE_WGSL: &str = concat!(
     include_str!("../../../../shaders/word_texels.wgsl"),
     include_str!("../../../../shaders/raygrid_common.wgsl"),
     include_str!("../../../../shaders/raygrid_trace.wgsl")
 );
 /// Ray grids on the GPU, pass 2: the triangles splatted, energy conserved.
-pub const RAYGRID_SPLAT_WGSL: &str = concat!(
+pub(crate) const RAYGRID_SPLAT_WGSL: &str = concat!(
     include_str!("../../../../shaders/word_texels.wgsl"),
     include_str!("../../../../shaders/raygrid_common.wgsl"),
     include_str!("../../../../shaders/aperture.wgsl"),
     include_str!("../../../../shaders/raygrid_splat.wgsl")
 );
 /// Ray grids on the GPU, pass 2 as compute: each triangle box-filtered as the CPU twin does.
-pub const RAYGRID_BOX_WGSL: &str = concat!(
+pub(crate) const RAYGRID_BOX_WGSL: &str = concat!(
     include_str!("../../../../shaders/word_texels.wgsl"),
     include_str!("../../../../shaders/raygrid_common.wgsl"),
     include_str!("../../../../shaders/fixed64.wgsl"),
@@ -88,7 +88,7 @@ pub const RAYGRID_BOX_WGSL: &str = concat!(
     include_str!("../../../../shaders/raygrid_box.wgsl")
 );
 /// The live depth of field: split, gather, composite, resolve (`crate::dof::live`).
-pub const DOF_WGSL: &str = include_str!("../../../../shaders/dof.wgsl");
+pub(crate) const DOF_WGSL: &str = include_str!("../../../../shaders/dof.wgsl");
 /// The app's viewport pass (the flare texture into egui's render pass; used by the app, validated here).
 pub const VIEWPORT_WGSL: &str = include_str!("../../../../shaders/viewport.wgsl");
 
@@ -119,7 +119,7 @@ pub(crate) mod layout {
             (std::mem::size_of::<$t>(), vec![$((stringify!($f), std::mem::offset_of!($t, $f))),+])
         };
     }
-    pub(crate) use fields;
+    pub(crate) use ::fields;
 
     /// The struct `name` of the WGSL `source`: its size and each member's name and offset (naga's layout).
     pub(crate) fn wgsl_layout(source: &str, name: &str) -> (usize, Vec<(String, usize)>) {

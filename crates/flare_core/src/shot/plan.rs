@@ -29,7 +29,7 @@ use crate::preset::Document;
 use crate::shutter::LightPath;
 
 /// The size of a frame with no plate and no size given.
-pub const DEFAULT_SIZE: (u32, u32) = (1280, 720);
+pub(crate) const DEFAULT_SIZE: (u32, u32) = (1280, 720);
 
 /// One planned frame.
 #[derive(Clone, Debug, PartialEq)]
@@ -145,7 +145,7 @@ pub fn check_range(doc: &Document, frames: &RangeInclusive<i64>) -> Result<Vec<i
 }
 
 /// The size of the frames of `range`: `size` when given, else the size of the first plate of the range on
-/// disk, else [`DEFAULT_SIZE`]. Refuses a range the plate sequence does not cover ([`check_range`]) and a frame
+/// disk, else `DEFAULT_SIZE`. Refuses a range the plate sequence does not cover ([`check_range`]) and a frame
 /// that would need more memory than it may take ([`crate::frame::check_frame_memory`]).
 pub fn frame_size(
     doc: &Document,

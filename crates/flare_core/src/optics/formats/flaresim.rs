@@ -22,7 +22,7 @@ fn line_error(line: usize, message: impl Into<String>) -> FormatError {
 }
 
 /// True when `text` looks like a FlareSim lens: a `surfaces:` line.
-pub fn looks_like(text: &str) -> bool {
+pub(crate) fn looks_like(text: &str) -> bool {
     text.lines().any(|l| l.trim().eq_ignore_ascii_case("surfaces:"))
 }
 

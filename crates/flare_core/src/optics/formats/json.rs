@@ -44,7 +44,7 @@ pub fn parse(text: &str) -> Result<LoadedLens, FormatError> {
 }
 
 /// Every key a surface may have.
-pub const SURFACE_KEYS: &[&str] = &[
+pub(crate) const SURFACE_KEYS: &[&str] = &[
     "radius",
     "thickness",
     "nd",
@@ -59,7 +59,7 @@ pub const SURFACE_KEYS: &[&str] = &[
 ];
 
 /// The top-level keys besides `id`, `name` and `surfaces` the lens files document (`lenses/README.md`).
-pub const LENS_METADATA: &[&str] =
+pub(crate) const LENS_METADATA: &[&str] =
     &["image_distance_source", "source", "published", "format", "units", "wavelength_nm", "object_index", "notes"];
 
 /// The known key `key` is a near miss of (at most two edits away), if any.

@@ -5,7 +5,7 @@
 //! [`load_lens_file`] reads at most [`MAX_FILE_BYTES`], decodes the text (UTF-8, or UTF-16 with or without a
 //! byte-order mark as OpticStudio writes it, or Latin-1 for old `.zmx` files), picks the format by extension
 //! and then by content ([`LensFormat::detect`]), parses it, and validates the lens
-//! tolerantly ([`crate::optics::tolerance::repair`]: guessed clear apertures that make neighbours cross are
+//! tolerantly (`crate::optics::tolerance::repair`: guessed clear apertures that make neighbours cross are
 //! clipped, with a warning, where no axial light passes). Every failure is a [`FormatError`] that names the file's line
 //! (text formats) or the JSON path, and the field; nothing is half-loaded. Writers produce text that the
 //! readers read back to the same lens ([`to_json`], [`zmx::write`], [`pbrt::write`]), and
@@ -204,7 +204,7 @@ pub fn to_json(lens: &Lens) -> String {
 }
 
 /// Reads an AGF glass catalogue (any text encoding lens files may have) and adds its glasses to the ones
-/// found by name ([`crate::optics::glass::add_catalogue`]); the catalogue is named by the file stem in
+/// found by name (`crate::optics::glass::add_catalogue`); the catalogue is named by the file stem in
 /// capitals (`ohara.agf` is OHARA). Returns how many glasses it holds; a broken file adds nothing.
 pub fn load_glass_catalogue(path: &Path) -> Result<usize, String> {
     let bytes = crate::files::read_bounded(path, crate::files::MAX_TEXT_BYTES)?;

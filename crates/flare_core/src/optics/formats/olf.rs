@@ -28,7 +28,7 @@ fn line_error(line: usize, message: impl Into<String>) -> FormatError {
 }
 
 /// True when `text` looks like an OpenLensFlare optical system.
-pub fn looks_like(text: &str) -> bool {
+pub(crate) fn looks_like(text: &str) -> bool {
     text.trim_start().starts_with('<') && text.contains("<opticalSystem")
 }
 

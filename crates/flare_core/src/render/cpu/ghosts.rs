@@ -6,7 +6,7 @@
 //! Each enabled stop map names the level of [`GhostMasks`] it reads (`stops[k][3]`: 1 the base mask of
 //! [`crate::aperture::DEFAULT_MASK_SIZE`] texels, 2 and 3 the same shape rasterised at twice and four times
 //! that), picked per sprite by [`GhostMasks::assign_levels`] so that a texel spans at most
-//! [`MAX_PIXELS_PER_TEXEL`] accumulation pixels where a finer level exists. A mask's edge is a texel wide (the
+//! `MAX_PIXELS_PER_TEXEL` accumulation pixels where a finer level exists. A mask's edge is a texel wide (the
 //! rasteriser's anti-aliasing) and the bilinear lookup widens it to two: at the base size a frame-filling sprite
 //! of a 4K frame has edges 32 pixels wide, which the fast pass shades pixel by pixel, while the sprites
 //! smaller than the base mask would alias if they read a finer one. The fast pass ([`ghost_pass`]) shades a row's
@@ -160,7 +160,8 @@ const BAND_ROWS: usize = 8;
 /// `ghosts.wgsl` pixel by pixel: every instance into a cleared HDR accumulation image (`hdr_width` x
 /// `hdr_height`), every covered pixel shaded with its mask lookups, as the fragment shader does. The oracle of
 /// [`ghost_pass`] (a test holds the two within a fraction of an 8-bit step) and of the GPU comparison.
-pub fn ghost_pass_direct(scene: &FlareScene, masks: &GhostMasks) -> HdrImage {
+#[cfg(test)]
+pub(crate) fn ghost_pass_direct(scene: &FlareScene, masks: &GhostMasks) -> HdrImage {
     let (w, h) = (scene.hdr_width as usize, scene.hdr_height as usize);
     let scale = accumulation_scale(scene);
     let mut pixels = vec![[0.0f32; 4]; w * h];
@@ -179,7 +180,7 @@ pub fn ghost_pass_direct(scene: &FlareScene, masks: &GhostMasks) -> HdrImage {
     HdrImage { width: scene.hdr_width, height: scene.hdr_height, pixels }
 }
 
-/// `ghosts.wgsl` on the CPU, fast: the same image as [`ghost_pass_direct`] (to float rounding) for a fraction
+/// `ghosts.wgsl` on the CPU, fast: the same image as `ghost_pass_direct` (to float rounding) for a fraction
 /// of the work. In each row a sprite has an **open span**, where every clear-aperture disc and every stop mask
 /// are exactly 1 (no lookup can change the fragment, which is the instance's colour), flanked by its edges. The
 /// edges are shaded pixel by pixel as the shader does; the open span is added in O(1) as two entries of a
@@ -255,10 +256,10 @@ fn reach(map: [f32; 4], scale_y: f32) -> f32 {
 
 /// The most accumulation pixels one texel of a sprite's stop mask may span before the sprite reads the next
 /// finer level of [`GhostMasks`] (where there is one): the texel of a finer level is never under a pixel.
-pub const MAX_PIXELS_PER_TEXEL: f32 = 4.0;
+pub(crate) const MAX_PIXELS_PER_TEXEL: f32 = 4.0;
 
 /// The most levels [`GhostMasks`] has: [`crate::aperture::DEFAULT_MASK_SIZE`] x 1, 2 and 4 texels a side.
-pub const MASK_LEVELS: usize = 3;
+pub(crate) const MASK_LEVELS: usize = 3;
 
 /// One level of [`GhostMasks`]: the mask, its per-band table and its fully open radius.
 #[derive(Debug)]
@@ -270,7 +271,7 @@ pub struct MaskLevel {
 
 /// The stop's mask at the resolutions the ghost passes pick from, per sprite and stop crossing (see the module
 /// documentation): level 0 is the base mask every other pass reads ([`crate::flare::PreparedFlare::mask`]);
-/// a blade or round stop has [`MASK_LEVELS`] levels, each rasterised from the shape itself, while an image stop
+/// a blade or round stop has `MASK_LEVELS` levels, each rasterised from the shape itself, while an image stop
 /// has only its base (a finer raster of an image would repeat its texels, with no sharper edge).
 #[derive(Debug)]
 pub struct GhostMasks {
@@ -291,7 +292,7 @@ impl GhostMasks {
     }
 
     /// Levels from masks of any sizes, the coarsest first (tests; a single mask is a one-level set). At least
-    /// one mask, and at most [`MASK_LEVELS`] (what the GPU passes bind): a caller's error otherwise, which
+    /// one mask, and at most `MASK_LEVELS` (what the GPU passes bind): a caller's error otherwise, which
     /// panics.
     pub fn from_masks(masks: Vec<ApertureMask>) -> Self {
         assert!((1..=MASK_LEVELS).contains(&masks.len()), "{} mask levels", masks.len());
@@ -322,7 +323,7 @@ impl GhostMasks {
     }
 
     /// The level code (1 the coarsest) for a stop map whose mask coordinate moves `pixels_per_unit`
-    /// accumulation pixels per unit: the coarsest level whose texel spans at most [`MAX_PIXELS_PER_TEXEL`]
+    /// accumulation pixels per unit: the coarsest level whose texel spans at most `MAX_PIXELS_PER_TEXEL`
     /// of them, else the finest.
     pub fn pick(&self, pixels_per_unit: f32) -> f32 {
         let fits = |l: &MaskLevel| pixels_per_unit * 2.0 / l.mask.size as f32 <= MAX_PIXELS_PER_TEXEL;
@@ -360,7 +361,7 @@ impl GhostMasks {
     /// the light it should as the sprite moves by a fraction of a pixel, so a moving light strobes the ghost
     /// and a motion-blurred one breaks its streak into dashes; a quad of a whole number of pixels covers that
     /// many pixel centres wherever it lies, and its energy is the same at every position. The share is the mean
-    /// over a [`POINT_SHARE_GRID`]-square grid of the quad of the mask product with hard disc edges and the
+    /// over a `POINT_SHARE_GRID`-square grid of the quad of the mask product with hard disc edges and the
     /// base aperture mask (the detail no pixel can show). The three passes draw the instance this leaves.
     pub fn settle_point_sprites(&self, scene: &mut crate::render::FlareScene) {
         let (sx, sy) = accumulation_scale(scene);
@@ -410,7 +411,7 @@ impl GhostMasks {
 /// ([`GhostMasks::settle_point_sprites`]).
 pub const POINT_SPRITE_PX: f32 = 2.0;
 /// Samples a side of the grid a point sprite's lit share is measured on.
-pub const POINT_SHARE_GRID: usize = 16;
+pub(crate) const POINT_SHARE_GRID: usize = 16;
 
 /// The index of the level a stop map's last field `code` names among `levels` levels: 1 the first, clamped
 /// to those there are (`ghosts_compute.wgsl`'s `level_of`).

@@ -51,13 +51,13 @@ pub fn plate_layer(scene: &FlareScene, plate: &HdrImage) -> HdrImage {
 }
 
 /// `tonemap.wgsl`: [`composite`], then tonemap and sRGB into 8-bit display pixels.
-pub fn tonemap_pass(scene: &FlareScene, hdr: &HdrImage, plate: Option<&HdrImage>) -> DisplayImage {
+pub(crate) fn tonemap_pass(scene: &FlareScene, hdr: &HdrImage, plate: Option<&HdrImage>) -> DisplayImage {
     display_of(scene, &composite(scene, hdr, plate))
 }
 
 /// The display image of a composite already at the image size ([`tonemap_pixel`] of every pixel; the OCIO
 /// view over the whole image at once).
-pub fn display_of(scene: &FlareScene, composite: &HdrImage) -> DisplayImage {
+pub(crate) fn display_of(scene: &FlareScene, composite: &HdrImage) -> DisplayImage {
     let pixels = if scene.globals.operator() == Tonemap::View {
         let encode = scene.globals.encode_srgb != 0;
         let mut values: Vec<[f32; 4]> = composite
