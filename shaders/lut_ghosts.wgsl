@@ -9,6 +9,7 @@ struct LutInstance {
     @location(0) centre_axis_x: vec4<f32>, // quad centre (pixels); pixels per unit q.x
     @location(1) axis_y: vec2<f32>,        // pixels per unit q.y
     @location(4) page: u32,                // the atlas page that holds the entry
+    @location(5) _pad0: u32,
     @location(2) rect: vec4<f32>,          // the entry in its page: u0, v0, u1, v1
     @location(3) colour: vec4<f32>,        // RGB gain, alpha gain
 };

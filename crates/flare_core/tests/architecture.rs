@@ -2,7 +2,7 @@
 //! rooms (its top-level files and folders) in strict layers.
 //!
 //! Each source file is a module (`a/b.rs` and `a/b/mod.rs` are `a::b`). A module depends on every module its
-//! code (not its comments, not its `#[cfg(test)]` tests) names through `crate::...` or `super::...`, resolved
+//! code (not its comments, not its `#[cfg(test)]` test module) names through `crate::...` or `super::...`, resolved
 //! to the longest module path that exists, and every child module it names by a relative path (`plot::Row` in
 //! the module that declares `mod plot`). A depth-first search then looks for a cycle; the first one found
 //! is printed in full.
@@ -19,7 +19,22 @@ use std::path::Path;
 
 type Graph = BTreeMap<String, BTreeSet<String>>;
 
-/// Every module of the crate rooted at `src` with its source (the part before `#[cfg(test)]`).
+/// The code of a source file before its tests: up to a `#[cfg(test)]` that opens a module (a `cfg(test)`
+/// function or struct among the code is code too).
+fn before_tests(text: &str) -> &str {
+    let mut at = 0;
+    let mut lines = text.split_inclusive('\n').peekable();
+    while let Some(line) = lines.next() {
+        let next = lines.peek().map_or("", |l| l.trim_start_matches("pub(crate) ").trim_start_matches("pub "));
+        if line.trim_end() == "#[cfg(test)]" && next.starts_with("mod ") {
+            return &text[..at];
+        }
+        at += line.len();
+    }
+    text
+}
+
+/// Every module of the crate rooted at `src` with its source (the part before its tests, [`before_tests`]).
 fn modules(src: &Path) -> BTreeMap<String, String> {
     let mut out = BTreeMap::new();
     let mut stack = vec![src.to_path_buf()];
@@ -40,7 +55,7 @@ fn modules(src: &Path) -> BTreeMap<String, String> {
             }
             let name = if parts.is_empty() { "crate".to_owned() } else { parts.join("::") };
             let text = std::fs::read_to_string(&path).unwrap();
-            let code = text.split("#[cfg(test)]").next().unwrap_or("").to_owned();
+            let code = before_tests(&text).to_owned();
             out.insert(name, code);
         }
     }
@@ -320,7 +335,7 @@ fn the_cycle_finder_finds_a_cycle() {
 /// The longest a function may be, in lines from its `fn` to its closing brace.
 const MOST_LINES: usize = 120;
 
-/// Each function of `code` (the part before its `#[cfg(test)]` tests) as (name, first line, lines): from its
+/// Each function of `code` (the part before its test module) as (name, first line, lines): from its
 /// `fn` line to the closing brace at the `fn`'s indentation. A function on one line and a declaration without
 /// a body (a trait's `fn f();`) are not counted.
 fn function_lengths(code: &str) -> Vec<(String, usize, usize)> {
@@ -355,7 +370,7 @@ fn function_lengths(code: &str) -> Vec<(String, usize, usize)> {
     out
 }
 
-/// Every `.rs` file under `dir`, with its code before `#[cfg(test)]`.
+/// Every `.rs` file under `dir`, with its code before its tests ([`before_tests`]).
 fn sources(dir: &Path) -> Vec<(std::path::PathBuf, String)> {
     let mut out = Vec::new();
     let mut stack = vec![dir.to_path_buf()];
@@ -366,7 +381,7 @@ fn sources(dir: &Path) -> Vec<(std::path::PathBuf, String)> {
                 stack.push(path);
             } else if path.extension().and_then(|e| e.to_str()) == Some("rs") {
                 let text = std::fs::read_to_string(&path).unwrap();
-                out.push((path, text.split("#[cfg(test)]").next().unwrap_or("").to_owned()));
+                out.push((path, before_tests(&text).to_owned()));
             }
         }
     }
@@ -401,4 +416,7 @@ fn the_function_scanner_counts_a_long_function() {
     );
     let found = function_lengths(&code);
     assert_eq!(found, vec![("long".to_owned(), 5, 137)], "{found:?}");
+    // A `cfg(test)` function is code; a `cfg(test)` module is where the tests start.
+    let text = "fn a() {}\n#[cfg(test)]\nfn oracle() {}\nfn b() {}\n#[cfg(test)]\nmod tests {\n}\n";
+    assert_eq!(before_tests(text), "fn a() {}\n#[cfg(test)]\nfn oracle() {}\nfn b() {}\n");
 }

@@ -6,7 +6,9 @@
 //! renderer's passes, the ray grids and the depth of field all upload through it. [`compute_pipeline`] makes
 //! a compute pipeline with the layout its entry point implies (its bind groups are made from that layout), and
 //! [`render_pipeline`] a full render pipeline of a shader's `vs_main` and `fs_main` into one target, and
-//! [`upload`] writes a texture's texels (the renderer's textures and the compute ghosts' mask).
+//! [`upload`] writes a texture's texels (the renderer's textures and the compute ghosts' mask), 16-bit floats
+//! from [`half_floats`]. [`frame_group`] binds what the renderer's raster passes share: the frame's uniforms at
+//! binding 0, the pass's texture at 1, then its own resources.
 
 /// Every source added to what the target holds (the accumulation's passes).
 pub(crate) const ADDITIVE: wgpu::BlendState = wgpu::BlendState {
@@ -282,6 +284,30 @@ pub(crate) fn shader_module(device: &wgpu::Device, label: &str, source: &str) ->
         label: Some(label),
         source: wgpu::ShaderSource::Wgsl(source.into()),
     })
+}
+
+/// `rgba` as the bytes of 16-bit float texels (a value that is not finite is 0).
+pub(crate) fn half_floats(rgba: &[[f32; 4]]) -> Vec<u8> {
+    let halves: Vec<half::f16> = rgba.iter().flat_map(|t| t.map(crate::image::finite_half)).collect();
+    bytemuck::cast_slice(&halves).to_vec()
+}
+
+/// A bind group of the renderer's passes: the frame's uniforms `globals` at binding 0, `view` at 1, then
+/// `rest` at 2, 3, ... in order.
+pub(crate) fn frame_group(
+    device: &wgpu::Device,
+    label: &str,
+    layout: &wgpu::BindGroupLayout,
+    globals: &wgpu::Buffer,
+    view: &wgpu::TextureView,
+    rest: Vec<wgpu::BindingResource>,
+) -> wgpu::BindGroup {
+    let mut entries = vec![
+        wgpu::BindGroupEntry { binding: 0, resource: globals.as_entire_binding() },
+        wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(view) },
+    ];
+    entries.extend(rest.into_iter().zip(2..).map(|(resource, binding)| wgpu::BindGroupEntry { binding, resource }));
+    device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries: &entries })
 }
 
 #[cfg(test)]

@@ -151,20 +151,38 @@ impl GpuDof {
             pass.dispatch_workgroups(groups_of(w), groups_of(h), 1);
         }
         self.profiler.resolve_queries(&mut encoder);
-        let readback = empty("dof readback", frame_bytes, wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ);
-        encoder.copy_buffer_to_buffer(&out, 0, &readback, 0, frame_bytes);
+        let (pixels, gpu_ms) = self.read_back(device, queue, encoder, &out, frame_bytes)?;
+        Ok(GpuDofImage { image: HdrImage { width: w, height: h, pixels }, gpu_ms })
+    }
+
+    /// Submits `encoder` with a copy of `out` (`frame_bytes` of RGBA f32) to a buffer it then reads: the
+    /// pixels, and the pass's GPU time where the device has timestamps.
+    fn read_back(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        mut encoder: wgpu::CommandEncoder,
+        out: &wgpu::Buffer,
+        frame_bytes: u64,
+    ) -> Result<(Vec<[f32; 4]>, Option<f64>), GpuError> {
+        let readback = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("dof readback"),
+            size: frame_bytes.max(16),
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        });
+        encoder.copy_buffer_to_buffer(out, 0, &readback, 0, frame_bytes);
         queue.submit(Some(encoder.finish()));
         let _ = self.profiler.end_frame();
         let view = map_read(device, &readback, frame_bytes)?;
         let pixels: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&view);
         let mut gpu_ms = None;
         while let Some(results) = self.profiler.process_finished_frame(queue.get_timestamp_period()) {
-            let times = PassTimes::from_results(&results);
-            if let Some(ms) = times.get("dof") {
+            if let Some(ms) = PassTimes::from_results(&results).get("dof") {
                 gpu_ms = Some(ms);
             }
         }
-        Ok(GpuDofImage { image: HdrImage { width: w, height: h, pixels }, gpu_ms })
+        Ok((pixels, gpu_ms))
     }
 }
 

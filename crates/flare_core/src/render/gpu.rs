@@ -1,9 +1,13 @@
 //! The wgpu renderer: draws a [`FlareScene`] into a texture view it is given.
 //!
 //! # How it works
-//! [`FlareRenderer`] owns its pipelines, the aperture mask (R8Unorm), the starburst (Rgba16Float), an
-//! optional background plate (Rgba16Float) and an HDR accumulation target (Rgba16Float, resized on demand).
-//! [`crate::frame`]'s headless drawer), records its passes into the caller's encoder:
+//! [`FlareRenderer`] is the frame's sequence of passes, each a primitive that owns its pipelines and its
+//! resources: the compute ghosts (`gpu_ghosts`), the raster ghosts (`gpu_ghosts_raster`, with the aperture
+//! mask's levels as textures; [`FlareRenderer::set_aperture`] gives them to both), the LUT ghosts (`gpu_lut`, `gpu_lut_raster`), the
+//! starburst and the dirt's glow (`gpu_sprites`) and the tonemap (`gpu_view`). The renderer keeps what they
+//! share: the frame's uniforms ([`Globals`]), the HDR accumulation (Rgba16Float, resized on demand), the
+//! background plate (Rgba16Float), the LUT atlas, the sampler, the bind groups and the profiler. Called by the
+//! app's viewport or by [`crate::frame`]'s headless drawer, it records its passes into the caller's encoder:
 //! 1. the accumulation into the HDR target. Where the device runs compute shaders (`ComputeGhosts::supported`:
 //!    every Vulkan, Metal and DX12 adapter), the LUT ghosts (`lut_compute.wgsl`, `render::gpu_lut`: per pixel
 //!    the instances binned to its tile, into a LUT layer) and then the ghost sprites (`ghosts_compute.wgsl`,
@@ -40,17 +44,16 @@ use wgpu_profiler::{GpuProfiler, GpuProfilerSettings, GpuTimerQueryResult};
 
 pub(crate) use super::buffers::HDR_FORMAT;
 pub use super::buffers::texture_2d;
-use super::buffers::{
-    ADDITIVE, pipeline_layout, render_pipeline, shader_module, texture_entry, uniform_entry, upload, upload_part,
-    vertex_buffer,
-};
-use super::cpu::ghosts::{GhostMasks, MASK_LEVELS};
+use super::buffers::{frame_group, half_floats, texture_entry, uniform_entry, upload, upload_part};
+use super::cpu::ghosts::GhostMasks;
 use super::gpu_ghosts::{ComputeGhosts, mask_level_textures};
+use super::gpu_ghosts_raster::RasterGhosts;
 use super::gpu_lut::{ComputeLut, TILE};
 use super::gpu_lut_raster::RasterLut;
+use super::gpu_sprites::{SpritePass, sprite_layout};
 use super::gpu_view::{PassKey, ViewPass};
-use super::shaders::{DIRT_WGSL, GHOSTS_WGSL, STARBURST_WGSL};
-use super::{FlareScene, GhostInstance, Globals};
+use super::shaders::{DIRT_WGSL, STARBURST_WGSL};
+use super::{FlareScene, Globals};
 use crate::dirt::PreparedDirt;
 use crate::image::{DisplayImage, HdrImage};
 use crate::lut::blend::{ATLAS_PAGE, LiveLut, LutScene};
@@ -281,11 +284,6 @@ fn test_context_on(backends: wgpu::Backends) -> Option<GpuContext> {
     }
 }
 
-fn half_floats(rgba: &[[f32; 4]]) -> Vec<u8> {
-    let halves: Vec<half::f16> = rgba.iter().flat_map(|t| t.map(crate::image::finite_half)).collect();
-    bytemuck::cast_slice(&halves).to_vec()
-}
-
 /// An Rgba16Float 2D array texture of `pages` square pages of `side` texels holding `bytes` when given (half
 /// floats, the pages in order; else filled later, [`LutAtlas::new`]). wgpu's OpenGL ES backend makes a texture of one layer a plain 2D texture, which the
 /// shaders' array view then cannot read (wgpu issues 1574 and 1614: a one-page LUT drew 60% of its light
@@ -361,12 +359,15 @@ fn empty_atlas(device: &wgpu::Device, queue: &wgpu::Queue) -> wgpu::Texture {
     atlas_texture(device, queue, 1, 1, Some(&half_floats(&[[0.0; 4]])))
 }
 
-/// A vertex buffer for `capacity` instances of `T`, written by the queue.
-/// The GPU flare renderer.
+/// The GPU flare renderer: the frame's sequence of passes (the ghosts, the LUT ghosts, the starburst, the
+/// dirt's glow, the tonemap), each of which owns its pipelines, and what they share (the frame's uniforms, the
+/// accumulation, the sampler, the profiler).
 pub struct FlareRenderer {
-    ghost_pipeline: wgpu::RenderPipeline,
-    starburst_pipeline: wgpu::RenderPipeline,
-    dirt_pipeline: wgpu::RenderPipeline,
+    /// The ghosts rasterised, where the compute pass does not draw them (it owns the aperture's levels).
+    raster_ghosts: RasterGhosts,
+    starburst: SpritePass,
+    /// The front dirt's glow: its map D (Rgba16Float, D in red; 1 x 1 black for a clean lens).
+    dirt: SpritePass,
     /// The tonemap pass of the last frame's OCIO view, or of FlareLab's curves when the frame's tonemap is one of
     /// them (made again when a frame's view, or its choice of the view, differs).
     view_pass: ViewPass,
@@ -377,21 +378,12 @@ pub struct FlareRenderer {
     view_from_cube: bool,
     /// The starburst's and the dirt's resources (uniforms, a texture, a sampler).
     sprite_layout: wgpu::BindGroupLayout,
-    /// The raster ghosts' (the same, and the aperture's finer levels).
-    raster_ghost_layout: wgpu::BindGroupLayout,
     tonemap_layout: wgpu::BindGroupLayout,
     globals: wgpu::Buffer,
     sampler: wgpu::Sampler,
-    /// The aperture's levels (`GhostMasks`), the base first; a missing level repeats the last (never read).
-    aperture: [wgpu::Texture; MASK_LEVELS],
-    starburst: wgpu::Texture,
-    /// The front dirt's map D (Rgba16Float, D in red; 1 x 1 black for a clean lens).
-    dirt: wgpu::Texture,
     background: wgpu::Texture,
     has_background: bool,
     hdr: Option<(wgpu::Texture, u32, u32)>,
-    instances: wgpu::Buffer,
-    instance_capacity: usize,
     target_format: wgpu::TextureFormat,
     /// The LUT layer rasterised (no compute, or bins past the storage binding).
     raster_lut: RasterLut,
@@ -433,64 +425,30 @@ struct BindGroups {
     tonemap: wgpu::BindGroup,
 }
 
-/// The renderer's bind group layouts: the starburst's and the dirt's, the raster ghosts' and the tonemap's.
-fn frame_layouts(device: &wgpu::Device) -> [wgpu::BindGroupLayout; 3] {
-    let uniform = uniform_entry(0);
+/// The tonemap's bind group layout: the frame's uniforms, the accumulation, the plate and a sampler, read by
+/// its fragment and its compute form alike.
+fn tonemap_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
     let texture = |binding, filterable| texture_entry(binding, filterable, wgpu::TextureViewDimension::D2);
-    let sampler_entry = wgpu::BindGroupLayoutEntry {
-        binding: 2,
+    let sampler = wgpu::BindGroupLayoutEntry {
+        binding: 3,
         visibility: wgpu::ShaderStages::FRAGMENT,
         ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
         count: None,
     };
-    let sprite_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("starburst and dirt"),
-        entries: &[uniform, texture(1, true), sampler_entry],
-    });
-    // The raster ghosts read the aperture's levels (`GhostMasks`): the base at 1, the finer ones at 3 and 4.
-    let raster_ghost_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("ghosts"),
-        entries: &[uniform, texture(1, true), sampler_entry, texture(3, true), texture(4, true)],
-    });
-    // The tonemap's resources are read by its fragment and its compute form alike.
-    let tonemap_stages = wgpu::ShaderStages::VERTEX_FRAGMENT | wgpu::ShaderStages::COMPUTE;
-    let tonemap_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+    let stages = wgpu::ShaderStages::VERTEX_FRAGMENT | wgpu::ShaderStages::COMPUTE;
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("tonemap"),
-        entries: &[
-            uniform,
-            texture(1, true),
-            texture(2, false),
-            wgpu::BindGroupLayoutEntry { binding: 3, ..sampler_entry },
-        ]
-        .map(|e| wgpu::BindGroupLayoutEntry { visibility: tonemap_stages, ..e }),
-    });
-    [sprite_layout, raster_ghost_layout, tonemap_layout]
-}
-
-/// The raster ghosts' pipeline: one quad per [`GhostInstance`], its eleven `vec4`s as instance attributes,
-/// added into the accumulation.
-fn ghost_pipeline(device: &wgpu::Device, layout: &wgpu::BindGroupLayout) -> wgpu::RenderPipeline {
-    let module = shader_module(device, "ghosts.wgsl", GHOSTS_WGSL);
-    let instance_attributes = wgpu::vertex_attr_array![0 => Float32x4, 1 => Float32x4, 2 => Float32x4, 3 => Float32x4, 4 => Float32x4, 5 => Float32x4, 6 => Float32x4, 7 => Float32x4, 8 => Float32x4, 9 => Float32x4, 10 => Float32x4];
-    let instances = wgpu::VertexBufferLayout {
-        array_stride: std::mem::size_of::<GhostInstance>() as u64,
-        step_mode: wgpu::VertexStepMode::Instance,
-        attributes: &instance_attributes,
-    };
-    let layout = pipeline_layout(device, layout);
-    render_pipeline(device, "ghosts", &layout, &module, &[Some(instances)], HDR_FORMAT, Some(ADDITIVE))
+        entries: &[uniform_entry(0), texture(1, true), texture(2, false), sampler]
+            .map(|e| wgpu::BindGroupLayoutEntry { visibility: stages, ..e }),
+    })
 }
 
 impl FlareRenderer {
     /// Pipelines for drawing into views of `target_format`.
     pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, target_format: wgpu::TextureFormat) -> Self {
-        let [sprite_layout, raster_ghost_layout, tonemap_layout] = frame_layouts(device);
-        let sprite_pl = pipeline_layout(device, &sprite_layout);
-        let starburst_module = shader_module(device, "starburst.wgsl", STARBURST_WGSL);
-        let starburst_pipeline =
-            render_pipeline(device, "starburst", &sprite_pl, &starburst_module, &[], HDR_FORMAT, Some(ADDITIVE));
-        let dirt_module = shader_module(device, "dirt.wgsl", DIRT_WGSL);
-        let dirt_pipeline = render_pipeline(device, "dirt", &sprite_pl, &dirt_module, &[], HDR_FORMAT, Some(ADDITIVE));
+        let (sprite_layout, tonemap_layout) = (sprite_layout(device), tonemap_layout(device));
+        let starburst = SpritePass::new(device, queue, &sprite_layout, ("starburst", STARBURST_WGSL), 6);
+        let dirt = SpritePass::new(device, queue, &sprite_layout, ("dirt", DIRT_WGSL), 3);
         let view_pass = ViewPass::new(
             device,
             queue,
@@ -517,14 +475,9 @@ impl FlareRenderer {
             upload(queue, &level, &[255], 1);
             level
         });
-        // Black, one texel each, until a frame brings its own.
-        let [starburst, dirt, background] = ["starburst", "dirt", "background"].map(|label| {
-            let texture = texture_2d(device, label, 1, 1, HDR_FORMAT, sampled);
-            upload(queue, &texture, &half_floats(&[[0.0; 4]]), 8);
-            texture
-        });
-        let instance_capacity = 256;
-        let instances = vertex_buffer::<GhostInstance>(device, "ghost instances", instance_capacity);
+        // Black, one texel, until a frame brings its plate.
+        let background = texture_2d(device, "background", 1, 1, HDR_FORMAT, sampled);
+        upload(queue, &background, &half_floats(&[[0.0; 4]]), 8);
         let lut_atlas = empty_atlas(device, queue);
         let compute = ComputeGhosts::supported(device).then(|| ComputeGhosts::new(device, queue));
         let compute_lut = compute.is_some().then(|| ComputeLut::new(device));
@@ -543,25 +496,19 @@ impl FlareRenderer {
             unread_frames: 0,
             timed: device.features().contains(wgpu::Features::TIMESTAMP_QUERY),
             pass_times: None,
-            ghost_pipeline: ghost_pipeline(device, &raster_ghost_layout),
-            starburst_pipeline,
-            dirt_pipeline,
+            raster_ghosts: RasterGhosts::new(device, aperture),
             view_pass,
             cube_pass: None,
             view_from_cube: false,
             sprite_layout,
-            raster_ghost_layout,
             tonemap_layout,
             globals,
             sampler,
-            aperture,
             starburst,
             dirt,
             background,
             has_background: false,
             hdr: None,
-            instances,
-            instance_capacity,
             target_format,
         }
     }
@@ -593,7 +540,7 @@ impl FlareRenderer {
         if let Some(compute) = &mut self.compute {
             compute.set_aperture(device, queue, masks, &textures);
         }
-        self.aperture = textures;
+        self.raster_ghosts.aperture = textures;
     }
 
     /// Whether the ghost sprites are drawn by the compute pass (`ghosts_compute.wgsl`) rather than rasterised
@@ -675,23 +622,19 @@ impl FlareRenderer {
     /// Replaces the starburst texture.
     pub fn set_starburst(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, starburst: &Starburst) {
         self.groups = None;
-        let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
         let texels: Vec<[f32; 4]> = starburst.profile.iter().map(|&p| [p, p, p, 1.0]).collect();
-        self.starburst = texture_2d(device, "starburst", texels.len() as u32, 1, HDR_FORMAT, usage);
-        upload(queue, &self.starburst, &half_floats(&texels), 8);
+        self.starburst.set_texture(device, queue, (texels.len() as u32, 1), &texels);
     }
 
     /// Replaces the front dirt's map (`None`: a clean lens, a 1 x 1 black texture; the pass is drawn only for a
     /// frame that places a glow).
     pub fn set_dirt(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, dirt: Option<&PreparedDirt>) {
         self.groups = None;
-        let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
         let (side, texels): (u32, Vec<[f32; 4]>) = match dirt {
             Some(d) => (d.size as u32, d.map.iter().map(|&v| [v, v, v, 1.0]).collect()),
             None => (1, vec![[0.0; 4]]),
         };
-        self.dirt = texture_2d(device, "dirt", side, side, HDR_FORMAT, usage);
-        upload(queue, &self.dirt, &half_floats(&texels), 8);
+        self.dirt.set_texture(device, queue, (side, side), &texels);
     }
 
     /// Sets or clears the background plate (linear).
@@ -735,47 +678,25 @@ impl FlareRenderer {
     /// The bind groups of every pass for the current textures (made when one of them was replaced or the
     /// accumulation resized, not every frame).
     fn bind_groups(&self, device: &wgpu::Device, hdr_view: &wgpu::TextureView) -> BindGroups {
-        let [aperture_view, finer_view, finest_view] =
-            self.aperture.each_ref().map(|t| t.create_view(&wgpu::TextureViewDescriptor::default()));
-        let starburst_view = self.starburst.create_view(&wgpu::TextureViewDescriptor::default());
-        let dirt_view = self.dirt.create_view(&wgpu::TextureViewDescriptor::default());
         let background_view = self.background.create_view(&wgpu::TextureViewDescriptor::default());
         let atlas_view = self.lut_atlas.create_view(&wgpu::TextureViewDescriptor {
             dimension: Some(wgpu::TextureViewDimension::D2Array),
             ..Default::default()
         });
-        let sampler = || wgpu::BindingResource::Sampler(&self.sampler);
-        // Binding 0 is the uniforms, 1 the texture, then the layout's own resources.
-        let bind =
-            |label, layout: &wgpu::BindGroupLayout, view: &wgpu::TextureView, rest: Vec<wgpu::BindingResource>| {
-                let mut entries = vec![
-                    wgpu::BindGroupEntry { binding: 0, resource: self.globals.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(view) },
-                ];
-                entries.extend(
-                    rest.into_iter().zip(2..).map(|(resource, binding)| wgpu::BindGroupEntry { binding, resource }),
-                );
-                device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries: &entries })
-            };
+        let (globals, sampler) = (&self.globals, &self.sampler);
+        let sampled = || wgpu::BindingResource::Sampler(sampler);
         BindGroups {
-            ghosts: bind(
-                "ghosts",
-                &self.raster_ghost_layout,
-                &aperture_view,
-                vec![
-                    sampler(),
-                    wgpu::BindingResource::TextureView(&finer_view),
-                    wgpu::BindingResource::TextureView(&finest_view),
-                ],
-            ),
-            starburst: bind("starburst", &self.sprite_layout, &starburst_view, vec![sampler()]),
-            dirt: bind("dirt", &self.sprite_layout, &dirt_view, vec![sampler()]),
-            lut: bind("lut ghosts", &self.raster_lut.layout, &atlas_view, vec![sampler()]),
-            tonemap: bind(
+            ghosts: self.raster_ghosts.bind_group(device, globals, sampler),
+            starburst: self.starburst.bind_group(device, &self.sprite_layout, globals, sampler),
+            dirt: self.dirt.bind_group(device, &self.sprite_layout, globals, sampler),
+            lut: frame_group(device, "lut ghosts", &self.raster_lut.layout, globals, &atlas_view, vec![sampled()]),
+            tonemap: frame_group(
+                device,
                 "tonemap",
                 &self.tonemap_layout,
+                globals,
                 hdr_view,
-                vec![wgpu::BindingResource::TextureView(&background_view), sampler()],
+                vec![wgpu::BindingResource::TextureView(&background_view), sampled()],
             ),
         }
     }
@@ -805,7 +726,7 @@ impl FlareRenderer {
         queue.write_buffer(&self.globals, 0, bytemuck::bytes_of(&globals));
         let use_compute = self.compute.is_some() && !self.rasterise;
         if !use_compute {
-            self.upload_instances(device, queue, &scene.instances);
+            self.raster_ghosts.upload(device, queue, &scene.instances);
         }
         let lut = lut.filter(|l| !l.instances.is_empty());
         let bins = lut.filter(|_| use_compute && self.compute_lut.is_some()).and_then(|lut| self.bins(scene, lut));
@@ -819,20 +740,6 @@ impl FlareRenderer {
             self.groups = Some(self.bind_groups(device, &hdr_view));
         }
         let Some(groups) = &self.groups else { return };
-        let hdr_target = |load| {
-            [Some(wgpu::RenderPassColorAttachment {
-                view: &hdr_view,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations { load, store: wgpu::StoreOp::Store },
-            })]
-        };
-        let (clear, load) = (hdr_target(wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT)), hdr_target(wgpu::LoadOp::Load));
-        let accumulate = |attachments| wgpu::RenderPassDescriptor {
-            label: Some("flare hdr"),
-            color_attachments: attachments,
-            ..Default::default()
-        };
         {
             let mut frame = self.profiler.scope("flare", encoder);
             if let (true, Some(compute)) = (use_compute, &mut self.compute) {
@@ -853,28 +760,16 @@ impl FlareRenderer {
                 let mut pass = frame.scoped_compute_pass("ghosts");
                 compute.encode(device, queue, &mut pass, scene, &hdr_view, layer.as_ref());
             } else {
-                let mut pass = frame.scoped_render_pass("ghosts", accumulate(&clear));
-                if !scene.instances.is_empty() {
-                    pass.set_pipeline(&self.ghost_pipeline);
-                    pass.set_bind_group(0, &groups.ghosts, &[]);
-                    pass.set_vertex_buffer(0, self.instances.slice(..));
-                    pass.draw(0..6, 0..scene.instances.len() as u32);
-                }
+                self.raster_ghosts.draw(&mut frame, &hdr_view, &groups.ghosts, scene.instances.len());
             }
             if let Some(lut) = lut.filter(|_| raster_lut) {
                 self.raster_lut.draw(&mut frame, &hdr_view, &groups.lut, lut);
             }
             if globals.starburst_reach_px > 0.0 {
-                let mut pass = frame.scoped_render_pass("starburst", accumulate(&load));
-                pass.set_pipeline(&self.starburst_pipeline);
-                pass.set_bind_group(0, &groups.starburst, &[]);
-                pass.draw(0..6, 0..1);
+                self.starburst.draw(&mut frame, &hdr_view, &groups.starburst);
             }
             if scene.has_dirt_glow() {
-                let mut pass = frame.scoped_render_pass("dirt", accumulate(&load));
-                pass.set_pipeline(&self.dirt_pipeline);
-                pass.set_bind_group(0, &groups.dirt, &[]);
-                pass.draw(0..3, 0..1);
+                self.dirt.draw(&mut frame, &hdr_view, &groups.dirt);
             }
             let tonemap = match &self.cube_pass {
                 Some(cube) if through_cube => cube,
@@ -884,17 +779,6 @@ impl FlareRenderer {
         }
         self.profiler.resolve_queries(encoder);
         self.profiled_open = true;
-    }
-
-    /// Writes the raster ghosts' instances, growing their buffer to the next power of two where they do not fit.
-    fn upload_instances(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, instances: &[GhostInstance]) {
-        if instances.len() > self.instance_capacity {
-            self.instance_capacity = instances.len().next_power_of_two();
-            self.instances = vertex_buffer::<GhostInstance>(device, "ghost instances", self.instance_capacity);
-        }
-        if !instances.is_empty() {
-            queue.write_buffer(&self.instances, 0, bytemuck::cast_slice(instances));
-        }
     }
 
     /// The LUT instances binned for the compute pass, or `None` where the bins would pass the adapter's largest

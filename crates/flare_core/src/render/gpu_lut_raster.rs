@@ -106,13 +106,14 @@ impl RasterLut {
             alpha: wgpu::BlendComponent { operation: wgpu::BlendOperation::ReverseSubtract, ..added.alpha },
             ..added
         };
-        // Each attribute where `LutInstance` has its field (the padding after `page` is not read).
+        // Each attribute where `LutInstance` has its field (`layouts` checks the order against the shader's).
         let attribute =
             |shader_location, format, offset| wgpu::VertexAttribute { format, offset: offset as u64, shader_location };
         let attributes = [
             attribute(0, wgpu::VertexFormat::Float32x4, std::mem::offset_of!(LutInstance, centre_axis_x)),
             attribute(1, wgpu::VertexFormat::Float32x2, std::mem::offset_of!(LutInstance, axis_y)),
             attribute(4, wgpu::VertexFormat::Uint32, std::mem::offset_of!(LutInstance, page)),
+            attribute(5, wgpu::VertexFormat::Uint32, std::mem::offset_of!(LutInstance, _pad0)),
             attribute(2, wgpu::VertexFormat::Float32x4, std::mem::offset_of!(LutInstance, rect)),
             attribute(3, wgpu::VertexFormat::Float32x4, std::mem::offset_of!(LutInstance, colour)),
         ];

@@ -22,8 +22,10 @@ pub mod cpu;
 pub mod dof_gpu;
 pub mod gpu;
 pub mod gpu_ghosts;
+mod gpu_ghosts_raster;
 mod gpu_lut;
 mod gpu_lut_raster;
+mod gpu_sprites;
 mod gpu_view;
 pub mod raygrid;
 pub mod shaders;
@@ -535,10 +537,21 @@ mod layouts {
                 dirt_light_slopes, dirt_slopes_per_px, dirt_footprint, dirt_centre_texels, dirt_g, dirt_per_mm2,
                 dirt_power_rgb, dirt_hg_norm, dirt_inv_ns, _pad1, _pad2, _pad3),
         );
+        // Both forms of a ghost instance: the compute pass's storage struct and the raster pass's vertex
+        // attributes (read in the struct's order, one `vec4` each: arrays spelled out).
+        for source in [shaders::GHOSTS_COMPUTE_WGSL, shaders::GHOSTS_WGSL] {
+            assert_same_layout(
+                source,
+                "GhostInstance",
+                fields!(GhostInstance: centre_half, colour, stops, scale_y, discs, disc_scale_y),
+            );
+        }
+        // The LUT's raster instance (its compute form is inside `TiledInstance`, checked by `gpu_lut`).
+        use crate::lut::blend::LutInstance;
         assert_same_layout(
-            shaders::GHOSTS_COMPUTE_WGSL,
-            "GhostInstance",
-            fields!(GhostInstance: centre_half, colour, stops, scale_y, discs, disc_scale_y),
+            shaders::LUT_GHOSTS_WGSL,
+            "LutInstance",
+            fields!(LutInstance: centre_axis_x, axis_y, page, _pad0, rect, colour),
         );
         use super::gpu_ghosts::ComputeStrip;
         assert_same_layout(

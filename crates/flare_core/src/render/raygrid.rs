@@ -462,19 +462,7 @@ impl GpuRayGrid {
                     p.end_query(&mut encoder, q);
                 }
                 let query = profiler.as_deref().map(|p| p.begin_pass_query("splat", &mut encoder));
-                let splat_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("raygrid splat"),
-                    layout: &self.splat_pipeline.get_bind_group_layout(0),
-                    entries: &[
-                        wgpu::BindGroupEntry { binding: 0, resource: vertices.as_entire_binding() },
-                        wgpu::BindGroupEntry { binding: 1, resource: jobs.as_entire_binding() },
-                        wgpu::BindGroupEntry {
-                            binding: 2,
-                            resource: wgpu::BindingResource::TextureView(&aperture_view),
-                        },
-                        wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(&self.sampler) },
-                    ],
-                });
+                let splat_group = self.splat_group(device, &vertices, &jobs, &aperture_view);
                 let load =
                     if batches == 0 { wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT) } else { wgpu::LoadOp::Load };
                 let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -504,6 +492,26 @@ impl GpuRayGrid {
         }
         let (hdr, gpu_times) = finish_frame(ctx, &target, self.target_format, profiler)?;
         Ok(GpuRayGridImage { hdr: hdr.box_reduced(s), jobs: planned.len(), batches, gpu_times })
+    }
+
+    /// The raster splat's bind group: a batch's traced `vertices` and `jobs`, and the aperture mask.
+    fn splat_group(
+        &self,
+        device: &wgpu::Device,
+        vertices: &wgpu::Buffer,
+        jobs: &wgpu::Buffer,
+        aperture: &wgpu::TextureView,
+    ) -> wgpu::BindGroup {
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("raygrid splat"),
+            layout: &self.splat_pipeline.get_bind_group_layout(0),
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: vertices.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: jobs.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(aperture) },
+                wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(&self.sampler) },
+            ],
+        })
     }
 
     /// [`Self::draw`] box-filtered: each batch traced, then its triangles splatted by `splat_box` into 64-bit

@@ -119,7 +119,7 @@ pub(crate) mod layout {
             (std::mem::size_of::<$t>(), vec![$((stringify!($f), std::mem::offset_of!($t, $f))),+])
         };
     }
-    pub(crate) use ::fields;
+    pub(crate) use fields;
 
     /// The struct `name` of the WGSL `source`: its size and each member's name and offset (naga's layout).
     pub(crate) fn wgsl_layout(source: &str, name: &str) -> (usize, Vec<(String, usize)>) {

@@ -494,6 +494,31 @@ enum Fragment {
     Edge { x: usize, y: usize, m: f32 },
 }
 
+/// Narrows the interval `lo..=hi` of q to where `scale q + offset` lies in `u` (empty, `1..=-1`, where it
+/// never does).
+fn clip(lo: &mut f32, hi: &mut f32, scale: f32, offset: f32, u: [f32; 2]) {
+    if u[0] > u[1] {
+        *lo = 1.0;
+        *hi = -1.0;
+    } else if scale == 0.0 {
+        if offset < u[0] || offset > u[1] {
+            *lo = 1.0;
+            *hi = -1.0;
+        }
+    } else {
+        let (a, b) = ((u[0] - offset) / scale, (u[1] - offset) / scale);
+        *lo = lo.max(a.min(b));
+        *hi = hi.min(a.max(b));
+    }
+}
+
+/// Where `scale q + offset` lies in `u`: a mask's own open interval (all of it, `OPEN_FAR`, before [`clip`]).
+fn own_interval(scale: f32, offset: f32, u: [f32; 2]) -> (f32, f32) {
+    let (mut lo, mut hi) = (-OPEN_FAR, OPEN_FAR);
+    clip(&mut lo, &mut hi, scale, offset, u);
+    (lo, hi)
+}
+
 /// One instance over the rows `rows` for [`ghost_pass`]: its open runs, and its edge pixels shaded as
 /// [`shade_instance`] shades them.
 fn sweep_instance(
@@ -512,28 +537,7 @@ fn sweep_instance(
     for y in covered_rows.start.max(rows.start)..covered_rows.end.min(rows.end) {
         let q_y = ((y as f32 + 0.5) * sy - cy) / hy;
         let Some((mut q_lo, mut q_hi)) = row_support(inst, q_y) else { continue };
-        // The open interval, narrowed by each mask below; the support, by where each mask is non-zero.
-        let clip = |lo: &mut f32, hi: &mut f32, scale: f32, offset: f32, u: [f32; 2]| {
-            if u[0] > u[1] {
-                *lo = 1.0;
-                *hi = -1.0;
-            } else if scale == 0.0 {
-                if offset < u[0] || offset > u[1] {
-                    *lo = 1.0;
-                    *hi = -1.0;
-                }
-            } else {
-                let (a, b) = ((u[0] - offset) / scale, (u[1] - offset) / scale);
-                *lo = lo.max(a.min(b));
-                *hi = hi.min(a.max(b));
-            }
-        };
-        // Where `scale q + offset` lies in `u`: a mask's own open interval (all of it, `OPEN_FAR`, before `clip`).
-        let own_interval = |scale: f32, offset: f32, u: [f32; 2]| {
-            let (mut lo, mut hi) = (-OPEN_FAR, OPEN_FAR);
-            clip(&mut lo, &mut hi, scale, offset, u);
-            (lo, hi)
-        };
+        // The open interval, narrowed by each mask below (`clip`); the support, by where each mask is non-zero.
         // Each mask's own open interval (all of it where it is off; empty where it is nowhere exactly 1 on the
         // row): the open interval is their intersection with the support, and the live set comes from them.
         let mut own = [(-OPEN_FAR, OPEN_FAR); FIRST_STOP_BIT + 3];
