@@ -37,27 +37,14 @@ fn before_tests(text: &str) -> &str {
 /// Every module of the crate rooted at `src` with its source (the part before its tests, [`before_tests`]).
 fn modules(src: &Path) -> BTreeMap<String, String> {
     let mut out = BTreeMap::new();
-    let mut stack = vec![src.to_path_buf()];
-    while let Some(dir) = stack.pop() {
-        for entry in std::fs::read_dir(&dir).unwrap() {
-            let path = entry.unwrap().path();
-            if path.is_dir() {
-                stack.push(path);
-                continue;
-            }
-            if path.extension().and_then(|e| e.to_str()) != Some("rs") {
-                continue;
-            }
-            let relative = path.strip_prefix(src).unwrap().with_extension("");
-            let mut parts: Vec<String> = relative.iter().map(|p| p.to_string_lossy().into_owned()).collect();
-            if parts.last().is_some_and(|p| p == "mod" || p == "lib" || p == "main") {
-                parts.pop();
-            }
-            let name = if parts.is_empty() { "crate".to_owned() } else { parts.join("::") };
-            let text = std::fs::read_to_string(&path).unwrap();
-            let code = before_tests(&text).to_owned();
-            out.insert(name, code);
+    for (path, code) in sources(src) {
+        let relative = path.strip_prefix(src).unwrap().with_extension("");
+        let mut parts: Vec<String> = relative.iter().map(|p| p.to_string_lossy().into_owned()).collect();
+        if parts.last().is_some_and(|p| p == "mod" || p == "lib" || p == "main") {
+            parts.pop();
         }
+        let name = if parts.is_empty() { "crate".to_owned() } else { parts.join("::") };
+        out.insert(name, code);
     }
     out
 }

@@ -221,6 +221,13 @@ pub struct GpuRayGridImage {
     pub gpu_times: Option<PassTimes>,
 }
 
+impl GpuRayGridImage {
+    /// The image of a frame no job lights: black, nothing traced.
+    fn black(window: Window) -> Self {
+        Self { hdr: HdrImage::black(window.width, window.height), jobs: 0, batches: 0, gpu_times: None }
+    }
+}
+
 /// The uploaded form of a planned frame.
 struct Upload {
     steps: Vec<GpuStep>,
@@ -431,9 +438,7 @@ impl GpuRayGrid {
             return Err(e);
         }
         if planned.is_empty() {
-            // No job has light: a black image.
-            let hdr = HdrImage::black(window.width, window.height);
-            return Ok(GpuRayGridImage { hdr, jobs: 0, batches: 0, gpu_times: None });
+            return Ok(GpuRayGridImage::black(window));
         }
         let target = texture_2d(
             device,
@@ -534,8 +539,7 @@ impl GpuRayGrid {
             return Err(e);
         }
         if planned.is_empty() {
-            let hdr = HdrImage::black(window.width, window.height);
-            return Ok(GpuRayGridImage { hdr, jobs: 0, batches: 0, gpu_times: None });
+            return Ok(GpuRayGridImage::black(window));
         }
         let target = texture_2d(
             device,
