@@ -578,12 +578,10 @@ impl GhostSystem {
         for (w, &wavelength_nm) in spectrum.wavelengths_nm.iter().enumerate() {
             let transmittance = |k: usize, backward: bool| 1.0 - tables.table(tables.index(k, backward, w)).at(0.0);
             let system = Paraxial { z: &z, curvature: &curvature, n: &indices[w] };
-            let (gap, forward_refraction) = (|a, b| system.gap(a, b), |k| system.forward(k));
-            let backward_refraction = |k| system.backward(k);
             let sweeps = system.sweeps(stop, sensor_z);
             let Sweeps { arrive, to_sensor, .. } = &sweeps;
             let last = n_surfaces - 1;
-            let image_f = to_sensor[last].mul(&forward_refraction(last)).mul(&arrive[last]);
+            let image_f = to_sensor[last].mul(&system.forward(last)).mul(&arrive[last]);
             let image_a = arrive[stop];
             image_centre_per_slope.push(image_f.b - image_f.a * image_a.b / image_a.a);
             image_transmission.push((0..n_surfaces).map(|m| transmittance(m, false)).product::<f64>());
@@ -598,11 +596,11 @@ impl GhostSystem {
                 let mut back = Mat2::reflection(curvature[j], 1.0).mul(&at_j);
                 let mut backward_stop_crossing = None;
                 for k in (0..j).rev() {
-                    let at_k = gap(k + 1, k).mul(&back);
+                    let at_k = system.gap(k + 1, k).mul(&back);
                     if k == stop {
                         // Just after the stop's interaction, as `PathMatrices::walk` records it (the heights
                         // are those on arrival: refraction and reflection keep them).
-                        backward_stop_crossing = Some(backward_refraction(k).mul(&at_k));
+                        backward_stop_crossing = Some(system.backward(k).mul(&at_k));
                     }
                     if reflecting[k]
                         && let Some(g) = ghost_index(k, j)
@@ -627,7 +625,7 @@ impl GhostSystem {
                             reflectance_i: tables.index(k, true, w),
                         });
                     }
-                    back = backward_refraction(k).mul(&at_k);
+                    back = system.backward(k).mul(&at_k);
                 }
             }
         }

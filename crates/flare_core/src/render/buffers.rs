@@ -7,7 +7,7 @@
 //! a compute pipeline with the layout its entry point implies (its bind groups are made from that layout), and
 //! [`render_pipeline`] a full render pipeline of a shader's `vs_main` and `fs_main` into one target, and
 //! [`upload`] writes a texture's texels (the renderer's textures and the compute ghosts' mask), 16-bit floats
-//! from [`half_floats`]. [`frame_group`] binds what the renderer's raster passes share: the frame's uniforms at
+//! from [`half_floats`] ([`sampled_texture`] makes and fills one). [`frame_group`] binds what the renderer's raster passes share: the frame's uniforms at
 //! binding 0, the pass's texture at 1, then its own resources.
 
 /// Every source added to what the target holds (the accumulation's passes).
@@ -236,6 +236,16 @@ pub(crate) fn vertex_buffer<T>(device: &wgpu::Device, label: &str, capacity: usi
     })
 }
 
+/// A bind group layout entry: a filtering sampler at `binding`, read by the fragment stage.
+pub(crate) fn sampler_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::FRAGMENT,
+        ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+        count: None,
+    }
+}
+
 /// A bind group layout entry: the uniform buffer at `binding`, read by the vertex and fragment stages.
 pub(crate) fn uniform_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
@@ -284,6 +294,20 @@ pub(crate) fn shader_module(device: &wgpu::Device, label: &str, source: &str) ->
         label: Some(label),
         source: wgpu::ShaderSource::Wgsl(source.into()),
     })
+}
+
+/// An Rgba16Float texture of `size` texels holding `rgba` (rows first) for the passes to sample.
+pub(crate) fn sampled_texture(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    label: &str,
+    size: (u32, u32),
+    rgba: &[[f32; 4]],
+) -> wgpu::Texture {
+    let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
+    let texture = texture_2d(device, label, size.0, size.1, HDR_FORMAT, usage);
+    upload(queue, &texture, &half_floats(rgba), 8);
+    texture
 }
 
 /// `rgba` as the bytes of 16-bit float texels (a value that is not finite is 0).

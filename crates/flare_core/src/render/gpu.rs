@@ -44,7 +44,9 @@ use wgpu_profiler::{GpuProfiler, GpuProfilerSettings, GpuTimerQueryResult};
 
 pub(crate) use super::buffers::HDR_FORMAT;
 pub use super::buffers::texture_2d;
-use super::buffers::{frame_group, half_floats, texture_entry, uniform_entry, upload, upload_part};
+use super::buffers::{
+    frame_group, half_floats, sampled_texture, sampler_entry, texture_entry, uniform_entry, upload, upload_part,
+};
 use super::cpu::ghosts::GhostMasks;
 use super::gpu_ghosts::{ComputeGhosts, mask_level_textures};
 use super::gpu_ghosts_raster::RasterGhosts;
@@ -429,16 +431,10 @@ struct BindGroups {
 /// its fragment and its compute form alike.
 fn tonemap_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
     let texture = |binding, filterable| texture_entry(binding, filterable, wgpu::TextureViewDimension::D2);
-    let sampler = wgpu::BindGroupLayoutEntry {
-        binding: 3,
-        visibility: wgpu::ShaderStages::FRAGMENT,
-        ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-        count: None,
-    };
     let stages = wgpu::ShaderStages::VERTEX_FRAGMENT | wgpu::ShaderStages::COMPUTE;
     device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("tonemap"),
-        entries: &[uniform_entry(0), texture(1, true), texture(2, false), sampler]
+        entries: &[uniform_entry(0), texture(1, true), texture(2, false), sampler_entry(3)]
             .map(|e| wgpu::BindGroupLayoutEntry { visibility: stages, ..e }),
     })
 }
@@ -476,8 +472,7 @@ impl FlareRenderer {
             level
         });
         // Black, one texel, until a frame brings its plate.
-        let background = texture_2d(device, "background", 1, 1, HDR_FORMAT, sampled);
-        upload(queue, &background, &half_floats(&[[0.0; 4]]), 8);
+        let background = sampled_texture(device, queue, "background", (1, 1), &[[0.0; 4]]);
         let lut_atlas = empty_atlas(device, queue);
         let compute = ComputeGhosts::supported(device).then(|| ComputeGhosts::new(device, queue));
         let compute_lut = compute.is_some().then(|| ComputeLut::new(device));
@@ -641,13 +636,10 @@ impl FlareRenderer {
     pub fn set_background(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, plate: Option<&HdrImage>) {
         self.groups = None;
         self.has_background = plate.is_some();
-        let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
-        let (w, h, pixels) = match plate {
-            Some(p) => (p.width, p.height, half_floats(&p.pixels)),
-            None => (1, 1, half_floats(&[[0.0; 4]])),
+        self.background = match plate {
+            Some(p) => sampled_texture(device, queue, "background", (p.width, p.height), &p.pixels),
+            None => sampled_texture(device, queue, "background", (1, 1), &[[0.0; 4]]),
         };
-        self.background = texture_2d(device, "background", w, h, HDR_FORMAT, usage);
-        upload(queue, &self.background, &pixels, 8);
     }
 
     /// The HDR accumulation texture of the last render (for EXR output).

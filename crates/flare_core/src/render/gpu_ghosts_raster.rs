@@ -10,8 +10,8 @@
 
 use super::GhostInstance;
 use super::buffers::{
-    ADDITIVE, HDR_FORMAT, frame_group, pipeline_layout, render_pipeline, shader_module, texture_entry, uniform_entry,
-    vertex_buffer,
+    ADDITIVE, HDR_FORMAT, frame_group, pipeline_layout, render_pipeline, sampler_entry, shader_module, texture_entry,
+    uniform_entry, vertex_buffer,
 };
 use super::cpu::ghosts::MASK_LEVELS;
 use super::shaders::GHOSTS_WGSL;
@@ -30,16 +30,10 @@ impl RasterGhosts {
     /// The pass, with `aperture` for the mask's levels until they are replaced.
     pub fn new(device: &wgpu::Device, aperture: [wgpu::Texture; MASK_LEVELS]) -> Self {
         let texture = |binding| texture_entry(binding, true, wgpu::TextureViewDimension::D2);
-        let sampler = wgpu::BindGroupLayoutEntry {
-            binding: 2,
-            visibility: wgpu::ShaderStages::FRAGMENT,
-            ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-            count: None,
-        };
         // The mask's levels: the base at 1, the finer ones at 3 and 4.
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("ghosts"),
-            entries: &[uniform_entry(0), texture(1), sampler, texture(3), texture(4)],
+            entries: &[uniform_entry(0), texture(1), sampler_entry(2), texture(3), texture(4)],
         });
         let module = shader_module(device, "ghosts.wgsl", GHOSTS_WGSL);
         let instance_attributes = wgpu::vertex_attr_array![0 => Float32x4, 1 => Float32x4, 2 => Float32x4, 3 => Float32x4, 4 => Float32x4, 5 => Float32x4, 6 => Float32x4, 7 => Float32x4, 8 => Float32x4, 9 => Float32x4, 10 => Float32x4];

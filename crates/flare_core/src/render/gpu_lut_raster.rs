@@ -21,8 +21,8 @@
 //! (each step rounded at the size of what is left) keeps it within 0.5 % (0.4/255).
 
 use super::buffers::{
-    HDR_FORMAT, pipeline_layout, render_pipeline, shader_module, texture_2d, texture_entry, uniform_entry,
-    vertex_buffer,
+    HDR_FORMAT, pipeline_layout, render_pipeline, sampler_entry, shader_module, texture_2d, texture_entry,
+    uniform_entry, vertex_buffer,
 };
 use super::shaders::{LUT_GHOSTS_WGSL, LUT_RUNS_WGSL};
 use crate::lut::blend::{LutInstance, LutScene};
@@ -77,16 +77,7 @@ impl RasterLut {
     pub(crate) fn new(device: &wgpu::Device) -> Self {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("lut ghosts"),
-            entries: &[
-                uniform_entry(0),
-                texture_entry(1, true, wgpu::TextureViewDimension::D2Array),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 2,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                    count: None,
-                },
-            ],
+            entries: &[uniform_entry(0), texture_entry(1, true, wgpu::TextureViewDimension::D2Array), sampler_entry(2)],
         });
         let runs_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("lut runs"),

@@ -9,24 +9,15 @@
 //! groups again. Their CPU twins are `render::cpu::starburst` and `render::cpu::dirt`.
 
 use super::buffers::{
-    ADDITIVE, HDR_FORMAT, frame_group, half_floats, pipeline_layout, render_pipeline, shader_module, texture_2d,
-    texture_entry, uniform_entry, upload,
+    ADDITIVE, HDR_FORMAT, frame_group, pipeline_layout, render_pipeline, sampled_texture, sampler_entry, shader_module,
+    texture_entry, uniform_entry,
 };
 
 /// The sprite passes' bind group layout: the frame's uniforms, the pass's texture, a filtering sampler.
 pub(super) fn sprite_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
     device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("starburst and dirt"),
-        entries: &[
-            uniform_entry(0),
-            texture_entry(1, true, wgpu::TextureViewDimension::D2),
-            wgpu::BindGroupLayoutEntry {
-                binding: 2,
-                visibility: wgpu::ShaderStages::FRAGMENT,
-                ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                count: None,
-            },
-        ],
+        entries: &[uniform_entry(0), texture_entry(1, true, wgpu::TextureViewDimension::D2), sampler_entry(2)],
     })
 }
 
@@ -51,15 +42,13 @@ impl SpritePass {
         let module = shader_module(device, label, source);
         let layout = pipeline_layout(device, layout);
         let pipeline = render_pipeline(device, label, &layout, &module, &[], HDR_FORMAT, Some(ADDITIVE));
-        let texture = texture_2d(device, label, 1, 1, HDR_FORMAT, SAMPLED);
-        upload(queue, &texture, &half_floats(&[[0.0; 4]]), 8);
+        let texture = sampled_texture(device, queue, label, (1, 1), &[[0.0; 4]]);
         Self { label, pipeline, texture, vertices }
     }
 
     /// Replaces the pass's texture with `texels` (linear RGBA, `size` texels, rows first), as 16-bit floats.
     pub fn set_texture(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, size: (u32, u32), texels: &[[f32; 4]]) {
-        self.texture = texture_2d(device, self.label, size.0, size.1, HDR_FORMAT, SAMPLED);
-        upload(queue, &self.texture, &half_floats(texels), 8);
+        self.texture = sampled_texture(device, queue, self.label, size, texels);
     }
 
     /// The pass's bind group in `layout` ([`sprite_layout`]), the frame's uniforms `globals`.
@@ -98,6 +87,3 @@ impl SpritePass {
         pass.draw(0..self.vertices, 0..1);
     }
 }
-
-/// A texture the passes sample, written by the queue.
-const SAMPLED: wgpu::TextureUsages = wgpu::TextureUsages::TEXTURE_BINDING.union(wgpu::TextureUsages::COPY_DST);

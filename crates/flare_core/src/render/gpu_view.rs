@@ -10,6 +10,7 @@
 //! (`cs_main`, writing an `rgba8unorm` storage texture: what the renderer uses when the target allows it),
 //! beside the fragment pipeline (`fs_main`) every other target gets.
 
+use super::buffers::sampler_entry;
 use crate::view_lut::ViewLut;
 use crate::view_transform::{ViewTransform, WGSL_GROUP, WgslShader, WgslTexture};
 
@@ -198,12 +199,7 @@ fn view_layout(device: &wgpu::Device, shader: &WgslShader) -> wgpu::BindGroupLay
         });
     }
     if let Some(binding) = shader.sampler {
-        entries.push(wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: stages,
-            ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-            count: None,
-        });
+        entries.push(wgpu::BindGroupLayoutEntry { visibility: stages, ..sampler_entry(binding) });
     }
     device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("ocio view"), entries: &entries })
 }

@@ -132,7 +132,7 @@ pub fn parse(text: &str, id_hint: &str) -> Result<LoadedLens, FormatError> {
             "FLOA" if blocks.is_empty() => apertures.push(SystemAperture::FloatByStop { line }),
             _ => {
                 if let Some(block) = blocks.last_mut() {
-                    surface_keyword(block, (line, raw), tokens, scale_to_mm, &gcat)?;
+                    surface_keyword(block, (line, keyword, raw), tokens, scale_to_mm, &gcat)?;
                 }
             }
         }
@@ -167,16 +167,15 @@ fn once_per_surface(
     Ok(())
 }
 
-/// Reads one keyword of a SURF block into `block`: `raw` is line `line`, `tokens` what follows its keyword,
-/// lengths in the file's unit (`scale_to_mm` mm each), glasses looked up in `gcat` first.
+/// Reads one keyword of a SURF block into `block`: `raw` is line `line`, `keyword` its first word, `tokens` what
+/// follows it; lengths in the file's unit (`scale_to_mm` mm each), glasses looked up in `gcat` first.
 fn surface_keyword(
     block: &mut Block,
-    (line, raw): (usize, &str),
+    (line, keyword, raw): (usize, &str, &str),
     mut tokens: std::str::SplitWhitespace,
     scale_to_mm: f64,
     gcat: &[String],
 ) -> Result<(), FormatError> {
-    let keyword = raw.split_whitespace().next().unwrap_or("");
     match keyword {
         "TYPE" => match tokens.next() {
             Some("STANDARD") => {}
